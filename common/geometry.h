@@ -1,0 +1,68 @@
+#pragma once
+// Planar geometry: angles and SE(2) poses.
+//
+// Frames follow the driver convention of DESIGN.md: a sensor's x axis points forward (the telegram's 90°
+// beam), y to the left, angles counter-clockwise, metres and radians. A pose named `a_from_b` maps
+// coordinates in frame b to frame a:  p_a = a_from_b * p_b.
+
+#include <Eigen/Core>
+#include <cmath>
+#include <numbers>
+
+namespace lrfnet::common {
+
+inline constexpr double kPi = std::numbers::pi;
+
+constexpr double DegToRad(double deg) { return deg * (kPi / 180.0); }
+constexpr double RadToDeg(double rad) { return rad * (180.0 / kPi); }
+
+// Wraps an angle to (-pi, pi].
+inline double NormalizeAngle(double angle_rad) {
+  double a = std::remainder(angle_rad, 2.0 * kPi);  // in [-pi, pi]
+  if (a <= -kPi) a += 2.0 * kPi;
+  return a;
+}
+
+// Smallest signed difference a - b, wrapped to (-pi, pi].
+inline double AngleDiff(double a_rad, double b_rad) { return NormalizeAngle(a_rad - b_rad); }
+
+// A rigid transform in the plane: rotation by yaw_rad, then translation (x_m, y_m).
+struct Pose2 {
+  double x_m = 0.0;
+  double y_m = 0.0;
+  double yaw_rad = 0.0;
+
+  static Pose2 Identity() { return {}; }
+
+  Eigen::Vector2d translation() const { return {x_m, y_m}; }
+  Eigen::Matrix2d rotation() const {
+    const double c = std::cos(yaw_rad), s = std::sin(yaw_rad);
+    Eigen::Matrix2d r;
+    r << c, -s, s, c;
+    return r;
+  }
+
+  // this * p (p given in the right-hand frame).
+  Eigen::Vector2d operator*(const Eigen::Vector2d& p) const { return rotation() * p + translation(); }
+
+  // Composition: (a_from_b * b_from_c) = a_from_c. Yaw is kept in (-pi, pi].
+  Pose2 operator*(const Pose2& o) const {
+    const Eigen::Vector2d t = (*this) * o.translation();
+    return {t.x(), t.y(), NormalizeAngle(yaw_rad + o.yaw_rad)};
+  }
+
+  Pose2 inverse() const {
+    const Eigen::Vector2d t = -(rotation().transpose() * translation());
+    return {t.x(), t.y(), NormalizeAngle(-yaw_rad)};
+  }
+};
+
+// Rotation distance |yaw_a - yaw_b| in radians, wrapped, and translation distance in metres.
+inline double RotationDistanceRad(const Pose2& a, const Pose2& b) {
+  return std::abs(AngleDiff(a.yaw_rad, b.yaw_rad));
+}
+inline double TranslationDistanceM(const Pose2& a, const Pose2& b) {
+  return (a.translation() - b.translation()).norm();
+}
+
+}  // namespace lrfnet::common

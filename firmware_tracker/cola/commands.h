@@ -1,0 +1,67 @@
+#pragma once
+// CoLa-B commands a client sends and the replies a device returns, as frame payloads (use EncodeFrame to
+// wrap them). Everything writes into caller-provided fixed buffers: no allocation.
+
+#include <array>
+#include <cstddef>
+#include <cstdint>
+#include <span>
+#include <string_view>
+
+#include "firmware_tracker/cola/telegram.h"
+
+namespace lrfnet::cola {
+
+// SOPAS user levels for SetAccessMode, with the devices' published default password hashes.
+enum class AccessLevel : std::uint8_t { kOperator = 1, kMaintenance = 2, kAuthorizedClient = 3, kService = 4 };
+inline constexpr std::uint32_t kAuthorizedClientPasswordHash = 0xF4724744;  // "client"
+inline constexpr std::uint32_t kServicePasswordHash = 0x81BE23AA;           // "servicelevel"
+
+// ---- client -> device (payload bytes written to `out`; return value is the size, 0 if out is too small)
+std::size_t EncodeSetAccessMode(AccessLevel level, std::uint32_t password_hash, std::span<std::uint8_t> out);
+std::size_t EncodeReadVariable(std::string_view name, std::span<std::uint8_t> out);  // sRN <name>
+std::size_t EncodeStartMeasurement(std::span<std::uint8_t> out);                      // sMN LMCstartmeas
+std::size_t EncodeStopMeasurement(std::span<std::uint8_t> out);                       // sMN LMCstopmeas
+std::size_t EncodeRun(std::span<std::uint8_t> out);                                   // sMN Run
+std::size_t EncodeScanDataEvent(bool enable, std::span<std::uint8_t> out);            // sEN LMDscandata 1|0
+
+// sWN LMDscandatacfg: which channels and blocks the device puts into LMDscandata (LMS1xx/5xx layout).
+struct ScanDataConfig {
+  std::uint8_t output_channel = 1;  // bit mask of echo channels (1 = first echo)
+  bool remission = true;            // RSSI channel on
+  std::uint8_t resolution = 1;      // 0 = 8-bit RSSI, 1 = 16-bit RSSI
+  bool encoder = false;
+  bool position = false;
+  bool device_name = false;
+  bool comment = false;
+  bool time = true;                 // time block
+  std::uint16_t output_interval = 1;  // every n-th scan
+};
+std::size_t EncodeScanDataConfig(const ScanDataConfig& config, std::span<std::uint8_t> out);
+
+// ---- device -> client (used by the emulator and by tests)
+// "<type> <name>[ <args>]"; a type of kError must use EncodeErrorReply instead.
+std::size_t EncodeReply(CommandType type, std::string_view name, std::span<const std::uint8_t> args,
+                        std::span<std::uint8_t> out);
+std::size_t EncodeErrorReply(std::uint16_t sopas_error_code, std::span<std::uint8_t> out);  // sFA
+
+// ---- decoding of reply arguments (views into the payload; all bounds-checked)
+// A length-prefixed string (uint16 big-endian length + chars), e.g. FirmwareVersion, SerialNumber.
+struct FlexString {
+  std::string_view text;
+  std::size_t consumed = 0;  // bytes used from the input
+};
+bool DecodeFlexString(std::span<const std::uint8_t> args, FlexString* out);
+
+// DeviceIdent: two flex strings, device name and version.
+struct DeviceIdent {
+  std::string_view name;
+  std::string_view version;
+};
+bool DecodeDeviceIdent(std::span<const std::uint8_t> args, DeviceIdent* out);
+
+// The first argument byte of a method/event answer (SetAccessMode: 1 = success; LMCstartmeas: 0 = success;
+// Run: 1 = success; sEA LMDscandata: 1 = enabled). Returns false when there is no argument byte.
+bool DecodeFirstByte(std::span<const std::uint8_t> args, std::uint8_t* out);
+
+}  // namespace lrfnet::cola

@@ -1,0 +1,8 @@
+#!/usr/bin/env bash
+# Runs the benchmarks (not part of the test command) and writes their tables to results/.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+build_dir=${1:-build}
+cmake --build "$build_dir" --target decode_benchmark >/dev/null
+mkdir -p results
+"$build_dir/tests/bench/decode_benchmark" --out results/decode_benchmark.md

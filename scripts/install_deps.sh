@@ -1,0 +1,54 @@
+#!/usr/bin/env bash
+# Installs the Debian 12 packages lrfnet needs, only those that are missing. Idempotent; run as root.
+#   scripts/install_deps.sh            host build, tests and fuzzing
+#   scripts/install_deps.sh --no-cross skip the aarch64 cross toolchain and qemu-user
+set -euo pipefail
+
+cross=1
+for arg in "$@"; do
+  case "$arg" in
+    --no-cross) cross=0 ;;
+    -h|--help) sed -n '2,4p' "$0"; exit 0 ;;
+    *) echo "install_deps.sh: unknown option '$arg'" >&2; exit 2 ;;
+  esac
+done
+
+host_pkgs=(
+  build-essential cmake ninja-build pkg-config git
+  clang libclang-rt-14-dev            # libFuzzer + sanitizers for the fuzz targets
+  libeigen3-dev libboost-dev libboost-program-options-dev
+  libprotobuf-dev protobuf-compiler libspdlog-dev libfmt-dev
+  libpcap-dev libyaml-cpp-dev nlohmann-json3-dev
+  libgtest-dev libgmock-dev libbenchmark-dev
+)
+cross_pkgs=(
+  g++-aarch64-linux-gnu qemu-user
+  libpcap-dev:arm64 libboost-dev:arm64 libboost-program-options-dev:arm64
+  libspdlog-dev:arm64 libfmt-dev:arm64 libgtest-dev:arm64 libyaml-cpp-dev:arm64
+)
+
+if [ "$(id -u)" -ne 0 ]; then
+  SUDO=sudo
+else
+  SUDO=
+fi
+
+missing=()
+is_installed() { dpkg-query -W -f='${Status}' "$1" 2>/dev/null | grep -q 'install ok installed'; }
+for p in "${host_pkgs[@]}"; do is_installed "$p" || missing+=("$p"); done
+if [ "$cross" = 1 ]; then
+  if ! dpkg --print-foreign-architectures | grep -qx arm64; then
+    $SUDO dpkg --add-architecture arm64
+  fi
+  for p in "${cross_pkgs[@]}"; do is_installed "$p" || missing+=("$p"); done
+fi
+
+if [ "${#missing[@]}" -eq 0 ]; then
+  echo "install_deps: all packages present"
+  exit 0
+fi
+echo "install_deps: installing ${missing[*]}"
+export DEBIAN_FRONTEND=noninteractive
+$SUDO apt-get update -qq
+$SUDO apt-get install -y -qq --no-install-recommends "${missing[@]}" >/dev/null
+echo "install_deps: done"

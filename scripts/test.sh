@@ -1,0 +1,83 @@
+#!/usr/bin/env bash
+# Builds and runs every test: host unit + integration tests (ctest), the fuzz targets under libFuzzer for a
+# fixed time, and the tracker's aarch64 build under qemu-user. Ends with one line "N passed, N failed".
+#   LRFNET_FUZZ_SECONDS   seconds per fuzz target (default 20)
+#   LRFNET_SKIP_CROSS=1   skip the aarch64 stage; LRFNET_SKIP_FUZZ=1 skip the libFuzzer stage
+set -uo pipefail
+cd "$(dirname "$0")/.."
+root=$(pwd)
+jobs=$(nproc)
+fuzz_seconds=${LRFNET_FUZZ_SECONDS:-20}
+passed=0
+failed=0
+failures=()
+
+stage() { echo; echo "==== $* ($(date +%H:%M:%S))"; }
+record() {  # record NAME PASSED FAILED
+  passed=$((passed + $2)); failed=$((failed + $3))
+  [ "$3" -gt 0 ] && failures+=("$1")
+  return 0
+}
+ctest_counts() {  # parses "N% tests passed, F tests failed out of T"
+  local line total bad
+  line=$(grep -E 'tests passed, [0-9]+ tests? failed out of [0-9]+' "$1" | tail -n 1)
+  if [ -z "$line" ]; then echo "0 1"; return; fi
+  bad=$(echo "$line" | sed -E 's/.* ([0-9]+) tests? failed out of ([0-9]+).*/\1/')
+  total=$(echo "$line" | sed -E 's/.* failed out of ([0-9]+).*/\1/')
+  echo "$((total - bad)) $bad"
+}
+
+# ---- host build and tests
+stage "host build"
+if cmake -S . -B build -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo -DLRFNET_WERROR=ON >/dev/null &&
+   cmake --build build -j"$jobs"; then
+  stage "host tests (ctest)"
+  (cd build && ctest -j"$jobs" --output-on-failure --timeout 600) 2>&1 | tee build/ctest.log
+  read -r p f < <(ctest_counts build/ctest.log)
+  record host-tests "$p" "$f"
+else
+  record host-build 0 1
+fi
+
+# ---- libFuzzer: every fuzz target for a fixed time, seeded by the corpus the host tests wrote
+if [ "${LRFNET_SKIP_FUZZ:-0}" != 1 ]; then
+  stage "fuzz build (clang, libFuzzer + ASan/UBSan)"
+  if CC=clang CXX=clang++ cmake -S . -B build-fuzz -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo \
+       -DLRFNET_FUZZ=ON >/dev/null && cmake --build build-fuzz -j"$jobs"; then
+    for target in cola_fuzz reassembler_fuzz packet_fuzz; do
+      stage "fuzz $target for ${fuzz_seconds}s"
+      corpus=build-fuzz/corpus/$target
+      mkdir -p "$corpus"
+      [ -d "build/fuzz_corpus/$target" ] && cp -n build/fuzz_corpus/$target/* "$corpus"/ 2>/dev/null
+      if (cd build-fuzz && "./tests/fuzz/$target" -max_total_time="$fuzz_seconds" -timeout=10 \
+            -rss_limit_mb=2048 -print_final_stats=1 "corpus/$target" 2>&1 | tail -n 12); then
+        record "$target" 1 0
+      else
+        record "$target" 0 1
+      fi
+    done
+  else
+    record fuzz-build 0 1
+  fi
+fi
+
+# ---- aarch64: the tracker and its tests, cross-compiled and run under qemu-user
+if [ "${LRFNET_SKIP_CROSS:-0}" != 1 ]; then
+  stage "aarch64 cross build (tracker only)"
+  if cmake -S . -B build-aarch64 -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo \
+       -DCMAKE_TOOLCHAIN_FILE="$root/cmake/aarch64-linux-gnu.cmake" -DLRFNET_TRACKER_ONLY=ON \
+       -DLRFNET_SHARED_DIR="$root/../shared" >/dev/null && cmake --build build-aarch64 -j"$jobs"; then
+    stage "aarch64 tests under qemu-aarch64"
+    file build-aarch64/firmware_tracker/app/lrfnet-tracker 2>/dev/null | sed 's/,.*//' || true
+    (cd build-aarch64 && ctest -j"$jobs" --output-on-failure --timeout 900) 2>&1 | tee build-aarch64/ctest.log
+    read -r p f < <(ctest_counts build-aarch64/ctest.log)
+    record aarch64-tests "$p" "$f"
+  else
+    record aarch64-build 0 1
+  fi
+fi
+
+echo
+[ "${#failures[@]}" -gt 0 ] && echo "failed stages: ${failures[*]}"
+echo "lrfnet: $passed passed, $failed failed"
+[ "$failed" -eq 0 ]
