@@ -7,7 +7,7 @@ namespace {
 
 // A full track frame of a crowded scan must fit the 1400-byte datagram budget when split into parts of
 // this many tracks (the uplink's part size).
-constexpr int kTracksPerPart = 24;
+constexpr int kTracksPerPart = 14;
 constexpr std::size_t kMaxDatagramBytes = 1400;
 
 TEST(ProtoTest, DatagramRoundTripsAllFields) {
