@@ -17,7 +17,8 @@ enum class AccessLevel : std::uint8_t { kOperator = 1, kMaintenance = 2, kAuthor
 inline constexpr std::uint32_t kAuthorizedClientPasswordHash = 0xF4724744;  // "client"
 inline constexpr std::uint32_t kServicePasswordHash = 0x81BE23AA;           // "servicelevel"
 
-// ---- client -> device (payload bytes written to `out`; return value is the size, 0 if out is too small)
+// ---- client -> device (payload bytes written to `out`; return value is the size, 0 if out is too small
+// or a name is empty or not printable ASCII without spaces)
 std::size_t EncodeSetAccessMode(AccessLevel level, std::uint32_t password_hash, std::span<std::uint8_t> out);
 std::size_t EncodeReadVariable(std::string_view name, std::span<std::uint8_t> out);  // sRN <name>
 std::size_t EncodeStartMeasurement(std::span<std::uint8_t> out);                      // sMN LMCstartmeas
@@ -26,6 +27,10 @@ std::size_t EncodeRun(std::span<std::uint8_t> out);                             
 std::size_t EncodeScanDataEvent(bool enable, std::span<std::uint8_t> out);            // sEN LMDscandata 1|0
 
 // sWN LMDscandatacfg: which channels and blocks the device puts into LMDscandata (LMS1xx/5xx layout).
+// Wire layout (13 argument bytes): output_channel u8, 00, remission u8, resolution u8, unit u8 (always 0),
+// encoder u8, 00, position u8, device_name u8, comment u8, time u8, output_interval u16 big-endian.
+// The LMS111 capture's config is {output_channel 1, remission false, resolution 0, time true, interval 1},
+// the LMS511's the same with remission true (8-bit RSSI1).
 struct ScanDataConfig {
   std::uint8_t output_channel = 1;  // bit mask of echo channels (1 = first echo)
   bool remission = true;            // RSSI channel on
@@ -44,6 +49,11 @@ std::size_t EncodeScanDataConfig(const ScanDataConfig& config, std::span<std::ui
 std::size_t EncodeReply(CommandType type, std::string_view name, std::span<const std::uint8_t> args,
                         std::span<std::uint8_t> out);
 std::size_t EncodeErrorReply(std::uint16_t sopas_error_code, std::span<std::uint8_t> out);  // sFA
+// Whether a reply without arguments ends in a space: LMS devices answer "sWA LMDscandatacfg " (space),
+// the MRS1104 answers "sWA FREchoFilter" (none). The four-argument EncodeReply omits it.
+enum class EmptyArgsSpace : std::uint8_t { kOmit, kWrite };
+std::size_t EncodeReply(CommandType type, std::string_view name, std::span<const std::uint8_t> args,
+                        EmptyArgsSpace empty_args_space, std::span<std::uint8_t> out);
 
 // ---- decoding of reply arguments (views into the payload; all bounds-checked)
 // A length-prefixed string (uint16 big-endian length + chars), e.g. FirmwareVersion, SerialNumber.

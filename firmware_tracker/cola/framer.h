@@ -32,7 +32,8 @@ struct FramerCounters {
   std::uint64_t frames = 0;            // complete frames with a correct checksum
   std::uint64_t bad_checksum = 0;      // complete frames whose XOR did not match (dropped)
   std::uint64_t oversize_length = 0;   // length field above max_payload_bytes or zero (dropped)
-  std::uint64_t garbage_bytes = 0;     // bytes skipped while searching for a start sequence
+  std::uint64_t garbage_bytes = 0;     // bytes skipped while searching for a start sequence (the bytes of
+                                       // rejected frames included; buffered bytes not yet)
   std::uint64_t bytes_in = 0;          // all bytes fed
 };
 

@@ -128,13 +128,18 @@ struct DecodeResult {
 
 // Decodes a complete frame payload that starts with "sSN LMDscandata ". Never reads out of bounds; content
 // that does not fit the fixed capacities (too many points or channels) is an error, not a truncation.
-// Trailing bytes after the event flag are an error ("trailing bytes").
+// Trailing bytes after the event flag are an error ("trailing bytes"), and so are block flags other than
+// 0 and 1. On error `*out` is partly overwritten and must not be used. Absent optional blocks are zeroed.
+// The exact layout of the optional blocks is written down in scan_telegram.cc.
 DecodeResult DecodeScanTelegram(std::span<const std::uint8_t> payload, ScanTelegram* out);
 
-// Writes the payload ("sSN LMDscandata " + binary) of `scan`. Returns its size, 0 if `out` is too small.
+// Writes the payload ("sSN LMDscandata " + binary) of `scan`. Returns its size, 0 if `out` is too small
+// or `scan` cannot be sent (a channel count above kMaxPointsPerChannel, an 8-bit channel value above 255,
+// a name or comment longer than kMaxBlockTextBytes). The block a channel sits in (channels16 or channels8)
+// decides its width on the wire; ScanChannel::bits is not consulted.
 // DecodeScanTelegram(EncodeScanTelegram(x)) == x, and re-encoding a decoded real telegram gives its bytes.
 std::size_t EncodeScanTelegram(const ScanTelegram& scan, std::span<std::uint8_t> out);
-// Upper bound of the encoded size of `scan` (for sizing buffers).
+// Upper bound of the encoded size of `scan` (for sizing buffers); the exact size when it can be encoded.
 std::size_t MaxEncodedSize(const ScanTelegram& scan);
 
 // A scan in the sensor frame (DESIGN.md): beam i at angle first_angle_rad + i × angle_step_rad, where 0 rad

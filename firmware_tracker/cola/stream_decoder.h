@@ -38,6 +38,10 @@ struct StreamCounters {
   std::array<std::uint64_t, 11> by_type{};  // indexed by CommandType
 };
 
+// Every valid frame is counted exactly once: framer.frames == bad_headers + scans + scan_decode_errors +
+// other_telegrams. Rejected frames (framer.bad_checksum, framer.oversize_length) and undecodable telegrams
+// also reach OnError. No heap allocation after construction.
+// Thread-safety: none; the listener must not call Feed or Reset of the decoder that is calling it.
 class StreamDecoder {
  public:
   explicit StreamDecoder(const FramerOptions& options = {});

@@ -44,7 +44,8 @@ const char* HeaderStatusName(HeaderStatus s);
 // True when the payload is an `sSN LMDscandata ` telegram (exact name; LMDscandatamon is another one).
 bool IsScanTelegram(std::span<const std::uint8_t> payload);
 
-// Human-readable meaning of an sFA error code (SICK telegram listing), e.g. 3 -> "variable index unknown"...
+// Human-readable meaning of an sFA error code (SICK telegram listing) with SICK's identifier, e.g.
+// 3 -> "unknown variable (Sopas_Error_VARIABLE_UNKNOWNINDEX)"; codes above 26 -> "unknown SOPAS error code".
 const char* SopasErrorName(std::uint16_t code);
 
 }  // namespace lrfnet::cola
