@@ -1,0 +1,204 @@
+#include "firmware_tracker/tracking/background_model.h"
+
+#include <algorithm>
+#include <cmath>
+#include <cstdlib>
+
+namespace lrfnet::tracking {
+namespace {
+
+bool Positive(double v) { return std::isfinite(v) && v > 0.0; }
+bool NonNegative(double v) { return std::isfinite(v) && v >= 0.0; }
+
+}  // namespace
+
+std::optional<std::string> Validate(const BackgroundOptions& o) {
+  if (!NonNegative(o.learn_duration_s)) return "learn_duration_s must be >= 0";
+  if (!NonNegative(o.min_range_m)) return "min_range_m must be >= 0";
+  if (!Positive(o.max_range_m) || o.max_range_m <= o.min_range_m) {
+    return "max_range_m must be finite and greater than min_range_m";
+  }
+  if (!NonNegative(o.base_margin_m) || !NonNegative(o.range_noise_m) ||
+      !NonNegative(o.range_noise_per_m) || !NonNegative(o.noise_margin_k)) {
+    return "base_margin_m, range_noise_m, range_noise_per_m and noise_margin_k must be >= 0";
+  }
+  if (!(o.base_margin_m > 0.0 || (o.noise_margin_k > 0.0 && o.range_noise_m > 0.0))) {
+    return "the foreground margin must be positive at every range";
+  }
+  if (!Positive(o.absorb_after_s)) return "absorb_after_s must be > 0";
+  if (!Positive(o.recede_after_s)) return "recede_after_s must be > 0";
+  if (!Positive(o.track_time_constant_s)) return "track_time_constant_s must be > 0";
+  if (!(o.free_fraction >= 0.0 && o.free_fraction <= 1.0)) return "free_fraction must be in [0, 1]";
+  if (!Positive(o.max_scan_gap_s)) return "max_scan_gap_s must be > 0";
+  return std::nullopt;
+}
+
+BackgroundModel::BackgroundModel(const BackgroundOptions& options) : options_(options) {
+  if (Validate(options_)) std::abort();
+}
+
+void BackgroundModel::Reset() {
+  learned_ = false;
+  has_scan_ = false;
+  learn_elapsed_s_ = 0.0;
+  learn_scans_ = 0;
+  beams_.clear();
+  background_m_.clear();
+  foreground_.clear();
+}
+
+double BackgroundModel::Margin(double range_m) const {
+  return options_.base_margin_m +
+         options_.noise_margin_k * (options_.range_noise_m + options_.range_noise_per_m * range_m);
+}
+
+float BackgroundModel::Sanitize(float range_m) const {
+  // 0 is the telegram's "no echo"; out-of-window and non-finite values are treated the same way.
+  if (!std::isfinite(range_m) || range_m < options_.min_range_m || range_m > options_.max_range_m) {
+    return 0.0f;
+  }
+  return range_m;
+}
+
+void BackgroundModel::StartLearning(const ScanView& scan) {
+  const std::size_t n = scan.range_m.size();
+  learned_ = false;
+  learn_elapsed_s_ = 0.0;
+  learn_scans_ = 0;
+  first_angle_rad_ = scan.first_angle_rad;
+  angle_step_rad_ = scan.angle_step_rad;
+  // Capacity was checked by CheckScan; resize cannot fail here.
+  (void)beams_.resize(0);
+  (void)beams_.resize(n);
+  (void)background_m_.resize(0);
+  (void)background_m_.resize(n);
+  (void)foreground_.resize(0);
+  (void)foreground_.resize(n);
+}
+
+void BackgroundModel::Learn(std::size_t i, float r) {
+  Beam& b = beams_[i];
+  if (r == 0.0f) {
+    ++b.no_echo_scans;
+  } else {
+    ++b.echo_scans;
+    if (b.prev_m != 0.0f && std::abs(r - b.prev_m) <= Margin(r)) {
+      b.learn_max_m = std::max(b.learn_max_m, std::min(r, b.prev_m));
+    }
+  }
+  b.prev_m = r;
+}
+
+void BackgroundModel::FinishLearning() {
+  for (std::size_t i = 0; i < beams_.size(); ++i) {
+    Beam& b = beams_[i];
+    const double total = static_cast<double>(b.echo_scans + b.no_echo_scans);
+    const bool mostly_no_echo =
+        static_cast<double>(b.no_echo_scans) > options_.free_fraction * total;
+    background_m_[i] = mostly_no_echo ? 0.0f : b.learn_max_m;
+    b = Beam{};
+  }
+  learned_ = true;
+}
+
+void BackgroundModel::UpdateBeam(std::size_t i, float r, double dt_s) {
+  Beam& b = beams_[i];
+  float& bg = background_m_[i];
+  const auto dt = static_cast<float>(dt_s);
+
+  const bool at_background =
+      (r == 0.0f && bg == 0.0f) || (r != 0.0f && bg != 0.0f && std::abs(r - bg) <= Margin(bg));
+  if (at_background) {
+    if (r != 0.0f) {
+      const double alpha = dt_s / (options_.track_time_constant_s + dt_s);
+      bg += static_cast<float>(alpha * (r - bg));
+    }
+    b.candidate = Candidate::kNone;
+    b.candidate_age_s = 0.0f;
+    return;
+  }
+
+  const bool nearer = r != 0.0f && (bg == 0.0f || r < bg);
+  const Candidate kind = nearer ? Candidate::kNearer : Candidate::kFarther;
+  const bool same_as_candidate =
+      b.candidate == kind && ((r == 0.0f && b.candidate_m == 0.0f) ||
+                              (r != 0.0f && b.candidate_m != 0.0f &&
+                               std::abs(r - b.candidate_m) <= Margin(b.candidate_m)));
+  if (same_as_candidate) {
+    b.candidate_age_s += dt;
+    if (r != 0.0f) b.candidate_m += 0.5f * (r - b.candidate_m);
+  } else if (kind == Candidate::kNearer && b.candidate == Candidate::kNearer && r < b.candidate_m) {
+    // Something passes in front of a candidate static object: its clock holds, it does not restart.
+    return;
+  } else {
+    b.candidate = kind;
+    b.candidate_m = r;
+    b.candidate_age_s = 0.0f;
+    return;
+  }
+
+  const double limit_s =
+      kind == Candidate::kNearer ? options_.absorb_after_s : options_.recede_after_s;
+  if (b.candidate_age_s >= limit_s) {
+    bg = b.candidate_m;
+    b.candidate = Candidate::kNone;
+    b.candidate_age_s = 0.0f;
+    ++(kind == Candidate::kNearer ? counters_.absorbed_beams : counters_.receded_beams);
+  }
+}
+
+BackgroundResult BackgroundModel::Update(const ScanView& scan) {
+  BackgroundResult result;
+  result.scan_error = CheckScan(scan);
+  if (result.scan_error != ScanError::kNone) {
+    ++counters_.rejected_scans;
+    result.learned = learned_;
+    return result;
+  }
+
+  double dt_s = 0.0;
+  const bool same_geometry = has_scan_ && scan.range_m.size() == beams_.size() &&
+                             scan.first_angle_rad == first_angle_rad_ &&
+                             scan.angle_step_rad == angle_step_rad_;
+  if (!same_geometry) {
+    if (has_scan_) {
+      ++counters_.geometry_changes;
+      result.relearn_started = true;
+    }
+    StartLearning(scan);
+  } else {
+    dt_s = common::NsToSeconds(scan.stamp_ns - last_stamp_ns_);
+    if (dt_s < 0.0) {
+      ++counters_.time_steps_backwards;
+      dt_s = 0.0;
+    }
+    dt_s = std::min(dt_s, options_.max_scan_gap_s);
+  }
+  has_scan_ = true;
+  last_stamp_ns_ = scan.stamp_ns;
+
+  const std::size_t n = scan.range_m.size();
+  if (!learned_) {
+    learn_elapsed_s_ += dt_s;
+    ++learn_scans_;
+    for (std::size_t i = 0; i < n; ++i) {
+      foreground_[i] = 0;
+      Learn(i, Sanitize(scan.range_m[i]));
+    }
+    if (learn_elapsed_s_ >= options_.learn_duration_s && learn_scans_ >= 2) FinishLearning();
+    return result;  // the scan that completes learning is not classified: the model was not ready
+  }
+
+  result.learned = true;
+  for (std::size_t i = 0; i < n; ++i) {
+    const float r = Sanitize(scan.range_m[i]);
+    const float bg = background_m_[i];
+    const bool fg = r != 0.0f && (bg == 0.0f || r < bg - Margin(bg));
+    foreground_[i] = fg ? 1 : 0;
+    result.foreground_beams += fg ? 1 : 0;
+    UpdateBeam(i, r, dt_s);
+  }
+  return result;
+}
+
+}  // namespace lrfnet::tracking

@@ -1,0 +1,240 @@
+#include "firmware_tracker/tracking/background_model.h"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <vector>
+
+#include "firmware_tracker/tracking/tracking_test_util.h"
+
+namespace lrfnet::tracking {
+namespace {
+
+using testing::Body;
+using testing::Room;
+using testing::SyntheticScanner;
+using testing::Wall;
+
+constexpr double kRateHz = 25.0;
+
+std::int64_t Scans(double seconds) {
+  return static_cast<std::int64_t>(std::lround(seconds * kRateHz));
+}
+
+// Runs scans [k_begin, k_end) of a fixed scene; returns the largest foreground count seen.
+std::size_t RunScans(BackgroundModel& model, SyntheticScanner& scanner, std::int64_t k_begin,
+                     std::int64_t k_end, const std::vector<Wall>& walls,
+                     const std::vector<Body>& bodies) {
+  std::size_t max_fg = 0;
+  for (std::int64_t k = k_begin; k < k_end; ++k) {
+    const BackgroundResult r = model.Update(scanner.Render(k, walls, bodies));
+    EXPECT_EQ(r.scan_error, ScanError::kNone);
+    max_fg = std::max(max_fg, r.foreground_beams);
+  }
+  return max_fg;
+}
+
+// Beams whose ray passes within `radius_m` of `p`.
+std::vector<std::size_t> BeamsTowards(const SyntheticScanner& s, const Eigen::Vector2d& p,
+                                      double radius_m) {
+  std::vector<std::size_t> out;
+  const double half = std::asin(radius_m / p.norm());
+  const double centre = std::atan2(p.y(), p.x());
+  for (std::size_t i = 0; i < s.config().beams; ++i) {
+    if (std::abs(common::AngleDiff(s.BeamAngle(i), centre)) < half) out.push_back(i);
+  }
+  return out;
+}
+
+TEST(BackgroundOptionsTest, DefaultsValidAndBadValuesRejected) {
+  EXPECT_EQ(Validate(BackgroundOptions{}), std::nullopt);
+  BackgroundOptions o;
+  o.max_range_m = 0.01;
+  EXPECT_NE(Validate(o), std::nullopt);
+  o = {};
+  o.absorb_after_s = 0.0;
+  EXPECT_NE(Validate(o), std::nullopt);
+  o = {};
+  o.base_margin_m = 0.0;
+  o.range_noise_m = 0.0;
+  EXPECT_NE(Validate(o), std::nullopt);
+  o = {};
+  o.free_fraction = 1.5;
+  EXPECT_NE(Validate(o), std::nullopt);
+}
+
+TEST(BackgroundModelTest, LearnsWallsAndFreeBeamsDespiteSomeoneWalkingThrough) {
+  SyntheticScanner scanner;
+  BackgroundModel model(BackgroundOptions{});
+  const auto room = Room();
+  // A person crosses the room during the whole start-up period.
+  for (std::int64_t k = 0; k < Scans(5.0) + 1; ++k) {
+    const double t = static_cast<double>(k) / kRateHz;
+    const std::vector<Body> person = {{{3.0, -3.0 + 1.2 * t}, 0.25, 0.15, 0.0}};
+    const BackgroundResult r = model.Update(scanner.Render(k, room, person));
+    EXPECT_EQ(r.foreground_beams, 0u);
+  }
+  ASSERT_TRUE(model.learned());
+  const std::vector<Body> none;
+  SyntheticScanner noiseless({.noise_sigma_m = 0.0});
+  const ScanView clean = noiseless.Render(0, room, none);
+  const auto bg = model.background_range_m();
+  ASSERT_EQ(bg.size(), clean.range_m.size());
+  std::size_t free_beams = 0;
+  for (std::size_t i = 0; i < bg.size(); ++i) {
+    if (clean.range_m[i] == 0.0f) {
+      EXPECT_EQ(bg[i], 0.0f) << "beam " << i << " looks through the opening";
+      ++free_beams;
+    } else {
+      EXPECT_NEAR(bg[i], clean.range_m[i], 0.05) << "beam " << i;
+    }
+  }
+  EXPECT_GT(free_beams, 10u);
+}
+
+TEST(BackgroundModelTest, NoiseOnlyGivesNoForeground) {
+  SyntheticScanner scanner({.noise_sigma_m = 0.02, .seed = 7});
+  BackgroundModel model(BackgroundOptions{});
+  const auto room = Room();
+  RunScans(model, scanner, 0, Scans(5.0) + 1, room, {});
+  ASSERT_TRUE(model.learned());
+  EXPECT_EQ(RunScans(model, scanner, Scans(5.0) + 1, Scans(65.0), room, {}), 0u);
+  EXPECT_EQ(model.counters().absorbed_beams, 0u);
+}
+
+TEST(BackgroundModelTest, NoForegroundWhileLearning) {
+  SyntheticScanner scanner;
+  BackgroundModel model(BackgroundOptions{});
+  const auto room = Room();
+  const std::vector<Body> person = {{{3.0, 0.0}, 0.25, 0.15, 0.0}};
+  const BackgroundResult r = model.Update(scanner.Render(0, room, person));
+  EXPECT_FALSE(r.learned);
+  EXPECT_EQ(r.foreground_beams, 0u);
+}
+
+TEST(BackgroundModelTest, PersonInFrontOfLearnedWallIsForeground) {
+  SyntheticScanner scanner;
+  BackgroundModel model(BackgroundOptions{});
+  const auto room = Room();
+  RunScans(model, scanner, 0, Scans(6.0), room, {});
+  const Eigen::Vector2d at(4.0, -2.0);
+  const BackgroundResult r =
+      model.Update(scanner.Render(Scans(6.0), room, std::vector<Body>{{at, 0.25, 0.15, 0.0}}));
+  ASSERT_TRUE(r.learned);
+  const auto beams = BeamsTowards(scanner, at, 0.12);
+  ASSERT_FALSE(beams.empty());
+  for (std::size_t i : beams) EXPECT_EQ(model.foreground()[i], 1) << "beam " << i;
+  EXPECT_LE(r.foreground_beams, BeamsTowards(scanner, at, 0.3).size());
+}
+
+TEST(BackgroundModelTest, DoorOpeningRecedesBackgroundThenReveals) {
+  SyntheticScanner scanner;
+  BackgroundOptions options;
+  BackgroundModel model(options);
+  auto closed = Room();
+  closed.push_back({{3.0, -1.0}, {3.0, 0.0}});  // a door 3 m ahead, in front of the wall at 8 m
+  const auto open = Room();
+  RunScans(model, scanner, 0, Scans(6.0), closed, {});
+  const auto door_beams = BeamsTowards(scanner, {3.0, -0.5}, 0.4);
+  ASSERT_FALSE(door_beams.empty());
+  for (std::size_t i : door_beams)
+    ASSERT_NEAR(model.background_range_m()[i], 3.0 / std::cos(scanner.BeamAngle(i)), 0.05);
+
+  // Opening reveals farther ranges: never foreground, and the background follows after
+  // recede_after_s.
+  std::int64_t k = Scans(6.0);
+  EXPECT_EQ(RunScans(model, scanner, k, k + Scans(options.recede_after_s + 0.5), open, {}), 0u);
+  k += Scans(options.recede_after_s + 0.5);
+  for (std::size_t i : door_beams) {
+    EXPECT_NEAR(model.background_range_m()[i], 8.0 / std::cos(scanner.BeamAngle(i)), 0.1);
+  }
+  EXPECT_GE(model.counters().receded_beams, door_beams.size());
+
+  // Someone walking in the doorway at 6 m is now foreground (behind the old door range).
+  const Eigen::Vector2d at(6.0, -0.5);
+  const BackgroundResult r =
+      model.Update(scanner.Render(k, open, std::vector<Body>{{at, 0.25, 0.15, 0.0}}));
+  EXPECT_GT(r.foreground_beams, 3u);
+  for (std::size_t i : BeamsTowards(scanner, at, 0.1)) EXPECT_EQ(model.foreground()[i], 1);
+}
+
+TEST(BackgroundModelTest, ParkedCartIsAbsorbedAfterTimeConstant) {
+  SyntheticScanner scanner;
+  BackgroundOptions options;
+  BackgroundModel model(options);
+  const auto room = Room();
+  RunScans(model, scanner, 0, Scans(6.0), room, {});
+  const std::vector<Body> cart = {{{4.0, 2.0}, 0.4, 0.3, 0.5}};
+  std::int64_t k = Scans(6.0);
+  // Still foreground shortly before absorb_after_s ...
+  const std::int64_t before = Scans(options.absorb_after_s - 1.0);
+  RunScans(model, scanner, k, k + before, room, cart);
+  k += before;
+  EXPECT_GT(model.Update(scanner.Render(k++, room, cart)).foreground_beams, 5u);
+  // ... and background shortly after it.
+  RunScans(model, scanner, k, k + Scans(2.0), room, cart);
+  k += Scans(2.0);
+  EXPECT_EQ(model.Update(scanner.Render(k++, room, cart)).foreground_beams, 0u);
+  EXPECT_GT(model.counters().absorbed_beams, 5u);
+  // When the cart leaves, the wall behind it comes back as background without foreground.
+  EXPECT_EQ(RunScans(model, scanner, k, k + Scans(options.recede_after_s + 1.0), room, {}), 0u);
+  const std::vector<Body> none;
+  SyntheticScanner noiseless({.noise_sigma_m = 0.0});
+  const ScanView clean = noiseless.Render(0, room, none);
+  for (std::size_t i : BeamsTowards(scanner, {4.0, 2.0}, 0.2)) {
+    EXPECT_NEAR(model.background_range_m()[i], clean.range_m[i], 0.1);
+  }
+}
+
+TEST(BackgroundModelTest, PersonStandingStillForSecondsIsNotAbsorbed) {
+  SyntheticScanner scanner;
+  BackgroundModel model(BackgroundOptions{});
+  const auto room = Room();
+  RunScans(model, scanner, 0, Scans(6.0), room, {});
+  const Eigen::Vector2d at(3.0, 1.0);
+  std::int64_t k = Scans(6.0);
+  for (int i = 0; i < Scans(8.0); ++i, ++k) {
+    // Standing, but swaying by a centimetre or two.
+    const Eigen::Vector2d sway(0.015 * std::sin(0.7 * static_cast<double>(i)), 0.0);
+    const BackgroundResult r =
+        model.Update(scanner.Render(k, room, std::vector<Body>{{at + sway, 0.25, 0.15, 1.5}}));
+    ASSERT_GT(r.foreground_beams, 5u) << "scan " << i;
+  }
+  EXPECT_EQ(model.counters().absorbed_beams, 0u);
+  EXPECT_EQ(RunScans(model, scanner, k, k + Scans(2.0), room, {}), 0u);
+}
+
+TEST(BackgroundModelTest, BadScanRejectedAndGeometryChangeRelearns) {
+  SyntheticScanner scanner;
+  BackgroundModel model(BackgroundOptions{});
+  const auto room = Room();
+  RunScans(model, scanner, 0, Scans(6.0), room, {});
+  ASSERT_TRUE(model.learned());
+
+  ScanView bad = scanner.Render(Scans(6.0), room, {});
+  bad.angle_step_rad = std::nan("");
+  EXPECT_EQ(model.Update(bad).scan_error, ScanError::kBadAngles);
+  bad.range_m = {};
+  EXPECT_EQ(model.Update(bad).scan_error, ScanError::kEmpty);
+  EXPECT_EQ(model.counters().rejected_scans, 2u);
+  EXPECT_TRUE(model.learned());
+
+  ScanView shorter = scanner.Render(Scans(6.0), room, {});
+  shorter.range_m = shorter.range_m.first(300);
+  const BackgroundResult r = model.Update(shorter);
+  EXPECT_TRUE(r.relearn_started);
+  EXPECT_FALSE(model.learned());
+  EXPECT_EQ(model.counters().geometry_changes, 1u);
+}
+
+TEST(BackgroundModelTest, TimeGoingBackwardsIsCountedNotFatal) {
+  SyntheticScanner scanner;
+  BackgroundModel model(BackgroundOptions{});
+  const auto room = Room();
+  RunScans(model, scanner, 0, Scans(6.0), room, {});
+  EXPECT_EQ(model.Update(scanner.Render(10, room, {})).foreground_beams, 0u);
+  EXPECT_EQ(model.counters().time_steps_backwards, 1u);
+}
+
+}  // namespace
+}  // namespace lrfnet::tracking

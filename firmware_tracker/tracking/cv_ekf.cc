@@ -1,0 +1,72 @@
+#include "firmware_tracker/tracking/cv_ekf.h"
+
+#include <Eigen/Cholesky>
+#include <cmath>
+#include <limits>
+
+namespace lrfnet::tracking {
+
+std::optional<std::string> Validate(const CvEkfOptions& o) {
+  if (!(std::isfinite(o.accel_psd_m2ps3) && o.accel_psd_m2ps3 > 0.0)) {
+    return "accel_psd_m2ps3 must be > 0";
+  }
+  if (!(std::isfinite(o.initial_velocity_sigma_mps) && o.initial_velocity_sigma_mps > 0.0)) {
+    return "initial_velocity_sigma_mps must be > 0";
+  }
+  return std::nullopt;
+}
+
+void CvEkf::Init(const Eigen::Vector2d& z_m, const Eigen::Matrix2d& r_m2) {
+  x_ << z_m, 0.0, 0.0;
+  p_.setZero();
+  p_.topLeftCorner<2, 2>() = 0.5 * (r_m2 + r_m2.transpose());
+  const double v2 = options_.initial_velocity_sigma_mps * options_.initial_velocity_sigma_mps;
+  p_(2, 2) = v2;
+  p_(3, 3) = v2;
+}
+
+void CvEkf::Predict(double dt_s) {
+  if (!(dt_s > 0.0) || !std::isfinite(dt_s)) return;
+  Eigen::Matrix4d f = Eigen::Matrix4d::Identity();
+  f(0, 2) = dt_s;
+  f(1, 3) = dt_s;
+  const double q = options_.accel_psd_m2ps3;
+  const double q11 = q * dt_s * dt_s * dt_s / 3.0, q12 = q * dt_s * dt_s / 2.0, q22 = q * dt_s;
+  Eigen::Matrix4d qm = Eigen::Matrix4d::Zero();
+  qm(0, 0) = qm(1, 1) = q11;
+  qm(0, 2) = qm(2, 0) = qm(1, 3) = qm(3, 1) = q12;
+  qm(2, 2) = qm(3, 3) = q22;
+  x_ = f * x_;
+  p_ = f * p_ * f.transpose() + qm;
+  p_ = 0.5 * (p_ + p_.transpose()).eval();
+}
+
+double CvEkf::MahalanobisSq(const Eigen::Vector2d& z_m, const Eigen::Matrix2d& r_m2) const {
+  const Eigen::Matrix2d s = p_.topLeftCorner<2, 2>() + r_m2;
+  const Eigen::LLT<Eigen::Matrix2d> llt(0.5 * (s + s.transpose()));
+  if (llt.info() != Eigen::Success) return std::numeric_limits<double>::infinity();
+  const Eigen::Vector2d y = z_m - x_.head<2>();
+  const double d2 = y.dot(llt.solve(y));
+  return std::isfinite(d2) ? d2 : std::numeric_limits<double>::infinity();
+}
+
+bool CvEkf::Update(const Eigen::Vector2d& z_m, const Eigen::Matrix2d& r_m2) {
+  if (!z_m.allFinite() || !r_m2.allFinite()) return false;
+  const Eigen::Matrix2d r = 0.5 * (r_m2 + r_m2.transpose());
+  Eigen::Matrix<double, 2, 4> h = Eigen::Matrix<double, 2, 4>::Zero();
+  h(0, 0) = 1.0;
+  h(1, 1) = 1.0;
+  const Eigen::Matrix2d s = h * p_ * h.transpose() + r;
+  const Eigen::LLT<Eigen::Matrix2d> llt(s);
+  if (llt.info() != Eigen::Success) return false;
+  // K = P H^T S^-1, via the Cholesky factor instead of an explicit inverse.
+  const Eigen::Matrix<double, 4, 2> k = llt.solve(h * p_).transpose();
+  x_ += k * (z_m - h * x_);
+  // Joseph form: stays positive semi-definite even with a slightly wrong gain from rounding.
+  const Eigen::Matrix4d i_kh = Eigen::Matrix4d::Identity() - k * h;
+  p_ = i_kh * p_ * i_kh.transpose() + k * r * k.transpose();
+  p_ = 0.5 * (p_ + p_.transpose()).eval();
+  return true;
+}
+
+}  // namespace lrfnet::tracking

@@ -1,0 +1,60 @@
+#pragma once
+// Constant-velocity Kalman filter for one track (Quenzel et al., section III-B: "the center of mass
+// (CoM) is tracked over time by an Extended Kalman Filter under the assumption of a constant
+// velocity"). With a linear position measurement the EKF reduces to the linear filter implemented
+// here.
+//
+// State x = (x_m, y_m, vx_mps, vy_mps) in the sensor frame. Process noise: continuous white
+// acceleration with spectral density q = accel_psd_m2ps3 per axis, discretised exactly:
+//   Q_axis = q * [dt^3/3, dt^2/2; dt^2/2, dt].
+// Update uses the Joseph form, and covariances are re-symmetrised after every step, so P stays
+// symmetric positive definite in floating point. Pure, fixed-size, never allocates.
+
+#include <Eigen/Core>
+#include <optional>
+#include <string>
+
+namespace lrfnet::tracking {
+
+struct CvEkfOptions {
+  double accel_psd_m2ps3 = 0.5;             // q: people change speed by ~0.7 m/s within a second
+  double initial_velocity_sigma_mps = 1.5;  // velocity prior of a new track (walking speed range)
+};
+
+std::optional<std::string> Validate(const CvEkfOptions& options);
+
+class CvEkf {
+ public:
+  using State = Eigen::Vector4d;
+  using Covariance = Eigen::Matrix4d;
+
+  CvEkf() = default;
+  explicit CvEkf(const CvEkfOptions& options) : options_(options) {}
+
+  // Starts at position z with covariance r, zero velocity with the velocity prior.
+  void Init(const Eigen::Vector2d& z_m, const Eigen::Matrix2d& r_m2);
+
+  // Propagates by dt_s seconds (dt_s <= 0 leaves the filter unchanged).
+  void Predict(double dt_s);
+
+  // Squared Mahalanobis distance of a position measurement from the predicted position,
+  // (z - Hx)^T (H P H^T + R)^-1 (z - Hx); +infinity when the innovation covariance is not
+  // invertible.
+  double MahalanobisSq(const Eigen::Vector2d& z_m, const Eigen::Matrix2d& r_m2) const;
+
+  // Position update. Returns false (filter unchanged) when the innovation covariance is not
+  // positive definite or the input is not finite.
+  bool Update(const Eigen::Vector2d& z_m, const Eigen::Matrix2d& r_m2);
+
+  const State& state() const { return x_; }
+  const Covariance& covariance() const { return p_; }
+  Eigen::Vector2d position_m() const { return x_.head<2>(); }
+  Eigen::Vector2d velocity_mps() const { return x_.tail<2>(); }
+
+ private:
+  CvEkfOptions options_;
+  State x_ = State::Zero();
+  Covariance p_ = Covariance::Identity();
+};
+
+}  // namespace lrfnet::tracking

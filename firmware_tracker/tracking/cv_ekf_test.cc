@@ -1,0 +1,94 @@
+#include "firmware_tracker/tracking/cv_ekf.h"
+
+#include <gtest/gtest.h>
+
+#include <Eigen/Cholesky>
+#include <cmath>
+#include <random>
+
+namespace lrfnet::tracking {
+namespace {
+
+bool SymmetricPositiveDefinite(const Eigen::Matrix4d& p) {
+  return p.allFinite() && p == p.transpose() &&
+         Eigen::LLT<Eigen::Matrix4d>(p).info() == Eigen::Success;
+}
+
+TEST(CvEkfOptionsTest, DefaultsValidAndBadValuesRejected) {
+  EXPECT_EQ(Validate(CvEkfOptions{}), std::nullopt);
+  EXPECT_NE(Validate(CvEkfOptions{.accel_psd_m2ps3 = 0.0}), std::nullopt);
+  EXPECT_NE(Validate(CvEkfOptions{.initial_velocity_sigma_mps = -1.0}), std::nullopt);
+}
+
+TEST(CvEkfTest, StraightWalkConvergesToTheVelocity) {
+  const Eigen::Vector2d start(1.0, -3.0);
+  const Eigen::Vector2d velocity(1.2 * std::cos(0.6), 1.2 * std::sin(0.6));  // 1.2 m/s
+  const double dt = 0.04, sigma = 0.03;
+  const Eigen::Matrix2d r = sigma * sigma * Eigen::Matrix2d::Identity();
+  std::mt19937 rng(5);
+  std::normal_distribution<double> noise(0.0, sigma);
+  // A steady walker: low acceleration noise (the default suits people who stop and turn).
+  CvEkf ekf{CvEkfOptions{.accel_psd_m2ps3 = 0.05}};
+  ekf.Init(start, r);
+  for (int k = 1; k <= 250; ++k) {  // 10 s at 25 Hz
+    ekf.Predict(dt);
+    const Eigen::Vector2d truth = start + velocity * (k * dt);
+    ASSERT_TRUE(ekf.Update(truth + Eigen::Vector2d(noise(rng), noise(rng)), r));
+    ASSERT_TRUE(SymmetricPositiveDefinite(ekf.covariance())) << "step " << k;
+  }
+  EXPECT_LT((ekf.velocity_mps() - velocity).norm(), 0.15);
+  EXPECT_LT((ekf.position_m() - (start + velocity * 10.0)).norm(), 0.05);
+  // The filter's velocity uncertainty shrank far below the 1.5 m/s prior and is consistent with the
+  // error.
+  const double velocity_sigma = std::sqrt(ekf.covariance()(2, 2));
+  EXPECT_LT(velocity_sigma, 0.15);
+  EXPECT_LT(std::abs(ekf.velocity_mps().x() - velocity.x()), 3.0 * velocity_sigma);
+}
+
+TEST(CvEkfTest, PredictGrowsUncertaintyAndMovesWithVelocity) {
+  CvEkf ekf{CvEkfOptions{}};
+  ekf.Init({0.0, 0.0}, 0.01 * Eigen::Matrix2d::Identity());
+  const Eigen::Matrix2d r = 0.0001 * Eigen::Matrix2d::Identity();
+  for (int k = 1; k <= 50; ++k) {
+    ekf.Predict(0.1);
+    ASSERT_TRUE(ekf.Update({0.5 * k * 0.1, 0.0}, r));
+  }
+  const double p_before = ekf.covariance()(0, 0);
+  const double x_before = ekf.position_m().x();
+  ekf.Predict(1.0);
+  EXPECT_GT(ekf.covariance()(0, 0), p_before);
+  EXPECT_NEAR(ekf.position_m().x() - x_before, 0.5, 0.05);
+  EXPECT_TRUE(SymmetricPositiveDefinite(ekf.covariance()));
+
+  const auto frozen = ekf.state();
+  ekf.Predict(0.0);
+  ekf.Predict(-1.0);
+  ekf.Predict(std::nan(""));
+  EXPECT_EQ(ekf.state(), frozen);
+}
+
+TEST(CvEkfTest, MahalanobisDistanceGatesFarMeasurements) {
+  CvEkf ekf{CvEkfOptions{}};
+  const Eigen::Matrix2d r = 0.01 * Eigen::Matrix2d::Identity();
+  ekf.Init({2.0, 1.0}, r);
+  EXPECT_NEAR(ekf.MahalanobisSq({2.0, 1.0}, r), 0.0, 1e-12);
+  // One sigma of the innovation (P + R = 0.02) along x.
+  EXPECT_NEAR(ekf.MahalanobisSq({2.0 + std::sqrt(0.02), 1.0}, r), 1.0, 1e-9);
+  EXPECT_GT(ekf.MahalanobisSq({4.0, 1.0}, r), 100.0);
+  EXPECT_TRUE(std::isinf(ekf.MahalanobisSq({2.0, 1.0}, -Eigen::Matrix2d::Identity())));
+}
+
+TEST(CvEkfTest, BadMeasurementsLeaveTheFilterUnchanged) {
+  CvEkf ekf{CvEkfOptions{}};
+  const Eigen::Matrix2d r = 0.01 * Eigen::Matrix2d::Identity();
+  ekf.Init({2.0, 1.0}, r);
+  const auto x = ekf.state();
+  const auto p = ekf.covariance();
+  EXPECT_FALSE(ekf.Update({std::nan(""), 1.0}, r));
+  EXPECT_FALSE(ekf.Update({2.0, 1.0}, -Eigen::Matrix2d::Identity()));
+  EXPECT_EQ(ekf.state(), x);
+  EXPECT_EQ(ekf.covariance(), p);
+}
+
+}  // namespace
+}  // namespace lrfnet::tracking

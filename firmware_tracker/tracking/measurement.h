@@ -1,0 +1,82 @@
+#pragma once
+// Position measurements of one segment (Quenzel et al., section III-B).
+//
+// - Centre of mass (CoM): the mean of the segment's points. Its covariance is com_sigma_m^2 * I:
+// the CoM
+//   of a person's visible side moves with the viewpoint (the paper reports ~40 cm between two
+//   sensors on a cylinder), which dwarfs the range noise.
+// - Ellipse: the paper's two steps. First Fitzgibbon's direct least-squares ellipse fit, computed
+// in the
+//   numerically stable form of Halir and Flusser, gives an initial centre and orientation. Then
+//   eqs. 3-4 fit an ellipse with fixed semi-axes a, b (0.25 m, 0.15 m: a person at upper-body
+//   height):
+//       x* = argmin_[theta, alpha, t] ||f(x)||^2                                   (3)
+//       f_i(x) = S_i - ( R(alpha) * (a cos(theta_i), b sin(theta_i))^T + t )       (4)
+//   over the per-point ellipse angles theta_i, the orientation alpha and the centre t, by
+//   Levenberg- Marquardt with the theta_i eliminated through the Schur complement (fixed-size 3x3
+//   solves). The sensor sees only the near side of a person, so t lies behind the visible points; a
+//   fit whose centre is not behind the CoM, is far from it, or is too uncertain falls back to the
+//   CoM (kind says which was used). Covariance of t: the (alpha, t) block of (J^T J)^-1 after
+//   eliminating theta, scaled by the residual variance (floored at min_point_sigma_m^2),
+//   eigenvalues floored at min_position_sigma_m^2.
+//
+// Frames: points and results are in the sensor frame (sensor at the origin, metres, radians). Pure
+// and allocation-free: per-point scratch lives on the stack, bounded by kMaxSegmentPoints.
+
+#include <Eigen/Core>
+#include <cstddef>
+#include <cstdint>
+#include <optional>
+#include <span>
+#include <string>
+
+namespace lrfnet::tracking {
+
+enum class MeasurementKind : std::uint8_t { kCenterOfMass, kEllipse };
+
+struct MeasurementOptions {
+  bool fit_ellipse = true;
+  double ellipse_major_m = 0.25;  // a in eq. 4
+  double ellipse_minor_m = 0.15;  // b in eq. 4
+  std::size_t min_ellipse_points = 5;
+  int max_iterations = 20;
+  double com_sigma_m = 0.10;
+  double min_point_sigma_m = 0.01;
+  double min_position_sigma_m = 0.01;
+  double max_position_sigma_m = 0.30;
+  double max_centre_offset_m = 0.60;  // ellipse centre to CoM
+};
+
+std::optional<std::string> Validate(const MeasurementOptions& options);
+
+struct Measurement {
+  MeasurementKind kind = MeasurementKind::kCenterOfMass;
+  Eigen::Vector2d position_m = Eigen::Vector2d::Zero();  // sensor frame
+  Eigen::Matrix2d covariance_m2 = Eigen::Matrix2d::Identity();
+  double orientation_rad = 0.0;  // ellipse major axis direction in (-pi/2, pi/2]; 0 for CoM
+  double rms_residual_m = 0.0;   // ellipse fit; 0 for CoM
+  std::size_t point_count = 0;
+};
+
+// Precondition: points is not empty.
+Eigen::Vector2d CenterOfMass(std::span<const Eigen::Vector2d> points);
+
+struct ConicEllipse {
+  Eigen::Vector2d center_m = Eigen::Vector2d::Zero();
+  double semi_major_m = 0.0;
+  double semi_minor_m = 0.0;
+  double orientation_rad = 0.0;  // major axis direction in (-pi/2, pi/2]
+};
+
+// Fitzgibbon direct least-squares ellipse (Halir-Flusser form). nullopt for fewer than 5 points,
+// collinear or otherwise degenerate points, non-finite input, or when the best conic is not a real
+// ellipse.
+std::optional<ConicEllipse> FitConicEllipse(std::span<const Eigen::Vector2d> points);
+
+// CoM, or the fixed-axes ellipse of eqs. 3-4 when options.fit_ellipse and the fit is usable. Points
+// beyond kMaxSegmentPoints are ignored by the ellipse fit. Precondition: points is not empty;
+// options valid.
+Measurement MeasureSegment(std::span<const Eigen::Vector2d> points,
+                           const MeasurementOptions& options);
+
+}  // namespace lrfnet::tracking

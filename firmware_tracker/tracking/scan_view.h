@@ -1,0 +1,44 @@
+#pragma once
+// The tracking pipeline's view of one scan, independent of the codec that produced it.
+//
+// Frame: the sensor frame of DESIGN.md (x forward, y left, angles counter-clockwise, radians,
+// metres). Beam i points at first_angle_rad + i * angle_step_rad. A range of 0 means "no echo";
+// ranges are not owned (the span must outlive the call that receives the view).
+
+#include <cstddef>
+#include <span>
+
+#include "common/time.h"
+
+namespace lrfnet::tracking {
+
+// Upper bound on beams per scan for every fixed-capacity buffer in the pipeline (an LMS5xx at
+// 0.0417° over 190° sends 4561 beams; the shipped captures have at most 1141).
+inline constexpr std::size_t kMaxBeams = 4608;
+
+struct ScanView {
+  double first_angle_rad = 0.0;
+  double angle_step_rad = 0.0;
+  std::span<const float> range_m;
+  common::UtcNs stamp_ns = 0;
+  double scan_period_s = 0.0;
+
+  double BeamAngleRad(std::size_t i) const {
+    return first_angle_rad + static_cast<double>(i) * angle_step_rad;
+  }
+};
+
+// Why a scan cannot be used at all. A status value, not a string, so rejecting a scan never
+// allocates.
+enum class ScanError {
+  kNone = 0,
+  kEmpty,
+  kTooManyBeams,   // more than kMaxBeams
+  kBadAngles,      // non-finite first angle, non-finite or zero step
+  kBadScanPeriod,  // non-positive or non-finite
+};
+
+ScanError CheckScan(const ScanView& scan);
+const char* ToString(ScanError error);
+
+}  // namespace lrfnet::tracking

@@ -1,0 +1,117 @@
+#include "firmware_tracker/tracking/segmentation.h"
+
+#include <algorithm>
+#include <cmath>
+
+namespace lrfnet::tracking {
+
+std::optional<std::string> Validate(const SegmentationOptions& o) {
+  if (!(std::isfinite(o.jump_base_m) && o.jump_base_m > 0.0)) return "jump_base_m must be > 0";
+  if (!(std::isfinite(o.jump_per_m) && o.jump_per_m >= 0.0)) return "jump_per_m must be >= 0";
+  if (o.min_points < 1) return "min_points must be >= 1";
+  if (o.max_points < o.min_points || o.max_points > kMaxSegmentPoints) {
+    return "max_points must be in [min_points, kMaxSegmentPoints]";
+  }
+  if (!(std::isfinite(o.min_width_m) && o.min_width_m >= 0.0)) return "min_width_m must be >= 0";
+  if (!(std::isfinite(o.max_width_m) && o.max_width_m > o.min_width_m)) {
+    return "max_width_m must be finite and greater than min_width_m";
+  }
+  return std::nullopt;
+}
+
+namespace {
+
+class Builder {
+ public:
+  Builder(const SegmentationOptions& options, SegmentList& out) : options_(options), out_(out) {}
+
+  bool open() const { return open_; }
+  const Eigen::Vector2d& last_point() const { return out_.points_m[out_.points_m.size() - 1]; }
+  std::size_t last_beam() const { return last_beam_; }
+
+  bool Fits(const Eigen::Vector2d& p) const {
+    return count_ < options_.max_points &&
+           (p - out_.points_m[first_point_]).norm() <= options_.max_width_m;
+  }
+
+  void Open(std::size_t beam, const Eigen::Vector2d& p) {
+    open_ = true;
+    begin_beam_ = beam;
+    first_point_ = out_.points_m.size();
+    count_ = 0;
+    Add(beam, p);
+  }
+
+  void Add(std::size_t beam, const Eigen::Vector2d& p) {
+    (void)out_.points_m.push_back(p);  // the pool holds one point per beam: cannot overflow
+    last_beam_ = beam;
+    ++count_;
+  }
+
+  void Close() {
+    if (!open_) return;
+    open_ = false;
+    const double width_m = (last_point() - out_.points_m[first_point_]).norm();
+    if (count_ < options_.min_points || width_m < options_.min_width_m) {
+      DropPoints();
+      return;
+    }
+    Segment s;
+    s.begin_beam = begin_beam_;
+    s.end_beam = last_beam_ + 1;
+    s.first_point = first_point_;
+    s.point_count = count_;
+    s.width_m = width_m;
+    if (!out_.segments.push_back(s)) {
+      ++out_.dropped_segments;
+      DropPoints();
+    }
+  }
+
+ private:
+  // Shrinking only; FixedVector::resize would also be able to grow with uninitialised Eigen values.
+  void DropPoints() {
+    while (out_.points_m.size() > first_point_) out_.points_m.pop_back();
+  }
+
+  const SegmentationOptions& options_;
+  SegmentList& out_;
+  bool open_ = false;
+  std::size_t begin_beam_ = 0;
+  std::size_t last_beam_ = 0;
+  std::size_t first_point_ = 0;
+  std::size_t count_ = 0;
+};
+
+}  // namespace
+
+void SegmentScan(const ScanView& scan, std::span<const std::uint8_t> foreground,
+                 const SegmentationOptions& options, SegmentList& out) {
+  out.segments.clear();
+  out.points_m.clear();
+  out.dropped_segments = 0;
+  if (CheckScan(scan) != ScanError::kNone) return;
+
+  Builder builder(options, out);
+  const std::size_t n = std::min(scan.range_m.size(), foreground.size());
+  for (std::size_t i = 0; i < n; ++i) {
+    const double r = scan.range_m[i];
+    if (foreground[i] == 0 || !(std::isfinite(r) && r > 0.0)) continue;
+    const double angle_rad = scan.BeamAngleRad(i);
+    const Eigen::Vector2d p(r * std::cos(angle_rad), r * std::sin(angle_rad));
+    if (builder.open()) {
+      const bool beam_gap_ok = i - builder.last_beam() - 1 <= options.max_missing_beams;
+      const bool jump_ok =
+          (p - builder.last_point()).norm() <= options.jump_base_m + options.jump_per_m * r;
+      if (beam_gap_ok && jump_ok && builder.Fits(p)) {
+        builder.Add(i, p);
+        continue;
+      }
+      builder.Close();
+    }
+    builder.Open(i, p);
+  }
+  builder.Close();
+}
+
+}  // namespace lrfnet::tracking

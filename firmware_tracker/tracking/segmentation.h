@@ -1,0 +1,68 @@
+#pragma once
+// Segmentation of foreground beams into objects (Quenzel et al., section III-B: "close measurements
+// on dynamic objects are clustered into segments").
+//
+// Jump-distance clustering over consecutive beams: a foreground point joins the open segment when
+// its Euclidean distance to the segment's last point is at most jump_base_m + jump_per_m * range
+// (range of the new point) and at most max_missing_beams non-foreground beams lie between them. A
+// segment whose extent (first to current point) would exceed max_width_m is closed and a new one
+// starts at that point. Segments with fewer than min_points points (single-beam noise with the
+// default 2) or narrower than min_width_m are dropped; a segment reaching kMaxSegmentPoints is
+// closed and the next point starts a new one.
+//
+// Points are in the sensor frame (x forward, y left, metres). Output storage is fixed: at most
+// kMaxSegments segments, whose points share one pool of kMaxBeams points; segments that do not fit
+// are dropped and counted. Segment() never allocates. Not thread-safe.
+
+#include <Eigen/Core>
+#include <cstddef>
+#include <cstdint>
+#include <optional>
+#include <span>
+#include <string>
+
+#include "common/fixed_capacity.h"
+#include "firmware_tracker/tracking/scan_view.h"
+
+namespace lrfnet::tracking {
+
+inline constexpr std::size_t kMaxSegments = 64;
+inline constexpr std::size_t kMaxSegmentPoints = 512;
+
+struct SegmentationOptions {
+  double jump_base_m = 0.15;
+  double jump_per_m = 0.03;
+  std::size_t max_missing_beams = 2;
+  std::size_t min_points = 2;
+  std::size_t max_points = kMaxSegmentPoints;
+  double min_width_m = 0.0;
+  double max_width_m = 1.0;
+};
+
+std::optional<std::string> Validate(const SegmentationOptions& options);
+
+struct Segment {
+  std::size_t begin_beam = 0;   // first beam
+  std::size_t end_beam = 0;     // one past the last beam
+  std::size_t first_point = 0;  // into SegmentList::points
+  std::size_t point_count = 0;
+  double width_m = 0.0;  // first to last point
+};
+
+struct SegmentList {
+  common::FixedVector<Segment, kMaxSegments> segments;
+  common::FixedVector<Eigen::Vector2d, kMaxBeams> points_m;  // sensor frame
+  std::uint64_t dropped_segments = 0;  // did not fit into kMaxSegments (this scan)
+
+  std::span<const Eigen::Vector2d> Points(const Segment& s) const {
+    return points_m.span().subspan(s.first_point, s.point_count);
+  }
+};
+
+// Fills `out` (cleared first) from a scan and its per-beam foreground mask (same length as the
+// scan; a shorter mask treats the missing beams as background). The scan must pass CheckScan (else
+// `out` stays empty). Options must be valid (checked by the caller through Validate).
+void SegmentScan(const ScanView& scan, std::span<const std::uint8_t> foreground,
+                 const SegmentationOptions& options, SegmentList& out);
+
+}  // namespace lrfnet::tracking

@@ -1,0 +1,189 @@
+#include "firmware_tracker/tracking/segmentation.h"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <vector>
+
+#include "common/geometry.h"
+#include "firmware_tracker/tracking/tracking_test_util.h"
+
+namespace lrfnet::tracking {
+namespace {
+
+// A scan of `n` beams, 0.5° apart, all at `range_m`.
+struct MaskScan {
+  explicit MaskScan(std::size_t n, float range_m = 5.0f) : ranges(n, range_m), mask(n, 0) {}
+  ScanView view() const {
+    return {common::DegToRad(-90.0), common::DegToRad(0.5), ranges, 0, 0.04};
+  }
+  void Mark(std::size_t begin, std::size_t end) {
+    for (std::size_t i = begin; i < end; ++i) mask[i] = 1;
+  }
+  std::vector<float> ranges;
+  std::vector<std::uint8_t> mask;
+};
+
+TEST(SegmentationOptionsTest, DefaultsValidAndBadValuesRejected) {
+  EXPECT_EQ(Validate(SegmentationOptions{}), std::nullopt);
+  SegmentationOptions o;
+  o.min_points = 0;
+  EXPECT_NE(Validate(o), std::nullopt);
+  o = {};
+  o.max_points = kMaxSegmentPoints + 1;
+  EXPECT_NE(Validate(o), std::nullopt);
+  o = {};
+  o.max_width_m = 0.0;
+  EXPECT_NE(Validate(o), std::nullopt);
+}
+
+TEST(SegmentationTest, TwoSeparatedGroupsGiveTwoSegmentsWithSensorFramePoints) {
+  MaskScan s(361);
+  s.Mark(100, 106);
+  s.Mark(200, 210);
+  SegmentList out;
+  SegmentScan(s.view(), s.mask, SegmentationOptions{}, out);
+  ASSERT_EQ(out.segments.size(), 2u);
+  EXPECT_EQ(out.segments[0].begin_beam, 100u);
+  EXPECT_EQ(out.segments[0].end_beam, 106u);
+  EXPECT_EQ(out.segments[1].begin_beam, 200u);
+  EXPECT_EQ(out.segments[1].end_beam, 210u);
+  const auto pts = out.Points(out.segments[1]);
+  ASSERT_EQ(pts.size(), 10u);
+  // Beam 200 points at -90° + 100° = +10°: in front, slightly to the left.
+  EXPECT_NEAR(pts[0].x(), 5.0 * std::cos(common::DegToRad(10.0)), 1e-5);
+  EXPECT_NEAR(pts[0].y(), 5.0 * std::sin(common::DegToRad(10.0)), 1e-5);
+}
+
+TEST(SegmentationTest, SingleBeamNoiseIsDropped) {
+  MaskScan s(361);
+  s.Mark(50, 51);
+  s.Mark(150, 151);
+  s.Mark(250, 254);
+  SegmentList out;
+  SegmentScan(s.view(), s.mask, SegmentationOptions{}, out);
+  ASSERT_EQ(out.segments.size(), 1u);
+  EXPECT_EQ(out.segments[0].begin_beam, 250u);
+  EXPECT_EQ(out.points_m.size(), 4u);
+}
+
+TEST(SegmentationTest, MissingBeamGapUpToLimitJoinsBeyondSplits) {
+  SegmentationOptions o;
+  o.max_missing_beams = 2;
+  MaskScan s(361);
+  s.Mark(100, 104);
+  s.Mark(106, 110);  // 2 missing beams: joined
+  s.Mark(113, 117);  // 3 missing beams: split
+  SegmentList out;
+  SegmentScan(s.view(), s.mask, o, out);
+  ASSERT_EQ(out.segments.size(), 2u);
+  EXPECT_EQ(out.segments[0].begin_beam, 100u);
+  EXPECT_EQ(out.segments[0].end_beam, 110u);
+  EXPECT_EQ(out.segments[0].point_count, 8u);
+  EXPECT_EQ(out.segments[1].begin_beam, 113u);
+}
+
+TEST(SegmentationTest, RangeJumpSplitsNeighbouringBeams) {
+  MaskScan s(361);
+  s.Mark(100, 110);
+  for (std::size_t i = 105; i < 110; ++i) s.ranges[i] = 6.0f;  // a person behind another
+  SegmentList out;
+  SegmentScan(s.view(), s.mask, SegmentationOptions{}, out);
+  ASSERT_EQ(out.segments.size(), 2u);
+  EXPECT_EQ(out.segments[0].end_beam, 105u);
+  EXPECT_EQ(out.segments[1].begin_beam, 105u);
+}
+
+TEST(SegmentationTest, JumpThresholdGrowsWithRange) {
+  // At 20 m, 0.5° beams are 17 cm apart: beyond the 15 cm base, within base + 0.03 * 20.
+  MaskScan s(361, 20.0f);
+  s.Mark(100, 104);
+  SegmentList out;
+  SegmentationOptions o;
+  SegmentScan(s.view(), s.mask, o, out);
+  EXPECT_EQ(out.segments.size(), 1u);
+  o.jump_per_m = 0.0;
+  SegmentScan(s.view(), s.mask, o, out);
+  EXPECT_EQ(out.segments.size(), 0u) << "every point alone, dropped as single-beam noise";
+}
+
+TEST(SegmentationTest, WideSegmentsAreSplitIntoPiecesNoWiderThanMax) {
+  MaskScan s(361, 5.0f);
+  s.Mark(100, 160);  // 30° at 5 m: a 2.6 m long object
+  SegmentationOptions o;
+  o.max_width_m = 0.8;
+  SegmentList out;
+  SegmentScan(s.view(), s.mask, o, out);
+  ASSERT_GE(out.segments.size(), 3u);
+  std::size_t points = 0;
+  for (const Segment& seg : out.segments) {
+    EXPECT_LE(seg.width_m, o.max_width_m + 1e-9);
+    points += seg.point_count;
+  }
+  EXPECT_EQ(points, 60u);
+}
+
+TEST(SegmentationTest, MinWidthAndMinPointsDrop) {
+  MaskScan s(361, 5.0f);
+  s.Mark(100, 103);  // 3 points, ~9 cm wide
+  SegmentationOptions o;
+  o.min_points = 4;
+  SegmentList out;
+  SegmentScan(s.view(), s.mask, o, out);
+  EXPECT_TRUE(out.segments.empty());
+  o = {};
+  o.min_width_m = 0.2;
+  SegmentScan(s.view(), s.mask, o, out);
+  EXPECT_TRUE(out.segments.empty());
+  EXPECT_TRUE(out.points_m.empty()) << "points of dropped segments are released";
+}
+
+TEST(SegmentationTest, MoreSegmentsThanCapacityAreCountedNotOverflowed) {
+  MaskScan s(kMaxBeams, 5.0f);
+  std::size_t groups = 0;
+  for (std::size_t i = 0; i + 2 < kMaxBeams; i += 6, ++groups) s.Mark(i, i + 2);
+  ASSERT_GT(groups, kMaxSegments);
+  SegmentList out;
+  SegmentScan(s.view(), s.mask, SegmentationOptions{}, out);
+  EXPECT_EQ(out.segments.size(), kMaxSegments);
+  EXPECT_EQ(out.dropped_segments, groups - kMaxSegments);
+  EXPECT_EQ(out.points_m.size(), 2 * kMaxSegments);
+}
+
+TEST(SegmentationTest, ShortMaskBadScanAndNoEchoBeamsAreSafe) {
+  MaskScan s(361, 5.0f);
+  s.Mark(100, 110);
+  s.ranges[104] = 0.0f;  // no echo inside the group: skipped, within the missing-beam allowance
+  SegmentList out;
+  SegmentScan(s.view(), std::span<const std::uint8_t>(s.mask).first(107), SegmentationOptions{},
+              out);
+  ASSERT_EQ(out.segments.size(), 1u);
+  EXPECT_EQ(out.segments[0].point_count, 6u);
+  ScanView bad = s.view();
+  bad.angle_step_rad = 0.0;
+  SegmentScan(bad, s.mask, SegmentationOptions{}, out);
+  EXPECT_TRUE(out.segments.empty());
+}
+
+TEST(SegmentationTest, PersonInSyntheticScanIsOneSegment) {
+  testing::SyntheticScanner scanner;
+  const std::vector<testing::Body> people = {{{3.0, 1.0}, 0.25, 0.15, 0.3},
+                                             {{3.0, -1.0}, 0.25, 0.15, -0.3}};
+  const ScanView scan = scanner.Render(0, {}, people);
+  std::vector<std::uint8_t> mask(scan.range_m.size());
+  for (std::size_t i = 0; i < mask.size(); ++i) mask[i] = scan.range_m[i] > 0.0f ? 1 : 0;
+  SegmentList out;
+  SegmentScan(scan, mask, SegmentationOptions{}, out);
+  ASSERT_EQ(out.segments.size(), 2u);
+  auto mean_y = [&](std::size_t k) {
+    double sum = 0.0;
+    for (const auto& p : out.Points(out.segments[k])) sum += p.y();
+    return sum / static_cast<double>(out.segments[k].point_count);
+  };
+  // Beams run counter-clockwise: the person on the right (negative y) comes first.
+  EXPECT_NEAR(mean_y(0), -1.0, 0.2);
+  EXPECT_NEAR(mean_y(1), 1.0, 0.2);
+}
+
+}  // namespace
+}  // namespace lrfnet::tracking
