@@ -119,6 +119,7 @@ class PcapCaptureStream final : public CaptureStream {
     counters_.out_of_order_segments = r.out_of_order_segments;
     counters_.gaps = r.gaps;
     counters_.gap_bytes = r.gap_bytes;
+    counters_.out_of_window_segments = r.out_of_window_segments;
     counters_.connections = r.connections;
     counters_.delivered_bytes = r.delivered_bytes;
   }

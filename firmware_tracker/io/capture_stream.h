@@ -32,6 +32,7 @@ struct CaptureCounters {
   std::uint64_t out_of_order_segments = 0;
   std::uint64_t gaps = 0;                 // holes in the stream that were given up on
   std::uint64_t gap_bytes = 0;
+  std::uint64_t out_of_window_segments = 0;  // stray far-ahead segments dropped (see TcpReassembler)
   std::uint64_t connections = 0;          // SYNs of the selected direction (new streams)
   std::uint64_t delivered_bytes = 0;
 };

@@ -22,6 +22,9 @@ std::optional<std::string> Validate(const TcpReassemblerOptions& options) {
   if (options.max_pending_ranges < 1 || options.max_pending_ranges > kMaxPendingRanges) {
     return "max_pending_ranges must be between 1 and 65536";
   }
+  if (options.jump_confirm_segments < 1 || options.jump_confirm_segments > 64) {
+    return "jump_confirm_segments must be between 1 and 64";
+  }
   return std::nullopt;
 }
 
@@ -92,6 +95,7 @@ void TcpReassembler::StartStream(std::uint32_t first_seq) {
   next_seq_ = first_seq;
   ranges_.clear();
   pending_bytes_ = 0;
+  jump_run_ = 0;
 }
 
 void TcpReassembler::HandleData(std::uint32_t seq, std::span<const std::uint8_t> payload) {
@@ -111,12 +115,29 @@ void TcpReassembler::HandleData(std::uint32_t seq, std::span<const std::uint8_t>
     pos = next_pos_;
   }
   if (pos == next_pos_) {
+    jump_run_ = 0;
     Emit(payload);
     DrainContiguous();
     return;
   }
   ++counters_.out_of_order_segments;
-  if (end - next_pos_ <= static_cast<std::int64_t>(ring_.size()) && Store(pos, payload)) return;
+  const auto ring_size = static_cast<std::int64_t>(ring_.size());
+  // Distance from the frontier of what has been seen: a segment near the highest held byte is the
+  // stream continuing past a loss; one far beyond it is a stray or forged packet until confirmed.
+  const std::int64_t frontier = ranges_.empty() ? next_pos_ : ranges_.back().end;
+  if (pos - frontier >= ring_size) {
+    // Beyond anything that can be held: jump only when a contiguous run of such segments confirms
+    // that the stream really continues there (a capture that lost more than the window).
+    jump_run_ = (jump_run_ > 0 && pos == jump_run_end_) ? jump_run_ + 1 : 1;
+    jump_run_end_ = end;
+    if (jump_run_ < options_.jump_confirm_segments) {
+      ++counters_.out_of_window_segments;
+      counters_.out_of_window_bytes += payload.size();
+      return;
+    }
+  }
+  jump_run_ = 0;
+  if (end - next_pos_ <= ring_size && Store(pos, payload)) return;
   // Held bytes would exceed the bound: give up on the holes before this segment.
   GiveUpBefore(pos, end);
   if (pos > next_pos_) Gap(pos);

@@ -53,8 +53,14 @@ struct TcpReassemblerOptions {
   // Disjoint held byte ranges (holes between them each need one): bounds the bookkeeping per
   // segment.
   std::size_t max_pending_ranges = 256;
+  // A segment that starts more than max_pending_bytes beyond the highest byte seen so far is a stray
+  // or forged packet unless more follow it: the stream jumps there only
+  // after this many contiguous such segments; until then they are dropped and counted
+  // (out_of_window_*), so one bogus packet cannot make the stream skip ahead and lose what follows.
+  std::size_t jump_confirm_segments = 3;
 };
-// Accepts 1 <= max_pending_bytes <= 1 GiB and 1 <= max_pending_ranges <= 65536.
+// Accepts 1 <= max_pending_bytes <= 1 GiB, 1 <= max_pending_ranges <= 65536 and
+// 1 <= jump_confirm_segments <= 64.
 std::optional<std::string> Validate(const TcpReassemblerOptions& options);
 
 struct TcpSegment {
@@ -80,6 +86,8 @@ struct TcpReassemblerCounters {
   std::uint64_t gap_bytes = 0;              // their total size
   std::uint64_t connections = 0;            // SYNs that started a stream
   std::uint64_t delivered_bytes = 0;        // bytes handed out by Pop()
+  std::uint64_t out_of_window_segments = 0; // far-ahead segments dropped (not, or not yet, a jump)
+  std::uint64_t out_of_window_bytes = 0;
 };
 
 class TcpReassembler {
@@ -130,6 +138,9 @@ class TcpReassembler {
   std::int64_t next_pos_ = 0;
   std::uint32_t next_seq_ = 0;
   bool discontinuity_ = false;  // attach to the next emitted chunk
+  // Run of contiguous far-ahead segments seen so far (see jump_confirm_segments).
+  std::size_t jump_run_ = 0;
+  std::int64_t jump_run_end_ = 0;
   common::UtcNs now_ns_ = 0;
   bool has_time_ = false;
   TcpReassemblerCounters counters_;

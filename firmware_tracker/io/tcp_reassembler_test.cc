@@ -192,7 +192,7 @@ TEST(TcpReassembler, InOrderSegmentCoveringHeldBytes) {
 }
 
 TEST(TcpReassembler, GapBeyondTheBoundIsSkipped) {
-  Harness h(TcpReassemblerOptions{16, 8});
+  Harness h(TcpReassemblerOptions{16, 8, 1});  // a single far segment is trusted here
   h.Data(0, "start");                 // next expected: 5
   h.Data(10, "held", 1);              // hole [5, 10)
   h.Data(30, "far beyond bound", 2);  // [30, 46) does not fit in 16 bytes after 5
@@ -211,6 +211,35 @@ TEST(TcpReassembler, GapBeyondTheBoundIsSkipped) {
   h.Data(46, "next");
   EXPECT_EQ(h.chunks.back().bytes, "next");
   EXPECT_FALSE(h.chunks.back().discontinuity);
+}
+
+TEST(TcpReassembler, OneStrayFarSegmentDoesNotDerailTheStream) {
+  Harness h(TcpReassemblerOptions{16, 8, 3});
+  h.Data(0, "start");
+  h.Data(100000, "forged");  // far beyond what can be held: dropped, the stream stays put
+  h.Data(5, "-more");
+  h.Data(10, "-and more");
+  EXPECT_EQ(h.Stream(), "start-more-and more");
+  EXPECT_EQ(h.Discontinuities(), 0);
+  EXPECT_EQ(h.reassembler.counters().out_of_window_segments, 1u);
+  EXPECT_EQ(h.reassembler.counters().out_of_window_bytes, 6u);
+  EXPECT_EQ(h.reassembler.counters().gaps, 0u);
+}
+
+TEST(TcpReassembler, ContiguousFarSegmentsConfirmAJump) {
+  Harness h(TcpReassemblerOptions{16, 8, 3});
+  h.Data(0, "start");
+  // The capture lost a large stretch: the stream really continues far ahead.
+  h.Data(1000, "aaaa");
+  h.Data(1004, "bbbb");
+  EXPECT_EQ(h.Stream(), "start");
+  h.Data(1008, "cccc");  // third contiguous segment: jump
+  h.Data(1012, "dddd");
+  EXPECT_EQ(h.Stream(), "startccccdddd");
+  EXPECT_EQ(h.Discontinuities(), 1);
+  EXPECT_EQ(h.reassembler.counters().gaps, 1u);
+  EXPECT_EQ(h.reassembler.counters().gap_bytes, 1008u - 5u);
+  EXPECT_EQ(h.reassembler.counters().out_of_window_segments, 2u);
 }
 
 TEST(TcpReassembler, TooManyHeldRangesGivesUpOnHoles) {
