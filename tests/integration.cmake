@@ -1,0 +1,19 @@
+# Integration tests: real sockets on loopback, the shared captures (skipped with a message when absent), and
+# the built binaries.
+
+# `lrfnet dump` against the golden files of the shared captures.
+lrfnet_test(golden_test SOURCES golden_test.cc LIBS lrfnet_dump nlohmann_json::nlohmann_json)
+
+# Emulator -> SickClient over loopback: every scan of a capture (or of the synthetic source) arrives.
+lrfnet_test(loopback_test SOURCES loopback_test.cc LIBS lrfnet_emulator lrfnet_sick_client lrfnet_dump)
+
+# SickClient against a misbehaving device: stalls, broken frames, garbage, sFA, restarts, silence, refusal.
+lrfnet_test(link_faults_test SOURCES link_faults_test.cc LIBS lrfnet_emulator lrfnet_sick_client)
+
+# The binaries: exit codes, one-line errors, --help, replay, and emulator + tracker as processes.
+lrfnet_test(cli_test SOURCES cli_test.cc LIBS lrfnet_dump)
+if(TARGET cli_test)
+  target_compile_definitions(cli_test PRIVATE LRFNET_TOOL_BINARY="$<TARGET_FILE:lrfnet>"
+                                              LRFNET_TRACKER_BINARY="$<TARGET_FILE:lrfnet-tracker>")
+  add_dependencies(cli_test lrfnet lrfnet-tracker)
+endif()

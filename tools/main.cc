@@ -1,0 +1,85 @@
+// lrfnet: the tools binary. `lrfnet <subcommand> [options]`; see subcommands.h.
+
+#include <spdlog/sinks/stdout_color_sinks.h>
+#include <spdlog/spdlog.h>
+
+#include <cstdio>
+#include <cstring>
+#include <exception>
+#include <string>
+
+#include "tools/subcommands.h"
+
+namespace lrfnet::tools {
+namespace {
+
+struct Subcommand {
+  const char* name;
+  const char* summary;
+  int (*run)(int argc, char** argv);
+};
+
+constexpr Subcommand kSubcommands[] = {
+    {"dump", "print the scans of a pcap/pcapng capture as JSON lines (--summary: counts)", RunDump},
+    {"emulate", "serve a capture's scans (or synthetic ones) as a SICK device on TCP", RunEmulate},
+};
+
+std::string Names() {
+  std::string names;
+  for (const Subcommand& s : kSubcommands) names += std::string(names.empty() ? "" : "|") + s.name;
+  return names;
+}
+
+void PrintUsage(std::FILE* out) {
+  std::fprintf(out, "usage: lrfnet {%s} [options]   (lrfnet SUBCOMMAND --help for its options)\n\n",
+               Names().c_str());
+  for (const Subcommand& s : kSubcommands) std::fprintf(out, "  %-10s %s\n", s.name, s.summary);
+}
+
+}  // namespace
+
+int UsageError(const std::string& subcommand, const std::string& message) {
+  std::fprintf(stderr, "lrfnet %s: %s (see lrfnet %s --help)\n", subcommand.c_str(),
+               message.c_str(), subcommand.c_str());
+  return kExitUsage;
+}
+
+bool SetUpLogging(const std::string& level) {
+  const spdlog::level::level_enum parsed = spdlog::level::from_str(level);
+  // from_str maps unknown names to "off": accept "off" only when asked for.
+  if (parsed == spdlog::level::off && level != "off") return false;
+  auto logger = spdlog::stderr_color_mt("lrfnet");
+  spdlog::set_default_logger(logger);
+  spdlog::set_level(parsed);
+  return true;
+}
+
+}  // namespace lrfnet::tools
+
+int main(int argc, char** argv) {
+  using namespace lrfnet::tools;
+  if (argc < 2) {
+    std::fprintf(stderr,
+                 "lrfnet: missing subcommand; usage: lrfnet {%s} [options] (see lrfnet --help)\n",
+                 Names().c_str());
+    return kExitUsage;
+  }
+  const std::string name = argv[1];
+  if (name == "--help" || name == "-h" || name == "help") {
+    PrintUsage(stdout);
+    return kExitOk;
+  }
+  for (const Subcommand& s : kSubcommands) {
+    if (name != s.name) continue;
+    try {
+      return s.run(argc - 1, argv + 1);
+    } catch (const std::exception& e) {
+      std::fprintf(stderr, "lrfnet %s: %s\n", s.name, e.what());
+      return kExitFailure;
+    }
+  }
+  std::fprintf(
+      stderr, "lrfnet: unknown subcommand '%s'; usage: lrfnet {%s} [options] (see lrfnet --help)\n",
+      name.c_str(), Names().c_str());
+  return kExitUsage;
+}

@@ -1,0 +1,27 @@
+#pragma once
+// The `lrfnet` subcommands. Each lives in its own <name>_command.cc, parses its own options (Boost
+// program_options, --help on every one) and returns the process exit code. Adding one: write the
+// file, declare its Run function here, add a row to kSubcommands in main.cc and the file to
+// tools/CMakeLists.txt.
+
+#include <string>
+
+namespace lrfnet::tools {
+
+inline constexpr int kExitOk = 0;
+inline constexpr int kExitFailure = 1;  // unreadable input, runtime failure
+inline constexpr int kExitUsage = 2;    // bad arguments
+
+// argv[0] is the subcommand name; the options follow.
+int RunDump(int argc, char** argv);
+int RunEmulate(int argc, char** argv);
+
+// Prints "lrfnet <subcommand>: <message> (see lrfnet <subcommand> --help)" as one line on stderr
+// and returns kExitUsage.
+int UsageError(const std::string& subcommand, const std::string& message);
+
+// Sends spdlog's default logger to stderr (stdout carries the subcommand's output) at `level`
+// ("trace", "debug", "info", "warn", "error", "off"). False for an unknown level name.
+bool SetUpLogging(const std::string& level);
+
+}  // namespace lrfnet::tools
