@@ -228,27 +228,36 @@ void SickClient::Connect() {
   decoder_.Reset();
   SetDeadline(options_.connect_timeout, DeadlineKind::kConnect);
   const std::uint64_t session = session_;
+  auto on_connect = [this, session](const boost::system::error_code& cec) {
+    if (session != session_) return;
+    if (cec) {
+      ++counters_.connect_failures;
+      Fail("connect failed: " + cec.message());
+      return;
+    }
+    OnConnected();
+  };
+  // Scanners are addressed by IP almost always: connect directly, without the resolver (whose
+  // private thread is needless work on the gateway and does not start under qemu-user).
+  boost::system::error_code parse_error;
+  const asio::ip::address address = asio::ip::make_address(options_.host, parse_error);
+  if (!parse_error) {
+    socket_.async_connect(tcp::endpoint(address, options_.port), on_connect);
+    return;
+  }
   resolver_.async_resolve(
       options_.host, std::to_string(options_.port), tcp::resolver::numeric_service,
-      [this, session](const boost::system::error_code& ec,
-                      const tcp::resolver::results_type& results) {
+      [this, session, on_connect](const boost::system::error_code& ec,
+                                  const tcp::resolver::results_type& results) {
         if (session != session_) return;
         if (ec) {
           ++counters_.connect_failures;
           Fail("cannot resolve " + options_.host + ": " + ec.message());
           return;
         }
-        asio::async_connect(
-            socket_, results,
-            [this, session](const boost::system::error_code& cec, const tcp::endpoint&) {
-              if (session != session_) return;
-              if (cec) {
-                ++counters_.connect_failures;
-                Fail("connect failed: " + cec.message());
-                return;
-              }
-              OnConnected();
-            });
+        asio::async_connect(socket_, results,
+                            [on_connect](const boost::system::error_code& cec,
+                                         const tcp::endpoint&) { on_connect(cec); });
       });
 }
 

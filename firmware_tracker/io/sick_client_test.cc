@@ -293,6 +293,11 @@ TEST(SickClientTest, RunsTheStartUpDialogueAndDeliversScansWithTheInjectedClock)
 }
 
 TEST(SickClientTest, StreamingAllocatesNothingPerScan) {
+#ifdef LRFNET_CROSS_EMULATED_TESTS
+  // The device runs on a second thread; the qemu-user of the cross test run (7.2) hangs in
+  // pthread_create. The tracker itself runs on one thread; the host run covers this test.
+  GTEST_SKIP() << "needs a second thread, which qemu-user does not start here";
+#endif
   // LMS511-sized scans, 1 ms apart, so every read completes about one telegram: the per-scan path
   // runs hundreds of times after the warm-up.
   constexpr int kScans = 300;

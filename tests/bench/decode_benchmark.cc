@@ -137,7 +137,7 @@ int main(int argc, char** argv) {
   // The telegram decoder alone on the stream's scan payloads.
   std::vector<std::vector<std::uint8_t>> payloads;
   {
-    lrfnet::cola::Framer framer({});
+    lrfnet::cola::Framer framer;
     framer.FeedAll(stream, [&](std::span<const std::uint8_t> p) {
       if (lrfnet::cola::IsScanTelegram(p)) payloads.emplace_back(p.begin(), p.end());
     }, [](const char*) {});
