@@ -69,7 +69,7 @@ if [ "${LRFNET_SKIP_CROSS:-0}" != 1 ]; then
        -DLRFNET_SHARED_DIR="$root/../shared" >/dev/null && cmake --build build-aarch64 -j"$jobs"; then
     stage "aarch64 tests under qemu-aarch64"
     file build-aarch64/firmware_tracker/app/lrfnet-tracker 2>/dev/null | sed 's/,.*//' || true
-    (cd build-aarch64 && ctest -j"$jobs" --output-on-failure --timeout 900) 2>&1 | tee build-aarch64/ctest.log
+    (cd build-aarch64 && ctest -j"$jobs" --output-on-failure --timeout 120) 2>&1 | tee build-aarch64/ctest.log
     read -r p f < <(ctest_counts build-aarch64/ctest.log)
     record aarch64-tests "$p" "$f"
   else

@@ -335,6 +335,11 @@ TEST(TcpReassembler, HostileSequenceJumpsStayBounded) {
 }
 
 TEST(TcpReassembler, PushBeforeDrainingAborts) {
+#ifdef LRFNET_CROSS_EMULATED_TESTS
+  // Death tests fork; a forked child hangs in the qemu-user of the cross test run. The host run
+  // covers this test.
+  GTEST_SKIP() << "death tests fork, which hangs under qemu-user here";
+#endif
   const auto push_twice = [] {
     TcpReassembler r;
     const std::uint8_t bytes[2] = {1, 2};
