@@ -26,24 +26,8 @@ int RunDump(int argc, char** argv) {
       "port", po::value<int>(&port)->default_value(2112), "the scanner's TCP port in the capture")(
       "log-level", po::value<std::string>(&log_level)->default_value("warn"),
       "trace, debug, info, warn, error or off (stderr)");
-  po::options_description hidden;
-  hidden.add_options()("capture", po::value<std::string>(), "capture file");
-  po::options_description all;
-  all.add(visible).add(hidden);
-  po::positional_options_description positional;
-  positional.add("capture", 1);
-
   po::variables_map vm;
-  try {
-    po::store(po::command_line_parser(argc, argv).options(all).positional(positional).run(), vm);
-    po::notify(vm);
-  } catch (const po::error& e) {
-    return UsageError("dump", e.what());
-  }
-  if (vm.count("help") != 0) {
-    std::cout << visible << "\n";
-    return kExitOk;
-  }
+  if (auto exit_code = ParseOptions("dump", argc, argv, visible, "capture", &vm)) return *exit_code;
   if (vm.count("capture") == 0)
     return UsageError("dump", "missing CAPTURE (a .pcap or .pcapng file)");
   if (port < 1 || port > 65535) return UsageError("dump", "--port must be 1..65535");

@@ -102,24 +102,8 @@ int RunEmulate(int argc, char** argv) {
                                                   po::value<long long>(&fault_restart),
                                                   "on every connection: after N scans the device "
                                                   "reboots (connection dropped, counters restart)");
-  po::options_description hidden;
-  hidden.add_options()("capture", po::value<std::string>(), "capture file");
-  po::options_description all;
-  all.add(visible).add(hidden);
-  po::positional_options_description positional;
-  positional.add("capture", 1);
-
   po::variables_map vm;
-  try {
-    po::store(po::command_line_parser(argc, argv).options(all).positional(positional).run(), vm);
-    po::notify(vm);
-  } catch (const po::error& e) {
-    return UsageError("emulate", e.what());
-  }
-  if (vm.count("help") != 0) {
-    std::cout << visible << "\n";
-    return kExitOk;
-  }
+  if (auto exit_code = ParseOptions("emulate", argc, argv, visible, "capture", &vm)) return *exit_code;
   const bool have_capture = vm.count("capture") != 0;
   if (have_capture == !synthetic.empty()) {
     return UsageError("emulate", "give either a CAPTURE file or --synthetic MODEL");

@@ -6,6 +6,7 @@
 #include <cstdio>
 #include <cstring>
 #include <exception>
+#include <iostream>
 #include <string>
 
 #include "tools/subcommands.h"
@@ -42,6 +43,31 @@ int UsageError(const std::string& subcommand, const std::string& message) {
   std::fprintf(stderr, "lrfnet %s: %s (see lrfnet %s --help)\n", subcommand.c_str(),
                message.c_str(), subcommand.c_str());
   return kExitUsage;
+}
+
+std::optional<int> ParseOptions(const std::string& subcommand, int argc, char** argv,
+                                const boost::program_options::options_description& visible,
+                                const std::string& positional,
+                                boost::program_options::variables_map* vm) {
+  namespace po = boost::program_options;
+  po::options_description hidden;
+  hidden.add_options()(positional.c_str(), po::value<std::string>(), "positional argument");
+  po::options_description all;
+  all.add(visible).add(hidden);
+  po::positional_options_description positional_options;
+  positional_options.add(positional.c_str(), 1);
+  try {
+    po::store(po::command_line_parser(argc, argv).options(all).positional(positional_options).run(),
+              *vm);
+    po::notify(*vm);
+  } catch (const po::error& e) {
+    return UsageError(subcommand, e.what());
+  }
+  if (vm->count("help") != 0) {
+    std::cout << visible << "\n";
+    return kExitOk;
+  }
+  return std::nullopt;
 }
 
 bool SetUpLogging(const std::string& level) {

@@ -4,6 +4,8 @@
 // file, declare its Run function here, add a row to kSubcommands in main.cc and the file to
 // tools/CMakeLists.txt.
 
+#include <boost/program_options.hpp>
+#include <optional>
 #include <string>
 
 namespace lrfnet::tools {
@@ -19,6 +21,14 @@ int RunEmulate(int argc, char** argv);
 // Prints "lrfnet <subcommand>: <message> (see lrfnet <subcommand> --help)" as one line on stderr
 // and returns kExitUsage.
 int UsageError(const std::string& subcommand, const std::string& message);
+
+// Parses the subcommand's options (`visible`, shown by --help) plus one positional argument stored
+// under `positional` (e.g. "capture"). Returns nullopt when the subcommand should go on, else the
+// exit code to return: kExitOk after printing --help, kExitUsage after a one-line parse error.
+std::optional<int> ParseOptions(const std::string& subcommand, int argc, char** argv,
+                                const boost::program_options::options_description& visible,
+                                const std::string& positional,
+                                boost::program_options::variables_map* vm);
 
 // Sends spdlog's default logger to stderr (stdout carries the subcommand's output) at `level`
 // ("trace", "debug", "info", "warn", "error", "off"). False for an unknown level name.
