@@ -3,6 +3,7 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 build_dir=${1:-build}
-cmake --build "$build_dir" --target decode_benchmark >/dev/null
+cmake --build "$build_dir" --target decode_benchmark tracker_benchmark >/dev/null
 mkdir -p results
 "$build_dir/tests/bench/decode_benchmark" --out results/decode_benchmark.md
+"$build_dir/tests/bench/tracker_benchmark" --out results/tracker_benchmark.md

@@ -1,7 +1,9 @@
 #!/usr/bin/env bash
-# Demo: `lrfnet emulate` plays a SICK LMS511 on loopback (the LMS511 capture of ../shared/data/sick when it
-# is there, else synthetic scans) and `lrfnet-tracker` connects to it over TCP: log-in, device ident, start
-# of measurement, scan stream. Prints every 10th of 100 scans and the link counters.
+# Demo: `lrfnet emulate` plays a SICK LMS511 on loopback (synthetic: a room with a person walking an
+# ellipse) and `lrfnet-tracker` connects to it over TCP (log-in, device ident, start of measurement, scan
+# stream), learns the background for 5 s, tracks the person and writes every datagram (track frames,
+# background snapshot, health, sensor info) to a recording. Prints the tracks of every 25th of 300 scans
+# and the counters.
 #   scripts/demo.sh [BUILD_DIR]    (default: build; build first with scripts/build.sh)
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -15,15 +17,8 @@ for binary in "$lrfnet" "$tracker"; do
   fi
 done
 
-shared_dir=${LRFNET_SHARED_DIR:-../shared}
-capture=$shared_dir/data/sick/lms511_20210301.pcap
-if [ -f "$capture" ]; then
-  source_args=("$capture")
-  source_text="LMS511 capture $capture"
-else
-  source_args=(--synthetic lms511)
-  source_text="synthetic LMS511 (no capture at $capture)"
-fi
+source_args=(--synthetic lms511)
+source_text="synthetic LMS511"
 
 work=$(mktemp -d)
 emulator_pid=""
@@ -53,5 +48,7 @@ if [ ! -s "$work/port" ]; then
 fi
 port=$(cat "$work/port")
 echo "demo: emulated device ($source_text) on 127.0.0.1:$port"
-echo "demo: lrfnet-tracker --sensor 127.0.0.1:$port --sensor-id demo --max-scans 100 --print-every 10"
-"$tracker" --sensor "127.0.0.1:$port" --sensor-id demo --max-scans 100 --print-every 10
+echo "demo: lrfnet-tracker --sensor 127.0.0.1:$port --sensor-id demo --out demo.rec --max-scans 300 --print-every 25"
+"$tracker" --sensor "127.0.0.1:$port" --sensor-id demo --out "$work/demo.rec" --max-scans 300 \
+  --print-every 25
+echo "demo: recording of $(stat -c %s "$work/demo.rec") bytes written (removed on exit)"

@@ -18,13 +18,14 @@ host_pkgs=(
   clang libclang-rt-14-dev            # libFuzzer + sanitizers for the fuzz targets
   libeigen3-dev libboost-dev libboost-program-options-dev
   libprotobuf-dev protobuf-compiler libspdlog-dev libfmt-dev
-  libpcap-dev libyaml-cpp-dev nlohmann-json3-dev
+  libpcap-dev libyaml-cpp-dev nlohmann-json3-dev nanopb libnanopb-dev
   libgtest-dev libgmock-dev libbenchmark-dev
 )
 cross_pkgs=(
   g++-aarch64-linux-gnu qemu-user
   libpcap-dev:arm64 libboost-dev:arm64 libboost-program-options-dev:arm64
-  libspdlog-dev:arm64 libfmt-dev:arm64 libgtest-dev:arm64 libyaml-cpp-dev:arm64
+  libspdlog-dev:arm64 libfmt-dev:arm64 libgtest-dev:arm64 libnanopb-dev:arm64
+  libyaml-cpp0.7:arm64                # runtime only: libyaml-cpp-dev is not co-installable, the host headers serve both
 )
 
 if [ "$(id -u)" -ne 0 ]; then

@@ -2,132 +2,30 @@
 // output, and `lrfnet emulate` + `lrfnet-tracker` as two processes over loopback (what
 // scripts/demo.sh does).
 
-#include <fcntl.h>
 #include <gtest/gtest.h>
-#include <signal.h>
-#include <spawn.h>
-#include <sys/wait.h>
-#include <unistd.h>
 
-#include <algorithm>
 #include <chrono>
 #include <filesystem>
-#include <fstream>
-#include <sstream>
 #include <string>
-#include <thread>
 #include <tuple>
 #include <vector>
 
+#include "tests/process_harness.h"
 #include "tests/support/test_data.h"
 #include "tools/dump.h"
-
-extern char** environ;
 
 namespace lrfnet {
 namespace {
 
 using std::chrono::milliseconds;
 using std::chrono::seconds;
+using testing::CountLines;
+using testing::CountPrefixed;
+using testing::Process;
+using testing::ReadText;
 
 const char* const kTool = LRFNET_TOOL_BINARY;
 const char* const kTracker = LRFNET_TRACKER_BINARY;
-
-std::string ReadText(const std::string& path) {
-  std::ifstream in(path);
-  std::stringstream s;
-  s << in.rdbuf();
-  return s.str();
-}
-
-std::size_t CountLines(const std::string& text) {
-  return static_cast<std::size_t>(std::count(text.begin(), text.end(), '\n'));
-}
-
-std::size_t CountPrefixed(const std::string& text, const std::string& prefix) {
-  std::size_t n = 0;
-  std::istringstream in(text);
-  for (std::string line; std::getline(in, line);) n += line.rfind(prefix, 0) == 0 ? 1 : 0;
-  return n;
-}
-
-class Process {
- public:
-  // Starts `binary args...` with stdout and stderr redirected to files in a fresh temp folder.
-  Process(const std::string& binary, const std::vector<std::string>& args) {
-    static int counter = 0;
-    dir_ = std::filesystem::path(::testing::TempDir()) /
-           ("lrfnet_cli_" + std::to_string(::getpid()) + "_" + std::to_string(counter++));
-    std::filesystem::create_directories(dir_);
-    out_path_ = (dir_ / "stdout").string();
-    err_path_ = (dir_ / "stderr").string();
-    std::vector<std::string> argv_strings = {binary};
-    argv_strings.insert(argv_strings.end(), args.begin(), args.end());
-    std::vector<char*> argv;
-    for (std::string& s : argv_strings) argv.push_back(s.data());
-    argv.push_back(nullptr);
-    posix_spawn_file_actions_t actions;
-    posix_spawn_file_actions_init(&actions);
-    posix_spawn_file_actions_addopen(&actions, 1, out_path_.c_str(), O_WRONLY | O_CREAT | O_TRUNC,
-                                     0644);
-    posix_spawn_file_actions_addopen(&actions, 2, err_path_.c_str(), O_WRONLY | O_CREAT | O_TRUNC,
-                                     0644);
-    const int rc = posix_spawn(&pid_, binary.c_str(), &actions, nullptr, argv.data(), environ);
-    posix_spawn_file_actions_destroy(&actions);
-    EXPECT_EQ(rc, 0) << "cannot start " << binary;
-    if (rc != 0) pid_ = -1;
-  }
-  ~Process() {
-    if (pid_ > 0 && !exited_) {
-      ::kill(pid_, SIGKILL);
-      int status = 0;
-      ::waitpid(pid_, &status, 0);
-    }
-    std::error_code ec;
-    std::filesystem::remove_all(dir_, ec);
-  }
-
-  // Exit code, or -1 on timeout (then the process is killed) / -2 when killed by a signal.
-  int Wait(milliseconds timeout = milliseconds(20'000)) {
-    if (pid_ <= 0) return -3;
-    const auto deadline = std::chrono::steady_clock::now() + timeout;
-    while (true) {
-      int status = 0;
-      const pid_t r = ::waitpid(pid_, &status, WNOHANG);
-      if (r == pid_) {
-        exited_ = true;
-        return WIFEXITED(status) ? WEXITSTATUS(status) : -2;
-      }
-      if (std::chrono::steady_clock::now() > deadline) {
-        ::kill(pid_, SIGKILL);
-        ::waitpid(pid_, &status, 0);
-        exited_ = true;
-        return -1;
-      }
-      std::this_thread::sleep_for(milliseconds(10));
-    }
-  }
-  void Signal(int signal_number) { ::kill(pid_, signal_number); }
-  std::string out() const { return ReadText(out_path_); }
-  std::string err() const { return ReadText(err_path_); }
-  std::string dir() const { return dir_.string(); }
-
-  // Polls stdout until it contains `text`.
-  bool WaitForOutput(const std::string& text, milliseconds timeout) {
-    const auto deadline = std::chrono::steady_clock::now() + timeout;
-    while (std::chrono::steady_clock::now() < deadline) {
-      if (out().find(text) != std::string::npos) return true;
-      std::this_thread::sleep_for(milliseconds(20));
-    }
-    return false;
-  }
-
- private:
-  std::filesystem::path dir_;
-  std::string out_path_, err_path_;
-  pid_t pid_ = -1;
-  bool exited_ = false;
-};
 
 struct BadArgs {
   std::vector<std::string> args;
@@ -183,7 +81,10 @@ TEST(CliTest, TrackerBadArgumentsGiveOneLineAndExitCode2) {
       {{"--sensor", "127.0.0.1", "--replay", "x.pcap", "--sensor-id", "s"}, 2},  // two sources
       {{"--sensor", "127.0.0.1:99999", "--sensor-id", "s"}, 2},
       {{"--sensor", "127.0.0.1:", "--sensor-id", "s"}, 2},
-      {{"--sensor", "127.0.0.1", "--sensor-id", "s", "--print-every", "0"}, 2},
+      {{"--sensor", "127.0.0.1", "--sensor-id", "s", "--print-every", "-1"}, 2},
+      {{"--sensor", "127.0.0.1", "--sensor-id", "s", "--uplink", "127.0.0.1"}, 2},  // no port
+      {{"--sensor", "127.0.0.1", "--sensor-id", "bad id"}, 2},
+      {{"--sensor", "127.0.0.1", "--sensor-id", "s", "--config", "no/such/config.yaml"}, 2},
       {{"--sensor", "127.0.0.1", "--sensor-id", "s", "--bogus"}, 2},
       {{"--sensor", "127.0.0.1", "--sensor-id", "s", "--reply-timeout-ms", "0"}, 2},
       {{"--sensor", "127.0.0.1", "--sensor-id", "s", "--log-level", "loud"}, 2},
@@ -226,7 +127,8 @@ TEST(CliTest, DumpBinaryPrintsTheLibraryOutputAndASummary) {
 
 TEST(CliTest, TrackerReplaysACapture) {
   LRFNET_REQUIRE_SHARED_FILE(capture, "data/sick/lms111_20210302.pcap");
-  Process all(kTracker, {"--replay", capture, "--sensor-id", "r1", "--log-level", "warn"});
+  Process all(kTracker, {"--replay", capture, "--sensor-id", "r1", "--print-every", "1",
+                         "--log-level", "warn"});
   ASSERT_EQ(all.Wait(), 0) << all.err();
   EXPECT_EQ(CountPrefixed(all.out(), "r1 tc="), 172u);
   EXPECT_NE(all.out().find("summary: sensor=r1 mode=replay scans=172"), std::string::npos)
@@ -260,8 +162,8 @@ TEST(CliTest, TrackerStreamsFromTheEmulatorProcessAndStopsOnSigint) {
   EXPECT_NE(tracker.out().find("ident='LMS511-10100'"), std::string::npos) << tracker.out();
 
   // Without --max-scans the tracker runs until a signal, then prints its counters and exits 0.
-  Process endless(kTracker,
-                  {"--sensor", "127.0.0.1:" + port, "--sensor-id", "sig", "--log-level", "warn"});
+  Process endless(kTracker, {"--sensor", "127.0.0.1:" + port, "--sensor-id", "sig", "--print-every",
+                             "1", "--log-level", "warn"});
   ASSERT_TRUE(endless.WaitForOutput("sig tc=", seconds(10))) << endless.err();
   endless.Signal(SIGINT);
   EXPECT_EQ(endless.Wait(seconds(10)), 0) << endless.err();

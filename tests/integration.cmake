@@ -17,3 +17,14 @@ if(TARGET cli_test)
                                               LRFNET_TRACKER_BINARY="$<TARGET_FILE:lrfnet-tracker>")
   add_dependencies(cli_test lrfnet lrfnet-tracker)
 endif()
+
+# lrfnet-tracker's outputs: --print-config, --replay --out recordings (read with libprotobuf), live
+# --uplink over UDP with Requests answered.
+lrfnet_test(tracker_cli_test SOURCES tracker_cli_test.cc LIBS lrfnet_proto)
+if(TARGET tracker_cli_test)
+  target_compile_definitions(tracker_cli_test PRIVATE
+    LRFNET_TOOL_BINARY="$<TARGET_FILE:lrfnet>"
+    LRFNET_TRACKER_BINARY="$<TARGET_FILE:lrfnet-tracker>"
+    LRFNET_TRACKER_CONFIG_FILE="${PROJECT_SOURCE_DIR}/firmware_tracker/config/lrfnet-tracker.yaml")
+  add_dependencies(tracker_cli_test lrfnet lrfnet-tracker)
+endif()

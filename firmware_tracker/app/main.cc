@@ -1,12 +1,15 @@
 // lrfnet-tracker: the gateway program next to one SICK scanner.
 //
-//   lrfnet-tracker --sensor HOST[:PORT] --sensor-id ID   live, CoLa-B over TCP (SickClient)
-//   lrfnet-tracker --replay CAPTURE --sensor-id ID       offline, a pcap/pcapng of the scanner's
-//                                                        TCP stream, as fast as it can be read
+//   lrfnet-tracker --sensor HOST[:PORT] --sensor-id ID --uplink HOST:PORT   live: CoLa-B over TCP in,
+//                                                                           tracks over UDP out
+//   lrfnet-tracker --replay CAPTURE --sensor-id ID --out REC                offline: a pcap/pcapng of
+//                                                                           the scanner's TCP stream
+//                                                                           in, a recording out
+//   lrfnet-tracker --print-config                                           the documented defaults
 //
-// Both paths feed cola::StreamDecoder. For now every scan (or every N-th) is printed as one line;
-// the tracking pipeline and the UDP uplink come later. SIGINT / SIGTERM stop cleanly and print the
-// counters.
+// Both modes feed cola::StreamDecoder and one TrackerNode (clock mapping, tracking, datagrams);
+// --uplink and --out may be combined in either mode. SIGINT / SIGTERM stop cleanly (the recording
+// is flushed and closed) and print the counters.
 
 #include <spdlog/fmt/fmt.h>
 #include <spdlog/sinks/stdout_color_sinks.h>
@@ -15,21 +18,38 @@
 #include <boost/asio/io_context.hpp>
 #include <boost/asio/post.hpp>
 #include <boost/asio/signal_set.hpp>
+#include <boost/asio/steady_timer.hpp>
 #include <boost/program_options.hpp>
+#include <chrono>
 #include <csignal>
 #include <cstdint>
 #include <cstdio>
 #include <ctime>
 #include <exception>
+#include <fstream>
+#include <functional>
 #include <iostream>
 #include <memory>
 #include <optional>
+#include <random>
+#include <sstream>
 #include <string>
 
 #include "common/time.h"
+#include "firmware_tracker/app/config.h"
+#include "firmware_tracker/app/tracker_node.h"
+#include "firmware_tracker/cola/commands.h"
 #include "firmware_tracker/cola/stream_decoder.h"
 #include "firmware_tracker/io/capture_stream.h"
+#include "firmware_tracker/io/datagram_encoder.h"
+#include "firmware_tracker/io/recording_writer.h"
 #include "firmware_tracker/io/sick_client.h"
+#include "firmware_tracker/io/system_clock.h"
+#include "firmware_tracker/io/udp_uplink.h"
+
+#ifndef LRFNET_VERSION
+#define LRFNET_VERSION "unknown"
+#endif
 
 namespace lrfnet::tracker {
 namespace {
@@ -48,50 +68,60 @@ int UsageError(const std::string& message) {
 
 struct HostPort {
   std::string host;
-  std::uint16_t port = 2112;
+  std::uint16_t port = 0;
 };
 
 // "HOST", "HOST:PORT", "[IPv6]" or "[IPv6]:PORT"; a bare IPv6 address (several colons) has no port.
-std::optional<HostPort> ParseHostPort(const std::string& text, std::string* error) {
+// `what` names the option in errors; `default_port` 0 means a port is required.
+std::optional<HostPort> ParseHostPort(const std::string& text, const std::string& what,
+                                      std::uint16_t default_port, std::string* error) {
   HostPort out;
+  out.port = default_port;
   std::string port_text;
+  bool has_port = false;
   if (!text.empty() && text.front() == '[') {
     const auto close = text.find(']');
     if (close == std::string::npos) {
-      *error = "--sensor: missing ']' in '" + text + "'";
+      *error = what + ": missing ']' in '" + text + "'";
       return std::nullopt;
     }
     out.host = text.substr(1, close - 1);
     if (close + 1 < text.size()) {
       if (text[close + 1] != ':') {
-        *error = "--sensor: expected ':PORT' after ']' in '" + text + "'";
+        *error = what + ": expected ':PORT' after ']' in '" + text + "'";
         return std::nullopt;
       }
       port_text = text.substr(close + 2);
+      has_port = true;
     }
   } else if (text.find(':') != std::string::npos && text.find(':') == text.rfind(':')) {
     out.host = text.substr(0, text.find(':'));
     port_text = text.substr(text.find(':') + 1);
+    has_port = true;
   } else {
     out.host = text;
   }
   if (out.host.empty()) {
-    *error = "--sensor: empty host in '" + text + "'";
+    *error = what + ": empty host in '" + text + "'";
     return std::nullopt;
   }
-  if (!port_text.empty() || text.back() == ':') {
+  if (has_port) {
     char* end = nullptr;
     const long port = std::strtol(port_text.c_str(), &end, 10);
     if (port_text.empty() || *end != '\0' || port < 1 || port > 65535) {
-      *error = "--sensor: bad port '" + port_text + "' (1..65535)";
+      *error = what + ": bad port '" + port_text + "' (1..65535)";
       return std::nullopt;
     }
     out.port = static_cast<std::uint16_t>(port);
   }
+  if (out.port == 0) {
+    *error = what + ": a port is required, HOST:PORT or [IPv6]:PORT";
+    return std::nullopt;
+  }
   return out;
 }
 
-// UTC as 2021-01-01T12:00:03.123456Z (µs: enough to tell scans 20 ms apart and short to read).
+// UTC as 2021-01-01T12:00:03.123456Z.
 std::string FormatUtc(common::UtcNs t_ns) {
   const std::time_t seconds =
       static_cast<std::time_t>(t_ns / common::kNsPerS) - (t_ns % common::kNsPerS < 0 ? 1 : 0);
@@ -103,39 +133,6 @@ std::string FormatUtc(common::UtcNs t_ns) {
                      tm.tm_mday, tm.tm_hour, tm.tm_min, tm.tm_sec, micros);
 }
 
-// Prints scans and decides when to stop; shared by the live and the replay path.
-class ScanPrinter {
- public:
-  ScanPrinter(std::string sensor_id, std::uint64_t print_every, std::uint64_t max_scans)
-      : sensor_id_(std::move(sensor_id)), print_every_(print_every), max_scans_(max_scans) {}
-
-  // Returns false once max_scans were seen (the caller stops).
-  bool OnScan(const cola::ScanTelegram& scan, common::UtcNs receive_time_ns) {
-    ++scans_;
-    if ((scans_ - 1) % print_every_ == 0) {
-      const cola::ScanChannel* dist = scan.FindChannel("DIST1");
-      std::string first;
-      if (dist != nullptr) {
-        for (std::size_t i = 0; i < std::min<std::size_t>(3, dist->count); ++i) {
-          first += fmt::format("{}{:.3f}", i == 0 ? "" : ", ", dist->RangeM(i));
-        }
-      }
-      fmt::print("{} tc={} sc={} points={} rx={} first_m=[{}]\n", sensor_id_, scan.telegram_counter,
-                 scan.scan_counter, dist != nullptr ? dist->count : 0, FormatUtc(receive_time_ns),
-                 first);
-      std::fflush(stdout);
-    }
-    return max_scans_ == 0 || scans_ < max_scans_;
-  }
-  std::uint64_t scans() const { return scans_; }
-
- private:
-  std::string sensor_id_;
-  std::uint64_t print_every_;
-  std::uint64_t max_scans_;
-  std::uint64_t scans_ = 0;
-};
-
 std::string DecoderSummary(const cola::StreamCounters& c) {
   return fmt::format(
       "frames={} bad_checksums={} oversize_lengths={} garbage_bytes={} other_telegrams={} "
@@ -144,15 +141,196 @@ std::string DecoderSummary(const cola::StreamCounters& c) {
       c.other_telegrams, c.bad_headers, c.scan_decode_errors);
 }
 
-int RunLive(const io::SickClientOptions& options, ScanPrinter& printer,
-            const std::string& sensor_id) {
+std::uint64_t RandomSessionId() {
+  std::random_device device;
+  return (static_cast<std::uint64_t>(device()) << 32) ^ device();
+}
+
+// Where the datagrams go: UDP, a recording, both, or only counted.
+class Outputs {
+ public:
+  std::optional<std::string> Open(const TrackerConfig& config, const std::string& record_path,
+                                   common::UtcNs created_ns) {
+    if (!config.uplink_address.empty()) {
+      std::string error;
+      const auto endpoint = ParseHostPort(config.uplink_address, "--uplink", 0, &error);
+      if (!endpoint) return error;
+      io::UdpUplinkOptions options;
+      options.host = endpoint->host;
+      options.port = endpoint->port;
+      options.sensor_id = config.sensor_id;
+      if (auto e = io::Validate(options)) return "--uplink: " + *e;
+      udp_ = std::make_unique<io::UdpUplink>(options);
+      if (auto e = udp_->Open()) return "--uplink " + config.uplink_address + ": " + *e;
+      (void)fanout_.Add(udp_.get());
+    }
+    if (!record_path.empty()) {
+      io::RecordingWriterOptions options;
+      options.path = record_path;
+      options.writer = std::string("lrfnet-tracker ") + LRFNET_VERSION;
+      options.source = io::TrackerRecordSource(config.sensor_id);
+      if (auto e = io::Validate(options)) return "--out: " + *e;
+      recording_ = std::make_unique<io::RecordingWriter>(options);
+      if (auto e = recording_->Open(created_ns)) return "--out " + record_path + ": " + *e;
+      (void)fanout_.Add(recording_.get());
+    }
+    return std::nullopt;
+  }
+
+  io::DatagramSink& sink() { return fanout_; }
+  io::UdpUplink* udp() { return udp_.get(); }
+
+  std::uint64_t send_errors() const {
+    return (udp_ ? udp_->counters().send_errors : 0) +
+           (recording_ ? recording_->counters().write_errors : 0);
+  }
+
+  // Closes the recording; false (message printed) when the last write failed.
+  bool Close() {
+    if (!recording_) return true;
+    if (auto e = recording_->Close()) {
+      std::fprintf(stderr, "lrfnet-tracker: recording: %s\n", e->c_str());
+      return false;
+    }
+    return true;
+  }
+
+  std::string Summary() const {
+    std::string out;
+    if (udp_) {
+      const io::UdpUplinkCounters& c = udp_->counters();
+      out += fmt::format(" udp_sent={} udp_bytes={} udp_send_errors={} requests={}",
+                         c.datagrams_sent, c.bytes_sent, c.send_errors, c.received);
+    }
+    if (recording_) {
+      const io::RecordingCounters& c = recording_->counters();
+      out += fmt::format(" recorded={} recording_bytes={} write_errors={}", c.entries_written,
+                         c.bytes_written, c.write_errors);
+    }
+    return out;
+  }
+
+ private:
+  io::DatagramFanout fanout_;
+  std::unique_ptr<io::UdpUplink> udp_;
+  std::unique_ptr<io::RecordingWriter> recording_;
+};
+
+// Scan printing and the stop rule, shared by both modes.
+class ScanLog {
+ public:
+  ScanLog(std::uint64_t print_every, std::uint64_t max_scans)
+      : print_every_(print_every), max_scans_(max_scans) {}
+
+  // Returns false once max_scans were seen (the caller stops).
+  bool OnScan(const std::string& sensor_id, const cola::ScanTelegram& scan,
+              common::UtcNs receive_time_ns, const TrackerNode& node) {
+    ++scans_;
+    if (print_every_ > 0 && (scans_ - 1) % print_every_ == 0) {
+      const tracking::ScanTracks& tracks = node.pipeline().last_tracks();
+      std::string list;
+      for (const tracking::TrackReport& t : tracks.tracks) {
+        list += fmt::format("{}{}@({:.2f},{:.2f})", list.empty() ? "" : " ", t.track_id, t.x_m,
+                            t.y_m);
+      }
+      const cola::ScanChannel* dist = scan.FindChannel("DIST1");
+      fmt::print("{} tc={} sc={} points={} rx={} scan_start={} tracks={} [{}]\n", sensor_id,
+                 scan.telegram_counter, scan.scan_counter, dist != nullptr ? dist->count : 0,
+                 FormatUtc(receive_time_ns), FormatUtc(tracks.scan_start_ns),
+                 tracks.tracks.size(), list);
+      std::fflush(stdout);
+    }
+    return max_scans_ == 0 || scans_ < max_scans_;
+  }
+  std::uint64_t scans() const { return scans_; }
+
+ private:
+  std::uint64_t print_every_;
+  std::uint64_t max_scans_;
+  std::uint64_t scans_ = 0;
+};
+
+std::string NodeSummary(const TrackerNode& node) {
+  const tracking::MultiTrackerCounters& t = node.pipeline().tracker().counters();
+  const io::DatagramEncoderCounters& e = node.encoder().counters();
+  const tracking::ClockMapperStatus clock = node.clock().status();
+  return fmt::format(
+      "tracks_created={} tracks_confirmed={} datagrams={} datagram_bytes={} frames={} "
+      "snapshots={} tick_offset_s={:.6f} drift_ppm={:.2f} device_restarts={}",
+      t.created, t.confirmed, e.datagrams, e.bytes, node.counters().frames,
+      node.counters().snapshots, clock.offset_s, clock.drift_ppm,
+      node.clock().counters().device_restarts);
+}
+
+double ElapsedUs(std::chrono::steady_clock::time_point since) {
+  return std::chrono::duration<double, std::micro>(std::chrono::steady_clock::now() - since)
+      .count();
+}
+
+int RunLive(const TrackerConfig& config, const std::string& record_path, ScanLog& log) {
+  Outputs outputs;
+  if (auto e = outputs.Open(config, record_path, io::NowUtcNs())) {
+    std::fprintf(stderr, "lrfnet-tracker: %s\n", e->c_str());
+    return kExitFailure;
+  }
+  auto node = std::make_unique<TrackerNode>(config, RandomSessionId(), outputs.sink());
+  io::ClockStatus clock_status = io::ReadClockStatus(config.clock_status);
+  spdlog::info("gateway clock: {} (estimated error {:.3f} ms)", io::ToString(clock_status.sync),
+               clock_status.esterror_s * 1e3);
+
   asio::io_context io;
   asio::signal_set signals(io, SIGINT, SIGTERM);
+  asio::steady_timer timer(io);
   std::unique_ptr<io::SickClient> client;
+  std::uint64_t ticks = 0;
+
+  const auto link_health = [&] {
+    LinkHealth link;
+    const io::SickClientCounters& c = client->counters();
+    link.bad_frames = c.bad_frames;
+    link.decode_errors = client->decoder_counters().scan_decode_errors;
+    link.reconnects = c.reconnects;
+    link.send_errors = outputs.send_errors();
+    return link;
+  };
+  const auto serve_requests = [&] {
+    if (outputs.udp() == nullptr) return;
+    outputs.udp()->Poll();
+    const io::PendingRequests requests = outputs.udp()->TakeRequests();
+    if (requests.send_sensor_info) node->RequestSensorInfo();
+    if (requests.send_background) node->RequestBackground();
+  };
+  std::function<void()> arm_timer = [&] {
+    timer.expires_after(std::chrono::milliseconds(200));
+    timer.async_wait([&](const boost::system::error_code& ec) {
+      if (ec) return;
+      ++ticks;
+      serve_requests();
+      if (ticks % 5 == 0) clock_status = io::ReadClockStatus(config.clock_status);
+      node->OnTick(io::NowUtcNs(), link_health(), clock_status);
+      if (ticks % 50 == 0) {
+        const io::SickClientCounters& c = client->counters();
+        spdlog::info("status: scans={} tracks={} reconnects={} bad_frames={} clock={} {}", c.scans,
+                     node->pipeline().last_tracks().tracks.size(), c.reconnects, c.bad_frames,
+                     io::ToString(clock_status.sync), NodeSummary(*node));
+      }
+      arm_timer();
+    });
+  };
+
+  io::SickClientOptions link = config.link;
   client = std::make_unique<io::SickClient>(
-      io, options, [&](const cola::ScanTelegram& scan, common::UtcNs receive_time_ns) {
-        if (!printer.OnScan(scan, receive_time_ns)) {
+      io, link, [&](const cola::ScanTelegram& scan, common::UtcNs receive_time_ns) {
+        const auto started = std::chrono::steady_clock::now();
+        const io::SickDeviceInfo& d = client->device_info();
+        node->SetDeviceIdentity(d.ident_name, d.serial_number, d.firmware_version);
+        serve_requests();
+        node->OnScan(scan, receive_time_ns, io::NowUtcNs());
+        node->RecordScanCpu(ElapsedUs(started));
+        node->OnTick(io::NowUtcNs(), link_health(), clock_status);
+        if (!log.OnScan(config.sensor_id, scan, receive_time_ns, *node)) {
           client->Stop();
+          timer.cancel();
           signals.cancel();
         }
       });
@@ -160,42 +338,82 @@ int RunLive(const io::SickClientOptions& options, ScanPrinter& printer,
     if (ec) return;
     spdlog::info("signal {}: stopping", signal_number);
     client->Stop();
+    timer.cancel();
   });
   client->Start();
+  arm_timer();
   io.run();
 
+  const bool closed = outputs.Close();
   const io::SickClientCounters& c = client->counters();
   const io::SickDeviceInfo& d = client->device_info();
-  fmt::print("device: sensor={} ident='{}' version='{}' firmware='{}' serial='{}'\n", sensor_id,
-             d.ident_name, d.ident_version, d.firmware_version, d.serial_number);
+  fmt::print("device: sensor={} ident='{}' version='{}' firmware='{}' serial='{}'\n",
+             config.sensor_id, d.ident_name, d.ident_version, d.firmware_version, d.serial_number);
   fmt::print(
       "summary: sensor={} mode=live scans={} connects={} connect_failures={} reconnects={} "
       "reply_timeouts={} read_timeouts={} sfa_replies={} handshake_failures={} disconnects={} "
-      "bad_frames={} bytes={} {}\n",
-      sensor_id, c.scans, c.connects, c.connect_failures, c.reconnects, c.reply_timeouts,
+      "bad_frames={} bytes={} {} {}{}\n",
+      config.sensor_id, c.scans, c.connects, c.connect_failures, c.reconnects, c.reply_timeouts,
       c.read_timeouts, c.sfa_replies, c.handshake_failures, c.disconnects, c.bad_frames, c.bytes,
-      DecoderSummary(client->decoder_counters()));
+      DecoderSummary(client->decoder_counters()), NodeSummary(*node), outputs.Summary());
   std::fflush(stdout);
-  return kExitOk;
+  return closed ? kExitOk : kExitFailure;
 }
 
-// Replays a capture through the decoder in slices posted to the io_context, so a signal is handled
-// between slices even for a large file.
+// Replays a capture through the decoder and the node in slices posted to the io_context, so a
+// signal is handled between slices even for a large file. Runs as fast as it can; every time is
+// the capture's.
 class Replay : public cola::TelegramListener {
  public:
-  Replay(asio::io_context& io, std::unique_ptr<io::CaptureStream> capture, ScanPrinter& printer)
-      : io_(io), capture_(std::move(capture)), printer_(printer) {}
+  Replay(asio::io_context& io, std::unique_ptr<io::CaptureStream> capture, TrackerNode& node,
+         Outputs& outputs, ScanLog& log, const TrackerConfig& config)
+      : io_(io),
+        capture_(std::move(capture)),
+        node_(node),
+        outputs_(outputs),
+        log_(log),
+        config_(config) {
+    clock_.sync = io::ClockSync::kReplay;
+  }
 
   void Start() {
     asio::post(io_, [this] { Slice(); });
   }
   void Stop() { stopped_ = true; }
-  bool finished() const { return finished_; }
   const io::CaptureStream& capture() const { return *capture_; }
   cola::StreamCounters decoder_counters() const { return decoder_->counters(); }
 
   void OnScan(const cola::ScanTelegram& scan, common::UtcNs receive_time_ns) override {
-    if (!stopped_ && !printer_.OnScan(scan, receive_time_ns)) stopped_ = true;
+    if (stopped_) return;
+    const auto started = std::chrono::steady_clock::now();
+    if (outputs_.udp() != nullptr) {
+      outputs_.udp()->Poll();
+      const io::PendingRequests requests = outputs_.udp()->TakeRequests();
+      if (requests.send_sensor_info) node_.RequestSensorInfo();
+      if (requests.send_background) node_.RequestBackground();
+    }
+    node_.OnScan(scan, receive_time_ns, receive_time_ns);
+    node_.RecordScanCpu(ElapsedUs(started));
+    node_.OnTick(receive_time_ns, Link(), clock_);
+    if (!log_.OnScan(config_.sensor_id, scan, receive_time_ns, node_)) stopped_ = true;
+  }
+
+  // Identity from the device's replies in the capture (when the capture holds the start-up).
+  void OnTelegram(const cola::TelegramHeader& header, std::span<const std::uint8_t>,
+                  common::UtcNs) override {
+    if (header.type != cola::CommandType::kReadAnswer) return;
+    cola::FlexString text;
+    if (header.name == "DeviceIdent") {
+      cola::DeviceIdent ident;
+      if (cola::DecodeDeviceIdent(header.args, &ident)) model_ = std::string(ident.name);
+    } else if (header.name == "FirmwareVersion" && cola::DecodeFlexString(header.args, &text)) {
+      firmware_ = std::string(text.text);
+    } else if (header.name == "SerialNumber" && cola::DecodeFlexString(header.args, &text)) {
+      serial_ = std::string(text.text);
+    } else {
+      return;
+    }
+    node_.SetDeviceIdentity(model_, serial_, firmware_);
   }
   void OnError(const char* reason, common::UtcNs) override {
     spdlog::debug("replay: bad frame: {}", reason);
@@ -204,18 +422,28 @@ class Replay : public cola::TelegramListener {
   std::function<void()> on_done;
 
  private:
+  LinkHealth Link() const {
+    LinkHealth link;
+    const cola::StreamCounters c = decoder_->counters();
+    link.bad_frames = c.framer.bad_checksum + c.framer.oversize_length;
+    link.decode_errors = c.scan_decode_errors + c.bad_headers;
+    link.send_errors = outputs_.send_errors();
+    return link;
+  }
+
   void Slice() {
     constexpr int kChunksPerSlice = 256;
     io::StreamChunk chunk;
+    bool finished = false;
     for (int i = 0; i < kChunksPerSlice && !stopped_; ++i) {
       if (!capture_->Next(&chunk)) {
-        finished_ = true;
+        finished = true;
         break;
       }
       if (chunk.discontinuity) decoder_->Reset();
       decoder_->Feed(chunk.bytes, chunk.receive_time_ns, *this);
     }
-    if (stopped_ || finished_) {
+    if (stopped_ || finished) {
       if (on_done) on_done();
       return;
     }
@@ -225,22 +453,36 @@ class Replay : public cola::TelegramListener {
   asio::io_context& io_;
   std::unique_ptr<io::CaptureStream> capture_;
   std::unique_ptr<cola::StreamDecoder> decoder_ = std::make_unique<cola::StreamDecoder>();
-  ScanPrinter& printer_;
+  TrackerNode& node_;
+  Outputs& outputs_;
+  ScanLog& log_;
+  const TrackerConfig& config_;
+  io::ClockStatus clock_;
+  std::string model_;
+  std::string serial_;
+  std::string firmware_;
   bool stopped_ = false;
-  bool finished_ = false;
 };
 
-int RunReplay(const std::string& path, const io::CaptureStreamOptions& options,
-              ScanPrinter& printer, const std::string& sensor_id) {
+int RunReplay(const TrackerConfig& config, const std::string& path,
+              const io::CaptureStreamOptions& options, const std::string& record_path,
+              ScanLog& log) {
   std::string error;
   std::unique_ptr<io::CaptureStream> capture = io::CaptureStream::Open(path, options, &error);
   if (!capture) {
     std::fprintf(stderr, "lrfnet-tracker: %s\n", error.c_str());
     return kExitFailure;
   }
+  Outputs outputs;
+  if (auto e = outputs.Open(config, record_path, io::NowUtcNs())) {
+    std::fprintf(stderr, "lrfnet-tracker: %s\n", e->c_str());
+    return kExitFailure;
+  }
+  auto node = std::make_unique<TrackerNode>(config, RandomSessionId(), outputs.sink());
+
   asio::io_context io;
   asio::signal_set signals(io, SIGINT, SIGTERM);
-  Replay replay(io, std::move(capture), printer);
+  Replay replay(io, std::move(capture), *node, outputs, log, config);
   replay.on_done = [&] { signals.cancel(); };
   signals.async_wait([&](const boost::system::error_code& ec, int signal_number) {
     if (ec) return;
@@ -250,56 +492,71 @@ int RunReplay(const std::string& path, const io::CaptureStreamOptions& options,
   replay.Start();
   io.run();
 
+  const bool closed = outputs.Close();
   const io::CaptureCounters& c = replay.capture().counters();
   fmt::print(
       "summary: sensor={} mode=replay scans={} packets={} stream_packets={} malformed_packets={} "
-      "retransmitted_bytes={} gaps={} gap_bytes={} {}\n",
-      sensor_id, printer.scans(), c.packets, c.stream_packets, c.malformed_packets,
-      c.retransmitted_bytes, c.gaps, c.gap_bytes, DecoderSummary(replay.decoder_counters()));
+      "retransmitted_bytes={} gaps={} gap_bytes={} {} {}{}\n",
+      config.sensor_id, log.scans(), c.packets, c.stream_packets, c.malformed_packets,
+      c.retransmitted_bytes, c.gaps, c.gap_bytes, DecoderSummary(replay.decoder_counters()),
+      NodeSummary(*node), outputs.Summary());
   std::fflush(stdout);
   if (!replay.capture().error().empty()) {
     std::fprintf(stderr, "lrfnet-tracker: %s\n", replay.capture().error().c_str());
     return kExitFailure;
   }
-  return kExitOk;
+  return closed ? kExitOk : kExitFailure;
 }
 
 int Run(int argc, char** argv) {
   po::options_description visible(
-      "lrfnet-tracker --sensor HOST[:PORT] --sensor-id ID [options]\n"
-      "lrfnet-tracker --replay CAPTURE --sensor-id ID [options]\n"
-      "Reads a SICK scanner live (CoLa-B over TCP: log-in, device ident, start of measurement, "
-      "scan stream;\n"
-      "reconnects on failure) or a pcap/pcapng capture of its TCP stream, and prints the scans.\n"
-      "Tracking and the UDP uplink (--uplink, --out) come with the tracking pipeline. Options",
+      "lrfnet-tracker --sensor HOST[:PORT] --sensor-id ID --uplink HOST:PORT [options]\n"
+      "lrfnet-tracker --replay CAPTURE --sensor-id ID --out REC [options]\n"
+      "lrfnet-tracker --print-config\n"
+      "Reads a SICK scanner live (CoLa-B over TCP; reconnects on failure) or a pcap/pcapng "
+      "capture of\n"
+      "its TCP stream, tracks the moving objects and sends track frames, background snapshots, "
+      "health and\n"
+      "sensor info as UDP datagrams (--uplink) and/or writes them to a recording (--out). "
+      "Options",
       100, 50);
+  std::string config_path;
   std::string sensor;
   std::string replay;
   std::string sensor_id;
-  long long print_every = 1;
+  std::string uplink;
+  std::string out;
+  long long print_every = 0;
   long long max_scans = 0;
   int capture_port = 2112;
-  long long connect_timeout_ms = 3000;
-  long long reply_timeout_ms = 2000;
-  double read_deadline_periods = 10.0;
+  long long connect_timeout_ms = 0;
+  long long reply_timeout_ms = 0;
+  double read_deadline_periods = 0.0;
   std::string log_level = "info";
   visible.add_options()("help,h", "this help")(
+      "print-config", "print every option with its default and documentation (YAML) and exit")(
+      "config", po::value<std::string>(&config_path),
+      "YAML config file (see --print-config); flags override it")(
       "sensor", po::value<std::string>(&sensor),
       "live: the scanner's address, HOST or HOST:PORT (port 2112)")(
       "replay", po::value<std::string>(&replay),
       "offline: a pcap/pcapng capture of the scanner's TCP stream")(
-      "sensor-id", po::value<std::string>(&sensor_id), "name of this sensor in output (required)")(
-      "print-every", po::value<long long>(&print_every)->default_value(1), "print every N-th scan")(
+      "sensor-id", po::value<std::string>(&sensor_id),
+      "name of this sensor in every datagram (required here or in the config)")(
+      "uplink", po::value<std::string>(&uplink), "send datagrams over UDP to lrfnetd at HOST:PORT")(
+      "out", po::value<std::string>(&out), "write the datagrams to this recording file")(
+      "print-every", po::value<long long>(&print_every)->default_value(0),
+      "print the tracks of every N-th scan (0: none)")(
       "max-scans", po::value<long long>(&max_scans)->default_value(0),
       "stop after N scans (0: never)")("capture-port",
                                        po::value<int>(&capture_port)->default_value(2112),
                                        "replay: the scanner's TCP port in the capture")(
-      "connect-timeout-ms", po::value<long long>(&connect_timeout_ms)->default_value(3000),
-      "live: TCP connect deadline")("reply-timeout-ms",
-                                    po::value<long long>(&reply_timeout_ms)->default_value(2000),
-                                    "live: deadline for each start-up command's reply")(
-      "read-deadline-periods", po::value<double>(&read_deadline_periods)->default_value(10.0),
-      "live: reconnect when no scan arrived for this many scan periods")(
+      "connect-timeout-ms", po::value<long long>(&connect_timeout_ms),
+      "live: TCP connect deadline (link.connect_timeout_ms)")(
+      "reply-timeout-ms", po::value<long long>(&reply_timeout_ms),
+      "live: deadline for each start-up reply (link.reply_timeout_ms)")(
+      "read-deadline-periods", po::value<double>(&read_deadline_periods),
+      "live: reconnect after this many scan periods without a scan")(
       "log-level", po::value<std::string>(&log_level)->default_value("info"),
       "trace, debug, info, warn, error or off (stderr)");
 
@@ -314,40 +571,67 @@ int Run(int argc, char** argv) {
     std::cout << visible << "\n";
     return kExitOk;
   }
-  if (sensor.empty() == replay.empty())
-    return UsageError("give either --sensor HOST[:PORT] or --replay CAPTURE");
-  if (sensor_id.empty()) return UsageError("--sensor-id is required");
-  if (print_every < 1) return UsageError("--print-every must be >= 1");
+
+  TrackerConfig config;
+  if (!config_path.empty()) {
+    std::ifstream file(config_path);
+    if (!file) return UsageError("--config: cannot read '" + config_path + "'");
+    std::stringstream text;
+    text << file.rdbuf();
+    if (auto e = LoadTrackerConfig(text.str(), config)) {
+      return UsageError("--config " + config_path + ": " + *e);
+    }
+  }
+  if (vm.count("print-config") != 0) {
+    std::cout << PrintTrackerConfig(config);
+    return kExitOk;
+  }
+
+  if (!sensor.empty()) config.sensor_address = sensor;
+  if (!sensor_id.empty()) config.sensor_id = sensor_id;
+  if (!uplink.empty()) config.uplink_address = uplink;
+  if (vm.count("connect-timeout-ms") != 0)
+    config.link.connect_timeout = std::chrono::milliseconds(connect_timeout_ms);
+  if (vm.count("reply-timeout-ms") != 0)
+    config.link.reply_timeout = std::chrono::milliseconds(reply_timeout_ms);
+  if (vm.count("read-deadline-periods") != 0)
+    config.link.read_deadline_scan_periods = read_deadline_periods;
+
+  if (replay.empty() && config.sensor_address.empty())
+    return UsageError("give --sensor HOST[:PORT] (or sensor.address in the config) or --replay CAPTURE");
+  if (!replay.empty() && !sensor.empty()) return UsageError("give either --sensor or --replay, not both");
+  if (config.sensor_id.empty()) return UsageError("--sensor-id is required");
+  if (print_every < 0) return UsageError("--print-every must be >= 0");
   if (max_scans < 0) return UsageError("--max-scans must be >= 0");
   const spdlog::level::level_enum level = spdlog::level::from_str(log_level);
   if (level == spdlog::level::off && log_level != "off") {
     return UsageError("unknown --log-level '" + log_level + "'");
   }
+  std::string error;
+  if (replay.empty()) {
+    const auto endpoint = ParseHostPort(config.sensor_address, "--sensor", 2112, &error);
+    if (!endpoint) return UsageError(error);
+    config.link.host = endpoint->host;
+    config.link.port = endpoint->port;
+  }
+  if (!config.uplink_address.empty() &&
+      !ParseHostPort(config.uplink_address, "--uplink", 0, &error)) {
+    return UsageError(error);
+  }
+  if (auto e = Validate(config)) return UsageError(*e);
   spdlog::set_default_logger(spdlog::stderr_color_mt("lrfnet-tracker"));
   spdlog::set_level(level);
 
-  ScanPrinter printer(sensor_id, static_cast<std::uint64_t>(print_every),
-                      static_cast<std::uint64_t>(max_scans));
+  ScanLog log(static_cast<std::uint64_t>(print_every), static_cast<std::uint64_t>(max_scans));
   if (!replay.empty()) {
     io::CaptureStreamOptions options;
     if (capture_port < 1 || capture_port > 65535)
       return UsageError("--capture-port must be 1..65535");
     options.sensor_port = static_cast<std::uint16_t>(capture_port);
     if (auto e = io::Validate(options)) return UsageError(*e);
-    return RunReplay(replay, options, printer, sensor_id);
+    return RunReplay(config, replay, options, out, log);
   }
-
-  std::string error;
-  const std::optional<HostPort> endpoint = ParseHostPort(sensor, &error);
-  if (!endpoint) return UsageError(error);
-  io::SickClientOptions options;
-  options.host = endpoint->host;
-  options.port = endpoint->port;
-  options.connect_timeout = std::chrono::milliseconds(connect_timeout_ms);
-  options.reply_timeout = std::chrono::milliseconds(reply_timeout_ms);
-  options.read_deadline_scan_periods = read_deadline_periods;
-  if (auto e = io::Validate(options)) return UsageError(*e);
-  return RunLive(options, printer, sensor_id);
+  return RunLive(config, out, log);
 }
 
 }  // namespace

@@ -1,6 +1,6 @@
 // Counts heap allocations while StreamDecoder decodes thousands of scan frames: there must be none
-// after construction. The global operator new is replaced for this whole binary, hence its own
-// executable.
+// after construction. The global allocation functions are replaced for this whole binary
+// (lrfnet_alloc_counter), hence its own executable.
 
 #include <gtest/gtest.h>
 
@@ -12,67 +12,26 @@
 
 #include "firmware_tracker/cola/cola_test_util.h"
 #include "firmware_tracker/cola/stream_decoder.h"
+#include "tests/support/alloc_counter.h"
 #include "tests/support/test_data.h"
-
-namespace {
-
-std::atomic<bool> g_counting{false};
-std::atomic<std::size_t> g_allocations{0};
-
-void* Allocate(std::size_t n) {
-  if (g_counting.load(std::memory_order_relaxed))
-    g_allocations.fetch_add(1, std::memory_order_relaxed);
-  return std::malloc(n == 0 ? 1 : n);
-}
-void* AllocateAligned(std::size_t n, std::align_val_t al) {
-  if (g_counting.load(std::memory_order_relaxed))
-    g_allocations.fetch_add(1, std::memory_order_relaxed);
-  const auto a = static_cast<std::size_t>(al);
-  return std::aligned_alloc(a, (n + a - 1) / a * a);
-}
-void* OrThrow(void* p) {
-  if (p == nullptr) throw std::bad_alloc();
-  return p;
-}
-
-}  // namespace
-
-void* operator new(std::size_t n) { return OrThrow(Allocate(n)); }
-void* operator new[](std::size_t n) { return OrThrow(Allocate(n)); }
-void* operator new(std::size_t n, const std::nothrow_t&) noexcept { return Allocate(n); }
-void* operator new[](std::size_t n, const std::nothrow_t&) noexcept { return Allocate(n); }
-void* operator new(std::size_t n, std::align_val_t al) { return OrThrow(AllocateAligned(n, al)); }
-void* operator new[](std::size_t n, std::align_val_t al) { return OrThrow(AllocateAligned(n, al)); }
-void* operator new(std::size_t n, std::align_val_t al, const std::nothrow_t&) noexcept {
-  return AllocateAligned(n, al);
-}
-void* operator new[](std::size_t n, std::align_val_t al, const std::nothrow_t&) noexcept {
-  return AllocateAligned(n, al);
-}
-void operator delete(void* p) noexcept { std::free(p); }
-void operator delete[](void* p) noexcept { std::free(p); }
-void operator delete(void* p, std::size_t) noexcept { std::free(p); }
-void operator delete[](void* p, std::size_t) noexcept { std::free(p); }
-void operator delete(void* p, const std::nothrow_t&) noexcept { std::free(p); }
-void operator delete[](void* p, const std::nothrow_t&) noexcept { std::free(p); }
-void operator delete(void* p, std::align_val_t) noexcept { std::free(p); }
-void operator delete[](void* p, std::align_val_t) noexcept { std::free(p); }
-void operator delete(void* p, std::size_t, std::align_val_t) noexcept { std::free(p); }
-void operator delete[](void* p, std::size_t, std::align_val_t) noexcept { std::free(p); }
-void operator delete(void* p, std::align_val_t, const std::nothrow_t&) noexcept { std::free(p); }
-void operator delete[](void* p, std::align_val_t, const std::nothrow_t&) noexcept { std::free(p); }
 
 namespace lrfnet::cola {
 namespace {
 
 class CountingScope {
  public:
-  CountingScope() {
-    g_allocations = 0;
-    g_counting = true;
+  CountingScope() { ::lrfnet::testing::StartCountingAllocations(); }
+  ~CountingScope() { Stop(); }
+  std::size_t allocations() { return Stop(); }
+
+ private:
+  std::size_t Stop() {
+    if (!stopped_) allocations_ = ::lrfnet::testing::StopCountingAllocations();
+    stopped_ = true;
+    return allocations_;
   }
-  ~CountingScope() { g_counting = false; }
-  std::size_t allocations() const { return g_allocations.load(); }
+  bool stopped_ = false;
+  std::size_t allocations_ = 0;
 };
 
 struct Tally : TelegramListener {
@@ -95,7 +54,7 @@ TEST(AllocationCounterTest, CountsAnAllocation) {
   CountingScope scope;
   auto* volatile p = new int(3);
   delete p;
-  EXPECT_EQ(scope.allocations(), 1u);
+  EXPECT_GE(scope.allocations(), 1u);
 }
 
 TEST(StreamDecoderAllocationTest, NoHeapAllocationWhileDecodingThousandsOfScans) {

@@ -1,98 +1,54 @@
 // Zero heap allocations per scan after start-up (DESIGN.md quality bar): replaces the global
 // allocation functions with counting ones and runs thousands of synthetic scans through background
-// model, segmentation, measurement and per-segment filters.
+// model, segmentation, measurement and per-segment filters, and through the whole
+// TrackingPipeline with a crowd of 20 people.
 
 #include <gtest/gtest.h>
 
 #include <atomic>
+#include <cmath>
 #include <cstddef>
 #include <cstdlib>
+#include <memory>
 #include <new>
 #include <vector>
 
 #include "firmware_tracker/tracking/background_model.h"
 #include "firmware_tracker/tracking/cv_ekf.h"
 #include "firmware_tracker/tracking/measurement.h"
+#include "firmware_tracker/tracking/pipeline.h"
 #include "firmware_tracker/tracking/segmentation.h"
 #include "firmware_tracker/tracking/tracking_test_util.h"
+#include "tests/support/alloc_counter.h"
 
-namespace {
-std::atomic<bool> g_counting{false};
-std::atomic<std::size_t> g_allocations{0};
-
-void* CountedAlloc(std::size_t size, std::size_t alignment) {
-  if (g_counting.load(std::memory_order_relaxed))
-    g_allocations.fetch_add(1, std::memory_order_relaxed);
-  if (size == 0) size = 1;
-  void* p = nullptr;
-  if (alignment <= alignof(std::max_align_t)) {
-    p = std::malloc(size);
-  } else {
-    p = std::aligned_alloc(alignment, (size + alignment - 1) / alignment * alignment);
-  }
-  if (p == nullptr) throw std::bad_alloc();
-  return p;
-}
-}  // namespace
-
-void* operator new(std::size_t size) { return CountedAlloc(size, 0); }
-void* operator new[](std::size_t size) { return CountedAlloc(size, 0); }
-void* operator new(std::size_t size, std::align_val_t a) {
-  return CountedAlloc(size, static_cast<std::size_t>(a));
-}
-void* operator new[](std::size_t size, std::align_val_t a) {
-  return CountedAlloc(size, static_cast<std::size_t>(a));
-}
-void* operator new(std::size_t size, const std::nothrow_t&) noexcept {
-  try {
-    return CountedAlloc(size, 0);
-  } catch (...) {
-    return nullptr;
-  }
-}
-void* operator new[](std::size_t size, const std::nothrow_t&) noexcept {
-  try {
-    return CountedAlloc(size, 0);
-  } catch (...) {
-    return nullptr;
-  }
-}
-void operator delete(void* p) noexcept { std::free(p); }
-void operator delete[](void* p) noexcept { std::free(p); }
-void operator delete(void* p, std::size_t) noexcept { std::free(p); }
-void operator delete[](void* p, std::size_t) noexcept { std::free(p); }
-void operator delete(void* p, std::align_val_t) noexcept { std::free(p); }
-void operator delete[](void* p, std::align_val_t) noexcept { std::free(p); }
-void operator delete(void* p, std::size_t, std::align_val_t) noexcept { std::free(p); }
-void operator delete[](void* p, std::size_t, std::align_val_t) noexcept { std::free(p); }
 
 namespace lrfnet::tracking {
 namespace {
 
-struct Pipeline {
+struct Stages {
   BackgroundModel background{BackgroundOptions{}};
   SegmentList segments;
   common::FixedVector<CvEkf, kMaxSegments> filters;
 };
 
 TEST(TrackingAllocTest, CounterSeesAllocations) {
-  g_allocations = 0;
-  g_counting = true;
+  ::lrfnet::testing::StartCountingAllocations();
   auto* p = new std::vector<int>(100);
-  g_counting = false;
+  const std::size_t allocations = ::lrfnet::testing::StopCountingAllocations();
   delete p;
-  EXPECT_EQ(g_allocations.load(), 2u);
+  EXPECT_GE(allocations, 2u);
 }
 
 TEST(TrackingAllocTest, NoHeapAllocationPerScanAfterTheFirst) {
   testing::SyntheticScanner scanner;
   const auto room = testing::Room();
-  auto pipeline = std::make_unique<Pipeline>();  // large: fixed buffers for kMaxBeams beams
+  auto pipeline = std::make_unique<Stages>();  // large: fixed buffers for kMaxBeams beams
   const SegmentationOptions seg_options;
   const MeasurementOptions meas_options;
   std::vector<testing::Body> bodies(3);
   constexpr int kScans = 3000;  // 2 minutes at 25 Hz, past learning and cart absorption
   std::size_t ellipses = 0, updates = 0, measured_scans = 0;
+  std::size_t allocations = 0;
 
   for (int k = 0; k < kScans; ++k) {
     const double t = k / 25.0;
@@ -105,11 +61,8 @@ TEST(TrackingAllocTest, NoHeapAllocationPerScanAfterTheFirst) {
     bodies[2] = {{t > 20.0 ? 4.0 : 30.0, -3.5}, 0.4, 0.3, 0.0};
     const ScanView scan = scanner.Render(k, room, bodies);  // outside the counted region
 
-    if (k == 1) {
-      g_allocations = 0;
-      g_counting = true;
-    }
-    Pipeline& p = *pipeline;
+    if (k >= 1) ::lrfnet::testing::StartCountingAllocations();
+    Stages& p = *pipeline;
     const BackgroundResult bg = p.background.Update(scan);
     if (bg.learned) {
       SegmentScan(scan, p.background.foreground(), seg_options, p.segments);
@@ -131,14 +84,58 @@ TEST(TrackingAllocTest, NoHeapAllocationPerScanAfterTheFirst) {
         }
       }
     }
-    g_counting = false;
+    if (k >= 1) allocations += ::lrfnet::testing::StopCountingAllocations();
   }
-  EXPECT_EQ(g_allocations.load(), 0u);
+  EXPECT_EQ(allocations, 0u);
   // The run exercised every stage.
   EXPECT_GT(measured_scans, 2000u);
   EXPECT_GT(ellipses, 2000u);
   EXPECT_GT(updates, 1000u);
   EXPECT_GT(pipeline->background.counters().absorbed_beams, 0u);
+}
+
+TEST(TrackingAllocTest, WholePipelineOnACrowdAllocatesNothingAfterTheFirstScan) {
+  testing::SyntheticScanner scanner;
+  const auto room = testing::Room();
+  // Allocated once, like the tracker application does.
+  auto pipeline = std::make_unique<TrackingPipeline>(TrackerOptions{});
+  constexpr int kPeople = 20;
+  constexpr int kScans = 3000;  // 2 minutes at 25 Hz
+  std::vector<testing::Body> bodies(kPeople);
+  std::size_t max_confirmed = 0, max_segments = 0;
+  std::size_t allocations = 0;
+
+  for (int k = 0; k < kScans; ++k) {
+    const double t = k / 25.0;
+    // People wander on Lissajous curves (0.3-1.5 m/s) over the room in front of the sensor and
+    // pass through each other; they enter after the background was learned.
+    for (int i = 0; i < kPeople; ++i) {
+      const double phase = 0.7 * i;
+      const double wx = 0.11 + 0.013 * i, wy = 0.07 + 0.017 * i;
+      const Eigen::Vector2d c(3.5 + 3.0 * std::sin(wx * t + phase),
+                              -0.5 + 3.8 * std::sin(wy * t + 2.0 * phase));
+      const Eigen::Vector2d v(3.0 * wx * std::cos(wx * t + phase),
+                              3.8 * wy * std::cos(wy * t + 2.0 * phase));
+      bodies[i] = {t < 6.0 ? Eigen::Vector2d(40.0, 0.0) : c, 0.25, 0.15,
+                   std::atan2(v.y(), v.x()) + common::kPi / 2};
+    }
+    const ScanView scan = scanner.Render(k, room, bodies);  // outside the counted region
+
+    if (k >= 1) ::lrfnet::testing::StartCountingAllocations();
+    const ScanTracks& out = pipeline->Process(scan, static_cast<std::uint32_t>(k));
+    if (k >= 1) allocations += ::lrfnet::testing::StopCountingAllocations();
+    max_confirmed = std::max(max_confirmed, out.tracks.size());
+    max_segments = std::max(max_segments, pipeline->last_segment_count());
+  }
+  EXPECT_EQ(allocations, 0u);
+  // The run exercised the whole pipeline: many tracks at once, births and deaths.
+  const MultiTrackerCounters& c = pipeline->tracker().counters();
+  EXPECT_GE(max_confirmed, 10u);
+  EXPECT_GE(max_segments, 10u);
+  EXPECT_GT(c.created, 20u);
+  EXPECT_GT(c.deleted(), 0u);
+  EXPECT_GT(c.associations, 10u * 2000u);
+  EXPECT_GT(pipeline->counters().ellipse_measurements, 0u);
 }
 
 }  // namespace

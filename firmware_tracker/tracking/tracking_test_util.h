@@ -43,25 +43,50 @@ struct ScannerConfig {
   double noise_sigma_m = 0.01;
   double rate_hz = 25.0;
   std::uint32_t seed = 1;
+  // Per beam and scan: probability of a spurious return at a uniform random range in
+  // [0.2 m, true range) (dust, rain, reflections), and of a no-echo (range 0) instead of the
+  // return.
+  double spurious_fraction = 0.0;
+  double dropout_fraction = 0.0;
 };
 
 class SyntheticScanner {
  public:
   explicit SyntheticScanner(const ScannerConfig& config = {})
-      : config_(config), ranges_(config.beams, 0.0f), rng_(config.seed) {}
+      : config_(config), ranges_(config.beams, 0.0f), rng_(config.seed) {
+    for (std::size_t i = 0; i < config_.beams; ++i) {
+      directions_.emplace_back(std::cos(BeamAngle(i)), std::sin(BeamAngle(i)));
+    }
+  }
 
   // Scan number k (stamp k / rate_hz seconds) of the given scene. The view refers to this object's
   // buffer and is valid until the next Render.
   ScanView Render(std::int64_t k, std::span<const Wall> walls, std::span<const Body> bodies) {
+    return RenderTimed(k, walls, [bodies](double) { return bodies; });
+  }
+
+  // As Render, but bodies move during the scan like in a real scanner: beam i is measured at
+  // BeamTimeS(k, i) (the mirror turns once per scan period, beam 0 at the scan start), and
+  // bodies_at(t_s) gives the bodies at that time (a std::span<const Body> valid until the next
+  // call).
+  template <typename BodiesAt>
+  ScanView RenderTimed(std::int64_t k, std::span<const Wall> walls, const BodiesAt& bodies_at) {
     std::normal_distribution<double> noise(0.0, 1.0);
+    std::uniform_real_distribution<double> uniform(0.0, 1.0);
     for (std::size_t i = 0; i < config_.beams; ++i) {
-      const double angle = BeamAngle(i);
-      const Eigen::Vector2d d(std::cos(angle), std::sin(angle));
+      const Eigen::Vector2d& d = directions_[i];
       double best = std::numeric_limits<double>::infinity();
       for (const Wall& w : walls) best = std::min(best, HitWall(d, w));
-      for (const Body& b : bodies) best = std::min(best, HitBody(d, b));
+      for (const Body& b : std::span<const Body>(bodies_at(BeamTimeS(k, i)))) {
+        best = std::min(best, HitBody(d, b));
+      }
       double r = best + config_.noise_sigma_m * noise(rng_);
       if (!(best <= config_.max_range_m)) r = 0.0;
+      if (config_.spurious_fraction > 0.0 && uniform(rng_) < config_.spurious_fraction) {
+        const double far = r > 0.0 ? r : config_.max_range_m;
+        r = 0.2 + (far - 0.2) * uniform(rng_);
+      }
+      if (config_.dropout_fraction > 0.0 && uniform(rng_) < config_.dropout_fraction) r = 0.0;
       ranges_[i] = static_cast<float>(std::max(r, 0.0));
     }
     ScanView view;
@@ -72,6 +97,14 @@ class SyntheticScanner {
     view.stamp_ns = StampNs(k);
     return view;
   }
+
+  // Seconds since scan 0 at which beam i of scan k is measured.
+  double BeamTimeS(std::int64_t k, std::size_t i) const {
+    return (static_cast<double>(k) +
+            static_cast<double>(i) * std::abs(config_.angle_step_rad) / (2.0 * common::kPi)) /
+           config_.rate_hz;
+  }
+  double ScanTimeS(std::int64_t k) const { return static_cast<double>(k) / config_.rate_hz; }
 
   common::UtcNs StampNs(std::int64_t k) const {
     return 1'600'000'000 * common::kNsPerS +
@@ -96,6 +129,10 @@ class SyntheticScanner {
     return (t > 0.0 && s >= 0.0 && s <= 1.0) ? t : std::numeric_limits<double>::infinity();
   }
   static double HitBody(const Eigen::Vector2d& d, const Body& b) {
+    // Cheap rejection by the enclosing circle before the exact ellipse intersection.
+    if (std::abs(Cross(d, b.centre_m)) > b.semi_major_m || d.dot(b.centre_m) < -b.semi_major_m) {
+      return std::numeric_limits<double>::infinity();
+    }
     const double c = std::cos(b.yaw_rad), s = std::sin(b.yaw_rad);
     const Eigen::Vector2d o(-(c * b.centre_m.x() + s * b.centre_m.y()),
                             -(-s * b.centre_m.x() + c * b.centre_m.y()));
@@ -111,6 +148,7 @@ class SyntheticScanner {
 
   ScannerConfig config_;
   std::vector<float> ranges_;
+  std::vector<Eigen::Vector2d> directions_;  // unit vector of every beam
   std::mt19937 rng_;
 };
 

@@ -6,12 +6,57 @@
 
 #include <cstdio>
 #include <filesystem>
+#include <fstream>
 #include <string>
 #include <vector>
 
+#include "firmware_tracker/io/datagram_encoder.h"
+#include "firmware_tracker/io/request_decoder.h"
 #include "tests/fuzz/capture_seeds.h"
 #include "tests/fuzz/cola_seeds.h"
 #include "tests/support/test_data.h"
+
+namespace {
+
+// request_fuzz: requests for the target's sensor id ("gate-3"), for all and for another sensor, and the
+// tracker's own datagram kinds, all made by the uplink's encoders.
+void WriteRequestSeeds(const std::filesystem::path& dir) {
+  struct Files final : lrfnet::io::DatagramSink {
+    std::filesystem::path dir;
+    int n = 0;
+    void Send(std::span<const std::uint8_t> d, lrfnet::common::UtcNs) override {
+      std::ofstream(dir / ("datagram_" + std::to_string(n++)), std::ios::binary)
+          .write(reinterpret_cast<const char*>(d.data()), static_cast<std::streamsize>(d.size()));
+    }
+  } files;
+  files.dir = dir;
+  for (const char* id : {"gate-3", "", "gate-4"}) {
+    for (int flags = 0; flags < 4; ++flags) {
+      lrfnet::io::RequestMessage m;
+      m.sensor_id = id;
+      m.sequence = static_cast<std::uint64_t>(flags) << 40;
+      m.sent_ns = 1'700'000'000'000'000'000;
+      m.send_sensor_info = (flags & 1) != 0;
+      m.send_background = (flags & 2) != 0;
+      std::uint8_t buf[lrfnet::io::kMaxDatagramBytes];
+      files.Send(std::span<const std::uint8_t>(buf, lrfnet::io::EncodeRequest(m, buf)), 0);
+    }
+  }
+  lrfnet::io::DatagramEncoder encoder({"gate-3", 7});
+  lrfnet::tracking::ScanTracks scan;
+  for (std::uint32_t i = 0; i < 16; ++i) {
+    lrfnet::tracking::TrackReport* t = scan.tracks.emplace_slot();
+    t->track_id = i;
+    t->x_m = i;
+  }
+  encoder.EncodeTracks(scan, 1, files);
+  const std::vector<float> ranges(500, 4.0f);
+  encoder.EncodeBackground({1, -0.1, 0.01, ranges}, 1, files);
+  encoder.EncodeHealth({}, 1, files);
+  encoder.EncodeSensorInfo({}, 1, files);
+}
+
+}  // namespace
 
 int main(int argc, char** argv) {
   if (argc != 2) {
@@ -22,7 +67,9 @@ int main(int argc, char** argv) {
   const std::string cola_dir = (out / "cola_fuzz").string();
   const std::string reassembler_dir = (out / "reassembler_fuzz").string();
   const std::string packet_dir = (out / "packet_fuzz").string();
-  for (const auto& d : {cola_dir, reassembler_dir, packet_dir}) std::filesystem::create_directories(d);
+  const std::string request_dir = (out / "request_fuzz").string();
+  for (const auto& d : {cola_dir, reassembler_dir, packet_dir, request_dir})
+    std::filesystem::create_directories(d);
 
   std::vector<std::vector<std::uint8_t>> streams;
   for (const auto& name : lrfnet::testing::SickCaptureNames()) {
@@ -35,9 +82,10 @@ int main(int argc, char** argv) {
     streams.push_back(lrfnet::fuzz::ReadSensorStream(*path));
   }
   lrfnet::fuzz::WriteColaSeeds(streams, cola_dir);
+  WriteRequestSeeds(request_dir);
 
   std::size_t files = 0;
-  for (const auto& d : {cola_dir, reassembler_dir, packet_dir}) {
+  for (const auto& d : {cola_dir, reassembler_dir, packet_dir, request_dir}) {
     for ([[maybe_unused]] const auto& e : std::filesystem::directory_iterator(d)) ++files;
   }
   std::printf("make_fuzz_corpus: %zu seed files in %s\n", files, out.string().c_str());

@@ -1,0 +1,262 @@
+#include "firmware_tracker/app/config.h"
+
+#include "firmware_tracker/io/datagram_encoder.h"
+
+#include <array>
+#include <cmath>
+
+namespace lrfnet::tracker {
+namespace {
+
+std::optional<std::string> Prefixed(const std::string& section,
+                                    const std::optional<std::string>& error) {
+  if (!error) return std::nullopt;
+  return section + ": " + *error;
+}
+
+void VisitSensor(TrackerConfig& c, ConfigVisitor& v) {
+  v.Section("sensor", "The scanner this tracker serves. Command-line flags override these.");
+  v.Field("id", c.sensor_id,
+          "Name of the sensor in every datagram and in the daemon: 1 to 32 letters, digits, "
+          "'_', '.' or '-'. --sensor-id.");
+  v.Field("address", c.sensor_address,
+          "The scanner's address, HOST or HOST:PORT (port 2112), for the live mode. --sensor.");
+  v.Field("uplink", c.uplink_address,
+          "Where the UDP datagrams go: HOST:PORT of lrfnetd (IPv4, IPv6 in brackets, or a name). "
+          "Empty: no UDP. --uplink.");
+}
+
+void VisitLink(io::SickClientOptions& o, ConfigVisitor& v) {
+  v.Section("link", "The CoLa-B session with the scanner (live mode).");
+  VisitMs(v, "connect_timeout_ms", o.connect_timeout,
+          "Name resolution and TCP connect must finish within this.");
+  VisitMs(v, "reply_timeout_ms", o.reply_timeout,
+          "Each start-up command (log-in, device ident, start of measurement) must be answered "
+          "within this.");
+  VisitMs(v, "first_scan_timeout_ms", o.first_scan_timeout,
+          "After the scan stream was enabled, the first scan must arrive within this.");
+  v.Field("read_deadline_scan_periods", o.read_deadline_scan_periods,
+          "No scan for this many scan periods: the session is dead and the tracker reconnects.");
+  VisitMs(v, "min_read_deadline_ms", o.min_read_deadline,
+          "Lower bound of that read deadline.");
+  VisitMs(v, "backoff_initial_ms", o.backoff.initial,
+          "First reconnect delay; doubled (backoff_multiplier) after every failed attempt.");
+  VisitMs(v, "backoff_max_ms", o.backoff.max, "Longest reconnect delay.");
+  v.Field("backoff_multiplier", o.backoff.multiplier, "Growth of the reconnect delay per failure.");
+  v.Field("backoff_jitter", o.backoff.jitter,
+          "Random fraction of the delay added or removed, in [0, 1), so many trackers do not "
+          "reconnect in lockstep.");
+  v.Field("configure_scan_data", o.configure_scan_data,
+          "Send sWN LMDscandatacfg (first echo, 16-bit RSSI, time block) before starting; off "
+          "keeps the device's stored output configuration.");
+  VisitInteger(v, "read_buffer_bytes", o.read_buffer_bytes, "Bytes per socket read.");
+}
+
+void VisitClock(tracking::ClockMapperOptions& o, double& max_error_s, ConfigVisitor& v) {
+  v.Section("clock",
+            "Mapping the scanner's microsecond tick to the gateway's UTC clock: offset = minimum "
+            "of (receive time - tick) over recent scans (Schenk et al.), drift from the lower "
+            "envelope.");
+  v.Field("window_s", o.window_s, "Window of the minimum-offset rule, seconds.");
+  v.Field("estimate_drift", o.estimate_drift,
+          "Track the drift of the scanner's oscillator against the gateway clock.");
+  v.Field("drift_window_s", o.drift_window_s,
+          "Device time over which the drift slope is fitted to the lower envelope.");
+  v.Field("min_drift_span_s", o.min_drift_span_s,
+          "Samples must span this much device time before a slope is fitted.");
+  v.Field("max_drift_ppm", o.max_drift_ppm, "Slope estimates are clamped to +- this.");
+  v.Field("bin_s", o.bin_s, "Resolution of the lower envelope: one minimum per bin.");
+  v.Field("restart_threshold_s", o.restart_threshold_s,
+          "The tick stepping back by more than this is a scanner restart (the model resets).");
+  v.Field("step_threshold_s", o.step_threshold_s,
+          "Offsets this far from the model are clock-step candidates.");
+  v.Field("settle_s", o.settle_s,
+          "A model younger than this accepts every sample without step detection.");
+  v.Field("step_forward_confirm_s", o.step_forward_confirm_s,
+          "Every sample above the model for this long: the gateway clock stepped forward.");
+  VisitInteger(v, "step_back_confirm_scans", o.step_back_confirm_scans,
+               "This many samples below the model in a row: the gateway clock stepped back.");
+  v.Field("max_device_delay_s", o.max_device_delay_s,
+          "Transmission tick minus stamp tick beyond this: the transmission tick is not trusted.");
+  v.Field("max_error_s", max_error_s,
+          "The kernel clock (adjtimex) counts as synchronized when its estimated error is below "
+          "this; reported in every Health datagram.");
+}
+
+void VisitBackground(tracking::BackgroundOptions& o, ConfigVisitor& v) {
+  v.Section("background",
+            "Per-beam background model: learned at start-up, then updated slowly. Foreground = "
+            "nearer than the background by more than base_margin_m + noise_margin_k * "
+            "(range_noise_m + range_noise_per_m * range).");
+  v.Field("learn_duration_s", o.learn_duration_s,
+          "Start-up learning time; no tracks are reported while learning.");
+  v.Field("min_range_m", o.min_range_m, "Nearer returns count as no echo (near-field values).");
+  v.Field("max_range_m", o.max_range_m, "Farther returns count as no echo.");
+  v.Field("base_margin_m", o.base_margin_m, "Constant part of the foreground margin.");
+  v.Field("range_noise_m", o.range_noise_m, "1-sigma range noise at 0 m.");
+  v.Field("range_noise_per_m", o.range_noise_per_m, "Added 1-sigma range noise per metre.");
+  v.Field("noise_margin_k", o.noise_margin_k, "Margin in range-noise sigmas.");
+  v.Field("absorb_after_s", o.absorb_after_s,
+          "A nearer object standing still this long becomes background (a parked cart); a person "
+          "standing for a few seconds does not.");
+  v.Field("recede_after_s", o.recede_after_s,
+          "A farther return or no echo persisting this long replaces the background (a door "
+          "opened, the cart left).");
+  v.Field("track_time_constant_s", o.track_time_constant_s,
+          "Time constant with which the background follows returns within its margin.");
+  v.Field("free_fraction", o.free_fraction,
+          "During learning, a beam without echo in more than this fraction of scans is free.");
+  v.Field("max_scan_gap_s", o.max_scan_gap_s,
+          "Time steps between scans are clamped to this, so a pause neither absorbs nor recedes.");
+}
+
+void VisitSegmentation(tracking::SegmentationOptions& o, ConfigVisitor& v) {
+  v.Section("segmentation",
+            "Jump-distance clustering of foreground beams: a point joins the open segment when "
+            "it is within jump_base_m + jump_per_m * range of the segment's last point.");
+  v.Field("jump_base_m", o.jump_base_m, "Constant part of the jump threshold.");
+  v.Field("jump_per_m", o.jump_per_m, "Range-proportional part of the jump threshold.");
+  VisitInteger(v, "max_missing_beams", o.max_missing_beams,
+               "Background beams allowed inside one segment.");
+  VisitInteger(v, "min_points", o.min_points, "Fewer points: dropped as noise.");
+  VisitInteger(v, "max_points", o.max_points, "More points: the segment is closed and split.");
+  v.Field("min_width_m", o.min_width_m, "Narrower segments are dropped.");
+  v.Field("max_width_m", o.max_width_m, "Wider segments are split.");
+}
+
+constexpr std::array<std::string_view, 2> kKindNames = {"center_of_mass", "ellipse"};
+
+void VisitMeasurement(tracking::MeasurementOptions& o, ConfigVisitor& v) {
+  v.Section("measurement",
+            "One position per segment: centre of mass, or the fixed-axes ellipse of Quenzel et "
+            "al. eqs. 3-4 (started from a direct least-squares fit). The kind is carried in every "
+            "track.");
+  int kind = o.fit_ellipse ? 1 : 0;
+  v.Choice("kind", kind, kKindNames,
+           "Measurement kind; an ellipse fit that fails its checks falls back to the centre of "
+           "mass for that segment.");
+  o.fit_ellipse = kind == 1;
+  v.Field("ellipse_major_m", o.ellipse_major_m, "Semi-major axis a of eq. 4 (upper body).");
+  v.Field("ellipse_minor_m", o.ellipse_minor_m, "Semi-minor axis b of eq. 4.");
+  VisitInteger(v, "min_ellipse_points", o.min_ellipse_points,
+               "Fewer points: centre of mass instead of an ellipse.");
+  VisitInteger(v, "max_iterations", o.max_iterations, "Levenberg-Marquardt iterations of eq. 3.");
+  v.Field("com_sigma_m", o.com_sigma_m, "1-sigma of a centre-of-mass measurement per axis.");
+  v.Field("min_point_sigma_m", o.min_point_sigma_m, "Floor of the ellipse fit's residual sigma.");
+  v.Field("min_position_sigma_m", o.min_position_sigma_m,
+          "Floor of the ellipse centre's sigma per axis.");
+  v.Field("max_position_sigma_m", o.max_position_sigma_m,
+          "Ellipse centres less certain than this fall back to the centre of mass.");
+  v.Field("max_centre_offset_m", o.max_centre_offset_m,
+          "Ellipse centres farther than this from the centre of mass fall back to it.");
+}
+
+constexpr std::array<std::string_view, 2> kAssociationNames = {"global_nearest_neighbour",
+                                                                "closest"};
+
+void VisitTracking(tracking::TrackerOptions& p, ConfigVisitor& v) {
+  tracking::MultiTrackerOptions& o = p.tracking;
+  v.Section("tracking",
+            "Constant-velocity Kalman filter per track, Mahalanobis gating, association, "
+            "lifecycle tentative -> confirmed (M of N) -> coasting -> deleted.");
+  v.Field("accel_psd_m2ps3", o.ekf.accel_psd_m2ps3,
+          "Process noise: white acceleration spectral density per axis, m^2/s^3.");
+  v.Field("initial_velocity_sigma_mps", o.ekf.initial_velocity_sigma_mps,
+          "Velocity prior of a new track, 1 sigma.");
+  VisitEnum(v, "association", o.association, kAssociationNames,
+            "global_nearest_neighbour: optimal assignment on the gated costs; closest: greedy by "
+            "Euclidean distance (the paper's rule).");
+  v.Field("gate_mahalanobis_sq", o.gate_mahalanobis_sq,
+          "Gate, squared Mahalanobis distance (9.21: chi-square, 2 dof, 99 %).");
+  v.Field("max_gate_distance_m", o.max_gate_distance_m, "Euclidean bound on top of the gate.");
+  v.Field("extra_measurement_sigma_m", o.extra_measurement_sigma_m,
+          "Added in quadrature to every measurement's sigma (sway, viewpoint changes).");
+  VisitInteger(v, "confirm_hits", o.confirm_hits, "M of the M-of-N confirmation.");
+  VisitInteger(v, "confirm_window", o.confirm_window, "N of the M-of-N confirmation (<= 32).");
+  v.Field("coast_timeout_s", o.coast_timeout_s,
+          "A confirmed track without measurements is deleted after this (occlusions shorter "
+          "than this keep their id).");
+  v.Field("max_position_sigma_m", o.max_position_sigma_m,
+          "A track whose position sigma grows beyond this is deleted.");
+  VisitInteger(v, "max_tracks", o.max_tracks, "Simultaneous tracks (at most 64).");
+  v.Field("max_time_gap_s", o.max_time_gap_s,
+          "A jump between consecutive scans beyond this (either way) deletes all tracks.");
+  v.Field("report_tentative", o.report_tentative, "Also send tentative (unconfirmed) tracks.");
+  v.Field("correct_beam_time", p.correct_beam_time,
+          "Stamp each measurement with its middle beam's time within the scan instead of the "
+          "scan start.");
+}
+
+void VisitPublish(PublishOptions& o, ConfigVisitor& v) {
+  v.Section("publish",
+            "What goes over UDP (and into --out): track frames, background snapshots, health, "
+            "sensor info. No datagram exceeds 1400 bytes; frames and snapshots are split.");
+  VisitInteger(v, "frame_every_n_scans", o.frame_every_n_scans,
+               "Track frames of every n-th scan (1: every scan).");
+  v.Field("health_period_s", o.health_period_s, "Health datagram period.");
+  v.Field("snapshot_period_s", o.snapshot_period_s,
+          "A background snapshot at least this often (also at start and on request).");
+  v.Field("snapshot_min_interval_s", o.snapshot_min_interval_s,
+          "At most this often when the background changes.");
+  v.Field("snapshot_change_fraction", o.snapshot_change_fraction,
+          "A new snapshot when this fraction of beams changed by more than the background margin "
+          "since the last one.");
+}
+
+}  // namespace
+
+std::optional<std::string> Validate(const PublishOptions& o) {
+  if (o.frame_every_n_scans < 1) return "frame_every_n_scans must be >= 1";
+  if (!(o.health_period_s >= 0.1 && o.health_period_s <= 3600.0))
+    return "health_period_s must be in [0.1, 3600]";
+  if (!(o.snapshot_period_s >= 1.0 && o.snapshot_period_s <= 86400.0))
+    return "snapshot_period_s must be in [1, 86400]";
+  if (!(o.snapshot_min_interval_s >= 0.0 && o.snapshot_min_interval_s <= o.snapshot_period_s))
+    return "snapshot_min_interval_s must be in [0, snapshot_period_s]";
+  if (!(o.snapshot_change_fraction > 0.0 && o.snapshot_change_fraction <= 1.0))
+    return "snapshot_change_fraction must be in (0, 1]";
+  return std::nullopt;
+}
+
+void VisitTrackerConfig(TrackerConfig& c, ConfigVisitor& v) {
+  VisitSensor(c, v);
+  VisitLink(c.link, v);
+  VisitClock(c.clock, c.clock_status.max_esterror_s, v);
+  VisitBackground(c.tracking.background, v);
+  VisitSegmentation(c.tracking.segmentation, v);
+  VisitMeasurement(c.tracking.measurement, v);
+  VisitTracking(c.tracking, v);
+  VisitPublish(c.publish, v);
+}
+
+std::optional<std::string> Validate(const TrackerConfig& c) {
+  if (!c.sensor_id.empty() && !io::IsValidSensorId(c.sensor_id))
+    return "sensor.id: '" + c.sensor_id + "' is not 1 to 32 letters, digits, '_', '.' or '-'";
+  // The link's host is checked where it is set (the live mode); validate the rest with a
+  // placeholder so a config without an address passes.
+  io::SickClientOptions link = c.link;
+  if (link.host.empty()) link.host = "localhost";
+  if (auto e = Prefixed("link", io::Validate(link))) return e;
+  if (auto e = tracking::Validate(c.clock)) return e;  // already says "clock: ..."
+  if (auto e = tracking::Validate(c.tracking)) return e;
+  if (auto e = Validate(c.publish)) return "publish." + *e;
+  if (auto e = io::Validate(c.clock_status)) return "clock.max_error_s: " + *e;
+  return std::nullopt;
+}
+
+std::optional<std::string> LoadTrackerConfig(std::string_view yaml_text, TrackerConfig& config) {
+  if (auto e = LoadYamlConfig(yaml_text, [&](ConfigVisitor& v) { VisitTrackerConfig(config, v); }))
+    return e;
+  return Validate(config);
+}
+
+std::string PrintTrackerConfig(const TrackerConfig& config) {
+  TrackerConfig copy = config;
+  return PrintYamlConfig(
+      [&](ConfigVisitor& v) { VisitTrackerConfig(copy, v); },
+      "lrfnet-tracker configuration (YAML). Every option with its default; lrfnet-tracker\n"
+      "--print-config prints this file, --config FILE reads one. Keys left out keep their\n"
+      "defaults; unknown keys are errors. Units are in the names (_s, _m, _ms, _ppm).");
+}
+
+}  // namespace lrfnet::tracker

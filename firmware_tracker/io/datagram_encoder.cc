@@ -1,0 +1,277 @@
+#include "firmware_tracker/io/datagram_encoder.h"
+
+#include <pb_encode.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <cstring>
+
+namespace lrfnet::io {
+namespace {
+
+lrfnet_proto_TrackState ToProto(tracking::TrackState state) {
+  switch (state) {
+    case tracking::TrackState::kTentative:
+      return lrfnet_proto_TrackState_TRACK_STATE_TENTATIVE;
+    case tracking::TrackState::kConfirmed:
+      return lrfnet_proto_TrackState_TRACK_STATE_CONFIRMED;
+    case tracking::TrackState::kCoasting:
+      return lrfnet_proto_TrackState_TRACK_STATE_COASTING;
+  }
+  return lrfnet_proto_TrackState_TRACK_STATE_UNSPECIFIED;
+}
+
+lrfnet_proto_MeasurementKind ToProto(tracking::MeasurementKind kind) {
+  switch (kind) {
+    case tracking::MeasurementKind::kCenterOfMass:
+      return lrfnet_proto_MeasurementKind_MEASUREMENT_KIND_CENTER_OF_MASS;
+    case tracking::MeasurementKind::kEllipse:
+      return lrfnet_proto_MeasurementKind_MEASUREMENT_KIND_ELLIPSE;
+  }
+  return lrfnet_proto_MeasurementKind_MEASUREMENT_KIND_UNSPECIFIED;
+}
+
+lrfnet_proto_ClockSyncState ToProto(ClockSync sync) {
+  switch (sync) {
+    case ClockSync::kUnknown:
+      return lrfnet_proto_ClockSyncState_CLOCK_SYNC_UNSPECIFIED;
+    case ClockSync::kSynchronized:
+      return lrfnet_proto_ClockSyncState_CLOCK_SYNC_SYNCHRONIZED;
+    case ClockSync::kUnsynchronized:
+      return lrfnet_proto_ClockSyncState_CLOCK_SYNC_UNSYNCHRONIZED;
+    case ClockSync::kReplay:
+      return lrfnet_proto_ClockSyncState_CLOCK_SYNC_REPLAY;
+  }
+  return lrfnet_proto_ClockSyncState_CLOCK_SYNC_UNSPECIFIED;
+}
+
+// Fills the wire track; false when a value is not finite as a float (such a track would poison the
+// daemon's filters).
+bool ToProto(const tracking::TrackReport& r, lrfnet_proto_Track* t) {
+  *t = lrfnet_proto_Track{};
+  t->track_id = r.track_id;
+  t->state = ToProto(r.state);
+  t->kind = ToProto(r.kind);
+  t->x_m = static_cast<float>(r.x_m);
+  t->y_m = static_cast<float>(r.y_m);
+  t->vx_mps = static_cast<float>(r.vx_mps);
+  t->vy_mps = static_cast<float>(r.vy_mps);
+  bool finite = std::isfinite(t->x_m) && std::isfinite(t->y_m) && std::isfinite(t->vx_mps) &&
+                std::isfinite(t->vy_mps);
+  // Upper triangle, row-major (the order documented in lrfnet.proto).
+  pb_size_t n = 0;
+  for (int row = 0; row < 4; ++row) {
+    for (int col = row; col < 4; ++col) {
+      const auto v = static_cast<float>(r.covariance(row, col));
+      finite = finite && std::isfinite(v);
+      t->covariance[n++] = v;
+    }
+  }
+  t->covariance_count = n;
+  t->age_scans = r.age_scans;
+  t->points = r.points;
+  if (r.kind == tracking::MeasurementKind::kEllipse) {
+    t->ellipse_yaw_rad = static_cast<float>(r.ellipse_yaw_rad);
+    finite = finite && std::isfinite(t->ellipse_yaw_rad);
+  }
+  return finite;
+}
+
+}  // namespace
+
+bool DatagramFanout::Add(DatagramSink* sink) {
+  if (sink == nullptr || count_ == kMaxSinks) return false;
+  sinks_[count_++] = sink;
+  return true;
+}
+
+void DatagramFanout::Send(std::span<const std::uint8_t> datagram, common::UtcNs sent_ns) {
+  for (std::size_t i = 0; i < count_; ++i) sinks_[i]->Send(datagram, sent_ns);
+}
+
+bool IsValidSensorId(std::string_view id) {
+  if (id.empty() || id.size() > kMaxSensorIdLength) return false;
+  return std::all_of(id.begin(), id.end(), [](char c) {
+    return (c >= 'A' && c <= 'Z') || (c >= 'a' && c <= 'z') || (c >= '0' && c <= '9') || c == '_' ||
+           c == '.' || c == '-';
+  });
+}
+
+std::optional<std::string> Validate(const DatagramEncoderOptions& options) {
+  if (!IsValidSensorId(options.sensor_id))
+    return "sensor id '" + options.sensor_id + "' must match [A-Za-z0-9_.-]{1,32}";
+  return std::nullopt;
+}
+
+DatagramEncoder::DatagramEncoder(const DatagramEncoderOptions& options)
+    : session_id_(options.session_id) {
+  if (const auto error = Validate(options)) {
+    std::fprintf(stderr, "DatagramEncoder: invalid options: %s\n", error->c_str());
+    std::abort();
+  }
+  std::memcpy(sensor_id_.data(), options.sensor_id.data(), options.sensor_id.size());
+}
+
+void DatagramEncoder::StartDatagram(pb_size_t payload_tag, common::UtcNs sent_ns) {
+  message_.version = lrfnet_proto_ProtocolVersion_PROTOCOL_VERSION_1;
+  std::memcpy(message_.sensor_id, sensor_id_.data(), sensor_id_.size());
+  message_.sequence = sequence_;
+  message_.sent_ns = sent_ns;
+  message_.session_id = session_id_;
+  message_.which_payload = payload_tag;
+}
+
+bool DatagramEncoder::Emit(common::UtcNs sent_ns, DatagramSink& sink) {
+  pb_ostream_t stream = pb_ostream_from_buffer(buffer_.data(), buffer_.size());
+  if (!pb_encode(&stream, lrfnet_proto_Datagram_fields, &message_)) {
+    ++counters_.encode_errors;
+    return false;
+  }
+  sink.Send(std::span<const std::uint8_t>(buffer_.data(), stream.bytes_written), sent_ns);
+  ++sequence_;
+  ++counters_.datagrams;
+  counters_.bytes += stream.bytes_written;
+  return true;
+}
+
+void DatagramEncoder::CopyString(std::string_view text, char* out, std::size_t capacity) {
+  const std::size_t n = std::min(text.size(), capacity - 1);
+  if (n < text.size()) ++counters_.truncated_strings;
+  for (std::size_t i = 0; i < n; ++i) {
+    const auto c = static_cast<unsigned char>(text[i]);
+    out[i] = (c >= 0x20 && c < 0x7f) ? static_cast<char>(c) : '?';
+  }
+  out[n] = '\0';
+}
+
+std::size_t DatagramEncoder::EncodeTracks(const tracking::ScanTracks& scan, common::UtcNs sent_ns,
+                                          DatagramSink& sink) {
+  ++counters_.track_frames;
+  // Converted first, so part_count counts only the tracks that are sent.
+  std::size_t valid = 0;
+  std::array<bool, tracking::kMaxTracks> keep{};
+  lrfnet_proto_Track scratch;
+  for (std::size_t i = 0; i < scan.tracks.size(); ++i) {
+    keep[i] = ToProto(scan.tracks[i], &scratch);
+    valid += keep[i] ? 1 : 0;
+  }
+  counters_.dropped_tracks += scan.tracks.size() - valid;
+  const std::size_t parts = std::max<std::size_t>(1, (valid + kTracksPerPart - 1) / kTracksPerPart);
+
+  std::size_t sent = 0;
+  std::size_t next = 0;
+  for (std::size_t part = 0; part < parts; ++part) {
+    StartDatagram(lrfnet_proto_Datagram_track_frame_tag, sent_ns);
+    lrfnet_proto_TrackFrame& frame = message_.payload.track_frame;
+    frame.scan_start_ns = scan.scan_start_ns;
+    frame.scan_period_s = scan.scan_period_s;
+    frame.scan_counter = scan.scan_counter;
+    frame.part = static_cast<std::uint32_t>(part);
+    frame.part_count = static_cast<std::uint32_t>(parts);
+    frame.tracks_count = 0;
+    while (frame.tracks_count < kTracksPerPart && next < scan.tracks.size()) {
+      if (keep[next]) ToProto(scan.tracks[next], &frame.tracks[frame.tracks_count++]);
+      ++next;
+    }
+    counters_.tracks += frame.tracks_count;
+    if (Emit(sent_ns, sink)) {
+      ++sent;
+      ++counters_.track_parts;
+    }
+  }
+  return sent;
+}
+
+std::size_t DatagramEncoder::EncodeBackground(const BackgroundSnapshotView& snapshot,
+                                              common::UtcNs sent_ns, DatagramSink& sink) {
+  const std::size_t beams = snapshot.range_m.size();
+  if (beams == 0) return 0;
+  ++counters_.snapshots;
+  const std::size_t parts = (beams + kBeamsPerPart - 1) / kBeamsPerPart;
+  std::size_t sent = 0;
+  for (std::size_t part = 0; part < parts; ++part) {
+    StartDatagram(lrfnet_proto_Datagram_background_tag, sent_ns);
+    lrfnet_proto_BackgroundSnapshot& s = message_.payload.background;
+    s.snapshot_id = snapshot_id_;
+    s.learned_until_ns = snapshot.learned_until_ns;
+    s.first_angle_rad = snapshot.first_angle_rad;
+    s.angle_step_rad = snapshot.angle_step_rad;
+    s.beam_count = static_cast<std::uint32_t>(beams);
+    s.part = static_cast<std::uint32_t>(part);
+    s.part_count = static_cast<std::uint32_t>(parts);
+    const std::size_t first = part * kBeamsPerPart;
+    const std::size_t count = std::min(kBeamsPerPart, beams - first);
+    s.first_beam = static_cast<std::uint32_t>(first);
+    s.ranges_mm_count = static_cast<pb_size_t>(count);
+    for (std::size_t i = 0; i < count; ++i) {
+      const float r_m = snapshot.range_m[first + i];
+      std::uint32_t mm = 0;
+      if (std::isfinite(r_m) && r_m > 0.0f) {
+        const double v = std::round(static_cast<double>(r_m) * 1000.0);
+        if (v > static_cast<double>(kMaxRangeMm)) {
+          mm = kMaxRangeMm;
+          ++counters_.clamped_ranges;
+        } else {
+          mm = std::max<std::uint32_t>(1,
+                                       static_cast<std::uint32_t>(v));  // a return is never "free"
+        }
+      }
+      s.ranges_mm[i] = mm;
+    }
+    if (Emit(sent_ns, sink)) {
+      ++sent;
+      ++counters_.snapshot_parts;
+    }
+  }
+  ++snapshot_id_;
+  return sent;
+}
+
+bool DatagramEncoder::EncodeHealth(const HealthReport& h, common::UtcNs sent_ns,
+                                   DatagramSink& sink) {
+  StartDatagram(lrfnet_proto_Datagram_health_tag, sent_ns);
+  lrfnet_proto_Health& p = message_.payload.health;
+  p = lrfnet_proto_Health{};
+  p.scans = h.scans;
+  p.bad_frames = h.bad_frames;
+  p.decode_errors = h.decode_errors;
+  p.reconnects = h.reconnects;
+  p.dropped_tracks = h.dropped_tracks;
+  p.datagrams_sent = h.datagrams_sent;
+  p.send_errors = h.send_errors;
+  p.scan_cpu_us_mean = h.scan_cpu_us_mean;
+  p.scan_cpu_us_max = h.scan_cpu_us_max;
+  p.clock_sync = ToProto(h.clock_sync);
+  p.clock_error_estimate_s = h.clock_error_estimate_s;
+  p.tick_offset_s = h.tick_offset_s;
+  p.tick_drift_ppm = h.tick_drift_ppm;
+  p.device_restarts = h.device_restarts;
+  const bool ok = Emit(sent_ns, sink);
+  counters_.health += ok ? 1 : 0;
+  return ok;
+}
+
+bool DatagramEncoder::EncodeSensorInfo(const SensorInfoReport& info, common::UtcNs sent_ns,
+                                       DatagramSink& sink) {
+  StartDatagram(lrfnet_proto_Datagram_sensor_info_tag, sent_ns);
+  lrfnet_proto_SensorInfo& p = message_.payload.sensor_info;
+  p = lrfnet_proto_SensorInfo{};
+  CopyString(info.model, p.model, sizeof(p.model));
+  CopyString(info.serial, p.serial, sizeof(p.serial));
+  CopyString(info.firmware, p.firmware, sizeof(p.firmware));
+  CopyString(info.tracker_version, p.tracker_version, sizeof(p.tracker_version));
+  p.first_angle_rad = info.first_angle_rad;
+  p.angle_step_rad = info.angle_step_rad;
+  p.beam_count = info.beam_count;
+  p.fov_rad = info.fov_rad;
+  p.scan_frequency_hz = info.scan_frequency_hz;
+  p.max_range_m = info.max_range_m;
+  p.kind = ToProto(info.kind);
+  const bool ok = Emit(sent_ns, sink);
+  counters_.sensor_info += ok ? 1 : 0;
+  return ok;
+}
+
+}  // namespace lrfnet::io

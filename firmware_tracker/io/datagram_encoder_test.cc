@@ -1,0 +1,430 @@
+#include "firmware_tracker/io/datagram_encoder.h"
+
+#include <gtest/gtest.h>
+#include <pb_decode.h>
+#include <pb_encode.h>
+
+#include <cmath>
+#include <cstdint>
+#include <limits>
+#include <string>
+#include <vector>
+
+namespace lrfnet::io {
+namespace {
+
+constexpr common::UtcNs kSentNs = 1'700'000'000'123'456'789;
+
+struct CollectSink final : DatagramSink {
+  std::vector<std::vector<std::uint8_t>> datagrams;
+  std::vector<common::UtcNs> sent;
+  void Send(std::span<const std::uint8_t> d, common::UtcNs sent_ns) override {
+    datagrams.emplace_back(d.begin(), d.end());
+    sent.push_back(sent_ns);
+  }
+};
+
+// nanopb is the decoder here so these tests also run in the tracker-only build; uplink_wire_test
+// repeats the essentials with libprotobuf.
+lrfnet_proto_Datagram Decode(const std::vector<std::uint8_t>& bytes) {
+  lrfnet_proto_Datagram d{};
+  pb_istream_t stream = pb_istream_from_buffer(bytes.data(), bytes.size());
+  EXPECT_TRUE(pb_decode(&stream, lrfnet_proto_Datagram_fields, &d)) << PB_GET_ERROR(&stream);
+  return d;
+}
+
+DatagramEncoderOptions Options(const std::string& id = "hall-north.lms511") {
+  DatagramEncoderOptions o;
+  o.sensor_id = id;
+  o.session_id = 0xC0FFEE1234ull;
+  return o;
+}
+
+tracking::TrackReport MakeTrack(std::uint32_t id) {
+  tracking::TrackReport t;
+  t.track_id = id;
+  t.state = tracking::TrackState::kConfirmed;
+  t.kind = tracking::MeasurementKind::kEllipse;
+  t.x_m = 1.5 + id;
+  t.y_m = -2.25;
+  t.vx_mps = 0.5;
+  t.vy_mps = -1.25;
+  for (int r = 0; r < 4; ++r) {
+    for (int c = 0; c < 4; ++c) t.covariance(r, c) = 0.01 * (1 + std::min(r, c)) + 0.1 * (r == c);
+  }
+  t.covariance(0, 1) = t.covariance(1, 0) = 0.002;
+  t.covariance(2, 3) = t.covariance(3, 2) = 0.003;
+  t.age_scans = 10 * id;
+  t.points = 7;
+  t.ellipse_yaw_rad = 0.75;
+  return t;
+}
+
+// Every field at its widest encoding.
+tracking::TrackReport WorstCaseTrack(std::uint32_t id) {
+  tracking::TrackReport t;
+  t.track_id = 0xF0000000u | id;
+  t.state = tracking::TrackState::kCoasting;
+  t.kind = tracking::MeasurementKind::kEllipse;
+  t.x_m = t.y_m = -123.456;
+  t.vx_mps = t.vy_mps = -1.5;
+  t.covariance.setConstant(1e-3);
+  t.age_scans = ~0u;
+  t.points = ~0u;
+  t.ellipse_yaw_rad = -3.0;
+  return t;
+}
+
+TEST(DatagramEncoderTest, SensorIdsFollowTheDocumentedPattern) {
+  EXPECT_TRUE(IsValidSensorId("s1"));
+  EXPECT_TRUE(IsValidSensorId("hall-north.lms_511"));
+  EXPECT_TRUE(IsValidSensorId(std::string(32, 'a')));
+  EXPECT_FALSE(IsValidSensorId(""));
+  EXPECT_FALSE(IsValidSensorId(std::string(33, 'a')));
+  EXPECT_FALSE(IsValidSensorId("a b"));
+  EXPECT_FALSE(IsValidSensorId("sensor/1"));
+  EXPECT_FALSE(IsValidSensorId("caf\xc3\xa9"));
+  ASSERT_TRUE(Validate(Options("bad id")).has_value());
+  EXPECT_NE(Validate(Options("bad id"))->find("bad id"), std::string::npos);
+}
+
+TEST(DatagramEncoderTest, TrackFrameCarriesHeaderAndEveryTrackField) {
+  DatagramEncoder encoder(Options());
+  CollectSink sink;
+  tracking::ScanTracks scan;
+  scan.scan_start_ns = kSentNs - 40'000'000;
+  scan.scan_period_s = 0.04;
+  scan.scan_counter = 65535;
+  for (std::uint32_t i = 1; i <= 3; ++i) ASSERT_TRUE(scan.tracks.push_back(MakeTrack(i)));
+  scan.tracks[2].kind = tracking::MeasurementKind::kCenterOfMass;
+  scan.tracks[2].state = tracking::TrackState::kTentative;
+
+  ASSERT_EQ(encoder.EncodeTracks(scan, kSentNs, sink), 1u);
+  ASSERT_EQ(sink.datagrams.size(), 1u);
+  EXPECT_EQ(sink.sent[0], kSentNs);
+  const lrfnet_proto_Datagram d = Decode(sink.datagrams[0]);
+  EXPECT_EQ(d.version, lrfnet_proto_ProtocolVersion_PROTOCOL_VERSION_1);
+  EXPECT_STREQ(d.sensor_id, "hall-north.lms511");
+  EXPECT_EQ(d.sequence, 0u);
+  EXPECT_EQ(d.sent_ns, kSentNs);
+  EXPECT_EQ(d.session_id, 0xC0FFEE1234ull);
+  ASSERT_EQ(d.which_payload, lrfnet_proto_Datagram_track_frame_tag);
+  const lrfnet_proto_TrackFrame& f = d.payload.track_frame;
+  EXPECT_EQ(f.scan_start_ns, scan.scan_start_ns);
+  EXPECT_EQ(f.scan_period_s, 0.04);
+  EXPECT_EQ(f.scan_counter, 65535u);
+  EXPECT_EQ(f.part, 0u);
+  EXPECT_EQ(f.part_count, 1u);
+  ASSERT_EQ(f.tracks_count, 3);
+  const lrfnet_proto_Track& t = f.tracks[0];
+  EXPECT_EQ(t.track_id, 1u);
+  EXPECT_EQ(t.state, lrfnet_proto_TrackState_TRACK_STATE_CONFIRMED);
+  EXPECT_EQ(t.kind, lrfnet_proto_MeasurementKind_MEASUREMENT_KIND_ELLIPSE);
+  EXPECT_FLOAT_EQ(t.x_m, 2.5f);
+  EXPECT_FLOAT_EQ(t.y_m, -2.25f);
+  EXPECT_FLOAT_EQ(t.vx_mps, 0.5f);
+  EXPECT_FLOAT_EQ(t.vy_mps, -1.25f);
+  EXPECT_EQ(t.age_scans, 10u);
+  EXPECT_EQ(t.points, 7u);
+  EXPECT_FLOAT_EQ(t.ellipse_yaw_rad, 0.75f);
+  // Upper triangle row-major: xx, xy, xvx, xvy, yy, yvx, yvy, vxvx, vxvy, vyvy.
+  ASSERT_EQ(t.covariance_count, 10);
+  const Eigen::Matrix4d& c = scan.tracks[0].covariance;
+  const double expected[10] = {c(0, 0), c(0, 1), c(0, 2), c(0, 3), c(1, 1),
+                               c(1, 2), c(1, 3), c(2, 2), c(2, 3), c(3, 3)};
+  for (int i = 0; i < 10; ++i)
+    EXPECT_FLOAT_EQ(t.covariance[i], static_cast<float>(expected[i])) << i;
+  EXPECT_FLOAT_EQ(t.covariance[1], 0.002f);
+  EXPECT_FLOAT_EQ(t.covariance[8], 0.003f);
+  // A centre-of-mass track has no ellipse orientation.
+  EXPECT_EQ(f.tracks[2].kind, lrfnet_proto_MeasurementKind_MEASUREMENT_KIND_CENTER_OF_MASS);
+  EXPECT_EQ(f.tracks[2].state, lrfnet_proto_TrackState_TRACK_STATE_TENTATIVE);
+  EXPECT_EQ(f.tracks[2].ellipse_yaw_rad, 0.0f);
+}
+
+TEST(DatagramEncoderTest, ScanWithoutTracksIsStillOnePart) {
+  DatagramEncoder encoder(Options());
+  CollectSink sink;
+  tracking::ScanTracks scan;
+  scan.scan_start_ns = kSentNs;
+  scan.scan_counter = 9;
+  ASSERT_EQ(encoder.EncodeTracks(scan, kSentNs, sink), 1u);
+  const lrfnet_proto_Datagram d = Decode(sink.datagrams[0]);
+  ASSERT_EQ(d.which_payload, lrfnet_proto_Datagram_track_frame_tag);
+  EXPECT_EQ(d.payload.track_frame.part_count, 1u);
+  EXPECT_EQ(d.payload.track_frame.tracks_count, 0);
+  EXPECT_EQ(d.payload.track_frame.scan_counter, 9u);
+}
+
+TEST(DatagramEncoderTest, SixtyFourWorstCaseTracksSplitIntoPartsOfFourteen) {
+  DatagramEncoder encoder(Options(std::string(32, 's')));
+  CollectSink sink;
+  tracking::ScanTracks scan;
+  scan.scan_start_ns = -1;
+  scan.scan_period_s = 1.0 / 7.0;
+  scan.scan_counter = ~0u;
+  for (std::uint32_t i = 0; i < tracking::kMaxTracks; ++i)
+    ASSERT_TRUE(scan.tracks.push_back(WorstCaseTrack(i)));
+  ASSERT_EQ(encoder.EncodeTracks(scan, -1, sink), 5u);
+  std::vector<std::uint32_t> ids;
+  std::size_t largest = 0;
+  for (std::size_t p = 0; p < sink.datagrams.size(); ++p) {
+    largest = std::max(largest, sink.datagrams[p].size());
+    EXPECT_LE(sink.datagrams[p].size(), kMaxDatagramBytes);
+    const lrfnet_proto_Datagram d = Decode(sink.datagrams[p]);
+    EXPECT_EQ(d.sequence, p);
+    const lrfnet_proto_TrackFrame& f = d.payload.track_frame;
+    EXPECT_EQ(f.part, p);
+    EXPECT_EQ(f.part_count, 5u);
+    EXPECT_EQ(f.scan_start_ns, -1);
+    EXPECT_EQ(f.tracks_count, p < 4 ? 14 : 8);
+    for (pb_size_t i = 0; i < f.tracks_count; ++i) ids.push_back(f.tracks[i].track_id & 0xffu);
+  }
+  ASSERT_EQ(ids.size(), tracking::kMaxTracks);
+  for (std::uint32_t i = 0; i < ids.size(); ++i) EXPECT_EQ(ids[i], i);
+  RecordProperty("worst_case_14_track_datagram_bytes", static_cast<int>(largest));
+
+  // 14 is the most that fits: the widest header (every varint at 10 bytes) plus 14 widest tracks
+  // stays within 1400 bytes, one more track would not.
+  lrfnet_proto_Datagram d = Decode(sink.datagrams[0]);
+  d.sequence = ~0ull;
+  d.session_id = ~0ull;
+  d.payload.track_frame.part = d.payload.track_frame.part_count = ~0u;
+  std::array<std::uint8_t, kMaxDatagramBytes> buffer{};
+  pb_ostream_t stream = pb_ostream_from_buffer(buffer.data(), buffer.size());
+  ASSERT_TRUE(pb_encode(&stream, lrfnet_proto_Datagram_fields, &d));
+  std::size_t track_bytes = 0;
+  ASSERT_TRUE(pb_get_encoded_size(&track_bytes, lrfnet_proto_Track_fields,
+                                  &d.payload.track_frame.tracks[0]));
+  const std::size_t one_more = stream.bytes_written + 1 /* tag */ + 1 /* length */ + track_bytes;
+  EXPECT_GT(one_more, kMaxDatagramBytes) << "a 15th track would fit: raise kTracksPerPart";
+  RecordProperty("widest_14_track_datagram_bytes", static_cast<int>(stream.bytes_written));
+}
+
+TEST(DatagramEncoderTest, TracksWithNonFiniteValuesAreDroppedAndCounted) {
+  DatagramEncoder encoder(Options());
+  CollectSink sink;
+  tracking::ScanTracks scan;
+  for (std::uint32_t i = 0; i < 16; ++i) ASSERT_TRUE(scan.tracks.push_back(MakeTrack(i)));
+  scan.tracks[3].x_m = std::numeric_limits<double>::quiet_NaN();
+  scan.tracks[7].covariance(2, 3) = std::numeric_limits<double>::infinity();
+  scan.tracks[9].vy_mps = 1e300;                             // infinite as a float
+  ASSERT_EQ(encoder.EncodeTracks(scan, kSentNs, sink), 1u);  // 13 tracks left: one part
+  const lrfnet_proto_Datagram d = Decode(sink.datagrams[0]);
+  EXPECT_EQ(d.payload.track_frame.tracks_count, 13);
+  for (pb_size_t i = 0; i < d.payload.track_frame.tracks_count; ++i) {
+    const std::uint32_t id = d.payload.track_frame.tracks[i].track_id;
+    EXPECT_TRUE(id != 3 && id != 7 && id != 9) << id;
+  }
+  EXPECT_EQ(encoder.counters().dropped_tracks, 3u);
+  EXPECT_EQ(encoder.counters().tracks, 13u);
+}
+
+TEST(DatagramEncoderTest, BackgroundSnapshotOf4561BeamsReassembles) {
+  DatagramEncoder encoder(Options(std::string(32, 'x')));
+  CollectSink sink;
+  std::vector<float> ranges(4561);
+  for (std::size_t i = 0; i < ranges.size(); ++i) {
+    ranges[i] = (i % 17 == 0) ? 0.0f : 0.5f + 0.01f * static_cast<float>(i % 5000);
+  }
+  BackgroundSnapshotView view;
+  view.learned_until_ns = kSentNs - 1;
+  view.first_angle_rad = -1.658;
+  view.angle_step_rad = 0.000727;
+  view.range_m = ranges;
+  ASSERT_EQ(encoder.EncodeBackground(view, kSentNs, sink), 11u);
+  std::vector<std::uint32_t> mm(ranges.size(), 0xdeadbeef);
+  for (std::size_t p = 0; p < sink.datagrams.size(); ++p) {
+    EXPECT_LE(sink.datagrams[p].size(), kMaxDatagramBytes);
+    const lrfnet_proto_Datagram d = Decode(sink.datagrams[p]);
+    ASSERT_EQ(d.which_payload, lrfnet_proto_Datagram_background_tag);
+    const lrfnet_proto_BackgroundSnapshot& s = d.payload.background;
+    EXPECT_EQ(s.snapshot_id, 0u);
+    EXPECT_EQ(s.learned_until_ns, kSentNs - 1);
+    EXPECT_EQ(s.first_angle_rad, -1.658);
+    EXPECT_EQ(s.angle_step_rad, 0.000727);
+    EXPECT_EQ(s.beam_count, 4561u);
+    EXPECT_EQ(s.part, p);
+    EXPECT_EQ(s.part_count, 11u);
+    EXPECT_EQ(s.first_beam, p * kBeamsPerPart);
+    for (pb_size_t i = 0; i < s.ranges_mm_count; ++i) mm[s.first_beam + i] = s.ranges_mm[i];
+  }
+  for (std::size_t i = 0; i < ranges.size(); ++i) {
+    ASSERT_EQ(mm[i], static_cast<std::uint32_t>(std::lround(ranges[i] * 1000.0f))) << "beam " << i;
+  }
+  // The next snapshot has the next id.
+  sink.datagrams.clear();
+  ASSERT_EQ(encoder.EncodeBackground(view, kSentNs, sink), 11u);
+  EXPECT_EQ(Decode(sink.datagrams[0]).payload.background.snapshot_id, 1u);
+  EXPECT_EQ(encoder.counters().snapshots, 2u);
+  EXPECT_EQ(encoder.counters().snapshot_parts, 22u);
+}
+
+TEST(DatagramEncoderTest, WidestSnapshotPartIsExactlyTheBudget) {
+  DatagramEncoder encoder(Options(std::string(32, 'x')));
+  CollectSink sink;
+  std::vector<float> ranges(kBeamsPerPart, 1e6f);  // clamped to kMaxRangeMm: 3 varint bytes each
+  BackgroundSnapshotView view;
+  view.learned_until_ns = -1;
+  view.first_angle_rad = -1.0;
+  view.angle_step_rad = 1e-3;
+  view.range_m = ranges;
+  ASSERT_EQ(encoder.EncodeBackground(view, -1, sink), 1u);
+  EXPECT_EQ(encoder.counters().clamped_ranges, kBeamsPerPart);
+  lrfnet_proto_Datagram d = Decode(sink.datagrams[0]);
+  d.sequence = d.session_id = ~0ull;
+  d.payload.background.snapshot_id = d.payload.background.beam_count = ~0u;
+  d.payload.background.part = d.payload.background.part_count = ~0u;
+  d.payload.background.first_beam = ~0u;
+  std::size_t size = 0;
+  ASSERT_TRUE(pb_get_encoded_size(&size, lrfnet_proto_Datagram_fields, &d));
+  EXPECT_EQ(size, kMaxDatagramBytes);
+  RecordProperty("widest_snapshot_part_bytes", static_cast<int>(size));
+}
+
+TEST(DatagramEncoderTest, RangesBecomeMillimetresWithFreeBeamsAsZero) {
+  DatagramEncoder encoder(Options());
+  CollectSink sink;
+  const std::vector<float> ranges = {0.0f,
+                                     -1.0f,
+                                     std::numeric_limits<float>::quiet_NaN(),
+                                     std::numeric_limits<float>::infinity(),
+                                     0.0004f,
+                                     1.2344f,
+                                     1.2346f,
+                                     80.0f,
+                                     1e7f};
+  BackgroundSnapshotView view;
+  view.range_m = ranges;
+  ASSERT_EQ(encoder.EncodeBackground(view, kSentNs, sink), 1u);
+  const lrfnet_proto_BackgroundSnapshot s = Decode(sink.datagrams[0]).payload.background;
+  ASSERT_EQ(s.ranges_mm_count, ranges.size());
+  const std::uint32_t expected[] = {0, 0, 0, 0, 1, 1234, 1235, 80000, kMaxRangeMm};
+  for (std::size_t i = 0; i < ranges.size(); ++i) EXPECT_EQ(s.ranges_mm[i], expected[i]) << i;
+  EXPECT_EQ(encoder.counters().clamped_ranges, 1u);
+}
+
+TEST(DatagramEncoderTest, EmptySnapshotSendsNothingAndKeepsTheId) {
+  DatagramEncoder encoder(Options());
+  CollectSink sink;
+  EXPECT_EQ(encoder.EncodeBackground(BackgroundSnapshotView{}, kSentNs, sink), 0u);
+  EXPECT_TRUE(sink.datagrams.empty());
+  EXPECT_EQ(encoder.next_snapshot_id(), 0u);
+}
+
+TEST(DatagramEncoderTest, HealthRoundTrips) {
+  DatagramEncoder encoder(Options());
+  CollectSink sink;
+  HealthReport h;
+  h.scans = 123456;
+  h.bad_frames = 2;
+  h.decode_errors = 3;
+  h.reconnects = 4;
+  h.dropped_tracks = 5;
+  h.datagrams_sent = 6;
+  h.send_errors = 7;
+  h.scan_cpu_us_mean = 812.5f;
+  h.scan_cpu_us_max = 2048.0f;
+  h.clock_sync = ClockSync::kUnsynchronized;
+  h.clock_error_estimate_s = 0.016f;
+  h.tick_offset_s = 1.7e9 + 0.125;
+  h.tick_drift_ppm = -12.5;
+  h.device_restarts = 1;
+  ASSERT_TRUE(encoder.EncodeHealth(h, kSentNs, sink));
+  const lrfnet_proto_Datagram d = Decode(sink.datagrams[0]);
+  ASSERT_EQ(d.which_payload, lrfnet_proto_Datagram_health_tag);
+  const lrfnet_proto_Health& p = d.payload.health;
+  EXPECT_EQ(p.scans, 123456u);
+  EXPECT_EQ(p.bad_frames, 2u);
+  EXPECT_EQ(p.decode_errors, 3u);
+  EXPECT_EQ(p.reconnects, 4u);
+  EXPECT_EQ(p.dropped_tracks, 5u);
+  EXPECT_EQ(p.datagrams_sent, 6u);
+  EXPECT_EQ(p.send_errors, 7u);
+  EXPECT_EQ(p.scan_cpu_us_mean, 812.5f);
+  EXPECT_EQ(p.scan_cpu_us_max, 2048.0f);
+  EXPECT_EQ(p.clock_sync, lrfnet_proto_ClockSyncState_CLOCK_SYNC_UNSYNCHRONIZED);
+  EXPECT_EQ(p.clock_error_estimate_s, 0.016f);
+  EXPECT_EQ(p.tick_offset_s, 1.7e9 + 0.125);
+  EXPECT_EQ(p.tick_drift_ppm, -12.5);
+  EXPECT_EQ(p.device_restarts, 1u);
+}
+
+TEST(DatagramEncoderTest, SensorInfoStringsAreBoundedAndPrintable) {
+  DatagramEncoder encoder(Options());
+  CollectSink sink;
+  const std::string long_model(100, 'M');
+  SensorInfoReport info;
+  info.model = long_model;
+  info.serial = "18110550";
+  info.firmware = "V1.80\x01\xff";
+  info.tracker_version = "lrfnet-tracker 0.1.0";
+  info.first_angle_rad = -0.087;
+  info.angle_step_rad = 0.0029;
+  info.beam_count = 1141;
+  info.fov_rad = 3.3;
+  info.scan_frequency_hz = 25.0;
+  info.max_range_m = 80.0;
+  info.kind = tracking::MeasurementKind::kEllipse;
+  ASSERT_TRUE(encoder.EncodeSensorInfo(info, kSentNs, sink));
+  const lrfnet_proto_Datagram d = Decode(sink.datagrams[0]);
+  ASSERT_EQ(d.which_payload, lrfnet_proto_Datagram_sensor_info_tag);
+  const lrfnet_proto_SensorInfo& p = d.payload.sensor_info;
+  EXPECT_EQ(std::string(p.model), std::string(64, 'M'));
+  EXPECT_STREQ(p.serial, "18110550");
+  EXPECT_STREQ(p.firmware, "V1.80??");
+  EXPECT_STREQ(p.tracker_version, "lrfnet-tracker 0.1.0");
+  EXPECT_EQ(p.first_angle_rad, -0.087);
+  EXPECT_EQ(p.angle_step_rad, 0.0029);
+  EXPECT_EQ(p.beam_count, 1141u);
+  EXPECT_EQ(p.fov_rad, 3.3);
+  EXPECT_EQ(p.scan_frequency_hz, 25.0);
+  EXPECT_EQ(p.max_range_m, 80.0);
+  EXPECT_EQ(p.kind, lrfnet_proto_MeasurementKind_MEASUREMENT_KIND_ELLIPSE);
+  EXPECT_EQ(encoder.counters().truncated_strings, 1u);
+  EXPECT_LE(sink.datagrams[0].size(), kMaxDatagramBytes);
+}
+
+TEST(DatagramEncoderTest, SequenceCountsEveryDatagramOfTheSession) {
+  DatagramEncoder encoder(Options());
+  CollectSink sink;
+  tracking::ScanTracks scan;
+  for (std::uint32_t i = 0; i < 20; ++i) ASSERT_TRUE(scan.tracks.push_back(MakeTrack(i)));
+  std::vector<float> ranges(500, 3.0f);
+  BackgroundSnapshotView view;
+  view.range_m = ranges;
+  encoder.EncodeTracks(scan, kSentNs, sink);      // 2 parts
+  encoder.EncodeHealth({}, kSentNs, sink);        // 1
+  encoder.EncodeBackground(view, kSentNs, sink);  // 2 parts
+  encoder.EncodeSensorInfo({}, kSentNs, sink);    // 1
+  ASSERT_EQ(sink.datagrams.size(), 6u);
+  for (std::size_t i = 0; i < sink.datagrams.size(); ++i) {
+    const lrfnet_proto_Datagram d = Decode(sink.datagrams[i]);
+    EXPECT_EQ(d.sequence, i);
+    EXPECT_EQ(d.session_id, 0xC0FFEE1234ull);
+  }
+  EXPECT_EQ(encoder.next_sequence(), 6u);
+  EXPECT_EQ(encoder.counters().datagrams, 6u);
+}
+
+TEST(DatagramEncoderTest, FanoutHandsTheSameBytesToEverySink) {
+  DatagramFanout fanout;
+  CollectSink a, b;
+  ASSERT_TRUE(fanout.Add(&a));
+  ASSERT_TRUE(fanout.Add(&b));
+  EXPECT_FALSE(fanout.Add(nullptr));
+  CollectSink c, d;
+  EXPECT_TRUE(fanout.Add(&c));
+  EXPECT_TRUE(fanout.Add(&d));
+  CollectSink e;
+  EXPECT_FALSE(fanout.Add(&e));  // capacity 4
+  DatagramEncoder encoder(Options());
+  encoder.EncodeHealth({}, kSentNs, fanout);
+  ASSERT_EQ(a.datagrams.size(), 1u);
+  EXPECT_EQ(a.datagrams, b.datagrams);
+  EXPECT_EQ(a.datagrams, d.datagrams);
+  EXPECT_TRUE(e.datagrams.empty());
+}
+
+}  // namespace
+}  // namespace lrfnet::io

@@ -1,0 +1,178 @@
+#include "firmware_tracker/io/udp_uplink.h"
+
+#include <arpa/inet.h>
+#include <fcntl.h>
+#include <netdb.h>
+#include <netinet/in.h>
+#include <sys/socket.h>
+#include <unistd.h>
+
+#include <cerrno>
+#include <cstdio>
+#include <cstdlib>
+#include <cstring>
+
+namespace lrfnet::io {
+namespace {
+
+std::string AddressText(const sockaddr* addr) {
+  char host[INET6_ADDRSTRLEN] = {};
+  if (addr->sa_family == AF_INET) {
+    const auto* a = reinterpret_cast<const sockaddr_in*>(addr);
+    inet_ntop(AF_INET, &a->sin_addr, host, sizeof(host));
+    return std::string(host) + ":" + std::to_string(ntohs(a->sin_port));
+  }
+  if (addr->sa_family == AF_INET6) {
+    const auto* a = reinterpret_cast<const sockaddr_in6*>(addr);
+    inet_ntop(AF_INET6, &a->sin6_addr, host, sizeof(host));
+    return "[" + std::string(host) + "]:" + std::to_string(ntohs(a->sin6_port));
+  }
+  return "?";
+}
+
+}  // namespace
+
+std::optional<std::string> Validate(const UdpUplinkOptions& options) {
+  if (options.host.empty()) return "uplink: empty host";
+  if (options.port == 0) return "uplink: port must be 1..65535";
+  if (!IsValidSensorId(options.sensor_id))
+    return "uplink: sensor id '" + options.sensor_id + "' must match [A-Za-z0-9_.-]{1,32}";
+  if (options.send_buffer_bytes < 0) return "uplink: send_buffer_bytes must be >= 0";
+  if (options.max_datagrams_per_poll == 0) return "uplink: max_datagrams_per_poll must be >= 1";
+  return std::nullopt;
+}
+
+UdpUplink::UdpUplink(const UdpUplinkOptions& options)
+    : options_(options), decoder_(options.sensor_id) {
+  if (const auto error = Validate(options)) {
+    std::fprintf(stderr, "UdpUplink: invalid options: %s\n", error->c_str());
+    std::abort();
+  }
+}
+
+UdpUplink::~UdpUplink() { Close(); }
+
+void UdpUplink::Close() {
+  if (fd_ >= 0) ::close(fd_);
+  fd_ = -1;
+}
+
+std::optional<std::string> UdpUplink::Open() {
+  Close();
+  addrinfo hints{};
+  hints.ai_family = AF_UNSPEC;
+  hints.ai_socktype = SOCK_DGRAM;
+  hints.ai_flags = AI_NUMERICSERV | AI_ADDRCONFIG;
+  addrinfo* found = nullptr;
+  const std::string port = std::to_string(options_.port);
+  int rc = getaddrinfo(options_.host.c_str(), port.c_str(), &hints, &found);
+  if (rc != 0 && (hints.ai_flags & AI_ADDRCONFIG) != 0) {
+    // AI_ADDRCONFIG hides loopback-only families on hosts without a configured address of that
+    // family.
+    hints.ai_flags = AI_NUMERICSERV;
+    rc = getaddrinfo(options_.host.c_str(), port.c_str(), &hints, &found);
+  }
+  if (rc != 0) {
+    return "uplink: cannot resolve '" + options_.host + "': " + gai_strerror(rc);
+  }
+  std::string error = "uplink: no address for '" + options_.host + "'";
+  for (const addrinfo* a = found; a != nullptr; a = a->ai_next) {
+    const int fd =
+        ::socket(a->ai_family, a->ai_socktype | SOCK_NONBLOCK | SOCK_CLOEXEC, a->ai_protocol);
+    if (fd < 0) {
+      error = std::string("uplink: socket: ") + std::strerror(errno);
+      continue;
+    }
+    if (options_.send_buffer_bytes > 0) {
+      // Best effort: the kernel caps it at net.core.wmem_max.
+      ::setsockopt(fd, SOL_SOCKET, SO_SNDBUF, &options_.send_buffer_bytes,
+                   sizeof(options_.send_buffer_bytes));
+    }
+    if (::connect(fd, a->ai_addr, a->ai_addrlen) != 0) {
+      error = "uplink: connect to " + AddressText(a->ai_addr) + ": " + std::strerror(errno);
+      ::close(fd);
+      continue;
+    }
+    fd_ = fd;
+    peer_ = AddressText(a->ai_addr);
+    break;
+  }
+  freeaddrinfo(found);
+  if (fd_ < 0) return error;
+  return std::nullopt;
+}
+
+std::uint16_t UdpUplink::local_port() const {
+  if (fd_ < 0) return 0;
+  sockaddr_storage addr{};
+  socklen_t len = sizeof(addr);
+  if (::getsockname(fd_, reinterpret_cast<sockaddr*>(&addr), &len) != 0) return 0;
+  if (addr.ss_family == AF_INET)
+    return ntohs(reinterpret_cast<const sockaddr_in*>(&addr)->sin_port);
+  if (addr.ss_family == AF_INET6)
+    return ntohs(reinterpret_cast<const sockaddr_in6*>(&addr)->sin6_port);
+  return 0;
+}
+
+void UdpUplink::Send(std::span<const std::uint8_t> datagram, common::UtcNs /*sent_ns*/) {
+  if (fd_ < 0) {
+    ++counters_.not_open;
+    return;
+  }
+  if (datagram.size() > kMaxDatagramBytes) {
+    ++counters_.oversize;
+    return;
+  }
+  ssize_t n;
+  do {
+    n = ::send(fd_, datagram.data(), datagram.size(), MSG_DONTWAIT | MSG_NOSIGNAL);
+  } while (n < 0 && errno == EINTR);
+  if (n < 0) {
+    ++counters_.send_errors;
+    if (errno == EAGAIN || errno == EWOULDBLOCK) ++counters_.would_block;
+    counters_.last_errno = errno;
+    return;
+  }
+  ++counters_.datagrams_sent;
+  counters_.bytes_sent += static_cast<std::uint64_t>(n);
+}
+
+std::size_t UdpUplink::Poll() {
+  if (fd_ < 0) return 0;
+  std::size_t read = 0;
+  while (read < options_.max_datagrams_per_poll) {
+    // MSG_TRUNC: the return value is the datagram's real length, so an oversized one is recognised.
+    const ssize_t n =
+        ::recv(fd_, receive_buffer_.data(), receive_buffer_.size(), MSG_DONTWAIT | MSG_TRUNC);
+    if (n < 0) {
+      if (errno == EINTR) continue;
+      if (errno != EAGAIN && errno != EWOULDBLOCK) {
+        // ECONNREFUSED from an earlier send's ICMP error is reported here too; not fatal.
+        ++counters_.receive_errors;
+        counters_.last_errno = errno;
+      }
+      break;
+    }
+    ++read;
+    ++counters_.received;
+    const auto size = static_cast<std::size_t>(n);
+    const DecodedRequest request =
+        size > kMaxDatagramBytes
+            ? decoder_.Decode(
+                  std::span<const std::uint8_t>(receive_buffer_.data(), receive_buffer_.size()))
+            : decoder_.Decode(std::span<const std::uint8_t>(receive_buffer_.data(), size));
+    if (request.reject == RequestReject::kNone) {
+      pending_.send_sensor_info |= request.send_sensor_info;
+      pending_.send_background |= request.send_background;
+    }
+  }
+  return read;
+}
+
+PendingRequests UdpUplink::TakeRequests() {
+  const PendingRequests r = pending_;
+  pending_ = {};
+  return r;
+}
+
+}  // namespace lrfnet::io

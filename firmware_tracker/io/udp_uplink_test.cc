@@ -1,0 +1,255 @@
+#include "firmware_tracker/io/udp_uplink.h"
+
+#include <arpa/inet.h>
+#include <gtest/gtest.h>
+#include <netinet/in.h>
+#include <pb_decode.h>
+#include <poll.h>
+#include <sys/socket.h>
+#include <unistd.h>
+
+#include <chrono>
+#include <cstdint>
+#include <cstring>
+#include <string>
+#include <thread>
+#include <vector>
+
+namespace lrfnet::io {
+namespace {
+
+constexpr char kId[] = "gate-3";
+
+// The daemon's side of the loopback: a bound UDP socket.
+class FakeDaemon {
+ public:
+  explicit FakeDaemon(int family) : family_(family) {
+    fd_ = ::socket(family, SOCK_DGRAM | SOCK_CLOEXEC, 0);
+    if (fd_ < 0) return;
+    sockaddr_storage addr{};
+    socklen_t len = 0;
+    if (family == AF_INET) {
+      auto* a = reinterpret_cast<sockaddr_in*>(&addr);
+      a->sin_family = AF_INET;
+      a->sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+      len = sizeof(sockaddr_in);
+    } else {
+      auto* a = reinterpret_cast<sockaddr_in6*>(&addr);
+      a->sin6_family = AF_INET6;
+      a->sin6_addr = in6addr_loopback;
+      len = sizeof(sockaddr_in6);
+    }
+    if (::bind(fd_, reinterpret_cast<sockaddr*>(&addr), len) != 0) {
+      ::close(fd_);
+      fd_ = -1;
+      return;
+    }
+    len = sizeof(addr);
+    ::getsockname(fd_, reinterpret_cast<sockaddr*>(&addr), &len);
+    port_ = family == AF_INET ? ntohs(reinterpret_cast<sockaddr_in*>(&addr)->sin_port)
+                              : ntohs(reinterpret_cast<sockaddr_in6*>(&addr)->sin6_port);
+  }
+  ~FakeDaemon() {
+    if (fd_ >= 0) ::close(fd_);
+  }
+  bool ok() const { return fd_ >= 0; }
+  std::uint16_t port() const { return port_; }
+
+  // Waits up to 2 s for one datagram; empty on timeout. Remembers the sender.
+  std::vector<std::uint8_t> Receive() {
+    pollfd p{fd_, POLLIN, 0};
+    if (::poll(&p, 1, 2000) != 1) return {};
+    std::vector<std::uint8_t> buf(2048);
+    peer_len_ = sizeof(peer_);
+    const ssize_t n =
+        ::recvfrom(fd_, buf.data(), buf.size(), 0, reinterpret_cast<sockaddr*>(&peer_), &peer_len_);
+    buf.resize(n > 0 ? static_cast<std::size_t>(n) : 0);
+    return buf;
+  }
+  // Sends to whoever sent the last received datagram (the daemon's way to answer a tracker).
+  bool Reply(const std::vector<std::uint8_t>& bytes) {
+    return ::sendto(fd_, bytes.data(), bytes.size(), 0, reinterpret_cast<sockaddr*>(&peer_),
+                    peer_len_) == static_cast<ssize_t>(bytes.size());
+  }
+
+ private:
+  int family_;
+  int fd_ = -1;
+  std::uint16_t port_ = 0;
+  sockaddr_storage peer_{};
+  socklen_t peer_len_ = 0;
+};
+
+UdpUplinkOptions Options(const std::string& host, std::uint16_t port) {
+  UdpUplinkOptions o;
+  o.host = host;
+  o.port = port;
+  o.sensor_id = kId;
+  return o;
+}
+
+std::vector<std::uint8_t> RequestBytes(std::string_view id, bool info, bool background) {
+  RequestMessage m;
+  m.sensor_id = id;
+  m.send_sensor_info = info;
+  m.send_background = background;
+  std::vector<std::uint8_t> out(256);
+  out.resize(EncodeRequest(m, out));
+  return out;
+}
+
+// Polls until something arrives or 2 s passed.
+std::size_t PollFor(UdpUplink& uplink) {
+  for (int i = 0; i < 200; ++i) {
+    if (const std::size_t n = uplink.Poll()) return n;
+    std::this_thread::sleep_for(std::chrono::milliseconds(10));
+  }
+  return 0;
+}
+
+void FramesAndRequestsOverLoopback(int family, const std::string& host) {
+  FakeDaemon daemon(family);
+  if (!daemon.ok()) GTEST_SKIP() << "no " << host << " loopback here";
+  UdpUplink uplink(Options(host, daemon.port()));
+  ASSERT_EQ(uplink.Open(), std::nullopt);
+  EXPECT_NE(uplink.peer().find(std::to_string(daemon.port())), std::string::npos) << uplink.peer();
+  EXPECT_NE(uplink.local_port(), 0);
+
+  DatagramEncoderOptions options;
+  options.sensor_id = kId;
+  DatagramEncoder encoder(options);
+  tracking::ScanTracks scan;
+  for (std::uint32_t i = 0; i < 20; ++i) {
+    tracking::TrackReport t;
+    t.track_id = i;
+    t.x_m = i;
+    ASSERT_TRUE(scan.tracks.push_back(t));
+  }
+  for (std::uint32_t s = 0; s < 10; ++s) {
+    scan.scan_counter = s;
+    ASSERT_EQ(encoder.EncodeTracks(scan, 1000 + s, uplink), 2u);  // 20 tracks: two parts
+  }
+  for (std::uint64_t k = 0; k < 20; ++k) {
+    const std::vector<std::uint8_t> bytes = daemon.Receive();
+    ASSERT_FALSE(bytes.empty()) << "datagram " << k << " did not arrive";
+    lrfnet_proto_Datagram d{};
+    pb_istream_t stream = pb_istream_from_buffer(bytes.data(), bytes.size());
+    ASSERT_TRUE(pb_decode(&stream, lrfnet_proto_Datagram_fields, &d));
+    EXPECT_EQ(d.sequence, k);
+    EXPECT_STREQ(d.sensor_id, kId);
+    ASSERT_EQ(d.which_payload, lrfnet_proto_Datagram_track_frame_tag);
+    EXPECT_EQ(d.payload.track_frame.scan_counter, k / 2);
+    EXPECT_EQ(d.payload.track_frame.part, k % 2);
+  }
+  EXPECT_EQ(uplink.counters().datagrams_sent, 20u);
+  EXPECT_EQ(uplink.counters().send_errors, 0u);
+
+  // No request yet.
+  EXPECT_EQ(uplink.Poll(), 0u);
+  EXPECT_FALSE(uplink.TakeRequests().any());
+  // The daemon asks for a background snapshot, then sends garbage and a request for another sensor.
+  ASSERT_TRUE(daemon.Reply(RequestBytes(kId, false, true)));
+  ASSERT_EQ(PollFor(uplink), 1u);
+  PendingRequests pending = uplink.TakeRequests();
+  EXPECT_TRUE(pending.send_background);
+  EXPECT_FALSE(pending.send_sensor_info);
+  EXPECT_FALSE(uplink.TakeRequests().any());  // taken
+  ASSERT_TRUE(daemon.Reply({0xff, 0xff, 0xff}));
+  ASSERT_TRUE(daemon.Reply(RequestBytes("gate-4", true, true)));
+  ASSERT_TRUE(daemon.Reply(RequestBytes("", true, false)));
+  std::size_t read = 0;
+  for (int i = 0; i < 200 && read < 3; ++i) {
+    read += uplink.Poll();
+    std::this_thread::sleep_for(std::chrono::milliseconds(5));
+  }
+  ASSERT_EQ(read, 3u);
+  pending = uplink.TakeRequests();
+  EXPECT_TRUE(pending.send_sensor_info);  // the one for every sensor
+  EXPECT_FALSE(pending.send_background);  // gate-4's request is not ours
+  EXPECT_EQ(uplink.request_counters().accepted, 2u);
+  EXPECT_EQ(uplink.request_counters().Rejected(RequestReject::kMalformed), 1u);
+  EXPECT_EQ(uplink.request_counters().Rejected(RequestReject::kOtherSensor), 1u);
+  EXPECT_EQ(uplink.counters().received, 4u);
+}
+
+TEST(UdpUplinkTest, FramesAndRequestsOverIpv4Loopback) {
+  FramesAndRequestsOverLoopback(AF_INET, "127.0.0.1");
+}
+
+TEST(UdpUplinkTest, FramesAndRequestsOverIpv6Loopback) {
+  FramesAndRequestsOverLoopback(AF_INET6, "::1");
+}
+
+TEST(UdpUplinkTest, HostNamesAreResolvedOnce) {
+  FakeDaemon daemon(AF_INET);
+  ASSERT_TRUE(daemon.ok());
+  UdpUplink uplink(Options("localhost", daemon.port()));
+  const auto error = uplink.Open();
+  if (error) GTEST_SKIP() << "localhost does not resolve here: " << *error;
+  const std::vector<std::uint8_t> hello = {1, 2, 3};
+  uplink.Send(hello, 0);
+  // localhost may resolve to ::1 first, where the IPv4 fake daemon does not listen.
+  if (uplink.peer().rfind("127.", 0) == 0) {
+    EXPECT_EQ(daemon.Receive(), hello);
+  }
+  EXPECT_TRUE(uplink.is_open());
+}
+
+TEST(UdpUplinkTest, OversizeAndClosedSendsAreCountedNotFatal) {
+  FakeDaemon daemon(AF_INET);
+  ASSERT_TRUE(daemon.ok());
+  UdpUplink uplink(Options("127.0.0.1", daemon.port()));
+  const std::vector<std::uint8_t> small(10, 1), big(kMaxDatagramBytes + 1, 1);
+  uplink.Send(small, 0);
+  EXPECT_EQ(uplink.counters().not_open, 1u);
+  EXPECT_EQ(uplink.Poll(), 0u);
+  ASSERT_EQ(uplink.Open(), std::nullopt);
+  uplink.Send(big, 0);
+  EXPECT_EQ(uplink.counters().oversize, 1u);
+  EXPECT_EQ(uplink.counters().datagrams_sent, 0u);
+  // An oversized datagram from the daemon is rejected by size, not parsed.
+  uplink.Send(small, 0);  // the daemon learns our address from it
+  ASSERT_EQ(daemon.Receive(), small);
+  ASSERT_TRUE(daemon.Reply(big));
+  ASSERT_EQ(PollFor(uplink), 1u);
+  EXPECT_EQ(uplink.request_counters().Rejected(RequestReject::kTooLarge), 1u);
+}
+
+// Nobody listens: the kernel reports the ICMP port-unreachable on a later send or receive. Counted,
+// sending goes on.
+TEST(UdpUplinkTest, DaemonDownMeansCountedErrorsOnly) {
+  std::uint16_t port = 0;
+  {
+    FakeDaemon gone(AF_INET);
+    ASSERT_TRUE(gone.ok());
+    port = gone.port();
+  }
+  UdpUplink uplink(Options("127.0.0.1", port));
+  ASSERT_EQ(uplink.Open(), std::nullopt);
+  const std::vector<std::uint8_t> d(100, 7);
+  for (int i = 0; i < 100 && uplink.counters().send_errors + uplink.counters().receive_errors == 0;
+       ++i) {
+    uplink.Send(d, 0);
+    uplink.Poll();
+    std::this_thread::sleep_for(std::chrono::milliseconds(5));
+  }
+  EXPECT_GT(uplink.counters().send_errors + uplink.counters().receive_errors, 0u);
+  EXPECT_EQ(uplink.counters().last_errno, ECONNREFUSED);
+  EXPECT_TRUE(uplink.is_open());
+  uplink.Send(d, 0);  // still usable
+}
+
+TEST(UdpUplinkTest, OptionsAreValidated) {
+  EXPECT_EQ(Validate(Options("127.0.0.1", 5000)), std::nullopt);
+  EXPECT_TRUE(Validate(Options("", 5000)).has_value());
+  EXPECT_TRUE(Validate(Options("127.0.0.1", 0)).has_value());
+  UdpUplinkOptions o = Options("127.0.0.1", 5000);
+  o.sensor_id = "bad id";
+  EXPECT_TRUE(Validate(o).has_value());
+  o = Options("127.0.0.1", 5000);
+  o.max_datagrams_per_poll = 0;
+  EXPECT_TRUE(Validate(o).has_value());
+}
+
+}  // namespace
+}  // namespace lrfnet::io

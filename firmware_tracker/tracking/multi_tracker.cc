@@ -1,0 +1,458 @@
+#include "firmware_tracker/tracking/multi_tracker.h"
+
+#include <algorithm>
+#include <bit>
+#include <cmath>
+#include <cstdlib>
+#include <limits>
+
+namespace lrfnet::tracking {
+namespace {
+
+bool Positive(double v) { return std::isfinite(v) && v > 0.0; }
+
+// Exact min-cost assignment of an n x m matrix, n <= m (every row gets a column): the Hungarian
+// method as shortest augmenting paths with potentials (Kuhn-Munkres / Jonker-Volgenant family),
+// O(n^2 m). cost(i, j) for 0-based i, j; row_to_col receives the column of every row.
+template <typename CostFn>
+void SolveAssignment(std::size_t n, std::size_t m, const CostFn& cost, int* row_to_col) {
+  constexpr std::size_t kDim = std::max(kMaxTracks, kMaxSegments) + 1;
+  constexpr double kInf = std::numeric_limits<double>::infinity();
+  // 1-based as in the textbook formulation; index 0 is the virtual start column.
+  std::array<double, kDim> u{};
+  std::array<double, kDim> v{};
+  std::array<std::size_t, kDim> row_of_col{};  // 0 = column free
+  std::array<std::size_t, kDim> way{};
+  std::array<double, kDim> min_slack{};
+  std::array<bool, kDim> used{};
+  for (std::size_t i = 1; i <= n; ++i) {
+    row_of_col[0] = i;
+    std::size_t j0 = 0;
+    std::fill_n(min_slack.begin(), m + 1, kInf);
+    std::fill_n(used.begin(), m + 1, false);
+    do {
+      used[j0] = true;
+      const std::size_t i0 = row_of_col[j0];
+      double delta = kInf;
+      std::size_t j1 = 0;
+      for (std::size_t j = 1; j <= m; ++j) {
+        if (used[j]) continue;
+        const double slack = cost(i0 - 1, j - 1) - u[i0] - v[j];
+        if (slack < min_slack[j]) {
+          min_slack[j] = slack;
+          way[j] = j0;
+        }
+        if (min_slack[j] < delta) {
+          delta = min_slack[j];
+          j1 = j;
+        }
+      }
+      for (std::size_t j = 0; j <= m; ++j) {
+        if (used[j]) {
+          u[row_of_col[j]] += delta;
+          v[j] -= delta;
+        } else {
+          min_slack[j] -= delta;
+        }
+      }
+      j0 = j1;
+    } while (row_of_col[j0] != 0);
+    do {
+      const std::size_t j1 = way[j0];
+      row_of_col[j0] = row_of_col[j1];
+      j0 = j1;
+    } while (j0 != 0);
+  }
+  for (std::size_t j = 1; j <= m; ++j) {
+    if (row_of_col[j] != 0) row_to_col[row_of_col[j] - 1] = static_cast<int>(j - 1);
+  }
+}
+
+// State and covariance of a constant-velocity filter moved by dt_s without process noise: used to
+// move a just-updated track from its measurement time back to the scan start (a few ms).
+void Extrapolate(double dt_s, Eigen::Vector4d& x, Eigen::Matrix4d& p) {
+  Eigen::Matrix4d f = Eigen::Matrix4d::Identity();
+  f(0, 2) = dt_s;
+  f(1, 3) = dt_s;
+  x = f * x;
+  p = f * p * f.transpose();
+  p = 0.5 * (p + p.transpose()).eval();
+}
+
+// scan_start_ns + offset without int64 overflow on hostile stamps (offset_s is in [0, gap limit]).
+common::UtcNs AtOffset(common::UtcNs scan_start_ns, double offset_s) {
+  const common::DurationNs offset_ns = common::SecondsToNs(offset_s);
+  return scan_start_ns > std::numeric_limits<common::UtcNs>::max() - offset_ns
+             ? std::numeric_limits<common::UtcNs>::max()
+             : scan_start_ns + offset_ns;
+}
+
+double LargestEigenvalue(const Eigen::Matrix2d& m) {
+  const double half_trace = 0.5 * (m(0, 0) + m(1, 1));
+  const double half_diff = 0.5 * (m(0, 0) - m(1, 1));
+  const double off = 0.5 * (m(0, 1) + m(1, 0));
+  return half_trace + std::sqrt(half_diff * half_diff + off * off);
+}
+
+}  // namespace
+
+std::optional<std::string> Validate(const MultiTrackerOptions& o) {
+  if (auto e = Validate(o.ekf)) return "ekf." + *e;
+  if (o.association != Association::kGlobalNearestNeighbour &&
+      o.association != Association::kClosest) {
+    return "association must be global_nearest_neighbour or closest";
+  }
+  if (!Positive(o.gate_mahalanobis_sq)) return "gate_mahalanobis_sq must be > 0";
+  if (!Positive(o.max_gate_distance_m)) return "max_gate_distance_m must be > 0";
+  if (!(std::isfinite(o.extra_measurement_sigma_m) && o.extra_measurement_sigma_m >= 0.0)) {
+    return "extra_measurement_sigma_m must be >= 0";
+  }
+  if (o.confirm_window < 1 || o.confirm_window > 32) return "confirm_window must be in [1, 32]";
+  if (o.confirm_hits < 1 || o.confirm_hits > o.confirm_window) {
+    return "confirm_hits must be in [1, confirm_window]";
+  }
+  if (!Positive(o.coast_timeout_s)) return "coast_timeout_s must be > 0";
+  if (!Positive(o.max_position_sigma_m)) return "max_position_sigma_m must be > 0";
+  if (o.max_tracks < 1 || o.max_tracks > kMaxTracks) {
+    return "max_tracks must be in [1, " + std::to_string(kMaxTracks) + "]";
+  }
+  if (!Positive(o.max_time_gap_s)) return "max_time_gap_s must be > 0";
+  return std::nullopt;
+}
+
+MultiTracker::MultiTracker(const MultiTrackerOptions& options) : options_(options) {
+  if (Validate(options_)) std::abort();
+}
+
+void MultiTracker::Clear() { tracks_.clear(); }
+
+std::size_t MultiTracker::confirmed_count() const {
+  return static_cast<std::size_t>(
+      std::count_if(tracks_.begin(), tracks_.end(), [](const Track& t) { return t.confirmed; }));
+}
+
+std::uint32_t MultiTracker::NewId() {
+  const std::uint32_t id = next_id_++;
+  if (next_id_ == 0) next_id_ = 1;
+  return id;
+}
+
+void MultiTracker::Step(common::UtcNs scan_start_ns, std::span<const Measurement> measurements,
+                        ScanTracks& out) {
+  Step(scan_start_ns, measurements, {}, out);
+}
+
+void MultiTracker::Step(common::UtcNs scan_start_ns, std::span<const Measurement> measurements,
+                        std::span<const double> time_offsets_s, ScanTracks& out) {
+  ++counters_.scans;
+  HandleTime(scan_start_ns);
+  for (Track& t : tracks_) {
+    ++t.age_scans;
+    t.hits <<= 1;
+    t.updated = false;
+    t.points = 0;
+  }
+  AcceptMeasurements(measurements, time_offsets_s);
+  Gate(scan_start_ns);
+  // Confirmed tracks first: a young track with its vague velocity must not outbid an established
+  // one for the same person.
+  Associate(/*confirmed=*/true);
+  Associate(/*confirmed=*/false);
+  UpdateAssigned(scan_start_ns, measurements);
+  ManageLifecycle(scan_start_ns);
+  StartTracks(scan_start_ns, measurements);
+  Report(scan_start_ns, out);
+}
+
+void MultiTracker::HandleTime(common::UtcNs scan_start_ns) {
+  if (has_time_) {
+    // In double: arbitrary (hostile) stamps must not overflow the int64 difference.
+    const double dt_s =
+        (static_cast<double>(scan_start_ns) - static_cast<double>(last_scan_ns_)) * 1e-9;
+    if (dt_s < 0.0) ++counters_.time_steps_backwards;
+    if (std::abs(dt_s) > options_.max_time_gap_s) {
+      ++counters_.time_resets;
+      counters_.deleted_time_reset += tracks_.size();
+      tracks_.clear();
+    }
+  }
+  has_time_ = true;
+  last_scan_ns_ = scan_start_ns;
+}
+
+void MultiTracker::AcceptMeasurements(std::span<const Measurement> measurements,
+                                      std::span<const double> time_offsets_s) {
+  candidates_.clear();
+  for (std::size_t j = 0; j < measurements.size(); ++j) {
+    const Measurement& m = measurements[j];
+    if (candidates_.full()) {
+      counters_.measurements_over_capacity += measurements.size() - j;
+      break;
+    }
+    Eigen::Matrix2d r = 0.5 * (m.covariance_m2 + m.covariance_m2.transpose());
+    // The measurement's own covariance must be positive definite before any inflation.
+    const bool positive_definite = r(0, 0) > 0.0 && r(0, 0) * r(1, 1) - r(0, 1) * r(1, 0) > 0.0;
+    if (!m.position_m.allFinite() || !r.allFinite() || !positive_definite) {
+      ++counters_.rejected_measurements;
+      continue;
+    }
+    r += options_.extra_measurement_sigma_m * options_.extra_measurement_sigma_m *
+         Eigen::Matrix2d::Identity();
+    Candidate* c = candidates_.emplace_slot();
+    c->z_m = m.position_m;
+    c->r_m2 = r;
+    c->source = j;
+    double offset_s = j < time_offsets_s.size() ? time_offsets_s[j] : 0.0;
+    if (!(std::isfinite(offset_s) && offset_s >= 0.0)) offset_s = 0.0;
+    c->offset_s = std::min(offset_s, options_.max_time_gap_s);
+  }
+  counters_.measurements += candidates_.size();
+}
+
+bool MultiTracker::InsideGate(const Eigen::Vector2d& predicted_m,
+                              const Eigen::Matrix2d& predicted_cov_m2, const Candidate& c,
+                              double* d2, double* log_det) const {
+  const Eigen::Vector2d y = c.z_m - predicted_m;
+  if (!(y.norm() <= options_.max_gate_distance_m)) return false;
+  const Eigen::Matrix2d s = predicted_cov_m2 + c.r_m2;
+  const double det = s(0, 0) * s(1, 1) - s(0, 1) * s(1, 0);
+  if (!(det > 0.0 && s(0, 0) > 0.0) || !std::isfinite(det)) return false;
+  // 2x2 inverse in closed form: y^T S^-1 y.
+  const double m2 =
+      (s(1, 1) * y.x() * y.x() - (s(0, 1) + s(1, 0)) * y.x() * y.y() + s(0, 0) * y.y() * y.y()) /
+      det;
+  if (!(m2 <= options_.gate_mahalanobis_sq)) return false;
+  if (d2 != nullptr) *d2 = m2;
+  if (log_det != nullptr) *log_det = std::log(det);
+  return true;
+}
+
+void MultiTracker::Gate(common::UtcNs scan_start_ns) {
+  const double q = options_.ekf.accel_psd_m2ps3;
+  gated_rows_ = tracks_.size();
+  for (std::size_t i = 0; i < tracks_.size(); ++i) {
+    CvEkf predicted = tracks_[i].filter;
+    predicted.Predict(common::NsToSeconds(scan_start_ns - tracks_[i].filter_ns));
+    track_to_candidate_[i] = -1;
+    const Eigen::Vector4d& x = predicted.state();
+    const Eigen::Matrix4d& p = predicted.covariance();
+    for (std::size_t j = 0; j < candidates_.size(); ++j) {
+      const Candidate& c = candidates_[j];
+      // The track moved on to the measurement's beam time: position block of F P F^T + Q over
+      // offset_s, in closed form (exact for the constant-velocity model).
+      const double d = c.offset_s;
+      const Eigen::Vector2d at = x.head<2>() + d * x.tail<2>();
+      const Eigen::Matrix2d cov =
+          p.topLeftCorner<2, 2>() + d * (p.topRightCorner<2, 2>() + p.bottomLeftCorner<2, 2>()) +
+          d * d * p.bottomRightCorner<2, 2>() + (q * d * d * d / 3.0) * Eigen::Matrix2d::Identity();
+      double d2 = 0.0, log_det = 0.0;
+      const bool inside = InsideGate(at, cov, c, &d2, &log_det);
+      gated_[i][j] = inside;
+      cost_[i][j] = inside ? d2 + log_det : kUnassignableCost;
+      distance_[i][j] = (c.z_m - at).norm();
+    }
+  }
+  for (std::size_t j = 0; j < candidates_.size(); ++j) candidate_to_track_[j] = -1;
+}
+
+void MultiTracker::Associate(bool confirmed) {
+  // Rows: this stage's tracks; columns: measurements nobody took yet.
+  std::array<std::size_t, kMaxTracks> rows{};
+  std::array<std::size_t, kMaxSegments> cols{};
+  std::size_t n = 0, m = 0;
+  for (std::size_t i = 0; i < tracks_.size(); ++i) {
+    if (tracks_[i].confirmed == confirmed) rows[n++] = i;
+  }
+  for (std::size_t j = 0; j < candidates_.size(); ++j) {
+    if (candidate_to_track_[j] < 0) cols[m++] = j;
+  }
+  if (n == 0 || m == 0) return;
+  auto assign = [this](std::size_t i, std::size_t j) {
+    if (!gated_[i][j]) return;  // the solver had to use a non-candidate pair: stays unassigned
+    track_to_candidate_[i] = static_cast<int>(j);
+    candidate_to_track_[j] = static_cast<int>(i);
+  };
+
+  if (options_.association == Association::kClosest) {
+    for (;;) {
+      double best = std::numeric_limits<double>::infinity();
+      std::size_t best_i = 0, best_j = 0;
+      for (std::size_t a = 0; a < n; ++a) {
+        const std::size_t i = rows[a];
+        if (track_to_candidate_[i] >= 0) continue;
+        for (std::size_t b = 0; b < m; ++b) {
+          const std::size_t j = cols[b];
+          if (!gated_[i][j] || candidate_to_track_[j] >= 0) continue;
+          if (distance_[i][j] < best) {
+            best = distance_[i][j];
+            best_i = i;
+            best_j = j;
+          }
+        }
+      }
+      if (!std::isfinite(best)) return;
+      assign(best_i, best_j);
+    }
+  }
+
+  std::array<int, std::max(kMaxTracks, kMaxSegments)> assignment{};
+  if (n <= m) {
+    SolveAssignment(
+        n, m, [&](std::size_t a, std::size_t b) { return cost_[rows[a]][cols[b]]; },
+        assignment.data());
+    for (std::size_t a = 0; a < n; ++a)
+      assign(rows[a], cols[static_cast<std::size_t>(assignment[a])]);
+  } else {
+    SolveAssignment(
+        m, n, [&](std::size_t b, std::size_t a) { return cost_[rows[a]][cols[b]]; },
+        assignment.data());
+    for (std::size_t b = 0; b < m; ++b)
+      assign(rows[static_cast<std::size_t>(assignment[b])], cols[b]);
+  }
+}
+
+void MultiTracker::UpdateAssigned(common::UtcNs scan_start_ns,
+                                  std::span<const Measurement> measurements) {
+  for (std::size_t i = 0; i < tracks_.size(); ++i) {
+    Track& t = tracks_[i];
+    const int j = track_to_candidate_[i];
+    if (j < 0) {
+      // Coasting: the filter moves to the scan start (never backwards).
+      if (scan_start_ns > t.filter_ns) {
+        t.filter.Predict(common::NsToSeconds(scan_start_ns - t.filter_ns));
+        t.filter_ns = scan_start_ns;
+      }
+      continue;
+    }
+    const Candidate& c = candidates_[static_cast<std::size_t>(j)];
+    const common::UtcNs at_ns = AtOffset(scan_start_ns, c.offset_s);
+    t.filter.Predict(common::NsToSeconds(at_ns - t.filter_ns));
+    t.filter_ns = std::max(t.filter_ns, at_ns);
+    if (!t.filter.Update(c.z_m, c.r_m2)) {
+      ++counters_.failed_updates;
+      continue;
+    }
+    ++counters_.associations;
+    const Measurement& m = measurements[c.source];
+    t.updated = true;
+    t.hits |= 1u;
+    t.last_update_ns = at_ns;
+    t.kind = m.kind;
+    t.ellipse_yaw_rad = m.kind == MeasurementKind::kEllipse ? m.orientation_rad : 0.0;
+    t.points = static_cast<std::uint32_t>(std::min<std::size_t>(m.point_count, UINT32_MAX));
+  }
+}
+
+void MultiTracker::ManageLifecycle(common::UtcNs scan_start_ns) {
+  const std::uint32_t window_mask =
+      options_.confirm_window >= 32 ? ~0u : ((1u << options_.confirm_window) - 1u);
+  std::size_t kept = 0;
+  for (std::size_t i = 0; i < tracks_.size(); ++i) {
+    Track& t = tracks_[i];
+    bool remove = false;
+    if (!t.confirmed) {
+      // All scans of a young track lie in its first window: bits 0..age_scans.
+      const auto hits = static_cast<std::uint32_t>(std::popcount(t.hits & window_mask));
+      if (hits >= options_.confirm_hits) {
+        t.confirmed = true;
+        ++counters_.confirmed;
+      } else {
+        const std::uint32_t scans_left = t.age_scans + 1 >= options_.confirm_window
+                                             ? 0
+                                             : options_.confirm_window - t.age_scans - 1;
+        if (hits + scans_left < options_.confirm_hits) {
+          remove = true;
+          ++counters_.deleted_tentative;
+        }
+      }
+    } else if (!t.updated &&
+               common::NsToSeconds(scan_start_ns - t.last_update_ns) > options_.coast_timeout_s) {
+      remove = true;
+      ++counters_.deleted_coast_timeout;
+    }
+    if (!remove) {
+      const Eigen::Matrix2d p = t.filter.covariance().topLeftCorner<2, 2>();
+      if (!(LargestEigenvalue(p) <=
+            options_.max_position_sigma_m * options_.max_position_sigma_m)) {
+        remove = true;
+        ++counters_.deleted_covariance;
+      }
+    }
+    if (remove) continue;
+    if (kept != i) tracks_[kept] = t;
+    ++kept;
+  }
+  while (tracks_.size() > kept) tracks_.pop_back();
+}
+
+void MultiTracker::StartTracks(common::UtcNs scan_start_ns,
+                               std::span<const Measurement> measurements) {
+  // Rows of gated_ still refer to the tracks as they were before the lifecycle step, which is what
+  // "inside an existing track's gate" means for this scan.
+  const std::size_t gated_rows = gated_rows_;
+  const std::size_t first_born = tracks_.size();
+  for (std::size_t j = 0; j < candidates_.size(); ++j) {
+    if (candidate_to_track_[j] >= 0) continue;
+    const Candidate& c = candidates_[j];
+    bool suppressed = false;
+    for (std::size_t i = 0; i < gated_rows && !suppressed; ++i) suppressed = gated_[i][j];
+    for (std::size_t b = first_born; b < tracks_.size() && !suppressed; ++b) {
+      const Track& born = tracks_[b];
+      suppressed = InsideGate(born.filter.position_m(),
+                              born.filter.covariance().topLeftCorner<2, 2>(), c, nullptr, nullptr);
+    }
+    if (suppressed) {
+      ++counters_.births_suppressed;
+      continue;
+    }
+    if (tracks_.size() >= options_.max_tracks) {
+      ++counters_.dropped_capacity;
+      continue;
+    }
+    Track* t = tracks_.emplace_slot();
+    const Measurement& m = measurements[c.source];
+    const common::UtcNs at_ns = AtOffset(scan_start_ns, c.offset_s);
+    t->filter = CvEkf(options_.ekf);
+    t->filter.Init(c.z_m, c.r_m2);
+    t->filter_ns = at_ns;
+    t->last_update_ns = at_ns;
+    t->id = NewId();
+    t->updated = true;
+    t->hits = 1u;
+    t->age_scans = 0;
+    t->kind = m.kind;
+    t->ellipse_yaw_rad = m.kind == MeasurementKind::kEllipse ? m.orientation_rad : 0.0;
+    t->points = static_cast<std::uint32_t>(std::min<std::size_t>(m.point_count, UINT32_MAX));
+    t->confirmed = options_.confirm_hits <= 1;
+    ++counters_.created;
+    if (t->confirmed) ++counters_.confirmed;
+  }
+}
+
+void MultiTracker::Report(common::UtcNs scan_start_ns, ScanTracks& out) const {
+  out.scan_start_ns = scan_start_ns;
+  out.tracks.clear();
+  for (const Track& t : tracks_) {
+    if (!t.confirmed && !options_.report_tentative) continue;
+    Eigen::Vector4d x = t.filter.state();
+    Eigen::Matrix4d p = t.filter.covariance();
+    const double back_s = common::NsToSeconds(scan_start_ns - t.filter_ns);
+    if (back_s < 0.0) Extrapolate(back_s, x, p);
+    TrackReport* r = out.tracks.emplace_slot();
+    if (r == nullptr) break;  // max_tracks <= kMaxTracks: cannot happen
+    r->track_id = t.id;
+    r->state = !t.confirmed ? TrackState::kTentative
+                            : (t.updated ? TrackState::kConfirmed : TrackState::kCoasting);
+    r->kind = t.kind;
+    r->x_m = x(0);
+    r->y_m = x(1);
+    r->vx_mps = x(2);
+    r->vy_mps = x(3);
+    r->covariance = p;
+    r->age_scans = t.age_scans;
+    r->points = t.points;
+    r->ellipse_yaw_rad = t.ellipse_yaw_rad;
+  }
+}
+
+}  // namespace lrfnet::tracking

@@ -1,0 +1,220 @@
+#pragma once
+// Multi-target tracker of one sensor (Quenzel et al., section III-B: "for each segment, the center
+// of mass (CoM) is tracked over time by an Extended Kalman Filter under the assumption of a
+// constant velocity. If multiple segments are candidates for one track, we associate the
+// geometrically closest.").
+//
+// Per scan, Step():
+//  1. Time. Every track's filter lives at the time of its last measurement. A scan more than
+//     max_time_gap_s away from the previous one (either direction) deletes every track (counted as
+//     time resets): predicting across such a gap is meaningless and all tracks would have timed out
+//     anyway. A smaller step backwards is counted and processed without prediction (filters are
+//     never predicted backwards).
+//  2. Gating. Track i and measurement j are a candidate pair when both
+//       d2_ij = (z_j - H x_i)^T S_ij^-1 (z_j - H x_i) <= gate_mahalanobis_sq   (S = H P H^T + R_j)
+//     (R_j: the measurement's covariance plus extra_measurement_sigma_m^2 I)
+//     and |z_j - H x_i| <= max_gate_distance_m, with x_i, P_i predicted to the measurement's time.
+//  3. Association, one measurement per track and one track per measurement, first for the
+//     confirmed tracks, then for the tentative tracks on the remaining measurements (a young track
+//     with its vague velocity must not take an established track's measurement):
+//     - kGlobalNearestNeighbour: the assignment that pairs the most candidate pairs and, among
+//       those, minimises sum(d2_ij + ln det S_ij) (the negative log-likelihood of the pairing up to
+//       a constant; ln det S favours the confident track when a coasting one competes for the same
+//       measurement). Solved exactly with the Hungarian method (shortest augmenting paths with
+//       potentials, O(n^2 m)) on fixed kMaxTracks x kMaxSegments storage; non-candidate pairs cost
+//       kUnassignableCost.
+//     - kClosest: the paper's rule; greedily pairs the geometrically closest remaining candidate
+//       pair (Euclidean distance of predicted position and measurement).
+//  4. Update of assigned tracks; the kind, orientation and point count of the measurement are kept.
+//  5. Lifecycle. A new track is tentative; it is confirmed when it was updated in confirm_hits of
+//     its first confirm_window scans (M of N) and deleted as soon as that became impossible. A
+//     confirmed track without a measurement coasts (predicted only) and is deleted when its last
+//     measurement is older than coast_timeout_s or its position sigma (square root of the largest
+//     eigenvalue of the position covariance at scan time) exceeds max_position_sigma_m.
+//  6. Births. A measurement that was not assigned starts a tentative track unless it lies within
+//     the gate of an existing track or of a track born earlier in the same scan (a person split
+//     into two segments must not become two tracks). Births beyond max_tracks are dropped and
+//     counted.
+//  7. Reports: one TrackReport per confirmed track (and per tentative track if report_tentative),
+//     ordered by id, state and covariance at scan_start_ns.
+//
+// Measurement times: measurement j was taken at scan_start_ns + time_offsets_s[j] (e.g. the beam
+// time of the segment's middle beam); the filter is predicted to that instant for gating and
+// update, and reports are extrapolated back to scan_start_ns with the constant-velocity model
+// (no process noise is subtracted). Without offsets every measurement is taken at scan start.
+//
+// Ids: uint32, 1, 2, 3, ... per MultiTracker instance (one session), never reused (0 is skipped if
+// the counter ever wraps, after 2^32 - 1 tracks).
+//
+// Frames: whatever frame the measurements are in (the sensor frame in the pipeline). Pure: time is
+// an argument, no clock, no I/O, no logging. Fixed allocation: Step never allocates.
+// Not thread-safe; one instance per sensor.
+
+#include <Eigen/Core>
+#include <array>
+#include <cstddef>
+#include <cstdint>
+#include <optional>
+#include <span>
+#include <string>
+
+#include "common/fixed_capacity.h"
+#include "common/time.h"
+#include "firmware_tracker/tracking/cv_ekf.h"
+#include "firmware_tracker/tracking/measurement.h"
+#include "firmware_tracker/tracking/segmentation.h"
+#include "firmware_tracker/tracking/track_report.h"
+
+namespace lrfnet::tracking {
+
+enum class Association : std::uint8_t {
+  kGlobalNearestNeighbour,  // optimal assignment on the gated costs
+  kClosest,                 // greedy by Euclidean distance (the paper's "geometrically closest")
+};
+
+struct MultiTrackerOptions {
+  CvEkfOptions ekf;
+  Association association = Association::kGlobalNearestNeighbour;
+  // Squared Mahalanobis distance; 9.21 = chi-square quantile for 2 degrees of freedom at 99 %.
+  double gate_mahalanobis_sq = 9.21;
+  // Euclidean bound on top of the statistical gate: a coasting track's covariance grows quickly and
+  // would otherwise swallow measurements of other people. 1 m is ~0.7 s of walking.
+  double max_gate_distance_m = 1.0;
+  // Added in quadrature to every measurement's covariance (sigma per axis): the centre of a person
+  // moves by a few cm more than a fit's residuals show (sway, arm swing, the visible part changing
+  // with the viewpoint; a fixed-axes ellipse fit on 5-8 points at 5 m flips between the end and the
+  // side of the ellipse, ~10 cm). Without it, ellipse fits claiming 1 cm make an established track
+  // reject its own person after such a jump and start a second track.
+  double extra_measurement_sigma_m = 0.05;
+  // M of N: confirmed when updated in confirm_hits of the first confirm_window scans (3 of 4 at
+  // 25 Hz: confirmed 80-120 ms after the first detection, while single-scan clutter and 2-scan
+  // flicker never confirm).
+  std::uint32_t confirm_hits = 3;
+  std::uint32_t confirm_window = 4;  // <= 32
+  // A confirmed track survives this long without measurements. 1 s covers a person at walking
+  // speed (1.2 m/s) passing behind a 0.4 m pillar half-way to the sensor (shadow ~0.8 m wide at
+  // the person: ~0.5 s hidden, ~1 s partly hidden) and two people passing each other; longer
+  // timeouts keep ghosts of people who left the field of view.
+  double coast_timeout_s = 1.0;
+  // Safety net for covariance growth (large coast_timeout_s, fresh tracks with the 1.5 m/s velocity
+  // prior): a track whose position sigma exceeds this can no longer be associated sensibly.
+  double max_position_sigma_m = 1.0;
+  std::size_t max_tracks = 32;  // <= kMaxTracks
+  // Steps between consecutive scans beyond this (forwards or backwards) delete all tracks.
+  double max_time_gap_s = 2.0;
+  bool report_tentative = false;
+};
+
+// nullopt when valid, else the reason, naming the field first (nested: "ekf.<field> ...").
+std::optional<std::string> Validate(const MultiTrackerOptions& options);
+
+struct MultiTrackerCounters {
+  std::uint64_t scans = 0;
+  std::uint64_t measurements = 0;  // accepted (finite, positive definite covariance)
+  std::uint64_t associations = 0;  // track updates with a measurement
+  std::uint64_t created = 0;
+  std::uint64_t confirmed = 0;
+  std::uint64_t deleted_tentative = 0;      // could no longer reach M of N
+  std::uint64_t deleted_coast_timeout = 0;  // confirmed, no measurement for coast_timeout_s
+  std::uint64_t deleted_covariance = 0;     // position sigma above max_position_sigma_m
+  std::uint64_t deleted_time_reset = 0;     // removed by a time reset
+  std::uint64_t dropped_capacity = 0;       // births refused: max_tracks reached
+  std::uint64_t births_suppressed = 0;      // unassigned measurement inside a track's gate
+  std::uint64_t rejected_measurements = 0;  // non-finite values or covariance not positive def.
+  std::uint64_t measurements_over_capacity = 0;  // beyond kMaxSegments per scan, ignored
+  std::uint64_t failed_updates = 0;              // filter refused an update (numerically)
+  std::uint64_t time_steps_backwards = 0;
+  std::uint64_t time_resets = 0;  // |scan gap| > max_time_gap_s
+
+  std::uint64_t deleted() const {
+    return deleted_tentative + deleted_coast_timeout + deleted_covariance + deleted_time_reset;
+  }
+};
+
+namespace internal {
+// Outside the class: nested types with member initializers are not yet default-constructible where
+// the class body instantiates FixedVector of them.
+struct Track {
+  CvEkf filter;
+  common::UtcNs filter_ns = 0;       // time the filter state refers to
+  common::UtcNs last_update_ns = 0;  // time of the last measurement
+  std::uint32_t id = 0;
+  bool confirmed = false;
+  bool updated = false;         // in the current scan
+  std::uint32_t hits = 0;       // bit k: updated k scans ago (bit 0 = current scan)
+  std::uint32_t age_scans = 0;  // scans since creation (0 in the creation scan)
+  MeasurementKind kind = MeasurementKind::kCenterOfMass;
+  double ellipse_yaw_rad = 0.0;
+  std::uint32_t points = 0;  // of the measurement of the current scan, 0 if none
+};
+// An accepted measurement of the current scan.
+struct Candidate {
+  Eigen::Vector2d z_m = Eigen::Vector2d::Zero();
+  Eigen::Matrix2d r_m2 = Eigen::Matrix2d::Identity();
+  double offset_s = 0.0;
+  std::size_t source = 0;  // index into the caller's measurements
+};
+}  // namespace internal
+
+class MultiTracker {
+ public:
+  // Cost of a pair outside the gate in the assignment problem; far above any sum of gated costs.
+  static constexpr double kUnassignableCost = 1e9;
+
+  // Precondition: Validate(options) is nullopt (checked; aborts otherwise).
+  explicit MultiTracker(const MultiTrackerOptions& options);
+
+  // One scan: measurements (at most kMaxSegments are used) taken at scan_start_ns. `out` is
+  // overwritten: scan_start_ns and tracks (scan_period_s and scan_counter are left to the caller).
+  void Step(common::UtcNs scan_start_ns, std::span<const Measurement> measurements,
+            ScanTracks& out);
+  // As above; time_offsets_s[j] (seconds, >= 0, finite, else treated as 0) is the time of
+  // measurement j after scan_start_ns. An empty span means all zero; otherwise same size as
+  // measurements.
+  void Step(common::UtcNs scan_start_ns, std::span<const Measurement> measurements,
+            std::span<const double> time_offsets_s, ScanTracks& out);
+
+  // Deletes all tracks (not counted as deletions); ids keep counting.
+  void Clear();
+
+  const MultiTrackerOptions& options() const { return options_; }
+  const MultiTrackerCounters& counters() const { return counters_; }
+  std::size_t track_count() const { return tracks_.size(); }
+  std::size_t confirmed_count() const;
+  std::uint32_t next_id() const { return next_id_; }
+
+ private:
+  using Track = internal::Track;
+  using Candidate = internal::Candidate;
+
+  void HandleTime(common::UtcNs scan_start_ns);
+  void AcceptMeasurements(std::span<const Measurement> measurements,
+                          std::span<const double> time_offsets_s);
+  void Gate(common::UtcNs scan_start_ns);
+  void Associate(bool confirmed);
+  void UpdateAssigned(common::UtcNs scan_start_ns, std::span<const Measurement> measurements);
+  void ManageLifecycle(common::UtcNs scan_start_ns);
+  void StartTracks(common::UtcNs scan_start_ns, std::span<const Measurement> measurements);
+  void Report(common::UtcNs scan_start_ns, ScanTracks& out) const;
+  bool InsideGate(const Eigen::Vector2d& predicted_m, const Eigen::Matrix2d& predicted_cov_m2,
+                  const Candidate& c, double* d2, double* log_det) const;
+  std::uint32_t NewId();
+
+  MultiTrackerOptions options_;
+  MultiTrackerCounters counters_;
+  bool has_time_ = false;
+  common::UtcNs last_scan_ns_ = 0;
+  std::uint32_t next_id_ = 1;
+  common::FixedVector<Track, kMaxTracks> tracks_;
+
+  // Per-scan scratch, sized at compile time.
+  common::FixedVector<Candidate, kMaxSegments> candidates_;
+  std::array<std::array<double, kMaxSegments>, kMaxTracks> cost_{};      // gated or unassignable
+  std::array<std::array<double, kMaxSegments>, kMaxTracks> distance_{};  // Euclidean, metres
+  std::array<std::array<bool, kMaxSegments>, kMaxTracks> gated_{};
+  std::size_t gated_rows_ = 0;                          // tracks when gated_ was filled
+  std::array<int, kMaxTracks> track_to_candidate_{};    // -1: none
+  std::array<int, kMaxSegments> candidate_to_track_{};  // -1: none
+};
+
+}  // namespace lrfnet::tracking

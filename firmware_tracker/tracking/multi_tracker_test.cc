@@ -1,0 +1,452 @@
+#include "firmware_tracker/tracking/multi_tracker.h"
+
+#include <gtest/gtest.h>
+
+#include <Eigen/Eigenvalues>
+#include <cmath>
+#include <limits>
+#include <set>
+#include <vector>
+
+namespace lrfnet::tracking {
+namespace {
+
+constexpr common::UtcNs kT0 = 1'600'000'000 * common::kNsPerS;
+constexpr common::DurationNs kPeriodNs = 40 * common::kNsPerMs;  // 25 Hz
+
+common::UtcNs ScanNs(std::int64_t k) { return kT0 + k * kPeriodNs; }
+
+Measurement Meas(double x, double y, double sigma_m = 0.05) {
+  Measurement m;
+  m.position_m = {x, y};
+  m.covariance_m2 = sigma_m * sigma_m * Eigen::Matrix2d::Identity();
+  m.point_count = 12;
+  return m;
+}
+
+const TrackReport* FindId(const ScanTracks& out, std::uint32_t id) {
+  for (const TrackReport& r : out.tracks) {
+    if (r.track_id == id) return &r;
+  }
+  return nullptr;
+}
+
+// Feeds the same measurements for scans [k_begin, k_end).
+void Feed(MultiTracker& tracker, std::int64_t k_begin, std::int64_t k_end,
+          const std::vector<Measurement>& ms, ScanTracks& out) {
+  for (std::int64_t k = k_begin; k < k_end; ++k) tracker.Step(ScanNs(k), ms, out);
+}
+
+TEST(MultiTrackerOptionsTest, DefaultsValidAndEachBadValueNamesItsField) {
+  const MultiTrackerOptions defaults;
+  EXPECT_EQ(Validate(defaults), std::nullopt);
+  EXPECT_EQ(defaults.association, Association::kGlobalNearestNeighbour);
+  EXPECT_LE(defaults.max_tracks, kMaxTracks);
+
+  struct Case {
+    MultiTrackerOptions options;
+    const char* field;
+  };
+  auto with = [](auto change) {
+    MultiTrackerOptions o;
+    change(o);
+    return o;
+  };
+  const double nan = std::numeric_limits<double>::quiet_NaN();
+  const std::vector<Case> cases = {
+      {with([](auto& o) { o.confirm_hits = 0; }), "confirm_hits"},
+      {with([](auto& o) { o.confirm_hits = 5; }), "confirm_hits"},  // > confirm_window (4)
+      {with([](auto& o) { o.confirm_window = 33; }), "confirm_window"},
+      {with([](auto& o) { o.gate_mahalanobis_sq = 0.0; }), "gate_mahalanobis_sq"},
+      {with([nan](auto& o) { o.gate_mahalanobis_sq = nan; }), "gate_mahalanobis_sq"},
+      {with([](auto& o) { o.max_gate_distance_m = -1.0; }), "max_gate_distance_m"},
+      {with([](auto& o) { o.extra_measurement_sigma_m = -0.01; }), "extra_measurement_sigma_m"},
+      {with([](auto& o) { o.coast_timeout_s = 0.0; }), "coast_timeout_s"},
+      {with([](auto& o) { o.max_position_sigma_m = 0.0; }), "max_position_sigma_m"},
+      {with([](auto& o) { o.max_tracks = 0; }), "max_tracks"},
+      {with([](auto& o) { o.max_tracks = kMaxTracks + 1; }), "max_tracks"},
+      {with([](auto& o) { o.max_time_gap_s = 0.0; }), "max_time_gap_s"},
+      {with([](auto& o) { o.ekf.accel_psd_m2ps3 = -1.0; }), "ekf.accel_psd_m2ps3"},
+      {with([](auto& o) { o.association = static_cast<Association>(7); }), "association"},
+  };
+  for (const Case& c : cases) {
+    const auto error = Validate(c.options);
+    ASSERT_NE(error, std::nullopt) << c.field;
+    EXPECT_EQ(error->rfind(c.field, 0), 0u) << *error;
+  }
+}
+
+TEST(MultiTrackerTest, ConfirmsAfterThreeOfFourScansAndHidesTentativeTracksByDefault) {
+  MultiTracker tracker{MultiTrackerOptions{}};
+  ScanTracks out;
+  const std::vector<Measurement> here = {Meas(2.0, 1.0)};
+  const std::vector<Measurement> none;
+  tracker.Step(ScanNs(0), here, out);
+  EXPECT_TRUE(out.tracks.empty());  // tentative: not reported
+  EXPECT_EQ(tracker.track_count(), 1u);
+  tracker.Step(ScanNs(1), none, out);  // a miss
+  tracker.Step(ScanNs(2), here, out);
+  EXPECT_TRUE(out.tracks.empty());  // 2 of 3
+  tracker.Step(ScanNs(3), here, out);
+  ASSERT_EQ(out.tracks.size(), 1u);  // 3 of 4
+  EXPECT_EQ(out.tracks[0].track_id, 1u);
+  EXPECT_EQ(out.tracks[0].state, TrackState::kConfirmed);
+  EXPECT_EQ(out.tracks[0].age_scans, 3u);
+  EXPECT_EQ(out.scan_start_ns, ScanNs(3));
+  EXPECT_NEAR(out.tracks[0].x_m, 2.0, 0.01);
+  EXPECT_EQ(tracker.counters().confirmed, 1u);
+}
+
+TEST(MultiTrackerTest, TentativeTrackIsDeletedAsSoonAsItCanNoLongerBeConfirmed) {
+  MultiTrackerOptions options;
+  options.report_tentative = true;
+  MultiTracker tracker(options);
+  ScanTracks out;
+  const std::vector<Measurement> none;
+  tracker.Step(ScanNs(0), std::vector<Measurement>{Meas(2.0, 1.0)}, out);
+  ASSERT_EQ(out.tracks.size(), 1u);
+  EXPECT_EQ(out.tracks[0].state, TrackState::kTentative);
+  tracker.Step(ScanNs(1), none, out);
+  EXPECT_EQ(out.tracks.size(), 1u);  // 1 hit, 2 scans left: 3 of 4 still possible
+  tracker.Step(ScanNs(2), none, out);
+  EXPECT_TRUE(out.tracks.empty());  // at most 2 of 4 now
+  EXPECT_EQ(tracker.counters().deleted_tentative, 1u);
+  EXPECT_EQ(tracker.counters().confirmed, 0u);
+}
+
+TEST(MultiTrackerTest, OneOfOneConfirmsAtBirth) {
+  MultiTrackerOptions options;
+  options.confirm_hits = 1;
+  options.confirm_window = 1;
+  MultiTracker tracker(options);
+  ScanTracks out;
+  tracker.Step(ScanNs(0), std::vector<Measurement>{Meas(1.0, 0.0)}, out);
+  ASSERT_EQ(out.tracks.size(), 1u);
+  EXPECT_EQ(out.tracks[0].state, TrackState::kConfirmed);
+}
+
+TEST(MultiTrackerTest, MahalanobisAndDistanceGates) {
+  MultiTracker tracker{MultiTrackerOptions{}};
+  ScanTracks out;
+  Feed(tracker, 0, 20, {Meas(3.0, 0.0, 0.05)}, out);
+  ASSERT_EQ(out.tracks.size(), 1u);
+
+  // 0.4 m off with 5 cm sigmas: d2 far above 9.21, so not this track; it starts a new one.
+  tracker.Step(ScanNs(20), std::vector<Measurement>{Meas(3.4, 0.0, 0.05)}, out);
+  ASSERT_EQ(out.tracks.size(), 1u);
+  EXPECT_EQ(out.tracks[0].state, TrackState::kCoasting);
+  EXPECT_NEAR(out.tracks[0].x_m, 3.0, 0.02);
+  EXPECT_EQ(tracker.track_count(), 2u);
+  EXPECT_EQ(tracker.counters().created, 2u);
+
+  // A vague measurement (1 m sigma) 1.5 m away is inside the statistical gate but beyond the 1 m
+  // distance gate.
+  tracker.Step(ScanNs(21), std::vector<Measurement>{Meas(3.0, 1.5, 1.0)}, out);
+  ASSERT_NE(FindId(out, 1), nullptr);
+  EXPECT_EQ(FindId(out, 1)->state, TrackState::kCoasting);
+  EXPECT_NEAR(FindId(out, 1)->y_m, 0.0, 0.02);
+
+  // Within 2 sigma: associated.
+  tracker.Step(ScanNs(22), std::vector<Measurement>{Meas(3.05, 0.05, 0.05)}, out);
+  ASSERT_NE(FindId(out, 1), nullptr);
+  EXPECT_EQ(FindId(out, 1)->state, TrackState::kConfirmed);
+  EXPECT_GT(FindId(out, 1)->x_m, 3.0);
+}
+
+// Two stationary tracks A at x = 0 and B at x = 1; then measurements at x = 0.6 (A: 0.6 m, B: 0.4
+// m) and x = 1.7 (B: 0.7 m, beyond A's gate), both with 0.3 m sigma so that both pairs of B gate.
+// The paper's greedy rule gives 0.6 to B, its closest, and leaves A without a measurement; the
+// global assignment pairs both, B-1.7.
+class AmbiguousAssociationTest : public ::testing::TestWithParam<Association> {};
+
+TEST_P(AmbiguousAssociationTest, GlobalAssignmentPairsBothGreedyClosestStealsOne) {
+  MultiTrackerOptions options;
+  options.association = GetParam();
+  MultiTracker tracker(options);
+  ScanTracks out;
+  Feed(tracker, 0, 10, {Meas(0.0, 0.0, 0.05), Meas(1.0, 0.0, 0.05)}, out);
+  ASSERT_EQ(out.tracks.size(), 2u);
+  const double a_before = FindId(out, 1)->x_m, b_before = FindId(out, 2)->x_m;
+  ASSERT_NEAR(a_before, 0.0, 0.05);
+  ASSERT_NEAR(b_before, 1.0, 0.05);
+
+  tracker.Step(ScanNs(10), std::vector<Measurement>{Meas(0.6, 0.0, 0.3), Meas(1.7, 0.0, 0.3)}, out);
+  ASSERT_EQ(out.tracks.size(), 2u);
+  const TrackReport& a = *FindId(out, 1);
+  const TrackReport& b = *FindId(out, 2);
+  if (GetParam() == Association::kGlobalNearestNeighbour) {
+    EXPECT_EQ(a.state, TrackState::kConfirmed);
+    EXPECT_EQ(b.state, TrackState::kConfirmed);
+    EXPECT_GT(a.x_m - a_before, 0.005);  // pulled towards 0.6
+    EXPECT_GT(b.x_m - b_before, 0.005);  // pulled towards 1.7
+  } else {
+    EXPECT_EQ(a.state, TrackState::kCoasting);
+    EXPECT_NEAR(a.x_m, a_before, 0.001);
+    EXPECT_EQ(b.state, TrackState::kConfirmed);
+    EXPECT_LT(b.x_m - b_before, -0.005);  // pulled towards 0.6
+  }
+  // 1.7 lies in B's gate either way: no third track.
+  EXPECT_EQ(tracker.track_count(), 2u);
+}
+
+INSTANTIATE_TEST_SUITE_P(Rules, AmbiguousAssociationTest,
+                         ::testing::Values(Association::kGlobalNearestNeighbour,
+                                           Association::kClosest));
+
+TEST(MultiTrackerTest, GlobalAssignmentHandlesMoreTracksThanMeasurementsAndViceVersa) {
+  MultiTracker tracker{MultiTrackerOptions{}};
+  ScanTracks out;
+  std::vector<Measurement> five;
+  for (int i = 0; i < 5; ++i) five.push_back(Meas(1.0 + 2.0 * i, 0.0));
+  Feed(tracker, 0, 5, five, out);
+  ASSERT_EQ(out.tracks.size(), 5u);
+  // Two measurements for five tracks: the right two tracks are updated.
+  tracker.Step(ScanNs(5), std::vector<Measurement>{Meas(7.0, 0.01), Meas(3.0, 0.01)}, out);
+  for (const TrackReport& r : out.tracks) {
+    const bool expect_update = r.track_id == 2 || r.track_id == 4;
+    EXPECT_EQ(r.state, expect_update ? TrackState::kConfirmed : TrackState::kCoasting)
+        << "id " << r.track_id;
+  }
+  // Seven measurements for five tracks: every track updated, two new tentative tracks.
+  five.push_back(Meas(-5.0, 0.0));
+  five.push_back(Meas(-8.0, 0.0));
+  tracker.Step(ScanNs(6), five, out);
+  EXPECT_EQ(out.tracks.size(), 5u);
+  for (const TrackReport& r : out.tracks) EXPECT_EQ(r.state, TrackState::kConfirmed);
+  EXPECT_EQ(tracker.track_count(), 7u);
+}
+
+TEST(MultiTrackerTest, ConfirmedTrackCoastsWithItsVelocityThenTimesOut) {
+  MultiTracker tracker{MultiTrackerOptions{}};
+  ScanTracks out;
+  std::int64_t k = 0;
+  for (; k < 50; ++k) {  // 2 s at 1 m/s along x
+    tracker.Step(ScanNs(k),
+                 std::vector<Measurement>{Meas(1.0 + 0.04 * static_cast<double>(k), 2.0, 0.02)},
+                 out);
+  }
+  ASSERT_EQ(out.tracks.size(), 1u);
+  EXPECT_NEAR(out.tracks[0].vx_mps, 1.0, 0.1);
+  const common::UtcNs last_ns = ScanNs(k - 1);
+  const std::vector<Measurement> none;
+  // Coasting up to and including coast_timeout_s (1 s = 25 scans) after the last measurement.
+  for (int i = 1; i <= 25; ++i, ++k) {
+    tracker.Step(ScanNs(k), none, out);
+    ASSERT_EQ(out.tracks.size(), 1u) << "scan " << i;
+    EXPECT_EQ(out.tracks[0].state, TrackState::kCoasting);
+    EXPECT_EQ(out.tracks[0].points, 0u);
+    const double expected_x = 1.0 + 0.04 * 49 + common::NsToSeconds(ScanNs(k) - last_ns);
+    EXPECT_NEAR(out.tracks[0].x_m, expected_x, 0.1);
+  }
+  tracker.Step(ScanNs(k), none, out);
+  EXPECT_TRUE(out.tracks.empty());
+  EXPECT_EQ(tracker.counters().deleted_coast_timeout, 1u);
+  EXPECT_EQ(tracker.counters().deleted(), 1u);
+}
+
+TEST(MultiTrackerTest, CoastingTrackIsDeletedWhenItsPositionSigmaGrowsTooLarge) {
+  MultiTrackerOptions options;
+  options.coast_timeout_s = 30.0;
+  options.max_position_sigma_m = 0.3;
+  MultiTracker tracker(options);
+  ScanTracks out;
+  Feed(tracker, 0, 30, {Meas(2.0, 2.0, 0.02)}, out);
+  ASSERT_EQ(out.tracks.size(), 1u);
+  const std::vector<Measurement> none;
+  std::int64_t k = 30;
+  double last_sigma = 0.0;
+  for (; k < 30 + 25 * 30; ++k) {
+    tracker.Step(ScanNs(k), none, out);
+    if (out.tracks.empty()) break;
+    const Eigen::Matrix2d p = out.tracks[0].covariance.topLeftCorner<2, 2>();
+    last_sigma = std::sqrt(p.eigenvalues().real().maxCoeff());
+    EXPECT_LE(last_sigma, 0.3);
+  }
+  EXPECT_TRUE(out.tracks.empty());
+  EXPECT_GT(last_sigma, 0.25);
+  EXPECT_LT(common::NsToSeconds(ScanNs(k) - ScanNs(29)), 5.0);  // long before the timeout
+  EXPECT_EQ(tracker.counters().deleted_covariance, 1u);
+  EXPECT_EQ(tracker.counters().deleted_coast_timeout, 0u);
+}
+
+TEST(MultiTrackerTest, IdsStartAtOneAndAreNeverReused) {
+  MultiTracker tracker{MultiTrackerOptions{}};
+  ScanTracks out;
+  std::set<std::uint32_t> seen;
+  std::uint32_t previous = 0;
+  std::int64_t k = 0;
+  for (int life = 0; life < 20; ++life) {
+    // Same place every time: a new track after the old one died must still get a new id.
+    Feed(tracker, k, k + 5, {Meas(4.0, -1.0)}, out);
+    k += 5;
+    ASSERT_EQ(out.tracks.size(), 1u);
+    const std::uint32_t id = out.tracks[0].track_id;
+    EXPECT_GT(id, previous);
+    EXPECT_TRUE(seen.insert(id).second) << "id " << id << " reused";
+    previous = id;
+    Feed(tracker, k, k + 30, {}, out);  // 1.2 s: timed out
+    k += 30;
+    ASSERT_EQ(tracker.track_count(), 0u);
+    if (life == 10) tracker.Clear();
+  }
+  EXPECT_EQ(*seen.begin(), 1u);
+  EXPECT_EQ(tracker.counters().created, 20u);
+}
+
+TEST(MultiTrackerTest, BirthsBeyondCapacityAreDroppedAndCounted) {
+  MultiTrackerOptions options;
+  options.max_tracks = 3;
+  options.report_tentative = true;
+  MultiTracker tracker(options);
+  ScanTracks out;
+  std::vector<Measurement> five;
+  for (int i = 0; i < 5; ++i) five.push_back(Meas(1.0 + 2.0 * i, 0.0));
+  tracker.Step(ScanNs(0), five, out);
+  EXPECT_EQ(out.tracks.size(), 3u);
+  EXPECT_EQ(tracker.counters().created, 3u);
+  EXPECT_EQ(tracker.counters().dropped_capacity, 2u);
+  tracker.Step(ScanNs(1), five, out);
+  EXPECT_EQ(tracker.counters().dropped_capacity, 4u);
+}
+
+TEST(MultiTrackerTest, MeasurementsBeyondSegmentCapacityAreCountedNotRead) {
+  MultiTrackerOptions options;
+  options.max_tracks = kMaxTracks;
+  MultiTracker tracker(options);
+  ScanTracks out;
+  std::vector<Measurement> many;
+  for (std::size_t i = 0; i < kMaxSegments + 6; ++i) {
+    many.push_back(Meas(static_cast<double>(i), 0.0));
+  }
+  Feed(tracker, 0, 3, many, out);
+  EXPECT_EQ(out.tracks.size(), kMaxSegments);
+  EXPECT_EQ(tracker.counters().measurements_over_capacity, 18u);
+}
+
+TEST(MultiTrackerTest, BadMeasurementsAreRejectedAndCounted) {
+  MultiTrackerOptions options;
+  options.report_tentative = true;
+  MultiTracker tracker(options);
+  ScanTracks out;
+  std::vector<Measurement> bad(4, Meas(1.0, 1.0));
+  bad[0].position_m.x() = std::numeric_limits<double>::quiet_NaN();
+  bad[1].covariance_m2(0, 0) = std::numeric_limits<double>::infinity();
+  bad[2].covariance_m2 = -Eigen::Matrix2d::Identity();
+  bad[3].covariance_m2.setZero();
+  tracker.Step(ScanNs(0), bad, out);
+  EXPECT_TRUE(out.tracks.empty());
+  EXPECT_EQ(tracker.counters().rejected_measurements, 4u);
+  EXPECT_EQ(tracker.track_count(), 0u);
+}
+
+TEST(MultiTrackerTest, SplitSegmentsOfOnePersonDoNotStartExtraTracks) {
+  MultiTrackerOptions options;
+  options.report_tentative = true;
+  MultiTracker tracker(options);
+  ScanTracks out;
+  // Two pieces 10 cm apart in the very first scan: one track.
+  tracker.Step(ScanNs(0), std::vector<Measurement>{Meas(2.0, 0.0), Meas(2.1, 0.0)}, out);
+  EXPECT_EQ(tracker.track_count(), 1u);
+  Feed(tracker, 1, 10, {Meas(2.0, 0.0)}, out);
+  // Later, a split: one piece updates the track, the other lies inside its gate.
+  tracker.Step(ScanNs(10), std::vector<Measurement>{Meas(1.95, 0.0), Meas(2.07, 0.02)}, out);
+  EXPECT_EQ(tracker.track_count(), 1u);
+  EXPECT_EQ(tracker.counters().births_suppressed, 2u);
+  // Someone 2 m away still starts a track.
+  tracker.Step(ScanNs(11), std::vector<Measurement>{Meas(2.0, 0.0), Meas(4.0, 0.0)}, out);
+  EXPECT_EQ(tracker.track_count(), 2u);
+}
+
+TEST(MultiTrackerTest, ReportCarriesKindOrientationAndPointsOfTheLastMeasurement) {
+  MultiTracker tracker{MultiTrackerOptions{}};
+  ScanTracks out;
+  Measurement e = Meas(3.0, 1.0, 0.02);
+  e.kind = MeasurementKind::kEllipse;
+  e.orientation_rad = 0.3;
+  e.point_count = 17;
+  Feed(tracker, 0, 3, {e}, out);
+  ASSERT_EQ(out.tracks.size(), 1u);
+  EXPECT_EQ(out.tracks[0].kind, MeasurementKind::kEllipse);
+  EXPECT_DOUBLE_EQ(out.tracks[0].ellipse_yaw_rad, 0.3);
+  EXPECT_EQ(out.tracks[0].points, 17u);
+  tracker.Step(ScanNs(3), std::vector<Measurement>{Meas(3.0, 1.0, 0.1)}, out);
+  EXPECT_EQ(out.tracks[0].kind, MeasurementKind::kCenterOfMass);
+  EXPECT_EQ(out.tracks[0].points, 12u);
+  tracker.Step(ScanNs(4), std::vector<Measurement>{}, out);
+  EXPECT_EQ(out.tracks[0].kind, MeasurementKind::kCenterOfMass);
+  EXPECT_EQ(out.tracks[0].points, 0u);
+}
+
+TEST(MultiTrackerTest, MeasurementTimeOffsetsGiveUnbiasedPositionsAtScanStart) {
+  // A person at 1.5 m/s seen 30 ms into every scan (e.g. at the end of a 270 deg field of view).
+  const double offset_s = 0.03, speed = 1.5;
+  auto truth_x = [&](double t) { return 1.0 + speed * t; };
+  double error_with = 0.0, error_without = 0.0;
+  for (const bool use_offsets : {true, false}) {
+    MultiTracker tracker{MultiTrackerOptions{}};
+    ScanTracks out;
+    for (std::int64_t k = 0; k < 100; ++k) {
+      const double t = 0.04 * static_cast<double>(k);
+      const std::vector<Measurement> ms = {Meas(truth_x(t + offset_s), 0.0, 0.01)};
+      const std::vector<double> offsets = {offset_s};
+      tracker.Step(ScanNs(k), ms,
+                   use_offsets ? std::span<const double>(offsets) : std::span<const double>(), out);
+      if (k == 99) {
+        ASSERT_EQ(out.tracks.size(), 1u);
+        (use_offsets ? error_with : error_without) = out.tracks[0].x_m - truth_x(t);
+        EXPECT_NEAR(out.tracks[0].vx_mps, speed, 0.05);
+      }
+    }
+  }
+  EXPECT_NEAR(error_with, 0.0, 0.005);
+  EXPECT_NEAR(error_without, speed * offset_s, 0.01);  // 4.5 cm ahead of the truth
+}
+
+TEST(MultiTrackerTest, SmallStepBackwardsIsCountedAndDoesNotPredict) {
+  MultiTracker tracker{MultiTrackerOptions{}};
+  ScanTracks out;
+  for (std::int64_t k = 0; k < 30; ++k) {
+    tracker.Step(ScanNs(k),
+                 std::vector<Measurement>{Meas(1.0 + 0.04 * static_cast<double>(k), 0.0, 0.02)},
+                 out);
+  }
+  ASSERT_EQ(out.tracks.size(), 1u);
+  const double x_before = out.tracks[0].x_m;
+  tracker.Step(ScanNs(29) - 5 * common::kNsPerMs, std::vector<Measurement>{}, out);
+  EXPECT_EQ(tracker.counters().time_steps_backwards, 1u);
+  EXPECT_EQ(tracker.counters().time_resets, 0u);
+  ASSERT_EQ(out.tracks.size(), 1u);
+  EXPECT_NEAR(out.tracks[0].x_m, x_before - 0.005, 0.002);  // moved back 5 ms, not predicted on
+  EXPECT_TRUE(out.tracks[0].covariance.allFinite());
+  // And it carries on normally.
+  tracker.Step(ScanNs(30), std::vector<Measurement>{Meas(1.0 + 0.04 * 30, 0.0, 0.02)}, out);
+  ASSERT_EQ(out.tracks.size(), 1u);
+  EXPECT_EQ(out.tracks[0].track_id, 1u);
+  EXPECT_EQ(out.tracks[0].state, TrackState::kConfirmed);
+}
+
+TEST(MultiTrackerTest, LargeTimeJumpsResetAllTracksAndAreCounted) {
+  MultiTracker tracker{MultiTrackerOptions{}};
+  ScanTracks out;
+  Feed(tracker, 0, 10, {Meas(1.0, 0.0), Meas(3.0, 0.0)}, out);
+  ASSERT_EQ(out.tracks.size(), 2u);
+  // Clock stepped back by an hour.
+  tracker.Step(ScanNs(10) - 3600 * common::kNsPerS, std::vector<Measurement>{Meas(1.0, 0.0)}, out);
+  EXPECT_TRUE(out.tracks.empty());
+  EXPECT_EQ(tracker.counters().time_steps_backwards, 1u);
+  EXPECT_EQ(tracker.counters().time_resets, 1u);
+  EXPECT_EQ(tracker.counters().deleted_time_reset, 2u);
+  EXPECT_EQ(tracker.track_count(), 1u);  // the new scan's measurement starts a fresh track
+  // Forward by 10 s: reset again; extreme stamps neither crash nor overflow.
+  tracker.Step(ScanNs(10) - 3590 * common::kNsPerS, std::vector<Measurement>{}, out);
+  EXPECT_EQ(tracker.counters().time_resets, 2u);
+  tracker.Step(std::numeric_limits<common::UtcNs>::min(), std::vector<Measurement>{Meas(1, 0)},
+               out);
+  tracker.Step(std::numeric_limits<common::UtcNs>::max(), std::vector<Measurement>{Meas(1, 0)},
+               out);
+  EXPECT_EQ(tracker.counters().time_resets, 4u);
+  EXPECT_EQ(tracker.track_count(), 1u);
+}
+
+}  // namespace
+}  // namespace lrfnet::tracking

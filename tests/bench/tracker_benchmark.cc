@@ -1,0 +1,368 @@
+// Per-scan cost of lrfnet-tracker's whole path (Google Benchmark): CoLa-B frame bytes -> stream
+// decoder -> clock mapping -> background model, segmentation, measurements, multi-target tracker ->
+// datagram encoding -> UDP send to a receiver on loopback. One benchmark iteration = one scan.
+//
+// Inputs: the shared LMS511 capture (1141 beams, 25 Hz; its scans looped with rewritten counters and
+// ticks so time runs on) when present, and synthetic LMS5xx scans (1141 beams over 190 deg, 25 Hz)
+// of a 30 x 20 m hall with 0, 10 and 50 people walking. The background is learned before timing.
+// Reported per case: median and p99 microseconds per scan, heap allocations in the timed loop, peak
+// RSS of the process after the case, uplink bytes per second against raw CoLa-B bytes per second.
+// A markdown table goes to stdout and to --out FILE.
+//
+//   tracker_benchmark [--out FILE] [--scans N] [google benchmark flags]
+
+#include <arpa/inet.h>
+#include <benchmark/benchmark.h>
+#include <netinet/in.h>
+#include <sys/resource.h>
+#include <sys/socket.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <array>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <cstring>
+#include <ctime>
+#include <fstream>
+#include <memory>
+#include <random>
+#include <string>
+#include <vector>
+
+#include "firmware_tracker/app/node_test_util.h"
+#include "firmware_tracker/app/tracker_node.h"
+#include "firmware_tracker/cola/framer.h"
+#include "firmware_tracker/cola/stream_decoder.h"
+#include "firmware_tracker/io/capture_stream.h"
+#include "firmware_tracker/io/udp_uplink.h"
+#include "tests/support/alloc_counter.h"
+#include "tests/support/test_data.h"
+
+namespace lrfnet::bench {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+struct Frame {
+  std::vector<std::uint8_t> bytes;  // one complete CoLa-B frame
+  common::UtcNs receive_ns = 0;
+};
+
+struct Input {
+  std::string name;
+  double rate_hz = 25.0;
+  std::vector<Frame> learn;  // fed before timing (background learning)
+  std::vector<Frame> timed;  // cycled through while timing
+};
+
+struct Row {
+  std::string name;
+  std::size_t scans = 0;
+  double median_us = 0.0;
+  double p99_us = 0.0;
+  double cpu_median_us = 0.0;
+  double cpu_p99_us = 0.0;
+  std::size_t allocations = 0;
+  long peak_rss_kib = 0;
+  double uplink_bytes_per_s = 0.0;
+  double raw_bytes_per_s = 0.0;
+  std::uint64_t confirmed_tracks = 0;
+};
+
+std::vector<Row>& Rows() {
+  static std::vector<Row> rows;
+  return rows;
+}
+
+Frame EncodeFrame(const cola::ScanTelegram& scan, common::UtcNs receive_ns) {
+  std::vector<std::uint8_t> payload(cola::MaxEncodedSize(scan) + 64);
+  payload.resize(cola::EncodeScanTelegram(scan, payload));
+  Frame frame;
+  frame.bytes.resize(payload.size() + 16);
+  frame.bytes.resize(cola::EncodeFrame(payload, frame.bytes));
+  frame.receive_ns = receive_ns;
+  return frame;
+}
+
+// The LMS511 capture's scans, looped `passes` times with counters and ticks continued.
+std::unique_ptr<Input> CaptureInput(std::size_t timed_scans) {
+  const auto path = lrfnet::testing::SharedFile("data/sick/lms511_20210301.pcap");
+  if (!path) return nullptr;
+  struct Collect : cola::TelegramListener {
+    std::vector<std::unique_ptr<cola::ScanTelegram>> scans;
+    std::vector<common::UtcNs> times;
+    void OnScan(const cola::ScanTelegram& s, common::UtcNs rx) override {
+      scans.push_back(std::make_unique<cola::ScanTelegram>(s));
+      times.push_back(rx);
+    }
+  } collect;
+  std::string error;
+  auto capture = io::CaptureStream::Open(*path, io::CaptureStreamOptions{}, &error);
+  if (!capture) return nullptr;
+  cola::StreamDecoder decoder;
+  io::StreamChunk chunk;
+  while (capture->Next(&chunk)) decoder.Feed(chunk.bytes, chunk.receive_time_ns, collect);
+  if (collect.scans.size() < 2) return nullptr;
+
+  auto input = std::make_unique<Input>();
+  input->name = "LMS511 capture (looped)";
+  input->rate_hz = collect.scans.front()->scan_frequency_hz();
+  const std::size_t n = collect.scans.size();
+  const common::DurationNs span_ns = collect.times.back() - collect.times.front() +
+                                     static_cast<common::DurationNs>(1e9 / input->rate_hz);
+  const std::uint32_t span_us = static_cast<std::uint32_t>(span_ns / 1000);
+  const std::size_t learn = static_cast<std::size_t>(6.0 * input->rate_hz);
+  for (std::size_t i = 0; i < learn + timed_scans; ++i) {
+    const std::size_t pass = i / n;
+    cola::ScanTelegram scan = *collect.scans[i % n];
+    scan.scan_counter = static_cast<std::uint16_t>(scan.scan_counter + pass * n);
+    scan.telegram_counter = static_cast<std::uint16_t>(scan.telegram_counter + pass * n);
+    scan.time_since_startup_us += static_cast<std::uint32_t>(pass) * span_us;
+    scan.time_of_transmission_us += static_cast<std::uint32_t>(pass) * span_us;
+    const common::UtcNs rx = collect.times[i % n] + static_cast<common::DurationNs>(pass) * span_ns;
+    (i < learn ? input->learn : input->timed).push_back(EncodeFrame(scan, rx));
+  }
+  return input;
+}
+
+// LMS5xx-like synthetic scans of a hall with `people` random walkers.
+std::unique_ptr<Input> SyntheticInput(int people, std::size_t timed_scans) {
+  tracking::testing::ScannerConfig config;
+  config.first_angle_rad = common::DegToRad(-95.0);
+  config.angle_step_rad = common::DegToRad(190.0 / 1140.0);
+  config.beams = 1141;
+  config.max_range_m = 40.0;
+  config.rate_hz = 25.0;
+  tracker::testing::SyntheticDevice device(config);
+  // Sensor on the middle of the south wall of a 30 x 20 m hall, looking north (+x).
+  const std::vector<tracking::testing::Wall> hall = {
+      {{-0.5, -15.0}, {19.5, -15.0}}, {{19.5, -15.0}, {19.5, 15.0}},
+      {{19.5, 15.0}, {-0.5, 15.0}},   {{-0.5, 15.0}, {-0.5, -15.0}},
+      {{6.0, -6.0}, {7.0, -6.0}},     {{7.0, -6.0}, {7.0, -5.0}},  // a pillar
+  };
+  std::mt19937 rng(11);
+  std::uniform_real_distribution<double> ux(1.0, 18.0), uy(-13.0, 13.0), ua(-M_PI, M_PI);
+  std::vector<tracking::testing::Body> bodies(static_cast<std::size_t>(people));
+  std::vector<double> heading(bodies.size());
+  for (std::size_t i = 0; i < bodies.size(); ++i) {
+    bodies[i] = {{ux(rng), uy(rng)}, 0.25, 0.15, 0.0};
+    heading[i] = ua(rng);
+  }
+  auto input = std::make_unique<Input>();
+  input->name = "synthetic 1141 beams, " + std::to_string(people) + " people";
+  const std::size_t learn = static_cast<std::size_t>(6.0 * config.rate_hz);
+  const std::vector<tracking::testing::Body> none;
+  for (std::size_t k = 0; k < learn + timed_scans; ++k) {
+    const bool walking = k >= learn;
+    if (walking) {
+      for (std::size_t i = 0; i < bodies.size(); ++i) {
+        heading[i] += 0.1 * ua(rng) / M_PI;
+        Eigen::Vector2d step(std::cos(heading[i]), std::sin(heading[i]));
+        bodies[i].centre_m += 0.05 * step;  // 1.25 m/s
+        const Eigen::Vector2d& c = bodies[i].centre_m;
+        if (c.x() < 1.0 || c.x() > 18.0 || std::abs(c.y()) > 13.0) heading[i] += M_PI;
+        bodies[i].yaw_rad = heading[i] + M_PI / 2;
+      }
+    }
+    common::UtcNs rx = 0;
+    const cola::ScanTelegram& scan =
+        device.Scan(static_cast<std::int64_t>(k), hall, walking ? bodies : none, &rx);
+    (walking ? input->timed : input->learn).push_back(EncodeFrame(scan, rx));
+  }
+  return input;
+}
+
+class Receiver {
+ public:
+  Receiver() {
+    fd_ = ::socket(AF_INET, SOCK_DGRAM | SOCK_NONBLOCK, 0);
+    sockaddr_in addr{};
+    addr.sin_family = AF_INET;
+    addr.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+    ::bind(fd_, reinterpret_cast<sockaddr*>(&addr), sizeof addr);
+    int size = 16 << 20;
+    ::setsockopt(fd_, SOL_SOCKET, SO_RCVBUF, &size, sizeof size);
+    socklen_t len = sizeof addr;
+    ::getsockname(fd_, reinterpret_cast<sockaddr*>(&addr), &len);
+    port_ = ntohs(addr.sin_port);
+  }
+  ~Receiver() { ::close(fd_); }
+  std::uint16_t port() const { return port_; }
+  void Drain() {
+    std::array<std::uint8_t, 2048> buffer{};
+    while (::recv(fd_, buffer.data(), buffer.size(), 0) > 0) {
+    }
+  }
+
+ private:
+  int fd_ = -1;
+  std::uint16_t port_ = 0;
+};
+
+struct Listener : cola::TelegramListener {
+  tracker::TrackerNode* node = nullptr;
+  void OnScan(const cola::ScanTelegram& scan, common::UtcNs rx) override {
+    node->OnScan(scan, rx, rx);
+    node->OnTick(rx, tracker::LinkHealth{}, clock);
+  }
+  io::ClockStatus clock{io::ClockSync::kReplay};
+};
+
+// CPU time of this thread: unlike wall time it does not count preemption by other processes.
+double ThreadCpuUs() {
+  timespec ts{};
+  clock_gettime(CLOCK_THREAD_CPUTIME_ID, &ts);
+  return static_cast<double>(ts.tv_sec) * 1e6 + static_cast<double>(ts.tv_nsec) * 1e-3;
+}
+
+double Quantile(std::vector<double> values, double q) {
+  std::sort(values.begin(), values.end());
+  const auto i = static_cast<std::size_t>(q * static_cast<double>(values.size() - 1) + 0.5);
+  return values[std::min(i, values.size() - 1)];
+}
+
+void RunCase(benchmark::State& state, const Input* input) {
+  Receiver receiver;
+  io::UdpUplinkOptions udp_options;
+  udp_options.host = "127.0.0.1";
+  udp_options.port = receiver.port();
+  udp_options.sensor_id = "bench";
+  io::UdpUplink udp(udp_options);
+  if (auto e = udp.Open()) {
+    state.SkipWithError(e->c_str());
+    return;
+  }
+  tracker::TrackerConfig config;
+  config.sensor_id = "bench";
+  config.tracking.background.max_range_m = 40.0;
+  auto node = std::make_unique<tracker::TrackerNode>(config, 1, udp);
+  cola::StreamDecoder decoder;
+  Listener listener;
+  listener.node = node.get();
+  for (const Frame& f : input->learn) decoder.Feed(f.bytes, f.receive_ns, listener);
+  receiver.Drain();
+
+  std::vector<double> durations_us;
+  std::vector<double> cpu_us;
+  durations_us.reserve(input->timed.size());
+  cpu_us.reserve(input->timed.size());
+  const std::uint64_t bytes_before = node->encoder().counters().bytes;
+  std::uint64_t raw_bytes = 0;
+  std::size_t i = 0;
+  lrfnet::testing::StartCountingAllocations();
+  for (auto _ : state) {
+    if (i == input->timed.size()) {
+      // Out of pre-rendered scans: stop (the learning above must not be repeated in the loop).
+      state.SkipWithError("input exhausted; pass a smaller --benchmark_min_time or more --scans");
+      break;
+    }
+    const Frame& f = input->timed[i++];
+    const double cpu_started = ThreadCpuUs();
+    const auto started = Clock::now();
+    decoder.Feed(f.bytes, f.receive_ns, listener);
+    durations_us.push_back(std::chrono::duration<double, std::micro>(Clock::now() - started).count());
+    cpu_us.push_back(ThreadCpuUs() - cpu_started);
+    raw_bytes += f.bytes.size();
+    if ((i & 255) == 0) receiver.Drain();
+  }
+  const std::size_t allocations = lrfnet::testing::StopCountingAllocations();
+  if (durations_us.empty()) return;
+
+  Row row;
+  row.name = input->name;
+  row.scans = durations_us.size();
+  row.median_us = Quantile(durations_us, 0.5);
+  row.p99_us = Quantile(durations_us, 0.99);
+  row.cpu_median_us = Quantile(cpu_us, 0.5);
+  row.cpu_p99_us = Quantile(cpu_us, 0.99);
+  // Allocations that are not the benchmark harness's own (the duration vector is reserved).
+  row.allocations = allocations;
+  rusage usage{};
+  getrusage(RUSAGE_SELF, &usage);
+  row.peak_rss_kib = usage.ru_maxrss;
+  const double seconds = static_cast<double>(row.scans) / input->rate_hz;
+  row.uplink_bytes_per_s =
+      static_cast<double>(node->encoder().counters().bytes - bytes_before) / seconds;
+  row.raw_bytes_per_s = static_cast<double>(raw_bytes) / seconds;
+  row.confirmed_tracks = node->pipeline().tracker().counters().confirmed;
+  state.counters["median_us"] = row.median_us;
+  state.counters["p99_us"] = row.p99_us;
+  state.counters["allocs"] = static_cast<double>(row.allocations);
+  // The framework calls a case several times while it sizes the run; the last run is reported.
+  auto& rows = Rows();
+  auto it = std::find_if(rows.begin(), rows.end(), [&](const Row& r) { return r.name == row.name; });
+  if (it != rows.end()) {
+    *it = row;
+  } else {
+    rows.push_back(row);
+  }
+}
+
+std::string Table() {
+  std::string out =
+      "| input | scans | median µs/scan | p99 µs/scan | CPU median µs | CPU p99 µs | allocations | "
+      "peak RSS MiB | uplink B/s | raw CoLa-B B/s | uplink/raw | confirmed tracks |\n"
+      "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n";
+  char line[512];
+  for (const Row& r : Rows()) {
+    std::snprintf(line, sizeof line, "| %s | %zu | %.1f | %.1f | %.1f | %.1f | %zu | %.1f | %.0f | %.0f | %.3f | %llu |\n",
+                  r.name.c_str(), r.scans, r.median_us, r.p99_us, r.cpu_median_us, r.cpu_p99_us,
+                  r.allocations,
+                  static_cast<double>(r.peak_rss_kib) / 1024.0, r.uplink_bytes_per_s,
+                  r.raw_bytes_per_s, r.uplink_bytes_per_s / r.raw_bytes_per_s,
+                  static_cast<unsigned long long>(r.confirmed_tracks));
+    out += line;
+  }
+  return out;
+}
+
+}  // namespace
+}  // namespace lrfnet::bench
+
+int main(int argc, char** argv) {
+  using namespace lrfnet::bench;
+  std::string out_path;
+  std::size_t scans = 3000;
+  std::vector<char*> args;
+  for (int i = 0; i < argc; ++i) {
+    if (std::strcmp(argv[i], "--out") == 0 && i + 1 < argc) {
+      out_path = argv[++i];
+    } else if (std::strcmp(argv[i], "--scans") == 0 && i + 1 < argc) {
+      scans = static_cast<std::size_t>(std::stoul(argv[++i]));
+    } else {
+      args.push_back(argv[i]);
+    }
+  }
+  int bench_argc = static_cast<int>(args.size());
+  benchmark::Initialize(&bench_argc, args.data());
+
+  std::vector<std::unique_ptr<Input>> inputs;
+  if (auto capture = CaptureInput(scans)) {
+    inputs.push_back(std::move(capture));
+  } else {
+    std::fprintf(stderr, "tracker_benchmark: LMS511 capture not found; synthetic inputs only\n");
+  }
+  for (int people : {0, 10, 50}) inputs.push_back(SyntheticInput(people, scans));
+  for (const auto& input : inputs) {
+    // Exactly `scans` iterations: every timed scan once, in order.
+    benchmark::RegisterBenchmark(input->name.c_str(), RunCase, input.get())
+        ->Iterations(static_cast<benchmark::IterationCount>(input->timed.size()))
+        ->Unit(benchmark::kMicrosecond);
+  }
+  benchmark::RunSpecifiedBenchmarks();
+  benchmark::Shutdown();
+
+  const std::string table = Table();
+  std::printf("\n%s", table.c_str());
+  if (!out_path.empty()) {
+    std::ofstream out(out_path);
+    out << "# lrfnet-tracker per-scan path\n\n"
+        << "decode -> clock mapping -> tracking -> encode -> UDP send on loopback, one scan per "
+           "iteration; allocations counted in the timed loop; peak RSS is the process's after "
+           "the case (inputs for all cases are held in memory).\n\n"
+        << table;
+  }
+  return 0;
+}
