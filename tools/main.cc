@@ -23,6 +23,7 @@ struct Subcommand {
 constexpr Subcommand kSubcommands[] = {
     {"dump", "print the scans of a pcap/pcapng capture as JSON lines (--summary: counts)", RunDump},
     {"emulate", "serve a capture's scans (or synthetic ones) as a SICK device on TCP", RunEmulate},
+    {"sim", "simulate a scenario: per-sensor captures and ground truth, or live devices", RunSim},
 };
 
 std::string Names() {
