@@ -3,6 +3,7 @@
 #include <gtest/gtest.h>
 
 #include <fstream>
+#include <ostream>
 #include <sstream>
 #include <string>
 
@@ -98,6 +99,9 @@ struct BadCase {
   const char* yaml;
   const char* expected;  // substring of the one-line error
 };
+
+// Readable test names in ctest instead of a byte dump.
+void PrintTo(const BadCase& c, std::ostream* os) { *os << c.expected; }
 
 class TrackerConfigErrors : public ::testing::TestWithParam<BadCase> {};
 
