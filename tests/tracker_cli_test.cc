@@ -3,24 +3,22 @@
 // one track frame per scan, identical on a second run; --sensor --uplink sends the datagrams over
 // UDP and answers the daemon's Request datagrams.
 
-#include <arpa/inet.h>
 #include <gtest/gtest.h>
-#include <netinet/in.h>
-#include <sys/socket.h>
 
-#include <array>
 #include <chrono>
 #include <cstdint>
 #include <filesystem>
 #include <fstream>
 #include <map>
 #include <optional>
+#include <span>
 #include <string>
 #include <vector>
 
 #include "lrfnet.pb.h"
 #include "tests/process_harness.h"
 #include "tests/support/test_data.h"
+#include "tests/support/udp_peer.h"
 
 namespace lrfnet {
 namespace {
@@ -140,47 +138,15 @@ TEST(TrackerCliTest, ReplayWritesARecordingWithAFramePerScanSameOnEveryRun) {
   std::filesystem::remove(rec_b);
 }
 
-// The daemon's end of the uplink: a UDP socket on loopback.
-class DaemonSocket {
- public:
-  DaemonSocket() {
-    fd_ = ::socket(AF_INET, SOCK_DGRAM, 0);
-    sockaddr_in addr{};
-    addr.sin_family = AF_INET;
-    addr.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
-    EXPECT_EQ(::bind(fd_, reinterpret_cast<sockaddr*>(&addr), sizeof addr), 0);
-    timeval timeout{0, 200'000};
-    ::setsockopt(fd_, SOL_SOCKET, SO_RCVTIMEO, &timeout, sizeof timeout);
-    socklen_t len = sizeof addr;
-    ::getsockname(fd_, reinterpret_cast<sockaddr*>(&addr), &len);
-    port_ = ntohs(addr.sin_port);
-  }
-  ~DaemonSocket() { ::close(fd_); }
-  std::uint16_t port() const { return port_; }
-
-  // Next datagram within ~200 ms; remembers the sender for Reply.
-  std::optional<proto::Datagram> Receive() {
-    std::array<char, 2048> buffer{};
-    socklen_t len = sizeof peer_;
-    const ssize_t n = ::recvfrom(fd_, buffer.data(), buffer.size(), 0,
-                                 reinterpret_cast<sockaddr*>(&peer_), &len);
-    if (n <= 0) return std::nullopt;
-    EXPECT_LE(n, 1400);
-    proto::Datagram d;
-    EXPECT_TRUE(d.ParseFromArray(buffer.data(), static_cast<int>(n)));
-    return d;
-  }
-  void Reply(const proto::Datagram& d) {
-    const std::string bytes = d.SerializeAsString();
-    ::sendto(fd_, bytes.data(), bytes.size(), 0, reinterpret_cast<const sockaddr*>(&peer_),
-             sizeof peer_);
-  }
-
- private:
-  int fd_ = -1;
-  std::uint16_t port_ = 0;
-  sockaddr_in peer_{};
-};
+// Next datagram from the tracker within ~200 ms, parsed.
+std::optional<proto::Datagram> ReceiveDatagram(testing::LoopbackUdpPeer& daemon) {
+  const std::vector<std::uint8_t> bytes = daemon.Receive(200);
+  if (bytes.empty()) return std::nullopt;
+  EXPECT_LE(bytes.size(), 1400u);
+  proto::Datagram d;
+  EXPECT_TRUE(d.ParseFromArray(bytes.data(), static_cast<int>(bytes.size())));
+  return d;
+}
 
 TEST(TrackerCliTest, LiveTrackerSendsOverUdpAndAnswersRequests) {
   Process emulator(kTool, {"emulate", "--synthetic", "lms511", "--port", "0", "--log-level",
@@ -193,7 +159,7 @@ TEST(TrackerCliTest, LiveTrackerSendsOverUdpAndAnswersRequests) {
 
   const std::string config = TempFile("fast_learning.yaml");
   std::ofstream(config) << "background:\n  learn_duration_s: 1.0\n";
-  DaemonSocket daemon;
+  testing::LoopbackUdpPeer daemon;  // lrfnetd's end of the uplink
   Process tracker(kTracker, {"--config", config, "--sensor", "127.0.0.1:" + port, "--sensor-id",
                              "live-1", "--uplink", "127.0.0.1:" + std::to_string(daemon.port()),
                              "--max-scans", "100", "--log-level", "warn"});
@@ -203,7 +169,7 @@ TEST(TrackerCliTest, LiveTrackerSendsOverUdpAndAnswersRequests) {
   std::uint64_t expected_sequence = 0;
   const auto deadline = std::chrono::steady_clock::now() + seconds(20);
   while (std::chrono::steady_clock::now() < deadline) {
-    const std::optional<proto::Datagram> d = daemon.Receive();
+    const std::optional<proto::Datagram> d = ReceiveDatagram(daemon);
     if (!d) {
       if (kinds[proto::Datagram::kTrackFrame] >= 100) break;  // the tracker stopped
       continue;
@@ -218,7 +184,8 @@ TEST(TrackerCliTest, LiveTrackerSendsOverUdpAndAnswersRequests) {
       request.set_sensor_id("live-1");
       request.mutable_request()->set_send_sensor_info(true);
       request.mutable_request()->set_send_background(true);
-      daemon.Reply(request);
+      const std::string bytes = request.SerializeAsString();
+      daemon.Reply(std::span(reinterpret_cast<const std::uint8_t*>(bytes.data()), bytes.size()));
       requested = true;
     }
   }

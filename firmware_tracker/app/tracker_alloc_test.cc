@@ -3,13 +3,9 @@
 // datagram encoding -> UDP send (to a receiver on loopback) and recording write, over all scans of
 // the shipped captures (several passes) and over thousands of scans of a synthetic crowd.
 
-#include <arpa/inet.h>
 #include <gtest/gtest.h>
-#include <netinet/in.h>
-#include <sys/socket.h>
 #include <unistd.h>
 
-#include <array>
 #include <cmath>
 #include <filesystem>
 #include <memory>
@@ -26,38 +22,10 @@
 #include "firmware_tracker/io/udp_uplink.h"
 #include "tests/support/alloc_counter.h"
 #include "tests/support/test_data.h"
+#include "tests/support/udp_peer.h"
 
 namespace lrfnet::tracker {
 namespace {
-
-// A UDP receiver on loopback standing in for lrfnetd; drained between passes.
-class Receiver {
- public:
-  Receiver() {
-    fd_ = ::socket(AF_INET, SOCK_DGRAM | SOCK_NONBLOCK, 0);
-    sockaddr_in addr{};
-    addr.sin_family = AF_INET;
-    addr.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
-    EXPECT_EQ(::bind(fd_, reinterpret_cast<sockaddr*>(&addr), sizeof addr), 0);
-    int size = 8 << 20;
-    ::setsockopt(fd_, SOL_SOCKET, SO_RCVBUF, &size, sizeof size);
-    socklen_t len = sizeof addr;
-    ::getsockname(fd_, reinterpret_cast<sockaddr*>(&addr), &len);
-    port_ = ntohs(addr.sin_port);
-  }
-  ~Receiver() { ::close(fd_); }
-  std::uint16_t port() const { return port_; }
-  std::size_t Drain() {
-    std::array<std::uint8_t, 2048> buffer{};
-    std::size_t n = 0;
-    while (::recv(fd_, buffer.data(), buffer.size(), 0) > 0) ++n;
-    return n;
-  }
-
- private:
-  int fd_ = -1;
-  std::uint16_t port_ = 0;
-};
 
 // Everything a running tracker holds, built before counting starts.
 struct Tracker : cola::TelegramListener {
@@ -119,7 +87,7 @@ TEST(TrackerAllocTest, CounterSeesAllocations) {
 TEST(TrackerAllocTest, ShippedCapturesAllocateNothingPerScan) {
   bool any = false;
   std::size_t total_scans = 0;
-  Receiver receiver;
+  lrfnet::testing::LoopbackUdpPeer receiver;  // lrfnetd's end, drained between passes
   for (const std::string& name : lrfnet::testing::SickCaptureNames()) {
     const std::optional<std::string> path = lrfnet::testing::SharedFile("data/sick/" + name);
     if (!path) continue;
@@ -162,7 +130,7 @@ TEST(TrackerAllocTest, ShippedCapturesAllocateNothingPerScan) {
 }
 
 TEST(TrackerAllocTest, SyntheticCrowdAllocatesNothingPerScan) {
-  Receiver receiver;
+  lrfnet::testing::LoopbackUdpPeer receiver;  // lrfnetd's end, drained between passes
   const std::string recording = TempPath("alloc_crowd");
   Tracker tracker("crowd", receiver.port(), recording);
   testing::ScannerConfig scanner;  // LMS1xx: 541 beams, 25 Hz

@@ -1,4 +1,5 @@
 #include "firmware_tracker/io/udp_uplink.h"
+#include "tests/support/udp_peer.h"
 
 #include <arpa/inet.h>
 #include <gtest/gtest.h>
@@ -20,65 +21,8 @@ namespace {
 
 constexpr char kId[] = "gate-3";
 
-// The daemon's side of the loopback: a bound UDP socket.
-class FakeDaemon {
- public:
-  explicit FakeDaemon(int family) : family_(family) {
-    fd_ = ::socket(family, SOCK_DGRAM | SOCK_CLOEXEC, 0);
-    if (fd_ < 0) return;
-    sockaddr_storage addr{};
-    socklen_t len = 0;
-    if (family == AF_INET) {
-      auto* a = reinterpret_cast<sockaddr_in*>(&addr);
-      a->sin_family = AF_INET;
-      a->sin_addr.s_addr = htonl(INADDR_LOOPBACK);
-      len = sizeof(sockaddr_in);
-    } else {
-      auto* a = reinterpret_cast<sockaddr_in6*>(&addr);
-      a->sin6_family = AF_INET6;
-      a->sin6_addr = in6addr_loopback;
-      len = sizeof(sockaddr_in6);
-    }
-    if (::bind(fd_, reinterpret_cast<sockaddr*>(&addr), len) != 0) {
-      ::close(fd_);
-      fd_ = -1;
-      return;
-    }
-    len = sizeof(addr);
-    ::getsockname(fd_, reinterpret_cast<sockaddr*>(&addr), &len);
-    port_ = family == AF_INET ? ntohs(reinterpret_cast<sockaddr_in*>(&addr)->sin_port)
-                              : ntohs(reinterpret_cast<sockaddr_in6*>(&addr)->sin6_port);
-  }
-  ~FakeDaemon() {
-    if (fd_ >= 0) ::close(fd_);
-  }
-  bool ok() const { return fd_ >= 0; }
-  std::uint16_t port() const { return port_; }
-
-  // Waits up to 2 s for one datagram; empty on timeout. Remembers the sender.
-  std::vector<std::uint8_t> Receive() {
-    pollfd p{fd_, POLLIN, 0};
-    if (::poll(&p, 1, 2000) != 1) return {};
-    std::vector<std::uint8_t> buf(2048);
-    peer_len_ = sizeof(peer_);
-    const ssize_t n =
-        ::recvfrom(fd_, buf.data(), buf.size(), 0, reinterpret_cast<sockaddr*>(&peer_), &peer_len_);
-    buf.resize(n > 0 ? static_cast<std::size_t>(n) : 0);
-    return buf;
-  }
-  // Sends to whoever sent the last received datagram (the daemon's way to answer a tracker).
-  bool Reply(const std::vector<std::uint8_t>& bytes) {
-    return ::sendto(fd_, bytes.data(), bytes.size(), 0, reinterpret_cast<sockaddr*>(&peer_),
-                    peer_len_) == static_cast<ssize_t>(bytes.size());
-  }
-
- private:
-  int family_;
-  int fd_ = -1;
-  std::uint16_t port_ = 0;
-  sockaddr_storage peer_{};
-  socklen_t peer_len_ = 0;
-};
+// The daemon's side of the loopback.
+using FakeDaemon = ::lrfnet::testing::LoopbackUdpPeer;
 
 UdpUplinkOptions Options(const std::string& host, std::uint16_t port) {
   UdpUplinkOptions o;
@@ -154,7 +98,7 @@ void FramesAndRequestsOverLoopback(int family, const std::string& host) {
   EXPECT_TRUE(pending.send_background);
   EXPECT_FALSE(pending.send_sensor_info);
   EXPECT_FALSE(uplink.TakeRequests().any());  // taken
-  ASSERT_TRUE(daemon.Reply({0xff, 0xff, 0xff}));
+  ASSERT_TRUE(daemon.Reply(std::vector<std::uint8_t>{0xff, 0xff, 0xff}));
   ASSERT_TRUE(daemon.Reply(RequestBytes("gate-4", true, true)));
   ASSERT_TRUE(daemon.Reply(RequestBytes("", true, false)));
   std::size_t read = 0;

@@ -26,35 +26,12 @@
 #include "firmware_tracker/io/udp_uplink.h"
 #include "firmware_tracker/tracking/clock_mapper.h"
 #include "tests/support/alloc_counter.h"
+#include "tests/support/udp_peer.h"
 
 namespace lrfnet::io {
 namespace {
 
 constexpr char kId[] = "gate-3";
-
-// The daemon on loopback: receives the datagrams (drained, not checked) and sends Requests.
-struct Daemon {
-  int fd = -1;
-  std::uint16_t port = 0;
-  sockaddr_in tracker{};
-  Daemon() {
-    fd = ::socket(AF_INET, SOCK_DGRAM | SOCK_NONBLOCK | SOCK_CLOEXEC, 0);
-    sockaddr_in a{};
-    a.sin_family = AF_INET;
-    a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
-    ::bind(fd, reinterpret_cast<sockaddr*>(&a), sizeof(a));
-    socklen_t len = sizeof(a);
-    ::getsockname(fd, reinterpret_cast<sockaddr*>(&a), &len);
-    port = ntohs(a.sin_port);
-  }
-  ~Daemon() { ::close(fd); }
-  std::size_t Drain() {
-    std::uint8_t buf[2048];
-    std::size_t n = 0;
-    while (::recv(fd, buf, sizeof(buf), 0) > 0) ++n;
-    return n;
-  }
-};
 
 TEST(UplinkAllocTest, CounterSeesAllocations) {
   ::lrfnet::testing::StartCountingAllocations();
@@ -86,11 +63,12 @@ struct Path {
 };
 
 TEST(UplinkAllocTest, NoHeapAllocationPerScanAfterStart) {
-  Daemon daemon;
-  ASSERT_GE(daemon.fd, 0);
+  // The daemon on loopback: receives the datagrams (drained, not checked) and sends Requests.
+  ::lrfnet::testing::LoopbackUdpPeer daemon;
+  ASSERT_TRUE(daemon.ok());
   const auto recording_path = std::filesystem::temp_directory_path() /
                               ("lrfnet_uplink_alloc_" + std::to_string(::getpid()) + ".rec");
-  auto path = std::make_unique<Path>(daemon.port, recording_path.string());  // start-up
+  auto path = std::make_unique<Path>(daemon.port(), recording_path.string());  // start-up
   ASSERT_EQ(path->uplink.Open(), std::nullopt);
   ASSERT_EQ(path->recording.Open(NowUtcNs()), std::nullopt);
   ASSERT_TRUE(path->fanout.Add(&path->uplink));
@@ -99,16 +77,9 @@ TEST(UplinkAllocTest, NoHeapAllocationPerScanAfterStart) {
     path->background[i] = i % 11 == 0 ? 0.0f : 2.0f + 0.001f * static_cast<float>(i);
   // The daemon learns the tracker's address from its first datagram.
   path->encoder.EncodeHealth({}, NowUtcNs(), path->fanout);
-  sockaddr_in tracker{};
-  socklen_t tracker_len = sizeof(tracker);
   {
-    std::uint8_t buf[2048];
-    for (int i = 0; i < 200; ++i) {
-      if (::recvfrom(daemon.fd, buf, sizeof(buf), 0, reinterpret_cast<sockaddr*>(&tracker),
-                     &tracker_len) > 0)
-        break;
-      ::usleep(5000);
-    }
+    std::array<std::uint8_t, 2048> buf{};
+    ASSERT_GT(daemon.ReceiveInto(buf, 1000), 0);
   }
   std::array<std::uint8_t, 64> request{};
   RequestMessage m;
@@ -160,8 +131,7 @@ TEST(UplinkAllocTest, NoHeapAllocationPerScanAfterStart) {
       p.encoder.EncodeHealth(h, receive, p.fanout);
       daemon.Drain();
       if (k % 500 == 0) {
-        ::sendto(daemon.fd, request.data(), request_size, 0, reinterpret_cast<sockaddr*>(&tracker),
-                 tracker_len);
+        daemon.Reply(std::span<const std::uint8_t>(request).first(request_size));
       }
       p.uplink.Poll();
       const PendingRequests pending = p.uplink.TakeRequests();

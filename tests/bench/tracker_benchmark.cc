@@ -11,15 +11,11 @@
 //
 //   tracker_benchmark [--out FILE] [--scans N] [google benchmark flags]
 
-#include <arpa/inet.h>
 #include <benchmark/benchmark.h>
-#include <netinet/in.h>
 #include <sys/resource.h>
-#include <sys/socket.h>
 #include <unistd.h>
 
 #include <algorithm>
-#include <array>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -39,6 +35,7 @@
 #include "firmware_tracker/io/udp_uplink.h"
 #include "tests/support/alloc_counter.h"
 #include "tests/support/test_data.h"
+#include "tests/support/udp_peer.h"
 
 namespace lrfnet::bench {
 namespace {
@@ -174,33 +171,6 @@ std::unique_ptr<Input> SyntheticInput(int people, std::size_t timed_scans) {
   return input;
 }
 
-class Receiver {
- public:
-  Receiver() {
-    fd_ = ::socket(AF_INET, SOCK_DGRAM | SOCK_NONBLOCK, 0);
-    sockaddr_in addr{};
-    addr.sin_family = AF_INET;
-    addr.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
-    ::bind(fd_, reinterpret_cast<sockaddr*>(&addr), sizeof addr);
-    int size = 16 << 20;
-    ::setsockopt(fd_, SOL_SOCKET, SO_RCVBUF, &size, sizeof size);
-    socklen_t len = sizeof addr;
-    ::getsockname(fd_, reinterpret_cast<sockaddr*>(&addr), &len);
-    port_ = ntohs(addr.sin_port);
-  }
-  ~Receiver() { ::close(fd_); }
-  std::uint16_t port() const { return port_; }
-  void Drain() {
-    std::array<std::uint8_t, 2048> buffer{};
-    while (::recv(fd_, buffer.data(), buffer.size(), 0) > 0) {
-    }
-  }
-
- private:
-  int fd_ = -1;
-  std::uint16_t port_ = 0;
-};
-
 struct Listener : cola::TelegramListener {
   tracker::TrackerNode* node = nullptr;
   void OnScan(const cola::ScanTelegram& scan, common::UtcNs rx) override {
@@ -224,7 +194,7 @@ double Quantile(std::vector<double> values, double q) {
 }
 
 void RunCase(benchmark::State& state, const Input* input) {
-  Receiver receiver;
+  lrfnet::testing::LoopbackUdpPeer receiver;
   io::UdpUplinkOptions udp_options;
   udp_options.host = "127.0.0.1";
   udp_options.port = receiver.port();
