@@ -178,7 +178,15 @@ class Outputs {
   }
 
   io::DatagramSink& sink() { return fanout_; }
-  io::UdpUplink* udp() { return udp_.get(); }
+
+  // Reads the daemon's Request datagrams (non-blocking) and hands them to the node.
+  void ServeRequests(TrackerNode& node) {
+    if (!udp_) return;
+    udp_->Poll();
+    const io::PendingRequests requests = udp_->TakeRequests();
+    if (requests.send_sensor_info) node.RequestSensorInfo();
+    if (requests.send_background) node.RequestBackground();
+  }
 
   std::uint64_t send_errors() const {
     return (udp_ ? udp_->counters().send_errors : 0) +
@@ -293,19 +301,12 @@ int RunLive(const TrackerConfig& config, const std::string& record_path, ScanLog
     link.send_errors = outputs.send_errors();
     return link;
   };
-  const auto serve_requests = [&] {
-    if (outputs.udp() == nullptr) return;
-    outputs.udp()->Poll();
-    const io::PendingRequests requests = outputs.udp()->TakeRequests();
-    if (requests.send_sensor_info) node->RequestSensorInfo();
-    if (requests.send_background) node->RequestBackground();
-  };
   std::function<void()> arm_timer = [&] {
     timer.expires_after(std::chrono::milliseconds(200));
     timer.async_wait([&](const boost::system::error_code& ec) {
       if (ec) return;
       ++ticks;
-      serve_requests();
+      outputs.ServeRequests(*node);
       if (ticks % 5 == 0) clock_status = io::ReadClockStatus(config.clock_status);
       node->OnTick(io::NowUtcNs(), link_health(), clock_status);
       if (ticks % 50 == 0) {
@@ -324,7 +325,7 @@ int RunLive(const TrackerConfig& config, const std::string& record_path, ScanLog
         const auto started = std::chrono::steady_clock::now();
         const io::SickDeviceInfo& d = client->device_info();
         node->SetDeviceIdentity(d.ident_name, d.serial_number, d.firmware_version);
-        serve_requests();
+        outputs.ServeRequests(*node);
         node->OnScan(scan, receive_time_ns, io::NowUtcNs());
         node->RecordScanCpu(ElapsedUs(started));
         node->OnTick(io::NowUtcNs(), link_health(), clock_status);
@@ -386,12 +387,7 @@ class Replay : public cola::TelegramListener {
   void OnScan(const cola::ScanTelegram& scan, common::UtcNs receive_time_ns) override {
     if (stopped_) return;
     const auto started = std::chrono::steady_clock::now();
-    if (outputs_.udp() != nullptr) {
-      outputs_.udp()->Poll();
-      const io::PendingRequests requests = outputs_.udp()->TakeRequests();
-      if (requests.send_sensor_info) node_.RequestSensorInfo();
-      if (requests.send_background) node_.RequestBackground();
-    }
+    outputs_.ServeRequests(node_);
     node_.OnScan(scan, receive_time_ns, receive_time_ns);
     node_.RecordScanCpu(ElapsedUs(started));
     node_.OnTick(receive_time_ns, Link(), clock_);

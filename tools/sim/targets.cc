@@ -278,26 +278,23 @@ std::size_t Trajectory::LegIndex(double t_s) const {
   return std::min(i, knots_.size() - 2);
 }
 
-Vec2 Trajectory::Position(double t_s) const {
-  if (knots_.empty()) return {};
+std::pair<std::size_t, double> Trajectory::LegFraction(double t_s) const {
   t_s = std::clamp(t_s, start_s(), end_s());
   const std::size_t i = LegIndex(t_s);
-  const Knot& a = knots_[i];
-  const Knot& b = knots_[i + 1];
-  const double dt = b.t_s - a.t_s;
-  const double u = dt > 0 ? (t_s - a.t_s) / dt : 1.0;
-  return a.p + u * (b.p - a.p);
+  const double dt = knots_[i + 1].t_s - knots_[i].t_s;
+  return {i, dt > 0 ? (t_s - knots_[i].t_s) / dt : 1.0};
+}
+
+Vec2 Trajectory::Position(double t_s) const {
+  if (knots_.empty()) return {};
+  const auto [i, u] = LegFraction(t_s);
+  return knots_[i].p + u * (knots_[i + 1].p - knots_[i].p);
 }
 
 double Trajectory::Distance(double t_s) const {
   if (knots_.empty()) return 0.0;
-  t_s = std::clamp(t_s, start_s(), end_s());
-  const std::size_t i = LegIndex(t_s);
-  const Knot& a = knots_[i];
-  const Knot& b = knots_[i + 1];
-  const double dt = b.t_s - a.t_s;
-  const double u = dt > 0 ? (t_s - a.t_s) / dt : 1.0;
-  return a.distance_m + u * (b.distance_m - a.distance_m);
+  const auto [i, u] = LegFraction(t_s);
+  return knots_[i].distance_m + u * (knots_[i + 1].distance_m - knots_[i].distance_m);
 }
 
 double Trajectory::LegHeading(double t_s) const {

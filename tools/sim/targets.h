@@ -6,6 +6,7 @@
 #include <cstdint>
 #include <optional>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "tools/sim/geometry2d.h"
@@ -40,6 +41,8 @@ class Trajectory {
 
  private:
   std::size_t LegIndex(double t_s) const;  // i with knots_[i].t_s <= t_s < knots_[i+1].t_s
+  // For t_s clamped to the trajectory: its leg and the fraction of that leg's time passed.
+  std::pair<std::size_t, double> LegFraction(double t_s) const;
 
   std::vector<Knot> knots_;
   std::vector<double> leg_heading_rad_;  // per leg
