@@ -7,6 +7,7 @@
 #include <cmath>
 #include <utility>
 
+#include "common/byte_order.h"
 #include "firmware_tracker/cola/commands.h"
 
 namespace lrfnet::tools {
@@ -225,9 +226,7 @@ void Emulator::HandleCommand(std::span<const std::uint8_t> payload) {
         // Arguments: user level u8, password hash u32 (big-endian).
         bool granted = false;
         if (header.args.size() >= 5) {
-          const std::uint32_t hash = (std::uint32_t{header.args[1]} << 24) |
-                                     (std::uint32_t{header.args[2]} << 16) |
-                                     (std::uint32_t{header.args[3]} << 8) | header.args[4];
+          const std::uint32_t hash = common::LoadBe32(header.args.data() + 1);
           const auto level = static_cast<cola::AccessLevel>(header.args[0]);
           granted = (level == cola::AccessLevel::kAuthorizedClient &&
                      hash == cola::kAuthorizedClientPasswordHash) ||

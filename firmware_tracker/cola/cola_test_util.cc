@@ -3,20 +3,15 @@
 #include <cstring>
 #include <optional>
 
+#include "common/byte_order.h"
 #include "firmware_tracker/cola/framer.h"
 
 namespace lrfnet::cola::test {
 namespace {
 
-std::uint16_t Be16(const std::uint8_t* p) { return static_cast<std::uint16_t>((p[0] << 8) | p[1]); }
-std::uint32_t Be32(const std::uint8_t* p) {
-  return (std::uint32_t{p[0]} << 24) | (std::uint32_t{p[1]} << 16) | (std::uint32_t{p[2]} << 8) |
-         p[3];
-}
-std::uint32_t Le32(const std::uint8_t* p) {
-  return (std::uint32_t{p[3]} << 24) | (std::uint32_t{p[2]} << 16) | (std::uint32_t{p[1]} << 8) |
-         p[0];
-}
+constexpr auto Be16 = common::LoadBe16;
+constexpr auto Be32 = common::LoadBe32;
+constexpr auto Le32 = common::LoadLe32;
 
 // Ethernet frame -> TCP payload from the sensor port, with its sequence number.
 struct Segment {

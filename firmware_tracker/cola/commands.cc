@@ -2,6 +2,8 @@
 
 #include <cstring>
 
+#include "common/byte_order.h"
+
 namespace lrfnet::cola {
 namespace {
 
@@ -16,13 +18,13 @@ class Writer {
   void Bytes(std::span<const std::uint8_t> b) { Bytes(b.data(), b.size()); }
   void U8(std::uint8_t v) { Bytes(&v, 1); }
   void U16(std::uint16_t v) {
-    const std::uint8_t b[2] = {static_cast<std::uint8_t>(v >> 8), static_cast<std::uint8_t>(v)};
+    std::uint8_t b[2];
+    common::StoreBe16(b, v);
     Bytes(b, 2);
   }
   void U32(std::uint32_t v) {
-    const std::uint8_t b[4] = {static_cast<std::uint8_t>(v >> 24),
-                               static_cast<std::uint8_t>(v >> 16),
-                               static_cast<std::uint8_t>(v >> 8), static_cast<std::uint8_t>(v)};
+    std::uint8_t b[4];
+    common::StoreBe32(b, v);
     Bytes(b, 4);
   }
   std::size_t Size() const { return ok_ ? pos_ : 0; }
@@ -146,7 +148,7 @@ std::size_t EncodeErrorReply(std::uint16_t sopas_error_code, std::span<std::uint
 
 bool DecodeFlexString(std::span<const std::uint8_t> args, FlexString* out) {
   if (args.size() < 2) return false;
-  const std::size_t length = (std::size_t{args[0]} << 8) | args[1];
+  const std::size_t length = common::LoadBe16(args.data());
   if (args.size() - 2 < length) return false;
   out->text = std::string_view(reinterpret_cast<const char*>(args.data()) + 2, length);
   out->consumed = 2 + length;

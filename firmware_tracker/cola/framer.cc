@@ -4,6 +4,8 @@
 #include <cstdlib>
 #include <cstring>
 
+#include "common/byte_order.h"
+
 namespace lrfnet::cola {
 namespace {
 
@@ -16,10 +18,6 @@ constexpr std::size_t kMaxConfigurablePayload = std::size_t{1} << 30;
 // header).
 constexpr std::size_t kMinConfigurablePayload = 64;
 
-std::uint32_t ReadU32Be(const std::uint8_t* p) {
-  return (std::uint32_t{p[0]} << 24) | (std::uint32_t{p[1]} << 16) | (std::uint32_t{p[2]} << 8) |
-         std::uint32_t{p[3]};
-}
 
 }  // namespace
 
@@ -80,7 +78,7 @@ FrameStatus Framer::Next() {
     if (begin_ == end_) begin_ = end_ = 0;  // empty: a free rewind instead of a later memmove
     return FrameStatus::kNeedMore;
   }
-  const std::uint32_t length = ReadU32Be(base + begin_ + kStartBytes);
+  const std::uint32_t length = common::LoadBe32(base + begin_ + kStartBytes);
   if (length == 0 || length > options_.max_payload_bytes) {
     ++counters_.oversize_length;
     ++counters_.garbage_bytes;
@@ -119,10 +117,7 @@ std::size_t EncodeFrame(std::span<const std::uint8_t> payload, std::span<std::ui
   std::uint8_t* p = out.data();
   p[0] = p[1] = p[2] = p[3] = kStx;
   const auto n = static_cast<std::uint32_t>(payload.size());
-  p[4] = static_cast<std::uint8_t>(n >> 24);
-  p[5] = static_cast<std::uint8_t>(n >> 16);
-  p[6] = static_cast<std::uint8_t>(n >> 8);
-  p[7] = static_cast<std::uint8_t>(n);
+  common::StoreBe32(p + 4, n);
   if (!payload.empty()) std::memcpy(p + kFrameHeaderBytes, payload.data(), payload.size());
   p[kFrameHeaderBytes + payload.size()] = Checksum(payload);
   return size;

@@ -5,6 +5,7 @@
 #include <cstring>
 #include <initializer_list>
 
+#include "common/byte_order.h"
 #include "common/geometry.h"
 #include "firmware_tracker/cola/telegram.h"
 
@@ -46,25 +47,18 @@ constexpr std::size_t kPositionBlockBytes = 26;
 constexpr std::size_t kTimeBlockBytes = 11;
 constexpr std::size_t kEventBlockBytes = 16;
 
-std::uint16_t U16(const std::uint8_t* p) { return static_cast<std::uint16_t>((p[0] << 8) | p[1]); }
-std::uint32_t U32(const std::uint8_t* p) {
-  return (std::uint32_t{p[0]} << 24) | (std::uint32_t{p[1]} << 16) | (std::uint32_t{p[2]} << 8) |
-         std::uint32_t{p[3]};
-}
+constexpr auto U16 = common::LoadBe16;
+constexpr auto U32 = common::LoadBe32;
 std::int16_t I16(const std::uint8_t* p) { return static_cast<std::int16_t>(U16(p)); }
 std::int32_t I32(const std::uint8_t* p) { return static_cast<std::int32_t>(U32(p)); }
 float F32(const std::uint8_t* p) { return std::bit_cast<float>(U32(p)); }
 
 std::uint8_t* PutU16(std::uint8_t* p, std::uint16_t v) {
-  p[0] = static_cast<std::uint8_t>(v >> 8);
-  p[1] = static_cast<std::uint8_t>(v);
+  common::StoreBe16(p, v);
   return p + 2;
 }
 std::uint8_t* PutU32(std::uint8_t* p, std::uint32_t v) {
-  p[0] = static_cast<std::uint8_t>(v >> 24);
-  p[1] = static_cast<std::uint8_t>(v >> 16);
-  p[2] = static_cast<std::uint8_t>(v >> 8);
-  p[3] = static_cast<std::uint8_t>(v);
+  common::StoreBe32(p, v);
   return p + 4;
 }
 std::uint8_t* PutI16(std::uint8_t* p, std::int16_t v) {

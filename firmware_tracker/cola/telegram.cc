@@ -3,6 +3,8 @@
 #include <array>
 #include <cstring>
 
+#include "common/byte_order.h"
+
 namespace lrfnet::cola {
 namespace {
 
@@ -54,7 +56,7 @@ HeaderStatus ParseTelegramHeader(std::span<const std::uint8_t> payload, Telegram
     // "sFA" + uint16 big-endian SOPAS error code, no space and no name (LMS511: `sFA 00 03`).
     if (payload.size() < 5) return HeaderStatus::kTooShort;
     out->type = type;
-    out->error_code = static_cast<std::uint16_t>((payload[3] << 8) | payload[4]);
+    out->error_code = common::LoadBe16(payload.data() + 3);
     out->args = payload.subspan(5);
     return HeaderStatus::kOk;
   }

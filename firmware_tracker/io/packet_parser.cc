@@ -3,6 +3,8 @@
 #include <algorithm>
 #include <cstddef>
 
+#include "common/byte_order.h"
+
 namespace lrfnet::io {
 namespace {
 
@@ -22,15 +24,13 @@ constexpr std::uint8_t kIpv6Fragment = 44;
 constexpr std::uint8_t kIpv6DestOptions = 60;
 
 std::uint16_t Be16(Bytes b, std::size_t at) {
-  return static_cast<std::uint16_t>((b[at] << 8) | b[at + 1]);
+  return common::LoadBe16(b.data() + at);
 }
 std::uint32_t Be32(Bytes b, std::size_t at) {
-  return (std::uint32_t{b[at]} << 24) | (std::uint32_t{b[at + 1]} << 16) |
-         (std::uint32_t{b[at + 2]} << 8) | std::uint32_t{b[at + 3]};
+  return common::LoadBe32(b.data() + at);
 }
 std::uint32_t Le32(Bytes b, std::size_t at) {
-  return (std::uint32_t{b[at + 3]} << 24) | (std::uint32_t{b[at + 2]} << 16) |
-         (std::uint32_t{b[at + 1]} << 8) | std::uint32_t{b[at]};
+  return common::LoadLe32(b.data() + at);
 }
 
 ParseResult Fail(ParseStatus status, const char* reason) {

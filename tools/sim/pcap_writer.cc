@@ -3,6 +3,8 @@
 #include <cerrno>
 #include <cstring>
 
+#include "common/byte_order.h"
+
 namespace lrfnet::sim {
 
 namespace {
@@ -18,26 +20,10 @@ constexpr std::size_t kEthernetMinimumFrame = 60;
 constexpr std::uint16_t kClientWindow = 64240;
 constexpr std::uint16_t kDeviceWindow = 8192;
 
-void PutLe32(std::uint8_t* p, std::uint32_t v) {
-  p[0] = static_cast<std::uint8_t>(v);
-  p[1] = static_cast<std::uint8_t>(v >> 8);
-  p[2] = static_cast<std::uint8_t>(v >> 16);
-  p[3] = static_cast<std::uint8_t>(v >> 24);
-}
-void PutLe16(std::uint8_t* p, std::uint16_t v) {
-  p[0] = static_cast<std::uint8_t>(v);
-  p[1] = static_cast<std::uint8_t>(v >> 8);
-}
-void PutBe16(std::uint8_t* p, std::uint16_t v) {
-  p[0] = static_cast<std::uint8_t>(v >> 8);
-  p[1] = static_cast<std::uint8_t>(v);
-}
-void PutBe32(std::uint8_t* p, std::uint32_t v) {
-  p[0] = static_cast<std::uint8_t>(v >> 24);
-  p[1] = static_cast<std::uint8_t>(v >> 16);
-  p[2] = static_cast<std::uint8_t>(v >> 8);
-  p[3] = static_cast<std::uint8_t>(v);
-}
+constexpr auto PutLe32 = common::StoreLe32;
+constexpr auto PutLe16 = common::StoreLe16;
+constexpr auto PutBe16 = common::StoreBe16;
+constexpr auto PutBe32 = common::StoreBe32;
 
 // RFC 1071 one's-complement sum.
 std::uint32_t SumWords(const std::uint8_t* p, std::size_t n, std::uint32_t sum) {
