@@ -8,6 +8,12 @@
 namespace lrfnet::tracker {
 namespace {
 
+using common::LoadYamlConfig;
+using common::PrintYamlConfig;
+using common::VisitEnum;
+using common::VisitInteger;
+using common::VisitMs;
+
 std::optional<std::string> Prefixed(const std::string& section,
                                     const std::optional<std::string>& error) {
   if (!error) return std::nullopt;

@@ -7,13 +7,15 @@
 #include <optional>
 #include <string>
 
-#include "firmware_tracker/app/config_yaml.h"
+#include "common/config_yaml.h"
 #include "firmware_tracker/io/sick_client.h"
 #include "firmware_tracker/io/system_clock.h"
 #include "firmware_tracker/tracking/clock_mapper.h"
 #include "firmware_tracker/tracking/pipeline.h"
 
 namespace lrfnet::tracker {
+
+using common::ConfigVisitor;
 
 // When and what the tracker publishes (see TrackerNode).
 struct PublishOptions {

@@ -10,6 +10,8 @@
 namespace lrfnet::tracker {
 namespace {
 
+using common::ConfigKeys;
+
 std::string ReadFile(const std::string& path) {
   std::ifstream in(path);
   std::stringstream text;

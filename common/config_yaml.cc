@@ -1,4 +1,4 @@
-#include "firmware_tracker/app/config_yaml.h"
+#include "common/config_yaml.h"
 
 #include <spdlog/fmt/fmt.h>
 #include <spdlog/fmt/ranges.h>
@@ -8,7 +8,7 @@
 #include <set>
 #include <sstream>
 
-namespace lrfnet::tracker {
+namespace lrfnet::common {
 namespace {
 
 std::string Scalar(const YAML::Node& node) { return node.IsScalar() ? node.Scalar() : "<not a scalar>"; }
@@ -278,4 +278,4 @@ std::vector<std::string> ConfigKeys(const ConfigVisit& visit) {
   return std::move(lister.keys);
 }
 
-}  // namespace lrfnet::tracker
+}  // namespace lrfnet::common

@@ -8,9 +8,9 @@
 #include <string_view>
 #include <vector>
 
-#include "firmware_tracker/app/config_schema.h"
+#include "common/config_schema.h"
 
-namespace lrfnet::tracker {
+namespace lrfnet::common {
 
 // Calls the visitor on every option of one config object.
 using ConfigVisit = std::function<void(ConfigVisitor&)>;
@@ -30,4 +30,4 @@ std::string PrintYamlConfig(const ConfigVisit& visit, std::string_view header);
 // "section.key" of every option, in visiting order.
 std::vector<std::string> ConfigKeys(const ConfigVisit& visit);
 
-}  // namespace lrfnet::tracker
+}  // namespace lrfnet::common

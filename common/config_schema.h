@@ -15,7 +15,7 @@
 #include <string>
 #include <string_view>
 
-namespace lrfnet::tracker {
+namespace lrfnet::common {
 
 class ConfigVisitor {
  public:
@@ -58,4 +58,4 @@ void VisitEnum(ConfigVisitor& v, std::string_view key, Enum& value,
   value = static_cast<Enum>(index);
 }
 
-}  // namespace lrfnet::tracker
+}  // namespace lrfnet::common
