@@ -14,6 +14,7 @@
 #include "firmware_tracker/io/request_decoder.h"
 #include "tests/fuzz/capture_seeds.h"
 #include "tests/fuzz/cola_seeds.h"
+#include "tests/fuzz/daemon_seeds.h"
 #include "tests/support/test_data.h"
 
 namespace {
@@ -68,7 +69,9 @@ int main(int argc, char** argv) {
   const std::string reassembler_dir = (out / "reassembler_fuzz").string();
   const std::string packet_dir = (out / "packet_fuzz").string();
   const std::string request_dir = (out / "request_fuzz").string();
-  for (const auto& d : {cola_dir, reassembler_dir, packet_dir, request_dir})
+  const std::string datagram_dir = (out / "datagram_fuzz").string();
+  const std::string recording_dir = (out / "recording_fuzz").string();
+  for (const auto& d : {cola_dir, reassembler_dir, packet_dir, request_dir, datagram_dir, recording_dir})
     std::filesystem::create_directories(d);
 
   std::vector<std::vector<std::uint8_t>> streams;
@@ -83,9 +86,11 @@ int main(int argc, char** argv) {
   }
   lrfnet::fuzz::WriteColaSeeds(streams, cola_dir);
   WriteRequestSeeds(request_dir);
+  lrfnet::fuzz::WriteDatagramSeeds(datagram_dir);
+  lrfnet::fuzz::WriteRecordingSeeds(recording_dir);
 
   std::size_t files = 0;
-  for (const auto& d : {cola_dir, reassembler_dir, packet_dir, request_dir}) {
+  for (const auto& d : {cola_dir, reassembler_dir, packet_dir, request_dir, datagram_dir, recording_dir}) {
     for ([[maybe_unused]] const auto& e : std::filesystem::directory_iterator(d)) ++files;
   }
   std::printf("make_fuzz_corpus: %zu seed files in %s\n", files, out.string().c_str());

@@ -1,0 +1,14 @@
+#pragma once
+// Seeds for the daemon's fuzz targets, written by make_fuzz_corpus.
+
+#include <string>
+
+namespace lrfnet::fuzz {
+
+// datagram_fuzz: valid datagrams of every kind (made by the tracker's encoder) and hostile
+// variants (bad versions, NaNs, huge counts, truncations).
+void WriteDatagramSeeds(const std::string& dir);
+// recording_fuzz: small recordings and UDP captures, whole and damaged.
+void WriteRecordingSeeds(const std::string& dir);
+
+}  // namespace lrfnet::fuzz
