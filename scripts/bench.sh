@@ -1,9 +1,13 @@
 #!/usr/bin/env bash
 # Runs the benchmarks (not part of the test command) and writes their tables to results/.
+# Run them on an otherwise idle machine: daemon_benchmark pins threads to CPUs 0 and 1.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 build_dir=${1:-build}
-cmake --build "$build_dir" --target decode_benchmark tracker_benchmark >/dev/null
+cmake --build "$build_dir" --target decode_benchmark tracker_benchmark store_benchmark daemon_benchmark \
+  >/dev/null
 mkdir -p results
 "$build_dir/tests/bench/decode_benchmark" --out results/decode_benchmark.md
 "$build_dir/tests/bench/tracker_benchmark" --out results/tracker_benchmark.md
+"$build_dir/tests/bench/store_benchmark" results/store_benchmark.md
+"$build_dir/tests/bench/daemon_benchmark" --out results/daemon_benchmark.md

@@ -28,3 +28,25 @@ if(TARGET tracker_cli_test)
     LRFNET_TRACKER_CONFIG_FILE="${PROJECT_SOURCE_DIR}/firmware_tracker/config/lrfnet-tracker.yaml")
   add_dependencies(tracker_cli_test lrfnet lrfnet-tracker)
 endif()
+
+# `lrfnet dump` and `lrfnet replay` on recordings and UDP captures: JSON lines, rotation parts,
+# replay into a loopback socket (bytes, order, senders, timing, IPv6, SIGINT), exit codes.
+lrfnet_test(datagram_tools_test SOURCES datagram_tools_test.cc
+            LIBS lrfnet_dump lrfnet_proto lrfnet_capture nlohmann_json::nlohmann_json)
+if(TARGET datagram_tools_test)
+  target_compile_definitions(datagram_tools_test PRIVATE LRFNET_TOOL_BINARY="$<TARGET_FILE:lrfnet>")
+  add_dependencies(datagram_tools_test lrfnet)
+endif()
+
+# lrfnetd as a process: several tracker replays -> daemon -> recording identical to what was sent;
+# loss / reordering / duplicates / restart; hostile datagrams; SIGKILL durability; SIGHUP; --input.
+lrfnet_test(daemon_cli_test SOURCES daemon_cli_test.cc
+            LIBS lrfnet_daemon_io lrfnet_uplink lrfnet_proto nlohmann_json::nlohmann_json)
+if(TARGET daemon_cli_test)
+  target_compile_definitions(daemon_cli_test PRIVATE
+    LRFNET_TOOL_BINARY="$<TARGET_FILE:lrfnet>"
+    LRFNET_TRACKER_BINARY="$<TARGET_FILE:lrfnet-tracker>"
+    LRFNET_DAEMON_BINARY="$<TARGET_FILE:lrfnetd>"
+    LRFNET_DAEMON_CONFIG_FILE="${PROJECT_SOURCE_DIR}/central_daemon/config/lrfnetd.yaml")
+  add_dependencies(daemon_cli_test lrfnet lrfnet-tracker lrfnetd)
+endif()

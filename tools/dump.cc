@@ -9,6 +9,9 @@
 #include <utility>
 #include <vector>
 
+#include "firmware_tracker/io/packet_parser.h"
+#include "firmware_tracker/io/pcap_reader.h"
+
 namespace lrfnet::tools {
 namespace {
 
@@ -218,6 +221,36 @@ bool DumpCapture(const std::string& path, const DumpOptions& options, std::ostre
     return false;
   }
   return true;
+}
+
+CaptureContent InspectCapture(const std::string& path, std::uint16_t tcp_port,
+                              std::uint16_t udp_port) {
+  CaptureContent content;
+  std::string error;
+  const std::unique_ptr<io::PcapReader> reader = io::PcapReader::Open(path, &error);
+  if (!reader) return content;
+  content.is_capture = true;
+  io::RawPacket raw;
+  // A read error at the end is the scan or datagram path's to report: the packets before it count.
+  while (reader->Next(&raw) == io::ReadStatus::kPacket) {
+    const io::ParseResult parsed = io::ParsePacket(raw.link_type, raw.bytes);
+    if (parsed.status != io::ParseStatus::kOk) continue;
+    const io::ParsedPacket& p = parsed.packet;
+    if (p.protocol == io::TransportProtocol::kTcp &&
+        (p.src_port == tcp_port || p.dst_port == tcp_port)) {
+      ++content.scanner_tcp_packets;
+      break;  // decided: scans
+    }
+    if (p.protocol == io::TransportProtocol::kUdp && (udp_port == 0 || p.dst_port == udp_port))
+      ++content.udp_packets;
+  }
+  return content;
+}
+
+DumpInput ChooseDumpInput(const CaptureContent& content) {
+  if (!content.is_capture) return DumpInput::kDatagrams;
+  if (content.scanner_tcp_packets > 0) return DumpInput::kScans;
+  return content.udp_packets > 0 ? DumpInput::kDatagrams : DumpInput::kScans;
 }
 
 }  // namespace lrfnet::tools

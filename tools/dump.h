@@ -59,4 +59,22 @@ std::string SummaryJson(const DumpSummary& summary);
 bool DumpCapture(const std::string& path, const DumpOptions& options, std::ostream* out,
                  DumpSummary* summary, std::string* error);
 
+// What a pcap/pcapng file holds, from one pass over its packets, so that `lrfnet dump` can choose
+// between scans (the scanner's TCP stream) and datagram lines (a capture of the UDP uplink).
+struct CaptureContent {
+  bool is_capture = false;                // libpcap opened the file (pcap or pcapng)
+  std::uint64_t scanner_tcp_packets = 0;  // TCP from or to tcp_port; the pass stops at the first
+  std::uint64_t udp_packets = 0;          // UDP to udp_port (0: any)
+};
+CaptureContent InspectCapture(const std::string& path, std::uint16_t tcp_port,
+                              std::uint16_t udp_port);
+
+enum class DumpInput : std::uint8_t {
+  kScans,      // the scanner's TCP stream (DumpCapture), or a capture holding neither
+  kDatagrams,  // UDP datagrams, or not a capture (a recording: OpenDatagramFile decides)
+};
+// Scans when the capture holds any TCP packet of the scanner's port, else datagrams when it holds
+// UDP, else scans (no output, as before there were datagram files). Not a capture: datagrams.
+DumpInput ChooseDumpInput(const CaptureContent& content);
+
 }  // namespace lrfnet::tools

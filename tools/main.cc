@@ -21,8 +21,10 @@ struct Subcommand {
 };
 
 constexpr Subcommand kSubcommands[] = {
-    {"dump", "print the scans of a pcap/pcapng capture as JSON lines (--summary: counts)", RunDump},
+    {"dump", "scans of a capture, or datagrams of a recording or UDP capture, as JSON lines",
+     RunDump},
     {"emulate", "serve a capture's scans (or synthetic ones) as a SICK device on TCP", RunEmulate},
+    {"replay", "send a recording or UDP capture to HOST:PORT over UDP with its timing", RunReplay},
     {"sim", "simulate a scenario: per-sensor captures and ground truth, or live devices", RunSim},
 };
 

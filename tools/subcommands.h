@@ -17,6 +17,7 @@ inline constexpr int kExitUsage = 2;    // bad arguments
 // argv[0] is the subcommand name; the options follow.
 int RunDump(int argc, char** argv);
 int RunEmulate(int argc, char** argv);
+int RunReplay(int argc, char** argv);
 int RunSim(int argc, char** argv);
 
 // Prints "lrfnet <subcommand>: <message> (see lrfnet <subcommand> --help)" as one line on stderr

@@ -18,6 +18,26 @@
 // number further than max_sequence_jump ahead of the highest within one session is a reset
 // (counted, state restarts at it).
 //
+// Choices within that contract:
+// - Attribution: a datagram that parses and names a valid sensor id counts at that sensor, also
+//   when it is rejected (a wrong version too); the sensor is created (SensorEvent kNew) unless
+//   max_sensors is reached (kTooManySensors, unattributed). Everything rejected earlier counts in
+//   IngestCounters::unattributed.
+// - Order of checks: decoding and validation (datagram_decoder.h), then the background part against
+//   the snapshot in reassembly (background_assembler.h), then the sequence state; so a datagram
+//   rejected for its content is not "received" (its number counts as lost unless it arrives valid)
+//   and only accepted datagrams move the sequence state.
+// - Sequence: an arrival older than the window cannot be told from a duplicate: it is dropped and
+//   counted as one. A number more than max_sequence_jump behind the highest is a reset too. A
+//   session_id change is a restart whatever the order (a late datagram of the old session after a
+//   restart would count as another restart; a tracker restart takes seconds, reordering does not).
+// - Restart: the snapshot in reassembly is dropped (backgrounds_abandoned); SensorStatus keeps the
+//   last info and background for the status, but requests ask for both again.
+// - Silence: any attributed datagram is a sign of life (kBack), valid or not.
+// - Requests: only for sensors with an accepted datagram in their current session (whose protocol
+//   and session are known), not silent, lacking SensorInfo or a complete background of that
+//   session; the first at once, then at most every request_interval_s.
+//
 // Not thread-safe: one ingest per thread (the daemon's io thread).
 
 #include <array>
@@ -40,20 +60,20 @@ inline constexpr std::size_t kMaxDatagramBytes = 1400;
 
 // Why a datagram was dropped. Names (ToString) are used in logs, the status JSON and tests.
 enum class RejectReason : std::uint8_t {
-  kOversize,         // "oversize": more than kMaxDatagramBytes
-  kEmpty,            // "empty": zero bytes
-  kMalformed,        // "malformed": not a protobuf Datagram
-  kVersion,          // "version": protocol version unknown or unspecified
-  kSensorId,         // "sensor_id": not [A-Za-z0-9_.-]{1,32}
-  kTooManySensors,   // "too_many_sensors": max_sensors reached
-  kUnknownKind,      // "unknown_kind": no payload or one this daemon does not know
-  kUnexpectedKind,   // "unexpected_kind": a Request sent to the daemon
-  kNotFinite,        // "not_finite": NaN or infinity in a float/double field
-  kCovariance,       // "covariance": not 10 values or not positive semi-definite
-  kOutOfRange,       // "out_of_range": position, speed, period, angle or count outside its bounds
-  kPart,             // "part": part >= part_count, part_count 0 or above the bound, beams outside
-  kTimestamp,        // "timestamp": outside the accepted window (see ValidationOptions)
-  kDuplicate,        // "duplicate": sequence number already received in this session
+  kOversize,        // "oversize": more than kMaxDatagramBytes
+  kEmpty,           // "empty": zero bytes
+  kMalformed,       // "malformed": not a protobuf Datagram
+  kVersion,         // "version": protocol version unknown or unspecified
+  kSensorId,        // "sensor_id": not [A-Za-z0-9_.-]{1,32}
+  kTooManySensors,  // "too_many_sensors": max_sensors reached
+  kUnknownKind,     // "unknown_kind": no payload or one this daemon does not know
+  kUnexpectedKind,  // "unexpected_kind": a Request sent to the daemon
+  kNotFinite,       // "not_finite": NaN or infinity in a float/double field
+  kCovariance,      // "covariance": not 10 values or not positive semi-definite
+  kOutOfRange,      // "out_of_range": position, speed, period, angle or count outside its bounds
+  kPart,            // "part": part >= part_count, part_count 0 or above the bound, beams outside
+  kTimestamp,       // "timestamp": outside the accepted window (see ValidationOptions)
+  kDuplicate,       // "duplicate": sequence number already received in this session
   kCount
 };
 inline constexpr std::size_t kRejectReasonCount = static_cast<std::size_t>(RejectReason::kCount);
@@ -88,12 +108,12 @@ struct IngestOptions {
 std::optional<std::string> Validate(const IngestOptions& options);
 
 struct SequenceCounters {
-  std::uint64_t received = 0;   // accepted datagrams (duplicates not included)
-  std::uint64_t lost = 0;       // skipped sequence numbers that did not arrive within the window
-  std::uint64_t reordered = 0;  // arrived after a higher sequence number
-  std::uint64_t duplicates = 0;
-  std::uint64_t restarts = 0;   // session_id changes
-  std::uint64_t resets = 0;     // sequence jumps within one session
+  std::uint64_t received = 0;    // accepted datagrams (duplicates not included)
+  std::uint64_t lost = 0;        // skipped sequence numbers that did not arrive within the window
+  std::uint64_t reordered = 0;   // arrived after a higher sequence number
+  std::uint64_t duplicates = 0;  // also arrivals older than the window (dropped)
+  std::uint64_t restarts = 0;    // session_id changes
+  std::uint64_t resets = 0;      // sequence jumps within one session
 };
 
 struct SensorCounters {
@@ -104,7 +124,8 @@ struct SensorCounters {
   std::uint64_t health = 0;
   std::uint64_t sensor_info = 0;
   std::uint64_t backgrounds_completed = 0;
-  std::uint64_t backgrounds_abandoned = 0;  // replaced by a newer snapshot before all parts arrived
+  // Replaced by a newer snapshot (or dropped by a restart) before all parts arrived.
+  std::uint64_t backgrounds_abandoned = 0;
   std::uint64_t silent_periods = 0;
   std::uint64_t requests_sent = 0;
   std::array<std::uint64_t, kRejectReasonCount> rejected{};
@@ -137,15 +158,18 @@ struct SensorEvent {
   common::UtcNs time_ns = 0;  // receive clock
 };
 
-// Receives what the ingest accepted. Default implementations ignore it.
+// Receives what the ingest accepted. Default implementations ignore it. Called synchronously from
+// OnDatagram / OnTick; the references are valid during the call only (the ingest reuses them), and
+// a listener must not call OnDatagram, OnTick or Reconfigure of the same ingest.
 class IngestListener {
  public:
   virtual ~IngestListener() = default;
-  virtual void OnTrackFrame(const std::string& sensor_id, const TrackFrameData& frame) {}
-  virtual void OnBackground(const std::string& sensor_id, const BackgroundScan& background) {}
-  virtual void OnSensorInfo(const std::string& sensor_id, const SensorDescription& info) {}
-  virtual void OnHealth(const std::string& sensor_id, const SensorHealth& health) {}
-  virtual void OnSensorEvent(const SensorEvent& event) {}
+  virtual void OnTrackFrame(const std::string& /*sensor_id*/, const TrackFrameData& /*frame*/) {}
+  virtual void OnBackground(const std::string& /*sensor_id*/,
+                            const BackgroundScan& /*background*/) {}
+  virtual void OnSensorInfo(const std::string& /*sensor_id*/, const SensorDescription& /*info*/) {}
+  virtual void OnHealth(const std::string& /*sensor_id*/, const SensorHealth& /*health*/) {}
+  virtual void OnSensorEvent(const SensorEvent& /*event*/) {}
 };
 
 // A request the daemon should send to a sensor's tracker (at its newest source address).
@@ -169,8 +193,11 @@ struct IngestCounters {
 struct Disposition {
   bool accepted = false;
   RejectReason reason = RejectReason::kCount;  // when !accepted
-  std::string sensor_id;                        // empty when unattributed
+  std::string sensor_id;                       // empty when unattributed
+  std::string detail;  // when !accepted: one line saying what was wrong (for logs)
 };
+
+class DatagramDecoder;
 
 class Ingest {
  public:
@@ -205,6 +232,15 @@ class Ingest {
   IngestListener* listener_;
   std::map<std::string, std::unique_ptr<SensorState>, std::less<>> sensors_;
   IngestCounters counters_;
+
+  Disposition Reject(RejectReason reason, SensorState* sensor, std::string_view detail);
+  SensorState* FindOrAdd(std::string_view sensor_id, common::UtcNs receive_ns);
+  void Emit(SensorEventKind kind, const std::string& sensor_id, common::UtcNs time_ns);
+  SensorStatus StatusOf(const SensorState& sensor) const;
+
+  std::unique_ptr<DatagramDecoder> decoder_;
+  TrackFrameData frame_;       // reused for every track frame handed to the listener
+  BackgroundScan background_;  // filled when a snapshot completes
 };
 
 }  // namespace lrfnet::daemon

@@ -37,14 +37,14 @@ struct TrackObservation {
 // The tracks of one scan (proto TrackFrame), or of one part of them as received: part < part_count.
 // The store merges the parts of a scan into one frame (part = 0, part_count = parts held).
 struct TrackFrameData {
-  std::uint64_t session_id = 0;   // tracker session (Datagram.session_id)
+  std::uint64_t session_id = 0;  // tracker session (Datagram.session_id)
   common::UtcNs scan_start_ns = 0;
   double scan_period_s = 0.0;
   std::uint32_t scan_counter = 0;
   std::uint32_t part = 0;
   std::uint32_t part_count = 1;
-  common::UtcNs sent_ns = 0;      // Datagram.sent_ns (gateway clock)
-  common::UtcNs receive_ns = 0;   // daemon clock
+  common::UtcNs sent_ns = 0;     // Datagram.sent_ns (gateway clock)
+  common::UtcNs receive_ns = 0;  // daemon clock
   std::vector<TrackObservation> tracks;
 };
 

@@ -35,6 +35,7 @@
 #include <sstream>
 #include <string>
 
+#include "common/host_port.h"
 #include "common/time.h"
 #include "firmware_tracker/app/config.h"
 #include "firmware_tracker/app/tracker_node.h"
@@ -66,60 +67,8 @@ int UsageError(const std::string& message) {
   return kExitUsage;
 }
 
-struct HostPort {
-  std::string host;
-  std::uint16_t port = 0;
-};
-
-// "HOST", "HOST:PORT", "[IPv6]" or "[IPv6]:PORT"; a bare IPv6 address (several colons) has no port.
-// `what` names the option in errors; `default_port` 0 means a port is required.
-std::optional<HostPort> ParseHostPort(const std::string& text, const std::string& what,
-                                      std::uint16_t default_port, std::string* error) {
-  HostPort out;
-  out.port = default_port;
-  std::string port_text;
-  bool has_port = false;
-  if (!text.empty() && text.front() == '[') {
-    const auto close = text.find(']');
-    if (close == std::string::npos) {
-      *error = what + ": missing ']' in '" + text + "'";
-      return std::nullopt;
-    }
-    out.host = text.substr(1, close - 1);
-    if (close + 1 < text.size()) {
-      if (text[close + 1] != ':') {
-        *error = what + ": expected ':PORT' after ']' in '" + text + "'";
-        return std::nullopt;
-      }
-      port_text = text.substr(close + 2);
-      has_port = true;
-    }
-  } else if (text.find(':') != std::string::npos && text.find(':') == text.rfind(':')) {
-    out.host = text.substr(0, text.find(':'));
-    port_text = text.substr(text.find(':') + 1);
-    has_port = true;
-  } else {
-    out.host = text;
-  }
-  if (out.host.empty()) {
-    *error = what + ": empty host in '" + text + "'";
-    return std::nullopt;
-  }
-  if (has_port) {
-    char* end = nullptr;
-    const long port = std::strtol(port_text.c_str(), &end, 10);
-    if (port_text.empty() || *end != '\0' || port < 1 || port > 65535) {
-      *error = what + ": bad port '" + port_text + "' (1..65535)";
-      return std::nullopt;
-    }
-    out.port = static_cast<std::uint16_t>(port);
-  }
-  if (out.port == 0) {
-    *error = what + ": a port is required, HOST:PORT or [IPv6]:PORT";
-    return std::nullopt;
-  }
-  return out;
-}
+using common::HostPort;
+using common::ParseHostPort;
 
 // UTC as 2021-01-01T12:00:03.123456Z.
 std::string FormatUtc(common::UtcNs t_ns) {
@@ -380,7 +329,16 @@ class Replay : public cola::TelegramListener {
   void Start() {
     asio::post(io_, [this] { Slice(); });
   }
-  void Stop() { stopped_ = true; }
+  void Stop() {
+    stopped_ = true;
+    timer_.cancel();
+    if (has_pending_ && on_done) {
+      has_pending_ = false;
+      on_done();
+    }
+  }
+  // Packet times scaled by 1/speed (0: as fast as possible).
+  void SetSpeed(double speed) { speed_ = speed; }
   const io::CaptureStream& capture() const { return *capture_; }
   cola::StreamCounters decoder_counters() const { return decoder_->counters(); }
 
@@ -429,15 +387,17 @@ class Replay : public cola::TelegramListener {
 
   void Slice() {
     constexpr int kChunksPerSlice = 256;
-    io::StreamChunk chunk;
     bool finished = false;
     for (int i = 0; i < kChunksPerSlice && !stopped_; ++i) {
-      if (!capture_->Next(&chunk)) {
+      if (!has_pending_ && !capture_->Next(&pending_)) {
         finished = true;
         break;
       }
-      if (chunk.discontinuity) decoder_->Reset();
-      decoder_->Feed(chunk.bytes, chunk.receive_time_ns, *this);
+      has_pending_ = true;
+      if (speed_ > 0.0 && WaitFor(pending_.receive_time_ns)) return;
+      has_pending_ = false;
+      if (pending_.discontinuity) decoder_->Reset();
+      decoder_->Feed(pending_.bytes, pending_.receive_time_ns, *this);
     }
     if (stopped_ || finished) {
       if (on_done) on_done();
@@ -446,7 +406,35 @@ class Replay : public cola::TelegramListener {
     asio::post(io_, [this] { Slice(); });
   }
 
+  // --speed: the capture's packet times, scaled by 1/speed, against a steady clock from the first
+  // packet on. True when a timer was set to resume at the packet's time.
+  bool WaitFor(common::UtcNs capture_ns) {
+    const auto now = std::chrono::steady_clock::now();
+    if (!paced_) {
+      paced_ = true;
+      first_capture_ns_ = capture_ns;
+      first_steady_ = now;
+    }
+    // A capture whose clock steps backwards is replayed without waiting until it catches up.
+    const double offset_s = static_cast<double>(capture_ns - first_capture_ns_) * 1e-9 / speed_;
+    const auto due = first_steady_ + std::chrono::duration_cast<std::chrono::steady_clock::duration>(
+                                         std::chrono::duration<double>(offset_s));
+    if (due <= now) return false;
+    timer_.expires_at(due);
+    timer_.async_wait([this](const boost::system::error_code& ec) {
+      if (!ec) Slice();
+    });
+    return true;
+  }
+
   asio::io_context& io_;
+  asio::steady_timer timer_{io_};
+  double speed_ = 0.0;
+  io::StreamChunk pending_;
+  bool has_pending_ = false;
+  bool paced_ = false;
+  common::UtcNs first_capture_ns_ = 0;
+  std::chrono::steady_clock::time_point first_steady_;
   std::unique_ptr<io::CaptureStream> capture_;
   std::unique_ptr<cola::StreamDecoder> decoder_ = std::make_unique<cola::StreamDecoder>();
   TrackerNode& node_;
@@ -462,7 +450,7 @@ class Replay : public cola::TelegramListener {
 
 int RunReplay(const TrackerConfig& config, const std::string& path,
               const io::CaptureStreamOptions& options, const std::string& record_path,
-              ScanLog& log) {
+              double speed, ScanLog& log) {
   std::string error;
   std::unique_ptr<io::CaptureStream> capture = io::CaptureStream::Open(path, options, &error);
   if (!capture) {
@@ -485,6 +473,7 @@ int RunReplay(const TrackerConfig& config, const std::string& path,
     spdlog::info("signal {}: stopping", signal_number);
     replay.Stop();
   });
+  replay.SetSpeed(speed);
   replay.Start();
   io.run();
 
@@ -524,6 +513,7 @@ int Run(int argc, char** argv) {
   std::string out;
   long long print_every = 0;
   long long max_scans = 0;
+  double speed = 0.0;
   int capture_port = 2112;
   long long connect_timeout_ms = 0;
   long long reply_timeout_ms = 0;
@@ -543,6 +533,9 @@ int Run(int argc, char** argv) {
       "out", po::value<std::string>(&out), "write the datagrams to this recording file")(
       "print-every", po::value<long long>(&print_every)->default_value(0),
       "print the tracks of every N-th scan (0: none)")(
+      "speed", po::value<double>(&speed)->default_value(0.0),
+      "replay: play the capture at this multiple of its recorded pace (1: real time; 0: as fast "
+      "as possible)")(
       "max-scans", po::value<long long>(&max_scans)->default_value(0),
       "stop after N scans (0: never)")("capture-port",
                                        po::value<int>(&capture_port)->default_value(2112),
@@ -599,6 +592,7 @@ int Run(int argc, char** argv) {
   if (config.sensor_id.empty()) return UsageError("--sensor-id is required");
   if (print_every < 0) return UsageError("--print-every must be >= 0");
   if (max_scans < 0) return UsageError("--max-scans must be >= 0");
+  if (!(speed >= 0.0 && speed <= 1e6)) return UsageError("--speed must be in [0, 1e6]");
   const spdlog::level::level_enum level = spdlog::level::from_str(log_level);
   if (level == spdlog::level::off && log_level != "off") {
     return UsageError("unknown --log-level '" + log_level + "'");
@@ -625,7 +619,7 @@ int Run(int argc, char** argv) {
       return UsageError("--capture-port must be 1..65535");
     options.sensor_port = static_cast<std::uint16_t>(capture_port);
     if (auto e = io::Validate(options)) return UsageError(*e);
-    return RunReplay(config, replay, options, out, log);
+    return RunReplay(config, replay, options, out, speed, log);
   }
   return RunLive(config, out, log);
 }

@@ -1,0 +1,51 @@
+#pragma once
+// Configuration of lrfnetd: the UDP socket, the recording, datagram validation, per-sensor state,
+// the track store's retention and the status line, loaded from a YAML file (`--config FILE`) and
+// printed with its documentation by `--print-config`. Command-line flags override the file.
+// SIGHUP reloads the file: everything except listen.* and record.* applies at once.
+
+#include <cstdint>
+#include <optional>
+#include <string>
+#include <string_view>
+
+#include "central_daemon/ingest/ingest.h"
+#include "central_daemon/io/recording_writer.h"
+#include "central_daemon/io/udp_receiver.h"
+#include "central_daemon/store/track_store.h"
+#include "common/config_yaml.h"
+
+namespace lrfnet::daemon {
+
+inline constexpr std::uint16_t kDefaultPort = 5800;
+
+struct DaemonConfig {
+  std::string listen = "[::]:5800";   // ADDR:PORT ("[::]" takes IPv4 and IPv6)
+  UdpReceiverOptions receiver;         // address/port are set from `listen`
+  std::string record_path;             // empty: no recording
+  std::uint64_t record_max_file_mb = 1024;  // rotation size; 0 = never rotate
+  double record_flush_interval_s = 1.0;
+  IngestOptions ingest;
+  bool send_requests = true;
+  TrackStoreOptions store;
+  std::uint64_t store_max_mb = 2048;   // store.max_bytes in MiB
+  double status_interval_s = 5.0;      // 0 = no status line
+};
+
+// Lists every option (sections listen, record, validation, sensors, store, status).
+void VisitDaemonConfig(DaemonConfig& config, common::ConfigVisitor& visitor);
+
+// Every option, with the prefix of its section ("store.max_age_s: must be > 0"). Also parses
+// `listen` into receiver.address/port.
+std::optional<std::string> Validate(DaemonConfig& config);
+
+// Loads a YAML document over `config` and validates the result.
+std::optional<std::string> LoadDaemonConfig(std::string_view yaml_text, DaemonConfig& config);
+
+// The documented YAML of `config` (the defaults for a default-constructed one).
+std::string PrintDaemonConfig(const DaemonConfig& config);
+
+// The recording options of the config (path, rotation, flush), writer "lrfnetd <version>".
+RecordingWriterOptions RecordingOptions(const DaemonConfig& config, const std::string& writer);
+
+}  // namespace lrfnet::daemon

@@ -1,0 +1,72 @@
+#include "central_daemon/app/config.h"
+
+#include <gtest/gtest.h>
+
+#include <fstream>
+#include <sstream>
+
+namespace lrfnet::daemon {
+namespace {
+
+TEST(DaemonConfigTest, ShippedFileIsPrintConfigOfTheDefaults) {
+  std::ifstream file(LRFNET_DAEMON_CONFIG_FILE);
+  ASSERT_TRUE(file) << "missing " << LRFNET_DAEMON_CONFIG_FILE;
+  std::stringstream text;
+  text << file.rdbuf();
+  EXPECT_EQ(text.str(), PrintDaemonConfig(DaemonConfig{}))
+      << "regenerate central_daemon/config/lrfnetd.yaml with lrfnetd --print-config";
+  DaemonConfig loaded;
+  EXPECT_EQ(LoadDaemonConfig(text.str(), loaded), std::nullopt);
+  EXPECT_EQ(loaded.receiver.port, kDefaultPort);
+  EXPECT_EQ(loaded.receiver.address, "::");
+}
+
+TEST(DaemonConfigTest, ValuesRoundTripThroughPrint) {
+  DaemonConfig c;
+  c.listen = "127.0.0.1:6000";
+  c.record_path = "session.lrfrec";
+  c.ingest.validation.max_clock_offset_s = 2.5;
+  c.ingest.silent_after_s = 7.0;
+  c.store.max_age_s = 600.0;
+  c.store_max_mb = 64;
+  c.send_requests = false;
+  ASSERT_EQ(Validate(c), std::nullopt);
+  DaemonConfig back;
+  ASSERT_EQ(LoadDaemonConfig(PrintDaemonConfig(c), back), std::nullopt);
+  EXPECT_EQ(back.receiver.address, "127.0.0.1");
+  EXPECT_EQ(back.receiver.port, 6000);
+  EXPECT_EQ(back.record_path, "session.lrfrec");
+  EXPECT_EQ(back.ingest.validation.max_clock_offset_s, 2.5);
+  EXPECT_EQ(back.ingest.silent_after_s, 7.0);
+  EXPECT_EQ(back.store.max_age_s, 600.0);
+  EXPECT_EQ(back.store.max_bytes, std::size_t{64} << 20);
+  EXPECT_FALSE(back.send_requests);
+}
+
+TEST(DaemonConfigTest, ErrorsNameTheKey) {
+  struct Case {
+    const char* yaml;
+    const char* expected;
+  };
+  const Case cases[] = {
+      {"listen: {address: 'nohostport'}", "listen.address"},
+      {"listen: {address: '[::1]:99999'}", "listen.address"},
+      {"record: {flush_interval_s: 0}", "record.flush_interval_s"},
+      {"store: {max_age_s: -1}", "store."},
+      {"store: {max_mb: 0}", "store.max_mb"},
+      {"sensors: {silent_after_s: abc}", "sensors.silent_after_s"},
+      {"sensors: {no_such_key: 1}", "no_such_key"},
+      {"status: {interval_s: -2}", "status.interval_s"},
+      {"listen: {receive_buffer_bytes: 10}", "receive_buffer_bytes"},
+  };
+  for (const Case& c : cases) {
+    DaemonConfig config;
+    const auto error = LoadDaemonConfig(c.yaml, config);
+    ASSERT_TRUE(error.has_value()) << c.yaml;
+    EXPECT_NE(error->find(c.expected), std::string::npos) << c.yaml << " -> " << *error;
+    EXPECT_EQ(error->find('\n'), std::string::npos) << *error;
+  }
+}
+
+}  // namespace
+}  // namespace lrfnet::daemon

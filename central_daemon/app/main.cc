@@ -1,0 +1,500 @@
+// lrfnetd: collects the track streams of the trackers over UDP, records everything received and
+// keeps the tracks for calibration and fusion.
+//
+//   lrfnetd --listen ADDR:PORT --record REC           live
+//   lrfnetd --input REC_OR_CAPTURE... [--record REC]  offline: recordings or UDP captures in
+//   lrfnetd --print-config
+//
+// SIGINT / SIGTERM stop cleanly (the recording is flushed and closed); SIGHUP reloads --config.
+
+#include <fcntl.h>
+#include <spdlog/sinks/stdout_color_sinks.h>
+#include <spdlog/spdlog.h>
+#include <time.h>
+#include <unistd.h>
+
+#include <boost/asio/io_context.hpp>
+#include <boost/asio/signal_set.hpp>
+#include <boost/asio/steady_timer.hpp>
+#include <boost/program_options.hpp>
+#include <chrono>
+#include <csignal>
+#include <cstdio>
+#include <exception>
+#include <fstream>
+#include <iostream>
+#include <nlohmann/json.hpp>
+#include <optional>
+#include <random>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include "central_daemon/app/config.h"
+#include "central_daemon/app/daemon.h"
+#include "central_daemon/app/stats_json.h"
+#include "central_daemon/io/datagram_source.h"
+#include "central_daemon/io/recording_writer.h"
+#include "central_daemon/io/udp_receiver.h"
+#include "google/protobuf/stubs/logging.h"
+
+namespace lrfnet::daemon {
+namespace {
+
+namespace asio = boost::asio;
+namespace po = boost::program_options;
+
+constexpr int kExitOk = 0;
+constexpr int kExitFailure = 1;
+constexpr int kExitUsage = 2;
+constexpr auto kTickPeriod = std::chrono::milliseconds(250);
+constexpr common::DurationNs kTickPeriodNs = 250'000'000;
+
+int UsageError(const std::string& message) {
+  std::fprintf(stderr, "lrfnetd: %s (see lrfnetd --help)\n", message.c_str());
+  return kExitUsage;
+}
+
+common::UtcNs NowUtcNs() {
+  timespec ts{};
+  ::clock_gettime(CLOCK_REALTIME, &ts);
+  return static_cast<common::UtcNs>(ts.tv_sec) * 1'000'000'000 + ts.tv_nsec;
+}
+
+std::uint64_t RandomSessionId() {
+  std::random_device device;
+  return (static_cast<std::uint64_t>(device()) << 32) ^ device();
+}
+
+std::string Writer() { return std::string("lrfnetd ") + LRFNET_VERSION; }
+
+DaemonOptions CoreOptions(const DaemonConfig& c) {
+  DaemonOptions o;
+  o.ingest = c.ingest;
+  o.store = c.store;
+  o.send_requests = c.send_requests;
+  return o;
+}
+
+// RecordSink over the recording writer; logs write errors once per burst.
+class Recorder final : public RecordSink {
+ public:
+  explicit Recorder(const RecordingWriterOptions& options) : writer_(options) {}
+  std::optional<std::string> Open(common::UtcNs now_ns) { return writer_.Open(now_ns); }
+  std::optional<std::string> Close() { return writer_.Close(); }
+  void Record(std::span<const std::uint8_t> datagram, std::string_view source,
+              common::UtcNs receive_ns) override {
+    writer_.Append(datagram, source, receive_ns);
+    CheckErrors();
+  }
+  void FlushIfDue(common::UtcNs now_ns) override {
+    writer_.FlushIfDue(now_ns);
+    CheckErrors();
+  }
+  const RecordingWriter& writer() const { return writer_; }
+
+ private:
+  void CheckErrors() {
+    const RecordingWriterCounters& c = writer_.counters();
+    if (c.write_errors != reported_errors_) {
+      spdlog::error("recording {}: write error ({}), {} entries lost so far",
+                    writer_.current_path(), std::strerror(c.last_errno), c.dropped_entries);
+      reported_errors_ = c.write_errors;
+    }
+  }
+  RecordingWriter writer_;
+  std::uint64_t reported_errors_ = 0;
+};
+
+class Replies final : public RequestSink {
+ public:
+  UdpReceiver* receiver = nullptr;
+  bool SendTo(std::string_view source, std::span<const std::uint8_t> datagram) override {
+    return receiver != nullptr && receiver->SendTo(source, datagram);
+  }
+};
+
+void LogEvents(Daemon& daemon, double silent_after_s) {
+  for (const SensorEvent& e : daemon.TakeEvents()) {
+    const auto sensor = daemon.ingest().Sensor(e.sensor_id);
+    const std::string source = sensor ? sensor->source : "";
+    switch (e.kind) {
+      case SensorEventKind::kNew:
+        spdlog::info("sensor {}: first datagram from {}", e.sensor_id, source);
+        break;
+      case SensorEventKind::kRestart:
+        spdlog::warn("sensor {}: tracker restarted (new session) at {}", e.sensor_id, source);
+        break;
+      case SensorEventKind::kSequenceReset:
+        spdlog::warn("sensor {}: sequence number jumped; sequence state restarted", e.sensor_id);
+        break;
+      case SensorEventKind::kSilent:
+        spdlog::warn("sensor {}: silent (no datagram for {:.1f} s)", e.sensor_id, silent_after_s);
+        break;
+      case SensorEventKind::kBack:
+        spdlog::info("sensor {}: back (from {})", e.sensor_id, source);
+        break;
+    }
+  }
+}
+
+struct RunOptions {
+  std::string config_path;
+  std::optional<std::string> listen_flag;
+  std::optional<std::string> record_flag;
+  std::optional<double> status_flag;
+  double duration_s = 0.0;
+  std::string stats_out;
+};
+
+// Re-reads the config file over the defaults and applies the flags again.
+std::optional<std::string> LoadConfig(const RunOptions& run, DaemonConfig* config) {
+  DaemonConfig c;
+  if (!run.config_path.empty()) {
+    std::ifstream file(run.config_path);
+    if (!file) return "--config: cannot read '" + run.config_path + "'";
+    std::stringstream text;
+    text << file.rdbuf();
+    if (auto e = common::LoadYamlConfig(text.str(),
+                                        [&](common::ConfigVisitor& v) { VisitDaemonConfig(c, v); }))
+      return "--config " + run.config_path + ": " + *e;
+  }
+  if (run.listen_flag) c.listen = *run.listen_flag;
+  if (run.record_flag) c.record_path = *run.record_flag;
+  if (run.status_flag) c.status_interval_s = *run.status_flag;
+  if (auto e = Validate(c)) return (run.config_path.empty() ? "" : run.config_path + ": ") + *e;
+  *config = c;
+  return std::nullopt;
+}
+
+bool WriteStats(const std::string& path, const Daemon& daemon, const UdpReceiver* receiver,
+                const Recorder* recorder) {
+  if (path.empty()) return true;
+  nlohmann::json j = StatsJson(daemon.ingest(), daemon.store());
+  j["requests_sent"] = daemon.requests_sent();
+  j["requests_dropped"] = daemon.requests_dropped();
+  if (receiver != nullptr) j["receiver"] = ReceiverJson(receiver->counters());
+  if (recorder != nullptr) j["recording"] = RecordingJson(recorder->writer().counters());
+  std::ofstream out(path);
+  out << j.dump(2) << "\n";
+  if (!out) {
+    spdlog::error("--stats-out {}: cannot write", path);
+    return false;
+  }
+  return true;
+}
+
+std::string Summary(const Daemon& daemon) {
+  const IngestCounters& c = daemon.ingest().counters();
+  std::uint64_t lost = 0;
+  for (const SensorStatus& s : daemon.ingest().Sensors()) lost += s.counters.sequence.lost;
+  return fmt::format("summary: sensors={} datagrams={} accepted={} rejected={} lost={} frames={}",
+                     daemon.ingest().Sensors().size(), c.datagrams, c.accepted, c.rejected, lost,
+                     daemon.store().frames());
+}
+
+int RunLive(const RunOptions& run, DaemonConfig config) {
+  asio::io_context io;
+  std::optional<Recorder> recorder;
+  if (!config.record_path.empty()) {
+    recorder.emplace(RecordingOptions(config, Writer()));
+    if (auto e = recorder->Open(NowUtcNs())) {
+      std::fprintf(stderr, "lrfnetd: %s\n", e->c_str());
+      return kExitFailure;
+    }
+  }
+  Replies replies;
+  Daemon daemon(CoreOptions(config), recorder ? &*recorder : nullptr, &replies, RandomSessionId());
+  UdpReceiver receiver(io, config.receiver,
+                       [&](std::span<const std::uint8_t> bytes, const std::string& source,
+                           common::UtcNs receive_ns) { daemon.OnDatagram(bytes, source, receive_ns); });
+  if (auto e = receiver.Open()) {
+    std::fprintf(stderr, "lrfnetd: --listen %s: %s\n", config.listen.c_str(), e->c_str());
+    return kExitFailure;
+  }
+  replies.receiver = &receiver;
+  spdlog::info("listening on {} (receive buffer {} KiB){}", receiver.local_address(),
+               receiver.receive_buffer_bytes() / 1024,
+               recorder ? ", recording to " + config.record_path : "");
+  if (receiver.receive_buffer_bytes() < config.receiver.receive_buffer_bytes / 2)
+    spdlog::warn("the kernel granted {} KiB of the {} KiB receive buffer asked for "
+                 "(net.core.rmem_max); bursts may be dropped",
+                 receiver.receive_buffer_bytes() / 1024,
+                 config.receiver.receive_buffer_bytes / 1024);
+  // Printed on stdout for scripts and tests that bind port 0.
+  std::printf("listening %s\n", receiver.local_address().c_str());
+  std::fflush(stdout);
+
+  bool stopping = false;
+  auto stop = [&](const std::string& why) {
+    if (stopping) return;
+    stopping = true;
+    spdlog::info("{}: stopping", why);
+    receiver.Close();
+    io.stop();
+  };
+
+  asio::steady_timer tick(io);
+  std::function<void()> schedule_tick = [&] {
+    tick.expires_after(kTickPeriod);
+    tick.async_wait([&](const boost::system::error_code& ec) {
+      if (ec) return;
+      daemon.OnTick(NowUtcNs());
+      LogEvents(daemon, config.ingest.silent_after_s);
+      schedule_tick();
+    });
+  };
+  schedule_tick();
+
+  asio::steady_timer status(io);
+  std::function<void()> schedule_status = [&] {
+    if (config.status_interval_s <= 0) return;
+    status.expires_after(std::chrono::duration_cast<std::chrono::steady_clock::duration>(
+        std::chrono::duration<double>(config.status_interval_s)));
+    status.async_wait([&](const boost::system::error_code& ec) {
+      if (ec) return;
+      const UdpReceiverCounters& r = receiver.counters();
+      std::string line = daemon.StatusLine(NowUtcNs());
+      if (r.kernel_drops > 0) line += fmt::format(" | kernel drops {}", r.kernel_drops);
+      if (recorder)
+        line += fmt::format(" | recorded {:.1f} MiB",
+                            static_cast<double>(recorder->writer().counters().bytes_written) /
+                                (1 << 20));
+      spdlog::info("status: {}", line);
+      schedule_status();
+    });
+  };
+  daemon.StatusLine(NowUtcNs());  // starts the first rate interval
+  schedule_status();
+
+  asio::steady_timer deadline(io);
+  if (run.duration_s > 0) {
+    deadline.expires_after(std::chrono::duration_cast<std::chrono::steady_clock::duration>(
+        std::chrono::duration<double>(run.duration_s)));
+    deadline.async_wait([&](const boost::system::error_code& ec) {
+      if (!ec) stop("--duration-s reached");
+    });
+  }
+
+  asio::signal_set signals(io, SIGINT, SIGTERM, SIGHUP);
+  std::function<void()> wait_signal = [&] {
+    signals.async_wait([&](const boost::system::error_code& ec, int signal_number) {
+      if (ec) return;
+      if (signal_number != SIGHUP) {
+        stop(signal_number == SIGINT ? "SIGINT" : "SIGTERM");
+        return;
+      }
+      DaemonConfig reloaded;
+      if (auto e = LoadConfig(run, &reloaded)) {
+        spdlog::error("SIGHUP: config not reloaded: {}", *e);
+      } else {
+        if (reloaded.listen != config.listen || reloaded.record_path != config.record_path ||
+            reloaded.record_max_file_mb != config.record_max_file_mb ||
+            reloaded.ingest.max_sensors != config.ingest.max_sensors)
+          spdlog::warn("SIGHUP: listen, record and sensors.max_sensors changes need a restart");
+        const bool status_changed = reloaded.status_interval_s != config.status_interval_s;
+        config.ingest.validation = reloaded.ingest.validation;
+        config.ingest.silent_after_s = reloaded.ingest.silent_after_s;
+        config.ingest.request_interval_s = reloaded.ingest.request_interval_s;
+        config.ingest.max_sequence_jump = reloaded.ingest.max_sequence_jump;
+        config.send_requests = reloaded.send_requests;
+        config.store = reloaded.store;
+        config.store_max_mb = reloaded.store_max_mb;
+        config.status_interval_s = reloaded.status_interval_s;
+        daemon.Reconfigure(CoreOptions(config));
+        if (status_changed) {
+          status.cancel();
+          schedule_status();
+        }
+        spdlog::info("SIGHUP: config reloaded{}",
+                     run.config_path.empty() ? " (no --config file: flags and defaults)" : "");
+      }
+      wait_signal();
+    });
+  };
+  wait_signal();
+
+  io.run();
+
+  daemon.OnTick(NowUtcNs());
+  LogEvents(daemon, config.ingest.silent_after_s);
+  int exit_code = kExitOk;
+  if (recorder) {
+    if (auto e = recorder->Close()) {
+      spdlog::error("{}", *e);
+      exit_code = kExitFailure;
+    }
+  }
+  if (!WriteStats(run.stats_out, daemon, &receiver, recorder ? &*recorder : nullptr))
+    exit_code = kExitFailure;
+  std::printf("%s received=%llu kernel_drops=%llu requests_sent=%llu%s\n", Summary(daemon).c_str(),
+              static_cast<unsigned long long>(receiver.counters().datagrams),
+              static_cast<unsigned long long>(receiver.counters().kernel_drops),
+              static_cast<unsigned long long>(daemon.requests_sent()),
+              recorder ? fmt::format(" recorded={} recording_bytes={}",
+                                     recorder->writer().counters().entries_written,
+                                     recorder->writer().counters().bytes_written)
+                             .c_str()
+                       : "");
+  std::fflush(stdout);
+  return exit_code;
+}
+
+// Offline: the datagrams of recordings and UDP captures through the same core, with their
+// recorded receive times as the clock.
+int RunOffline(const RunOptions& run, const DaemonConfig& config,
+               const std::vector<std::string>& inputs, std::uint16_t udp_port) {
+  std::optional<Recorder> recorder;
+  if (!config.record_path.empty()) recorder.emplace(RecordingOptions(config, Writer()));
+  struct Tee final : RecordSink {
+    Recorder* recorder = nullptr;
+    bool opened = false;
+    std::optional<std::string> error;
+    void Record(std::span<const std::uint8_t> d, std::string_view s, common::UtcNs t) override {
+      if (!opened && recorder != nullptr) {
+        opened = true;
+        error = recorder->Open(t);
+      }
+      if (recorder != nullptr && !error) recorder->Record(d, s, t);
+    }
+    void FlushIfDue(common::UtcNs t) override {
+      if (recorder != nullptr && opened && !error) recorder->FlushIfDue(t);
+    }
+  } tee;
+  tee.recorder = recorder ? &*recorder : nullptr;
+  Daemon core(CoreOptions(config), &tee, nullptr, RandomSessionId());
+
+  int exit_code = kExitOk;
+  common::UtcNs last_tick_ns = 0;
+  common::UtcNs last_ns = 0;
+  for (const std::string& path : inputs) {
+    std::string error;
+    DatagramSourceOptions options;
+    options.udp_port = udp_port;
+    auto source = OpenDatagramFile(path, options, &error);
+    if (!source) {
+      std::fprintf(stderr, "lrfnetd: --input %s: %s\n", path.c_str(), error.c_str());
+      return kExitFailure;
+    }
+    ReceivedDatagram d;
+    SourceStatus status;
+    while ((status = source->Next(&d)) == SourceStatus::kDatagram) {
+      core.OnDatagram(d.bytes, d.source, d.receive_ns);
+      last_ns = d.receive_ns;
+      if (d.receive_ns - last_tick_ns >= kTickPeriodNs || d.receive_ns < last_tick_ns) {
+        core.OnTick(d.receive_ns);
+        LogEvents(core, config.ingest.silent_after_s);
+        last_tick_ns = d.receive_ns;
+      }
+    }
+    if (status == SourceStatus::kError) {
+      spdlog::error("--input {}", source->error());
+      exit_code = kExitFailure;
+    }
+    spdlog::info("input {}: {} datagrams", path, source->counters().datagrams);
+  }
+  if (last_ns != 0) core.OnTick(last_ns);
+  LogEvents(core, config.ingest.silent_after_s);
+  if (tee.error) {
+    std::fprintf(stderr, "lrfnetd: %s\n", tee.error->c_str());
+    exit_code = kExitFailure;
+  }
+  if (recorder && tee.opened && !tee.error) {
+    if (auto e = recorder->Close()) {
+      spdlog::error("{}", *e);
+      exit_code = kExitFailure;
+    }
+  }
+  spdlog::info("status: {}", core.StatusLine(last_ns));
+  if (!WriteStats(run.stats_out, core, nullptr, recorder && tee.opened ? &*recorder : nullptr))
+    exit_code = kExitFailure;
+  std::printf("%s\n", Summary(core).c_str());
+  std::fflush(stdout);
+  return exit_code;
+}
+
+int Run(int argc, char** argv) {
+  po::options_description visible(
+      "lrfnetd --listen ADDR:PORT [--record REC] [options]\n"
+      "lrfnetd --input REC_OR_CAPTURE... [--record REC] [options]\n"
+      "lrfnetd --print-config\n"
+      "Collects the trackers' UDP datagrams (track frames, background snapshots, health, sensor "
+      "info),\nvalidates them, keeps the tracks of every sensor and records everything received. "
+      "--input reads\nrecordings or pcap/pcapng captures of the UDP stream instead of the socket. "
+      "SIGINT/SIGTERM stop,\nSIGHUP reloads --config. Options",
+      100, 50);
+  RunOptions run;
+  std::string listen;
+  std::string record;
+  std::vector<std::string> inputs;
+  int udp_port = 0;
+  double status_interval_s = 0;
+  std::string log_level = "info";
+  visible.add_options()("help,h", "this help")(
+      "config", po::value<std::string>(&run.config_path), "YAML config file (see --print-config)")(
+      "print-config", "print the configuration in effect (documented YAML) and exit")(
+      "listen", po::value<std::string>(&listen),
+      "UDP address to receive on, ADDR:PORT (default [::]:5800; port 0: any free port)")(
+      "record", po::value<std::string>(&record), "record everything received to this file")(
+      "input", po::value<std::vector<std::string>>(&inputs)->multitoken(),
+      "offline: read these recordings or UDP captures instead of the socket")(
+      "udp-port", po::value<int>(&udp_port)->default_value(0),
+      "--input captures: only UDP datagrams to this port (0: all)")(
+      "status-interval-s", po::value<double>(&status_interval_s),
+      "a status line this often (overrides status.interval_s; 0: none)")(
+      "duration-s", po::value<double>(&run.duration_s)->default_value(0.0),
+      "live: stop after this many seconds (0: run until a signal)")(
+      "stats-out", po::value<std::string>(&run.stats_out),
+      "at exit, write every counter (per sensor and reason) as JSON to this file")(
+      "log-level", po::value<std::string>(&log_level)->default_value("info"),
+      "trace, debug, info, warn, error or off (stderr)");
+  po::variables_map vm;
+  try {
+    po::store(po::parse_command_line(argc, argv, visible), vm);
+    po::notify(vm);
+  } catch (const po::error& e) {
+    return UsageError(e.what());
+  }
+  if (vm.count("help") != 0) {
+    std::cout << visible << "\n";
+    return kExitOk;
+  }
+  if (vm.count("listen") != 0) run.listen_flag = listen;
+  if (vm.count("record") != 0) run.record_flag = record;
+  if (vm.count("status-interval-s") != 0) run.status_flag = status_interval_s;
+  if (udp_port < 0 || udp_port > 65535) return UsageError("--udp-port must be 0..65535");
+  if (!(run.duration_s >= 0.0)) return UsageError("--duration-s must be >= 0");
+  if (!inputs.empty() && run.listen_flag) return UsageError("give either --listen or --input");
+
+  DaemonConfig config;
+  if (auto e = LoadConfig(run, &config)) return UsageError(*e);
+  if (vm.count("print-config") != 0) {
+    std::cout << PrintDaemonConfig(config);
+    return kExitOk;
+  }
+  const spdlog::level::level_enum level = spdlog::level::from_str(log_level);
+  if (level == spdlog::level::off && log_level != "off")
+    return UsageError("unknown --log-level '" + log_level + "'");
+  spdlog::set_default_logger(spdlog::stderr_color_mt("lrfnetd"));
+  spdlog::set_level(level);
+
+  if (!inputs.empty())
+    return RunOffline(run, config, inputs, static_cast<std::uint16_t>(udp_port));
+  return RunLive(run, config);
+}
+
+}  // namespace
+}  // namespace lrfnet::daemon
+
+int main(int argc, char** argv) {
+  // A file-size limit must give a counted write error (EFBIG), not kill the daemon.
+  std::signal(SIGXFSZ, SIG_IGN);
+  // libprotobuf logs every string field that is not UTF-8; hostile datagrams are counted instead.
+  google::protobuf::SetLogHandler(nullptr);
+  try {
+    return lrfnet::daemon::Run(argc, argv);
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "lrfnetd: %s\n", e.what());
+    return 1;
+  }
+}

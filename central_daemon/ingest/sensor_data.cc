@@ -1,0 +1,43 @@
+#include "central_daemon/ingest/sensor_data.h"
+
+namespace lrfnet::daemon {
+
+const char* ToString(TrackState state) {
+  switch (state) {
+    case TrackState::kTentative:
+      return "tentative";
+    case TrackState::kConfirmed:
+      return "confirmed";
+    case TrackState::kCoasting:
+      return "coasting";
+  }
+  return "invalid";
+}
+
+const char* ToString(MeasurementKind kind) {
+  switch (kind) {
+    case MeasurementKind::kUnspecified:
+      return "unspecified";
+    case MeasurementKind::kCenterOfMass:
+      return "center_of_mass";
+    case MeasurementKind::kEllipse:
+      return "ellipse";
+  }
+  return "invalid";
+}
+
+const char* ToString(ClockSync sync) {
+  switch (sync) {
+    case ClockSync::kUnknown:
+      return "unknown";
+    case ClockSync::kSynchronized:
+      return "synchronized";
+    case ClockSync::kUnsynchronized:
+      return "unsynchronized";
+    case ClockSync::kReplay:
+      return "replay";
+  }
+  return "invalid";
+}
+
+}  // namespace lrfnet::daemon
