@@ -91,6 +91,24 @@ TEST(TrackerCliTest, PrintConfigIsTheShippedFileAndLoadsBack) {
   std::filesystem::remove(bad);
 }
 
+// --speed paces the replay by the capture's packet times: the LMS511 capture spans 5.4 s, so at
+// speed 4 it takes about 1.35 s, and it still processes every scan.
+TEST(TrackerCliTest, ReplaySpeedPacesByTheCaptureTimes) {
+  LRFNET_REQUIRE_SHARED_FILE(capture, "data/sick/lms511_20210301.pcap");
+  const auto start = std::chrono::steady_clock::now();
+  Process run(kTracker, {"--replay", capture, "--sensor-id", "paced", "--speed", "4",
+                         "--log-level", "warn"});
+  ASSERT_EQ(run.Wait(), 0) << run.err();
+  const double elapsed_s =
+      std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  EXPECT_NE(run.out().find("scans=136"), std::string::npos) << run.out();
+  EXPECT_GT(elapsed_s, 1.1);
+  EXPECT_LT(elapsed_s, 10.0);
+  Process bad(kTracker, {"--replay", capture, "--sensor-id", "paced", "--speed", "-1"});
+  EXPECT_EQ(bad.Wait(), 2);
+  EXPECT_NE(bad.err().find("--speed"), std::string::npos) << bad.err();
+}
+
 TEST(TrackerCliTest, ReplayWritesARecordingWithAFramePerScanSameOnEveryRun) {
   LRFNET_REQUIRE_SHARED_FILE(capture, "data/sick/lms511_20210301.pcap");
   const std::string rec_a = TempFile("replay_a.rec");
