@@ -18,17 +18,18 @@
 #include <netinet/in.h>
 #include <sched.h>
 #include <sys/prctl.h>
+#include <sys/resource.h>
 #include <sys/socket.h>
 #include <time.h>
 #include <unistd.h>
 
 #include <algorithm>
 #include <atomic>
-#include <cstdarg>
 #include <boost/asio/io_context.hpp>
 #include <boost/asio/steady_timer.hpp>
 #include <chrono>
 #include <cmath>
+#include <cstdarg>
 #include <cstdio>
 #include <cstring>
 #include <filesystem>
@@ -231,13 +232,19 @@ std::string SensorId(std::size_t s) {
 std::vector<Encoded> Encode(std::size_t sensors, std::size_t per_sensor, UtcNs t0_ns,
                             DurationNs period_ns) {
   std::vector<Encoded> out(sensors);
-  for (std::size_t s = 0; s < sensors; ++s) {
-    SensorStream stream(SensorId(s), 7000 + s, t0_ns, period_ns);
-    out[s].bytes.reserve(per_sensor * 300);
-    out[s].ends.reserve(per_sensor);
-    out[s].sent_ns.reserve(per_sensor);
-    for (std::size_t i = 0; i < per_sensor; ++i) stream.Next(out[s]);
-  }
+  auto encode = [&](std::size_t first, std::size_t step) {
+    for (std::size_t s = first; s < sensors; s += step) {
+      SensorStream stream(SensorId(s), 7000 + s, t0_ns, period_ns);
+      out[s].bytes.reserve(per_sensor * 500);
+      out[s].ends.reserve(per_sensor);
+      out[s].sent_ns.reserve(per_sensor);
+      for (std::size_t i = 0; i < per_sensor; ++i) stream.Next(out[s]);
+    }
+  };
+  // Both cores: encoding is set-up, not measured.
+  std::thread helper(encode, 1, 2);
+  encode(0, 2);
+  helper.join();
   return out;
 }
 
@@ -494,8 +501,8 @@ SendResult RunSenders(const std::vector<Encoded>& data, std::uint16_t port, doub
   };
   const std::uint64_t total_available = static_cast<std::uint64_t>(available) * n;
   r.start = Clock::now();
-  const auto end = r.start + std::chrono::duration_cast<Clock::duration>(
-                                 std::chrono::duration<double>(seconds));
+  const auto end =
+      r.start + std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(seconds));
   std::uint64_t i = 0;
   if (rate_per_s <= 0.0) {
     while (i < total_available && Clock::now() < end) {
@@ -520,6 +527,30 @@ SendResult RunSenders(const std::vector<Encoded>& data, std::uint16_t port, doub
   return r;
 }
 
+// CPU time of the whole machine (all CPUs, not idle) and of this process, seconds.
+struct CpuUse {
+  double machine_s = 0.0;
+  double process_s = 0.0;
+};
+CpuUse ReadCpuUse() {
+  CpuUse u;
+  std::ifstream stat("/proc/stat");
+  std::string cpu;
+  // user nice system idle iowait irq softirq steal
+  std::uint64_t v[8] = {};
+  stat >> cpu;
+  for (auto& x : v) stat >> x;
+  const double hz = static_cast<double>(::sysconf(_SC_CLK_TCK));
+  u.machine_s = static_cast<double>(v[0] + v[1] + v[2] + v[5] + v[6] + v[7]) / hz;
+  rusage r{};
+  ::getrusage(RUSAGE_SELF, &r);
+  auto tv = [](const timeval& t) {
+    return static_cast<double>(t.tv_sec) + static_cast<double>(t.tv_usec) * 1e-6;
+  };
+  u.process_s = tv(r.ru_utime) + tv(r.ru_stime);
+  return u;
+}
+
 struct LoopbackRow {
   std::size_t sensors = 0;
   bool record = false;
@@ -527,6 +558,9 @@ struct LoopbackRow {
   SendResult sent;
   ReceiverResult received;
   double wall_s = 0.0;  // first send to last datagram handled
+  // CPU time used by everything but this process while the row ran (other programs, the kernel's
+  // own threads), as a share of one CPU.
+  double others_cpu = 0.0;
 };
 
 LoopbackRow RunLoopback(const std::vector<Encoded>& data, bool record, double seconds,
@@ -536,6 +570,8 @@ LoopbackRow RunLoopback(const std::vector<Encoded>& data, bool record, double se
   row.record = record;
   row.rate_per_s = rate_per_s;
   daemon::DaemonOptions options;  // lrfnetd's defaults
+  const CpuUse before = ReadCpuUse();
+  const auto t_begin = Clock::now();
   ReceiverThread receiver(data.size(), record, options);
   const std::uint16_t port = receiver.WaitForPort();
   if (port != 0) {
@@ -545,6 +581,10 @@ LoopbackRow RunLoopback(const std::vector<Encoded>& data, bool record, double se
   receiver.SendersDone(row.sent.offered);
   row.received = receiver.Join();
   row.wall_s = Seconds(row.received.last_handled - row.sent.start);
+  const CpuUse after = ReadCpuUse();
+  const double others_s =
+      (after.machine_s - before.machine_s) - (after.process_s - before.process_s);
+  row.others_cpu = std::max(0.0, others_s) / Seconds(Clock::now() - t_begin);
   return row;
 }
 
@@ -714,8 +754,7 @@ int main(int argc, char** argv) {
     std::fprintf(stderr, " %.1f s\n", Seconds(Clock::now() - t_encode));
     bytes_per_datagram = AverageBytes(data);
     for (const bool record : {false, true}) {
-      std::fprintf(stderr, "throughput: %zu sensors%s...\n", sensors,
-                   record ? ", recording" : "");
+      std::fprintf(stderr, "throughput: %zu sensors%s...\n", sensors, record ? ", recording" : "");
       throughput.push_back(RunLoopback(data, record, seconds, 0.0));
     }
   }
@@ -739,11 +778,11 @@ int main(int argc, char** argv) {
   // ---- report
   std::string md;
   md += "# lrfnetd: datagrams received, decoded and stored (daemon_benchmark)\n\n";
-  md += Format("Machine: %ld CPUs (%s); load average (1, 5, 15 min) %s at the start, %s at the "
-               "end; receive buffer granted %d KiB. Whole run %.0f s.\n\n",
-               cpus, CpuModel().c_str(), load_at_start.c_str(), load_at_end.c_str(),
-               throughput.empty() ? 0 : throughput[0].received.granted_buffer_bytes / 1024,
-               total_s);
+  md += Format(
+      "Machine: %ld CPUs (%s); load average (1, 5, 15 min) %s at the start, %s at the "
+      "end; receive buffer granted %d KiB. Whole run %.0f s.\n\n",
+      cpus, CpuModel().c_str(), load_at_start.c_str(), load_at_end.c_str(),
+      throughput.empty() ? 0 : throughput[0].received.granted_buffer_bytes / 1024, total_s);
   md += Format(
       "Datagrams from the tracker's encoder (nanopb): per sensor a SensorInfo, then one track "
       "frame of %zu tracks per scan (%.0f bytes on average with the health) and a Health after "
@@ -766,26 +805,26 @@ int main(int argc, char** argv) {
       "CPU-second* is accepted datagrams per second of receiver CPU time (recvmmsg + the "
       "daemon).\n\n",
       seconds);
-  md += "| sensors | recording | offered | received | accepted | stored frames | kernel drops | "
-        "accepted/s (wall) | receiver busy | datagrams per recvmmsg | receiver CPU per datagram | "
-        "datagrams per CPU-second |\n"
-        "|---:|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n";
+  md +=
+      "| sensors | recording | offered | received | accepted | stored frames | kernel drops | "
+      "accepted/s (wall) | receiver busy | datagrams per recvmmsg | receiver CPU per datagram | "
+      "datagrams per CPU-second |\n"
+      "|---:|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n";
   for (const LoopbackRow& r : throughput) {
     const ReceiverResult& x = r.received;
     const double cpu_s = static_cast<double>(x.cpu_ns) * 1e-9;
     const auto accepted = static_cast<double>(x.ingest.accepted);
-    md += Format("| %zu | %s | %s | %s | %s | %s | %s | %s | %.0f %% | %.1f | %.2f µs | %s |\n",
-                 r.sensors,
-                 r.record ? Format("yes (%.0f MB)", static_cast<double>(x.recorded_bytes) / 1e6)
-                                .c_str()
-                          : "no",
-                 Number(r.sent.offered).c_str(), Number(x.udp.datagrams).c_str(),
-                 Number(x.ingest.accepted).c_str(), Number(x.frames_added).c_str(),
-                 Number(x.udp.kernel_drops).c_str(),
-                 Number(r.wall_s > 0 ? accepted / r.wall_s : 0.0).c_str(),
-                 r.wall_s > 0 ? 100.0 * cpu_s / r.wall_s : 0.0, BatchSize(x.udp),
-                 accepted > 0 ? cpu_s * 1e6 / accepted : 0.0,
-                 Number(cpu_s > 0 ? accepted / cpu_s : 0.0).c_str());
+    md += Format(
+        "| %zu | %s | %s | %s | %s | %s | %s | %s | %.0f %% | %.1f | %.2f µs | %s |\n", r.sensors,
+        r.record ? Format("yes (%.0f MB)", static_cast<double>(x.recorded_bytes) / 1e6).c_str()
+                 : "no",
+        Number(r.sent.offered).c_str(), Number(x.udp.datagrams).c_str(),
+        Number(x.ingest.accepted).c_str(), Number(x.frames_added).c_str(),
+        Number(x.udp.kernel_drops).c_str(),
+        Number(r.wall_s > 0 ? accepted / r.wall_s : 0.0).c_str(),
+        r.wall_s > 0 ? 100.0 * cpu_s / r.wall_s : 0.0, BatchSize(x.udp),
+        accepted > 0 ? cpu_s * 1e6 / accepted : 0.0,
+        Number(cpu_s > 0 ? accepted / cpu_s : 0.0).c_str());
   }
 
   md += Format(
@@ -795,9 +834,10 @@ int main(int argc, char** argv) {
       "SequenceCounters.lost over the sensors plus the datagrams never seen at the end (sent minus "
       "received minus lost, per sensor: the last ones of a stream are not yet declared lost).\n\n",
       paced_s);
-  md += "| offered load | per sensor | offered | accepted | lost (sequence) | never seen | loss | "
-        "kernel drops | receiver busy | datagrams per recvmmsg | receiver CPU per datagram |\n"
-        "|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n";
+  md +=
+      "| offered load | per sensor | offered | accepted | lost (sequence) | never seen | loss | "
+      "kernel drops | receiver busy | datagrams per recvmmsg | receiver CPU per datagram |\n"
+      "|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n";
   for (const LoopbackRow& r : paced) {
     const ReceiverResult& x = r.received;
     std::uint64_t lost = 0, unseen = 0;
@@ -809,16 +849,17 @@ int main(int argc, char** argv) {
     }
     const double offered = static_cast<double>(r.sent.offered);
     const double cpu_s = static_cast<double>(x.cpu_ns) * 1e-9;
-    md += Format("| %s/s (%s/s achieved) | %.0f Hz | %s | %s | %s | %s | %.3f %% | %s | %.0f %% | "
-                 "%.1f | %.2f µs |\n",
-                 Number(r.rate_per_s).c_str(),
-                 Number(r.sent.seconds > 0 ? offered / r.sent.seconds : 0.0).c_str(),
-                 r.rate_per_s / static_cast<double>(r.sensors), Number(r.sent.offered).c_str(),
-                 Number(x.ingest.accepted).c_str(), Number(lost).c_str(), Number(unseen).c_str(),
-                 offered > 0 ? 100.0 * static_cast<double>(lost + unseen) / offered : 0.0,
-                 Number(x.udp.kernel_drops).c_str(), r.wall_s > 0 ? 100.0 * cpu_s / r.wall_s : 0.0,
-                 BatchSize(x.udp),
-                 x.ingest.accepted > 0 ? cpu_s * 1e6 / static_cast<double>(x.ingest.accepted) : 0.0);
+    md += Format(
+        "| %s/s (%s/s achieved) | %.0f Hz | %s | %s | %s | %s | %.3f %% | %s | %.0f %% | "
+        "%.1f | %.2f µs |\n",
+        Number(r.rate_per_s).c_str(),
+        Number(r.sent.seconds > 0 ? offered / r.sent.seconds : 0.0).c_str(),
+        r.rate_per_s / static_cast<double>(r.sensors), Number(r.sent.offered).c_str(),
+        Number(x.ingest.accepted).c_str(), Number(lost).c_str(), Number(unseen).c_str(),
+        offered > 0 ? 100.0 * static_cast<double>(lost + unseen) / offered : 0.0,
+        Number(x.udp.kernel_drops).c_str(), r.wall_s > 0 ? 100.0 * cpu_s / r.wall_s : 0.0,
+        BatchSize(x.udp),
+        x.ingest.accepted > 0 ? cpu_s * 1e6 / static_cast<double>(x.ingest.accepted) : 0.0);
   }
 
   const double mb = 1e6;
@@ -848,15 +889,23 @@ int main(int argc, char** argv) {
         notes += "- a run reported: " + r.received.error + "\n";
       if (!r.sent.pinned) notes += "- the senders could not be pinned to CPU 1\n";
       if (r.rate_per_s <= 0.0 && r.sent.seconds < 0.95 * seconds)
-        notes += Format("- %zu sensors%s: the senders used up the pre-encoded datagrams after "
-                        "%.2f s\n",
-                        r.sensors, r.record ? " with recording" : "", r.sent.seconds);
+        notes += Format(
+            "- %zu sensors%s: the senders used up the pre-encoded datagrams after "
+            "%.2f s\n",
+            r.sensors, r.record ? " with recording" : "", r.sent.seconds);
+      if (r.others_cpu > 0.05)
+        notes +=
+            Format("- %zu sensors, %s: other programs used %.0f %% of a CPU meanwhile\n", r.sensors,
+                   r.rate_per_s > 0.0 ? Format("%.0f/s", r.rate_per_s).c_str()
+                   : r.record         ? "as fast as possible, recording"
+                                      : "as fast as possible",
+                   100.0 * r.others_cpu);
       if (r.sent.send_errors > 0)
         notes += "- " + Number(r.sent.send_errors) + " send errors in one run\n";
     }
   }
   if (!memory.error.empty()) notes += "- memory run: " + memory.error + "\n";
-  if (!notes.empty()) md += "\n## Problems\n\n" + notes;
+  if (!notes.empty()) md += "\n## Notes\n\n" + notes;
 
   std::fputs(md.c_str(), stdout);
   const auto parent = std::filesystem::path(out).parent_path();
