@@ -1,5 +1,7 @@
 #include "central_daemon/io/recording_writer.h"
 
+#include "common/file_append.h"
+
 #include <fcntl.h>
 #include <sys/stat.h>
 #include <unistd.h>
@@ -91,24 +93,15 @@ struct RecordingWriter::Impl {
 
   bool Write() {
     if (fd < 0 || used == 0) return fd >= 0;
-    std::size_t done = 0;
-    while (done < used) {
-      const ssize_t n = ::write(fd, buffer.data() + done, used - done);
-      if (n < 0 && errno == EINTR) continue;
-      if (n <= 0) {
-        ++counters.write_errors;
-        counters.last_errno = n < 0 ? errno : EIO;
-        counters.dropped_entries += buffered_entries;
-        // A reader stops at a torn entry; cut the partial write off so the entries that follow a
-        // recovered disk are still readable.
-        if (done > 0 && ::lseek(fd, static_cast<off_t>(file_bytes), SEEK_SET) >= 0) {
-          [[maybe_unused]] const int rc = ::ftruncate(fd, static_cast<off_t>(file_bytes));
-        }
-        used = 0;
-        buffered_entries = 0;
-        return false;
-      }
-      done += static_cast<std::size_t>(n);
+    if (const int error = common::AppendWhole(fd, buffer.data(), used, file_bytes)) {
+      // A reader stops at a torn entry: AppendWhole cut the partial write off, so the entries
+      // that follow a recovered disk are still readable.
+      ++counters.write_errors;
+      counters.last_errno = error;
+      counters.dropped_entries += buffered_entries;
+      used = 0;
+      buffered_entries = 0;
+      return false;
     }
     file_bytes += used;
     counters.bytes_written += used;

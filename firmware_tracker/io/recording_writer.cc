@@ -4,6 +4,8 @@
 #include <pb_encode.h>
 #include <unistd.h>
 
+#include "common/file_append.h"
+
 #include <algorithm>
 #include <cerrno>
 #include <cmath>
@@ -149,24 +151,14 @@ bool RecordingWriter::Append(std::span<const std::uint8_t> datagram, common::Utc
 
 bool RecordingWriter::Flush() {
   if (fd_ < 0 || used_ == 0) return fd_ >= 0;
-  std::size_t done = 0;
-  while (done < used_) {
-    const ssize_t n = ::write(fd_, buffer_.data() + done, used_ - done);
-    if (n < 0 && errno == EINTR) continue;
-    if (n <= 0) {
-      ++counters_.write_errors;
-      counters_.last_errno = n < 0 ? errno : EIO;
-      counters_.dropped_entries += buffered_entries_;
-      // Cut a partly written entry off again, so the file ends with a whole entry (regular files
-      // only).
-      if (done > 0 && ::lseek(fd_, static_cast<off_t>(file_bytes_), SEEK_SET) >= 0) {
-        [[maybe_unused]] const int rc = ::ftruncate(fd_, static_cast<off_t>(file_bytes_));
-      }
-      used_ = 0;
-      buffered_entries_ = 0;
-      return false;
-    }
-    done += static_cast<std::size_t>(n);
+  if (const int error = common::AppendWhole(fd_, buffer_.data(), used_, file_bytes_)) {
+    // The partial write was cut off again, so the file ends with a whole entry.
+    ++counters_.write_errors;
+    counters_.last_errno = error;
+    counters_.dropped_entries += buffered_entries_;
+    used_ = 0;
+    buffered_entries_ = 0;
+    return false;
   }
   file_bytes_ += used_;
   counters_.bytes_written += used_;
