@@ -82,9 +82,9 @@ void Daemon::OnTick(common::UtcNs now_ns) {
   ingest_.OnTick(now_ns);
   store_.Evict(now_ns);
   if (recorder_ != nullptr) recorder_->FlushIfDue(now_ns);
-  std::vector<PendingRequest> due = ingest_.TakeRequests(now_ns);
+  // Taking a request counts it as sent: only take them when they can go out.
   if (!options_.send_requests || requests_ == nullptr) return;
-  for (const PendingRequest& r : due) {
+  for (const PendingRequest& r : ingest_.TakeRequests(now_ns)) {
     const auto bytes = EncodeRequestDatagram(r, request_sequence_++, now_ns, session_id_);
     if (requests_->SendTo(r.source, bytes)) {
       ++requests_sent_;
@@ -135,14 +135,13 @@ std::string Daemon::StatusLine(common::UtcNs now_ns) {
     double loss;
   };
   std::vector<Row> rows;
-  std::vector<std::pair<std::string, SensorMark>> marks;
+  std::map<std::string, SensorMark, std::less<>> marks;
   std::uint64_t lost = 0, received = 0, lost_total = 0, reordered = 0, duplicates = 0;
   std::size_t silent = 0;
   for (const SensorStatus& s : sensors) {
     const SequenceCounters& q = s.counters.sequence;
-    SensorMark before;
-    for (const auto& m : status_marks_)
-      if (m.first == s.sensor_id) before = m.second;
+    const auto found = status_marks_.find(s.sensor_id);
+    const SensorMark before = found != status_marks_.end() ? found->second : SensorMark{};
     const std::uint64_t d_received = q.received - std::min(q.received, before.received);
     const std::uint64_t d_lost = q.lost - std::min(q.lost, before.lost);
     const std::uint64_t d_datagrams = s.counters.datagrams - std::min(s.counters.datagrams, before.datagrams);
@@ -156,7 +155,7 @@ std::string Daemon::StatusLine(common::UtcNs now_ns) {
                             ? static_cast<double>(d_lost) / static_cast<double>(d_received + d_lost)
                             : 0.0;
     rows.push_back({&s, interval_s > 0 ? static_cast<double>(d_datagrams) / interval_s : 0.0, loss});
-    marks.emplace_back(s.sensor_id, SensorMark{s.counters.datagrams, q.received, q.lost});
+    marks.emplace(s.sensor_id, SensorMark{s.counters.datagrams, q.received, q.lost});
   }
   const std::uint64_t d_datagrams = c.datagrams - status_counters_.datagrams;
   const std::uint64_t d_rejected = c.rejected - status_counters_.rejected;

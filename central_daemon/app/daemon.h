@@ -9,6 +9,7 @@
 
 #include <cstdint>
 #include <deque>
+#include <map>
 #include <memory>
 #include <span>
 #include <string>
@@ -100,7 +101,7 @@ class Daemon final : public IngestListener {
     std::uint64_t received = 0;
     std::uint64_t lost = 0;
   };
-  std::vector<std::pair<std::string, SensorMark>> status_marks_;
+  std::map<std::string, SensorMark, std::less<>> status_marks_;
 };
 
 }  // namespace lrfnet::daemon

@@ -186,10 +186,11 @@ bool WriteStats(const std::string& path, const Daemon& daemon, const UdpReceiver
 
 std::string Summary(const Daemon& daemon) {
   const IngestCounters& c = daemon.ingest().counters();
+  const std::vector<SensorStatus> sensors = daemon.ingest().Sensors();
   std::uint64_t lost = 0;
-  for (const SensorStatus& s : daemon.ingest().Sensors()) lost += s.counters.sequence.lost;
+  for (const SensorStatus& s : sensors) lost += s.counters.sequence.lost;
   return fmt::format("summary: sensors={} datagrams={} accepted={} rejected={} lost={} frames={}",
-                     daemon.ingest().Sensors().size(), c.datagrams, c.accepted, c.rejected, lost,
+                     sensors.size(), c.datagrams, c.accepted, c.rejected, lost,
                      daemon.store().frames());
 }
 

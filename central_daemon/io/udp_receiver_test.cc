@@ -104,16 +104,30 @@ std::vector<std::uint8_t> Payload(std::size_t size, std::uint8_t seed) {
   return p;
 }
 
-TEST(UdpReceiverTest, ReceivesEveryDatagramOfTwoSendersInOrderWithSourceAndTime) {
+// A receiver on `address`, any free port, that collects what arrives into `got`.
+struct CollectingReceiver {
   asio::io_context io;
   std::vector<Received> got;
-  UdpReceiverOptions options;
-  options.address = "127.0.0.1";
-  options.port = 0;
-  options.batch_datagrams = 16;
-  UdpReceiver receiver(io, options, [&](auto bytes, const std::string& source, auto t) {
-    got.push_back({{bytes.begin(), bytes.end()}, source, t});
-  });
+  UdpReceiver receiver;
+  explicit CollectingReceiver(const std::string& address, std::size_t batch_datagrams = 64)
+      : receiver(io, Options(address, batch_datagrams),
+                 [this](auto bytes, const std::string& source, auto t) {
+                   got.push_back({{bytes.begin(), bytes.end()}, source, t});
+                 }) {}
+  static UdpReceiverOptions Options(const std::string& address, std::size_t batch_datagrams) {
+    UdpReceiverOptions options;
+    options.address = address;
+    options.port = 0;
+    options.batch_datagrams = batch_datagrams;
+    return options;
+  }
+  void RunUntil(std::size_t count) { lrfnet::daemon::RunUntil(io, got, count); }
+};
+
+TEST(UdpReceiverTest, ReceivesEveryDatagramOfTwoSendersInOrderWithSourceAndTime) {
+  CollectingReceiver loop("127.0.0.1", 16);
+  UdpReceiver& receiver = loop.receiver;
+  std::vector<Received>& got = loop.got;
   ASSERT_EQ(receiver.Open(), std::nullopt);
   EXPECT_GE(receiver.receive_buffer_bytes(), 65536);
   EXPECT_EQ(receiver.local_address(), "127.0.0.1:" + std::to_string(receiver.local_port()));
@@ -125,7 +139,7 @@ TEST(UdpReceiverTest, ReceivesEveryDatagramOfTwoSendersInOrderWithSourceAndTime)
     ASSERT_TRUE(a.SendTo(receiver.local_port(), Payload(100 + i, 1)));
     ASSERT_TRUE(b.SendTo(receiver.local_port(), Payload(1400, static_cast<std::uint8_t>(i))));
   }
-  RunUntil(io, got, 2 * kEach);
+  loop.RunUntil(2 * kEach);
   const common::UtcNs after = Now();
   ASSERT_EQ(got.size(), 2u * kEach);
   const std::string source_a = "127.0.0.1:" + std::to_string(a.port());
@@ -151,36 +165,26 @@ TEST(UdpReceiverTest, ReceivesEveryDatagramOfTwoSendersInOrderWithSourceAndTime)
 }
 
 TEST(UdpReceiverTest, LargeDatagramArrivesWhole) {
-  asio::io_context io;
-  std::vector<Received> got;
-  UdpReceiverOptions options;
-  options.address = "127.0.0.1";
-  options.port = 0;
-  UdpReceiver receiver(io, options, [&](auto bytes, const std::string& source, auto t) {
-    got.push_back({{bytes.begin(), bytes.end()}, source, t});
-  });
+  CollectingReceiver loop("127.0.0.1");
+  UdpReceiver& receiver = loop.receiver;
+  std::vector<Received>& got = loop.got;
   ASSERT_EQ(receiver.Open(), std::nullopt);
   Sender a(AF_INET);
   ASSERT_TRUE(a.SendTo(receiver.local_port(), Payload(60000, 3)));
-  RunUntil(io, got, 1);
+  loop.RunUntil(1);
   ASSERT_EQ(got.size(), 1u);
   EXPECT_EQ(got[0].bytes, Payload(60000, 3));
   EXPECT_EQ(receiver.counters().truncated, 0u);
 }
 
 TEST(UdpReceiverTest, RepliesReachTheSenderAndUnknownDestinationsAreCounted) {
-  asio::io_context io;
-  std::vector<Received> got;
-  UdpReceiverOptions options;
-  options.address = "127.0.0.1";
-  options.port = 0;
-  UdpReceiver receiver(io, options, [&](auto bytes, const std::string& source, auto t) {
-    got.push_back({{bytes.begin(), bytes.end()}, source, t});
-  });
+  CollectingReceiver loop("127.0.0.1");
+  UdpReceiver& receiver = loop.receiver;
+  std::vector<Received>& got = loop.got;
   ASSERT_EQ(receiver.Open(), std::nullopt);
   Sender a(AF_INET);
   ASSERT_TRUE(a.SendTo(receiver.local_port(), Payload(10, 0)));
-  RunUntil(io, got, 1);
+  loop.RunUntil(1);
   ASSERT_EQ(got.size(), 1u);
   ASSERT_TRUE(receiver.SendTo(got[0].source, Payload(20, 9)));
   EXPECT_EQ(a.Receive(), Payload(20, 9));
@@ -190,21 +194,16 @@ TEST(UdpReceiverTest, RepliesReachTheSenderAndUnknownDestinationsAreCounted) {
 }
 
 TEST(UdpReceiverTest, Ipv6AndDualStack) {
-  asio::io_context io;
-  std::vector<Received> got;
-  UdpReceiverOptions options;
-  options.address = "::";
-  options.port = 0;
-  UdpReceiver receiver(io, options, [&](auto bytes, const std::string& source, auto t) {
-    got.push_back({{bytes.begin(), bytes.end()}, source, t});
-  });
+  CollectingReceiver loop("::");
+  UdpReceiver& receiver = loop.receiver;
+  std::vector<Received>& got = loop.got;
   if (auto e = receiver.Open()) GTEST_SKIP() << "no IPv6 here: " << *e;
   Sender v6(AF_INET6);
   if (!v6.ok()) GTEST_SKIP() << "no IPv6 loopback here";
   Sender v4(AF_INET);
   ASSERT_TRUE(v6.SendTo(receiver.local_port(), Payload(50, 1)));
   ASSERT_TRUE(v4.SendTo(receiver.local_port(), Payload(60, 2)));
-  RunUntil(io, got, 2);
+  loop.RunUntil(2);
   ASSERT_EQ(got.size(), 2u);
   EXPECT_EQ(got[0].source, "[::1]:" + std::to_string(v6.port()));
   // An IPv4 tracker on a dual-stack socket appears with its IPv4 address.
