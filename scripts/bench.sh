@@ -5,9 +5,14 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 build_dir=${1:-build}
 cmake --build "$build_dir" --target decode_benchmark tracker_benchmark store_benchmark daemon_benchmark \
-  >/dev/null
+  rotation_averaging_benchmark calibration_benchmark lrfnet lrfnet-tracker >/dev/null
 mkdir -p results
 "$build_dir/tests/bench/decode_benchmark" --out results/decode_benchmark.md
 "$build_dir/tests/bench/tracker_benchmark" --out results/tracker_benchmark.md
 "$build_dir/tests/bench/store_benchmark" results/store_benchmark.md
 "$build_dir/tests/bench/daemon_benchmark" --out results/daemon_benchmark.md
+"$build_dir/tests/bench/rotation_averaging_benchmark" --out results/rotation_averaging_benchmark.md
+# The whole calibration chain over every shipped scenario (3 seeds; a few minutes).
+"$build_dir/tests/bench/calibration_benchmark" --tool "$build_dir/tools/lrfnet" \
+  --tracker "$build_dir/firmware_tracker/app/lrfnet-tracker" --scenarios tools/scenarios --seeds 3 \
+  --out results/calibration_benchmark.md

@@ -20,6 +20,7 @@ host_pkgs=(
   libprotobuf-dev protobuf-compiler libspdlog-dev libfmt-dev
   libpcap-dev libyaml-cpp-dev nlohmann-json3-dev nanopb libnanopb-dev
   libgtest-dev libgmock-dev libbenchmark-dev
+  libceres-dev coinor-libclp-dev zlib1g-dev   # calibration: joint refinement, LP oracle in tests, PNG report
 )
 cross_pkgs=(
   g++-aarch64-linux-gnu qemu-user

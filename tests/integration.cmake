@@ -50,3 +50,14 @@ if(TARGET daemon_cli_test)
     LRFNET_DAEMON_CONFIG_FILE="${PROJECT_SOURCE_DIR}/central_daemon/config/lrfnetd.yaml")
   add_dependencies(daemon_cli_test lrfnet lrfnet-tracker lrfnetd)
 endif()
+
+# The calibration chain as processes: lrfnet sim → lrfnet-tracker --replay per sensor → lrfnet calibrate /
+# lrfnetd --input → lrfnet eval; accuracy bounds on the simulated setup of Quenzel et al.; one-line errors.
+lrfnet_test(calibration_cli_test SOURCES calibration_cli_test.cc LIBS nlohmann_json::nlohmann_json)
+if(TARGET calibration_cli_test)
+  target_compile_definitions(calibration_cli_test PRIVATE
+    LRFNET_TOOL_BINARY="$<TARGET_FILE:lrfnet>"
+    LRFNET_TRACKER_BINARY="$<TARGET_FILE:lrfnet-tracker>"
+    LRFNET_DAEMON_BINARY="$<TARGET_FILE:lrfnetd>")
+  add_dependencies(calibration_cli_test lrfnet lrfnet-tracker lrfnetd)
+endif()

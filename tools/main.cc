@@ -21,9 +21,12 @@ struct Subcommand {
 };
 
 constexpr Subcommand kSubcommands[] = {
+    {"calibrate", "every sensor's pose from recordings or UDP captures of the tracks",
+     RunCalibrate},
     {"dump", "scans of a capture, or datagrams of a recording or UDP capture, as JSON lines",
      RunDump},
     {"emulate", "serve a capture's scans (or synthetic ones) as a SICK device on TCP", RunEmulate},
+    {"eval", "errors d_R, d_t of a calibration against the truth, per sensor", RunEval},
     {"replay", "send a recording or UDP capture to HOST:PORT over UDP with its timing", RunReplay},
     {"sim", "simulate a scenario: per-sensor captures and ground truth, or live devices", RunSim},
 };

@@ -15,8 +15,10 @@ inline constexpr int kExitFailure = 1;  // unreadable input, runtime failure
 inline constexpr int kExitUsage = 2;    // bad arguments
 
 // argv[0] is the subcommand name; the options follow.
+int RunCalibrate(int argc, char** argv);
 int RunDump(int argc, char** argv);
 int RunEmulate(int argc, char** argv);
+int RunEval(int argc, char** argv);
 int RunReplay(int argc, char** argv);
 int RunSim(int argc, char** argv);
 

@@ -91,6 +91,40 @@ void VisitStatus(DaemonConfig& c, ConfigVisitor& v) {
   v.Field("interval_s", c.status_interval_s, "A status line this often; 0: none.");
 }
 
+constexpr std::string_view kMethodNames[] = {"quenzel", "spectral", "schenk"};
+static_assert(static_cast<int>(calib::Method::kSchenk) == 2);
+
+void VisitCalibration(DaemonConfig& c, ConfigVisitor& v) {
+  v.Section("calibration",
+            "Finding every sensor's pose from the tracks (Quenzel et al.). The daemon tries every "
+            "attempt_interval_s until the data connects all sensors, then keeps the result; "
+            "SIGUSR1 calibrates at once. Runs on a worker thread over a copy of the newest "
+            "window_s of tracks.");
+  v.Field("auto", c.calibration_auto, "Calibrate by itself once enough data is in.");
+  v.Field("attempt_interval_s", c.calibration_attempt_interval_s,
+          "Time between attempts while the calibration is missing.");
+  v.Field("window_s", c.calibration_window_s, "Use the newest this many seconds of tracks.");
+  v.Field("recalibrate_interval_s", c.calibration_recalibrate_interval_s,
+          "After a calibration, calibrate again this often; 0: keep it.");
+  v.Field("output", c.calibration_output,
+          "Write calibration.yaml here (replaced atomically); empty: only log it. "
+          "--calibration-out.");
+  v.Field("report_dir", c.calibration_report_dir,
+          "Write the report (pictures, residuals) into this folder; empty: none.");
+  common::VisitEnum(v, "method", c.calibration.method, kMethodNames,
+                    "quenzel (robust), spectral or schenk (baselines).");
+  v.Field("reference", c.calibration.reference,
+          "The sensor at the origin; empty: the best-connected one.");
+  v.Field("weighted", c.calibration.weighted,
+          "Weight the edges of the global step by Schenk's N/d (helps when about half of the "
+          "pairwise estimates are wrong).");
+  v.Field("icp", c.calibration.use_icp, "Refine the pairwise poses on the background scans.");
+  v.Field("refine", c.calibration.refine,
+          "Joint refinement of all poses over every associated observation.");
+  v.Field("min_pair_overlap_s", c.calibration.min_pair_overlap_s,
+          "Seconds of simultaneous tracks that link two sensors in the data check.");
+}
+
 }  // namespace
 
 void VisitDaemonConfig(DaemonConfig& c, ConfigVisitor& v) {
@@ -100,6 +134,7 @@ void VisitDaemonConfig(DaemonConfig& c, ConfigVisitor& v) {
   VisitSensors(c, v);
   VisitStore(c, v);
   VisitStatus(c, v);
+  VisitCalibration(c, v);
 }
 
 std::optional<std::string> Validate(DaemonConfig& c) {
@@ -120,6 +155,14 @@ std::optional<std::string> Validate(DaemonConfig& c) {
   if (auto e = Prefixed("store", Validate(c.store))) return e;
   if (!(c.status_interval_s >= 0.0 && c.status_interval_s <= 3600.0))
     return "status.interval_s: must be in [0, 3600]";
+  if (!(c.calibration_attempt_interval_s >= 1.0 && c.calibration_attempt_interval_s <= 86400.0))
+    return "calibration.attempt_interval_s: must be in [1, 86400]";
+  if (!(c.calibration_window_s >= 1.0 && c.calibration_window_s <= 1e6))
+    return "calibration.window_s: must be in [1, 1e6]";
+  if (!(c.calibration_recalibrate_interval_s >= 0.0 &&
+        c.calibration_recalibrate_interval_s <= 1e7))
+    return "calibration.recalibrate_interval_s: must be in [0, 1e7]";
+  if (auto e = Prefixed("calibration", calib::Validate(c.calibration))) return e;
   return std::nullopt;
 }
 

@@ -3,12 +3,14 @@
 // the track store's retention and the status line, loaded from a YAML file (`--config FILE`) and
 // printed with its documentation by `--print-config`. Command-line flags override the file.
 // SIGHUP reloads the file: everything except listen.* and record.* applies at once.
+// SIGUSR1 calibrates at once with the data held.
 
 #include <cstdint>
 #include <optional>
 #include <string>
 #include <string_view>
 
+#include "central_daemon/calibration/pipeline.h"
 #include "central_daemon/ingest/ingest.h"
 #include "central_daemon/io/recording_writer.h"
 #include "central_daemon/io/udp_receiver.h"
@@ -30,9 +32,17 @@ struct DaemonConfig {
   TrackStoreOptions store;
   std::uint64_t store_max_mb = 2048;   // store.max_bytes in MiB
   double status_interval_s = 5.0;      // 0 = no status line
+  // Calibration (section `calibration`).
+  bool calibration_auto = true;           // calibrate once enough data is in
+  double calibration_attempt_interval_s = 10.0;
+  double calibration_window_s = 600.0;    // the newest this many seconds of tracks
+  double calibration_recalibrate_interval_s = 0.0;  // after success; 0 = keep the calibration
+  std::string calibration_output;         // calibration.yaml to write; empty: log only
+  std::string calibration_report_dir;     // report folder; empty: none
+  calib::CalibrationOptions calibration;  // method, reference, weights, icp, refine, min overlap
 };
 
-// Lists every option (sections listen, record, validation, sensors, store, status).
+// Lists every option (sections listen, record, validation, sensors, store, status, calibration).
 void VisitDaemonConfig(DaemonConfig& config, common::ConfigVisitor& visitor);
 
 // Every option, with the prefix of its section ("store.max_age_s: must be > 0"). Also parses

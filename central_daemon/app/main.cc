@@ -5,7 +5,9 @@
 //   lrfnetd --input REC_OR_CAPTURE... [--record REC]  offline: recordings or UDP captures in
 //   lrfnetd --print-config
 //
-// SIGINT / SIGTERM stop cleanly (the recording is flushed and closed); SIGHUP reloads --config.
+// SIGINT / SIGTERM stop cleanly (the recording is flushed and closed); SIGHUP reloads --config;
+// SIGUSR1 calibrates at once. Calibration also runs by itself once the data connects every sensor
+// (config section `calibration`); offline (--input) it runs once over all the input.
 
 #include <fcntl.h>
 #include <spdlog/sinks/stdout_color_sinks.h>
@@ -30,6 +32,8 @@
 #include <string>
 #include <vector>
 
+#include "central_daemon/app/calibration_input.h"
+#include "central_daemon/app/calibration_service.h"
 #include "central_daemon/app/config.h"
 #include "central_daemon/app/daemon.h"
 #include "central_daemon/app/stats_json.h"
@@ -53,6 +57,10 @@ constexpr common::DurationNs kTickPeriodNs = 250'000'000;
 int UsageError(const std::string& message) {
   std::fprintf(stderr, "lrfnetd: %s (see lrfnetd --help)\n", message.c_str());
   return kExitUsage;
+}
+
+double MonotonicS() {
+  return std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count();
 }
 
 common::UtcNs NowUtcNs() {
@@ -143,6 +151,8 @@ struct RunOptions {
   std::optional<std::string> listen_flag;
   std::optional<std::string> record_flag;
   std::optional<double> status_flag;
+  std::optional<std::string> calibration_out_flag;
+  std::optional<std::string> calibration_report_flag;
   double duration_s = 0.0;
   std::string stats_out;
 };
@@ -162,6 +172,8 @@ std::optional<std::string> LoadConfig(const RunOptions& run, DaemonConfig* confi
   if (run.listen_flag) c.listen = *run.listen_flag;
   if (run.record_flag) c.record_path = *run.record_flag;
   if (run.status_flag) c.status_interval_s = *run.status_flag;
+  if (run.calibration_out_flag) c.calibration_output = *run.calibration_out_flag;
+  if (run.calibration_report_flag) c.calibration_report_dir = *run.calibration_report_flag;
   if (auto e = Validate(c)) return (run.config_path.empty() ? "" : run.config_path + ": ") + *e;
   *config = c;
   return std::nullopt;
@@ -206,6 +218,7 @@ int RunLive(const RunOptions& run, DaemonConfig config) {
   }
   Replies replies;
   Daemon daemon(CoreOptions(config), recorder ? &*recorder : nullptr, &replies, RandomSessionId());
+  CalibrationService calibration(io, config);
   UdpReceiver receiver(io, config.receiver,
                        [&](std::span<const std::uint8_t> bytes, const std::string& source,
                            common::UtcNs receive_ns) { daemon.OnDatagram(bytes, source, receive_ns); });
@@ -242,6 +255,7 @@ int RunLive(const RunOptions& run, DaemonConfig config) {
       if (ec) return;
       daemon.OnTick(NowUtcNs());
       LogEvents(daemon, config.ingest.silent_after_s);
+      calibration.OnTick(MonotonicS(), daemon);
       schedule_tick();
     });
   };
@@ -257,6 +271,7 @@ int RunLive(const RunOptions& run, DaemonConfig config) {
       const UdpReceiverCounters& r = receiver.counters();
       std::string line = daemon.StatusLine(NowUtcNs());
       if (r.kernel_drops > 0) line += fmt::format(" | kernel drops {}", r.kernel_drops);
+      line += " | " + calibration.StatusText();
       if (recorder)
         line += fmt::format(" | recorded {:.1f} MiB",
                             static_cast<double>(recorder->writer().counters().bytes_written) /
@@ -278,9 +293,16 @@ int RunLive(const RunOptions& run, DaemonConfig config) {
   }
 
   asio::signal_set signals(io, SIGINT, SIGTERM, SIGHUP);
+  signals.add(SIGUSR1);
   std::function<void()> wait_signal = [&] {
     signals.async_wait([&](const boost::system::error_code& ec, int signal_number) {
       if (ec) return;
+      if (signal_number == SIGUSR1) {
+        spdlog::info("SIGUSR1: calibrating{}", calibration.busy() ? " after the running attempt" : "");
+        calibration.Request();
+        wait_signal();
+        return;
+      }
       if (signal_number != SIGHUP) {
         stop(signal_number == SIGINT ? "SIGINT" : "SIGTERM");
         return;
@@ -302,7 +324,15 @@ int RunLive(const RunOptions& run, DaemonConfig config) {
         config.store = reloaded.store;
         config.store_max_mb = reloaded.store_max_mb;
         config.status_interval_s = reloaded.status_interval_s;
+        config.calibration_auto = reloaded.calibration_auto;
+        config.calibration_attempt_interval_s = reloaded.calibration_attempt_interval_s;
+        config.calibration_window_s = reloaded.calibration_window_s;
+        config.calibration_recalibrate_interval_s = reloaded.calibration_recalibrate_interval_s;
+        config.calibration_output = reloaded.calibration_output;
+        config.calibration_report_dir = reloaded.calibration_report_dir;
+        config.calibration = reloaded.calibration;
         daemon.Reconfigure(CoreOptions(config));
+        calibration.Reconfigure(config);
         if (status_changed) {
           status.cancel();
           schedule_status();
@@ -407,6 +437,28 @@ int RunOffline(const RunOptions& run, const DaemonConfig& config,
     }
   }
   spdlog::info("status: {}", core.StatusLine(last_ns));
+  if (config.calibration_auto || !config.calibration_output.empty()) {
+    const auto start = std::chrono::steady_clock::now();
+    const calib::CalibrationOutcome outcome = calib::Calibrate(
+        CalibrationInputFrom(core.ingest(), core.store()), config.calibration,
+        [start] { return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count(); });
+    if (!outcome.ok) {
+      spdlog::warn("calibration: {}", outcome.error);
+      if (!config.calibration_output.empty()) exit_code = kExitFailure;
+    } else {
+      spdlog::info("calibration: reference {}, {} sensors, track residual {:.3f} m rms",
+                   outcome.result.reference, outcome.result.sensors.size(),
+                   outcome.result.track_residual_rms_m);
+      const std::string e = WriteCalibrationFiles(outcome, config.calibration_output,
+                                                  config.calibration_report_dir, inputs);
+      if (!e.empty()) {
+        spdlog::error("calibration: {}", e);
+        exit_code = kExitFailure;
+      } else if (!config.calibration_output.empty()) {
+        spdlog::info("calibration: wrote {}", config.calibration_output);
+      }
+    }
+  }
   if (!WriteStats(run.stats_out, core, nullptr, recorder && tee.opened ? &*recorder : nullptr))
     exit_code = kExitFailure;
   std::printf("%s\n", Summary(core).c_str());
@@ -445,6 +497,10 @@ int Run(int argc, char** argv) {
       "a status line this often (overrides status.interval_s; 0: none)")(
       "duration-s", po::value<double>(&run.duration_s)->default_value(0.0),
       "live: stop after this many seconds (0: run until a signal)")(
+      "calibration-out", po::value<std::string>(),
+      "write calibration.yaml here when a calibration succeeds (overrides calibration.output)")(
+      "calibration-report", po::value<std::string>(),
+      "write the calibration report into this folder (overrides calibration.report_dir)")(
       "stats-out", po::value<std::string>(&run.stats_out),
       "at exit, write every counter (per sensor and reason) as JSON to this file")(
       "log-level", po::value<std::string>(&log_level)->default_value("info"),
@@ -463,6 +519,10 @@ int Run(int argc, char** argv) {
   if (vm.count("listen") != 0) run.listen_flag = listen;
   if (vm.count("record") != 0) run.record_flag = record;
   if (vm.count("status-interval-s") != 0) run.status_flag = status_interval_s;
+  if (vm.count("calibration-out") != 0)
+    run.calibration_out_flag = vm["calibration-out"].as<std::string>();
+  if (vm.count("calibration-report") != 0)
+    run.calibration_report_flag = vm["calibration-report"].as<std::string>();
   if (udp_port < 0 || udp_port > 65535) return UsageError("--udp-port must be 0..65535");
   if (!(run.duration_s >= 0.0)) return UsageError("--duration-s must be >= 0");
   if (!inputs.empty() && run.listen_flag) return UsageError("give either --listen or --input");

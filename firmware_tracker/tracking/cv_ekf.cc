@@ -4,6 +4,8 @@
 #include <cmath>
 #include <limits>
 
+#include "common/cv_model.h"
+
 namespace lrfnet::tracking {
 
 std::optional<std::string> Validate(const CvEkfOptions& o) {
@@ -27,18 +29,7 @@ void CvEkf::Init(const Eigen::Vector2d& z_m, const Eigen::Matrix2d& r_m2) {
 
 void CvEkf::Predict(double dt_s) {
   if (!(dt_s > 0.0) || !std::isfinite(dt_s)) return;
-  Eigen::Matrix4d f = Eigen::Matrix4d::Identity();
-  f(0, 2) = dt_s;
-  f(1, 3) = dt_s;
-  const double q = options_.accel_psd_m2ps3;
-  const double q11 = q * dt_s * dt_s * dt_s / 3.0, q12 = q * dt_s * dt_s / 2.0, q22 = q * dt_s;
-  Eigen::Matrix4d qm = Eigen::Matrix4d::Zero();
-  qm(0, 0) = qm(1, 1) = q11;
-  qm(0, 2) = qm(2, 0) = qm(1, 3) = qm(3, 1) = q12;
-  qm(2, 2) = qm(3, 3) = q22;
-  x_ = f * x_;
-  p_ = f * p_ * f.transpose() + qm;
-  p_ = 0.5 * (p_ + p_.transpose()).eval();
+  common::CvPredict(dt_s, options_.accel_psd_m2ps3, x_, p_);
 }
 
 double CvEkf::MahalanobisSq(const Eigen::Vector2d& z_m, const Eigen::Matrix2d& r_m2) const {

@@ -1,0 +1,37 @@
+#pragma once
+// The calibration's input from what the daemon holds, and from datagram files (recordings, UDP
+// captures) read through the same daemon core as `lrfnetd --input`.
+
+#include <cstdint>
+#include <limits>
+#include <string>
+#include <vector>
+
+#include "central_daemon/calibration/types.h"
+#include "central_daemon/ingest/ingest.h"
+#include "central_daemon/store/track_store.h"
+#include "common/time.h"
+
+namespace lrfnet::daemon {
+
+// Every sensor the store has frames or a background of, sorted by id, with its frames whose scan
+// time is in [from_ns, to_ns), its newest background, its SensorInfo and clock state (from the
+// ingest, when received). A copy: the calibration may run on another thread.
+calib::CalibrationInput CalibrationInputFrom(
+    const Ingest& ingest, const TrackStore& store, common::UtcNs from_ns = 0,
+    common::UtcNs to_ns = std::numeric_limits<common::UtcNs>::max());
+
+struct LoadCounters {
+  std::uint64_t files = 0;
+  std::uint64_t datagrams = 0;
+  std::uint64_t invalid = 0;  // rejected by the ingest's validation
+};
+
+// Reads every file (recordings, with their rotation parts, or pcap/pcapng captures of the UDP
+// stream: only datagrams to udp_port, 0 = all) in order. False with a one-line *error naming the
+// file when one cannot be opened or is corrupt; invalid datagrams are only counted.
+bool LoadCalibrationInput(const std::vector<std::string>& paths, std::uint16_t udp_port,
+                          calib::CalibrationInput* input, LoadCounters* counters,
+                          std::string* error);
+
+}  // namespace lrfnet::daemon

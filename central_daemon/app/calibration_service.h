@@ -1,0 +1,79 @@
+#pragma once
+// lrfnetd's calibration: when to calibrate, on which data, and what happens with the result (an
+// adapter: a worker thread, the clock, files and logs).
+//
+// Policy (calibration.* of the config): while no calibration of every sensor exists, an attempt
+// starts every attempt_interval_s (when `auto`); after a success, again every
+// recalibrate_interval_s (0: never); Request() (SIGUSR1) starts one at the next tick regardless.
+// An attempt copies the newest window_s of the store (on the io thread: the store is not
+// thread-safe), then calibrates on a worker thread; at most one runs at a time. The result comes
+// back to the io thread: logged (poses, edges, or what data is missing), written to `output`
+// (atomically: a temporary file renamed) and `report_dir`, and kept as latest().
+//
+// Thread-safety: every public function is called on the io thread.
+
+#include <boost/asio/io_context.hpp>
+#include <atomic>
+#include <memory>
+#include <optional>
+#include <string>
+#include <thread>
+
+#include "central_daemon/app/config.h"
+#include "central_daemon/app/daemon.h"
+#include "central_daemon/calibration/pipeline.h"
+#include "common/time.h"
+
+namespace lrfnet::daemon {
+
+struct CalibrationCounters {
+  std::uint64_t attempts = 0;
+  std::uint64_t successes = 0;
+  std::uint64_t insufficient = 0;  // too little data (or not yet connected)
+  std::uint64_t write_errors = 0;
+};
+
+// Pure scheduling: should an attempt start at now_s (seconds on a monotonic clock)?
+struct CalibrationSchedule {
+  std::optional<double> last_attempt_s;
+  std::optional<double> last_success_s;
+  bool requested = false;
+};
+bool AttemptDue(const CalibrationSchedule& schedule, const DaemonConfig& config, double now_s);
+
+// Writes the calibration (YAML) and, when report_dir is set, the report. Returns "" or the error.
+std::string WriteCalibrationFiles(const calib::CalibrationOutcome& outcome,
+                                  const std::string& output, const std::string& report_dir,
+                                  const std::vector<std::string>& inputs);
+
+class CalibrationService {
+ public:
+  CalibrationService(boost::asio::io_context& io, const DaemonConfig& config);
+  ~CalibrationService();  // waits for a running attempt
+  CalibrationService(const CalibrationService&) = delete;
+  CalibrationService& operator=(const CalibrationService&) = delete;
+
+  void Reconfigure(const DaemonConfig& config);
+  void Request() { schedule_.requested = true; }
+  // Starts an attempt when due; now_s is a monotonic clock in seconds.
+  void OnTick(double now_s, const Daemon& daemon);
+  bool busy() const { return busy_; }
+  const std::optional<calib::CalibrationOutcome>& latest() const { return latest_; }
+  const CalibrationCounters& counters() const { return counters_; }
+  // The calibration state in a few words for the status line.
+  std::string StatusText() const;
+
+ private:
+  void Finish(std::shared_ptr<calib::CalibrationOutcome> outcome, std::string write_error);
+
+  boost::asio::io_context& io_;
+  DaemonConfig config_;
+  CalibrationSchedule schedule_;
+  std::thread worker_;
+  bool busy_ = false;
+  std::optional<calib::CalibrationOutcome> latest_;
+  std::string last_problem_;
+  CalibrationCounters counters_;
+};
+
+}  // namespace lrfnet::daemon

@@ -1,0 +1,64 @@
+#pragma once
+// calibration.yaml (DESIGN.md "Poses"): writing a CalibrationResult, and reading the `sensors`
+// poses of a calibration.yaml or of the simulator's truth.yaml, which share the format:
+//
+//   reference: "s1"                      # calibration only: the sensor fixed at the origin
+//   sensors:
+//     - {id: "s1", x_m: 0, y_m: 0, yaw_deg: 0, sigma_x_m: 0, sigma_y_m: 0, sigma_yaw_deg: 0}
+//     - {id: "s7", calibrated: false}    # calibration only: not connected, no pose
+//
+// x_m, y_m [m] and yaw_deg [deg, counter-clockwise] are world_from_sensor (common/geometry.h);
+// a calibration's world is the reference sensor's frame. Other keys (method, quality, devices,
+// targets, ...) are informative and ignored by the reader.
+
+#include <optional>
+#include <string>
+#include <utility>
+#include <vector>
+
+#include "central_daemon/calibration/types.h"
+
+namespace lrfnet::calib {
+
+// Informative header fields (the caller knows the time and the input files; this code reads no
+// clock).
+struct YamlContext {
+  std::string created_utc;          // e.g. "2024-05-01T12:00:00Z"; omitted when empty
+  std::vector<std::string> inputs;  // the recordings / captures calibrated
+};
+
+// The whole file: a comment block explaining the fields, then method, reference, the context,
+// `sensors` (poses printed with shortest round-trip precision, so reading gives the same doubles)
+// and `quality` (per-edge status and residuals, joint refinement before/after, track residual,
+// warnings, stage timings). The file always reads back with ParsePoseYaml: a calibrated sensor
+// whose pose is not finite (or beyond kMaxPoseCoordinateM) is written as calibrated: false with a
+// comment, and `reference` is only written when it names a sensor with a pose.
+std::string CalibrationYaml(const CalibrationResult& result, const YamlContext& context);
+
+struct PoseFile {
+  std::optional<std::string> reference;                // `reference`, when the file has one
+  std::vector<std::pair<std::string, Pose2>> sensors;  // in file order; yaw in (-pi, pi]
+  std::vector<bool> calibrated;                        // parallel to sensors (absent: true)
+
+  // Index of `id` in sensors, or nullopt.
+  std::optional<std::size_t> Find(const std::string& id) const;
+};
+
+// The poses of a result as a PoseFile (what reading its calibration.yaml gives, without the
+// round trip through text), e.g. to Evaluate it against a truth.
+PoseFile PoseFileOf(const CalibrationResult& result);
+
+// Bounds of what the reader accepts (a larger or stranger file is an error, not a crash).
+inline constexpr std::size_t kMaxPoseFileBytes = 16u << 20;
+inline constexpr double kMaxPoseCoordinateM = 1e7;
+inline constexpr double kMaxPoseYawDeg = 1e6;
+
+// Parses the `sensors` list (and `reference`). False with a one-line *error naming the file (if
+// any), the line and the key for anything malformed: not YAML, no `sensors` list or an empty one,
+// an entry without id, a duplicate id, a missing or non-numeric or non-finite or out-of-range
+// x_m / y_m / yaw_deg of a calibrated sensor, a `calibrated` that is not true/false, a
+// `reference` that is not one of the calibrated sensors. *out is only written on success.
+bool ParsePoseYaml(const std::string& text, PoseFile* out, std::string* error);
+bool ReadPoseFile(const std::string& path, PoseFile* out, std::string* error);
+
+}  // namespace lrfnet::calib

@@ -1,0 +1,582 @@
+#include "central_daemon/calibration/pairwise.h"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <limits>
+#include <random>
+
+namespace lrfnet::calib {
+namespace {
+
+using common::DegToRad;
+using common::RadToDeg;
+using Eigen::Vector2d;
+
+// ---------------------------------------------------------------------------------------------
+// A small synthetic world: people walking closed polygons at constant speed, seen by sensors with
+// a range and a field of view. Every contiguous stretch of visibility is one track (so a person
+// who leaves and re-enters gets a new id), optionally cut into pieces of split_every_steps.
+
+struct Person {
+  std::vector<Vector2d> path;  // world frame, closed loop; one point = standing still
+  double speed_mps = 1.2;
+  double start_s = 0.0;  // present on [start_s, end_s)
+  double end_s = 1e9;
+  double offset_m = 0.0;  // where on its path the person starts
+};
+
+struct SimSensor {
+  Pose2 world_from_sensor;
+  double range_m = 25.0;
+  double fov_deg = 360.0;
+  std::size_t split_every_steps = 0;  // 0: tracks end only when visibility ends
+};
+
+struct SimOptions {
+  std::size_t steps = 1200;
+  double step_s = 0.05;
+  double noise_m = 0.0;  // AR(1) noise per track, standard deviation
+  double com_bias_m =
+      0.0;  // observed point moves this far towards the sensor (CoM of the seen side)
+  double cov_sigma_m = 0.03;                         // reported position standard deviation
+  MeasurementKind kind = MeasurementKind::kEllipse;  // kCenterOfMass with com_bias_m
+  std::uint64_t seed = 11;
+};
+
+struct Sim {
+  AlignedTracks aligned;
+  std::vector<std::vector<std::size_t>> person_of_track;  // [sensor][track]
+};
+
+Vector2d PathPosition(const Person& p, double t_s) {
+  if (p.path.size() == 1) return p.path[0];
+  double perimeter = 0.0;
+  for (std::size_t i = 0; i < p.path.size(); ++i) {
+    perimeter += (p.path[(i + 1) % p.path.size()] - p.path[i]).norm();
+  }
+  double d = std::fmod(p.offset_m + p.speed_mps * (t_s - p.start_s), perimeter);
+  if (d < 0) d += perimeter;
+  for (std::size_t i = 0;; i = (i + 1) % p.path.size()) {
+    const Vector2d a = p.path[i], b = p.path[(i + 1) % p.path.size()];
+    const double len = (b - a).norm();
+    if (d <= len) return a + (b - a) * (d / len);
+    d -= len;
+  }
+}
+
+Sim Simulate(const std::vector<SimSensor>& sensors, const std::vector<Person>& people,
+             const SimOptions& o) {
+  Sim sim;
+  sim.aligned.step_s = o.step_s;
+  sim.aligned.steps = o.steps;
+  sim.person_of_track.resize(sensors.size());
+  std::mt19937_64 rng(o.seed);
+  std::normal_distribution<double> gauss(0.0, 1.0);
+  const double a = 0.9, b = std::sqrt(1.0 - a * a);
+  for (std::size_t si = 0; si < sensors.size(); ++si) {
+    const SimSensor& sensor = sensors[si];
+    SensorTracks st;
+    st.id = "s" + std::to_string(si);
+    const Pose2 sensor_from_world = sensor.world_from_sensor.inverse();
+    for (std::size_t pi = 0; pi < people.size(); ++pi) {
+      const Person& person = people[pi];
+      GridTrack* open = nullptr;
+      Vector2d noise = Vector2d::Zero();
+      for (std::size_t k = 0; k < o.steps; ++k) {
+        const double t = static_cast<double>(k) * o.step_s;
+        const Vector2d w = PathPosition(person, t);
+        const Vector2d local = sensor_from_world * w;
+        const double bearing = std::atan2(local.y(), local.x());
+        const bool visible = t >= person.start_s && t < person.end_s &&
+                             local.norm() <= sensor.range_m &&
+                             std::abs(bearing) <= DegToRad(sensor.fov_deg) / 2.0 + 1e-12;
+        if (!visible) {
+          open = nullptr;
+          continue;
+        }
+        if (open != nullptr && sensor.split_every_steps > 0 &&
+            open->samples.size() >= sensor.split_every_steps) {
+          open = nullptr;
+        }
+        if (open == nullptr) {
+          st.tracks.emplace_back();
+          open = &st.tracks.back();
+          open->track_id = static_cast<std::uint32_t>(st.tracks.size());
+          open->first_step = k;
+          open->kind = o.kind;
+          sim.person_of_track[si].push_back(pi);
+          noise = o.noise_m * Vector2d(gauss(rng), gauss(rng));
+        }
+        noise = a * noise + b * o.noise_m * Vector2d(gauss(rng), gauss(rng));
+        TrackSample x;
+        x.position_m = local - o.com_bias_m * local.normalized() + noise;
+        x.position_cov_m2 = Eigen::Matrix2d::Identity() * (o.cov_sigma_m * o.cov_sigma_m);
+        open->samples.push_back(x);
+      }
+    }
+    // Tracks were made person by person; AlignedTracks orders them by first_step.
+    std::vector<std::size_t> order(st.tracks.size());
+    for (std::size_t i = 0; i < order.size(); ++i) order[i] = i;
+    std::stable_sort(order.begin(), order.end(), [&](std::size_t x, std::size_t y) {
+      return st.tracks[x].first_step < st.tracks[y].first_step;
+    });
+    SensorTracks sorted = st;
+    std::vector<std::size_t> persons;
+    for (std::size_t i = 0; i < order.size(); ++i) {
+      sorted.tracks[i] = st.tracks[order[i]];
+      persons.push_back(sim.person_of_track[si][order[i]]);
+    }
+    sim.person_of_track[si] = persons;
+    sim.aligned.sensors.push_back(std::move(sorted));
+  }
+  return sim;
+}
+
+Pose2 TrueSFromR(const std::vector<SimSensor>& sensors, std::size_t r, std::size_t s) {
+  return sensors[s].world_from_sensor.inverse() * sensors[r].world_from_sensor;
+}
+
+double YawErrorDeg(const Pose2& a, const Pose2& b) {
+  return RadToDeg(common::RotationDistanceRad(a, b));
+}
+double TranslationError(const Pose2& a, const Pose2& b) {
+  return common::TranslationDistanceM(a, b);
+}
+
+// Two sensors on opposite corners of a 10 m x 10 m room, facing each other.
+std::vector<SimSensor> FacingPair() {
+  return {{Pose2{0.0, 0.0, DegToRad(45.0)}, 25.0, 270.0, 0},
+          {Pose2{10.0, 10.0, DegToRad(-135.0)}, 25.0, 270.0, 0}};
+}
+
+Person Walker(std::vector<Vector2d> path, double speed_mps, double offset_m = 0.0) {
+  Person p;
+  p.path = std::move(path);
+  p.speed_mps = speed_mps;
+  p.offset_m = offset_m;
+  return p;
+}
+
+std::vector<Person> Crowd(std::size_t n) {
+  std::vector<Person> all = {
+      Walker({{2, 2}, {8, 3}, {7, 8}, {3, 7}}, 1.2),
+      Walker({{8, 2}, {2, 8}, {8, 8}, {2, 2}}, 1.0, 3.0),   // crosses the others
+      Walker({{5, 1}, {9, 6}, {5, 9}, {1, 5}}, 1.4, 5.0),   // crosses the others
+      Walker({{3, 3}, {7, 3}, {7, 7}, {3, 7}}, 0.9, 7.0)};  // inside, parallel segments
+  all.resize(n);
+  return all;
+}
+
+void ExpectClose(const PairEstimate& e, const Pose2& truth, double yaw_deg, double dist_m) {
+  EXPECT_TRUE(e.accepted) << e.reason;
+  EXPECT_LT(YawErrorDeg(e.s_from_r, truth), yaw_deg);
+  EXPECT_LT(TranslationError(e.s_from_r, truth), dist_m);
+}
+
+// ---------------------------------------------------------------------------------------------
+
+TEST(PairwiseOptions, DefaultsAreValidAndBadValuesAreNamed) {
+  EXPECT_FALSE(Validate(PairwiseOptions{}).has_value());
+  PairwiseOptions o;
+  o.model_sigma_m = 0.0;
+  ASSERT_TRUE(Validate(o).has_value());
+  EXPECT_NE(Validate(o)->find("model_sigma_m"), std::string::npos);
+  o = {};
+  o.max_ambiguity_ratio = 1.5;
+  EXPECT_TRUE(Validate(o).has_value());
+  o = {};
+  o.intervals.min_steps = 0;
+  EXPECT_TRUE(Validate(o).has_value());
+  o = {};
+  o.verify_gate = std::nan("");
+  EXPECT_TRUE(Validate(o).has_value());
+}
+
+TEST(EstimatePair, ExactWithoutNoise) {
+  const auto sensors = FacingPair();
+  const Sim sim = Simulate(sensors, Crowd(1), {});
+  const PairEstimate e = EstimatePair(sim.aligned, 0, 1, {});
+  ExpectClose(e, TrueSFromR(sensors, 0, 1), 1e-6, 1e-6);
+  EXPECT_EQ(e.r, 0u);
+  EXPECT_EQ(e.s, 1u);
+  EXPECT_EQ(e.matches, 1200u);
+  EXPECT_LT(e.rms_m, 1e-6);
+  EXPECT_EQ(e.intervals, 1u);
+  EXPECT_GE(e.hypotheses, 1u);
+  EXPECT_FALSE(std::isfinite(e.second_error));  // nothing else comes close
+}
+
+TEST(EstimatePair, AccurateWithNoiseAndAConsistentCovariance) {
+  const auto sensors = FacingPair();
+  SimOptions o;
+  o.noise_m = 0.04;
+  const Sim sim = Simulate(sensors, Crowd(2), o);
+  const PairEstimate e = EstimatePair(sim.aligned, 0, 1, {});
+  const Pose2 truth = TrueSFromR(sensors, 0, 1);
+  ExpectClose(e, truth, 0.3, 0.03);
+  EXPECT_NEAR(e.rms_m, 0.04 * std::sqrt(2.0) * std::sqrt(2.0), 0.03);
+  // The reported uncertainty covers the actual error without being uselessly wide.
+  const double sigma_yaw = std::sqrt(e.covariance(2, 2));
+  const double sigma_xy = std::sqrt(e.covariance(0, 0) + e.covariance(1, 1));
+  EXPECT_LT(std::abs(common::AngleDiff(e.s_from_r.yaw_rad, truth.yaw_rad)), 4.0 * sigma_yaw);
+  EXPECT_LT(TranslationError(e.s_from_r, truth), 4.0 * sigma_xy);
+  EXPECT_LT(RadToDeg(sigma_yaw), 0.5);
+  EXPECT_LT(sigma_xy, 0.1);
+}
+
+TEST(EstimatePair, ViewDependentComBiasIsModelled) {
+  // The seen side of a person is nearer the sensor: two sensors at right angles see one person
+  // from directions that vary with the person's position, so the CoM offset is observable.
+  const std::vector<SimSensor> sensors = {{Pose2{0.0, 0.0, DegToRad(45.0)}, 25.0, 270.0, 0},
+                                          {Pose2{10.0, 0.0, DegToRad(135.0)}, 25.0, 270.0, 0}};
+  SimOptions o;
+  o.noise_m = 0.03;
+  o.com_bias_m = 0.17;
+  o.kind = MeasurementKind::kCenterOfMass;
+  const Sim sim = Simulate(sensors, Crowd(3), o);
+  const Pose2 truth = TrueSFromR(sensors, 0, 1);
+  PairDiagnostics diag;
+  const PairEstimate e = EstimatePair(sim.aligned, 0, 1, {}, &diag);
+  ExpectClose(e, truth, 0.3, 0.05);
+  EXPECT_NEAR(diag.com_view_offset_m, 0.17, 0.03);
+  // Unmodelled, the offset goes into the translation.
+  PairwiseOptions plain;
+  plain.estimate_view_offset = false;
+  const PairEstimate biased = EstimatePair(sim.aligned, 0, 1, plain);
+  EXPECT_GT(TranslationError(biased.s_from_r, truth), 0.15);
+}
+
+TEST(EstimatePair, ViewDependentComBiasOfFacingSensorsIsBounded) {
+  // Facing sensors see the people between them from nearly constant directions: the offset is
+  // barely observable and its prior carries the correction.
+  const auto sensors = FacingPair();
+  SimOptions o;
+  o.noise_m = 0.03;
+  o.com_bias_m = 0.15;
+  o.kind = MeasurementKind::kCenterOfMass;
+  const Sim sim = Simulate(sensors, Crowd(3), o);
+  const PairEstimate e = EstimatePair(sim.aligned, 0, 1, {});
+  ExpectClose(e, TrueSFromR(sensors, 0, 1), 0.5, 0.08);
+}
+
+class Crowded : public ::testing::TestWithParam<std::size_t> {};
+
+TEST_P(Crowded, VerificationPicksTheRightPairingAmongCrossingPeople) {
+  const auto sensors = FacingPair();
+  SimOptions o;
+  o.noise_m = 0.03;
+  o.com_bias_m = 0.1;
+  o.kind = MeasurementKind::kCenterOfMass;
+  const Sim sim = Simulate(sensors, Crowd(GetParam()), o);
+  PairDiagnostics diag;
+  const PairEstimate e = EstimatePair(sim.aligned, 0, 1, {}, &diag);
+  ExpectClose(e, TrueSFromR(sensors, 0, 1), 0.5, 0.1);
+  EXPECT_GT(diag.visible_match_fraction, 0.9);
+  EXPECT_LT(diag.second_gain, 0.5 * diag.best_gain);
+}
+
+INSTANTIATE_TEST_SUITE_P(People, Crowded, ::testing::Values(2, 3, 4));
+
+TEST(EstimatePair, WrongPairingsProduceHypothesesThatVerificationRejects) {
+  // Tracks cut into 3 s pieces give many short intervals, each with every (p, q) combination of
+  // four people; the wrong combinations still produce hypotheses.
+  auto sensors = FacingPair();
+  sensors[0].split_every_steps = 60;
+  sensors[1].split_every_steps = 47;
+  SimOptions o;
+  o.noise_m = 0.03;
+  const Sim sim = Simulate(sensors, Crowd(4), o);
+  PairDiagnostics diag;
+  const PairEstimate e = EstimatePair(sim.aligned, 0, 1, {}, &diag);
+  ExpectClose(e, TrueSFromR(sensors, 0, 1), 0.5, 0.1);
+  EXPECT_GT(e.intervals, 40u);
+  EXPECT_GT(diag.clusters, 1u);  // wrong hypotheses were there to be rejected
+  EXPECT_TRUE(std::isfinite(e.second_error));
+  EXPECT_GT(e.second_error, e.best_error);
+}
+
+TEST(EstimatePair, UnrelatedTrackIdsAndASplitTrackDoNotMatter) {
+  // r loses and re-acquires people (new ids) at other times than s, and for a while r reports a
+  // second, offset track on person 0 (a split).
+  auto sensors = FacingPair();
+  sensors[0].split_every_steps = 90;
+  sensors[1].split_every_steps = 130;
+  SimOptions o;
+  o.noise_m = 0.03;
+  Sim sim = Simulate(sensors, Crowd(2), o);
+  auto& r_tracks = sim.aligned.sensors[0].tracks;
+  GridTrack ghost = r_tracks[0];
+  for (auto& x : ghost.samples) x.position_m += Vector2d(0.35, -0.2);
+  r_tracks.insert(r_tracks.begin() + 1, ghost);
+  const PairEstimate e = EstimatePair(sim.aligned, 0, 1, {});
+  ExpectClose(e, TrueSFromR(sensors, 0, 1), 0.5, 0.1);
+}
+
+TEST(EstimatePair, IndependentMotionsWithoutOverlapAreRejected) {
+  // Two sensors 30 m apart with 8 m range: each sees its own people, never the other's.
+  const std::vector<SimSensor> sensors = {{Pose2{0.0, 0.0, 0.0}, 8.0, 180.0, 50},
+                                          {Pose2{30.0, 0.0, DegToRad(180.0)}, 8.0, 180.0, 50}};
+  const std::vector<Person> people = {Walker({{2, -3}, {6, -2}, {5, 3}, {2, 2}}, 1.2),
+                                      Walker({{1, 0}, {5, 1}, {6, -4}}, 1.2, 2.0),
+                                      Walker({{28, 3}, {24, 2}, {25, -3}, {27, -2}}, 1.2),
+                                      Walker({{26, -1}, {23, 3}, {27, 4}}, 1.2, 1.0)};
+  SimOptions o;
+  o.noise_m = 0.03;
+  const Sim sim = Simulate(sensors, people, o);
+  PairDiagnostics diag;
+  const PairEstimate e = EstimatePair(sim.aligned, 0, 1, {}, &diag);
+  EXPECT_GT(e.intervals, 0u);
+  EXPECT_FALSE(e.accepted);
+  EXPECT_FALSE(e.reason.empty());
+}
+
+TEST(EstimatePair, StraightWalksOfTwoStrangersAreRejected) {
+  // Each sensor sees one person pacing up and down a straight line at the same speed, 40 m apart,
+  // with tracks cut every 4 s: pieces of straight walks, and any two of them align perfectly. But
+  // under such an alignment r's person lands where s sees people at other times, and nobody is
+  // there.
+  const std::vector<SimSensor> sensors = {{Pose2{0.0, 0.0, 0.0}, 10.0, 180.0, 80},
+                                          {Pose2{40.0, 0.0, DegToRad(180.0)}, 10.0, 180.0, 80}};
+  const std::vector<Person> people = {Walker({{2, -6}, {2, 6}}, 1.2),
+                                      Walker({{35, 6}, {33, -5}}, 1.2, 4.0)};
+  const Sim sim = Simulate(sensors, people, {});
+  PairDiagnostics diag;
+  const PairEstimate e = EstimatePair(sim.aligned, 0, 1, {}, &diag);
+  EXPECT_GT(e.hypotheses, 0u);
+  EXPECT_FALSE(e.accepted);
+  EXPECT_NE(e.reason.find("inconsistent"), std::string::npos) << e.reason;
+  EXPECT_LT(diag.visible_match_fraction, 0.35);
+}
+
+TEST(EstimatePair, TwoEquallyGoodInterpretationsAreAmbiguous) {
+  // Two people walk the same loop side by side, 2 m apart, in step. r sees only one of them, s
+  // both: "r's person is s's first" and "r's person is s's second" explain r's data equally well.
+  const auto sensors = FacingPair();
+  const Person a = Walker({{2, 2}, {6, 2.5}, {5, 6}, {2.5, 5}}, 1.0);
+  Person b = a;
+  for (auto& p : b.path) p += Vector2d(2.0, 0.0);
+  SimOptions so;
+  so.noise_m = 0.02;
+  Sim sim = Simulate(sensors, {a, b}, so);
+  auto& r_tracks = sim.aligned.sensors[0].tracks;
+  std::vector<GridTrack> only_a;
+  for (std::size_t i = 0; i < r_tracks.size(); ++i) {
+    if (sim.person_of_track[0][i] == 0) only_a.push_back(r_tracks[i]);
+  }
+  r_tracks = only_a;
+  PairDiagnostics diag;
+  const PairEstimate e = EstimatePair(sim.aligned, 0, 1, {}, &diag);
+  EXPECT_FALSE(e.accepted);
+  EXPECT_NE(e.reason.find("ambiguous"), std::string::npos) << e.reason;
+  EXPECT_GT(diag.second_gain, 0.8 * diag.best_gain);
+  // With s seeing only the same person, the pair is fine.
+  auto& s_tracks = sim.aligned.sensors[1].tracks;
+  std::vector<GridTrack> s_only_a;
+  for (std::size_t i = 0; i < s_tracks.size(); ++i) {
+    if (sim.person_of_track[1][i] == 0) s_only_a.push_back(s_tracks[i]);
+  }
+  s_tracks = s_only_a;
+  ExpectClose(EstimatePair(sim.aligned, 0, 1, {}), TrueSFromR(sensors, 0, 1), 0.3, 0.05);
+}
+
+TEST(EstimatePair, StandingPersonIsDegenerate) {
+  const auto sensors = FacingPair();
+  SimOptions o;
+  o.noise_m = 0.02;
+  const Sim sim = Simulate(sensors, {Walker({{5, 5}}, 0.0)}, o);
+  const PairEstimate e = EstimatePair(sim.aligned, 0, 1, {});
+  EXPECT_FALSE(e.accepted);
+  EXPECT_NE(e.reason.find("degenerate"), std::string::npos) << e.reason;
+}
+
+TEST(EstimatePair, NoSimultaneousTracks) {
+  const auto sensors = FacingPair();
+  Person early = Crowd(1)[0];
+  early.end_s = 20.0;
+  Sim sim = Simulate(sensors, {early}, {});
+  // s only sees the person after r lost it.
+  Sim later = Simulate(sensors, {Walker({{2, 2}, {8, 3}, {7, 8}}, 1.0)}, {});
+  sim.aligned.sensors[1] = later.aligned.sensors[1];
+  for (auto& t : sim.aligned.sensors[1].tracks) {
+    t.first_step += 600;
+    t.samples.resize(std::min<std::size_t>(t.samples.size(), 600));
+  }
+  const PairEstimate e = EstimatePair(sim.aligned, 0, 1, {});
+  EXPECT_FALSE(e.accepted);
+  EXPECT_EQ(e.intervals, 0u);
+  EXPECT_NE(e.reason.find("no simultaneous"), std::string::npos) << e.reason;
+}
+
+class YawCase : public ::testing::TestWithParam<double> {};
+
+TEST_P(YawCase, RotationsAroundHalfATurnWrapCorrectly) {
+  // s at 10 m on r's x axis, turned by yaw_deg: 180 degrees and yaws just either side of +-pi.
+  const double yaw_deg = GetParam();
+  const std::vector<SimSensor> sensors = {{Pose2{0.0, 0.0, 0.0}, 25.0, 360.0, 0},
+                                          {Pose2{10.0, 0.5, DegToRad(yaw_deg)}, 25.0, 360.0, 0}};
+  SimOptions o;
+  o.noise_m = 0.02;
+  const Sim sim = Simulate(sensors, {Walker({{3, -3}, {7, -2}, {6, 3}, {4, 2}}, 1.1)}, o);
+  const Pose2 truth = TrueSFromR(sensors, 0, 1);
+  const PairEstimate e = EstimatePair(sim.aligned, 0, 1, {});
+  ExpectClose(e, truth, 0.3, 0.05);
+  EXPECT_LE(e.s_from_r.yaw_rad, common::kPi);
+  EXPECT_GT(e.s_from_r.yaw_rad, -common::kPi);
+  // And the other direction is the inverse.
+  const PairEstimate back = EstimatePair(sim.aligned, 1, 0, {});
+  ExpectClose(back, truth.inverse(), 0.3, 0.05);
+}
+
+INSTANTIATE_TEST_SUITE_P(NearPi, YawCase, ::testing::Values(180.0, 179.7, -179.7, 0.2));
+
+TEST(EstimatePair, DeterministicForAFixedSeed) {
+  auto sensors = FacingPair();
+  sensors[0].split_every_steps = 80;
+  SimOptions so;
+  so.noise_m = 0.04;
+  so.com_bias_m = 0.1;
+  so.kind = MeasurementKind::kCenterOfMass;
+  const Sim sim = Simulate(sensors, Crowd(3), so);
+  PairwiseOptions o;
+  o.seed = 1234;
+  const PairEstimate a = EstimatePair(sim.aligned, 0, 1, o);
+  const PairEstimate b = EstimatePair(sim.aligned, 0, 1, o);
+  EXPECT_EQ(a.accepted, b.accepted);
+  EXPECT_EQ(a.s_from_r.x_m, b.s_from_r.x_m);
+  EXPECT_EQ(a.s_from_r.y_m, b.s_from_r.y_m);
+  EXPECT_EQ(a.s_from_r.yaw_rad, b.s_from_r.yaw_rad);
+  EXPECT_EQ(a.best_error, b.best_error);
+  EXPECT_EQ(a.hypotheses, b.hypotheses);
+  EXPECT_EQ(a.matches, b.matches);
+  // Another seed samples differently but reaches the same answer.
+  o.seed = 99;
+  const PairEstimate c = EstimatePair(sim.aligned, 0, 1, o);
+  ASSERT_TRUE(c.accepted) << c.reason;
+  EXPECT_LT(YawErrorDeg(a.s_from_r, c.s_from_r), 0.05);
+  EXPECT_LT(TranslationError(a.s_from_r, c.s_from_r), 0.01);
+}
+
+TEST(EstimatePair, BadSamplesAreSkippedAndCounted) {
+  const auto sensors = FacingPair();
+  SimOptions so;
+  so.noise_m = 0.03;
+  Sim sim = Simulate(sensors, Crowd(2), so);
+  auto& samples = sim.aligned.sensors[1].tracks[0].samples;
+  for (std::size_t i = 0; i < samples.size(); i += 7) {
+    samples[i].position_m.x() = std::nan("");
+  }
+  sim.aligned.sensors[0].tracks[0].samples[3].position_cov_m2.setZero();
+  sim.aligned.sensors[0].tracks[0].samples[5].position_cov_m2(0, 0) =
+      std::numeric_limits<double>::infinity();
+  PairDiagnostics diag;
+  const PairEstimate e = EstimatePair(sim.aligned, 0, 1, {}, &diag);
+  ExpectClose(e, TrueSFromR(sensors, 0, 1), 0.3, 0.05);
+  EXPECT_GT(diag.unusable_samples, samples.size() / 7);
+}
+
+TEST(EstimateAllPairs, HostileTracksGiveReasonsNotCrashes) {
+  std::mt19937_64 rng(5);
+  std::uniform_real_distribution<double> u(-1.0, 1.0);
+  const double specials[] = {
+      std::nan(""), std::numeric_limits<double>::infinity(), 1e300, -1e300, 0.0, -1.0, 1e-300};
+  for (int round = 0; round < 20; ++round) {
+    AlignedTracks a;
+    a.steps = 400;
+    a.sensors.resize(3);
+    for (auto& sensor : a.sensors) {
+      for (int t = 0; t < 6; ++t) {
+        GridTrack track;
+        track.first_step = static_cast<std::size_t>(200.0 * (u(rng) + 1.0));
+        track.kind = static_cast<MeasurementKind>(t % 3);
+        const std::size_t n = static_cast<std::size_t>(100.0 * (u(rng) + 1.0));
+        for (std::size_t k = 0; k < n; ++k) {
+          TrackSample x;
+          x.position_m = Vector2d(5.0 * u(rng), 5.0 * u(rng));
+          if (u(rng) > 0.9) x.position_m.x() = specials[k % 7];
+          if (u(rng) > 0.9) x.position_cov_m2(0, 1) = specials[(k + 3) % 7];
+          if (u(rng) > 0.95) x.position_cov_m2(1, 1) = specials[(k + 5) % 7];
+          track.samples.push_back(x);
+        }
+        sensor.tracks.push_back(track);
+      }
+      std::sort(sensor.tracks.begin(), sensor.tracks.end(),
+                [](const GridTrack& x, const GridTrack& y) { return x.first_step < y.first_step; });
+    }
+    a.sensors[2].tracks.front().first_step = std::numeric_limits<std::size_t>::max() - 3;
+    for (const PairEstimate& e : EstimateAllPairs(a, {})) {
+      if (e.accepted) {
+        EXPECT_TRUE(std::isfinite(e.s_from_r.x_m) && std::isfinite(e.s_from_r.yaw_rad));
+        EXPECT_TRUE(e.covariance.allFinite());
+      } else {
+        EXPECT_FALSE(e.reason.empty());
+      }
+    }
+  }
+}
+
+TEST(EstimatePair, InvalidPairIsRejectedNotACrash) {
+  const Sim sim = Simulate(FacingPair(), Crowd(1), {});
+  EXPECT_FALSE(EstimatePair(sim.aligned, 0, 0, {}).accepted);
+  EXPECT_FALSE(EstimatePair(sim.aligned, 0, 5, {}).accepted);
+  EXPECT_TRUE(AssociatePair(sim.aligned, 3, 0, Pose2{}, 1.0).empty());
+}
+
+TEST(EstimateAllPairs, ListsOnlyPairsWithSimultaneousTracks) {
+  // 0 and 1 share the left room, 1 and 2 the right one; 0 and 2 never see anyone at once.
+  const std::vector<SimSensor> sensors = {{Pose2{0.0, 5.0, 0.0}, 9.0, 180.0, 0},
+                                          {Pose2{10.0, 0.0, DegToRad(90.0)}, 12.0, 180.0, 0},
+                                          {Pose2{20.0, 5.0, DegToRad(180.0)}, 9.0, 180.0, 0}};
+  Person left = Walker({{2, 2}, {7, 3}, {6, 8}, {3, 7}}, 1.2);
+  Person right = Walker({{18, 2}, {13, 3}, {14, 8}, {17, 7}}, 1.1);
+  left.end_s = 30.0;
+  right.start_s = 30.0;
+  SimOptions o;
+  o.noise_m = 0.02;
+  const Sim sim = Simulate(sensors, {left, right}, o);
+  const auto pairs = EstimateAllPairs(sim.aligned, {});
+  ASSERT_EQ(pairs.size(), 2u);
+  EXPECT_EQ(pairs[0].r, 0u);
+  EXPECT_EQ(pairs[0].s, 1u);
+  EXPECT_EQ(pairs[1].r, 1u);
+  EXPECT_EQ(pairs[1].s, 2u);
+  ExpectClose(pairs[0], TrueSFromR(sensors, 0, 1), 0.3, 0.05);
+  ExpectClose(pairs[1], TrueSFromR(sensors, 1, 2), 0.3, 0.05);
+}
+
+TEST(AssociatePair, PairsTheSamePersonOneToOne) {
+  const auto sensors = FacingPair();
+  SimOptions so;
+  so.noise_m = 0.03;
+  const Sim sim = Simulate(sensors, Crowd(4), so);
+  const auto matches = AssociatePair(sim.aligned, 0, 1, TrueSFromR(sensors, 0, 1), 0.5);
+  ASSERT_GT(matches.size(), 3000u);
+  std::size_t same_person = 0;
+  for (std::size_t i = 0; i < matches.size(); ++i) {
+    const Match& m = matches[i];
+    same_person += sim.person_of_track[0][m.track_r] == sim.person_of_track[1][m.track_s];
+    if (i > 0 && matches[i - 1].step == m.step) {  // one-to-one within a step
+      EXPECT_NE(matches[i - 1].track_r, m.track_r);
+      EXPECT_NE(matches[i - 1].track_s, m.track_s);
+    }
+    if (i > 0) {
+      EXPECT_LE(matches[i - 1].step, m.step);
+    }
+  }
+  EXPECT_GT(static_cast<double>(same_person), 0.99 * static_cast<double>(matches.size()));
+}
+
+TEST(FitMatches, RecoversThePoseFromTrueMatches) {
+  const auto sensors = FacingPair();
+  const Sim sim = Simulate(sensors, Crowd(2), {});
+  const Pose2 truth = TrueSFromR(sensors, 0, 1);
+  const auto matches = AssociatePair(sim.aligned, 0, 1, truth, 0.5);
+  const RigidFit fit = FitMatches(sim.aligned, 0, 1, matches, {});
+  ASSERT_TRUE(fit.ok);
+  EXPECT_LT(YawErrorDeg(fit.s_from_r, truth), 1e-6);
+  EXPECT_LT(TranslationError(fit.s_from_r, truth), 1e-6);
+  EXPECT_FALSE(FitMatches(sim.aligned, 0, 1, {}, {}).ok);
+}
+
+}  // namespace
+}  // namespace lrfnet::calib

@@ -1,0 +1,114 @@
+#pragma once
+// The whole calibration: from the tracks and backgrounds of N sensors to every sensor's pose
+// (pure: no clock, no files, no logging; stage times are measured with a clock passed in).
+//
+// Methods (CalibrationOptions::method):
+//   quenzel  (default) Quenzel et al. end to end: align + RTS smoothing → dynamic intervals →
+//            pairwise MSAC + verification (eqs. 5-8) → point-to-line ICP on the backgrounds →
+//            L1 rotation averaging (Algorithm 1, node-angle form) → least-squares translations →
+//            joint refinement over all associated observations (Ceres; kept only if it lowers the
+//            cost).
+//   spectral the same pairwise estimates, then weighted spectral relaxation [21] and weighted
+//            least-squares translations (Quenzel et al.'s non-robust comparison).
+//   schenk   Schenk et al.: SVD track association, N/d weights, greedy placement, mass-spring
+//            relaxation, close-points-only ICP.
+//
+// Robustness of the quenzel method: an edge whose rotation disagrees with the L1 solution by more
+// than RotationAveragingOptions::outlier_threshold_deg, or whose translation then disagrees by more
+// than max_translation_residual_m, takes no part in the translations (reported per edge).
+//
+// Failure is a value: CalibrationOutcome::ok = false with `error`, one line a person can act on:
+// too little data says what is missing (which sensors have no tracks, which share no simultaneous
+// tracks with the others, how many seconds of co-observation each link has and needs); a graph
+// that stays disconnected names the sensors not connected to the reference. The poses of the
+// sensors that are connected are still filled in (calibrated = true) so a caller may show them.
+
+#include <functional>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "central_daemon/calibration/align.h"
+#include "central_daemon/calibration/icp.h"
+#include "central_daemon/calibration/intervals.h"
+#include "central_daemon/calibration/pairwise.h"
+#include "central_daemon/calibration/refine.h"
+#include "central_daemon/calibration/rotation_averaging.h"
+#include "central_daemon/calibration/schenk.h"
+#include "central_daemon/calibration/translations.h"
+#include "central_daemon/calibration/types.h"
+
+namespace lrfnet::calib {
+
+enum class Method { kQuenzel, kSpectral, kSchenk };
+const char* ToString(Method method);
+std::optional<Method> ParseMethod(const std::string& name);
+
+struct CalibrationOptions {
+  Method method = Method::kQuenzel;
+  // The sensor fixed at the origin; empty: the best-connected one (most accepted edges, then
+  // most matched observations, then the first id).
+  std::string reference;
+  // Schenk's N/d weights on the edges (rotation averaging, translations); false: uniform.
+  bool weighted = false;
+  bool use_icp = true;                       // step 6
+  bool refine = true;                        // step 8
+  // ICP is kept only if the tracks still agree: the matched-track RMS under the ICP pose may
+  // exceed the one under g_rs by at most this much (the ICP may legitimately move the tracks by
+  // the centre-of-mass bias).
+  double icp_max_track_rms_increase_m = 0.05;
+  double max_translation_residual_m = 0.5;   // edges beyond it are dropped from the translations
+  // Minimum data: seconds of simultaneous tracks a pair needs to count as linked (assessment).
+  double min_pair_overlap_s = 3.0;
+  AlignOptions align;
+  IntervalOptions intervals;
+  PairwiseOptions pairwise;
+  IcpOptions icp;
+  RotationAveragingOptions rotation;
+  TranslationOptions translation;
+  JointRefineOptions joint;
+  SchenkOptions schenk;
+};
+std::optional<std::string> Validate(const CalibrationOptions& options);
+
+// What the data allows, before any estimation (cheap; the daemon shows it as progress).
+struct SensorData {
+  std::string id;
+  double tracked_s = 0.0;       // grid time with at least one track
+  std::size_t tracks = 0;
+  bool has_background = false;
+  bool has_description = false;
+  bool clock_suspect = false;
+};
+struct PairData {
+  std::size_t r = 0, s = 0;
+  double overlap_s = 0.0;  // grid time during which both sensors have tracks
+};
+struct DataAssessment {
+  std::vector<SensorData> sensors;
+  std::vector<PairData> pairs;  // pairs with overlap_s > 0
+  // Sensors not linked to the first sensor with data by pairs of at least min_pair_overlap_s
+  // (empty: the data can connect every sensor).
+  std::vector<std::string> unlinked;
+  bool sufficient = false;
+  std::string missing;  // what is missing, one line ("" when sufficient)
+};
+DataAssessment Assess(const AlignedTracks& tracks, double min_pair_overlap_s);
+
+struct CalibrationOutcome {
+  bool ok = false;
+  std::string error;
+  CalibrationResult result;
+  AlignedTracks tracks;             // the aligned tracks used (for the report and fusion)
+  std::vector<PairEstimate> pairs;  // every pair considered
+  DataAssessment assessment;
+};
+
+// A monotonic clock in seconds for the stage times (may be empty: no timings).
+using StageClock = std::function<double()>;
+
+// Precondition: Validate(options) is nullopt (checked: a violation gives ok = false).
+CalibrationOutcome Calibrate(const CalibrationInput& input, const CalibrationOptions& options,
+                             const StageClock& clock = {});
+
+}  // namespace lrfnet::calib

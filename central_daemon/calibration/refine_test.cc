@@ -1,0 +1,534 @@
+#include "central_daemon/calibration/refine.h"
+
+#include <gtest/gtest.h>
+
+#include <Eigen/Cholesky>
+#include <cmath>
+#include <functional>
+#include <random>
+#include <string>
+#include <vector>
+
+namespace lrfnet::calib {
+namespace {
+
+using common::DegToRad;
+using common::RadToDeg;
+
+using Path = std::function<Eigen::Vector2d(double)>;  // world position at time t (s)
+
+struct SynthOptions {
+  std::size_t steps = 1200;  // one minute at 20 Hz
+  double step_s = 0.05;
+  double range_m = 30.0;
+  double noise_m = 0.02;           // white position noise per sample
+  double reported_sigma_m = 0.02;  // the sample covariance is reported_sigma^2 I
+  double com_bias_m = 0.0;         // observed centre shifted this far toward the sensor
+  MeasurementKind kind = MeasurementKind::kEllipse;
+  unsigned seed = 1;
+};
+
+// Every sensor tracks every object while it is within range; one GridTrack per visible run.
+AlignedTracks MakeTracks(const std::vector<Pose2>& world_from_sensor,
+                         const std::vector<Path>& paths, const SynthOptions& o) {
+  std::mt19937 rng(o.seed);
+  std::normal_distribution<double> noise(0.0, 1.0);
+  AlignedTracks tracks;
+  tracks.step_s = o.step_s;
+  tracks.steps = o.steps;
+  for (std::size_t s = 0; s < world_from_sensor.size(); ++s) {
+    SensorTracks sensor;
+    sensor.id = "s" + std::to_string(s);
+    const Pose2 sensor_from_world = world_from_sensor[s].inverse();
+    std::uint32_t next_id = 1;
+    for (const Path& path : paths) {
+      GridTrack* open = nullptr;
+      for (std::size_t k = 0; k < o.steps; ++k) {
+        const Eigen::Vector2d p = path(tracks.TimeOf(k));
+        const Eigen::Vector2d to_object = p - world_from_sensor[s].translation();
+        if (to_object.norm() > o.range_m) {
+          open = nullptr;
+          continue;
+        }
+        if (open == nullptr) {
+          sensor.tracks.emplace_back();
+          open = &sensor.tracks.back();
+          open->track_id = next_id++;
+          open->kind = o.kind;
+          open->first_step = k;
+        }
+        const Eigen::Vector2d seen = p - o.com_bias_m * to_object.normalized();
+        TrackSample sample;
+        sample.position_m =
+            sensor_from_world * seen + o.noise_m * Eigen::Vector2d(noise(rng), noise(rng));
+        sample.position_cov_m2 =
+            o.reported_sigma_m * o.reported_sigma_m * Eigen::Matrix2d::Identity();
+        open->samples.push_back(sample);
+      }
+    }
+    tracks.sensors.push_back(std::move(sensor));
+  }
+  return tracks;
+}
+
+// Smooth closed curves inside a 10 m x 10 m room (periods of tens of seconds).
+std::vector<Path> RoomPaths() {
+  return {
+      [](double t) {
+        return Eigen::Vector2d(5.0 + 3.5 * std::cos(0.21 * t), 5.0 + 3.0 * std::sin(0.33 * t));
+      },
+      [](double t) {
+        return Eigen::Vector2d(5.0 + 2.5 * std::sin(0.17 * t + 1.0),
+                               5.0 + 3.5 * std::cos(0.27 * t));
+      },
+      [](double t) {
+        return Eigen::Vector2d(5.0 + 4.0 * std::cos(0.13 * t + 2.0),
+                               5.0 + 2.0 * std::sin(0.41 * t + 0.5));
+      },
+  };
+}
+
+// Four sensors in the corners of the room, looking inward.
+std::vector<Pose2> RoomSensors() {
+  return {{0.2, 0.3, DegToRad(45.0)},
+          {9.8, 0.1, DegToRad(135.0)},
+          {9.9, 9.7, DegToRad(-135.0)},
+          {0.1, 9.9, DegToRad(-45.0)}};
+}
+
+std::vector<Pose2> Perturb(std::vector<Pose2> poses, std::size_t reference, double offset_m,
+                           double yaw_rad) {
+  for (std::size_t s = 0; s < poses.size(); ++s) {
+    if (s == reference) continue;
+    const double a = 1.3 * static_cast<double>(s) + 0.4;  // a different direction per sensor
+    poses[s].x_m += offset_m * std::cos(a);
+    poses[s].y_m += offset_m * std::sin(a);
+    poses[s].yaw_rad += (s % 2 == 0 ? 1.0 : -1.0) * yaw_rad;
+  }
+  return poses;
+}
+
+double MaxTranslationError(const std::vector<Pose2>& a, const std::vector<Pose2>& b) {
+  double e = 0.0;
+  for (std::size_t s = 0; s < a.size(); ++s)
+    e = std::max(e, common::TranslationDistanceM(a[s], b[s]));
+  return e;
+}
+double MaxRotationError(const std::vector<Pose2>& a, const std::vector<Pose2>& b) {
+  double e = 0.0;
+  for (std::size_t s = 0; s < a.size(); ++s)
+    e = std::max(e, common::RotationDistanceRad(a[s], b[s]));
+  return e;
+}
+
+// The synthetic tracks' only error is their reported white noise.
+JointRefineOptions EllipseOptions() {
+  JointRefineOptions o;
+  o.model_sigma_ellipse_m = 0.0;
+  o.model_sigma_per_m = 0.0;
+  return o;
+}
+
+TEST(JointRefineOptionsTest, DefaultsAreValidAndBadValuesAreNamed) {
+  EXPECT_FALSE(Validate(JointRefineOptions{}).has_value());
+  JointRefineOptions o;
+  o.association_gate_m = 0.0;
+  ASSERT_TRUE(Validate(o).has_value());
+  EXPECT_NE(Validate(o)->find("association_gate_m"), std::string::npos);
+  o = {};
+  o.model_sigma_com_m = -0.1;
+  EXPECT_TRUE(Validate(o).has_value());
+  o = {};
+  o.loss_scale = std::nan("");
+  EXPECT_TRUE(Validate(o).has_value());
+  o = {};
+  o.step_stride = 0;
+  EXPECT_TRUE(Validate(o).has_value());
+  o = {};
+  o.association_rounds = 0;
+  EXPECT_TRUE(Validate(o).has_value());
+  o = {};
+  o.threads = 0;
+  EXPECT_TRUE(Validate(o).has_value());
+}
+
+TEST(RefineJointlyTest, PerturbedPosesConvergeBackToTruth) {
+  const std::vector<Pose2> truth = RoomSensors();
+  const AlignedTracks tracks = MakeTracks(truth, RoomPaths(), {});
+  const std::vector<Pose2> initial = Perturb(truth, 0, 0.05, DegToRad(1.0));
+  const JointRefineResult r =
+      RefineJointly(tracks, initial, std::vector<bool>(4, true), 0, EllipseOptions());
+  ASSERT_TRUE(r.ok) << r.message;
+  // 2 cm white noise over ~900 objects: the poses are determined to a few millimetres.
+  EXPECT_LT(MaxTranslationError(r.world_from_sensor, truth), 0.005);
+  EXPECT_LT(RadToDeg(MaxRotationError(r.world_from_sensor, truth)), 0.05);
+  EXPECT_LT(r.cost_after, r.cost_before);
+  EXPECT_LT(r.rms_after_m, 0.5 * r.rms_before_m);
+  EXPECT_NEAR(r.rms_after_m, 0.02, 0.005);  // the noise level (objects absorb part of it)
+  EXPECT_GT(r.observations, 2000u);
+  EXPECT_GT(r.objects, 600u);
+  EXPECT_EQ(r.steps, 300u);  // every 4th of 1200 steps, all with objects
+  EXPECT_EQ(r.stride, 4u);
+  for (std::size_t s = 0; s < 4; ++s) {
+    EXPECT_TRUE(r.refined[s]);
+    EXPECT_GT(r.sensor_observations[s], 500u);
+  }
+}
+
+TEST(RefineJointlyTest, NoiseFreeInputConvergesExactly) {
+  const std::vector<Pose2> truth = RoomSensors();
+  SynthOptions synth;
+  synth.noise_m = 0.0;
+  const AlignedTracks tracks = MakeTracks(truth, RoomPaths(), synth);
+  const std::vector<Pose2> initial = Perturb(truth, 0, 0.05, DegToRad(1.0));
+  const JointRefineResult r =
+      RefineJointly(tracks, initial, std::vector<bool>(4, true), 0, EllipseOptions());
+  ASSERT_TRUE(r.ok) << r.message;
+  EXPECT_LT(MaxTranslationError(r.world_from_sensor, truth), 1e-6);
+  EXPECT_LT(MaxRotationError(r.world_from_sensor, truth), 1e-6);
+  EXPECT_LT(r.rms_after_m, 1e-6);
+}
+
+TEST(RefineJointlyTest, ReferenceStaysFixedAndOthersFollowIt) {
+  const std::vector<Pose2> truth = RoomSensors();
+  SynthOptions synth;
+  synth.noise_m = 0.0;
+  const AlignedTracks tracks = MakeTracks(truth, RoomPaths(), synth);
+  // The initial poses live in another world frame (the reference sensor's pose differs from the
+  // truth): the others must be placed relative to the reference, not to the truth.
+  const Pose2 other_world_from_world{3.0, -2.0, DegToRad(20.0)};
+  std::vector<Pose2> initial;
+  for (const Pose2& p : truth) initial.push_back(other_world_from_world * p);
+  initial = Perturb(initial, 2, 0.05, DegToRad(1.0));
+  const JointRefineResult r =
+      RefineJointly(tracks, initial, std::vector<bool>(4, true), 2, EllipseOptions());
+  ASSERT_TRUE(r.ok) << r.message;
+  EXPECT_EQ(r.world_from_sensor[2].x_m, initial[2].x_m);
+  EXPECT_EQ(r.world_from_sensor[2].y_m, initial[2].y_m);
+  EXPECT_EQ(r.world_from_sensor[2].yaw_rad, initial[2].yaw_rad);
+  EXPECT_TRUE(r.covariance[2].isZero());
+  for (std::size_t s = 0; s < 4; ++s) {
+    const Pose2 got = r.world_from_sensor[2].inverse() * r.world_from_sensor[s];
+    const Pose2 want = truth[2].inverse() * truth[s];
+    EXPECT_LT(common::TranslationDistanceM(got, want), 1e-6) << s;
+    EXPECT_LT(common::RotationDistanceRad(got, want), 1e-6) << s;
+  }
+}
+
+TEST(RefineJointlyTest, UncalibratedSensorIsUntouchedAndIgnored) {
+  const std::vector<Pose2> truth = RoomSensors();
+  SynthOptions synth;
+  synth.noise_m = 0.0;
+  const AlignedTracks tracks = MakeTracks(truth, RoomPaths(), synth);
+  std::vector<Pose2> initial = Perturb(truth, 0, 0.05, DegToRad(1.0));
+  // A wrong pose 0.3 m off: were its tracks used, they would pull the others away from the truth.
+  initial[3] = {truth[3].x_m + 0.3, truth[3].y_m, truth[3].yaw_rad};
+  const JointRefineResult r =
+      RefineJointly(tracks, initial, {true, true, true, false}, 0, EllipseOptions());
+  ASSERT_TRUE(r.ok) << r.message;
+  EXPECT_EQ(r.world_from_sensor[3].x_m, initial[3].x_m);
+  EXPECT_EQ(r.world_from_sensor[3].y_m, initial[3].y_m);
+  EXPECT_EQ(r.world_from_sensor[3].yaw_rad, initial[3].yaw_rad);
+  EXPECT_FALSE(r.refined[3]);
+  EXPECT_EQ(r.sensor_observations[3], 0u);
+  EXPECT_TRUE(r.covariance[3].isZero());
+  for (std::size_t s = 0; s < 3; ++s) {
+    EXPECT_LT(common::TranslationDistanceM(r.world_from_sensor[s], truth[s]), 1e-6) << s;
+  }
+}
+
+TEST(RefineJointlyTest, WrongTrackIsDownWeightedByTheRobustLoss) {
+  const std::vector<Pose2> truth = RoomSensors();
+  AlignedTracks tracks = MakeTracks(truth, RoomPaths(), {});
+  // Sensor 1 follows the wrong thing for 20 s of one of its tracks: 0.35 m beside the person
+  // (inside the association gate, so it is associated and must be down-weighted).
+  GridTrack& wrong = tracks.sensors[1].tracks.front();
+  ASSERT_GE(wrong.samples.size(), 600u);
+  for (std::size_t k = 100; k < 500; ++k) wrong.samples[k].position_m += Eigen::Vector2d(0.0, 0.35);
+  const std::vector<Pose2> initial = Perturb(truth, 0, 0.05, DegToRad(1.0));
+
+  const JointRefineResult robust =
+      RefineJointly(tracks, initial, std::vector<bool>(4, true), 0, EllipseOptions());
+  ASSERT_TRUE(robust.ok) << robust.message;
+  JointRefineOptions plain_options = EllipseOptions();
+  plain_options.loss = RobustLoss::kNone;
+  const JointRefineResult plain =
+      RefineJointly(tracks, initial, std::vector<bool>(4, true), 0, plain_options);
+  ASSERT_TRUE(plain.ok) << plain.message;
+
+  const double robust_error = common::TranslationDistanceM(robust.world_from_sensor[1], truth[1]);
+  const double plain_error = common::TranslationDistanceM(plain.world_from_sensor[1], truth[1]);
+  EXPECT_LT(robust_error, 0.005);
+  EXPECT_GT(plain_error, 3.0 * robust_error);
+  EXPECT_GE(robust.downweighted, 80u);  // ~100 used steps of the wrong track
+  EXPECT_EQ(plain.downweighted, 0u);
+}
+
+TEST(RefineJointlyTest, TooFewObservationsFailWithAClearMessage) {
+  const std::vector<Pose2> truth = RoomSensors();
+  SynthOptions synth;
+  synth.steps = 10;  // half a second: 3 used steps
+  const AlignedTracks tracks = MakeTracks(truth, RoomPaths(), synth);
+  const std::vector<Pose2> initial = Perturb(truth, 0, 0.05, DegToRad(1.0));
+  const JointRefineResult r =
+      RefineJointly(tracks, initial, std::vector<bool>(4, true), 0, EllipseOptions());
+  EXPECT_FALSE(r.ok);
+  EXPECT_NE(r.message.find("too few associated observations"), std::string::npos) << r.message;
+  EXPECT_NE(r.message.find("need 20"), std::string::npos) << r.message;
+  for (std::size_t s = 0; s < 4; ++s) {
+    EXPECT_EQ(r.world_from_sensor[s].x_m, initial[s].x_m);
+    EXPECT_EQ(r.world_from_sensor[s].yaw_rad, initial[s].yaw_rad);
+  }
+}
+
+TEST(RefineJointlyTest, BadInputGivesAReasonNotACrash) {
+  const std::vector<Pose2> truth = RoomSensors();
+  SynthOptions synth;
+  synth.steps = 200;
+  AlignedTracks tracks = MakeTracks(truth, RoomPaths(), synth);
+  const std::vector<bool> all(4, true);
+  EXPECT_NE(RefineJointly(tracks, {truth[0]}, all, 0, {}).message.find("size mismatch"),
+            std::string::npos);
+  EXPECT_NE(RefineJointly(tracks, truth, all, 7, {}).message.find("out of range"),
+            std::string::npos);
+  EXPECT_NE(
+      RefineJointly(tracks, truth, {false, true, true, true}, 0, {}).message.find("not calibrated"),
+      std::string::npos);
+  JointRefineOptions bad;
+  bad.step_stride = 0;
+  EXPECT_NE(RefineJointly(tracks, truth, all, 0, bad).message.find("invalid options"),
+            std::string::npos);
+  std::vector<Pose2> nan_pose = truth;
+  nan_pose[1].yaw_rad = std::nan("");
+  EXPECT_NE(RefineJointly(tracks, nan_pose, all, 0, {}).message.find("not finite"),
+            std::string::npos);
+
+  // Broken samples are counted and skipped; a track claiming steps beyond the grid is clipped.
+  tracks.sensors[1].tracks[0].samples[0].position_m.x() = std::nan("");
+  tracks.sensors[1].tracks[0].samples[4].position_cov_m2 << 1.0, 0.0, 0.0, -1.0;
+  tracks.sensors[2].tracks[0].samples.resize(tracks.sensors[2].tracks[0].samples.size() + 500);
+  GridTrack beyond;
+  beyond.first_step = 100000;
+  beyond.samples.resize(3);
+  tracks.sensors[3].tracks.push_back(beyond);
+  const JointRefineResult r = RefineJointly(tracks, truth, all, 0, EllipseOptions());
+  EXPECT_TRUE(r.ok) << r.message;
+  EXPECT_EQ(r.rejected_samples, 2u);
+}
+
+TEST(RefineJointlyTest, ChainWhereOnlyNeighboursOverlap) {
+  // Five sensors along a 32 m corridor, 8 m range, 7 m apart: each sees only its neighbours' ends.
+  std::vector<Pose2> truth;
+  for (int i = 0; i < 5; ++i) {
+    truth.push_back(
+        {1.0 + 7.0 * i, (i % 2 == 0) ? 0.2 : 2.8, DegToRad(i % 2 == 0 ? 10.0 : -170.0)});
+  }
+  std::vector<Path> paths = {
+      [](double t) {
+        return Eigen::Vector2d(15.0 - 14.0 * std::cos(0.1 * t), 1.2 + 0.3 * std::sin(t));
+      },
+      [](double t) { return Eigen::Vector2d(15.0 + 14.0 * std::cos(0.08 * t + 0.5), 1.8); },
+  };
+  SynthOptions synth;
+  synth.range_m = 8.0;
+  synth.steps = 2400;  // two minutes: each walker passes every overlap a few times
+  const AlignedTracks tracks = MakeTracks(truth, paths, synth);
+  // Sensors 0 and 2 are 14 m apart: no common view.
+  const std::vector<Pose2> initial = Perturb(truth, 0, 0.05, DegToRad(1.0));
+  const JointRefineResult r =
+      RefineJointly(tracks, initial, std::vector<bool>(5, true), 0, EllipseOptions());
+  ASSERT_TRUE(r.ok) << r.message;
+  for (std::size_t s = 1; s < 5; ++s) {
+    EXPECT_TRUE(r.refined[s]);
+    EXPECT_LT(common::TranslationDistanceM(r.world_from_sensor[s], truth[s]), 0.02) << s;
+    EXPECT_LT(RadToDeg(common::RotationDistanceRad(r.world_from_sensor[s], truth[s])), 0.1) << s;
+  }
+  // The uncertainty grows along the chain.
+  EXPECT_LT(r.covariance[1](2, 2), r.covariance[4](2, 2));
+  EXPECT_LT(r.covariance[1](0, 0) + r.covariance[1](1, 1),
+            r.covariance[4](0, 0) + r.covariance[4](1, 1));
+}
+
+TEST(RefineJointlyTest, SensorWithoutSharedViewIsHeldAndNamed) {
+  std::vector<Pose2> truth = RoomSensors();
+  truth.push_back({50.0, 50.0, 0.0});  // far away: sees nothing the others see
+  SynthOptions synth;
+  synth.range_m = 15.0;
+  const AlignedTracks tracks = MakeTracks(truth, RoomPaths(), synth);
+  const std::vector<Pose2> initial = Perturb(truth, 0, 0.05, DegToRad(1.0));
+  const JointRefineResult r =
+      RefineJointly(tracks, initial, std::vector<bool>(5, true), 0, EllipseOptions());
+  ASSERT_TRUE(r.ok) << r.message;
+  EXPECT_FALSE(r.refined[4]);
+  EXPECT_EQ(r.world_from_sensor[4].x_m, initial[4].x_m);
+  EXPECT_NE(r.message.find("held at the initial pose"), std::string::npos) << r.message;
+  EXPECT_NE(r.message.find("s4"), std::string::npos) << r.message;
+  EXPECT_LT(common::TranslationDistanceM(r.world_from_sensor[1], truth[1]), 0.005);
+}
+
+TEST(RefineJointlyTest, ReassociationRecoversObservationsOutsideTheFirstGate) {
+  const std::vector<Pose2> truth = RoomSensors();
+  const AlignedTracks tracks = MakeTracks(truth, RoomPaths(), {});
+  // 3 degrees: far objects are displaced by ~0.5 m and miss the gate in the first round.
+  std::vector<Pose2> initial = truth;
+  initial[1].yaw_rad += DegToRad(3.0);
+  JointRefineOptions one = EllipseOptions();
+  one.association_rounds = 1;
+  const JointRefineResult once = RefineJointly(tracks, initial, std::vector<bool>(4, true), 0, one);
+  const JointRefineResult again =
+      RefineJointly(tracks, initial, std::vector<bool>(4, true), 0, EllipseOptions());
+  ASSERT_TRUE(once.ok) << once.message;
+  ASSERT_TRUE(again.ok) << again.message;
+  EXPECT_EQ(once.rounds, 1);
+  EXPECT_GE(again.rounds, 2);
+  EXPECT_GT(again.sensor_observations[1], once.sensor_observations[1] + 50);
+  EXPECT_LT(common::TranslationDistanceM(again.world_from_sensor[1], truth[1]), 0.005);
+  EXPECT_LT(RadToDeg(common::RotationDistanceRad(again.world_from_sensor[1], truth[1])), 0.05);
+}
+
+TEST(RefineJointlyTest, CentreOfMassBiasIsEstimatedInsteadOfMovingTheSensors) {
+  const std::vector<Pose2> truth = RoomSensors();
+  SynthOptions synth;
+  synth.kind = MeasurementKind::kCenterOfMass;
+  synth.com_bias_m = 0.16;  // pi r / 4 of a 0.2 m cylinder: every view is pulled toward its sensor
+  synth.noise_m = 0.03;
+  synth.reported_sigma_m = 0.03;
+  const AlignedTracks tracks = MakeTracks(truth, RoomPaths(), synth);
+  const std::vector<Pose2> initial = Perturb(truth, 0, 0.10, DegToRad(1.5));
+  const std::vector<bool> all(4, true);
+
+  JointRefineOptions options;
+  options.estimate_radial_bias = true;
+  const JointRefineResult r = RefineJointly(tracks, initial, all, 0, options);
+  ASSERT_TRUE(r.ok) << r.message;
+  const auto com = static_cast<std::size_t>(MeasurementKind::kCenterOfMass);
+  EXPECT_TRUE(r.radial_bias_estimated[com]);
+  EXPECT_NEAR(r.radial_bias_m[com], 0.16, 0.01);
+  for (std::size_t s = 1; s < 4; ++s) {
+    EXPECT_LT(common::TranslationDistanceM(r.world_from_sensor[s], truth[s]), 0.01) << s;
+    EXPECT_LT(RadToDeg(common::RotationDistanceRad(r.world_from_sensor[s], truth[s])), 0.05) << s;
+  }
+
+  // Unmodelled, the bias looks like every sensor sitting closer to the scene: the corner sensors
+  // end up several centimetres off, no better than where they started.
+  JointRefineOptions fixed_bias;
+  fixed_bias.estimate_radial_bias = false;
+  fixed_bias.radial_bias_com_m = 0.0;
+  const JointRefineResult unmodelled = RefineJointly(tracks, initial, all, 0, fixed_bias);
+  ASSERT_TRUE(unmodelled.ok) << unmodelled.message;
+  EXPECT_GT(MaxTranslationError(unmodelled.world_from_sensor, truth), 0.05);
+}
+
+RelativePoseConstraint TrueConstraint(const std::vector<Pose2>& truth, std::size_t r, std::size_t s,
+                                      double sigma_m, double sigma_rad) {
+  RelativePoseConstraint c;
+  c.r = r;
+  c.s = s;
+  c.s_from_r = truth[s].inverse() * truth[r];
+  c.covariance =
+      Eigen::Vector3d(sigma_m * sigma_m, sigma_m * sigma_m, sigma_rad * sigma_rad).asDiagonal();
+  return c;
+}
+
+TEST(RefineJointlyTest, RelativePoseConstraintsOutweighBiasedTracks) {
+  const std::vector<Pose2> truth = RoomSensors();
+  SynthOptions synth;
+  synth.kind = MeasurementKind::kCenterOfMass;
+  synth.com_bias_m = 0.16;
+  const AlignedTracks tracks = MakeTracks(truth, RoomPaths(), synth);
+  const std::vector<Pose2> initial = Perturb(truth, 0, 0.05, DegToRad(1.0));
+  const std::vector<bool> all(4, true);
+  JointRefineOptions options;
+  options.radial_bias_com_m = 0.0;  // unmodelled: the tracks alone pull the sensors inward
+
+  const JointRefineResult tracks_only = RefineJointly(tracks, initial, all, 0, options);
+  ASSERT_TRUE(tracks_only.ok) << tracks_only.message;
+  EXPECT_GT(common::TranslationDistanceM(tracks_only.world_from_sensor[1], truth[1]), 0.05);
+
+  // Walls (background ICP) fix 0-1 and 1-2 to a millimetre; sensor 3 has only tracks.
+  const std::vector<RelativePoseConstraint> constraints = {
+      TrueConstraint(truth, 0, 1, 0.001, DegToRad(0.01)),
+      TrueConstraint(truth, 1, 2, 0.001, DegToRad(0.01))};
+  const JointRefineResult r = RefineJointly(tracks, initial, all, 0, options, constraints);
+  ASSERT_TRUE(r.ok) << r.message;
+  EXPECT_EQ(r.constraints_used, 2u);
+  EXPECT_EQ(r.constraints_rejected, 0u);
+  for (std::size_t s = 1; s < 3; ++s) {
+    EXPECT_LT(common::TranslationDistanceM(r.world_from_sensor[s], truth[s]), 0.01) << s;
+    EXPECT_LT(RadToDeg(common::RotationDistanceRad(r.world_from_sensor[s], truth[s])), 0.05) << s;
+  }
+  EXPECT_LT(r.constraint_rms_sigma, 3.0);
+  EXPECT_NE(r.message.find("2 relative-pose constraints"), std::string::npos) << r.message;
+}
+
+TEST(RefineJointlyTest, ConstraintLinksASensorWithoutSharedTracks) {
+  std::vector<Pose2> truth = RoomSensors();
+  truth.push_back({50.0, 50.0, DegToRad(30.0)});  // sees nothing the others see
+  SynthOptions synth;
+  synth.range_m = 15.0;
+  const AlignedTracks tracks = MakeTracks(truth, RoomPaths(), synth);
+  const std::vector<Pose2> initial = Perturb(truth, 0, 0.05, DegToRad(1.0));
+  const JointRefineResult r =
+      RefineJointly(tracks, initial, std::vector<bool>(5, true), 0, EllipseOptions(),
+                    {TrueConstraint(truth, 2, 4, 0.002, DegToRad(0.02))});
+  ASSERT_TRUE(r.ok) << r.message;
+  EXPECT_TRUE(r.refined[4]);
+  EXPECT_EQ(r.sensor_observations[4], 0u);
+  // Placed through sensor 2, itself placed by the tracks to a few millimetres.
+  EXPECT_LT(common::TranslationDistanceM(r.world_from_sensor[4], truth[4]), 0.05);
+  EXPECT_LT(RadToDeg(common::RotationDistanceRad(r.world_from_sensor[4], truth[4])), 0.1);
+  EXPECT_GT(r.covariance[4](0, 0), r.covariance[2](0, 0));
+}
+
+TEST(RefineJointlyTest, UnusableConstraintsAreCountedAndIgnored) {
+  const std::vector<Pose2> truth = RoomSensors();
+  const AlignedTracks tracks = MakeTracks(truth, RoomPaths(), {});
+  const std::vector<Pose2> initial = Perturb(truth, 0, 0.05, DegToRad(1.0));
+  std::vector<RelativePoseConstraint> bad(6, TrueConstraint(truth, 0, 1, 0.001, 0.001));
+  bad[0].s = 9;                            // out of range
+  bad[1].s = 0;                            // r == s
+  bad[2].s = 3;                            // sensor 3 is not calibrated
+  bad[3].covariance(0, 0) = -1.0;          // not positive definite
+  bad[4].covariance(0, 1) = 0.5;           // not symmetric
+  bad[5].s_from_r.yaw_rad = std::nan("");  // not finite
+  const JointRefineResult r =
+      RefineJointly(tracks, initial, {true, true, true, false}, 0, EllipseOptions(), bad);
+  ASSERT_TRUE(r.ok) << r.message;
+  EXPECT_EQ(r.constraints_rejected, 6u);
+  EXPECT_EQ(r.constraints_used, 0u);
+  EXPECT_LT(common::TranslationDistanceM(r.world_from_sensor[1], truth[1]), 0.005);
+}
+
+TEST(RefineJointlyTest, CovarianceMatchesTheSpreadOverNoiseDraws) {
+  const std::vector<Pose2> truth = RoomSensors();
+  JointRefineOptions options = EllipseOptions();
+  options.loss = RobustLoss::kNone;
+  options.step_stride = 8;
+  options.observation_correlation_steps = 1.0;  // white noise: every sample is independent
+  double nees_sum = 0.0;
+  constexpr int kRuns = 20;
+  for (int run = 0; run < kRuns; ++run) {
+    SynthOptions synth;
+    synth.seed = static_cast<unsigned>(100 + run);
+    synth.noise_m = 0.05;
+    synth.reported_sigma_m = 0.05;
+    const AlignedTracks tracks = MakeTracks(truth, RoomPaths(), synth);
+    const JointRefineResult r =
+        RefineJointly(tracks, truth, std::vector<bool>(4, true), 0, options);
+    ASSERT_TRUE(r.ok) << r.message;
+    EXPECT_NEAR(r.variance_factor, 1.0, 0.15);
+    for (std::size_t s = 1; s < 4; ++s) {
+      const Eigen::Vector3d e(r.world_from_sensor[s].x_m - truth[s].x_m,
+                              r.world_from_sensor[s].y_m - truth[s].y_m,
+                              common::AngleDiff(r.world_from_sensor[s].yaw_rad, truth[s].yaw_rad));
+      nees_sum += e.dot(r.covariance[s].ldlt().solve(e));
+    }
+  }
+  // Normalised estimation error squared: 3 on average for a consistent covariance.
+  const double nees = nees_sum / (3.0 * kRuns);
+  EXPECT_GT(nees, 1.5);
+  EXPECT_LT(nees, 5.0);
+}
+
+}  // namespace
+}  // namespace lrfnet::calib

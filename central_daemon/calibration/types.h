@@ -1,0 +1,157 @@
+#pragma once
+// Value types shared by the stages of the calibration (pure library, namespace lrfnet::calib).
+//
+// Poses follow common/geometry.h: `a_from_b` maps coordinates in frame b to frame a. A sensor's
+// calibrated pose is world_from_sensor; a pairwise estimate between sensors r and s is s_from_r
+// (Quenzel et al. eq. 5: R * t_p + t = t_q maps r's observation t_p onto s's observation t_q, so
+// (R, t) = s_from_r). Times on the common grid are seconds since AlignedTracks::t0_ns.
+//
+// Stages (equation numbers of Quenzel et al., papers/000):
+//   input (CalibrationInput) → alignment + RTS smoothing (AlignedTracks)
+//   → per pair: dynamic intervals (III-C) → MSAC hypotheses (eq. 5) → verification (eqs. 6-8)
+//     → PairEstimate → point-to-line ICP on the backgrounds
+//   → L1 rotation averaging (Algorithm 1) + least-squares translations → joint refinement
+//   → CalibrationResult (calibration.yaml, report).
+
+#include <Eigen/Core>
+#include <cstddef>
+#include <cstdint>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "central_daemon/ingest/sensor_data.h"
+#include "common/geometry.h"
+#include "common/time.h"
+
+namespace lrfnet::calib {
+
+using common::Pose2;
+using daemon::BackgroundScan;
+using daemon::ClockSync;
+using daemon::MeasurementKind;
+using daemon::SensorDescription;
+using daemon::TrackFrameData;
+using daemon::TrackObservation;
+
+// ---------------------------------------------------------------------------------------------
+// Input: what the daemon holds per sensor (from its TrackStore, a recording or a UDP capture).
+
+struct SensorRecording {
+  std::string id;
+  std::optional<SensorDescription> description;  // SensorInfo, when received
+  ClockSync clock_sync = ClockSync::kUnknown;      // latest Health, when received
+  std::vector<TrackFrameData> frames;             // in scan order (scan_start_ns)
+  std::optional<BackgroundScan> background;       // the newest complete snapshot
+};
+
+struct CalibrationInput {
+  std::vector<SensorRecording> sensors;  // any order; ids unique
+};
+
+// ---------------------------------------------------------------------------------------------
+// Aligned tracks: every sensor's smoothed tracks sampled on one common UTC time grid.
+
+struct TrackSample {
+  Eigen::Vector2d position_m = Eigen::Vector2d::Zero();  // sensor frame
+  Eigen::Vector2d velocity_mps = Eigen::Vector2d::Zero();
+  Eigen::Matrix2d position_cov_m2 = Eigen::Matrix2d::Identity();  // symmetric positive definite
+};
+
+// One track of one sensor, present on grid steps [first_step, first_step + samples.size()).
+struct GridTrack {
+  std::uint32_t track_id = 0;        // the tracker's id (unique within the sensor's session)
+  std::uint64_t session_id = 0;      // the tracker's session
+  MeasurementKind kind = MeasurementKind::kUnspecified;
+  std::size_t first_step = 0;
+  std::vector<TrackSample> samples;  // one per grid step, contiguous
+
+  std::size_t end_step() const { return first_step + samples.size(); }
+  bool Covers(std::size_t step) const { return step >= first_step && step < end_step(); }
+  const TrackSample& At(std::size_t step) const { return samples[step - first_step]; }
+};
+
+struct SensorTracks {
+  std::string id;
+  std::optional<SensorDescription> description;
+  std::optional<BackgroundScan> background;
+  bool clock_suspect = false;          // clock sync reported bad (see AlignOptions)
+  std::vector<GridTrack> tracks;       // ordered by first_step
+  std::size_t frames_used = 0;         // input frames that contributed
+  std::size_t observations_used = 0;   // input track observations that contributed
+};
+
+struct AlignedTracks {
+  common::UtcNs t0_ns = 0;  // UTC of grid step 0
+  double step_s = 0.05;     // grid spacing
+  std::size_t steps = 0;
+  std::vector<SensorTracks> sensors;  // same order as CalibrationInput::sensors
+
+  double TimeOf(std::size_t step) const { return static_cast<double>(step) * step_s; }
+};
+
+// ---------------------------------------------------------------------------------------------
+// Pairwise estimates (one per unordered sensor pair that has simultaneous tracks).
+
+struct PairEstimate {
+  std::size_t r = 0;  // sensor indices into AlignedTracks::sensors, r < s
+  std::size_t s = 0;
+  bool accepted = false;        // a convincing hypothesis was found (an edge of the pose graph)
+  std::string reason;           // why not accepted ("" when accepted)
+  Pose2 s_from_r;               // the estimate g_rs (valid when accepted)
+  Eigen::Matrix3d covariance = Eigen::Matrix3d::Identity();  // of (x, y, yaw) of s_from_r
+  std::size_t intervals = 0;     // dynamic intervals with tracks on both sides
+  std::size_t hypotheses = 0;    // MSAC hypotheses generated (eq. 5)
+  double best_error = 0.0;       // E of the best hypothesis (eq. 8)
+  double second_error = 0.0;     // E of the best clearly different hypothesis (or +inf)
+  std::size_t matches = 0;       // associated simultaneous observations used in the refit (N)
+  double rms_m = 0.0;            // residual of the refit over the matches
+  double mean_residual_m = 0.0;  // d of Schenk's weight N/d
+  bool icp_applied = false;      // the background ICP changed the estimate
+  double icp_score_before = 0.0; // consistency of the backgrounds before/after ICP (see icp.h)
+  double icp_score_after = 0.0;
+};
+
+// ---------------------------------------------------------------------------------------------
+// Global result.
+
+struct SensorPose {
+  std::string id;
+  bool calibrated = false;       // false: not connected to the reference
+  Pose2 world_from_sensor;       // the reference sensor is the identity
+  Eigen::Matrix3d covariance = Eigen::Matrix3d::Zero();  // (x, y, yaw), metres and radians
+};
+
+struct EdgeReport {
+  std::string r, s;               // sensor ids
+  bool used = false;              // used by the global solution
+  std::string status;             // "used", or why not (no hypothesis, rotation outlier, ...)
+  std::size_t matches = 0;
+  double rms_m = 0.0;
+  double rotation_residual_deg = 0.0;     // |yaw(s_from_r measured) - yaw(from poses)|
+  double translation_residual_m = 0.0;    // |t(s_from_r measured) - t(from poses)|
+  double track_residual_rms_m = 0.0;      // matched observations under the final poses
+  bool icp_applied = false;
+};
+
+struct StageTime {
+  std::string stage;
+  double seconds = 0.0;
+};
+
+struct CalibrationResult {
+  std::string method;     // "quenzel", "schenk", "spectral"
+  std::string reference;  // the sensor at the origin
+  std::vector<SensorPose> sensors;  // same order as the input
+  std::vector<EdgeReport> edges;
+  std::vector<StageTime> timings;
+  // Joint refinement (Quenzel method only).
+  bool refined = false;
+  double refine_cost_before = 0.0;  // robust cost over all associated observations
+  double refine_cost_after = 0.0;
+  std::size_t refine_observations = 0;
+  double track_residual_rms_m = 0.0;  // all matched observations under the final poses
+  std::vector<std::string> warnings;
+};
+
+}  // namespace lrfnet::calib
