@@ -183,80 +183,81 @@ struct Line {
   bool point_only = false;
 };
 
-// The local line of the background around each beam: a least-squares line through the beam's
-// point and its neighbours, grown outward one beam at a time on both sides while the next point
-// is chain-connected (at most max_segment_length_m from the previous one: no line across a depth
-// jump), lies within line_tolerance_m of the line fitted so far (no line around a corner), and,
-// once three points are in, lies within line_radius_m of the centre point. Censi's line through
-// only the two nearest points has a normal as noisy as two range errors over a beam spacing of a
-// few centimetres; those tilted normals bias the solution and, worse, fake information along a
-// degenerate direction (a corridor's axis) that the degeneracy test must see as absent.
+// The local line of the background around each beam: the least-squares line through the beam's
+// point and its chain-connected neighbours (each at most max_segment_length_m from the previous
+// one: no line across a depth jump) within line_radius_m of it (the nearest neighbour on each side
+// also beyond, so that the sparse points of a far wall get lines too). When the points scatter
+// about the line by more than line_tolerance_m (RMS), the window spans a corner: it is halved until
+// it is straight; a beam whose three nearest points are not straight has no line. Censi's line
+// through only the two nearest points, and lines cut short by testing each new point against the
+// line of the few before it, have normals tilted by a good fraction of a radian at a few
+// centimetres' beam spacing and centimetre noise; the tilts bias the solution and fake information
+// along a degenerate direction (a corridor's axis) that the degeneracy test must see as absent.
 void FitLines(PolarCloud& cloud, const IcpOptions& options) {
-  constexpr int kMaxBeamsPerSide = 16;
+  constexpr std::ptrdiff_t kMaxBeamsPerSide = 16;
   const auto n = static_cast<std::ptrdiff_t>(cloud.beams());
   cloud.line_point_m.assign(cloud.beams(), Eigen::Vector2d::Zero());
   cloud.line_normal.assign(cloud.beams(), Eigen::Vector2d::Zero());
   cloud.line_angle_var_rad2.assign(cloud.beams(), 0.0);
   cloud.has_line.assign(cloud.beams(), 0);
-  for (const std::uint32_t i : cloud.valid_beams) {
+  // Counter-clockwise first, whichever way the beams are numbered, so that a scan gives the same
+  // lines in either order.
+  const std::ptrdiff_t steps[2] = {cloud.direction > 0 ? 1 : -1, cloud.direction > 0 ? -1 : 1};
+  for (const std::uint32_t beam : cloud.valid_beams) {
+    const auto i = static_cast<std::ptrdiff_t>(beam);
     const Eigen::Vector2d& centre = cloud.point_m[i];
-    // Moments of the points relative to the centre point (no cancellation at long ranges).
-    double count = 1.0, sx = 0.0, sy = 0.0, sxx = 0.0, sxy = 0.0, syy = 0.0;
-    double smaller = 0.0, larger = 0.0;  // eigenvalues of the points' covariance
-    Eigen::Vector2d mean = Eigen::Vector2d::Zero(), normal = Eigen::Vector2d::Zero();
-    const auto fit = [&] {
-      mean = Eigen::Vector2d(sx, sy) / count;
+    for (double radius_m = options.line_radius_m;; radius_m *= 0.5) {
+      // Moments of the points relative to the centre point (no cancellation at long ranges).
+      double count = 1.0, sx = 0.0, sy = 0.0, sxx = 0.0, sxy = 0.0, syy = 0.0;
+      std::ptrdiff_t ends[2] = {i, i};
+      bool open[2] = {true, true};
+      while (open[0] || open[1]) {
+        for (int side = 0; side < 2; ++side) {
+          if (!open[side]) continue;
+          const std::ptrdiff_t k = ends[side] + steps[side];
+          if (k < 0 || k >= n || cloud.valid[k] == 0 || std::abs(k - i) > kMaxBeamsPerSide ||
+              (cloud.point_m[k] - cloud.point_m[ends[side]]).norm() >
+                  options.max_segment_length_m ||
+              (std::abs(k - i) > 1 && (cloud.point_m[k] - centre).norm() > radius_m)) {
+            open[side] = false;
+            continue;
+          }
+          const Eigen::Vector2d d = cloud.point_m[k] - centre;
+          count += 1.0;
+          sx += d.x();
+          sy += d.y();
+          sxx += d.x() * d.x();
+          sxy += d.x() * d.y();
+          syy += d.y() * d.y();
+          ends[side] = k;
+        }
+      }
+      if (count < 3.0) break;  // two points alone make a normal as noisy as Censi's segment
+      const Eigen::Vector2d mean = Eigen::Vector2d(sx, sy) / count;
       const double cxx = sxx / count - mean.x() * mean.x();
       const double cxy = sxy / count - mean.x() * mean.y();
       const double cyy = syy / count - mean.y() * mean.y();
-      // Eigenvector of the smaller eigenvalue of [[cxx, cxy], [cxy, cyy]].
       const double root = std::sqrt(0.25 * (cxx - cyy) * (cxx - cyy) + cxy * cxy);
-      smaller = 0.5 * (cxx + cyy) - root;
-      larger = 0.5 * (cxx + cyy) + root;
-      const Eigen::Vector2d a(cxy, smaller - cxx), b(smaller - cyy, cxy);
-      normal = a.squaredNorm() >= b.squaredNorm() ? a : b;
-      const double norm = normal.norm();
-      normal = norm > 0.0 ? Eigen::Vector2d(normal / norm) : Eigen::Vector2d::Zero();
-    };
-    std::ptrdiff_t ends[2] = {static_cast<std::ptrdiff_t>(i), static_cast<std::ptrdiff_t>(i)};
-    bool open[2] = {true, true};
-    for (int added = 0; (open[0] || open[1]) && added < 2 * kMaxBeamsPerSide; ++added) {
-      for (int side = 0; side < 2; ++side) {
-        if (!open[side]) continue;
-        // Counter-clockwise first, whichever way the beams are numbered, so that a scan gives
-        // the same lines in either order.
-        const std::ptrdiff_t k = ends[side] + ((side == 0) == (cloud.direction > 0) ? 1 : -1);
-        if (k < 0 || k >= n || cloud.valid[k] == 0 ||
-            std::abs(k - static_cast<std::ptrdiff_t>(i)) > kMaxBeamsPerSide) {
-          open[side] = false;
-          continue;
-        }
-        const Eigen::Vector2d d = cloud.point_m[k] - centre;
-        if ((cloud.point_m[k] - cloud.point_m[ends[side]]).norm() > options.max_segment_length_m ||
-            (count >= 3.0 && d.norm() > options.line_radius_m) ||
-            (count >= 2.0 && std::abs(normal.dot(d - mean)) > options.line_tolerance_m)) {
-          open[side] = false;
-          continue;
-        }
-        count += 1.0;
-        sx += d.x();
-        sy += d.y();
-        sxx += d.x() * d.x();
-        sxy += d.x() * d.y();
-        syy += d.y() * d.y();
-        ends[side] = k;
-        fit();
+      const double smaller = std::max(0.5 * (cxx + cyy) - root, 0.0);
+      const double larger = 0.5 * (cxx + cyy) + root;
+      if (smaller > options.line_tolerance_m * options.line_tolerance_m) {
+        if (count <= 3.0) break;
+        continue;  // a corner: try half the window
       }
+      // Eigenvector of the smaller eigenvalue of [[cxx, cxy], [cxy, cyy]].
+      const Eigen::Vector2d a(cxy, smaller - cxx), b(smaller - cyy, cxy);
+      Eigen::Vector2d normal = a.squaredNorm() >= b.squaredNorm() ? a : b;
+      if (!(normal.norm() > 0.0) || !(larger > 0.0)) break;
+      normal.normalize();
+      const Eigen::Vector2d point = centre + mean;
+      if (normal.dot(point) > 0.0) normal = -normal;
+      cloud.line_point_m[i] = point;
+      cloud.line_normal[i] = normal;
+      // Slope variance of a least-squares line: residual variance / (count * spread variance).
+      cloud.line_angle_var_rad2[i] = smaller / ((count - 2.0) * larger);
+      cloud.has_line[i] = 1;
+      break;
     }
-    // Two points alone make a normal as noisy as Censi's segment.
-    if (count < 3.0 || normal.isZero()) continue;
-    const Eigen::Vector2d point = centre + mean;
-    if (normal.dot(point) > 0.0) normal = -normal;
-    cloud.line_point_m[i] = point;
-    cloud.line_normal[i] = normal;
-    // Slope variance of a least-squares line: residual variance / (count * spread variance).
-    cloud.line_angle_var_rad2[i] = std::max(smaller, 0.0) / ((count - 2.0) * larger);
-    cloud.has_line[i] = 1;
   }
 }
 

@@ -289,6 +289,11 @@ void ApplyIcp(const AlignedTracks& tracks, const CalibrationOptions& options,
     if (rms_after > rms_before + options.icp_max_track_rms_increase_m) continue;
     p.s_from_r = icp.s_from_r;
     p.icp_applied = true;
+    // The walls now fix this pair far better than the tracks: the joint refinement keeps it as
+    // a constraint with the ICP's covariance.
+    if (icp.covariance.allFinite() && icp.covariance.determinant() > 0.0) {
+      p.covariance = icp.covariance;
+    }
   }
 }
 
@@ -516,8 +521,16 @@ CalibrationOutcome Calibrate(const CalibrationInput& input, const CalibrationOpt
     timer.Mark("rotation averaging + translations");
 
     if (options.refine && options.method == Method::kQuenzel) {
-      const JointRefineResult joint = RefineJointly(tracks, global.world_from_sensor,
-                                                    global.calibrated, reference, options.joint);
+      // Pairs aligned on their backgrounds are constraints: without them the tracks' systematic
+      // errors (object-shape bias) would pull wall-accurate poses apart.
+      std::vector<RelativePoseConstraint> constraints;
+      for (const PairEstimate& p : out.pairs) {
+        if (!p.accepted || !p.icp_applied) continue;
+        constraints.push_back({p.r, p.s, p.s_from_r, p.covariance});
+      }
+      const JointRefineResult joint =
+          RefineJointly(tracks, global.world_from_sensor, global.calibrated, reference,
+                        options.joint, constraints);
       timer.Mark("joint refinement");
       result.refine_cost_before = joint.cost_before;
       result.refine_cost_after = joint.cost_after;

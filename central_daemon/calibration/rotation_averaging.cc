@@ -751,6 +751,58 @@ RotationAveragingResult AverageRotationsL1(std::size_t n, std::size_t reference,
   return result;
 }
 
+namespace {
+
+// The generic exact finish: the vertex through the rows with the smallest |residual| (as many as
+// unknowns, plus any exactly zero), x from those rows, and the LP dual on them from
+// A_S^T g_S = -A_N^T g_N with g_N = w sign(r_N) (least norm when degenerate). Optimal iff
+// |g_S| <= w_S; then `bound` is the exact optimum.
+bool FinishGeneric(const SparseMatrix& a, const Eigen::VectorXd& b, const Eigen::VectorXd& weight,
+                   const Eigen::VectorXd& r_irls, Eigen::VectorXd* x_out, double* cost_out) {
+  const Eigen::Index rows = a.rows(), cols = a.cols();
+  std::vector<Eigen::Index> order(static_cast<std::size_t>(rows));
+  std::iota(order.begin(), order.end(), Eigen::Index{0});
+  std::sort(order.begin(), order.end(), [&](Eigen::Index i, Eigen::Index j) {
+    return std::abs(r_irls(i)) < std::abs(r_irls(j));
+  });
+  std::vector<bool> active(static_cast<std::size_t>(rows), false);
+  for (Eigen::Index k = 0; k < rows; ++k) {
+    const Eigen::Index i = order[static_cast<std::size_t>(k)];
+    if (k >= cols && std::abs(r_irls(i)) > kZeroResidualRad) break;
+    active[static_cast<std::size_t>(i)] = true;
+  }
+  Eigen::VectorXd mask(rows);
+  for (Eigen::Index i = 0; i < rows; ++i) mask(i) = active[static_cast<std::size_t>(i)] ? 1.0 : 0.0;
+  const SparseMatrix as = mask.asDiagonal() * a;  // inactive rows zeroed
+  const SparseMatrix ast = as.transpose();
+  Solver solver(ast * as);
+  if (solver.info() != Eigen::Success) return false;
+  const Eigen::VectorXd x = solver.solve(ast * mask.cwiseProduct(b));
+  if (solver.info() != Eigen::Success || !x.allFinite()) return false;
+  const Eigen::VectorXd r = a * x - b;
+  const double scale = 1.0 + b.cwiseAbs().maxCoeff();
+  Eigen::VectorXd g_n = Eigen::VectorXd::Zero(rows);
+  for (Eigen::Index i = 0; i < rows; ++i) {
+    if (active[static_cast<std::size_t>(i)]) {
+      if (std::abs(r(i)) > 1e-9 * scale) return false;  // the active rows are not consistent
+    } else {
+      g_n(i) = std::copysign(weight(i), r(i));
+    }
+  }
+  const Eigen::VectorXd g_s = as * solver.solve(-(a.transpose() * g_n));
+  for (Eigen::Index i = 0; i < rows; ++i) {
+    if (active[static_cast<std::size_t>(i)] && std::abs(g_s(i)) > weight(i) * (1.0 + kCertifyTolerance)) {
+      return false;
+    }
+  }
+  if ((a.transpose() * (g_n + g_s)).cwiseAbs().maxCoeff() > 1e-9 * weight.cwiseAbs().sum()) return false;
+  *x_out = x;
+  *cost_out = weight.dot(r.cwiseAbs());
+  return true;
+}
+
+}  // namespace
+
 L1IrlsResult SolveL1Irls(const Eigen::SparseMatrix<double>& a, const Eigen::VectorXd& b,
                          const Eigen::VectorXd& weight, const Eigen::VectorXd& x0,
                          const L1IrlsOptions& options) {
@@ -795,6 +847,17 @@ L1IrlsResult SolveL1Irls(const Eigen::SparseMatrix<double>& a, const Eigen::Vect
     const double scale = std::max(1.0, (g.cwiseAbs().array() / weight.array()).maxCoeff());
     bound = std::max(bound, -(g / scale).dot(b));
     if (best_cost - bound <= options.tolerance * best_cost) break;
+    if (best_cost - bound <= 1e-2 * best_cost) {
+      Eigen::VectorXd vertex;
+      double vertex_cost = 0.0;
+      if (FinishGeneric(a, b, weight, r, &vertex, &vertex_cost) && vertex_cost <= best_cost) {
+        best_x = vertex;
+        best_cost = vertex_cost;
+        bound = vertex_cost;
+        result.exact = true;
+        break;
+      }
+    }
   }
   result.ok = true;
   result.x = best_x;

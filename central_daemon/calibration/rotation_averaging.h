@@ -138,6 +138,8 @@ void FillRotationDiagnostics(std::size_t n, std::size_t reference,
                              RotationAveragingResult* result);
 
 // Generic weighted L1 regression by IRLS: min_x Σ_i w_i |(A x - b)_i|, A of full column rank.
+// ε shrinks geometrically; every iteration yields a dual-feasible flow (projected onto
+// A^T g = 0), hence a lower bound; once within 1e-2 relative, an exact vertex finish is tried.
 struct L1IrlsOptions {
   double initial_epsilon = 1e-2;
   double final_epsilon = 1e-10;
@@ -149,8 +151,11 @@ struct L1IrlsResult {
   bool ok = false;          // false: the normal equations were singular
   Eigen::VectorXd x;
   double cost = 0.0;
-  double lower_bound = 0.0;  // -g^T b for the dual-feasible g of the last iteration
+  double lower_bound = 0.0;  // -g^T b for the best dual-feasible g found
   int iterations = 0;
+  // An exact finish (the vertex through the smallest residuals, certified by the LP dual)
+  // succeeded: x is optimal up to round-off and lower_bound = cost.
+  bool exact = false;
 };
 L1IrlsResult SolveL1Irls(const Eigen::SparseMatrix<double>& a, const Eigen::VectorXd& b,
                          const Eigen::VectorXd& weight, const Eigen::VectorXd& x0,
