@@ -21,7 +21,7 @@ struct LpL1Result {
   bool infeasible = false;  // the hard rows have no solution
   std::string error;
   Eigen::VectorXd x;
-  double cost = 0.0;        // Σ w_i |a_i x - b_i| over the soft rows
+  double cost = 0.0;  // Σ w_i |a_i x - b_i| over the soft rows
 };
 
 // `hard`: one flag per row (empty: no hard rows). weight: one per row (ignored for hard rows).

@@ -25,8 +25,8 @@ TEST(SolveL1ByLp, HardRowsAreEqualities) {
   // x0 - x1 = 0 (hard), x0 ≈ 1, x1 ≈ 3 (soft): x0 = x1 anywhere in [1, 3], cost 2.
   Eigen::MatrixXd a(3, 2);
   a << 1, -1, 1, 0, 0, 1;
-  const LpL1Result result =
-      SolveL1ByLp(Dense(a), Eigen::Vector3d(0.0, 1.0, 3.0), Eigen::Vector3d::Ones(), {true, false, false});
+  const LpL1Result result = SolveL1ByLp(Dense(a), Eigen::Vector3d(0.0, 1.0, 3.0),
+                                        Eigen::Vector3d::Ones(), {true, false, false});
   ASSERT_TRUE(result.ok);
   EXPECT_NEAR(result.x(0), result.x(1), 1e-9);
   EXPECT_NEAR(result.cost, 2.0, 1e-9);
@@ -39,7 +39,8 @@ TEST(SolveL1ByLp, ReportsInfeasibleHardRowsAndBadSizes) {
       SolveL1ByLp(Dense(a), Eigen::Vector2d(0.0, 1.0), Eigen::Vector2d::Ones(), {true, true});
   EXPECT_FALSE(infeasible.ok);
   EXPECT_TRUE(infeasible.infeasible);
-  const LpL1Result bad = SolveL1ByLp(Dense(a), Eigen::Vector3d::Zero(), Eigen::Vector2d::Ones(), {});
+  const LpL1Result bad =
+      SolveL1ByLp(Dense(a), Eigen::Vector3d::Zero(), Eigen::Vector2d::Ones(), {});
   EXPECT_FALSE(bad.ok);
   EXPECT_FALSE(bad.error.empty());
 }

@@ -79,23 +79,27 @@ std::optional<std::string> CheckGraphInput(std::size_t n, std::size_t reference,
                                            const std::vector<bool>& covariance_of) {
   if (n < 2) return "need at least 2 nodes, got " + std::to_string(n);
   if (reference >= n) {
-    return "reference node " + std::to_string(reference) + " out of range (n = " +
-           std::to_string(n) + ")";
+    return "reference node " + std::to_string(reference) +
+           " out of range (n = " + std::to_string(n) + ")";
   }
   for (std::size_t e = 0; e < measurements.size(); ++e) {
     const RelativeMeasurement& m = measurements[e];
     const std::string which = "measurement " + std::to_string(e) + " (" + std::to_string(m.r) +
                               ", " + std::to_string(m.s) + ")";
-    if (m.r >= n || m.s >= n) return which + ": node index out of range (n = " + std::to_string(n) + ")";
+    if (m.r >= n || m.s >= n)
+      return which + ": node index out of range (n = " + std::to_string(n) + ")";
     if (m.r == m.s) return which + ": relates a node to itself";
     if (!Finite(m.s_from_r)) return which + ": pose is not finite";
-    if (!std::isfinite(m.weight) || !(m.weight > 0.0)) return which + ": weight must be finite and > 0";
-    if (check_covariance && (covariance_of.empty() || (e < covariance_of.size() && covariance_of[e]))) {
+    if (!std::isfinite(m.weight) || !(m.weight > 0.0))
+      return which + ": weight must be finite and > 0";
+    if (check_covariance &&
+        (covariance_of.empty() || (e < covariance_of.size() && covariance_of[e]))) {
       const Eigen::Matrix2d c = m.covariance.topLeftCorner<2, 2>();
       if (!c.allFinite()) return which + ": translation covariance is not finite";
       const Eigen::Matrix2d sym = 0.5 * (c + c.transpose());
       Eigen::LLT<Eigen::Matrix2d> llt(sym);
-      if (llt.info() != Eigen::Success || !((sym - c).cwiseAbs().maxCoeff() <= 1e-9 * c.cwiseAbs().maxCoeff())) {
+      if (llt.info() != Eigen::Success ||
+          !((sym - c).cwiseAbs().maxCoeff() <= 1e-9 * c.cwiseAbs().maxCoeff())) {
         return which + ": translation covariance is not symmetric positive definite";
       }
     }

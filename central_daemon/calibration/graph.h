@@ -3,7 +3,8 @@
 // node is fixed at the identity, and every edge is a relative measurement of a sensor pair.
 //
 // Convention: a measurement of the pair (r, s) is s_from_r (Pose2: yaw θ, translation t_sr), so
-//   world_from_r = world_from_s * s_from_r,   i.e.   φ_r = φ_s + θ (mod 2π),  t_r = t_s + R(φ_s) t_sr
+//   world_from_r = world_from_s * s_from_r,   i.e.   φ_r = φ_s + θ (mod 2π),  t_r = t_s + R(φ_s)
+//   t_sr
 // with φ_v the yaw and t_v the position of world_from_v. In Quenzel et al.'s notation (eq. 1,
 // R_ij = R_i^T R_j, tangent angle w_ij = φ_j - φ_i) the measurement is w_sr = θ.
 //

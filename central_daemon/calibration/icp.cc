@@ -30,8 +30,8 @@ bool Finite(const Pose2& pose) {
 
 constexpr std::size_t kBlockBeams = 8;
 
-// One background per beam, so that beam adjacency (which two points may span a line) and the
-// bearing lookup stay as the sensor measured them (the polar form CSM keeps, STYLE.md).
+// One background per beam, so that beam adjacency (which points may share a line) and the bearing
+// lookup stay as the sensor measured them (the polar form CSM keeps, STYLE.md).
 struct PolarCloud {
   double first_angle_rad = 0.0;
   double step_abs_rad = 0.0;
@@ -415,8 +415,10 @@ Information ComputeInformation(std::span<const Scored> scored, const Pose2& pose
   return info;
 }
 
-// Orthonormal directions in the scaled coordinates of an Information (columns).
+// Orthonormal directions in the scaled coordinates of an Information (columns), and the matrices
+// of a system restricted to them (fixed capacity: no allocation).
 using Directions = Eigen::Matrix<double, 3, Eigen::Dynamic, 0, 3, 3>;
+using SmallMatrix = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, 0, 3, 3>;
 
 // The degenerate (or the other) eigen-directions of `info`.
 Directions Eigendirections(const Information& info, bool degenerate) {
@@ -434,8 +436,8 @@ std::optional<Pose2> RestrictedGaussNewtonStep(const Information& info, const Po
                                                const Directions& free) {
   Eigen::Vector3d step = Eigen::Vector3d::Zero();
   if (free.cols() > 0) {
-    const Eigen::MatrixXd reduced = free.transpose() * info.h * free;
-    const Eigen::LDLT<Eigen::MatrixXd> ldlt(reduced);
+    const SmallMatrix reduced = free.transpose() * info.h * free;
+    const Eigen::LDLT<SmallMatrix> ldlt(reduced);
     if (ldlt.info() != Eigen::Success || !(ldlt.vectorD().minCoeff() > 0.0)) return std::nullopt;
     step = -free * ldlt.solve(free.transpose() * info.g);
   }
@@ -463,8 +465,9 @@ std::optional<std::string> Validate(const IcpOptions& o) {
   if (!(std::isfinite(o.max_segment_length_m) && o.max_segment_length_m > 0.0)) {
     return "max_segment_length_m must be > 0";
   }
-  if (!(o.trim_fraction >= 0.0 && o.trim_fraction <= 0.9))
+  if (!(o.trim_fraction >= 0.0 && o.trim_fraction <= 0.9)) {
     return "trim_fraction must be in [0, 0.9]";
+  }
   if (o.min_correspondences < 4) return "min_correspondences must be >= 4";
   if (!(std::isfinite(o.max_translation_change_m) && o.max_translation_change_m > 0.0)) {
     return "max_translation_change_m must be > 0";
@@ -479,8 +482,9 @@ std::optional<std::string> Validate(const IcpOptions& o) {
   if (!(o.min_score_improvement >= 0.0 && o.min_score_improvement < 1.0)) {
     return "min_score_improvement must be in [0, 1)";
   }
-  if (!(std::isfinite(o.line_radius_m) && o.line_radius_m > 0.0))
+  if (!(std::isfinite(o.line_radius_m) && o.line_radius_m > 0.0)) {
     return "line_radius_m must be > 0";
+  }
   if (!(std::isfinite(o.line_tolerance_m) && o.line_tolerance_m > 0.0)) {
     return "line_tolerance_m must be > 0";
   }
@@ -516,9 +520,8 @@ std::optional<std::string> CheckBackground(const BackgroundScan& background) {
   const double span_rad = static_cast<double>(n - 1) * std::abs(background.angle_step_rad);
   if (span_rad > 2.0 * kPi * (1.0 + 1e-9)) {
     return Format(
-        "background beam count %zu and angle step %.4f deg span %.1f deg, more than a "
-        "full turn",
-        n, common::RadToDeg(background.angle_step_rad), common::RadToDeg(span_rad));
+        "background beam count %zu and angle step %.4f deg span %.1f deg, more than a full turn", n,
+        common::RadToDeg(background.angle_step_rad), common::RadToDeg(span_rad));
   }
   return std::nullopt;
 }
@@ -582,7 +585,7 @@ std::optional<Pose2> SolvePointToLine(std::span<const LineCorrespondence> corres
   s = 0.5 * (s + s.transpose());
   const Eigen::Vector2d h = c_r - b.transpose() * a_inv * c_t;
   const Eigen::SelfAdjointEigenSolver<Eigen::Matrix2d> solver(s);
-  const Eigen::Vector2d s_values = solver.eigenvalues();  // ascending
+  const Eigen::Vector2d& s_values = solver.eigenvalues();  // ascending
   const Eigen::Vector2d h_rot = solver.eigenvectors().transpose() * h;
   const double h_norm = h.norm();
   if (!(h_norm > 1e-12 * std::max(1.0, s_values.cwiseAbs().maxCoeff()))) return std::nullopt;
@@ -671,13 +674,16 @@ IcpRun RunIcp(const PolarCloud& r, const PolarCloud& s, const Pose2& initial,
     if (!next) {
       // Frozen or degenerate directions (or the closed form's hard case): a few restricted
       // Gauss-Newton steps on the same correspondences reach their minimum in the free ones.
-      next = run.pose;
-      for (int k = 0; k < 3 && next; ++k) {
+      Pose2 stepped = run.pose;
+      for (int k = 0; k < 3; ++k) {
         const Information local =
-            k == 0 ? info : ComputeInformation(scored, *next, options, scale_m);
-        next = RestrictedGaussNewtonStep(
-            local, *next, frozen != nullptr ? frozen->free : Eigendirections(local, false));
+            k == 0 ? info : ComputeInformation(scored, stepped, options, scale_m);
+        const std::optional<Pose2> step = RestrictedGaussNewtonStep(
+            local, stepped, frozen != nullptr ? frozen->free : Eigendirections(local, false));
+        if (!step) break;  // singular within the free directions: stay
+        stepped = *step;
       }
+      next = stepped;
     }
     if (!next || !Finite(*next)) break;
     const double moved_m = common::TranslationDistanceM(*next, run.pose);
@@ -765,22 +771,25 @@ IcpResult RefineWithBackgrounds(const BackgroundScan& r_background,
   // along it) or fake one. When there are any, the ICP runs again from the initial estimate with
   // those directions frozen, so that the result keeps the initial estimate along them.
   IcpRun run = RunIcp(r, s, s_from_r, options, nullptr, scored, lines);
+  result.iterations = run.iterations;
   if (!final_correspondences(run.pose)) return too_few(run.out_of_bounds);
   Information info = ComputeInformation(scored, run.pose, options);
-  const int degenerate = info.degenerate_count;
-  result.degenerate_directions = degenerate;
+  int degenerate = info.degenerate_count;
   std::optional<Frozen> frozen;
   if (degenerate > 0 && degenerate <= options.max_degenerate_directions && !run.out_of_bounds) {
     frozen = Frozen{Eigendirections(info, true), Eigendirections(info, false), info.scale_m};
     const IcpRun second = RunIcp(r, s, s_from_r, options, &*frozen, scored, lines);
     run.pose = second.pose;
     run.out_of_bounds = second.out_of_bounds;
-    run.iterations += second.iterations;
+    result.iterations += second.iterations;
     if (!final_correspondences(run.pose)) return too_few(run.out_of_bounds);
     info = ComputeInformation(scored, run.pose, options, frozen->scale_m);
+    // Where the second run ended, the backgrounds may determine even less (a weak direction at
+    // the threshold in a small common part).
+    degenerate = std::max(degenerate, info.degenerate_count);
   }
+  result.degenerate_directions = degenerate;
   const Pose2 pose = run.pose;
-  result.iterations = run.iterations;
 
   // Covariance: sigma^2 (V^T H V)^-1 within the free directions V; along the frozen ones, the
   // bound of the change (the estimate there is the initial one).
@@ -791,7 +800,7 @@ IcpResult RefineWithBackgrounds(const BackgroundScan& r_background,
   const Directions fixed = frozen ? frozen->directions : Eigendirections(info, true);
   Eigen::Matrix3d cov_scaled = Eigen::Matrix3d::Zero();
   if (free.cols() > 0) {
-    const Eigen::MatrixXd reduced = free.transpose() * info.h * free;
+    const SmallMatrix reduced = free.transpose() * info.h * free;
     cov_scaled += sigma2 * free * reduced.inverse() * free.transpose();
   }
   const double yaw_bound_m = common::DegToRad(options.max_yaw_change_deg) * info.scale_m;

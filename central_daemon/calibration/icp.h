@@ -9,35 +9,37 @@
 // points at first_angle_rad + i * angle_step_rad, 0 rad = x forward, angles counter-clockwise; a
 // range of 0 mm means no static return. s_from_r maps r's sensor frame to s's (types.h).
 //
-// Method: every background point gets its local line once: a least-squares line through it and at
-// least two neighbouring beams (grown outward while the next point is at most max_segment_length_m
-// from the previous one, so no line spans a depth jump; within line_tolerance_m of the line so far,
-// so none turns a corner; within line_radius_m). One iteration: r's background points are mapped
-// into s with the current pose; each is paired with the line of its nearest s point (searched
-// outward from its bearing in s's beam order, so a query costs a few beams). A pair is rejected
-// when the nearest point is farther than the current correspondence distance, when that point has
-// no line, or when r's sensor lies behind the line as seen by s (the two sensors would see opposite
-// faces of a thin wall). The residual is the point-to-line distance n^T (s_from_r * p - q) (Censi's
-// metric; his line through the two nearest points has a normal too noisy for the degeneracy test
-// below). The worst trim_fraction of the pairs are dropped and the pose minimising the sum of
-// squared residuals of the rest is solved exactly (Censi's closed form with a Lagrange multiplier).
-// The correspondence distance is annealed geometrically from initial_ to final_correspondence_m
-// over anneal_iterations; the loop stops when a step after the annealing is below the convergence
-// thresholds or returns to the pose of the iteration before (correspondences flipping between two
-// sets), or after max_iterations.
+// Method: every background point gets its local line once: the least-squares line through it and
+// its neighbouring beams within line_radius_m (no line across a depth jump of more than
+// max_segment_length_m between adjacent beams; the window is halved while its points scatter by
+// more than line_tolerance_m RMS, so that no line turns a corner). One iteration: r's background
+// points are mapped into s with the current pose; each is paired with the line of its nearest s
+// point (searched outward from its bearing in s's beam order, so a query costs a few beams). A pair
+// is rejected when the nearest point is farther than the current correspondence distance, when that
+// point has no line, or when r's sensor lies behind the line as seen by s (the two sensors would
+// see opposite faces of a thin wall). The residual is the point-to-line distance
+// n^T (s_from_r * p - q) (Censi's metric; his line through the two nearest points has a normal too
+// noisy for the degeneracy test below). The worst trim_fraction of the pairs are dropped and the
+// pose minimising the sum of squared residuals of the rest is solved exactly (Censi's closed form
+// with a Lagrange multiplier). The correspondence distance is annealed geometrically from
+// initial_ to final_correspondence_m over anneal_iterations; the loop stops when a step after the
+// annealing is below the convergence thresholds or returns to the pose of the iteration before
+// (correspondences flipping between two sets), or after max_iterations.
 //
 // Degeneracy: in coordinates (x, y, yaw * L), L the RMS range of r's matched points (so that a
 // unit step of each moves the points by about a metre), the eigenvalue lambda_k of the Gauss-Newton
 // information J^T J of the point-to-line residuals is the information along eigen-direction v_k (a
-// correspondence whose normal points along v_k adds 1). Normals are fitted and tilted by their
-// fitting error; a tilted normal adds information along its line where the surfaces carry none
-// (along a corridor, many slightly tilted normals add up to what looks like a constraint on its
-// axis), so the expected contribution of each normal's variance (from its fit) is subtracted. A
-// direction left with less than min_direction_information is degenerate: the backgrounds do not
-// determine it (a corridor along its axis). The step then is a Gauss-Newton step restricted to the
-// other directions (solution remapping of Zhang, Kaess, Singh, "On degeneracy of
-// optimization-based state estimation problems", ICRA 2016), so the pose keeps its estimate along
-// the degenerate direction instead of wandering along it.
+// correspondence whose normal points along v_k adds 1). A fitted normal is tilted by its fitting
+// error, and a tilted normal adds information along its line where the surfaces carry none (along
+// a corridor, many slightly tilted normals add up to what looks like a constraint on its axis), so
+// the expected contribution of each normal's variance (from its fit) is subtracted. A direction
+// left with less than min_direction_information is degenerate: the backgrounds do not determine it
+// (a corridor along its axis). Degeneracy is judged at the converged pose (while the pose is wrong
+// or the correspondence distance wide, wrong pairs can hide it, or fake it). When there is a
+// degenerate direction, the ICP runs again from the initial estimate with every step a
+// Gauss-Newton step restricted to the other directions (solution remapping of Zhang, Kaess,
+// Singh, "On degeneracy of optimization-based state estimation problems", ICRA 2016): the result
+// keeps the initial estimate along the degenerate direction instead of wandering along it.
 //
 // Consistency score (lower is better, in [0, 1]): the MSAC cost of both backgrounds against each
 // other, symmetric and over every background point of both sensors:
@@ -81,9 +83,10 @@ struct IcpOptions {
   // Two adjacent beams farther apart than this span a depth jump, not a surface (a wall at 10 m
   // and 80 deg incidence has 0.5 deg beams 0.5 m apart).
   double max_segment_length_m = 0.5;
-  // The local line of a background at a beam (see "Method"): fitted over the chain-connected
-  // neighbours within line_radius_m of the beam's point (the first two also beyond it, so that the
-  // sparse points of a far wall get lines too), each within line_tolerance_m of the line so far.
+  // The local line of a background at a beam (see "Method"): fitted over the neighbouring beams
+  // within line_radius_m of the beam's point (the adjacent ones also beyond it, so that the sparse
+  // points of a far wall get lines too), halved while the points scatter by more than
+  // line_tolerance_m (RMS) about the line.
   double line_radius_m = 0.25;
   double line_tolerance_m = 0.03;
   // Fraction of the correspondences with the largest residuals dropped every iteration.
@@ -101,7 +104,7 @@ struct IcpOptions {
   double min_score_improvement = 0.002;
   // See "Degeneracy" above: the information a direction needs (a correspondence whose normal
   // points along the direction adds 1).
-  double min_direction_information = 1.0;
+  double min_direction_information = 0.5;
   // Floor of the residual standard deviation of the covariance (real backgrounds have errors
   // correlated between neighbouring beams that the RMS of a near-perfect fit does not show).
   double residual_floor_m = 0.005;
@@ -124,7 +127,7 @@ struct IcpResult {
   // reached (also when that pose was not applied; equal to score_before when the ICP did not run).
   double score_before = 0.0, score_after = 0.0;
   std::size_t correspondences = 0;  // trimmed correspondences at the ICP's final pose
-  int iterations = 0;
+  int iterations = 0;               // of both runs when a degenerate direction made a second one
   // Covariance of (x_m, y_m, yaw_rad) of the ICP's pose: sigma^2 (J^T J)^-1 with sigma^2 the
   // residual variance of the final correspondences, at least residual_floor_m^2. Still optimistic:
   // it treats the residuals as independent. Along a degenerate direction the variance is that of

@@ -48,7 +48,9 @@ L1mcFull BuildL1mcFull(std::size_t n, const std::vector<RelativeMeasurement>& me
       p.start(static_cast<Eigen::Index>(p.Unknown(i, j))) = common::NormalizeAngle(psi_j - psi_i);
     }
   }
-  auto x0 = [&](std::size_t i, std::size_t j) { return p.start(static_cast<Eigen::Index>(p.Unknown(i, j))); };
+  auto x0 = [&](std::size_t i, std::size_t j) {
+    return p.start(static_cast<Eigen::Index>(p.Unknown(i, j)));
+  };
 
   std::vector<Eigen::Triplet<double>> triplets;
   triplets.reserve(size.nonzeros);
@@ -128,7 +130,8 @@ L1mcFull BuildL1mcFull(std::size_t n, const std::vector<RelativeMeasurement>& me
 std::vector<double> YawsFromL1mc(const L1mcFull& problem, const Eigen::VectorXd& x,
                                  std::size_t reference) {
   std::vector<double> yaw(problem.n, 0.0);
-  if (reference >= problem.n || x.size() != static_cast<Eigen::Index>(problem.n * (problem.n - 1))) {
+  if (reference >= problem.n ||
+      x.size() != static_cast<Eigen::Index>(problem.n * (problem.n - 1))) {
     return yaw;
   }
   for (std::size_t j = 0; j < problem.n; ++j) {

@@ -4,9 +4,9 @@
 //
 // Unknowns: one tangent angle per directed pair, x_ij = w_ij ≈ φ_j - φ_i (eq. 18; R_ij = R_i^T R_j,
 // eq. 1), i != j: n (n - 1) columns. Rows, in this order:
-//   measurement  (eq. 19)  x_sr = normalize(θ_e)                per measurement e = (r, s), weight w_e
-//   inverse      (eq. 20)  x_ij + x_ji = 0                      per pair i < j
-//   transitivity (eq. 21)  x_ik + x_kj - x_ij = b_t             per triangle i < k < j
+//   measurement  (eq. 19)  x_sr = normalize(θ_e)                per measurement e = (r, s), weight
+//   w_e inverse      (eq. 20)  x_ij + x_ji = 0                      per pair i < j transitivity
+//   (eq. 21)  x_ik + x_kj - x_ij = b_t             per triangle i < k < j
 // with b_t = A_t x' - normalize(A_t x') (the paper's 2π normalisation; a multiple of 2π) for the
 // start x': x'_sr = normalize(θ_e) and x'_rs = -x'_sr for measured pairs (the first measurement
 // of a pair), x'_ij = wrap(ψ_j - ψ_i) with ψ = start_yaw_rad for unmeasured pairs. (The paper
@@ -46,14 +46,16 @@ struct L1mcFull {
   std::size_t transitivity_rows = 0;
   Eigen::SparseMatrix<double> a;  // (rows) x (n (n - 1)), entries ±1
   Eigen::VectorXd b;
-  Eigen::VectorXd weight;         // per row: w_e for measurement rows, 1 for the others
-  Eigen::VectorXd start;          // x'
+  Eigen::VectorXd weight;  // per row: w_e for measurement rows, 1 for the others
+  Eigen::VectorXd start;   // x'
   // The inverse and transitivity rows have an exact solution (their 2π offsets agree on every
   // cycle); false: the hard form is infeasible.
   bool offsets_consistent = false;
 
   // Column of x_ij (i != j, both < n).
-  std::size_t Unknown(std::size_t i, std::size_t j) const { return i * (n - 1) + (j < i ? j : j - 1); }
+  std::size_t Unknown(std::size_t i, std::size_t j) const {
+    return i * (n - 1) + (j < i ? j : j - 1);
+  }
   // Per row: true for the inverse and transitivity rows.
   std::vector<bool> ConstraintRows() const;
 };

@@ -145,8 +145,8 @@ TEST(L1mcFull, HardFormEqualsTheNodeFormOnRandomGraphs) {
       continue;
     }
     ++consistent;
-    // The same optimal cost (the node form's tie-break moves it by at most 1e-7 relative).
-    EXPECT_NEAR(node.l1_cost, lp.cost, 1e-7 * lp.cost + 1e-9) << "seed " << seed;
+    // The same optimal cost (the node form's tie-break moves it by at most 1e-6 relative).
+    EXPECT_NEAR(node.l1_cost, lp.cost, 1e-6 * lp.cost + 1e-9) << "seed " << seed;
     const std::vector<double> lp_yaw = YawsFromL1mc(full, lp.x, 0);
     if (random_weights) {
       ++unique_compared;
@@ -174,7 +174,7 @@ TEST(L1mcFull, HardFormEqualsTheNodeFormOnRandomGraphs) {
         cost += full.weight(row) * std::abs(r(row));
       }
     }
-    EXPECT_NEAR(cost, lp.cost, 1e-7 * lp.cost + 1e-9) << "seed " << seed;
+    EXPECT_NEAR(cost, lp.cost, 1e-6 * lp.cost + 1e-9) << "seed " << seed;
   }
   // The test exercised the equivalence (the rest had inconsistent offsets).
   std::printf("80 random graphs: %d with consistent offsets, %d of them with generic weights\n",
@@ -242,6 +242,7 @@ TEST(L1mcFull, IrlsReachesTheLpOptimumOfTheSoftForm) {
     options.max_iterations = 200;
     const L1IrlsResult irls = SolveL1Irls(full.a, full.b, full.weight, full.start, options);
     ASSERT_TRUE(irls.ok);
+    EXPECT_TRUE(irls.exact) << "seed " << seed;
     EXPECT_NEAR(irls.cost, lp.cost, 1e-6 * lp.cost) << "seed " << seed;
     EXPECT_LE(irls.lower_bound, lp.cost * (1 + 1e-9) + 1e-12);
     EXPECT_GE(irls.lower_bound, lp.cost * (1 - 1e-6));

@@ -1,5 +1,6 @@
 #include "central_daemon/calibration/pipeline.h"
 
+#include <Eigen/LU>
 #include <algorithm>
 #include <cmath>
 #include <limits>

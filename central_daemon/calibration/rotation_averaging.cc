@@ -3,12 +3,10 @@
 #include <Eigen/SparseCholesky>
 #include <algorithm>
 #include <cmath>
-#include <deque>
 #include <limits>
 #include <numeric>
 
 #include "central_daemon/calibration/spectral.h"
-
 
 namespace lrfnet::calib {
 namespace {
@@ -33,10 +31,10 @@ struct NodeProblem {
   std::size_t n = 0;
   std::size_t reference = 0;
   std::vector<std::size_t> r, s;
-  std::vector<double> theta;   // measured yaw (any representative)
-  std::vector<double> weight;  // w_e
-  std::vector<double> b;       // theta + 2π k_e
-  std::vector<Eigen::Index> column;  // node -> unknown index, -1 for the reference
+  std::vector<double> theta;                       // measured yaw (any representative)
+  std::vector<double> weight;                      // w_e
+  std::vector<double> b;                           // theta + 2π k_e
+  std::vector<Eigen::Index> column;                // node -> unknown index, -1 for the reference
   std::vector<std::vector<std::size_t>> adjacent;  // node -> its edges
 
   std::size_t edges() const { return r.size(); }
@@ -50,7 +48,8 @@ NodeProblem MakeProblem(std::size_t n, std::size_t reference,
   for (const RelativeMeasurement& m : measurements) {
     p.r.push_back(m.r);
     p.s.push_back(m.s);
-    p.theta.push_back(m.s_from_r.yaw_rad);
+    // Any representative may come in; wrapped first so that the offsets stay small integers.
+    p.theta.push_back(common::NormalizeAngle(m.s_from_r.yaw_rad));
     p.weight.push_back(use_weights ? m.weight : 1.0);
   }
   p.b = p.theta;
@@ -134,9 +133,9 @@ bool SolveWeighted(const NodeProblem& p, const std::vector<double>& c, Solver* s
 
 // A spanning tree rooted at the reference.
 struct Tree {
-  std::vector<bool> in_tree;              // per edge
-  std::vector<std::size_t> parent_edge;   // per node; kNone at the root
-  std::vector<std::size_t> order;         // breadth-first from the root
+  std::vector<bool> in_tree;             // per edge
+  std::vector<std::size_t> parent_edge;  // per node; kNone at the root
+  std::vector<std::size_t> order;        // breadth-first from the root
 };
 
 Tree RootTree(const NodeProblem& p, std::vector<bool> in_tree) {
@@ -411,7 +410,8 @@ std::vector<double> ConsensusYaws(std::size_t n, std::size_t reference,
   for (std::size_t step = 1; step < n; ++step) {
     std::size_t next = kNone;
     for (std::size_t v = 0; v < n; ++v) {
-      if (!placed[v] && placed_weight[v] > 0.0 && (next == kNone || placed_weight[v] > placed_weight[next])) {
+      if (!placed[v] && placed_weight[v] > 0.0 &&
+          (next == kNone || placed_weight[v] > placed_weight[next])) {
         next = v;
       }
     }
@@ -493,10 +493,12 @@ std::optional<std::string> Validate(const RotationAveragingOptions& o) {
   if (!(o.initial_epsilon >= o.irls_epsilon) || !std::isfinite(o.initial_epsilon)) {
     return "initial_epsilon must be finite and >= irls_epsilon";
   }
-  if (!(o.epsilon_factor > 0.0 && o.epsilon_factor <= 1.0)) return "epsilon_factor must be in (0, 1]";
+  if (!(o.epsilon_factor > 0.0 && o.epsilon_factor <= 1.0))
+    return "epsilon_factor must be in (0, 1]";
   if (o.max_iterations < 1) return "max_iterations must be >= 1";
   if (o.max_offset_rounds < 1) return "max_offset_rounds must be >= 1";
-  if (!(o.tolerance >= 0.0) || !std::isfinite(o.tolerance)) return "tolerance must be finite and >= 0";
+  if (!(o.tolerance >= 0.0) || !std::isfinite(o.tolerance))
+    return "tolerance must be finite and >= 0";
   if (!(o.outlier_threshold_deg > 0.0 && o.outlier_threshold_deg <= 180.0)) {
     return "outlier_threshold_deg must be in (0, 180]";
   }
@@ -564,11 +566,11 @@ void FillRotationDiagnostics(std::size_t n, std::size_t reference,
   for (double w : p.weight) mean_weight += w / static_cast<double>(p.edges());
   const double variance = dof > 0 ? chi2 / static_cast<double>(dof) : prior * prior * mean_weight;
   const auto unknowns = static_cast<Eigen::Index>(n - 1);
-  const Eigen::MatrixXd inverse =
-      solver.solve(Eigen::MatrixXd::Identity(unknowns, unknowns));
+  const Eigen::MatrixXd inverse = solver.solve(Eigen::MatrixXd::Identity(unknowns, unknowns));
   for (std::size_t v = 0; v < n; ++v) {
     if (p.column[v] >= 0) {
-      result->yaw_sigma_rad[v] = std::sqrt(std::max(0.0, variance * inverse(p.column[v], p.column[v])));
+      result->yaw_sigma_rad[v] =
+          std::sqrt(std::max(0.0, variance * inverse(p.column[v], p.column[v])));
     }
   }
 }
@@ -680,6 +682,11 @@ RotationAveragingResult AverageRotationsL1(std::size_t n, std::size_t reference,
     result.error = *error;
     return result;
   }
+  if (!options.initial_yaw_rad.empty() && options.initial_yaw_rad.size() != n) {
+    result.error = "initial_yaw_rad has " + std::to_string(options.initial_yaw_rad.size()) +
+                   " values for " + std::to_string(n) + " nodes";
+    return result;
+  }
 
   // Starts. The wrapped cost has local minima (a block of nodes turned by a wrong 2π branch of
   // the measurements between it and the rest), so several starts are solved and the lowest cost
@@ -711,7 +718,8 @@ RotationAveragingResult AverageRotationsL1(std::size_t n, std::size_t reference,
   std::size_t most = 0;
   for (std::size_t count : triangles) most = std::max(most, count);
   for (std::size_t e = 0; e < p.edges(); ++e) {
-    p.weight[e] *= 1.0 + kTieBreak * static_cast<double>(triangles[e]) / static_cast<double>(1 + most);
+    p.weight[e] *=
+        1.0 + kTieBreak * static_cast<double>(triangles[e]) / static_cast<double>(1 + most);
   }
   Solver solver;
   bool analysed = false;
@@ -753,24 +761,14 @@ RotationAveragingResult AverageRotationsL1(std::size_t n, std::size_t reference,
 
 namespace {
 
-// The generic exact finish: the vertex through the rows with the smallest |residual| (as many as
-// unknowns, plus any exactly zero), x from those rows, and the LP dual on them from
-// A_S^T g_S = -A_N^T g_N with g_N = w sign(r_N) (least norm when degenerate). Optimal iff
-// |g_S| <= w_S; then `bound` is the exact optimum.
-bool FinishGeneric(const SparseMatrix& a, const Eigen::VectorXd& b, const Eigen::VectorXd& weight,
-                   const Eigen::VectorXd& r_irls, Eigen::VectorXd* x_out, double* cost_out) {
-  const Eigen::Index rows = a.rows(), cols = a.cols();
-  std::vector<Eigen::Index> order(static_cast<std::size_t>(rows));
-  std::iota(order.begin(), order.end(), Eigen::Index{0});
-  std::sort(order.begin(), order.end(), [&](Eigen::Index i, Eigen::Index j) {
-    return std::abs(r_irls(i)) < std::abs(r_irls(j));
-  });
-  std::vector<bool> active(static_cast<std::size_t>(rows), false);
-  for (Eigen::Index k = 0; k < rows; ++k) {
-    const Eigen::Index i = order[static_cast<std::size_t>(k)];
-    if (k >= cols && std::abs(r_irls(i)) > kZeroResidualRad) break;
-    active[static_cast<std::size_t>(i)] = true;
-  }
+// The generic exact finish at one active set S: x from the rows in S, and the LP dual on them from
+// A_S^T g_S = -A_N^T g_N with g_N = w sign(r_N) (the solution nearest to the IRLS flow, as the
+// dual is not unique at a degenerate vertex). Optimal iff the rows in S hold exactly and
+// |g_S| <= w_S (up to kCertifyTolerance); false otherwise or when S does not determine x.
+bool FinishGenericAt(const SparseMatrix& a, const Eigen::VectorXd& b, const Eigen::VectorXd& weight,
+                     const Eigen::VectorXd& g_irls, const std::vector<bool>& active,
+                     Eigen::VectorXd* x_out, double* cost_out) {
+  const Eigen::Index rows = a.rows();
   Eigen::VectorXd mask(rows);
   for (Eigen::Index i = 0; i < rows; ++i) mask(i) = active[static_cast<std::size_t>(i)] ? 1.0 : 0.0;
   const SparseMatrix as = mask.asDiagonal() * a;  // inactive rows zeroed
@@ -789,16 +787,51 @@ bool FinishGeneric(const SparseMatrix& a, const Eigen::VectorXd& b, const Eigen:
       g_n(i) = std::copysign(weight(i), r(i));
     }
   }
-  const Eigen::VectorXd g_s = as * solver.solve(-(a.transpose() * g_n));
+  Eigen::VectorXd g_s = mask.cwiseProduct(g_irls);
+  g_s += as * solver.solve(-(a.transpose() * g_n) - ast * g_s);
   for (Eigen::Index i = 0; i < rows; ++i) {
-    if (active[static_cast<std::size_t>(i)] && std::abs(g_s(i)) > weight(i) * (1.0 + kCertifyTolerance)) {
+    if (active[static_cast<std::size_t>(i)] &&
+        std::abs(g_s(i)) > weight(i) * (1.0 + kCertifyTolerance)) {
       return false;
     }
   }
-  if ((a.transpose() * (g_n + g_s)).cwiseAbs().maxCoeff() > 1e-9 * weight.cwiseAbs().sum()) return false;
+  if ((a.transpose() * (g_n + g_s)).cwiseAbs().maxCoeff() > 1e-9 * weight.cwiseAbs().sum())
+    return false;
   *x_out = x;
   *cost_out = weight.dot(r.cwiseAbs());
   return true;
+}
+
+// Active sets from the IRLS residuals: at least as many rows as unknowns, cut where the sorted
+// |residual| jumps most (a degenerate vertex, e.g. the full form's constraint rows, has more
+// active rows than unknowns, left by the IRLS orders of magnitude below the others); the few
+// largest jumps are tried in turn, as the smallest rows alone may not determine x.
+bool FinishGeneric(const SparseMatrix& a, const Eigen::VectorXd& b, const Eigen::VectorXd& weight,
+                   const Eigen::VectorXd& r_irls, const Eigen::VectorXd& g_irls,
+                   Eigen::VectorXd* x_out, double* cost_out) {
+  const Eigen::Index rows = a.rows(), cols = a.cols();
+  if (rows <= cols) return false;
+  std::vector<Eigen::Index> order(static_cast<std::size_t>(rows));
+  std::iota(order.begin(), order.end(), Eigen::Index{0});
+  std::sort(order.begin(), order.end(), [&](Eigen::Index i, Eigen::Index j) {
+    return std::abs(r_irls(i)) < std::abs(r_irls(j));
+  });
+  std::vector<std::pair<double, Eigen::Index>> jumps;  // (ratio, last active position)
+  for (Eigen::Index k = cols - 1; k + 1 < rows; ++k) {
+    const double here = std::max(std::abs(r_irls(order[static_cast<std::size_t>(k)])), 1e-300);
+    jumps.emplace_back(std::abs(r_irls(order[static_cast<std::size_t>(k + 1)])) / here, k);
+  }
+  const std::size_t tries = std::min<std::size_t>(4, jumps.size());
+  std::partial_sort(jumps.begin(), jumps.begin() + static_cast<std::ptrdiff_t>(tries), jumps.end(),
+                    [](const auto& x, const auto& y) { return x.first > y.first; });
+  for (std::size_t t = 0; t < tries; ++t) {
+    std::vector<bool> active(static_cast<std::size_t>(rows), false);
+    for (Eigen::Index k = 0; k <= jumps[t].second; ++k) {
+      active[static_cast<std::size_t>(order[static_cast<std::size_t>(k)])] = true;
+    }
+    if (FinishGenericAt(a, b, weight, g_irls, active, x_out, cost_out)) return true;
+  }
+  return false;
 }
 
 }  // namespace
@@ -850,7 +883,8 @@ L1IrlsResult SolveL1Irls(const Eigen::SparseMatrix<double>& a, const Eigen::Vect
     if (best_cost - bound <= 1e-2 * best_cost) {
       Eigen::VectorXd vertex;
       double vertex_cost = 0.0;
-      if (FinishGeneric(a, b, weight, r, &vertex, &vertex_cost) && vertex_cost <= best_cost) {
+      if (FinishGeneric(a, b, weight, r, c.cwiseProduct(r), &vertex, &vertex_cost) &&
+          vertex_cost <= best_cost) {
         best_x = vertex;
         best_cost = vertex_cost;
         bound = vertex_cost;

@@ -8,32 +8,38 @@
 //
 // Node-angle form. Algorithm 1 has one unknown per directed pair, w_ij ≈ φ_j - φ_i, measurement
 // rows (eq. 19), inverse rows (eq. 20) and transitivity rows for every triangle (eq. 21) with the
-// 2π normalisation b_t = A_t b_m - normalize(A_t b_m); that is O(N^3) rows (l1mc_full.h builds
-// it). With the inverse and transitivity rows as hard constraints its feasible set is exactly
-// {w_ij = φ_j - φ_i + 2π m_ij} for node angles φ and integer offsets m fixed by b_t (the
-// triangles of the complete graph generate its cycle space), so its measurement part is
+// 2π normalisation b_t = A_t b_m - normalize(A_t b_m): O(n^3) rows (l1mc_full.h builds it). With
+// the inverse and transitivity rows as hard constraints its feasible set is exactly
+// {w_ij = φ_j - φ_i + 2π m_ij} for node angles φ and integers m fixed by the b_t (the triangles
+// of the complete graph generate its cycle space), so its measurement part is
 //     min_φ  Σ_e w_e |φ_r - φ_s - b̃_e|,   b̃_e = θ_e + 2π k_e,
-// a problem over n - 1 unknowns with one row per measurement. Here the offsets k_e are fixed by
-// normalising every measurement against the current solution (k_e = round((φ_r - φ_s - θ_e)/2π),
-// so every residual lies in [-π, π]: the 2π normalisation of the paper), starting from a robust
-// consensus placement (ConsensusYaws below), and re-fixed until they no longer change. With the paper's
-// offsets equal to these, both forms have the same optimum; l1mc_full_test.cc shows it against an
-// exact LP (Clp) on small random graphs, and explains where the paper's soft form (constraint
-// rows weighted like measurements) differs.
+// over n - 1 unknowns with one row per measurement. Here the offsets k_e are fixed by normalising
+// every measurement against a solution (k_e = round((φ_r - φ_s - θ_e) / 2π): every residual in
+// [-π, π], the paper's normalisation) and re-fixed against the optimum until they no longer
+// change. Where the paper's offsets equal these, both forms have the same optimum;
+// l1mc_full_test.cc shows it against an exact LP (Clp) on random graphs and explains where the
+// paper's soft form (constraint rows weighted like measurements) and its per-triangle
+// normalisation differ.
+//
+// Starts. The wrapped cost is not convex: the result is the exact optimum for its 2π offsets,
+// which are those of a local optimum of the wrapped cost. Its minima differ by blocks of nodes
+// turned against the rest where the outliers locally outweigh the inliers, so the solver starts
+// from ConsensusYaws, the spectral relaxation and ConsistentTreeYaws (all discounting the
+// measurements that close no consistent triangle) and keeps the lowest cost.
 //
 // Solver. IRLS: each iteration solves the weighted least squares with weights w_e / max(|r_e|, ε)
 // (reduced graph Laplacian, sparse LDLT), ε shrinking geometrically to `irls_epsilon`. Every
-// iteration gives a dual-feasible flow g_e = (IRLS weight) r_e (scaled into |g_e| <= w_e, with
-// Σ_e g_e ∂r_e/∂φ = 0), hence the lower bound -Σ g_e b̃_e on the optimum. The IRLS point is then
-// finished exactly: the spanning tree of its smallest residuals defines a vertex of the LP; the
-// vertex is optimal iff the tree edges' flows (fixed by flow conservation from g_e = w_e sign(r_e)
-// on the other edges) satisfy |g_e| <= w_e (the LP dual); a violating tree edge is pivoted out
-// by moving its subtree to the weighted median of the breakpoints across the cut (a network
-// simplex step). `certified` = the returned yaws are an exact optimum (up to round-off) for the
-// final offsets; otherwise l1_lower_bound bounds how far the cost can be from it.
+// iteration gives a flow g_e = (IRLS weight) r_e, made conserved (Σ_e g_e ∂r_e/∂φ_v = 0) and
+// scaled into |g_e| <= w_e: a dual-feasible point, hence the lower bound -Σ g_e b̃_e. Near the
+// optimum the IRLS point is finished exactly: the spanning tree of its smallest residuals is a
+// vertex of the LP; it is optimal iff the tree edges' flows, fixed by conservation from
+// g_e = w_e sign(r_e) on the other edges, satisfy |g_e| <= w_e (the LP dual); a violating tree
+// edge is pivoted out by moving its subtree to the weighted median of the breakpoints across the
+// cut (a network-simplex step). `certified`: the yaws are that optimum up to round-off.
 //
-// The wrapped problem is not convex: the result is the global optimum for its 2π offsets, which
-// are those of a local optimum of the wrapped cost reached from the consensus start.
+// Ties. An L1 optimum is often a whole face (e.g. a node held by as much weight on either side);
+// the solver then prefers the measurements that close consistent triangles, by raising their
+// weights by at most 1e-6 relative: the returned cost is within 1e-6 relative of the optimum.
 //
 // Pure functions; thread-safe.
 
@@ -49,13 +55,13 @@
 namespace lrfnet::calib {
 
 struct RotationAveragingOptions {
-  bool use_weights = false;          // w_e = measurement weight (e.g. Schenk's N/d); else 1
-  double irls_epsilon = 1e-10;       // rad: the final IRLS smoothing ε
-  double initial_epsilon = 1e-2;     // rad: the first IRLS smoothing ε
-  double epsilon_factor = 0.25;      // ε shrinks by this factor per IRLS iteration
-  int max_iterations = 200;          // IRLS iterations (all offset rounds together)
-  int max_offset_rounds = 10;        // re-normalisations of the 2π offsets
-  double tolerance = 1e-9;           // stop when (cost - lower bound) <= tolerance * cost
+  bool use_weights = false;            // w_e = measurement weight (e.g. Schenk's N/d); else 1
+  double irls_epsilon = 1e-10;         // rad: the final IRLS smoothing ε
+  double initial_epsilon = 1e-2;       // rad: the first IRLS smoothing ε
+  double epsilon_factor = 0.25;        // ε shrinks by this factor per IRLS iteration
+  int max_iterations = 200;            // IRLS iterations per start (all offset rounds together)
+  int max_offset_rounds = 10;          // re-normalisations of the 2π offsets
+  double tolerance = 1e-9;             // or stop when (cost - lower bound) <= tolerance * cost
   double outlier_threshold_deg = 5.0;  // |residual| above: the edge is a rotation outlier
   // Yaw σ of a measurement (of average weight) when the inlier edges have no redundancy (a tree):
   // no residual to estimate it from.
@@ -87,11 +93,11 @@ struct RotationAveragingResult {
   // Reference 0.
   std::vector<double> yaw_sigma_rad;
   // L1 only:
-  bool certified = false;            // exact LP optimum for the final offsets (see above)
-  double l1_lower_bound = 0.0;       // a lower bound of the optimum for the final offsets
-  int offset_rounds = 0;             // solves with different 2π offsets
-  int pivots = 0;                    // network-simplex steps of the exact finish
-  int starts = 0;                    // starts solved
+  bool certified = false;       // exact LP optimum for the final offsets (see above)
+  double l1_lower_bound = 0.0;  // a lower bound of the optimum for the final offsets
+  int offset_rounds = 0;        // solves with different 2π offsets
+  int pivots = 0;               // network-simplex steps of the exact finish
+  int starts = 0;               // starts solved
 };
 
 RotationAveragingResult AverageRotationsL1(std::size_t n, std::size_t reference,
@@ -113,13 +119,14 @@ std::vector<double> ConsensusYaws(std::size_t n, std::size_t reference,
 
 // Per measurement: the number of triangles of measurements it closes consistently, i.e. with
 // |wrap(sum of the relative yaws around the triangle)| <= tol_rad (cycle consistency: an outlier
-// rarely closes a triangle).
+// rarely closes a triangle). Measurements must pass CheckGraphInput.
 std::vector<std::size_t> ConsistentTriangles(std::size_t n,
                                              const std::vector<RelativeMeasurement>& measurements,
                                              double tol_rad);
 
 // Yaws composed along the spanning tree that prefers the measurements closing the most
-// consistent triangles (then the heavier; Kruskal), reference 0.
+// consistent triangles (then the heavier; Kruskal), reference 0, yaws in (-π, π]. Inputs must
+// pass CheckGraphInput and be connected.
 std::vector<double> ConsistentTreeYaws(std::size_t n, std::size_t reference,
                                        const std::vector<RelativeMeasurement>& measurements,
                                        bool use_weights, double triangle_tol_rad);
@@ -131,7 +138,8 @@ std::vector<double> LeastSquaresYaws(std::size_t n, std::size_t reference,
                                      const std::vector<RelativeMeasurement>& measurements,
                                      bool use_weights, const std::vector<double>& branch_yaw_rad);
 
-// Fills residual_rad, inlier, l1_cost and yaw_sigma_rad of `result` from result->yaw_rad.
+// Fills residual_rad, inlier, l1_cost and yaw_sigma_rad of `result` from result->yaw_rad (size
+// n; inputs already checked as by AverageRotationsL1).
 void FillRotationDiagnostics(std::size_t n, std::size_t reference,
                              const std::vector<RelativeMeasurement>& measurements,
                              const RotationAveragingOptions& options,
@@ -148,7 +156,7 @@ struct L1IrlsOptions {
   double tolerance = 1e-9;  // relative gap (cost - lower bound) / cost
 };
 struct L1IrlsResult {
-  bool ok = false;          // false: the normal equations were singular
+  bool ok = false;  // false: the normal equations were singular
   Eigen::VectorXd x;
   double cost = 0.0;
   double lower_bound = 0.0;  // -g^T b for the best dual-feasible g found

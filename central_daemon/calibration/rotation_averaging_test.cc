@@ -31,7 +31,8 @@ RelativeMeasurement Measure(const std::vector<double>& truth, std::size_t r, std
   return Edge(r, s, truth[r] - truth[s] + error_rad + shift);
 }
 
-double MaxYawError(const std::vector<double>& truth, const std::vector<double>& yaw, std::size_t ref) {
+double MaxYawError(const std::vector<double>& truth, const std::vector<double>& yaw,
+                   std::size_t ref) {
   double worst = 0.0;
   for (std::size_t v = 0; v < truth.size(); ++v) {
     worst = std::max(worst, std::abs(AngleDiff(yaw[v], truth[v] - truth[ref])));
@@ -82,13 +83,14 @@ TEST(AverageRotationsL1, NoiseFreeCompleteGraphIsExact) {
 TEST(AverageRotationsL1, HandlesThe2PiWrap) {
   // True yaws on both sides of ±π; the measurements are given as θ + 2π, θ - 2π or θ, and some
   // relative yaws are themselves near ±π.
-  const std::vector<double> truth = {DegToRad(179.9), DegToRad(-179.8), DegToRad(179.5),
-                                     DegToRad(-179.95), DegToRad(0.3), DegToRad(-0.2)};
+  const std::vector<double> truth = {DegToRad(179.9),   DegToRad(-179.8), DegToRad(179.5),
+                                     DegToRad(-179.95), DegToRad(0.3),    DegToRad(-0.2)};
   std::mt19937 rng(11);
   std::normal_distribution<double> noise(0.0, DegToRad(0.05));
   std::vector<RelativeMeasurement> m;
   for (std::size_t i = 0; i < truth.size(); ++i) {
-    for (std::size_t j = i + 1; j < truth.size(); ++j) m.push_back(Measure(truth, i, j, noise(rng), rng));
+    for (std::size_t j = i + 1; j < truth.size(); ++j)
+      m.push_back(Measure(truth, i, j, noise(rng), rng));
   }
   // Exactly π apart (the branch cut of the normalisation) as well.
   m.push_back(Edge(4, 0, truth[4] - truth[0] + 3 * kPi - 3 * kPi));
@@ -102,7 +104,8 @@ TEST(AverageRotationsL1, HandlesThe2PiWrap) {
   // Noise-free: exact.
   for (std::size_t e = 0; e + 1 < m.size(); ++e) {
     const std::size_t r = m[e].r, s = m[e].s;
-    m[e].s_from_r.yaw_rad = truth[r] - truth[s] + 2 * kPi * static_cast<double>(static_cast<int>(e % 3) - 1);
+    m[e].s_from_r.yaw_rad =
+        truth[r] - truth[s] + 2 * kPi * static_cast<double>(static_cast<int>(e % 3) - 1);
   }
   const RotationAveragingResult exact = AverageRotationsL1(truth.size(), 0, m, {});
   ASSERT_TRUE(exact.ok);
@@ -204,7 +207,7 @@ TEST(AverageRotationsL1, EqualsTheExactLpOptimum) {
     a.setFromTriplets(triplets.begin(), triplets.end());
     const LpL1Result lp = SolveL1ByLp(a, b, w, {});
     ASSERT_TRUE(lp.ok) << lp.error;
-    EXPECT_NEAR(result.l1_cost, lp.cost, 1e-7 * lp.cost) << "seed " << seed;
+    EXPECT_NEAR(result.l1_cost, lp.cost, 1e-6 * lp.cost) << "seed " << seed;
     for (std::size_t v = 1; v < n; ++v) {
       EXPECT_NEAR(AngleDiff(result.yaw_rad[v], lp.x(column(v))), 0.0, 1e-8) << v;
     }
@@ -216,7 +219,7 @@ TEST(AverageRotationsL1, WeightsDecideBetweenDisagreeingMeasurements) {
   // and 1 (weight 1 each) and at 0.5 rad from node 2 (weight 5).
   std::vector<RelativeMeasurement> m = {Edge(1, 0, 0.0, 10.0), Edge(2, 0, 0.0, 10.0),
                                         Edge(2, 1, 0.0, 10.0), Edge(3, 0, 0.0, 1.0),
-                                        Edge(3, 1, 0.0, 1.0), Edge(3, 2, 0.5, 5.0)};
+                                        Edge(3, 1, 0.0, 1.0),  Edge(3, 2, 0.5, 5.0)};
   RotationAveragingOptions options;
   const RotationAveragingResult uniform = AverageRotationsL1(4, 0, m, options);
   ASSERT_TRUE(uniform.ok);
@@ -302,8 +305,18 @@ TEST(AverageRotationsL1, RejectsBadInputWithAReason) {
   EXPECT_NE(result.error.find("measurement 1"), std::string::npos);
   EXPECT_NE(result.error.find("not finite"), std::string::npos);
   RotationAveragingOptions options;
+  options.initial_yaw_rad = {0.0, 0.0, 0.0};
+  EXPECT_NE(AverageRotationsL1(2, 0, one, options).error.find("initial_yaw_rad has 3 values"),
+            std::string::npos);
+  options.initial_yaw_rad.clear();
   options.irls_epsilon = 0.0;
-  EXPECT_NE(AverageRotationsL1(2, 0, one, options).error.find("invalid options"), std::string::npos);
+  EXPECT_NE(AverageRotationsL1(2, 0, one, options).error.find("invalid options"),
+            std::string::npos);
+  // A huge (finite) representative of the angle is still that angle.
+  const RotationAveragingResult huge =
+      AverageRotationsL1(2, 0, {Edge(1, 0, 0.25 + 2 * kPi * 1e6)}, {});
+  ASSERT_TRUE(huge.ok);
+  EXPECT_NEAR(huge.yaw_rad[1], 0.25, 1e-8);
   // Two nodes, one measurement: the trivial answer.
   const RotationAveragingResult two = AverageRotationsL1(2, 0, one, {});
   ASSERT_TRUE(two.ok);
@@ -327,8 +340,11 @@ TEST(RotationAveragingOptions, ValidateNamesTheBadField) {
   check([](auto& o) { o.tolerance = std::numeric_limits<double>::quiet_NaN(); }, "tolerance");
   check([](auto& o) { o.outlier_threshold_deg = 0.0; }, "outlier_threshold_deg");
   check([](auto& o) { o.prior_sigma_deg = 0.0; }, "prior_sigma_deg");
-  check([](auto& o) { o.initial_yaw_rad = {0.0, std::numeric_limits<double>::infinity()}; },
-        "initial_yaw_rad");
+  check(
+      [](auto& o) {
+        o.initial_yaw_rad = {0.0, std::numeric_limits<double>::infinity()};
+      },
+      "initial_yaw_rad");
 }
 
 TEST(ConsistentTriangles, AnOutlierClosesNoTriangle) {

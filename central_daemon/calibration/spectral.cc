@@ -1,6 +1,7 @@
 #include "central_daemon/calibration/spectral.h"
 
 #include <Eigen/Eigenvalues>
+#include <algorithm>
 #include <cmath>
 #include <complex>
 #include <random>
@@ -42,6 +43,7 @@ std::vector<double> SpectralYaws(std::size_t n, std::size_t reference,
   std::vector<double> alpha, beta;
   Eigen::VectorXcd w(size);
   Eigen::VectorXd top_s;
+  double scale = 0.0;  // largest Lanczos coefficient: the scale of H
   for (Eigen::Index k = 0; k < size; ++k) {
     basis.push_back(q);
     Apply(measurements, use_weights, q, &w);
@@ -52,25 +54,31 @@ std::vector<double> SpectralYaws(std::size_t n, std::size_t reference,
       for (const Eigen::VectorXcd& b : basis) w -= b.dot(w) * b;
     }
     const double b_next = w.norm();
-    const auto m = static_cast<Eigen::Index>(alpha.size());
-    Eigen::MatrixXd t = Eigen::MatrixXd::Zero(m, m);
-    for (Eigen::Index i = 0; i < m; ++i) {
-      t(i, i) = alpha[static_cast<std::size_t>(i)];
-      if (i + 1 < m) t(i, i + 1) = t(i + 1, i) = beta[static_cast<std::size_t>(i)];
-    }
-    Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> eig(t);
-    if (eig.info() != Eigen::Success) break;
-    top_s = eig.eigenvectors().col(m - 1);
-    const double theta = eig.eigenvalues()(m - 1);
-    if (b_next * std::abs(top_s(m - 1)) <= 1e-12 * std::max(std::abs(theta), 1e-300) ||
-        b_next <= 1e-14) {
-      break;
+    scale = std::max({scale, std::abs(alpha.back()), b_next});
+    // The Ritz pair is checked every few steps (a dense solve of the small tridiagonal matrix),
+    // and at the end: the Krylov space is exhausted or became invariant.
+    const bool last = k + 1 == size || b_next <= 1e-14 * scale;
+    if (k % 8 == 7 || last) {
+      const auto m = static_cast<Eigen::Index>(alpha.size());
+      Eigen::MatrixXd t = Eigen::MatrixXd::Zero(m, m);
+      for (Eigen::Index i = 0; i < m; ++i) {
+        t(i, i) = alpha[static_cast<std::size_t>(i)];
+        if (i + 1 < m) t(i, i + 1) = t(i + 1, i) = beta[static_cast<std::size_t>(i)];
+      }
+      Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> eig(t);
+      if (eig.info() != Eigen::Success) break;
+      top_s = eig.eigenvectors().col(m - 1);
+      const double theta = eig.eigenvalues()(m - 1);
+      if (last || b_next * std::abs(top_s(m - 1)) <= 1e-12 * std::max(std::abs(theta), 1e-300)) {
+        break;
+      }
     }
     beta.push_back(b_next);
     q = w / b_next;
   }
   Eigen::VectorXcd top = Eigen::VectorXcd::Zero(size);
-  for (Eigen::Index i = 0; i < top_s.size(); ++i) top += top_s(i) * basis[static_cast<std::size_t>(i)];
+  for (Eigen::Index i = 0; i < top_s.size(); ++i)
+    top += top_s(i) * basis[static_cast<std::size_t>(i)];
   const Complex ref = top(static_cast<Eigen::Index>(reference));
   for (std::size_t v = 0; v < n; ++v) {
     yaw[v] = std::arg(top(static_cast<Eigen::Index>(v)) * std::conj(ref));
@@ -79,9 +87,9 @@ std::vector<double> SpectralYaws(std::size_t n, std::size_t reference,
   return yaw;
 }
 
-RotationAveragingResult AverageRotationsSpectral(std::size_t n, std::size_t reference,
-                                                 const std::vector<RelativeMeasurement>& measurements,
-                                                 const RotationAveragingOptions& options) {
+RotationAveragingResult AverageRotationsSpectral(
+    std::size_t n, std::size_t reference, const std::vector<RelativeMeasurement>& measurements,
+    const RotationAveragingOptions& options) {
   RotationAveragingResult result;
   if (auto error = Validate(options)) {
     result.error = "invalid options: " + *error;
@@ -101,9 +109,9 @@ RotationAveragingResult AverageRotationsSpectral(std::size_t n, std::size_t refe
   return result;
 }
 
-RotationAveragingResult AverageRotationsSpectral(std::size_t n, std::size_t reference,
-                                                 const std::vector<RelativeMeasurement>& measurements,
-                                                 bool use_weights) {
+RotationAveragingResult AverageRotationsSpectral(
+    std::size_t n, std::size_t reference, const std::vector<RelativeMeasurement>& measurements,
+    bool use_weights) {
   RotationAveragingOptions options;
   options.use_weights = use_weights;
   return AverageRotationsSpectral(n, reference, measurements, options);

@@ -75,7 +75,8 @@ TEST(AverageRotationsSpectral, MatchesADenseEigensolver) {
                             0.5 + u(rng)));
       }
     }
-    Eigen::MatrixXcd h = Eigen::MatrixXcd::Zero(static_cast<Eigen::Index>(n), static_cast<Eigen::Index>(n));
+    Eigen::MatrixXcd h =
+        Eigen::MatrixXcd::Zero(static_cast<Eigen::Index>(n), static_cast<Eigen::Index>(n));
     for (const RelativeMeasurement& e : m) {
       const auto r = static_cast<Eigen::Index>(e.r), s = static_cast<Eigen::Index>(e.s);
       h(r, s) += std::polar(e.weight, e.s_from_r.yaw_rad);

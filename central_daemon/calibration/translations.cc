@@ -28,7 +28,8 @@ std::optional<std::string> Validate(const TranslationOptions& options) {
 TranslationResult SolveTranslations(std::size_t n, std::size_t reference,
                                     const std::vector<double>& yaw_rad,
                                     const std::vector<RelativeMeasurement>& measurements,
-                                    const std::vector<bool>& use, const TranslationOptions& options) {
+                                    const std::vector<bool>& use,
+                                    const TranslationOptions& options) {
   TranslationResult result;
   if (auto error = Validate(options)) {
     result.error = "invalid options: " + *error;
@@ -44,7 +45,8 @@ TranslationResult SolveTranslations(std::size_t n, std::size_t reference,
     return result;
   }
   if (yaw_rad.size() != n) {
-    result.error = "got " + std::to_string(yaw_rad.size()) + " yaws for " + std::to_string(n) + " nodes";
+    result.error =
+        "got " + std::to_string(yaw_rad.size()) + " yaws for " + std::to_string(n) + " nodes";
     return result;
   }
   for (std::size_t v = 0; v < n; ++v) {
@@ -145,11 +147,13 @@ TranslationResult SolveTranslations(std::size_t n, std::size_t reference,
     double mean_weight = 1.0;
     if (options.use_weights) {
       double sum = 0.0;
-      for (std::size_t e = 0; e < measurements.size(); ++e) sum += use[e] ? measurements[e].weight : 0.0;
+      for (std::size_t e = 0; e < measurements.size(); ++e)
+        sum += use[e] ? measurements[e].weight : 0.0;
       mean_weight = sum / static_cast<double>(used_count);
     }
     result.variance_factor =
-        mean_weight * (options.use_covariances ? 1.0 : options.prior_sigma_m * options.prior_sigma_m);
+        mean_weight *
+        (options.use_covariances ? 1.0 : options.prior_sigma_m * options.prior_sigma_m);
   }
   const Eigen::MatrixXd inverse = solver.solve(Eigen::MatrixXd::Identity(unknowns, unknowns));
   result.position_cov_m2.assign(n, Eigen::Matrix2d::Zero());

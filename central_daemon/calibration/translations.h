@@ -40,12 +40,12 @@ std::optional<std::string> Validate(const TranslationOptions& options);
 struct TranslationResult {
   bool ok = false;
   std::string error;
-  std::vector<Eigen::Vector2d> position_m;        // world_from_node translation; reference 0
-  std::vector<Eigen::Matrix2d> position_cov_m2;   // reference 0
-  std::vector<double> residual_m;                 // per measurement (used or not): |ρ_e|
-  double chi2 = 0.0;                              // Σ ρ^T Ω ρ over the used measurements
-  long dof = 0;                                   // 2 m_used - 2 (n - 1)
-  double variance_factor = 1.0;                   // σ̂² applied to H^-1
+  std::vector<Eigen::Vector2d> position_m;       // world_from_node translation; reference 0
+  std::vector<Eigen::Matrix2d> position_cov_m2;  // reference 0
+  std::vector<double> residual_m;                // per measurement (used or not): |ρ_e|
+  double chi2 = 0.0;                             // Σ ρ^T Ω ρ over the used measurements
+  long dof = 0;                                  // 2 m_used - 2 (n - 1)
+  double variance_factor = 1.0;                  // σ̂² applied to H^-1
 };
 
 // Least squares with the rotations fixed (only the measurements flagged in `use` take part;
@@ -56,6 +56,7 @@ struct TranslationResult {
 TranslationResult SolveTranslations(std::size_t n, std::size_t reference,
                                     const std::vector<double>& yaw_rad,
                                     const std::vector<RelativeMeasurement>& measurements,
-                                    const std::vector<bool>& use, const TranslationOptions& options);
+                                    const std::vector<bool>& use,
+                                    const TranslationOptions& options);
 
 }  // namespace lrfnet::calib

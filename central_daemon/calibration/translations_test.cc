@@ -34,7 +34,8 @@ TEST(SolveTranslations, ExactOnNoiseFreeInput) {
   std::vector<RelativeMeasurement> m;
   for (std::size_t i = 0; i < n; ++i) {
     for (std::size_t j = i + 1; j < n; ++j) {
-      if (j == i + 1 || u(rng) > 0.3) m.push_back(Measure(world_from, (i + j) % 2 ? i : j, (i + j) % 2 ? j : i));
+      if (j == i + 1 || u(rng) > 0.3)
+        m.push_back(Measure(world_from, (i + j) % 2 ? i : j, (i + j) % 2 ? j : i));
     }
   }
   for (bool covariances : {false, true}) {
@@ -105,7 +106,8 @@ TEST(SolveTranslations, CovariancesAreRotatedIntoTheWorldAndCombined) {
   ASSERT_TRUE(result.ok) << result.error;
   // Per-axis information-weighted mean in frame 0: x ≈ (1/0.01 * 1 + 1 * 2) / 101, y ≈ (1 * 0
   // + 1/0.01 * 1) / 101; node 0 = -(R(yaw0) * that).
-  const Eigen::Vector2d in_frame0((100.0 * 1.0 + 1.0 * 2.0) / 101.0, (1.0 * 0.0 + 100.0 * 1.0) / 101.0);
+  const Eigen::Vector2d in_frame0((100.0 * 1.0 + 1.0 * 2.0) / 101.0,
+                                  (1.0 * 0.0 + 100.0 * 1.0) / 101.0);
   const Eigen::Vector2d expected = -(Pose2{0.0, 0.0, yaw0}.rotation() * in_frame0);
   EXPECT_NEAR((result.position_m[0] - expected).norm(), 0.0, 1e-12);
   // With covariances (no weights) H^-1 is the covariance: 1/101 per frame-0 axis, rotated.
@@ -143,13 +145,15 @@ TEST(SolveTranslations, ReportsDisconnectedUseAndBadInput) {
   m[1].covariance(1, 1) = 0.0;  // singular translation block
   TranslationOptions options;
   options.use_covariances = true;
-  EXPECT_NE(SolveTranslations(4, 0, yaw, m, {true, true, true}, options).error.find("measurement 1"),
-            std::string::npos);
+  EXPECT_NE(
+      SolveTranslations(4, 0, yaw, m, {true, true, true}, options).error.find("measurement 1"),
+      std::string::npos);
   // ... but not when that measurement is not used (the graph must still be connected).
   m.push_back(Measure(world_from, 2, 0));
   EXPECT_TRUE(SolveTranslations(4, 0, yaw, m, {true, false, true, true}, options).ok);
   options.prior_sigma_m = 0.0;
-  EXPECT_NE(SolveTranslations(4, 0, yaw, m, {true, true, true, true}, options).error.find("invalid options"),
+  EXPECT_NE(SolveTranslations(4, 0, yaw, m, {true, true, true, true}, options)
+                .error.find("invalid options"),
             std::string::npos);
 }
 
