@@ -20,23 +20,7 @@ using std::chrono::milliseconds;
 using testing::Process;
 using testing::ReadText;
 
-class TempDir {
- public:
-  TempDir() {
-    static int n = 0;
-    path_ = fs::path(::testing::TempDir()) /
-            ("lrfnet_calib_test_" + std::to_string(::getpid()) + "_" + std::to_string(n++));
-    fs::create_directories(path_);
-  }
-  ~TempDir() {
-    std::error_code ec;
-    fs::remove_all(path_, ec);
-  }
-  std::string operator/(const std::string& name) const { return (path_ / name).string(); }
-
- private:
-  fs::path path_;
-};
+using TempDir = testing::ScratchDir;
 
 // The simulated setup of Quenzel et al. (six sensors on a 60 m circle, 120 s: the cylinder goes
 // round once, so every neighbouring pair sees it together) and each sensor's tracks as its tracker

@@ -50,23 +50,7 @@ targets:
   - {shape: cylinder, radius_m: 0.2, path: [[8, 2], [2, 5]], speed_mps: 1.0, loop: true}
 )";
 
-class TempDir {
- public:
-  TempDir() {
-    static int n = 0;
-    path_ = fs::path(::testing::TempDir()) /
-            ("lrfnetd_test_" + std::to_string(::getpid()) + "_" + std::to_string(n++));
-    fs::create_directories(path_);
-  }
-  ~TempDir() {
-    std::error_code ec;
-    fs::remove_all(path_, ec);
-  }
-  std::string operator/(const std::string& name) const { return (path_ / name).string(); }
-
- private:
-  fs::path path_;
-};
+using TempDir = testing::ScratchDir;
 
 struct Entry {
   std::string source;

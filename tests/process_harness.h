@@ -43,6 +43,27 @@ inline std::size_t CountPrefixed(const std::string& text, const std::string& pre
   return n;
 }
 
+// A fresh folder under the test temp dir, removed with everything in it at the end of scope.
+class ScratchDir {
+ public:
+  ScratchDir() {
+    static int n = 0;
+    path_ = std::filesystem::path(::testing::TempDir()) /
+            ("lrfnet_test_" + std::to_string(::getpid()) + "_" + std::to_string(n++));
+    std::filesystem::create_directories(path_);
+  }
+  ~ScratchDir() {
+    std::error_code ec;
+    std::filesystem::remove_all(path_, ec);
+  }
+  ScratchDir(const ScratchDir&) = delete;
+  ScratchDir& operator=(const ScratchDir&) = delete;
+  std::string operator/(const std::string& name) const { return (path_ / name).string(); }
+
+ private:
+  std::filesystem::path path_;
+};
+
 class Process {
  public:
   // Starts `binary args...` with stdout and stderr redirected to files in a fresh temp folder.

@@ -5,15 +5,13 @@
 #include <boost/program_options.hpp>
 #include <chrono>
 #include <cstdio>
-#include <ctime>
-#include <filesystem>
-#include <fstream>
 #include <iostream>
 #include <nlohmann/json.hpp>
 #include <string>
 #include <vector>
 
 #include "central_daemon/app/calibration_input.h"
+#include "central_daemon/app/calibration_service.h"
 #include "central_daemon/calibration/calibration_yaml.h"
 #include "central_daemon/calibration/eval.h"
 #include "central_daemon/calibration/pipeline.h"
@@ -25,37 +23,6 @@ namespace lrfnet::tools {
 namespace po = boost::program_options;
 
 namespace {
-
-std::string UtcNow() {
-  const std::time_t now = std::time(nullptr);
-  std::tm tm{};
-  gmtime_r(&now, &tm);
-  char buffer[32];
-  std::strftime(buffer, sizeof buffer, "%Y-%m-%dT%H:%M:%SZ", &tm);
-  return buffer;
-}
-
-// Writes `text` to `path` through a temporary file and a rename, so a reader never sees half a
-// file and a failed run leaves the previous calibration in place.
-bool WriteAtomically(const std::string& path, const std::string& text, std::string* error) {
-  const std::string tmp = path + ".tmp";
-  {
-    std::ofstream out(tmp, std::ios::trunc);
-    out << text;
-    out.flush();
-    if (!out.good()) {
-      *error = tmp + ": write error";
-      return false;
-    }
-  }
-  std::error_code ec;
-  std::filesystem::rename(tmp, path, ec);
-  if (ec) {
-    *error = path + ": " + ec.message();
-    return false;
-  }
-  return true;
-}
 
 void PrintSummary(const calib::CalibrationOutcome& outcome) {
   const calib::CalibrationResult& r = outcome.result;
@@ -265,9 +232,10 @@ int RunCalibrate(int argc, char** argv) {
   const bool have_poses = outcome.ok || (vm.count("partial") != 0 && !outcome.result.reference.empty());
   if (have_poses) {
     calib::YamlContext context;
-    context.created_utc = UtcNow();
+    context.created_utc = daemon::UtcNowText();
     context.inputs = inputs;
-    if (!WriteAtomically(out_path, calib::CalibrationYaml(outcome.result, context), &error)) {
+    error = daemon::WriteFileAtomically(out_path, calib::CalibrationYaml(outcome.result, context));
+    if (!error.empty()) {
       std::fprintf(stderr, "lrfnet calibrate: %s\n", error.c_str());
       return kExitFailure;
     }
@@ -287,13 +255,7 @@ int RunCalibrate(int argc, char** argv) {
   }
   std::optional<calib::EvalResult> eval;
   if (truth && !outcome.result.reference.empty()) {
-    calib::PoseFile calibrated;
-    calibrated.reference = outcome.result.reference;
-    for (const calib::SensorPose& s : outcome.result.sensors) {
-      calibrated.sensors.emplace_back(s.id, s.world_from_sensor);
-      calibrated.calibrated.push_back(s.calibrated);
-    }
-    eval = calib::Evaluate(calibrated, *truth, std::nullopt);
+    eval = calib::Evaluate(calib::PoseFileOf(outcome.result), *truth, std::nullopt);
     if (eval->ok) {
       std::printf("%s", calib::EvalTable(*eval).c_str());
     } else {
@@ -301,8 +263,9 @@ int RunCalibrate(int argc, char** argv) {
     }
   }
   if (!stats_out.empty()) {
-    if (!WriteAtomically(stats_out, StatsJson(outcome, load, eval ? &*eval : nullptr).dump(2) + "\n",
-                         &error)) {
+    error = daemon::WriteFileAtomically(
+        stats_out, StatsJson(outcome, load, eval ? &*eval : nullptr).dump(2) + "\n");
+    if (!error.empty()) {
       std::fprintf(stderr, "lrfnet calibrate: %s\n", error.c_str());
       return kExitFailure;
     }

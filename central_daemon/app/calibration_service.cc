@@ -13,7 +13,6 @@
 #include "central_daemon/calibration/report.h"
 
 namespace lrfnet::daemon {
-namespace {
 
 std::string UtcNowText() {
   const std::time_t now = std::time(nullptr);
@@ -24,7 +23,7 @@ std::string UtcNowText() {
   return buffer;
 }
 
-std::string WriteAtomically(const std::string& path, const std::string& text) {
+std::string WriteFileAtomically(const std::string& path, const std::string& text) {
   const std::string tmp = path + ".tmp";
   {
     std::ofstream out(tmp, std::ios::trunc);
@@ -37,6 +36,8 @@ std::string WriteAtomically(const std::string& path, const std::string& text) {
   if (ec) return path + ": " + ec.message();
   return "";
 }
+
+namespace {
 
 void LogOutcome(const calib::CalibrationOutcome& outcome) {
   const calib::CalibrationResult& r = outcome.result;
@@ -80,7 +81,7 @@ std::string WriteCalibrationFiles(const calib::CalibrationOutcome& outcome,
     calib::YamlContext context;
     context.created_utc = UtcNowText();
     context.inputs = inputs;
-    if (std::string e = WriteAtomically(output, calib::CalibrationYaml(outcome.result, context));
+    if (std::string e = WriteFileAtomically(output, calib::CalibrationYaml(outcome.result, context));
         !e.empty())
       return e;
   }

@@ -41,6 +41,12 @@ struct CalibrationSchedule {
 };
 bool AttemptDue(const CalibrationSchedule& schedule, const DaemonConfig& config, double now_s);
 
+// Replaces `path` by `text` through a temporary file and a rename, so a reader never sees half a
+// file and a failed write leaves the previous one in place. Returns "" or the error.
+std::string WriteFileAtomically(const std::string& path, const std::string& text);
+// The wall clock as "YYYY-MM-DDTHH:MM:SSZ" (the `created` field of calibration.yaml).
+std::string UtcNowText();
+
 // Writes the calibration (YAML) and, when report_dir is set, the report. Returns "" or the error.
 std::string WriteCalibrationFiles(const calib::CalibrationOutcome& outcome,
                                   const std::string& output, const std::string& report_dir,

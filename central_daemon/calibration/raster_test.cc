@@ -10,23 +10,11 @@
 #include <string>
 #include <vector>
 
+#include "central_daemon/calibration/png_test_reader.h"
+
 namespace lrfnet::calib {
 
 namespace testing {
-
-struct DecodedPng {
-  bool ok = false;
-  std::string error;
-  int width = 0;
-  int height = 0;
-  std::vector<std::uint8_t> rgba;
-  int idat_chunks = 0;
-
-  Rgba At(int x, int y) const {
-    const std::size_t i = (static_cast<std::size_t>(y) * width + x) * 4;
-    return {rgba[i], rgba[i + 1], rgba[i + 2], rgba[i + 3]};
-  }
-};
 
 namespace {
 std::uint32_t BigEndian(const std::uint8_t* p) {

@@ -207,14 +207,8 @@ int main(int argc, char** argv) {
           tally.sensors_missing += truth.sensors.size() - 1;
           continue;
         }
-        calib::PoseFile calibrated;
-        calibrated.reference = outcome.result.reference;
-        for (const calib::SensorPose& s : outcome.result.sensors) {
-          if (!s.calibrated) continue;
-          calibrated.sensors.emplace_back(s.id, s.world_from_sensor);
-          calibrated.calibrated.push_back(true);
-        }
-        const calib::EvalResult eval = calib::Evaluate(calibrated, truth, std::nullopt);
+        const calib::EvalResult eval =
+            calib::Evaluate(calib::PoseFileOf(outcome.result), truth, std::nullopt);
         if (!eval.ok) {
           tally.sensors_missing += truth.sensors.size() - 1;
           continue;
