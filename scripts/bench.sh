@@ -5,7 +5,7 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 build_dir=${1:-build}
 cmake --build "$build_dir" --target decode_benchmark tracker_benchmark store_benchmark daemon_benchmark \
-  rotation_averaging_benchmark calibration_benchmark lrfnet lrfnet-tracker >/dev/null
+  rotation_averaging_benchmark calibration_benchmark fusion_benchmark lrfnet lrfnet-tracker >/dev/null
 mkdir -p results
 "$build_dir/tests/bench/decode_benchmark" --out results/decode_benchmark.md
 "$build_dir/tests/bench/tracker_benchmark" --out results/tracker_benchmark.md
@@ -16,3 +16,5 @@ mkdir -p results
 "$build_dir/tests/bench/calibration_benchmark" --tool "$build_dir/tools/lrfnet" \
   --tracker "$build_dir/firmware_tracker/app/lrfnet-tracker" --scenarios tools/scenarios --seeds 3 \
   --out results/calibration_benchmark.md
+# Fusion on synthetic multi-sensor scenes (accuracy, id continuity, update time).
+"$build_dir/tests/bench/fusion_benchmark" --out results/fusion_benchmark.md

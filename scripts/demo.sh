@@ -1,11 +1,19 @@
 #!/usr/bin/env bash
-# Demo: `lrfnet emulate` plays a SICK LMS511 on loopback (synthetic: a room with a person walking an
-# ellipse) and `lrfnet-tracker` connects to it over TCP (log-in, device ident, start of measurement, scan
-# stream), learns the background for 5 s, tracks the person and sends every datagram (track frames,
-# background snapshot, health, sensor info) over UDP to `lrfnetd`, which validates, stores and records
-# them (and asks the tracker for what it lacks). Prints the tracks of every 25th of 300 scans, the
-# daemon's status lines and counters, and a summary of the daemon's recording (`lrfnet dump --summary`).
-#   scripts/demo.sh [BUILD_DIR]    (default: build; build first with scripts/build.sh)
+# The whole system on loopback, on real sockets and real protocols:
+#   lrfnet sim SCENARIO --serve   one emulated SICK device per sensor (CoLa-B over TCP)
+#   lrfnet-tracker                one per device: scans → tracks → UDP datagrams to lrfnetd
+#   lrfnetd                       collects (progress bar: data still needed), calibrates when the data
+#                                 links every sensor, then fuses; serves the live view
+# then prints the calibration next to the simulator's truth (lrfnet eval), the report picture and a
+# summary of the fused tracks. Every process it starts is stopped on exit (also on Ctrl-C).
+#   scripts/demo.sh [BUILD_DIR]   (default: build; build first with scripts/build.sh)
+# Environment:
+#   LRFNET_DEMO_SCENARIO   scenario file (default tools/scenarios/office_distributed.yaml, six sensors)
+#   LRFNET_DEMO_SPEED      scenario seconds per wall-clock second (default 1; faster looks to the
+#                          trackers like people running, so tracks break more often)
+#   LRFNET_DEMO_OUT        output folder (default BUILD_DIR/demo): calibration, report, fused tracks
+#   LRFNET_DEMO_LIVE       address of the live view (default 127.0.0.1:8080; port 0: any free port)
+#   LRFNET_DEMO_HOLD_S     keep everything running this long after the scenario (to watch the view)
 set -euo pipefail
 cd "$(dirname "$0")/.."
 build_dir=${1:-build}
@@ -18,67 +26,124 @@ for binary in "$lrfnet" "$tracker" "$daemon"; do
     exit 1
   fi
 done
+scenario=${LRFNET_DEMO_SCENARIO:-tools/scenarios/office_distributed.yaml}
+speed=${LRFNET_DEMO_SPEED:-1}
+out=${LRFNET_DEMO_OUT:-$build_dir/demo}
+live=${LRFNET_DEMO_LIVE:-127.0.0.1:8080}
+hold_s=${LRFNET_DEMO_HOLD_S:-0}
+duration_s=$(sed -n 's/^duration_s: *\([0-9.]*\).*/\1/p' "$scenario" | head -n 1)
 
-source_args=(--synthetic lms511)
-source_text="synthetic LMS511"
-
-work=$(mktemp -d)
-emulator_pid=""
-daemon_pid=""
+rm -rf "$out"
+mkdir -p "$out/logs"
+pids=()
 cleanup() {
-  for pid in "$emulator_pid" "$daemon_pid"; do
-    if [ -n "$pid" ]; then
-      kill "$pid" 2>/dev/null || true
-      wait "$pid" 2>/dev/null || true
-    fi
-  done
-  rm -rf "$work"
+  local pid
+  for pid in "${pids[@]}"; do kill "$pid" 2>/dev/null || true; done
+  for pid in "${pids[@]}"; do wait "$pid" 2>/dev/null || true; done
 }
 trap cleanup EXIT
+trap 'echo; echo "demo: interrupted"; exit 130' INT TERM
 
-"$lrfnet" emulate "${source_args[@]}" --port 0 --port-file "$work/port" --log-level warn \
-  >"$work/emulator.out" &
-emulator_pid=$!
-for _ in $(seq 100); do
-  [ -s "$work/port" ] && break
-  if ! kill -0 "$emulator_pid" 2>/dev/null; then
-    echo "demo: the emulator exited before listening" >&2
-    exit 1
-  fi
-  sleep 0.1
-done
-if [ ! -s "$work/port" ]; then
-  echo "demo: the emulator did not report its port within 10 s" >&2
+# wait_for FILE PATTERN SECONDS PID WHAT: until a line of FILE matches PATTERN.
+wait_for() {
+  local i
+  for ((i = 0; i < $3 * 10; ++i)); do
+    grep -q "$2" "$1" 2>/dev/null && return 0
+    if ! kill -0 "$4" 2>/dev/null; then
+      echo "demo: $5 exited early; its log:" >&2
+      tail -n 20 "$1" "$out/logs/"*.log 2>/dev/null >&2 || true
+      exit 1
+    fi
+    sleep 0.1
+  done
+  echo "demo: $5 did not get ready within $3 s" >&2
   exit 1
-fi
-port=$(cat "$work/port")
-echo "demo: emulated device ($source_text) on 127.0.0.1:$port"
+}
 
-echo "demo: lrfnetd --listen 127.0.0.1:0 --record daemon.rec --status-interval-s 2"
-"$daemon" --listen 127.0.0.1:0 --record "$work/daemon.rec" --status-interval-s 2 >"$work/daemon.out" &
+echo "demo: scenario $(basename "$scenario") ($duration_s s at ${speed}x), output in $out"
+"$lrfnet" sim "$scenario" --serve --speed "$speed" --out "$out" --log-level warn \
+  >"$out/logs/sim.out" 2>"$out/logs/sim.log" &
+pids+=($!)
+sim_pid=$!
+# One line "ID HOST:PORT" per sensor once every device listens.
+wait_for "$out/logs/sim.out" ':[0-9]' 10 "$sim_pid" "lrfnet sim --serve"
+sleep 0.3
+mapfile -t devices < <(grep -E '^[^ ]+ [^ ]+:[0-9]+$' "$out/logs/sim.out")
+echo "demo: ${#devices[@]} emulated devices: $(cut -d' ' -f1 <<<"$(printf '%s\n' "${devices[@]}")" | tr '\n' ' ')"
+
+cat >"$out/lrfnetd.yaml" <<EOF
+# The demo's lrfnetd settings (everything else: lrfnetd --print-config).
+status:
+  interval_s: 2.0
+calibration:
+  attempt_interval_s: 3.0
+  min_pair_overlap_s: 10.0
+  output: $out/calibration.yaml
+  report_dir: $out/report
+fusion:
+  record: $out/fused.jsonl
+live_view:
+  listen: "$live"
+EOF
+"$daemon" --listen 127.0.0.1:0 --config "$out/lrfnetd.yaml" --record "$out/lrfnetd.rec" \
+  --stats-out "$out/lrfnetd_stats.json" >"$out/logs/lrfnetd.out" 2>"$out/logs/lrfnetd.log" &
+pids+=($!)
 daemon_pid=$!
-for _ in $(seq 100); do
-  grep -q '^listening ' "$work/daemon.out" 2>/dev/null && break
+wait_for "$out/logs/lrfnetd.out" '^listening ' 10 "$daemon_pid" "lrfnetd"
+uplink=$(sed -n 's/^listening //p' "$out/logs/lrfnetd.out")
+wait_for "$out/logs/lrfnetd.out" '^live view ' 10 "$daemon_pid" "lrfnetd (live view)"
+live_url=$(sed -n 's/^live view //p' "$out/logs/lrfnetd.out")
+echo "demo: lrfnetd collects on $uplink; live view: $live_url (open it in a browser)"
+
+for device in "${devices[@]}"; do
+  id=${device%% *}
+  address=${device#* }
+  "$tracker" --sensor "$address" --sensor-id "$id" --uplink "$uplink" --log-level warn \
+    >"$out/logs/tracker_$id.out" 2>"$out/logs/tracker_$id.log" &
+  pids+=($!)
+done
+echo "demo: ${#devices[@]} lrfnet-tracker processes connected their devices to lrfnetd"
+
+# The daemon's status lines (progress bar while collecting) until it has calibrated.
+start=$(date +%s)
+shown=0
+deadline=$((start + ${duration_s%.*} / ${speed%.*} + 30))
+while ! grep -q '^calibrated ' "$out/logs/lrfnetd.out"; do
   if ! kill -0 "$daemon_pid" 2>/dev/null; then
-    echo "demo: lrfnetd exited before listening" >&2
+    echo "demo: lrfnetd exited; its log:" >&2
+    tail -n 20 "$out/logs/lrfnetd.log" >&2
     exit 1
   fi
-  sleep 0.1
+  if [ "$(date +%s)" -gt "$deadline" ]; then
+    echo "demo: no calibration before the scenario ended; lrfnetd's last status:" >&2
+    grep 'status:' "$out/logs/lrfnetd.log" | tail -n 1 >&2
+    exit 1
+  fi
+  lines=$(grep -c 'status:' "$out/logs/lrfnetd.log" || true)
+  if [ "$lines" -gt "$shown" ]; then
+    line=$(grep 'status:' "$out/logs/lrfnetd.log" | tail -n 1)
+    # "collecting [####----] 40% weakest link ..." and the sensor count of the status line.
+    echo "  $(date +%H:%M:%S) $(sed -E 's/.*status: ([0-9]+ sensors[^|]*).*\| (collecting[^|]*|calibrating[^|]*).*/\1| \2/' <<<"$line")"
+    shown=$lines
+  fi
+  sleep 0.5
 done
-uplink=$(sed -n 's/^listening //p' "$work/daemon.out")
-if [ -z "$uplink" ]; then
-  echo "demo: lrfnetd did not report its address within 10 s" >&2
-  exit 1
-fi
+echo "demo: calibrated after $(($(date +%s) - start)) s"
+grep -E 'calibration: ' "$out/logs/lrfnetd.log" | sed -E 's/^.*calibration: /  /'
+echo "demo: calibration vs truth (lrfnet eval $out/calibration.yaml $out/truth.yaml)"
+"$lrfnet" eval "$out/calibration.yaml" "$out/truth.yaml" | sed 's/^/  /'
 
-echo "demo: lrfnet-tracker --sensor 127.0.0.1:$port --sensor-id demo --uplink $uplink --out demo.rec --max-scans 300 --print-every 25"
-"$tracker" --sensor "127.0.0.1:$port" --sensor-id demo --uplink "$uplink" --out "$work/demo.rec" \
-  --max-scans 300 --print-every 25
-sleep 0.5
+echo "demo: fusing until the scenario ends"
+while kill -0 "$sim_pid" 2>/dev/null; do sleep 1; done
+if [ "$hold_s" != 0 ]; then
+  echo "demo: holding for $hold_s s; live view at $live_url"
+  sleep "$hold_s"
+fi
 kill -INT "$daemon_pid"
-wait "$daemon_pid"
-daemon_pid=""
-cat "$work/daemon.out"
-echo "demo: lrfnet dump --summary daemon.rec"
-"$lrfnet" dump --summary "$work/daemon.rec"
-echo "demo: the tracker's own recording has $(stat -c %s "$work/demo.rec") bytes, the daemon's $(stat -c %s "$work/daemon.rec") (both removed on exit)"
+wait "$daemon_pid" || true
+tail -n 1 "$out/logs/lrfnetd.out" | sed 's/^/  /'
+if [ -s "$out/fused.jsonl" ]; then
+  ids=$(grep -o '"id":[0-9]*' "$out/fused.jsonl" | sort -u | wc -l)
+  echo "demo: fused tracks: $(wc -l <"$out/fused.jsonl") snapshots in $out/fused.jsonl, $ids distinct fused ids"
+fi
+echo "demo: report picture: $out/report/calibration.png (and .svg); calibration: $out/calibration.yaml"

@@ -21,6 +21,7 @@ host_pkgs=(
   libpcap-dev libyaml-cpp-dev nlohmann-json3-dev nanopb libnanopb-dev
   libgtest-dev libgmock-dev libbenchmark-dev
   libceres-dev coinor-libclp-dev zlib1g-dev   # calibration: joint refinement, LP oracle in tests, PNG report
+  chromium fonts-dejavu-core          # the live view's browser test (headless)
 )
 cross_pkgs=(
   g++-aarch64-linux-gnu qemu-user

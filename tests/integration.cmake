@@ -61,3 +61,14 @@ if(TARGET calibration_cli_test)
     LRFNET_DAEMON_BINARY="$<TARGET_FILE:lrfnetd>")
   add_dependencies(calibration_cli_test lrfnet lrfnet-tracker lrfnetd)
 endif()
+
+# The whole chain live, like the demo: lrfnet sim --serve → lrfnet-tracker per device → lrfnetd
+# (calibrates by itself, fuses, live view); one tracker killed and restarted while fusing.
+lrfnet_test(system_test SOURCES system_test.cc LIBS nlohmann_json::nlohmann_json)
+if(TARGET system_test)
+  target_compile_definitions(system_test PRIVATE
+    LRFNET_TOOL_BINARY="$<TARGET_FILE:lrfnet>"
+    LRFNET_TRACKER_BINARY="$<TARGET_FILE:lrfnet-tracker>"
+    LRFNET_DAEMON_BINARY="$<TARGET_FILE:lrfnetd>")
+  add_dependencies(system_test lrfnet lrfnet-tracker lrfnetd)
+endif()

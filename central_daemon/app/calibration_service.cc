@@ -3,7 +3,10 @@
 #include <spdlog/spdlog.h>
 
 #include <boost/asio/post.hpp>
+#include <algorithm>
 #include <chrono>
+#include <cmath>
+#include <numeric>
 #include <ctime>
 #include <filesystem>
 #include <fstream>
@@ -39,6 +42,9 @@ std::string WriteFileAtomically(const std::string& path, const std::string& text
 
 namespace {
 
+// The data check behind the progress runs this often while collecting.
+constexpr double kProgressPeriodS = 2.0;
+
 void LogOutcome(const calib::CalibrationOutcome& outcome) {
   const calib::CalibrationResult& r = outcome.result;
   for (const calib::SensorPose& s : r.sensors) {
@@ -61,9 +67,72 @@ void LogOutcome(const calib::CalibrationOutcome& outcome) {
 
 }  // namespace
 
+CalibrationProgress ProgressOf(const calib::DataAssessment& assessment, double required_overlap_s) {
+  CalibrationProgress out;
+  const std::size_t n = assessment.sensors.size();
+  if (n < 2) {
+    out.text = n == 0 ? "waiting for sensors" : "waiting for a second sensor";
+    return out;
+  }
+  std::vector<std::string> no_tracks;
+  for (const calib::SensorData& s : assessment.sensors) {
+    if (s.tracks == 0) no_tracks.push_back(s.id);
+  }
+  // Kruskal over the pairs by decreasing overlap: the maximum spanning forest. Its links are the
+  // strongest way to connect every sensor, so its weakest link bounds what the data supports.
+  std::vector<calib::PairData> pairs = assessment.pairs;
+  std::sort(pairs.begin(), pairs.end(),
+            [](const calib::PairData& a, const calib::PairData& b) { return a.overlap_s > b.overlap_s; });
+  std::vector<std::size_t> parent(n);
+  std::iota(parent.begin(), parent.end(), std::size_t{0});
+  auto find = [&](std::size_t i) {
+    while (parent[i] != i) i = parent[i] = parent[parent[i]];
+    return i;
+  };
+  double sum = 0.0;
+  std::size_t links = 0;
+  const calib::PairData* weakest = nullptr;
+  for (const calib::PairData& p : pairs) {
+    if (p.r >= n || p.s >= n || find(p.r) == find(p.s)) continue;
+    parent[find(p.r)] = find(p.s);
+    ++links;
+    sum += std::min(1.0, p.overlap_s / required_overlap_s);
+    if (weakest == nullptr || p.overlap_s < weakest->overlap_s) weakest = &p;
+  }
+  out.fraction = std::clamp(sum / static_cast<double>(n - 1), 0.0, 1.0);
+  out.sufficient = links == n - 1 && weakest != nullptr && weakest->overlap_s >= required_overlap_s;
+  char buffer[200];
+  if (!no_tracks.empty()) {
+    std::string ids;
+    for (std::size_t k = 0; k < no_tracks.size(); ++k) ids += (k ? ", " : "") + no_tracks[k];
+    out.text = "no tracks yet from " + ids;
+  } else if (links < n - 1) {
+    out.text = "sensors not yet linked by shared tracks: " + std::to_string(n - 1 - links) +
+               " link(s) missing";
+  } else if (weakest != nullptr) {
+    std::snprintf(buffer, sizeof buffer, "weakest link %s-%s %.1f of %.0f s shared",
+                  assessment.sensors[weakest->r].id.c_str(),
+                  assessment.sensors[weakest->s].id.c_str(), weakest->overlap_s, required_overlap_s);
+    out.text = buffer;
+  }
+  if (out.sufficient) out.text = "enough data";
+  return out;
+}
+
+std::string ProgressBar(double fraction, int width) {
+  const double f = std::isfinite(fraction) ? std::clamp(fraction, 0.0, 1.0) : 0.0;
+  // Rounded down: 100 % only when the data is complete.
+  const int filled = static_cast<int>(std::floor(f * width));
+  char percent[8];
+  std::snprintf(percent, sizeof percent, "%3d%%", static_cast<int>(std::floor(f * 100.0)));
+  return "[" + std::string(static_cast<std::size_t>(filled), '#') +
+         std::string(static_cast<std::size_t>(width - filled), '-') + "] " + percent;
+}
+
 bool AttemptDue(const CalibrationSchedule& schedule, const DaemonConfig& config, double now_s) {
   if (schedule.requested) return true;
   if (!config.calibration_auto) return false;
+  if (!schedule.last_success_s && !schedule.data_sufficient) return false;
   if (schedule.last_success_s) {
     if (config.calibration_recalibrate_interval_s <= 0.0) return false;
     return now_s - *schedule.last_success_s >= config.calibration_recalibrate_interval_s &&
@@ -105,7 +174,44 @@ CalibrationService::~CalibrationService() {
 
 void CalibrationService::Reconfigure(const DaemonConfig& config) { config_ = config; }
 
+void CalibrationService::UpdateProgress(double now_s, const Daemon& daemon) {
+  last_progress_s_ = now_s;
+  common::UtcNs newest_ns = 0;
+  for (const SensorStoreInfo& s : daemon.store().Sensors()) {
+    newest_ns = std::max(newest_ns, s.last_scan_ns);
+  }
+  const auto window_ns = static_cast<common::UtcNs>(config_.calibration_window_s * 1e9);
+  const common::UtcNs from_ns = newest_ns > window_ns ? newest_ns - window_ns : 0;
+  const calib::CalibrationInput input = CalibrationInputFrom(daemon.ingest(), daemon.store(), from_ns);
+  const calib::AlignedTracks tracks = calib::Align(input, config_.calibration.align);
+  progress_ = ProgressOf(calib::Assess(tracks, config_.calibration.min_pair_overlap_s),
+                         config_.calibration.min_pair_overlap_s);
+  schedule_.data_sufficient = progress_.sufficient;
+  progress_history_.emplace_back(now_s, progress_.fraction);
+  while (progress_history_.size() > 2 && now_s - progress_history_.front().first > 60.0) {
+    progress_history_.pop_front();
+  }
+}
+
+std::optional<double> CalibrationService::RemainingS() const {
+  if (progress_.sufficient) return 0.0;
+  if (progress_history_.size() < 2) return std::nullopt;
+  const auto& [t0, f0] = progress_history_.front();
+  const auto& [t1, f1] = progress_history_.back();
+  if (t1 - t0 < 4.0 || f1 <= f0) return std::nullopt;
+  return (1.0 - f1) * (t1 - t0) / (f1 - f0);
+}
+
+void CalibrationService::SetInitial(calib::CalibrationOutcome outcome) {
+  latest_ = std::move(outcome);
+}
+
 void CalibrationService::OnTick(double now_s, const Daemon& daemon) {
+  // The data check runs until the first calibration (cheap: alignment without estimation).
+  if (!latest_ && !busy_ && (!last_progress_s_ || now_s - *last_progress_s_ >= kProgressPeriodS ||
+                             now_s < *last_progress_s_)) {
+    UpdateProgress(now_s, daemon);
+  }
   if (busy_ || !AttemptDue(schedule_, config_, now_s)) return;
   schedule_.requested = false;
   schedule_.last_attempt_s = now_s;
@@ -162,8 +268,13 @@ void CalibrationService::Finish(std::shared_ptr<calib::CalibrationOutcome> outco
 std::string CalibrationService::StatusText() const {
   if (busy_) return "calibrating";
   if (latest_) return "calibrated (" + std::to_string(latest_->result.sensors.size()) + " sensors)";
-  if (!last_problem_.empty()) return "not calibrated: " + last_problem_;
-  return "not calibrated";
+  std::string text = "collecting " + ProgressBar(progress_.fraction);
+  if (!progress_.text.empty()) text += " " + progress_.text;
+  if (const auto remaining = RemainingS(); remaining && *remaining >= 1.0) {
+    text += fmt::format(", about {:.0f} s more", *remaining);
+  }
+  if (!last_problem_.empty()) text += "; last attempt: " + last_problem_;
+  return text;
 }
 
 }  // namespace lrfnet::daemon

@@ -14,6 +14,7 @@
 
 #include <boost/asio/io_context.hpp>
 #include <atomic>
+#include <deque>
 #include <memory>
 #include <optional>
 #include <string>
@@ -38,8 +39,24 @@ struct CalibrationSchedule {
   std::optional<double> last_attempt_s;
   std::optional<double> last_success_s;
   bool requested = false;
+  // Before the first success, automatic attempts wait until the data links every sensor.
+  bool data_sufficient = true;
 };
 bool AttemptDue(const CalibrationSchedule& schedule, const DaemonConfig& config, double now_s);
+
+// How far the data is from what the first calibration needs (pure): every sensor linked to the
+// others by pairs with at least required_overlap_s of simultaneous tracks. The links are those of
+// a maximum spanning tree over the pairs' overlap times; each of the n - 1 links counts
+// min(1, overlap / required) (a missing link 0), the fraction is their mean. `text` names the
+// weakest link or the sensors without tracks.
+struct CalibrationProgress {
+  double fraction = 0.0;  // 0..1
+  bool sufficient = false;
+  std::string text;
+};
+CalibrationProgress ProgressOf(const calib::DataAssessment& assessment, double required_overlap_s);
+// "[##########----------]  50%" (width characters between the brackets).
+std::string ProgressBar(double fraction, int width = 20);
 
 // Replaces `path` by `text` through a temporary file and a rename, so a reader never sees half a
 // file and a failed write leaves the previous one in place. Returns "" or the error.
@@ -66,11 +83,19 @@ class CalibrationService {
   bool busy() const { return busy_; }
   const std::optional<calib::CalibrationOutcome>& latest() const { return latest_; }
   const CalibrationCounters& counters() const { return counters_; }
-  // The calibration state in a few words for the status line.
+  // The calibration state in a few words for the status line (with the progress bar and the
+  // estimated time still needed while collecting).
   std::string StatusText() const;
+  // The data check behind the progress, refreshed every few seconds until the first success.
+  const CalibrationProgress& progress() const { return progress_; }
+  // Seconds still needed at the recent rate of progress; nullopt when unknown.
+  std::optional<double> RemainingS() const;
+  // Starts from a calibration read from a file (calibration.initial): latest() has its poses.
+  void SetInitial(calib::CalibrationOutcome outcome);
 
  private:
   void Finish(std::shared_ptr<calib::CalibrationOutcome> outcome, std::string write_error);
+  void UpdateProgress(double now_s, const Daemon& daemon);
 
   boost::asio::io_context& io_;
   DaemonConfig config_;
@@ -80,6 +105,9 @@ class CalibrationService {
   std::optional<calib::CalibrationOutcome> latest_;
   std::string last_problem_;
   CalibrationCounters counters_;
+  CalibrationProgress progress_;
+  std::optional<double> last_progress_s_;
+  std::deque<std::pair<double, double>> progress_history_;  // (now_s, fraction), last minute
 };
 
 }  // namespace lrfnet::daemon

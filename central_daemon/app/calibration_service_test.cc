@@ -2,6 +2,8 @@
 
 #include <gtest/gtest.h>
 
+#include <cmath>
+
 namespace lrfnet::daemon {
 namespace {
 
@@ -31,6 +33,67 @@ TEST(CalibrationSchedule, AutoOffOnlyOnRequest) {
   EXPECT_FALSE(AttemptDue(s, config, 100.0));
   s.requested = true;
   EXPECT_TRUE(AttemptDue(s, config, 100.0));
+}
+
+TEST(CalibrationSchedule, BeforeTheFirstSuccessAttemptsWaitForSufficientData) {
+  DaemonConfig config;
+  CalibrationSchedule s;
+  s.data_sufficient = false;
+  EXPECT_FALSE(AttemptDue(s, config, 100.0));
+  s.requested = true;  // SIGUSR1 tries anyway (and says what is missing)
+  EXPECT_TRUE(AttemptDue(s, config, 100.0));
+  s.requested = false;
+  s.data_sufficient = true;
+  EXPECT_TRUE(AttemptDue(s, config, 100.0));
+}
+
+calib::DataAssessment Assessment(std::size_t sensors,
+                                 const std::vector<calib::PairData>& pairs) {
+  calib::DataAssessment a;
+  for (std::size_t i = 0; i < sensors; ++i) {
+    calib::SensorData d;
+    d.id = "s" + std::to_string(i + 1);
+    d.tracks = 3;
+    d.tracked_s = 30.0;
+    a.sensors.push_back(d);
+  }
+  a.pairs = pairs;
+  return a;
+}
+
+TEST(CalibrationProgress, TheWeakestLinkOfTheStrongestTreeBoundsTheProgress) {
+  // s1-s2 20 s, s2-s3 5 s, s1-s3 2 s: the tree is s1-s2 (full) and s2-s3 (half of 10 s).
+  const CalibrationProgress p =
+      ProgressOf(Assessment(3, {{0, 1, 20.0}, {1, 2, 5.0}, {0, 2, 2.0}}), 10.0);
+  EXPECT_NEAR(p.fraction, 0.75, 1e-12);
+  EXPECT_FALSE(p.sufficient);
+  EXPECT_NE(p.text.find("s2-s3 5.0 of 10 s"), std::string::npos) << p.text;
+
+  const CalibrationProgress done =
+      ProgressOf(Assessment(3, {{0, 1, 20.0}, {1, 2, 12.0}}), 10.0);
+  EXPECT_DOUBLE_EQ(done.fraction, 1.0);
+  EXPECT_TRUE(done.sufficient);
+}
+
+TEST(CalibrationProgress, AMissingLinkOrSensorWithoutTracksIsNamed) {
+  CalibrationProgress p = ProgressOf(Assessment(4, {{0, 1, 10.0}, {2, 3, 10.0}}), 10.0);
+  EXPECT_NEAR(p.fraction, 2.0 / 3.0, 1e-12);
+  EXPECT_FALSE(p.sufficient);
+  EXPECT_NE(p.text.find("1 link(s) missing"), std::string::npos) << p.text;
+
+  calib::DataAssessment a = Assessment(3, {{0, 1, 10.0}});
+  a.sensors[2].tracks = 0;
+  p = ProgressOf(a, 10.0);
+  EXPECT_NE(p.text.find("no tracks yet from s3"), std::string::npos) << p.text;
+  EXPECT_EQ(ProgressOf(Assessment(1, {}), 10.0).text, "waiting for a second sensor");
+}
+
+TEST(CalibrationProgress, BarShowsTheFraction) {
+  EXPECT_EQ(ProgressBar(0.5, 10), "[#####-----]  50%");
+  EXPECT_EQ(ProgressBar(0.996, 10), "[#########-]  99%");  // 100 % only when complete
+  EXPECT_EQ(ProgressBar(0.0, 4), "[----]   0%");
+  EXPECT_EQ(ProgressBar(7.0, 4), "[####] 100%");
+  EXPECT_EQ(ProgressBar(std::nan(""), 4), "[----]   0%");
 }
 
 TEST(CalibrationFiles, AnUnwritablePathIsAnErrorNamingIt) {

@@ -122,7 +122,47 @@ void VisitCalibration(DaemonConfig& c, ConfigVisitor& v) {
   v.Field("refine", c.calibration.refine,
           "Joint refinement of all poses over every associated observation.");
   v.Field("min_pair_overlap_s", c.calibration.min_pair_overlap_s,
-          "Seconds of simultaneous tracks that link two sensors in the data check.");
+          "Seconds of simultaneous tracks that link two sensors in the data check; the first "
+          "attempt waits until every sensor is linked (the progress shown).");
+  v.Field("initial", c.calibration_initial,
+          "Start from this calibration.yaml (fuse at once until a new calibration replaces it); "
+          "empty: none. --calibration-in.");
+}
+
+void VisitFusion(DaemonConfig& c, ConfigVisitor& v) {
+  fusion::FusionOptions& o = c.fusion;
+  v.Section("fusion",
+            "Once calibrated, every sensor's tracks in the world frame, the same person seen by "
+            "several sensors merged into one fused track (ids kept across sensor hand-over), "
+            "streamed as JSON over UDP and recorded as JSON lines.");
+  v.Field("enabled", c.fusion_enabled, "Fuse tracks once a calibration exists.");
+  v.Field("publish", c.fusion_publish,
+          "Send the fused tracks as JSON datagrams to this HOST:PORT; empty: none. --fused-udp.");
+  v.Field("record", c.fusion_record,
+          "Append the fused tracks as JSON lines to this file; empty: none. --fused-out.");
+  v.Field("publish_hz", c.fusion_publish_hz, "Fused tracks are published this often.");
+  v.Field("gate_mahalanobis2", o.gate_mahalanobis2,
+          "Association gate, squared Mahalanobis distance of positions (2 dof).");
+  v.Field("gate_max_distance_m", o.gate_max_distance_m, "Association gate in metres.");
+  v.Field("accel_psd", o.accel_psd, "Process noise of the fused tracks, m^2/s^3.");
+  v.Field("position_noise_floor_m2", o.position_noise_floor_m2,
+          "Added to every sensor's position variance (calibration and object-centre errors).");
+  v.Field("max_coast_s", o.max_coast_s, "A fused track without updates is deleted after this.");
+  v.Field("source_timeout_s", o.source_timeout_s,
+          "A sensor's track without frames for this long leaves its fused track.");
+  VisitInteger(v, "confirm_updates", o.confirm_updates, "Updates before a fused track is confirmed.");
+}
+
+void VisitLiveView(DaemonConfig& c, ConfigVisitor& v) {
+  v.Section("live_view",
+            "A web page (HTTP + WebSocket) with the sensors, their fields of view and backgrounds, "
+            "raw and fused tracks, the calibration state and each sensor's health.");
+  v.Field("listen", c.live_view_listen,
+          "ADDR:PORT to serve the page on (port 0: any free port); empty: off. --live-view.");
+  v.Field("publish_hz", c.live_view_publish_hz, "Updates sent to the page per second.");
+  VisitInteger(v, "max_clients", c.live_view_max_clients, "Browser connections served at most.");
+  VisitInteger(v, "background_points", c.live_view_background_points,
+               "Background points per sensor sent to the page (decimated).");
 }
 
 }  // namespace
@@ -135,6 +175,8 @@ void VisitDaemonConfig(DaemonConfig& c, ConfigVisitor& v) {
   VisitStore(c, v);
   VisitStatus(c, v);
   VisitCalibration(c, v);
+  VisitFusion(c, v);
+  VisitLiveView(c, v);
 }
 
 std::optional<std::string> Validate(DaemonConfig& c) {
@@ -163,6 +205,21 @@ std::optional<std::string> Validate(DaemonConfig& c) {
         c.calibration_recalibrate_interval_s <= 1e7))
     return "calibration.recalibrate_interval_s: must be in [0, 1e7]";
   if (auto e = Prefixed("calibration", calib::Validate(c.calibration))) return e;
+  if (!c.fusion_publish.empty() &&
+      !common::ParseHostPort(c.fusion_publish, "fusion.publish", 0, &error))
+    return error;
+  if (!(c.fusion_publish_hz >= 0.1 && c.fusion_publish_hz <= 1000.0))
+    return "fusion.publish_hz: must be in [0.1, 1000]";
+  if (auto e = Prefixed("fusion", fusion::Validate(c.fusion))) return e;
+  if (!c.live_view_listen.empty() &&
+      !common::ParseHostPort(c.live_view_listen, "live_view.listen", 0, &error, true))
+    return error;
+  if (!(c.live_view_publish_hz >= 0.1 && c.live_view_publish_hz <= 100.0))
+    return "live_view.publish_hz: must be in [0.1, 100]";
+  if (c.live_view_max_clients < 1 || c.live_view_max_clients > 10000)
+    return "live_view.max_clients: must be in [1, 10000]";
+  if (c.live_view_background_points > 100000)
+    return "live_view.background_points: must be <= 100000";
   return std::nullopt;
 }
 

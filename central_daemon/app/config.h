@@ -11,6 +11,7 @@
 #include <string_view>
 
 #include "central_daemon/calibration/pipeline.h"
+#include "central_daemon/fusion/fusion.h"
 #include "central_daemon/ingest/ingest.h"
 #include "central_daemon/io/recording_writer.h"
 #include "central_daemon/io/udp_receiver.h"
@@ -40,9 +41,22 @@ struct DaemonConfig {
   std::string calibration_output;         // calibration.yaml to write; empty: log only
   std::string calibration_report_dir;     // report folder; empty: none
   calib::CalibrationOptions calibration;  // method, reference, weights, icp, refine, min overlap
+  std::string calibration_initial;        // calibration.yaml to start from; empty: none
+  // Fusion (section `fusion`).
+  bool fusion_enabled = true;
+  std::string fusion_publish;             // HOST:PORT for the UDP/JSON stream; empty: none
+  std::string fusion_record;              // JSON lines file of the fused tracks; empty: none
+  double fusion_publish_hz = 10.0;
+  fusion::FusionOptions fusion;
+  // Live view (section `live_view`).
+  std::string live_view_listen;           // ADDR:PORT of the web page; empty: off
+  double live_view_publish_hz = 5.0;
+  std::uint64_t live_view_max_clients = 32;
+  std::uint64_t live_view_background_points = 720;  // per sensor, decimated
 };
 
-// Lists every option (sections listen, record, validation, sensors, store, status, calibration).
+// Lists every option (sections listen, record, validation, sensors, store, status, calibration,
+// fusion, live_view).
 void VisitDaemonConfig(DaemonConfig& config, common::ConfigVisitor& visitor);
 
 // Every option, with the prefix of its section ("store.max_age_s: must be > 0"). Also parses

@@ -106,6 +106,7 @@ void Daemon::Reconfigure(const DaemonOptions& options) {
 
 void Daemon::OnTrackFrame(const std::string& sensor_id, const TrackFrameData& frame) {
   store_.Add(sensor_id, frame);
+  if (frame_listener_ != nullptr) frame_listener_->OnFrame(sensor_id, frame);
 }
 
 void Daemon::OnBackground(const std::string& sensor_id, const BackgroundScan& background) {

@@ -38,6 +38,14 @@ class RequestSink {
   virtual bool SendTo(std::string_view source, std::span<const std::uint8_t> datagram) = 0;
 };
 
+// Receives every accepted track frame (or part of one) as it arrives, after the store has it (the
+// fusion in lrfnetd).
+class FrameListener {
+ public:
+  virtual ~FrameListener() = default;
+  virtual void OnFrame(const std::string& sensor_id, const TrackFrameData& frame) = 0;
+};
+
 struct DaemonOptions {
   IngestOptions ingest;
   TrackStoreOptions store;
@@ -72,6 +80,9 @@ class Daemon final : public IngestListener {
   // (at most 1000 kept).
   std::vector<SensorEvent> TakeEvents();
 
+  // May be null (none). Must outlive the daemon or be reset first.
+  void set_frame_listener(FrameListener* listener) { frame_listener_ = listener; }
+
   const Ingest& ingest() const { return ingest_; }
   const TrackStore& store() const { return store_; }
   std::uint64_t requests_sent() const { return requests_sent_; }
@@ -86,6 +97,7 @@ class Daemon final : public IngestListener {
   DaemonOptions options_;
   RecordSink* recorder_;
   RequestSink* requests_;
+  FrameListener* frame_listener_ = nullptr;
   std::uint64_t session_id_;
   TrackStore store_;
   Ingest ingest_;

@@ -7,7 +7,9 @@
 //
 // SIGINT / SIGTERM stop cleanly (the recording is flushed and closed); SIGHUP reloads --config;
 // SIGUSR1 calibrates at once. Calibration also runs by itself once the data connects every sensor
-// (config section `calibration`); offline (--input) it runs once over all the input.
+// (config section `calibration`, progress in the status line); offline (--input) it runs once over
+// all the input. Once calibrated, tracks are fused (section `fusion`: JSON over UDP and/or JSON
+// lines) and the live view (section `live_view`, --live-view) shows it all in a browser.
 
 #include <fcntl.h>
 #include <spdlog/sinks/stdout_color_sinks.h>
@@ -36,10 +38,16 @@
 #include "central_daemon/app/calibration_service.h"
 #include "central_daemon/app/config.h"
 #include "central_daemon/app/daemon.h"
+#include "central_daemon/app/fusion_service.h"
+#include "central_daemon/app/live_feed.h"
+#include "central_daemon/app/live_state.h"
 #include "central_daemon/app/stats_json.h"
+#include "central_daemon/calibration/calibration_yaml.h"
 #include "central_daemon/io/datagram_source.h"
+#include "central_daemon/io/live_view_server.h"
 #include "central_daemon/io/recording_writer.h"
 #include "central_daemon/io/udp_receiver.h"
+#include "common/host_port.h"
 #include "google/protobuf/stubs/logging.h"
 
 namespace lrfnet::daemon {
@@ -153,6 +161,10 @@ struct RunOptions {
   std::optional<double> status_flag;
   std::optional<std::string> calibration_out_flag;
   std::optional<std::string> calibration_report_flag;
+  std::optional<std::string> calibration_in_flag;
+  std::optional<std::string> live_view_flag;
+  std::optional<std::string> fused_out_flag;
+  std::optional<std::string> fused_udp_flag;
   double duration_s = 0.0;
   std::string stats_out;
 };
@@ -174,6 +186,10 @@ std::optional<std::string> LoadConfig(const RunOptions& run, DaemonConfig* confi
   if (run.status_flag) c.status_interval_s = *run.status_flag;
   if (run.calibration_out_flag) c.calibration_output = *run.calibration_out_flag;
   if (run.calibration_report_flag) c.calibration_report_dir = *run.calibration_report_flag;
+  if (run.calibration_in_flag) c.calibration_initial = *run.calibration_in_flag;
+  if (run.live_view_flag) c.live_view_listen = *run.live_view_flag;
+  if (run.fused_out_flag) c.fusion_record = *run.fused_out_flag;
+  if (run.fused_udp_flag) c.fusion_publish = *run.fused_udp_flag;
   if (auto e = Validate(c)) return (run.config_path.empty() ? "" : run.config_path + ": ") + *e;
   *config = c;
   return std::nullopt;
@@ -206,6 +222,37 @@ std::string Summary(const Daemon& daemon) {
                      daemon.store().frames());
 }
 
+// calibration.initial: the poses of a calibration.yaml as a calibration outcome.
+std::optional<std::string> LoadInitialCalibration(const std::string& path,
+                                                  calib::CalibrationOutcome* outcome) {
+  calib::PoseFile file;
+  std::string error;
+  if (!calib::ReadPoseFile(path, &file, &error)) return "calibration.initial: " + error;
+  outcome->ok = true;
+  outcome->result.method = "file";
+  outcome->result.reference = file.reference.value_or("");
+  for (std::size_t i = 0; i < file.sensors.size(); ++i) {
+    calib::SensorPose pose;
+    pose.id = file.sensors[i].first;
+    pose.world_from_sensor = file.sensors[i].second;
+    pose.calibrated = i < file.calibrated.size() ? file.calibrated[i] : true;
+    outcome->result.sensors.push_back(std::move(pose));
+  }
+  return std::nullopt;
+}
+
+LiveViewOptions LiveOptions(const DaemonConfig& config) {
+  LiveViewOptions o;
+  std::string error;
+  if (const auto hp = common::ParseHostPort(config.live_view_listen, "live_view.listen", 0, &error,
+                                            true)) {
+    o.bind_address = hp->host;
+    o.port = hp->port;
+  }
+  o.max_clients = static_cast<std::size_t>(config.live_view_max_clients);
+  return o;
+}
+
 int RunLive(const RunOptions& run, DaemonConfig config) {
   asio::io_context io;
   std::optional<Recorder> recorder;
@@ -219,6 +266,35 @@ int RunLive(const RunOptions& run, DaemonConfig config) {
   Replies replies;
   Daemon daemon(CoreOptions(config), recorder ? &*recorder : nullptr, &replies, RandomSessionId());
   CalibrationService calibration(io, config);
+  FusionService fusion(io, config);
+  if (std::string e = fusion.Open(); !e.empty()) {
+    std::fprintf(stderr, "lrfnetd: %s\n", e.c_str());
+    return kExitFailure;
+  }
+  daemon.set_frame_listener(&fusion);
+  std::uint64_t applied_calibrations = 0;
+  if (!config.calibration_initial.empty()) {
+    calib::CalibrationOutcome initial;
+    if (auto e = LoadInitialCalibration(config.calibration_initial, &initial)) {
+      std::fprintf(stderr, "lrfnetd: %s\n", e->c_str());
+      return kExitFailure;
+    }
+    spdlog::info("calibration: starting from {} ({} sensors)", config.calibration_initial,
+                 initial.result.sensors.size());
+    fusion.SetCalibration(initial.result);
+    calibration.SetInitial(std::move(initial));
+  }
+  std::optional<LiveViewServer> live_view;
+  LiveFeed live_feed(static_cast<std::size_t>(config.live_view_background_points));
+  if (!config.live_view_listen.empty()) {
+    live_view.emplace(io, LiveOptions(config));
+    std::string error;
+    if (!live_view->Start(&error)) {
+      std::fprintf(stderr, "lrfnetd: --live-view %s: %s\n", config.live_view_listen.c_str(),
+                   error.c_str());
+      return kExitFailure;
+    }
+  }
   UdpReceiver receiver(io, config.receiver,
                        [&](std::span<const std::uint8_t> bytes, const std::string& source,
                            common::UtcNs receive_ns) { daemon.OnDatagram(bytes, source, receive_ns); });
@@ -237,6 +313,12 @@ int RunLive(const RunOptions& run, DaemonConfig config) {
                  config.receiver.receive_buffer_bytes / 1024);
   // Printed on stdout for scripts and tests that bind port 0.
   std::printf("listening %s\n", receiver.local_address().c_str());
+  if (live_view) {
+    const std::string host = LiveOptions(config).bind_address;
+    const std::string shown = host.find(':') != std::string::npos ? "[" + host + "]" : host;
+    std::printf("live view http://%s:%u/\n", shown.c_str(), static_cast<unsigned>(live_view->port()));
+    spdlog::info("live view on http://{}:{}/", shown, live_view->port());
+  }
   std::fflush(stdout);
 
   bool stopping = false;
@@ -245,6 +327,7 @@ int RunLive(const RunOptions& run, DaemonConfig config) {
     stopping = true;
     spdlog::info("{}: stopping", why);
     receiver.Close();
+    if (live_view) live_view->Stop();
     io.stop();
   };
 
@@ -256,6 +339,15 @@ int RunLive(const RunOptions& run, DaemonConfig config) {
       daemon.OnTick(NowUtcNs());
       LogEvents(daemon, config.ingest.silent_after_s);
       calibration.OnTick(MonotonicS(), daemon);
+      if (calibration.counters().successes != applied_calibrations && calibration.latest()) {
+        applied_calibrations = calibration.counters().successes;
+        fusion.SetCalibration(calibration.latest()->result);
+        // One line on stdout per calibration, for scripts.
+        std::printf("calibrated %s\n", config.calibration_output.empty()
+                                            ? "(not written)"
+                                            : config.calibration_output.c_str());
+        std::fflush(stdout);
+      }
       schedule_tick();
     });
   };
@@ -272,6 +364,9 @@ int RunLive(const RunOptions& run, DaemonConfig config) {
       std::string line = daemon.StatusLine(NowUtcNs());
       if (r.kernel_drops > 0) line += fmt::format(" | kernel drops {}", r.kernel_drops);
       line += " | " + calibration.StatusText();
+      if (fusion.calibrated()) {
+        line += fmt::format(" | fused tracks {}", fusion.fuser().Snapshot(fusion.now_ns()).size());
+      }
       if (recorder)
         line += fmt::format(" | recorded {:.1f} MiB",
                             static_cast<double>(recorder->writer().counters().bytes_written) /
@@ -282,6 +377,33 @@ int RunLive(const RunOptions& run, DaemonConfig config) {
   };
   daemon.StatusLine(NowUtcNs());  // starts the first rate interval
   schedule_status();
+
+  // Fused tracks are published at their own rate (fusion.publish_hz), not the tick's.
+  asio::steady_timer fusion_timer(io);
+  std::function<void()> schedule_fusion = [&] {
+    fusion_timer.expires_after(std::chrono::duration_cast<std::chrono::steady_clock::duration>(
+        std::chrono::duration<double>(1.0 / config.fusion_publish_hz)));
+    fusion_timer.async_wait([&](const boost::system::error_code& ec) {
+      if (ec || stopping) return;
+      fusion.OnTick(MonotonicS());
+      schedule_fusion();
+    });
+  };
+  schedule_fusion();
+
+  asio::steady_timer live_timer(io);
+  std::function<void()> schedule_live = [&] {
+    if (!live_view) return;
+    live_timer.expires_after(std::chrono::duration_cast<std::chrono::steady_clock::duration>(
+        std::chrono::duration<double>(1.0 / config.live_view_publish_hz)));
+    live_timer.async_wait([&](const boost::system::error_code& ec) {
+      if (ec || stopping) return;
+      live_view->Publish(
+          LiveStateJson(live_feed.Build(daemon, calibration, fusion, NowUtcNs(), Writer())));
+      schedule_live();
+    });
+  };
+  schedule_live();
 
   asio::steady_timer deadline(io);
   if (run.duration_s > 0) {
@@ -331,8 +453,11 @@ int RunLive(const RunOptions& run, DaemonConfig config) {
         config.calibration_output = reloaded.calibration_output;
         config.calibration_report_dir = reloaded.calibration_report_dir;
         config.calibration = reloaded.calibration;
+        config.fusion_enabled = reloaded.fusion_enabled;
+        config.fusion_publish_hz = reloaded.fusion_publish_hz;
         daemon.Reconfigure(CoreOptions(config));
         calibration.Reconfigure(config);
+        fusion.Reconfigure(config);
         if (status_changed) {
           status.cancel();
           schedule_status();
@@ -347,6 +472,8 @@ int RunLive(const RunOptions& run, DaemonConfig config) {
 
   io.run();
 
+  daemon.set_frame_listener(nullptr);
+  fusion.Close();
   daemon.OnTick(NowUtcNs());
   LogEvents(daemon, config.ingest.silent_after_s);
   int exit_code = kExitOk;
@@ -394,6 +521,24 @@ int RunOffline(const RunOptions& run, const DaemonConfig& config,
   } tee;
   tee.recorder = recorder ? &*recorder : nullptr;
   Daemon core(CoreOptions(config), &tee, nullptr, RandomSessionId());
+  // With a calibration to start from, the input is fused as it is read (on its receive times).
+  asio::io_context io;
+  FusionService fusion(io, config);
+  if (!config.calibration_initial.empty()) {
+    calib::CalibrationOutcome initial;
+    if (auto e = LoadInitialCalibration(config.calibration_initial, &initial)) {
+      std::fprintf(stderr, "lrfnetd: %s\n", e->c_str());
+      return kExitFailure;
+    }
+    if (std::string e = fusion.Open(); !e.empty()) {
+      std::fprintf(stderr, "lrfnetd: %s\n", e.c_str());
+      return kExitFailure;
+    }
+    fusion.SetCalibration(initial.result);
+    core.set_frame_listener(&fusion);
+  }
+  const auto fusion_period_ns = static_cast<common::DurationNs>(1e9 / config.fusion_publish_hz);
+  common::UtcNs last_fusion_ns = 0;
 
   int exit_code = kExitOk;
   common::UtcNs last_tick_ns = 0;
@@ -412,6 +557,11 @@ int RunOffline(const RunOptions& run, const DaemonConfig& config,
     while ((status = source->Next(&d)) == SourceStatus::kDatagram) {
       core.OnDatagram(d.bytes, d.source, d.receive_ns);
       last_ns = d.receive_ns;
+      if (fusion.calibrated() && (d.receive_ns - last_fusion_ns >= fusion_period_ns ||
+                                  d.receive_ns < last_fusion_ns)) {
+        fusion.OnTick(static_cast<double>(d.receive_ns) * 1e-9);
+        last_fusion_ns = d.receive_ns;
+      }
       if (d.receive_ns - last_tick_ns >= kTickPeriodNs || d.receive_ns < last_tick_ns) {
         core.OnTick(d.receive_ns);
         LogEvents(core, config.ingest.silent_after_s);
@@ -426,6 +576,12 @@ int RunOffline(const RunOptions& run, const DaemonConfig& config,
   }
   if (last_ns != 0) core.OnTick(last_ns);
   LogEvents(core, config.ingest.silent_after_s);
+  core.set_frame_listener(nullptr);
+  if (fusion.calibrated()) {
+    fusion.Close();
+    spdlog::info("fusion: {} snapshots, {} fused tracks created",
+                 fusion.counters().publishes, fusion.fuser().counters().fused_created);
+  }
   if (tee.error) {
     std::fprintf(stderr, "lrfnetd: %s\n", tee.error->c_str());
     exit_code = kExitFailure;
@@ -437,7 +593,8 @@ int RunOffline(const RunOptions& run, const DaemonConfig& config,
     }
   }
   spdlog::info("status: {}", core.StatusLine(last_ns));
-  if (config.calibration_auto || !config.calibration_output.empty()) {
+  if ((config.calibration_auto && config.calibration_initial.empty()) ||
+      !config.calibration_output.empty()) {
     const auto start = std::chrono::steady_clock::now();
     const calib::CalibrationOutcome outcome = calib::Calibrate(
         CalibrationInputFrom(core.ingest(), core.store()), config.calibration,
@@ -501,6 +658,15 @@ int Run(int argc, char** argv) {
       "write calibration.yaml here when a calibration succeeds (overrides calibration.output)")(
       "calibration-report", po::value<std::string>(),
       "write the calibration report into this folder (overrides calibration.report_dir)")(
+      "calibration-in", po::value<std::string>(),
+      "start from this calibration.yaml: fuse at once (overrides calibration.initial)")(
+      "live-view", po::value<std::string>(),
+      "serve the live view (web page) on ADDR:PORT, e.g. 127.0.0.1:8080 (overrides "
+      "live_view.listen)")(
+      "fused-out", po::value<std::string>(),
+      "append the fused tracks as JSON lines to this file (overrides fusion.record)")(
+      "fused-udp", po::value<std::string>(),
+      "send the fused tracks as JSON datagrams to HOST:PORT (overrides fusion.publish)")(
       "stats-out", po::value<std::string>(&run.stats_out),
       "at exit, write every counter (per sensor and reason) as JSON to this file")(
       "log-level", po::value<std::string>(&log_level)->default_value("info"),
@@ -523,6 +689,12 @@ int Run(int argc, char** argv) {
     run.calibration_out_flag = vm["calibration-out"].as<std::string>();
   if (vm.count("calibration-report") != 0)
     run.calibration_report_flag = vm["calibration-report"].as<std::string>();
+  for (const auto& [flag, target] :
+       {std::pair{"calibration-in", &run.calibration_in_flag},
+        std::pair{"live-view", &run.live_view_flag}, std::pair{"fused-out", &run.fused_out_flag},
+        std::pair{"fused-udp", &run.fused_udp_flag}}) {
+    if (vm.count(flag) != 0) *target = vm[flag].as<std::string>();
+  }
   if (udp_port < 0 || udp_port > 65535) return UsageError("--udp-port must be 0..65535");
   if (!(run.duration_s >= 0.0)) return UsageError("--duration-s must be >= 0");
   if (!inputs.empty() && run.listen_flag) return UsageError("give either --listen or --input");

@@ -1,0 +1,132 @@
+#include "central_daemon/app/fusion_service.h"
+
+#include <spdlog/spdlog.h>
+
+#include <boost/asio/ip/address.hpp>
+#include <cerrno>
+#include <cstring>
+
+#include "common/host_port.h"
+
+namespace lrfnet::daemon {
+
+std::vector<fusion::SensorPlacement> PlacementsOf(const calib::CalibrationResult& result) {
+  std::vector<fusion::SensorPlacement> out;
+  for (const calib::SensorPose& s : result.sensors) {
+    if (!s.calibrated) continue;
+    fusion::SensorPlacement p;
+    p.id = s.id;
+    p.world_from_sensor = s.world_from_sensor;
+    p.covariance = s.covariance;
+    out.push_back(std::move(p));
+  }
+  return out;
+}
+
+FusionService::FusionService(boost::asio::io_context& io, const DaemonConfig& config)
+    : io_(io), config_(config), fuser_(config.fusion) {}
+
+FusionService::~FusionService() { Close(); }
+
+std::string FusionService::Open() {
+  if (!config_.fusion_publish.empty()) {
+    std::string error;
+    const auto hp = common::ParseHostPort(config_.fusion_publish, "fusion.publish", 0, &error);
+    if (!hp) return error;
+    boost::system::error_code ec;
+    const boost::asio::ip::address address = boost::asio::ip::make_address(hp->host, ec);
+    if (ec) return "fusion.publish: '" + hp->host + "' is not an IP address";
+    destination_ = boost::asio::ip::udp::endpoint(address, hp->port);
+    socket_.emplace(io_);
+    socket_->open(destination_.protocol(), ec);
+    if (ec) return "fusion.publish: " + ec.message();
+    socket_->non_blocking(true, ec);
+  }
+  if (!config_.fusion_record.empty()) {
+    record_ = std::fopen(config_.fusion_record.c_str(), "ae");
+    if (record_ == nullptr) {
+      return "fusion.record: cannot open '" + config_.fusion_record + "': " + std::strerror(errno);
+    }
+  }
+  return "";
+}
+
+void FusionService::Reconfigure(const DaemonConfig& config) {
+  // The fuser keeps its tracks; only options that need no new state change.
+  config_.fusion_enabled = config.fusion_enabled;
+  config_.fusion_publish_hz = config.fusion_publish_hz;
+}
+
+void FusionService::SetCalibration(const calib::CalibrationResult& result) {
+  fuser_.SetPlacements(PlacementsOf(result));
+  calibrated_ = true;
+  ++counters_.calibrations;
+}
+
+void FusionService::OnFrame(const std::string& sensor_id, const TrackFrameData& frame) {
+  now_ns_ = std::max(now_ns_, frame.scan_start_ns);
+  TrackFrameData& latest = latest_frames_[sensor_id];
+  // Parts of one scan are collected into one frame; a newer scan replaces it.
+  if (latest.scan_start_ns == frame.scan_start_ns && latest.session_id == frame.session_id &&
+      latest.scan_counter == frame.scan_counter && frame.part_count > 1) {
+    latest.tracks.insert(latest.tracks.end(), frame.tracks.begin(), frame.tracks.end());
+  } else if (frame.scan_start_ns >= latest.scan_start_ns || frame.session_id != latest.session_id) {
+    latest = frame;
+  }
+  if (calibrated_ && config_.fusion_enabled) fuser_.AddFrame(sensor_id, frame);
+}
+
+void FusionService::OnTick(double now_s) {
+  if (!calibrated_ || !config_.fusion_enabled) return;
+  // Timer jitter: a publish counts as due slightly early.
+  if (last_publish_s_ && now_s - *last_publish_s_ < 0.9 / config_.fusion_publish_hz &&
+      now_s >= *last_publish_s_)
+    return;
+  last_publish_s_ = now_s;
+  Publish();
+}
+
+void FusionService::Publish() {
+  if (now_ns_ == 0) return;
+  fuser_.Tick(now_ns_);
+  const std::vector<fusion::FusedTrack> tracks = fuser_.Snapshot(now_ns_);
+  ++counters_.publishes;
+  if (socket_) {
+    for (const std::string& datagram : fusion::FusedTrackDatagrams(tracks, now_ns_)) {
+      boost::system::error_code ec;
+      socket_->send_to(boost::asio::buffer(datagram), destination_, 0, ec);
+      if (ec) {
+        if (counters_.send_errors++ == 0) {
+          spdlog::warn("fusion: sending to {}: {}", config_.fusion_publish, ec.message());
+        }
+      } else {
+        ++counters_.datagrams_sent;
+      }
+    }
+  }
+  if (record_ != nullptr) {
+    const std::string line = fusion::FusedTracksJson(tracks, now_ns_) + "\n";
+    if (std::fwrite(line.data(), 1, line.size(), record_) != line.size() ||
+        std::fflush(record_) != 0) {
+      if (counters_.record_errors++ == 0) {
+        spdlog::error("fusion: writing {}: {}", config_.fusion_record, std::strerror(errno));
+      }
+    } else {
+      ++counters_.lines_recorded;
+    }
+  }
+}
+
+void FusionService::Close() {
+  if (record_ != nullptr) {
+    std::fclose(record_);
+    record_ = nullptr;
+  }
+  if (socket_) {
+    boost::system::error_code ec;
+    socket_->close(ec);
+    socket_.reset();
+  }
+}
+
+}  // namespace lrfnet::daemon

@@ -1,0 +1,85 @@
+#pragma once
+// lrfnetd's fusion (an adapter around fusion::Fuser): every accepted track frame goes to the fuser
+// once the sensor has a calibrated pose; at fusion.publish_hz the fused tracks are sent as JSON
+// datagrams over UDP (fusion.publish) and appended as JSON lines to fusion.record. Also keeps
+// each sensor's latest frame for the live view (raw tracks before calibration).
+//
+// Time: the fuser runs on the gateways' UTC scan times; "now" is the newest scan time received
+// (so a recording replayed offline fuses exactly like the live stream).
+// Thread-safety: every function is called on the io thread.
+
+#include <boost/asio/io_context.hpp>
+#include <boost/asio/ip/udp.hpp>
+#include <cstdio>
+#include <map>
+#include <memory>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "central_daemon/app/config.h"
+#include "central_daemon/app/daemon.h"
+#include "central_daemon/calibration/types.h"
+#include "central_daemon/fusion/fusion.h"
+
+namespace lrfnet::daemon {
+
+struct FusionServiceCounters {
+  std::uint64_t publishes = 0;      // snapshots taken
+  std::uint64_t datagrams_sent = 0;
+  std::uint64_t send_errors = 0;
+  std::uint64_t lines_recorded = 0;
+  std::uint64_t record_errors = 0;
+  std::uint64_t calibrations = 0;   // placements applied
+};
+
+// The placements of the calibrated sensors of a calibration result.
+std::vector<fusion::SensorPlacement> PlacementsOf(const calib::CalibrationResult& result);
+
+class FusionService final : public FrameListener {
+ public:
+  FusionService(boost::asio::io_context& io, const DaemonConfig& config);
+  ~FusionService() override;
+  FusionService(const FusionService&) = delete;
+  FusionService& operator=(const FusionService&) = delete;
+
+  // Opens the UDP socket and the record file. Returns "" or the error.
+  std::string Open();
+  // Applies the fusion options that may change at run time (not publish / record).
+  void Reconfigure(const DaemonConfig& config);
+  // A new calibration: its calibrated sensors are placed (fused ids are kept).
+  void SetCalibration(const calib::CalibrationResult& result);
+  bool calibrated() const { return calibrated_; }
+
+  void OnFrame(const std::string& sensor_id, const TrackFrameData& frame) override;
+  // Publishes when due (monotonic now_s).
+  void OnTick(double now_s);
+  // Flushes the record file.
+  void Close();
+
+  // The newest scan time received (gateway UTC), 0 before the first frame.
+  common::UtcNs now_ns() const { return now_ns_; }
+  const fusion::Fuser& fuser() const { return fuser_; }
+  // Each sensor's latest frame (sensor frame), for the live view.
+  const std::map<std::string, TrackFrameData, std::less<>>& latest_frames() const {
+    return latest_frames_;
+  }
+  const FusionServiceCounters& counters() const { return counters_; }
+
+ private:
+  void Publish();
+
+  boost::asio::io_context& io_;
+  DaemonConfig config_;
+  fusion::Fuser fuser_;
+  bool calibrated_ = false;
+  common::UtcNs now_ns_ = 0;
+  std::optional<double> last_publish_s_;
+  std::map<std::string, TrackFrameData, std::less<>> latest_frames_;
+  std::optional<boost::asio::ip::udp::socket> socket_;
+  boost::asio::ip::udp::endpoint destination_;
+  std::FILE* record_ = nullptr;
+  FusionServiceCounters counters_;
+};
+
+}  // namespace lrfnet::daemon

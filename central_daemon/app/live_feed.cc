@@ -1,0 +1,153 @@
+#include "central_daemon/app/live_feed.h"
+
+#include <cmath>
+
+namespace lrfnet::daemon {
+namespace {
+
+// Background points in the frame of `pose` (identity: the sensor frame), at most `max_points`.
+std::vector<std::array<float, 2>> BackgroundPoints(const BackgroundScan& scan,
+                                                   const common::Pose2& pose,
+                                                   std::size_t max_points) {
+  std::vector<std::array<float, 2>> out;
+  std::size_t valid = 0;
+  for (std::uint32_t r : scan.ranges_mm) valid += r > 0 ? 1 : 0;
+  if (valid == 0 || max_points == 0) return out;
+  const std::size_t stride = (valid + max_points - 1) / max_points;
+  std::size_t k = 0;
+  for (std::size_t i = 0; i < scan.ranges_mm.size(); ++i) {
+    if (scan.ranges_mm[i] == 0) continue;
+    if (k++ % stride != 0) continue;
+    const double angle = scan.first_angle_rad + static_cast<double>(i) * scan.angle_step_rad;
+    const double range_m = scan.ranges_mm[i] * 1e-3;
+    const Eigen::Vector2d p = pose * Eigen::Vector2d(range_m * std::cos(angle), range_m * std::sin(angle));
+    out.push_back({static_cast<float>(p.x()), static_cast<float>(p.y())});
+  }
+  return out;
+}
+
+}  // namespace
+
+LiveState LiveFeed::Build(const Daemon& daemon, const CalibrationService& calibration,
+                          const FusionService& fusion, common::UtcNs now_ns,
+                          const std::string& version) {
+  LiveState state;
+  state.stamp_ns = fusion.now_ns() != 0 ? fusion.now_ns() : now_ns;
+  state.version = version;
+
+  // Calibration.
+  const auto& latest = calibration.latest();
+  std::map<std::string, common::Pose2, std::less<>> poses;
+  if (latest) {
+    for (const calib::SensorPose& s : latest->result.sensors) {
+      if (s.calibrated) poses[s.id] = s.world_from_sensor;
+    }
+    state.calibration.state = "calibrated";
+    state.calibration.progress = 1.0;
+    state.calibration.reference = latest->result.reference;
+    state.calibration.track_residual_rms_m = latest->result.track_residual_rms_m;
+    char text[120];
+    std::snprintf(text, sizeof text, "%zu sensors placed, track residual %.3f m rms", poses.size(),
+                  latest->result.track_residual_rms_m);
+    state.calibration.message = text;
+    if (calibration.busy()) state.calibration.message += "; recalibrating";
+  } else {
+    state.calibration.state = calibration.busy() ? "calibrating" : "collecting";
+    state.calibration.progress = calibration.progress().fraction;
+    state.calibration.message = calibration.progress().text;
+    if (const auto remaining = calibration.RemainingS(); remaining && *remaining >= 1.0) {
+      char text[64];
+      std::snprintf(text, sizeof text, ", about %.0f s more", *remaining);
+      state.calibration.message += text;
+    }
+  }
+
+  // Sensors.
+  for (const SensorStatus& s : daemon.ingest().Sensors()) {
+    LiveSensor sensor;
+    sensor.id = s.sensor_id;
+    const auto pose = poses.find(s.sensor_id);
+    sensor.placed = pose != poses.end();
+    if (sensor.placed) sensor.world_from_sensor = pose->second;
+    if (s.info) {
+      sensor.model = s.info->model;
+      sensor.first_angle_rad = s.info->first_angle_rad;
+      sensor.fov_rad = s.info->fov_rad;
+      sensor.max_range_m = s.info->max_range_m;
+    }
+    sensor.status = s.silent ? "silent" : (s.counters.track_frames > 0 ? "active" : "waiting");
+    Mark& mark = marks_[s.sensor_id];
+    if (mark.at_ns != 0 && now_ns > mark.at_ns) {
+      mark.rate_hz = static_cast<double>(s.counters.datagrams - mark.datagrams) /
+                     (static_cast<double>(now_ns - mark.at_ns) * 1e-9);
+    }
+    mark.datagrams = s.counters.datagrams;
+    mark.at_ns = now_ns;
+    sensor.datagram_rate_hz = mark.rate_hz;
+    const double received = static_cast<double>(s.counters.sequence.received);
+    const double lost = static_cast<double>(s.counters.sequence.lost);
+    sensor.loss = received + lost > 0 ? lost / (received + lost) : 0.0;
+    sensor.clock_sync = s.health ? ToString(s.health->clock_sync) : "unknown";
+    sensor.track_frames = s.counters.track_frames;
+    if (const BackgroundScan* background = daemon.store().Background(s.sensor_id)) {
+      sensor.background_xy = BackgroundPoints(
+          *background, sensor.placed ? sensor.world_from_sensor : common::Pose2::Identity(),
+          background_points_);
+    }
+    state.sensors.push_back(std::move(sensor));
+  }
+
+  // Raw tracks: world frame where placed (from the fuser, with their fused ids), else the
+  // sensor's latest frame in its own frame.
+  std::map<std::string, bool, std::less<>> from_fuser;
+  if (fusion.calibrated()) {
+    for (const fusion::WorldTrack& t : fusion.fuser().WorldTracks(fusion.now_ns())) {
+      from_fuser[t.sensor_id] = true;
+      LiveTrack track;
+      track.sensor_id = t.sensor_id;
+      track.track_id = t.track_id;
+      track.state = ToString(t.state);
+      track.x_m = t.x_m;
+      track.y_m = t.y_m;
+      track.vx_mps = t.vx_mps;
+      track.vy_mps = t.vy_mps;
+      track.fused_id = t.fused_id;
+      state.tracks.push_back(std::move(track));
+    }
+    for (const fusion::FusedTrack& f : fusion.fuser().Snapshot(fusion.now_ns())) {
+      LiveFusedTrack fused;
+      fused.id = f.id;
+      fused.state = fusion::ToString(f.state);
+      fused.x_m = f.x_m;
+      fused.y_m = f.y_m;
+      fused.vx_mps = f.vx_mps;
+      fused.vy_mps = f.vy_mps;
+      fused.cov_xx = f.covariance(0, 0);
+      fused.cov_xy = f.covariance(0, 1);
+      fused.cov_yy = f.covariance(1, 1);
+      for (const fusion::FusedSource& source : f.sources) fused.sensors.push_back(source.sensor_id);
+      state.fused.push_back(std::move(fused));
+    }
+  }
+  // A frame older than this is not drawn (the sensor lost its tracks or went silent).
+  constexpr common::DurationNs kStaleNs = 1'000'000'000;
+  for (const auto& [sensor_id, frame] : fusion.latest_frames()) {
+    if (poses.count(sensor_id) != 0 && fusion.calibrated()) continue;
+    if (fusion.now_ns() - frame.scan_start_ns > kStaleNs) continue;
+    for (const TrackObservation& o : frame.tracks) {
+      if (o.state == TrackState::kTentative) continue;
+      LiveTrack track;
+      track.sensor_id = sensor_id;
+      track.track_id = o.track_id;
+      track.state = ToString(o.state);
+      track.x_m = o.x_m;
+      track.y_m = o.y_m;
+      track.vx_mps = o.vx_mps;
+      track.vy_mps = o.vy_mps;
+      state.tracks.push_back(std::move(track));
+    }
+  }
+  return state;
+}
+
+}  // namespace lrfnet::daemon

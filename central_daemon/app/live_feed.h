@@ -1,0 +1,34 @@
+#pragma once
+// Fills the live view's LiveState from the daemon's parts (sensors, health, backgrounds,
+// calibration state, raw and fused tracks). Keeps the counters of the previous call to give rates.
+// Thread-safety: called on the io thread.
+
+#include <map>
+#include <string>
+
+#include "central_daemon/app/calibration_service.h"
+#include "central_daemon/app/daemon.h"
+#include "central_daemon/app/fusion_service.h"
+#include "central_daemon/app/live_state.h"
+
+namespace lrfnet::daemon {
+
+class LiveFeed {
+ public:
+  explicit LiveFeed(std::size_t background_points) : background_points_(background_points) {}
+
+  // now_ns: the daemon's clock (rates); the track times come from the fusion service.
+  LiveState Build(const Daemon& daemon, const CalibrationService& calibration,
+                  const FusionService& fusion, common::UtcNs now_ns, const std::string& version);
+
+ private:
+  struct Mark {
+    std::uint64_t datagrams = 0;
+    common::UtcNs at_ns = 0;
+    double rate_hz = 0.0;
+  };
+  std::size_t background_points_;
+  std::map<std::string, Mark, std::less<>> marks_;
+};
+
+}  // namespace lrfnet::daemon

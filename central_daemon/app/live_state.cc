@@ -1,0 +1,302 @@
+#include "central_daemon/app/live_state.h"
+
+#include <charconv>
+#include <cmath>
+#include <cstddef>
+#include <cstdint>
+#include <string_view>
+
+namespace lrfnet::daemon {
+namespace {
+
+// A small streaming writer instead of a JSON DOM: the message is built a few times a second with
+// thousands of background points, and writing straight into one string keeps that cheap.
+class Writer {
+ public:
+  explicit Writer(std::string& out) : out_(out) {}
+
+  void Raw(std::string_view s) { out_.append(s); }
+  void Key(std::string_view key) {
+    Comma();
+    Quoted(key);
+    out_.push_back(':');
+    first_ = true;  // the value that follows needs no comma
+  }
+  void BeginObject() { Open('{'); }
+  void EndObject() { Close('}'); }
+  void BeginArray() { Open('['); }
+  void EndArray() { Close(']'); }
+
+  // Coordinates: rounded to the millimetre, which also keeps the text short.
+  void Metres(double v) { Number(v, 1e3); }
+  // Angles: micro-radians are far below anything the page can show.
+  void Radians(double v) { Number(v, 1e6); }
+  // Rates, fractions, covariances: six significant digits.
+  void Real(double v) {
+    Comma();
+    if (!std::isfinite(v)) {
+      out_.append("null");
+      return;
+    }
+    char buf[32];
+    const auto r = std::to_chars(buf, buf + sizeof(buf), v, std::chars_format::general, 6);
+    out_.append(buf, r.ptr);
+  }
+  void Int(std::int64_t v) { Integer(v); }
+  void UInt(std::uint64_t v) { Integer(v); }
+  void Bool(bool v) {
+    Comma();
+    out_.append(v ? "true" : "false");
+  }
+  void Null() {
+    Comma();
+    out_.append("null");
+  }
+  void String(std::string_view s) {
+    Comma();
+    Quoted(s);
+  }
+
+ private:
+  void Quoted(std::string_view s) {
+    out_.push_back('"');
+    AppendEscaped(s);
+    out_.push_back('"');
+  }
+  void Open(char c) {
+    Comma();
+    out_.push_back(c);
+    first_ = true;
+  }
+  void Close(char c) {
+    out_.push_back(c);
+    first_ = false;
+  }
+  void Comma() {
+    if (!first_) out_.push_back(',');
+    first_ = false;
+  }
+  void Number(double v, double scale) {
+    Comma();
+    if (!std::isfinite(v)) {
+      out_.append("null");
+      return;
+    }
+    const double rounded = std::round(v * scale) / scale;
+    char buf[32];
+    // Shortest round-trip form of the rounded value: "1.234", "-0.5", "12".
+    const auto r = std::to_chars(buf, buf + sizeof(buf), rounded == 0.0 ? 0.0 : rounded);
+    out_.append(buf, r.ptr);
+  }
+  template <typename T>
+  void Integer(T v) {
+    Comma();
+    char buf[24];
+    const auto r = std::to_chars(buf, buf + sizeof(buf), v);
+    out_.append(buf, r.ptr);
+  }
+
+  // Length of the well-formed UTF-8 sequence at s[i], or 0 when it is not one (overlong forms,
+  // surrogates and code points above U+10FFFF included): browsers fail a WebSocket whose text frame
+  // is not valid UTF-8, so a hostile sensor id must not get through as raw bytes.
+  static std::size_t Utf8Length(std::string_view s, std::size_t i) {
+    const auto byte = [&](std::size_t k) { return static_cast<unsigned char>(s[k]); };
+    const unsigned char c = byte(i);
+    std::size_t n = 0;
+    unsigned char lo = 0x80, hi = 0xBF;  // allowed range of the second byte
+    if (c >= 0xC2 && c <= 0xDF) {
+      n = 2;
+    } else if (c >= 0xE0 && c <= 0xEF) {
+      n = 3;
+      if (c == 0xE0) lo = 0xA0;
+      if (c == 0xED) hi = 0x9F;
+    } else if (c >= 0xF0 && c <= 0xF4) {
+      n = 4;
+      if (c == 0xF0) lo = 0x90;
+      if (c == 0xF4) hi = 0x8F;
+    } else {
+      return 0;
+    }
+    if (i + n > s.size()) return 0;
+    if (byte(i + 1) < lo || byte(i + 1) > hi) return 0;
+    for (std::size_t k = 2; k < n; ++k) {
+      if (byte(i + k) < 0x80 || byte(i + k) > 0xBF) return 0;
+    }
+    return n;
+  }
+
+  void AppendEscaped(std::string_view s) {
+    static constexpr char kHex[] = "0123456789abcdef";
+    for (std::size_t i = 0; i < s.size();) {
+      const unsigned char c = static_cast<unsigned char>(s[i]);
+      if (c == '"' || c == '\\') {
+        out_.push_back('\\');
+        out_.push_back(static_cast<char>(c));
+        ++i;
+      } else if (c < 0x20 || c == 0x7F) {
+        out_.append("\\u00");
+        out_.push_back(kHex[c >> 4]);
+        out_.push_back(kHex[c & 0xF]);
+        ++i;
+      } else if (c < 0x80) {
+        out_.push_back(static_cast<char>(c));
+        ++i;
+      } else if (const std::size_t n = Utf8Length(s, i); n > 0) {
+        out_.append(s.substr(i, n));
+        i += n;
+      } else {
+        out_.append("\xEF\xBF\xBD");  // U+FFFD for each byte that is not part of valid UTF-8
+        ++i;
+      }
+    }
+  }
+
+  std::string& out_;
+  bool first_ = true;
+};
+
+void WriteCalibration(Writer& w, const LiveCalibration& c) {
+  w.BeginObject();
+  w.Key("state");
+  w.String(c.state);
+  w.Key("progress");
+  w.Real(c.progress);
+  w.Key("message");
+  w.String(c.message);
+  w.Key("reference");
+  w.String(c.reference);
+  w.Key("track_residual_rms_m");
+  w.Real(c.track_residual_rms_m);
+  w.EndObject();
+}
+
+void WriteSensor(Writer& w, const LiveSensor& s) {
+  w.BeginObject();
+  w.Key("id");
+  w.String(s.id);
+  w.Key("model");
+  w.String(s.model);
+  w.Key("placed");
+  w.Bool(s.placed);
+  w.Key("x_m");
+  w.Metres(s.world_from_sensor.x_m);
+  w.Key("y_m");
+  w.Metres(s.world_from_sensor.y_m);
+  w.Key("yaw_rad");
+  w.Radians(s.world_from_sensor.yaw_rad);
+  w.Key("first_angle_rad");
+  w.Radians(s.first_angle_rad);
+  w.Key("fov_rad");
+  w.Radians(s.fov_rad);
+  w.Key("max_range_m");
+  w.Metres(s.max_range_m);
+  w.Key("status");
+  w.String(s.status);
+  w.Key("datagram_rate_hz");
+  w.Real(s.datagram_rate_hz);
+  w.Key("loss");
+  w.Real(s.loss);
+  w.Key("clock_sync");
+  w.String(s.clock_sync);
+  w.Key("track_frames");
+  w.UInt(s.track_frames);
+  w.Key("background");
+  w.BeginArray();
+  for (const auto& p : s.background_xy) {
+    w.BeginArray();
+    w.Metres(p[0]);
+    w.Metres(p[1]);
+    w.EndArray();
+  }
+  w.EndArray();
+  w.EndObject();
+}
+
+void WriteTrack(Writer& w, const LiveTrack& t) {
+  w.BeginObject();
+  w.Key("sensor");
+  w.String(t.sensor_id);
+  w.Key("id");
+  w.UInt(t.track_id);
+  w.Key("state");
+  w.String(t.state);
+  w.Key("x_m");
+  w.Metres(t.x_m);
+  w.Key("y_m");
+  w.Metres(t.y_m);
+  w.Key("vx_mps");
+  w.Metres(t.vx_mps);
+  w.Key("vy_mps");
+  w.Metres(t.vy_mps);
+  w.Key("fused");
+  if (t.fused_id) {
+    w.UInt(*t.fused_id);
+  } else {
+    w.Null();
+  }
+  w.EndObject();
+}
+
+void WriteFused(Writer& w, const LiveFusedTrack& f) {
+  w.BeginObject();
+  w.Key("id");
+  w.UInt(f.id);
+  w.Key("state");
+  w.String(f.state);
+  w.Key("x_m");
+  w.Metres(f.x_m);
+  w.Key("y_m");
+  w.Metres(f.y_m);
+  w.Key("vx_mps");
+  w.Metres(f.vx_mps);
+  w.Key("vy_mps");
+  w.Metres(f.vy_mps);
+  w.Key("cov_xx");
+  w.Real(f.cov_xx);
+  w.Key("cov_xy");
+  w.Real(f.cov_xy);
+  w.Key("cov_yy");
+  w.Real(f.cov_yy);
+  w.Key("sensors");
+  w.BeginArray();
+  for (const auto& id : f.sensors) w.String(id);
+  w.EndArray();
+  w.EndObject();
+}
+
+}  // namespace
+
+std::string LiveStateJson(const LiveState& state) {
+  std::size_t points = 0;
+  for (const auto& s : state.sensors) points += s.background_xy.size();
+  std::string out;
+  // About 16 bytes per point and 200 per sensor or track: one allocation for typical messages.
+  out.reserve(512 + 16 * points + 256 * (state.sensors.size() + state.tracks.size() +
+                                         state.fused.size()));
+  Writer w(out);
+  w.BeginObject();
+  w.Key("type");
+  w.String("state");
+  w.Key("stamp_ns");
+  w.Int(state.stamp_ns);
+  w.Key("version");
+  w.String(state.version);
+  w.Key("calibration");
+  WriteCalibration(w, state.calibration);
+  w.Key("sensors");
+  w.BeginArray();
+  for (const auto& s : state.sensors) WriteSensor(w, s);
+  w.EndArray();
+  w.Key("tracks");
+  w.BeginArray();
+  for (const auto& t : state.tracks) WriteTrack(w, t);
+  w.EndArray();
+  w.Key("fused");
+  w.BeginArray();
+  for (const auto& f : state.fused) WriteFused(w, f);
+  w.EndArray();
+  w.EndObject();
+  return out;
+}
+
+}  // namespace lrfnet::daemon

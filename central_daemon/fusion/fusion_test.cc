@@ -1,0 +1,828 @@
+#include "central_daemon/fusion/fusion.h"
+
+#include <gtest/gtest.h>
+
+#include <Eigen/Cholesky>
+#include <cmath>
+#include <limits>
+#include <random>
+#include <set>
+
+#include "central_daemon/fusion/fusion_test_util.h"
+
+namespace lrfnet::fusion {
+namespace {
+
+using common::DegToRad;
+using common::Pose2;
+using common::UtcNs;
+using daemon::TrackFrameData;
+using daemon::TrackObservation;
+using daemon::TrackState;
+using testing::AtSeconds;
+using testing::Scene;
+using testing::SimSensor;
+using testing::Walker;
+
+TrackObservation Obs(std::uint32_t id, double x, double y, double vx = 0.0, double vy = 0.0,
+                     double sigma_m = 0.05) {
+  TrackObservation o;
+  o.track_id = id;
+  o.state = TrackState::kConfirmed;
+  o.x_m = static_cast<float>(x);
+  o.y_m = static_cast<float>(y);
+  o.vx_mps = static_cast<float>(vx);
+  o.vy_mps = static_cast<float>(vy);
+  const auto var = static_cast<float>(sigma_m * sigma_m);
+  o.covariance = {var, 0, 0, 0, var, 0, 0, 0.01f, 0, 0.01f};
+  return o;
+}
+
+TrackFrameData FrameAt(double t_s, std::vector<TrackObservation> tracks,
+                       std::uint64_t session = 1) {
+  TrackFrameData f;
+  f.session_id = session;
+  f.scan_start_ns = AtSeconds(t_s);
+  f.scan_period_s = 0.04;
+  f.tracks = std::move(tracks);
+  return f;
+}
+
+SensorPlacement Placed(const std::string& id, double x, double y, double yaw_deg) {
+  SensorPlacement p;
+  p.id = id;
+  p.world_from_sensor = Pose2{x, y, DegToRad(yaw_deg)};
+  p.covariance = Eigen::Vector3d(1e-4, 1e-4, 1e-6).asDiagonal();
+  return p;
+}
+
+bool AllFinite(const FusedTrack& t) {
+  return std::isfinite(t.x_m) && std::isfinite(t.y_m) && std::isfinite(t.vx_mps) &&
+         std::isfinite(t.vy_mps) && t.covariance.array().isFinite().all();
+}
+
+SimSensor Sensor(const std::string& id, double x, double y, double yaw_deg, double phase_s = 0.0) {
+  SimSensor s;
+  s.id = id;
+  s.truth = Pose2{x, y, DegToRad(yaw_deg)};
+  s.phase_s = phase_s;
+  return s;
+}
+
+// ---------------------------------------------------------------------------------------------
+// ToWorld
+
+TEST(ToWorldTest, MatchesHandComputedValues) {
+  // Sensor at (1, 2) looking along +y: sensor x is world y, sensor y is world -x.
+  SensorPlacement placement;
+  placement.world_from_sensor = Pose2{1.0, 2.0, DegToRad(90.0)};
+  placement.covariance = Eigen::Vector3d(0.0025, 0.0025, 1e-4).asDiagonal();
+  TrackObservation o = Obs(7, 3.0, 0.0, 1.0, 0.0);
+  o.covariance = {0.01f, 0, 0, 0, 0.04f, 0, 0, 0.09f, 0, 0.16f};
+
+  const WorldTrack w = ToWorld(placement, "s1", 42, o);
+  EXPECT_EQ(w.sensor_id, "s1");
+  EXPECT_EQ(w.track_id, 7u);
+  EXPECT_EQ(w.stamp_ns, 42);
+  EXPECT_NEAR(w.x_m, 1.0, 1e-12);
+  EXPECT_NEAR(w.y_m, 5.0, 1e-12);
+  EXPECT_NEAR(w.vx_mps, 0.0, 1e-12);
+  EXPECT_NEAR(w.vy_mps, 1.0, 1e-12);
+  // R P R^T swaps the axes; the yaw variance moves the point across the beam (3 m lever arm,
+  // dp/dyaw = (-3, 0)) and the velocity too (dv/dyaw = (-1, 0)), correlated.
+  EXPECT_NEAR(w.position_covariance(0, 0), 0.04 + 0.0025 + 9.0 * 1e-4, 1e-7);
+  EXPECT_NEAR(w.position_covariance(1, 1), 0.01 + 0.0025, 1e-7);
+  EXPECT_NEAR(w.position_covariance(0, 1), 0.0, 1e-7);
+  EXPECT_NEAR(w.covariance(2, 2), 0.16 + 1e-4, 1e-7);
+  EXPECT_NEAR(w.covariance(3, 3), 0.09, 1e-7);
+  EXPECT_NEAR(w.covariance(0, 2), 3.0 * 1e-4, 1e-7);
+  EXPECT_NEAR(w.covariance(2, 0), 3.0 * 1e-4, 1e-7);
+  EXPECT_TRUE((w.position_covariance.array() == w.covariance.topLeftCorner<2, 2>().array()).all());
+}
+
+TEST(ToWorldTest, CovarianceMatchesMonteCarlo) {
+  SensorPlacement placement;
+  placement.world_from_sensor = Pose2{2.0, -1.0, DegToRad(30.0)};
+  Eigen::Matrix3d pose_cov;
+  pose_cov << 0.04 * 0.04, 0.0004, 0.0002, 0.0004, 0.03 * 0.03, -0.0001, 0.0002, -0.0001,
+      std::pow(DegToRad(1.5), 2);
+  placement.covariance = pose_cov;
+  TrackObservation o = Obs(1, 6.0, 2.0, 0.8, -0.3);
+  Eigen::Matrix4d local;
+  local << 0.0025, 0.0010, 0.0005, 0.0, 0.0010, 0.0040, 0.0, 0.0008, 0.0005, 0.0, 0.0400, 0.0050,
+      0.0, 0.0008, 0.0050, 0.0300;
+  o.covariance = {0.0025f, 0.0010f, 0.0005f, 0.0f,    0.0040f,
+                  0.0f,    0.0008f, 0.0400f, 0.0050f, 0.0300f};
+  const WorldTrack w = ToWorld(placement, "s", 0, o);
+
+  std::mt19937 rng(11);
+  std::normal_distribution<double> n01(0.0, 1.0);
+  const Eigen::Matrix3d lp = pose_cov.llt().matrixL();
+  const Eigen::Matrix4d ll = local.llt().matrixL();
+  constexpr int kSamples = 200000;
+  std::vector<Eigen::Vector4d> samples;
+  samples.reserve(kSamples);
+  Eigen::Vector4d mean = Eigen::Vector4d::Zero();
+  for (int i = 0; i < kSamples; ++i) {
+    const Eigen::Vector3d dp = lp * Eigen::Vector3d(n01(rng), n01(rng), n01(rng));
+    const Eigen::Vector4d dl = ll * Eigen::Vector4d(n01(rng), n01(rng), n01(rng), n01(rng));
+    const Pose2 pose{2.0 + dp(0), -1.0 + dp(1), DegToRad(30.0) + dp(2)};
+    const Eigen::Vector2d p = pose * Eigen::Vector2d(6.0 + dl(0), 2.0 + dl(1));
+    const Eigen::Vector2d v = pose.rotation() * Eigen::Vector2d(0.8 + dl(2), -0.3 + dl(3));
+    samples.emplace_back(p.x(), p.y(), v.x(), v.y());
+    mean += samples.back();
+  }
+  mean /= kSamples;
+  Eigen::Matrix4d cov = Eigen::Matrix4d::Zero();
+  for (const auto& s : samples) cov += (s - mean) * (s - mean).transpose();
+  cov /= kSamples - 1;
+
+  EXPECT_NEAR(mean(0), w.x_m, 0.005);
+  EXPECT_NEAR(mean(1), w.y_m, 0.005);
+  for (int r = 0; r < 4; ++r) {
+    for (int c = 0; c < 4; ++c) {
+      const double scale = std::sqrt(cov(r, r) * cov(c, c));
+      EXPECT_NEAR(w.covariance(r, c), cov(r, c), 0.02 * scale) << "entry " << r << "," << c;
+    }
+  }
+}
+
+// ---------------------------------------------------------------------------------------------
+// Options and placements
+
+TEST(FusionOptionsTest, DefaultsAreValidAndBadValuesNamed) {
+  EXPECT_FALSE(Validate(FusionOptions{}));
+  FusionOptions o;
+  o.gate_mahalanobis2 = std::numeric_limits<double>::quiet_NaN();
+  EXPECT_NE(Validate(o).value_or("").find("gate_mahalanobis2"), std::string::npos);
+  o = {};
+  o.position_noise_floor_m2 = 0.0;
+  EXPECT_NE(Validate(o).value_or("").find("position_noise_floor_m2"), std::string::npos);
+  o = {};
+  o.agree_mahalanobis2 = 20.0;
+  EXPECT_NE(Validate(o).value_or("").find("agree_mahalanobis2"), std::string::npos);
+  o = {};
+  o.confirm_updates = 0;
+  EXPECT_TRUE(Validate(o));
+  o = {};
+  o.max_tracks_per_frame = 0;
+  EXPECT_TRUE(Validate(o));
+}
+
+TEST(FuserTest, InvalidPlacementsAreIgnoredAndCounted) {
+  Fuser fuser;
+  SensorPlacement nan_pose = Placed("a", 0, 0, 0);
+  nan_pose.world_from_sensor.yaw_rad = std::numeric_limits<double>::quiet_NaN();
+  SensorPlacement negative = Placed("b", 0, 0, 0);
+  negative.covariance(2, 2) = -1.0;
+  SensorPlacement nan_cov = Placed("c", 0, 0, 0);
+  nan_cov.covariance(0, 1) = std::numeric_limits<double>::quiet_NaN();
+  fuser.SetPlacements({nan_pose, negative, nan_cov, Placed("d", 1, 2, 3)});
+  EXPECT_EQ(fuser.counters().placements_invalid, 3u);
+  EXPECT_FALSE(fuser.HasPlacement("a"));
+  EXPECT_FALSE(fuser.HasPlacement("b"));
+  EXPECT_FALSE(fuser.HasPlacement("c"));
+  EXPECT_TRUE(fuser.HasPlacement("d"));
+  fuser.AddFrame("a", FrameAt(1.0, {Obs(1, 1, 1)}));
+  EXPECT_EQ(fuser.counters().frames_unplaced, 1u);
+}
+
+TEST(FuserTest, UnplacedSensorIsCountedAndIgnored) {
+  Fuser fuser;
+  fuser.SetPlacements({Placed("a", 0, 0, 0)});
+  for (int k = 0; k < 10; ++k) {
+    fuser.AddFrame("ghost", FrameAt(1.0 + 0.04 * k, {Obs(1, 2, 0)}));
+    fuser.AddFrame("a", FrameAt(1.01 + 0.04 * k, {Obs(1, 5, 0)}));
+  }
+  EXPECT_EQ(fuser.counters().frames, 20u);
+  EXPECT_EQ(fuser.counters().frames_unplaced, 10u);
+  const auto fused = fuser.Snapshot(AtSeconds(1.4));
+  ASSERT_EQ(fused.size(), 1u);
+  EXPECT_NEAR(fused[0].x_m, 5.0, 0.01);
+  ASSERT_EQ(fused[0].sources.size(), 1u);
+  EXPECT_EQ(fused[0].sources[0].sensor_id, "a");
+  for (const WorldTrack& w : fuser.WorldTracks(AtSeconds(1.4))) EXPECT_EQ(w.sensor_id, "a");
+}
+
+// ---------------------------------------------------------------------------------------------
+// Lifecycle
+
+TEST(FuserTest, TentativeConfirmedCoastingDeleted) {
+  Fuser fuser;
+  fuser.SetPlacements({Placed("a", 0, 0, 0)});
+  fuser.AddFrame("a", FrameAt(1.00, {Obs(1, 3, 0, 1, 0)}));
+  EXPECT_TRUE(fuser.Snapshot(AtSeconds(1.0)).empty());
+  auto tentative = fuser.Snapshot(AtSeconds(1.0), true);
+  ASSERT_EQ(tentative.size(), 1u);
+  EXPECT_EQ(tentative[0].state, FusedState::kTentative);
+  fuser.AddFrame("a", FrameAt(1.04, {Obs(1, 3.04, 0, 1, 0)}));
+  fuser.AddFrame("a", FrameAt(1.08, {Obs(1, 3.08, 0, 1, 0)}));
+  auto confirmed = fuser.Snapshot(AtSeconds(1.1));
+  ASSERT_EQ(confirmed.size(), 1u);
+  EXPECT_EQ(confirmed[0].state, FusedState::kConfirmed);
+  EXPECT_EQ(confirmed[0].updates, 3u);
+  EXPECT_EQ(confirmed[0].first_ns, AtSeconds(1.0));
+  EXPECT_EQ(confirmed[0].stamp_ns, AtSeconds(1.1));
+  EXPECT_NEAR(confirmed[0].x_m, 3.1, 0.01);  // predicted to the snapshot time
+  // No more frames: coasting, then deleted after max_coast_s.
+  fuser.Tick(AtSeconds(1.5));
+  ASSERT_EQ(fuser.Snapshot(AtSeconds(1.5)).size(), 1u);
+  EXPECT_EQ(fuser.Snapshot(AtSeconds(1.5))[0].sources.size(), 1u);
+  fuser.Tick(AtSeconds(1.6));
+  auto coasting = fuser.Snapshot(AtSeconds(1.6));
+  ASSERT_EQ(coasting.size(), 1u);
+  EXPECT_EQ(coasting[0].state, FusedState::kCoasting);
+  EXPECT_TRUE(coasting[0].sources.empty());  // unbound after source_timeout_s
+  EXPECT_EQ(fuser.counters().sources_timed_out, 1u);
+  EXPECT_NEAR(coasting[0].x_m, 3.6, 0.02);
+  fuser.Tick(AtSeconds(2.2));
+  EXPECT_TRUE(fuser.Snapshot(AtSeconds(2.2), true).empty());
+  EXPECT_EQ(fuser.counters().fused_deleted, 1u);
+}
+
+TEST(FuserTest, TentativeLocalTracksIgnoredUnlessAllowed) {
+  for (const bool allow : {false, true}) {
+    FusionOptions options;
+    options.use_tentative_sources = allow;
+    Fuser fuser(options);
+    fuser.SetPlacements({Placed("a", 0, 0, 0)});
+    for (int k = 0; k < 5; ++k) {
+      TrackObservation o = Obs(1, 3, 0);
+      o.state = TrackState::kTentative;
+      fuser.AddFrame("a", FrameAt(1.0 + 0.04 * k, {o}));
+    }
+    EXPECT_EQ(fuser.Snapshot(AtSeconds(1.2), true).size(), allow ? 1u : 0u);
+    EXPECT_EQ(fuser.counters().observations_ignored, allow ? 0u : 5u);
+    EXPECT_EQ(fuser.WorldTracks(AtSeconds(1.2)).size(), 1u);  // still drawn as a raw track
+  }
+}
+
+// ---------------------------------------------------------------------------------------------
+// Scenes
+
+// Error statistics of one person seen by several sensors.
+struct Errors {
+  double fused_sum2 = 0.0;
+  std::size_t fused_n = 0;
+  std::map<std::string, std::pair<double, std::size_t>> sensor_sum2;
+  std::set<std::uint64_t> ids;
+  std::size_t samples_not_one = 0;
+  std::size_t samples = 0;
+  double Rms() const { return std::sqrt(fused_sum2 / static_cast<double>(fused_n)); }
+  double SensorRms(const std::string& s) const {
+    const auto& [sum, n] = sensor_sum2.at(s);
+    return std::sqrt(sum / static_cast<double>(n));
+  }
+};
+
+TEST(FuserSceneTest, OnePersonTwoSensorsGivesOneMoreAccurateTrack) {
+  Scene scene;
+  // Facing each other: each sees the near side of the person (bias towards itself).
+  scene.sensors = {Sensor("a", 0, 0, 0), Sensor("b", 10, 0, 180, 0.013)};
+  for (auto& s : scene.sensors) s.bias_m = 0.1;
+  scene.people = {Walker({3, -3}, {7, 3}, 1.0)};
+  Fuser fuser;
+  fuser.SetPlacements(scene.Placements());
+  Errors e;
+  scene.Run(fuser, 7.0, 0.1, [&](double t, UtcNs now) {
+    if (t < 0.5) return;
+    const Eigen::Vector2d truth = scene.people[0].position(t);
+    const auto fused = fuser.Snapshot(now);
+    ++e.samples;
+    if (fused.size() != 1) ++e.samples_not_one;
+    for (const FusedTrack& f : fused) {
+      e.ids.insert(f.id);
+      e.fused_sum2 += (Eigen::Vector2d(f.x_m, f.y_m) - truth).squaredNorm();
+      ++e.fused_n;
+      EXPECT_EQ(f.sources.size(), 2u);
+    }
+    for (const WorldTrack& w : fuser.WorldTracks(now)) {
+      // The raw track is at its own scan time; compare with the truth then.
+      const double tw = common::NsToSeconds(w.stamp_ns - AtSeconds(0));
+      auto& [sum, n] = e.sensor_sum2[w.sensor_id];
+      sum += (Eigen::Vector2d(w.x_m, w.y_m) - scene.people[0].position(tw)).squaredNorm();
+      ++n;
+      ASSERT_TRUE(w.fused_id.has_value());
+      ASSERT_FALSE(e.ids.empty());
+      EXPECT_EQ(*w.fused_id, *e.ids.begin());
+    }
+  });
+  EXPECT_EQ(e.samples_not_one, 0u);
+  EXPECT_EQ(e.ids.size(), 1u);
+  const double rms_a = e.SensorRms("a"), rms_b = e.SensorRms("b");
+  EXPECT_LT(e.Rms(), 0.7 * std::min(rms_a, rms_b))
+      << "fused " << e.Rms() << " a " << rms_a << " b " << rms_b;
+  EXPECT_EQ(fuser.counters().fused_created, 1u);
+  EXPECT_EQ(fuser.counters().bindings, 1u);
+}
+
+// One person walking from a's field of view into b's; a sees x < a_max, b sees x > b_min.
+struct HandOverResult {
+  std::set<std::uint64_t> ids_while_seen;
+  std::vector<std::uint64_t> id_sequence;
+  std::size_t samples_more_than_one = 0;
+  FusionCounters counters;
+};
+
+HandOverResult HandOver(double a_max, double b_min, bool same_sensor = false) {
+  Scene scene;
+  scene.sensors = {Sensor("a", -3, -4, 60), Sensor("b", 3, -4, 120, 0.011)};
+  scene.sensors[0].sees = [=](const Eigen::Vector2d& p) { return p.x() < a_max; };
+  scene.sensors[1].sees = [=](const Eigen::Vector2d& p) { return p.x() > b_min; };
+  if (same_sensor) {
+    // One sensor, the person hidden in between (its tracker starts a new id afterwards).
+    scene.sensors.pop_back();
+    scene.sensors[0].sees = [=](const Eigen::Vector2d& p) {
+      return p.x() < a_max || p.x() > b_min;
+    };
+  }
+  scene.people = {Walker({-5, 1}, {5, 1}, 1.2)};
+  Fuser fuser;
+  fuser.SetPlacements(scene.Placements());
+  HandOverResult r;
+  scene.Run(fuser, 8.3, 0.05, [&](double t, UtcNs now) {
+    if (t < 0.3) return;
+    const auto fused = fuser.Snapshot(now);
+    if (fused.size() > 1) ++r.samples_more_than_one;
+    const auto* f = testing::Nearest(fused, scene.people[0].position(t), 1.0);
+    if (f == nullptr) return;
+    r.ids_while_seen.insert(f->id);
+    if (r.id_sequence.empty() || r.id_sequence.back() != f->id) r.id_sequence.push_back(f->id);
+  });
+  r.counters = fuser.counters();
+  return r;
+}
+
+TEST(FuserSceneTest, HandOverWithOverlapKeepsTheId) {
+  const HandOverResult r = HandOver(1.0, -1.0);
+  EXPECT_EQ(r.ids_while_seen.size(), 1u);
+  EXPECT_EQ(r.samples_more_than_one, 0u);
+  EXPECT_EQ(r.counters.handovers, 1u);
+  EXPECT_EQ(r.counters.fused_created, 1u);
+}
+
+TEST(FuserSceneTest, HandOverWithShortGapKeepsTheId) {
+  // 0.6 m at 1.2 m/s: 0.5 s unseen (plus b's tentative frames) < max_coast_s.
+  const HandOverResult r = HandOver(-0.3, 0.3);
+  EXPECT_EQ(r.ids_while_seen.size(), 1u);
+  EXPECT_EQ(r.samples_more_than_one, 0u);
+  EXPECT_EQ(r.counters.handovers, 1u);
+}
+
+TEST(FuserSceneTest, SameSensorNewLocalIdAfterOcclusionKeepsTheId) {
+  // 0.2 s hidden: the old local track is still bound (source_timeout_s) when the new one binds
+  // and replaces it; 0.5 s: the old one has timed out.
+  for (const double half_gap_m : {0.12, 0.3}) {
+    const HandOverResult r = HandOver(-half_gap_m, half_gap_m, true);
+    EXPECT_EQ(r.ids_while_seen.size(), 1u) << half_gap_m;
+    EXPECT_EQ(r.samples_more_than_one, 0u) << half_gap_m;
+    EXPECT_EQ(r.counters.handovers, 0u) << half_gap_m;
+    EXPECT_EQ(r.counters.bindings, 1u) << half_gap_m;
+    EXPECT_EQ(r.counters.sources_timed_out, half_gap_m < 0.2 ? 0u : 1u) << half_gap_m;
+  }
+}
+
+TEST(FuserSceneTest, GapLongerThanMaxCoastGivesANewId) {
+  // 3 m at 1.2 m/s: 2.5 s unseen > max_coast_s.
+  const HandOverResult r = HandOver(-1.5, 1.5);
+  EXPECT_EQ(r.id_sequence.size(), 2u);
+  EXPECT_EQ(r.counters.fused_created, 2u);
+  EXPECT_EQ(r.counters.fused_deleted, 1u);
+}
+
+// Two people; returns, for each, the fused ids nearest to them at samples where they are at least
+// min_separation_m apart, and the samples where a person had not exactly one fused track near.
+struct TwoPeopleResult {
+  std::set<std::uint64_t> ids[2];
+  std::size_t samples_not_one = 0;
+  std::size_t samples = 0;
+  FusionCounters counters;
+};
+
+TwoPeopleResult RunTwoPeople(Scene& scene, double duration_s, double min_separation_m,
+                             double skip_from_s = -1.0, double skip_to_s = -1.0,
+                             const FusionOptions& options = {}) {
+  Fuser fuser(options);
+  fuser.SetPlacements(scene.Placements());
+  TwoPeopleResult r;
+  scene.Run(fuser, duration_s, 0.05, [&](double t, UtcNs now) {
+    if (t < 0.3 || (t >= skip_from_s && t < skip_to_s)) return;
+    const Eigen::Vector2d p0 = scene.people[0].position(t), p1 = scene.people[1].position(t);
+    if ((p0 - p1).norm() < min_separation_m) return;
+    const auto fused = fuser.Snapshot(now);
+    ++r.samples;
+    for (int i = 0; i < 2; ++i) {
+      const Eigen::Vector2d p = i == 0 ? p0 : p1;
+      if (testing::CountNear(fused, p, 0.5) != 1) ++r.samples_not_one;
+      if (const auto* f = testing::Nearest(fused, p, 0.5)) r.ids[i].insert(f->id);
+    }
+  });
+  r.counters = fuser.counters();
+  return r;
+}
+
+TEST(FuserSceneTest, CrossingPeopleKeepTheirIds) {
+  Scene scene;
+  scene.sensors = {Sensor("a", 0, -8, 90), Sensor("b", 0, 8, -90, 0.017)};
+  scene.people = {Walker({-5, -2}, {5, 2}, 1.2), Walker({-5, 2}, {5, -2}, 1.2, 0.3)};
+  const TwoPeopleResult r = RunTwoPeople(scene, 9.0, 1.0);
+  EXPECT_EQ(r.ids[0].size(), 1u);
+  EXPECT_EQ(r.ids[1].size(), 1u);
+  EXPECT_NE(*r.ids[0].begin(), *r.ids[1].begin());
+  EXPECT_EQ(r.samples_not_one, 0u);
+  EXPECT_EQ(r.counters.fused_created, 2u);
+  EXPECT_EQ(r.counters.sources_drifted, 0u);
+  EXPECT_EQ(r.counters.fused_merged, 0u);
+}
+
+TEST(FuserSceneTest, TwoPeopleSideBySideSeenByOneSensorStayTwo) {
+  Scene scene;
+  scene.sensors = {Sensor("a", 0, -6, 90)};
+  scene.people = {Walker({-4, 0}, {4, 0}, 1.0), Walker({-4, 0.35}, {4, 0.35}, 1.0)};
+  const TwoPeopleResult r = RunTwoPeople(scene, 8.0, 0.0);
+  EXPECT_EQ(r.ids[0].size(), 1u);
+  EXPECT_EQ(r.ids[1].size(), 1u);
+  EXPECT_EQ(r.counters.fused_created, 2u);
+  EXPECT_EQ(r.counters.fused_merged, 0u);
+}
+
+// A's tracker exchanges the ids of the two people at 3 s (B, if present, does not).
+TwoPeopleResult TrackerIdSwitch(bool with_b) {
+  Scene scene;
+  scene.sensors = {Sensor("a", 0, -6, 90)};
+  if (with_b) scene.sensors.push_back(Sensor("b", 0, 6, -90, 0.02));
+  scene.people = {Walker({-5, -1}, {5, -1}, 1.2), Walker({5, 1}, {-5, 1}, 1.2)};
+  scene.remap = [](std::size_t sensor, double t, std::size_t, std::uint32_t id) {
+    return sensor == 0 && t >= 3.0 ? 3u - id : id;
+  };
+  // Recovery takes drift_updates frames of a: leave out 0.2 s after the switch.
+  return RunTwoPeople(scene, 8.0, 0.0, 3.0, 3.2);
+}
+
+TEST(FuserSceneTest, TrackerIdSwitchWithASecondSensorFusedIdsFollowThePeople) {
+  const TwoPeopleResult r = TrackerIdSwitch(true);
+  EXPECT_EQ(r.ids[0].size(), 1u);
+  EXPECT_EQ(r.ids[1].size(), 1u);
+  EXPECT_NE(*r.ids[0].begin(), *r.ids[1].begin());
+  EXPECT_EQ(r.samples_not_one, 0u);
+  EXPECT_EQ(r.counters.sources_drifted, 2u);
+  EXPECT_EQ(r.counters.fused_created, 2u);
+}
+
+TEST(FuserSceneTest, TrackerIdSwitchOfASingleSensorFusedIdsFollowThePeople) {
+  const TwoPeopleResult r = TrackerIdSwitch(false);
+  EXPECT_EQ(r.ids[0].size(), 1u);
+  EXPECT_EQ(r.ids[1].size(), 1u);
+  EXPECT_NE(*r.ids[0].begin(), *r.ids[1].begin());
+  EXPECT_EQ(r.samples_not_one, 0u);
+  EXPECT_EQ(r.counters.sources_drifted, 2u);
+  EXPECT_EQ(r.counters.fused_created, 2u);
+}
+
+TEST(FuserSceneTest, TrackerIdSwitchWhilePassingCloseByFusedIdsFollowThePeople) {
+  // Crossing at right angles 0.3 m apart, a's tracker exchanges them at the closest approach:
+  // the swapped tracks are still inside every gate then, and move apart from there.
+  Scene scene;
+  scene.sensors = {Sensor("a", 0, -7, 90), Sensor("b", 0, 7, -90, 0.013)};
+  for (auto& s : scene.sensors) s.bias_m = 0.1;
+  scene.people = {Walker({-4.8, -0.15}, {4.8, -0.15}, 1.2), Walker({0.15, -4.8}, {0.15, 4.8}, 1.2)};
+  scene.remap = [](std::size_t sensor, double t, std::size_t, std::uint32_t id) {
+    return sensor == 0 && t >= 4.0 ? 3u - id : id;
+  };
+  Fuser fuser;
+  fuser.SetPlacements(scene.Placements());
+  std::set<std::uint64_t> ids[2];
+  double max_error_m = 0.0;
+  scene.Run(fuser, 7.0, 0.05, [&](double t, UtcNs now) {
+    if (t < 0.5) return;
+    const auto fused = fuser.Snapshot(now);
+    for (std::size_t i = 0; i < 2; ++i) {
+      const Eigen::Vector2d p = scene.people[i].position(t);
+      const auto* f = testing::Nearest(fused, p, 1.0);
+      ASSERT_NE(f, nullptr) << t;
+      // Near the crossing the nearest track may be the other person's: judge ids away from it.
+      if (std::abs(t - 4.0) > 0.4) ids[i].insert(f->id);
+      max_error_m = std::max(max_error_m, (Eigen::Vector2d(f->x_m, f->y_m) - p).norm());
+    }
+  });
+  EXPECT_EQ(ids[0].size(), 1u);
+  EXPECT_EQ(ids[1].size(), 1u);
+  EXPECT_NE(*ids[0].begin(), *ids[1].begin());
+  // One swapped source may be replaced by the other (struck) instead of drifting out itself.
+  EXPECT_GE(fuser.counters().sources_drifted, 1u);
+  EXPECT_GT(fuser.counters().source_exclusions, 0u);
+  EXPECT_LT(max_error_m, 0.3);  // the swapped tracks never dragged a fused track along
+}
+
+TEST(FuserSceneTest, TrackerRestartReusedIdsDoNotCaptureOldBindings) {
+  Scene scene;
+  scene.sensors = {Sensor("a", 0, -6, 90)};
+  scene.people = {Walker({-5, -1}, {5, -1}, 1.2), Walker({5, 1}, {-5, 1}, 1.2)};
+  scene.sensors[0].silent = [](double t) { return t >= 3.0 && t < 3.3; };
+  bool restarted = false;
+  scene.before_frame = [&](Scene& s, std::size_t sensor, double t) {
+    if (sensor == 0 && t >= 3.3 && !restarted) {
+      s.RestartTracker(0);
+      restarted = true;
+    }
+  };
+  // The new session numbers the people the other way round: its id 1 is the old id 2's person.
+  scene.remap = [](std::size_t, double t, std::size_t, std::uint32_t id) {
+    return t >= 3.3 ? 3u - id : id;
+  };
+  // Without the drift test, which would also catch the jump of a captured binding.
+  FusionOptions no_drift;
+  no_drift.drift_updates = 1'000'000;
+  const TwoPeopleResult r = RunTwoPeople(scene, 7.0, 0.0, 3.0, 3.5, no_drift);
+  EXPECT_TRUE(restarted);
+  EXPECT_EQ(r.ids[0].size(), 1u);
+  EXPECT_EQ(r.ids[1].size(), 1u);
+  EXPECT_NE(*r.ids[0].begin(), *r.ids[1].begin());
+  EXPECT_EQ(r.samples_not_one, 0u);
+  EXPECT_EQ(r.counters.session_changes, 1u);
+  EXPECT_EQ(r.counters.fused_created, 2u);
+}
+
+// ---------------------------------------------------------------------------------------------
+// Calibration changes
+
+TEST(FuserSceneTest, NewCalibrationMidRunKeepsTheIds) {
+  Scene scene;
+  scene.sensors = {Sensor("a", 0, 0, 0), Sensor("b", 10, 0, 180, 0.013)};
+  scene.people = {Walker({2, -2}, {8, 2}, 1.0), Walker({8, -2}, {2, 2}, 1.0, 0.5)};
+  Fuser fuser;
+  fuser.SetPlacements(scene.Placements());
+  bool changed = false;
+  scene.before_frame = [&](Scene& s, std::size_t, double t) {
+    if (t >= 3.0 && !changed) {
+      // A slightly different calibration (still within the gates of the old one).
+      std::vector<SensorPlacement> p = s.Placements();
+      p[1].world_from_sensor.x_m += 0.15;
+      p[1].world_from_sensor.yaw_rad += DegToRad(1.0);
+      fuser.SetPlacements(p);
+      changed = true;
+    }
+  };
+  std::set<std::uint64_t> ids[2];
+  std::size_t not_one = 0;
+  scene.Run(fuser, 7.0, 0.05, [&](double t, UtcNs now) {
+    if (t < 1.0) return;
+    if ((scene.people[0].position(t) - scene.people[1].position(t)).norm() < 1.2) return;
+    const auto fused = fuser.Snapshot(now);
+    for (int i = 0; i < 2; ++i) {
+      const Eigen::Vector2d p = scene.people[static_cast<std::size_t>(i)].position(t);
+      if (testing::CountNear(fused, p, 0.6) != 1) ++not_one;
+      if (const auto* f = testing::Nearest(fused, p, 0.6)) ids[i].insert(f->id);
+    }
+  });
+  EXPECT_TRUE(changed);
+  EXPECT_EQ(ids[0].size(), 1u);
+  EXPECT_EQ(ids[1].size(), 1u);
+  EXPECT_EQ(not_one, 0u);
+  EXPECT_EQ(fuser.counters().fused_created, 2u);
+  EXPECT_EQ(fuser.counters().sources_drifted, 0u);
+}
+
+TEST(FuserSceneTest, DuplicatesOfABadCalibrationMergeIntoTheOlderId) {
+  Scene scene;
+  scene.sensors = {Sensor("a", 0, 0, 0), Sensor("b", 10, 0, 180, 0.013)};
+  scene.sensors[1].placed = Pose2{12.0, 0.0, common::kPi};  // 2 m off: no association possible
+  scene.people = {Walker({3, -3}, {7, 3}, 1.0)};
+  Fuser fuser;
+  fuser.SetPlacements(scene.Placements());
+  bool changed = false;
+  std::set<std::uint64_t> before;
+  scene.before_frame = [&](Scene& s, std::size_t, double t) {
+    if (t >= 3.0 && !changed) {
+      for (const auto& f : fuser.Snapshot(AtSeconds(t))) before.insert(f.id);
+      s.sensors[1].placed.reset();
+      fuser.SetPlacements(s.Placements());
+      changed = true;
+    }
+  };
+  std::set<std::uint64_t> after;
+  std::size_t not_one_after = 0;
+  scene.Run(fuser, 6.0, 0.05, [&](double t, UtcNs now) {
+    if (t < 3.5) return;
+    const auto fused = fuser.Snapshot(now);
+    if (fused.size() != 1) ++not_one_after;
+    for (const auto& f : fused) {
+      after.insert(f.id);
+      EXPECT_EQ(f.sources.size(), 2u);
+    }
+  });
+  ASSERT_EQ(before.size(), 2u);
+  EXPECT_EQ(not_one_after, 0u);
+  ASSERT_EQ(after.size(), 1u);
+  EXPECT_EQ(*after.begin(), *before.begin());  // the older id
+  EXPECT_EQ(fuser.counters().fused_merged, 1u);
+}
+
+// ---------------------------------------------------------------------------------------------
+// Time
+
+TEST(FuserTest, StaleAndOutOfOrderFramesAreCountedAndDropped) {
+  Fuser fuser;
+  fuser.SetPlacements({Placed("a", 0, 0, 0), Placed("b", 0, 0, 0)});
+  for (int k = 0; k <= 10; ++k) {
+    const double t = 1.0 + 0.04 * k;
+    fuser.AddFrame("a", FrameAt(t, {Obs(1, 3 + 0.04 * k, 0, 1, 0)}));
+  }
+  const auto before = fuser.Snapshot(AtSeconds(1.4));
+  ASSERT_EQ(before.size(), 1u);
+  // The same scan again, and an older one, far from the truth: dropped.
+  fuser.AddFrame("a", FrameAt(1.4, {Obs(1, 9, 9)}));
+  fuser.AddFrame("a", FrameAt(1.2, {Obs(1, 9, 9)}));
+  EXPECT_EQ(fuser.counters().frames_stale, 2u);
+  // b is 0.6 s late: dropped; 0.3 s late: used, fused at the newer time.
+  fuser.AddFrame("b", FrameAt(0.8, {Obs(4, 9, 9)}));
+  EXPECT_EQ(fuser.counters().frames_out_of_order, 1u);
+  fuser.AddFrame("b", FrameAt(1.1, {Obs(4, 3.1, 0, 1, 0)}));
+  EXPECT_EQ(fuser.counters().frames_out_of_order, 1u);
+  const auto after = fuser.Snapshot(AtSeconds(1.4));
+  ASSERT_EQ(after.size(), 1u);
+  EXPECT_EQ(after[0].id, before[0].id);
+  EXPECT_EQ(after[0].sources.size(), 2u);
+  EXPECT_NEAR(after[0].x_m, 3.4, 0.05);
+  EXPECT_NEAR(after[0].y_m, 0.0, 0.05);
+  TrackFrameData before_1970 = FrameAt(0, {Obs(1, 3, 0)});
+  before_1970.scan_start_ns = -5;
+  fuser.AddFrame("a", before_1970);
+  EXPECT_EQ(fuser.counters().frames_invalid, 1u);
+  EXPECT_EQ(fuser.counters().frames_stale, 2u);
+}
+
+TEST(FuserTest, PartsOfAScanAreAddedOnce) {
+  Fuser fuser;
+  fuser.SetPlacements({Placed("a", 0, 0, 0)});
+  for (int k = 0; k < 4; ++k) {
+    TrackFrameData first = FrameAt(1.0 + 0.04 * k, {Obs(1, 3, 0)});
+    first.scan_counter = static_cast<std::uint32_t>(k);
+    first.part_count = 2;
+    TrackFrameData second = first;
+    second.part = 1;
+    second.tracks = {Obs(2, 3, 4)};
+    fuser.AddFrame("a", first);
+    fuser.AddFrame("a", second);
+    fuser.AddFrame("a", second);  // again: stale
+  }
+  EXPECT_EQ(fuser.counters().frames_stale, 4u);
+  EXPECT_EQ(fuser.counters().observations, 8u);
+  const auto fused = fuser.Snapshot(AtSeconds(1.12));
+  ASSERT_EQ(fused.size(), 2u);
+  EXPECT_NEAR(fused[0].y_m, 0.0, 0.01);
+  EXPECT_NEAR(fused[1].y_m, 4.0, 0.01);
+  EXPECT_EQ(fused[1].updates, 4u);
+}
+
+// ---------------------------------------------------------------------------------------------
+// Hostile values
+
+TEST(FuserTest, HostileValuesAreSkippedAndCountedNeverNaN) {
+  FusionOptions options;
+  options.max_tracks_per_frame = 20;
+  Fuser fuser(options);
+  fuser.SetPlacements({Placed("a", 1, 1, 30)});
+  const float nan = std::numeric_limits<float>::quiet_NaN();
+  const float inf = std::numeric_limits<float>::infinity();
+  std::vector<TrackObservation> bad;
+  bad.push_back(Obs(2, nan, 0));
+  bad.push_back(Obs(3, 0, 0, inf, 0));
+  TrackObservation negative = Obs(4, 1, 1);
+  negative.covariance[0] = -1.0f;
+  bad.push_back(negative);
+  TrackObservation huge = Obs(5, 1, 1);
+  huge.covariance[4] = 1e30f;
+  bad.push_back(huge);
+  TrackObservation not_psd = Obs(6, 1, 1);
+  not_psd.covariance[1] = 1.0f;  // |xy| > sqrt(xx yy)
+  bad.push_back(not_psd);
+  TrackObservation nan_cov = Obs(7, 1, 1);
+  nan_cov.covariance[9] = nan;
+  bad.push_back(nan_cov);
+  bad.push_back(Obs(8, 1e9, 0));
+  bad.push_back(Obs(9, 1, 1, 1e6, 0));
+  for (int k = 0; k < 5; ++k) {
+    std::vector<TrackObservation> tracks = bad;
+    tracks.push_back(Obs(1, 4 + 0.04 * k, 2, 1, 0));
+    tracks.push_back(Obs(1, -4, -2));  // the same id twice in one frame
+    fuser.AddFrame("a", FrameAt(1.0 + 0.04 * k, tracks));
+  }
+  EXPECT_EQ(fuser.counters().observations_invalid, 5u * 9u);
+  EXPECT_EQ(fuser.counters().observations, 5u);
+  // Far too many tracks in a frame.
+  std::vector<TrackObservation> many;
+  for (std::uint32_t i = 0; i < 1000; ++i) many.push_back(Obs(100 + i, 0.1 * i, 50));
+  fuser.AddFrame("a", FrameAt(1.3, many));
+  EXPECT_EQ(fuser.counters().observations_over_capacity, 980u);
+
+  const auto fused = fuser.Snapshot(AtSeconds(1.3), true);
+  for (const auto& f : fused) EXPECT_TRUE(AllFinite(f));
+  const auto* person =
+      testing::Nearest(fused, Pose2{1, 1, DegToRad(30)} * Eigen::Vector2d(4.2, 2), 0.5);
+  ASSERT_NE(person, nullptr);
+  EXPECT_EQ(person->state, FusedState::kConfirmed);
+  for (const auto& w : fuser.WorldTracks(AtSeconds(1.3))) {
+    EXPECT_TRUE(std::isfinite(w.x_m) && std::isfinite(w.y_m));
+    EXPECT_TRUE(w.covariance.array().isFinite().all());
+  }
+  // Extreme stamps do not overflow anything.
+  fuser.AddFrame("a", FrameAt(2.0, {Obs(1, 4, 2)}));
+  TrackFrameData far = FrameAt(0, {Obs(1, 4, 2)});
+  far.scan_start_ns = std::numeric_limits<UtcNs>::max();
+  fuser.AddFrame("a", far);
+  fuser.Tick(std::numeric_limits<UtcNs>::min());
+  fuser.Tick(std::numeric_limits<UtcNs>::max());
+  for (const auto& f : fuser.Snapshot(std::numeric_limits<UtcNs>::max(), true)) {
+    EXPECT_TRUE(AllFinite(f));
+  }
+}
+
+// Random, mostly hostile input: never a crash, never a non-finite output, bounded state.
+TEST(FuserTest, RandomInputNeverBreaksIt) {
+  std::mt19937 rng(17);
+  std::uniform_real_distribution<double> u(-1.0, 1.0);
+  const float specials[] = {std::numeric_limits<float>::quiet_NaN(),
+                            std::numeric_limits<float>::infinity(),
+                            -1e30f,
+                            1e30f,
+                            -0.0f,
+                            std::numeric_limits<float>::denorm_min()};
+  FusionOptions options;
+  options.max_fused_tracks = 200;
+  Fuser fuser(options);
+  const std::vector<std::string> ids = {"a", "b", "c", "d"};
+  auto random_placements = [&] {
+    std::vector<SensorPlacement> p;
+    for (const auto& id : ids) {
+      SensorPlacement s = Placed(id, 10 * u(rng), 10 * u(rng), 180 * u(rng));
+      if (rng() % 8 == 0) s.covariance(rng() % 3, rng() % 3) = specials[rng() % 6];
+      p.push_back(s);
+    }
+    return p;
+  };
+  fuser.SetPlacements(random_placements());
+  double t = 1.0;
+  for (int k = 0; k < 3000; ++k) {
+    t += rng() % 50 == 0 ? -0.3 : 0.01 * static_cast<double>(rng() % 5);
+    std::vector<TrackObservation> tracks;
+    const std::size_t n = rng() % 12;
+    for (std::size_t i = 0; i < n; ++i) {
+      TrackObservation o = Obs(static_cast<std::uint32_t>(rng() % 8), 5 + 5 * u(rng), 5 * u(rng),
+                               u(rng), u(rng), 0.01 + 0.2 * std::abs(u(rng)));
+      o.state = static_cast<TrackState>(rng() % 3);
+      if (rng() % 10 == 0) o.x_m = specials[rng() % 6];
+      if (rng() % 10 == 0) o.covariance[rng() % 10] = specials[rng() % 6];
+      if (rng() % 10 == 0) o.covariance[rng() % 10] = static_cast<float>(u(rng));
+      tracks.push_back(o);
+    }
+    TrackFrameData frame = FrameAt(t, tracks, rng() % 200 == 0 ? rng() : 1);
+    frame.part = rng() % 4 == 0 ? static_cast<std::uint32_t>(rng() % 3) : 0u;
+    fuser.AddFrame(ids[rng() % ids.size()], frame);
+    if (rng() % 500 == 0) fuser.SetPlacements(random_placements());
+    if (k % 10 == 0) {
+      fuser.Tick(AtSeconds(t));
+      const auto fused = fuser.Snapshot(AtSeconds(t), true);
+      EXPECT_LE(fused.size(), options.max_fused_tracks);
+      for (const auto& f : fused) {
+        ASSERT_TRUE(AllFinite(f)) << "frame " << k;
+        std::set<std::string> sensors;
+        for (const auto& s : f.sources) EXPECT_TRUE(sensors.insert(s.sensor_id).second);
+      }
+      for (const auto& w : fuser.WorldTracks(AtSeconds(t))) {
+        ASSERT_TRUE(std::isfinite(w.x_m) && std::isfinite(w.y_m) && std::isfinite(w.vx_mps));
+      }
+      EXPECT_FALSE(FusedTrackDatagrams(fused, AtSeconds(t)).empty());
+    }
+  }
+  EXPECT_GT(fuser.counters().observations_invalid, 0u);
+  EXPECT_GT(fuser.counters().fused_created, 0u);
+}
+
+TEST(FuserTest, FusedTrackCapacityIsBounded) {
+  FusionOptions options;
+  options.max_fused_tracks = 10;
+  Fuser fuser(options);
+  fuser.SetPlacements({Placed("a", 0, 0, 0)});
+  std::vector<TrackObservation> many;
+  for (std::uint32_t i = 0; i < 30; ++i) many.push_back(Obs(i + 1, 2.0 * i, 3));
+  fuser.AddFrame("a", FrameAt(1.0, many));
+  EXPECT_EQ(fuser.Snapshot(AtSeconds(1.0), true).size(), 10u);
+  EXPECT_EQ(fuser.counters().fused_over_capacity, 20u);
+}
+
+TEST(FuserTest, IsMovable) {
+  Fuser a;
+  a.SetPlacements({Placed("a", 0, 0, 0)});
+  for (int k = 0; k < 3; ++k) a.AddFrame("a", FrameAt(1.0 + 0.04 * k, {Obs(1, 3, 0)}));
+  Fuser b(std::move(a));
+  EXPECT_EQ(b.Snapshot(AtSeconds(1.1)).size(), 1u);
+  Fuser c;
+  c = std::move(b);
+  c.AddFrame("a", FrameAt(1.2, {Obs(1, 3, 0)}));
+  EXPECT_EQ(c.Snapshot(AtSeconds(1.2)).size(), 1u);
+  EXPECT_TRUE(c.HasPlacement("a"));
+}
+
+}  // namespace
+}  // namespace lrfnet::fusion

@@ -1,0 +1,212 @@
+// The whole chain as processes on loopback, like the demo: `lrfnet sim --serve` (one emulated SICK
+// device per sensor, CoLa-B over TCP) → one `lrfnet-tracker` per device (tracks over UDP) →
+// `lrfnetd` (collects, calibrates by itself, fuses, serves the live view). One tracker is killed and
+// restarted while the daemon fuses. Asserts the calibration against the simulator's truth, the
+// continuity of the fused tracks, and the live view's state.
+
+#include <arpa/inet.h>
+#include <gtest/gtest.h>
+#include <netinet/in.h>
+#include <sys/socket.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <chrono>
+#include <csignal>
+#include <memory>
+#include <fstream>
+#include <map>
+#include <nlohmann/json.hpp>
+#include <set>
+#include <sstream>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include "tests/process_harness.h"
+
+namespace lrfnet::testing {
+namespace {
+
+using std::chrono::milliseconds;
+using std::chrono::seconds;
+
+// A 12 x 8 m room, three TiM561 (10 m, 15 Hz) in three corners, two people walking loops the
+// whole time, a cabinet for the background.
+constexpr const char* kScenario = R"(name: system_room
+seed: 5
+duration_s: 50
+world:
+  walls:
+    - [[0, 0], [12, 0], [12, 8], [0, 8], [0, 0]]
+  obstacles:
+    - [[5.5, 7.0], [7.5, 7.0], [7.5, 7.6], [5.5, 7.6]]
+sensors:
+  - {id: s1, model: tim561, x_m: 0.3, y_m: 0.3, yaw_deg: 40}
+  - {id: s2, model: tim561, x_m: 11.7, y_m: 0.3, yaw_deg: 140}
+  - {id: s3, model: tim561, x_m: 11.7, y_m: 7.7, yaw_deg: -140}
+targets:
+  - {shape: person, a_m: 0.25, b_m: 0.15, path: [[2.5, 2], [9.5, 2], [9.5, 5.5], [2.5, 5.5]], speed_mps: 1.2, loop: true}
+  - {shape: person, a_m: 0.22, b_m: 0.14, path: [[4, 3.5], [8.5, 3.5], [6.5, 6]], speed_mps: 1.0, loop: true}
+)";
+
+constexpr double kSpeed = 1.0;  // scenario seconds per wall-clock second (faster: people "run")
+
+std::vector<std::pair<std::string, std::string>> Devices(const std::string& sim_out) {
+  std::vector<std::pair<std::string, std::string>> out;
+  std::istringstream in(sim_out);
+  for (std::string line; std::getline(in, line);) {
+    const auto space = line.find(' ');
+    if (space == std::string::npos || line.find(':', space) == std::string::npos) continue;
+    out.emplace_back(line.substr(0, space), line.substr(space + 1));
+  }
+  return out;
+}
+
+// GET `path` from 127.0.0.1:port; the body, or "" on failure.
+std::string HttpGet(std::uint16_t port, const std::string& path) {
+  const int fd = ::socket(AF_INET, SOCK_STREAM, 0);
+  if (fd < 0) return "";
+  sockaddr_in address{};
+  address.sin_family = AF_INET;
+  address.sin_port = htons(port);
+  address.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+  timeval timeout{5, 0};
+  ::setsockopt(fd, SOL_SOCKET, SO_RCVTIMEO, &timeout, sizeof timeout);
+  std::string response;
+  if (::connect(fd, reinterpret_cast<sockaddr*>(&address), sizeof address) == 0) {
+    const std::string request =
+        "GET " + path + " HTTP/1.1\r\nHost: 127.0.0.1\r\nConnection: close\r\n\r\n";
+    if (::send(fd, request.data(), request.size(), 0) == static_cast<ssize_t>(request.size())) {
+      char buffer[65536];
+      for (ssize_t n; (n = ::recv(fd, buffer, sizeof buffer, 0)) > 0;) {
+        response.append(buffer, static_cast<std::size_t>(n));
+      }
+    }
+  }
+  ::close(fd);
+  const auto body = response.find("\r\n\r\n");
+  if (response.rfind("HTTP/1.1 200", 0) != 0 || body == std::string::npos) return "";
+  return response.substr(body + 4);
+}
+
+TEST(SystemTest, SimTrackersDaemonCalibrateFuseAndSurviveATrackerRestart) {
+  ScratchDir dir;
+  {
+    std::ofstream scenario(dir / "scenario.yaml");
+    scenario << kScenario;
+  }
+  {
+    std::ofstream config(dir / "lrfnetd.yaml");
+    config << "status:\n  interval_s: 1.0\n"
+              "calibration:\n  attempt_interval_s: 2.0\n  min_pair_overlap_s: 8.0\n"
+              "fusion:\n  publish_hz: 10.0\n";
+  }
+  Process sim(LRFNET_TOOL_BINARY, {"sim", dir / "scenario.yaml", "--serve", "--speed",
+                                   std::to_string(kSpeed), "--out", dir / "sim", "--log-level",
+                                   "warn"});
+  ASSERT_TRUE(sim.WaitForOutput("s3 ", seconds(10))) << sim.err();
+  std::this_thread::sleep_for(milliseconds(100));
+  const auto devices = Devices(sim.out());
+  ASSERT_EQ(devices.size(), 3u) << sim.out();
+
+  Process daemon(LRFNET_DAEMON_BINARY,
+                 {"--listen", "127.0.0.1:0", "--config", dir / "lrfnetd.yaml", "--calibration-out",
+                  dir / "calibration.yaml", "--fused-out", dir / "fused.jsonl", "--live-view",
+                  "127.0.0.1:0", "--stats-out", dir / "stats.json"});
+  ASSERT_TRUE(daemon.WaitForOutput("live view http://", seconds(10))) << daemon.err();
+  std::string uplink, live_port;
+  {
+    std::istringstream in(daemon.out());
+    for (std::string line; std::getline(in, line);) {
+      if (line.rfind("listening ", 0) == 0) uplink = line.substr(10);
+      if (line.rfind("live view http://127.0.0.1:", 0) == 0) {
+        live_port = line.substr(27, line.size() - 28);
+      }
+    }
+  }
+  ASSERT_FALSE(uplink.empty()) << daemon.out();
+  ASSERT_FALSE(live_port.empty()) << daemon.out();
+
+  auto start_tracker = [&](const std::pair<std::string, std::string>& device) {
+    return std::make_unique<Process>(
+        LRFNET_TRACKER_BINARY, std::vector<std::string>{"--sensor", device.second, "--sensor-id",
+                                                        device.first, "--uplink", uplink,
+                                                        "--log-level", "warn"});
+  };
+  std::vector<std::unique_ptr<Process>> trackers;
+  for (const auto& device : devices) trackers.push_back(start_tracker(device));
+
+  // The daemon calibrates by itself once the data links every sensor.
+  ASSERT_TRUE(daemon.WaitForOutput("calibrated ", seconds(60))) << daemon.err();
+  // Kill one tracker mid-fusion and start it again: a new session of the same sensor.
+  std::this_thread::sleep_for(milliseconds(1500));
+  trackers[1]->Signal(SIGKILL);
+  EXPECT_EQ(trackers[1]->Wait(milliseconds(5000)), -2);
+  std::this_thread::sleep_for(milliseconds(1000));
+  trackers[1] = start_tracker(devices[1]);
+
+  // The live view's state while fusing: every sensor placed, fused tracks present.
+  std::this_thread::sleep_for(milliseconds(3000));
+  const nlohmann::json live =
+      nlohmann::json::parse(HttpGet(static_cast<std::uint16_t>(std::stoi(live_port)), "/state"),
+                            nullptr, false);
+  ASSERT_TRUE(live.is_object()) << "GET /state";
+  EXPECT_EQ(live["calibration"]["state"], "calibrated");
+  ASSERT_EQ(live["sensors"].size(), 3u);
+  for (const auto& sensor : live["sensors"]) EXPECT_TRUE(sensor["placed"].get<bool>()) << sensor;
+  EXPECT_GE(live["fused"].size(), 1u);
+
+  // The scenario ends; the daemon stops on SIGINT.
+  EXPECT_EQ(sim.Wait(seconds(60)), 0) << sim.err();
+  daemon.Signal(SIGINT);
+  ASSERT_EQ(daemon.Wait(seconds(20)), 0) << daemon.err();
+  for (auto& tracker : trackers) tracker->Signal(SIGTERM);
+  EXPECT_NE(daemon.err().find("tracker restarted"), std::string::npos) << daemon.err();
+
+  // Calibration against the truth.
+  Process eval(LRFNET_TOOL_BINARY,
+               {"eval", dir / "calibration.yaml", dir / "sim/truth.yaml", "--json"});
+  ASSERT_EQ(eval.Wait(), 0) << eval.err();
+  const nlohmann::json e = nlohmann::json::parse(eval.out(), nullptr, false);
+  ASSERT_TRUE(e.is_object()) << eval.out();
+  EXPECT_LT(e["mean_d_r_deg"].get<double>(), 1.0) << eval.out();
+  EXPECT_LT(e["mean_d_t_m"].get<double>(), 0.15) << eval.out();
+
+  // Fused-track continuity: two people, so (almost) never more than two confirmed fused tracks at
+  // once, few distinct ids, and the two longest-lived ids cover most of the fused time.
+  std::ifstream fused(dir / "fused.jsonl");
+  ASSERT_TRUE(fused) << "no fused tracks recorded";
+  std::size_t snapshots = 0, crowded = 0, with_tracks = 0;
+  std::map<std::uint64_t, std::size_t> seen;  // confirmed id → snapshots
+  for (std::string line; std::getline(fused, line);) {
+    const nlohmann::json j = nlohmann::json::parse(line, nullptr, false);
+    ASSERT_TRUE(j.is_object()) << line;
+    ++snapshots;
+    std::size_t confirmed = 0;
+    for (const auto& t : j["tracks"]) {
+      if (t["state"] == "tentative") continue;
+      ++confirmed;
+      ++seen[t["id"].get<std::uint64_t>()];
+    }
+    crowded += confirmed > 2 ? 1 : 0;
+    with_tracks += confirmed > 0 ? 1 : 0;
+  }
+  ASSERT_GT(snapshots, 50u);
+  EXPECT_GT(with_tracks, snapshots * 8 / 10);
+  EXPECT_LT(crowded, snapshots / 10) << "duplicated fused tracks";
+  EXPECT_LE(seen.size(), 6u) << "fused ids were not kept";
+  std::vector<std::size_t> lives;
+  std::size_t total = 0;
+  for (const auto& [id, n] : seen) {
+    lives.push_back(n);
+    total += n;
+  }
+  std::sort(lives.rbegin(), lives.rend());
+  ASSERT_GE(lives.size(), 2u);
+  EXPECT_GT(lives[0] + lives[1], total * 8 / 10)
+      << "the two people's fused ids cover too little of the time";
+}
+
+}  // namespace
+}  // namespace lrfnet::testing
