@@ -110,10 +110,21 @@ TEST(SystemTest, SimTrackersDaemonCalibrateFuseAndSurviveATrackerRestart) {
   const auto devices = Devices(sim.out());
   ASSERT_EQ(devices.size(), 3u) << sim.out();
 
+  // The fused-track stream's receiver: a UDP socket on a free port.
+  const int fused_socket = ::socket(AF_INET, SOCK_DGRAM, 0);
+  ASSERT_GE(fused_socket, 0);
+  sockaddr_in fused_address{};
+  fused_address.sin_family = AF_INET;
+  fused_address.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+  socklen_t fused_length = sizeof fused_address;
+  ASSERT_EQ(::bind(fused_socket, reinterpret_cast<sockaddr*>(&fused_address), sizeof fused_address), 0);
+  ASSERT_EQ(::getsockname(fused_socket, reinterpret_cast<sockaddr*>(&fused_address), &fused_length), 0);
+  const std::string fused_udp = "127.0.0.1:" + std::to_string(ntohs(fused_address.sin_port));
+
   Process daemon(LRFNET_DAEMON_BINARY,
                  {"--listen", "127.0.0.1:0", "--config", dir / "lrfnetd.yaml", "--calibration-out",
-                  dir / "calibration.yaml", "--fused-out", dir / "fused.jsonl", "--live-view",
-                  "127.0.0.1:0", "--stats-out", dir / "stats.json"});
+                  dir / "calibration.yaml", "--fused-out", dir / "fused.jsonl", "--fused-udp",
+                  fused_udp, "--live-view", "127.0.0.1:0", "--stats-out", dir / "stats.json"});
   ASSERT_TRUE(daemon.WaitForOutput("live view http://", seconds(10))) << daemon.err();
   std::string uplink, live_port;
   {
@@ -156,6 +167,22 @@ TEST(SystemTest, SimTrackersDaemonCalibrateFuseAndSurviveATrackerRestart) {
   ASSERT_EQ(live["sensors"].size(), 3u);
   for (const auto& sensor : live["sensors"]) EXPECT_TRUE(sensor["placed"].get<bool>()) << sensor;
   EXPECT_GE(live["fused"].size(), 1u);
+
+  // The fused tracks also arrive as JSON datagrams.
+  {
+    timeval timeout{2, 0};
+    ::setsockopt(fused_socket, SOL_SOCKET, SO_RCVTIMEO, &timeout, sizeof timeout);
+    char buffer[65536];
+    const ssize_t n = ::recv(fused_socket, buffer, sizeof buffer, 0);
+    ASSERT_GT(n, 0) << "no fused-track datagram";
+    EXPECT_LE(n, 1400);
+    const nlohmann::json d =
+        nlohmann::json::parse(std::string(buffer, static_cast<std::size_t>(n)), nullptr, false);
+    ASSERT_TRUE(d.is_object());
+    EXPECT_EQ(d["type"], "fused");
+    EXPECT_TRUE(d["tracks"].is_array());
+  }
+  ::close(fused_socket);
 
   // The scenario ends; the daemon stops on SIGINT.
   EXPECT_EQ(sim.Wait(seconds(60)), 0) << sim.err();
