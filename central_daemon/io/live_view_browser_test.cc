@@ -528,6 +528,9 @@ class LiveViewBrowserTest : public ::testing::Test {
       if (server_) server_->Stop();
     });
     guard_.reset();
+    // A timer wait that completed just before the cancel would publish and wait again: stop the
+    // loop rather than wait for it to run dry.
+    io_.stop();
     thread_.join();
   }
 
