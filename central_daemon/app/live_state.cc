@@ -28,9 +28,9 @@ class Writer {
   void EndArray() { Close(']'); }
 
   // Coordinates: rounded to the millimetre, which also keeps the text short.
-  void Metres(double v) { Number(v, 1e3); }
+  void Metres(double v) { Fixed(v, 3); }
   // Angles: micro-radians are far below anything the page can show.
-  void Radians(double v) { Number(v, 1e6); }
+  void Radians(double v) { Fixed(v, 6); }
   // Rates, fractions, covariances: six significant digits.
   void Real(double v) {
     Comma();
@@ -76,16 +76,41 @@ class Writer {
     if (!first_) out_.push_back(',');
     first_ = false;
   }
-  void Number(double v, double scale) {
+  // `decimals` places, trailing zeros dropped ("1.5", "-0.25", "12"). Formatted as an integer
+  // count of 10^-decimals: several times faster than a shortest-form double conversion, which
+  // matters with thousands of background points per message.
+  void Fixed(double v, int decimals) {
     Comma();
     if (!std::isfinite(v)) {
       out_.append("null");
       return;
     }
-    const double rounded = std::round(v * scale) / scale;
+    std::int64_t unit = 1;
+    for (int i = 0; i < decimals; ++i) unit *= 10;
+    const double scaled = std::round(v * static_cast<double>(unit));
     char buf[32];
-    // Shortest round-trip form of the rounded value: "1.234", "-0.5", "12".
-    const auto r = std::to_chars(buf, buf + sizeof(buf), rounded == 0.0 ? 0.0 : rounded);
+    if (!(std::fabs(scaled) < 9e15)) {  // beyond exact integers: no place for a fixed point
+      const auto r = std::to_chars(buf, buf + sizeof(buf), v);
+      out_.append(buf, r.ptr);
+      return;
+    }
+    std::int64_t n = static_cast<std::int64_t>(scaled);
+    if (n < 0) {
+      out_.push_back('-');
+      n = -n;
+    }
+    auto r = std::to_chars(buf, buf + sizeof(buf), n / unit);
+    out_.append(buf, r.ptr);
+    std::int64_t fraction = n % unit;
+    if (fraction == 0) return;
+    int places = decimals;
+    while (fraction % 10 == 0) {
+      fraction /= 10;
+      --places;
+    }
+    out_.push_back('.');
+    r = std::to_chars(buf, buf + sizeof(buf), fraction);
+    out_.append(static_cast<std::size_t>(places - (r.ptr - buf)), '0');
     out_.append(buf, r.ptr);
   }
   template <typename T>
@@ -271,8 +296,8 @@ std::string LiveStateJson(const LiveState& state) {
   for (const auto& s : state.sensors) points += s.background_xy.size();
   std::string out;
   // About 16 bytes per point and 200 per sensor or track: one allocation for typical messages.
-  out.reserve(512 + 16 * points + 256 * (state.sensors.size() + state.tracks.size() +
-                                         state.fused.size()));
+  out.reserve(512 + 16 * points +
+              256 * (state.sensors.size() + state.tracks.size() + state.fused.size()));
   Writer w(out);
   w.BeginObject();
   w.Key("type");

@@ -22,14 +22,14 @@ struct LiveSensor {
   std::string id;
   std::string model;
   bool placed = false;
-  common::Pose2 world_from_sensor;      // valid when placed
-  double first_angle_rad = 0.0;         // field of view in the sensor frame (x forward)
+  common::Pose2 world_from_sensor;  // valid when placed
+  double first_angle_rad = 0.0;     // field of view in the sensor frame (x forward)
   double fov_rad = 0.0;
   double max_range_m = 0.0;
-  std::string status;                   // "active", "silent", "waiting" (no data yet)
+  std::string status;  // "active", "silent", "waiting" (no data yet)
   double datagram_rate_hz = 0.0;
-  double loss = 0.0;                    // fraction of datagrams lost, 0..1
-  std::string clock_sync;               // "synchronized", "unsynchronized", "replay", "unknown"
+  double loss = 0.0;       // fraction of datagrams lost, 0..1
+  std::string clock_sync;  // "synchronized", "unsynchronized", "replay", "unknown"
   std::uint64_t track_frames = 0;
   std::vector<std::array<float, 2>> background_xy;  // static points (frame: see above)
 };
@@ -37,7 +37,7 @@ struct LiveSensor {
 struct LiveTrack {
   std::string sensor_id;
   std::uint32_t track_id = 0;
-  std::string state;  // "tentative", "confirmed", "coasting"
+  std::string state;                                        // "tentative", "confirmed", "coasting"
   double x_m = 0.0, y_m = 0.0, vx_mps = 0.0, vy_mps = 0.0;  // frame: see above
   std::optional<std::uint64_t> fused_id;
 };
@@ -51,10 +51,10 @@ struct LiveFusedTrack {
 };
 
 struct LiveCalibration {
-  std::string state;        // "collecting", "calibrating", "calibrated", "failed"
-  double progress = 0.0;    // 0..1 towards the first calibration
-  std::string message;      // e.g. what data is still missing, or the residual
-  std::string reference;    // reference sensor once calibrated
+  std::string state;      // "collecting", "calibrating", "calibrated", "failed"
+  double progress = 0.0;  // 0..1 towards the first calibration
+  std::string message;    // e.g. what data is still missing, or the residual
+  std::string reference;  // reference sensor once calibrated
   double track_residual_rms_m = 0.0;
 };
 

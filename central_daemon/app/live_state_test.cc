@@ -140,6 +140,16 @@ TEST(LiveStateJson, CoordinatesAreRoundedToTheMillimetre) {
   EXPECT_DOUBLE_EQ(j["tracks"][0]["x_m"].get<double>(), 1.235);
   EXPECT_EQ(j["sensors"][0]["background"], json::parse("[[0.1,0.333]]"));
   EXPECT_NE(text.find("\"x_m\":1.235,\"y_m\":0,"), std::string::npos) << text;
+
+  // Leading zeros of the fraction, negative values, and values too large for a fixed point.
+  s.tracks[0].x_m = -0.0072;
+  s.tracks[0].y_m = 1e13;
+  s.fused[0].x_m = -12.0405;
+  const std::string more = LiveStateJson(s);
+  const json k = Parse(more);
+  EXPECT_NE(more.find("\"x_m\":-0.007,"), std::string::npos) << more;
+  EXPECT_DOUBLE_EQ(k["tracks"][0]["y_m"].get<double>(), 1e13);
+  EXPECT_DOUBLE_EQ(k["fused"][0]["x_m"].get<double>(), -12.041);
 }
 
 TEST(LiveStateJson, NonFiniteNumbersAreNull) {
@@ -185,7 +195,8 @@ TEST(LiveStateJson, InvalidUtf8BecomesReplacementCharacters) {
   LiveState s = TwoSensors();
   // Valid multi-byte text stays; a lone continuation byte, a truncated sequence, an overlong '/'
   // and an encoded surrogate are each replaced, so the message is valid UTF-8 for the browser.
-  s.sensors[0].id = "gr\xC3\xBC\xC3\x9F \xE2\x82\xAC \xF0\x9F\x98\x80|\x80|\xE2\x82|\xC0\xAF|\xED\xA0\x80";
+  s.sensors[0].id =
+      "gr\xC3\xBC\xC3\x9F \xE2\x82\xAC \xF0\x9F\x98\x80|\x80|\xE2\x82|\xC0\xAF|\xED\xA0\x80";
   const json j = Parse(LiveStateJson(s));
   const std::string r = "\xEF\xBF\xBD";
   EXPECT_EQ(j["sensors"][0]["id"].get<std::string>(),

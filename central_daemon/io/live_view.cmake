@@ -7,8 +7,9 @@
 set(lrfnet_live_view_page_html ${CMAKE_CURRENT_SOURCE_DIR}/live_view_page.html)
 set_property(DIRECTORY APPEND PROPERTY CMAKE_CONFIGURE_DEPENDS ${lrfnet_live_view_page_html})
 file(READ ${lrfnet_live_view_page_html} lrfnet_live_view_page_hex HEX)
-string(REGEX REPLACE "([0-9a-f][0-9a-f][0-9a-f][0-9a-f][0-9a-f][0-9a-f][0-9a-f][0-9a-f][0-9a-f][0-9a-f][0-9a-f][0-9a-f][0-9a-f][0-9a-f][0-9a-f][0-9a-f][0-9a-f][0-9a-f][0-9a-f][0-9a-f][0-9a-f][0-9a-f][0-9a-f][0-9a-f][0-9a-f][0-9a-f][0-9a-f][0-9a-f][0-9a-f][0-9a-f][0-9a-f][0-9a-f])"
-       "\\1\n" lrfnet_live_view_page_hex "${lrfnet_live_view_page_hex}")
+string(REPEAT "[0-9a-f]" 64 lrfnet_live_view_hex_line)  # 32 bytes per line
+string(REGEX REPLACE "(${lrfnet_live_view_hex_line})" "\\1\n" lrfnet_live_view_page_hex
+       "${lrfnet_live_view_page_hex}")
 string(REGEX REPLACE "([0-9a-f][0-9a-f])" "0x\\1," LRFNET_LIVE_VIEW_PAGE_BYTES
        "${lrfnet_live_view_page_hex}")
 file(CONFIGURE OUTPUT ${CMAKE_CURRENT_BINARY_DIR}/live_view_page.cc @ONLY CONTENT
@@ -64,5 +65,5 @@ if(BUILD_TESTING)
   target_compile_definitions(live_view_browser_test PRIVATE
     LRFNET_TEST_ARTIFACTS_DIR="${CMAKE_BINARY_DIR}/test_artifacts")
   lrfnet_warnings(live_view_browser_test)
-  gtest_discover_tests(live_view_browser_test DISCOVERY_TIMEOUT 120 PROPERTIES TIMEOUT 120)
+  gtest_discover_tests(live_view_browser_test DISCOVERY_TIMEOUT 120 PROPERTIES TIMEOUT 60)
 endif()

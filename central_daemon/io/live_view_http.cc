@@ -1,10 +1,10 @@
 #include "central_daemon/io/live_view_http.h"
 
+#include <algorithm>
 #include <boost/asio/buffer.hpp>
 #include <boost/beast/core/string.hpp>
 #include <boost/beast/http/error.hpp>
 #include <boost/beast/websocket/rfc6455.hpp>
-#include <algorithm>
 #include <cctype>
 #include <cstdint>
 #include <limits>
@@ -52,7 +52,8 @@ bool OriginMatchesHost(const HttpRequest& request) {
   if (host_it == request.end()) return false;
   const std::string_view host(host_it->value().data(), host_it->value().size());
   if (host.empty()) return false;
-  for (const std::string_view scheme : {std::string_view("http://"), std::string_view("https://")}) {
+  for (const std::string_view scheme :
+       {std::string_view("http://"), std::string_view("https://")}) {
     if (origin.size() == scheme.size() + host.size() &&
         EqualsIgnoringCase(origin.substr(0, scheme.size()), scheme) &&
         EqualsIgnoringCase(origin.substr(scheme.size()), host)) {
@@ -186,8 +187,8 @@ HttpResponse RespondTo(const HttpRequest& request, LiveViewRoute route,
     }
     case LiveViewRoute::kState:
       if (latest_json == nullptr) {
-        HttpResponse r = Response(request, http::status::service_unavailable,
-                                  "application/json", R"({"error":"no state published yet"})");
+        HttpResponse r = Response(request, http::status::service_unavailable, "application/json",
+                                  R"({"error":"no state published yet"})");
         r.set(http::field::retry_after, "1");
         return r;
       }
@@ -207,8 +208,8 @@ HttpResponse RespondTo(const HttpRequest& request, LiveViewRoute route,
       return r;
     }
     case LiveViewRoute::kMethodNotAllowed: {
-      HttpResponse r = Response(request, http::status::method_not_allowed, "text/plain",
-                                "only GET and HEAD\n");
+      HttpResponse r =
+          Response(request, http::status::method_not_allowed, "text/plain", "only GET and HEAD\n");
       r.set(http::field::allow, PathOf(request) == "/ws" ? "GET" : "GET, HEAD");
       return r;
     }

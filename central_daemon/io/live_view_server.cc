@@ -2,6 +2,8 @@
 
 #include <fcntl.h>
 
+#include <algorithm>
+#include <array>
 #include <boost/asio/ip/address.hpp>
 #include <boost/asio/ip/tcp.hpp>
 #include <boost/asio/steady_timer.hpp>
@@ -10,8 +12,6 @@
 #include <boost/beast/core/tcp_stream.hpp>
 #include <boost/beast/http/write.hpp>
 #include <boost/beast/websocket/stream.hpp>
-#include <algorithm>
-#include <array>
 #include <chrono>
 #include <optional>
 #include <unordered_set>
@@ -96,9 +96,8 @@ class WsSession : public std::enable_shared_from_this<WsSession> {
         [](websocket::response_type& r) { r.set(http::field::server, "lrfnetd"); }));
     // Clients send nothing we use; a large frame from one is an error, not a buffer to grow.
     ws_.read_message_max(4096);
-    ws_.async_accept(request_, [self = shared_from_this()](const error_code& ec) {
-      self->OnAccept(ec);
-    });
+    ws_.async_accept(request_,
+                     [self = shared_from_this()](const error_code& ec) { self->OnAccept(ec); });
   }
 
   void Send(const std::shared_ptr<const std::string>& message) {
@@ -110,10 +109,9 @@ class WsSession : public std::enable_shared_from_this<WsSession> {
     }
     writing_ = message;
     ws_.text(true);
-    ws_.async_write(asio::buffer(*writing_),
-                    [self = shared_from_this()](const error_code& ec, std::size_t) {
-                      self->OnWrite(ec);
-                    });
+    ws_.async_write(
+        asio::buffer(*writing_),
+        [self = shared_from_this()](const error_code& ec, std::size_t) { self->OnWrite(ec); });
   }
 
   void Close() {
@@ -229,12 +227,11 @@ class HttpSession : public std::enable_shared_from_this<HttpSession> {
       return;
     }
     unparsed_.resize(RequestBufferBytes(impl_->options.max_request_bytes));
-    stream_.async_read_some(
-        asio::buffer(unparsed_.data() + have, unparsed_.size() - have),
-        [self = shared_from_this(), have](const error_code& ec, std::size_t n) {
-          self->unparsed_.resize(have + n);
-          self->OnRead(ec);
-        });
+    stream_.async_read_some(asio::buffer(unparsed_.data() + have, unparsed_.size() - have),
+                            [self = shared_from_this(), have](const error_code& ec, std::size_t n) {
+                              self->unparsed_.resize(have + n);
+                              self->OnRead(ec);
+                            });
   }
 
   void OnRead(const error_code& ec) {
@@ -298,10 +295,9 @@ class HttpSession : public std::enable_shared_from_this<HttpSession> {
     response_.emplace(std::move(response));
     // A client that does not take the response is cut off like a slow request.
     stream_.expires_after(Seconds(impl_->options.idle_timeout_s));
-    http::async_write(stream_, *response_,
-                      [self = shared_from_this()](const error_code& ec, std::size_t) {
-                        self->OnWrite(ec);
-                      });
+    http::async_write(
+        stream_, *response_,
+        [self = shared_from_this()](const error_code& ec, std::size_t) { self->OnWrite(ec); });
   }
 
   void OnWrite(const error_code& ec) {
@@ -396,11 +392,10 @@ void Core::Refuse(tcp::socket socket) {
 }
 
 std::optional<std::string> Validate(const LiveViewOptions& options) {
-  error_code ec;
-  asio::ip::make_address(options.bind_address, ec);
-  if (ec) {
+  if (options.bind_address.empty() ||
+      options.bind_address.find_first_of(" \t\r\n") != std::string::npos) {
     return "live view: bind_address '" + options.bind_address +
-           "' is not an IPv4 or IPv6 address";
+           "' is not an address or a host name";
   }
   if (options.max_clients < 1 || options.max_clients > 10000) {
     return "live view: max_clients must be in 1..10000";
@@ -424,8 +419,16 @@ LiveViewServer::~LiveViewServer() { Stop(); }
 
 bool LiveViewServer::Start(std::string* error) {
   error_code ec;
-  const asio::ip::address address = asio::ip::make_address(impl_->options.bind_address, ec);
-  const tcp::endpoint endpoint(address, impl_->options.port);
+  tcp::endpoint endpoint(asio::ip::make_address(impl_->options.bind_address, ec),
+                         impl_->options.port);
+  if (ec) {  // a host name: its first address
+    tcp::resolver resolver(impl_->acceptor.get_executor());
+    const auto found =
+        resolver.resolve(impl_->options.bind_address, std::to_string(impl_->options.port),
+                         tcp::resolver::passive | tcp::resolver::numeric_service, ec);
+    if (!ec && found.empty()) ec = asio::error::host_not_found;
+    if (!ec) endpoint = found.begin()->endpoint();
+  }
   const auto fail = [&](const char* what) {
     if (error != nullptr) {
       *error = std::string("live view: ") + what + " " + impl_->options.bind_address + ":" +
@@ -435,7 +438,7 @@ bool LiveViewServer::Start(std::string* error) {
     impl_->acceptor.close(ignored);
     return false;
   };
-  if (ec) return fail("bad address");
+  if (ec) return fail("cannot resolve");
   if (impl_->acceptor.open(endpoint.protocol(), ec)) return fail("cannot open");
   CloseOnExec(impl_->acceptor.native_handle());
   if (impl_->acceptor.set_option(asio::socket_base::reuse_address(true), ec)) {

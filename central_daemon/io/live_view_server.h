@@ -22,11 +22,11 @@
 namespace lrfnet::daemon {
 
 struct LiveViewOptions {
-  std::string bind_address = "127.0.0.1";
-  std::uint16_t port = 0;            // 0: any free port (see LiveViewServer::port())
+  std::string bind_address = "127.0.0.1";  // IPv4 or IPv6 literal, or a host name
+  std::uint16_t port = 0;                  // 0: any free port (see LiveViewServer::port())
   std::size_t max_clients = 32;
   std::size_t max_request_bytes = 8192;
-  double idle_timeout_s = 30.0;      // HTTP keep-alive and WebSocket handshake
+  double idle_timeout_s = 30.0;  // HTTP keep-alive and WebSocket handshake
   // A WebSocket client is pinged after half of this without data from it and dropped after all of
   // it (a browser answers pings by itself; a client that stopped reading does not).
   double websocket_idle_timeout_s = 60.0;
@@ -35,7 +35,7 @@ std::optional<std::string> Validate(const LiveViewOptions& options);
 
 struct LiveViewCounters {
   std::uint64_t http_requests = 0;
-  std::uint64_t bad_requests = 0;       // malformed or too large (400 / closed)
+  std::uint64_t bad_requests = 0;  // malformed or too large (400 / closed)
   std::uint64_t not_found = 0;
   std::uint64_t refused_connections = 0;  // over max_clients
   std::uint64_t websocket_clients = 0;    // accepted upgrades, total

@@ -59,8 +59,9 @@ class HttpClient {
   }
   bool ok() const { return ok_; }
 
-  std::optional<Response> Send(http::verb method, const std::string& target,
-                               const std::vector<std::pair<std::string, std::string>>& headers = {}) {
+  std::optional<Response> Send(
+      http::verb method, const std::string& target,
+      const std::vector<std::pair<std::string, std::string>>& headers = {}) {
     http::request<http::string_body> request(method, target, 11);
     request.set(http::field::host, "127.0.0.1");
     for (const auto& [name, value] : headers) request.set(name, value);
@@ -227,6 +228,19 @@ bool WaitFor(const std::function<bool()>& condition, std::chrono::milliseconds t
   return condition();
 }
 
+// AddressSanitizer keeps freed memory in quarantine, so resident memory says nothing there.
+#if defined(__SANITIZE_ADDRESS__)
+constexpr bool kFreedMemoryReturns = false;
+#elif defined(__has_feature)
+#if __has_feature(address_sanitizer)
+constexpr bool kFreedMemoryReturns = false;
+#else
+constexpr bool kFreedMemoryReturns = true;
+#endif
+#else
+constexpr bool kFreedMemoryReturns = true;
+#endif
+
 std::size_t ResidentBytes() {
   std::ifstream statm("/proc/self/statm");
   std::size_t pages = 0, resident = 0;
@@ -292,7 +306,9 @@ class LiveViewServerTest : public ::testing::Test {
 TEST(LiveViewOptionsTest, ValidateNamesTheBadValue) {
   EXPECT_EQ(Validate(LiveViewOptions{}), std::nullopt);
   LiveViewOptions o;
-  o.bind_address = "localhost:80";
+  o.bind_address = "";
+  EXPECT_NE(Validate(o).value_or("").find("bind_address"), std::string::npos);
+  o.bind_address = "local host";
   EXPECT_NE(Validate(o).value_or("").find("bind_address"), std::string::npos);
   o = {};
   o.max_clients = 0;
@@ -306,6 +322,18 @@ TEST(LiveViewOptionsTest, ValidateNamesTheBadValue) {
   o = {};
   o.websocket_idle_timeout_s = -1;
   EXPECT_NE(Validate(o).value_or("").find("websocket_idle_timeout_s"), std::string::npos);
+}
+
+TEST(LiveViewServerStartTest, HostNamesAndIpv6Work) {
+  asio::io_context io;
+  for (const char* address : {"localhost", "::1"}) {
+    LiveViewOptions o;
+    o.bind_address = address;
+    LiveViewServer server(io, o);
+    std::string error;
+    EXPECT_TRUE(server.Start(&error)) << address << ": " << error;
+    EXPECT_NE(server.port(), 0) << address;
+  }
 }
 
 TEST(LiveViewServerStartTest, AddressInUseIsAnError) {
@@ -441,8 +469,10 @@ TEST_F(LiveViewServerTest, ClientThatStopsReadingDoesNotGrowMemory) {
   const LiveViewCounters c = Counters();
   // Of each publish to the stuck client: written, replaced, or the one pending/being written.
   EXPECT_GT(c.messages_replaced, kMessages / 2u);
-  EXPECT_LT(rss_after, rss_before + (24u << 20))
-      << "resident memory grew by " << (rss_after - rss_before) / (1 << 20) << " MiB";
+  if (kFreedMemoryReturns) {
+    EXPECT_LT(rss_after, rss_before + (24u << 20))
+        << "resident memory grew by " << (rss_after - rss_before) / (1 << 20) << " MiB";
+  }
 
   // The other client is served: it sees the newest message (older ones may be replaced for it
   // too, as it reads slower than the loop publishes).
@@ -457,7 +487,8 @@ TEST_F(LiveViewServerTest, GarbageGets400AndTheServerGoesOn) {
   StartServer();
   RawClient c(port_);
   ASSERT_TRUE(c.ok());
-  ASSERT_TRUE(c.Send(std::string("\x16\x03\x01\x02\x00\x01\x00\x01\xfc\x03\x03 hello\r\n\r\n", 22)));
+  ASSERT_TRUE(
+      c.Send(std::string("\x16\x03\x01\x02\x00\x01\x00\x01\xfc\x03\x03 hello\r\n\r\n", 22)));
   bool closed = false;
   EXPECT_EQ(StatusOf(c.ReadToEnd(&closed)), 400);
   EXPECT_TRUE(closed);
@@ -482,7 +513,8 @@ TEST_F(LiveViewServerTest, HeaderOverTheLimitGets400) {
   StartServer();
   RawClient c(port_);
   ASSERT_TRUE(c.ok());
-  ASSERT_TRUE(c.Send("GET / HTTP/1.1\r\nHost: x\r\nX-Big: " + std::string(20000, 'a') + "\r\n\r\n"));
+  ASSERT_TRUE(
+      c.Send("GET / HTTP/1.1\r\nHost: x\r\nX-Big: " + std::string(20000, 'a') + "\r\n\r\n"));
   bool closed = false;
   const std::string response = c.ReadToEnd(&closed);
   EXPECT_EQ(StatusOf(response), 400) << response.substr(0, 200);
@@ -569,8 +601,9 @@ TEST_F(LiveViewServerTest, BrokenUpgradeIsCounted) {
   RawClient c(port_);
   ASSERT_TRUE(c.ok());
   // An upgrade without Sec-WebSocket-Key: the handshake refuses it.
-  ASSERT_TRUE(c.Send("GET /ws HTTP/1.1\r\nHost: x\r\nConnection: Upgrade\r\nUpgrade: websocket\r\n"
-                     "Sec-WebSocket-Version: 13\r\n\r\n"));
+  ASSERT_TRUE(
+      c.Send("GET /ws HTTP/1.1\r\nHost: x\r\nConnection: Upgrade\r\nUpgrade: websocket\r\n"
+             "Sec-WebSocket-Version: 13\r\n\r\n"));
   bool closed = false;
   EXPECT_EQ(StatusOf(c.ReadToEnd(&closed)), 400);
   EXPECT_TRUE(WaitFor([&] { return Counters().failed_handshakes == 1u; }));
@@ -679,7 +712,8 @@ TEST_F(LiveViewServerTest, ChildProcessesDoNotKeepConnectionsOpen) {
 // ---- the request handling without sockets ------------------------------------------------------
 
 TEST(LiveViewHttpTest, ParseRequestReportsCompleteNeedMoreAndBad) {
-  ParsedRequest p = ParseRequest("GET /state?x=1 HTTP/1.1\r\nHost: a\r\n\r\nGET / HTTP/1.1\r\n", 8192);
+  ParsedRequest p =
+      ParseRequest("GET /state?x=1 HTTP/1.1\r\nHost: a\r\n\r\nGET / HTTP/1.1\r\n", 8192);
   ASSERT_EQ(p.status, RequestReader::Status::kComplete);
   EXPECT_EQ(p.consumed, std::string_view("GET /state?x=1 HTTP/1.1\r\nHost: a\r\n\r\n").size());
   EXPECT_EQ(RouteOf(p.request), LiveViewRoute::kState);
@@ -713,7 +747,8 @@ RequestReader::Status FeedInPieces(RequestReader& reader, std::string_view all, 
 TEST(LiveViewHttpTest, HeaderLimitHoldsAcrossReads) {
   const std::string header = SlightlyLongHeader();
   ASSERT_GT(header.size(), 8192u);
-  for (const std::size_t piece : {std::size_t{1}, std::size_t{40}, std::size_t{4096}, header.size()}) {
+  for (const std::size_t piece :
+       {std::size_t{1}, std::size_t{40}, std::size_t{4096}, header.size()}) {
     RequestReader reader(8192);
     std::size_t used = 0;
     EXPECT_EQ(FeedInPieces(reader, header, piece, &used), RequestReader::Status::kBad) << piece;

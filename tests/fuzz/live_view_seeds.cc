@@ -1,9 +1,9 @@
+#include "tests/fuzz/live_view_seeds.h"
+
 #include <filesystem>
 #include <fstream>
 #include <string>
 #include <vector>
-
-#include "tests/fuzz/live_view_seeds.h"
 
 namespace lrfnet::fuzz {
 
