@@ -1,6 +1,17 @@
 # Integration tests: real sockets on loopback, the shared captures (skipped with a message when absent), and
 # the built binaries.
 
+# A test that starts the three binaries: their paths as compile definitions, built before it.
+function(lrfnet_uses_binaries name)
+  if(TARGET ${name})
+    target_compile_definitions(${name} PRIVATE
+      LRFNET_TOOL_BINARY="$<TARGET_FILE:lrfnet>"
+      LRFNET_TRACKER_BINARY="$<TARGET_FILE:lrfnet-tracker>"
+      LRFNET_DAEMON_BINARY="$<TARGET_FILE:lrfnetd>")
+    add_dependencies(${name} lrfnet lrfnet-tracker lrfnetd)
+  endif()
+endfunction()
+
 # `lrfnet dump` against the golden files of the shared captures.
 lrfnet_test(golden_test SOURCES golden_test.cc LIBS lrfnet_dump nlohmann_json::nlohmann_json)
 
@@ -42,33 +53,18 @@ endif()
 # loss / reordering / duplicates / restart; hostile datagrams; SIGKILL durability; SIGHUP; --input.
 lrfnet_test(daemon_cli_test SOURCES daemon_cli_test.cc
             LIBS lrfnet_daemon_io lrfnet_uplink lrfnet_proto nlohmann_json::nlohmann_json)
+lrfnet_uses_binaries(daemon_cli_test)
 if(TARGET daemon_cli_test)
   target_compile_definitions(daemon_cli_test PRIVATE
-    LRFNET_TOOL_BINARY="$<TARGET_FILE:lrfnet>"
-    LRFNET_TRACKER_BINARY="$<TARGET_FILE:lrfnet-tracker>"
-    LRFNET_DAEMON_BINARY="$<TARGET_FILE:lrfnetd>"
     LRFNET_DAEMON_CONFIG_FILE="${PROJECT_SOURCE_DIR}/central_daemon/config/lrfnetd.yaml")
-  add_dependencies(daemon_cli_test lrfnet lrfnet-tracker lrfnetd)
 endif()
 
 # The calibration chain as processes: lrfnet sim → lrfnet-tracker --replay per sensor → lrfnet calibrate /
 # lrfnetd --input → lrfnet eval; accuracy bounds on the simulated setup of Quenzel et al.; one-line errors.
 lrfnet_test(calibration_cli_test SOURCES calibration_cli_test.cc LIBS nlohmann_json::nlohmann_json)
-if(TARGET calibration_cli_test)
-  target_compile_definitions(calibration_cli_test PRIVATE
-    LRFNET_TOOL_BINARY="$<TARGET_FILE:lrfnet>"
-    LRFNET_TRACKER_BINARY="$<TARGET_FILE:lrfnet-tracker>"
-    LRFNET_DAEMON_BINARY="$<TARGET_FILE:lrfnetd>")
-  add_dependencies(calibration_cli_test lrfnet lrfnet-tracker lrfnetd)
-endif()
+lrfnet_uses_binaries(calibration_cli_test)
 
 # The whole chain live, like the demo: lrfnet sim --serve → lrfnet-tracker per device → lrfnetd
 # (calibrates by itself, fuses, live view); one tracker killed and restarted while fusing.
 lrfnet_test(system_test SOURCES system_test.cc LIBS nlohmann_json::nlohmann_json)
-if(TARGET system_test)
-  target_compile_definitions(system_test PRIVATE
-    LRFNET_TOOL_BINARY="$<TARGET_FILE:lrfnet>"
-    LRFNET_TRACKER_BINARY="$<TARGET_FILE:lrfnet-tracker>"
-    LRFNET_DAEMON_BINARY="$<TARGET_FILE:lrfnetd>")
-  add_dependencies(system_test lrfnet lrfnet-tracker lrfnetd)
-endif()
+lrfnet_uses_binaries(system_test)

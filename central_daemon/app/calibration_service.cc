@@ -6,13 +6,13 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
-#include <numeric>
 #include <ctime>
 #include <filesystem>
 #include <fstream>
 
 #include "central_daemon/app/calibration_input.h"
 #include "central_daemon/calibration/calibration_yaml.h"
+#include "central_daemon/calibration/graph.h"
 #include "central_daemon/calibration/report.h"
 
 namespace lrfnet::daemon {
@@ -83,18 +83,12 @@ CalibrationProgress ProgressOf(const calib::DataAssessment& assessment, double r
   std::vector<calib::PairData> pairs = assessment.pairs;
   std::sort(pairs.begin(), pairs.end(),
             [](const calib::PairData& a, const calib::PairData& b) { return a.overlap_s > b.overlap_s; });
-  std::vector<std::size_t> parent(n);
-  std::iota(parent.begin(), parent.end(), std::size_t{0});
-  auto find = [&](std::size_t i) {
-    while (parent[i] != i) i = parent[i] = parent[parent[i]];
-    return i;
-  };
+  calib::DisjointSets sets(n);
   double sum = 0.0;
   std::size_t links = 0;
   const calib::PairData* weakest = nullptr;
   for (const calib::PairData& p : pairs) {
-    if (p.r >= n || p.s >= n || find(p.r) == find(p.s)) continue;
-    parent[find(p.r)] = find(p.s);
+    if (p.r >= n || p.s >= n || !sets.Union(p.r, p.s)) continue;
     ++links;
     sum += std::min(1.0, p.overlap_s / required_overlap_s);
     if (weakest == nullptr || p.overlap_s < weakest->overlap_s) weakest = &p;
@@ -174,15 +168,19 @@ CalibrationService::~CalibrationService() {
 
 void CalibrationService::Reconfigure(const DaemonConfig& config) { config_ = config; }
 
-void CalibrationService::UpdateProgress(double now_s, const Daemon& daemon) {
-  last_progress_s_ = now_s;
+calib::CalibrationInput CalibrationService::WindowInput(const Daemon& daemon) const {
   common::UtcNs newest_ns = 0;
   for (const SensorStoreInfo& s : daemon.store().Sensors()) {
     newest_ns = std::max(newest_ns, s.last_scan_ns);
   }
   const auto window_ns = static_cast<common::UtcNs>(config_.calibration_window_s * 1e9);
   const common::UtcNs from_ns = newest_ns > window_ns ? newest_ns - window_ns : 0;
-  const calib::CalibrationInput input = CalibrationInputFrom(daemon.ingest(), daemon.store(), from_ns);
+  return CalibrationInputFrom(daemon.ingest(), daemon.store(), from_ns);
+}
+
+void CalibrationService::UpdateProgress(double now_s, const Daemon& daemon) {
+  last_progress_s_ = now_s;
+  const calib::CalibrationInput input = WindowInput(daemon);
   const calib::AlignedTracks tracks = calib::Align(input, config_.calibration.align);
   progress_ = ProgressOf(calib::Assess(tracks, config_.calibration.min_pair_overlap_s),
                          config_.calibration.min_pair_overlap_s);
@@ -216,14 +214,7 @@ void CalibrationService::OnTick(double now_s, const Daemon& daemon) {
   schedule_.requested = false;
   schedule_.last_attempt_s = now_s;
   ++counters_.attempts;
-  common::UtcNs newest_ns = 0;
-  for (const SensorStoreInfo& s : daemon.store().Sensors()) {
-    newest_ns = std::max(newest_ns, s.last_scan_ns);
-  }
-  const auto window_ns = static_cast<common::UtcNs>(config_.calibration_window_s * 1e9);
-  const common::UtcNs from_ns = newest_ns > window_ns ? newest_ns - window_ns : 0;
-  auto input = std::make_shared<calib::CalibrationInput>(
-      CalibrationInputFrom(daemon.ingest(), daemon.store(), from_ns));
+  auto input = std::make_shared<calib::CalibrationInput>(WindowInput(daemon));
   if (worker_.joinable()) worker_.join();
   busy_ = true;
   const DaemonConfig config = config_;

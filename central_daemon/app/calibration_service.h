@@ -96,6 +96,8 @@ class CalibrationService {
  private:
   void Finish(std::shared_ptr<calib::CalibrationOutcome> outcome, std::string write_error);
   void UpdateProgress(double now_s, const Daemon& daemon);
+  // The store's newest calibration_window_s of tracks (copied; on the io thread).
+  calib::CalibrationInput WindowInput(const Daemon& daemon) const;
 
   boost::asio::io_context& io_;
   DaemonConfig config_;

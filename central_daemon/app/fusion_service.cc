@@ -65,14 +65,6 @@ void FusionService::SetCalibration(const calib::CalibrationResult& result) {
 
 void FusionService::OnFrame(const std::string& sensor_id, const TrackFrameData& frame) {
   now_ns_ = std::max(now_ns_, frame.scan_start_ns);
-  TrackFrameData& latest = latest_frames_[sensor_id];
-  // Parts of one scan are collected into one frame; a newer scan replaces it.
-  if (latest.scan_start_ns == frame.scan_start_ns && latest.session_id == frame.session_id &&
-      latest.scan_counter == frame.scan_counter && frame.part_count > 1) {
-    latest.tracks.insert(latest.tracks.end(), frame.tracks.begin(), frame.tracks.end());
-  } else if (frame.scan_start_ns >= latest.scan_start_ns || frame.session_id != latest.session_id) {
-    latest = frame;
-  }
   if (calibrated_ && config_.fusion_enabled) fuser_.AddFrame(sensor_id, frame);
 }
 

@@ -1,8 +1,7 @@
 #pragma once
 // lrfnetd's fusion (an adapter around fusion::Fuser): every accepted track frame goes to the fuser
 // once the sensor has a calibrated pose; at fusion.publish_hz the fused tracks are sent as JSON
-// datagrams over UDP (fusion.publish) and appended as JSON lines to fusion.record. Also keeps
-// each sensor's latest frame for the live view (raw tracks before calibration).
+// datagrams over UDP (fusion.publish) and appended as JSON lines to fusion.record.
 //
 // Time: the fuser runs on the gateways' UTC scan times; "now" is the newest scan time received
 // (so a recording replayed offline fuses exactly like the live stream).
@@ -11,7 +10,6 @@
 #include <boost/asio/io_context.hpp>
 #include <boost/asio/ip/udp.hpp>
 #include <cstdio>
-#include <map>
 #include <memory>
 #include <optional>
 #include <string>
@@ -60,10 +58,6 @@ class FusionService final : public FrameListener {
   // The newest scan time received (gateway UTC), 0 before the first frame.
   common::UtcNs now_ns() const { return now_ns_; }
   const fusion::Fuser& fuser() const { return fuser_; }
-  // Each sensor's latest frame (sensor frame), for the live view.
-  const std::map<std::string, TrackFrameData, std::less<>>& latest_frames() const {
-    return latest_frames_;
-  }
   const FusionServiceCounters& counters() const { return counters_; }
 
  private:
@@ -75,7 +69,6 @@ class FusionService final : public FrameListener {
   bool calibrated_ = false;
   common::UtcNs now_ns_ = 0;
   std::optional<double> last_publish_s_;
-  std::map<std::string, TrackFrameData, std::less<>> latest_frames_;
   std::optional<boost::asio::ip::udp::socket> socket_;
   boost::asio::ip::udp::endpoint destination_;
   std::FILE* record_ = nullptr;

@@ -99,10 +99,8 @@ LiveState LiveFeed::Build(const Daemon& daemon, const CalibrationService& calibr
 
   // Raw tracks: world frame where placed (from the fuser, with their fused ids), else the
   // sensor's latest frame in its own frame.
-  std::map<std::string, bool, std::less<>> from_fuser;
   if (fusion.calibrated()) {
     for (const fusion::WorldTrack& t : fusion.fuser().WorldTracks(fusion.now_ns())) {
-      from_fuser[t.sensor_id] = true;
       LiveTrack track;
       track.sensor_id = t.sensor_id;
       track.track_id = t.track_id;
@@ -131,10 +129,15 @@ LiveState LiveFeed::Build(const Daemon& daemon, const CalibrationService& calibr
   }
   // A frame older than this is not drawn (the sensor lost its tracks or went silent).
   constexpr common::DurationNs kStaleNs = 1'000'000'000;
-  for (const auto& [sensor_id, frame] : fusion.latest_frames()) {
-    if (poses.count(sensor_id) != 0 && fusion.calibrated()) continue;
-    if (fusion.now_ns() - frame.scan_start_ns > kStaleNs) continue;
-    for (const TrackObservation& o : frame.tracks) {
+  for (const SensorStoreInfo& info : daemon.store().Sensors()) {
+    if (poses.count(info.sensor_id) != 0 && fusion.calibrated()) continue;
+    if (info.frames == 0 || fusion.now_ns() - info.last_scan_ns > kStaleNs) continue;
+    // The newest scan, its parts merged by the store.
+    const std::vector<TrackFrameData> newest =
+        daemon.store().Query(info.sensor_id, info.last_scan_ns, info.last_scan_ns + 1);
+    if (newest.empty()) continue;
+    const std::string& sensor_id = info.sensor_id;
+    for (const TrackObservation& o : newest.back().tracks) {
       if (o.state == TrackState::kTentative) continue;
       LiveTrack track;
       track.sensor_id = sensor_id;

@@ -237,6 +237,18 @@ void WriteSensor(Writer& w, const LiveSensor& s) {
   w.EndObject();
 }
 
+// Position and velocity of a track (metres, metres per second; millimetre precision).
+void WriteMotion(Writer& w, double x_m, double y_m, double vx_mps, double vy_mps) {
+  w.Key("x_m");
+  w.Metres(x_m);
+  w.Key("y_m");
+  w.Metres(y_m);
+  w.Key("vx_mps");
+  w.Metres(vx_mps);
+  w.Key("vy_mps");
+  w.Metres(vy_mps);
+}
+
 void WriteTrack(Writer& w, const LiveTrack& t) {
   w.BeginObject();
   w.Key("sensor");
@@ -245,14 +257,7 @@ void WriteTrack(Writer& w, const LiveTrack& t) {
   w.UInt(t.track_id);
   w.Key("state");
   w.String(t.state);
-  w.Key("x_m");
-  w.Metres(t.x_m);
-  w.Key("y_m");
-  w.Metres(t.y_m);
-  w.Key("vx_mps");
-  w.Metres(t.vx_mps);
-  w.Key("vy_mps");
-  w.Metres(t.vy_mps);
+  WriteMotion(w, t.x_m, t.y_m, t.vx_mps, t.vy_mps);
   w.Key("fused");
   if (t.fused_id) {
     w.UInt(*t.fused_id);
@@ -268,14 +273,7 @@ void WriteFused(Writer& w, const LiveFusedTrack& f) {
   w.UInt(f.id);
   w.Key("state");
   w.String(f.state);
-  w.Key("x_m");
-  w.Metres(f.x_m);
-  w.Key("y_m");
-  w.Metres(f.y_m);
-  w.Key("vx_mps");
-  w.Metres(f.vx_mps);
-  w.Key("vy_mps");
-  w.Metres(f.vy_mps);
+  WriteMotion(w, f.x_m, f.y_m, f.vx_mps, f.vy_mps);
   w.Key("cov_xx");
   w.Real(f.cov_xx);
   w.Key("cov_xy");

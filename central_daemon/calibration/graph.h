@@ -30,6 +30,29 @@ struct RelativeMeasurement {
   Eigen::Matrix3d covariance = Eigen::Matrix3d::Identity();  // of (x, y, yaw) of s_from_r
 };
 
+// Union-find over nodes 0..n-1 (path halving). Find and Union take node indices < n.
+class DisjointSets {
+ public:
+  explicit DisjointSets(std::size_t n) : parent_(n) {
+    for (std::size_t i = 0; i < n; ++i) parent_[i] = i;
+  }
+  std::size_t Find(std::size_t i) {
+    while (parent_[i] != i) i = parent_[i] = parent_[parent_[i]];
+    return i;
+  }
+  // Joins the sets of a and b; false when they were one set already.
+  bool Union(std::size_t a, std::size_t b) {
+    a = Find(a);
+    b = Find(b);
+    if (a == b) return false;
+    parent_[a] = b;
+    return true;
+  }
+
+ private:
+  std::vector<std::size_t> parent_;
+};
+
 // Nodes not connected to `reference` through measurements (sorted ascending). Measurements with
 // an index >= n are ignored; reference >= n: every node is unconnected.
 std::vector<std::size_t> UnconnectedNodes(std::size_t n, std::size_t reference,

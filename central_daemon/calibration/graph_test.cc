@@ -101,5 +101,16 @@ TEST(SpanningTreeYaws, ComposesTheMeasurementsFromTheReference) {
   EXPECT_NEAR(from1[0], -0.5, 1e-15);
 }
 
+TEST(DisjointSets, UnionReportsWhetherItJoinedTwoSets) {
+  DisjointSets sets(4);
+  EXPECT_TRUE(sets.Union(0, 1));
+  EXPECT_TRUE(sets.Union(2, 3));
+  EXPECT_FALSE(sets.Union(1, 0));
+  EXPECT_NE(sets.Find(0), sets.Find(2));
+  EXPECT_TRUE(sets.Union(1, 3));
+  EXPECT_EQ(sets.Find(0), sets.Find(2));
+  EXPECT_FALSE(sets.Union(0, 3));
+}
+
 }  // namespace
 }  // namespace lrfnet::calib

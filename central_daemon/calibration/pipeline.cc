@@ -360,12 +360,8 @@ DataAssessment Assess(const AlignedTracks& tracks, double min_pair_overlap_s) {
     out.sensors.push_back(std::move(d));
   }
   // Union-find over the pairs with enough simultaneous tracks.
-  std::vector<std::size_t> parent(n);
-  std::iota(parent.begin(), parent.end(), std::size_t{0});
-  auto find = [&](std::size_t i) {
-    while (parent[i] != i) i = parent[i] = parent[parent[i]];
-    return i;
-  };
+  DisjointSets sets(n);
+  auto find = [&sets](std::size_t i) { return sets.Find(i); };
   for (std::size_t r = 0; r < n; ++r) {
     for (std::size_t s = r + 1; s < n; ++s) {
       std::size_t both = 0;
@@ -373,7 +369,7 @@ DataAssessment Assess(const AlignedTracks& tracks, double min_pair_overlap_s) {
       if (both == 0) continue;
       const double overlap_s = static_cast<double>(both) * tracks.step_s;
       out.pairs.push_back({r, s, overlap_s});
-      if (overlap_s >= min_pair_overlap_s) parent[find(r)] = find(s);
+      if (overlap_s >= min_pair_overlap_s) sets.Union(r, s);
     }
   }
   // The component of the sensor with the most tracked time is "the network".

@@ -666,19 +666,19 @@ Run SolveFrom(NodeProblem& p, std::vector<double> phi, const RotationAveragingOp
 
 }  // namespace
 
+std::optional<std::string> CheckRotationProblem(std::size_t n, std::size_t reference,
+                                                const std::vector<RelativeMeasurement>& measurements,
+                                                const RotationAveragingOptions& options) {
+  if (auto error = Validate(options)) return "invalid options: " + *error;
+  if (auto error = CheckGraphInput(n, reference, measurements)) return error;
+  return ConnectivityError(n, reference, measurements);
+}
+
 RotationAveragingResult AverageRotationsL1(std::size_t n, std::size_t reference,
                                            const std::vector<RelativeMeasurement>& measurements,
                                            const RotationAveragingOptions& options) {
   RotationAveragingResult result;
-  if (auto error = Validate(options)) {
-    result.error = "invalid options: " + *error;
-    return result;
-  }
-  if (auto error = CheckGraphInput(n, reference, measurements)) {
-    result.error = *error;
-    return result;
-  }
-  if (auto error = ConnectivityError(n, reference, measurements)) {
+  if (auto error = CheckRotationProblem(n, reference, measurements, options)) {
     result.error = *error;
     return result;
   }

@@ -100,6 +100,12 @@ struct RotationAveragingResult {
   int starts = 0;               // starts solved
 };
 
+// What every rotation solver checks first: the options (Validate), the graph (CheckGraphInput)
+// and that the measurements connect every node to the reference. The error, or nullopt.
+std::optional<std::string> CheckRotationProblem(std::size_t n, std::size_t reference,
+                                                const std::vector<RelativeMeasurement>& measurements,
+                                                const RotationAveragingOptions& options);
+
 RotationAveragingResult AverageRotationsL1(std::size_t n, std::size_t reference,
                                            const std::vector<RelativeMeasurement>& measurements,
                                            const RotationAveragingOptions& options);

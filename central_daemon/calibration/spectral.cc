@@ -91,15 +91,7 @@ RotationAveragingResult AverageRotationsSpectral(
     std::size_t n, std::size_t reference, const std::vector<RelativeMeasurement>& measurements,
     const RotationAveragingOptions& options) {
   RotationAveragingResult result;
-  if (auto error = Validate(options)) {
-    result.error = "invalid options: " + *error;
-    return result;
-  }
-  if (auto error = CheckGraphInput(n, reference, measurements)) {
-    result.error = *error;
-    return result;
-  }
-  if (auto error = ConnectivityError(n, reference, measurements)) {
+  if (auto error = CheckRotationProblem(n, reference, measurements, options)) {
     result.error = *error;
     return result;
   }
