@@ -54,6 +54,8 @@ void VisitValidation(ValidationOptions& o, ConfigVisitor& v) {
           "(strict live sites). 0 accepts replays of old captures.");
   v.Field("max_position_m", o.max_position_m, "Largest accepted |x|, |y| of a track.");
   v.Field("max_speed_mps", o.max_speed_mps, "Largest accepted |vx|, |vy| of a track.");
+  v.Field("max_object_size_m", o.max_object_size_m,
+          "Largest accepted size semi-axis (and its sigma) of a track, metres.");
   VisitInteger(v, "max_tracks_per_frame", o.max_tracks_per_frame, "Tracks in one datagram.");
   VisitInteger(v, "max_part_count", o.max_part_count, "Parts of one frame or snapshot (<= 64).");
   VisitInteger(v, "max_background_beams", o.max_background_beams,

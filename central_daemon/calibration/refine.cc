@@ -283,6 +283,7 @@ double ModelSigma(std::size_t kind, const JointRefineOptions& options) {
     case MeasurementKind::kEllipse:
       return options.model_sigma_ellipse_m;
     case MeasurementKind::kUnspecified:
+    case MeasurementKind::kShapeFit:  // body centre: no view offset; the unbiased sigma
       break;
   }
   return options.model_sigma_unspecified_m;

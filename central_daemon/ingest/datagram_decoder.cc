@@ -88,16 +88,31 @@ RejectReason CheckTrack(const proto::Track& t, int index, const ValidationOption
                 t.track_id(), state);
   }
   const int kind = t.kind();
-  if (kind < proto::MEASUREMENT_KIND_UNSPECIFIED || kind > proto::MEASUREMENT_KIND_ELLIPSE) {
+  if (kind < proto::MEASUREMENT_KIND_UNSPECIFIED || kind > proto::MEASUREMENT_KIND_SHAPE_FIT) {
     return Fail(detail, RejectReason::kOutOfRange, "track %d (id %u): unknown kind %d", index,
                 t.track_id(), kind);
+  }
+  const int shape = t.shape();
+  if (shape < proto::OBJECT_SHAPE_UNSPECIFIED || shape > proto::OBJECT_SHAPE_BOX) {
+    return Fail(detail, RejectReason::kOutOfRange, "track %d (id %u): unknown shape %d", index,
+                t.track_id(), shape);
   }
   const bool covariance_finite = std::all_of(t.covariance().begin(), t.covariance().end(),
                                              [](float v) { return std::isfinite(v); });
   if (!std::isfinite(t.x_m()) || !std::isfinite(t.y_m()) || !std::isfinite(t.vx_mps()) ||
-      !std::isfinite(t.vy_mps()) || !std::isfinite(t.ellipse_yaw_rad()) || !covariance_finite) {
+      !std::isfinite(t.vy_mps()) || !std::isfinite(t.ellipse_yaw_rad()) || !covariance_finite ||
+      !std::isfinite(t.size_major_m()) || !std::isfinite(t.size_minor_m()) ||
+      !std::isfinite(t.size_sigma_m())) {
     return Fail(detail, RejectReason::kNotFinite, "track %d (id %u): value not finite", index,
                 t.track_id());
+  }
+  // Sizes: semi-axes of a person, a cart or a cylinder; negative or beyond a few metres is garbage.
+  const auto bad_size = [&](float v) { return v < 0.0f || v > o.max_object_size_m; };
+  if (bad_size(t.size_major_m()) || bad_size(t.size_minor_m()) || bad_size(t.size_sigma_m())) {
+    return Fail(detail, RejectReason::kOutOfRange,
+                "track %d (id %u): size (%g, %g ± %g) m outside [0, %g] m", index, t.track_id(),
+                static_cast<double>(t.size_major_m()), static_cast<double>(t.size_minor_m()),
+                static_cast<double>(t.size_sigma_m()), o.max_object_size_m);
   }
   if (t.covariance_size() != 10) {
     return Fail(detail, RejectReason::kCovariance,
@@ -210,8 +225,18 @@ RejectReason CheckSensorInfo(const proto::SensorInfo& s, std::string* detail) {
                 longest, kMaxInfoStringBytes);
   }
   const int kind = s.kind();
-  if (kind < proto::MEASUREMENT_KIND_UNSPECIFIED || kind > proto::MEASUREMENT_KIND_ELLIPSE) {
+  if (kind < proto::MEASUREMENT_KIND_UNSPECIFIED || kind > proto::MEASUREMENT_KIND_SHAPE_FIT) {
     return Fail(detail, RejectReason::kOutOfRange, "sensor info: unknown kind %d", kind);
+  }
+  const int mount = s.mount();
+  if (mount < proto::MOUNT_HEIGHT_UNSPECIFIED || mount > proto::MOUNT_HEIGHT_LEGS) {
+    return Fail(detail, RejectReason::kOutOfRange, "sensor info: unknown mount %d", mount);
+  }
+  if (!std::isfinite(s.accel_psd_m2ps3()) || !std::isfinite(s.max_speed_mps())) {
+    return Fail(detail, RejectReason::kNotFinite, "sensor info value not finite");
+  }
+  if (s.accel_psd_m2ps3() < 0.0 || s.max_speed_mps() < 0.0) {
+    return Fail(detail, RejectReason::kOutOfRange, "sensor info: negative motion model value");
   }
   return RejectReason::kCount;
 }

@@ -8,8 +8,9 @@
 //   unknown field number) -> sent_ns (kTimestamp) -> the payload's fields:
 // - TrackFrame: scan_start_ns (kTimestamp); scan_period_s finite (kNotFinite) and in (0, 1]
 //   (kOutOfRange); part < part_count <= max_part_count (kPart); at most max_tracks_per_frame tracks
-//   (kOutOfRange); per track: state TENTATIVE/CONFIRMED/COASTING and kind a known value
-//   (kOutOfRange), every float finite (kNotFinite), exactly 10 covariance values (kCovariance),
+//   (kOutOfRange); per track: state TENTATIVE/CONFIRMED/COASTING, kind and shape known values
+//   (kOutOfRange), every float finite (kNotFinite), size semi-axes and sigma in
+//   [0, max_object_size_m] (kOutOfRange), exactly 10 covariance values (kCovariance),
 //   |x|, |y| <= max_position_m and |vx|, |vy| <= max_speed_mps (kOutOfRange), covariance positive
 //   semi-definite (kCovariance, see IsCovariancePsd).
 // - BackgroundSnapshot: learned_until_ns (kTimestamp); angles finite (kNotFinite); angle_step_rad
@@ -18,7 +19,8 @@
 //   (kPart).
 // - Health: floats and doubles finite (kNotFinite), clock_sync a known value (kOutOfRange).
 // - SensorInfo: doubles finite (kNotFinite); model, serial, firmware and tracker_version at most
-//   kMaxInfoStringBytes (kOutOfRange); kind a known value (kOutOfRange). (The parser already
+//   kMaxInfoStringBytes (kOutOfRange); kind and mount known values (kOutOfRange); the motion
+//   model's values not negative (kOutOfRange). (The parser already
 //   refuses strings that are not UTF-8: kMalformed.)
 // Timestamps: see ValidationOptions (ingest.h); all arithmetic saturates, so no stamp overflows.
 //

@@ -117,6 +117,8 @@ std::optional<std::string> Validate(const ValidationOptions& o) {
     return "validation.max_position_m must be > 0";
   if (!(std::isfinite(o.max_speed_mps) && o.max_speed_mps > 0.0))
     return "validation.max_speed_mps must be > 0";
+  if (!(std::isfinite(o.max_object_size_m) && o.max_object_size_m > 0.0))
+    return "validation.max_object_size_m must be > 0";
   if (o.max_tracks_per_frame == 0) return "validation.max_tracks_per_frame must be >= 1";
   if (o.max_part_count == 0 || o.max_part_count > 65536)
     return "validation.max_part_count must be in [1, 65536]";

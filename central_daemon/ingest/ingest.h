@@ -90,6 +90,7 @@ struct ValidationOptions {
   double max_clock_offset_s = 0.0;
   double max_position_m = 1000.0;  // |x|, |y| of a track
   double max_speed_mps = 100.0;    // |vx|, |vy|
+  double max_object_size_m = 10.0;  // a track's size semi-axes and their sigma
   std::uint32_t max_tracks_per_frame = 256;
   std::uint32_t max_part_count = 64;
   std::uint32_t max_background_beams = 65536;

@@ -21,8 +21,36 @@ MeasurementKind ToMeasurementKind(proto::MeasurementKind kind) {
       return MeasurementKind::kCenterOfMass;
     case proto::MEASUREMENT_KIND_ELLIPSE:
       return MeasurementKind::kEllipse;
+    case proto::MEASUREMENT_KIND_SHAPE_FIT:
+      return MeasurementKind::kShapeFit;
     default:
       return MeasurementKind::kUnspecified;
+  }
+}
+
+ObjectShape ToObjectShape(proto::ObjectShape shape) {
+  switch (shape) {
+    case proto::OBJECT_SHAPE_TORSO:
+      return ObjectShape::kTorso;
+    case proto::OBJECT_SHAPE_LEGS:
+      return ObjectShape::kLegs;
+    case proto::OBJECT_SHAPE_CYLINDER:
+      return ObjectShape::kCylinder;
+    case proto::OBJECT_SHAPE_BOX:
+      return ObjectShape::kBox;
+    default:
+      return ObjectShape::kUnspecified;
+  }
+}
+
+MountHeight ToMountHeight(proto::MountHeight mount) {
+  switch (mount) {
+    case proto::MOUNT_HEIGHT_TORSO:
+      return MountHeight::kTorso;
+    case proto::MOUNT_HEIGHT_LEGS:
+      return MountHeight::kLegs;
+    default:
+      return MountHeight::kUnspecified;
   }
 }
 
@@ -66,6 +94,10 @@ void ToTrackFrame(const proto::Datagram& d, common::UtcNs receive_ns, TrackFrame
     o.age_scans = t.age_scans();
     o.points = t.points();
     o.ellipse_yaw_rad = t.ellipse_yaw_rad();
+    o.shape = ToObjectShape(t.shape());
+    o.size_major_m = t.size_major_m();
+    o.size_minor_m = t.size_minor_m();
+    o.size_sigma_m = t.size_sigma_m();
   }
 }
 
@@ -121,6 +153,9 @@ SensorDescription ToSensorDescription(const proto::SensorInfo& s) {
   out.max_range_m = s.max_range_m();
   out.tracker_version = s.tracker_version();
   out.kind = ToMeasurementKind(s.kind());
+  out.mount = ToMountHeight(s.mount());
+  out.accel_psd_m2ps3 = s.accel_psd_m2ps3();
+  out.max_speed_mps = s.max_speed_mps();
   return out;
 }
 

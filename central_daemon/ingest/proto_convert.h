@@ -22,6 +22,8 @@ SensorDescription ToSensorDescription(const proto::SensorInfo& info);
 
 TrackState ToTrackState(proto::TrackState state);
 MeasurementKind ToMeasurementKind(proto::MeasurementKind kind);
+ObjectShape ToObjectShape(proto::ObjectShape shape);
+MountHeight ToMountHeight(proto::MountHeight mount);
 ClockSync ToClockSync(proto::ClockSyncState sync);
 
 }  // namespace lrfnet::daemon

@@ -22,6 +22,36 @@ const char* ToString(MeasurementKind kind) {
       return "center_of_mass";
     case MeasurementKind::kEllipse:
       return "ellipse";
+    case MeasurementKind::kShapeFit:
+      return "shape_fit";
+  }
+  return "invalid";
+}
+
+const char* ToString(ObjectShape shape) {
+  switch (shape) {
+    case ObjectShape::kUnspecified:
+      return "unspecified";
+    case ObjectShape::kTorso:
+      return "torso";
+    case ObjectShape::kLegs:
+      return "legs";
+    case ObjectShape::kCylinder:
+      return "cylinder";
+    case ObjectShape::kBox:
+      return "box";
+  }
+  return "invalid";
+}
+
+const char* ToString(MountHeight mount) {
+  switch (mount) {
+    case MountHeight::kUnspecified:
+      return "unspecified";
+    case MountHeight::kTorso:
+      return "torso";
+    case MountHeight::kLegs:
+      return "legs";
   }
   return "invalid";
 }

@@ -15,7 +15,12 @@
 namespace lrfnet::daemon {
 
 enum class TrackState : std::uint8_t { kTentative, kConfirmed, kCoasting };
-enum class MeasurementKind : std::uint8_t { kUnspecified, kCenterOfMass, kEllipse };
+// kShapeFit: the body centre from a fit of the track's shape with a per-track size (proto SHAPE_FIT).
+enum class MeasurementKind : std::uint8_t { kUnspecified, kCenterOfMass, kEllipse, kShapeFit };
+// The object's cross-section as the tracker models it (proto ObjectShape); kUnspecified from old
+// trackers, which means a person's torso with the receiver's prior size.
+enum class ObjectShape : std::uint8_t { kUnspecified, kTorso, kLegs, kCylinder, kBox };
+enum class MountHeight : std::uint8_t { kUnspecified, kTorso, kLegs };
 
 // One track in one scan (proto Track).
 struct TrackObservation {
@@ -31,7 +36,12 @@ struct TrackObservation {
   std::array<float, 10> covariance{};
   std::uint32_t age_scans = 0;
   std::uint32_t points = 0;
-  float ellipse_yaw_rad = 0.0f;
+  float ellipse_yaw_rad = 0.0f;  // major axis of the ellipse / shape, sensor frame
+  // The tracker's size estimate (0 from old trackers: unknown, use a prior). Semi-axes in metres.
+  ObjectShape shape = ObjectShape::kUnspecified;
+  float size_major_m = 0.0f;
+  float size_minor_m = 0.0f;
+  float size_sigma_m = 0.0f;
 };
 
 // The tracks of one scan (proto TrackFrame), or of one part of them as received: part < part_count.
@@ -72,6 +82,9 @@ struct SensorDescription {
   double max_range_m = 0.0;
   std::string tracker_version;
   MeasurementKind kind = MeasurementKind::kUnspecified;
+  MountHeight mount = MountHeight::kUnspecified;
+  double accel_psd_m2ps3 = 0.0;  // the tracker's CV model; 0 = not sent (old tracker)
+  double max_speed_mps = 0.0;    // the tracker's motion limit; 0 = not sent
 };
 
 enum class ClockSync : std::uint8_t { kUnknown, kSynchronized, kUnsynchronized, kReplay };
@@ -98,6 +111,8 @@ struct SensorHealth {
 
 const char* ToString(TrackState state);
 const char* ToString(MeasurementKind kind);
+const char* ToString(ObjectShape shape);
+const char* ToString(MountHeight mount);
 const char* ToString(ClockSync sync);
 
 }  // namespace lrfnet::daemon
