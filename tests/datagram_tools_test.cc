@@ -27,7 +27,7 @@
 
 #include "central_daemon/io/udp_capture_test_util.h"
 #include "common/byte_order.h"
-#include "firmware_tracker/io/packet_parser.h"
+#include "common/capture/packet_parser.h"
 #include "lrfnet.pb.h"
 #include "tests/process_harness.h"
 #include "tests/support/test_data.h"
@@ -262,13 +262,13 @@ Bytes ScannerTcp(std::uint16_t scanner_port) {
   ip.resize(40, 0);
   common::StoreBe16(&ip[2], 40);
   ip[32] = 0x50;  // data offset 5 words
-  ip[33] = io::kTcpAck;
+  ip[33] = capture::kTcpAck;
   return daemon::test_util::Ethernet(ip);
 }
 
 TEST_F(DatagramToolsTest, DumpOfAUdpCapturePrintsItsDatagrams) {
   const std::string pcap = Path("udp.pcap");
-  daemon::test_util::PcapFile file(io::kLinkTypeEthernet, /*nanosecond=*/true);
+  daemon::test_util::PcapFile file(capture::kLinkTypeEthernet, /*nanosecond=*/true);
   file.Add(kT0 + 10, Udp(5, 40000, 5800, TrackFrame("s1", 0, kT0)));
   file.Add(kT0 + 20, Udp(6, 40001, 5800, Health("s2", 0, kT0)));
   file.Add(kT0 + 30, Udp(6, 40001, 9999, Health("s2", 1, kT0)));
@@ -298,7 +298,7 @@ TEST_F(DatagramToolsTest, DumpOfAUdpCapturePrintsItsDatagrams) {
 
 TEST_F(DatagramToolsTest, ACaptureWithTheScannerStreamStaysOnTheScanPathUnlessAsked) {
   const std::string pcap = Path("mixed.pcap");
-  daemon::test_util::PcapFile file(io::kLinkTypeEthernet, /*nanosecond=*/true);
+  daemon::test_util::PcapFile file(capture::kLinkTypeEthernet, /*nanosecond=*/true);
   file.Add(kT0 + 10, Udp(5, 40000, 5800, TrackFrame("s1", 0, kT0)));
   file.Add(kT0 + 20, ScannerTcp(2112));
   file.Add(kT0 + 30, Udp(5, 40000, 5800, Health("s1", 1, kT0)));
@@ -488,7 +488,7 @@ TEST_F(DatagramToolsTest, ReplayToAnIpv6Target) {
 TEST_F(DatagramToolsTest, ReplayOfAUdpCaptureSendsItsPayloads) {
   const std::string pcap = Path("udp.pcap");
   const Bytes a = TrackFrame("s1", 0, kT0), b = Health("s2", 0, kT0);
-  daemon::test_util::PcapFile file(io::kLinkTypeEthernet, /*nanosecond=*/true);
+  daemon::test_util::PcapFile file(capture::kLinkTypeEthernet, /*nanosecond=*/true);
   file.Add(kT0, Udp(5, 40000, 5800, a));
   file.Add(kT0 + 1000, Udp(6, 40000, 5801, b));
   WriteFile(pcap, file.bytes());

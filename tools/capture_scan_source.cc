@@ -125,12 +125,12 @@ std::string GuessModelName(const cola::ScanTelegram& scan) {
 std::unique_ptr<ScanSource> OpenCaptureScanSource(const std::string& path,
                                                   const CaptureScanSourceOptions& options,
                                                   std::string* error) {
-  std::unique_ptr<io::CaptureStream> capture =
-      io::CaptureStream::Open(path, options.capture, error);
+  std::unique_ptr<capture::CaptureStream> capture =
+      capture::CaptureStream::Open(path, options.capture, error);
   if (!capture) return nullptr;
   auto decoder = std::make_unique<cola::StreamDecoder>();
   Collector collector;
-  io::StreamChunk chunk;
+  capture::StreamChunk chunk;
   while (capture->Next(&chunk)) {
     if (chunk.discontinuity) decoder->Reset();
     decoder->Feed(chunk.bytes, chunk.receive_time_ns, collector);

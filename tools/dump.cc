@@ -9,8 +9,8 @@
 #include <utility>
 #include <vector>
 
-#include "firmware_tracker/io/packet_parser.h"
-#include "firmware_tracker/io/pcap_reader.h"
+#include "common/capture/packet_parser.h"
+#include "common/capture/pcap_reader.h"
 
 namespace lrfnet::tools {
 namespace {
@@ -201,12 +201,12 @@ bool DumpCapture(const std::string& path, const DumpOptions& options, std::ostre
                  DumpSummary* summary, std::string* error) {
   DumpSummary local;
   DumpSummary* sum = summary != nullptr ? summary : &local;
-  std::unique_ptr<io::CaptureStream> capture =
-      io::CaptureStream::Open(path, options.capture, error);
+  std::unique_ptr<capture::CaptureStream> capture =
+      capture::CaptureStream::Open(path, options.capture, error);
   if (!capture) return false;
   auto decoder = std::make_unique<cola::StreamDecoder>();  // holds a ~100 kB scan: not on the stack
   DumpListener listener(out, sum);
-  io::StreamChunk chunk;
+  capture::StreamChunk chunk;
   while (capture->Next(&chunk)) {
     if (chunk.discontinuity) {
       ++sum->discontinuities;
@@ -227,21 +227,21 @@ CaptureContent InspectCapture(const std::string& path, std::uint16_t tcp_port,
                               std::uint16_t udp_port) {
   CaptureContent content;
   std::string error;
-  const std::unique_ptr<io::PcapReader> reader = io::PcapReader::Open(path, &error);
+  const std::unique_ptr<capture::PcapReader> reader = capture::PcapReader::Open(path, &error);
   if (!reader) return content;
   content.is_capture = true;
-  io::RawPacket raw;
+  capture::RawPacket raw;
   // A read error at the end is the scan or datagram path's to report: the packets before it count.
-  while (reader->Next(&raw) == io::ReadStatus::kPacket) {
-    const io::ParseResult parsed = io::ParsePacket(raw.link_type, raw.bytes);
-    if (parsed.status != io::ParseStatus::kOk) continue;
-    const io::ParsedPacket& p = parsed.packet;
-    if (p.protocol == io::TransportProtocol::kTcp &&
+  while (reader->Next(&raw) == capture::ReadStatus::kPacket) {
+    const capture::ParseResult parsed = capture::ParsePacket(raw.link_type, raw.bytes);
+    if (parsed.status != capture::ParseStatus::kOk) continue;
+    const capture::ParsedPacket& p = parsed.packet;
+    if (p.protocol == capture::TransportProtocol::kTcp &&
         (p.src_port == tcp_port || p.dst_port == tcp_port)) {
       ++content.scanner_tcp_packets;
       break;  // decided: scans
     }
-    if (p.protocol == io::TransportProtocol::kUdp && (udp_port == 0 || p.dst_port == udp_port))
+    if (p.protocol == capture::TransportProtocol::kUdp && (udp_port == 0 || p.dst_port == udp_port))
       ++content.udp_packets;
   }
   return content;

@@ -19,10 +19,10 @@
 #include <ostream>
 #include <string>
 
+#include "common/capture/capture_stream.h"
 #include "common/time.h"
 #include "firmware_tracker/cola/scan_telegram.h"
 #include "firmware_tracker/cola/stream_decoder.h"
-#include "firmware_tracker/io/capture_stream.h"
 
 namespace lrfnet::tools {
 
@@ -37,12 +37,12 @@ double RoundDecimals(double v, int decimals);
 std::string ScanJsonLine(const cola::ScanTelegram& scan, common::UtcNs receive_time_ns);
 
 struct DumpOptions {
-  io::CaptureStreamOptions capture;  // sensor_port selects the scanner's TCP port
+  capture::CaptureStreamOptions capture;  // sensor_port selects the scanner's TCP port
 };
 
 struct DumpSummary {
   cola::StreamCounters stream;
-  io::CaptureCounters capture;
+  capture::CaptureCounters capture;
   // Telegrams other than LMDscandata scans, by type ("sRA", "sFA", ...) and, for sSN events, by
   // name.
   std::map<std::string, std::uint64_t> other_by_type;

@@ -20,7 +20,7 @@ namespace {
 int DumpScans(const std::string& path, std::uint16_t port, bool summary_only) {
   DumpOptions options;
   options.capture.sensor_port = port;
-  if (auto e = io::Validate(options.capture)) return UsageError("dump", *e);
+  if (auto e = capture::Validate(options.capture)) return UsageError("dump", *e);
   DumpSummary summary;
   std::string error;
   const bool ok = DumpCapture(path, options, summary_only ? nullptr : &std::cout, &summary, &error);

@@ -9,9 +9,9 @@
 #include <string>
 #include <vector>
 
+#include "common/capture/capture_stream.h"
 #include "common/time.h"
 #include "firmware_tracker/cola/scan_telegram.h"
-#include "firmware_tracker/io/capture_stream.h"
 
 namespace lrfnet::tools {
 
@@ -46,7 +46,7 @@ class ScanSource {
 // ---- every scan of a capture (sensor -> client stream), with the capture's receive-time spacing
 
 struct CaptureScanSourceOptions {
-  io::CaptureStreamOptions capture;
+  capture::CaptureStreamOptions capture;
   // Overrides the identity found in the capture (empty: keep).
   std::string model_name;
 };

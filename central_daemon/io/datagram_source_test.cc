@@ -267,7 +267,7 @@ test_util::PcapFile EthernetCapture() {
   arp[12] = 0x08;
   arp[13] = 0x06;
 
-  test_util::PcapFile pcap(io::kLinkTypeEthernet);
+  test_util::PcapFile pcap(capture::kLinkTypeEthernet);
   pcap.Add(kT0 + 1'000'000, Ethernet(Ipv4Udp(kSensorA, 40000, kDaemon4, 2222, Payload("A"))))
       .Add(kT0 + 2'000'000, Ethernet(Ipv4Udp(kSensorB, 40001, kDaemon4, 3333, Payload("BB"))))
       .Add(kT0 + 3'000'000, Ethernet(Ipv6Udp(kSensorC, 40002, kDaemon6, 2222, Payload("CCC"))))
@@ -332,7 +332,7 @@ TEST_F(DatagramSourceTest, UdpCapturePortFilter) {
 
 TEST_F(DatagramSourceTest, RawIpNanosecondCaptureKeepsNanoseconds) {
   const std::string path = TempPath("raw_ns.pcap");
-  test_util::PcapFile pcap(io::kLinkTypeRaw, /*nanosecond=*/true);
+  test_util::PcapFile pcap(capture::kLinkTypeRaw, /*nanosecond=*/true);
   pcap.Add(kT0 + 123'456'789, test_util::Ipv4Udp(kSensorA, 1, kDaemon4, 2222, Payload("v4")))
       .Add(kT0 + 223'456'789, test_util::Ipv6Udp(kSensorC, 65535, kDaemon6, 2222, Payload("v6")));
   WriteBytes(path, pcap.bytes());
@@ -350,7 +350,7 @@ TEST_F(DatagramSourceTest, RawIpNanosecondCaptureKeepsNanoseconds) {
 
 TEST_F(DatagramSourceTest, PcapngCaptureIsDetectedByContent) {
   const std::string path = TempPath("udp_capture.rec");  // the name does not matter
-  test_util::PcapngFile pcapng(io::kLinkTypeEthernet);
+  test_util::PcapngFile pcapng(capture::kLinkTypeEthernet);
   pcapng.Add(kT0 + 5,
              test_util::Ethernet(test_util::Ipv4Udp(kSensorB, 9, kDaemon4, 2222, Payload("ng"))));
   WriteBytes(path, pcapng.bytes());
@@ -392,16 +392,16 @@ TEST_F(DatagramSourceTest, CaptureOfAnUnknownLinkTypeIsRefused) {
 }
 
 TEST(FormatUdpSourceTest, Ipv4Ipv6AndMapped) {
-  io::IpAddress v4;
-  v4.family = io::IpFamily::kIpv4;
+  capture::IpAddress v4;
+  v4.family = capture::IpFamily::kIpv4;
   v4.bytes = {10, 1, 2, 3};
   EXPECT_EQ(FormatUdpSource(v4, 5000), "10.1.2.3:5000");
-  io::IpAddress v6;
-  v6.family = io::IpFamily::kIpv6;
+  capture::IpAddress v6;
+  v6.family = capture::IpFamily::kIpv6;
   v6.bytes = {0x20, 0x01, 0x0d, 0xb8, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0x01};
   EXPECT_EQ(FormatUdpSource(v6, 1), "[2001:db8::1]:1");
-  io::IpAddress mapped;
-  mapped.family = io::IpFamily::kIpv6;
+  capture::IpAddress mapped;
+  mapped.family = capture::IpFamily::kIpv6;
   mapped.bytes = {0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0xff, 0xff, 127, 0, 0, 1};
   EXPECT_EQ(FormatUdpSource(mapped, 2222), "127.0.0.1:2222");
 }

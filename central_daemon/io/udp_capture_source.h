@@ -16,13 +16,13 @@
 #include <string>
 
 #include "central_daemon/io/datagram_source.h"
-#include "firmware_tracker/io/packet_parser.h"
-#include "firmware_tracker/io/pcap_reader.h"
+#include "common/capture/packet_parser.h"
+#include "common/capture/pcap_reader.h"
 
 namespace lrfnet::daemon {
 
 // "a.b.c.d:port" for IPv4 (and IPv4-mapped IPv6), "[v6]:port" for IPv6 (RFC 5952 text).
-std::string FormatUdpSource(const io::IpAddress& address, std::uint16_t port);
+std::string FormatUdpSource(const capture::IpAddress& address, std::uint16_t port);
 
 class UdpCaptureSource final : public DatagramSource {
  public:
@@ -40,11 +40,11 @@ class UdpCaptureSource final : public DatagramSource {
 
  private:
   UdpCaptureSource(std::string path, const DatagramSourceOptions& options,
-                   std::unique_ptr<io::PcapReader> reader);
+                   std::unique_ptr<capture::PcapReader> reader);
 
   std::string path_;
   DatagramSourceOptions options_;
-  std::unique_ptr<io::PcapReader> reader_;
+  std::unique_ptr<capture::PcapReader> reader_;
   DatagramSourceCounters counters_;
   SourceStatus final_ = SourceStatus::kDatagram;
   std::string error_;

@@ -10,8 +10,8 @@
 #include <vector>
 
 #include "common/byte_order.h"
+#include "common/capture/packet_parser.h"
 #include "common/time.h"
-#include "firmware_tracker/io/packet_parser.h"
 
 namespace lrfnet::daemon::test_util {
 

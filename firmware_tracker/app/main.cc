@@ -35,13 +35,13 @@
 #include <sstream>
 #include <string>
 
+#include "common/capture/capture_stream.h"
 #include "common/host_port.h"
 #include "common/time.h"
 #include "firmware_tracker/app/config.h"
 #include "firmware_tracker/app/tracker_node.h"
 #include "firmware_tracker/cola/commands.h"
 #include "firmware_tracker/cola/stream_decoder.h"
-#include "firmware_tracker/io/capture_stream.h"
 #include "firmware_tracker/io/datagram_encoder.h"
 #include "firmware_tracker/io/recording_writer.h"
 #include "firmware_tracker/io/sick_client.h"
@@ -315,7 +315,7 @@ int RunLive(const TrackerConfig& config, const std::string& record_path, ScanLog
 // the capture's.
 class Replay : public cola::TelegramListener {
  public:
-  Replay(asio::io_context& io, std::unique_ptr<io::CaptureStream> capture, TrackerNode& node,
+  Replay(asio::io_context& io, std::unique_ptr<capture::CaptureStream> capture, TrackerNode& node,
          Outputs& outputs, ScanLog& log, const TrackerConfig& config)
       : io_(io),
         capture_(std::move(capture)),
@@ -339,7 +339,7 @@ class Replay : public cola::TelegramListener {
   }
   // Packet times scaled by 1/speed (0: as fast as possible).
   void SetSpeed(double speed) { speed_ = speed; }
-  const io::CaptureStream& capture() const { return *capture_; }
+  const capture::CaptureStream& capture() const { return *capture_; }
   cola::StreamCounters decoder_counters() const { return decoder_->counters(); }
 
   void OnScan(const cola::ScanTelegram& scan, common::UtcNs receive_time_ns) override {
@@ -430,12 +430,12 @@ class Replay : public cola::TelegramListener {
   asio::io_context& io_;
   asio::steady_timer timer_{io_};
   double speed_ = 0.0;
-  io::StreamChunk pending_;
+  capture::StreamChunk pending_;
   bool has_pending_ = false;
   bool paced_ = false;
   common::UtcNs first_capture_ns_ = 0;
   std::chrono::steady_clock::time_point first_steady_;
-  std::unique_ptr<io::CaptureStream> capture_;
+  std::unique_ptr<capture::CaptureStream> capture_;
   std::unique_ptr<cola::StreamDecoder> decoder_ = std::make_unique<cola::StreamDecoder>();
   TrackerNode& node_;
   Outputs& outputs_;
@@ -449,10 +449,11 @@ class Replay : public cola::TelegramListener {
 };
 
 int RunReplay(const TrackerConfig& config, const std::string& path,
-              const io::CaptureStreamOptions& options, const std::string& record_path,
+              const capture::CaptureStreamOptions& options, const std::string& record_path,
               double speed, ScanLog& log) {
   std::string error;
-  std::unique_ptr<io::CaptureStream> capture = io::CaptureStream::Open(path, options, &error);
+  std::unique_ptr<capture::CaptureStream> capture =
+      capture::CaptureStream::Open(path, options, &error);
   if (!capture) {
     std::fprintf(stderr, "lrfnet-tracker: %s\n", error.c_str());
     return kExitFailure;
@@ -478,7 +479,7 @@ int RunReplay(const TrackerConfig& config, const std::string& path,
   io.run();
 
   const bool closed = outputs.Close();
-  const io::CaptureCounters& c = replay.capture().counters();
+  const capture::CaptureCounters& c = replay.capture().counters();
   fmt::print(
       "summary: sensor={} mode=replay scans={} packets={} stream_packets={} malformed_packets={} "
       "retransmitted_bytes={} gaps={} gap_bytes={} {} {}{}\n",
@@ -614,11 +615,11 @@ int Run(int argc, char** argv) {
 
   ScanLog log(static_cast<std::uint64_t>(print_every), static_cast<std::uint64_t>(max_scans));
   if (!replay.empty()) {
-    io::CaptureStreamOptions options;
+    capture::CaptureStreamOptions options;
     if (capture_port < 1 || capture_port > 65535)
       return UsageError("--capture-port must be 1..65535");
     options.sensor_port = static_cast<std::uint16_t>(capture_port);
-    if (auto e = io::Validate(options)) return UsageError(*e);
+    if (auto e = capture::Validate(options)) return UsageError(*e);
     return RunReplay(config, replay, options, out, speed, log);
   }
   return RunLive(config, out, log);

@@ -13,11 +13,11 @@
 #include <string>
 #include <vector>
 
+#include "common/capture/capture_stream.h"
 #include "firmware_tracker/app/node_test_util.h"
 #include "firmware_tracker/app/tracker_node.h"
 #include "firmware_tracker/cola/framer.h"
 #include "firmware_tracker/cola/stream_decoder.h"
-#include "firmware_tracker/io/capture_stream.h"
 #include "firmware_tracker/io/recording_writer.h"
 #include "firmware_tracker/io/udp_uplink.h"
 #include "tests/support/alloc_counter.h"
@@ -99,9 +99,9 @@ TEST(TrackerAllocTest, ShippedCapturesAllocateNothingPerScan) {
     for (int pass = 0; pass < 5; ++pass) {
       Tracker tracker("alloc", receiver.port(), recording);
       std::string error;
-      auto capture = io::CaptureStream::Open(*path, io::CaptureStreamOptions{}, &error);
+      auto capture = capture::CaptureStream::Open(*path, capture::CaptureStreamOptions{}, &error);
       ASSERT_NE(capture, nullptr) << error;
-      io::StreamChunk chunk;
+      capture::StreamChunk chunk;
       bool counting = false;
       std::size_t scans_at_start = 0;
       while (capture->Next(&chunk)) {

@@ -15,9 +15,9 @@
 #include <string>
 #include <vector>
 
+#include "common/capture/capture_stream.h"
 #include "firmware_tracker/cola/framer.h"
 #include "firmware_tracker/cola/stream_decoder.h"
-#include "firmware_tracker/io/capture_stream.h"
 #include "tests/support/test_data.h"
 
 namespace {
@@ -110,13 +110,13 @@ int main(int argc, char** argv) {
     capture_file_bytes = static_cast<std::uint64_t>(std::ifstream(capture, std::ios::ate | std::ios::binary).tellg());
     capture_s = MedianSeconds(seconds, [&] {
       std::string error;
-      auto cs = lrfnet::io::CaptureStream::Open(capture, {}, &error);
+      auto cs = lrfnet::capture::CaptureStream::Open(capture, {}, &error);
       if (!cs) {
         std::fprintf(stderr, "decode_benchmark: %s\n", error.c_str());
         std::exit(1);
       }
       stream.clear();
-      lrfnet::io::StreamChunk chunk;
+      lrfnet::capture::StreamChunk chunk;
       while (cs->Next(&chunk)) stream.insert(stream.end(), chunk.bytes.begin(), chunk.bytes.end());
     });
   } else {

@@ -27,11 +27,11 @@
 #include <string>
 #include <vector>
 
+#include "common/capture/capture_stream.h"
 #include "firmware_tracker/app/node_test_util.h"
 #include "firmware_tracker/app/tracker_node.h"
 #include "firmware_tracker/cola/framer.h"
 #include "firmware_tracker/cola/stream_decoder.h"
-#include "firmware_tracker/io/capture_stream.h"
 #include "firmware_tracker/io/udp_uplink.h"
 #include "tests/support/alloc_counter.h"
 #include "tests/support/test_data.h"
@@ -96,10 +96,10 @@ std::unique_ptr<Input> CaptureInput(std::size_t timed_scans) {
     }
   } collect;
   std::string error;
-  auto capture = io::CaptureStream::Open(*path, io::CaptureStreamOptions{}, &error);
+  auto capture = capture::CaptureStream::Open(*path, capture::CaptureStreamOptions{}, &error);
   if (!capture) return nullptr;
   cola::StreamDecoder decoder;
-  io::StreamChunk chunk;
+  capture::StreamChunk chunk;
   while (capture->Next(&chunk)) decoder.Feed(chunk.bytes, chunk.receive_time_ns, collect);
   if (collect.scans.size() < 2) return nullptr;
 

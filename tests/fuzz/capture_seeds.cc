@@ -5,8 +5,8 @@
 #include <filesystem>
 #include <fstream>
 
-#include "firmware_tracker/io/capture_stream.h"
-#include "firmware_tracker/io/pcap_reader.h"
+#include "common/capture/capture_stream.h"
+#include "common/capture/pcap_reader.h"
 
 namespace lrfnet::fuzz {
 namespace {
@@ -75,22 +75,22 @@ std::vector<std::uint8_t> EncodeRun(const std::vector<Segment>& segments, std::s
 void WriteCaptureSeeds(const std::string& capture_path, const std::string& reassembler_dir,
                        const std::string& packet_dir) {
   std::string error;
-  auto reader = io::PcapReader::Open(capture_path, &error);
+  auto reader = capture::PcapReader::Open(capture_path, &error);
   if (reader == nullptr) return;
   const std::optional<std::uint8_t> selector = FuzzLinkTypeSelector(reader->link_type());
 
   std::vector<std::vector<std::uint8_t>> frames;  // selector byte + frame
   std::vector<Segment> segments;
-  io::RawPacket packet;
-  while (reader->Next(&packet) == io::ReadStatus::kPacket) {
+  capture::RawPacket packet;
+  while (reader->Next(&packet) == capture::ReadStatus::kPacket) {
     if (selector) {
       std::vector<std::uint8_t> seed = {*selector};
       seed.insert(seed.end(), packet.bytes.begin(), packet.bytes.end());
       frames.push_back(std::move(seed));
     }
-    const io::ParseResult parsed = io::ParsePacket(packet.link_type, packet.bytes);
-    if (parsed.status == io::ParseStatus::kOk &&
-        parsed.packet.protocol == io::TransportProtocol::kTcp &&
+    const capture::ParseResult parsed = capture::ParsePacket(packet.link_type, packet.bytes);
+    if (parsed.status == capture::ParseStatus::kOk &&
+        parsed.packet.protocol == capture::TransportProtocol::kTcp &&
         parsed.packet.src_port == kSensorPort) {
       segments.push_back(
           {parsed.packet.tcp_seq, parsed.packet.tcp_flags,
@@ -123,11 +123,11 @@ void WriteCaptureSeeds(const std::string& capture_path, const std::string& reass
 std::vector<std::uint8_t> ReadSensorStream(const std::string& capture_path) {
   std::vector<std::uint8_t> bytes;
   std::string error;
-  io::CaptureStreamOptions options;
+  capture::CaptureStreamOptions options;
   options.sensor_port = kSensorPort;
-  auto stream = io::CaptureStream::Open(capture_path, options, &error);
+  auto stream = capture::CaptureStream::Open(capture_path, options, &error);
   if (stream == nullptr) return bytes;
-  io::StreamChunk chunk;
+  capture::StreamChunk chunk;
   while (stream->Next(&chunk)) bytes.insert(bytes.end(), chunk.bytes.begin(), chunk.bytes.end());
   return bytes;
 }

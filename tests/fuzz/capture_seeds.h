@@ -22,15 +22,15 @@
 #include <string>
 #include <vector>
 
-#include "firmware_tracker/io/packet_parser.h"
+#include "common/capture/packet_parser.h"
 
 namespace lrfnet::fuzz {
 
 // The last entry is deliberately unsupported (IEEE 802.11) so the fuzzer covers that path too.
 inline constexpr std::array<std::uint32_t, 9> kFuzzLinkTypes = {
-    io::kLinkTypeEthernet, io::kLinkTypeLinuxSll, io::kLinkTypeLinuxSll2,
-    io::kLinkTypeRaw,      io::kLinkTypeIpv4,     io::kLinkTypeIpv6,
-    io::kLinkTypeNull,     io::kLinkTypeLoop,     105};
+    capture::kLinkTypeEthernet, capture::kLinkTypeLinuxSll, capture::kLinkTypeLinuxSll2,
+    capture::kLinkTypeRaw,      capture::kLinkTypeIpv4,     capture::kLinkTypeIpv6,
+    capture::kLinkTypeNull,     capture::kLinkTypeLoop,     105};
 
 inline std::uint32_t FuzzLinkType(std::uint8_t selector) {
   return kFuzzLinkTypes[selector % kFuzzLinkTypes.size()];

@@ -8,7 +8,7 @@
 #include <span>
 #include <vector>
 
-#include "firmware_tracker/io/packet_parser.h"
+#include "common/capture/packet_parser.h"
 #include "tests/fuzz/capture_seeds.h"
 
 namespace {
@@ -23,7 +23,7 @@ void Check(bool ok, const char* what) {
 }  // namespace
 
 extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
-  using namespace lrfnet::io;
+  using namespace lrfnet::capture;
   if (size == 0) return 0;
   const std::uint32_t link_type = lrfnet::fuzz::FuzzLinkType(data[0]);
   // An exactly-sized copy, so that reading one byte past the frame is caught by AddressSanitizer.

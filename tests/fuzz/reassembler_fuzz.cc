@@ -11,7 +11,7 @@
 #include <span>
 #include <vector>
 
-#include "firmware_tracker/io/tcp_reassembler.h"
+#include "common/capture/tcp_reassembler.h"
 #include "tests/fuzz/capture_seeds.h"
 
 namespace {
@@ -30,8 +30,8 @@ struct Observer {
   lrfnet::common::UtcNs last_time_ns = 0;
   std::uint64_t delivered = 0;
 
-  void Drain(lrfnet::io::TcpReassembler* reassembler) {
-    lrfnet::io::ReassembledChunk chunk;
+  void Drain(lrfnet::capture::TcpReassembler* reassembler) {
+    lrfnet::capture::ReassembledChunk chunk;
     while (reassembler->Pop(&chunk)) {
       Check(!chunk.bytes.empty(), "chunks are not empty");
       if (has_previous) {
@@ -56,7 +56,7 @@ struct Observer {
 }  // namespace
 
 extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
-  using namespace lrfnet::io;
+  using namespace lrfnet::capture;
   using namespace lrfnet::fuzz;
   if (size == 0) return 0;
   const std::uint8_t options_byte = data[0];

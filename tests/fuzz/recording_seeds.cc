@@ -119,16 +119,16 @@ void WriteRecordingSeeds(const std::string& dir_name) {
   const std::array<std::uint8_t, 16> c = {0xfe, 0x80, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 1};
   const std::array<std::uint8_t, 16> d = {0xfe, 0x80, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 2};
   const Bytes payload = Datagram(40, 7);
-  PcapFile pcap(io::kLinkTypeEthernet);
+  PcapFile pcap(capture::kLinkTypeEthernet);
   pcap.Add(kT0, Ethernet(Ipv4Udp(a, 40000, b, 2222, payload)))
       .Add(kT0 + 1000, Ethernet(Ipv6Udp(c, 40001, d, 2222, payload)))
       .Add(kT0 + 2000, Ethernet(Ipv4Udp(a, 40000, b, 3333, {})));
   Write(dir / "udp_ethernet.pcap", pcap.bytes());
   Write(dir / "udp_torn.pcap", Cut(pcap.bytes(), pcap.bytes().size() - 5));
-  PcapFile raw(io::kLinkTypeRaw, /*nanosecond=*/true);
+  PcapFile raw(capture::kLinkTypeRaw, /*nanosecond=*/true);
   raw.Add(kT0 + 1, Ipv4Udp(a, 1, b, 2222, payload)).Add(kT0 + 2, Ipv6Udp(c, 2, d, 2222, payload));
   Write(dir / "udp_raw_ns.pcap", raw.bytes());
-  PcapngFile pcapng(io::kLinkTypeEthernet);
+  PcapngFile pcapng(capture::kLinkTypeEthernet);
   pcapng.Add(kT0 + 3, Ethernet(Ipv4Udp(a, 40000, b, 2222, payload)));
   Write(dir / "udp.pcapng", pcapng.bytes());
 }

@@ -14,10 +14,10 @@
 #include <string>
 #include <vector>
 
+#include "common/capture/capture_stream.h"
 #include "common/time.h"
 #include "firmware_tracker/cola/commands.h"
 #include "firmware_tracker/cola/stream_decoder.h"
-#include "firmware_tracker/io/capture_stream.h"
 #include "tools/dump.h"
 #include "tools/sim/sim_output.h"
 #include "tools/sim/simulator.h"
@@ -88,7 +88,7 @@ struct Decoded {
   std::vector<std::string> replies;  // "<type> <name>"
   std::map<std::string, std::string>
       text_replies;  // DeviceIdent name, FirmwareVersion, SerialNumber
-  io::CaptureCounters capture;
+  capture::CaptureCounters capture;
   cola::StreamCounters stream;
 };
 
@@ -120,15 +120,15 @@ class Collector : public cola::TelegramListener {
 
 Decoded Decode(const std::string& path, bool from_sensor = true) {
   Decoded d;
-  io::CaptureStreamOptions options;
+  capture::CaptureStreamOptions options;
   options.from_sensor = from_sensor;
   std::string error;
-  auto capture = io::CaptureStream::Open(path, options, &error);
+  auto capture = capture::CaptureStream::Open(path, options, &error);
   EXPECT_NE(capture, nullptr) << error;
   if (!capture) return d;
   auto decoder = std::make_unique<cola::StreamDecoder>();
   Collector collector(&d);
-  io::StreamChunk chunk;
+  capture::StreamChunk chunk;
   while (capture->Next(&chunk)) {
     if (chunk.discontinuity) decoder->Reset();
     decoder->Feed(chunk.bytes, chunk.receive_time_ns, collector);

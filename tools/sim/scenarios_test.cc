@@ -12,8 +12,8 @@
 #include <string>
 #include <vector>
 
+#include "common/capture/capture_stream.h"
 #include "firmware_tracker/cola/stream_decoder.h"
-#include "firmware_tracker/io/capture_stream.h"
 #include "tools/sim/sim_output.h"
 #include "tools/sim/simulator.h"
 
@@ -136,7 +136,7 @@ TEST_P(ShippedScenario, LoadsHasThePapersSetupAndSimulates) {
   ASSERT_TRUE(WriteSimulation(*sim, dir.string(), {}, nullptr, &error)) << error;
   for (std::size_t i = 0; i < sim->sensor_count(); ++i) {
     const SensorSetup& sensor = sim->sensor(i);
-    auto capture = io::CaptureStream::Open((dir / (sensor.id + ".pcap")).string(), {}, &error);
+    auto capture = capture::CaptureStream::Open((dir / (sensor.id + ".pcap")).string(), {}, &error);
     ASSERT_NE(capture, nullptr) << error;
     cola::StreamDecoder decoder;
     struct Counter : cola::TelegramListener {
@@ -148,7 +148,7 @@ TEST_P(ShippedScenario, LoadsHasThePapersSetupAndSimulates) {
         beams += d != nullptr ? d->count : 0;
       }
     } counter;
-    io::StreamChunk chunk;
+    capture::StreamChunk chunk;
     while (capture->Next(&chunk)) decoder.Feed(chunk.bytes, chunk.receive_time_ns, counter);
     EXPECT_EQ(counter.scans, sensor.scan_count) << sensor.id;
     EXPECT_GE(sensor.scan_count, static_cast<std::uint64_t>(2.0 * sensor.device.rate_hz) - 1)

@@ -1,4 +1,4 @@
-#include "firmware_tracker/io/packet_parser.h"
+#include "common/capture/packet_parser.h"
 
 #include <gtest/gtest.h>
 
@@ -6,7 +6,7 @@
 #include <string>
 #include <vector>
 
-namespace lrfnet::io {
+namespace lrfnet::capture {
 namespace {
 
 using Bytes = std::vector<std::uint8_t>;
@@ -435,4 +435,4 @@ TEST(PacketParser, EveryTruncationLengthIsMalformed) {
 }
 
 }  // namespace
-}  // namespace lrfnet::io
+}  // namespace lrfnet::capture

@@ -13,7 +13,7 @@
 
 #include "common/time.h"
 
-namespace lrfnet::io {
+namespace lrfnet::capture {
 
 struct RawPacket {
   // Link-layer header type as written in the file format (LINKTYPE_* of the tcpdump.org registry,
@@ -61,4 +61,4 @@ class PcapReader {
   std::string error_;
 };
 
-}  // namespace lrfnet::io
+}  // namespace lrfnet::capture

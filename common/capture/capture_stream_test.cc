@@ -1,4 +1,4 @@
-#include "firmware_tracker/io/capture_stream.h"
+#include "common/capture/capture_stream.h"
 
 #include <gtest/gtest.h>
 #include <unistd.h>
@@ -10,11 +10,11 @@
 #include <string>
 #include <vector>
 
-#include "firmware_tracker/io/packet_parser.h"
-#include "firmware_tracker/io/pcap_reader.h"
+#include "common/capture/packet_parser.h"
+#include "common/capture/pcap_reader.h"
 #include "tests/support/test_data.h"
 
-namespace lrfnet::io {
+namespace lrfnet::capture {
 namespace {
 
 using Bytes = std::vector<std::uint8_t>;
@@ -533,4 +533,4 @@ TEST_F(CaptureFiles, MissingSegmentAtTheEndIsCountedAsAGap) {
 }
 
 }  // namespace
-}  // namespace lrfnet::io
+}  // namespace lrfnet::capture

@@ -1,10 +1,10 @@
-#include "firmware_tracker/io/pcap_reader.h"
+#include "common/capture/pcap_reader.h"
 
 #include <pcap/pcap.h>
 
 #include <limits>
 
-namespace lrfnet::io {
+namespace lrfnet::capture {
 namespace {
 
 // libpcap reports DLT_* values, which differ from the file's LINKTYPE_* value only where BSDs
@@ -81,4 +81,4 @@ ReadStatus PcapReader::Next(RawPacket* packet) {
   return final_status_;
 }
 
-}  // namespace lrfnet::io
+}  // namespace lrfnet::capture

@@ -11,7 +11,7 @@
 
 #include "common/time.h"
 
-namespace lrfnet::io {
+namespace lrfnet::capture {
 
 struct CaptureStreamOptions {
   // The device's TCP port: bytes sent *from* this port are the scanner -> client stream.
@@ -57,4 +57,4 @@ class CaptureStream {
   virtual const std::string& error() const = 0;
 };
 
-}  // namespace lrfnet::io
+}  // namespace lrfnet::capture

@@ -1,11 +1,11 @@
-#include "firmware_tracker/io/packet_parser.h"
+#include "common/capture/packet_parser.h"
 
 #include <algorithm>
 #include <cstddef>
 
 #include "common/byte_order.h"
 
-namespace lrfnet::io {
+namespace lrfnet::capture {
 namespace {
 
 using Bytes = std::span<const std::uint8_t>;
@@ -211,4 +211,4 @@ ParseResult ParsePacket(std::uint32_t link_type, std::span<const std::uint8_t> f
   }
 }
 
-}  // namespace lrfnet::io
+}  // namespace lrfnet::capture

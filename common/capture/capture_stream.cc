@@ -1,12 +1,12 @@
-#include "firmware_tracker/io/capture_stream.h"
+#include "common/capture/capture_stream.h"
 
 #include <utility>
 
-#include "firmware_tracker/io/packet_parser.h"
-#include "firmware_tracker/io/pcap_reader.h"
-#include "firmware_tracker/io/tcp_reassembler.h"
+#include "common/capture/packet_parser.h"
+#include "common/capture/pcap_reader.h"
+#include "common/capture/tcp_reassembler.h"
 
-namespace lrfnet::io {
+namespace lrfnet::capture {
 namespace {
 
 TcpReassemblerOptions ReassemblerOptions(const CaptureStreamOptions& options) {
@@ -169,4 +169,4 @@ std::unique_ptr<CaptureStream> CaptureStream::Open(const std::string& path,
   return std::make_unique<PcapCaptureStream>(path, std::move(reader), options);
 }
 
-}  // namespace lrfnet::io
+}  // namespace lrfnet::capture

@@ -1,4 +1,4 @@
-#include "firmware_tracker/io/tcp_reassembler.h"
+#include "common/capture/tcp_reassembler.h"
 
 #include <gtest/gtest.h>
 
@@ -8,9 +8,9 @@
 #include <string>
 #include <vector>
 
-#include "firmware_tracker/io/packet_parser.h"
+#include "common/capture/packet_parser.h"
 
-namespace lrfnet::io {
+namespace lrfnet::capture {
 namespace {
 
 // 32-bit draws without narrowing warnings.
@@ -448,4 +448,4 @@ TEST(TcpReassembler, LostSegmentsBecomeCountedGaps) {
 }
 
 }  // namespace
-}  // namespace lrfnet::io
+}  // namespace lrfnet::capture

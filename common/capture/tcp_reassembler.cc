@@ -1,12 +1,12 @@
-#include "firmware_tracker/io/tcp_reassembler.h"
+#include "common/capture/tcp_reassembler.h"
 
 #include <algorithm>
 #include <cstdlib>
 #include <limits>
 
-#include "firmware_tracker/io/packet_parser.h"
+#include "common/capture/packet_parser.h"
 
-namespace lrfnet::io {
+namespace lrfnet::capture {
 namespace {
 
 constexpr std::int64_t kEndOfStream = std::numeric_limits<std::int64_t>::max();
@@ -251,4 +251,4 @@ void TcpReassembler::Emit(std::span<const std::uint8_t> bytes) {
   next_seq_ += static_cast<std::uint32_t>(bytes.size());
 }
 
-}  // namespace lrfnet::io
+}  // namespace lrfnet::capture

@@ -20,7 +20,7 @@
 #include <cstdint>
 #include <span>
 
-namespace lrfnet::io {
+namespace lrfnet::capture {
 
 inline constexpr std::uint32_t kLinkTypeNull = 0;  // BSD loopback, host byte order family
 inline constexpr std::uint32_t kLinkTypeEthernet = 1;
@@ -82,4 +82,4 @@ struct ParseResult {
 // Parses one captured frame of the given link type.
 ParseResult ParsePacket(std::uint32_t link_type, std::span<const std::uint8_t> frame);
 
-}  // namespace lrfnet::io
+}  // namespace lrfnet::capture

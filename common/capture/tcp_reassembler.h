@@ -44,7 +44,7 @@
 
 #include "common/time.h"
 
-namespace lrfnet::io {
+namespace lrfnet::capture {
 
 struct TcpReassemblerOptions {
   // Out-of-order bytes held while waiting for a missing segment (the ring is allocated at this
@@ -146,4 +146,4 @@ class TcpReassembler {
   TcpReassemblerCounters counters_;
 };
 
-}  // namespace lrfnet::io
+}  // namespace lrfnet::capture
