@@ -1,0 +1,135 @@
+#pragma once
+// Zones (pure): named polygons and lines in the world frame, and what the fused tracks do in them:
+// occupancy, inbound / outbound counts since start, dwell times.
+//
+// Every zone has a *region* a track can be in: the inside of a polygon, or for a line the band of
+// half-width hysteresis_m around the segment ("on the line"). Occupancy and dwell times count the
+// tracks in the region.
+//
+// Crossings, with hysteresis so that a person standing on the boundary is counted once:
+// - Polygon: s = the signed distance of the track to the boundary (> 0 inside). A track is
+//   *inside* once s >= hysteresis_m and *outside* once s <= -hysteresis_m; in between it keeps its
+//   state. outside -> inside is one inbound, inside -> outside one outbound.
+// - Line A->B: d = cross(B - A, p - A) / |B - A|, the signed distance to the line (> 0 on the left
+//   of A->B, i.e. walking from A to B the left-hand side). A track is on the left once
+//   d >= hysteresis_m and on the right once d <= -hysteresis_m; in between it keeps its side. A
+//   change of side counts when the track's last crossing of the line itself (d changing sign
+//   between two updates, interpolated) lies on the segment: right -> left is inbound (moving
+//   along the left normal of A->B), left -> right outbound. A track that walks around the end of
+//   the segment is not counted.
+// A track seen first somewhere in the band or inside a polygon has no "before" side: it counts
+// when it leaves to a side, never as a crossing. Coasting tracks (predictions, measured = false)
+// keep their state and are not used to change it.
+//
+// Dwell: a track's dwell in a region starts when it is first seen in it and ends when it leaves it
+// or disappears (a track absent from an update is gone: the fused ids are never reused). Ended
+// dwells are summed (count, total, longest); a track that disappears in a polygon is also counted
+// as lost_inside (it left the sensors' view there, or its fused track was merged).
+//
+// Time is passed in (gateway UTC ns, the fused tracks' time base). Not thread-safe.
+
+#include <cstdint>
+#include <map>
+#include <optional>
+#include <span>
+#include <string>
+#include <vector>
+
+#include "common/time.h"
+
+namespace lrfnet::zones {
+
+struct Point {
+  double x_m = 0.0;
+  double y_m = 0.0;
+};
+
+enum class ZoneKind : std::uint8_t { kPolygon, kLine };
+const char* ToString(ZoneKind kind);
+
+struct Zone {
+  std::string name;  // [A-Za-z0-9_-]+, at most 64 bytes: also an MQTT topic level
+  ZoneKind kind = ZoneKind::kPolygon;
+  std::vector<Point> points;  // world frame; polygon: >= 3 vertices (not closed), line: 2 points
+};
+
+struct ZoneOptions {
+  // Half-width of the hysteresis band [m] around polygon edges and lines (see the header). About
+  // a person's radius plus the fused position's noise; a polygon narrower than twice this never
+  // holds a track.
+  double hysteresis_m = 0.3;
+};
+std::optional<std::string> Validate(const ZoneOptions& options);
+
+// Name, point count, finite coordinates, a line of non-zero length, a simple polygon (no
+// crossing edges) with non-zero area. The error names the zone ("zone 'door': ...").
+std::optional<std::string> Validate(const Zone& zone);
+// Every zone and unique names; at most kMaxZones.
+std::optional<std::string> Validate(std::span<const Zone> zones);
+inline constexpr std::size_t kMaxZones = 256;
+inline constexpr std::size_t kMaxZonePoints = 1024;
+
+// Signed distance [m] of p to the polygon's boundary, > 0 inside (even-odd rule).
+double SignedDistanceToPolygon(std::span<const Point> polygon, Point p);
+
+// A fused track as the zones see it.
+struct ZoneTrack {
+  std::uint64_t id = 0;
+  double x_m = 0.0;
+  double y_m = 0.0;
+  bool measured = true;  // false: coasting (a prediction)
+};
+
+struct ZoneState {
+  std::string name;
+  ZoneKind kind = ZoneKind::kPolygon;
+  std::vector<std::uint64_t> present_ids;  // tracks in the region now, ascending
+  std::vector<double> present_dwell_s;     // how long each has been in it (same order)
+  std::uint64_t inbound = 0;               // crossings since start (see the header)
+  std::uint64_t outbound = 0;
+  std::uint64_t dwells_completed = 0;  // tracks that left the region or disappeared in it
+  double dwell_total_s = 0.0;          // sum of the completed dwells
+  double dwell_max_s = 0.0;            // longest completed dwell
+  std::uint64_t lost_inside = 0;       // tracks that disappeared in the region
+};
+
+class ZoneCounter {
+ public:
+  // Preconditions: Validate(zones), Validate(options) (checked; aborts otherwise).
+  ZoneCounter(std::vector<Zone> zones, const ZoneOptions& options);
+
+  // All current tracks at now_ns (ids absent since the last update are gone). Updates with a
+  // time before the previous one are ignored (returns false).
+  bool Update(std::span<const ZoneTrack> tracks, common::UtcNs now_ns);
+
+  // Every zone's state as of the last update, in the order of the zones.
+  std::vector<ZoneState> States() const;
+  const std::vector<Zone>& zones() const { return zones_; }
+  const ZoneOptions& options() const { return options_; }
+
+ private:
+  enum class Side : std::uint8_t { kUnknown, kA, kB };  // polygon: A outside, B inside
+  struct TrackInZone {
+    Side side = Side::kUnknown;
+    bool in_region = false;
+    common::UtcNs region_since_ns = 0;
+    std::optional<double> last_crossing_t;  // line: where it last crossed (0..1 on the segment)
+    double last_d = 0.0;                    // line: signed distance of the previous update
+    Point last_p;
+    bool has_last = false;
+  };
+  struct ZoneData {
+    ZoneState state;
+    std::map<std::uint64_t, TrackInZone> tracks;
+  };
+  void UpdateTrack(const Zone& zone, ZoneData& data, const ZoneTrack& track, common::UtcNs now_ns);
+  static void EndDwell(ZoneData& data, TrackInZone& t, common::UtcNs now_ns);
+
+  std::vector<Zone> zones_;
+  ZoneOptions options_;
+  std::vector<ZoneData> data_;
+  common::UtcNs now_ns_ = 0;
+  bool started_ = false;
+};
+
+}  // namespace lrfnet::zones

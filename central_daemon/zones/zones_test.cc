@@ -1,0 +1,215 @@
+#include "central_daemon/zones/zones.h"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <vector>
+
+namespace lrfnet::zones {
+namespace {
+
+constexpr common::UtcNs kT0 = 1'700'000'000'000'000'000;
+constexpr common::DurationNs kStepNs = 100'000'000;  // 10 Hz, as the fusion publishes
+
+Zone Line(const char* name, Point a, Point b) { return Zone{name, ZoneKind::kLine, {a, b}}; }
+Zone Square(const char* name, double x0, double y0, double side) {
+  return Zone{name, ZoneKind::kPolygon,
+              {{x0, y0}, {x0 + side, y0}, {x0 + side, y0 + side}, {x0, y0 + side}}};
+}
+
+// Feeds one track along a list of positions, one update each, and returns the counter.
+class Walk {
+ public:
+  Walk(std::vector<Zone> zones, double hysteresis_m = 0.3)
+      : counter_(std::move(zones), ZoneOptions{hysteresis_m}) {}
+  void To(std::uint64_t id, Point p, bool measured = true) {
+    const ZoneTrack t{id, p.x_m, p.y_m, measured};
+    counter_.Update(std::span<const ZoneTrack>(&t, 1), Now());
+  }
+  // Straight from a to b in steps of step_m (both ends included).
+  void Straight(std::uint64_t id, Point a, Point b, double step_m = 0.12) {
+    const double len = std::hypot(b.x_m - a.x_m, b.y_m - a.y_m);
+    const int n = std::max(1, static_cast<int>(std::ceil(len / step_m)));
+    for (int i = 0; i <= n; ++i) {
+      const double f = static_cast<double>(i) / n;
+      To(id, {a.x_m + f * (b.x_m - a.x_m), a.y_m + f * (b.y_m - a.y_m)});
+    }
+  }
+  void Nothing() { counter_.Update({}, Now()); }
+  ZoneState State(std::size_t i = 0) const { return counter_.States().at(i); }
+  ZoneCounter& counter() { return counter_; }
+  double elapsed_s() const { return common::NsToSeconds(now_ns_ - kT0); }
+
+ private:
+  common::UtcNs Now() { return now_ns_ += kStepNs; }
+  ZoneCounter counter_;
+  common::UtcNs now_ns_ = kT0;
+};
+
+// The line runs along +x; its left side (inbound side) is +y.
+TEST(ZonesTest, LineCountsEachCrossingOnceInItsDirection) {
+  Walk w({Line("door", {-1, 0}, {1, 0})});
+  w.Straight(1, {0, -2}, {0, 2});
+  EXPECT_EQ(w.State().inbound, 1u);
+  EXPECT_EQ(w.State().outbound, 0u);
+  w.Straight(1, {0, 2}, {0.5, -2});
+  EXPECT_EQ(w.State().inbound, 1u);
+  EXPECT_EQ(w.State().outbound, 1u);
+  // A second person crossing inbound at the other end of the door.
+  w.Straight(2, {-0.9, -1}, {-0.9, 1});
+  EXPECT_EQ(w.State().inbound, 2u);
+  EXPECT_EQ(w.State().outbound, 1u);
+}
+
+TEST(ZonesTest, StandingOnTheLineIsCountedOnceWhenCrossingAndNeverWhenTurningBack) {
+  Walk w({Line("door", {-1, 0}, {1, 0})});
+  w.Straight(1, {0, -2}, {0, -0.05});
+  // Stands on the line for 20 s, swaying 25 cm across it (inside the band).
+  for (int i = 0; i < 200; ++i) w.To(1, {0.02 * (i % 3), (i % 2 == 0) ? 0.25 : -0.25});
+  EXPECT_EQ(w.State().inbound + w.State().outbound, 0u);
+  EXPECT_EQ(w.State().present_ids, std::vector<std::uint64_t>{1});
+  w.Straight(1, {0, 0.1}, {0, 2});
+  EXPECT_EQ(w.State().inbound, 1u);
+  EXPECT_EQ(w.State().outbound, 0u);
+  EXPECT_TRUE(w.State().present_ids.empty());
+  EXPECT_EQ(w.State().dwells_completed, 1u);
+  EXPECT_GT(w.State().dwell_total_s, 20.0);
+
+  // Onto the line and back the way it came: no crossing.
+  w.Straight(1, {0, 2}, {0, 0.1});
+  for (int i = 0; i < 30; ++i) w.To(1, {0, (i % 2 == 0) ? -0.2 : 0.2});
+  w.Straight(1, {0, 0.1}, {0, 2});
+  EXPECT_EQ(w.State().inbound, 1u);
+  EXPECT_EQ(w.State().outbound, 0u);
+}
+
+TEST(ZonesTest, LineIgnoresWalkingAroundItsEnds) {
+  Walk w({Line("door", {-1, 0}, {1, 0})});
+  w.Straight(1, {3, -2}, {3, 2});   // beyond B
+  w.Straight(1, {3, 2}, {-3, 2});   // along the left side
+  w.Straight(1, {-3, 2}, {-3, -2});  // beyond A
+  EXPECT_EQ(w.State().inbound + w.State().outbound, 0u);
+  // A jump straight across in one update (a gap in the fused track) still counts.
+  w.To(2, {0.3, -1.5});
+  w.To(2, {0.2, 1.5});
+  EXPECT_EQ(w.State().inbound, 1u);
+}
+
+TEST(ZonesTest, TracksSeenFirstInsideTheBandCountOnlyWhenTheyLeaveAcross) {
+  Walk w({Line("door", {-1, 0}, {1, 0})});
+  w.Straight(1, {0, 0.1}, {0, 2});  // appears on the line: no "before" side
+  EXPECT_EQ(w.State().inbound + w.State().outbound, 0u);
+  w.Straight(1, {0, 2}, {0, -2});
+  EXPECT_EQ(w.State().outbound, 1u);
+}
+
+TEST(ZonesTest, PolygonOccupancyCrossingsAndDwell) {
+  Walk w({Square("room", 0, 0, 4)});
+  w.Straight(1, {-2, 2}, {2, 2});
+  EXPECT_EQ(w.State().inbound, 1u);
+  EXPECT_EQ(w.State().present_ids, std::vector<std::uint64_t>{1});
+  for (int i = 0; i < 100; ++i) w.To(1, {2, 2});  // 10 s inside
+  ASSERT_EQ(w.State().present_dwell_s.size(), 1u);
+  // Inside since it was 0.3 m (the hysteresis) past the edge: 14 steps of 0.12 m before the
+  // wait, then 100 updates, 0.1 s each.
+  EXPECT_NEAR(w.State().present_dwell_s[0], 11.4, 1e-6);
+  w.Straight(1, {2, 2}, {6, 2});
+  EXPECT_EQ(w.State().outbound, 1u);
+  EXPECT_TRUE(w.State().present_ids.empty());
+  EXPECT_EQ(w.State().dwells_completed, 1u);
+  EXPECT_NEAR(w.State().dwell_total_s, w.State().dwell_max_s, 1e-9);
+  EXPECT_EQ(w.State().lost_inside, 0u);
+}
+
+TEST(ZonesTest, PolygonBoundaryHysteresisAndLostTracks) {
+  Walk w({Square("room", 0, 0, 4)});
+  w.Straight(1, {-2, 2}, {-0.05, 2});
+  // Lingers on the boundary, 20 cm either side.
+  for (int i = 0; i < 50; ++i) w.To(1, {(i % 2 == 0) ? 0.2 : -0.2, 2});
+  EXPECT_EQ(w.State().inbound + w.State().outbound, 0u);
+  w.Straight(1, {0, 2}, {1, 2});
+  EXPECT_EQ(w.State().inbound, 1u);
+  // Another track is born inside (no inbound) and disappears there: lost inside.
+  w.To(2, {3, 3});
+  // (track 1 was absent from that update: it is gone, inside.)
+  EXPECT_EQ(w.State().lost_inside, 1u);
+  EXPECT_EQ(w.State().present_ids, std::vector<std::uint64_t>{2});
+  w.Nothing();
+  EXPECT_EQ(w.State().lost_inside, 2u);
+  EXPECT_EQ(w.State().inbound, 1u);
+  EXPECT_EQ(w.State().outbound, 0u);
+  EXPECT_EQ(w.State().dwells_completed, 2u);
+  // Born inside and walking out is an exit.
+  w.Straight(3, {3, 3}, {3, 6});
+  EXPECT_EQ(w.State().outbound, 1u);
+}
+
+TEST(ZonesTest, CoastingTracksKeepTheirState) {
+  Walk w({Line("door", {-1, 0}, {1, 0}), Square("room", -1, 0, 2)});
+  w.Straight(1, {0, -2}, {0, -1});
+  // The prediction runs across the line; nothing is counted until a measurement confirms it.
+  w.To(1, {0, 1}, false);
+  w.To(1, {0, 2}, false);
+  EXPECT_EQ(w.State(0).inbound, 0u);
+  EXPECT_EQ(w.State(1).inbound, 0u);
+  w.To(1, {0, 1.5});
+  EXPECT_EQ(w.State(0).inbound, 1u);
+  EXPECT_EQ(w.State(1).inbound, 1u);
+}
+
+TEST(ZonesTest, ManyPeopleBothWaysAtOnce) {
+  Walk w({Line("corridor", {0, 0}, {0, 10})});  // left of +y is -x: inbound walks towards -x
+  ZoneCounter& c = w.counter();
+  common::UtcNs now = kT0;
+  for (int step = 0; step <= 40; ++step) {
+    std::vector<ZoneTrack> tracks;
+    for (std::uint64_t k = 0; k < 8; ++k) {
+      const double x = (k % 2 == 0 ? 2.0 : -2.0) + (k % 2 == 0 ? -0.1 : 0.1) * step;
+      tracks.push_back({k + 1, x, 0.5 + static_cast<double>(k), true});
+    }
+    c.Update(tracks, now += kStepNs);
+  }
+  EXPECT_EQ(c.States()[0].inbound, 4u);
+  EXPECT_EQ(c.States()[0].outbound, 4u);
+  EXPECT_FALSE(c.Update({}, kT0));  // time going back is ignored
+}
+
+TEST(ZonesTest, SignedDistance) {
+  const std::vector<Point> square = {{0, 0}, {4, 0}, {4, 4}, {0, 4}};
+  EXPECT_NEAR(SignedDistanceToPolygon(square, {2, 2}), 2.0, 1e-12);
+  EXPECT_NEAR(SignedDistanceToPolygon(square, {5, 2}), -1.0, 1e-12);
+  EXPECT_NEAR(SignedDistanceToPolygon(square, {-3, -4}), -5.0, 1e-12);
+  // Clockwise vertex order gives the same.
+  const std::vector<Point> clockwise(square.rbegin(), square.rend());
+  EXPECT_NEAR(SignedDistanceToPolygon(clockwise, {1, 2}), 1.0, 1e-12);
+}
+
+TEST(ZonesTest, ValidationNamesTheZoneAndTheProblem) {
+  struct Case {
+    Zone zone;
+    const char* expected;
+  };
+  const Case cases[] = {
+      {Zone{"", ZoneKind::kLine, {{0, 0}, {1, 0}}}, "name"},
+      {Zone{"a/b", ZoneKind::kLine, {{0, 0}, {1, 0}}}, "name"},
+      {Zone{"door", ZoneKind::kLine, {{0, 0}, {1, 0}, {2, 0}}}, "exactly 2 points"},
+      {Zone{"door", ZoneKind::kLine, {{0, 0}, {0, 0}}}, "apart"},
+      {Zone{"hall", ZoneKind::kPolygon, {{0, 0}, {1, 0}}}, "at least 3"},
+      {Zone{"hall", ZoneKind::kPolygon, {{0, 0}, {1, 0}, {2, 0}}}, "no area"},
+      {Zone{"bowtie", ZoneKind::kPolygon, {{0, 0}, {2, 2}, {2, 0}, {0, 2}}}, "cross"},
+      {Zone{"far", ZoneKind::kLine, {{0, 0}, {NAN, 1}}}, "finite"},
+  };
+  for (const Case& c : cases) {
+    const auto e = Validate(c.zone);
+    ASSERT_TRUE(e.has_value()) << c.expected;
+    EXPECT_NE(e->find(c.expected), std::string::npos) << *e;
+  }
+  const std::vector<Zone> twice = {Square("a", 0, 0, 1), Square("a", 5, 5, 1)};
+  ASSERT_TRUE(Validate(std::span<const Zone>(twice)).has_value());
+  EXPECT_NE(Validate(std::span<const Zone>(twice))->find("twice"), std::string::npos);
+  EXPECT_FALSE(Validate(Square("ok-zone_1", 0, 0, 1)).has_value());
+  EXPECT_TRUE(Validate(ZoneOptions{-1.0}).has_value());
+}
+
+}  // namespace
+}  // namespace lrfnet::zones
