@@ -68,3 +68,13 @@ lrfnet_uses_binaries(calibration_cli_test)
 # (calibrates by itself, fuses, live view); one tracker killed and restarted while fusing.
 lrfnet_test(system_test SOURCES system_test.cc LIBS nlohmann_json::nlohmann_json)
 lrfnet_uses_binaries(system_test)
+
+# `lrfnet export` read back with independent parsers (yaml-cpp for the ROS 2 launch file, urdfdom
+# for the URDF when installed, the CSV by hand): transforms compose back to the calibration.
+lrfnet_test(export_cli_test SOURCES export_cli_test.cc LIBS yaml-cpp Eigen3::Eigen)
+lrfnet_uses_binaries(export_cli_test)
+pkg_check_modules(URDFDOM IMPORTED_TARGET urdfdom)
+if(TARGET export_cli_test AND URDFDOM_FOUND)
+  target_link_libraries(export_cli_test PRIVATE PkgConfig::URDFDOM)
+  target_compile_definitions(export_cli_test PRIVATE LRFNET_HAVE_URDFDOM=1)
+endif()
