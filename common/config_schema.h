@@ -31,6 +31,13 @@ class ConfigVisitor {
   // One of `names`; `index` is the position in `names`.
   virtual void Choice(std::string_view key, int& index, std::span<const std::string_view> names,
                       std::string_view doc) = 0;
+  // A structured value (a list or map, e.g. the daemon's zones) kept as YAML text in flow style
+  // ("[{name: door, line: [[0, 0], [1, 0]]}]"); the owner parses and validates it. The loader takes
+  // any YAML value under the key and writes it back in flow style, the printer writes the text.
+  // Visitors that do not handle structured values ignore them.
+  virtual void StructuredField(std::string_view key, std::string& flow_yaml, std::string_view doc) {
+    (void)key, (void)flow_yaml, (void)doc;
+  }
 };
 
 // Adapters for the integer and duration types of the option structs (range-checked on load).

@@ -11,6 +11,15 @@
 namespace lrfnet::common {
 namespace {
 
+void SetFlowStyle(YAML::Node node) {
+  if (node.IsSequence() || node.IsMap()) node.SetStyle(YAML::EmitterStyle::Flow);
+  if (node.IsSequence()) {
+    for (YAML::Node child : node) SetFlowStyle(child);
+  } else if (node.IsMap()) {
+    for (auto entry : node) SetFlowStyle(entry.second);
+  }
+}
+
 std::string Scalar(const YAML::Node& node) { return node.IsScalar() ? node.Scalar() : "<not a scalar>"; }
 
 class Loader final : public ConfigVisitor {
@@ -89,6 +98,17 @@ class Loader final : public ConfigVisitor {
       }
     }
     Fail(Path(key), fmt::format("unknown value '{}' (one of: {})", text, fmt::join(names, ", ")));
+  }
+
+  void StructuredField(std::string_view key, std::string& flow_yaml, std::string_view) override {
+    const YAML::Node node = Find(key);
+    if (!node) return;
+    // Nodes keep the style they were written in: set flow style on a copy, all the way down.
+    YAML::Node copy = YAML::Clone(node);
+    SetFlowStyle(copy);
+    YAML::Emitter emitter;
+    emitter << copy;
+    flow_yaml = emitter.c_str();
   }
 
   // Unknown sections and keys: everything in the document the visit did not name.
@@ -195,6 +215,9 @@ class Printer final : public ConfigVisitor {
     const std::string_view name = i < names.size() ? names[i] : std::string_view("?");
     Line(key, std::string(name), fmt::format("{} One of: {}.", doc, fmt::join(names, ", ")));
   }
+  void StructuredField(std::string_view key, std::string& flow_yaml, std::string_view doc) override {
+    Line(key, flow_yaml.empty() ? "[]" : flow_yaml, doc);
+  }
 
  private:
   void Line(std::string_view key, const std::string& value, std::string_view doc) {
@@ -219,6 +242,7 @@ class KeyLister final : public ConfigVisitor {
               std::string_view) override {
     Add(key);
   }
+  void StructuredField(std::string_view key, std::string&, std::string_view) override { Add(key); }
 
  private:
   void Add(std::string_view key) { keys.push_back(section_ + "." + std::string(key)); }

@@ -1,5 +1,6 @@
 #!/usr/bin/env bash
-# Installs the Debian 12 packages lrfnet needs, only those that are missing. Idempotent; run as root.
+# Installs the Debian 12 packages lrfnet needs, only those that are missing, and the npm packages of
+# the test clients (tests/node, from its package-lock.json). Idempotent; run as root.
 #   scripts/install_deps.sh            host build, tests and fuzzing
 #   scripts/install_deps.sh --no-cross skip the aarch64 cross toolchain and qemu-user
 set -euo pipefail
@@ -22,6 +23,9 @@ host_pkgs=(
   libgtest-dev libgmock-dev libbenchmark-dev
   libceres-dev coinor-libclp-dev zlib1g-dev   # calibration: joint refinement, LP oracle in tests, PNG report
   chromium fonts-dejavu-core          # the live view's browser test (headless)
+  libmosquitto-dev mosquitto mosquitto-clients  # MQTT output; the broker and mosquitto_sub for its tests
+  liburdfdom-dev                      # the URDF export's round-trip test (ROS's URDF parser)
+  nodejs                              # the Foxglove client and JSON Schema validator of the tests
 )
 cross_pkgs=(
   g++-aarch64-linux-gnu qemu-user
@@ -46,12 +50,25 @@ if [ "$cross" = 1 ]; then
   for p in "${cross_pkgs[@]}"; do is_installed "$p" || missing+=("$p"); done
 fi
 
+# Debian's nodejs comes without npm (other builds of nodejs bring their own).
+command -v npm >/dev/null 2>&1 || is_installed npm || missing+=(npm)
+
 if [ "${#missing[@]}" -eq 0 ]; then
   echo "install_deps: all packages present"
-  exit 0
+else
+  echo "install_deps: installing ${missing[*]}"
+  export DEBIAN_FRONTEND=noninteractive
+  $SUDO apt-get update -qq
+  $SUDO apt-get install -y -qq --no-install-recommends "${missing[@]}" >/dev/null
+  echo "install_deps: done"
 fi
-echo "install_deps: installing ${missing[*]}"
-export DEBIAN_FRONTEND=noninteractive
-$SUDO apt-get update -qq
-$SUDO apt-get install -y -qq --no-install-recommends "${missing[@]}" >/dev/null
-echo "install_deps: done"
+
+# The npm test clients (@foxglove/ws-protocol, ws, ajv, @foxglove/schemas) into tests/node/node_modules,
+# exactly as locked; again only when the lock file changed.
+node_dir="$(cd "$(dirname "$0")/.." && pwd)/tests/node"
+if [ -f "$node_dir/package-lock.json" ] &&
+   { [ ! -f "$node_dir/node_modules/.package-lock.json" ] ||
+     [ "$node_dir/package-lock.json" -nt "$node_dir/node_modules/.package-lock.json" ]; }; then
+  echo "install_deps: npm ci in tests/node"
+  (cd "$node_dir" && npm ci --no-audit --no-fund --loglevel=error >/dev/null)
+fi

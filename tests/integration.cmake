@@ -78,3 +78,16 @@ if(TARGET export_cli_test AND URDFDOM_FOUND)
   target_link_libraries(export_cli_test PRIVATE PkgConfig::URDFDOM)
   target_compile_definitions(export_cli_test PRIVATE LRFNET_HAVE_URDFDOM=1)
 endif()
+
+# lrfnetd's MQTT output against a real mosquitto (skipped when not installed): a short simulated
+# scene offline (objects vs the truth, zone counts vs the paths, libmosquitto and mosquitto_sub
+# subscribers, every message against central_daemon/schemas with ajv) and live through a broker
+# restart; the last will.
+lrfnet_test(mqtt_system_test SOURCES mqtt_system_test.cc
+            LIBS PkgConfig::MOSQUITTO nlohmann_json::nlohmann_json)
+lrfnet_uses_binaries(mqtt_system_test)
+if(TARGET mqtt_system_test)
+  target_compile_definitions(mqtt_system_test PRIVATE
+    LRFNET_NODE_DIR="${PROJECT_SOURCE_DIR}/tests/node"
+    LRFNET_SCHEMA_DIR="${PROJECT_SOURCE_DIR}/central_daemon/schemas")
+endif()

@@ -1,5 +1,7 @@
 #include "central_daemon/app/config.h"
 
+#include <yaml-cpp/yaml.h>
+
 #include <cmath>
 
 #include "common/host_port.h"
@@ -167,6 +169,163 @@ void VisitLiveView(DaemonConfig& c, ConfigVisitor& v) {
                "Background points per sensor sent to the page (decimated).");
 }
 
+void VisitZones(DaemonConfig& c, ConfigVisitor& v) {
+  v.Section("zones",
+            "Named areas (polygons) and lines in the world frame, counted from the fused tracks: "
+            "occupancy, inbound / outbound counts since start and dwell times (published over "
+            "MQTT, drawn in the live view). Changes need a restart.");
+  v.StructuredField(
+      "list", c.zones_list,
+      "The zones: a list of {name: NAME, polygon: [[x_m, y_m], ...]} (at least 3 vertices) or "
+      "{name: NAME, line: [[x_m, y_m], [x_m, y_m]]}. Names are [A-Za-z0-9_-] (an MQTT topic "
+      "level). A line counts crossings by direction: inbound is towards its left side (walking "
+      "from its first point to its second, the left hand), outbound towards its right. A polygon "
+      "counts entries (inbound) and exits (outbound).");
+  v.Field("hysteresis_m", c.zone_options.hysteresis_m,
+          "A track must be this far past a polygon's edge or a line to change sides, so a person "
+          "standing on it is counted once. Zones should be wider than twice this.");
+  v.Field("update_hz", c.zones_update_hz, "The zones are evaluated this often (fused-track time).");
+}
+
+void VisitMqtt(DaemonConfig& c, ConfigVisitor& v) {
+  MqttConfig& m = c.mqtt;
+  v.Section("mqtt",
+            "Publishing to an MQTT broker (JSON, see central_daemon/schemas): "
+            "<topic_prefix>/<site>/objects (the fused objects at objects_hz), "
+            "<topic_prefix>/<site>/zones/<name> (each zone's state when it changes and every "
+            "zones_interval_s), <topic_prefix>/<site>/calibration (retained, when it changes), "
+            "<topic_prefix>/<site>/sensors/<id>/health (retained), <topic_prefix>/<site>/status "
+            "(retained; \"offline\" is the daemon's last will). Publishing never waits for the "
+            "broker: messages go through a bounded queue, drops are counted. Changes need a "
+            "restart.");
+  v.Field("broker", m.broker, "HOST:PORT of the broker (1883; 8883 with TLS); empty: off. --mqtt.");
+  v.Field("site", m.site, "The site's name in the topics ([A-Za-z0-9_.-]). --mqtt-site.");
+  v.Field("topic_prefix", m.topic_prefix, "First level(s) of every topic.");
+  v.Field("client_id", m.client_id, "MQTT client id; empty: lrfnetd-<site>.");
+  v.Field("username", m.username, "User name for the broker; empty: none.");
+  v.Field("password", m.password, "Password for the broker (keep the config file private).");
+  v.Field("tls", m.tls, "Connect with TLS.");
+  v.Field("tls_ca_file", m.tls_ca_file,
+          "PEM file of the CA(s) that signed the broker's certificate; empty: the system's CAs.");
+  v.Field("tls_cert_file", m.tls_cert_file, "Client certificate (PEM) for brokers that ask; empty: none.");
+  v.Field("tls_key_file", m.tls_key_file, "The client certificate's private key (PEM).");
+  v.Field("tls_insecure", m.tls_insecure,
+          "Do not check the broker's host name against its certificate (tests only).");
+  VisitInteger(v, "keepalive_s", m.keepalive_s, "MQTT keep-alive, seconds (5..3600).");
+  v.Field("objects_hz", m.objects_hz, "Object lists per second.");
+  VisitInteger(v, "objects_qos", m.objects_qos, "QoS of the object lists (0 or 1).");
+  VisitInteger(v, "qos", m.qos, "QoS of zones, calibration, health and status (0 or 1).");
+  VisitInteger(v, "path_points", m.path_points, "Points of each object's path (0: no path).");
+  v.Field("path_interval_s", m.path_interval_s, "Time between two points of a path.");
+  v.Field("zones_interval_s", m.zones_interval_s,
+          "Every zone's state is published at least this often (and at once when it changes).");
+  v.Field("health_interval_s", m.health_interval_s,
+          "Every sensor's health is published at least this often (and at once when its state "
+          "changes).");
+  VisitInteger(v, "queue_messages", m.queue_messages,
+               "Messages waiting for the broker at most; more are dropped and counted.");
+  v.Field("reconnect_min_s", m.reconnect_min_s,
+          "First wait before reconnecting; doubles after every failure up to reconnect_max_s.");
+  v.Field("reconnect_max_s", m.reconnect_max_s, "Longest wait between reconnection attempts.");
+}
+
+// zones.list: [{name, polygon | line}, ...] -> zones.
+std::optional<std::string> ParseZones(const std::string& text, std::vector<zones::Zone>* out) {
+  out->clear();
+  YAML::Node root;
+  try {
+    root = YAML::Load(text);
+  } catch (const YAML::Exception& e) {
+    return "zones.list: " + e.msg;
+  }
+  if (!root || root.IsNull()) return std::nullopt;
+  if (!root.IsSequence()) return std::string("zones.list: expected a list of zones");
+  for (std::size_t i = 0; i < root.size(); ++i) {
+    const std::string where = "zones.list[" + std::to_string(i) + "]";
+    const YAML::Node item = root[i];
+    if (!item.IsMap()) return where + ": expected {name: ..., polygon: [...]} or {name, line}";
+    zones::Zone zone;
+    int shapes = 0;
+    for (const auto& entry : item) {
+      const std::string key = entry.first.IsScalar() ? entry.first.Scalar() : "?";
+      if (key == "name") {
+        if (!entry.second.IsScalar()) return where + ".name: expected a string";
+        zone.name = entry.second.Scalar();
+      } else if (key == "polygon" || key == "line") {
+        ++shapes;
+        zone.kind = key == "line" ? zones::ZoneKind::kLine : zones::ZoneKind::kPolygon;
+        if (!entry.second.IsSequence()) return where + "." + key + ": expected a list of [x_m, y_m]";
+        if (entry.second.size() > zones::kMaxZonePoints) return where + "." + key + ": too many points";
+        for (const YAML::Node& p : entry.second) {
+          double x = 0.0, y = 0.0;
+          if (!p.IsSequence() || p.size() != 2 || !p[0].IsScalar() || !p[1].IsScalar() ||
+              !YAML::convert<double>::decode(p[0], x) || !YAML::convert<double>::decode(p[1], y)) {
+            return where + "." + key + ": expected points [x_m, y_m]";
+          }
+          zone.points.push_back({x, y});
+        }
+      } else {
+        return where + "." + key + ": unknown key (name, polygon, line)";
+      }
+    }
+    if (shapes != 1) return where + ": give exactly one of polygon or line";
+    if (auto e = zones::Validate(zone)) return where + ": " + *e;
+    out->push_back(std::move(zone));
+  }
+  if (auto e = zones::Validate(std::span<const zones::Zone>(*out))) return "zones.list: " + *e;
+  return std::nullopt;
+}
+
+bool TopicLevelOk(const std::string& s) {
+  if (s.empty() || s.size() > 64) return false;
+  for (const char ch : s) {
+    const bool ok = (ch >= 'a' && ch <= 'z') || (ch >= 'A' && ch <= 'Z') || (ch >= '0' && ch <= '9') ||
+                    ch == '_' || ch == '-' || ch == '.';
+    if (!ok) return false;
+  }
+  return true;
+}
+
+std::optional<std::string> ValidateZonesAndMqtt(DaemonConfig& c) {
+  if (auto e = ParseZones(c.zones_list, &c.zones)) return e;
+  if (auto e = Prefixed("zones", zones::Validate(c.zone_options))) return e;
+  if (!(c.zones_update_hz >= 0.1 && c.zones_update_hz <= 100.0))
+    return "zones.update_hz: must be in [0.1, 100]";
+  const MqttConfig& m = c.mqtt;
+  std::string error;
+  if (!m.broker.empty() && !common::ParseHostPort(m.broker, "mqtt.broker", 0, &error))
+    return error;
+  if (!TopicLevelOk(m.site)) return "mqtt.site: must be 1-64 characters of A-Z, a-z, 0-9, _, - and .";
+  if (m.topic_prefix.empty() || m.topic_prefix.size() > 128 ||
+      m.topic_prefix.find_first_of("+#") != std::string::npos || m.topic_prefix.front() == '/' ||
+      m.topic_prefix.back() == '/')
+    return "mqtt.topic_prefix: must be 1-128 characters without + and #, not starting or ending "
+           "with /";
+  if (m.client_id.size() > 128) return "mqtt.client_id: at most 128 characters";
+  if (!m.password.empty() && m.username.empty()) return "mqtt.password: needs mqtt.username";
+  if (m.tls_cert_file.empty() != m.tls_key_file.empty())
+    return "mqtt.tls_cert_file: give both tls_cert_file and tls_key_file, or neither";
+  if (!m.tls && (!m.tls_ca_file.empty() || !m.tls_cert_file.empty()))
+    return "mqtt.tls: the tls_* files need tls: true";
+  if (m.keepalive_s < 5 || m.keepalive_s > 3600) return "mqtt.keepalive_s: must be in [5, 3600]";
+  if (!(m.objects_hz >= 0.1 && m.objects_hz <= 100.0)) return "mqtt.objects_hz: must be in [0.1, 100]";
+  if (m.objects_qos < 0 || m.objects_qos > 1) return "mqtt.objects_qos: must be 0 or 1";
+  if (m.qos < 0 || m.qos > 1) return "mqtt.qos: must be 0 or 1";
+  if (m.path_points < 0 || m.path_points > 1000) return "mqtt.path_points: must be in [0, 1000]";
+  if (!(m.path_interval_s >= 0.01 && m.path_interval_s <= 3600.0))
+    return "mqtt.path_interval_s: must be in [0.01, 3600]";
+  if (!(m.zones_interval_s >= 0.01 && m.zones_interval_s <= 3600.0))
+    return "mqtt.zones_interval_s: must be in [0.01, 3600]";
+  if (!(m.health_interval_s >= 0.1 && m.health_interval_s <= 3600.0))
+    return "mqtt.health_interval_s: must be in [0.1, 3600]";
+  if (m.queue_messages < 1 || m.queue_messages > 1000000)
+    return "mqtt.queue_messages: must be in [1, 1000000]";
+  if (!(m.reconnect_min_s >= 0.01 && m.reconnect_min_s <= m.reconnect_max_s &&
+        m.reconnect_max_s <= 3600.0))
+    return "mqtt.reconnect_min_s: need 0.01 <= reconnect_min_s <= reconnect_max_s <= 3600";
+  return std::nullopt;
+}
+
 }  // namespace
 
 void VisitDaemonConfig(DaemonConfig& c, ConfigVisitor& v) {
@@ -179,6 +338,8 @@ void VisitDaemonConfig(DaemonConfig& c, ConfigVisitor& v) {
   VisitCalibration(c, v);
   VisitFusion(c, v);
   VisitLiveView(c, v);
+  VisitZones(c, v);
+  VisitMqtt(c, v);
 }
 
 std::optional<std::string> Validate(DaemonConfig& c) {
@@ -222,6 +383,7 @@ std::optional<std::string> Validate(DaemonConfig& c) {
     return "live_view.max_clients: must be in [1, 10000]";
   if (c.live_view_background_points > 100000)
     return "live_view.background_points: must be <= 100000";
+  if (auto e = ValidateZonesAndMqtt(c)) return e;
   return std::nullopt;
 }
 

@@ -16,11 +16,38 @@
 #include "central_daemon/io/recording_writer.h"
 #include "central_daemon/io/udp_receiver.h"
 #include "central_daemon/store/track_store.h"
+#include "central_daemon/zones/zones.h"
 #include "common/config_yaml.h"
 
 namespace lrfnet::daemon {
 
 inline constexpr std::uint16_t kDefaultPort = 5800;
+
+// Section `mqtt`: what lrfnetd publishes to an MQTT broker (see central_daemon/app/mqtt_service.h).
+struct MqttConfig {
+  std::string broker;            // HOST:PORT; empty: no MQTT
+  std::string site = "site";     // topic level: <topic_prefix>/<site>/...
+  std::string topic_prefix = "lrfnet";
+  std::string client_id;         // empty: "lrfnetd-<site>"
+  std::string username;          // empty: none
+  std::string password;
+  bool tls = false;
+  std::string tls_ca_file;       // empty with tls: the system's CAs
+  std::string tls_cert_file;     // client certificate (with tls_key_file); empty: none
+  std::string tls_key_file;
+  bool tls_insecure = false;     // do not check the broker's host name against its certificate
+  std::int64_t keepalive_s = 30;
+  double objects_hz = 5.0;
+  std::int64_t objects_qos = 0;
+  std::int64_t qos = 1;          // zones, calibration, health, status
+  std::int64_t path_points = 10;
+  double path_interval_s = 0.5;
+  double zones_interval_s = 1.0;
+  double health_interval_s = 5.0;
+  std::int64_t queue_messages = 1000;
+  double reconnect_min_s = 0.5;
+  double reconnect_max_s = 30.0;
+};
 
 struct DaemonConfig {
   std::string listen = "[::]:5800";   // ADDR:PORT ("[::]" takes IPv4 and IPv6)
@@ -53,14 +80,21 @@ struct DaemonConfig {
   double live_view_publish_hz = 5.0;
   std::uint64_t live_view_max_clients = 32;
   std::uint64_t live_view_background_points = 720;  // per sensor, decimated
+  // Zones (section `zones`).
+  std::string zones_list = "[]";      // the zones as YAML text (flow style), parsed by Validate
+  std::vector<zones::Zone> zones;     // from zones_list
+  zones::ZoneOptions zone_options;
+  double zones_update_hz = 10.0;
+  // MQTT (section `mqtt`).
+  MqttConfig mqtt;
 };
 
 // Lists every option (sections listen, record, validation, sensors, store, status, calibration,
-// fusion, live_view).
+// fusion, live_view, zones, mqtt).
 void VisitDaemonConfig(DaemonConfig& config, common::ConfigVisitor& visitor);
 
 // Every option, with the prefix of its section ("store.max_age_s: must be > 0"). Also parses
-// `listen` into receiver.address/port.
+// `listen` into receiver.address/port and `zones.list` into zones.
 std::optional<std::string> Validate(DaemonConfig& config);
 
 // Loads a YAML document over `config` and validates the result.

@@ -58,6 +58,23 @@ TEST(DaemonConfigTest, ErrorsNameTheKey) {
       {"sensors: {no_such_key: 1}", "no_such_key"},
       {"status: {interval_s: -2}", "status.interval_s"},
       {"listen: {receive_buffer_bytes: 10}", "receive_buffer_bytes"},
+      {"zones: {list: 5}", "zones.list"},
+      {"zones: {list: [{name: a, line: [[0, 0]]}]}", "zones.list[0]: zone 'a'"},
+      {"zones: {list: [{name: a, line: [[0, 0], [1, x]]}]}", "zones.list[0].line"},
+      {"zones: {list: [{name: a, circle: 1}]}", "zones.list[0].circle"},
+      {"zones: {list: [{name: a}]}", "exactly one of polygon or line"},
+      {"zones: {list: [{name: 'a b', line: [[0, 0], [1, 0]]}]}", "zones.list[0]"},
+      {"zones: {list: [{name: a, line: [[0, 0], [1, 0]]}, {name: a, line: [[0, 0], [1, 0]]}]}",
+       "twice"},
+      {"zones: {hysteresis_m: -1}", "zones.hysteresis_m"},
+      {"mqtt: {broker: 'nope'}", "mqtt.broker"},
+      {"mqtt: {site: 'a/b'}", "mqtt.site"},
+      {"mqtt: {topic_prefix: 'a/#'}", "mqtt.topic_prefix"},
+      {"mqtt: {qos: 2}", "mqtt.qos"},
+      {"mqtt: {password: x}", "mqtt.password"},
+      {"mqtt: {tls_ca_file: ca.pem}", "mqtt.tls"},
+      {"mqtt: {objects_hz: 0}", "mqtt.objects_hz"},
+      {"mqtt: {reconnect_min_s: 50}", "mqtt.reconnect_min_s"},
   };
   for (const Case& c : cases) {
     DaemonConfig config;
@@ -66,6 +83,43 @@ TEST(DaemonConfigTest, ErrorsNameTheKey) {
     EXPECT_NE(error->find(c.expected), std::string::npos) << c.yaml << " -> " << *error;
     EXPECT_EQ(error->find('\n'), std::string::npos) << *error;
   }
+}
+
+TEST(DaemonConfigTest, ZonesAndMqttLoadFromBlockYamlAndRoundTripThroughPrint) {
+  DaemonConfig c;
+  ASSERT_EQ(LoadDaemonConfig(R"(
+zones:
+  hysteresis_m: 0.25
+  list:
+    - name: door
+      line: [[1, 0], [1, 2.5]]
+    - {name: lobby, polygon: [[0, 0], [5, 0], [5, 4], [0, 4]]}
+mqtt:
+  broker: 127.0.0.1:1883
+  site: lab-2
+  username: daemon
+  password: "p: w"
+)",
+                             c),
+            std::nullopt);
+  ASSERT_EQ(c.zones.size(), 2u);
+  EXPECT_EQ(c.zones[0].name, "door");
+  EXPECT_EQ(c.zones[0].kind, zones::ZoneKind::kLine);
+  EXPECT_EQ(c.zones[0].points[1].y_m, 2.5);
+  EXPECT_EQ(c.zones[1].kind, zones::ZoneKind::kPolygon);
+  EXPECT_EQ(c.zones[1].points.size(), 4u);
+  EXPECT_EQ(c.zone_options.hysteresis_m, 0.25);
+  EXPECT_EQ(c.mqtt.site, "lab-2");
+
+  const std::string printed = PrintDaemonConfig(c);
+  EXPECT_NE(printed.find("list: [{name: door, line: [[1, 0], [1, 2.5]]}"), std::string::npos)
+      << printed;
+  DaemonConfig back;
+  ASSERT_EQ(LoadDaemonConfig(printed, back), std::nullopt);
+  ASSERT_EQ(back.zones.size(), 2u);
+  EXPECT_EQ(back.zones[1].points[2].x_m, 5.0);
+  EXPECT_EQ(back.mqtt.broker, "127.0.0.1:1883");
+  EXPECT_EQ(back.mqtt.password, "p: w");
 }
 
 }  // namespace

@@ -9,7 +9,9 @@
 // SIGUSR1 calibrates at once. Calibration also runs by itself once the data connects every sensor
 // (config section `calibration`, progress in the status line); offline (--input) it runs once over
 // all the input. Once calibrated, tracks are fused (section `fusion`: JSON over UDP and/or JSON
-// lines) and the live view (section `live_view`, --live-view) shows it all in a browser.
+// lines) and the live view (section `live_view`, --live-view) shows it all in a browser. With
+// --mqtt (section `mqtt`) the objects, the zones' counts (section `zones`), the calibration and
+// every sensor's health are published to an MQTT broker.
 
 #include <fcntl.h>
 #include <spdlog/sinks/stdout_color_sinks.h>
@@ -27,6 +29,7 @@
 #include <exception>
 #include <fstream>
 #include <iostream>
+#include <memory>
 #include <nlohmann/json.hpp>
 #include <optional>
 #include <random>
@@ -41,6 +44,8 @@
 #include "central_daemon/app/fusion_service.h"
 #include "central_daemon/app/live_feed.h"
 #include "central_daemon/app/live_state.h"
+#include "central_daemon/app/mqtt_service.h"
+#include "central_daemon/app/zone_service.h"
 #include "central_daemon/app/stats_json.h"
 #include "central_daemon/calibration/calibration_yaml.h"
 #include "central_daemon/io/datagram_source.h"
@@ -165,6 +170,8 @@ struct RunOptions {
   std::optional<std::string> live_view_flag;
   std::optional<std::string> fused_out_flag;
   std::optional<std::string> fused_udp_flag;
+  std::optional<std::string> mqtt_flag;
+  std::optional<std::string> mqtt_site_flag;
   double duration_s = 0.0;
   std::string stats_out;
 };
@@ -190,15 +197,79 @@ std::optional<std::string> LoadConfig(const RunOptions& run, DaemonConfig* confi
   if (run.live_view_flag) c.live_view_listen = *run.live_view_flag;
   if (run.fused_out_flag) c.fusion_record = *run.fused_out_flag;
   if (run.fused_udp_flag) c.fusion_publish = *run.fused_udp_flag;
+  if (run.mqtt_flag) c.mqtt.broker = *run.mqtt_flag;
+  if (run.mqtt_site_flag) c.mqtt.site = *run.mqtt_site_flag;
   if (auto e = Validate(c)) return (run.config_path.empty() ? "" : run.config_path + ": ") + *e;
   *config = c;
   return std::nullopt;
 }
 
+// The MQTT output of a run: the service, its publisher and the sink between them.
+struct MqttOutput {
+  std::unique_ptr<MqttPublisher> publisher;
+  std::unique_ptr<MqttPublisherSink> sink;
+  std::unique_ptr<MqttService> service;
+};
+
+// Starts the MQTT output when configured. False (with the error printed) when it cannot start.
+bool StartMqtt(const DaemonConfig& config, bool offline, MqttOutput* out) {
+  if (config.mqtt.broker.empty()) return true;
+  out->sink = std::make_unique<MqttPublisherSink>(nullptr);
+  out->service = std::make_unique<MqttService>(config, out->sink.get(), Writer());
+  MqttOptions options = PublisherOptions(config, *out->service);
+  options.wait_when_full = offline;
+  out->publisher = std::make_unique<MqttPublisher>(options);
+  out->sink->set_publisher(out->publisher.get());
+  std::string error;
+  if (!out->publisher->Start(&error)) {
+    std::fprintf(stderr, "lrfnetd: %s\n", error.c_str());
+    return false;
+  }
+  spdlog::info("mqtt: publishing to {} as {}/{}/...", config.mqtt.broker, config.mqtt.topic_prefix,
+               config.mqtt.site);
+  return true;
+}
+
+// The final zone states and "offline", then a clean disconnect (the will is not used).
+void StopMqtt(MqttOutput* mqtt, const ZoneService& zones, common::UtcNs now_ns, double timeout_s) {
+  if (!mqtt->service) return;
+  mqtt->service->PublishZones(zones);
+  mqtt->service->PublishStatus(false, now_ns);
+  mqtt->publisher->Stop(timeout_s);
+  const MqttCounters c = mqtt->publisher->counters();
+  spdlog::info("mqtt: {} messages sent, {} dropped (queue full {}, broker unreachable {}, lost in "
+               "flight {}), {} connects, {} lost connections",
+               c.sent, c.dropped_queue_full + c.dropped_disconnected + c.lost_in_flight,
+               c.dropped_queue_full, c.dropped_disconnected, c.lost_in_flight, c.connects,
+               c.disconnects);
+}
+
+nlohmann::json MqttJson(const MqttOutput& mqtt) {
+  const MqttCounters c = mqtt.publisher->counters();
+  const MqttServiceCounters& s = mqtt.service->counters();
+  return {{"submitted", c.submitted},
+          {"sent", c.sent},
+          {"dropped_queue_full", c.dropped_queue_full},
+          {"dropped_disconnected", c.dropped_disconnected},
+          {"lost_in_flight", c.lost_in_flight},
+          {"retained_replaced", c.retained_replaced},
+          {"publish_errors", c.publish_errors},
+          {"connects", c.connects},
+          {"connect_failures", c.connect_failures},
+          {"disconnects", c.disconnects},
+          {"resent", c.resent},
+          {"unsent", c.queued + c.in_flight},
+          {"objects", s.objects},
+          {"zones", s.zones},
+          {"calibrations", s.calibrations},
+          {"health", s.health}};
+}
+
 bool WriteStats(const std::string& path, const Daemon& daemon, const UdpReceiver* receiver,
-                const Recorder* recorder) {
+                const Recorder* recorder, const MqttOutput* mqtt = nullptr) {
   if (path.empty()) return true;
   nlohmann::json j = StatsJson(daemon.ingest(), daemon.store());
+  if (mqtt != nullptr && mqtt->publisher) j["mqtt"] = MqttJson(*mqtt);
   j["requests_sent"] = daemon.requests_sent();
   j["requests_dropped"] = daemon.requests_dropped();
   if (receiver != nullptr) j["receiver"] = ReceiverJson(receiver->counters());
@@ -272,6 +343,10 @@ int RunLive(const RunOptions& run, DaemonConfig config) {
     return kExitFailure;
   }
   daemon.set_frame_listener(&fusion);
+  ZoneService zones(config);
+  MqttOutput mqtt;
+  if (!StartMqtt(config, false, &mqtt)) return kExitFailure;
+  if (mqtt.service) mqtt.service->PublishStatus(true, NowUtcNs());
   std::uint64_t applied_calibrations = 0;
   if (!config.calibration_initial.empty()) {
     calib::CalibrationOutcome initial;
@@ -282,6 +357,7 @@ int RunLive(const RunOptions& run, DaemonConfig config) {
     spdlog::info("calibration: starting from {} ({} sensors)", config.calibration_initial,
                  initial.result.sensors.size());
     fusion.SetCalibration(initial.result);
+    if (mqtt.service) mqtt.service->PublishCalibration(initial.result, NowUtcNs());
     calibration.SetInitial(std::move(initial));
   }
   std::optional<LiveViewServer> live_view;
@@ -342,6 +418,7 @@ int RunLive(const RunOptions& run, DaemonConfig config) {
       if (calibration.counters().successes != applied_calibrations && calibration.latest()) {
         applied_calibrations = calibration.counters().successes;
         fusion.SetCalibration(calibration.latest()->result);
+        if (mqtt.service) mqtt.service->PublishCalibration(calibration.latest()->result, NowUtcNs());
         // One line on stdout per calibration, for scripts.
         std::printf("calibrated %s\n", config.calibration_output.empty()
                                             ? "(not written)"
@@ -367,6 +444,14 @@ int RunLive(const RunOptions& run, DaemonConfig config) {
       if (fusion.calibrated()) {
         line += fmt::format(" | fused tracks {}", fusion.fuser().Snapshot(fusion.now_ns()).size());
       }
+      if (mqtt.publisher) {
+        const MqttCounters m = mqtt.publisher->counters();
+        line += fmt::format(" | mqtt {} sent {} dropped {}",
+                            mqtt.publisher->connected() ? "connected" : "disconnected", m.sent,
+                            m.dropped_queue_full + m.dropped_disconnected + m.lost_in_flight);
+        if (!mqtt.publisher->connected() && !mqtt.publisher->last_error().empty())
+          line += " (" + mqtt.publisher->last_error() + ")";
+      }
       if (recorder)
         line += fmt::format(" | recorded {:.1f} MiB",
                             static_cast<double>(recorder->writer().counters().bytes_written) /
@@ -390,6 +475,22 @@ int RunLive(const RunOptions& run, DaemonConfig config) {
     });
   };
   schedule_fusion();
+
+  // Zones and MQTT: checked at the higher of their rates; each is due on its own clock.
+  asio::steady_timer outputs_timer(io);
+  const double outputs_hz = std::max(config.zones_update_hz, config.mqtt.objects_hz);
+  std::function<void()> schedule_outputs = [&] {
+    if (!zones.enabled() && !mqtt.service) return;
+    outputs_timer.expires_after(std::chrono::duration_cast<std::chrono::steady_clock::duration>(
+        std::chrono::duration<double>(1.0 / outputs_hz)));
+    outputs_timer.async_wait([&](const boost::system::error_code& ec) {
+      if (ec || stopping) return;
+      zones.OnTick(fusion);
+      if (mqtt.service) mqtt.service->OnTick(NowUtcNs(), daemon, fusion, zones);
+      schedule_outputs();
+    });
+  };
+  schedule_outputs();
 
   asio::steady_timer live_timer(io);
   std::function<void()> schedule_live = [&] {
@@ -476,6 +577,7 @@ int RunLive(const RunOptions& run, DaemonConfig config) {
   fusion.Close();
   daemon.OnTick(NowUtcNs());
   LogEvents(daemon, config.ingest.silent_after_s);
+  StopMqtt(&mqtt, zones, NowUtcNs(), 2.0);
   int exit_code = kExitOk;
   if (recorder) {
     if (auto e = recorder->Close()) {
@@ -483,7 +585,7 @@ int RunLive(const RunOptions& run, DaemonConfig config) {
       exit_code = kExitFailure;
     }
   }
-  if (!WriteStats(run.stats_out, daemon, &receiver, recorder ? &*recorder : nullptr))
+  if (!WriteStats(run.stats_out, daemon, &receiver, recorder ? &*recorder : nullptr, &mqtt))
     exit_code = kExitFailure;
   std::printf("%s received=%llu kernel_drops=%llu requests_sent=%llu%s\n", Summary(daemon).c_str(),
               static_cast<unsigned long long>(receiver.counters().datagrams),
@@ -524,6 +626,15 @@ int RunOffline(const RunOptions& run, const DaemonConfig& config,
   // With a calibration to start from, the input is fused as it is read (on its receive times).
   asio::io_context io;
   FusionService fusion(io, config);
+  ZoneService zones(config);
+  MqttOutput mqtt;
+  if (!StartMqtt(config, true, &mqtt)) return kExitFailure;
+  if (mqtt.service) {
+    // Offline the input is read as fast as it goes: wait for the broker rather than drop.
+    if (!mqtt.publisher->WaitConnected(10.0))
+      spdlog::warn("mqtt: not connected to {} after 10 s ({}); publishing what can be",
+                   config.mqtt.broker, mqtt.publisher->last_error());
+  }
   if (!config.calibration_initial.empty()) {
     calib::CalibrationOutcome initial;
     if (auto e = LoadInitialCalibration(config.calibration_initial, &initial)) {
@@ -536,6 +647,7 @@ int RunOffline(const RunOptions& run, const DaemonConfig& config,
     }
     fusion.SetCalibration(initial.result);
     core.set_frame_listener(&fusion);
+    if (mqtt.service) mqtt.service->PublishCalibration(initial.result, 0);
   }
   const auto fusion_period_ns = static_cast<common::DurationNs>(1e9 / config.fusion_publish_hz);
   common::UtcNs last_fusion_ns = 0;
@@ -556,12 +668,15 @@ int RunOffline(const RunOptions& run, const DaemonConfig& config,
     SourceStatus status;
     while ((status = source->Next(&d)) == SourceStatus::kDatagram) {
       core.OnDatagram(d.bytes, d.source, d.receive_ns);
+      if (last_ns == 0 && mqtt.service) mqtt.service->PublishStatus(true, d.receive_ns);
       last_ns = d.receive_ns;
       if (fusion.calibrated() && (d.receive_ns - last_fusion_ns >= fusion_period_ns ||
                                   d.receive_ns < last_fusion_ns)) {
         fusion.OnTick(static_cast<double>(d.receive_ns) * 1e-9);
         last_fusion_ns = d.receive_ns;
       }
+      zones.OnTick(fusion);
+      if (mqtt.service) mqtt.service->OnTick(d.receive_ns, core, fusion, zones);
       if (d.receive_ns - last_tick_ns >= kTickPeriodNs || d.receive_ns < last_tick_ns) {
         core.OnTick(d.receive_ns);
         LogEvents(core, config.ingest.silent_after_s);
@@ -606,6 +721,7 @@ int RunOffline(const RunOptions& run, const DaemonConfig& config,
       spdlog::info("calibration: reference {}, {} sensors, track residual {:.3f} m rms",
                    outcome.result.reference, outcome.result.sensors.size(),
                    outcome.result.track_residual_rms_m);
+      if (mqtt.service) mqtt.service->PublishCalibration(outcome.result, last_ns);
       const std::string e = WriteCalibrationFiles(outcome, config.calibration_output,
                                                   config.calibration_report_dir, inputs);
       if (!e.empty()) {
@@ -616,7 +732,9 @@ int RunOffline(const RunOptions& run, const DaemonConfig& config,
       }
     }
   }
-  if (!WriteStats(run.stats_out, core, nullptr, recorder && tee.opened ? &*recorder : nullptr))
+  StopMqtt(&mqtt, zones, last_ns, 30.0);
+  if (!WriteStats(run.stats_out, core, nullptr, recorder && tee.opened ? &*recorder : nullptr,
+                  &mqtt))
     exit_code = kExitFailure;
   std::printf("%s\n", Summary(core).c_str());
   std::fflush(stdout);
@@ -667,6 +785,11 @@ int Run(int argc, char** argv) {
       "append the fused tracks as JSON lines to this file (overrides fusion.record)")(
       "fused-udp", po::value<std::string>(),
       "send the fused tracks as JSON datagrams to HOST:PORT (overrides fusion.publish)")(
+      "mqtt", po::value<std::string>(),
+      "publish objects, zones, calibration and health to the MQTT broker at HOST:PORT (overrides "
+      "mqtt.broker)")(
+      "mqtt-site", po::value<std::string>(),
+      "the site's name in the MQTT topics (overrides mqtt.site)")(
       "stats-out", po::value<std::string>(&run.stats_out),
       "at exit, write every counter (per sensor and reason) as JSON to this file")(
       "log-level", po::value<std::string>(&log_level)->default_value("info"),
@@ -692,7 +815,8 @@ int Run(int argc, char** argv) {
   for (const auto& [flag, target] :
        {std::pair{"calibration-in", &run.calibration_in_flag},
         std::pair{"live-view", &run.live_view_flag}, std::pair{"fused-out", &run.fused_out_flag},
-        std::pair{"fused-udp", &run.fused_udp_flag}}) {
+        std::pair{"fused-udp", &run.fused_udp_flag}, std::pair{"mqtt", &run.mqtt_flag},
+        std::pair{"mqtt-site", &run.mqtt_site_flag}}) {
     if (vm.count(flag) != 0) *target = vm[flag].as<std::string>();
   }
   if (udp_port < 0 || udp_port > 65535) return UsageError("--udp-port must be 0..65535");
