@@ -28,9 +28,26 @@ std::vector<std::array<float, 2>> BackgroundPoints(const BackgroundScan& scan,
 
 }  // namespace
 
+namespace {
+
+// Every k-th beam (k as BackgroundPoints takes every k-th valid point) of the scan.
+void BackgroundScanOf(const BackgroundScan& scan, std::size_t max_points, LiveSensor* sensor) {
+  std::size_t valid = 0;
+  for (std::uint32_t r : scan.ranges_mm) valid += r > 0 ? 1 : 0;
+  if (valid == 0 || max_points == 0) return;
+  const std::size_t stride = (valid + max_points - 1) / max_points;
+  sensor->background_first_angle_rad = scan.first_angle_rad;
+  sensor->background_angle_step_rad = scan.angle_step_rad * static_cast<double>(stride);
+  for (std::size_t i = 0; i < scan.ranges_mm.size(); i += stride) {
+    sensor->background_ranges_m.push_back(static_cast<float>(scan.ranges_mm[i] * 1e-3));
+  }
+}
+
+}  // namespace
+
 LiveState LiveFeed::Build(const Daemon& daemon, const CalibrationService& calibration,
                           const FusionService& fusion, common::UtcNs now_ns,
-                          const std::string& version) {
+                          const std::string& version, const ZoneService* zones) {
   LiveState state;
   state.stamp_ns = fusion.now_ns() != 0 ? fusion.now_ns() : now_ns;
   state.version = version;
@@ -93,6 +110,7 @@ LiveState LiveFeed::Build(const Daemon& daemon, const CalibrationService& calibr
       sensor.background_xy = BackgroundPoints(
           *background, sensor.placed ? sensor.world_from_sensor : common::Pose2::Identity(),
           background_points_);
+      BackgroundScanOf(*background, background_points_, &sensor);
     }
     state.sensors.push_back(std::move(sensor));
   }
@@ -148,6 +166,22 @@ LiveState LiveFeed::Build(const Daemon& daemon, const CalibrationService& calibr
       track.vx_mps = o.vx_mps;
       track.vy_mps = o.vy_mps;
       state.tracks.push_back(std::move(track));
+    }
+  }
+  if (zones != nullptr) {
+    const std::vector<zones::ZoneState> states = zones->States();
+    for (std::size_t i = 0; i < zones->zones().size(); ++i) {
+      const zones::Zone& z = zones->zones()[i];
+      LiveZone zone;
+      zone.name = z.name;
+      zone.kind = zones::ToString(z.kind);
+      for (const zones::Point& p : z.points) zone.points.push_back({p.x_m, p.y_m});
+      if (i < states.size()) {
+        zone.occupancy = states[i].present_ids.size();
+        zone.inbound = states[i].inbound;
+        zone.outbound = states[i].outbound;
+      }
+      state.zones.push_back(std::move(zone));
     }
   }
   return state;

@@ -10,6 +10,7 @@
 #include "central_daemon/app/daemon.h"
 #include "central_daemon/app/fusion_service.h"
 #include "central_daemon/app/live_state.h"
+#include "central_daemon/app/zone_service.h"
 
 namespace lrfnet::daemon {
 
@@ -18,8 +19,10 @@ class LiveFeed {
   explicit LiveFeed(std::size_t background_points) : background_points_(background_points) {}
 
   // now_ns: the daemon's clock (rates); the track times come from the fusion service.
+  // zones: may be null (none).
   LiveState Build(const Daemon& daemon, const CalibrationService& calibration,
-                  const FusionService& fusion, common::UtcNs now_ns, const std::string& version);
+                  const FusionService& fusion, common::UtcNs now_ns, const std::string& version,
+                  const ZoneService* zones = nullptr);
 
  private:
   struct Mark {

@@ -318,6 +318,32 @@ std::string LiveStateJson(const LiveState& state) {
   w.BeginArray();
   for (const auto& f : state.fused) WriteFused(w, f);
   w.EndArray();
+  w.Key("zones");
+  w.BeginArray();
+  for (const LiveZone& z : state.zones) {
+    w.BeginObject();
+    w.Key("name");
+    w.String(z.name);
+    w.Key("kind");
+    w.String(z.kind);
+    w.Key("points");
+    w.BeginArray();
+    for (const auto& p : z.points) {
+      w.BeginArray();
+      w.Metres(p[0]);
+      w.Metres(p[1]);
+      w.EndArray();
+    }
+    w.EndArray();
+    w.Key("occupancy");
+    w.UInt(z.occupancy);
+    w.Key("inbound");
+    w.UInt(z.inbound);
+    w.Key("outbound");
+    w.UInt(z.outbound);
+    w.EndObject();
+  }
+  w.EndArray();
   w.EndObject();
   return out;
 }

@@ -32,6 +32,11 @@ struct LiveSensor {
   std::string clock_sync;  // "synchronized", "unsynchronized", "replay", "unknown"
   std::uint64_t track_frames = 0;
   std::vector<std::array<float, 2>> background_xy;  // static points (frame: see above)
+  // The same background as a scan in the sensor frame (every k-th beam, k as for background_xy):
+  // for Foxglove's LaserScan. Not in LiveStateJson.
+  double background_first_angle_rad = 0.0;
+  double background_angle_step_rad = 0.0;
+  std::vector<float> background_ranges_m;  // 0: no static return
 };
 
 struct LiveTrack {
@@ -58,6 +63,16 @@ struct LiveCalibration {
   double track_residual_rms_m = 0.0;
 };
 
+// A zone (world frame) with its counts.
+struct LiveZone {
+  std::string name;
+  std::string kind;  // "polygon", "line"
+  std::vector<std::array<double, 2>> points;
+  std::size_t occupancy = 0;
+  std::uint64_t inbound = 0;
+  std::uint64_t outbound = 0;
+};
+
 struct LiveState {
   common::UtcNs stamp_ns = 0;
   std::string version;
@@ -65,6 +80,7 @@ struct LiveState {
   std::vector<LiveSensor> sensors;
   std::vector<LiveTrack> tracks;
   std::vector<LiveFusedTrack> fused;
+  std::vector<LiveZone> zones;
 };
 
 // One JSON object, e.g.
@@ -72,7 +88,9 @@ struct LiveState {
 //  "sensors":[{"id":"s1","placed":true,"x_m":..,"y_m":..,"yaw_rad":..,"first_angle_rad":..,
 //   "fov_rad":..,"max_range_m":..,"status":"active",...,"background":[[x,y],...]}],
 //  "tracks":[{"sensor":"s1","id":3,"state":"confirmed","x_m":..,...,"fused":7}],
-//  "fused":[{"id":7,"state":"confirmed","x_m":..,...,"sensors":["s1","s2"]}]}
+//  "fused":[{"id":7,"state":"confirmed","x_m":..,...,"sensors":["s1","s2"]}],
+//  "zones":[{"name":"door","kind":"line","points":[[x,y],...],"occupancy":0,"inbound":3,
+//   "outbound":1}]}
 // Coordinates with millimetre precision; strings escaped; non-finite numbers written as null.
 std::string LiveStateJson(const LiveState& state);
 

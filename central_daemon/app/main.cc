@@ -41,6 +41,7 @@
 #include "central_daemon/app/calibration_service.h"
 #include "central_daemon/app/config.h"
 #include "central_daemon/app/daemon.h"
+#include "central_daemon/app/foxglove_feed.h"
 #include "central_daemon/app/fusion_service.h"
 #include "central_daemon/app/live_feed.h"
 #include "central_daemon/app/live_state.h"
@@ -499,8 +500,10 @@ int RunLive(const RunOptions& run, DaemonConfig config) {
         std::chrono::duration<double>(1.0 / config.live_view_publish_hz)));
     live_timer.async_wait([&](const boost::system::error_code& ec) {
       if (ec || stopping) return;
-      live_view->Publish(
-          LiveStateJson(live_feed.Build(daemon, calibration, fusion, NowUtcNs(), Writer())));
+      const LiveState state =
+          live_feed.Build(daemon, calibration, fusion, NowUtcNs(), Writer(), &zones);
+      live_view->PublishFoxglove(FoxgloveMessagesOf(state));
+      live_view->Publish(LiveStateJson(state));
       schedule_live();
     });
   };

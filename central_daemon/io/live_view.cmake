@@ -31,10 +31,14 @@ const std::string& LiveViewPage() {
 }  // namespace lrfnet::daemon
 ")
 
-add_library(lrfnet_live_view_http STATIC live_view_http.cc
+# The Foxglove WebSocket protocol's messages (foxglove_protocol.cc) are built and parsed here too.
+if(NOT TARGET nlohmann_json::nlohmann_json)
+  find_package(nlohmann_json 3 REQUIRED)
+endif()
+add_library(lrfnet_live_view_http STATIC live_view_http.cc foxglove_protocol.cc
                                          ${CMAKE_CURRENT_BINARY_DIR}/live_view_page.cc)
 target_include_directories(lrfnet_live_view_http PUBLIC ${PROJECT_SOURCE_DIR})
-target_link_libraries(lrfnet_live_view_http PUBLIC Boost::boost)
+target_link_libraries(lrfnet_live_view_http PUBLIC Boost::boost PRIVATE nlohmann_json::nlohmann_json)
 lrfnet_warnings(lrfnet_live_view_http)
 if(LRFNET_FUZZ)
   # Coverage feedback from the request handling itself, not only from the fuzz target.
@@ -49,21 +53,26 @@ target_link_libraries(lrfnet_daemon_live_view PUBLIC lrfnet_live_view_http Boost
 lrfnet_warnings(lrfnet_daemon_live_view)
 
 # Real sockets on loopback with Beast clients: routes, limits, hostile clients, slow WebSocket
-# readers, max_clients, Stop().
-lrfnet_test(live_view_server_test SOURCES live_view_server_test.cc LIBS lrfnet_daemon_live_view)
+# readers, max_clients, Stop(); the Foxglove protocol (subprotocols, channels, subscriptions,
+# hostile client messages, origins).
+lrfnet_test(live_view_server_test SOURCES live_view_server_test.cc
+            LIBS lrfnet_daemon_live_view nlohmann_json::nlohmann_json)
 
 # The page in headless Chromium (Debian's chromium; skipped when absent): six sensors and moving
-# tracks on the page, a screenshot in test_artifacts/. Only the pure JSON writer of the daemon's
+# tracks on the page, a screenshot in test_artifacts/; and the same state to the real Foxglove
+# client (@foxglove/ws-protocol in node, tests/node; skipped when not installed). Only the pure JSON writer of the daemon's
 # app is compiled in, not the whole daemon. Not lrfnet_test: it needs its own, shorter timeout.
 if(BUILD_TESTING)
   find_package(ZLIB REQUIRED)  # to read the screenshot back
   add_executable(live_view_browser_test live_view_browser_test.cc
-                                        ${PROJECT_SOURCE_DIR}/central_daemon/app/live_state.cc)
+                                        ${PROJECT_SOURCE_DIR}/central_daemon/app/live_state.cc
+                                        ${PROJECT_SOURCE_DIR}/central_daemon/app/foxglove_feed.cc)
   target_link_libraries(live_view_browser_test PRIVATE lrfnet_daemon_live_view lrfnet_common
                                                        nlohmann_json::nlohmann_json ZLIB::ZLIB
                                                        lrfnet_test_support GTest::gtest_main)
   target_compile_definitions(live_view_browser_test PRIVATE
-    LRFNET_TEST_ARTIFACTS_DIR="${CMAKE_BINARY_DIR}/test_artifacts")
+    LRFNET_TEST_ARTIFACTS_DIR="${CMAKE_BINARY_DIR}/test_artifacts"
+    LRFNET_NODE_DIR="${PROJECT_SOURCE_DIR}/tests/node")
   lrfnet_warnings(live_view_browser_test)
   gtest_discover_tests(live_view_browser_test DISCOVERY_TIMEOUT 120 PROPERTIES TIMEOUT 60)
 endif()

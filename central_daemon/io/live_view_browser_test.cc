@@ -36,9 +36,11 @@
 #include <thread>
 #include <vector>
 
+#include "central_daemon/app/foxglove_feed.h"
 #include "central_daemon/app/live_state.h"
 #include "central_daemon/io/live_view_server.h"
 #include "common/geometry.h"
+#include "tests/node_clients.h"
 #include "tests/process_harness.h"
 
 extern char** environ;
@@ -125,10 +127,13 @@ LiveState RoomState(double t_s, bool placed) {
     s.clock_sync = i == 2 ? "unsynchronized" : "synchronized";
     s.track_frames = 1000 * i;
     // A beam every 2.5 degrees to the walls.
+    s.background_first_angle_rad = s.first_angle_rad;
+    s.background_angle_step_rad = common::DegToRad(2.5);
     for (double a = 0; a <= r.fov_deg; a += 2.5) {
       const double beam_rad = s.first_angle_rad + common::DegToRad(a);
       const double world_rad = world_from_sensor.yaw_rad + beam_rad;
       const double d = WallDistance(r.x_m, r.y_m, world_rad);
+      s.background_ranges_m.push_back(d > r.max_range_m ? 0.0f : static_cast<float>(d));
       if (d > r.max_range_m) continue;
       const Eigen::Vector2d local(d * std::cos(beam_rad), d * std::sin(beam_rad));
       const Eigen::Vector2d p = placed ? world_from_sensor * local : local;
@@ -173,6 +178,8 @@ LiveState RoomState(double t_s, bool placed) {
       state.tracks.push_back(t);
     }
   }
+  state.zones.push_back({"door", "line", {{6.0, 1.0}, {6.0, 5.0}}, 0, 4, 3});
+  state.zones.push_back({"lobby", "polygon", {{9.0, 1.0}, {13.0, 1.0}, {13.0, 4.0}, {9.0, 4.0}}, 1, 5, 4});
   return state;
 }
 
@@ -542,7 +549,9 @@ class LiveViewBrowserTest : public ::testing::Test {
   void PublishEvery100Ms() {
     if (server_) {
       const double t_s = std::chrono::duration<double>(Clock::now() - start_).count();
-      server_->Publish(LiveStateJson(RoomState(t_s, placed_)));
+      const LiveState state = RoomState(t_s, placed_);
+      server_->PublishFoxglove(FoxgloveMessagesOf(state));
+      server_->Publish(LiveStateJson(state));
     }
     timer_.expires_after(100ms);
     timer_.async_wait([this](const boost::system::error_code& ec) {
@@ -618,6 +627,9 @@ TEST_F(LiveViewBrowserTest, ShowsPlacedSensorsAndMovingTracksAndReconnects) {
   EXPECT_EQ(Attribute(html, "data-placed"), 6);
   EXPECT_EQ(Attribute(html, "data-tracks"), 12);
   EXPECT_EQ(Attribute(html, "data-fused"), 2);
+  EXPECT_EQ(Attribute(html, "data-zones"), 2);
+  EXPECT_EQ(browser.Evaluate("document.querySelector('#zone-rows tr[data-zone=\"door\"]').textContent"),
+            "door (line)043");
   EXPECT_EQ(Attribute(html, "data-errors"), 0);
   EXPECT_EQ(Attribute(html, "data-script-errors"), 0);
   const double moved = browser.WaitForSummary("moved", 0.8, 5s);
@@ -671,6 +683,118 @@ TEST_F(LiveViewBrowserTest, BeforeCalibrationShowsEachSensorInItsOwnFrame) {
   EXPECT_EQ(browser.Evaluate("document.getElementById('calib-state').textContent"), "collecting");
   EXPECT_EQ(browser.Evaluate("document.getElementById('calib-percent').textContent"), "45 %");
   EXPECT_EQ(browser.Evaluate("document.getElementById('progress-fill').style.width"), "45%");
+}
+
+// ---- Foxglove -------------------------------------------------------------------------------
+
+// The same server and state, with the real Foxglove client (@foxglove/ws-protocol, node).
+class LiveViewFoxgloveTest : public LiveViewBrowserTest {
+ protected:
+  void SetUp() override {
+    const std::string missing = testing::NodeClientsMissing();
+    if (!missing.empty()) GTEST_SKIP() << missing;
+  }
+  // Runs the client until every channel sent something and `wait_topic` three messages.
+  json RunClient(const std::string& path, const std::string& subprotocol,
+                 const std::string& wait_topic) {
+    testing::Process node(testing::kNode,
+                          {std::string(LRFNET_NODE_DIR) + "/foxglove_client.mjs",
+                           "ws://127.0.0.1:" + std::to_string(port_) + path, subprotocol,
+                           wait_topic, "3", "20"});
+    EXPECT_EQ(node.Wait(30s), 0) << node.err();
+    const json summary = json::parse(node.out(), nullptr, false);
+    EXPECT_TRUE(summary.is_object()) << node.out() << node.err();
+    return summary;
+  }
+};
+
+double Yaw(const json& q) {
+  return 2.0 * std::atan2(q["z"].get<double>(), q["w"].get<double>());
+}
+
+TEST_F(LiveViewFoxgloveTest, AFoxgloveClientSeesSensorsTracksTransformsAndZones) {
+  StartServer(/*placed=*/true);
+  RunIo();
+  const json summary = RunClient("/", "foxglove.websocket.v1", "/lrfnet/fused");
+  ASSERT_TRUE(summary.is_object());
+  EXPECT_EQ(summary["subprotocol"], "foxglove.websocket.v1");
+  EXPECT_EQ(summary["serverInfo"]["name"], "lrfnetd");
+  EXPECT_TRUE(summary["invalid"].empty()) << summary["invalid"].dump(1);
+  EXPECT_TRUE(summary["errors"].empty()) << summary["errors"].dump(1);
+  std::map<std::string, std::string> schema_of;
+  for (const json& c : summary["channels"]) schema_of[c["topic"]] = c["schemaName"];
+  EXPECT_EQ(schema_of["/tf"], "foxglove.FrameTransforms");
+  EXPECT_EQ(schema_of["/lrfnet/fused"], "foxglove.SceneUpdate");
+  EXPECT_EQ(schema_of["/lrfnet/zones"], "foxglove.SceneUpdate");
+  EXPECT_EQ(schema_of["/lrfnet/calibration"], "lrfnet.Calibration");
+  for (const RoomSensor& r : kRoom) {
+    EXPECT_EQ(schema_of["/lrfnet/tracks/" + std::string(r.id)], "foxglove.SceneUpdate") << r.id;
+    EXPECT_EQ(schema_of["/lrfnet/background/" + std::string(r.id)], "foxglove.LaserScan") << r.id;
+  }
+  const json& last = summary["last"];
+  // Sensor poses as transforms from the world.
+  ASSERT_EQ(last["/tf"]["transforms"].size(), kRoom.size());
+  for (const json& t : last["/tf"]["transforms"]) {
+    const auto room = std::find_if(kRoom.begin(), kRoom.end(), [&](const RoomSensor& r) {
+      return t["child_frame_id"] == r.id;
+    });
+    ASSERT_NE(room, kRoom.end()) << t.dump();
+    EXPECT_EQ(t["parent_frame_id"], "world");
+    EXPECT_NEAR(t["translation"]["x"].get<double>(), room->x_m, 1e-9);
+    EXPECT_NEAR(t["translation"]["y"].get<double>(), room->y_m, 1e-9);
+    EXPECT_NEAR(common::AngleDiff(Yaw(t["rotation"]), common::DegToRad(room->yaw_deg)), 0.0, 1e-9);
+  }
+  // Two people, each a cylinder at its fused position, with its id; the message's time is the
+  // state's.
+  const json& fused = last["/lrfnet/fused"];
+  ASSERT_EQ(fused["entities"].size(), 2u);
+  for (const json& e : fused["entities"]) {
+    EXPECT_EQ(e["frame_id"], "world");
+    ASSERT_EQ(e["cylinders"].size(), 1u);
+    const double x = e["cylinders"][0]["pose"]["position"]["x"].get<double>();
+    const double y = e["cylinders"][0]["pose"]["position"]["y"].get<double>();
+    EXPECT_GT(x, 0.0);
+    EXPECT_LT(x, 16.0);
+    EXPECT_GT(y, 0.0);
+    EXPECT_LT(y, 12.0);
+    EXPECT_TRUE(e["texts"][0]["text"] == "7" || e["texts"][0]["text"] == "8");
+  }
+  const std::uint64_t stamp = std::stoull(last["/lrfnet/fused#timestamp"].get<std::string>());
+  EXPECT_EQ(stamp, fused["entities"][0]["timestamp"]["sec"].get<std::uint64_t>() * 1'000'000'000 +
+                       fused["entities"][0]["timestamp"]["nsec"].get<std::uint64_t>());
+  // Each sensor's raw tracks; its background as a scan in its own frame.
+  EXPECT_EQ(last["/lrfnet/tracks/s1"]["entities"].size(), 2u);
+  const json& scan = last["/lrfnet/background/s1"];
+  EXPECT_EQ(scan["frame_id"], "s1");
+  EXPECT_GT(scan["ranges"].size(), 50u);
+  EXPECT_NEAR(scan["start_angle"].get<double>(), -common::DegToRad(kRoom[0].fov_deg) / 2, 1e-9);
+  // Zones with their counts; the calibration state.
+  ASSERT_EQ(last["/lrfnet/zones"]["entities"].size(), 2u);
+  EXPECT_EQ(last["/lrfnet/zones"]["entities"][0]["lines"][0]["points"].size(), 2u);
+  EXPECT_EQ(last["/lrfnet/zones"]["entities"][1]["lines"][0]["type"], 1);  // closed polygon
+  EXPECT_EQ(last["/lrfnet/calibration"]["state"], "calibrated");
+  EXPECT_EQ(last["/lrfnet/calibration"]["sensors"].size(), kRoom.size());
+  // Everything subscribed arrived more than once (moving people), and the counters say so.
+  EXPECT_GE(summary["counts"]["/lrfnet/fused"].get<int>(), 3);
+  const LiveViewCounters c = OnIo([this] { return server_->counters(); });
+  EXPECT_EQ(c.foxglove_clients, 1u);
+  std::uint64_t received = 0;
+  for (const auto& [topic, n] : summary["counts"].items()) received += n.get<std::uint64_t>();
+  EXPECT_GE(c.foxglove_messages_sent, received);
+}
+
+TEST_F(LiveViewFoxgloveTest, NewerClientsSubprotocolAndThePagesFeedSideBySide) {
+  StartServer(/*placed=*/false);
+  RunIo();
+  // foxglove.sdk.v1 (newer Foxglove) on /ws: the same protocol; before calibration no transforms.
+  const json summary = RunClient("/ws", "foxglove.sdk.v1", "/lrfnet/tracks/s2");
+  ASSERT_TRUE(summary.is_object());
+  EXPECT_EQ(summary["subprotocol"], "foxglove.sdk.v1");
+  EXPECT_TRUE(summary["invalid"].empty()) << summary["invalid"].dump(1);
+  EXPECT_TRUE(summary["last"]["/tf"]["transforms"].empty());
+  EXPECT_EQ(summary["last"]["/lrfnet/calibration"]["state"], "collecting");
+  // Raw tracks in each sensor's own frame.
+  EXPECT_EQ(summary["last"]["/lrfnet/tracks/s2"]["entities"][0]["frame_id"], "s2");
 }
 
 }  // namespace

@@ -162,7 +162,8 @@ const char* ToString(LiveViewRoute route) {
 
 LiveViewRoute RouteOf(const HttpRequest& request) {
   const std::string_view path = PathOf(request);
-  if (path == "/ws") {
+  // A WebSocket client (Foxglove) given only the address connects to "/".
+  if (path == "/ws" || (path == "/" && boost::beast::websocket::is_upgrade(request))) {
     if (request.method() != http::verb::get) return LiveViewRoute::kMethodNotAllowed;
     if (!boost::beast::websocket::is_upgrade(request)) return LiveViewRoute::kUpgradeRequired;
     if (!OriginMatchesHost(request)) return LiveViewRoute::kForbiddenOrigin;

@@ -73,7 +73,8 @@ class RequestReader {
 enum class LiveViewRoute {
   kPage,              // GET/HEAD /
   kState,             // GET/HEAD /state
-  kWebSocket,         // GET /ws with a valid-looking upgrade: the caller performs the handshake
+  kWebSocket,         // GET /ws (or / with an upgrade) with a valid-looking upgrade: the caller
+                      // performs the handshake
   kUpgradeRequired,   // /ws without an upgrade: 426
   kForbiddenOrigin,   // /ws upgrade from a page of another origin: 403
   kMethodNotAllowed,  // a known path with a method other than GET/HEAD: 405

@@ -7,16 +7,20 @@
 #include <boost/asio/ip/address.hpp>
 #include <boost/asio/ip/tcp.hpp>
 #include <boost/asio/steady_timer.hpp>
+#include <boost/beast/core/buffers_to_string.hpp>
 #include <boost/beast/core/error.hpp>
 #include <boost/beast/core/flat_buffer.hpp>
 #include <boost/beast/core/tcp_stream.hpp>
 #include <boost/beast/http/write.hpp>
 #include <boost/beast/websocket/stream.hpp>
 #include <chrono>
+#include <deque>
+#include <map>
 #include <optional>
 #include <unordered_set>
 #include <utility>
 
+#include "central_daemon/io/foxglove_protocol.h"
 #include "central_daemon/io/live_view_http.h"
 
 namespace lrfnet::daemon {
@@ -70,7 +74,29 @@ struct Core : std::enable_shared_from_this<Core> {
   std::unordered_set<HttpSession*> http_sessions;
   std::unordered_set<WsSession*> ws_sessions;
   std::size_t ws_open = 0;
+  // Foxglove channels, by id - 1, with their latest message.
+  struct FoxgloveTopic {
+    FoxgloveChannel channel;
+    std::shared_ptr<const std::string> payload;
+    std::uint64_t stamp_ns = 0;
+  };
+  std::vector<FoxgloveTopic> foxglove_topics;
+  std::map<std::string, std::uint32_t, std::less<>> foxglove_ids;
+  std::string session_id = std::to_string(
+      std::chrono::system_clock::now().time_since_epoch().count());
 };
+
+// Does the upgrade come from a page allowed to open a Foxglove connection?
+bool FoxgloveOriginAllowed(const HttpRequest& request, const LiveViewOptions& options) {
+  if (SelectSubprotocol(request).empty()) return false;
+  const auto it = request.find(http::field::origin);
+  if (it == request.end()) return false;
+  const std::string_view origin(it->value().data(), it->value().size());
+  for (const std::string& allowed : options.foxglove_origins) {
+    if (origin == allowed) return true;
+  }
+  return false;
+}
 
 class WsSession : public std::enable_shared_from_this<WsSession> {
  public:
@@ -92,16 +118,44 @@ class WsSession : public std::enable_shared_from_this<WsSession> {
     timeouts.idle_timeout = Seconds(impl_->options.websocket_idle_timeout_s);
     timeouts.keep_alive_pings = true;
     ws_.set_option(timeouts);
-    ws_.set_option(websocket::stream_base::decorator(
-        [](websocket::response_type& r) { r.set(http::field::server, "lrfnetd"); }));
-    // Clients send nothing we use; a large frame from one is an error, not a buffer to grow.
-    ws_.read_message_max(4096);
+    // The subprotocol decides what this connection speaks: Foxglove, or the page's own JSON.
+    subprotocol_ = SelectSubprotocol(request_);
+    foxglove_ = !subprotocol_.empty();
+    ws_.set_option(websocket::stream_base::decorator([protocol = subprotocol_](websocket::response_type& r) {
+      r.set(http::field::server, "lrfnetd");
+      if (!protocol.empty()) r.set(http::field::sec_websocket_protocol, protocol);
+    }));
+    // Clients send little (Foxglove: subscriptions); a large frame from one is an error, not a
+    // buffer to grow.
+    ws_.read_message_max(foxglove_ ? 65536 : 4096);
     ws_.async_accept(request_,
                      [self = shared_from_this()](const error_code& ec) { self->OnAccept(ec); });
   }
 
+  bool foxglove() const { return foxglove_; }
+
+  // Foxglove: a control message (never dropped).
+  void SendControl(std::string text) {
+    if (!open_ || !foxglove_) return;
+    control_.push_back(std::make_shared<const std::string>(std::move(text)));
+    Pump();
+  }
+  // Foxglove: a channel's message to the subscriptions of that channel; an unsent older one of the
+  // same subscription is replaced.
+  void SendChannel(std::uint32_t channel_id, std::uint64_t stamp_ns,
+                   const std::shared_ptr<const std::string>& payload) {
+    if (!open_ || !foxglove_) return;
+    for (const auto& [subscription, channel] : subscriptions_) {
+      if (channel != channel_id) continue;
+      auto [it, inserted] = data_pending_.try_emplace(subscription);
+      if (!inserted) ++impl_->counters.foxglove_messages_replaced;
+      it->second = {stamp_ns, payload};
+    }
+    Pump();
+  }
+
   void Send(const std::shared_ptr<const std::string>& message) {
-    if (!open_) return;
+    if (!open_ || foxglove_) return;
     if (writing_) {
       if (pending_) ++impl_->counters.messages_replaced;
       pending_ = message;
@@ -135,8 +189,76 @@ class WsSession : public std::enable_shared_from_this<WsSession> {
     open_ = true;
     ++impl_->ws_open;
     ++impl_->counters.websocket_clients;
-    if (impl_->latest) Send(impl_->latest);
+    if (foxglove_) {
+      ++impl_->counters.foxglove_clients;
+      SendControl(FoxgloveServerInfo("lrfnetd", impl_->session_id));
+      std::vector<FoxgloveChannel> channels;
+      for (const Core::FoxgloveTopic& t : impl_->foxglove_topics) channels.push_back(t.channel);
+      if (!channels.empty()) SendControl(FoxgloveAdvertise(channels));
+    } else if (impl_->latest) {
+      Send(impl_->latest);
+    }
     Read();
+  }
+
+  // Foxglove: the next control message, else the next channel message, when nothing is being
+  // written.
+  void Pump() {
+    if (!open_ || writing_) return;
+    bool text = true;
+    if (!control_.empty()) {
+      writing_ = std::move(control_.front());
+      control_.pop_front();
+    } else if (!data_pending_.empty()) {
+      const auto it = data_pending_.begin();
+      writing_ = std::make_shared<const std::string>(
+          FoxgloveMessageData(it->first, it->second.stamp_ns, *it->second.payload));
+      data_pending_.erase(it);
+      text = false;
+      ++impl_->counters.foxglove_messages_sent;
+    } else {
+      return;
+    }
+    ws_.text(text);
+    ws_.async_write(
+        asio::buffer(*writing_),
+        [self = shared_from_this()](const error_code& ec, std::size_t) { self->OnWrite(ec); });
+  }
+
+  void OnClientMessage() {
+    const std::string bytes = beast::buffers_to_string(read_buffer_.data());
+    const FoxgloveClientMessage m = ParseFoxgloveClientMessage(bytes, !ws_.got_text());
+    switch (m.kind) {
+      case FoxgloveClientMessage::Kind::kSubscribe:
+        for (const auto& [subscription, channel] : m.subscribe) {
+          if (channel == 0 || channel > impl_->foxglove_topics.size()) {
+            ++impl_->counters.foxglove_refused_messages;
+            SendControl(FoxgloveStatus(1, "subscribe: no channel " + std::to_string(channel)));
+            continue;
+          }
+          subscriptions_[subscription] = channel;
+          const Core::FoxgloveTopic& topic = impl_->foxglove_topics[channel - 1];
+          if (topic.payload) {
+            data_pending_[subscription] = {topic.stamp_ns, topic.payload};
+          }
+        }
+        Pump();
+        break;
+      case FoxgloveClientMessage::Kind::kUnsubscribe:
+        for (const std::uint32_t subscription : m.unsubscribe) {
+          subscriptions_.erase(subscription);
+          data_pending_.erase(subscription);
+        }
+        break;
+      case FoxgloveClientMessage::Kind::kUnsupported:
+        ++impl_->counters.foxglove_refused_messages;
+        SendControl(FoxgloveStatus(1, "lrfnetd does not support '" + m.op + "'"));
+        break;
+      case FoxgloveClientMessage::Kind::kBad:
+        ++impl_->counters.foxglove_refused_messages;
+        SendControl(FoxgloveStatus(2, "malformed message: " + m.error));
+        break;
+    }
   }
 
   void Read() {
@@ -151,6 +273,7 @@ class WsSession : public std::enable_shared_from_this<WsSession> {
       Close();
       return;
     }
+    if (foxglove_) OnClientMessage();
     read_buffer_.consume(read_buffer_.size());
     Read();
   }
@@ -162,6 +285,10 @@ class WsSession : public std::enable_shared_from_this<WsSession> {
       return;
     }
     ++impl_->counters.messages_sent;
+    if (foxglove_) {
+      Pump();
+      return;
+    }
     if (pending_) {
       const auto next = std::move(pending_);
       pending_.reset();
@@ -175,6 +302,8 @@ class WsSession : public std::enable_shared_from_this<WsSession> {
       --impl_->ws_open;
     }
     pending_.reset();
+    control_.clear();
+    data_pending_.clear();
   }
 
   std::shared_ptr<Core> impl_;
@@ -184,6 +313,16 @@ class WsSession : public std::enable_shared_from_this<WsSession> {
   bool open_ = false;
   std::shared_ptr<const std::string> writing_;  // the frame being written (keeps its bytes alive)
   std::shared_ptr<const std::string> pending_;  // at most one; a newer message replaces it
+  // Foxglove.
+  std::string subprotocol_;
+  bool foxglove_ = false;
+  std::map<std::uint32_t, std::uint32_t> subscriptions_;  // subscription id -> channel id
+  std::deque<std::shared_ptr<const std::string>> control_;
+  struct PendingData {
+    std::uint64_t stamp_ns = 0;
+    std::shared_ptr<const std::string> payload;
+  };
+  std::map<std::uint32_t, PendingData> data_pending_;  // by subscription id
 };
 
 class HttpSession : public std::enable_shared_from_this<HttpSession> {
@@ -279,6 +418,11 @@ class HttpSession : public std::enable_shared_from_this<HttpSession> {
         ++impl_->counters.method_not_allowed;
         break;
       case LiveViewRoute::kForbiddenOrigin:
+        if (FoxgloveOriginAllowed(request, impl_->options)) {
+          if (!impl_->running) return;
+          std::make_shared<WsSession>(impl_, stream_.release_socket())->Start(std::move(request));
+          return;
+        }
         ++impl_->counters.forbidden_origins;
         break;
       case LiveViewRoute::kUpgradeRequired:
@@ -469,6 +613,37 @@ std::uint16_t LiveViewServer::port() const { return impl_->port; }
 void LiveViewServer::Publish(std::string json) {
   impl_->latest = std::make_shared<const std::string>(std::move(json));
   for (WsSession* s : impl_->ws_sessions) s->Send(impl_->latest);
+}
+
+void LiveViewServer::PublishFoxglove(std::vector<FoxgloveChannelMessage> messages) {
+  std::vector<FoxgloveChannel> advertise;
+  std::vector<std::uint32_t> changed;
+  for (FoxgloveChannelMessage& m : messages) {
+    auto it = impl_->foxglove_ids.find(m.topic);
+    if (it == impl_->foxglove_ids.end()) {
+      Core::FoxgloveTopic topic;
+      topic.channel.id = static_cast<std::uint32_t>(impl_->foxglove_topics.size() + 1);
+      topic.channel.topic = m.topic;
+      topic.channel.schema_name = m.schema_name;
+      topic.channel.schema = m.schema;
+      impl_->foxglove_topics.push_back(std::move(topic));
+      it = impl_->foxglove_ids.emplace(m.topic, impl_->foxglove_topics.back().channel.id).first;
+      advertise.push_back(impl_->foxglove_topics.back().channel);
+    }
+    Core::FoxgloveTopic& topic = impl_->foxglove_topics[it->second - 1];
+    if (topic.payload && *topic.payload == m.payload) continue;
+    topic.payload = std::make_shared<const std::string>(std::move(m.payload));
+    topic.stamp_ns = m.stamp_ns;
+    changed.push_back(it->second);
+  }
+  for (WsSession* s : impl_->ws_sessions) {
+    if (!s->foxglove()) continue;
+    if (!advertise.empty()) s->SendControl(FoxgloveAdvertise(advertise));
+    for (const std::uint32_t id : changed) {
+      const Core::FoxgloveTopic& t = impl_->foxglove_topics[id - 1];
+      s->SendChannel(id, t.stamp_ns, t.payload);
+    }
+  }
 }
 
 std::size_t LiveViewServer::websocket_clients() const { return impl_->ws_open; }

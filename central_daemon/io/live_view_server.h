@@ -5,6 +5,9 @@
 //   GET /state       the latest published JSON message (application/json; 503 before the first)
 //   GET /ws          WebSocket upgrade; the server then sends every published message as a text
 //                    frame (the newest first on connect); what a client sends is read and ignored
+//   GET / or /ws     WebSocket upgrade offering the subprotocol foxglove.websocket.v1 (or
+//                    foxglove.sdk.v1): the Foxglove WebSocket protocol (foxglove_protocol.h) with
+//                    the channels of PublishFoxglove; a client subscribes to the channels it wants
 //   anything else    404; methods other than GET/HEAD: 405; malformed requests: 400 and the
 //                    connection closed
 // Robustness: request header and body sizes are limited, idle and slow clients time out, at most
@@ -18,6 +21,7 @@
 #include <memory>
 #include <optional>
 #include <string>
+#include <vector>
 
 namespace lrfnet::daemon {
 
@@ -30,6 +34,9 @@ struct LiveViewOptions {
   // A WebSocket client is pinged after half of this without data from it and dropped after all of
   // it (a browser answers pings by itself; a client that stopped reading does not).
   double websocket_idle_timeout_s = 60.0;
+  // Pages of these origins may open a Foxglove connection although they are not served by this
+  // host (the Foxglove web app); other cross-origin WebSockets are refused.
+  std::vector<std::string> foxglove_origins = {"https://app.foxglove.dev"};
 };
 std::optional<std::string> Validate(const LiveViewOptions& options);
 
@@ -47,6 +54,20 @@ struct LiveViewCounters {
   std::uint64_t forbidden_origins = 0;    // WebSocket upgrades from another origin's page (403)
   std::uint64_t upgrade_required = 0;     // /ws without an upgrade (426)
   std::uint64_t failed_handshakes = 0;    // upgrade requests the WebSocket handshake refused
+  std::uint64_t foxglove_clients = 0;     // WebSocket clients that chose a Foxglove subprotocol
+  std::uint64_t foxglove_messages_sent = 0;      // message-data frames written
+  std::uint64_t foxglove_messages_replaced = 0;  // a slow client's unsent channel message replaced
+  std::uint64_t foxglove_refused_messages = 0;   // client messages malformed or not supported
+};
+
+// One message of a Foxglove channel (JSON encoding). The channel is advertised the first time its
+// topic is published; a message equal to the channel's previous one is not sent again.
+struct FoxgloveChannelMessage {
+  std::string topic;
+  std::string schema_name;  // e.g. "foxglove.SceneUpdate"
+  std::string schema;       // JSON Schema of the payload
+  std::string payload;      // JSON text
+  std::uint64_t stamp_ns = 0;
 };
 
 // The bytes of the page served at "/" (defined with the request handling, live_view_http.h).
@@ -66,8 +87,12 @@ class LiveViewServer {
   void Stop();
   std::uint16_t port() const;
 
-  // Makes `json` the latest message and sends it to every WebSocket client.
+  // Makes `json` the latest message and sends it to every WebSocket client of the live view's own
+  // feed.
   void Publish(std::string json);
+  // Publishes to the Foxglove clients (see FoxgloveChannelMessage); a subscriber gets a channel's
+  // latest message at once.
+  void PublishFoxglove(std::vector<FoxgloveChannelMessage> messages);
   // Connected WebSocket clients (handshake done), and all open connections (HTTP included).
   std::size_t websocket_clients() const;
   std::size_t connections() const;

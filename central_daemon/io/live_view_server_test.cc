@@ -25,6 +25,7 @@
 #include <functional>
 #include <future>
 #include <memory>
+#include <nlohmann/json.hpp>
 #include <optional>
 #include <string>
 #include <thread>
@@ -45,6 +46,7 @@ using tcp = asio::ip::tcp;
 using boost::system::error_code;
 using namespace std::chrono_literals;
 using Response = http::response<http::string_body>;
+using Json = nlohmann::json;
 
 // ---- clients (on their own io_context in the test thread, every operation with a deadline) ----
 
@@ -99,8 +101,11 @@ std::optional<Response> Request(std::uint16_t port, http::verb method, const std
 
 class WsClient {
  public:
-  // Connects and upgrades; `origin` is sent as the Origin header when set.
-  bool Connect(std::uint16_t port, const std::optional<std::string>& origin = std::nullopt) {
+  // Connects and upgrades; `origin` is sent as the Origin header and `subprotocols` as
+  // Sec-WebSocket-Protocol when set.
+  bool Connect(std::uint16_t port, const std::optional<std::string>& origin = std::nullopt,
+               const std::optional<std::string>& subprotocols = std::nullopt,
+               const std::string& path = "/ws") {
     bool done = false, ok = false;
     beast::get_lowest_layer(ws_).expires_after(5s);
     beast::get_lowest_layer(ws_).async_connect(
@@ -112,13 +117,14 @@ class WsClient {
     if (!ok) return false;
     beast::get_lowest_layer(ws_).expires_never();
     ws_.set_option(websocket::stream_base::timeout{5s, websocket::stream_base::none(), false});
-    ws_.set_option(websocket::stream_base::decorator([origin](websocket::request_type& r) {
+    ws_.set_option(websocket::stream_base::decorator([origin, subprotocols](websocket::request_type& r) {
       if (origin) r.set(http::field::origin, *origin);
+      if (subprotocols) r.set(http::field::sec_websocket_protocol, *subprotocols);
     }));
     ws_.read_message_max(64 << 20);
     done = false;
     const std::string host = "127.0.0.1:" + std::to_string(port);
-    ws_.async_handshake(response_, host, "/ws", [&](const error_code& ec) {
+    ws_.async_handshake(response_, host, path, [&](const error_code& ec) {
       done = true;
       ok = !ec;
     });
@@ -149,7 +155,20 @@ class WsClient {
     if (read_error_) return std::nullopt;
     std::string message = beast::buffers_to_string(buffer_.data());
     buffer_.consume(buffer_.size());
+    last_text_ = ws_.got_text();
     return message;
+  }
+  bool last_was_text() const { return last_text_; }
+
+  bool Write(const std::string& message, bool text = true) {
+    bool done = false, ok = false;
+    ws_.text(text);
+    ws_.async_write(asio::buffer(message), [&](const error_code& ec, std::size_t) {
+      done = true;
+      ok = !ec;
+    });
+    RunUntil(done);
+    return ok;
   }
 
  private:
@@ -162,7 +181,7 @@ class WsClient {
   websocket::stream<beast::tcp_stream> ws_{ioc_};
   websocket::response_type response_;
   beast::flat_buffer buffer_;
-  bool reading_ = false, read_done_ = false;
+  bool reading_ = false, read_done_ = false, last_text_ = true;
   error_code read_error_;
 };
 
@@ -433,6 +452,123 @@ TEST_F(LiveViewServerTest, WebSocketGetsTheLatestOnConnectAndEveryPublish) {
   EXPECT_EQ(c.websocket_clients, 2u);
   EXPECT_EQ(c.messages_sent, 5u);
   EXPECT_EQ(c.messages_replaced, 0u);
+}
+
+// ---- Foxglove WebSocket protocol ---------------------------------------------------------------
+
+Json ParseJson(const std::optional<std::string>& text) {
+  return text ? Json::parse(*text, nullptr, false) : Json();
+}
+
+FoxgloveChannelMessage Channel(const std::string& topic, const std::string& payload,
+                               std::uint64_t stamp_ns) {
+  return {topic, "lrfnet.Test", R"({"type":"object"})", payload, stamp_ns};
+}
+
+// The binary message-data frame: opcode 1, subscription id, stamp, payload.
+struct DataFrame {
+  std::uint32_t subscription = 0;
+  std::uint64_t stamp_ns = 0;
+  std::string payload;
+};
+std::optional<DataFrame> ParseFrame(const std::optional<std::string>& bytes) {
+  if (!bytes || bytes->size() < 13 || (*bytes)[0] != 0x01) return std::nullopt;
+  DataFrame f;
+  for (int i = 3; i >= 0; --i) f.subscription = (f.subscription << 8) | static_cast<std::uint8_t>((*bytes)[1 + i]);
+  for (int i = 7; i >= 0; --i) f.stamp_ns = (f.stamp_ns << 8) | static_cast<std::uint8_t>((*bytes)[5 + i]);
+  f.payload = bytes->substr(13);
+  return f;
+}
+
+TEST_F(LiveViewServerTest, FoxgloveClientGetsServerInfoChannelsAndWhatItSubscribedTo) {
+  StartServer();
+  OnIo([this] { server_->PublishFoxglove({Channel("/a", R"({"n":1})", 11)}); });
+  WsClient fox;
+  // Foxglove connects to "/" and offers its subprotocol.
+  ASSERT_TRUE(fox.Connect(port_, std::nullopt, "foxglove.websocket.v1", "/"));
+  EXPECT_EQ(fox.handshake_response()[http::field::sec_websocket_protocol], "foxglove.websocket.v1");
+  const Json info = ParseJson(fox.Read());
+  EXPECT_EQ(info["op"], "serverInfo");
+  EXPECT_EQ(info["name"], "lrfnetd");
+  const Json advertise = ParseJson(fox.Read());
+  ASSERT_EQ(advertise["op"], "advertise");
+  ASSERT_EQ(advertise["channels"].size(), 1u);
+  EXPECT_EQ(advertise["channels"][0]["topic"], "/a");
+  EXPECT_EQ(advertise["channels"][0]["encoding"], "json");
+  EXPECT_EQ(advertise["channels"][0]["schemaEncoding"], "jsonschema");
+  const std::uint32_t a = advertise["channels"][0]["id"].get<std::uint32_t>();
+  // A channel that appears later is advertised then.
+  OnIo([this] { server_->PublishFoxglove({Channel("/a", R"({"n":1})", 12), Channel("/b", "{}", 12)}); });
+  const Json later = ParseJson(fox.Read());
+  ASSERT_EQ(later["channels"].size(), 1u);
+  EXPECT_EQ(later["channels"][0]["topic"], "/b");
+  // Subscribed: the latest message at once, then every new one; an unchanged one is not resent.
+  ASSERT_TRUE(fox.Write(R"({"op":"subscribe","subscriptions":[{"id":42,"channelId":)" + std::to_string(a) + "}]}"));
+  auto frame = ParseFrame(fox.Read());
+  ASSERT_TRUE(frame.has_value());
+  EXPECT_FALSE(fox.last_was_text());
+  EXPECT_EQ(frame->subscription, 42u);
+  EXPECT_EQ(frame->stamp_ns, 11u);
+  EXPECT_EQ(frame->payload, R"({"n":1})");
+  OnIo([this] { server_->PublishFoxglove({Channel("/a", R"({"n":1})", 13), Channel("/b", "{\"x\":2}", 13)}); });
+  OnIo([this] { server_->PublishFoxglove({Channel("/a", R"({"n":2})", 14), Channel("/b", "{\"x\":3}", 14)}); });
+  frame = ParseFrame(fox.Read());
+  ASSERT_TRUE(frame.has_value());
+  EXPECT_EQ(frame->payload, R"({"n":2})");  // /b never: not subscribed
+  EXPECT_EQ(fox.Read(200ms), std::nullopt);
+  ASSERT_TRUE(fox.Write(R"({"op":"unsubscribe","subscriptionIds":[42]})"));
+  // Client messages are handled in order: once the answer to a later one is here, the
+  // unsubscription is done.
+  ASSERT_TRUE(fox.Write(R"({"op":"getParameters","parameterNames":[]})"));
+  EXPECT_EQ(ParseJson(fox.Read())["op"], "status");
+  OnIo([this] { server_->PublishFoxglove({Channel("/a", R"({"n":3})", 15)}); });
+  EXPECT_EQ(fox.Read(200ms), std::nullopt);
+  // The page's own clients are not affected, and the JSON feed's clients get no Foxglove data.
+  WsClient page;
+  ASSERT_TRUE(page.Connect(port_));
+  EXPECT_EQ(page.handshake_response().count(http::field::sec_websocket_protocol), 0u);
+  Publish("state");
+  EXPECT_EQ(page.Read(), "state");
+  const LiveViewCounters c = Counters();
+  EXPECT_EQ(c.foxglove_clients, 1u);
+  EXPECT_EQ(c.foxglove_messages_sent, 2u);
+}
+
+TEST_F(LiveViewServerTest, HostileFoxgloveMessagesGetAStatusAndTheConnectionGoesOn) {
+  StartServer();
+  OnIo([this] { server_->PublishFoxglove({Channel("/a", "{}", 1)}); });
+  WsClient fox;
+  ASSERT_TRUE(fox.Connect(port_, std::nullopt, "x-unknown, foxglove.sdk.v1", "/ws"));
+  EXPECT_EQ(fox.handshake_response()[http::field::sec_websocket_protocol], "foxglove.sdk.v1");
+  ASSERT_EQ(ParseJson(fox.Read())["op"], "serverInfo");
+  ASSERT_EQ(ParseJson(fox.Read())["op"], "advertise");
+  for (const auto& [message, text] :
+       std::vector<std::pair<std::string, bool>>{{"{not json", true},
+                                                 {R"({"op":"getParameters","parameterNames":[]})", true},
+                                                 {std::string("\x01\x00\x00\x00\x00zz", 7), false},
+                                                 {R"({"op":"subscribe","subscriptions":[{"id":1,"channelId":99}]})", true},
+                                                 {R"({"op":"subscribe","subscriptions":[{"id":-1,"channelId":1}]})", true}}) {
+    ASSERT_TRUE(fox.Write(message, text));
+    const Json status = ParseJson(fox.Read());
+    EXPECT_EQ(status["op"], "status") << message;
+    EXPECT_FALSE(status["message"].get<std::string>().empty());
+  }
+  EXPECT_EQ(Counters().foxglove_refused_messages, 5u);
+  ASSERT_TRUE(fox.Write(R"({"op":"subscribe","subscriptions":[{"id":1,"channelId":1}]})"));
+  ASSERT_TRUE(ParseFrame(fox.Read()).has_value());
+  ExpectServing();
+}
+
+TEST_F(LiveViewServerTest, FoxgloveWebAppIsTheOnlyForeignOriginAllowed) {
+  StartServer();
+  WsClient app;
+  EXPECT_TRUE(app.Connect(port_, "https://app.foxglove.dev", "foxglove.websocket.v1", "/"));
+  WsClient evil;
+  EXPECT_FALSE(evil.Connect(port_, "http://evil.example", "foxglove.websocket.v1", "/"));
+  EXPECT_EQ(evil.handshake_response().result_int(), 403);
+  // The Foxglove origin does not open the page's own feed.
+  WsClient feed;
+  EXPECT_FALSE(feed.Connect(port_, "https://app.foxglove.dev"));
 }
 
 TEST_F(LiveViewServerTest, WebSocketFromAnotherOriginIsRefused) {

@@ -4,3 +4,10 @@ lrfnet_fuzz_target(http_request_fuzz SOURCES live_view_fuzz.cc LIBS lrfnet_live_
 if(TARGET make_fuzz_corpus)
   target_sources(make_fuzz_corpus PRIVATE live_view_seeds.cc)
 endif()
+
+# What a Foxglove client sends the live view (subscriptions, other ops, hostile JSON, binary).
+# Seeds: foxglove_seeds.cc.
+lrfnet_fuzz_target(foxglove_fuzz SOURCES foxglove_fuzz.cc LIBS lrfnet_live_view_http nlohmann_json::nlohmann_json)
+if(TARGET make_fuzz_corpus)
+  target_sources(make_fuzz_corpus PRIVATE foxglove_seeds.cc)
+endif()
