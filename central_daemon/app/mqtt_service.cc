@@ -145,15 +145,30 @@ void MqttService::PublishZonesDue(const ZoneService& zones, bool force) {
   }
 }
 
+SensorHealthReport HealthReportOf(const SensorStatus& s, bool placed) {
+  SensorHealthReport h;
+  h.sensor_id = s.sensor_id;
+  h.state = s.silent ? "silent" : (s.counters.track_frames > 0 ? "active" : "waiting");
+  h.placed = placed;
+  if (s.info) h.model = s.info->model;
+  const double received = static_cast<double>(s.counters.sequence.received);
+  const double lost = static_cast<double>(s.counters.sequence.lost);
+  h.loss = received + lost > 0 ? lost / (received + lost) : 0.0;
+  h.clock_sync = s.health ? ToString(s.health->clock_sync) : "unknown";
+  h.track_frames = s.counters.track_frames;
+  for (const std::uint64_t r : s.counters.rejected) h.rejected += r;
+  h.restarts = s.counters.sequence.restarts;
+  h.last_receive_ns = s.last_receive_ns;
+  return h;
+}
+
 void MqttService::PublishHealthDue(common::UtcNs now_ns, const Daemon& daemon,
                                    const FusionService& fusion) {
   for (const SensorStatus& s : daemon.ingest().Sensors()) {
     HealthMark& mark = health_marks_[s.sensor_id];
-    SensorHealthReport h;
-    h.sensor_id = s.sensor_id;
-    h.state = s.silent ? "silent" : (s.counters.track_frames > 0 ? "active" : "waiting");
     const auto placed = placed_.find(s.sensor_id);
-    h.placed = fusion.calibrated() && placed != placed_.end() && placed->second;
+    SensorHealthReport h =
+        HealthReportOf(s, fusion.calibrated() && placed != placed_.end() && placed->second);
     const bool changed = h.state != mark.state || h.placed != mark.placed;
     if (!changed && !Due(now_ns, mark.published_ns, health_interval_ns_)) continue;
     if (mark.datagrams_at_ns != 0 && now_ns > mark.datagrams_at_ns) {
@@ -163,15 +178,6 @@ void MqttService::PublishHealthDue(common::UtcNs now_ns, const Daemon& daemon,
     mark.datagrams = s.counters.datagrams;
     mark.datagrams_at_ns = now_ns;
     h.datagram_rate_hz = mark.rate_hz;
-    if (s.info) h.model = s.info->model;
-    const double received = static_cast<double>(s.counters.sequence.received);
-    const double lost = static_cast<double>(s.counters.sequence.lost);
-    h.loss = received + lost > 0 ? lost / (received + lost) : 0.0;
-    h.clock_sync = s.health ? ToString(s.health->clock_sync) : "unknown";
-    h.track_frames = s.counters.track_frames;
-    for (const std::uint64_t r : s.counters.rejected) h.rejected += r;
-    h.restarts = s.counters.sequence.restarts;
-    h.last_receive_ns = s.last_receive_ns;
     mark.state = h.state;
     mark.placed = h.placed;
     mark.published_ns = now_ns;

@@ -27,6 +27,11 @@
 
 namespace lrfnet::daemon {
 
+// A sensor's health report from what the ingest knows (without the rate, which needs two
+// readings). A new sensor state (e.g. a sensor that moved) is added here and in
+// SensorHealthReport's list of states; a change of state is published at once.
+SensorHealthReport HealthReportOf(const SensorStatus& status, bool placed);
+
 class MqttSink {
  public:
   virtual ~MqttSink() = default;
