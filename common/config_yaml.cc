@@ -215,7 +215,8 @@ class Printer final : public ConfigVisitor {
     const std::string_view name = i < names.size() ? names[i] : std::string_view("?");
     Line(key, std::string(name), fmt::format("{} One of: {}.", doc, fmt::join(names, ", ")));
   }
-  void StructuredField(std::string_view key, std::string& flow_yaml, std::string_view doc) override {
+  void StructuredField(std::string_view key, std::string& flow_yaml,
+                       std::string_view doc) override {
     Line(key, flow_yaml.empty() ? "[]" : flow_yaml, doc);
   }
 

@@ -108,9 +108,12 @@ class ExportTest : public ::testing::Test {
     }
   }
   std::string Export(const std::string& format, const std::vector<std::string>& extra = {}) {
-    std::vector<std::string> args = {"export", dir_ / "calibration.yaml", "--format", format,
-                                     "--parent-frame", "map", "--frame", "site/{id}_laser",
-                                     "--z-m", "2.5", "--out", dir_ / ("out." + format)};
+    std::vector<std::string> args = {"export",         dir_ / "calibration.yaml",
+                                     "--format",       format,
+                                     "--parent-frame", "map",
+                                     "--frame",        "site/{id}_laser",
+                                     "--z-m",          "2.5",
+                                     "--out",          dir_ / ("out." + format)};
     args.insert(args.end(), extra.begin(), extra.end());
     Process p(LRFNET_TOOL_BINARY, args);
     EXPECT_EQ(p.Wait(), 0) << p.err();
@@ -134,9 +137,9 @@ TEST_F(ExportTest, Ros2StaticTransformsComposeBackToTheCalibration) {
     for (std::string key, v; args >> key >> v;) value[key] = v;
     EXPECT_EQ(value.at("--frame-id"), "map");
     exported[value.at("--child-frame-id")] =
-        Transform(std::stod(value.at("--x")), std::stod(value.at("--y")), std::stod(value.at("--z")),
-                  std::stod(value.at("--roll")), std::stod(value.at("--pitch")),
-                  std::stod(value.at("--yaw")));
+        Transform(std::stod(value.at("--x")), std::stod(value.at("--y")),
+                  std::stod(value.at("--z")), std::stod(value.at("--roll")),
+                  std::stod(value.at("--pitch")), std::stod(value.at("--yaw")));
   }
   ExpectPoses(exported, frame_of_, 2.5);
 }
@@ -176,7 +179,8 @@ TEST_F(ExportTest, CsvHasEveryPoseAndTheUncalibratedOnlyWhenAsked) {
     ASSERT_EQ(f.size(), 13u) << line;
     EXPECT_EQ(f[1], "map");
     EXPECT_EQ(f[12], "true");
-    const Eigen::Quaterniond q(std::stod(f[11]), std::stod(f[8]), std::stod(f[9]), std::stod(f[10]));
+    const Eigen::Quaterniond q(std::stod(f[11]), std::stod(f[8]), std::stod(f[9]),
+                               std::stod(f[10]));
     EXPECT_NEAR(q.norm(), 1.0, 1e-12);
     EXPECT_NEAR(std::stod(f[6]) * M_PI / 180.0, std::stod(f[7]), 1e-9);
     Eigen::Isometry3d t = Eigen::Isometry3d::Identity();
@@ -199,12 +203,14 @@ TEST_F(ExportTest, BadArgumentsAreOneLineErrors) {
       {{"export", dir_ / "calibration.yaml"}, 2, "--format"},
       {{"export", dir_ / "calibration.yaml", "--format", "sdf"}, 2, "unknown --format"},
       {{"export", dir_ / "calibration.yaml", "--format", "csv", "--frame", "laser"}, 2, "{id}"},
-      {{"export", dir_ / "calibration.yaml", "--format", "csv", "--parent-frame", "a b"}, 2,
+      {{"export", dir_ / "calibration.yaml", "--format", "csv", "--parent-frame", "a b"},
+       2,
        "--parent-frame"},
       {{"export", dir_ / "nope.yaml", "--format", "csv"}, 1, "nope.yaml"},
       {{"export", dir_ / "calibration.yaml", "--format", "csv", "--frame", "x{id}",
         "--parent-frame", "xs1"},
-       1, "two frames"},
+       1,
+       "two frames"},
   };
   for (const Case& c : cases) {
     Process p(LRFNET_TOOL_BINARY, c.args);

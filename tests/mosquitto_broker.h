@@ -51,7 +51,7 @@ inline bool CanConnect(std::uint16_t port) {
 struct BrokerOptions {
   std::string username;  // with a password: anonymous clients are refused
   std::string password;
-  bool tls = false;      // certificates in the broker's folder: ca.crt, server.crt, server.key
+  bool tls = false;  // certificates in the broker's folder: ca.crt, server.crt, server.key
 };
 
 class MosquittoBroker {
@@ -70,9 +70,9 @@ class MosquittoBroker {
                      {"-b", "-c", *dir_ / "passwd", options_.username, options_.password});
       EXPECT_EQ(passwd.Wait(), 0) << passwd.err();
       std::filesystem::permissions(*dir_ / "passwd", std::filesystem::perms::owner_read |
-                                                        std::filesystem::perms::owner_write |
-                                                        std::filesystem::perms::group_read |
-                                                        std::filesystem::perms::others_read);
+                                                         std::filesystem::perms::owner_write |
+                                                         std::filesystem::perms::group_read |
+                                                         std::filesystem::perms::others_read);
       conf << "allow_anonymous false\npassword_file " << (*dir_ / "passwd") << "\n";
     } else {
       conf << "allow_anonymous true\n";
@@ -86,7 +86,8 @@ class MosquittoBroker {
 
   // Starts (or restarts) the broker and waits until it accepts connections.
   bool Start() {
-    process_ = std::make_unique<Process>(kMosquitto, std::vector<std::string>{"-c", *dir_ / "mosquitto.conf"});
+    process_ = std::make_unique<Process>(kMosquitto,
+                                         std::vector<std::string>{"-c", *dir_ / "mosquitto.conf"});
     const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(20);
     while (std::chrono::steady_clock::now() < deadline) {
       if (CanConnect(port_)) return true;
@@ -109,7 +110,8 @@ class MosquittoBroker {
   void MakeCertificates() {
     const std::string d = *dir_ / "";
     const std::string script =
-        "cd '" + d + "' && "
+        "cd '" + d +
+        "' && "
         "openssl req -x509 -newkey rsa:2048 -nodes -days 2 -subj /CN=lrfnet-test-ca "
         "-keyout ca.key -out ca.crt 2>/dev/null && "
         "openssl req -newkey rsa:2048 -nodes -subj /CN=localhost -keyout server.key "

@@ -38,8 +38,9 @@ class MqttSubscriber {
     mosquitto_message_callback_set(mosq_, [](mosquitto*, void* self, const mosquitto_message* m) {
       auto* s = static_cast<MqttSubscriber*>(self);
       std::lock_guard lock(s->mutex_);
-      s->messages_.push_back({m->topic, std::string(static_cast<const char*>(m->payload),
-                                                    static_cast<std::size_t>(m->payloadlen)),
+      s->messages_.push_back({m->topic,
+                              std::string(static_cast<const char*>(m->payload),
+                                          static_cast<std::size_t>(m->payloadlen)),
                               m->retain});
       s->changed_.notify_all();
     });

@@ -13,8 +13,8 @@
 #include <cstdio>
 #include <fstream>
 #include <map>
-#include <set>
 #include <nlohmann/json.hpp>
+#include <set>
 #include <sstream>
 #include <string>
 #include <vector>
@@ -138,7 +138,8 @@ class MqttSystem : public ::testing::Test {
     dir_ = new ScratchDir();
     std::ofstream(*dir_ / "scene.yaml") << kScenario;
     std::ofstream(*dir_ / "lrfnetd.yaml") << kDaemonConfig;
-    Process sim(LRFNET_TOOL_BINARY, {"sim", *dir_ / "scene.yaml", "--out", *dir_ / "sim", "--jobs", "2"});
+    Process sim(LRFNET_TOOL_BINARY,
+                {"sim", *dir_ / "scene.yaml", "--out", *dir_ / "sim", "--jobs", "2"});
     ASSERT_EQ(sim.Wait(milliseconds(120'000)), 0) << sim.err();
     for (const char* id : {"s1", "s2"}) {
       Process tracker(LRFNET_TRACKER_BINARY,
@@ -171,11 +172,13 @@ std::string SchemaOf(const std::string& topic) {
 json Parse(const std::string& text) { return json::parse(text, nullptr, false); }
 
 // Position of `target` at utc_ns from the truth (nearest row), or nothing when absent then.
-const TruthRow* TruthAt(const std::vector<TruthRow>& rows, const std::string& target, std::int64_t utc_ns) {
+const TruthRow* TruthAt(const std::vector<TruthRow>& rows, const std::string& target,
+                        std::int64_t utc_ns) {
   const TruthRow* best = nullptr;
   for (const TruthRow& r : rows) {
     if (r.target != target) continue;
-    if (best == nullptr || std::llabs(r.utc_ns - utc_ns) < std::llabs(best->utc_ns - utc_ns)) best = &r;
+    if (best == nullptr || std::llabs(r.utc_ns - utc_ns) < std::llabs(best->utc_ns - utc_ns))
+      best = &r;
   }
   return best != nullptr && std::llabs(best->utc_ns - utc_ns) <= 60'000'000 ? best : nullptr;
 }
@@ -185,17 +188,16 @@ TEST_F(MqttSystem, OfflineObjectsAndZoneCountsMatchTheTruthAndEveryMessageItsSch
   ASSERT_TRUE(broker.Start());
   MqttSubscriber subscriber(broker.port(), "lrfnet/lab/#");
   ASSERT_TRUE(subscriber.WaitSubscribed());
-  Process sub(testing::kMosquittoSub,
-              {"-h", "127.0.0.1", "-p", std::to_string(broker.port()), "-t", "lrfnet/lab/zones/#",
-               "-v", "-q", "1"});
+  Process sub(testing::kMosquittoSub, {"-h", "127.0.0.1", "-p", std::to_string(broker.port()), "-t",
+                                       "lrfnet/lab/zones/#", "-v", "-q", "1"});
   testing::LoopbackUdpPeer udp;
   ScratchDir out;
-  Process daemon(LRFNET_DAEMON_BINARY,
-                 {"--input", *dir_ / "s1.rec", *dir_ / "s2.rec", "--calibration-in",
-                  *dir_ / "sim/truth.yaml", "--config", *dir_ / "lrfnetd.yaml", "--mqtt",
-                  broker.address(), "--mqtt-site", "lab", "--fused-out", out / "fused.jsonl",
-                  "--fused-udp", "127.0.0.1:" + std::to_string(udp.port()), "--stats-out",
-                  out / "stats.json"});
+  Process daemon(
+      LRFNET_DAEMON_BINARY,
+      {"--input", *dir_ / "s1.rec", *dir_ / "s2.rec", "--calibration-in", *dir_ / "sim/truth.yaml",
+       "--config", *dir_ / "lrfnetd.yaml", "--mqtt", broker.address(), "--mqtt-site", "lab",
+       "--fused-out", out / "fused.jsonl", "--fused-udp", "127.0.0.1:" + std::to_string(udp.port()),
+       "--stats-out", out / "stats.json"});
   ASSERT_EQ(daemon.Wait(milliseconds(120'000)), 0) << daemon.err();
   const json stats = Parse(ReadText(out / "stats.json"));
   ASSERT_TRUE(stats.contains("mqtt")) << stats.dump();
@@ -209,7 +211,8 @@ TEST_F(MqttSystem, OfflineObjectsAndZoneCountsMatchTheTruthAndEveryMessageItsSch
             m["submitted"].get<std::uint64_t>());
   ASSERT_TRUE(subscriber.WaitFor([&](const std::vector<ReceivedMessage>& got) {
     return got.size() >= m["sent"].get<std::size_t>();
-  })) << subscriber.messages().size() << " of " << m["sent"];
+  })) << subscriber.messages().size()
+      << " of " << m["sent"];
 
   // Zones: the final state of each (retained, cumulative) against the paths.
   const ExpectedCounts expected = FromTruth(ReadTruth(*dir_ / "sim/truth_tracks.csv"));
@@ -282,7 +285,8 @@ TEST_F(MqttSystem, OfflineObjectsAndZoneCountsMatchTheTruthAndEveryMessageItsSch
       double best = 1e9;
       const TruthRow* match = nullptr;
       for (const TruthRow* t : present) {
-        const double d = std::hypot(o["x_m"].get<double>() - t->x_m, o["y_m"].get<double>() - t->y_m);
+        const double d =
+            std::hypot(o["x_m"].get<double>() - t->x_m, o["y_m"].get<double>() - t->y_m);
         if (d < best) {
           best = d;
           match = t;
@@ -290,11 +294,12 @@ TEST_F(MqttSystem, OfflineObjectsAndZoneCountsMatchTheTruthAndEveryMessageItsSch
       }
       near += best < 0.5 ? 1 : 0;
       if (best >= 0.5 && far_examples.size() < 1000) {
-        far_examples += "\n  t=" + std::to_string(static_cast<double>(stamp - truth.front().utc_ns) * 1e-9) +
-                        " id " + std::to_string(o["id"].get<int>()) + " at (" +
-                        std::to_string(o["x_m"].get<double>()) + ", " +
-                        std::to_string(o["y_m"].get<double>()) + ") nearest person " +
-                        (match ? match->target : "none") + " " + std::to_string(best) + " m";
+        far_examples +=
+            "\n  t=" + std::to_string(static_cast<double>(stamp - truth.front().utc_ns) * 1e-9) +
+            " id " + std::to_string(o["id"].get<int>()) + " at (" +
+            std::to_string(o["x_m"].get<double>()) + ", " + std::to_string(o["y_m"].get<double>()) +
+            ") nearest person " + (match ? match->target : "none") + " " + std::to_string(best) +
+            " m";
       }
       if (match != nullptr && std::hypot(o["vx_mps"].get<double>() - match->vx_mps,
                                          o["vy_mps"].get<double>() - match->vy_mps) < 0.5)
@@ -306,9 +311,10 @@ TEST_F(MqttSystem, OfflineObjectsAndZoneCountsMatchTheTruthAndEveryMessageItsSch
     count_matches += confirmed == in_room ? 1 : 0;
   }
   ASSERT_GT(checked, 100u);
-  std::printf("objects: %zu confirmed positions, %zu within 0.5 m of a person, %zu with velocity "
-              "within 0.5 m/s; %zu of %zu lists with one object per person in the room\n",
-              checked, near, velocity_ok, count_matches, messages);
+  std::printf(
+      "objects: %zu confirmed positions, %zu within 0.5 m of a person, %zu with velocity "
+      "within 0.5 m/s; %zu of %zu lists with one object per person in the room\n",
+      checked, near, velocity_ok, count_matches, messages);
   const auto fraction = [](std::size_t a, std::size_t b) {
     return static_cast<double>(a) / static_cast<double>(b);
   };
@@ -334,10 +340,12 @@ TEST_F(MqttSystem, OfflineObjectsAndZoneCountsMatchTheTruthAndEveryMessageItsSch
   const std::string missing = testing::NodeClientsMissing();
   if (!missing.empty()) GTEST_SKIP() << "schema validation skipped: " << missing;
   std::vector<std::pair<std::string, std::string>> all;
-  for (const ReceivedMessage& r : subscriber.messages()) all.emplace_back(SchemaOf(r.topic), r.payload);
+  for (const ReceivedMessage& r : subscriber.messages())
+    all.emplace_back(SchemaOf(r.topic), r.payload);
   std::istringstream fused(ReadText(out / "fused.jsonl"));
   std::size_t fused_lines = 0;
-  for (std::string line; std::getline(fused, line); ++fused_lines) all.emplace_back("fused.schema.json", line);
+  for (std::string line; std::getline(fused, line); ++fused_lines)
+    all.emplace_back("fused.schema.json", line);
   EXPECT_GT(fused_lines, 50u);
   std::size_t datagrams = 0;
   for (std::vector<std::uint8_t> d; !(d = udp.Receive(200)).empty(); ++datagrams) {
@@ -359,18 +367,21 @@ TEST_F(MqttSystem, LiveBrokerRestartPublishingResumesAndTheLossIsCounted) {
                   "lab", "--stats-out", out / "stats.json", "--status-interval-s", "1"});
   ASSERT_TRUE(daemon.WaitForOutput("listening ", milliseconds(20'000))) << daemon.err();
   const std::string out_text = daemon.out();
-  const std::string address = out_text.substr(out_text.find("listening ") + 10,
-                                              out_text.find('\n', out_text.find("listening ")) -
-                                                  out_text.find("listening ") - 10);
+  const std::string address = out_text.substr(
+      out_text.find("listening ") + 10,
+      out_text.find('\n', out_text.find("listening ")) - out_text.find("listening ") - 10);
   auto subscriber = std::make_unique<MqttSubscriber>(broker.port(), "lrfnet/lab/#");
   ASSERT_TRUE(subscriber->WaitSubscribed());
   // At twice the recorded pace (the daemon fuses on the scans' own times).
-  Process replay1(LRFNET_TOOL_BINARY, {"replay", *dir_ / "s1.rec", "--to", address, "--speed", "2"});
-  Process replay2(LRFNET_TOOL_BINARY, {"replay", *dir_ / "s2.rec", "--to", address, "--speed", "2"});
+  Process replay1(LRFNET_TOOL_BINARY,
+                  {"replay", *dir_ / "s1.rec", "--to", address, "--speed", "2"});
+  Process replay2(LRFNET_TOOL_BINARY,
+                  {"replay", *dir_ / "s2.rec", "--to", address, "--speed", "2"});
   // Objects flow; then the broker goes away for a while and comes back empty.
   ASSERT_TRUE(subscriber->WaitFor([](const auto& got) {
-    return std::count_if(got.begin(), got.end(),
-                         [](const ReceivedMessage& r) { return r.topic == "lrfnet/lab/objects"; }) >= 5;
+    return std::count_if(got.begin(), got.end(), [](const ReceivedMessage& r) {
+             return r.topic == "lrfnet/lab/objects";
+           }) >= 5;
   }));
   std::uint64_t seq_before = 0;
   for (const ReceivedMessage& r : subscriber->On("lrfnet/lab/objects"))
@@ -384,7 +395,8 @@ TEST_F(MqttSystem, LiveBrokerRestartPublishingResumesAndTheLossIsCounted) {
   // Retained state is there again at once (sent again after the reconnect), then new objects.
   ASSERT_TRUE(subscriber->WaitFor([&](const auto& got) {
     return std::any_of(got.begin(), got.end(), [&](const ReceivedMessage& r) {
-      return r.topic == "lrfnet/lab/objects" && Parse(r.payload)["seq"].get<std::uint64_t>() > seq_before + 3;
+      return r.topic == "lrfnet/lab/objects" &&
+             Parse(r.payload)["seq"].get<std::uint64_t>() > seq_before + 3;
     });
   })) << daemon.err();
   EXPECT_FALSE(subscriber->On("lrfnet/lab/calibration").empty());
@@ -405,9 +417,10 @@ TEST_F(MqttSystem, LiveBrokerRestartPublishingResumesAndTheLossIsCounted) {
   EXPECT_GE(m["dropped_disconnected"].get<int>() + m["lost_in_flight"].get<int>(), 3) << m.dump();
   EXPECT_EQ(m["submitted"].get<std::uint64_t>(),
             m["sent"].get<std::uint64_t>() + m["dropped_disconnected"].get<std::uint64_t>() +
-                m["dropped_queue_full"].get<std::uint64_t>() + m["lost_in_flight"].get<std::uint64_t>() +
-                m["retained_replaced"].get<std::uint64_t>() + m["publish_errors"].get<std::uint64_t>() +
-                m["unsent"].get<std::uint64_t>())
+                m["dropped_queue_full"].get<std::uint64_t>() +
+                m["lost_in_flight"].get<std::uint64_t>() +
+                m["retained_replaced"].get<std::uint64_t>() +
+                m["publish_errors"].get<std::uint64_t>() + m["unsent"].get<std::uint64_t>())
       << m.dump();
   // Zone counts survive the restart: cumulative since the daemon started.
   const ExpectedCounts expected = FromTruth(ReadTruth(*dir_ / "sim/truth_tracks.csv"));
@@ -422,16 +435,15 @@ TEST_F(MqttSystem, TheBrokerPublishesTheLastWillWhenTheDaemonDies) {
   ASSERT_TRUE(broker.Start());
   MqttSubscriber subscriber(broker.port(), "lrfnet/will/status");
   ASSERT_TRUE(subscriber.WaitSubscribed());
-  Process daemon(LRFNET_DAEMON_BINARY, {"--listen", "127.0.0.1:0", "--mqtt", broker.address(),
-                                        "--mqtt-site", "will"});
+  Process daemon(LRFNET_DAEMON_BINARY,
+                 {"--listen", "127.0.0.1:0", "--mqtt", broker.address(), "--mqtt-site", "will"});
   ASSERT_TRUE(subscriber.WaitFor([](const auto& got) {
     return !got.empty() && Parse(got.back().payload)["state"] == "online";
   })) << daemon.err();
   daemon.Signal(SIGKILL);
   daemon.Wait();
-  ASSERT_TRUE(subscriber.WaitFor([](const auto& got) {
-    return Parse(got.back().payload)["state"] == "offline";
-  }));
+  ASSERT_TRUE(subscriber.WaitFor(
+      [](const auto& got) { return Parse(got.back().payload)["state"] == "offline"; }));
   const json will = Parse(subscriber.messages().back().payload);
   EXPECT_FALSE(will.contains("stamp_ns"));  // the will, not a clean stop
   EXPECT_EQ(will["site"], "will");

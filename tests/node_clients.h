@@ -31,8 +31,9 @@ inline std::string NodeClientsMissing() {
 #ifdef LRFNET_SCHEMA_DIR
 // Validates (schema file name, JSON text) pairs against central_daemon/schemas with ajv. Returns
 // the validator's output; *ok tells whether every message was valid.
-inline std::string ValidateJsonMessages(const std::vector<std::pair<std::string, std::string>>& messages,
-                                        const std::string& scratch_file, bool* ok) {
+inline std::string ValidateJsonMessages(
+    const std::vector<std::pair<std::string, std::string>>& messages,
+    const std::string& scratch_file, bool* ok) {
   {
     std::ofstream out(scratch_file);
     for (const auto& [schema, text] : messages) out << schema << "\t" << text << "\n";

@@ -21,7 +21,8 @@ bool FrameCharsOk(const std::string& s) {
 std::string Sanitized(const std::string& id) {
   std::string out = id;
   for (char& c : out) {
-    const bool ok = (c >= 'a' && c <= 'z') || (c >= 'A' && c <= 'Z') || (c >= '0' && c <= '9') || c == '_';
+    const bool ok =
+        (c >= 'a' && c <= 'z') || (c >= 'A' && c <= 'Z') || (c >= '0' && c <= '9') || c == '_';
     if (!ok) c = '_';
   }
   return out;
@@ -37,7 +38,8 @@ struct Entry {
   bool calibrated = true;
 };
 
-std::string Ros2(const std::vector<Entry>& entries, const ExportOptions& o, const std::string& source) {
+std::string Ros2(const std::vector<Entry>& entries, const ExportOptions& o,
+                 const std::string& source) {
   std::string out = fmt::format(
       "# ROS 2 launch file: the lrfnet sensors as static transforms ({} -> sensor), from {}.\n"
       "# Run with: ros2 launch <this file>. One tf2_ros static_transform_publisher per sensor;\n"
@@ -58,7 +60,8 @@ std::string Ros2(const std::vector<Entry>& entries, const ExportOptions& o, cons
   return out;
 }
 
-std::string Urdf(const std::vector<Entry>& entries, const ExportOptions& o, const std::string& source) {
+std::string Urdf(const std::vector<Entry>& entries, const ExportOptions& o,
+                 const std::string& source) {
   std::string out = fmt::format(
       "<?xml version=\"1.0\"?>\n"
       "<!-- The lrfnet sensors as fixed joints below {}, from {}. Metres and radians. -->\n"
@@ -81,7 +84,8 @@ std::string Urdf(const std::vector<Entry>& entries, const ExportOptions& o, cons
 }
 
 std::string Csv(const std::vector<Entry>& entries, const ExportOptions& o) {
-  std::string out = "sensor,parent_frame,frame,x_m,y_m,z_m,yaw_deg,yaw_rad,qx,qy,qz,qw,calibrated\n";
+  std::string out =
+      "sensor,parent_frame,frame,x_m,y_m,z_m,yaw_deg,yaw_rad,qx,qy,qz,qw,calibrated\n";
   for (const Entry& e : entries) {
     // Rotation about z as a unit quaternion.
     const double qz = std::sin(e.pose.yaw_rad / 2.0), qw = std::cos(e.pose.yaw_rad / 2.0);
@@ -105,7 +109,8 @@ std::optional<ExportFormat> ParseExportFormat(const std::string& name) {
 std::optional<std::string> Validate(const ExportOptions& o) {
   if (!FrameCharsOk(o.parent_frame)) return "--parent-frame: 1-256 characters of A-Z a-z 0-9 _ /";
   if (o.frame_pattern.find("{id}") == std::string::npos) return "--frame: the pattern needs {id}";
-  if (!FrameCharsOk(SensorFrame(o, "x"))) return "--frame: 1-256 characters of A-Z a-z 0-9 _ / and {id}";
+  if (!FrameCharsOk(SensorFrame(o, "x")))
+    return "--frame: 1-256 characters of A-Z a-z 0-9 _ / and {id}";
   if (!std::isfinite(o.z_m) || std::abs(o.z_m) > 1e4) return "--z-m: a finite height in metres";
   if (!FrameCharsOk(o.robot_name) || o.robot_name.find('/') != std::string::npos)
     return "--robot-name: 1-256 characters of A-Z a-z 0-9 _";
@@ -115,7 +120,8 @@ std::optional<std::string> Validate(const ExportOptions& o) {
 std::string SensorFrame(const ExportOptions& options, const std::string& sensor_id) {
   std::string out = options.frame_pattern;
   const std::string id = Sanitized(sensor_id);
-  for (std::size_t at = out.find("{id}"); at != std::string::npos; at = out.find("{id}", at + id.size())) {
+  for (std::size_t at = out.find("{id}"); at != std::string::npos;
+       at = out.find("{id}", at + id.size())) {
     out.replace(at, 4, id);
   }
   return out;

@@ -20,8 +20,8 @@ std::optional<ExportFormat> ParseExportFormat(const std::string& name);
 
 struct ExportOptions {
   std::string parent_frame = "world";
-  std::string frame_pattern = "{id}";  // e.g. "lrfnet_{id}_laser"
-  double z_m = 0.0;                    // mounting height of every sensor above the parent frame
+  std::string frame_pattern = "{id}";      // e.g. "lrfnet_{id}_laser"
+  double z_m = 0.0;                        // mounting height of every sensor above the parent frame
   std::string robot_name = "lrfnet_site";  // URDF
   bool include_uncalibrated = false;  // sensors the calibration could not place (at the origin!)
 };

@@ -26,9 +26,10 @@ int RunExport(int argc, char** argv) {
   std::string format_name;
   std::string out_path;
   ExportOptions options;
-  visible.add_options()("help,h", "this help")(
-      "format", po::value<std::string>(&format_name), "ros2-static-tf, urdf or csv")(
-      "out", po::value<std::string>(&out_path), "write to this file (replaced atomically); default: stdout")(
+  visible.add_options()("help,h", "this help")("format", po::value<std::string>(&format_name),
+                                               "ros2-static-tf, urdf or csv")(
+      "out", po::value<std::string>(&out_path),
+      "write to this file (replaced atomically); default: stdout")(
       "parent-frame", po::value<std::string>(&options.parent_frame)->default_value("world"),
       "the calibration's world frame (the reference sensor at its origin)")(
       "frame", po::value<std::string>(&options.frame_pattern)->default_value("{id}"),
@@ -36,14 +37,18 @@ int RunExport(int argc, char** argv) {
       "z-m", po::value<double>(&options.z_m)->default_value(0.0),
       "the sensors' height above the parent frame, metres")(
       "robot-name", po::value<std::string>(&options.robot_name)->default_value("lrfnet_site"),
-      "the URDF robot's name")(
-      "include-uncalibrated", "also the sensors the calibration could not place (at the origin)");
+      "the URDF robot's name")("include-uncalibrated",
+                               "also the sensors the calibration could not place (at the origin)");
   po::variables_map vm;
-  if (const auto code = ParseOptions("export", argc, argv, visible, "calibration", &vm)) return *code;
+  if (const auto code = ParseOptions("export", argc, argv, visible, "calibration", &vm))
+    return *code;
   if (vm.count("calibration") == 0) return UsageError("export", "expected CALIBRATION");
-  if (format_name.empty()) return UsageError("export", "--format is required (ros2-static-tf, urdf, csv)");
+  if (format_name.empty())
+    return UsageError("export", "--format is required (ros2-static-tf, urdf, csv)");
   const auto format = ParseExportFormat(format_name);
-  if (!format) return UsageError("export", "unknown --format '" + format_name + "' (ros2-static-tf, urdf, csv)");
+  if (!format)
+    return UsageError("export",
+                      "unknown --format '" + format_name + "' (ros2-static-tf, urdf, csv)");
   options.include_uncalibrated = vm.count("include-uncalibrated") != 0;
   if (auto e = Validate(options)) return UsageError("export", *e);
 
@@ -54,8 +59,8 @@ int RunExport(int argc, char** argv) {
     std::fprintf(stderr, "lrfnet export: %s\n", error.c_str());
     return kExitFailure;
   }
-  const ExportResult result = ExportCalibration(
-      poses, *format, options, std::filesystem::path(path).filename().string());
+  const ExportResult result =
+      ExportCalibration(poses, *format, options, std::filesystem::path(path).filename().string());
   if (!result.ok) {
     std::fprintf(stderr, "lrfnet export: %s: %s\n", path.c_str(), result.error.c_str());
     return kExitFailure;

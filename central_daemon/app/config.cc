@@ -207,7 +207,8 @@ void VisitMqtt(DaemonConfig& c, ConfigVisitor& v) {
   v.Field("tls", m.tls, "Connect with TLS.");
   v.Field("tls_ca_file", m.tls_ca_file,
           "PEM file of the CA(s) that signed the broker's certificate; empty: the system's CAs.");
-  v.Field("tls_cert_file", m.tls_cert_file, "Client certificate (PEM) for brokers that ask; empty: none.");
+  v.Field("tls_cert_file", m.tls_cert_file,
+          "Client certificate (PEM) for brokers that ask; empty: none.");
   v.Field("tls_key_file", m.tls_key_file, "The client certificate's private key (PEM).");
   v.Field("tls_insecure", m.tls_insecure,
           "Do not check the broker's host name against its certificate (tests only).");
@@ -254,8 +255,10 @@ std::optional<std::string> ParseZones(const std::string& text, std::vector<zones
       } else if (key == "polygon" || key == "line") {
         ++shapes;
         zone.kind = key == "line" ? zones::ZoneKind::kLine : zones::ZoneKind::kPolygon;
-        if (!entry.second.IsSequence()) return where + "." + key + ": expected a list of [x_m, y_m]";
-        if (entry.second.size() > zones::kMaxZonePoints) return where + "." + key + ": too many points";
+        if (!entry.second.IsSequence())
+          return where + "." + key + ": expected a list of [x_m, y_m]";
+        if (entry.second.size() > zones::kMaxZonePoints)
+          return where + "." + key + ": too many points";
         for (const YAML::Node& p : entry.second) {
           double x = 0.0, y = 0.0;
           if (!p.IsSequence() || p.size() != 2 || !p[0].IsScalar() || !p[1].IsScalar() ||
@@ -279,8 +282,8 @@ std::optional<std::string> ParseZones(const std::string& text, std::vector<zones
 bool TopicLevelOk(const std::string& s) {
   if (s.empty() || s.size() > 64) return false;
   for (const char ch : s) {
-    const bool ok = (ch >= 'a' && ch <= 'z') || (ch >= 'A' && ch <= 'Z') || (ch >= '0' && ch <= '9') ||
-                    ch == '_' || ch == '-' || ch == '.';
+    const bool ok = (ch >= 'a' && ch <= 'z') || (ch >= 'A' && ch <= 'Z') ||
+                    (ch >= '0' && ch <= '9') || ch == '_' || ch == '-' || ch == '.';
     if (!ok) return false;
   }
   return true;
@@ -293,9 +296,9 @@ std::optional<std::string> ValidateZonesAndMqtt(DaemonConfig& c) {
     return "zones.update_hz: must be in [0.1, 100]";
   const MqttConfig& m = c.mqtt;
   std::string error;
-  if (!m.broker.empty() && !common::ParseHostPort(m.broker, "mqtt.broker", 0, &error))
-    return error;
-  if (!TopicLevelOk(m.site)) return "mqtt.site: must be 1-64 characters of A-Z, a-z, 0-9, _, - and .";
+  if (!m.broker.empty() && !common::ParseHostPort(m.broker, "mqtt.broker", 0, &error)) return error;
+  if (!TopicLevelOk(m.site))
+    return "mqtt.site: must be 1-64 characters of A-Z, a-z, 0-9, _, - and .";
   if (m.topic_prefix.empty() || m.topic_prefix.size() > 128 ||
       m.topic_prefix.find_first_of("+#") != std::string::npos || m.topic_prefix.front() == '/' ||
       m.topic_prefix.back() == '/')
@@ -308,7 +311,8 @@ std::optional<std::string> ValidateZonesAndMqtt(DaemonConfig& c) {
   if (!m.tls && (!m.tls_ca_file.empty() || !m.tls_cert_file.empty()))
     return "mqtt.tls: the tls_* files need tls: true";
   if (m.keepalive_s < 5 || m.keepalive_s > 3600) return "mqtt.keepalive_s: must be in [5, 3600]";
-  if (!(m.objects_hz >= 0.1 && m.objects_hz <= 100.0)) return "mqtt.objects_hz: must be in [0.1, 100]";
+  if (!(m.objects_hz >= 0.1 && m.objects_hz <= 100.0))
+    return "mqtt.objects_hz: must be in [0.1, 100]";
   if (m.objects_qos < 0 || m.objects_qos > 1) return "mqtt.objects_qos: must be 0 or 1";
   if (m.qos < 0 || m.qos > 1) return "mqtt.qos: must be 0 or 1";
   if (m.path_points < 0 || m.path_points > 1000) return "mqtt.path_points: must be in [0, 1000]";

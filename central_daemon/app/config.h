@@ -25,21 +25,21 @@ inline constexpr std::uint16_t kDefaultPort = 5800;
 
 // Section `mqtt`: what lrfnetd publishes to an MQTT broker (see central_daemon/app/mqtt_service.h).
 struct MqttConfig {
-  std::string broker;            // HOST:PORT; empty: no MQTT
-  std::string site = "site";     // topic level: <topic_prefix>/<site>/...
+  std::string broker;         // HOST:PORT; empty: no MQTT
+  std::string site = "site";  // topic level: <topic_prefix>/<site>/...
   std::string topic_prefix = "lrfnet";
-  std::string client_id;         // empty: "lrfnetd-<site>"
-  std::string username;          // empty: none
+  std::string client_id;  // empty: "lrfnetd-<site>"
+  std::string username;   // empty: none
   std::string password;
   bool tls = false;
-  std::string tls_ca_file;       // empty with tls: the system's CAs
-  std::string tls_cert_file;     // client certificate (with tls_key_file); empty: none
+  std::string tls_ca_file;    // empty with tls: the system's CAs
+  std::string tls_cert_file;  // client certificate (with tls_key_file); empty: none
   std::string tls_key_file;
-  bool tls_insecure = false;     // do not check the broker's host name against its certificate
+  bool tls_insecure = false;  // do not check the broker's host name against its certificate
   std::int64_t keepalive_s = 30;
   double objects_hz = 5.0;
   std::int64_t objects_qos = 0;
-  std::int64_t qos = 1;          // zones, calibration, health, status
+  std::int64_t qos = 1;  // zones, calibration, health, status
   std::int64_t path_points = 10;
   double path_interval_s = 0.5;
   double zones_interval_s = 1.0;
@@ -81,8 +81,8 @@ struct DaemonConfig {
   std::uint64_t live_view_max_clients = 32;
   std::uint64_t live_view_background_points = 720;  // per sensor, decimated
   // Zones (section `zones`).
-  std::string zones_list = "[]";      // the zones as YAML text (flow style), parsed by Validate
-  std::vector<zones::Zone> zones;     // from zones_list
+  std::string zones_list = "[]";   // the zones as YAML text (flow style), parsed by Validate
+  std::vector<zones::Zone> zones;  // from zones_list
   zones::ZoneOptions zone_options;
   double zones_update_hz = 10.0;
   // MQTT (section `mqtt`).

@@ -20,12 +20,15 @@ Json Time(common::UtcNs ns) {
 }
 Json Vector3(double x, double y, double z) { return {{"x", F(x)}, {"y", F(y)}, {"z", F(z)}}; }
 Json YawQuaternion(double yaw_rad) {
-  return {{"x", 0.0}, {"y", 0.0}, {"z", F(std::sin(yaw_rad / 2.0))}, {"w", F(std::cos(yaw_rad / 2.0))}};
+  return {
+      {"x", 0.0}, {"y", 0.0}, {"z", F(std::sin(yaw_rad / 2.0))}, {"w", F(std::cos(yaw_rad / 2.0))}};
 }
 Json PoseJson(double x, double y, double z, double yaw_rad) {
   return {{"position", Vector3(x, y, z)}, {"orientation", YawQuaternion(yaw_rad)}};
 }
-Json Color(double r, double g, double b, double a) { return {{"r", r}, {"g", g}, {"b", b}, {"a", a}}; }
+Json Color(double r, double g, double b, double a) {
+  return {{"r", r}, {"g", g}, {"b", b}, {"a", a}};
+}
 
 Json Entity(common::UtcNs stamp_ns, const std::string& frame, const std::string& id) {
   Json e;
@@ -35,16 +38,16 @@ Json Entity(common::UtcNs stamp_ns, const std::string& frame, const std::string&
   e["lifetime"] = {{"sec", 0}, {"nsec", 0}};
   e["frame_locked"] = false;
   e["metadata"] = Json::array();
-  for (const char* key : {"arrows", "cubes", "spheres", "cylinders", "lines", "triangles", "texts",
-                          "models"}) {
+  for (const char* key :
+       {"arrows", "cubes", "spheres", "cylinders", "lines", "triangles", "texts", "models"}) {
     e[key] = Json::array();
   }
   return e;
 }
 
 Json Text(double x, double y, double z, const std::string& text, const Json& color) {
-  return {{"pose", PoseJson(x, y, z, 0.0)}, {"billboard", true},  {"font_size", 14.0},
-          {"scale_invariant", true},        {"color", color},     {"text", text}};
+  return {{"pose", PoseJson(x, y, z, 0.0)}, {"billboard", true}, {"font_size", 14.0},
+          {"scale_invariant", true},        {"color", color},    {"text", text}};
 }
 
 Json Arrow(double x, double y, double z, double vx, double vy, const Json& color) {
@@ -68,7 +71,8 @@ Json SceneUpdate(common::UtcNs stamp_ns, Json entities) {
 constexpr const char* kTimeSchema =
     R"({"type":"object","properties":{"sec":{"type":"integer"},"nsec":{"type":"integer"}}})";
 std::string Replace(std::string text, const std::string& what, const std::string& with) {
-  for (std::size_t at = text.find(what); at != std::string::npos; at = text.find(what, at + with.size()))
+  for (std::size_t at = text.find(what); at != std::string::npos;
+       at = text.find(what, at + with.size()))
     text.replace(at, what.size(), with);
   return text;
 }
@@ -89,37 +93,49 @@ const std::string& ColorSchema() {
   return s;
 }
 const std::string& SceneUpdateSchema() {
-  static const std::string s = Replace(Replace(Replace(Replace(
-      R"({"title":"foxglove.SceneUpdate","type":"object","required":["deletions","entities"],"properties":{)"
-      R"("deletions":{"type":"array","items":{"type":"object","properties":{"timestamp":TIME,"type":{"type":"integer"},"id":{"type":"string"}}}},)"
-      R"("entities":{"type":"array","items":{"type":"object","properties":{"timestamp":TIME,"frame_id":{"type":"string"},"id":{"type":"string"},)"
-      R"("lifetime":TIME,"frame_locked":{"type":"boolean"},)"
-      R"("metadata":{"type":"array","items":{"type":"object","properties":{"key":{"type":"string"},"value":{"type":"string"}}}},)"
-      R"("arrows":{"type":"array","items":{"type":"object","properties":{"pose":POSE,"shaft_length":{"type":"number"},"shaft_diameter":{"type":"number"},"head_length":{"type":"number"},"head_diameter":{"type":"number"},"color":COLOR}}},)"
-      R"("cubes":{"type":"array"},"spheres":{"type":"array","items":{"type":"object","properties":{"pose":POSE,"size":VECTOR3,"color":COLOR}}},)"
-      R"("cylinders":{"type":"array","items":{"type":"object","properties":{"pose":POSE,"size":VECTOR3,"bottom_scale":{"type":"number"},"top_scale":{"type":"number"},"color":COLOR}}},)"
-      R"("lines":{"type":"array","items":{"type":"object","properties":{"type":{"type":"integer"},"pose":POSE,"thickness":{"type":"number"},"scale_invariant":{"type":"boolean"},"points":{"type":"array","items":VECTOR3},"color":COLOR,"colors":{"type":"array"},"indices":{"type":"array"}}}},)"
-      R"("triangles":{"type":"array"},)"
-      R"("texts":{"type":"array","items":{"type":"object","properties":{"pose":POSE,"billboard":{"type":"boolean"},"font_size":{"type":"number"},"scale_invariant":{"type":"boolean"},"color":COLOR,"text":{"type":"string"}}}},)"
-      R"("models":{"type":"array"}}}}}})",
-      "TIME", kTimeSchema), "POSE", PoseSchema()), "COLOR", ColorSchema()), "VECTOR3", Vector3Schema());
+  static const std::string s = Replace(
+      Replace(
+          Replace(
+              Replace(
+                  R"({"title":"foxglove.SceneUpdate","type":"object","required":["deletions","entities"],"properties":{)"
+                  R"("deletions":{"type":"array","items":{"type":"object","properties":{"timestamp":TIME,"type":{"type":"integer"},"id":{"type":"string"}}}},)"
+                  R"("entities":{"type":"array","items":{"type":"object","properties":{"timestamp":TIME,"frame_id":{"type":"string"},"id":{"type":"string"},)"
+                  R"("lifetime":TIME,"frame_locked":{"type":"boolean"},)"
+                  R"("metadata":{"type":"array","items":{"type":"object","properties":{"key":{"type":"string"},"value":{"type":"string"}}}},)"
+                  R"("arrows":{"type":"array","items":{"type":"object","properties":{"pose":POSE,"shaft_length":{"type":"number"},"shaft_diameter":{"type":"number"},"head_length":{"type":"number"},"head_diameter":{"type":"number"},"color":COLOR}}},)"
+                  R"("cubes":{"type":"array"},"spheres":{"type":"array","items":{"type":"object","properties":{"pose":POSE,"size":VECTOR3,"color":COLOR}}},)"
+                  R"("cylinders":{"type":"array","items":{"type":"object","properties":{"pose":POSE,"size":VECTOR3,"bottom_scale":{"type":"number"},"top_scale":{"type":"number"},"color":COLOR}}},)"
+                  R"("lines":{"type":"array","items":{"type":"object","properties":{"type":{"type":"integer"},"pose":POSE,"thickness":{"type":"number"},"scale_invariant":{"type":"boolean"},"points":{"type":"array","items":VECTOR3},"color":COLOR,"colors":{"type":"array"},"indices":{"type":"array"}}}},)"
+                  R"("triangles":{"type":"array"},)"
+                  R"("texts":{"type":"array","items":{"type":"object","properties":{"pose":POSE,"billboard":{"type":"boolean"},"font_size":{"type":"number"},"scale_invariant":{"type":"boolean"},"color":COLOR,"text":{"type":"string"}}}},)"
+                  R"("models":{"type":"array"}}}}}})",
+                  "TIME", kTimeSchema),
+              "POSE", PoseSchema()),
+          "COLOR", ColorSchema()),
+      "VECTOR3", Vector3Schema());
   return s;
 }
 const std::string& FrameTransformsSchema() {
-  static const std::string s = Replace(Replace(Replace(
-      R"({"title":"foxglove.FrameTransforms","type":"object","required":["transforms"],"properties":{"transforms":{"type":"array","items":{"type":"object",)"
-      R"("required":["timestamp","parent_frame_id","child_frame_id","translation","rotation"],"properties":{"timestamp":TIME,)"
-      R"("parent_frame_id":{"type":"string"},"child_frame_id":{"type":"string"},"translation":VECTOR3,"rotation":QUAT}}}}})",
-      "TIME", kTimeSchema), "VECTOR3", Vector3Schema()), "QUAT",
+  static const std::string s = Replace(
+      Replace(
+          Replace(
+              R"({"title":"foxglove.FrameTransforms","type":"object","required":["transforms"],"properties":{"transforms":{"type":"array","items":{"type":"object",)"
+              R"("required":["timestamp","parent_frame_id","child_frame_id","translation","rotation"],"properties":{"timestamp":TIME,)"
+              R"("parent_frame_id":{"type":"string"},"child_frame_id":{"type":"string"},"translation":VECTOR3,"rotation":QUAT}}}}})",
+              "TIME", kTimeSchema),
+          "VECTOR3", Vector3Schema()),
+      "QUAT",
       R"({"type":"object","properties":{"x":{"type":"number"},"y":{"type":"number"},"z":{"type":"number"},"w":{"type":"number"}}})");
   return s;
 }
 const std::string& LaserScanSchema() {
-  static const std::string s = Replace(Replace(
-      R"({"title":"foxglove.LaserScan","type":"object","required":["timestamp","frame_id","pose","start_angle","end_angle","ranges","intensities"],)"
-      R"("properties":{"timestamp":TIME,"frame_id":{"type":"string"},"pose":POSE,"start_angle":{"type":"number"},"end_angle":{"type":"number"},)"
-      R"("ranges":{"type":"array","items":{"type":"number"}},"intensities":{"type":"array","items":{"type":"number"}}}})",
-      "TIME", kTimeSchema), "POSE", PoseSchema());
+  static const std::string s = Replace(
+      Replace(
+          R"({"title":"foxglove.LaserScan","type":"object","required":["timestamp","frame_id","pose","start_angle","end_angle","ranges","intensities"],)"
+          R"("properties":{"timestamp":TIME,"frame_id":{"type":"string"},"pose":POSE,"start_angle":{"type":"number"},"end_angle":{"type":"number"},)"
+          R"("ranges":{"type":"array","items":{"type":"number"}},"intensities":{"type":"array","items":{"type":"number"}}}})",
+          "TIME", kTimeSchema),
+      "POSE", PoseSchema());
   return s;
 }
 constexpr const char* kCalibrationSchema =
@@ -145,11 +161,12 @@ std::vector<FoxgloveChannelMessage> FoxgloveMessagesOf(const LiveState& state) {
   Json transforms = Json::array();
   for (const LiveSensor& s : state.sensors) {
     if (!s.placed) continue;
-    transforms.push_back({{"timestamp", Time(t)},
-                          {"parent_frame_id", "world"},
-                          {"child_frame_id", s.id},
-                          {"translation", Vector3(s.world_from_sensor.x_m, s.world_from_sensor.y_m, 0.0)},
-                          {"rotation", YawQuaternion(s.world_from_sensor.yaw_rad)}});
+    transforms.push_back(
+        {{"timestamp", Time(t)},
+         {"parent_frame_id", "world"},
+         {"child_frame_id", s.id},
+         {"translation", Vector3(s.world_from_sensor.x_m, s.world_from_sensor.y_m, 0.0)},
+         {"rotation", YawQuaternion(s.world_from_sensor.yaw_rad)}});
   }
   out.push_back(Message("/tf", "foxglove.FrameTransforms", FrameTransformsSchema(),
                         {{"transforms", std::move(transforms)}}, t));
@@ -181,12 +198,13 @@ std::vector<FoxgloveChannelMessage> FoxgloveMessagesOf(const LiveState& state) {
       Json e = Entity(t, s.placed ? "world" : s.id,
                       "track/" + s.id + "/" + std::to_string(track.track_id));
       e["metadata"].push_back({{"key", "state"}, {"value", track.state}});
-      if (track.fused_id) e["metadata"].push_back({{"key", "fused"}, {"value", std::to_string(*track.fused_id)}});
+      if (track.fused_id)
+        e["metadata"].push_back({{"key", "fused"}, {"value", std::to_string(*track.fused_id)}});
       e["spheres"].push_back({{"pose", PoseJson(track.x_m, track.y_m, 1.0, 0.0)},
                               {"size", Vector3(0.3, 0.3, 0.3)},
                               {"color", Color(1.0, 0.6, 0.1, 0.8)}});
-      e["arrows"].push_back(Arrow(track.x_m, track.y_m, 1.0, track.vx_mps, track.vy_mps,
-                                  Color(1.0, 0.6, 0.1, 0.8)));
+      e["arrows"].push_back(
+          Arrow(track.x_m, track.y_m, 1.0, track.vx_mps, track.vy_mps, Color(1.0, 0.6, 0.1, 0.8)));
       tracks.push_back(std::move(e));
     }
     out.push_back(Message("/lrfnet/tracks/" + s.id, "foxglove.SceneUpdate", SceneUpdateSchema(),
@@ -194,8 +212,9 @@ std::vector<FoxgloveChannelMessage> FoxgloveMessagesOf(const LiveState& state) {
     if (!s.background_ranges_m.empty()) {
       Json ranges = Json::array();
       for (const float r : s.background_ranges_m) ranges.push_back(F(r));
-      const double end = s.background_first_angle_rad +
-                         s.background_angle_step_rad * static_cast<double>(s.background_ranges_m.size() - 1);
+      const double end =
+          s.background_first_angle_rad +
+          s.background_angle_step_rad * static_cast<double>(s.background_ranges_m.size() - 1);
       out.push_back(Message("/lrfnet/background/" + s.id, "foxglove.LaserScan", LaserScanSchema(),
                             {{"timestamp", Time(t)},
                              {"frame_id", s.id},
@@ -255,7 +274,8 @@ std::vector<FoxgloveChannelMessage> FoxgloveMessagesOf(const LiveState& state) {
     sensors.push_back(std::move(e));
   }
   calibration["sensors"] = std::move(sensors);
-  out.push_back(Message("/lrfnet/calibration", "lrfnet.Calibration", kCalibrationSchema, calibration, t));
+  out.push_back(
+      Message("/lrfnet/calibration", "lrfnet.Calibration", kCalibrationSchema, calibration, t));
   return out;
 }
 

@@ -46,8 +46,8 @@
 #include "central_daemon/app/live_feed.h"
 #include "central_daemon/app/live_state.h"
 #include "central_daemon/app/mqtt_service.h"
-#include "central_daemon/app/zone_service.h"
 #include "central_daemon/app/stats_json.h"
+#include "central_daemon/app/zone_service.h"
 #include "central_daemon/calibration/calibration_yaml.h"
 #include "central_daemon/io/datagram_source.h"
 #include "central_daemon/io/live_view_server.h"
@@ -238,11 +238,11 @@ void StopMqtt(MqttOutput* mqtt, const ZoneService& zones, common::UtcNs now_ns, 
   mqtt->service->PublishStatus(false, now_ns);
   mqtt->publisher->Stop(timeout_s);
   const MqttCounters c = mqtt->publisher->counters();
-  spdlog::info("mqtt: {} messages sent, {} dropped (queue full {}, broker unreachable {}, lost in "
-               "flight {}), {} connects, {} lost connections",
-               c.sent, c.dropped_queue_full + c.dropped_disconnected + c.lost_in_flight,
-               c.dropped_queue_full, c.dropped_disconnected, c.lost_in_flight, c.connects,
-               c.disconnects);
+  spdlog::info(
+      "mqtt: {} messages sent, {} dropped (queue full {}, broker unreachable {}, lost in "
+      "flight {}), {} connects, {} lost connections",
+      c.sent, c.dropped_queue_full + c.dropped_disconnected + c.lost_in_flight,
+      c.dropped_queue_full, c.dropped_disconnected, c.lost_in_flight, c.connects, c.disconnects);
 }
 
 nlohmann::json MqttJson(const MqttOutput& mqtt) {
@@ -419,7 +419,8 @@ int RunLive(const RunOptions& run, DaemonConfig config) {
       if (calibration.counters().successes != applied_calibrations && calibration.latest()) {
         applied_calibrations = calibration.counters().successes;
         fusion.SetCalibration(calibration.latest()->result);
-        if (mqtt.service) mqtt.service->PublishCalibration(calibration.latest()->result, NowUtcNs());
+        if (mqtt.service)
+          mqtt.service->PublishCalibration(calibration.latest()->result, NowUtcNs());
         // One line on stdout per calibration, for scripts.
         std::printf("calibrated %s\n", config.calibration_output.empty()
                                             ? "(not written)"
@@ -761,8 +762,8 @@ int Run(int argc, char** argv) {
   int udp_port = 0;
   double status_interval_s = 0;
   std::string log_level = "info";
-  visible.add_options()("help,h", "this help")(
-      "config", po::value<std::string>(&run.config_path), "YAML config file (see --print-config)")(
+  visible.add_options()("help,h", "this help")("config", po::value<std::string>(&run.config_path),
+                                               "YAML config file (see --print-config)")(
       "print-config", "print the configuration in effect (documented YAML) and exit")(
       "listen", po::value<std::string>(&listen),
       "UDP address to receive on, ADDR:PORT (default [::]:5800; port 0: any free port)")(
@@ -790,9 +791,8 @@ int Run(int argc, char** argv) {
       "send the fused tracks as JSON datagrams to HOST:PORT (overrides fusion.publish)")(
       "mqtt", po::value<std::string>(),
       "publish objects, zones, calibration and health to the MQTT broker at HOST:PORT (overrides "
-      "mqtt.broker)")(
-      "mqtt-site", po::value<std::string>(),
-      "the site's name in the MQTT topics (overrides mqtt.site)")(
+      "mqtt.broker)")("mqtt-site", po::value<std::string>(),
+                      "the site's name in the MQTT topics (overrides mqtt.site)")(
       "stats-out", po::value<std::string>(&run.stats_out),
       "at exit, write every counter (per sensor and reason) as JSON to this file")(
       "log-level", po::value<std::string>(&log_level)->default_value("info"),

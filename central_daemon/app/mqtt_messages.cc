@@ -52,8 +52,8 @@ std::string ObjectsJson(const std::string& site, std::uint64_t seq, common::UtcN
     } else {
       e["size"] = nullptr;
     }
-    e["age_s"] = Rounded(common::NsToSeconds(std::max<common::DurationNs>(0, stamp_ns - t.first_ns)),
-                         1e3);
+    e["age_s"] =
+        Rounded(common::NsToSeconds(std::max<common::DurationNs>(0, stamp_ns - t.first_ns)), 1e3);
     Json sensors = Json::array();
     for (const fusion::FusedSource& s : t.sources) {
       if (sensors.empty() || sensors.back() != s.sensor_id) sensors.push_back(s.sensor_id);
@@ -80,8 +80,10 @@ std::string ZoneJson(const std::string& site, std::uint64_t seq, common::UtcNs s
   j["occupancy"] = zone.present_ids.size();
   Json present = Json::array();
   for (std::size_t i = 0; i < zone.present_ids.size(); ++i) {
-    present.push_back({{"id", zone.present_ids[i]},
-                       {"dwell_s", Rounded(i < zone.present_dwell_s.size() ? zone.present_dwell_s[i] : 0.0, 1e3)}});
+    present.push_back(
+        {{"id", zone.present_ids[i]},
+         {"dwell_s",
+          Rounded(i < zone.present_dwell_s.size() ? zone.present_dwell_s[i] : 0.0, 1e3)}});
   }
   j["present"] = std::move(present);
   j["inbound"] = zone.inbound;

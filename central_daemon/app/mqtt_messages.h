@@ -1,10 +1,10 @@
 #pragma once
 // The JSON messages lrfnetd publishes over MQTT (pure). Their schemas are
-// central_daemon/schemas/*.schema.json, documented with examples in central_daemon/schemas/README.md.
-// Every message is one JSON object with "type" and "site"; positions in metres (millimetre
-// precision) in the world frame of the calibration (the reference sensor at the origin), times
-// as gateway UTC nanoseconds. Always valid JSON: non-finite numbers are written as null, invalid
-// UTF-8 is replaced.
+// central_daemon/schemas/*.schema.json, documented with examples in
+// central_daemon/schemas/README.md. Every message is one JSON object with "type" and "site";
+// positions in metres (millimetre precision) in the world frame of the calibration (the reference
+// sensor at the origin), times as gateway UTC nanoseconds. Always valid JSON: non-finite numbers
+// are written as null, invalid UTF-8 is replaced.
 
 #include <array>
 #include <cstdint>
@@ -32,8 +32,9 @@ struct MqttObject {
 
 // lrfnet/<site>/objects:
 // {"type":"objects","site":..,"seq":..,"stamp_ns":..,"frame":"world","objects":[{"id":..,
-//  "state":..,"x_m":..,"y_m":..,"vx_mps":..,"vy_mps":..,"covariance":[16, row-major (x, y, vx, vy)],
-//  "size":{"length_m":..,"width_m":..}|null,"age_s":..,"sensors":[..],"path":[[x_m, y_m, t_s]]}]}
+//  "state":..,"x_m":..,"y_m":..,"vx_mps":..,"vy_mps":..,"covariance":[16, row-major (x, y, vx,
+//  vy)], "size":{"length_m":..,"width_m":..}|null,"age_s":..,"sensors":[..],"path":[[x_m, y_m,
+//  t_s]]}]}
 std::string ObjectsJson(const std::string& site, std::uint64_t seq, common::UtcNs stamp_ns,
                         const std::vector<MqttObject>& objects);
 

@@ -9,7 +9,9 @@
 namespace lrfnet::daemon {
 namespace {
 
-common::DurationNs PeriodNs(double seconds) { return static_cast<common::DurationNs>(seconds * 1e9); }
+common::DurationNs PeriodNs(double seconds) {
+  return static_cast<common::DurationNs>(seconds * 1e9);
+}
 
 // Due when at least 90 % of the period passed (timer jitter), or the clock stepped back.
 bool Due(common::UtcNs now_ns, common::UtcNs last_ns, common::DurationNs period_ns) {
@@ -38,12 +40,14 @@ std::string MqttService::WillPayload() const {
 }
 
 void MqttService::PublishStatus(bool online, common::UtcNs now_ns) {
-  sink_->Publish(Topic("status"), StatusJson(config_.site, online ? "online" : "offline", version_, now_ns),
-                 qos_, true);
+  sink_->Publish(Topic("status"),
+                 StatusJson(config_.site, online ? "online" : "offline", version_, now_ns), qos_,
+                 true);
   ++counters_.status;
 }
 
-void MqttService::PublishCalibration(const calib::CalibrationResult& result, common::UtcNs stamp_ns) {
+void MqttService::PublishCalibration(const calib::CalibrationResult& result,
+                                     common::UtcNs stamp_ns) {
   sink_->Publish(Topic("calibration"), CalibrationJson(config_.site, stamp_ns, result), qos_, true);
   ++counters_.calibrations;
   placed_.clear();

@@ -36,7 +36,8 @@ std::string SelectSubprotocol(const HttpRequest& request) {
     while (!list.empty()) {
       const std::size_t comma = list.find(',');
       const std::string_view token = Trim(list.substr(0, comma));
-      if (token == kFoxgloveSubprotocol || token == kFoxgloveSdkSubprotocol) return std::string(token);
+      if (token == kFoxgloveSubprotocol || token == kFoxgloveSdkSubprotocol)
+        return std::string(token);
       if (comma == std::string_view::npos) break;
       list.remove_prefix(comma + 1);
     }
@@ -76,8 +77,10 @@ std::string FoxgloveMessageData(std::uint32_t subscription_id, std::uint64_t sta
                                 std::string_view payload) {
   std::string out(1 + 4 + 8 + payload.size(), '\0');
   out[0] = 0x01;
-  for (int i = 0; i < 4; ++i) out[static_cast<std::size_t>(1 + i)] = static_cast<char>((subscription_id >> (8 * i)) & 0xff);
-  for (int i = 0; i < 8; ++i) out[static_cast<std::size_t>(5 + i)] = static_cast<char>((stamp_ns >> (8 * i)) & 0xff);
+  for (int i = 0; i < 4; ++i)
+    out[static_cast<std::size_t>(1 + i)] = static_cast<char>((subscription_id >> (8 * i)) & 0xff);
+  for (int i = 0; i < 8; ++i)
+    out[static_cast<std::size_t>(5 + i)] = static_cast<char>((stamp_ns >> (8 * i)) & 0xff);
   std::memcpy(out.data() + 13, payload.data(), payload.size());
   return out;
 }
@@ -86,7 +89,8 @@ FoxgloveClientMessage ParseFoxgloveClientMessage(std::string_view bytes, bool bi
   FoxgloveClientMessage m;
   if (binary) {
     m.kind = FoxgloveClientMessage::Kind::kUnsupported;
-    m.op = bytes.empty() ? "binary" : "binary opcode " + std::to_string(static_cast<unsigned char>(bytes[0]));
+    m.op = bytes.empty() ? "binary"
+                         : "binary opcode " + std::to_string(static_cast<unsigned char>(bytes[0]));
     return m;
   }
   const Json j = Json::parse(bytes.begin(), bytes.end(), nullptr, /*allow_exceptions=*/false);

@@ -56,8 +56,8 @@ struct FoxgloveClientMessage {
   Kind kind = Kind::kBad;
   std::vector<std::pair<std::uint32_t, std::uint32_t>> subscribe;  // (subscription id, channel id)
   std::vector<std::uint32_t> unsubscribe;                          // subscription ids
-  std::string op;     // the op of kUnsupported
-  std::string error;  // why, for kBad
+  std::string op;                                                  // the op of kUnsupported
+  std::string error;                                               // why, for kBad
 };
 FoxgloveClientMessage ParseFoxgloveClientMessage(std::string_view bytes, bool binary);
 

@@ -179,7 +179,8 @@ LiveState RoomState(double t_s, bool placed) {
     }
   }
   state.zones.push_back({"door", "line", {{6.0, 1.0}, {6.0, 5.0}}, 0, 4, 3});
-  state.zones.push_back({"lobby", "polygon", {{9.0, 1.0}, {13.0, 1.0}, {13.0, 4.0}, {9.0, 4.0}}, 1, 5, 4});
+  state.zones.push_back(
+      {"lobby", "polygon", {{9.0, 1.0}, {13.0, 1.0}, {13.0, 4.0}, {9.0, 4.0}}, 1, 5, 4});
   return state;
 }
 
@@ -628,8 +629,9 @@ TEST_F(LiveViewBrowserTest, ShowsPlacedSensorsAndMovingTracksAndReconnects) {
   EXPECT_EQ(Attribute(html, "data-tracks"), 12);
   EXPECT_EQ(Attribute(html, "data-fused"), 2);
   EXPECT_EQ(Attribute(html, "data-zones"), 2);
-  EXPECT_EQ(browser.Evaluate("document.querySelector('#zone-rows tr[data-zone=\"door\"]').textContent"),
-            "door (line)043");
+  EXPECT_EQ(
+      browser.Evaluate("document.querySelector('#zone-rows tr[data-zone=\"door\"]').textContent"),
+      "door (line)043");
   EXPECT_EQ(Attribute(html, "data-errors"), 0);
   EXPECT_EQ(Attribute(html, "data-script-errors"), 0);
   const double moved = browser.WaitForSummary("moved", 0.8, 5s);
@@ -697,10 +699,9 @@ class LiveViewFoxgloveTest : public LiveViewBrowserTest {
   // Runs the client until every channel sent something and `wait_topic` three messages.
   json RunClient(const std::string& path, const std::string& subprotocol,
                  const std::string& wait_topic) {
-    testing::Process node(testing::kNode,
-                          {std::string(LRFNET_NODE_DIR) + "/foxglove_client.mjs",
-                           "ws://127.0.0.1:" + std::to_string(port_) + path, subprotocol,
-                           wait_topic, "3", "20"});
+    testing::Process node(testing::kNode, {std::string(LRFNET_NODE_DIR) + "/foxglove_client.mjs",
+                                           "ws://127.0.0.1:" + std::to_string(port_) + path,
+                                           subprotocol, wait_topic, "3", "20"});
     EXPECT_EQ(node.Wait(30s), 0) << node.err();
     const json summary = json::parse(node.out(), nullptr, false);
     EXPECT_TRUE(summary.is_object()) << node.out() << node.err();
@@ -708,9 +709,7 @@ class LiveViewFoxgloveTest : public LiveViewBrowserTest {
   }
 };
 
-double Yaw(const json& q) {
-  return 2.0 * std::atan2(q["z"].get<double>(), q["w"].get<double>());
-}
+double Yaw(const json& q) { return 2.0 * std::atan2(q["z"].get<double>(), q["w"].get<double>()); }
 
 TEST_F(LiveViewFoxgloveTest, AFoxgloveClientSeesSensorsTracksTransformsAndZones) {
   StartServer(/*placed=*/true);

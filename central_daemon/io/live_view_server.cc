@@ -82,8 +82,8 @@ struct Core : std::enable_shared_from_this<Core> {
   };
   std::vector<FoxgloveTopic> foxglove_topics;
   std::map<std::string, std::uint32_t, std::less<>> foxglove_ids;
-  std::string session_id = std::to_string(
-      std::chrono::system_clock::now().time_since_epoch().count());
+  std::string session_id =
+      std::to_string(std::chrono::system_clock::now().time_since_epoch().count());
 };
 
 // Does the upgrade come from a page allowed to open a Foxglove connection?
@@ -121,10 +121,11 @@ class WsSession : public std::enable_shared_from_this<WsSession> {
     // The subprotocol decides what this connection speaks: Foxglove, or the page's own JSON.
     subprotocol_ = SelectSubprotocol(request_);
     foxglove_ = !subprotocol_.empty();
-    ws_.set_option(websocket::stream_base::decorator([protocol = subprotocol_](websocket::response_type& r) {
-      r.set(http::field::server, "lrfnetd");
-      if (!protocol.empty()) r.set(http::field::sec_websocket_protocol, protocol);
-    }));
+    ws_.set_option(
+        websocket::stream_base::decorator([protocol = subprotocol_](websocket::response_type& r) {
+          r.set(http::field::server, "lrfnetd");
+          if (!protocol.empty()) r.set(http::field::sec_websocket_protocol, protocol);
+        }));
     // Clients send little (Foxglove: subscriptions); a large frame from one is an error, not a
     // buffer to grow.
     ws_.read_message_max(foxglove_ ? 65536 : 4096);

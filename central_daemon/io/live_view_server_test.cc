@@ -117,10 +117,11 @@ class WsClient {
     if (!ok) return false;
     beast::get_lowest_layer(ws_).expires_never();
     ws_.set_option(websocket::stream_base::timeout{5s, websocket::stream_base::none(), false});
-    ws_.set_option(websocket::stream_base::decorator([origin, subprotocols](websocket::request_type& r) {
-      if (origin) r.set(http::field::origin, *origin);
-      if (subprotocols) r.set(http::field::sec_websocket_protocol, *subprotocols);
-    }));
+    ws_.set_option(
+        websocket::stream_base::decorator([origin, subprotocols](websocket::request_type& r) {
+          if (origin) r.set(http::field::origin, *origin);
+          if (subprotocols) r.set(http::field::sec_websocket_protocol, *subprotocols);
+        }));
     ws_.read_message_max(64 << 20);
     done = false;
     const std::string host = "127.0.0.1:" + std::to_string(port);
@@ -474,8 +475,10 @@ struct DataFrame {
 std::optional<DataFrame> ParseFrame(const std::optional<std::string>& bytes) {
   if (!bytes || bytes->size() < 13 || (*bytes)[0] != 0x01) return std::nullopt;
   DataFrame f;
-  for (int i = 3; i >= 0; --i) f.subscription = (f.subscription << 8) | static_cast<std::uint8_t>((*bytes)[1 + i]);
-  for (int i = 7; i >= 0; --i) f.stamp_ns = (f.stamp_ns << 8) | static_cast<std::uint8_t>((*bytes)[5 + i]);
+  for (int i = 3; i >= 0; --i)
+    f.subscription = (f.subscription << 8) | static_cast<std::uint8_t>((*bytes)[1 + i]);
+  for (int i = 7; i >= 0; --i)
+    f.stamp_ns = (f.stamp_ns << 8) | static_cast<std::uint8_t>((*bytes)[5 + i]);
   f.payload = bytes->substr(13);
   return f;
 }
@@ -498,20 +501,27 @@ TEST_F(LiveViewServerTest, FoxgloveClientGetsServerInfoChannelsAndWhatItSubscrib
   EXPECT_EQ(advertise["channels"][0]["schemaEncoding"], "jsonschema");
   const std::uint32_t a = advertise["channels"][0]["id"].get<std::uint32_t>();
   // A channel that appears later is advertised then.
-  OnIo([this] { server_->PublishFoxglove({Channel("/a", R"({"n":1})", 12), Channel("/b", "{}", 12)}); });
+  OnIo([this] {
+    server_->PublishFoxglove({Channel("/a", R"({"n":1})", 12), Channel("/b", "{}", 12)});
+  });
   const Json later = ParseJson(fox.Read());
   ASSERT_EQ(later["channels"].size(), 1u);
   EXPECT_EQ(later["channels"][0]["topic"], "/b");
   // Subscribed: the latest message at once, then every new one; an unchanged one is not resent.
-  ASSERT_TRUE(fox.Write(R"({"op":"subscribe","subscriptions":[{"id":42,"channelId":)" + std::to_string(a) + "}]}"));
+  ASSERT_TRUE(fox.Write(R"({"op":"subscribe","subscriptions":[{"id":42,"channelId":)" +
+                        std::to_string(a) + "}]}"));
   auto frame = ParseFrame(fox.Read());
   ASSERT_TRUE(frame.has_value());
   EXPECT_FALSE(fox.last_was_text());
   EXPECT_EQ(frame->subscription, 42u);
   EXPECT_EQ(frame->stamp_ns, 11u);
   EXPECT_EQ(frame->payload, R"({"n":1})");
-  OnIo([this] { server_->PublishFoxglove({Channel("/a", R"({"n":1})", 13), Channel("/b", "{\"x\":2}", 13)}); });
-  OnIo([this] { server_->PublishFoxglove({Channel("/a", R"({"n":2})", 14), Channel("/b", "{\"x\":3}", 14)}); });
+  OnIo([this] {
+    server_->PublishFoxglove({Channel("/a", R"({"n":1})", 13), Channel("/b", "{\"x\":2}", 13)});
+  });
+  OnIo([this] {
+    server_->PublishFoxglove({Channel("/a", R"({"n":2})", 14), Channel("/b", "{\"x\":3}", 14)});
+  });
   frame = ParseFrame(fox.Read());
   ASSERT_TRUE(frame.has_value());
   EXPECT_EQ(frame->payload, R"({"n":2})");  // /b never: not subscribed
@@ -542,12 +552,12 @@ TEST_F(LiveViewServerTest, HostileFoxgloveMessagesGetAStatusAndTheConnectionGoes
   EXPECT_EQ(fox.handshake_response()[http::field::sec_websocket_protocol], "foxglove.sdk.v1");
   ASSERT_EQ(ParseJson(fox.Read())["op"], "serverInfo");
   ASSERT_EQ(ParseJson(fox.Read())["op"], "advertise");
-  for (const auto& [message, text] :
-       std::vector<std::pair<std::string, bool>>{{"{not json", true},
-                                                 {R"({"op":"getParameters","parameterNames":[]})", true},
-                                                 {std::string("\x01\x00\x00\x00\x00zz", 7), false},
-                                                 {R"({"op":"subscribe","subscriptions":[{"id":1,"channelId":99}]})", true},
-                                                 {R"({"op":"subscribe","subscriptions":[{"id":-1,"channelId":1}]})", true}}) {
+  for (const auto& [message, text] : std::vector<std::pair<std::string, bool>>{
+           {"{not json", true},
+           {R"({"op":"getParameters","parameterNames":[]})", true},
+           {std::string("\x01\x00\x00\x00\x00zz", 7), false},
+           {R"({"op":"subscribe","subscriptions":[{"id":1,"channelId":99}]})", true},
+           {R"({"op":"subscribe","subscriptions":[{"id":-1,"channelId":1}]})", true}}) {
     ASSERT_TRUE(fox.Write(message, text));
     const Json status = ParseJson(fox.Read());
     EXPECT_EQ(status["op"], "status") << message;

@@ -8,12 +8,12 @@
 #include <algorithm>
 #include <chrono>
 #include <condition_variable>
+#include <cstring>
 #include <deque>
 #include <map>
 #include <mutex>
 #include <random>
 #include <thread>
-#include <cstring>
 #include <unordered_map>
 #include <unordered_set>
 
@@ -71,8 +71,8 @@ struct MqttPublisher::Impl {
 
   // Shared with the callers' threads.
   mutable std::mutex mutex;
-  std::condition_variable changed;  // queue drained, connected, in-flight done
-  std::deque<Message> queue;        // not retained
+  std::condition_variable changed;                 // queue drained, connected, in-flight done
+  std::deque<Message> queue;                       // not retained
   std::map<std::string, Message> retained_unsent;  // newest per topic, sent after connect
   std::map<std::string, Message> retained_all;     // newest per topic, sent again after reconnect
   MqttCounters counters;
@@ -135,7 +135,8 @@ struct MqttPublisher::Impl {
     if (!connected && was_connecting) {
       ++counters.connect_failures;
       last_error = "cannot connect to " + options.host + ":" + std::to_string(options.port) + ": " +
-                   mosquitto_strerror(rc) + (rc == MOSQ_ERR_ERRNO ? std::string(" (") + std::strerror(errno) + ")" : "");
+                   mosquitto_strerror(rc) +
+                   (rc == MOSQ_ERR_ERRNO ? std::string(" (") + std::strerror(errno) + ")" : "");
     }
     if (connected) {
       ++counters.disconnects;
@@ -235,8 +236,9 @@ struct MqttPublisher::Impl {
         if (!m.resend) ++in_flight_new;
       }
       int mid = 0;
-      const int rc = mosquitto_publish(mosq, &mid, m.topic.c_str(), static_cast<int>(m.payload.size()),
-                                       m.payload.data(), m.qos, m.retain);
+      const int rc =
+          mosquitto_publish(mosq, &mid, m.topic.c_str(), static_cast<int>(m.payload.size()),
+                            m.payload.data(), m.qos, m.retain);
       std::lock_guard lock(mutex);
       if (rc == MOSQ_ERR_SUCCESS) {
         // Outside the library's own thread mosquitto_publish writes at once, so a QoS 0 message
@@ -282,8 +284,8 @@ struct MqttPublisher::Impl {
         connecting = false;
         std::lock_guard lock(mutex);
         ++counters.connect_failures;
-        last_error = "connecting to " + options.host + ":" + std::to_string(options.port) +
-                     " timed out";
+        last_error =
+            "connecting to " + options.host + ":" + std::to_string(options.port) + " timed out";
         ScheduleRetryLocked();
       }
       Drain();
@@ -295,7 +297,8 @@ struct MqttPublisher::Impl {
       }
       int timeout_ms = 200;
       if (!is_connected && !connecting) {
-        const auto wait = std::chrono::duration_cast<std::chrono::milliseconds>(next_attempt - Clock::now());
+        const auto wait =
+            std::chrono::duration_cast<std::chrono::milliseconds>(next_attempt - Clock::now());
         timeout_ms = static_cast<int>(std::clamp<std::int64_t>(wait.count(), 0, 200));
       }
       ::poll(fds, n, timeout_ms);
@@ -306,7 +309,8 @@ struct MqttPublisher::Impl {
       if (n == 2) {
         int rc = MOSQ_ERR_SUCCESS;
         if (fds[1].revents & (POLLIN | POLLHUP | POLLERR)) rc = mosquitto_loop_read(mosq, 16);
-        if (rc == MOSQ_ERR_SUCCESS && (fds[1].revents & POLLOUT)) rc = mosquitto_loop_write(mosq, 16);
+        if (rc == MOSQ_ERR_SUCCESS && (fds[1].revents & POLLOUT))
+          rc = mosquitto_loop_write(mosq, 16);
         // On an error the library closes the socket and calls on_disconnect (Disconnected).
         (void)rc;
       }
@@ -344,15 +348,16 @@ bool MqttPublisher::Start(std::string* error) {
   mosquitto_publish_callback_set(impl_->mosq, &Impl::OnPublish);
   if (!o.username.empty() &&
       mosquitto_username_pw_set(impl_->mosq, o.username.c_str(),
-                                o.password.empty() ? nullptr : o.password.c_str()) != MOSQ_ERR_SUCCESS) {
+                                o.password.empty() ? nullptr : o.password.c_str()) !=
+          MOSQ_ERR_SUCCESS) {
     return fail("cannot set the user name");
   }
   if (o.tls) {
-    const int rc = mosquitto_tls_set(
-        impl_->mosq, o.tls_ca_file.empty() ? nullptr : o.tls_ca_file.c_str(),
-        o.tls_ca_file.empty() ? "/etc/ssl/certs" : nullptr,
-        o.tls_cert_file.empty() ? nullptr : o.tls_cert_file.c_str(),
-        o.tls_key_file.empty() ? nullptr : o.tls_key_file.c_str(), nullptr);
+    const int rc =
+        mosquitto_tls_set(impl_->mosq, o.tls_ca_file.empty() ? nullptr : o.tls_ca_file.c_str(),
+                          o.tls_ca_file.empty() ? "/etc/ssl/certs" : nullptr,
+                          o.tls_cert_file.empty() ? nullptr : o.tls_cert_file.c_str(),
+                          o.tls_key_file.empty() ? nullptr : o.tls_key_file.c_str(), nullptr);
     if (rc != MOSQ_ERR_SUCCESS) {
       return fail(std::string("TLS setup: ") + mosquitto_strerror(rc) +
                   " (check tls_ca_file, tls_cert_file and tls_key_file)");

@@ -23,8 +23,8 @@ using lrfnet::testing::Process;
 using lrfnet::testing::ReceivedMessage;
 using std::chrono::milliseconds;
 
-#define REQUIRE_MOSQUITTO()                                                        \
-  if (!lrfnet::testing::HaveBinary(lrfnet::testing::kMosquitto)) {                 \
+#define REQUIRE_MOSQUITTO()                                                         \
+  if (!lrfnet::testing::HaveBinary(lrfnet::testing::kMosquitto)) {                  \
     GTEST_SKIP() << "mosquitto is not installed (scripts/install_deps.sh adds it)"; \
   }
 
@@ -63,7 +63,8 @@ TEST(MqttPublisherTest, DeliversEveryMessageInOrder) {
   ASSERT_TRUE(subscriber.WaitFor([](const auto& m) { return m.size() >= 500; }));
   const std::vector<ReceivedMessage> got = subscriber.messages();
   ASSERT_EQ(got.size(), 500u);
-  for (int i = 0; i < 500; ++i) EXPECT_EQ(got[static_cast<std::size_t>(i)].payload, std::to_string(i));
+  for (int i = 0; i < 500; ++i)
+    EXPECT_EQ(got[static_cast<std::size_t>(i)].payload, std::to_string(i));
   const MqttCounters c = publisher.counters();
   EXPECT_EQ(c.submitted, 500u);
   EXPECT_EQ(c.sent, 500u);
@@ -115,8 +116,8 @@ TEST(MqttPublisherTest, ConnectsWhenTheBrokerComesAndAgainAfterARestart) {
   EXPECT_EQ(c.disconnects, 1u);
   EXPECT_EQ(c.dropped_disconnected, 27u);
   EXPECT_EQ(c.lost_in_flight, 0u);
-  EXPECT_EQ(c.submitted, c.sent + c.dropped_disconnected + c.dropped_queue_full +
-                             c.lost_in_flight + c.retained_replaced + c.queued + c.in_flight);
+  EXPECT_EQ(c.submitted, c.sent + c.dropped_disconnected + c.dropped_queue_full + c.lost_in_flight +
+                             c.retained_replaced + c.queued + c.in_flight);
 }
 
 // A broker that accepts the connection and then never reads or acknowledges again.
@@ -213,9 +214,8 @@ TEST(MqttPublisherTest, TlsWithUserAndPassword) {
   EXPECT_EQ(publisher.counters().sent, 1u);  // acknowledged by the broker (QoS 1)
   // A second, independent client: mosquitto_sub over TLS with the same credentials.
   Process sub(lrfnet::testing::kMosquittoSub,
-              {"-h", "127.0.0.1", "-p", std::to_string(broker.port()), "--cafile",
-               broker.ca_file(), "-u", "daemon", "-P", "s3cret", "-t", "test/tls", "-C", "1",
-               "-W", "20"});
+              {"-h", "127.0.0.1", "-p", std::to_string(broker.port()), "--cafile", broker.ca_file(),
+               "-u", "daemon", "-P", "s3cret", "-t", "test/tls", "-C", "1", "-W", "20"});
   EXPECT_EQ(sub.Wait(milliseconds(30'000)), 0) << sub.err();
   EXPECT_EQ(sub.out(), "over tls\n");
 }

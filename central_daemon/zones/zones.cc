@@ -156,7 +156,8 @@ ZoneCounter::ZoneCounter(std::vector<Zone> zones, const ZoneOptions& options)
 void ZoneCounter::EndDwell(ZoneData& data, TrackInZone& t, common::UtcNs now_ns) {
   if (!t.in_region) return;
   t.in_region = false;
-  const double dwell_s = common::NsToSeconds(std::max<common::DurationNs>(0, now_ns - t.region_since_ns));
+  const double dwell_s =
+      common::NsToSeconds(std::max<common::DurationNs>(0, now_ns - t.region_since_ns));
   ++data.state.dwells_completed;
   data.state.dwell_total_s += dwell_s;
   data.state.dwell_max_s = std::max(data.state.dwell_max_s, dwell_s);

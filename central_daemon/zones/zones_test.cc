@@ -13,7 +13,8 @@ constexpr common::DurationNs kStepNs = 100'000'000;  // 10 Hz, as the fusion pub
 
 Zone Line(const char* name, Point a, Point b) { return Zone{name, ZoneKind::kLine, {a, b}}; }
 Zone Square(const char* name, double x0, double y0, double side) {
-  return Zone{name, ZoneKind::kPolygon,
+  return Zone{name,
+              ZoneKind::kPolygon,
               {{x0, y0}, {x0 + side, y0}, {x0 + side, y0 + side}, {x0, y0 + side}}};
 }
 
@@ -85,8 +86,8 @@ TEST(ZonesTest, StandingOnTheLineIsCountedOnceWhenCrossingAndNeverWhenTurningBac
 
 TEST(ZonesTest, LineIgnoresWalkingAroundItsEnds) {
   Walk w({Line("door", {-1, 0}, {1, 0})});
-  w.Straight(1, {3, -2}, {3, 2});   // beyond B
-  w.Straight(1, {3, 2}, {-3, 2});   // along the left side
+  w.Straight(1, {3, -2}, {3, 2});    // beyond B
+  w.Straight(1, {3, 2}, {-3, 2});    // along the left side
   w.Straight(1, {-3, 2}, {-3, -2});  // beyond A
   EXPECT_EQ(w.State().inbound + w.State().outbound, 0u);
   // A jump straight across in one update (a gap in the fused track) still counts.

@@ -32,7 +32,8 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
   const std::string_view bytes(reinterpret_cast<const char*>(data + 1), size - 1);
   const FoxgloveClientMessage m = lrfnet::daemon::ParseFoxgloveClientMessage(bytes, binary);
   const FoxgloveClientMessage again = lrfnet::daemon::ParseFoxgloveClientMessage(bytes, binary);
-  Check(m.kind == again.kind && m.subscribe == again.subscribe && m.unsubscribe == again.unsubscribe);
+  Check(m.kind == again.kind && m.subscribe == again.subscribe &&
+        m.unsubscribe == again.unsubscribe);
   Check(m.subscribe.size() <= lrfnet::daemon::kMaxFoxgloveSubscriptions);
   Check(m.unsubscribe.size() <= lrfnet::daemon::kMaxFoxgloveSubscriptions);
   switch (m.kind) {
@@ -47,8 +48,8 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
       Check(!binary);
       break;
   }
-  const std::string status =
-      lrfnet::daemon::FoxgloveStatus(2, m.kind == FoxgloveClientMessage::Kind::kBad ? m.error : m.op);
+  const std::string status = lrfnet::daemon::FoxgloveStatus(
+      2, m.kind == FoxgloveClientMessage::Kind::kBad ? m.error : m.op);
   const nlohmann::json j = nlohmann::json::parse(status, nullptr, false);
   Check(j.is_object() && j["op"] == "status" && j["level"] == 2);
   for (const auto& [subscription, channel] : m.subscribe) {

@@ -11,11 +11,14 @@ void WriteFoxgloveSeeds(const std::string& dir) {
   std::filesystem::create_directories(dir);
   // First byte: 0 text, 1 binary.
   const std::vector<std::string> seeds = {
-      std::string("\0", 1) + R"({"op":"subscribe","subscriptions":[{"id":0,"channelId":1},{"id":1,"channelId":2}]})",
+      std::string("\0", 1) +
+          R"({"op":"subscribe","subscriptions":[{"id":0,"channelId":1},{"id":1,"channelId":2}]})",
       std::string("\0", 1) + R"({"op":"unsubscribe","subscriptionIds":[0,1]})",
       std::string("\0", 1) + R"({"op":"getParameters","parameterNames":[],"id":"x"})",
-      std::string("\0", 1) + R"({"op":"advertise","channels":[{"id":1,"topic":"/x","encoding":"json","schemaName":"a"}]})",
-      std::string("\0", 1) + R"({"op":"subscribe","subscriptions":[{"id":-1,"channelId":4294967296}]})",
+      std::string("\0", 1) +
+          R"({"op":"advertise","channels":[{"id":1,"topic":"/x","encoding":"json","schemaName":"a"}]})",
+      std::string("\0", 1) +
+          R"({"op":"subscribe","subscriptions":[{"id":-1,"channelId":4294967296}]})",
       std::string("\0", 1) + R"({"op":"subscribe","subscriptions":{"id":1}})",
       std::string("\0", 1) + R"({"op":5})",
       std::string("\0", 1) + R"([[[[[[[[[[[[[[[[[[[[[[[[[[[[[[]]]]]]]]]]]]]]]]]]]]]]]]]]]]])",
