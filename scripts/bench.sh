@@ -5,7 +5,8 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 build_dir=${1:-build}
 cmake --build "$build_dir" --target decode_benchmark tracker_benchmark store_benchmark daemon_benchmark \
-  rotation_averaging_benchmark calibration_benchmark fusion_benchmark lrfnet lrfnet-tracker >/dev/null
+  rotation_averaging_benchmark calibration_benchmark fusion_benchmark outputs_benchmark lrfnet lrfnet-tracker \
+  >/dev/null
 mkdir -p results
 "$build_dir/tests/bench/decode_benchmark" --out results/decode_benchmark.md
 "$build_dir/tests/bench/tracker_benchmark" --out results/tracker_benchmark.md
@@ -18,3 +19,5 @@ mkdir -p results
   --out results/calibration_benchmark.md
 # Fusion on synthetic multi-sensor scenes (accuracy, id continuity, update time).
 "$build_dir/tests/bench/fusion_benchmark" --out results/fusion_benchmark.md
+# The outputs for other systems: zones, MQTT object lists, Publish with a real, a stalled and no broker.
+"$build_dir/tests/bench/outputs_benchmark" --out results/outputs_benchmark.md
