@@ -122,6 +122,34 @@ std::size_t EncodeScanDataConfig(const ScanDataConfig& config, std::span<std::ui
   return w.Size();
 }
 
+bool DecodeScanDataConfig(std::span<const std::uint8_t> args, ScanDataConfig* out) {
+  // Byte order as in EncodeScanDataConfig; bytes 1, 4 and 6 are not kept.
+  if (args.size() != 13) return false;
+  ScanDataConfig c;
+  c.output_channel = args[0];
+  c.remission = args[2] != 0;
+  c.resolution = args[3];
+  c.encoder = args[5] != 0;
+  c.position = args[7] != 0;
+  c.device_name = args[8] != 0;
+  c.comment = args[9] != 0;
+  c.time = args[10] != 0;
+  c.output_interval = common::LoadBe16(args.data() + 11);
+  *out = c;
+  return true;
+}
+
+bool DecodeOutputRange(std::span<const std::uint8_t> args, OutputRange* out) {
+  if (args.size() < 2) return false;
+  const std::uint16_t sectors = common::LoadBe16(args.data());
+  if (sectors == 0 || args.size() != 2 + std::size_t{sectors} * 12) return false;
+  out->sectors = sectors;
+  out->step_raw = common::LoadBe32(args.data() + 2);
+  out->start_raw = static_cast<std::int32_t>(common::LoadBe32(args.data() + 6));
+  out->stop_raw = static_cast<std::int32_t>(common::LoadBe32(args.data() + 10));
+  return true;
+}
+
 std::size_t EncodeReply(CommandType type, std::string_view name, std::span<const std::uint8_t> args,
                         std::span<std::uint8_t> out) {
   return EncodeReply(type, name, args, EmptyArgsSpace::kOmit, out);

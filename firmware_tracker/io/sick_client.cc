@@ -53,6 +53,8 @@ std::optional<std::string> Validate(const SickClientOptions& options) {
     return "read deadline must be >= 1 scan period";
   }
   if (options.min_read_deadline.count() <= 0) return "minimum read deadline must be > 0 ms";
+  if (options.ready_poll_interval.count() <= 0) return "ready poll interval must be > 0 ms";
+  if (options.ready_timeout.count() <= 0) return "ready timeout must be > 0 ms";
   if (auto e = Validate(options.backoff)) return e;
   if (options.read_buffer_bytes < 64 || options.read_buffer_bytes > (16u << 20)) {
     return "read buffer must be 64 B .. 16 MiB";
@@ -111,6 +113,7 @@ SickClient::SickClient(asio::io_context& io, const SickClientOptions& options, S
       socket_(io),
       deadline_timer_(io),
       backoff_timer_(io),
+      poll_timer_(io),
       decoder_(options.framer),
       read_buffer_(options.read_buffer_bytes),
       backoff_(options.backoff, options.backoff_seed) {
@@ -120,7 +123,10 @@ SickClient::SickClient(asio::io_context& io, const SickClientOptions& options, S
   }
   steps_ = {Step::kSetAccessMode, Step::kDeviceIdent, Step::kFirmwareVersion, Step::kSerialNumber};
   if (options_.configure_scan_data) steps_.push_back(Step::kScanDataConfig);
-  steps_.insert(steps_.end(), {Step::kStartMeasurement, Step::kRun, Step::kEnableScanData});
+  steps_.insert(steps_.end(), {Step::kReadScanDataConfig, Step::kReadOutputRange,
+                               Step::kStartMeasurement, Step::kRun});
+  if (options_.wait_for_ready) steps_.push_back(Step::kWaitReady);
+  steps_.push_back(Step::kEnableScanData);
 }
 
 SickClient::~SickClient() { Stop(); }
@@ -136,11 +142,16 @@ const char* SickClient::StepCommandName(Step s) const {
     case Step::kSerialNumber:
       return "SerialNumber";
     case Step::kScanDataConfig:
+    case Step::kReadScanDataConfig:
       return "LMDscandatacfg";
+    case Step::kReadOutputRange:
+      return "LMPoutputRange";
     case Step::kStartMeasurement:
       return "LMCstartmeas";
     case Step::kRun:
       return "Run";
+    case Step::kWaitReady:
+      return "SCdevicestate";
     case Step::kEnableScanData:
       return "LMDscandata";
   }
@@ -163,6 +174,9 @@ cola::CommandType SickClient::StepReplyType(Step s) const {
     case Step::kDeviceIdent:
     case Step::kFirmwareVersion:
     case Step::kSerialNumber:
+    case Step::kReadScanDataConfig:
+    case Step::kReadOutputRange:
+    case Step::kWaitReady:
       return cola::CommandType::kReadAnswer;
     case Step::kScanDataConfig:
       return cola::CommandType::kWriteAnswer;
@@ -188,6 +202,7 @@ void SickClient::Stop() {
   boost::system::error_code ignored;
   deadline_timer_.cancel(ignored);
   backoff_timer_.cancel(ignored);
+  poll_timer_.cancel(ignored);
   if (was_running) spdlog::info("sick_client {}: stopped", endpoint_text_);
 }
 
@@ -223,6 +238,7 @@ void SickClient::Connect() {
   session_has_scan_ = false;
   bad_frame_logged_ = false;
   step_index_ = 0;
+  ready_deadline_ = {};
   // A new connection is a new byte stream: a partial telegram of the previous one must not be glued
   // to it.
   decoder_.Reset();
@@ -285,6 +301,14 @@ void SickClient::SendStep() {
     case Step::kDeviceIdent:
     case Step::kFirmwareVersion:
     case Step::kSerialNumber:
+    case Step::kReadScanDataConfig:
+    case Step::kReadOutputRange:
+      n = cola::EncodeReadVariable(StepCommandName(step), out);
+      break;
+    case Step::kWaitReady:
+      if (ready_deadline_ == SteadyClock::time_point{}) {
+        ready_deadline_ = SteadyClock::now() + options_.ready_timeout;
+      }
       n = cola::EncodeReadVariable(StepCommandName(step), out);
       break;
     case Step::kScanDataConfig:
@@ -394,6 +418,64 @@ void SickClient::HandleStepReply(const cola::TelegramHeader& header) {
       break;
     }
     case Step::kScanDataConfig:
+      break;
+    case Step::kReadScanDataConfig: {
+      cola::ScanDataConfig config;
+      if (!cola::DecodeScanDataConfig(header.args, &config)) {
+        spdlog::warn("sick_client {}: undecodable LMDscandatacfg reply; continuing",
+                     endpoint_text_);
+        break;
+      }
+      device_info_.scan_data_config = config;
+      if (options_.configure_scan_data && !(config == options_.scan_data_config)) {
+        ++counters_.config_mismatches;
+        spdlog::warn(
+            "sick_client {}: the device kept another scan data configuration than the "
+            "one written (channels {}, remission {}, resolution {}, time {}, every {}. scan)",
+            endpoint_text_, config.output_channel, config.remission, config.resolution, config.time,
+            config.output_interval);
+      }
+      break;
+    }
+    case Step::kReadOutputRange: {
+      cola::OutputRange range;
+      if (cola::DecodeOutputRange(header.args, &range)) {
+        device_info_.output_range = range;
+      } else {
+        spdlog::warn("sick_client {}: undecodable LMPoutputRange reply; continuing",
+                     endpoint_text_);
+      }
+      break;
+    }
+    case Step::kWaitReady:
+      if (!has_status) {
+        spdlog::warn("sick_client {}: SCdevicestate without a value; continuing", endpoint_text_);
+        break;
+      }
+      device_info_.device_state = status;
+      if (status == 2) {
+        ++counters_.handshake_failures;
+        Fail("the device reports its error state (SCdevicestate 2)");
+        return;
+      }
+      if (status != 1) {
+        ++counters_.busy_polls;
+        if (SteadyClock::now() + options_.ready_poll_interval > ready_deadline_) {
+          ++counters_.handshake_failures;
+          Fail(fmt::format("the device is still busy {} ms after Run (SCdevicestate {})",
+                           options_.ready_timeout.count(), status));
+          return;
+        }
+        // Poll again; the reply deadline does not run meanwhile.
+        deadline_kind_ = DeadlineKind::kNone;
+        poll_timer_.expires_after(options_.ready_poll_interval);
+        const std::uint64_t session = session_;
+        poll_timer_.async_wait([this, session](const boost::system::error_code& ec) {
+          if (ec || session != session_ || state_ != SickClientState::kHandshake) return;
+          SendStep();
+        });
+        return;
+      }
       break;
     case Step::kStartMeasurement:
       // sAN LMCstartmeas: 0 = no error.

@@ -2,17 +2,24 @@
 // Live link to a SICK scanner over TCP (CoLa-B, port 2112), built on Boost.Asio.
 //
 // A session is: connect -> sMN SetAccessMode -> sRN DeviceIdent -> sRN FirmwareVersion
-// -> sRN SerialNumber [-> sWN LMDscandatacfg] -> sMN LMCstartmeas -> sMN Run -> sEN LMDscandata 1,
-// each command waiting for its reply within `reply_timeout`, then streaming: received bytes go
-// through cola::StreamDecoder (the same path the capture replay uses) and every decoded scan is
-// handed to the scan callback with its receive time.
+// -> sRN SerialNumber [-> sWN LMDscandatacfg] -> sRN LMDscandatacfg -> sRN LMPoutputRange
+// -> sMN LMCstartmeas -> sMN Run -> sRN SCdevicestate until the device reports ready
+// -> sEN LMDscandata 1, each command waiting for its reply within `reply_timeout`, then streaming:
+// received bytes go through cola::StreamDecoder (the same path the capture replay uses) and every
+// decoded scan is handed to the scan callback with its receive time. The scan configuration read
+// back (LMDscandatacfg, LMPoutputRange) is in device_info(); one that differs from what was
+// written is logged and counted. After Run an LMS1xx or MRS1xxx is busy for a while (the MRS1104
+// about 15 s): SCdevicestate is polled every `ready_poll_interval` until it says ready, for at most
+// `ready_timeout` (SICK's driver waits 45 s); a device that reports its error state (2) fails the
+// session.
 //
 // Failures never end the client: a refused or timed-out connect, a device that does not answer, an
 // sFA to an essential command (LMCstartmeas, sEN LMDscandata), a closed connection or no scan
 // within the read deadline close the session, are logged once with their reason and counted, and
-// the client reconnects after an exponential backoff with jitter. sFA to the identification reads
-// (DeviceIdent, FirmwareVersion, SerialNumber), to SetAccessMode and to Run is logged and the
-// session continues (not every device knows every variable). The decoder is Reset() on every new
+// the client reconnects after an exponential backoff with jitter. sFA to the identification and
+// configuration reads (DeviceIdent, FirmwareVersion, SerialNumber, LMDscandatacfg,
+// LMPoutputRange, SCdevicestate), to SetAccessMode and to Run is logged and the session continues
+// (not every device knows every variable). The decoder is Reset() on every new
 // connection, so a device that rebooted (small telegram counters again) or a connection that broke
 // mid-telegram starts a clean stream.
 //
@@ -96,6 +103,10 @@ struct SickClientOptions {
   // device's stored configuration). A refusal is logged and the session continues.
   bool configure_scan_data = false;
   cola::ScanDataConfig scan_data_config;
+  // After Run: poll SCdevicestate until the device is ready (off: enable the scans at once).
+  bool wait_for_ready = true;
+  std::chrono::milliseconds ready_poll_interval{250};
+  std::chrono::milliseconds ready_timeout{45'000};
   // Size of the one read buffer (bytes per read call).
   std::size_t read_buffer_bytes = 16 * 1024;
   cola::FramerOptions framer;
@@ -113,8 +124,10 @@ struct SickClientCounters {
       0;                          // an essential start-up command refused (sFA or error status)
   std::uint64_t disconnects = 0;  // connection closed by the device or a socket error
   std::uint64_t bad_frames = 0;   // frames or telegrams the decoder rejected
-  std::uint64_t scans = 0;        // scans delivered to the callback
-  std::uint64_t bytes = 0;        // bytes received
+  std::uint64_t busy_polls = 0;   // SCdevicestate answered busy while waiting for ready
+  std::uint64_t config_mismatches = 0;  // LMDscandatacfg read back differs from what was written
+  std::uint64_t scans = 0;              // scans delivered to the callback
+  std::uint64_t bytes = 0;              // bytes received
 };
 
 // What the device said about itself during the start-up dialogue (empty where it answered sFA).
@@ -123,6 +136,10 @@ struct SickDeviceInfo {
   std::string ident_version;  // DeviceIdent version string
   std::string firmware_version;
   std::string serial_number;
+  // The scan configuration read back (nullopt where the device refused the read).
+  std::optional<cola::ScanDataConfig> scan_data_config;  // LMDscandatacfg
+  std::optional<cola::OutputRange> output_range;         // LMPoutputRange
+  int device_state = -1;  // last SCdevicestate: 0 busy, 1 ready, 2 error; -1 not read
 };
 
 enum class SickClientState {
@@ -175,8 +192,11 @@ class SickClient {
     kFirmwareVersion,
     kSerialNumber,
     kScanDataConfig,
+    kReadScanDataConfig,
+    kReadOutputRange,
     kStartMeasurement,
     kRun,
+    kWaitReady,
     kEnableScanData,
   };
   enum class DeadlineKind : std::uint8_t { kNone, kConnect, kReply, kFirstScan, kScan };
@@ -225,6 +245,7 @@ class SickClient {
   boost::asio::ip::tcp::socket socket_;
   boost::asio::steady_timer deadline_timer_;
   boost::asio::steady_timer backoff_timer_;
+  boost::asio::steady_timer poll_timer_;  // the next SCdevicestate poll
 
   cola::StreamDecoder decoder_;
   Listener listener_{this};
@@ -240,6 +261,7 @@ class SickClient {
       0;  // bumped whenever a session ends: handlers of older sessions are ignored
   bool session_has_scan_ = false;
   bool bad_frame_logged_ = false;
+  std::chrono::steady_clock::time_point ready_deadline_{};  // kWaitReady gives up after this
 
   std::chrono::steady_clock::time_point deadline_{};
   DeadlineKind deadline_kind_ = DeadlineKind::kNone;

@@ -114,9 +114,13 @@ class ScriptedDevice {
  public:
   // `scans` scans of `points` DIST1 values each; all in one write after sEA LMDscandata, or
   // `interval` apart.
+  // `busy_polls`: SCdevicestate answers busy (0) this often before ready (1); then `final_state`.
   ScriptedDevice(asio::io_context& io, int scans, std::uint16_t points = 4,
-                 milliseconds interval = milliseconds(0))
-      : acceptor_(io, tcp::endpoint(asio::ip::make_address("127.0.0.1"), 0)),
+                 milliseconds interval = milliseconds(0), int busy_polls = 0,
+                 std::uint8_t final_state = 1)
+      : busy_polls_(busy_polls),
+        final_state_(final_state),
+        acceptor_(io, tcp::endpoint(asio::ip::make_address("127.0.0.1"), 0)),
         socket_(io),
         timer_(io),
         scans_(scans),
@@ -172,8 +176,23 @@ class ScriptedDevice {
     } else if (h.name == "SerialNumber") {
       type = cola::CommandType::kReadAnswer;
       flex("424242");
-    } else if (h.name == "LMDscandatacfg") {
+    } else if (h.name == "LMDscandatacfg" && h.type == cola::CommandType::kWrite) {
       type = cola::CommandType::kWriteAnswer;
+      written_config_.assign(h.args.begin(), h.args.end());
+    } else if (h.name == "LMDscandatacfg") {
+      type = cola::CommandType::kReadAnswer;
+      // What was written, but every second scan only: a device that changed the request.
+      args = written_config_.empty()
+                 ? std::vector<std::uint8_t>{1, 0, 0, 0, 0, 0, 0, 0, 0, 0, 1, 0, 1}
+                 : written_config_;
+      args[12] = 2;
+    } else if (h.name == "LMPoutputRange") {
+      type = cola::CommandType::kReadAnswer;
+      // The LMS111 of the shared capture.
+      args = {0x00, 0x01, 0x00, 0x00, 0x13, 0x88, 0xff, 0xf9, 0x22, 0x33, 0x00, 0x22, 0x55, 0x0d};
+    } else if (h.name == "SCdevicestate") {
+      type = cola::CommandType::kReadAnswer;
+      args = {static_cast<std::uint8_t>(polls_++ < busy_polls_ ? 0 : final_state_)};
     } else if (h.name == "LMDscandata") {
       type = cola::CommandType::kEventAnswer;
       args = {1};
@@ -227,6 +246,10 @@ class ScriptedDevice {
     out->insert(out->end(), frame.begin(), frame.end());
   }
 
+  int busy_polls_ = 0;
+  std::uint8_t final_state_ = 1;
+  int polls_ = 0;
+  std::vector<std::uint8_t> written_config_;
   tcp::acceptor acceptor_;
   tcp::socket socket_;
   asio::steady_timer timer_;
@@ -253,9 +276,10 @@ SickClientOptions FastOptions(std::uint16_t port) {
 
 TEST(SickClientTest, RunsTheStartUpDialogueAndDeliversScansWithTheInjectedClock) {
   asio::io_context io;
-  ScriptedDevice device(io, 3);
+  ScriptedDevice device(io, 3, 4, milliseconds(0), /*busy_polls=*/2);
   SickClientOptions options = FastOptions(device.port());
   options.configure_scan_data = true;
+  options.ready_poll_interval = milliseconds(10);
   std::vector<std::uint16_t> counters;
   std::vector<common::UtcNs> times;
   std::vector<std::uint16_t> first_raw;
@@ -274,10 +298,11 @@ TEST(SickClientTest, RunsTheStartUpDialogueAndDeliversScansWithTheInjectedClock)
   client.Start();
   io.run_for(std::chrono::seconds(5));
 
-  EXPECT_EQ(
-      device.commands(),
-      (std::vector<std::string>{"SetAccessMode", "DeviceIdent", "FirmwareVersion", "SerialNumber",
-                                "LMDscandatacfg", "LMCstartmeas", "Run", "LMDscandata"}));
+  EXPECT_EQ(device.commands(),
+            (std::vector<std::string>{"SetAccessMode", "DeviceIdent", "FirmwareVersion",
+                                      "SerialNumber", "LMDscandatacfg", "LMDscandatacfg",
+                                      "LMPoutputRange", "LMCstartmeas", "Run", "SCdevicestate",
+                                      "SCdevicestate", "SCdevicestate", "LMDscandata"}));
   EXPECT_EQ(counters, (std::vector<std::uint16_t>{100, 101, 102}));
   EXPECT_EQ(first_raw, (std::vector<std::uint16_t>{1000, 2000, 3000}));
   ASSERT_EQ(times.size(), 3u);
@@ -286,10 +311,51 @@ TEST(SickClientTest, RunsTheStartUpDialogueAndDeliversScansWithTheInjectedClock)
   EXPECT_EQ(client.device_info().ident_version, "1.2.3");
   EXPECT_EQ(client.device_info().firmware_version, "V9.9");
   EXPECT_EQ(client.device_info().serial_number, "424242");
+  // The scan configuration read back: the device answered every second scan.
+  ASSERT_TRUE(client.device_info().scan_data_config.has_value());
+  cola::ScanDataConfig expected = options.scan_data_config;
+  expected.output_interval = 2;
+  EXPECT_EQ(*client.device_info().scan_data_config, expected);
+  EXPECT_EQ(client.counters().config_mismatches, 1u);
+  ASSERT_TRUE(client.device_info().output_range.has_value());
+  EXPECT_EQ(client.device_info().output_range->start_raw, -449997);
+  EXPECT_EQ(client.device_info().output_range->stop_raw, 2249997);
+  EXPECT_EQ(client.device_info().output_range->step_raw, 5000u);
+  EXPECT_EQ(client.device_info().device_state, 1);
+  EXPECT_EQ(client.counters().busy_polls, 2u);
   EXPECT_EQ(client.counters().connects, 1u);
   EXPECT_EQ(client.counters().scans, 3u);
   EXPECT_EQ(client.counters().sfa_replies, 0u);
   EXPECT_EQ(client.state(), SickClientState::kStopped);
+}
+
+TEST(SickClientTest, ADeviceThatStaysBusyOrReportsAnErrorFailsTheSession) {
+  for (const std::uint8_t final_state : {std::uint8_t{0}, std::uint8_t{2}}) {
+    asio::io_context io;
+    ScriptedDevice device(io, 3, 4, milliseconds(0), /*busy_polls=*/1, final_state);
+    SickClientOptions options = FastOptions(device.port());
+    options.ready_poll_interval = milliseconds(10);
+    options.ready_timeout = milliseconds(200);
+    SickClient client(io, options, [](const cola::ScanTelegram&, common::UtcNs) {});
+    client.Start();
+    const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(10);
+    while (client.counters().handshake_failures == 0 &&
+           std::chrono::steady_clock::now() < deadline) {
+      io.run_for(milliseconds(10));
+    }
+    EXPECT_EQ(client.counters().handshake_failures, 1u) << int{final_state};
+    EXPECT_EQ(client.counters().scans, 0u);
+    EXPECT_NE(client.last_failure().find(final_state == 2 ? "error state" : "still busy"),
+              std::string::npos)
+        << client.last_failure();
+    if (final_state == 0) {
+      EXPECT_GE(client.counters().busy_polls, 10u);
+    }
+    EXPECT_EQ(device.commands().back(), "SCdevicestate");
+    client.Stop();
+    device.Close();
+    io.run_for(milliseconds(50));
+  }
 }
 
 TEST(SickClientTest, StreamingAllocatesNothingPerScan) {
