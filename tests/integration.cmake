@@ -12,8 +12,10 @@ function(lrfnet_uses_binaries name)
   endif()
 endfunction()
 
-# `lrfnet dump` against the golden files of the shared captures.
-lrfnet_test(golden_test SOURCES golden_test.cc LIBS lrfnet_dump nlohmann_json::nlohmann_json)
+# `lrfnet dump` against the golden files of the shared captures; the emulated devices' replies
+# against the recorded devices' replies.
+lrfnet_test(golden_test SOURCES golden_test.cc
+            LIBS lrfnet_dump lrfnet_emulator nlohmann_json::nlohmann_json)
 
 # Emulator -> SickClient over loopback: every scan of a capture (or of the synthetic source) arrives.
 lrfnet_test(loopback_test SOURCES loopback_test.cc LIBS lrfnet_emulator lrfnet_sick_client lrfnet_dump)

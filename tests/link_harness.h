@@ -37,6 +37,7 @@ inline io::SickClientOptions TestClientOptions() {
   o.min_read_deadline = std::chrono::milliseconds(500);
   o.backoff.initial = std::chrono::milliseconds(20);
   o.backoff.max = std::chrono::milliseconds(200);
+  o.ready_poll_interval = std::chrono::milliseconds(20);
   return o;
 }
 

@@ -49,6 +49,7 @@ TEST_P(CaptureLoopbackTest, ClientReceivesExactlyTheDumpedScans) {
   ASSERT_NE(source, nullptr) << error;
   tools::EmulatorOptions emulator_options;
   emulator_options.speed = 20;
+  emulator_options.ready_after_run_s = 0.2;  // the MRS1104 takes 15 s; the dialogue test has it
   std::vector<std::string> received_lines;
   testing::LinkHarness link(
       emulator_options, std::move(source), testing::TestClientOptions(),

@@ -34,12 +34,21 @@ class Collector : public cola::TelegramListener {
       first_serial = scan.serial_number;
       first_frequency_raw = scan.scan_frequency_raw;
       guessed_model = GuessModelName(scan);
+      if (const cola::ScanChannel* dist = scan.FindChannel("DIST1")) {
+        const cola::ScanChannel* rssi = scan.FindChannel("RSSI1");
+        identity.geometry = {dist->start_angle_raw, dist->angle_step_raw, dist->count,
+                             scan.scan_frequency_raw,
+                             static_cast<std::uint8_t>(rssi != nullptr ? rssi->bits : 0)};
+      }
     }
   }
 
   void OnTelegram(const cola::TelegramHeader& header, std::span<const std::uint8_t>,
                   common::UtcNs) override {
     if (header.type != cola::CommandType::kReadAnswer) return;
+    // The device's own answers: the emulated device answers these reads as it did.
+    identity.recorded_reads.try_emplace(std::string(header.name), header.args.begin(),
+                                        header.args.end());
     if (header.name == "DeviceIdent") {
       cola::DeviceIdent ident;
       if (cola::DecodeDeviceIdent(header.args, &ident)) {

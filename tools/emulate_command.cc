@@ -53,11 +53,13 @@ bool InPortRange(int port, int min) { return port >= min && port <= 65535; }
 int RunEmulate(int argc, char** argv) {
   po::options_description visible(
       "lrfnet emulate [CAPTURE] [options]\n"
-      "A SICK scanner on TCP (CoLa-B): answers the start-up dialogue of a driver and streams the "
-      "scans of\n"
-      "CAPTURE (pcap/pcapng) at the recorded pace, or synthetic scans with --synthetic MODEL. Runs "
-      "until\n"
-      "SIGINT/SIGTERM. Options",
+      "A SICK scanner on TCP (CoLa-A and CoLa-B on one port): answers the whole SOPAS dialogue of "
+      "its\n"
+      "device family as the device does (SICK's own driver included) and streams the scans of "
+      "CAPTURE\n"
+      "(pcap/pcapng; the recorded device's answers are kept) at the recorded pace, or synthetic "
+      "scans\n"
+      "with --synthetic MODEL. Runs until SIGINT/SIGTERM. Options",
       100, 50);
   int port = 2112;
   int sensor_port = 2112;
@@ -66,15 +68,22 @@ int RunEmulate(int argc, char** argv) {
   std::string synthetic;
   std::string model;
   std::string log_level = "info";
+  std::string family;
   EmulatorOptions options;
   EmulatorFaults& faults = options.faults;
   long long fault_stall = 0, fault_close = 0, fault_garbage = 0, fault_sfa_times = 0,
             fault_restart = 0;
   visible.add_options()("help,h", "this help")(
       "synthetic", po::value<std::string>(&synthetic),
-      "serve generated scans of MODEL (lms511, lms111, tim561, tim781) instead of a capture")(
-      "port", po::value<int>(&port)->default_value(2112),
-      "TCP port to listen on (0: any free port)")(
+      "serve generated scans of MODEL (lms511, lms111, tim561, tim781, tim781s, mrs1104) instead "
+      "of a capture")(
+      "family", po::value<std::string>(&family),
+      "device family whose dialogue to speak (LMS1xx, LMS5xx, TiM5xx, TiM7xx, TiM7xxS, MRS1xxx; "
+      "default: from the device name)")(
+      "ready-after", po::value<double>(&options.ready_after_run_s),
+      "seconds from sMN Run until the device reports ready (default: the family's, MRS1xxx "
+      "14.5)")("port", po::value<int>(&port)->default_value(2112),
+               "TCP port to listen on (0: any free port)")(
       "bind", po::value<std::string>(&bind)->default_value("127.0.0.1"), "address to listen on")(
       "port-file", po::value<std::string>(&port_file),
       "write the port number to this file once listening")(
@@ -103,7 +112,8 @@ int RunEmulate(int argc, char** argv) {
                                                   "on every connection: after N scans the device "
                                                   "reboots (connection dropped, counters restart)");
   po::variables_map vm;
-  if (auto exit_code = ParseOptions("emulate", argc, argv, visible, "capture", &vm)) return *exit_code;
+  if (auto exit_code = ParseOptions("emulate", argc, argv, visible, "capture", &vm))
+    return *exit_code;
   const bool have_capture = vm.count("capture") != 0;
   if (have_capture == !synthetic.empty()) {
     return UsageError("emulate", "give either a CAPTURE file or --synthetic MODEL");
@@ -124,6 +134,13 @@ int RunEmulate(int argc, char** argv) {
   }
   options.port = static_cast<std::uint16_t>(port);
   options.bind_address = bind;
+  if (!family.empty()) {
+    options.family = ParseDeviceFamily(family);
+    if (!options.family) return UsageError("emulate", "unknown --family '" + family + "'");
+  }
+  if (vm.count("ready-after") != 0 && !(options.ready_after_run_s >= 0.0)) {
+    return UsageError("emulate", "--ready-after must be >= 0");
+  }
   if (auto e = Validate(options)) return UsageError("emulate", *e);
   if (!SetUpLogging(log_level))
     return UsageError("emulate", "unknown --log-level '" + log_level + "'");
@@ -170,11 +187,16 @@ int RunEmulate(int argc, char** argv) {
     if (ec) return;
     spdlog::info("signal {}: stopping", signal_number);
     emulator.Stop();
+    io.stop();  // now, not after the cancelled handlers drained
   });
   io.run();
   const EmulatorCounters& c = emulator.counters();
-  spdlog::info("emulator: {} connections, {} commands, {} scans sent, {} sFA, {} passes",
-               c.connections, c.commands, c.scans_sent, c.sfa_sent, c.passes);
+  const SopasDeviceCounters& d = emulator.device_counters();
+  spdlog::info(
+      "emulator: {} connections, {} commands ({} in CoLa-A), {} scans sent, {} sFA ({} unknown, {} "
+      "denied, {} bad arguments), {} bad frames, {} passes",
+      c.connections, c.commands, d.requests_cola_a, c.scans_sent, c.sfa_sent, d.unknown_commands,
+      d.access_denied, d.bad_arguments, c.bad_frames, c.passes);
   return kExitOk;
 }
 

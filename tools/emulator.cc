@@ -18,14 +18,14 @@ using SteadyClock = std::chrono::steady_clock;
 
 namespace {
 
-// SOPAS error codes as the devices send them in sFA (the shared captures show 3 for an unknown
-// variable on an LMS511 and 15 for an unknown event on an MRS1104).
+// SOPAS error codes the injected sFA fault answers with (by request type, as a device refusing
+// it would).
 constexpr std::uint16_t kSopasMethodAccessDenied = 1;
-constexpr std::uint16_t kSopasMethodUnknownIndex = 2;
 constexpr std::uint16_t kSopasVariableUnknownIndex = 3;
 constexpr std::uint16_t kSopasVariableWriteAccessDenied = 10;
-constexpr std::uint16_t kSopasUnknownColaCommand = 12;
-constexpr std::uint16_t kSopasEventRegUnknownIndex = 15;
+
+// A subscribed device that is not ready yet is looked at again this often.
+constexpr std::chrono::milliseconds kStatePollPeriod{20};
 
 // After an injected restart the device counts from here (as a freshly powered unit: ticks a few
 // seconds in).
@@ -34,18 +34,20 @@ constexpr std::uint32_t kRestartTickUs = 2'000'000;
 constexpr std::size_t kGarbageBytes = 48;
 constexpr std::size_t kFakeFramePayloadBytes = 16;
 
-void AppendFlexString(std::string_view text, std::vector<std::uint8_t>* out) {
-  const auto n = static_cast<std::uint16_t>(std::min<std::size_t>(text.size(), 0xFFFF));
-  out->push_back(static_cast<std::uint8_t>(n >> 8));
-  out->push_back(static_cast<std::uint8_t>(n & 0xFF));
-  out->insert(out->end(), text.begin(), text.begin() + n);
+std::vector<std::uint8_t> Frame(std::span<const std::uint8_t> payload) {
+  return cola::EncodeSopasFrame(cola::Dialect::kColaB, payload);
 }
 
-std::vector<std::uint8_t> Frame(std::span<const std::uint8_t> payload) {
-  std::vector<std::uint8_t> frame(payload.size() + cola::kFrameHeaderBytes +
-                                  cola::kFrameTrailerBytes);
-  frame.resize(cola::EncodeFrame(payload, frame));
-  return frame;
+SopasDeviceOptions DeviceOptionsFor(const EmulatorOptions& options, const ScanSource& source) {
+  SopasDeviceOptions o;
+  o.identity = source.identity();
+  // A DeviceIdent name ("LMS511-10100"), or the family a capture without one was recognised as
+  // by its scan geometry ("LMS5xx").
+  o.family = options.family.value_or(
+      FamilyFromDeviceName(o.identity.name)
+          .value_or(ParseDeviceFamily(o.identity.name).value_or(DeviceFamily::kLms5xx)));
+  o.ready_after_run_s = options.ready_after_run_s;
+  return o;
 }
 
 }  // namespace
@@ -57,6 +59,9 @@ std::optional<std::string> Validate(const EmulatorOptions& options) {
   if (!(options.speed > 0.0) || !std::isfinite(options.speed) || options.speed > 1e6) {
     return "speed must be > 0";
   }
+  if (!(options.ready_after_run_s < 3600.0) || std::isnan(options.ready_after_run_s)) {
+    return "ready delay after Run must be below 3600 s";
+  }
   return std::nullopt;
 }
 
@@ -67,6 +72,9 @@ Emulator::Emulator(asio::io_context& io, const EmulatorOptions& options,
       acceptor_(io),
       socket_(io),
       scan_timer_(io),
+      state_timer_(io),
+      epoch_(SteadyClock::now()),
+      device_(DeviceOptionsFor(options, *source_)),
       scan_(std::make_unique<cola::ScanTelegram>()),
       rng_(options.seed) {}
 
@@ -91,8 +99,9 @@ bool Emulator::Start(std::string* error) {
   if (acceptor_.bind(endpoint, ec)) return fail("bind");
   if (acceptor_.listen(asio::socket_base::max_listen_connections, ec)) return fail("listen on");
   port_ = acceptor_.local_endpoint(ec).port();
-  spdlog::info("emulator: device '{}' listening on {}:{}", source_->identity().name,
-               options_.bind_address, port_);
+  spdlog::info("emulator: device '{}' ({}, CoLa-A and CoLa-B) listening on {}:{}",
+               source_->identity().name, DeviceFamilyName(device_.family()), options_.bind_address,
+               port_);
   Accept();
   return true;
 }
@@ -104,6 +113,11 @@ void Emulator::Stop() {
   acceptor_.close(ignored);
   if (socket_.is_open()) CloseConnection("emulator stopped");
   scan_timer_.cancel(ignored);
+  state_timer_.cancel(ignored);
+}
+
+common::DurationNs Emulator::Now() const {
+  return std::chrono::duration_cast<std::chrono::nanoseconds>(SteadyClock::now() - epoch_).count();
 }
 
 // ---- connections
@@ -132,7 +146,6 @@ void Emulator::OnAccepted(tcp::socket socket) {
   framer_.Reset();
   out_queue_.clear();
   writing_ = false;
-  logged_in_ = false;
   streaming_ = false;
   stalled_ = false;
   scan_due_ = false;
@@ -145,6 +158,9 @@ void Emulator::OnAccepted(tcp::socket socket) {
 void Emulator::CloseConnection(const char* why) {
   ++connection_;
   StopStreaming();
+  boost::system::error_code ignored_ec;
+  state_timer_.cancel(ignored_ec);
+  device_.OnDisconnect();
   out_queue_.clear();
   writing_ = false;
   boost::system::error_code ignored;
@@ -171,8 +187,8 @@ void Emulator::StartRead() {
     }
     framer_.FeedAll(
         {read_buffer_.data(), n},
-        [this, connection](std::span<const std::uint8_t> payload) {
-          if (connection == connection_) HandleCommand(payload);
+        [this, connection](cola::Dialect dialect, std::span<const std::uint8_t> payload) {
+          if (connection == connection_) HandleCommand(dialect, payload);
         },
         [this](const char* reason) {
           ++counters_.bad_frames;
@@ -184,132 +200,71 @@ void Emulator::StartRead() {
 
 // ---- commands
 
-void Emulator::HandleCommand(std::span<const std::uint8_t> payload) {
+void Emulator::HandleCommand(cola::Dialect dialect, std::span<const std::uint8_t> payload) {
   if (stalled_) return;
-  cola::TelegramHeader header;
-  if (cola::ParseTelegramHeader(payload, &header) != cola::HeaderStatus::kOk) {
-    ReplyError(kSopasUnknownColaCommand);
-    return;
-  }
   ++counters_.commands;
-  spdlog::debug("emulator: {} {}", cola::CommandTypeName(header.type), header.name);
-  using cola::CommandType;
-
+  cola::TelegramHeader header;
+  const bool parsed =
+      cola::ParseSopasTelegram(dialect, payload, &header) == cola::HeaderStatus::kOk;
+  if (parsed) {
+    spdlog::debug("emulator: {} {} {}", cola::DialectName(dialect),
+                  cola::CommandTypeName(header.type), header.name);
+  }
   const EmulatorFaults& faults = options_.faults;
-  if (!faults.sfa_command.empty() && header.name == faults.sfa_command &&
+  if (parsed && !faults.sfa_command.empty() && header.name == faults.sfa_command &&
       (faults.sfa_times == 0 || sfa_fault_count_ < faults.sfa_times)) {
     ++sfa_fault_count_;
     spdlog::info("emulator: fault: answering {} {} with sFA", cola::CommandTypeName(header.type),
                  header.name);
-    switch (header.type) {
-      case CommandType::kRead:
-        ReplyError(kSopasVariableUnknownIndex);
-        break;
-      case CommandType::kWrite:
-        ReplyError(kSopasVariableWriteAccessDenied);
-        break;
-      default:
-        ReplyError(kSopasMethodAccessDenied);
-        break;
-    }
+    const std::uint16_t code = header.type == cola::CommandType::kRead ? kSopasVariableUnknownIndex
+                               : header.type == cola::CommandType::kWrite
+                                   ? kSopasVariableWriteAccessDenied
+                                   : kSopasMethodAccessDenied;
+    ++counters_.sfa_sent;
+    SendOutputs({SopasOutput{dialect, cola::EncodeSopasError(dialect, code)}}, false);
     return;
   }
+  const std::uint64_t sfa_before = device_.counters().sfa;
+  const std::uint64_t reboots_before = device_.counters().reboots;
+  std::vector<SopasOutput> outputs;
+  device_.HandleRequest(dialect, payload, Now(), &outputs);
+  counters_.sfa_sent += device_.counters().sfa - sfa_before;
+  if (device_.counters().reboots != reboots_before) {
+    // sMN mSCreboot: the reply goes out, then the device is gone until it has booted.
+    ++counters_.restarts;
+    rebase_ = Rebase::kRestart;
+    SendOutputs(outputs, true);
+    return;
+  }
+  SendOutputs(outputs, false);
+  UpdateStreaming();
+}
 
-  const std::string_view name = header.name;
-  std::uint8_t first = 0;
-  const bool has_first = cola::DecodeFirstByte(header.args, &first);
-  const DeviceIdentity& identity = source_->identity();
-  std::vector<std::uint8_t> args;
-  switch (header.type) {
-    case CommandType::kMethod:
-      if (name == "SetAccessMode") {
-        // Arguments: user level u8, password hash u32 (big-endian).
-        bool granted = false;
-        if (header.args.size() >= 5) {
-          const std::uint32_t hash = common::LoadBe32(header.args.data() + 1);
-          const auto level = static_cast<cola::AccessLevel>(header.args[0]);
-          granted = (level == cola::AccessLevel::kAuthorizedClient &&
-                     hash == cola::kAuthorizedClientPasswordHash) ||
-                    (level == cola::AccessLevel::kService && hash == cola::kServicePasswordHash);
-        }
-        logged_in_ = granted;
-        args = {static_cast<std::uint8_t>(granted ? 1 : 0)};
-        Reply(CommandType::kMethodAnswer, name, args);
-      } else if (name == "LMCstartmeas") {
-        if (!logged_in_) {
-          ReplyError(kSopasMethodAccessDenied);
-          return;
-        }
-        args = {0};
-        Reply(CommandType::kMethodAnswer, name, args);
-      } else if (name == "LMCstopmeas") {
-        args = {0};
-        Reply(CommandType::kMethodAnswer, name, args);
-      } else if (name == "Run") {
-        args = {1};
-        Reply(CommandType::kMethodAnswer, name, args);
-      } else {
-        ReplyError(kSopasMethodUnknownIndex);
-      }
-      return;
-    case CommandType::kRead:
-      if (name == "DeviceIdent") {
-        AppendFlexString(identity.name, &args);
-        AppendFlexString(identity.version, &args);
-      } else if (name == "FirmwareVersion") {
-        AppendFlexString(identity.firmware_version, &args);
-      } else if (name == "SerialNumber") {
-        AppendFlexString(identity.serial_number, &args);
-      } else {
-        ReplyError(kSopasVariableUnknownIndex);
-        return;
-      }
-      Reply(CommandType::kReadAnswer, name, args);
-      return;
-    case CommandType::kWrite:
-      if (name == "LMDscandatacfg") {
-        if (!logged_in_) {
-          ReplyError(kSopasVariableWriteAccessDenied);
-          return;
-        }
-        Reply(CommandType::kWriteAnswer, name, {});
-      } else {
-        ReplyError(kSopasVariableUnknownIndex);
-      }
-      return;
-    case CommandType::kEvent:
-      if (name == "LMDscandata" && has_first) {
-        const bool enable = first != 0;
-        args = {static_cast<std::uint8_t>(enable ? 1 : 0)};
-        Reply(CommandType::kEventAnswer, name, args);
-        if (enable) {
-          StartStreaming();
-        } else {
-          StopStreaming();
-        }
-      } else {
-        ReplyError(kSopasEventRegUnknownIndex);
-      }
-      return;
-    default:
-      // Answers and events are never sent to a device.
-      ReplyError(kSopasUnknownColaCommand);
-      return;
+void Emulator::SendOutputs(const std::vector<SopasOutput>& outputs, bool close_after) {
+  for (std::size_t i = 0; i < outputs.size(); ++i) {
+    std::vector<std::uint8_t> frame =
+        cola::EncodeSopasFrame(outputs[i].dialect, outputs[i].payload);
+    if (frame.empty()) continue;
+    Enqueue(OutItem{std::move(frame), -1, close_after && i + 1 == outputs.size()});
   }
 }
 
-void Emulator::Reply(cola::CommandType type, std::string_view name,
-                     std::span<const std::uint8_t> args) {
-  std::vector<std::uint8_t> payload(name.size() + args.size() + 8);
-  payload.resize(cola::EncodeReply(type, name, args, payload));
-  Enqueue(OutItem{Frame(payload), -1, false});
-}
-
-void Emulator::ReplyError(std::uint16_t code) {
-  std::array<std::uint8_t, 16> payload{};
-  const std::size_t n = cola::EncodeErrorReply(code, payload);
-  ++counters_.sfa_sent;
-  Enqueue(OutItem{Frame({payload.data(), n}), -1, false});
+void Emulator::UpdateStreaming() {
+  if (!socket_.is_open() || stopped_) return;
+  const common::DurationNs now = Now();
+  if (device_.ScanOutputEnabled(now)) {
+    StartStreaming();
+    return;
+  }
+  StopStreaming();
+  if (!device_.ScanSubscribed()) return;
+  // Subscribed but busy (after Run): look again shortly; the device becomes ready on its own.
+  state_timer_.expires_after(kStatePollPeriod);
+  const std::uint64_t connection = connection_;
+  state_timer_.async_wait([this, connection](const boost::system::error_code& ec) {
+    if (ec || stopped_ || connection != connection_) return;
+    UpdateStreaming();
+  });
 }
 
 // ---- writing
@@ -480,6 +435,7 @@ void Emulator::SendScan() {
     ++counters_.restarts;
     rebase_ = Rebase::kRestart;
     spdlog::info("emulator: fault: device restart after {} scans", n);
+    device_.Reboot(Now());
     CloseConnection("fault: device restart");
     return;
   }
@@ -489,15 +445,22 @@ void Emulator::SendScan() {
   }
 
   ApplyRebase();
-  std::vector<std::uint8_t> payload(cola::MaxEncodedSize(*scan_));
-  payload.resize(cola::EncodeScanTelegram(*scan_, payload));
   have_pending_scan_ = false;
-  if (payload.empty()) {
-    spdlog::warn("emulator: scan {} cannot be encoded; skipped", scan_->telegram_counter);
+  std::vector<SopasOutput> events;
+  if (!device_.PrepareScan(scan_.get(), Now(), &events)) {
+    // Not sent (output interval, filtered layer); field evaluation ran on it all the same.
+    SendOutputs(events, false);
     ScheduleNextScan();
     return;
   }
-  std::vector<std::uint8_t> frame = Frame(payload);
+  const SopasOutput encoded = device_.EncodeScan(*scan_);
+  std::vector<std::uint8_t> frame = cola::EncodeSopasFrame(encoded.dialect, encoded.payload);
+  if (frame.empty()) {
+    spdlog::warn("emulator: scan {} cannot be encoded; skipped", scan_->telegram_counter);
+    SendOutputs(events, false);
+    ScheduleNextScan();
+    return;
+  }
   if (faults.close_mid_frame_after_scans != 0 && n == faults.close_mid_frame_after_scans) {
     ++counters_.mid_frame_closes;
     spdlog::info("emulator: fault: closing in the middle of scan {}", scan_->telegram_counter);
@@ -507,6 +470,7 @@ void Emulator::SendScan() {
   }
   ++scans_on_connection_;
   Enqueue(OutItem{std::move(frame), scan_->telegram_counter, false});
+  SendOutputs(events, false);
   ScheduleNextScan();
 }
 

@@ -1,17 +1,11 @@
 #pragma once
-// A TCP server that behaves like a SICK scanner speaking CoLa-B (Boost.Asio): answers the start-up
-// dialogue a driver sends and streams `sSN LMDscandata` from a ScanSource at the source's pace,
-// scaled by `speed`.
-//
-// Commands answered:
-//   sMN SetAccessMode <level> <hash>  -> sAN SetAccessMode 1 (0 for a wrong password hash)
-//   sRN DeviceIdent                   -> sRA DeviceIdent <flex name> <flex version>
-//   sRN FirmwareVersion, SerialNumber -> sRA <name> <flex string>
-//   sMN LMCstartmeas, LMCstopmeas     -> sAN <name> 0 (LMCstartmeas needs a granted access level)
-//   sMN Run                           -> sAN Run 1
-//   sWN LMDscandatacfg <...>          -> sWA LMDscandatacfg
-//   sEN LMDscandata 1|0               -> sEA LMDscandata 1|0, then streaming starts / stops
-//   anything else                     -> sFA with the code a device uses (unknown variable/method)
+// A TCP server that behaves like a SICK scanner (Boost.Asio): one port speaks CoLa-B and CoLa-A
+// (each request is answered in its own dialect), the SOPAS dialogue is a SopasDevice of the
+// source's device family (sopas_device.h: every variable, method and event a driver uses, the
+// login levels, the device state machine, field evaluation and I/O telegrams), and scans of a
+// ScanSource go out at the source's pace, scaled by `speed`, while the device's state lets them:
+// measuring (LMCstopmeas stops them), out of configuration mode, ready, and subscribed with
+// `sEN LMDscandata 1` in either dialect.
 //
 // One client at a time: a new connection replaces the current one. The source keeps its position
 // across connections (the device keeps measuring); counters and µs ticks are rewritten so they keep
@@ -40,10 +34,10 @@
 #include <string_view>
 #include <vector>
 
-#include "firmware_tracker/cola/framer.h"
 #include "firmware_tracker/cola/scan_telegram.h"
-#include "firmware_tracker/cola/telegram.h"
+#include "firmware_tracker/cola/sopas_framer.h"
 #include "tools/scan_source.h"
+#include "tools/sopas_device.h"
 
 namespace lrfnet::tools {
 
@@ -70,15 +64,20 @@ struct EmulatorOptions {
   double speed = 1.0;         // > 0; 2 = twice the recorded scan rate
   bool loop = false;          // restart the source at its end (counters and ticks keep increasing)
   std::uint64_t seed = 1;     // garbage bytes
+  // The device family; nullopt: from the source's DeviceIdent name (FamilyFromDeviceName), and
+  // LMS5xx when that names none.
+  std::optional<DeviceFamily> family;
+  // Seconds from `sMN Run` until the device reports ready; negative: the family's value.
+  double ready_after_run_s = -1.0;
   EmulatorFaults faults;
 };
 std::optional<std::string> Validate(const EmulatorOptions& options);
 
 struct EmulatorCounters {
   std::uint64_t connections = 0;
-  std::uint64_t commands = 0;    // well-formed command telegrams received
+  std::uint64_t commands = 0;    // request telegrams received (SopasDevice counts them in detail)
   std::uint64_t bad_frames = 0;  // frames from the client that were rejected
-  std::uint64_t sfa_sent = 0;
+  std::uint64_t sfa_sent = 0;    // sFA replies, the device's and the injected ones
   std::uint64_t scans_sent = 0;  // scan frames written completely
   std::uint64_t passes = 0;      // times the source was rewound (--loop)
   std::uint64_t garbage_bursts = 0;
@@ -103,6 +102,9 @@ class Emulator {
 
   std::uint16_t port() const { return port_; }
   const EmulatorCounters& counters() const { return counters_; }
+  const SopasDeviceCounters& device_counters() const { return device_.counters(); }
+  const SopasDevice& device() const { return device_; }
+  const cola::SopasFramerCounters& framer_counters() const { return framer_.counters(); }
   // Telegram counters (as sent) of the scan frames written completely, one list per accepted
   // connection.
   const std::vector<std::vector<std::uint16_t>>& sent_telegram_counters() const { return sent_; }
@@ -121,9 +123,10 @@ class Emulator {
   void OnAccepted(boost::asio::ip::tcp::socket socket);
   void CloseConnection(const char* why);
   void StartRead();
-  void HandleCommand(std::span<const std::uint8_t> payload);
-  void Reply(cola::CommandType type, std::string_view name, std::span<const std::uint8_t> args);
-  void ReplyError(std::uint16_t code);
+  void HandleCommand(cola::Dialect dialect, std::span<const std::uint8_t> payload);
+  void SendOutputs(const std::vector<SopasOutput>& outputs, bool close_after);
+  void UpdateStreaming();
+  common::DurationNs Now() const;
   void Enqueue(OutItem item);
   void WriteNext();
   void StartStreaming();
@@ -141,17 +144,19 @@ class Emulator {
   boost::asio::ip::tcp::acceptor acceptor_;
   boost::asio::ip::tcp::socket socket_;
   boost::asio::steady_timer scan_timer_;
+  boost::asio::steady_timer state_timer_;  // re-checks a subscribed device that is not ready yet
+  std::chrono::steady_clock::time_point epoch_;
+  SopasDevice device_;
   std::uint16_t port_ = 0;
   bool stopped_ = false;
 
   // Per connection.
   std::uint64_t connection_ =
       0;  // bumped when a connection ends: handlers of older ones are ignored
-  cola::Framer framer_;
+  cola::SopasFramer framer_;
   std::array<std::uint8_t, 4096> read_buffer_{};
   std::deque<OutItem> out_queue_;
   bool writing_ = false;
-  bool logged_in_ = false;
   bool streaming_ = false;
   bool stalled_ = false;
   bool scan_due_ = false;  // the timer fired while a scan was still being written

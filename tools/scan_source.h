@@ -4,6 +4,7 @@
 // one, so every source carries its own timing.
 
 #include <cstdint>
+#include <map>
 #include <memory>
 #include <optional>
 #include <string>
@@ -15,13 +16,28 @@
 
 namespace lrfnet::tools {
 
-// What the device reports in the start-up dialogue (sRA DeviceIdent / FirmwareVersion /
-// SerialNumber).
+// The scans a device produces on its own (before any output configuration): what it reports as
+// LMPoutputRange / LMPscancfg and the defaults of LMDscandatacfg. count 0: unknown (the device
+// family's typical values apply).
+struct ScanGeometry {
+  std::int32_t start_angle_raw = 0;      // 1/10000 °, SICK convention (first beam)
+  std::uint16_t angle_step_raw = 0;      // 1/10000 °
+  std::uint16_t count = 0;               // beams per scan
+  std::uint32_t scan_frequency_raw = 0;  // 1/100 Hz (telegram rate; MRS1xxx: 4 layers per turn)
+  std::uint8_t rssi_bits = 0;            // 0, 8 or 16
+};
+
+// What the device reports about itself in the start-up dialogue (sRA DeviceIdent /
+// FirmwareVersion / SerialNumber), its scan geometry, and for a recorded device its recorded
+// answers to reads.
 struct DeviceIdentity {
   std::string name;     // DeviceIdent name, e.g. "LMS511"
   std::string version;  // DeviceIdent version
   std::string firmware_version;
   std::string serial_number;
+  ScanGeometry geometry;
+  // `sRA <name>` arguments (CoLa-B bytes) as the recorded device sent them, first reply per name.
+  std::map<std::string, std::vector<std::uint8_t>> recorded_reads;
 };
 
 class ScanSource {
@@ -63,7 +79,7 @@ std::unique_ptr<ScanSource> OpenCaptureScanSource(const std::string& path,
 // ---- a synthetic device: a rectangular room with a person-sized blob walking an ellipse
 
 struct SyntheticScanOptions {
-  std::string model = "lms511";  // lms511 | lms111 | tim561 | tim781
+  std::string model = "lms511";  // lms511 | lms111 | tim561 | tim781 | tim781s | mrs1104
   std::uint64_t seed = 1;        // range noise
   double noise_m = 0.01;         // uniform range noise amplitude
 };

@@ -95,13 +95,16 @@ int Serve(std::shared_ptr<const sim::Simulator> simulator, const EmulatorOptions
   const auto stop_all = [&]() {
     for (auto& e : emulators) e->Stop();
   };
+  boost::asio::steady_timer end_timer(io);
   boost::asio::signal_set signals(io, SIGINT, SIGTERM);
   signals.async_wait([&](const boost::system::error_code& ec, int signal_number) {
     if (ec) return;
     spdlog::info("signal {}: stopping", signal_number);
     stop_all();
+    // Without --loop the end-of-scenario timer would keep the loop running to the scenario's end.
+    end_timer.cancel();
+    io.stop();
   });
-  boost::asio::steady_timer end_timer(io);
   if (!base_options.loop) {
     const double end_s = (scenario.duration_s + kServeGraceS) / speed;
     end_timer.expires_after(
@@ -157,9 +160,11 @@ int RunSim(int argc, char** argv) {
       "base-port", po::value<int>(&base_port)->default_value(0),
       "--serve: sensor i listens on this port + i (0: any free ports)")(
       "bind", po::value<std::string>(&emulator_options.bind_address)->default_value("127.0.0.1"),
-      "--serve: address to listen on")("log-level",
-                                       po::value<std::string>(&log_level)->default_value("info"),
-                                       "trace, debug, info, warn, error or off (stderr)");
+      "--serve: address to listen on")(
+      "ready-after", po::value<double>(&emulator_options.ready_after_run_s),
+      "--serve: seconds from sMN Run until a device reports ready (default: its family's)")(
+      "log-level", po::value<std::string>(&log_level)->default_value("info"),
+      "trace, debug, info, warn, error or off (stderr)");
   po::variables_map vm;
   if (auto exit_code = ParseOptions("sim", argc, argv, visible, "scenario", &vm)) return *exit_code;
   if (vm.count("scenario") == 0) return UsageError("sim", "missing SCENARIO");
@@ -168,9 +173,12 @@ int RunSim(int argc, char** argv) {
     return UsageError("sim", "--duration must be > 0");
   if (jobs < 1 || jobs > 256) return UsageError("sim", "--jobs must be 1..256");
   if (base_port < 0 || base_port > 65535) return UsageError("sim", "--base-port must be 0..65535");
-  if (!serve &&
-      (vm["speed"].defaulted() == false || emulator_options.loop || !vm["base-port"].defaulted())) {
-    return UsageError("sim", "--speed, --loop and --base-port need --serve");
+  if (!serve && (vm["speed"].defaulted() == false || emulator_options.loop ||
+                 !vm["base-port"].defaulted() || vm.count("ready-after") != 0)) {
+    return UsageError("sim", "--speed, --loop, --base-port and --ready-after need --serve");
+  }
+  if (vm.count("ready-after") != 0 && !(emulator_options.ready_after_run_s >= 0.0)) {
+    return UsageError("sim", "--ready-after must be >= 0");
   }
   if (auto e = Validate(emulator_options)) return UsageError("sim", *e);
   if (!SetUpLogging(log_level)) return UsageError("sim", "unknown --log-level '" + log_level + "'");

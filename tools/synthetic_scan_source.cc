@@ -18,19 +18,26 @@ struct ModelSpec {
   std::uint16_t points;
   std::int32_t start_angle_raw;  // 1/10000 °, SICK convention (90° = forward)
   std::uint16_t step_raw;        // 1/10000 °
-  std::uint32_t frequency_raw;   // 1/100 Hz
+  std::uint32_t frequency_raw;   // 1/100 Hz (telegrams; the MRS1104 sends one layer per telegram)
   double max_range_m;
   std::uint8_t rssi_bits;  // 0 = no RSSI channel
   std::uint32_t serial;
+  std::uint8_t layers;  // 1, or 4 for the MRS1104
 };
 
-// Geometry and channel layout as the real devices send them (see the shared captures' README).
+// Geometry and channel layout as the real devices send them (see the shared captures' README);
+// one model per device family (sopas_device.h).
 constexpr ModelSpec kModels[] = {
-    {"lms511", "LMS511-10100", "V1.80", 1141, -50000, 1667, 2500, 80.0, 8, 10000511},
-    {"lms111", "LMS111-10100", "V1.80", 541, -450000, 5000, 5000, 20.0, 0, 10000111},
-    {"tim561", "TiM561-2050101", "V3.13", 811, -450000, 3333, 1500, 10.0, 16, 10000561},
-    {"tim781", "TiM781S-2174104", "V3.13", 811, -450000, 3333, 1500, 25.0, 16, 10000781},
+    {"lms511", "LMS511-10100", "V1.80", 1141, -50000, 1667, 2500, 80.0, 8, 10000511, 1},
+    {"lms111", "LMS111-10100", "V1.80", 541, -450000, 5000, 5000, 20.0, 0, 10000111, 1},
+    {"tim561", "TiM561-2050101", "V3.13", 811, -450000, 3333, 1500, 10.0, 16, 10000561, 1},
+    {"tim781", "TiM781-2174101", "V3.13", 811, -450000, 3333, 1500, 25.0, 16, 10000781, 1},
+    {"tim781s", "TiM781S-2174104", "V3.13", 811, -450000, 3333, 1500, 25.0, 16, 10007815, 1},
+    {"mrs1104", "MRS1xxxx", "V 1.0.0", 1101, -475000, 2500, 5000, 64.0, 8, 10001104, 4},
 };
+
+// The MRS1104's layer angle field per telegram, in its capture's order (1/100 °).
+constexpr std::int16_t kMrsLayerAngles[] = {250, -500, 0, -250};
 
 const ModelSpec* FindModel(const std::string& key) {
   for (const ModelSpec& m : kModels) {
@@ -84,6 +91,8 @@ class SyntheticScanSource : public ScanSource {
     identity_.version = "synthetic";
     identity_.firmware_version = model.firmware;
     identity_.serial_number = std::to_string(model.serial);
+    identity_.geometry = {model.start_angle_raw, model.step_raw, model.points, model.frequency_raw,
+                          model.rssi_bits};
   }
 
   const DeviceIdentity& identity() const override { return identity_; }
@@ -109,7 +118,7 @@ class SyntheticScanSource : public ScanSource {
     scan->has_position = scan->has_name = scan->has_comment = scan->has_event = false;
     scan->device_status = {0, 0};
     scan->digital_inputs = scan->digital_outputs = 0;
-    scan->layer_angle_raw = 0;
+    scan->layer_angle_raw = model_.layers == 4 ? kMrsLayerAngles[k % 4] : std::int16_t{0};
     const auto tick_us =
         static_cast<std::uint32_t>(kFirstTickUs + k * static_cast<std::uint64_t>(PeriodUs()));
     scan->version = 1;

@@ -13,6 +13,13 @@ namespace {
 // the present instead of replaying the backlog.
 constexpr double kLateS = 2e-3;
 
+tools::DeviceIdentity IdentityWithGeometry(const SensorSetup& sensor) {
+  tools::DeviceIdentity id = IdentityOf(sensor);
+  const DeviceConfig& d = sensor.device;
+  id.geometry = {d.start_angle_raw, d.step_raw, d.count, d.frequency_raw, d.model->rssi_bits};
+  return id;
+}
+
 class SimScanSource : public tools::ScanSource {
  public:
   SimScanSource(std::shared_ptr<const Simulator> sim, std::size_t sensor,
@@ -20,7 +27,7 @@ class SimScanSource : public tools::ScanSource {
       : sim_(std::move(sim)),
         sensor_(sensor),
         now_s_(std::move(now_s)),
-        identity_(IdentityOf(sim_->sensor(sensor))),
+        identity_(IdentityWithGeometry(sim_->sensor(sensor))),
         count_(sim_->sensor(sensor).scan_count),
         duration_s_(sim_->scenario().duration_s) {}
 
