@@ -48,23 +48,23 @@ TEST(SopasSchemaTest, ParsesTheLanguageAndRejectsNonsense) {
   }
 }
 
-// LMPoutputRange as the LMS111 sent it (CoLa-B, shared capture) and as SICK's telegram listing
-// writes it in CoLa-A.
+// LMPoutputRange as the LMS111 sent it (CoLa-B, shared capture: −44.9997° .. 224.9997° at 0.5°)
+// and in CoLa-A.
 TEST(SopasValueTest, OutputRangeInBothDialects) {
   const Bytes binary = {0x00, 0x01, 0x00, 0x00, 0x13, 0x88, 0xff,
-                        0xf9, 0x22, 0x30, 0x00, 0x22, 0x55, 0x0d};
+                        0xf9, 0x22, 0x33, 0x00, 0x22, 0x55, 0x0d};
   const SopasValues v = Decode("u16[u32 i32 i32]", Dialect::kColaB, binary);
   ASSERT_EQ(v.size(), 4u);
   EXPECT_EQ(v[0].AsInt(), 1);
   EXPECT_EQ(v[1].AsInt(), 5000);
-  EXPECT_EQ(v[2].AsInt(), -450000);
+  EXPECT_EQ(v[2].AsInt(), -449997);
   EXPECT_EQ(v[3].AsInt(), 2249997);
   EXPECT_EQ(Encode(v, Dialect::kColaB), binary);
-  EXPECT_EQ(Text(Encode(v, Dialect::kColaA)), "1 1388 FFF92230 22550D");
-  EXPECT_EQ(Decode("u16[u32 i32 i32]", Dialect::kColaA, B("1 1388 FFF92230 22550D")), v);
+  EXPECT_EQ(Text(Encode(v, Dialect::kColaA)), "1 1388 FFF92233 22550D");
+  EXPECT_EQ(Decode("u16[u32 i32 i32]", Dialect::kColaA, B("1 1388 FFF92233 22550D")), v);
   // Decimal with a sign, as hand-written requests use it; leading zeros and extra spaces too.
-  EXPECT_EQ(Decode("u16[u32 i32 i32]", Dialect::kColaA, B("+1 +5000 -450000  +2249997 ")), v);
-  EXPECT_EQ(Decode("u16[u32 i32 i32]", Dialect::kColaA, B("0001 00001388 FFF92230 22550D")), v);
+  EXPECT_EQ(Decode("u16[u32 i32 i32]", Dialect::kColaA, B("+1 +5000 -449997  +2249997 ")), v);
+  EXPECT_EQ(Decode("u16[u32 i32 i32]", Dialect::kColaA, B("0001 00001388 FFF92233 22550D")), v);
 }
 
 TEST(SopasValueTest, StringsCarryTheirLengthAndMayHoldSpaces) {
