@@ -19,6 +19,8 @@ struct Geometry {
   std::int32_t start_raw;
   std::uint16_t step_raw;
   std::uint8_t rssi_bits;
+  std::uint32_t measurement_frequency_raw;  // as the real devices send it
+  const char* guessed;
 };
 
 class SyntheticSourceTest : public ::testing::TestWithParam<Geometry> {};
@@ -53,6 +55,12 @@ TEST_P(SyntheticSourceTest, ScansHaveTheModelsLayoutAndSurviveEncoding) {
     EXPECT_EQ(dist->count, g.points);
     EXPECT_EQ(dist->start_angle_raw, g.start_raw);
     EXPECT_EQ(dist->angle_step_raw, g.step_raw);
+    EXPECT_EQ(decoded->measurement_frequency_raw, g.measurement_frequency_raw);
+    const DeviceIdentity& id = source->identity();
+    EXPECT_EQ(id.geometry.count, g.points);
+    EXPECT_EQ(id.geometry.start_angle_raw, g.start_raw);
+    EXPECT_EQ(id.geometry.angle_step_raw, g.step_raw);
+    EXPECT_EQ(id.geometry.scan_frequency_raw, decoded->scan_frequency_raw);
     const cola::ScanChannel* rssi = decoded->FindChannel("RSSI1");
     if (g.rssi_bits == 0) {
       EXPECT_EQ(rssi, nullptr);
@@ -65,16 +73,17 @@ TEST_P(SyntheticSourceTest, ScansHaveTheModelsLayoutAndSurviveEncoding) {
     for (std::size_t i = 0; i < dist->count; ++i) echoes += dist->raw[i] != 0 ? 1 : 0;
     EXPECT_GT(echoes, dist->count / 2);
   }
-  EXPECT_EQ(GuessModelName(*scan), std::string(g.model) == "lms511"   ? "LMS5xx"
-                                   : std::string(g.model) == "lms111" ? "LMS1xx"
-                                                                      : "TiM7xx");
+  EXPECT_EQ(GuessModelName(*scan), g.guessed);
 }
 
-INSTANTIATE_TEST_SUITE_P(Models, SyntheticSourceTest,
-                         ::testing::Values(Geometry{"lms511", 1141, -50000, 1667, 8},
-                                           Geometry{"lms111", 541, -450000, 5000, 0},
-                                           Geometry{"tim561", 811, -450000, 3333, 16},
-                                           Geometry{"tim781", 811, -450000, 3333, 16}));
+INSTANTIATE_TEST_SUITE_P(
+    Models, SyntheticSourceTest,
+    ::testing::Values(Geometry{"lms511", 1141, -50000, 1667, 8, 540, "LMS5xx"},
+                      Geometry{"lms111", 541, -450000, 5000, 0, 360, "LMS1xx"},
+                      Geometry{"tim561", 811, -450000, 3333, 16, 162, "TiM7xx"},
+                      Geometry{"tim781", 811, -450000, 3333, 16, 162, "TiM7xx"},
+                      Geometry{"tim781s", 811, -450000, 3333, 16, 162, "TiM7xx"},
+                      Geometry{"mrs1104", 1101, -475000, 2500, 8, 180, "MRS1xxx"}));
 
 TEST(SyntheticSource, TheBlobMovesAndTheSeedFixesTheNoise) {
   SyntheticScanOptions options;

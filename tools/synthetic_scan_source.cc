@@ -129,9 +129,12 @@ class SyntheticScanSource : public ScanSource {
     scan->time_since_startup_us = tick_us;
     scan->time_of_transmission_us = tick_us + kTransmissionDelayUs;
     scan->scan_frequency_raw = model_.frequency_raw;
-    // Measurement frequency field: 100 Hz units (points per second / 100).
+    // Measurement frequency field: 100 Hz units, the spot rate over a whole turn of the mirror
+    // (every real capture: TiM781S 162 = 360° / 0.3333° × 15 Hz / 100, LMS111 360, LMS511 540,
+    // MRS1104 180 with its four layers per turn). SICK's driver derives the beam time from it.
+    const double turns_per_s = model_.frequency_raw / 100.0 / model_.layers;
     scan->measurement_frequency_raw = static_cast<std::uint32_t>(
-        static_cast<std::uint64_t>(model_.points) * model_.frequency_raw / 10000);
+        std::lround(360.0 / (model_.step_raw / 10000.0) * turns_per_s / 100.0));
 
     cola::ScanChannel* dist = scan->channels16.emplace_slot();
     SetName(dist, "DIST1");
