@@ -20,6 +20,9 @@ lrfnet_test(golden_test SOURCES golden_test.cc
 # Emulator -> SickClient over loopback: every scan of a capture (or of the synthetic source) arrives.
 lrfnet_test(loopback_test SOURCES loopback_test.cc LIBS lrfnet_emulator lrfnet_sick_client lrfnet_dump)
 
+# SICK's driver's start-up dialogue per device family, CoLa-B and CoLa-A, against the emulator.
+lrfnet_test(link_dialogue_test SOURCES link_dialogue_test.cc LIBS lrfnet_emulator)
+
 # SickClient against a misbehaving device: stalls, broken frames, garbage, sFA, restarts, silence, refusal.
 lrfnet_test(link_faults_test SOURCES link_faults_test.cc LIBS lrfnet_emulator lrfnet_sick_client)
 
