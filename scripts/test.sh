@@ -45,7 +45,7 @@ if [ "${LRFNET_SKIP_FUZZ:-0}" != 1 ]; then
   if CC=clang CXX=clang++ cmake -S . -B build-fuzz -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo \
        -DLRFNET_FUZZ=ON >/dev/null && cmake --build build-fuzz -j"$jobs"; then
     for target in cola_fuzz reassembler_fuzz packet_fuzz request_fuzz datagram_fuzz recording_fuzz \
-                  http_request_fuzz foxglove_fuzz; do
+                  http_request_fuzz foxglove_fuzz sopas_fuzz; do
       stage "fuzz $target for ${fuzz_seconds}s"
       corpus=build-fuzz/corpus/$target
       mkdir -p "$corpus"

@@ -17,6 +17,7 @@
 #include "tests/fuzz/daemon_seeds.h"
 #include "tests/fuzz/foxglove_seeds.h"
 #include "tests/fuzz/live_view_seeds.h"
+#include "tests/fuzz/sopas_seeds.h"
 #include "tests/support/test_data.h"
 
 namespace {
@@ -92,6 +93,7 @@ int main(int argc, char** argv) {
   lrfnet::fuzz::WriteRecordingSeeds(recording_dir);
   lrfnet::fuzz::WriteLiveViewSeeds((out / "http_request_fuzz").string());
   lrfnet::fuzz::WriteFoxgloveSeeds((out / "foxglove_fuzz").string());
+  lrfnet::fuzz::WriteSopasSeeds((out / "sopas_fuzz").string());
 
   std::size_t files = 0;
   for (const auto& d : {cola_dir, reassembler_dir, packet_dir, request_dir, datagram_dir, recording_dir}) {
