@@ -20,8 +20,13 @@ lrfnet_test(golden_test SOURCES golden_test.cc
 # Emulator -> SickClient over loopback: every scan of a capture (or of the synthetic source) arrives.
 lrfnet_test(loopback_test SOURCES loopback_test.cc LIBS lrfnet_emulator lrfnet_sick_client lrfnet_dump)
 
-# SICK's driver's start-up dialogue per device family, CoLa-B and CoLa-A, against the emulator.
-lrfnet_test(link_dialogue_test SOURCES link_dialogue_test.cc LIBS lrfnet_emulator)
+# SICK's driver's start-up dialogue per device family, CoLa-B and CoLa-A, against the emulator;
+# `lrfnet emulate` and `lrfnet sim --serve` stopping at once on SIGINT/SIGTERM.
+lrfnet_test(link_dialogue_test SOURCES link_dialogue_test.cc link_process_test.cc LIBS lrfnet_emulator)
+if(TARGET link_dialogue_test)
+  target_compile_definitions(link_dialogue_test PRIVATE LRFNET_TOOL_BINARY="$<TARGET_FILE:lrfnet>")
+  add_dependencies(link_dialogue_test lrfnet)
+endif()
 
 # SickClient against a misbehaving device: stalls, broken frames, garbage, sFA, restarts, silence, refusal.
 lrfnet_test(link_faults_test SOURCES link_faults_test.cc LIBS lrfnet_emulator lrfnet_sick_client)
