@@ -781,28 +781,37 @@ bool SopasDevice::PrepareScan(cola::ScanTelegram* scan, common::DurationNs now_n
   const std::int64_t echo_mask = cfg[0].AsInt();
   const bool remission = cfg[2].AsInt() != 0;
   const bool rssi16 = cfg[3].AsInt() != 0;
-  auto kept16 = std::make_unique<decltype(scan->channels16)>();
-  auto kept8 = std::make_unique<decltype(scan->channels8)>();
+  // Kept channels are compacted in place; one whose width changes moves to the other block
+  // (rare: a configuration that asks for the other remission width).
+  std::vector<cola::ScanChannel> moved;
   for (auto* block : {&scan->channels16, &scan->channels8}) {
-    for (cola::ScanChannel& ch : *block) {
+    const bool wide = block == &scan->channels16;
+    std::size_t kept = 0;
+    for (std::size_t k = 0; k < block->size(); ++k) {
+      cola::ScanChannel& ch = (*block)[k];
       const std::string_view n = ch.name_view();
       const bool is_rssi = n.substr(0, 4) == "RSSI";
       if (((echo_mask >> (DigitOf(n) - 1)) & 1) == 0) continue;
       if (is_rssi && !remission) continue;
-      if (is_rssi && (block == &scan->channels16) != rssi16) {
+      if (is_rssi && wide != rssi16) {
         // The configured remission width: 8-bit values scale up by 257, 16-bit ones down.
         for (std::size_t i = 0; i < ch.count; ++i) {
           ch.raw[i] = rssi16 ? static_cast<std::uint16_t>(ch.raw[i] * 257)
                              : static_cast<std::uint16_t>(ch.raw[i] / 257);
         }
         ch.bits = rssi16 ? 16 : 8;
+        moved.push_back(ch);
+        continue;
       }
-      auto* target = (!is_rssi ? block == &scan->channels16 : rssi16) ? kept16.get() : kept8.get();
-      if (cola::ScanChannel* slot = target->emplace_slot()) *slot = ch;
+      if (kept != k) (*block)[kept] = ch;
+      ++kept;
     }
+    (void)block->resize(kept);  // shrinking never fails
   }
-  scan->channels16 = *kept16;
-  scan->channels8 = *kept8;
+  for (const cola::ScanChannel& ch : moved) {
+    auto& target = ch.bits == 16 ? scan->channels16 : scan->channels8;
+    if (cola::ScanChannel* slot = target.emplace_slot()) *slot = ch;
+  }
 
   // Angular crop to the first output range sector.
   const SopasValues& range = values_.at("LMPoutputRange");

@@ -407,5 +407,32 @@ TEST(SopasDeviceTest, LmsReadyShortlyAfterRunAndTimTimAtOnce) {
   EXPECT_EQ(t.Ask(CommandType::kRead, "field000"), t.Error(3)) << "a TiM5xx has no fields";
 }
 
+TEST(SopasDeviceTest, RemissionWidthAndEchoChannelsFollowTheConfiguration) {
+  SopasDeviceOptions o = Options(DeviceFamily::kTim5xx, "TiM561-2050101");
+  o.identity.geometry = {-450000, 3333, 811, 1500, 16};
+  SopasDevice device(o);
+  Client c(&device, Dialect::kColaB);
+  ASSERT_TRUE(c.Login(3, 0xF4724744));
+  // 8-bit remission, echo 1 only, every scan, time block.
+  const SopasValues cfg = {S::U8(1), S::U8(0), S::U8(1), S::U8(0), S::U8(0), S::U8(0),
+                           S::U8(0), S::U8(0), S::U8(0), S::U8(0), S::U8(1), S::U16(1)};
+  ASSERT_EQ(c.Ask(CommandType::kWrite, "LMDscandatacfg", cfg),
+            c.Expect(CommandType::kWriteAnswer, "LMDscandatacfg", {}, true));
+  auto scan = Scan(o.identity.geometry, 3000);
+  cola::ScanChannel* dist2 = scan->channels16.emplace_slot();
+  *dist2 = scan->channels16[0];
+  std::memcpy(dist2->name.data(), "DIST2", 5);
+  std::vector<SopasOutput> events;
+  ASSERT_TRUE(device.PrepareScan(scan.get(), 0, &events));
+  ASSERT_EQ(scan->channels16.size(), 1u) << "DIST2 is not an output channel";
+  EXPECT_EQ(scan->channels16[0].name_view(), "DIST1");
+  ASSERT_EQ(scan->channels8.size(), 1u);
+  EXPECT_EQ(scan->channels8[0].name_view(), "RSSI1");
+  EXPECT_EQ(scan->channels8[0].raw[0], 12000 / 257);
+  EXPECT_EQ(scan->channels8[0].count, 811);
+  std::vector<std::uint8_t> payload(cola::MaxEncodedSize(*scan));
+  EXPECT_GT(cola::EncodeScanTelegram(*scan, payload), 0u);
+}
+
 }  // namespace
 }  // namespace lrfnet::tools
