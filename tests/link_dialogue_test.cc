@@ -58,7 +58,10 @@ class EmulatorThread {
     EXPECT_TRUE(emulator_->Start(&error)) << error;
     thread_ = std::thread([this] { io_.run(); });
   }
-  ~EmulatorThread() {
+  ~EmulatorThread() { Stop(); }
+  // Stops the emulator and joins its thread; afterwards its counters can be read.
+  void Stop() {
+    if (!thread_.joinable()) return;
     asio::post(io_, [this] { emulator_->Stop(); });
     thread_.join();
   }
@@ -138,6 +141,9 @@ class Client {
 
   void Drain(milliseconds d) {
     Next([](const Received&) { return false; }, d, nullptr);
+  }
+  void SendRaw(const std::vector<std::uint8_t>& bytes) {
+    asio::write(socket_, asio::buffer(bytes));
   }
 
   std::string Expect(CommandType type, std::string_view name, const SopasValues& v,
@@ -387,6 +393,49 @@ TEST_P(DialogueTest, DriverStartUpRepliesStateMachineScansAndStop) {
   const std::size_t after_stop = c.scans();
   c.Drain(milliseconds(600));
   EXPECT_EQ(c.scans(), after_stop) << "scans after LMCstopmeas";
+}
+
+// Bytes no device should have to take: each request refused with its sFA code and counted,
+// broken frames dropped and counted, and the device still answers the next request at once.
+TEST(HostileClientTest, GarbageBrokenFramesAndUnknownCommandsNeverStopTheDevice) {
+  EmulatorThread emulator("lms511");
+  Client c(emulator.port(), Dialect::kColaB);
+  std::vector<std::uint8_t> junk = {'x', 'y', 0x03, 0x7F, 0x00};
+  std::vector<std::uint8_t> bad =
+      cola::EncodeSopasFrame(Dialect::kColaB, std::vector<std::uint8_t>{'s', 'R', 'N', ' ', 'X'});
+  bad.back() ^= 0xFF;  // the checksum
+  junk.insert(junk.end(), bad.begin(), bad.end());
+  std::vector<std::uint8_t> huge(70000, 'a');
+  huge[0] = 0x02;  // a CoLa-A frame that does not end within the bound
+  junk.insert(junk.end(), huge.begin(), huge.end());
+  c.SendRaw(junk);
+  using CT = CommandType;
+  EXPECT_EQ(c.Ask(CT::kRead, "NoSuchVariable"), c.Error(3));
+  EXPECT_EQ(c.Ask(CT::kMethod, "NoSuchMethod"), c.Error(2));
+  EXPECT_EQ(c.Ask(CT::kEvent, "NoSuchEvent", {S::U8(1)}), c.Error(15));
+  EXPECT_EQ(c.Ask(CT::kWrite, "LMPoutputRange", {S::U16(1)}), c.Error(10)) << "no user level";
+  EXPECT_EQ(c.Ask(CT::kMethod, "SetAccessMode", {S::U8(3)}), c.Error(8)) << "arguments too short";
+  c.SendRaw(std::vector<std::uint8_t>{0x02, 's', 'X', 'Y', ' ', 'Z', 0x03});
+  Received reply;
+  ASSERT_TRUE(c.Next([](const Received&) { return true; }, milliseconds(3000), &reply));
+  EXPECT_EQ(reply.text(), "sFA C") << "an unknown CoLa-A command";
+  EXPECT_EQ(c.Ask(CT::kRead, "SCdevicestate"),
+            c.Expect(CT::kReadAnswer, "SCdevicestate", {S::U8(1)}));
+  emulator.Stop();
+  const auto& framer = emulator.emulator().framer_counters();
+  EXPECT_EQ(framer.bad_checksum, 1u);
+  // The unending one, and (after the rejected CoLa-B start) the remains of that frame, which look
+  // like a CoLa-A start until the next STX cuts them.
+  EXPECT_GE(framer.bad_cola_a, 1u);
+  EXPECT_GT(framer.garbage_bytes, 70000u);
+  const auto& device = emulator.emulator().device_counters();
+  EXPECT_EQ(device.unknown_commands, 4u);
+  EXPECT_EQ(device.access_denied, 1u);
+  EXPECT_EQ(device.bad_arguments, 1u);
+  EXPECT_EQ(device.sfa, 6u);
+  EXPECT_EQ(emulator.emulator().counters().sfa_sent, 6u);
+  EXPECT_EQ(emulator.emulator().counters().bad_frames,
+            framer.bad_checksum + framer.oversize_length + framer.bad_cola_a);
 }
 
 const FamilyCase kFamilies[] = {
