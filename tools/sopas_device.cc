@@ -485,7 +485,13 @@ void SopasDevice::Read(Dialect d, std::string_view name, std::span<const std::ui
     Reply(d, CommandType::kReadAnswer, name, live, out);
     return;
   }
-  Reply(d, CommandType::kReadAnswer, name, values_.at(var->name), out);
+  const auto it = values_.find(var->name);
+  if (it == values_.end()) {  // every stored variable has a default; defensive only
+    ++counters_.unknown_commands;
+    Error(d, kVariableUnknown, out);
+    return;
+  }
+  Reply(d, CommandType::kReadAnswer, name, it->second, out);
 }
 
 std::optional<std::uint16_t> SopasDevice::CheckWrite(std::string_view name,
