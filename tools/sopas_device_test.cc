@@ -289,7 +289,8 @@ TEST_P(DialectTest, LmsFieldsIoAndScanConfiguration) {
   EXPECT_EQ(dist.count, 601);                            // up to 140°
   EXPECT_FALSE(far->has_time);
   EXPECT_FALSE(device.PrepareScan(Scan(g, 5000).get(), kNsPerS, &events)) << "every second scan";
-  // Someone 0.8 m in front: inside the near field (1 m arc) -> LFErec and LIDoutputstate.
+  // Everything at 0.8 m, in front too: inside the near field (1 m ahead) -> LFErec and
+  // LIDoutputstate.
   ASSERT_TRUE(device.PrepareScan(Scan(g, 800).get(), 2 * kNsPerS, &events));
   ASSERT_EQ(events.size(), 2u);
   const std::string lferec(events[0].payload.begin(), events[0].payload.end());

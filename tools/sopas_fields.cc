@@ -1,5 +1,6 @@
 #include "tools/sopas_fields.h"
 
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <numbers>
@@ -143,13 +144,21 @@ std::string OutputStateSchema(int outputs) {
 SopasValues DefaultField(const ScanGeometry& g, int index, double rect_ref_offset_deg) {
   SopasValues v = EmptyField(g);
   if (index == 0) {
-    // Segmented field #1: a 1 m arc over the whole field of view, nine points.
+    // Segmented field #1: 1 m ahead over the front 90° (45° .. 135° in the telegram's angles, as
+    // far as the field of view reaches), nine points. (Over the whole field of view a 270° device
+    // mounted at a wall would see the wall inside it.)
     v[4] = S::U8(2);
     v[5] = S::U8(1);
     v[6] = S::U16(1);
+    const auto index_of = [&](std::int64_t raw_angle) {
+      const double i = static_cast<double>(raw_angle - g.start_angle_raw) / g.angle_step_raw;
+      return std::clamp<std::int64_t>(std::llround(i), 0, g.count - 1);
+    };
+    const std::int64_t first = index_of(450000);
+    const std::int64_t last = index_of(1350000);
     SopasValues seg = {S::U16(9)};
     for (int i = 0; i < 9; ++i) {
-      const auto idx = static_cast<std::uint32_t>((g.count - 1) * i / 8);
+      const auto idx = static_cast<std::uint32_t>(first + (last - first) * i / 8);
       seg.push_back(S::U16(idx));
       seg.push_back(S::U16(0));
       seg.push_back(S::U16(1000));

@@ -55,8 +55,8 @@ struct FieldFamily {
   double rect_ref_offset_deg = 0;  // LMS1xx: rectangle reference angles count from −45°
 };
 
-// Field `index` of a fresh device: field000 is segmented (#1, a 1 m arc over the whole field of
-// view), field001 a rectangle (#2, 1 m wide and 2 m long, 1 m ahead), the others not configured.
+// Field `index` of a fresh device: field000 is segmented (#1, 1 m ahead over the front 90°),
+// field001 a rectangle (#2, 1 m wide and 2 m long, 1 m ahead), the others not configured.
 cola::SopasValues DefaultField(const ScanGeometry& geometry, int index, double rect_ref_offset_deg);
 
 // Per field slot: 0 not configured, 1 free, 2 infringed (an echo of DIST1 inside the field).
