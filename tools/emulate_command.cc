@@ -168,6 +168,9 @@ int RunEmulate(int argc, char** argv) {
   }
 
   boost::asio::io_context io;
+  // Taken over before "listening" is printed: a signal from a script that reacts to that line must
+  // not find the default action still in place (it would kill the process).
+  boost::asio::signal_set signals(io, SIGINT, SIGTERM);
   Emulator emulator(io, options, std::move(source));
   std::string error;
   if (!emulator.Start(&error)) {
@@ -182,7 +185,6 @@ int RunEmulate(int argc, char** argv) {
               static_cast<unsigned>(emulator.port()));
   std::fflush(stdout);
 
-  boost::asio::signal_set signals(io, SIGINT, SIGTERM);
   signals.async_wait([&](const boost::system::error_code& ec, int signal_number) {
     if (ec) return;
     spdlog::info("signal {}: stopping", signal_number);

@@ -37,6 +37,9 @@ int Serve(std::shared_ptr<const sim::Simulator> simulator, const EmulatorOptions
           int base_port, const std::string& truth_dir) {
   const sim::Scenario& scenario = simulator->scenario();
   boost::asio::io_context io;
+  // Taken over before the ports are printed: a signal from a script that reacts to them must not
+  // find the default action still in place (it would kill the process).
+  boost::asio::signal_set signals(io, SIGINT, SIGTERM);
   using Clock = std::chrono::steady_clock;
   Clock::time_point start = Clock::now();
   const double speed = base_options.speed;
@@ -96,7 +99,6 @@ int Serve(std::shared_ptr<const sim::Simulator> simulator, const EmulatorOptions
     for (auto& e : emulators) e->Stop();
   };
   boost::asio::steady_timer end_timer(io);
-  boost::asio::signal_set signals(io, SIGINT, SIGTERM);
   signals.async_wait([&](const boost::system::error_code& ec, int signal_number) {
     if (ec) return;
     spdlog::info("signal {}: stopping", signal_number);
