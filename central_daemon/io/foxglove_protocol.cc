@@ -103,6 +103,10 @@ FoxgloveClientMessage ParseFoxgloveClientMessage(std::string_view bytes, bool bi
     return m;
   }
   const std::string op = j["op"].get<std::string>();
+  if (op.empty()) {
+    m.error = "\"op\" is empty";
+    return m;
+  }
   if (op == "subscribe") {
     const auto it = j.find("subscriptions");
     if (it == j.end() || !it->is_array()) {

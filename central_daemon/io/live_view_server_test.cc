@@ -554,6 +554,7 @@ TEST_F(LiveViewServerTest, HostileFoxgloveMessagesGetAStatusAndTheConnectionGoes
   ASSERT_EQ(ParseJson(fox.Read())["op"], "advertise");
   for (const auto& [message, text] : std::vector<std::pair<std::string, bool>>{
            {"{not json", true},
+           {R"({"op":""})", true},
            {R"({"op":"getParameters","parameterNames":[]})", true},
            {std::string("\x01\x00\x00\x00\x00zz", 7), false},
            {R"({"op":"subscribe","subscriptions":[{"id":1,"channelId":99}]})", true},
@@ -563,7 +564,7 @@ TEST_F(LiveViewServerTest, HostileFoxgloveMessagesGetAStatusAndTheConnectionGoes
     EXPECT_EQ(status["op"], "status") << message;
     EXPECT_FALSE(status["message"].get<std::string>().empty());
   }
-  EXPECT_EQ(Counters().foxglove_refused_messages, 5u);
+  EXPECT_EQ(Counters().foxglove_refused_messages, 6u);
   ASSERT_TRUE(fox.Write(R"({"op":"subscribe","subscriptions":[{"id":1,"channelId":1}]})"));
   ASSERT_TRUE(ParseFrame(fox.Read()).has_value());
   ExpectServing();
