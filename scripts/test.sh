@@ -44,16 +44,31 @@ if [ "${LRFNET_SKIP_FUZZ:-0}" != 1 ]; then
   stage "fuzz build (clang, libFuzzer + ASan/UBSan)"
   if CC=clang CXX=clang++ cmake -S . -B build-fuzz -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo \
        -DLRFNET_FUZZ=ON >/dev/null && cmake --build build-fuzz -j"$jobs"; then
-    for target in cola_fuzz reassembler_fuzz packet_fuzz request_fuzz datagram_fuzz recording_fuzz \
-                  http_request_fuzz foxglove_fuzz sopas_fuzz; do
-      stage "fuzz $target for ${fuzz_seconds}s"
+    # Every *_fuzz executable the build made, $jobs at a time (each libFuzzer process uses one core).
+    mapfile -t targets < <(find build-fuzz/tests/fuzz -maxdepth 1 -type f -name '*_fuzz' -perm -u+x \
+                             -printf '%f\n' | sort)
+    stage "fuzz ${#targets[@]} targets for ${fuzz_seconds}s each, $jobs at a time"
+    mkdir -p build-fuzz/logs
+    declare -A fuzz_pid=()
+    for target in "${targets[@]}"; do
+      while [ "$(jobs -rp | wc -l)" -ge "$jobs" ]; do wait -n || true; done
       corpus=build-fuzz/corpus/$target
       mkdir -p "$corpus"
       [ -d "build/fuzz_corpus/$target" ] && cp -n build/fuzz_corpus/$target/* "$corpus"/ 2>/dev/null
-      if (cd build-fuzz && "./tests/fuzz/$target" -max_total_time="$fuzz_seconds" -timeout=10 \
-            -rss_limit_mb=2048 -print_final_stats=1 "corpus/$target" 2>&1 | tail -n 12); then
+      (cd build-fuzz && exec "./tests/fuzz/$target" -max_total_time="$fuzz_seconds" -timeout=10 \
+          -rss_limit_mb=2048 -print_final_stats=1 -artifact_prefix="logs/$target-" "corpus/$target" \
+          >"logs/$target.log" 2>&1) &
+      fuzz_pid[$target]=$!
+    done
+    for target in "${targets[@]}"; do
+      if wait "${fuzz_pid[$target]}"; then status=0; else status=1; fi
+      stage "fuzz $target: $([ $status = 0 ] && echo passed || echo FAILED)"
+      if [ $status = 0 ]; then
+        tail -n 12 "build-fuzz/logs/$target.log"
         record "$target" 1 0
       else
+        grep -v -E '^#[0-9]+' "build-fuzz/logs/$target.log" | tail -n 60
+        ls build-fuzz/logs/"$target"-* 2>/dev/null
         record "$target" 0 1
       fi
     done
