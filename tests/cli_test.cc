@@ -144,7 +144,7 @@ TEST(CliTest, TrackerReplaysACapture) {
 
 TEST(CliTest, TrackerStreamsFromTheEmulatorProcessAndStopsOnSigint) {
   Process emulator(kTool, {"emulate", "--synthetic", "lms511", "--port", "0", "--speed", "4",
-                           "--log-level", "warn"});
+                           "--log-level", "info"});
   ASSERT_TRUE(emulator.WaitForOutput("\n", seconds(10))) << emulator.err();
   const std::string line = emulator.out();
   const std::string prefix = "lrfnet emulate: listening on 127.0.0.1:";
@@ -152,8 +152,9 @@ TEST(CliTest, TrackerStreamsFromTheEmulatorProcessAndStopsOnSigint) {
   const std::string port = line.substr(prefix.size(), line.find('\n') - prefix.size());
 
   Process tracker(kTracker, {"--sensor", "127.0.0.1:" + port, "--sensor-id", "e2e", "--max-scans",
-                             "20", "--print-every", "5", "--log-level", "warn"});
-  ASSERT_EQ(tracker.Wait(seconds(20)), 0) << tracker.err();
+                             "20", "--print-every", "5", "--log-level", "info"});
+  // 20 scans take 0.2 s; the info log (connect, dialogue, first scan) says where a slow run stood.
+  ASSERT_EQ(tracker.Wait(seconds(30)), 0) << tracker.err() << "\nemulator: " << emulator.err();
   EXPECT_EQ(CountPrefixed(tracker.out(), "e2e tc="), 4u) << tracker.out();
   EXPECT_NE(tracker.out().find("e2e tc=1 sc=1 points=1141"), std::string::npos) << tracker.out();
   EXPECT_NE(tracker.out().find("summary: sensor=e2e mode=live scans=20 connects=1"),
