@@ -101,3 +101,8 @@ if(TARGET mqtt_system_test)
     LRFNET_NODE_DIR="${PROJECT_SOURCE_DIR}/tests/node"
     LRFNET_SCHEMA_DIR="${PROJECT_SOURCE_DIR}/central_daemon/schemas")
 endif()
+
+# The binaries under a fake service manager (sd_notify socket, watchdog): ready, watchdog while
+# scans flow, none while the scanner link hangs, status and stopping.
+lrfnet_test(service_test SOURCES service_test.cc)
+lrfnet_uses_binaries(service_test)

@@ -54,6 +54,7 @@
 #include "central_daemon/io/recording_writer.h"
 #include "central_daemon/io/udp_receiver.h"
 #include "common/host_port.h"
+#include "common/systemd_notify.h"
 #include "google/protobuf/stubs/logging.h"
 
 namespace lrfnet::daemon {
@@ -390,6 +391,12 @@ int RunLive(const RunOptions& run, DaemonConfig config) {
                  config.receiver.receive_buffer_bytes / 1024);
   // Printed on stdout for scripts and tests that bind port 0.
   std::printf("listening %s\n", receiver.local_address().c_str());
+  // Under systemd (Type=notify): ready once the socket is bound; the watchdog is fed from the tick
+  // on the io thread, which also receives and ingests, so a hung io loop gets lrfnetd restarted.
+  common::SystemdNotifier notifier(common::SystemdNotifier::ProcessEnvironment());
+  if (!notifier.error().empty()) spdlog::warn("systemd notification: {}", notifier.error());
+  notifier.Ready("listening on " + receiver.local_address());
+  notifier.Watchdog(common::SteadyNowNs());
   if (live_view) {
     const std::string host = LiveOptions(config).bind_address;
     const std::string shown = host.find(':') != std::string::npos ? "[" + host + "]" : host;
@@ -403,6 +410,7 @@ int RunLive(const RunOptions& run, DaemonConfig config) {
     if (stopping) return;
     stopping = true;
     spdlog::info("{}: stopping", why);
+    notifier.Stopping();
     receiver.Close();
     if (live_view) live_view->Stop();
     io.stop();
@@ -414,6 +422,7 @@ int RunLive(const RunOptions& run, DaemonConfig config) {
     tick.async_wait([&](const boost::system::error_code& ec) {
       if (ec) return;
       daemon.OnTick(NowUtcNs());
+      notifier.Watchdog(common::SteadyNowNs());
       LogEvents(daemon, config.ingest.silent_after_s);
       calibration.OnTick(MonotonicS(), daemon);
       if (calibration.counters().successes != applied_calibrations && calibration.latest()) {
@@ -459,6 +468,7 @@ int RunLive(const RunOptions& run, DaemonConfig config) {
                             static_cast<double>(recorder->writer().counters().bytes_written) /
                                 (1 << 20));
       spdlog::info("status: {}", line);
+      notifier.Status(line);
       schedule_status();
     });
   };

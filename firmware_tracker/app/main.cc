@@ -37,6 +37,7 @@
 
 #include "common/capture/capture_stream.h"
 #include "common/host_port.h"
+#include "common/systemd_notify.h"
 #include "common/time.h"
 #include "firmware_tracker/app/config.h"
 #include "firmware_tracker/app/tracker_node.h"
@@ -240,6 +241,11 @@ int RunLive(const TrackerConfig& config, const std::string& record_path, ScanLog
   asio::steady_timer timer(io);
   std::unique_ptr<io::SickClient> client;
   std::uint64_t ticks = 0;
+  // Under systemd (Type=notify): ready at the first scan, watchdog from the scan path, so a link
+  // that delivers no scans gets the tracker restarted.
+  common::SystemdNotifier notifier(common::SystemdNotifier::ProcessEnvironment());
+  if (!notifier.error().empty()) spdlog::warn("systemd notification: {}", notifier.error());
+  bool ready = false;
 
   const auto link_health = [&] {
     LinkHealth link;
@@ -263,6 +269,9 @@ int RunLive(const TrackerConfig& config, const std::string& record_path, ScanLog
         spdlog::info("status: scans={} tracks={} reconnects={} bad_frames={} clock={} {}", c.scans,
                      node->pipeline().last_tracks().tracks.size(), c.reconnects, c.bad_frames,
                      io::ToString(clock_status.sync), NodeSummary(*node));
+        notifier.Status(fmt::format("scans {}, tracks {}, reconnects {}, clock {}", c.scans,
+                                    node->pipeline().last_tracks().tracks.size(), c.reconnects,
+                                    io::ToString(clock_status.sync)));
       }
       arm_timer();
     });
@@ -278,6 +287,11 @@ int RunLive(const TrackerConfig& config, const std::string& record_path, ScanLog
         node->OnScan(scan, receive_time_ns, io::NowUtcNs());
         node->RecordScanCpu(ElapsedUs(started));
         node->OnTick(io::NowUtcNs(), link_health(), clock_status);
+        if (!ready) {
+          ready = true;
+          notifier.Ready(fmt::format("streaming from {}:{}", link.host, link.port));
+        }
+        notifier.Watchdog(common::SteadyNowNs());
         if (!log.OnScan(config.sensor_id, scan, receive_time_ns, *node)) {
           client->Stop();
           timer.cancel();
@@ -287,6 +301,7 @@ int RunLive(const TrackerConfig& config, const std::string& record_path, ScanLog
   signals.async_wait([&](const boost::system::error_code& ec, int signal_number) {
     if (ec) return;
     spdlog::info("signal {}: stopping", signal_number);
+    notifier.Stopping();
     client->Stop();
     timer.cancel();
   });
