@@ -1,8 +1,11 @@
 #!/usr/bin/env bash
 # Builds and runs every test: host unit + integration tests (ctest), the fuzz targets under libFuzzer for a
-# fixed time, and the tracker's aarch64 build under qemu-user. Ends with one line "N passed, N failed".
+# fixed time, the tracker's aarch64 build under qemu-user, and the Debian packages. Ends with one line
+# "N passed, N failed".
 #   LRFNET_FUZZ_SECONDS   seconds per fuzz target (default 20)
 #   LRFNET_SKIP_CROSS=1   skip the aarch64 stage; LRFNET_SKIP_FUZZ=1 skip the libFuzzer stage
+#   LRFNET_SKIP_PACKAGES=1 skip the Debian packages (built from the trees above, installed into a
+#                         throw-away root; the arm64 one run under qemu)
 set -uo pipefail
 cd "$(dirname "$0")/.."
 root=$(pwd)
@@ -90,6 +93,21 @@ if [ "${LRFNET_SKIP_CROSS:-0}" != 1 ]; then
     record aarch64-tests "$p" "$f"
   else
     record aarch64-build 0 1
+  fi
+fi
+
+# ---- Debian packages from the trees above: contents, dependencies, installed into a throw-away root
+if [ "${LRFNET_SKIP_PACKAGES:-0}" != 1 ]; then
+  stage "Debian packages (scripts/package.sh, tests/package_test.sh)"
+  package_args=()
+  [ "${LRFNET_SKIP_CROSS:-0}" = 1 ] && package_args+=(--no-cross)
+  tests/package_test.sh "${package_args[@]}" 2>&1 | tee build/package_test.log
+  line=$(grep -E '^package test: [0-9]+ passed, [0-9]+ failed' build/package_test.log | tail -n 1)
+  if [ -n "$line" ]; then
+    record packages "$(sed -E 's/.*: ([0-9]+) passed.*/\1/' <<<"$line")" \
+      "$(sed -E 's/.* ([0-9]+) failed.*/\1/' <<<"$line")"
+  elif ! grep -q '^package test: SKIP' build/package_test.log; then
+    record packages 0 1
   fi
 fi
 

@@ -13,6 +13,7 @@
 #include <initializer_list>
 #include <set>
 #include <sstream>
+#include <vector>
 
 #include "tools/sim/scenario.h"
 
@@ -427,17 +428,21 @@ std::optional<std::string> FindScenarioFile(const std::string& argument) {
   std::error_code ec;
   if (fs::is_regular_file(argument, ec)) return argument;
   if (argument.empty() || argument.find('/') != std::string::npos) return std::nullopt;
+  // An installed lrfnet (a package, or any prefix) finds its scenarios beside it in
+  // ../share/lrfnet/scenarios; a built one in the source tree; then the configured install prefix.
+  std::vector<std::string> dirs;
+  const fs::path executable = fs::read_symlink("/proc/self/exe", ec);
+  if (!ec) {
+    dirs.push_back((executable.parent_path().parent_path() / "share/lrfnet/scenarios").string());
+  }
   // Build-time locations (compile definitions of this library), not paths written in the sources.
-  const char* const dirs[] = {
 #ifdef LRFNET_SCENARIO_SOURCE_DIR
-      LRFNET_SCENARIO_SOURCE_DIR,
+  dirs.push_back(LRFNET_SCENARIO_SOURCE_DIR);
 #endif
 #ifdef LRFNET_SCENARIO_INSTALL_DIR
-      LRFNET_SCENARIO_INSTALL_DIR,
+  dirs.push_back(LRFNET_SCENARIO_INSTALL_DIR);
 #endif
-      nullptr};
-  for (const char* dir : dirs) {
-    if (dir == nullptr) continue;
+  for (const std::string& dir : dirs) {
     for (const std::string& name : {argument, argument + ".yaml"}) {
       const fs::path candidate = fs::path(dir) / name;
       if (fs::is_regular_file(candidate, ec)) return candidate.string();
