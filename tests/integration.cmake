@@ -103,6 +103,8 @@ if(TARGET mqtt_system_test)
 endif()
 
 # The binaries under a fake service manager (sd_notify socket, watchdog): ready, watchdog while
-# scans flow, none while the scanner link hangs, status and stopping.
-lrfnet_test(service_test SOURCES service_test.cc)
-lrfnet_uses_binaries(service_test)
+# scans flow, none while the scanner link hangs, status and stopping. In system_test's binary (one
+# link less); its tests stay separate ctest entries (ServiceTest.*).
+if(TARGET system_test)
+  target_sources(system_test PRIVATE service_test.cc)
+endif()
