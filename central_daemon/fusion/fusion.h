@@ -2,62 +2,78 @@
 // Track fusion (pure): after calibration, every sensor's tracks are brought into the world frame
 // and the same object seen by several sensors becomes one fused track.
 //
-// Model: centralised track-to-track fusion *without memory* (Bar-Shalom, Willett & Tian, "Tracking
-// and Data Fusion", 2011: the latest local estimates are combined, no fused filter in the loop). A
-// sensor's local track is *bound* to at most one fused track, and a fused track holds at most one
-// local track per sensor. When a frame of sensor S arrives, every fused track that holds a local
-// track of S in that frame is re-estimated as the information-weighted combination of the latest
-// states of all its bound sources, each predicted to the update time with the constant-velocity
-// model of common/cv_model.h (x' = F x, P' = F P F^T + Q):
-//   P_f = (sum_i P_i^-1)^-1,   x_f = P_f sum_i P_i^-1 x_i          (x = (x, y, vx, vy), world)
-// where P_i is the local covariance propagated into the world frame (ToWorld) plus
-// position_noise_floor_m2 on the position (residual calibration error, and the object-centre
-// offset: different sensors see different sides of a person) and velocity_noise_floor_m2ps2 on
-// the velocity. A local track's successive states
-// are strongly correlated (its filter's memory), so feeding them into a second filter as if they
-// were independent measurements would count the same information many times and make the fused
-// track lag; combining only the *latest* states avoids both. Local tracks of different sensors are
-// treated as independent (their measurement noise, pose errors and viewpoints are); the small
-// correlation through the common process noise (Bar-Shalom & Campo, IEEE TAES 22(6), 1986) is
-// neglected and covered by the noise floors. The fused track's own CV prediction is used for
-// coasting, for gating and as the drift reference below, never as a prior of the combination.
+// What a local track carries. A tracker's track is the state of its own constant-velocity Kalman
+// filter: each frame's estimate holds all its earlier measurements (its errors are correlated in
+// time), the error of its sensor's pose is common to all its tracks and constant, and the centre it
+// reports is offset from the body's centre by what the sensor's view leaves (more along the line
+// of sight than across it), changing slowly. Combining successive states as if they were new
+// measurements counts the same information many times; combining the latest states of several
+// sensors as independent estimates ignores that neither their pose errors nor their centre offsets
+// average out over time. The two methods (FusionOptions::method):
 //
-// Association: a usable local track that is not bound is associated by global nearest neighbour
-// (an optimal assignment, Hungarian method, over the gated costs d^2 + ln det S) against the fused
-// tracks predicted to the frame time that hold no local track of that sensor in the frame;
-// d^2 = r^T S^-1 r of the positions with S = P_local + P_fused, gated by gate_mahalanobis2 and
-// gate_max_distance_m. What stays unassociated starts a new fused track. A fused track's stale
-// local track of the same sensor (the tracker dropped it and started a new id for the same
-// person) is replaced by the new one. Fused ids therefore survive a hand-over between sensors
-// (B binds while A still sees the person, A drops, B continues) and short gaps (a coasting fused
-// track is predicted and re-bound within max_coast_s).
+// kFusedFilter (default). One Kalman filter per fused track, state (x, y, vx, vy) in the world
+// frame plus, for every sensor that measured it recently, that sensor's offset b_s (2-d, world):
+// the pose error carried to this place plus the centre offset. b_s is a first-order Gauss-Markov
+// process with the covariance B_s = J C_pose J^T + sigma_r^2 u u^T + sigma_l^2 (I - u u^T)
+// (J = d p_w / d pose as in ToWorld, C_pose the placement's covariance, u the direction from the
+// sensor, sigma_r = centre_sigma_<kind>_m, sigma_l = centre_lateral_fraction sigma_r) and the
+// correlation time centre_correlation_s; the kinematic part is the constant-velocity model of
+// common/cv_model.h with accel_psd. A sensor's frame z_s = p + b_s + v_s updates the track
+// (Kalman update, Joseph form) with only the *new* information of the frame: the measurement the
+// tracker's filter took, recovered from its consecutive states (the "tracklet" or
+// equivalent-measurement idea, Drummond, Proc. SPIE 3163, 1997): with the previous measured state
+// predicted by the tracker's model to xb, Pb,
+//   R^-1 = P_pp^-1 - Pb_pp^-1,      z = xb_p + R P_pp^-1 (x_p - xb_p) (fusion_filter.cc)
+// (position blocks; the tracker's process noise from SetTrackerModel, else tracker_accel_psd). The
+// first time a local track contributes, its whole state (position and velocity, with its
+// covariance) is the measurement: all of it is new to the fused tracks. So a fused track counts
+// every measurement once, knows that repeated frames of one sensor do not remove that sensor's
+// offset while other sensors' frames do, and its covariance contains the pose and centre errors.
+// States that are not a filter's (a client sending raw detections: the covariance does not shrink
+// while the position moves) are recognised and each frame is used as a measurement of its own
+// (sources_unfiltered).
+//   Association, every frame: global nearest neighbour (Hungarian method) of the frame's
+// measurements against the fused tracks predicted to the frame time, cost d^2 + ln det S of the
+// position innovation (S including the sensor's offset), gated by gate_mahalanobis2 and
+// gate_max_distance_m; the fused track a local track is bound to gets binding_bonus. A tracker's
+// id swap therefore moves its sources to the fused tracks they now fit (source_rebinds) in the
+// frame the measurements jump, also when it is the only sensor. A bound measurement that no
+// fused track took but lies within manoeuvre_max_distance_m of its own is a manoeuvre (a stop, a
+// sharp turn): its track's kinematic covariance is widened until it fits (manoeuvres). Otherwise
+// it is struck, and unbound after drift_updates consecutive strikes. An unbound measurement that
+// nothing took starts a fused track (after 2 x drift_updates frames when it was just unbound).
+//   Covariances that claim too much are scaled (adapt_covariances, covariance matching): the
+// placements' covariances by how well sensors' tracks fit the others' fused tracks when they join
+// them, each sensor's track covariances by how well its frames fit. Never below what was reported.
+//   When the placements change, every fused track restarts from its sources' latest states.
 //
-// Coasting: a local track its tracker reports as coasting (predicted, not measured) is used only
-// while the fused track has no measured source: it is a constant-velocity prediction like the
-// fused track's own, and it lags when the person turns or stops.
+// kLatestStates (earlier releases). Track-to-track fusion without memory: every fused track holding
+// a source of the frame's sensor is re-estimated as the information-weighted combination of its
+// bound sources' latest states, each predicted to the update time:
+//   P_f = (sum_i P_i^-1)^-1,   x_f = P_f sum_i P_i^-1 x_i
+// where P_i is the local covariance in the world frame (ToWorld) plus position_noise_floor_m2 and
+// velocity_noise_floor_m2ps2. Unbound local tracks are associated (Hungarian method, d^2 + ln det
+// S) only against fused tracks that hold no local track of that sensor in the frame. Drift: every
+// fused track keeps a reference estimate, the fused state of the last update in which the sources
+// it used agreed with it (position and velocity within agree_mahalanobis2), predicted from there;
+// sources that disagree with it while another agrees are left out (source_exclusions); a measured
+// source outside the gate around the reference is struck when the other sensors' sources agree
+// with the reference (or, alone, when the reference is younger than drift_reference_max_age_s),
+// and unbound after drift_updates strikes; a swap seen by one sensor only cannot be told from a
+// person's motion. A tracker's coasting track is used only while no measured source is left.
 //
-// Drift: every fused track keeps a reference estimate, the fused state of the last update in
-// which the sources it used agreed with the reference (position and velocity each within
-// agree_mahalanobis2), predicted from there. Sources that disagree with it while another source
-// agrees are left out of the combination (source_exclusions), so a source that starts to drift
-// cannot drag the track. A measured source outside the gate around the reference is struck when
-// the other sensors' measured sources agree with the reference and not with it (or, when it is
-// the only one, when the reference is younger than drift_reference_max_age_s: a jump); when it
-// agrees with the others instead, everybody saw the same turn and the reference is re-anchored.
-// After drift_updates consecutive strikes (frames of its sensor) the source is unbound, may not
-// re-bind to that fused track, and is associated afresh (for 2 x drift_updates frames only with
-// existing fused tracks: the one it belongs to is often freed a frame later, by the other swapped
-// source); a new local track of the same sensor may replace a struck one. This follows people
-// through a tracker's id swap as long as another sensor saw them right; a swap seen by one sensor
-// only cannot be told from a person's motion.
-//
+// Both methods. A sensor's local track is bound to at most one fused track, a fused track holds
+// at most one local track per sensor; a newer local track of the same sensor (the tracker started
+// a new id for the person) replaces the old one. Fused ids survive a hand-over between sensors and
+// gaps in every sensor's view shorter than max_coast_s (the fused track coasts and is picked up).
 // Merge: two fused tracks with disjoint sensors that stay within the gate of each other (position,
 // also under merge_max_distance_m, and velocity under merge_max_speed_difference_mps) for
-// merge_updates consecutive checks are one object (e.g. seen by A and B before they could be
-// associated, or after a better calibration): the younger one is merged into the older id.
+// merge_updates consecutive checks are one object: the younger is merged into the older id.
+// A tracker restart (TrackFrameData.session_id changes) unbinds every local track of the old
+// session; the new session's tracks (whose ids restart) are associated afresh.
 //
-// Sessions: a tracker restart (TrackFrameData.session_id changes) unbinds every local track of the
-// old session; the new session's tracks (whose ids restart) are associated afresh.
+// Where a bias model of the trackers' centres is applied to each sample: CentreCorrected in
+// fusion_internal.h, for both methods (DESIGN.md, "Measurement model").
 //
 // Time: frames carry the gateway's UTC scan time (scan_start_ns). A frame not newer than the
 // previous frame of its sensor (and not another part of it) is dropped (frames_stale); a frame
@@ -69,8 +85,8 @@
 //
 // Bad data: non-finite or implausible local tracks (see the bounds in FusionOptions), duplicate
 // track ids in a frame, invalid placements are skipped and counted; the output never holds NaN.
-// Memory is bounded: max_tracks_per_frame, max_fused_tracks, local tracks forgotten after
-// source_timeout_s, sensors only with a placement.
+// Memory is bounded: max_tracks_per_frame, max_fused_tracks, max_offset_sensors per fused track,
+// local tracks forgotten after source_timeout_s, sensors only with a placement.
 // Not thread-safe.
 
 #include <Eigen/Core>
@@ -88,24 +104,72 @@
 
 namespace lrfnet::fusion {
 
+namespace internal {
+class Engine;
+}  // namespace internal
+
+// How the sources of a fused track are combined (see the header comment).
+enum class FusionMethod : std::uint8_t {
+  kFusedFilter,   // one filter per fused track on each sensor's new information (default)
+  kLatestStates,  // the latest states of the bound sources combined (earlier releases)
+};
+const char* ToString(FusionMethod method);
+
 struct FusionOptions {
+  FusionMethod method = FusionMethod::kFusedFilter;
+
   // Association gate: squared Mahalanobis distance of positions (2 dof; 13.8 = 99.9 %). Also the
   // drift gate around the reference and the merge gate.
   double gate_mahalanobis2 = 13.8;
   // Hard gate in metres on top of the Mahalanobis one (large covariances never join far tracks).
   double gate_max_distance_m = 1.5;
-  // Process noise of the constant-velocity model used to predict sources and fused tracks, white
-  // acceleration PSD [m^2/s^3].
+  // Process noise of the constant-velocity model of the fused tracks (and, kLatestStates, of the
+  // sources' prediction), white acceleration PSD [m^2/s^3].
   double accel_psd = 1.0;
-  // Added to every source position variance [m^2]: residual calibration and object-centre errors
-  // (different sensors see different sides of a person). Must be > 0.
+
+  // kFusedFilter: the trackers' own process noise [m^2/s^3], with which each frame's measurement
+  // is recovered from a local track's consecutive states, for sensors that do not say theirs
+  // (SetTrackerModel). Too low is safe (the measurements count less than they could); too high
+  // makes the fused tracks over-confident. 0.5 is the tracker's default.
+  double tracker_accel_psd = 0.5;
+  // kFusedFilter: standard deviation [m] of the offset between the centre a tracker reports and
+  // the body's centre along the line of sight, per measurement kind (shape fit, ellipse, centre of
+  // mass or unspecified); across the line of sight centre_lateral_fraction of it. It changes
+  // slowly (correlation time centre_correlation_s), so repeated frames of one sensor do not
+  // average it away; other sensors' views do. Added to the pose uncertainty of the calibration.
+  double centre_sigma_shape_fit_m = 0.03;
+  double centre_sigma_ellipse_m = 0.08;
+  double centre_sigma_com_m = 0.12;
+  double centre_lateral_fraction = 0.5;
+  double centre_correlation_s = 2.0;
+  // kFusedFilter: scale the calibration's pose covariances up when sensors joining a fused track
+  // disagree with it more than those covariances allow (a calibration that claims too much), and
+  // a sensor's track covariances when its frames fit its fused tracks worse than they claim (a
+  // tracker that claims too much). Never scaled below what was reported.
+  bool adapt_covariances = true;
+  // kFusedFilter: a source's frame is assigned to the fused track it is bound to unless another
+  // fits better by this much (cost: squared Mahalanobis distance + ln det S). Larger values trust
+  // the trackers' ids more; 0 re-associates every frame from scratch.
+  double binding_bonus = 4.0;
+  // kFusedFilter: a frame of a source its fused track's gate refused, that no other fused track
+  // took, within this distance [m] of the predicted position: the person turned or stopped faster
+  // than the motion model (accel_psd) expects; the track's covariance is widened to take it.
+  double manoeuvre_max_distance_m = 0.5;
+  // kFusedFilter: most sensors whose centre offset a fused track keeps as a state; the sensor
+  // that measured it longest ago is forgotten first.
+  std::size_t max_offset_sensors = 8;
+
+  // kLatestStates: added to every source position variance [m^2] (residual calibration and
+  // object-centre errors). Must be > 0.
   double position_noise_floor_m2 = 0.01;
-  // Added to every source velocity variance [m^2/s^2]: gait and the different lags of the
-  // trackers' filters (a tracker's own velocity covariance does not cover them). Must be > 0.
+  // kLatestStates: added to every source velocity variance [m^2/s^2] (gait and the different lags
+  // of the trackers' filters). Must be > 0.
   double velocity_noise_floor_m2ps2 = 0.04;
   // A confirmed fused track without any update for this long is deleted [s]; until then it coasts
-  // and can be re-bound. A tentative fused track is deleted as soon as it has no source left.
-  double max_coast_s = 1.0;
+  // and can be re-bound (a person hidden from every sensor keeps the id). Longer keeps more ids
+  // in crowds and leaves ghosts longer where people leave the view. A tentative fused track is
+  // deleted as soon as it has no source left. (Earlier releases: 1.0.)
+  double max_coast_s = 1.5;
   // A confirmed fused track without an update for this long is reported as coasting [s].
   double coast_after_s = 0.2;
   // A local track of a sensor without a frame for this long is unbound and forgotten [s].
@@ -219,6 +283,28 @@ struct FusionCounters {
   std::uint64_t fused_merged = 0;         // merged into an older fused track
   std::uint64_t fused_over_capacity = 0;  // not created: max_fused_tracks reached
   std::uint64_t numerical_failures = 0;   // a covariance that could not be factorised (skipped)
+  // kFusedFilter: a source's frame went to another fused track than the one it was bound to (its
+  // tracker exchanged two people's ids, or it took over a person another fused track followed).
+  std::uint64_t source_rebinds = 0;
+  // kFusedFilter: frames of a local track that carried no new information the fused filter could
+  // recover (its tracker's covariance grew where a measurement should have shrunk it: a tracker
+  // model other than the one assumed, see tracker_accel_psd); directions without information
+  // are left out.
+  std::uint64_t recovery_clamped = 0;
+  // kFusedFilter: local tracks whose states do not behave like a Kalman filter's (their covariance
+  // hardly shrinks while their position moves: e.g. raw detections sent with their covariance);
+  // each of their frames is then used as a measurement of its own.
+  std::uint64_t sources_unfiltered = 0;
+  // kFusedFilter: frames taken by their fused track with its covariance widened (a person who
+  // turned or stopped faster than the motion model expects).
+  std::uint64_t manoeuvres = 0;
+};
+
+// What the fuser learnt about the covariances it is given (kFusedFilter, adapt_covariances):
+// factors >= 1 by which they had to be scaled to fit the errors seen.
+struct CovarianceScales {
+  double pose = 1.0;                       // of every placement's covariance
+  std::map<std::string, double> trackers;  // of each sensor's track covariances
 };
 
 class Fuser {
@@ -234,6 +320,9 @@ class Fuser {
   // placements are ignored and counted; sensors without a placement any more lose their bindings.
   void SetPlacements(const std::vector<SensorPlacement>& placements);
   bool HasPlacement(const std::string& sensor_id) const;
+  // The process noise of a sensor's tracker (SensorInfo.accel_psd_m2ps3), for kFusedFilter; 0 or
+  // invalid: FusionOptions::tracker_accel_psd.
+  void SetTrackerModel(const std::string& sensor_id, double accel_psd_m2ps3);
 
   // A frame of a sensor: all its tracks of one scan, or one part of them (the other parts of the
   // latest scan, same session_id, scan_counter and scan time, different part < 64, are added
@@ -250,16 +339,16 @@ class Fuser {
   // now_ns), with their fused ids, ordered by sensor id and track id.
   std::vector<WorldTrack> WorldTracks(common::UtcNs now_ns) const;
 
-  const FusionCounters& counters() const { return counters_; }
+  const FusionCounters& counters() const;
+  CovarianceScales covariance_scales() const;
   const FusionOptions& options() const { return options_; }
 
  private:
   FusionOptions options_;
-  FusionCounters counters_;
   std::map<std::string, SensorPlacement, std::less<>> placements_;
-  // Implementation state (fused tracks, bindings, latest world tracks) is defined in fusion.cc.
-  struct State;
-  std::unique_ptr<State> state_;
+  // The method's state (fused tracks, bindings, latest world tracks): fusion_filter.cc,
+  // fusion_latest.cc.
+  std::unique_ptr<internal::Engine> engine_;
 };
 
 // One JSON object (a single line, no newline) for the fused-track stream and recording:

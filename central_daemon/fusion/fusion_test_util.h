@@ -1,8 +1,10 @@
 #pragma once
 // Test helper: a synthetic scene of sensors and walking people whose local tracks (tracker-like:
-// new ids on (re)appearance, tentative for the first frames, noisy, biased towards the sensor)
-// are fed to a Fuser in time order. Deterministic for a given seed.
+// new ids on (re)appearance, tentative for the first frames, noisy measurements biased towards
+// the sensor, filtered by a constant-velocity Kalman filter like lrfnet-tracker's, or reported
+// raw) are fed to a Fuser in time order. Deterministic for a given seed.
 
+#include <Eigen/Cholesky>
 #include <Eigen/Core>
 #include <algorithm>
 #include <cmath>
@@ -16,6 +18,7 @@
 #include <vector>
 
 #include "central_daemon/fusion/fusion.h"
+#include "common/cv_model.h"
 #include "common/geometry.h"
 #include "common/time.h"
 
@@ -37,14 +40,23 @@ struct SimSensor {
   double phase_s = 0.0;
   // Scene times at which the sensor sends no frames; never when unset.
   std::function<bool(double)> silent;
-  double noise_m = 0.03;  // white position noise of the reported track (per axis)
-  double bias_m = 0.0;    // offset of the reported position towards the sensor
+  double noise_m = 0.03;  // white noise of each measurement (per axis)
+  double bias_m = 0.0;    // offset of the measured position towards the sensor
+  // The measurement's standard deviation the tracker assumes (and, unfiltered, reports).
   double reported_sigma_m = 0.05;
+  // Tracks are the states of a constant-velocity Kalman filter (process noise
+  // tracker_accel_psd) fed with the measurements; unset: every frame reports the raw measurement
+  // with reported_sigma_m and a velocity with 0.1 m/s noise.
+  bool filtered = true;
+  double tracker_accel_psd = 0.5;
   std::uint64_t session_id = 1;
 };
 
 struct SimPerson {
   std::function<Eigen::Vector2d(double)> position;  // world, at scene time t_s
+  // Whether sensor index s sees the object at scene time t_s (on top of its range and `sees`);
+  // always when unset. E.g. a false object only one sensor reports for a while.
+  std::function<bool(std::size_t, double)> seen_by;
   Eigen::Vector2d Velocity(double t_s) const {
     const double h = 1e-3;
     return (position(t_s + h) - position(t_s - h)) / (2.0 * h);
@@ -54,11 +66,13 @@ struct SimPerson {
 // A person walking from a to b at speed_mps starting at start_s (standing at a before, at b after).
 inline SimPerson Walker(Eigen::Vector2d a, Eigen::Vector2d b, double speed_mps,
                         double start_s = 0.0) {
-  return SimPerson{[=](double t) {
+  SimPerson person;
+  person.position = [=](double t) {
     const double len = (b - a).norm();
     const double s = std::clamp((t - start_s) * speed_mps, 0.0, len);
     return Eigen::Vector2d(a + (b - a) * (len > 0.0 ? s / len : 0.0));
-  }};
+  };
+  return person;
 }
 
 inline SensorPlacement PlacementOf(const SimSensor& s) {
@@ -75,11 +89,24 @@ class Scene {
   std::function<std::uint32_t(std::size_t, double, std::size_t, std::uint32_t)> remap;
   // Called before every frame of a sensor at scene time t_s (e.g. to restart a tracker).
   std::function<void(Scene&, std::size_t, double)> before_frame;
+  // Called with every measurement a tracker gets: (sensor index, t_s, person index, position in
+  // the world frame (true pose), its standard deviation per axis as the tracker assumes it).
+  std::function<void(std::size_t, double, std::size_t, const Eigen::Vector2d&, double)>
+      on_measurement;
 
   std::vector<SensorPlacement> Placements() const {
     std::vector<SensorPlacement> out;
     for (const SimSensor& s : sensors) out.push_back(PlacementOf(s));
     return out;
+  }
+
+  // Sensor s's tracker exchanges the local tracks (ids and filters) of persons p and q: from now
+  // on each goes on with the other person's measurements (an association error).
+  void ExchangeLocalTracks(std::size_t s, std::size_t p, std::size_t q) {
+    local_.resize(sensors.size());
+    auto& ids = local_[s].ids;
+    const auto ip = ids.find(p), iq = ids.find(q);
+    if (ip != ids.end() && iq != ids.end()) std::swap(ip->second, iq->second);
   }
 
   // Forgets the local tracks of a sensor (its tracker restarted): ids start again at 1.
@@ -131,36 +158,66 @@ class Scene {
     for (std::size_t p = 0; p < people.size(); ++p) {
       const Eigen::Vector2d pos = people[p].position(t_s);
       const bool visible = (pos - sensor.truth.translation()).norm() <= sensor.range_m &&
-                           (!sensor.sees || sensor.sees(pos));
+                           (!sensor.sees || sensor.sees(pos)) &&
+                           (!people[p].seen_by || people[p].seen_by(s, t_s));
       if (!visible) {
         local.ids.erase(p);
         continue;
       }
-      auto [it, inserted] = local.ids.try_emplace(p, std::make_pair(local.next_id, 0u));
+      auto [it, inserted] = local.ids.try_emplace(p, LocalTrack{local.next_id});
       if (inserted) ++local.next_id;
-      const std::uint32_t age = it->second.second++;
-      std::uint32_t id = it->second.first;
+      LocalTrack& track = it->second;
+      const std::uint32_t age = track.age++;
+      std::uint32_t id = track.id;
       if (remap) id = remap(s, t_s, p, id);
 
       Eigen::Vector2d observed = pos;
       const Eigen::Vector2d to_sensor = sensor.truth.translation() - pos;
       if (to_sensor.norm() > 1e-9) observed += sensor.bias_m * to_sensor.normalized();
       observed += sensor.noise_m * Eigen::Vector2d(n01(rng_), n01(rng_));
-      const Eigen::Vector2d p_s = sensor_from_world * observed;
-      const Eigen::Vector2d v_s =
-          sensor.truth.rotation().transpose() *
-          (people[p].Velocity(t_s) + 0.05 * Eigen::Vector2d(n01(rng_), n01(rng_)));
+      const Eigen::Vector2d z_s = sensor_from_world * observed;
+      const double r = sensor.reported_sigma_m * sensor.reported_sigma_m;
+      if (on_measurement) on_measurement(s, t_s, p, observed, sensor.reported_sigma_m);
+      common::CvState x;
+      common::CvCovariance cov;
+      if (sensor.filtered) {
+        if (age == 0) {
+          track.x << z_s, 0.0, 0.0;
+          track.p = Eigen::Vector4d(r, r, 2.25, 2.25).asDiagonal();
+        } else {
+          common::CvPredict(t_s - track.t_s, sensor.tracker_accel_psd, track.x, track.p);
+          const Eigen::Matrix2d s_inv =
+              (track.p.topLeftCorner<2, 2>() + r * Eigen::Matrix2d::Identity())
+                  .llt()
+                  .solve(Eigen::Matrix2d::Identity());
+          const Eigen::Matrix<double, 4, 2> gain = track.p.leftCols<2>() * s_inv;
+          track.x += gain * (z_s - track.x.head<2>());
+          track.p -= gain * track.p.topRows<2>();
+          track.p = (0.5 * (track.p + track.p.transpose())).eval();
+        }
+        track.t_s = t_s;
+        x = track.x;
+        cov = track.p;
+      } else {
+        const Eigen::Vector2d v_s =
+            sensor.truth.rotation().transpose() *
+            (people[p].Velocity(t_s) + 0.1 * Eigen::Vector2d(n01(rng_), n01(rng_)));
+        x << z_s, v_s;
+        cov = Eigen::Vector4d(r, r, 0.01, 0.01).asDiagonal();
+      }
       daemon::TrackObservation o;
       o.track_id = id;
       o.state =
           age < tentative_frames ? daemon::TrackState::kTentative : daemon::TrackState::kConfirmed;
       o.kind = daemon::MeasurementKind::kCenterOfMass;
-      o.x_m = static_cast<float>(p_s.x());
-      o.y_m = static_cast<float>(p_s.y());
-      o.vx_mps = static_cast<float>(v_s.x());
-      o.vy_mps = static_cast<float>(v_s.y());
-      const auto var = static_cast<float>(sensor.reported_sigma_m * sensor.reported_sigma_m);
-      o.covariance = {var, 0.0f, 0.0f, 0.0f, var, 0.0f, 0.0f, 0.01f, 0.0f, 0.01f};
+      o.x_m = static_cast<float>(x(0));
+      o.y_m = static_cast<float>(x(1));
+      o.vx_mps = static_cast<float>(x(2));
+      o.vy_mps = static_cast<float>(x(3));
+      std::size_t k = 0;
+      for (int row = 0; row < 4; ++row) {
+        for (int col = row; col < 4; ++col) o.covariance[k++] = static_cast<float>(cov(row, col));
+      }
       o.age_scans = age;
       frame.tracks.push_back(o);
     }
@@ -170,8 +227,15 @@ class Scene {
   }
 
  private:
+  struct LocalTrack {
+    std::uint32_t id = 0;
+    std::uint32_t age = 0;
+    double t_s = 0.0;  // of the filter's state
+    common::CvState x = common::CvState::Zero();
+    common::CvCovariance p = common::CvCovariance::Identity();
+  };
   struct Local {
-    std::map<std::size_t, std::pair<std::uint32_t, std::uint32_t>> ids;  // person -> (id, age)
+    std::map<std::size_t, LocalTrack> ids;  // person -> its local track
     std::uint32_t next_id = 1;
     std::uint32_t frames = 0;
   };

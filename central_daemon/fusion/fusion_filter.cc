@@ -1,0 +1,1178 @@
+// FusionMethod::kFusedFilter: one filter per fused track, fed with each sensor's new information
+// (fusion.h, "kFusedFilter").
+
+#include <Eigen/Cholesky>
+#include <Eigen/Eigenvalues>
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <optional>
+#include <tuple>
+#include <utility>
+
+#include "central_daemon/fusion/assignment.h"
+#include "central_daemon/fusion/fusion_internal.h"
+#include "common/cv_model.h"
+
+namespace lrfnet::fusion::internal {
+namespace {
+
+using common::CvCovariance;
+using common::CvState;
+using common::UtcNs;
+using Mat = Eigen::MatrixXd;
+using Vec = Eigen::VectorXd;
+
+// Bounds of a recovered measurement's variance per direction [m^2]: below, float rounding of the
+// wire's covariances dominates; above, the direction carries no information (kept finite so that
+// the innovation covariance stays invertible).
+constexpr double kMinMeasurementVariance = 1e-6;
+constexpr double kMaxMeasurementVariance = 1e4;
+// A local track whose recovered measurements are on average this many times less certain than
+// its own position after kUnfilteredFrames frames does not come from the assumed filter (a filter
+// at 25 Hz with people's process noise has a ratio of 2-5; raw detections reported with their
+// own covariance have hundreds).
+constexpr double kUnfilteredRatio = 30.0;
+constexpr std::uint32_t kUnfilteredFrames = 5;
+// Covariance matching (Mehra 1972): a covariance that fits its errors gives squared Mahalanobis
+// distances (2 dof) with mean 2. The running mean of such distances (each capped at kNisCap: a
+// mismatched pair must not dominate; memory ~1 / rate samples) raises the scale of the covariance
+// while it is above 2 and lowers it towards 1 while it is below; never below 1 (a covariance
+// claimed larger than needed is kept).
+struct CovarianceScale {
+  static constexpr double kNisCap = 20.0;
+  static constexpr double kStep = 0.05;
+  double mean = 2.0;
+  double scale = 1.0;
+  void Add(double d2, double rate, double max_scale) {
+    if (!std::isfinite(d2)) return;
+    mean += rate * (std::min(d2, kNisCap) - mean);
+    scale = std::clamp(scale * std::exp(kStep * (mean / 2.0 - 1.0)), 1.0, max_scale);
+  }
+};
+// Pose covariances: tested whenever a sensor's whole track joins a fused track of other sensors.
+constexpr double kPoseNisRate = 0.02;
+constexpr double kMaxPoseScale = 100.0;
+// A sensor's measurement covariances: tested by every frame's update of its own fused track.
+constexpr double kNoiseNisRate = 0.002;
+constexpr double kMaxNoiseScale = 1e4;
+
+// Squared Mahalanobis distance of the first two components of nu with the upper left of s.
+double PositionNis(const Vec& nu, const Mat& s) {
+  const Eigen::Matrix2d spp = s.topLeftCorner<2, 2>();
+  const Eigen::LLT<Eigen::Matrix2d> llt(spp);
+  if (llt.info() != Eigen::Success) return std::numeric_limits<double>::quiet_NaN();
+  const Eigen::Vector2d np = nu.head<2>();
+  return np.dot(llt.solve(np));
+}
+
+// The new information a local track's frame carries, in the world frame, and the covariance of
+// its sensor's centre offset at that place.
+struct Measurement {
+  bool valid = false;
+  // The whole tracker state (position and velocity): the first time the local track contributes,
+  // everything it learnt is new to the fused tracks. Afterwards only the frame's measurement.
+  bool full_state = false;
+  Eigen::Vector4d z = Eigen::Vector4d::Zero();  // position, and velocity when full_state
+  Eigen::Matrix4d r = Eigen::Matrix4d::Zero();  // its noise (upper left 2x2 when !full_state)
+  Eigen::Matrix2d offset_prior = Eigen::Matrix2d::Zero();
+};
+
+struct SourceKey {
+  std::string sensor_id;
+  std::uint32_t track_id = 0;
+  bool operator<(const SourceKey& o) const {
+    return std::tie(sensor_id, track_id) < std::tie(o.sensor_id, o.track_id);
+  }
+  bool operator==(const SourceKey& o) const {
+    return sensor_id == o.sensor_id && track_id == o.track_id;
+  }
+};
+
+struct LocalTrack {
+  daemon::TrackObservation observation;  // as received (centre corrected), sensor frame
+  WorldTrack world;
+  bool usable = false;  // not tentative, or tentative sources allowed
+  // The latest state its tracker measured (sensor frame) and its time: the next frame's
+  // measurement is recovered against it.
+  bool has_reference = false;
+  CvState reference_x = CvState::Zero();
+  CvCovariance reference_p = CvCovariance::Identity();
+  UtcNs reference_ns = 0;
+  // Its information entered a fused track: from now on only each frame's new information counts.
+  bool contributed = false;
+  // Recovery statistics: frames recovered and the sum of tr(R) / tr(P_pp) over them. A tracker's
+  // filter has a ratio of a few; states that are not a filter's (raw detections with their
+  // covariance) give hundreds, and then every frame is used as a measurement of its own.
+  std::uint32_t recovered_frames = 0;
+  double ratio_sum = 0.0;
+  bool unfiltered = false;
+  Measurement measurement;  // of the latest frame
+  std::optional<std::uint64_t> fused_id;
+  std::uint32_t misses = 0;       // consecutive measured frames not assigned to its fused track
+  std::uint32_t hold_frames = 0;  // after unbinding: frames before it may start a fused track
+  UtcNs stamp() const { return world.stamp_ns; }
+};
+
+struct SensorState {
+  FrameClock clock;
+  // Scale of its tracker's covariances, learnt from its frames' fit (adapt_covariances).
+  CovarianceScale noise_scale;
+  std::map<std::uint32_t, LocalTrack> tracks;
+};
+
+// A sensor's centre offset kept as a state of a fused track.
+struct Offset {
+  std::string sensor_id;
+  UtcNs last_ns = 0;                                // its latest measurement
+  Eigen::Matrix2d prior = Eigen::Matrix2d::Zero();  // stationary covariance there
+};
+
+struct Track {
+  std::uint64_t id = 0;
+  UtcNs first_ns = 0;
+  UtcNs stamp_ns = 0;  // time of x, p
+  // (x, y, vx, vy, then the 2-d offset of every sensor in `offsets`), world frame.
+  Vec x = Vec::Zero(4);
+  Mat p = Mat::Identity(4, 4);
+  std::vector<Offset> offsets;
+  std::uint64_t updates = 0;
+  bool confirmed = false;
+  std::vector<SourceKey> sources;  // sorted; at most one per sensor
+  // The sensor whose source timed out last, leaving the track without sources: a source of
+  // another sensor binding later is a hand-over.
+  std::string last_sensor;
+  std::uint64_t merge_into = 0;
+  std::uint32_t merge_count = 0;
+
+  int OffsetIndex(const std::string& sensor_id) const {
+    for (std::size_t i = 0; i < offsets.size(); ++i) {
+      if (offsets[i].sensor_id == sensor_id) return static_cast<int>(i);
+    }
+    return -1;
+  }
+};
+
+Eigen::Index Dim(const Track& f) { return 4 + 2 * static_cast<Eigen::Index>(f.offsets.size()); }
+
+void Symmetrize(Mat& p) { p = (0.5 * (p + p.transpose())).eval(); }
+
+// Predicts f's state over dt_s >= 0: constant velocity for (x, y, vx, vy), first-order
+// Gauss-Markov for every offset (b <- a b, a = exp(-dt / tau), process noise (1 - a^2) prior, so
+// that its covariance relaxes to the prior).
+void PredictState(const FusionOptions& o, double dt_s, Vec& x, Mat& p,
+                  const std::vector<Offset>& offsets) {
+  if (!(dt_s > 0.0) || !std::isfinite(dt_s)) return;
+  const Eigen::Index n = x.size();
+  const double a = std::exp(-dt_s / o.centre_correlation_s);
+  x(0) += dt_s * x(2);
+  x(1) += dt_s * x(3);
+  x.tail(n - 4) *= a;
+  p.row(0) += dt_s * p.row(2);
+  p.row(1) += dt_s * p.row(3);
+  p.bottomRows(n - 4) *= a;
+  p.col(0) += dt_s * p.col(2);
+  p.col(1) += dt_s * p.col(3);
+  p.rightCols(n - 4) *= a;
+  p.topLeftCorner<4, 4>() += common::CvProcessNoise(dt_s, o.accel_psd);
+  for (std::size_t i = 0; i < offsets.size(); ++i) {
+    const auto k = 4 + 2 * static_cast<Eigen::Index>(i);
+    p.block<2, 2>(k, k) += (1.0 - a * a) * offsets[i].prior;
+  }
+  Symmetrize(p);
+}
+
+// Adds a state for the offset of `sensor_id` (zero, its prior, uncorrelated); forgets the offset
+// measured longest ago when max_offset_sensors are kept.
+int AddOffset(const FusionOptions& o, Track& f, const std::string& sensor_id,
+              const Eigen::Matrix2d& prior, UtcNs t) {
+  if (f.offsets.size() >= o.max_offset_sensors) {
+    std::size_t oldest = 0;
+    for (std::size_t i = 1; i < f.offsets.size(); ++i) {
+      if (f.offsets[i].last_ns < f.offsets[oldest].last_ns) oldest = i;
+    }
+    // Marginalising a Gaussian: drop its rows and columns.
+    const auto k = 4 + 2 * static_cast<Eigen::Index>(oldest);
+    const Eigen::Index n = Dim(f);
+    std::vector<Eigen::Index> keep;
+    for (Eigen::Index i = 0; i < n; ++i) {
+      if (i != k && i != k + 1) keep.push_back(i);
+    }
+    Vec x(n - 2);
+    Mat p(n - 2, n - 2);
+    for (std::size_t i = 0; i < keep.size(); ++i) {
+      x(static_cast<Eigen::Index>(i)) = f.x(keep[i]);
+      for (std::size_t j = 0; j < keep.size(); ++j) {
+        p(static_cast<Eigen::Index>(i), static_cast<Eigen::Index>(j)) = f.p(keep[i], keep[j]);
+      }
+    }
+    f.x = std::move(x);
+    f.p = std::move(p);
+    f.offsets.erase(f.offsets.begin() + static_cast<std::ptrdiff_t>(oldest));
+  }
+  const Eigen::Index n = Dim(f);
+  f.x.conservativeResize(n + 2);
+  f.x.tail<2>().setZero();
+  Mat p = Mat::Zero(n + 2, n + 2);
+  p.topLeftCorner(n, n) = f.p;
+  p.bottomRightCorner<2, 2>() = prior;
+  f.p = std::move(p);
+  f.offsets.push_back(Offset{sensor_id, t, prior});
+  return static_cast<int>(f.offsets.size()) - 1;
+}
+
+// Forgets the offsets not measured for `max_age_s` (their correlation with anything has decayed).
+void ForgetOffsets(Track& f, UtcNs now, double max_age_s) {
+  std::vector<Eigen::Index> keep = {0, 1, 2, 3};
+  std::vector<Offset> kept;
+  for (std::size_t i = 0; i < f.offsets.size(); ++i) {
+    if (Seconds(now, f.offsets[i].last_ns) > max_age_s) continue;
+    const auto k = 4 + 2 * static_cast<Eigen::Index>(i);
+    keep.push_back(k);
+    keep.push_back(k + 1);
+    kept.push_back(f.offsets[i]);
+  }
+  if (kept.size() == f.offsets.size()) return;
+  const auto n = static_cast<Eigen::Index>(keep.size());
+  Vec x(n);
+  Mat p(n, n);
+  for (Eigen::Index i = 0; i < n; ++i) {
+    x(i) = f.x(keep[static_cast<std::size_t>(i)]);
+    for (Eigen::Index j = 0; j < n; ++j) {
+      p(i, j) = f.p(keep[static_cast<std::size_t>(i)], keep[static_cast<std::size_t>(j)]);
+    }
+  }
+  f.x = std::move(x);
+  f.p = std::move(p);
+  f.offsets = std::move(kept);
+}
+
+// The rows of the measurement matrix: position = (x, y) + the sensor's offset (when it has a
+// state), velocity = (vx, vy).
+Mat MeasurementMatrix(Eigen::Index n, int offset_index, bool full_state) {
+  Mat h = Mat::Zero(full_state ? 4 : 2, n);
+  h(0, 0) = 1.0;
+  h(1, 1) = 1.0;
+  if (offset_index >= 0) {
+    const auto k = 4 + 2 * static_cast<Eigen::Index>(offset_index);
+    h(0, k) = 1.0;
+    h(1, k + 1) = 1.0;
+  }
+  if (full_state) {
+    h(2, 2) = 1.0;
+    h(3, 3) = 1.0;
+  }
+  return h;
+}
+
+// A measurement made late_s before the state's time, moved to it with the state's velocity:
+// z_p += late v, its noise grows by what that prediction does not know.
+Measurement MovedForward(const Measurement& m, double late_s, const Vec& x, const Mat& p,
+                         double accel_psd) {
+  if (!(late_s > 0.0)) return m;
+  Measurement out = m;
+  const Eigen::Matrix4d q = common::CvProcessNoise(late_s, accel_psd);
+  if (m.full_state) {
+    out.z.head<2>() += late_s * m.z.tail<2>();
+    common::CvApplyTransition(late_s, out.r);
+    common::CvApplyTransitionTransposed(late_s, out.r);
+    out.r += q;
+  } else {
+    out.z.head<2>() += late_s * x.segment<2>(2);
+    out.r.topLeftCorner<2, 2>() += late_s * late_s * p.block<2, 2>(2, 2) + q.topLeftCorner<2, 2>();
+  }
+  return out;
+}
+
+class FusedFilterEngine final : public Engine {
+ public:
+  explicit FusedFilterEngine(const FusionOptions& options) : Engine(options) {}
+
+  void SetPlacements(const PlacementMap& next, const PlacementMap& previous) override {
+    for (auto it = sensors_.begin(); it != sensors_.end();) {
+      const auto placement = next.find(it->first);
+      if (placement == next.end()) {
+        DropSensorTracks(it->first, it->second);
+        it = sensors_.erase(it);
+        continue;
+      }
+      const auto old = previous.find(it->first);
+      if (old == previous.end() || !SamePlacement(old->second, placement->second)) {
+        for (auto& [tid, lt] : it->second.tracks) {
+          lt.world = ToWorld(placement->second, it->first, lt.world.stamp_ns, lt.observation);
+        }
+      }
+      ++it;
+    }
+    // Estimates made with the old poses do not fit the new ones: every fused track starts again
+    // from its sources' latest states, combined as independent estimates (their sensors differ).
+    for (auto& [id, f] : tracks_) {
+      Restart(f);
+      f.merge_into = 0;
+      f.merge_count = 0;
+    }
+  }
+
+  void SetTrackerModel(const std::string& sensor_id, double accel_psd) override {
+    if (std::isfinite(accel_psd) && accel_psd > 0.0 && accel_psd < 1e4) {
+      tracker_psd_[sensor_id] = accel_psd;
+    } else {
+      tracker_psd_.erase(sensor_id);
+    }
+  }
+
+  void AddFrame(const SensorPlacement& placement, const std::string& sensor_id,
+                const daemon::TrackFrameData& frame) override;
+  void Tick(UtcNs now_ns) override;
+  std::vector<FusedTrack> Snapshot(UtcNs now_ns, bool include_tentative) const override;
+  std::vector<WorldTrack> WorldTracks(UtcNs now_ns) const override;
+  CovarianceScales covariance_scales() const override {
+    CovarianceScales out;
+    out.pose = pose_scale_.scale;
+    for (const auto& [id, ss] : sensors_) out.trackers[id] = ss.noise_scale.scale;
+    return out;
+  }
+
+ private:
+  LocalTrack* Find(const SourceKey& key) {
+    const auto s = sensors_.find(key.sensor_id);
+    if (s == sensors_.end()) return nullptr;
+    const auto t = s->second.tracks.find(key.track_id);
+    return t == s->second.tracks.end() ? nullptr : &t->second;
+  }
+  const LocalTrack* Find(const SourceKey& key) const {
+    const auto s = sensors_.find(key.sensor_id);
+    if (s == sensors_.end()) return nullptr;
+    const auto t = s->second.tracks.find(key.track_id);
+    return t == s->second.tracks.end() ? nullptr : &t->second;
+  }
+
+  double TrackerPsd(const std::string& sensor_id) const {
+    const auto it = tracker_psd_.find(sensor_id);
+    return it == tracker_psd_.end() ? options_.tracker_accel_psd : it->second;
+  }
+
+  double CentreSigma(daemon::MeasurementKind kind) const {
+    switch (kind) {
+      case daemon::MeasurementKind::kShapeFit:
+        return options_.centre_sigma_shape_fit_m;
+      case daemon::MeasurementKind::kEllipse:
+        return options_.centre_sigma_ellipse_m;
+      case daemon::MeasurementKind::kCenterOfMass:
+      case daemon::MeasurementKind::kUnspecified:
+        break;
+    }
+    return options_.centre_sigma_com_m;
+  }
+
+  Measurement Measure(const SensorPlacement& placement, const std::string& sensor_id,
+                      LocalTrack& lt, UtcNs t);
+
+  void Unbind(Track& f, const SourceKey& key) {
+    f.sources.erase(std::remove(f.sources.begin(), f.sources.end(), key), f.sources.end());
+    if (LocalTrack* lt = Find(key); lt != nullptr && lt->fused_id == f.id) {
+      lt->fused_id.reset();
+      lt->misses = 0;
+    }
+  }
+
+  // Binds the local track to f: away from its previous fused track, and in place of any other
+  // source of the same sensor in f.
+  void Bind(Track& f, const SourceKey& key, LocalTrack& lt) {
+    if (lt.fused_id && *lt.fused_id != f.id) {
+      auto g = tracks_.find(*lt.fused_id);
+      if (g != tracks_.end()) Unbind(g->second, key);
+    }
+    const std::vector<SourceKey> current = f.sources;
+    for (const SourceKey& k : current) {
+      if (k.sensor_id == key.sensor_id && k.track_id != key.track_id) Unbind(f, k);
+    }
+    if (std::find(f.sources.begin(), f.sources.end(), key) == f.sources.end()) {
+      f.sources.insert(std::upper_bound(f.sources.begin(), f.sources.end(), key), key);
+    }
+    lt.fused_id = f.id;
+    lt.misses = 0;
+    lt.hold_frames = 0;
+  }
+
+  void DeleteTrack(std::map<std::uint64_t, Track>::iterator it) {
+    const std::vector<SourceKey> keys = it->second.sources;
+    for (const SourceKey& k : keys) Unbind(it->second, k);
+    tracks_.erase(it);
+  }
+
+  void DropSensorTracks(const std::string& sensor_id, SensorState& ss) {
+    for (auto& [tid, lt] : ss.tracks) {
+      if (!lt.fused_id) continue;
+      auto f = tracks_.find(*lt.fused_id);
+      if (f != tracks_.end()) Unbind(f->second, SourceKey{sensor_id, tid});
+    }
+    ss.tracks.clear();
+  }
+
+  void ExpireSources(const std::string& sensor_id, SensorState& ss, UtcNs now) {
+    for (auto it = ss.tracks.begin(); it != ss.tracks.end();) {
+      LocalTrack& lt = it->second;
+      if (Seconds(now, lt.stamp()) <= options_.source_timeout_s) {
+        ++it;
+        continue;
+      }
+      if (lt.fused_id) {
+        auto f = tracks_.find(*lt.fused_id);
+        if (f != tracks_.end()) {
+          Unbind(f->second, SourceKey{sensor_id, it->first});
+          if (!f->second.sources.empty()) {
+            ++counters_.handovers;  // other sensors continue the track
+          } else {
+            f->second.last_sensor = sensor_id;
+          }
+        }
+        ++counters_.sources_timed_out;
+      }
+      it = ss.tracks.erase(it);
+    }
+  }
+
+  // f's state predicted to t (not before its own time).
+  void Predicted(const Track& f, UtcNs t, Vec& x, Mat& p) const {
+    x = f.x;
+    p = f.p;
+    PredictState(options_, Seconds(t, f.stamp_ns), x, p, f.offsets);
+  }
+
+  // The association cost of measurement m of `sensor_id` with f predicted to t (x, p): squared
+  // Mahalanobis distance of the positions plus ln det S; nullopt outside the gates.
+  std::optional<double> Cost(const Track& f, const Vec& x, const Mat& p, const Measurement& m,
+                             const std::string& sensor_id, double late_s) const;
+
+  // For a bound measurement its fused track (fused_id, untaken in this frame) did not accept:
+  // the factor by which that track's kinematic covariance must grow for the measurement to lie
+  // at half the gate, when it is within manoeuvre_max_distance_m; else 1 (no manoeuvre).
+  template <typename Candidates>
+  double ManoeuvreWidening(Candidates& candidates, const std::vector<char>& taken,
+                           std::uint64_t fused_id, const Measurement& m,
+                           const std::string& sensor_id) {
+    for (std::size_t j = 0; j < candidates.size(); ++j) {
+      auto& c = candidates[j];
+      if (c.track->id != fused_id) continue;
+      if (taken[j] || !c.predicted) return 1.0;
+      const Measurement moved = MovedForward(m, c.late_s, c.x, c.p, options_.accel_psd);
+      const int k = c.track->OffsetIndex(sensor_id);
+      Eigen::Vector2d predicted = c.x.template head<2>();
+      Eigen::Matrix2d kinematic = c.p.template topLeftCorner<2, 2>();
+      Eigen::Matrix2d rest = moved.r.topLeftCorner<2, 2>();
+      if (k >= 0) {
+        const auto i = 4 + 2 * static_cast<Eigen::Index>(k);
+        predicted += c.x.template segment<2>(i);
+        rest += c.p.template block<2, 2>(i, i);
+        kinematic += c.p.template block<2, 2>(0, i) + c.p.template block<2, 2>(i, 0);
+      } else {
+        rest += moved.offset_prior;
+      }
+      const Eigen::Vector2d nu = moved.z.head<2>() - predicted;
+      if (nu.norm() > options_.manoeuvre_max_distance_m) return 1.0;
+      // Smallest widening w (doubling) with nu^T (w kinematic + rest)^-1 nu <= gate / 2.
+      for (double w = 2.0; w <= 1024.0; w *= 2.0) {
+        if (Mahalanobis2(nu, w * kinematic + rest, Eigen::Vector2d::Zero(),
+                         Eigen::Matrix2d::Zero()) <= 0.5 * options_.gate_mahalanobis2) {
+          return w;
+        }
+      }
+      return 1.0;
+    }
+    return 1.0;
+  }
+
+  // The Kalman update of f with m of `sensor_id` made at t. False (f unchanged) on a numerical
+  // failure.
+  // widen > 1 scales the covariance of (x, y, vx, vy) (and its correlation with the offsets by
+  // the square root) before the update: a manoeuvre the motion model did not expect.
+  bool Update(Track& f, const Measurement& m, const std::string& sensor_id, UtcNs t,
+              double widen = 1.0);
+
+  Track& NewTrack(const Measurement& m, const std::string& sensor_id, UtcNs t);
+
+  // Whether another sensor than `sensor_id` measured f within source_timeout_s of t.
+  bool OthersMeasured(const Track& f, const std::string& sensor_id, UtcNs t) const {
+    for (const Offset& off : f.offsets) {
+      if (off.sensor_id != sensor_id && Seconds(t, off.last_ns) <= options_.source_timeout_s) {
+        return true;
+      }
+    }
+    return false;
+  }
+
+  std::vector<std::string> ActiveSensors(const Track& f) const {
+    std::vector<std::string> out;
+    for (const SourceKey& k : f.sources) {
+      const LocalTrack* lt = Find(k);
+      const auto s = sensors_.find(k.sensor_id);
+      if (lt == nullptr || s == sensors_.end() || !lt->usable || lt->misses != 0 ||
+          lt->stamp() != s->second.clock.latest_ns ||
+          Seconds(f.stamp_ns, lt->stamp()) > options_.source_timeout_s) {
+        continue;
+      }
+      out.push_back(k.sensor_id);
+    }
+    return out;
+  }
+
+  // Replaces f's estimate by the information-weighted combination of its sources' latest world
+  // states (pose uncertainty included) predicted to f's time, its offsets forgotten. Unchanged
+  // when no source is left.
+  void Restart(Track& f) {
+    Eigen::Matrix4d info = Eigen::Matrix4d::Zero();
+    Eigen::Vector4d info_x = Eigen::Vector4d::Zero();
+    int count = 0;
+    for (const SourceKey& k : f.sources) {
+      const LocalTrack* lt = Find(k);
+      if (lt == nullptr) continue;
+      CvState x(lt->world.x_m, lt->world.y_m, lt->world.vx_mps, lt->world.vy_mps);
+      CvCovariance p = lt->world.covariance;
+      const double sigma = CentreSigma(lt->observation.kind);
+      p.topLeftCorner<2, 2>() += sigma * sigma * Eigen::Matrix2d::Identity();
+      internal::Predict(Seconds(f.stamp_ns, lt->stamp()), options_.accel_psd, x, p);
+      const Eigen::LLT<Eigen::Matrix4d> llt(p);
+      if (llt.info() != Eigen::Success) continue;
+      const Eigen::Matrix4d i = llt.solve(Eigen::Matrix4d::Identity());
+      info += i;
+      info_x += i * x;
+      ++count;
+    }
+    if (count == 0) return;
+    const Eigen::LLT<Eigen::Matrix4d> llt(info);
+    if (llt.info() != Eigen::Success) return;
+    Eigen::Matrix4d p = llt.solve(Eigen::Matrix4d::Identity());
+    p = (0.5 * (p + p.transpose())).eval();
+    const Eigen::Vector4d x = p * info_x;
+    if (!AllFinite(x) || !AllFinite(p)) return;
+    f.x = x;
+    f.p = p;
+    f.offsets.clear();
+  }
+
+  std::uint64_t MergeCheck(std::uint64_t f_id);
+  void Merge(std::uint64_t older_id, std::uint64_t younger_id);
+
+  std::map<std::string, SensorState, std::less<>> sensors_;
+  std::map<std::string, double, std::less<>> tracker_psd_;
+  std::map<std::uint64_t, Track> tracks_;
+  // Scale of the calibration's pose covariances, learnt from how well sensors' tracks fit the
+  // fused tracks of other sensors when they join them (adapt_covariances).
+  CovarianceScale pose_scale_;
+  std::uint64_t next_id_ = 1;
+  bool have_newest_ = false;
+  UtcNs newest_ns_ = 0;
+};
+
+// Recovers the information of this frame (fusion.h, "kFusedFilter"). The tracker's filter turned
+// its prediction xb, Pb (from the previous measured state, with its own process noise) into x, P
+// with a position measurement z ~ N(H x_true, R). For the position marginals of a Kalman update
+// with H = [I 0] (its information form; e.g. Bar-Shalom, Li & Kirubarajan, "Estimation with
+// Applications to Tracking and Navigation", 2001):
+//   P_pp^-1 = Pb_pp^-1 + R^-1,        x_p = xb_p + Pb_pp (Pb_pp + R)^-1 (z - xb_p)
+// so  R^-1 = P_pp^-1 - Pb_pp^-1   and   z = xb_p + R P_pp^-1 (x_p - xb_p)
+// (using (Pb_pp + R) Pb_pp^-1 = R P_pp^-1). Directions in which the covariance did not shrink
+// carry no information; if the tracker's model is not the one assumed, R is what it would have
+// had to be under the assumed one (a process noise assumed too low gives a larger R).
+Measurement FusedFilterEngine::Measure(const SensorPlacement& placement,
+                                       const std::string& sensor_id, LocalTrack& lt, UtcNs t) {
+  Measurement m;
+  const daemon::TrackObservation& obs = lt.observation;
+  if (obs.state == daemon::TrackState::kCoasting) return m;  // a prediction: nothing new
+  const CvState x(obs.x_m, obs.y_m, obs.vx_mps, obs.vy_mps);
+  const CvCovariance p = UnpackCovariance(obs.covariance);
+  const common::Pose2& pose = placement.world_from_sensor;
+  const Eigen::Matrix2d rot = pose.rotation();
+
+  Eigen::Vector2d z_s = x.head<2>();
+  Eigen::Matrix2d r_s = p.topLeftCorner<2, 2>();
+  bool usable_measurement = true;
+  if (lt.contributed && !lt.unfiltered) {
+    const double dt = Seconds(t, lt.reference_ns);
+    if (!lt.has_reference || !(dt > 0.0) || !std::isfinite(dt)) {
+      usable_measurement = false;
+    } else {
+      CvState xb = lt.reference_x;
+      CvCovariance pb = lt.reference_p;
+      common::CvPredict(dt, TrackerPsd(sensor_id), xb, pb);
+      const Eigen::Matrix2d pp = p.topLeftCorner<2, 2>(), pbp = pb.topLeftCorner<2, 2>();
+      const Eigen::LLT<Eigen::Matrix2d> llt_p(pp), llt_pb(pbp);
+      if (llt_p.info() != Eigen::Success || llt_pb.info() != Eigen::Success) {
+        usable_measurement = false;
+      } else {
+        const Eigen::Matrix2d pp_inv = llt_p.solve(Eigen::Matrix2d::Identity());
+        Eigen::Matrix2d info = pp_inv - llt_pb.solve(Eigen::Matrix2d::Identity());
+        info = (0.5 * (info + info.transpose())).eval();
+        const Eigen::SelfAdjointEigenSolver<Eigen::Matrix2d> eig(info);
+        const Eigen::Vector2d lambda = eig.eigenvalues();
+        const double scale = pp_inv.trace();
+        if (eig.info() != Eigen::Success || !AllFinite(lambda)) {
+          usable_measurement = false;
+        } else {
+          if (lambda.minCoeff() < -1e-3 * scale) ++counters_.recovery_clamped;
+          Eigen::Vector2d variance;
+          for (int i = 0; i < 2; ++i) {
+            variance(i) = lambda(i) > 1.0 / kMaxMeasurementVariance
+                              ? std::max(1.0 / lambda(i), kMinMeasurementVariance)
+                              : kMaxMeasurementVariance;
+          }
+          r_s = eig.eigenvectors() * variance.asDiagonal() * eig.eigenvectors().transpose();
+          z_s = xb.head<2>() + r_s * pp_inv * (x.head<2>() - xb.head<2>());
+          const double ratio = std::min(r_s.trace() / pp.trace(), 1e3);
+          ++lt.recovered_frames;
+          lt.ratio_sum += ratio;
+          if (lt.recovered_frames >= kUnfilteredFrames &&
+              lt.ratio_sum > kUnfilteredRatio * lt.recovered_frames) {
+            lt.unfiltered = true;
+            ++counters_.sources_unfiltered;
+          }
+          // A frame that added (almost) nothing to what a filter would have known: a state that
+          // is not a filter's (what was recovered is nonsense far away with a huge covariance).
+          // The state itself is the measurement then.
+          if (ratio > kUnfilteredRatio) {
+            z_s = x.head<2>();
+            r_s = pp;
+          }
+        }
+      }
+    }
+  }
+  // The next frame's reference.
+  lt.has_reference = true;
+  lt.reference_x = x;
+  lt.reference_p = p;
+  lt.reference_ns = t;
+  if (!usable_measurement || !AllFinite(z_s) || !AllFinite(r_s)) return m;
+
+  m.valid = true;
+  m.full_state = !lt.contributed;
+  m.z.head<2>() = rot * z_s + pose.translation();
+  const auto ss = sensors_.find(sensor_id);
+  const double noise_scale = ss == sensors_.end() ? 1.0 : ss->second.noise_scale.scale;
+  if (m.full_state) {
+    Eigen::Matrix4d j = Eigen::Matrix4d::Zero();
+    j.topLeftCorner<2, 2>() = rot;
+    j.bottomRightCorner<2, 2>() = rot;
+    m.z.tail<2>() = rot * x.tail<2>();
+    m.r = noise_scale * j * p * j.transpose();
+    // The yaw uncertainty turns the velocity too; the position part is in the offset.
+    const Eigen::Matrix<double, 4, 3> jp = PoseJacobian(pose, x.head<2>(), x.tail<2>());
+    m.r.bottomRightCorner<2, 2>() +=
+        jp.bottomRows<2>() * placement.covariance * jp.bottomRows<2>().transpose();
+  } else {
+    m.r.topLeftCorner<2, 2>() = noise_scale * rot * r_s * rot.transpose();
+  }
+  m.r = (0.5 * (m.r + m.r.transpose())).eval();
+  // The offset of this sensor's centre at this place: the pose's uncertainty carried to the
+  // position (first order, as in ToWorld) plus the centre's own offset, larger along the line
+  // of sight (the side a sensor sees) than across it.
+  const Eigen::Matrix<double, 4, 3> jp = PoseJacobian(pose, x.head<2>(), x.tail<2>());
+  m.offset_prior =
+      pose_scale_.scale * jp.topRows<2>() * placement.covariance * jp.topRows<2>().transpose();
+  const double sigma = CentreSigma(obs.kind);
+  const double lateral = options_.centre_lateral_fraction * sigma;
+  Eigen::Vector2d u = rot * x.head<2>();
+  const double range = u.norm();
+  u = range > 1e-6 ? Eigen::Vector2d(u / range) : Eigen::Vector2d(1.0, 0.0);
+  m.offset_prior += sigma * sigma * u * u.transpose() +
+                    lateral * lateral * (Eigen::Matrix2d::Identity() - u * u.transpose());
+  m.offset_prior = (0.5 * (m.offset_prior + m.offset_prior.transpose())).eval();
+  if (!AllFinite(m.z) || !AllFinite(m.r) || !AllFinite(m.offset_prior)) m.valid = false;
+  return m;
+}
+
+std::optional<double> FusedFilterEngine::Cost(const Track& f, const Vec& x, const Mat& p,
+                                              const Measurement& m0, const std::string& sensor_id,
+                                              double late_s) const {
+  const Measurement m = MovedForward(m0, late_s, x, p, options_.accel_psd);
+  const int k = f.OffsetIndex(sensor_id);
+  Eigen::Vector2d predicted = x.head<2>();
+  Eigen::Matrix2d s = p.topLeftCorner<2, 2>() + m.r.topLeftCorner<2, 2>();
+  if (k >= 0) {
+    const auto i = 4 + 2 * static_cast<Eigen::Index>(k);
+    predicted += x.segment<2>(i);
+    s += p.block<2, 2>(i, i) + p.block<2, 2>(0, i) + p.block<2, 2>(i, 0);
+  } else {
+    s += m.offset_prior;
+  }
+  const Eigen::Vector2d nu = m.z.head<2>() - predicted;
+  if (nu.norm() > options_.gate_max_distance_m) return std::nullopt;
+  double log_det = 0.0;
+  const double d2 = Mahalanobis2(m.z.head<2>(), Eigen::Matrix2d::Zero(), predicted, s, &log_det);
+  if (!(d2 <= options_.gate_mahalanobis2)) return std::nullopt;
+  return d2 + log_det;
+}
+
+bool FusedFilterEngine::Update(Track& f, const Measurement& m0, const std::string& sensor_id,
+                               UtcNs t, double widen) {
+  const UtcNs t_est = std::max(t, f.stamp_ns);
+  Vec x;
+  Mat p;
+  Predicted(f, t_est, x, p);
+  if (widen > 1.0) {
+    const double w = std::sqrt(widen);
+    p.topRows<4>() *= w;
+    p.leftCols<4>() *= w;
+  }
+  const Measurement m = MovedForward(m0, Seconds(t_est, t), x, p, options_.accel_psd);
+  // The update works on a copy of the filter state: f stays as it was if it fails.
+  Track candidate;
+  candidate.x = std::move(x);
+  candidate.p = std::move(p);
+  candidate.offsets = f.offsets;
+  int k = candidate.OffsetIndex(sensor_id);
+  if (k < 0) k = AddOffset(options_, candidate, sensor_id, m.offset_prior, t_est);
+  const Eigen::Index n = Dim(candidate);
+  const Mat h = MeasurementMatrix(n, k, m.full_state);
+  const Eigen::Index d = h.rows();
+  const Mat r = m.r.topLeftCorner(d, d);
+  const Vec nu = m.z.head(d) - h * candidate.x;
+  const Mat pht = candidate.p * h.transpose();
+  const Mat s = (h * pht + r).eval();
+  const Eigen::LLT<Mat> llt(s);
+  if (llt.info() != Eigen::Success) {
+    ++counters_.numerical_failures;
+    return false;
+  }
+  if (options_.adapt_covariances) {
+    // Covariance matching of the poses (a whole track joining others) and of the sensor's
+    // measurements (its frames in its own fused track).
+    if (m.full_state) {
+      if (OthersMeasured(candidate, sensor_id, t_est)) {
+        pose_scale_.Add(PositionNis(nu, s), kPoseNisRate, kMaxPoseScale);
+      }
+    } else if (const auto ss = sensors_.find(sensor_id); ss != sensors_.end()) {
+      ss->second.noise_scale.Add(PositionNis(nu, s), kNoiseNisRate, kMaxNoiseScale);
+    }
+  }
+  const Mat gain = llt.solve(pht.transpose()).transpose();
+  candidate.x += gain * nu;
+  // Joseph form: stays positive semi-definite in floating point.
+  const Mat i_kh = Mat::Identity(n, n) - gain * h;
+  candidate.p = i_kh * candidate.p * i_kh.transpose() + gain * r * gain.transpose();
+  Symmetrize(candidate.p);
+  if (!AllFinite(candidate.x) || !AllFinite(candidate.p)) {
+    ++counters_.numerical_failures;
+    return false;
+  }
+  Offset& offset = candidate.offsets[static_cast<std::size_t>(k)];
+  offset.last_ns = t_est;
+  offset.prior = m.offset_prior;
+  f.x = std::move(candidate.x);
+  f.p = std::move(candidate.p);
+  f.offsets = std::move(candidate.offsets);
+  f.stamp_ns = t_est;
+  if (f.updates == 0) f.first_ns = t_est;
+  ++f.updates;
+  if (f.updates >= options_.confirm_updates) f.confirmed = true;
+  return true;
+}
+
+// A new fused track from a local track's state z (with the tracker's covariance R, velocity
+// included) and its sensor's offset b ~ N(0, B): z = p + b + e, so p = z - b - e, and
+//   x = (z, 0),  P = [R + B_pp, -B; -B, B]   (B on the position rows only).
+Track& FusedFilterEngine::NewTrack(const Measurement& m, const std::string& sensor_id, UtcNs t) {
+  Track f;
+  f.id = next_id_++;
+  f.first_ns = t;
+  f.stamp_ns = t;
+  f.x = Vec::Zero(6);
+  f.x.head<4>() = m.z;
+  f.p = Mat::Zero(6, 6);
+  f.p.topLeftCorner<4, 4>() = m.r;
+  if (!m.full_state) {
+    // Only a position measurement (the local track contributed elsewhere before): the velocity
+    // is unknown within walking speeds.
+    f.x.segment<2>(2).setZero();
+    f.p.block<2, 2>(2, 2) = Eigen::Matrix2d::Identity() * 2.25;
+    f.p.block<2, 2>(0, 2).setZero();
+    f.p.block<2, 2>(2, 0).setZero();
+  }
+  f.p.topLeftCorner<2, 2>() += m.offset_prior;
+  f.p.block<2, 2>(0, 4) = -m.offset_prior;
+  f.p.block<2, 2>(4, 0) = -m.offset_prior;
+  f.p.block<2, 2>(4, 4) = m.offset_prior;
+  Symmetrize(f.p);
+  f.offsets.push_back(Offset{sensor_id, t, m.offset_prior});
+  f.updates = 1;
+  f.confirmed = f.updates >= options_.confirm_updates;
+  const std::uint64_t id = f.id;
+  ++counters_.fused_created;
+  return tracks_.emplace(id, std::move(f)).first->second;
+}
+
+void FusedFilterEngine::AddFrame(const SensorPlacement& placement, const std::string& sensor_id,
+                                 const daemon::TrackFrameData& frame) {
+  const FusionOptions& o = options_;
+  const UtcNs t = frame.scan_start_ns;
+  if (t <= 0) {
+    ++counters_.frames_invalid;
+    return;
+  }
+  SensorState& ss = sensors_[sensor_id];
+  const FrameAdmission admission =
+      AdmitFrame(frame, o.max_out_of_order_s, ss.clock, have_newest_, newest_ns_);
+  if (admission == FrameAdmission::kNewSession) DropSensorTracks(sensor_id, ss);
+  if (!CountAdmission(admission, counters_)) return;
+
+  // 1. The frame's tracks: world frame, and the new information of each.
+  std::vector<std::uint32_t> rows;  // local tracks with a measurement to associate
+  std::size_t accepted = 0;
+  for (const daemon::TrackObservation& received : frame.tracks) {
+    if (accepted >= o.max_tracks_per_frame) {
+      ++counters_.observations_over_capacity;
+      continue;
+    }
+    const daemon::TrackObservation obs = CentreCorrected(received);
+    if (!PlausibleObservation(o, obs)) {
+      ++counters_.observations_invalid;
+      continue;
+    }
+    const auto [it, inserted] = ss.tracks.try_emplace(obs.track_id);
+    LocalTrack& lt = it->second;
+    if (!inserted && lt.stamp() == t) {
+      ++counters_.observations_invalid;  // the same id twice in one frame
+      continue;
+    }
+    WorldTrack world = ToWorld(placement, sensor_id, t, obs);
+    if (!AllFinite(world.covariance) || !std::isfinite(world.x_m) || !std::isfinite(world.y_m) ||
+        !std::isfinite(world.vx_mps) || !std::isfinite(world.vy_mps)) {
+      ++counters_.observations_invalid;
+      if (inserted) ss.tracks.erase(it);
+      continue;
+    }
+    ++accepted;
+    lt.observation = obs;
+    lt.world = std::move(world);
+    lt.usable = obs.state != daemon::TrackState::kTentative || o.use_tentative_sources;
+    lt.measurement = Measure(placement, sensor_id, lt, t);
+    if (lt.usable) {
+      ++counters_.observations;
+      if (lt.measurement.valid) rows.push_back(obs.track_id);
+    } else {
+      ++counters_.observations_ignored;
+    }
+  }
+
+  // 2. Global nearest neighbour between the frame's measurements and the fused tracks alive at t
+  // (each fused track takes at most one measurement of a frame). A local track's own fused track
+  // gets binding_bonus: the trackers' ids are right most of the time.
+  struct Candidate {
+    Track* track;
+    Eigen::Vector2d position;  // predicted to t (cheap, for the distance pre-gate)
+    bool predicted = false;    // x, p below are valid
+    Vec x;
+    Mat p;
+    double late_s;  // the frame is this much older than the track's estimate
+  };
+  std::vector<Candidate> candidates;
+  if (!rows.empty()) {
+    for (auto& [id, f] : tracks_) {
+      const double age = Seconds(t, f.stamp_ns);
+      if (age > o.max_coast_s || -age > o.max_out_of_order_s || f.updates == 0) continue;
+      const Eigen::Vector2d position = f.x.head<2>() + std::max(0.0, age) * f.x.segment<2>(2);
+      candidates.push_back(Candidate{&f, position, false, Vec(), Mat(), std::max(0.0, -age)});
+    }
+  }
+  Eigen::MatrixXd cost =
+      Eigen::MatrixXd::Constant(static_cast<Eigen::Index>(rows.size()),
+                                static_cast<Eigen::Index>(candidates.size()), kForbiddenCost);
+  for (std::size_t i = 0; i < rows.size(); ++i) {
+    const LocalTrack& lt = ss.tracks.at(rows[i]);
+    const Eigen::Vector2d z = lt.measurement.z.head<2>();
+    for (std::size_t j = 0; j < candidates.size(); ++j) {
+      Candidate& c = candidates[j];
+      // The measurement moved forward for a late frame moves by less than a metre.
+      if ((z - c.position).norm() > o.gate_max_distance_m + 1.0) continue;
+      if (!c.predicted) {
+        Predicted(*c.track, t, c.x, c.p);
+        c.predicted = true;
+      }
+      const std::optional<double> pair_cost =
+          Cost(*c.track, c.x, c.p, lt.measurement, sensor_id, c.late_s);
+      if (!pair_cost) continue;
+      const bool bound = lt.fused_id == c.track->id;
+      cost(static_cast<Eigen::Index>(i), static_cast<Eigen::Index>(j)) =
+          *pair_cost - (bound ? o.binding_bonus : 0.0);
+    }
+  }
+  const std::vector<int> assignment = rows.empty() ? std::vector<int>() : SolveAssignment(cost);
+
+  // 3. Updates, re-bindings, misses, new fused tracks.
+  std::vector<std::uint64_t> updated;
+  std::vector<char> taken(candidates.size(), 0);
+  for (const int j : assignment) {
+    if (j >= 0) taken[static_cast<std::size_t>(j)] = 1;
+  }
+  // The bindings before this frame (a re-binding below may unbind a later row's source).
+  std::vector<std::optional<std::uint64_t>> bound_before;
+  for (const std::uint32_t tid : rows) bound_before.push_back(ss.tracks.at(tid).fused_id);
+  for (std::size_t i = 0; i < rows.size(); ++i) {
+    const SourceKey key{sensor_id, rows[i]};
+    LocalTrack& lt = ss.tracks.at(rows[i]);
+    if (assignment[i] >= 0) {
+      Track& f = *candidates[static_cast<std::size_t>(assignment[i])].track;
+      if (lt.fused_id != f.id) {
+        if (bound_before[i] && *bound_before[i] != f.id) {
+          ++counters_.source_rebinds;
+        } else {
+          ++counters_.bindings;
+          if (f.sources.empty() && !f.last_sensor.empty() && f.last_sensor != sensor_id) {
+            ++counters_.handovers;  // picked up by another sensor while coasting
+          }
+        }
+        Bind(f, key, lt);
+      }
+      lt.misses = 0;
+      if (Update(f, lt.measurement, sensor_id, t)) {
+        lt.contributed = true;
+        updated.push_back(f.id);
+      }
+      continue;
+    }
+    if (lt.fused_id) {
+      // Its fused track did not take it, and no other did. When the fused track had no other
+      // measurement of this frame and the measurement is near, the person turned or stopped
+      // faster than the motion model expects: the track's covariance is widened until it fits.
+      if (const double widen =
+              ManoeuvreWidening(candidates, taken, *lt.fused_id, lt.measurement, sensor_id);
+          widen > 1.0) {
+        Track& f = tracks_.at(*lt.fused_id);
+        if (Update(f, lt.measurement, sensor_id, t, widen)) {
+          ++counters_.manoeuvres;
+          lt.misses = 0;
+          updated.push_back(f.id);
+          continue;
+        }
+      }
+      // Otherwise the tracker may have swapped ids or jumped.
+      ++counters_.source_strikes;
+      if (++lt.misses >= o.drift_updates) {
+        auto f = tracks_.find(*lt.fused_id);
+        if (f != tracks_.end()) Unbind(f->second, key);
+        lt.fused_id.reset();
+        lt.hold_frames = 2 * o.drift_updates;
+        ++counters_.sources_drifted;
+      }
+      continue;
+    }
+    // Unbound and unassociated: a person no fused track follows yet. After unbinding, wait a
+    // few frames: the track it belongs to is often freed by its own swapped source.
+    if (lt.hold_frames > 0) {
+      --lt.hold_frames;
+      continue;
+    }
+    if (tracks_.size() >= o.max_fused_tracks) {
+      ++counters_.fused_over_capacity;
+      continue;
+    }
+    Track& f = NewTrack(lt.measurement, sensor_id, t);
+    Bind(f, key, lt);
+    lt.contributed = true;
+    updated.push_back(f.id);
+  }
+
+  // 4. Duplicates, then sources that left.
+  std::sort(updated.begin(), updated.end());
+  updated.erase(std::unique(updated.begin(), updated.end()), updated.end());
+  for (const std::uint64_t id : updated) MergeCheck(id);
+  ExpireSources(sensor_id, ss, t);
+}
+
+std::uint64_t FusedFilterEngine::MergeCheck(std::uint64_t f_id) {
+  const FusionOptions& o = options_;
+  auto fit = tracks_.find(f_id);
+  if (fit == tracks_.end()) return f_id;
+  Track& f = fit->second;
+  const UtcNs t = f.stamp_ns;
+  const std::vector<std::string> f_sensors = ActiveSensors(f);
+  if (f_sensors.empty()) return f_id;
+  const Eigen::Vector2d f_pos = f.x.head<2>(), f_vel = f.x.segment<2>(2);
+  for (auto& [g_id, g] : tracks_) {
+    if (g_id == f_id) continue;
+    Track& younger = g_id > f_id ? g : f;
+    const std::uint64_t older_id = std::min(g_id, f_id);
+    auto reset = [&] {
+      if (younger.merge_into == older_id) {
+        younger.merge_into = 0;
+        younger.merge_count = 0;
+      }
+    };
+    const double dt = Seconds(t, g.stamp_ns);
+    if (std::abs(dt) > o.coast_after_s) {
+      reset();
+      continue;
+    }
+    const Eigen::Vector2d g_pos = g.x.head<2>() + dt * g.x.segment<2>(2);
+    if ((g_pos - f_pos).norm() > o.merge_max_distance_m ||
+        (g.x.segment<2>(2) - f_vel).norm() > o.merge_max_speed_difference_mps) {
+      reset();
+      continue;
+    }
+    const std::vector<std::string> g_sensors = ActiveSensors(g);
+    bool disjoint = !g_sensors.empty();
+    for (const std::string& s : f_sensors) {
+      if (std::find(g_sensors.begin(), g_sensors.end(), s) != g_sensors.end()) disjoint = false;
+    }
+    CvState gx = g.x.head<4>();
+    CvCovariance gp = g.p.topLeftCorner<4, 4>();
+    internal::Predict(dt, o.accel_psd, gx, gp);
+    if (!disjoint || !(Mahalanobis2(f_pos, f.p.topLeftCorner<2, 2>(), gx.head<2>(),
+                                    gp.topLeftCorner<2, 2>()) <= o.gate_mahalanobis2)) {
+      reset();
+      continue;
+    }
+    if (younger.merge_into == older_id) {
+      ++younger.merge_count;
+    } else {
+      younger.merge_into = older_id;
+      younger.merge_count = 1;
+    }
+    if (younger.merge_count >= o.merge_updates) {
+      Merge(older_id, std::max(g_id, f_id));
+      return older_id;
+    }
+  }
+  return f_id;
+}
+
+// The younger track's estimate and sources go into the older one. Their sensors were disjoint,
+// so their estimates are independent: information-weighted sum of the two (x, y, vx, vy); the
+// older track's offsets are kept with their covariance, the younger's others start from their
+// priors.
+void FusedFilterEngine::Merge(std::uint64_t older_id, std::uint64_t younger_id) {
+  Track& older = tracks_.at(older_id);
+  auto yit = tracks_.find(younger_id);
+  Track& younger = yit->second;
+  const UtcNs t = std::max(older.stamp_ns, younger.stamp_ns);
+  Vec xo, xy;
+  Mat po, py;
+  Predicted(older, t, xo, po);
+  Predicted(younger, t, xy, py);
+  const Eigen::Matrix4d a = po.topLeftCorner<4, 4>(), b = py.topLeftCorner<4, 4>();
+  const Eigen::LLT<Eigen::Matrix4d> lla(a), llb(b);
+  if (lla.info() == Eigen::Success && llb.info() == Eigen::Success) {
+    const Eigen::Matrix4d ia = lla.solve(Eigen::Matrix4d::Identity());
+    const Eigen::Matrix4d ib = llb.solve(Eigen::Matrix4d::Identity());
+    const Eigen::LLT<Eigen::Matrix4d> llm(ia + ib);
+    if (llm.info() == Eigen::Success) {
+      Eigen::Matrix4d pm = llm.solve(Eigen::Matrix4d::Identity());
+      pm = (0.5 * (pm + pm.transpose())).eval();
+      const Eigen::Vector4d xm = pm * (ia * xo.head<4>() + ib * xy.head<4>());
+      if (AllFinite(xm) && AllFinite(pm)) {
+        xo.head<4>() = xm;
+        po.topLeftCorner<4, 4>() = pm;
+        po.topRightCorner(4, po.cols() - 4).setZero();
+        po.bottomLeftCorner(po.rows() - 4, 4).setZero();
+      }
+    }
+  }
+  older.x = std::move(xo);
+  older.p = std::move(po);
+  older.stamp_ns = t;
+  for (const Offset& off : younger.offsets) {
+    if (older.OffsetIndex(off.sensor_id) < 0) {
+      const int k = AddOffset(options_, older, off.sensor_id, off.prior, off.last_ns);
+      (void)k;
+    }
+  }
+  const std::vector<SourceKey> moving = younger.sources;
+  for (const SourceKey& k : moving) {
+    LocalTrack* lt = Find(k);
+    Unbind(younger, k);
+    if (lt == nullptr) continue;
+    bool keep_new = true;  // one source per sensor: keep the fresher one
+    for (const SourceKey& ok : older.sources) {
+      if (ok.sensor_id != k.sensor_id) continue;
+      const LocalTrack* olt = Find(ok);
+      if (olt != nullptr && olt->stamp() >= lt->stamp()) keep_new = false;
+    }
+    if (keep_new) Bind(older, k, *lt);
+  }
+  older.first_ns = std::min(older.first_ns, younger.first_ns);
+  older.updates += younger.updates;
+  older.confirmed = older.confirmed || younger.confirmed;
+  older.merge_into = 0;
+  older.merge_count = 0;
+  tracks_.erase(yit);
+  for (auto& [id, tr] : tracks_) {
+    if (tr.merge_into == younger_id) {
+      tr.merge_into = 0;
+      tr.merge_count = 0;
+    }
+  }
+  ++counters_.fused_merged;
+}
+
+void FusedFilterEngine::Tick(UtcNs now_ns) {
+  for (auto& [sensor_id, ss] : sensors_) ExpireSources(sensor_id, ss, now_ns);
+  const double offset_age_s =
+      std::max(options_.source_timeout_s, 3.0 * options_.centre_correlation_s);
+  for (auto it = tracks_.begin(); it != tracks_.end();) {
+    Track& f = it->second;
+    const double age = Seconds(now_ns, f.stamp_ns);
+    const bool dead = age > options_.max_coast_s || (!f.confirmed && f.sources.empty());
+    if (!dead) {
+      ForgetOffsets(f, now_ns, offset_age_s);
+      ++it;
+      continue;
+    }
+    ++counters_.fused_deleted;
+    auto next = std::next(it);
+    DeleteTrack(it);
+    it = next;
+  }
+}
+
+std::vector<FusedTrack> FusedFilterEngine::Snapshot(UtcNs now_ns, bool include_tentative) const {
+  std::vector<FusedTrack> out;
+  for (const auto& [id, f] : tracks_) {
+    if (f.updates == 0 || (!f.confirmed && !include_tentative)) continue;
+    const double age = Seconds(now_ns, f.stamp_ns);
+    if (age > options_.max_coast_s || -age > options_.max_coast_s) continue;
+    CvState x = f.x.head<4>();
+    CvCovariance p = f.p.topLeftCorner<4, 4>();
+    internal::Predict(age, options_.accel_psd, x, p);
+    FusedTrack t;
+    t.id = id;
+    t.state = !f.confirmed                   ? FusedState::kTentative
+              : age > options_.coast_after_s ? FusedState::kCoasting
+                                             : FusedState::kConfirmed;
+    t.stamp_ns = now_ns;
+    t.first_ns = f.first_ns;
+    t.x_m = x(0);
+    t.y_m = x(1);
+    t.vx_mps = x(2);
+    t.vy_mps = x(3);
+    t.covariance = p;
+    t.updates = f.updates;
+    for (const SourceKey& k : f.sources) {
+      const LocalTrack* lt = Find(k);
+      t.sources.push_back(FusedSource{k.sensor_id, k.track_id, lt != nullptr ? lt->stamp() : 0});
+    }
+    out.push_back(std::move(t));
+  }
+  return out;
+}
+
+std::vector<WorldTrack> FusedFilterEngine::WorldTracks(UtcNs now_ns) const {
+  std::vector<WorldTrack> out;
+  for (const auto& [sensor_id, ss] : sensors_) {
+    for (const auto& [tid, lt] : ss.tracks) {
+      if (std::abs(Seconds(now_ns, lt.stamp())) > options_.source_timeout_s) continue;
+      WorldTrack w = lt.world;
+      w.fused_id = lt.fused_id;
+      out.push_back(std::move(w));
+    }
+  }
+  return out;
+}
+
+}  // namespace
+
+std::unique_ptr<Engine> MakeFusedFilterEngine(const FusionOptions& options) {
+  return std::make_unique<FusedFilterEngine>(options);
+}
+
+}  // namespace lrfnet::fusion::internal

@@ -1,0 +1,137 @@
+#pragma once
+// Internals of the Fuser shared by its two methods (fusion.h, FusionMethod): the engine interface,
+// the admission of frames, and small numerical helpers. Not part of the library's interface.
+
+#include <Eigen/Cholesky>
+#include <Eigen/Core>
+#include <Eigen/Eigenvalues>
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <cstdint>
+#include <functional>
+#include <limits>
+#include <map>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "central_daemon/fusion/fusion.h"
+#include "common/cv_model.h"
+
+namespace lrfnet::fusion::internal {
+
+using PlacementMap = std::map<std::string, SensorPlacement, std::less<>>;
+
+// One fusion method. The Fuser validates placements and counts frames; the engine does the rest.
+class Engine {
+ public:
+  explicit Engine(const FusionOptions& options) : options_(options) {}
+  virtual ~Engine() = default;
+  Engine(const Engine&) = delete;
+  Engine& operator=(const Engine&) = delete;
+
+  // `next`: the new (valid) placements; `previous`: the ones they replace. Sensors missing from
+  // `next` lose their local tracks; sensors whose placement changed are transformed again.
+  virtual void SetPlacements(const PlacementMap& next, const PlacementMap& previous) = 0;
+  virtual void AddFrame(const SensorPlacement& placement, const std::string& sensor_id,
+                        const daemon::TrackFrameData& frame) = 0;
+  virtual void SetTrackerModel(const std::string& /*sensor_id*/, double /*accel_psd*/) {}
+  virtual void Tick(common::UtcNs now_ns) = 0;
+  virtual std::vector<FusedTrack> Snapshot(common::UtcNs now_ns, bool include_tentative) const = 0;
+  virtual std::vector<WorldTrack> WorldTracks(common::UtcNs now_ns) const = 0;
+  virtual CovarianceScales covariance_scales() const { return {}; }
+
+  FusionCounters& counters() { return counters_; }
+  const FusionCounters& counters() const { return counters_; }
+  const FusionOptions& options() const { return options_; }
+
+ protected:
+  FusionOptions options_;
+  FusionCounters counters_;
+};
+
+// The latest-states combination (FusionMethod::kLatestStates, fusion_latest.cc).
+std::unique_ptr<Engine> MakeLatestStatesEngine(const FusionOptions& options);
+// The fused filter (FusionMethod::kFusedFilter, fusion_filter.cc).
+std::unique_ptr<Engine> MakeFusedFilterEngine(const FusionOptions& options);
+
+// --- frames ---------------------------------------------------------------------------------
+
+// Per sensor: what the admission of its frames needs to remember.
+struct FrameClock {
+  bool has_frame = false;
+  std::uint64_t session_id = 0;
+  std::uint32_t scan_counter = 0;
+  std::uint64_t parts_seen = 0;  // bit p: part p of the latest scan was added
+  common::UtcNs latest_ns = 0;
+};
+
+enum class FrameAdmission : std::uint8_t {
+  kNewScan,      // newer than the sensor's latest scan
+  kNewSession,   // the same, from a new tracker session (the caller drops the old local tracks)
+  kAnotherPart,  // a part of the latest scan not seen before
+  kInvalid,      // scan time <= 0
+  kStale,        // not newer than the latest scan (and not another part of it)
+  kOutOfOrder,   // older than the newest frame of any sensor by more than max_out_of_order_s
+};
+
+// Decides about a frame of one sensor (see "Time" in fusion.h) and, when it is admitted, updates
+// the sensor's clock and the newest frame time of all sensors. Counts nothing.
+FrameAdmission AdmitFrame(const daemon::TrackFrameData& frame, double max_out_of_order_s,
+                          FrameClock& clock, bool& have_newest, common::UtcNs& newest_ns);
+
+// Counts a frame that was not admitted; returns whether it was admitted.
+bool CountAdmission(FrameAdmission admission, FusionCounters& counters);
+
+// --- numbers --------------------------------------------------------------------------------
+
+// a - b in seconds; saturates instead of overflowing for hostile stamps.
+double Seconds(common::UtcNs a, common::UtcNs b);
+
+template <typename Derived>
+bool AllFinite(const Eigen::MatrixBase<Derived>& m) {
+  return m.array().isFinite().all();
+}
+
+// The wire's upper triangle (TrackObservation::covariance) as a symmetric matrix.
+Eigen::Matrix4d UnpackCovariance(const std::array<float, 10>& c);
+
+// Symmetric and positive semi-definite within rounding.
+template <int N>
+bool IsCovariance(const Eigen::Matrix<double, N, N>& m) {
+  if (!AllFinite(m)) return false;
+  const double scale = std::max(1.0, m.cwiseAbs().maxCoeff());
+  if (((m - m.transpose()).cwiseAbs().array() > 1e-6 * scale).any()) return false;
+  const Eigen::SelfAdjointEigenSolver<Eigen::Matrix<double, N, N>> eig(m, Eigen::EigenvaluesOnly);
+  return eig.info() == Eigen::Success && eig.eigenvalues().minCoeff() >= -1e-9 * scale;
+}
+
+// Constant-velocity prediction over a signed dt (common/cv_model.h): x <- F(dt) x,
+// P <- F(dt) P F(dt)^T + Q(|dt|, q). Backwards the process noise is still added: going back in
+// time is no more certain than going forward.
+void Predict(double dt_s, double accel_psd, common::CvState& x, common::CvCovariance& p);
+
+// Squared Mahalanobis distance of two 2-vectors with the sum of their covariances; +inf when that
+// is not positive definite. log_det (optional): ln det of the sum.
+double Mahalanobis2(const Eigen::Vector2d& a, const Eigen::Matrix2d& pa, const Eigen::Vector2d& b,
+                    const Eigen::Matrix2d& pb, double* log_det = nullptr);
+
+// Placements with the same pose and covariance (nothing to transform again).
+bool SamePlacement(const SensorPlacement& a, const SensorPlacement& b);
+
+// d(p_w, v_w)/d(x, y, yaw) of p_w = R(yaw) p_s + t, v_w = R(yaw) v_s: [I, R' p_s; 0, R' v_s].
+Eigen::Matrix<double, 4, 3> PoseJacobian(const common::Pose2& world_from_sensor,
+                                         const Eigen::Vector2d& p_s, const Eigen::Vector2d& v_s);
+
+// The per-sample correction of a local track's centre (DESIGN.md, "Measurement model"): where the
+// shared model of what bias is left in a tracker's object centre is applied, for both methods and
+// for what the live view draws. Today the identity: the trackers report the body's centre, and
+// what is left is modelled as noise (FusionOptions::centre_sigma_*).
+daemon::TrackObservation CentreCorrected(const daemon::TrackObservation& observation);
+
+// A local track that is finite, within the plausibility bounds of the options, and has a valid
+// covariance.
+bool PlausibleObservation(const FusionOptions& o, const daemon::TrackObservation& t);
+
+}  // namespace lrfnet::fusion::internal
