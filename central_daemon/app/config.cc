@@ -133,28 +133,98 @@ void VisitCalibration(DaemonConfig& c, ConfigVisitor& v) {
           "empty: none. --calibration-in.");
 }
 
+constexpr std::string_view kFusionMethodNames[] = {"fused_filter", "latest_states"};
+static_assert(static_cast<int>(fusion::FusionMethod::kLatestStates) == 1);
+
 void VisitFusion(DaemonConfig& c, ConfigVisitor& v) {
   fusion::FusionOptions& o = c.fusion;
   v.Section("fusion",
             "Once calibrated, every sensor's tracks in the world frame, the same person seen by "
-            "several sensors merged into one fused track (ids kept across sensor hand-over), "
-            "streamed as JSON over UDP and recorded as JSON lines.");
+            "several sensors merged into one fused track (ids kept across sensor hand-over, "
+            "tracker id swaps and short gaps in every sensor's view), streamed as JSON over UDP "
+            "and recorded as JSON lines. SIGHUP applies everything but publish and record (those "
+            "need a restart); changed fusion options start the fused tracks afresh (new ids).");
   v.Field("enabled", c.fusion_enabled, "Fuse tracks once a calibration exists.");
   v.Field("publish", c.fusion_publish,
           "Send the fused tracks as JSON datagrams to this HOST:PORT; empty: none. --fused-udp.");
   v.Field("record", c.fusion_record,
           "Append the fused tracks as JSON lines to this file; empty: none. --fused-out.");
   v.Field("publish_hz", c.fusion_publish_hz, "Fused tracks are published this often.");
+  common::VisitEnum(v, "method", o.method, kFusionMethodNames,
+                    "fused_filter: one filter per fused track on every sensor's new information, "
+                    "each sensor's centre offset a state of it (covariances that contain the "
+                    "error). latest_states: the earlier releases' combination of the sources' "
+                    "latest states.");
   v.Field("gate_mahalanobis2", o.gate_mahalanobis2,
-          "Association gate, squared Mahalanobis distance of positions (2 dof).");
-  v.Field("gate_max_distance_m", o.gate_max_distance_m, "Association gate in metres.");
-  v.Field("accel_psd", o.accel_psd, "Process noise of the fused tracks, m^2/s^3.");
-  v.Field("position_noise_floor_m2", o.position_noise_floor_m2,
-          "Added to every sensor's position variance (calibration and object-centre errors).");
-  v.Field("max_coast_s", o.max_coast_s, "A fused track without updates is deleted after this.");
+          "Association gate, squared Mahalanobis distance of positions (2 dof; 13.8 = 99.9 %).");
+  v.Field("gate_max_distance_m", o.gate_max_distance_m,
+          "Association gate in metres on top of the statistical one.");
+  v.Field("accel_psd", o.accel_psd,
+          "Process noise of the fused tracks' constant-velocity model (white acceleration), "
+          "m^2/s^3.");
+  v.Field("tracker_accel_psd", o.tracker_accel_psd,
+          "The trackers' own process noise, m^2/s^3, for trackers that do not send theirs "
+          "(fused_filter: each frame's measurement is recovered with it; too low is safe, too "
+          "high over-confident).");
+  v.Field("centre_sigma_shape_fit_m", o.centre_sigma_shape_fit_m,
+          "fused_filter: standard deviation of the offset between the centre a shape-fit track "
+          "reports and the body's centre, along the line of sight; it changes slowly, so "
+          "repeated frames of one sensor do not average it away, other sensors' views do.");
+  v.Field("centre_sigma_ellipse_m", o.centre_sigma_ellipse_m,
+          "fused_filter: the same for ellipse measurements (older trackers).");
+  v.Field("centre_sigma_com_m", o.centre_sigma_com_m,
+          "fused_filter: the same for centre-of-mass measurements (older trackers and unknown "
+          "kinds).");
+  v.Field("centre_lateral_fraction", o.centre_lateral_fraction,
+          "fused_filter: the centre offset across the line of sight, as a fraction of the one "
+          "along it (0..1].");
+  v.Field("centre_correlation_s", o.centre_correlation_s,
+          "fused_filter: correlation time of a sensor's centre offset, seconds.");
+  v.Field("binding_bonus", o.binding_bonus,
+          "fused_filter: a track's frame goes to the fused track it is bound to unless another "
+          "fits better by this much (squared Mahalanobis distance + ln det); larger trusts the "
+          "trackers' ids more, 0 re-associates every frame.");
+  v.Field("adapt_covariances", o.adapt_covariances,
+          "fused_filter: scale the calibration's pose covariances and a tracker's covariances up "
+          "when the data show them too small (never below what was reported).");
+  v.Field("manoeuvre_max_distance_m", o.manoeuvre_max_distance_m,
+          "fused_filter: a bound track's frame within this distance of its fused track that the "
+          "gate refused is a stop or sharp turn: the fused track widens to take it.");
+  v.Field("max_coast_s", o.max_coast_s,
+          "A fused track without updates is deleted after this; until then it coasts and keeps "
+          "its id for a person hidden from every sensor. Longer keeps more ids in crowds and "
+          "ghosts longer where people leave the view.");
+  v.Field("coast_after_s", o.coast_after_s,
+          "A fused track without updates for this long is published as coasting.");
   v.Field("source_timeout_s", o.source_timeout_s,
           "A sensor's track without frames for this long leaves its fused track.");
-  VisitInteger(v, "confirm_updates", o.confirm_updates, "Updates before a fused track is confirmed.");
+  v.Field("max_out_of_order_s", o.max_out_of_order_s,
+          "Frames older than the newest frame of any sensor by more are dropped (counted).");
+  VisitInteger(v, "confirm_updates", o.confirm_updates,
+               "Updates before a fused track is confirmed.");
+  v.Field("use_tentative_sources", o.use_tentative_sources,
+          "Also use the trackers' tentative tracks (earlier, more false tracks).");
+  VisitInteger(v, "drift_updates", o.drift_updates,
+               "A track's frames in a row that do not fit its fused track before it is unbound.");
+  VisitInteger(v, "merge_updates", o.merge_updates,
+               "Consistent checks in a row after which two fused tracks of disjoint sensors are "
+               "one object (the younger merged into the older id).");
+  v.Field("merge_max_distance_m", o.merge_max_distance_m,
+          "Two fused tracks further apart are never merged.");
+  v.Field("merge_max_speed_difference_mps", o.merge_max_speed_difference_mps,
+          "Two fused tracks whose velocities differ more are never merged.");
+  v.Field("position_noise_floor_m2", o.position_noise_floor_m2,
+          "latest_states: added to every source's position variance (calibration and centre "
+          "errors).");
+  v.Field("velocity_noise_floor_m2ps2", o.velocity_noise_floor_m2ps2,
+          "latest_states: added to every source's velocity variance.");
+  v.Field("agree_mahalanobis2", o.agree_mahalanobis2,
+          "latest_states: agreement with a fused track's reference (drift test).");
+  v.Field("drift_reference_max_age_s", o.drift_reference_max_age_s,
+          "latest_states: a lone source is judged against a reference at most this old.");
+  v.Field("max_speed_mps", o.max_speed_mps, "Tracks faster than this are ignored (counted).");
+  VisitInteger(v, "max_fused_tracks", o.max_fused_tracks,
+               "Fused tracks at most (memory bound); further ones are not created (counted).");
 }
 
 void VisitLiveView(DaemonConfig& c, ConfigVisitor& v) {

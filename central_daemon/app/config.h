@@ -2,7 +2,8 @@
 // Configuration of lrfnetd: the UDP socket, the recording, datagram validation, per-sensor state,
 // the track store's retention and the status line, loaded from a YAML file (`--config FILE`) and
 // printed with its documentation by `--print-config`. Command-line flags override the file.
-// SIGHUP reloads the file: everything except listen.* and record.* applies at once.
+// SIGHUP reloads the file: everything except listen.*, record.*, fusion.publish and fusion.record
+// applies at once.
 // SIGUSR1 calibrates at once with the data held.
 
 #include <cstdint>

@@ -43,6 +43,25 @@ TEST(DaemonConfigTest, ValuesRoundTripThroughPrint) {
   EXPECT_FALSE(back.send_requests);
 }
 
+TEST(DaemonConfigTest, FusionOptionsRoundTripThroughPrint) {
+  DaemonConfig c;
+  c.fusion.method = fusion::FusionMethod::kLatestStates;
+  c.fusion.max_coast_s = 2.5;
+  c.fusion.tracker_accel_psd = 1.25;
+  c.fusion.centre_sigma_shape_fit_m = 0.04;
+  c.fusion.binding_bonus = 0.0;
+  c.fusion.adapt_covariances = false;
+  c.fusion.confirm_updates = 5;
+  ASSERT_EQ(Validate(c), std::nullopt);
+  DaemonConfig back;
+  ASSERT_EQ(LoadDaemonConfig(PrintDaemonConfig(c), back), std::nullopt);
+  EXPECT_TRUE(back.fusion == c.fusion);
+  DaemonConfig partial;
+  ASSERT_EQ(LoadDaemonConfig("fusion: {method: latest_states}", partial), std::nullopt);
+  EXPECT_EQ(partial.fusion.method, fusion::FusionMethod::kLatestStates);
+  EXPECT_EQ(partial.fusion.max_coast_s, fusion::FusionOptions{}.max_coast_s);
+}
+
 TEST(DaemonConfigTest, ErrorsNameTheKey) {
   struct Case {
     const char* yaml;
@@ -75,6 +94,11 @@ TEST(DaemonConfigTest, ErrorsNameTheKey) {
       {"mqtt: {tls_ca_file: ca.pem}", "mqtt.tls"},
       {"mqtt: {objects_hz: 0}", "mqtt.objects_hz"},
       {"mqtt: {reconnect_min_s: 50}", "mqtt.reconnect_min_s"},
+      {"fusion: {method: kalman}", "fusion.method"},
+      {"fusion: {centre_sigma_shape_fit_m: 0}", "fusion.centre_sigma_shape_fit_m"},
+      {"fusion: {centre_lateral_fraction: 2}", "fusion.centre_lateral_fraction"},
+      {"fusion: {max_coast_s: -1}", "fusion.max_coast_s"},
+      {"fusion: {binding_bonus: .nan}", "fusion.binding_bonus"},
   };
   for (const Case& c : cases) {
     DaemonConfig config;

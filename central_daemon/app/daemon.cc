@@ -113,6 +113,10 @@ void Daemon::OnBackground(const std::string& sensor_id, const BackgroundScan& ba
   store_.SetBackground(sensor_id, background);
 }
 
+void Daemon::OnSensorInfo(const std::string& sensor_id, const SensorDescription& info) {
+  if (frame_listener_ != nullptr) frame_listener_->OnSensorInfo(sensor_id, info);
+}
+
 void Daemon::OnSensorEvent(const SensorEvent& event) {
   if (events_.size() >= kMaxEvents) events_.pop_front();
   events_.push_back(event);

@@ -38,12 +38,13 @@ class RequestSink {
   virtual bool SendTo(std::string_view source, std::span<const std::uint8_t> datagram) = 0;
 };
 
-// Receives every accepted track frame (or part of one) as it arrives, after the store has it (the
-// fusion in lrfnetd).
+// Receives every accepted track frame (or part of one) as it arrives, after the store has it, and
+// every accepted sensor info (the fusion in lrfnetd).
 class FrameListener {
  public:
   virtual ~FrameListener() = default;
   virtual void OnFrame(const std::string& sensor_id, const TrackFrameData& frame) = 0;
+  virtual void OnSensorInfo(const std::string& /*sensor_id*/, const SensorDescription& /*info*/) {}
 };
 
 struct DaemonOptions {
@@ -91,6 +92,7 @@ class Daemon final : public IngestListener {
   // IngestListener
   void OnTrackFrame(const std::string& sensor_id, const TrackFrameData& frame) override;
   void OnBackground(const std::string& sensor_id, const BackgroundScan& background) override;
+  void OnSensorInfo(const std::string& sensor_id, const SensorDescription& info) override;
   void OnSensorEvent(const SensorEvent& event) override;
 
  private:

@@ -52,15 +52,28 @@ std::string FusionService::Open() {
 }
 
 void FusionService::Reconfigure(const DaemonConfig& config) {
-  // The fuser keeps its tracks; only options that need no new state change.
   config_.fusion_enabled = config.fusion_enabled;
   config_.fusion_publish_hz = config.fusion_publish_hz;
+  if (config.fusion == config_.fusion) return;  // the fuser keeps its tracks
+  config_.fusion = config.fusion;
+  fuser_ = fusion::Fuser(config_.fusion);
+  fuser_.SetPlacements(placements_);
+  for (const auto& [sensor_id, psd] : tracker_accel_psd_) fuser_.SetTrackerModel(sensor_id, psd);
+  spdlog::info("fusion: options changed, fused tracks start afresh (method {})",
+               fusion::ToString(config_.fusion.method));
 }
 
 void FusionService::SetCalibration(const calib::CalibrationResult& result) {
-  fuser_.SetPlacements(PlacementsOf(result));
+  placements_ = PlacementsOf(result);
+  fuser_.SetPlacements(placements_);
   calibrated_ = true;
   ++counters_.calibrations;
+}
+
+void FusionService::OnSensorInfo(const std::string& sensor_id, const SensorDescription& info) {
+  // 0: an older tracker that does not say; the fuser then assumes fusion.tracker_accel_psd.
+  tracker_accel_psd_[sensor_id] = info.accel_psd_m2ps3;
+  fuser_.SetTrackerModel(sensor_id, info.accel_psd_m2ps3);
 }
 
 void FusionService::OnFrame(const std::string& sensor_id, const TrackFrameData& frame) {

@@ -5,11 +5,13 @@
 //
 // Time: the fuser runs on the gateways' UTC scan times; "now" is the newest scan time received
 // (so a recording replayed offline fuses exactly like the live stream).
+// The trackers' motion models (SensorInfo.accel_psd_m2ps3) go to the fuser as they arrive.
 // Thread-safety: every function is called on the io thread.
 
 #include <boost/asio/io_context.hpp>
 #include <boost/asio/ip/udp.hpp>
 #include <cstdio>
+#include <map>
 #include <memory>
 #include <optional>
 #include <string>
@@ -23,12 +25,12 @@
 namespace lrfnet::daemon {
 
 struct FusionServiceCounters {
-  std::uint64_t publishes = 0;      // snapshots taken
+  std::uint64_t publishes = 0;  // snapshots taken
   std::uint64_t datagrams_sent = 0;
   std::uint64_t send_errors = 0;
   std::uint64_t lines_recorded = 0;
   std::uint64_t record_errors = 0;
-  std::uint64_t calibrations = 0;   // placements applied
+  std::uint64_t calibrations = 0;  // placements applied
 };
 
 // The placements of the calibrated sensors of a calibration result.
@@ -43,13 +45,15 @@ class FusionService final : public FrameListener {
 
   // Opens the UDP socket and the record file. Returns "" or the error.
   std::string Open();
-  // Applies the fusion options that may change at run time (not publish / record).
+  // Applies what may change at run time (not publish / record). Changed fusion options start a
+  // new fuser (fused ids start afresh) with the current placements and tracker models.
   void Reconfigure(const DaemonConfig& config);
   // A new calibration: its calibrated sensors are placed (fused ids are kept).
   void SetCalibration(const calib::CalibrationResult& result);
   bool calibrated() const { return calibrated_; }
 
   void OnFrame(const std::string& sensor_id, const TrackFrameData& frame) override;
+  void OnSensorInfo(const std::string& sensor_id, const SensorDescription& info) override;
   // Publishes when due (monotonic now_s).
   void OnTick(double now_s);
   // Flushes the record file.
@@ -66,6 +70,8 @@ class FusionService final : public FrameListener {
   boost::asio::io_context& io_;
   DaemonConfig config_;
   fusion::Fuser fuser_;
+  std::vector<fusion::SensorPlacement> placements_;  // of the latest calibration
+  std::map<std::string, double> tracker_accel_psd_;  // per sensor, from its SensorInfo
   bool calibrated_ = false;
   common::UtcNs now_ns_ = 0;
   std::optional<double> last_publish_s_;

@@ -570,6 +570,7 @@ int RunLive(const RunOptions& run, DaemonConfig config) {
         config.calibration = reloaded.calibration;
         config.fusion_enabled = reloaded.fusion_enabled;
         config.fusion_publish_hz = reloaded.fusion_publish_hz;
+        config.fusion = reloaded.fusion;
         daemon.Reconfigure(CoreOptions(config));
         calibration.Reconfigure(config);
         fusion.Reconfigure(config);

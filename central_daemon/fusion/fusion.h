@@ -205,6 +205,8 @@ struct FusionOptions {
   std::size_t max_tracks_per_frame = 256;
   // Local tracks that would start a fused track beyond this many are skipped and counted.
   std::size_t max_fused_tracks = 4096;
+
+  bool operator==(const FusionOptions&) const = default;
 };
 std::optional<std::string> Validate(const FusionOptions& options);
 

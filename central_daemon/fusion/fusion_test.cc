@@ -3,6 +3,7 @@
 #include <gtest/gtest.h>
 
 #include <Eigen/Cholesky>
+#include <Eigen/Eigenvalues>
 #include <cmath>
 #include <limits>
 #include <optional>
@@ -1148,18 +1149,30 @@ TEST_P(FuserTest, RandomInputNeverBreaksIt) {
       if (rng() % 10 == 0) o.x_m = specials[rng() % 6];
       if (rng() % 10 == 0) o.covariance[rng() % 10] = specials[rng() % 6];
       if (rng() % 10 == 0) o.covariance[rng() % 10] = static_cast<float>(u(rng));
+      if (rng() % 10 == 0) {
+        // Valid but extreme: tiny or huge, x and y almost perfectly correlated.
+        const float v = rng() % 2 == 0 ? 1e-12f : 20.0f;
+        o.covariance = {v, 0.999f * v, 0.0f, 0.0f, v, 0.0f, 0.0f, v, 0.0f, v};
+      }
       tracks.push_back(o);
     }
     TrackFrameData frame = FrameAt(t, tracks, rng() % 200 == 0 ? rng() : 1);
     frame.part = rng() % 4 == 0 ? static_cast<std::uint32_t>(rng() % 3) : 0u;
     fuser.AddFrame(ids[rng() % ids.size()], frame);
     if (rng() % 500 == 0) fuser.SetPlacements(random_placements());
+    if (rng() % 300 == 0) {
+      fuser.SetTrackerModel(ids[rng() % ids.size()],
+                            rng() % 2 == 0 ? specials[rng() % 6] : 100.0 * std::abs(u(rng)));
+    }
     if (k % 10 == 0) {
       fuser.Tick(AtSeconds(t));
       const auto fused = fuser.Snapshot(AtSeconds(t), true);
       EXPECT_LE(fused.size(), options.max_fused_tracks);
       for (const auto& f : fused) {
         ASSERT_TRUE(AllFinite(f)) << "frame " << k;
+        const Eigen::SelfAdjointEigenSolver<Eigen::Matrix4d> eig(f.covariance);
+        EXPECT_GE(eig.eigenvalues().minCoeff(), -1e-9 * std::max(1.0, f.covariance.norm()))
+            << "frame " << k;
         std::set<std::string> sensors;
         for (const auto& s : f.sources) EXPECT_TRUE(sensors.insert(s.sensor_id).second);
       }
