@@ -12,9 +12,9 @@
 // fused track, false fused tracks, and the update time per frame. Prints a markdown table and
 // writes it to FILE.
 //
-//   fusion_benchmark [--out FILE] [--seconds S] [--seeds N]
+//   fusion_benchmark [--out FILE] [--seconds S] [--seeds N] [--scene NAME/PEOPLE]
 //   (FILE: results/fusion_benchmark.md; S: simulated seconds per run, default 120; N: runs per
-//   row, default 3)
+//   row, default 3; --scene: only the rows of that scene, e.g. "tracker errors/25")
 
 #include <Eigen/Cholesky>
 #include <Eigen/Core>
@@ -446,6 +446,8 @@ double Nees2(const Vector2d& error, const Eigen::Matrix2d& covariance) {
 
 struct Totals {
   std::vector<double> fused_errors;
+  // The fused errors by the number of sensors with a confirmed track on the person: 0, 1, 2, 3+.
+  std::vector<std::vector<double>> fused_errors_by_views = std::vector<std::vector<double>>(4);
   std::vector<std::vector<double>> sensor_errors = std::vector<std::vector<double>>(6);
   // Per sensor, on the samples where it has a confirmed track on a person who also has a
   // matched fused track: that sensor's error and the fused track's.
@@ -486,7 +488,10 @@ void Run(const Config& config, double seconds, std::uint32_t seed, Totals& total
   fusion::FusionOptions options;
   options.method = config.method;
   // The earlier releases' defaults with their method.
-  if (config.method == fusion::FusionMethod::kLatestStates) options.max_coast_s = 1.0;
+  if (config.method == fusion::FusionMethod::kLatestStates) {
+    options.max_coast_s = 1.0;
+    options.accel_psd = 1.0;
+  }
   fusion::Fuser fuser(options);
   std::vector<fusion::SensorPlacement> placements;
   for (const Sensor& s : sensors) placements.push_back(s.placement);
@@ -551,12 +556,14 @@ void Run(const Config& config, double seconds, std::uint32_t seed, Totals& total
       if (match[p] >= 0) track_used[static_cast<std::size_t>(match[p])] = 1;
     }
     for (const char used : track_used) totals.unmatched_fused += used ? 0 : 1;
+    std::vector<double> fused_error(config.people, -1.0);
     for (std::size_t p = 0; p < config.people; ++p) {
       const bool visible = t - last_visible[p] < 0.2;
       if (match[p] >= 0) {
         const auto& f = fused[static_cast<std::size_t>(match[p])];
         const Vector2d error = fused_pos[static_cast<std::size_t>(match[p])] - people[p];
         totals.fused_errors.push_back(error.norm());
+        fused_error[p] = error.norm();
         if (f.state == fusion::FusedState::kConfirmed) {
           const double nees = Nees2(error, f.covariance.topLeftCorner<2, 2>());
           totals.fused_nees_sum += std::min(nees, 1e4);
@@ -584,6 +591,7 @@ void Run(const Config& config, double seconds, std::uint32_t seed, Totals& total
     }
     // Single sensors: their confirmed raw tracks in the world frame, at their own scan times.
     const auto world_tracks = fuser.WorldTracks(now);
+    std::vector<std::size_t> views(config.people, 0);
     for (std::size_t s = 0; s < sensors.size(); ++s) {
       std::vector<Vector2d> raw;
       std::vector<Eigen::Matrix2d> raw_cov;
@@ -602,6 +610,7 @@ void Run(const Config& config, double seconds, std::uint32_t seed, Totals& total
         if (m[p] < 0) continue;
         const auto k = static_cast<std::size_t>(m[p]);
         const Vector2d error = raw[k] - truth[p];
+        ++views[p];
         totals.sensor_errors[s].push_back(error.norm());
         if (match[p] >= 0) {
           totals.paired_sensor[s].push_back(error.norm());
@@ -610,6 +619,11 @@ void Run(const Config& config, double seconds, std::uint32_t seed, Totals& total
         }
         totals.sensor_nees_sum += std::min(Nees2(error, raw_cov[k]), 1e4);
         ++totals.sensor_nees_n;
+      }
+    }
+    for (std::size_t p = 0; p < config.people; ++p) {
+      if (fused_error[p] >= 0.0) {
+        totals.fused_errors_by_views[std::min<std::size_t>(views[p], 3)].push_back(fused_error[p]);
       }
     }
   };
@@ -685,6 +699,7 @@ int main(int argc, char** argv) {
   std::string out = "results/fusion_benchmark.md";
   double seconds = 120.0;
   int seeds = 3;
+  std::string only;  // rows whose scene and people are "NAME/PEOPLE", or all
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
     if (a == "--out" && i + 1 < argc) {
@@ -693,8 +708,10 @@ int main(int argc, char** argv) {
       seconds = std::stod(argv[++i]);
     } else if (a == "--seeds" && i + 1 < argc) {
       seeds = std::stoi(argv[++i]);
+    } else if (a == "--scene" && i + 1 < argc) {
+      only = argv[++i];
     } else {
-      std::fprintf(stderr, "usage: fusion_benchmark [--out FILE] [--seconds S] [--seeds N]\n");
+      std::fprintf(stderr, "usage: fusion_benchmark [--out FILE] [--seconds S] [--seeds N] [--scene NAME/PEOPLE]\n");
       return 2;
     }
   }
@@ -739,7 +756,8 @@ int main(int argc, char** argv) {
       "tracks come within %.1f m: each filter goes on with the other person's measurements) and "
       "false tracks (%.2f per sensor-second, 0.5-4 s, static or 0.3 m/s). Legacy trackers: the "
       "centre of the visible side, 0.08-0.20 m towards the sensor, claiming 0.11 m per axis, "
-      "centre-of-mass kind. %d runs of %.0f s per row, default FusionOptions except the method, "
+      "centre-of-mass kind. %d runs of %.0f s per row, default FusionOptions except the method "
+      "(latest states with the earlier releases' max_coast_s 1.0 s and accel_psd 1.0 m²/s³), "
       "evaluated every 0.1 s after 2 s. Rows of a scene share their seeds (the same walks, "
       "poses and tracker errors).\n\n"
       "Fusion: *fused filter* (the default; one Kalman filter per fused track on every sensor's "
@@ -751,7 +769,9 @@ int main(int argc, char** argv) {
       "style: a person keeps the track matched before while it stays within 1 m, the rest "
       "greedily by distance within 1 m); single sensor: each sensor's confirmed raw tracks in "
       "the world frame (the same poses) matched to people at their scan time, best and mean of "
-      "the six sensors' RMS. Fused ÷ sensor, same samples: for each sensor, the fused tracks' RMS "
+      "the six sensors' RMS. By views: the fused RMS split by how many sensors had a confirmed "
+      "track on the person at the sample (0: the fused track coasts or only tentative or "
+      "coasting local tracks see the person). Fused ÷ sensor, same samples: for each sensor, the fused tracks' RMS "
       "on the samples where that sensor has a confirmed track on a person, divided by that "
       "sensor's RMS on them; the largest of the six (below 1: fusion beats every sensor where it "
       "sees). NEES: mean of e^T P^-1 e over matched confirmed fused tracks with "
@@ -764,11 +784,12 @@ int main(int argc, char** argv) {
       "wall time per frame on one core. Rebinds / drifted / merged / hand-overs: the Fuser's "
       "counters source_rebinds, sources_drifted, fused_merged, handovers.\n\n"
       "| scene | fusion | people | tracker swaps | fused RMS m | fused p95 m "
+      "| fused RMS m by views 0 / 1 / 2 / 3+ (share of samples) "
       "| best / mean single-sensor RMS m | fused ÷ sensor RMS, same samples, worst sensor "
       "| fused NEES / inside 95 %% | single NEES "
       "| id switches / person-min | exactly one | false tracks / sample | update µs mean / p99 "
       "| rebinds / drifted / merged / hand-overs |\n"
-      "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n",
+      "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n",
       e.accel_psd, e.sensor_offset_min_m, e.sensor_offset_max_m, e.track_offset_sigma_m,
       e.turn_sigma_m, e.turn_tau_s, e.lateral_sigma_m, e.lateral_tau_s, e.noise_m, e.noise_per_m,
       e.coast_s, e.tentative_frames, e.loss_rate_hz, e.loss_gap_s, e.swap_probability,
@@ -777,6 +798,7 @@ int main(int argc, char** argv) {
   std::printf("%s", table.c_str());
   std::fflush(stdout);
   for (const Config& scene : scenes) {
+    if (!only.empty() && only != scene.name + "/" + std::to_string(scene.people)) continue;
     for (const fusion::FusionMethod method :
          {fusion::FusionMethod::kFusedFilter, fusion::FusionMethod::kLatestStates}) {
       Config config = scene;
@@ -803,16 +825,26 @@ int main(int argc, char** argv) {
       const auto ratio = [](double a, std::size_t b) {
         return a / static_cast<double>(std::max<std::size_t>(b, 1));
       };
+      std::string by_views;
+      for (std::size_t v = 0; v < 4; ++v) {
+        char cell[64];
+        std::snprintf(cell, sizeof(cell), "%s%.3f (%.0f %%)", v == 0 ? "" : " / ",
+                      Rms(totals.fused_errors_by_views[v]),
+                      100.0 * static_cast<double>(totals.fused_errors_by_views[v].size()) /
+                          static_cast<double>(std::max<std::size_t>(totals.fused_errors.size(), 1)));
+        by_views += cell;
+      }
       char row[1024];
       std::snprintf(
           row, sizeof(row),
-          "| %s | %s | %zu | %zu / %zu / %zu | %.3f | %.3f | %.3f / %.3f | %.2f | %.2f / %.1f %% | "
+          "| %s | %s | %zu | %zu / %zu / %zu | %.3f | %.3f | %s | %.3f / %.3f | %.2f | %.2f / %.1f %% | "
           "%.1f "
           "| %.2f | %.1f %% | %.2f | %.1f / %.1f | %llu / %llu / %llu / %llu |\n",
           config.name.c_str(),
           method == fusion::FusionMethod::kFusedFilter ? "fused filter" : "latest states",
           config.people, totals.tracker_swaps, totals.swap_events, totals.correctable_swap_events,
-          Rms(totals.fused_errors), Percentile(totals.fused_errors, 0.95), best, mean, worst_paired,
+          Rms(totals.fused_errors), Percentile(totals.fused_errors, 0.95), by_views.c_str(), best,
+          mean, worst_paired,
           ratio(totals.fused_nees_sum, totals.fused_nees_n),
           100.0 * ratio(static_cast<double>(totals.fused_nees_inside), totals.fused_nees_n),
           ratio(totals.sensor_nees_sum, totals.sensor_nees_n),
