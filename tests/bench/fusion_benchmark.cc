@@ -711,7 +711,9 @@ int main(int argc, char** argv) {
     } else if (a == "--scene" && i + 1 < argc) {
       only = argv[++i];
     } else {
-      std::fprintf(stderr, "usage: fusion_benchmark [--out FILE] [--seconds S] [--seeds N] [--scene NAME/PEOPLE]\n");
+      std::fprintf(
+          stderr,
+          "usage: fusion_benchmark [--out FILE] [--seconds S] [--seeds N] [--scene NAME/PEOPLE]\n");
       return 2;
     }
   }
@@ -771,8 +773,9 @@ int main(int argc, char** argv) {
       "the world frame (the same poses) matched to people at their scan time, best and mean of "
       "the six sensors' RMS. By views: the fused RMS split by how many sensors had a confirmed "
       "track on the person at the sample (0: the fused track coasts or only tentative or "
-      "coasting local tracks see the person). Fused ÷ sensor, same samples: for each sensor, the fused tracks' RMS "
-      "on the samples where that sensor has a confirmed track on a person, divided by that "
+      "coasting local tracks see the person). Fused ÷ sensor, same samples: for each sensor, the "
+      "fused tracks' RMS on the samples where that sensor has a confirmed track on a person, "
+      "divided by that "
       "sensor's RMS on them; the largest of the six (below 1: fusion beats every sensor where it "
       "sees). NEES: mean of e^T P^-1 e over matched confirmed fused tracks with "
       "their position covariance (2 for a covariance that fits the error; fraction inside the "
@@ -828,24 +831,24 @@ int main(int argc, char** argv) {
       std::string by_views;
       for (std::size_t v = 0; v < 4; ++v) {
         char cell[64];
-        std::snprintf(cell, sizeof(cell), "%s%.3f (%.0f %%)", v == 0 ? "" : " / ",
-                      Rms(totals.fused_errors_by_views[v]),
-                      100.0 * static_cast<double>(totals.fused_errors_by_views[v].size()) /
-                          static_cast<double>(std::max<std::size_t>(totals.fused_errors.size(), 1)));
+        std::snprintf(
+            cell, sizeof(cell), "%s%.3f (%.0f %%)", v == 0 ? "" : " / ",
+            Rms(totals.fused_errors_by_views[v]),
+            100.0 * static_cast<double>(totals.fused_errors_by_views[v].size()) /
+                static_cast<double>(std::max<std::size_t>(totals.fused_errors.size(), 1)));
         by_views += cell;
       }
       char row[1024];
       std::snprintf(
           row, sizeof(row),
-          "| %s | %s | %zu | %zu / %zu / %zu | %.3f | %.3f | %s | %.3f / %.3f | %.2f | %.2f / %.1f %% | "
-          "%.1f "
-          "| %.2f | %.1f %% | %.2f | %.1f / %.1f | %llu / %llu / %llu / %llu |\n",
+          "| %s | %s | %zu | %zu / %zu / %zu | %.3f | %.3f | %s | %.3f / %.3f | %.2f "
+          "| %.2f / %.1f %% | %.1f | %.2f | %.1f %% | %.2f | %.1f / %.1f | %llu / %llu / %llu / "
+          "%llu |\n",
           config.name.c_str(),
           method == fusion::FusionMethod::kFusedFilter ? "fused filter" : "latest states",
           config.people, totals.tracker_swaps, totals.swap_events, totals.correctable_swap_events,
           Rms(totals.fused_errors), Percentile(totals.fused_errors, 0.95), by_views.c_str(), best,
-          mean, worst_paired,
-          ratio(totals.fused_nees_sum, totals.fused_nees_n),
+          mean, worst_paired, ratio(totals.fused_nees_sum, totals.fused_nees_n),
           100.0 * ratio(static_cast<double>(totals.fused_nees_inside), totals.fused_nees_n),
           ratio(totals.sensor_nees_sum, totals.sensor_nees_n),
           static_cast<double>(totals.switches) / std::max(totals.person_seconds / 60.0, 1e-9),
