@@ -1,6 +1,6 @@
 #pragma once
 // Internals of the Fuser shared by its two methods (fusion.h, FusionMethod): the engine interface,
-// the admission of frames, and small numerical helpers. Not part of the library's interface.
+// the admission of frames, and small numerical functions. Not part of the library's interface.
 
 #include <Eigen/Cholesky>
 #include <Eigen/Core>

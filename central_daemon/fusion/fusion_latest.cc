@@ -133,7 +133,7 @@ class LatestStatesEngine final : public Engine {
   bool have_newest = false;
   UtcNs newest_ns = 0;
 
-  // --- helpers ------------------------------------------------------------------------------
+  // --- internals ----------------------------------------------------------------------------
 
   LocalTrack* Find(const SourceKey& key) {
     const auto s = sensors.find(key.sensor_id);

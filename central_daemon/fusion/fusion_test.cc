@@ -782,7 +782,7 @@ TEST(FusedFilterTest, CentreOffsetsAreNotAveragedAwayByRepeatedFrames) {
     scene.Run(fuser, 10.0, 1.0, nullptr);
     const auto fused = fuser.Snapshot(AtSeconds(9.99));
     ASSERT_EQ(fused.size(), 1u);
-    const double radial = o.centre_sigma_com_m;  // the helper's trackers say centre of mass
+    const double radial = o.centre_sigma_com_m;  // the scene's trackers say centre of mass
     const double lateral = o.centre_lateral_fraction * radial;
     const double expected_xx = two ? radial * radial / 2.0 : radial * radial;
     const double expected_yy = two ? lateral * lateral / 2.0 : lateral * lateral;

@@ -1,5 +1,5 @@
 #pragma once
-// Test helper: a synthetic scene of sensors and walking people whose local tracks (tracker-like:
+// For the tests: a synthetic scene of sensors and walking people whose local tracks (tracker-like:
 // new ids on (re)appearance, tentative for the first frames, noisy measurements biased towards
 // the sensor, filtered by a constant-velocity Kalman filter like lrfnet-tracker's, or reported
 // raw) are fed to a Fuser in time order. Deterministic for a given seed.
