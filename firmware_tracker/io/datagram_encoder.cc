@@ -29,8 +29,36 @@ lrfnet_proto_MeasurementKind ToProto(tracking::MeasurementKind kind) {
       return lrfnet_proto_MeasurementKind_MEASUREMENT_KIND_CENTER_OF_MASS;
     case tracking::MeasurementKind::kEllipse:
       return lrfnet_proto_MeasurementKind_MEASUREMENT_KIND_ELLIPSE;
+    case tracking::MeasurementKind::kShapeFit:
+      return lrfnet_proto_MeasurementKind_MEASUREMENT_KIND_SHAPE_FIT;
   }
   return lrfnet_proto_MeasurementKind_MEASUREMENT_KIND_UNSPECIFIED;
+}
+
+lrfnet_proto_ObjectShape ToProto(tracking::ObjectShape shape) {
+  switch (shape) {
+    case tracking::ObjectShape::kUnspecified:
+      return lrfnet_proto_ObjectShape_OBJECT_SHAPE_UNSPECIFIED;
+    case tracking::ObjectShape::kTorso:
+      return lrfnet_proto_ObjectShape_OBJECT_SHAPE_TORSO;
+    case tracking::ObjectShape::kLegs:
+      return lrfnet_proto_ObjectShape_OBJECT_SHAPE_LEGS;
+    case tracking::ObjectShape::kCylinder:
+      return lrfnet_proto_ObjectShape_OBJECT_SHAPE_CYLINDER;
+    case tracking::ObjectShape::kBox:
+      return lrfnet_proto_ObjectShape_OBJECT_SHAPE_BOX;
+  }
+  return lrfnet_proto_ObjectShape_OBJECT_SHAPE_UNSPECIFIED;
+}
+
+lrfnet_proto_MountHeight ToProto(tracking::Mount mount) {
+  switch (mount) {
+    case tracking::Mount::kTorso:
+      return lrfnet_proto_MountHeight_MOUNT_HEIGHT_TORSO;
+    case tracking::Mount::kLegs:
+      return lrfnet_proto_MountHeight_MOUNT_HEIGHT_LEGS;
+  }
+  return lrfnet_proto_MountHeight_MOUNT_HEIGHT_UNSPECIFIED;
 }
 
 lrfnet_proto_ClockSyncState ToProto(ClockSync sync) {
@@ -72,9 +100,17 @@ bool ToProto(const tracking::TrackReport& r, lrfnet_proto_Track* t) {
   t->covariance_count = n;
   t->age_scans = r.age_scans;
   t->points = r.points;
-  if (r.kind == tracking::MeasurementKind::kEllipse) {
+  if (r.kind != tracking::MeasurementKind::kCenterOfMass) {
     t->ellipse_yaw_rad = static_cast<float>(r.ellipse_yaw_rad);
     finite = finite && std::isfinite(t->ellipse_yaw_rad);
+  }
+  if (r.shape != tracking::ObjectShape::kUnspecified) {
+    t->shape = ToProto(r.shape);
+    t->size_major_m = static_cast<float>(r.size_major_m);
+    t->size_minor_m = static_cast<float>(r.size_minor_m);
+    t->size_sigma_m = static_cast<float>(r.size_sigma_m);
+    finite = finite && std::isfinite(t->size_major_m) && std::isfinite(t->size_minor_m) &&
+             std::isfinite(t->size_sigma_m);
   }
   return finite;
 }
@@ -269,6 +305,9 @@ bool DatagramEncoder::EncodeSensorInfo(const SensorInfoReport& info, common::Utc
   p.scan_frequency_hz = info.scan_frequency_hz;
   p.max_range_m = info.max_range_m;
   p.kind = ToProto(info.kind);
+  p.mount = ToProto(info.mount);
+  p.accel_psd_m2ps3 = info.accel_psd_m2ps3;
+  p.max_speed_mps = info.max_speed_mps;
   const bool ok = Emit(sent_ns, sink);
   counters_.sensor_info += ok ? 1 : 0;
   return ok;

@@ -20,7 +20,9 @@
 //   same scan_start_ns); a scan without tracks is still one part, so the daemon sees every scan.
 //   Tracks with a non-finite position, velocity or covariance are dropped (counted). Covariance:
 //   upper triangle of the (x, y, vx, vy) covariance, row-major (xx, xy, xvx, xvy, yy, yvx, yvy,
-//   vxvx, vxvy, vyvy), as floats. ellipse_yaw_rad is sent only for kind = ellipse.
+//   vxvx, vxvy, vyvy), as floats. ellipse_yaw_rad is sent for kinds ellipse and shape fit (the
+//   shape's axis a); shape, size_major_m, size_minor_m and size_sigma_m for tracks with a shape
+//   state (kind shape fit; lrfnet.proto documents their meaning), else left at 0 (unspecified).
 // - Background snapshots: the model's per-beam range (metres, 0 = free) as millimetres, rounded,
 //   clamped to [1, kMaxRangeMm] (clamps counted); 0, negative and non-finite ranges are 0 = free.
 //   Split into parts of kBeamsPerPart consecutive beams; every part carries the same snapshot_id,
@@ -47,8 +49,8 @@
 namespace lrfnet::io {
 
 inline constexpr std::size_t kMaxDatagramBytes = 1400;
-// Measured worst cases (uplink tests): 14 tracks -> 1384 bytes, 422 beams -> 1400 bytes.
-inline constexpr std::size_t kTracksPerPart = 14;
+// Measured worst cases (uplink tests): 11 tracks -> 1298 bytes, 422 beams -> 1400 bytes.
+inline constexpr std::size_t kTracksPerPart = 11;
 inline constexpr std::size_t kBeamsPerPart = 422;
 inline constexpr std::uint32_t kMaxRangeMm = (1u << 21) - 1;  // 3 varint bytes
 inline constexpr std::size_t kMaxSensorIdLength = 32;
@@ -129,6 +131,9 @@ struct SensorInfoReport {
   double max_range_m = 0.0;
   std::string_view tracker_version;  // <= 64 bytes sent
   tracking::MeasurementKind kind = tracking::MeasurementKind::kCenterOfMass;
+  tracking::Mount mount = tracking::Mount::kTorso;
+  double accel_psd_m2ps3 = 0.0;  // the tracker's constant-velocity model
+  double max_speed_mps = 0.0;    // and its speed limit
 };
 
 struct DatagramEncoderCounters {
