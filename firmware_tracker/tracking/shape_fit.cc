@@ -23,6 +23,9 @@ constexpr double kCentrePriorSigmaM = 1.0;
 constexpr double kMaxCentreStepM = 0.25;
 constexpr double kMaxYawStepRad = 0.6;
 constexpr double kMaxSizeStepM = 0.1;
+// Steps below these end the iteration.
+constexpr double kConvergedCentreM = 0.003;
+constexpr double kConvergedYawRad = 0.05;
 constexpr std::size_t kMaxFitPoints = 64;
 
 bool Positive(double v) { return std::isfinite(v) && v > 0.0; }
@@ -40,15 +43,21 @@ struct PointTerm {
   Vec5 grad = Vec5::Zero();
 };
 
-// |x|^p and d|x|^p / dx, with the common exponents without pow.
+// |x|^p and d|x|^p / dx, the common exponents without pow or a division.
 inline void PowerTerm(double x, double p, double* value, double* derivative) {
-  const double ax = std::abs(x);
   if (p == 2.0) {
     *value = x * x;
     *derivative = 2.0 * x;
     return;
   }
-  const double v = p == 2.5 ? x * x * std::sqrt(ax) : std::pow(ax, p);
+  const double ax = std::abs(x);
+  if (p == 2.5) {
+    const double root = std::sqrt(ax);
+    *value = x * x * root;
+    *derivative = 2.5 * x * root;
+    return;
+  }
+  const double v = std::pow(ax, p);
   *value = v;
   *derivative = ax > 0.0 ? p * v / x : 0.0;
 }
@@ -58,7 +67,7 @@ PointTerm PointResidual(ShapeModel model, const Vec5& x, double cos_yaw, double 
   PointTerm t;
   const double dx = p.x() - x(kCx), dy = p.y() - x(kCy);
   if (model == ShapeModel::kCircle) {
-    const double r = std::hypot(dx, dy);
+    const double r = std::sqrt(dx * dx + dy * dy);
     t.d = r - x(kA);
     if (r > 1e-12) {
       t.grad(kCx) = -dx / r;
@@ -73,27 +82,29 @@ PointTerm PointResidual(ShapeModel model, const Vec5& x, double cos_yaw, double 
   // d/dq of d as (gu, gv) in the body frame; q = R^T (p - c): dq/dc = -R^T, dq/dyaw = (v, -u).
   double gu = 0.0, gv = 0.0;
   if (model == ShapeModel::kSuperellipse) {
+    const double inv_a = 1.0 / a, inv_b = 1.0 / b;
     double s1 = 0.0, d1 = 0.0, s2 = 0.0, d2 = 0.0;
-    PowerTerm(u / a, exponent, &s1, &d1);
-    PowerTerm(v / b, exponent, &s2, &d2);
-    const double su = d1 / a, sv = d2 / b;  // dS/du, dS/dv
-    const double g = std::hypot(su, sv);
-    if (!(g > 1e-12)) {
+    PowerTerm(u * inv_a, exponent, &s1, &d1);
+    PowerTerm(v * inv_b, exponent, &s2, &d2);
+    const double su = d1 * inv_a, sv = d2 * inv_b;  // dS/du, dS/dv
+    const double g2 = su * su + sv * sv;
+    if (!(g2 > 1e-24)) {
       t.d = -std::min(a, b);  // at the centre
       return t;
     }
     // First-order (Sampson) distance; the gradient treats the normalisation 1 / |grad S| as
     // constant.
-    t.d = (s1 + s2 - 1.0) / g;
-    gu = su / g;
-    gv = sv / g;
-    t.grad(kA) = -su * u / (a * g);
-    t.grad(kB) = -sv * v / (b * g);
+    const double inv_g = 1.0 / std::sqrt(g2);
+    t.d = (s1 + s2 - 1.0) * inv_g;
+    gu = su * inv_g;
+    gv = sv * inv_g;
+    t.grad(kA) = -gu * u * inv_a;
+    t.grad(kB) = -gv * v * inv_b;
   } else {  // box: signed distance
     const double su = u < 0 ? -1.0 : 1.0, sv = v < 0 ? -1.0 : 1.0;
     const double du = std::abs(u) - a, dv = std::abs(v) - b;
     if (du > 0.0 && dv > 0.0) {
-      t.d = std::hypot(du, dv);
+      t.d = std::sqrt(du * du + dv * dv);
       gu = su * du / t.d;
       gv = sv * dv / t.d;
       t.grad(kA) = -du / t.d;
@@ -129,8 +140,14 @@ double Support(ShapeModel model, const Vec5& x, const Eigen::Vector2d& n, double
     // The dual norm: h = (|a p|^k + |b q|^k)^(1/k), 1/exponent + 1/k = 1.
     const double k = exponent / (exponent - 1.0);
     const double ap = std::abs(a * p), bq = std::abs(b * q);
-    const double tp = k == 2.0 ? ap * ap : std::pow(ap, k);
-    const double tq = k == 2.0 ? bq * bq : std::pow(bq, k);
+    // |x|^k: exponent 2.5 (the person model) has k = 5/3, x^(5/3) = x cbrt(x^2).
+    const auto power = [k](double v) {
+      if (k == 2.0) return v * v;
+      if (std::abs(k - 5.0 / 3.0) < 1e-12) return v * std::cbrt(v * v);
+      return std::pow(v, k);
+    };
+    const double tp = power(ap);
+    const double tq = power(bq);
     const double t = tp + tq;
     if (!(t > 0.0)) return 0.0;
     const double h = k == 2.0 ? std::sqrt(t) : std::pow(t, 1.0 / k);
@@ -300,10 +317,17 @@ ShapeFitResult FitShape(std::span<const Eigen::Vector2d> points, const Silhouett
   const double centre_info = 1.0 / (kCentrePriorSigmaM * kCentrePriorSigmaM);
   const Eigen::Vector2d size0(x(kA), x(kB));
 
-  // The objective at x: Cauchy on the points (rho(s) = k^2 ln(1 + s^2 / k^2), s the normalised
-  // distance), squares on edges and priors. Fills the Gauss-Newton normal matrix h and gradient g
-  // (halves) with the IRLS weights 1 / (1 + s^2 / k^2) of x; one pass over the points.
+  // The objective at x: Huber on the points (rho(s) = s^2 within k, 2 k |s| - k^2 beyond, s the
+  // normalised distance), squares on edges and priors. Fills the Gauss-Newton normal matrix h and
+  // gradient g (halves) with the IRLS weights min(1, k / |s|) of x; one pass over the points.
   const double k2 = o.robust_k * o.robust_k;
+  // h += w g g^T on the upper triangle (Eigen's rank update is slow at this size).
+  const auto add_outer = [](Mat5& hh, const Vec5& gr, double w) {
+    for (int r = 0; r < 5; ++r) {
+      const double wr = w * gr(r);
+      for (int col = r; col < 5; ++col) hh(r, col) += wr * gr(col);
+    }
+  };
   auto evaluate = [&](const Vec5& at, Mat5* h, Vec5* g, double* points_sq) {
     const double c = std::cos(at(kYaw)), s = std::sin(at(kYaw));
     Mat5 hh = Mat5::Zero();
@@ -311,11 +335,12 @@ ShapeFitResult FitShape(std::span<const Eigen::Vector2d> points, const Silhouett
     double cost = 0.0, sq = 0.0;
     for (std::size_t i = 0; i < n; ++i) {
       const PointTerm t = PointResidual(model, at, c, s, exponent, used[i]);
-      const double z2 = t.d * t.d * base_weight[i] * discount / k2;
-      const double w = base_weight[i] / (1.0 + z2);
-      hh.selfadjointView<Eigen::Upper>().rankUpdate(t.grad, w);
+      const double z2 = t.d * t.d * base_weight[i] * discount / k2;  // (s / k)^2
+      const double z = z2 > 1.0 ? std::sqrt(z2) : 1.0;
+      const double w = base_weight[i] / z;
+      add_outer(hh, t.grad, w);
       gg += (w * t.d) * t.grad;
-      cost += k2 / discount * std::log1p(z2);
+      cost += k2 / discount * (z2 > 1.0 ? 2.0 * z - 1.0 : z2);
       sq += t.d * t.d;
     }
     for (std::size_t e = 0; e < n_edges; ++e) {
@@ -324,7 +349,7 @@ ShapeFitResult FitShape(std::span<const Eigen::Vector2d> points, const Silhouett
           edges[e].n.dot(at.head<2>()) + Support(model, at, edges[e].n, exponent, &grad);
       grad(kCx) = edges[e].n.x();
       grad(kCy) = edges[e].n.y();
-      hh.selfadjointView<Eigen::Upper>().rankUpdate(grad, edges[e].weight);
+      add_outer(hh, grad, edges[e].weight);
       gg += (edges[e].weight * r) * grad;
       cost += edges[e].weight * r * r;
     }
@@ -374,8 +399,17 @@ ShapeFitResult FitShape(std::span<const Eigen::Vector2d> points, const Silhouett
         {1.0, step.head<2>().norm() / kMaxCentreStepM, std::abs(step(kYaw)) / kMaxYawStepRad,
          std::abs(step(kA)) / kMaxSizeStepM, std::abs(step(kB)) / kMaxSizeStepM});
     step /= scale;
+    // Converged: a step this small changes nothing that matters, and evaluating it would cost a
+    // pass over the points (the normal matrix at x serves for the covariance).
+    if (step.head<2>().norm() < kConvergedCentreM &&
+        std::abs(step(kA)) + std::abs(step(kB)) < kConvergedCentreM &&
+        std::abs(step(kYaw)) < kConvergedYawRad) {
+      x += step;
+      ++iterations;
+      break;
+    }
     bool accepted = false;
-    for (int halving = 0; halving < 4 && !accepted; ++halving) {
+    for (int halving = 0; halving < 3 && !accepted; ++halving) {
       Vec5 trial = x + step;
       trial(kA) = std::clamp(trial(kA), o.min_size_m, o.max_size_m);
       trial(kB) = circle ? trial(kA) : std::clamp(trial(kB), o.min_size_m, o.max_size_m);
@@ -395,11 +429,6 @@ ShapeFitResult FitShape(std::span<const Eigen::Vector2d> points, const Silhouett
       }
     }
     if (!accepted) break;
-    if (step.head<2>().norm() < 1e-4 && std::abs(step(kA)) + std::abs(step(kB)) < 1e-4 &&
-        std::abs(step(kYaw)) < 1e-3) {
-      ++iterations;
-      break;
-    }
   }
 
   const Eigen::LDLT<Mat5> ldlt(h);

@@ -16,8 +16,8 @@
 //            the rectangle; circle: |p_i - c| - a),
 //            sigma_i^2 = (point_sigma_m + point_sigma_per_m |p_i|)^2 + model_sigma_m^2, inflated by
 //            n / effective_points when there are more points than that (model errors of
-//            neighbouring points are correlated: the data do not average them away), and a Cauchy
-//            weight 1 / (1 + (r_i / robust_k)^2) against points of something else in the segment;
+//            neighbouring points are correlated: the data do not average them away), with Huber's
+//            loss beyond robust_k sigma against points of something else in the segment;
 //   edges:   the silhouette. The rays through the two ends of the segment's beam run, half a beam
 //            step outwards (the outline's tangent lies between the last beam that hit and the first
 //            that missed: uniform, sigma = range * step / sqrt(12)), touch the body:
@@ -78,9 +78,9 @@ struct ShapeFitOptions {
   double model_sigma_m = 0.01;       // how far a real outline departs from the model, per point
   double edge_floor_sigma_m = 0.01;  // mixed pixels and beam width at an edge
   double effective_points = 8.0;     // points beyond this count as correlated (see above)
-  double robust_k = 3.0;             // Cauchy scale, in sigmas
+  double robust_k = 2.0;             // Huber threshold, in sigmas
   int max_iterations = 6;
-  std::size_t max_points = 12;
+  std::size_t max_points = 8;
   double min_size_m = 0.01;
   double max_size_m = 2.0;
 };
