@@ -54,6 +54,8 @@ inline constexpr std::size_t kTracksPerPart = 11;
 inline constexpr std::size_t kBeamsPerPart = 422;
 inline constexpr std::uint32_t kMaxRangeMm = (1u << 21) - 1;  // 3 varint bytes
 inline constexpr std::size_t kMaxSensorIdLength = 32;
+// An encoded Track (without its tag and length in the frame): at most 106 bytes (lrfnet.options).
+inline constexpr std::size_t kMaxTrackBytes = 127;
 
 static_assert(sizeof(lrfnet_proto_TrackFrame::tracks) / sizeof(lrfnet_proto_Track) ==
               kTracksPerPart);
@@ -142,7 +144,7 @@ struct DatagramEncoderCounters {
   std::uint64_t track_frames = 0;
   std::uint64_t track_parts = 0;
   std::uint64_t tracks = 0;
-  std::uint64_t dropped_tracks = 0;  // non-finite values
+  std::uint64_t dropped_tracks = 0;  // non-finite values (or, never seen, not encodable)
   std::uint64_t snapshots = 0;
   std::uint64_t snapshot_parts = 0;
   std::uint64_t clamped_ranges = 0;
@@ -174,6 +176,10 @@ class DatagramEncoder {
  private:
   void StartDatagram(pb_size_t payload_tag, common::UtcNs sent_ns);
   bool Emit(common::UtcNs sent_ns, DatagramSink& sink);
+  // message_'s header and track frame (without tracks) with the encoded tracks [first, first +
+  // count) as its tracks.
+  bool EmitTrackFrame(std::size_t first, std::size_t count, common::UtcNs sent_ns,
+                      DatagramSink& sink);
   void CopyString(std::string_view text, char* out, std::size_t capacity);
 
   std::array<char, kMaxSensorIdLength + 1> sensor_id_{};
@@ -183,6 +189,8 @@ class DatagramEncoder {
   DatagramEncoderCounters counters_;
   lrfnet_proto_Datagram message_{};
   std::array<std::uint8_t, kMaxDatagramBytes> buffer_{};
+  std::array<std::array<std::uint8_t, kMaxTrackBytes>, tracking::kMaxTracks> track_bytes_{};
+  std::array<std::size_t, tracking::kMaxTracks> track_sizes_{};
 };
 
 }  // namespace lrfnet::io

@@ -221,6 +221,41 @@ TEST(DatagramEncoderTest, SixtyFourWorstCaseTracksSplitIntoPartsOfEleven) {
   RecordProperty("widest_11_track_datagram_bytes", static_cast<int>(stream.bytes_written));
 }
 
+// The track frame is assembled from tracks encoded once each: its bytes must be exactly what
+// nanopb writes for the same message (fields in number order), for 0, some and a full part of
+// tracks, plain and widest.
+TEST(DatagramEncoderTest, AssembledTrackFramesAreNanopbsOwnBytes) {
+  for (const bool widest : {false, true}) {
+    for (const std::uint32_t n : {0u, 1u, 5u, 11u, 12u, 23u}) {
+      DatagramEncoder encoder(Options(widest ? std::string(32, 'w') : "s1"));
+      CollectSink sink;
+      tracking::ScanTracks scan;
+      scan.scan_start_ns = widest ? -1 : 1'700'000'000'000'000'000;
+      scan.scan_period_s = 1.0 / 25.0;
+      scan.scan_counter = widest ? ~0u : 17u;
+      for (std::uint32_t i = 0; i < n; ++i)
+        ASSERT_TRUE(scan.tracks.push_back(widest ? WorstCaseTrack(i) : MakeTrack(i)));
+      const std::size_t parts = encoder.EncodeTracks(scan, 42, sink);
+      ASSERT_EQ(parts, std::max<std::size_t>(1, (n + 10) / 11));
+      ASSERT_EQ(sink.datagrams.size(), parts);
+      std::uint32_t tracks = 0;
+      for (const auto& bytes : sink.datagrams) {
+        const lrfnet_proto_Datagram d = Decode(bytes);
+        tracks += d.payload.track_frame.tracks_count;
+        std::array<std::uint8_t, kMaxDatagramBytes> again{};
+        pb_ostream_t stream = pb_ostream_from_buffer(again.data(), again.size());
+        ASSERT_TRUE(pb_encode(&stream, lrfnet_proto_Datagram_fields, &d));
+        EXPECT_EQ(std::vector<std::uint8_t>(again.begin(), again.begin() + stream.bytes_written),
+                  bytes)
+            << n << " tracks, widest " << widest;
+      }
+      EXPECT_EQ(tracks, n);
+      EXPECT_EQ(encoder.counters().tracks, n);
+      EXPECT_EQ(encoder.counters().encode_errors, 0u);
+    }
+  }
+}
+
 TEST(DatagramEncoderTest, TracksWithNonFiniteValuesAreDroppedAndCounted) {
   DatagramEncoder encoder(Options());
   CollectSink sink;
