@@ -650,6 +650,39 @@ std::string Totals(const Section& s) {
   return t;
 }
 
+// The targets for the new tracker per sensor: at upper-body height mean MOTP <= 0.03 m,
+// p95 <= 0.10 m, precision >= 0.99; at knee height within 1.5 times of that (precision >= 0.985);
+// NEES mean in [1.5, 3] at both.
+std::string Targets(const Section& s) {
+  std::string t =
+      "| mount | tracker | MOTP m (target) | p95 m (target) | precision (target) | NEES (target) "
+      "| all met |\n|---|---|---|---|---|---|---|\n";
+  char line[512];
+  for (const char* mount : {"torso", "legs"}) {
+    const bool legs = std::string(mount) == "legs";
+    const double scale = legs ? 1.5 : 1.0;
+    const double motp_max = 0.03 * scale, p95_max = 0.10 * scale;
+    const double precision_min = 1.0 - 0.01 * scale;
+    for (const char* tracker : {"new per sensor", "old per sensor"}) {
+      const auto it = s.totals.find(std::string(mount) + " " + tracker);
+      if (it == s.totals.end()) continue;
+      const Mot& m = it->second;
+      const double nees = m.nees_count > 0 ? m.nees_sum / m.nees_count : 0.0;
+      const bool motp = m.Motp() <= motp_max, p95 = m.P95() <= p95_max,
+                 precision = m.Precision() >= precision_min, honest = nees >= 1.5 && nees <= 3.0;
+      std::snprintf(line, sizeof line,
+                    "| %s | %s | %.3f (<= %.3f) %s | %.3f (<= %.3f) %s | %.4f (>= %.3f) %s | %.2f "
+                    "([1.5, 3]) %s | %s |\n",
+                    mount, tracker, m.Motp(), motp_max, motp ? "met" : "missed", m.P95(), p95_max,
+                    p95 ? "met" : "missed", m.Precision(), precision_min,
+                    precision ? "met" : "missed", nees, honest ? "met" : "missed",
+                    motp && p95 && precision && honest ? "yes" : "no");
+      t += line;
+    }
+  }
+  return t;
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -695,7 +728,7 @@ int main(int argc, char** argv) {
   std::string text;
   for (const Section& s : sections) {
     text += "## " + s.title + "\n\n" + s.table + "\n### " + s.title + ": all together\n\n" +
-            Totals(s) + "\n";
+            Totals(s) + "\n### " + s.title + ": targets (per sensor)\n\n" + Targets(s) + "\n";
   }
   std::printf("%s", text.c_str());
   if (!out_path.empty()) {
