@@ -103,7 +103,7 @@ struct ShapeOptions {
   // track's covariance on top of the filter's (which averages its measurements as if they were
   // independent): centre_bias_sigma_m (the outline not being the model's, the beam width at the
   // silhouette) in quadrature with the size state's sigma, taken as at least size_floor_sigma_m.
-  double centre_bias_sigma_m = 0.02;
+  double centre_bias_sigma_m = 0.035;
   double size_floor_sigma_m = 0.02;
   // Added in quadrature to every body-centre measurement (sigma per axis): what the fit cannot know
   // (sway, the torso's turn, an outline that is not the model's).

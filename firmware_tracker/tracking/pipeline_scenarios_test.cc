@@ -802,14 +802,19 @@ TEST(PipelineScenarioTest, ForkliftAtFourMetresPerSecondNeedsTheLimitsRaised) {
 
 TEST(PipelineScenarioTest, CovarianceOfPeopleOfDifferentSizesMatchesTheirError) {
   // Four people of different builds crossing and turning in front of the sensor: the normalised
-  // error squared (NEES, 2 dof) of measured confirmed tracks has a mean near 2.
+  // error squared (NEES, 2 dof) of measured confirmed tracks has a mean near 2. The synthetic
+  // people here are the model's own ellipses in an empty room, so the shared outline error is the
+  // 2 cm of a clean outline; the default (3.5 cm) is sized on the cluttered, superelliptic people
+  // of tracking_benchmark's scenes, where it gives a mean NEES of 2.6 (upper body) and 2.2 (legs).
+  TrackerOptions options = Synthetic();
+  options.shape.centre_bias_sigma_m = 0.02;
   Scene scene;
   scene.walkers = {Walker::Path(kLearnedS, {{1.5, -4.0}, {6.0, 0.0}, {2.0, 4.0}}, 1.2),
                    Walker::Path(kLearnedS + 1.0, {{7.0, -4.0}, {3.0, -1.0}, {6.5, 3.0}}, 1.0),
                    Walker::Path(kLearnedS + 2.0, {{-1.0, 4.0}, {3.0, 2.5}, {7.0, -3.5}}, 1.4),
                    Walker::Path(kLearnedS + 0.5, {{6.5, 4.0}, {6.0, -4.0}}, 0.8)};
   scene.sizes = {{0.22, 0.13}, {0.27, 0.16}, {0.2, 0.12}, {0.25, 0.15}};
-  const SceneRun run = Simulate(scene, kLearnedS + 12.0);
+  const SceneRun run = Simulate(scene, kLearnedS + 12.0, options);
   double nees = 0.0;
   int n = 0;
   for (const Frame& f : run.frames) {
