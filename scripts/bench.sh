@@ -5,11 +5,16 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 build_dir=${1:-build}
 cmake --build "$build_dir" --target decode_benchmark tracker_benchmark store_benchmark daemon_benchmark \
-  rotation_averaging_benchmark calibration_benchmark fusion_benchmark outputs_benchmark lrfnet lrfnet-tracker \
+  rotation_averaging_benchmark calibration_benchmark fusion_benchmark outputs_benchmark tracking_benchmark \
+  lrfnet lrfnet-tracker \
   >/dev/null
 mkdir -p results
 "$build_dir/tests/bench/decode_benchmark" --out results/decode_benchmark.md
 "$build_dir/tests/bench/tracker_benchmark" --out results/tracker_benchmark.md
+# Tracking accuracy (CLEAR-MOT, NEES) over every shipped scenario, old and new tracker, per sensor
+# and fused, at upper-body and knee height (a few minutes).
+"$build_dir/tests/bench/tracking_benchmark" --scenarios tools/scenarios --jobs 2 \
+  --out results/tracking_benchmark.md
 "$build_dir/tests/bench/store_benchmark" results/store_benchmark.md
 "$build_dir/tests/bench/daemon_benchmark" --out results/daemon_benchmark.md
 "$build_dir/tests/bench/rotation_averaging_benchmark" --out results/rotation_averaging_benchmark.md

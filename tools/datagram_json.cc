@@ -48,6 +48,16 @@ json MeasurementKindJson(int v) {
     return proto::MeasurementKind_Name(static_cast<proto::MeasurementKind>(x));
   });
 }
+json ObjectShapeJson(int v) {
+  return Enum(v, [](int x) -> const std::string& {
+    return proto::ObjectShape_Name(static_cast<proto::ObjectShape>(x));
+  });
+}
+json MountHeightJson(int v) {
+  return Enum(v, [](int x) -> const std::string& {
+    return proto::MountHeight_Name(static_cast<proto::MountHeight>(x));
+  });
+}
 json ClockSyncJson(int v) {
   return Enum(v, [](int x) -> const std::string& {
     return proto::ClockSyncState_Name(static_cast<proto::ClockSyncState>(x));
@@ -72,7 +82,11 @@ json TrackJson(const proto::Track& t) {
           {"covariance", std::move(covariance)},
           {"age_scans", t.age_scans()},
           {"points", t.points()},
-          {"ellipse_yaw_rad", Float(t.ellipse_yaw_rad())}};
+          {"ellipse_yaw_rad", Float(t.ellipse_yaw_rad())},
+          {"shape", ObjectShapeJson(t.shape())},
+          {"size_major_m", Float(t.size_major_m())},
+          {"size_minor_m", Float(t.size_minor_m())},
+          {"size_sigma_m", Float(t.size_sigma_m())}};
 }
 
 json TrackFrameJson(const proto::TrackFrame& f) {
@@ -125,7 +139,10 @@ json SensorInfoJson(const proto::SensorInfo& s) {
           {"scan_frequency_hz", Double(s.scan_frequency_hz())},
           {"max_range_m", Double(s.max_range_m())},
           {"tracker_version", s.tracker_version()},
-          {"kind", MeasurementKindJson(s.kind())}};
+          {"kind", MeasurementKindJson(s.kind())},
+          {"mount", MountHeightJson(s.mount())},
+          {"accel_psd_m2ps3", Double(s.accel_psd_m2ps3())},
+          {"max_speed_mps", Double(s.max_speed_mps())}};
 }
 
 json RequestJson(const proto::Request& r) {

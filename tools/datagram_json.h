@@ -11,7 +11,8 @@
 //     kind: "track_frame" | "background" | "health" | "sensor_info" | "request" | "none"
 //     "track_frame": {scan_start_ns, scan_period_s, scan_counter, part, part_count,
 //                     tracks: [{track_id, state, kind, x_m, y_m, vx_mps, vy_mps, covariance,
-//                               age_scans, points, ellipse_yaw_rad}]}
+//                               age_scans, points, ellipse_yaw_rad, shape, size_major_m,
+//                               size_minor_m, size_sigma_m}]}
 //     "background": {snapshot_id, learned_until_ns, first_angle_rad, angle_step_rad, beam_count,
 //                    part, part_count, first_beam, ranges_mm}
 //     "health", "sensor_info", "request": all fields.

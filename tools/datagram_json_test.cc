@@ -65,6 +65,10 @@ TEST(DatagramJsonTest, TrackFrameHasEveryFieldWithProtoNamesAndEnumNames) {
   t->set_age_scans(12);
   t->set_points(33);
   t->set_ellipse_yaw_rad(0.3f);
+  t->set_shape(proto::OBJECT_SHAPE_TORSO);
+  t->set_size_major_m(0.24f);
+  t->set_size_minor_m(0.13f);
+  t->set_size_sigma_m(0.02f);
   proto::Track* coasting = f->add_tracks();
   coasting->set_track_id(8);
   coasting->set_state(proto::TRACK_STATE_COASTING);
@@ -90,7 +94,7 @@ TEST(DatagramJsonTest, TrackFrameHasEveryFieldWithProtoNamesAndEnumNames) {
   EXPECT_EQ(frame["part_count"], 2);
   ASSERT_EQ(frame["tracks"].size(), 2u);
   const json& t0 = frame["tracks"][0];
-  EXPECT_EQ(t0.size(), 11u) << t0.dump();
+  EXPECT_EQ(t0.size(), 15u) << t0.dump();
   EXPECT_EQ(t0["track_id"], 7);
   EXPECT_EQ(t0["state"], "TRACK_STATE_CONFIRMED");
   EXPECT_EQ(t0["kind"], "MEASUREMENT_KIND_ELLIPSE");
@@ -105,10 +109,16 @@ TEST(DatagramJsonTest, TrackFrameHasEveryFieldWithProtoNamesAndEnumNames) {
   EXPECT_EQ(t0["age_scans"], 12);
   EXPECT_EQ(t0["points"], 33);
   EXPECT_EQ(t0["ellipse_yaw_rad"].dump(), "0.3");
+  EXPECT_EQ(t0["shape"], "OBJECT_SHAPE_TORSO");
+  EXPECT_EQ(t0["size_major_m"].dump(), "0.24");
+  EXPECT_EQ(t0["size_minor_m"].dump(), "0.13");
+  EXPECT_EQ(t0["size_sigma_m"].dump(), "0.02");
   const json& t1 = frame["tracks"][1];
   EXPECT_EQ(t1["state"], "TRACK_STATE_COASTING");
   EXPECT_EQ(t1["kind"], "MEASUREMENT_KIND_CENTER_OF_MASS");
   EXPECT_EQ(t1["points"], 0);  // defaults are printed too
+  EXPECT_EQ(t1["shape"], "OBJECT_SHAPE_UNSPECIFIED");  // an old tracker's: no shape state
+  EXPECT_EQ(t1["size_major_m"], 0.0);
   EXPECT_TRUE(t1["covariance"].is_array());
 }
 
@@ -190,7 +200,10 @@ TEST(DatagramJsonTest, SensorInfoAndRequestHaveAllFields) {
   s->set_scan_frequency_hz(25.0);
   s->set_max_range_m(80.0);
   s->set_tracker_version("lrfnet-tracker 0.1.0");
-  s->set_kind(proto::MEASUREMENT_KIND_ELLIPSE);
+  s->set_kind(proto::MEASUREMENT_KIND_SHAPE_FIT);
+  s->set_mount(proto::MOUNT_HEIGHT_LEGS);
+  s->set_accel_psd_m2ps3(0.5);
+  s->set_max_speed_mps(2.5);
   const json info = Line(d);
   EXPECT_EQ(info["kind"], "sensor_info");
   EXPECT_EQ(info["sequence"], 0);
@@ -204,7 +217,10 @@ TEST(DatagramJsonTest, SensorInfoAndRequestHaveAllFields) {
                               {"scan_frequency_hz", 25.0},
                               {"max_range_m", 80.0},
                               {"tracker_version", "lrfnet-tracker 0.1.0"},
-                              {"kind", "MEASUREMENT_KIND_ELLIPSE"}};
+                              {"kind", "MEASUREMENT_KIND_SHAPE_FIT"},
+                              {"mount", "MOUNT_HEIGHT_LEGS"},
+                              {"accel_psd_m2ps3", 0.5},
+                              {"max_speed_mps", 2.5}};
   EXPECT_EQ(info["sensor_info"], expected_info);
 
   proto::Datagram r = Header("lrfnetd", 1);

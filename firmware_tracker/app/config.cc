@@ -1,9 +1,9 @@
 #include "firmware_tracker/app/config.h"
 
-#include "firmware_tracker/io/datagram_encoder.h"
-
 #include <array>
 #include <cmath>
+
+#include "firmware_tracker/io/datagram_encoder.h"
 
 namespace lrfnet::tracker {
 namespace {
@@ -43,8 +43,7 @@ void VisitLink(io::SickClientOptions& o, ConfigVisitor& v) {
           "After the scan stream was enabled, the first scan must arrive within this.");
   v.Field("read_deadline_scan_periods", o.read_deadline_scan_periods,
           "No scan for this many scan periods: the session is dead and the tracker reconnects.");
-  VisitMs(v, "min_read_deadline_ms", o.min_read_deadline,
-          "Lower bound of that read deadline.");
+  VisitMs(v, "min_read_deadline_ms", o.min_read_deadline, "Lower bound of that read deadline.");
   VisitMs(v, "backoff_initial_ms", o.backoff.initial,
           "First reconnect delay; doubled (backoff_multiplier) after every failed attempt.");
   VisitMs(v, "backoff_max_ms", o.backoff.max, "Longest reconnect delay.");
@@ -130,35 +129,112 @@ void VisitSegmentation(tracking::SegmentationOptions& o, ConfigVisitor& v) {
   v.Field("max_width_m", o.max_width_m, "Wider segments are split.");
 }
 
-constexpr std::array<std::string_view, 2> kKindNames = {"center_of_mass", "ellipse"};
+constexpr std::array<std::string_view, 3> kKindNames = {"center_of_mass", "ellipse", "shape_fit"};
 
-void VisitMeasurement(tracking::MeasurementOptions& o, ConfigVisitor& v) {
+void VisitMeasurement(tracking::TrackerOptions& p, ConfigVisitor& v) {
+  tracking::MeasurementOptions& o = p.measurement;
   v.Section("measurement",
-            "One position per segment: centre of mass, or the fixed-axes ellipse of Quenzel et "
-            "al. eqs. 3-4 (started from a direct least-squares fit). The kind is carried in every "
+            "One position per object. shape_fit: the centre of the body from a fit of its known "
+            "shape with the size learned per track (section shape). center_of_mass / ellipse: "
+            "the previous estimators, kept to compare: the centre of mass of the visible points, "
+            "or the fixed-axes ellipse of Quenzel et al. eqs. 3-4 (started from a direct "
+            "least-squares fit), both biased towards the sensor. The kind is carried in every "
             "track.");
-  int kind = o.fit_ellipse ? 1 : 0;
-  v.Choice("kind", kind, kKindNames,
-           "Measurement kind; an ellipse fit that fails its checks falls back to the centre of "
-           "mass for that segment.");
-  o.fit_ellipse = kind == 1;
-  v.Field("ellipse_major_m", o.ellipse_major_m, "Semi-major axis a of eq. 4 (upper body).");
-  v.Field("ellipse_minor_m", o.ellipse_minor_m, "Semi-minor axis b of eq. 4.");
+  VisitEnum(v, "kind", p.method, kKindNames,
+            "Measurement kind; with ellipse, a fit that fails its checks falls back to the centre "
+            "of mass for that segment.");
+  v.Field("ellipse_major_m", o.ellipse_major_m, "kind ellipse: semi-major axis a of eq. 4.");
+  v.Field("ellipse_minor_m", o.ellipse_minor_m, "kind ellipse: semi-minor axis b of eq. 4.");
   VisitInteger(v, "min_ellipse_points", o.min_ellipse_points,
-               "Fewer points: centre of mass instead of an ellipse.");
-  VisitInteger(v, "max_iterations", o.max_iterations, "Levenberg-Marquardt iterations of eq. 3.");
+               "kind ellipse: fewer points give the centre of mass instead.");
+  VisitInteger(v, "max_iterations", o.max_iterations,
+               "kind ellipse: Levenberg-Marquardt iterations of eq. 3.");
   v.Field("com_sigma_m", o.com_sigma_m, "1-sigma of a centre-of-mass measurement per axis.");
-  v.Field("min_point_sigma_m", o.min_point_sigma_m, "Floor of the ellipse fit's residual sigma.");
+  v.Field("min_point_sigma_m", o.min_point_sigma_m,
+          "kind ellipse: floor of the fit's residual sigma.");
   v.Field("min_position_sigma_m", o.min_position_sigma_m,
-          "Floor of the ellipse centre's sigma per axis.");
+          "kind ellipse: floor of the centre's sigma per axis.");
   v.Field("max_position_sigma_m", o.max_position_sigma_m,
-          "Ellipse centres less certain than this fall back to the centre of mass.");
+          "kind ellipse: centres less certain than this fall back to the centre of mass.");
   v.Field("max_centre_offset_m", o.max_centre_offset_m,
-          "Ellipse centres farther than this from the centre of mass fall back to it.");
+          "kind ellipse: centres farther than this from the centre of mass fall back to it.");
+}
+
+constexpr std::array<std::string_view, 2> kMountNames = {"torso", "legs"};
+
+void VisitShape(tracking::ShapeOptions& o, ConfigVisitor& v) {
+  v.Section("shape",
+            "measurement.kind shape_fit: the body centre from a fit of the object's shape (a "
+            "person's upper body an ellipse, a cart a rectangle, a leg a circle) with its size a "
+            "state of the track, learned over its life from this prior; the silhouette's ends and "
+            "the walking direction (shoulders across it) constrain it too. With 2-4 points the "
+            "prior and the direction to the sensor still give the centre, with a covariance that "
+            "says what is open.");
+  VisitEnum(v, "mount", o.mount, kMountNames,
+            "Height of the scan plane: torso (upper body, about 1 m and above) or legs (knee "
+            "height, 0.3-0.6 m: a person shows two legs, paired into one track).");
+  v.Field("person_major_m", o.person_major_m,
+          "Prior semi-axis of a person's upper body across the shoulders (arms included).");
+  v.Field("person_minor_m", o.person_minor_m, "Prior semi-axis front to back.");
+  v.Field("person_size_sigma_m", o.person_size_sigma_m,
+          "1-sigma of that prior (people differ); a cylinder's or cart's size is learned from it.");
+  v.Field("person_exponent", o.person_exponent,
+          "Exponent p of the upper body's outline |u/a|^p + |v/b|^p = 1 (2: an ellipse; a torso "
+          "with arms lies between an ellipse and a rounded box). Round tracks (learned axes "
+          "within a tenth) are cylinders, fitted with p = 2.");
+  v.Field("box_min_half_length_m", o.box_min_half_length_m,
+          "A track whose learned semi-axis exceeds this is a cart: fitted as a rectangle.");
+  v.Field("leg_radius_m", o.leg_radius_m, "mount legs: prior radius of a leg at knee height.");
+  v.Field("leg_radius_sigma_m", o.leg_radius_sigma_m, "mount legs: 1-sigma of that prior.");
+  v.Field("leg_pairing_distance_m", o.leg_pairing_distance_m,
+          "mount legs: two legs this close (centre to centre) can be one person's.");
+  v.Field("person_min_leg_radius_m", o.person_min_leg_radius_m,
+          "mount legs: thinner legs are not a person's (a chair's) for the static-object rules.");
+  v.Field("hip_half_width_m", o.hip_half_width_m,
+          "mount legs: a leg's lateral offset from the body centre (a single leg's uncertainty).");
+  v.Field("gait_sigma_m", o.gait_sigma_m,
+          "mount legs: how far the midpoint of the legs strays from the body centre while "
+          "walking (1 sigma).");
+  v.Field("walking_speed_mps", o.walking_speed_mps,
+          "Faster than this a person faces where they walk (the yaw prior of the fit).");
+  v.Field("walking_yaw_sigma_rad", o.walking_yaw_sigma_rad,
+          "1-sigma of that yaw prior (the torso turns with the gait, people step sideways).");
+  v.Field("yaw_drift_rad_per_s", o.yaw_drift_rad_per_s,
+          "Standing, the orientation becomes this much less certain per second.");
+  v.Field("size_drift_m_per_sqrt_s", o.size_drift_m_per_sqrt_s,
+          "Random-walk drift of the size state (a person lifts a bag, turns the shoulders).");
+  v.Field("centre_bias_sigma_m", o.centre_bias_sigma_m,
+          "The centre's error successive measurements share (the outline is not the model's, the "
+          "beam width at the silhouette): added, with the size state's sigma, to the reported "
+          "covariance, which the filter alone would make too small.");
+  v.Field("size_floor_sigma_m", o.size_floor_sigma_m,
+          "The size state counts as no more certain than this in that shared error.");
+  v.Field("beam_divergence_rad", o.beam_divergence_rad,
+          "Full beam divergence of the scanner (LMS1xx, TiM: 0.015; LMS5xx: 0.011): where the "
+          "silhouette of an object ends.");
+  v.Field("centre_model_sigma_m", o.centre_model_sigma_m,
+          "Added in quadrature to every centre measurement's sigma: what the fit cannot know "
+          "(sway, an outline that is not the model's).");
+  v.Field("flat_rms_m", o.flat_rms_m,
+          "Outlines whose points stay closer than this to a straight line (noise removed) are "
+          "flat: not a person (a door leaf, a board).");
+  v.Field("flat_min_extent_m", o.flat_min_extent_m,
+          "Only outlines longer than this count as evidence of flatness.");
+  v.Field("association_sigma_m", o.association_sigma_m,
+          "1-sigma per axis of the rough position used to associate before the fit.");
+  v.Field("point_sigma_m", o.fit.point_sigma_m, "Range noise of a point at 0 m (1 sigma).");
+  v.Field("point_sigma_per_m", o.fit.point_sigma_per_m, "Growth of the range noise per metre.");
+  v.Field("model_sigma_m", o.fit.model_sigma_m,
+          "How far a real outline departs from the model shape, per point (1 sigma).");
+  v.Field("effective_points", o.fit.effective_points,
+          "Points beyond this many count as correlated (model errors of neighbours are alike).");
+  VisitInteger(v, "max_points", o.fit.max_points,
+               "At most this many points of a segment go into the fit (evenly spaced).");
+  VisitInteger(v, "max_iterations", o.fit.max_iterations, "Gauss-Newton iterations per fit.");
 }
 
 constexpr std::array<std::string_view, 2> kAssociationNames = {"global_nearest_neighbour",
-                                                                "closest"};
+                                                               "closest"};
 
 void VisitTracking(tracking::TrackerOptions& p, ConfigVisitor& v) {
   tracking::MultiTrackerOptions& o = p.tracking;
@@ -166,7 +242,8 @@ void VisitTracking(tracking::TrackerOptions& p, ConfigVisitor& v) {
             "Constant-velocity Kalman filter per track, Mahalanobis gating, association, "
             "lifecycle tentative -> confirmed (M of N) -> coasting -> deleted.");
   v.Field("accel_psd_m2ps3", o.ekf.accel_psd_m2ps3,
-          "Process noise: white acceleration spectral density per axis, m^2/s^3.");
+          "Process noise: white acceleration spectral density per axis, m^2/s^3 (walking people: "
+          "0.5; forklifts and runners more).");
   v.Field("initial_velocity_sigma_mps", o.ekf.initial_velocity_sigma_mps,
           "Velocity prior of a new track, 1 sigma.");
   VisitEnum(v, "association", o.association, kAssociationNames,
@@ -176,7 +253,8 @@ void VisitTracking(tracking::TrackerOptions& p, ConfigVisitor& v) {
           "Gate, squared Mahalanobis distance (9.21: chi-square, 2 dof, 99 %).");
   v.Field("max_gate_distance_m", o.max_gate_distance_m, "Euclidean bound on top of the gate.");
   v.Field("extra_measurement_sigma_m", o.extra_measurement_sigma_m,
-          "Added in quadrature to every measurement's sigma (sway, viewpoint changes).");
+          "Added in quadrature to every centre_of_mass / ellipse measurement's sigma and to the "
+          "rough position of shape_fit's association (sway, viewpoint changes).");
   VisitInteger(v, "confirm_hits", o.confirm_hits, "M of the M-of-N confirmation.");
   VisitInteger(v, "confirm_window", o.confirm_window, "N of the M-of-N confirmation (<= 32).");
   v.Field("coast_timeout_s", o.coast_timeout_s,
@@ -188,6 +266,27 @@ void VisitTracking(tracking::TrackerOptions& p, ConfigVisitor& v) {
   v.Field("max_time_gap_s", o.max_time_gap_s,
           "A jump between consecutive scans beyond this (either way) deletes all tracks.");
   v.Field("report_tentative", o.report_tentative, "Also send tentative (unconfirmed) tracks.");
+  v.Field("report_coasting_s", o.report_coasting_s,
+          "A coasting track is sent for this long after its last measurement (and kept until "
+          "coast_timeout_s, to be found again): someone hidden longer may have stopped or "
+          "turned.");
+  v.Field("max_speed_mps", o.max_speed_mps,
+          "Motion limit: a track's speed is clamped to this. 2.5 covers walking people; a site "
+          "with forklifts raises it (to ~6), with accel_psd_m2ps3 (~2), "
+          "initial_velocity_sigma_mps and max_gate_distance_m.");
+  v.Field("static_objects", o.static_objects,
+          "Static objects become background: a track that never moved (after "
+          "never_moved_to_background_s), or one that moved but is not person-like (flat like a "
+          "door leaf, thin legs like a chair's) and stands still (after "
+          "static_object_to_background_s). Tracks are reported once they moved. A person who "
+          "stops stays a track. Off: every confirmed track is reported until the background "
+          "absorbs it (background.absorb_after_s).");
+  v.Field("still_radius_m", o.still_radius_m,
+          "A track moves when it leaves a circle of this radius around where it last stood.");
+  v.Field("never_moved_to_background_s", o.never_moved_to_background_s,
+          "A track that never moved becomes background after this.");
+  v.Field("static_object_to_background_s", o.static_object_to_background_s,
+          "A not person-like track standing still becomes background after this.");
   v.Field("correct_beam_time", p.correct_beam_time,
           "Stamp each measurement with its middle beam's time within the scan instead of the "
           "scan start.");
@@ -230,7 +329,8 @@ void VisitTrackerConfig(TrackerConfig& c, ConfigVisitor& v) {
   VisitClock(c.clock, c.clock_status.max_esterror_s, v);
   VisitBackground(c.tracking.background, v);
   VisitSegmentation(c.tracking.segmentation, v);
-  VisitMeasurement(c.tracking.measurement, v);
+  VisitMeasurement(c.tracking, v);
+  VisitShape(c.tracking.shape, v);
   VisitTracking(c.tracking, v);
   VisitPublish(c.publish, v);
 }

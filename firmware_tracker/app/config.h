@@ -41,7 +41,7 @@ struct TrackerConfig {
 };
 
 // Lists every option of `config` (sections sensor, link, clock, background, segmentation,
-// measurement, tracking, publish).
+// measurement, shape, tracking, publish).
 void VisitTrackerConfig(TrackerConfig& config, ConfigVisitor& visitor);
 
 // Every option, with the prefix of its section ("tracking.confirm_hits: must be ...").

@@ -39,7 +39,9 @@ TEST(TrackerConfig, ChangedValuesRoundTripExactly) {
   config.sensor_id = "hall-2.lms511";
   config.uplink_address = "[fd00::7]:47800";
   config.tracking.background.learn_duration_s = 0.1 + 0.2;  // not exactly representable
-  config.tracking.measurement.fit_ellipse = false;
+  config.tracking.method = tracking::MeasurementMethod::kCenterOfMass;
+  config.tracking.shape.mount = tracking::Mount::kLegs;
+  config.tracking.tracking.max_speed_mps = 6.0;
   config.tracking.tracking.association = tracking::Association::kClosest;
   config.tracking.tracking.max_tracks = 17;
   config.link.reply_timeout = std::chrono::milliseconds(1234);
@@ -50,7 +52,9 @@ TEST(TrackerConfig, ChangedValuesRoundTripExactly) {
   EXPECT_EQ(loaded.sensor_id, "hall-2.lms511");
   EXPECT_EQ(loaded.uplink_address, "[fd00::7]:47800");
   EXPECT_EQ(loaded.tracking.background.learn_duration_s, 0.1 + 0.2);
-  EXPECT_FALSE(loaded.tracking.measurement.fit_ellipse);
+  EXPECT_EQ(loaded.tracking.method, tracking::MeasurementMethod::kCenterOfMass);
+  EXPECT_EQ(loaded.tracking.shape.mount, tracking::Mount::kLegs);
+  EXPECT_EQ(loaded.tracking.tracking.max_speed_mps, 6.0);
   EXPECT_EQ(loaded.tracking.tracking.association, tracking::Association::kClosest);
   EXPECT_EQ(loaded.tracking.tracking.max_tracks, 17u);
   EXPECT_EQ(loaded.link.reply_timeout, std::chrono::milliseconds(1234));

@@ -145,8 +145,10 @@ void TrackerNode::PublishSensorInfo(common::UtcNs sent_ns) {
   info.scan_frequency_hz = scan_frequency_hz_;
   info.max_range_m = config_.tracking.background.max_range_m;
   info.tracker_version = LRFNET_VERSION;
-  info.kind = config_.tracking.measurement.fit_ellipse ? tracking::MeasurementKind::kEllipse
-                                                       : tracking::MeasurementKind::kCenterOfMass;
+  info.kind = tracking::KindOf(config_.tracking.method);
+  info.mount = config_.tracking.shape.mount;
+  info.accel_psd_m2ps3 = config_.tracking.tracking.ekf.accel_psd_m2ps3;
+  info.max_speed_mps = config_.tracking.tracking.max_speed_mps;
   if (!encoder_.EncodeSensorInfo(info, sent_ns, sink_)) return;
   identity_changed_ = false;
   sensor_info_requested_ = false;

@@ -94,7 +94,11 @@ TEST(TrackerNode, CrossingPersonGivesOneTrackFramesSnapshotInfoAndHealth) {
   EXPECT_NEAR(first.payload.sensor_info.fov_rad, common::DegToRad(270.0), 1e-6);
   EXPECT_NEAR(first.payload.sensor_info.first_angle_rad, common::DegToRad(-135.0), 1e-6);
   EXPECT_DOUBLE_EQ(first.payload.sensor_info.scan_frequency_hz, kRateHz);
-  EXPECT_EQ(first.payload.sensor_info.kind, lrfnet_proto_MeasurementKind_MEASUREMENT_KIND_ELLIPSE);
+  EXPECT_EQ(first.payload.sensor_info.kind,
+            lrfnet_proto_MeasurementKind_MEASUREMENT_KIND_SHAPE_FIT);
+  EXPECT_EQ(first.payload.sensor_info.mount, lrfnet_proto_MountHeight_MOUNT_HEIGHT_TORSO);
+  EXPECT_EQ(first.payload.sensor_info.accel_psd_m2ps3, 0.5);
+  EXPECT_EQ(first.payload.sensor_info.max_speed_mps, 2.5);
   EXPECT_EQ(sink.Count(lrfnet_proto_Datagram_sensor_info_tag), 1u);
 
   // One frame per scan; scan starts in gateway UTC within the 1-3 ms network latency of the truth.

@@ -29,8 +29,36 @@ lrfnet_proto_MeasurementKind ToProto(tracking::MeasurementKind kind) {
       return lrfnet_proto_MeasurementKind_MEASUREMENT_KIND_CENTER_OF_MASS;
     case tracking::MeasurementKind::kEllipse:
       return lrfnet_proto_MeasurementKind_MEASUREMENT_KIND_ELLIPSE;
+    case tracking::MeasurementKind::kShapeFit:
+      return lrfnet_proto_MeasurementKind_MEASUREMENT_KIND_SHAPE_FIT;
   }
   return lrfnet_proto_MeasurementKind_MEASUREMENT_KIND_UNSPECIFIED;
+}
+
+lrfnet_proto_ObjectShape ToProto(tracking::ObjectShape shape) {
+  switch (shape) {
+    case tracking::ObjectShape::kUnspecified:
+      return lrfnet_proto_ObjectShape_OBJECT_SHAPE_UNSPECIFIED;
+    case tracking::ObjectShape::kTorso:
+      return lrfnet_proto_ObjectShape_OBJECT_SHAPE_TORSO;
+    case tracking::ObjectShape::kLegs:
+      return lrfnet_proto_ObjectShape_OBJECT_SHAPE_LEGS;
+    case tracking::ObjectShape::kCylinder:
+      return lrfnet_proto_ObjectShape_OBJECT_SHAPE_CYLINDER;
+    case tracking::ObjectShape::kBox:
+      return lrfnet_proto_ObjectShape_OBJECT_SHAPE_BOX;
+  }
+  return lrfnet_proto_ObjectShape_OBJECT_SHAPE_UNSPECIFIED;
+}
+
+lrfnet_proto_MountHeight ToProto(tracking::Mount mount) {
+  switch (mount) {
+    case tracking::Mount::kTorso:
+      return lrfnet_proto_MountHeight_MOUNT_HEIGHT_TORSO;
+    case tracking::Mount::kLegs:
+      return lrfnet_proto_MountHeight_MOUNT_HEIGHT_LEGS;
+  }
+  return lrfnet_proto_MountHeight_MOUNT_HEIGHT_UNSPECIFIED;
 }
 
 lrfnet_proto_ClockSyncState ToProto(ClockSync sync) {
@@ -72,11 +100,28 @@ bool ToProto(const tracking::TrackReport& r, lrfnet_proto_Track* t) {
   t->covariance_count = n;
   t->age_scans = r.age_scans;
   t->points = r.points;
-  if (r.kind == tracking::MeasurementKind::kEllipse) {
+  if (r.kind != tracking::MeasurementKind::kCenterOfMass) {
     t->ellipse_yaw_rad = static_cast<float>(r.ellipse_yaw_rad);
     finite = finite && std::isfinite(t->ellipse_yaw_rad);
   }
+  if (r.shape != tracking::ObjectShape::kUnspecified) {
+    t->shape = ToProto(r.shape);
+    t->size_major_m = static_cast<float>(r.size_major_m);
+    t->size_minor_m = static_cast<float>(r.size_minor_m);
+    t->size_sigma_m = static_cast<float>(r.size_sigma_m);
+    finite = finite && std::isfinite(t->size_major_m) && std::isfinite(t->size_minor_m) &&
+             std::isfinite(t->size_sigma_m);
+  }
   return finite;
+}
+
+std::size_t VarintBytes(std::size_t v) {
+  std::size_t n = 1;
+  while (v >= 0x80) {
+    v >>= 7;
+    ++n;
+  }
+  return n;
 }
 
 }  // namespace
@@ -149,20 +194,27 @@ void DatagramEncoder::CopyString(std::string_view text, char* out, std::size_t c
 std::size_t DatagramEncoder::EncodeTracks(const tracking::ScanTracks& scan, common::UtcNs sent_ns,
                                           DatagramSink& sink) {
   ++counters_.track_frames;
-  // Converted first, so part_count counts only the tracks that are sent.
+  // Every track is converted and encoded once, into its slot. nanopb sizes a submessage before it
+  // writes it, so a Track inside a TrackFrame inside a Datagram would be encoded four times; the
+  // frame is assembled here from the encoded tracks instead, in field order (the same bytes).
   std::size_t valid = 0;
-  std::array<bool, tracking::kMaxTracks> keep{};
-  lrfnet_proto_Track scratch;
+  lrfnet_proto_Track track;
   for (std::size_t i = 0; i < scan.tracks.size(); ++i) {
-    keep[i] = ToProto(scan.tracks[i], &scratch);
-    valid += keep[i] ? 1 : 0;
+    if (!ToProto(scan.tracks[i], &track)) continue;
+    pb_ostream_t stream = pb_ostream_from_buffer(track_bytes_[valid].data(), kMaxTrackBytes);
+    if (!pb_encode(&stream, lrfnet_proto_Track_fields, &track)) {
+      ++counters_.encode_errors;
+      continue;
+    }
+    track_sizes_[valid++] = stream.bytes_written;
   }
   counters_.dropped_tracks += scan.tracks.size() - valid;
   const std::size_t parts = std::max<std::size_t>(1, (valid + kTracksPerPart - 1) / kTracksPerPart);
 
   std::size_t sent = 0;
-  std::size_t next = 0;
   for (std::size_t part = 0; part < parts; ++part) {
+    const std::size_t first = part * kTracksPerPart;
+    const std::size_t count = std::min(kTracksPerPart, valid - std::min(valid, first));
     StartDatagram(lrfnet_proto_Datagram_track_frame_tag, sent_ns);
     lrfnet_proto_TrackFrame& frame = message_.payload.track_frame;
     frame.scan_start_ns = scan.scan_start_ns;
@@ -171,17 +223,48 @@ std::size_t DatagramEncoder::EncodeTracks(const tracking::ScanTracks& scan, comm
     frame.part = static_cast<std::uint32_t>(part);
     frame.part_count = static_cast<std::uint32_t>(parts);
     frame.tracks_count = 0;
-    while (frame.tracks_count < kTracksPerPart && next < scan.tracks.size()) {
-      if (keep[next]) ToProto(scan.tracks[next], &frame.tracks[frame.tracks_count++]);
-      ++next;
-    }
-    counters_.tracks += frame.tracks_count;
-    if (Emit(sent_ns, sink)) {
+    if (EmitTrackFrame(first, count, sent_ns, sink)) {
       ++sent;
       ++counters_.track_parts;
+      counters_.tracks += count;
     }
   }
   return sent;
+}
+
+bool DatagramEncoder::EmitTrackFrame(std::size_t first, std::size_t count, common::UtcNs sent_ns,
+                                     DatagramSink& sink) {
+  // The frame's own fields (1-5; tracks_count is 0) into the tail of the buffer, then the
+  // datagram's fields (1-5; no payload) at its start, the frame's tag and length, the frame's
+  // fields and its tracks (field 6), each with its tag and length.
+  std::array<std::uint8_t, 64> head{};
+  pb_ostream_t head_stream = pb_ostream_from_buffer(head.data(), head.size());
+  bool ok = pb_encode(&head_stream, lrfnet_proto_TrackFrame_fields, &message_.payload.track_frame);
+  std::size_t frame_bytes = head_stream.bytes_written;
+  for (std::size_t i = first; i < first + count; ++i) {
+    frame_bytes += 1 + VarintBytes(track_sizes_[i]) + track_sizes_[i];
+  }
+  message_.which_payload = 0;
+  pb_ostream_t stream = pb_ostream_from_buffer(buffer_.data(), buffer_.size());
+  ok = ok && pb_encode(&stream, lrfnet_proto_Datagram_fields, &message_) &&
+       pb_encode_tag(&stream, PB_WT_STRING, lrfnet_proto_Datagram_track_frame_tag) &&
+       pb_encode_varint(&stream, frame_bytes) &&
+       pb_write(&stream, head.data(), head_stream.bytes_written);
+  for (std::size_t i = first; ok && i < first + count; ++i) {
+    ok = pb_encode_tag(&stream, PB_WT_STRING, lrfnet_proto_TrackFrame_tracks_tag) &&
+         pb_encode_varint(&stream, track_sizes_[i]) &&
+         pb_write(&stream, track_bytes_[i].data(), track_sizes_[i]);
+  }
+  message_.which_payload = lrfnet_proto_Datagram_track_frame_tag;
+  if (!ok) {
+    ++counters_.encode_errors;
+    return false;
+  }
+  sink.Send(std::span<const std::uint8_t>(buffer_.data(), stream.bytes_written), sent_ns);
+  ++sequence_;
+  ++counters_.datagrams;
+  counters_.bytes += stream.bytes_written;
+  return true;
 }
 
 std::size_t DatagramEncoder::EncodeBackground(const BackgroundSnapshotView& snapshot,
@@ -269,6 +352,9 @@ bool DatagramEncoder::EncodeSensorInfo(const SensorInfoReport& info, common::Utc
   p.scan_frequency_hz = info.scan_frequency_hz;
   p.max_range_m = info.max_range_m;
   p.kind = ToProto(info.kind);
+  p.mount = ToProto(info.mount);
+  p.accel_psd_m2ps3 = info.accel_psd_m2ps3;
+  p.max_speed_mps = info.max_speed_mps;
   const bool ok = Emit(sent_ns, sink);
   counters_.sensor_info += ok ? 1 : 0;
   return ok;

@@ -20,7 +20,9 @@
 //   same scan_start_ns); a scan without tracks is still one part, so the daemon sees every scan.
 //   Tracks with a non-finite position, velocity or covariance are dropped (counted). Covariance:
 //   upper triangle of the (x, y, vx, vy) covariance, row-major (xx, xy, xvx, xvy, yy, yvx, yvy,
-//   vxvx, vxvy, vyvy), as floats. ellipse_yaw_rad is sent only for kind = ellipse.
+//   vxvx, vxvy, vyvy), as floats. ellipse_yaw_rad is sent for kinds ellipse and shape fit (the
+//   shape's axis a); shape, size_major_m, size_minor_m and size_sigma_m for tracks with a shape
+//   state (kind shape fit; lrfnet.proto documents their meaning), else left at 0 (unspecified).
 // - Background snapshots: the model's per-beam range (metres, 0 = free) as millimetres, rounded,
 //   clamped to [1, kMaxRangeMm] (clamps counted); 0, negative and non-finite ranges are 0 = free.
 //   Split into parts of kBeamsPerPart consecutive beams; every part carries the same snapshot_id,
@@ -47,11 +49,13 @@
 namespace lrfnet::io {
 
 inline constexpr std::size_t kMaxDatagramBytes = 1400;
-// Measured worst cases (uplink tests): 14 tracks -> 1384 bytes, 422 beams -> 1400 bytes.
-inline constexpr std::size_t kTracksPerPart = 14;
+// Measured worst cases (uplink tests): 11 tracks -> 1298 bytes, 422 beams -> 1400 bytes.
+inline constexpr std::size_t kTracksPerPart = 11;
 inline constexpr std::size_t kBeamsPerPart = 422;
 inline constexpr std::uint32_t kMaxRangeMm = (1u << 21) - 1;  // 3 varint bytes
 inline constexpr std::size_t kMaxSensorIdLength = 32;
+// An encoded Track (without its tag and length in the frame): at most 106 bytes (lrfnet.options).
+inline constexpr std::size_t kMaxTrackBytes = 127;
 
 static_assert(sizeof(lrfnet_proto_TrackFrame::tracks) / sizeof(lrfnet_proto_Track) ==
               kTracksPerPart);
@@ -129,6 +133,9 @@ struct SensorInfoReport {
   double max_range_m = 0.0;
   std::string_view tracker_version;  // <= 64 bytes sent
   tracking::MeasurementKind kind = tracking::MeasurementKind::kCenterOfMass;
+  tracking::Mount mount = tracking::Mount::kTorso;
+  double accel_psd_m2ps3 = 0.0;  // the tracker's constant-velocity model
+  double max_speed_mps = 0.0;    // and its speed limit
 };
 
 struct DatagramEncoderCounters {
@@ -137,7 +144,7 @@ struct DatagramEncoderCounters {
   std::uint64_t track_frames = 0;
   std::uint64_t track_parts = 0;
   std::uint64_t tracks = 0;
-  std::uint64_t dropped_tracks = 0;  // non-finite values
+  std::uint64_t dropped_tracks = 0;  // non-finite values (or, never seen, not encodable)
   std::uint64_t snapshots = 0;
   std::uint64_t snapshot_parts = 0;
   std::uint64_t clamped_ranges = 0;
@@ -169,6 +176,10 @@ class DatagramEncoder {
  private:
   void StartDatagram(pb_size_t payload_tag, common::UtcNs sent_ns);
   bool Emit(common::UtcNs sent_ns, DatagramSink& sink);
+  // message_'s header and track frame (without tracks) with the encoded tracks [first, first +
+  // count) as its tracks.
+  bool EmitTrackFrame(std::size_t first, std::size_t count, common::UtcNs sent_ns,
+                      DatagramSink& sink);
   void CopyString(std::string_view text, char* out, std::size_t capacity);
 
   std::array<char, kMaxSensorIdLength + 1> sensor_id_{};
@@ -178,6 +189,8 @@ class DatagramEncoder {
   DatagramEncoderCounters counters_;
   lrfnet_proto_Datagram message_{};
   std::array<std::uint8_t, kMaxDatagramBytes> buffer_{};
+  std::array<std::array<std::uint8_t, kMaxTrackBytes>, tracking::kMaxTracks> track_bytes_{};
+  std::array<std::size_t, tracking::kMaxTracks> track_sizes_{};
 };
 
 }  // namespace lrfnet::io

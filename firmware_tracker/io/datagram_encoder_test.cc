@@ -72,6 +72,11 @@ tracking::TrackReport WorstCaseTrack(std::uint32_t id) {
   t.age_scans = ~0u;
   t.points = ~0u;
   t.ellipse_yaw_rad = -3.0;
+  t.kind = tracking::MeasurementKind::kShapeFit;
+  t.shape = tracking::ObjectShape::kBox;
+  t.size_major_m = 0.51;
+  t.size_minor_m = 0.33;
+  t.size_sigma_m = 0.04;
   return t;
 }
 
@@ -97,6 +102,11 @@ TEST(DatagramEncoderTest, TrackFrameCarriesHeaderAndEveryTrackField) {
   scan.scan_counter = 65535;
   for (std::uint32_t i = 1; i <= 3; ++i) ASSERT_TRUE(scan.tracks.push_back(MakeTrack(i)));
   scan.tracks[2].kind = tracking::MeasurementKind::kCenterOfMass;
+  scan.tracks[1].kind = tracking::MeasurementKind::kShapeFit;
+  scan.tracks[1].shape = tracking::ObjectShape::kTorso;
+  scan.tracks[1].size_major_m = 0.24;
+  scan.tracks[1].size_minor_m = 0.13;
+  scan.tracks[1].size_sigma_m = 0.02;
   scan.tracks[2].state = tracking::TrackState::kTentative;
 
   ASSERT_EQ(encoder.EncodeTracks(scan, kSentNs, sink), 1u);
@@ -140,6 +150,16 @@ TEST(DatagramEncoderTest, TrackFrameCarriesHeaderAndEveryTrackField) {
   EXPECT_EQ(f.tracks[2].kind, lrfnet_proto_MeasurementKind_MEASUREMENT_KIND_CENTER_OF_MASS);
   EXPECT_EQ(f.tracks[2].state, lrfnet_proto_TrackState_TRACK_STATE_TENTATIVE);
   EXPECT_EQ(f.tracks[2].ellipse_yaw_rad, 0.0f);
+  EXPECT_EQ(t.shape, lrfnet_proto_ObjectShape_OBJECT_SHAPE_UNSPECIFIED);
+  EXPECT_EQ(t.size_major_m, 0.0f);
+  // A shape-fit track carries its orientation, shape and size state.
+  const lrfnet_proto_Track& s = f.tracks[1];
+  EXPECT_EQ(s.kind, lrfnet_proto_MeasurementKind_MEASUREMENT_KIND_SHAPE_FIT);
+  EXPECT_EQ(s.shape, lrfnet_proto_ObjectShape_OBJECT_SHAPE_TORSO);
+  EXPECT_FLOAT_EQ(s.ellipse_yaw_rad, 0.75f);
+  EXPECT_FLOAT_EQ(s.size_major_m, 0.24f);
+  EXPECT_FLOAT_EQ(s.size_minor_m, 0.13f);
+  EXPECT_FLOAT_EQ(s.size_sigma_m, 0.02f);
 }
 
 TEST(DatagramEncoderTest, ScanWithoutTracksIsStillOnePart) {
@@ -156,7 +176,7 @@ TEST(DatagramEncoderTest, ScanWithoutTracksIsStillOnePart) {
   EXPECT_EQ(d.payload.track_frame.scan_counter, 9u);
 }
 
-TEST(DatagramEncoderTest, SixtyFourWorstCaseTracksSplitIntoPartsOfFourteen) {
+TEST(DatagramEncoderTest, SixtyFourWorstCaseTracksSplitIntoPartsOfEleven) {
   DatagramEncoder encoder(Options(std::string(32, 's')));
   CollectSink sink;
   tracking::ScanTracks scan;
@@ -165,7 +185,7 @@ TEST(DatagramEncoderTest, SixtyFourWorstCaseTracksSplitIntoPartsOfFourteen) {
   scan.scan_counter = ~0u;
   for (std::uint32_t i = 0; i < tracking::kMaxTracks; ++i)
     ASSERT_TRUE(scan.tracks.push_back(WorstCaseTrack(i)));
-  ASSERT_EQ(encoder.EncodeTracks(scan, -1, sink), 5u);
+  ASSERT_EQ(encoder.EncodeTracks(scan, -1, sink), 6u);
   std::vector<std::uint32_t> ids;
   std::size_t largest = 0;
   for (std::size_t p = 0; p < sink.datagrams.size(); ++p) {
@@ -175,16 +195,16 @@ TEST(DatagramEncoderTest, SixtyFourWorstCaseTracksSplitIntoPartsOfFourteen) {
     EXPECT_EQ(d.sequence, p);
     const lrfnet_proto_TrackFrame& f = d.payload.track_frame;
     EXPECT_EQ(f.part, p);
-    EXPECT_EQ(f.part_count, 5u);
+    EXPECT_EQ(f.part_count, 6u);
     EXPECT_EQ(f.scan_start_ns, -1);
-    EXPECT_EQ(f.tracks_count, p < 4 ? 14 : 8);
+    EXPECT_EQ(f.tracks_count, p < 5 ? 11 : 9);
     for (pb_size_t i = 0; i < f.tracks_count; ++i) ids.push_back(f.tracks[i].track_id & 0xffu);
   }
   ASSERT_EQ(ids.size(), tracking::kMaxTracks);
   for (std::uint32_t i = 0; i < ids.size(); ++i) EXPECT_EQ(ids[i], i);
-  RecordProperty("worst_case_14_track_datagram_bytes", static_cast<int>(largest));
+  RecordProperty("worst_case_11_track_datagram_bytes", static_cast<int>(largest));
 
-  // 14 is the most that fits: the widest header (every varint at 10 bytes) plus 14 widest tracks
+  // 11 is the most that fits: the widest header (every varint at 10 bytes) plus 11 widest tracks
   // stays within 1400 bytes, one more track would not.
   lrfnet_proto_Datagram d = Decode(sink.datagrams[0]);
   d.sequence = ~0ull;
@@ -197,27 +217,64 @@ TEST(DatagramEncoderTest, SixtyFourWorstCaseTracksSplitIntoPartsOfFourteen) {
   ASSERT_TRUE(pb_get_encoded_size(&track_bytes, lrfnet_proto_Track_fields,
                                   &d.payload.track_frame.tracks[0]));
   const std::size_t one_more = stream.bytes_written + 1 /* tag */ + 1 /* length */ + track_bytes;
-  EXPECT_GT(one_more, kMaxDatagramBytes) << "a 15th track would fit: raise kTracksPerPart";
-  RecordProperty("widest_14_track_datagram_bytes", static_cast<int>(stream.bytes_written));
+  EXPECT_GT(one_more, kMaxDatagramBytes) << "a 12th track would fit: raise kTracksPerPart";
+  RecordProperty("widest_11_track_datagram_bytes", static_cast<int>(stream.bytes_written));
+}
+
+// The track frame is assembled from tracks encoded once each: its bytes must be exactly what
+// nanopb writes for the same message (fields in number order), for 0, some and a full part of
+// tracks, plain and widest.
+TEST(DatagramEncoderTest, AssembledTrackFramesAreNanopbsOwnBytes) {
+  for (const bool widest : {false, true}) {
+    for (const std::uint32_t n : {0u, 1u, 5u, 11u, 12u, 23u}) {
+      DatagramEncoder encoder(Options(widest ? std::string(32, 'w') : "s1"));
+      CollectSink sink;
+      tracking::ScanTracks scan;
+      scan.scan_start_ns = widest ? -1 : 1'700'000'000'000'000'000;
+      scan.scan_period_s = 1.0 / 25.0;
+      scan.scan_counter = widest ? ~0u : 17u;
+      for (std::uint32_t i = 0; i < n; ++i)
+        ASSERT_TRUE(scan.tracks.push_back(widest ? WorstCaseTrack(i) : MakeTrack(i)));
+      const std::size_t parts = encoder.EncodeTracks(scan, 42, sink);
+      ASSERT_EQ(parts, std::max<std::size_t>(1, (n + 10) / 11));
+      ASSERT_EQ(sink.datagrams.size(), parts);
+      std::uint32_t tracks = 0;
+      for (const auto& bytes : sink.datagrams) {
+        const lrfnet_proto_Datagram d = Decode(bytes);
+        tracks += d.payload.track_frame.tracks_count;
+        std::array<std::uint8_t, kMaxDatagramBytes> again{};
+        pb_ostream_t stream = pb_ostream_from_buffer(again.data(), again.size());
+        ASSERT_TRUE(pb_encode(&stream, lrfnet_proto_Datagram_fields, &d));
+        EXPECT_EQ(std::vector<std::uint8_t>(again.begin(), again.begin() + stream.bytes_written),
+                  bytes)
+            << n << " tracks, widest " << widest;
+      }
+      EXPECT_EQ(tracks, n);
+      EXPECT_EQ(encoder.counters().tracks, n);
+      EXPECT_EQ(encoder.counters().encode_errors, 0u);
+    }
+  }
 }
 
 TEST(DatagramEncoderTest, TracksWithNonFiniteValuesAreDroppedAndCounted) {
   DatagramEncoder encoder(Options());
   CollectSink sink;
   tracking::ScanTracks scan;
-  for (std::uint32_t i = 0; i < 16; ++i) ASSERT_TRUE(scan.tracks.push_back(MakeTrack(i)));
+  for (std::uint32_t i = 0; i < 14; ++i) ASSERT_TRUE(scan.tracks.push_back(MakeTrack(i)));
   scan.tracks[3].x_m = std::numeric_limits<double>::quiet_NaN();
   scan.tracks[7].covariance(2, 3) = std::numeric_limits<double>::infinity();
   scan.tracks[9].vy_mps = 1e300;                             // infinite as a float
-  ASSERT_EQ(encoder.EncodeTracks(scan, kSentNs, sink), 1u);  // 13 tracks left: one part
+  scan.tracks[12].shape = tracking::ObjectShape::kTorso;
+  scan.tracks[12].size_sigma_m = std::numeric_limits<double>::quiet_NaN();
+  ASSERT_EQ(encoder.EncodeTracks(scan, kSentNs, sink), 1u);  // 10 tracks left: one part
   const lrfnet_proto_Datagram d = Decode(sink.datagrams[0]);
-  EXPECT_EQ(d.payload.track_frame.tracks_count, 13);
+  EXPECT_EQ(d.payload.track_frame.tracks_count, 10);
   for (pb_size_t i = 0; i < d.payload.track_frame.tracks_count; ++i) {
     const std::uint32_t id = d.payload.track_frame.tracks[i].track_id;
-    EXPECT_TRUE(id != 3 && id != 7 && id != 9) << id;
+    EXPECT_TRUE(id != 3 && id != 7 && id != 9 && id != 12) << id;
   }
-  EXPECT_EQ(encoder.counters().dropped_tracks, 3u);
-  EXPECT_EQ(encoder.counters().tracks, 13u);
+  EXPECT_EQ(encoder.counters().dropped_tracks, 4u);
+  EXPECT_EQ(encoder.counters().tracks, 10u);
 }
 
 TEST(DatagramEncoderTest, BackgroundSnapshotOf4561BeamsReassembles) {
@@ -366,6 +423,9 @@ TEST(DatagramEncoderTest, SensorInfoStringsAreBoundedAndPrintable) {
   info.scan_frequency_hz = 25.0;
   info.max_range_m = 80.0;
   info.kind = tracking::MeasurementKind::kEllipse;
+  info.mount = tracking::Mount::kLegs;
+  info.accel_psd_m2ps3 = 2.0;
+  info.max_speed_mps = 6.0;
   ASSERT_TRUE(encoder.EncodeSensorInfo(info, kSentNs, sink));
   const lrfnet_proto_Datagram d = Decode(sink.datagrams[0]);
   ASSERT_EQ(d.which_payload, lrfnet_proto_Datagram_sensor_info_tag);
@@ -381,6 +441,9 @@ TEST(DatagramEncoderTest, SensorInfoStringsAreBoundedAndPrintable) {
   EXPECT_EQ(p.scan_frequency_hz, 25.0);
   EXPECT_EQ(p.max_range_m, 80.0);
   EXPECT_EQ(p.kind, lrfnet_proto_MeasurementKind_MEASUREMENT_KIND_ELLIPSE);
+  EXPECT_EQ(p.mount, lrfnet_proto_MountHeight_MOUNT_HEIGHT_LEGS);
+  EXPECT_EQ(p.accel_psd_m2ps3, 2.0);
+  EXPECT_EQ(p.max_speed_mps, 6.0);
   EXPECT_EQ(encoder.counters().truncated_strings, 1u);
   EXPECT_LE(sink.datagrams[0].size(), kMaxDatagramBytes);
 }

@@ -61,6 +61,14 @@ tracking::TrackReport Track(std::uint32_t id, bool worst_case) {
   t.age_scans = worst_case ? ~0u : 3 * id;
   t.points = worst_case ? ~0u : 11;
   t.ellipse_yaw_rad = worst_case ? -3.0 : 0.1 * id;
+  if (worst_case || id % 3 == 0) {
+    // A shape-fit track: the body centre, with the shape state (the largest track on the wire).
+    t.kind = tracking::MeasurementKind::kShapeFit;
+    t.shape = worst_case ? tracking::ObjectShape::kBox : tracking::ObjectShape::kTorso;
+    t.size_major_m = 0.23 + 0.001 * id;
+    t.size_minor_m = 0.14;
+    t.size_sigma_m = 0.02;
+  }
   return t;
 }
 
@@ -100,8 +108,13 @@ TEST(UplinkWireTest, TrackFramesParseWithLibprotobuf) {
     const tracking::TrackReport& r = scan.tracks[i];
     EXPECT_EQ(t.track_id(), i);
     EXPECT_EQ(t.state(), i == 6 ? pb::TRACK_STATE_TENTATIVE : pb::TRACK_STATE_CONFIRMED);
-    EXPECT_EQ(t.kind(),
-              i == 5 ? pb::MEASUREMENT_KIND_CENTER_OF_MASS : pb::MEASUREMENT_KIND_ELLIPSE);
+    EXPECT_EQ(t.kind(), i == 5        ? pb::MEASUREMENT_KIND_CENTER_OF_MASS
+                        : i % 3 == 0 ? pb::MEASUREMENT_KIND_SHAPE_FIT
+                                     : pb::MEASUREMENT_KIND_ELLIPSE);
+    EXPECT_EQ(t.shape(), i % 3 == 0 ? pb::OBJECT_SHAPE_TORSO : pb::OBJECT_SHAPE_UNSPECIFIED);
+    EXPECT_EQ(t.size_major_m(), i % 3 == 0 ? static_cast<float>(r.size_major_m) : 0.0f);
+    EXPECT_EQ(t.size_minor_m(), i % 3 == 0 ? 0.14f : 0.0f);
+    EXPECT_EQ(t.size_sigma_m(), i % 3 == 0 ? 0.02f : 0.0f);
     EXPECT_EQ(t.x_m(), static_cast<float>(r.x_m));
     EXPECT_EQ(t.y_m(), static_cast<float>(r.y_m));
     EXPECT_EQ(t.vx_mps(), static_cast<float>(r.vx_mps));
@@ -120,7 +133,7 @@ TEST(UplinkWireTest, TrackFramesParseWithLibprotobuf) {
   }
 }
 
-TEST(UplinkWireTest, FourteenWorstCaseTracksFitAndFifteenDoNot) {
+TEST(UplinkWireTest, ElevenWorstCaseTracksFitAndTwelveDoNot) {
   DatagramEncoder encoder(Options(std::string(32, 's')));
   CollectSink sink;
   tracking::ScanTracks scan;
@@ -129,25 +142,25 @@ TEST(UplinkWireTest, FourteenWorstCaseTracksFitAndFifteenDoNot) {
   scan.scan_counter = ~0u;
   for (std::uint32_t i = 0; i < tracking::kMaxTracks; ++i)
     ASSERT_TRUE(scan.tracks.push_back(Track(i, true)));
-  ASSERT_EQ(encoder.EncodeTracks(scan, -1, sink), 5u);
+  ASSERT_EQ(encoder.EncodeTracks(scan, -1, sink), 6u);
   std::size_t total = 0;
   for (const std::string& bytes : sink.datagrams) {
     EXPECT_LE(bytes.size(), kMaxDatagramBytes);
     total += static_cast<std::size_t>(Parse(bytes).track_frame().tracks_size());
   }
   EXPECT_EQ(total, tracking::kMaxTracks);
-  // Widen the header to its limits; 14 tracks still fit, a 15th does not.
+  // Widen the header to its limits; 11 tracks still fit, a 12th does not.
   pb::Datagram d = Parse(sink.datagrams[0]);
   d.set_sequence(~0ull);
   d.set_session_id(~0ull);
   d.mutable_track_frame()->set_part(~0u);
   d.mutable_track_frame()->set_part_count(~0u);
-  ASSERT_EQ(d.track_frame().tracks_size(), 14);
+  ASSERT_EQ(d.track_frame().tracks_size(), 11);
   const std::size_t widest = d.ByteSizeLong();
   EXPECT_LE(widest, kMaxDatagramBytes);
   *d.mutable_track_frame()->add_tracks() = d.track_frame().tracks(0);
   EXPECT_GT(d.ByteSizeLong(), kMaxDatagramBytes);
-  RecordProperty("widest_14_track_datagram_bytes", static_cast<int>(widest));
+  RecordProperty("widest_11_track_datagram_bytes", static_cast<int>(widest));
 }
 
 TEST(UplinkWireTest, BackgroundSnapshotOf4561BeamsReassembles) {
@@ -232,7 +245,10 @@ TEST(UplinkWireTest, HealthAndSensorInfoParse) {
   info.fov_rad = 3.3161;
   info.scan_frequency_hz = 25.0;
   info.max_range_m = 80.0;
-  info.kind = tracking::MeasurementKind::kCenterOfMass;
+  info.kind = tracking::MeasurementKind::kShapeFit;
+  info.mount = tracking::Mount::kLegs;
+  info.accel_psd_m2ps3 = 0.5;
+  info.max_speed_mps = 2.5;
   ASSERT_TRUE(encoder.EncodeSensorInfo(info, kSentNs, sink));
 
   const pb::Datagram hd = Parse(sink.datagrams[0]);
@@ -256,7 +272,10 @@ TEST(UplinkWireTest, HealthAndSensorInfoParse) {
   EXPECT_EQ(sd.sensor_info().fov_rad(), 3.3161);
   EXPECT_EQ(sd.sensor_info().scan_frequency_hz(), 25.0);
   EXPECT_EQ(sd.sensor_info().max_range_m(), 80.0);
-  EXPECT_EQ(sd.sensor_info().kind(), pb::MEASUREMENT_KIND_CENTER_OF_MASS);
+  EXPECT_EQ(sd.sensor_info().kind(), pb::MEASUREMENT_KIND_SHAPE_FIT);
+  EXPECT_EQ(sd.sensor_info().mount(), pb::MOUNT_HEIGHT_LEGS);
+  EXPECT_EQ(sd.sensor_info().accel_psd_m2ps3(), 0.5);
+  EXPECT_EQ(sd.sensor_info().max_speed_mps(), 2.5);
 }
 
 TEST(UplinkWireTest, RecordingReadsBackWithLibprotobuf) {

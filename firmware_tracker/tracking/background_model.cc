@@ -147,6 +147,26 @@ void BackgroundModel::UpdateBeam(std::size_t i, float r, double dt_s) {
   }
 }
 
+void BackgroundModel::Absorb(const ScanView& scan, std::size_t begin_beam, std::size_t end_beam) {
+  if (!learned_ || scan.range_m.size() != beams_.size() ||
+      scan.first_angle_rad != first_angle_rad_ || scan.angle_step_rad != angle_step_rad_) {
+    return;
+  }
+  end_beam = std::min(end_beam, beams_.size());
+  std::size_t taken = 0;
+  for (std::size_t i = begin_beam; i < end_beam; ++i) {
+    const float r = Sanitize(scan.range_m[i]);
+    const float bg = background_m_[i];
+    if (r == 0.0f || !(bg == 0.0f || r < bg - Margin(bg))) continue;
+    background_m_[i] = r;
+    beams_[i].candidate = Candidate::kNone;
+    beams_[i].candidate_age_s = 0.0f;
+    ++taken;
+  }
+  counters_.absorbed_beams += taken;
+  counters_.objects_absorbed += taken > 0 ? 1 : 0;
+}
+
 BackgroundResult BackgroundModel::Update(const ScanView& scan) {
   BackgroundResult result;
   result.scan_error = CheckScan(scan);

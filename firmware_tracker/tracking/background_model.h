@@ -74,8 +74,9 @@ struct BackgroundCounters {
   std::uint64_t rejected_scans = 0;
   std::uint64_t geometry_changes = 0;
   std::uint64_t time_steps_backwards = 0;
-  std::uint64_t absorbed_beams = 0;  // a nearer static object became background
-  std::uint64_t receded_beams = 0;   // the background moved farther away or became free
+  std::uint64_t absorbed_beams = 0;    // a nearer static object became background
+  std::uint64_t objects_absorbed = 0;  // Absorb calls that took at least one beam
+  std::uint64_t receded_beams = 0;     // the background moved farther away or became free
 };
 
 namespace internal {
@@ -112,6 +113,11 @@ class BackgroundModel {
   const BackgroundCounters& counters() const { return counters_; }
   // Forgets the model and starts learning again with the next scan; counters are kept.
   void Reset();
+  // Makes the foreground returns of beams [begin_beam, end_beam) of `scan` (the scan last passed
+  // to Update) background at once: a static object the tracker recognised (a door that swung
+  // open, a chair left behind, clutter that never moved). Counted in absorbed_beams and
+  // objects_absorbed. Ignored before learning or for another beam geometry.
+  void Absorb(const ScanView& scan, std::size_t begin_beam, std::size_t end_beam);
 
  private:
   using Beam = internal::BackgroundBeam;

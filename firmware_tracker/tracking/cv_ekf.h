@@ -46,6 +46,9 @@ class CvEkf {
   // positive definite or the input is not finite.
   bool Update(const Eigen::Vector2d& z_m, const Eigen::Matrix2d& r_m2);
 
+  // Replaces the state (e.g. a velocity limited to the possible), keeping the covariance.
+  void SetState(const State& x) { x_ = x; }
+
   const State& state() const { return x_; }
   const Covariance& covariance() const { return p_; }
   Eigen::Vector2d position_m() const { return x_.head<2>(); }

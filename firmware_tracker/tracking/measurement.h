@@ -1,5 +1,7 @@
 #pragma once
-// Position measurements of one segment (Quenzel et al., section III-B).
+// Position measurements of one segment (Quenzel et al., section III-B), the method of the previous
+// tracker kept for comparison (MeasurementMethod kCenterOfMass / kEllipse); the default shape fit
+// lives in shape_fit.h and pipeline.h.
 //
 // - Centre of mass (CoM): the mean of the segment's points. Its covariance is com_sigma_m^2 * I:
 // the CoM
@@ -32,10 +34,19 @@
 
 namespace lrfnet::tracking {
 
-enum class MeasurementKind : std::uint8_t { kCenterOfMass, kEllipse };
+// How a measurement's position was obtained (the wire's MeasurementKind).
+enum class MeasurementKind : std::uint8_t { kCenterOfMass, kEllipse, kShapeFit };
 
+// Which estimator the pipeline uses: the body centre from the known-shape fit (default), or the
+// previous tracker's centre of mass / fixed-axes ellipse with its fallback to the centre of mass.
+enum class MeasurementMethod : std::uint8_t { kCenterOfMass, kEllipse, kShapeFit };
+
+// The scan plane's height: what a person looks like (one upper body, or two legs).
+enum class Mount : std::uint8_t { kTorso, kLegs };
+
+// Options of the previous tracker's estimators (MeasureSegment).
 struct MeasurementOptions {
-  bool fit_ellipse = true;
+  bool fit_ellipse = true;        // false: centre of mass only
   double ellipse_major_m = 0.25;  // a in eq. 4
   double ellipse_minor_m = 0.15;  // b in eq. 4
   std::size_t min_ellipse_points = 5;

@@ -117,6 +117,15 @@ std::optional<std::string> Validate(const MultiTrackerOptions& o) {
     return "max_tracks must be in [1, " + std::to_string(kMaxTracks) + "]";
   }
   if (!Positive(o.max_time_gap_s)) return "max_time_gap_s must be > 0";
+  if (!(std::isfinite(o.report_coasting_s) && o.report_coasting_s >= 0.0)) {
+    return "report_coasting_s must be >= 0";
+  }
+  if (!Positive(o.max_speed_mps)) return "max_speed_mps must be > 0";
+  if (!Positive(o.still_radius_m)) return "still_radius_m must be > 0";
+  if (!Positive(o.never_moved_to_background_s)) return "never_moved_to_background_s must be > 0";
+  if (!Positive(o.static_object_to_background_s)) {
+    return "static_object_to_background_s must be > 0";
+  }
   return std::nullopt;
 }
 
@@ -144,7 +153,31 @@ void MultiTracker::Step(common::UtcNs scan_start_ns, std::span<const Measurement
 
 void MultiTracker::Step(common::UtcNs scan_start_ns, std::span<const Measurement> measurements,
                         std::span<const double> time_offsets_s, ScanTracks& out) {
+  Step(scan_start_ns, measurements, time_offsets_s, nullptr, out);
+}
+
+std::size_t MultiTracker::Predict(common::UtcNs t_ns, std::span<TrackPrediction> out) const {
+  std::size_t n = 0;
+  for (const bool confirmed : {true, false}) {
+    for (const Track& t : tracks_) {
+      if (t.confirmed != confirmed || n == out.size()) continue;
+      CvEkf f = t.filter;
+      if (t_ns > t.filter_ns) f.Predict(common::NsToSeconds(t_ns - t.filter_ns));
+      TrackPrediction& p = out[n++];
+      p.id = t.id;
+      p.confirmed = t.confirmed;
+      p.position_m = f.position_m();
+      p.covariance_m2 = f.covariance().topLeftCorner<2, 2>();
+    }
+  }
+  return n;
+}
+
+void MultiTracker::Step(common::UtcNs scan_start_ns, std::span<const Measurement> measurements,
+                        std::span<const double> time_offsets_s, MeasurementRefiner* refiner,
+                        ScanTracks& out) {
   ++counters_.scans;
+  absorbed_.clear();
   HandleTime(scan_start_ns);
   for (Track& t : tracks_) {
     ++t.age_scans;
@@ -158,9 +191,9 @@ void MultiTracker::Step(common::UtcNs scan_start_ns, std::span<const Measurement
   // one for the same person.
   Associate(/*confirmed=*/true);
   Associate(/*confirmed=*/false);
-  UpdateAssigned(scan_start_ns, measurements);
+  UpdateAssigned(scan_start_ns, measurements, refiner);
   ManageLifecycle(scan_start_ns);
-  StartTracks(scan_start_ns, measurements);
+  StartTracks(scan_start_ns, measurements, refiner);
   Report(scan_start_ns, out);
 }
 
@@ -311,8 +344,19 @@ void MultiTracker::Associate(bool confirmed) {
   }
 }
 
+void MultiTracker::LimitSpeed(Track& t) {
+  const Eigen::Vector2d v = t.filter.velocity_mps();
+  const double speed = v.norm();
+  if (!(speed > options_.max_speed_mps)) return;
+  ++counters_.speed_clamps;
+  Eigen::Vector4d x = t.filter.state();
+  x.tail<2>() *= options_.max_speed_mps / speed;
+  t.filter.SetState(x);
+}
+
 void MultiTracker::UpdateAssigned(common::UtcNs scan_start_ns,
-                                  std::span<const Measurement> measurements) {
+                                  std::span<const Measurement> measurements,
+                                  MeasurementRefiner* refiner) {
   for (std::size_t i = 0; i < tracks_.size(); ++i) {
     Track& t = tracks_[i];
     const int j = track_to_candidate_[i];
@@ -328,18 +372,45 @@ void MultiTracker::UpdateAssigned(common::UtcNs scan_start_ns,
     const common::UtcNs at_ns = AtOffset(scan_start_ns, c.offset_s);
     t.filter.Predict(common::NsToSeconds(at_ns - t.filter_ns));
     t.filter_ns = std::max(t.filter_ns, at_ns);
-    if (!t.filter.Update(c.z_m, c.r_m2)) {
+    Measurement m = measurements[c.source];
+    Eigen::Vector2d z = c.z_m;
+    Eigen::Matrix2d r = c.r_m2;
+    if (refiner != nullptr) {
+      const Eigen::Vector4d x = t.filter.state();
+      const Eigen::Matrix4d p = t.filter.covariance();
+      TrackShape shape = t.shape;
+      bool usable = refiner->Refine(c.source, at_ns, &x, &p, shape, m);
+      if (usable) {
+        // The refiner's covariance is its own, model errors included: no extra sigma.
+        z = m.position_m;
+        r = 0.5 * (m.covariance_m2 + m.covariance_m2.transpose());
+        double d2 = 0.0;
+        Candidate refined = c;
+        refined.z_m = z;
+        refined.r_m2 = r;
+        usable = z.allFinite() && r.allFinite() &&
+                 InsideGate(x.head<2>(), p.topLeftCorner<2, 2>(), refined, &d2, nullptr);
+        usable = usable || (std::isfinite(d2) && d2 <= 4.0 * options_.gate_mahalanobis_sq);
+      }
+      if (!usable) {
+        ++counters_.refine_failures;
+        continue;
+      }
+      t.shape = shape;
+    }
+    if (!t.filter.Update(z, r)) {
       ++counters_.failed_updates;
       continue;
     }
+    LimitSpeed(t);
     ++counters_.associations;
-    const Measurement& m = measurements[c.source];
     t.updated = true;
     t.hits |= 1u;
     t.last_update_ns = at_ns;
     t.kind = m.kind;
-    t.ellipse_yaw_rad = m.kind == MeasurementKind::kEllipse ? m.orientation_rad : 0.0;
+    t.ellipse_yaw_rad = m.kind == MeasurementKind::kCenterOfMass ? 0.0 : m.orientation_rad;
     t.points = static_cast<std::uint32_t>(std::min<std::size_t>(m.point_count, UINT32_MAX));
+    t.source = c.source;
   }
 }
 
@@ -378,6 +449,24 @@ void MultiTracker::ManageLifecycle(common::UtcNs scan_start_ns) {
         ++counters_.deleted_covariance;
       }
     }
+    if (!remove && t.updated && options_.static_objects) {
+      // Static objects: measured positions only (a coasting track says nothing about motion).
+      const Eigen::Vector2d position = t.filter.position_m();
+      if ((position - t.anchor_m).norm() > options_.still_radius_m) {
+        t.anchor_m = position;
+        t.anchor_ns = scan_start_ns;
+        t.moved = true;
+      }
+      const double still_s = common::NsToSeconds(scan_start_ns - t.anchor_ns);
+      const bool clutter = !t.moved && still_s >= options_.never_moved_to_background_s;
+      const bool left_behind =
+          t.moved && !t.shape.person_like && still_s >= options_.static_object_to_background_s;
+      if (clutter || left_behind) {
+        remove = true;
+        ++counters_.deleted_static;
+        (void)absorbed_.push_back(t.source);  // at most one per track
+      }
+    }
     if (remove) continue;
     if (kept != i) tracks_[kept] = t;
     ++kept;
@@ -386,7 +475,8 @@ void MultiTracker::ManageLifecycle(common::UtcNs scan_start_ns) {
 }
 
 void MultiTracker::StartTracks(common::UtcNs scan_start_ns,
-                               std::span<const Measurement> measurements) {
+                               std::span<const Measurement> measurements,
+                               MeasurementRefiner* refiner) {
   // Rows of gated_ still refer to the tracks as they were before the lifecycle step, which is what
   // "inside an existing track's gate" means for this scan.
   const std::size_t gated_rows = gated_rows_;
@@ -409,11 +499,23 @@ void MultiTracker::StartTracks(common::UtcNs scan_start_ns,
       ++counters_.dropped_capacity;
       continue;
     }
-    Track* t = tracks_.emplace_slot();
-    const Measurement& m = measurements[c.source];
     const common::UtcNs at_ns = AtOffset(scan_start_ns, c.offset_s);
+    Measurement m = measurements[c.source];
+    Eigen::Vector2d z = c.z_m;
+    Eigen::Matrix2d r = c.r_m2;
+    TrackShape shape;
+    if (refiner != nullptr) {
+      if (!refiner->Refine(c.source, at_ns, nullptr, nullptr, shape, m) ||
+          !m.position_m.allFinite() || !m.covariance_m2.allFinite()) {
+        ++counters_.refine_failures;
+        continue;
+      }
+      z = m.position_m;
+      r = 0.5 * (m.covariance_m2 + m.covariance_m2.transpose());
+    }
+    Track* t = tracks_.emplace_slot();
     t->filter = CvEkf(options_.ekf);
-    t->filter.Init(c.z_m, c.r_m2);
+    t->filter.Init(z, r);
     t->filter_ns = at_ns;
     t->last_update_ns = at_ns;
     t->id = NewId();
@@ -421,8 +523,13 @@ void MultiTracker::StartTracks(common::UtcNs scan_start_ns,
     t->hits = 1u;
     t->age_scans = 0;
     t->kind = m.kind;
-    t->ellipse_yaw_rad = m.kind == MeasurementKind::kEllipse ? m.orientation_rad : 0.0;
+    t->ellipse_yaw_rad = m.kind == MeasurementKind::kCenterOfMass ? 0.0 : m.orientation_rad;
     t->points = static_cast<std::uint32_t>(std::min<std::size_t>(m.point_count, UINT32_MAX));
+    t->shape = shape;
+    t->anchor_m = z;
+    t->anchor_ns = scan_start_ns;
+    t->moved = false;
+    t->source = c.source;
     t->confirmed = options_.confirm_hits <= 1;
     ++counters_.created;
     if (t->confirmed) ++counters_.confirmed;
@@ -433,7 +540,13 @@ void MultiTracker::Report(common::UtcNs scan_start_ns, ScanTracks& out) const {
   out.scan_start_ns = scan_start_ns;
   out.tracks.clear();
   for (const Track& t : tracks_) {
-    if (!t.confirmed && !options_.report_tentative) continue;
+    // A confirmed track that never moved is not reported as one (step 5).
+    const bool reportable = t.confirmed && (t.moved || !options_.static_objects);
+    if (reportable && !t.updated &&
+        common::NsToSeconds(scan_start_ns - t.last_update_ns) > options_.report_coasting_s) {
+      continue;
+    }
+    if (!reportable && !options_.report_tentative) continue;
     Eigen::Vector4d x = t.filter.state();
     Eigen::Matrix4d p = t.filter.covariance();
     const double back_s = common::NsToSeconds(scan_start_ns - t.filter_ns);
@@ -441,17 +554,25 @@ void MultiTracker::Report(common::UtcNs scan_start_ns, ScanTracks& out) const {
     TrackReport* r = out.tracks.emplace_slot();
     if (r == nullptr) break;  // max_tracks <= kMaxTracks: cannot happen
     r->track_id = t.id;
-    r->state = !t.confirmed ? TrackState::kTentative
-                            : (t.updated ? TrackState::kConfirmed : TrackState::kCoasting);
+    r->state = !reportable ? TrackState::kTentative
+                           : (t.updated ? TrackState::kConfirmed : TrackState::kCoasting);
     r->kind = t.kind;
     r->x_m = x(0);
     r->y_m = x(1);
     r->vx_mps = x(2);
     r->vy_mps = x(3);
+    // The filter averages its measurements as independent; what they share is added back.
+    p.topLeftCorner<2, 2>() += t.shape.centre_bias_cov_m2;
     r->covariance = p;
     r->age_scans = t.age_scans;
     r->points = t.points;
     r->ellipse_yaw_rad = t.ellipse_yaw_rad;
+    r->shape = t.shape.shape;
+    if (t.shape.shape != ObjectShape::kUnspecified) {
+      r->size_major_m = t.shape.size_m.x();
+      r->size_minor_m = t.shape.size_m.y();
+      r->size_sigma_m = std::sqrt(std::max(0.0, LargestEigenvalue(t.shape.size_cov_m2)));
+    }
   }
 }
 

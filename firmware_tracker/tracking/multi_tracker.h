@@ -26,17 +26,33 @@
 //     - kClosest: the paper's rule; greedily pairs the geometrically closest remaining candidate
 //       pair (Euclidean distance of predicted position and measurement).
 //  4. Update of assigned tracks; the kind, orientation and point count of the measurement are kept.
+//     With a MeasurementRefiner (the pipeline's shape fit), the associated measurement is first
+//     replaced by the refiner's, made with what the track knows (its shape state, its predicted
+//     position and velocity), with the refiner's covariance as it is (no extra sigma); a refined
+//     measurement farther than 4x the gate from the prediction is not used (counted). The speed of
+//     the filter's velocity is then limited to max_speed_mps (counted): the limits of the objects a
+//     site has.
 //  5. Lifecycle. A new track is tentative; it is confirmed when it was updated in confirm_hits of
 //     its first confirm_window scans (M of N) and deleted as soon as that became impossible. A
 //     confirmed track without a measurement coasts (predicted only) and is deleted when its last
 //     measurement is older than coast_timeout_s or its position sigma (square root of the largest
 //     eigenvalue of the position covariance at scan time) exceeds max_position_sigma_m.
+//     Static objects: a track remembers where it was when it last moved (an anchor; it moved when
+//     its position leaves still_radius_m around the anchor). A track that never moved for
+//     never_moved_to_background_s (clutter, an object put down while the sensor was not looking),
+//     and one that moved but is not person-like (the refiner says: flat like a door leaf or a
+//     chair's backrest, legs thinner than a person's) and has stood still for
+//     static_object_to_background_s (a door swung open, a chair moved and left) is deleted and its
+//     measurement of this scan is handed back (absorbed_sources()) so the background takes it over.
+//     A person who stops stays a track (until the background absorbs them after its
+//     absorb_after_s).
 //  6. Births. A measurement that was not assigned starts a tentative track unless it lies within
 //     the gate of an existing track or of a track born earlier in the same scan (a person split
 //     into two segments must not become two tracks). Births beyond max_tracks are dropped and
 //     counted.
-//  7. Reports: one TrackReport per confirmed track (and per tentative track if report_tentative),
-//     ordered by id, state and covariance at scan_start_ns.
+//  7. Reports: one TrackReport per confirmed track that has moved (and per tentative track if
+//     report_tentative; confirmed tracks that never moved count as tentative there), ordered by id,
+//     state and covariance at scan_start_ns.
 //
 // Measurement times: measurement j was taken at scan_start_ns + time_offsets_s[j] (e.g. the beam
 // time of the segment's middle beam); the filter is predicted to that instant for gating and
@@ -63,6 +79,7 @@
 #include "firmware_tracker/tracking/cv_ekf.h"
 #include "firmware_tracker/tracking/measurement.h"
 #include "firmware_tracker/tracking/segmentation.h"
+#include "firmware_tracker/tracking/shape_fit.h"
 #include "firmware_tracker/tracking/track_report.h"
 
 namespace lrfnet::tracking {
@@ -103,6 +120,20 @@ struct MultiTrackerOptions {
   // Steps between consecutive scans beyond this (forwards or backwards) delete all tracks.
   double max_time_gap_s = 2.0;
   bool report_tentative = false;
+  // A coasting track is reported for this long after its last measurement, and kept (to be found
+  // again) until coast_timeout_s: a person hidden for longer may have stopped or turned, and a
+  // track reported where they are not is a false one.
+  double report_coasting_s = 0.5;
+  // Motion limit: the filter's speed is clamped to this. 2.5 m/s covers people walking fast; a site
+  // with forklifts or running people raises it (with accel_psd_m2ps3, initial_velocity_sigma_mps
+  // and max_gate_distance_m).
+  double max_speed_mps = 2.5;
+  // Static objects (step 5). Off: every confirmed track is reported, none is handed to the
+  // background (the previous tracker's behaviour).
+  bool static_objects = true;
+  double still_radius_m = 0.25;
+  double never_moved_to_background_s = 3.0;
+  double static_object_to_background_s = 2.0;
 };
 
 // nullopt when valid, else the reason, naming the field first (nested: "ekf.<field> ...").
@@ -124,11 +155,60 @@ struct MultiTrackerCounters {
   std::uint64_t measurements_over_capacity = 0;  // beyond kMaxSegments per scan, ignored
   std::uint64_t failed_updates = 0;              // filter refused an update (numerically)
   std::uint64_t time_steps_backwards = 0;
-  std::uint64_t time_resets = 0;  // |scan gap| > max_time_gap_s
+  std::uint64_t time_resets = 0;      // |scan gap| > max_time_gap_s
+  std::uint64_t refine_failures = 0;  // the refiner had no measurement, or it was far off
+  std::uint64_t speed_clamps = 0;     // updates whose speed exceeded max_speed_mps
+  std::uint64_t deleted_static = 0;   // handed to the background (step 5)
 
   std::uint64_t deleted() const {
-    return deleted_tentative + deleted_coast_timeout + deleted_covariance + deleted_time_reset;
+    return deleted_tentative + deleted_coast_timeout + deleted_covariance + deleted_time_reset +
+           deleted_static;
   }
+};
+
+// What a track has learned of its object (shape-fit measurements, see shape_fit.h and pipeline.h);
+// the refiner reads and updates it, the tracker keeps it and reports it.
+struct TrackShape {
+  ObjectShape shape = ObjectShape::kUnspecified;
+  ShapeModel model = ShapeModel::kSuperellipse;
+  Eigen::Vector2d size_m = Eigen::Vector2d::Zero();           // (a, b), see TrackReport
+  Eigen::Matrix2d size_cov_m2 = Eigen::Matrix2d::Identity();  // of size_m
+  double yaw_rad = 0.0;                                       // direction of axis a
+  double yaw_sigma_rad = kUnknownYawSigmaRad;
+  double exponent = 2.0;       // superellipse exponent (2: ellipse or cylinder)
+  common::UtcNs stamp_ns = 0;  // time of the state (the last refined measurement)
+  std::uint32_t updates = 0;
+  // Running evidence of what the object is: a flat outline (door leaf, board) or legs thinner than
+  // a person's make it not person-like.
+  double flatness_m2 = 0.0;
+  std::uint32_t evidence_updates = 0;  // updates that carried such evidence
+  bool person_like = true;
+  // What the measurements share and the filter cannot average away (the size state's error, the
+  // outline not being the model's): added to the reported position covariance, not to the
+  // filter's.
+  Eigen::Matrix2d centre_bias_cov_m2 = Eigen::Matrix2d::Zero();
+};
+
+// Replaces an associated measurement with one made with what its track knows (the pipeline's shape
+// fit). `source`: index of the measurement as given to Step; `at_ns`: its time. `predicted` and
+// `predicted_cov`: the track's (x, y, vx, vy) at that time and its covariance, nullptr for a new
+// track. `shape`: in, the track's state (default-constructed for a new track); out, updated.
+// `measurement`: in, the scan's measurement; out, the refined one. False: nothing usable (the
+// track is not updated, or not started).
+class MeasurementRefiner {
+ public:
+  virtual ~MeasurementRefiner() = default;
+  virtual bool Refine(std::size_t source, common::UtcNs at_ns, const Eigen::Vector4d* predicted,
+                      const Eigen::Matrix4d* predicted_cov, TrackShape& shape,
+                      Measurement& measurement) = 0;
+};
+
+// A live track's position predicted to some time (for the pipeline's pairing of legs).
+struct TrackPrediction {
+  std::uint32_t id = 0;
+  bool confirmed = false;
+  Eigen::Vector2d position_m = Eigen::Vector2d::Zero();
+  Eigen::Matrix2d covariance_m2 = Eigen::Matrix2d::Identity();
 };
 
 namespace internal {
@@ -146,6 +226,12 @@ struct Track {
   MeasurementKind kind = MeasurementKind::kCenterOfMass;
   double ellipse_yaw_rad = 0.0;
   std::uint32_t points = 0;  // of the measurement of the current scan, 0 if none
+  TrackShape shape;
+  // Static objects: where the track was when it last moved, and since when it stays near there.
+  Eigen::Vector2d anchor_m = Eigen::Vector2d::Zero();
+  common::UtcNs anchor_ns = 0;
+  bool moved = false;
+  std::size_t source = 0;  // measurement of the current scan (when updated)
 };
 // An accepted measurement of the current scan.
 struct Candidate {
@@ -173,6 +259,15 @@ class MultiTracker {
   // measurements.
   void Step(common::UtcNs scan_start_ns, std::span<const Measurement> measurements,
             std::span<const double> time_offsets_s, ScanTracks& out);
+  // As above, with `refiner` (not null) making every update's and every birth's measurement.
+  void Step(common::UtcNs scan_start_ns, std::span<const Measurement> measurements,
+            std::span<const double> time_offsets_s, MeasurementRefiner* refiner, ScanTracks& out);
+
+  // Every live track's position predicted to t_ns (without changing it), confirmed tracks first;
+  // returns how many were written (at most out.size()).
+  std::size_t Predict(common::UtcNs t_ns, std::span<TrackPrediction> out) const;
+  // Measurements (indices as given to Step) of the tracks the last Step handed to the background.
+  std::span<const std::size_t> absorbed_sources() const { return absorbed_.span(); }
 
   // Deletes all tracks (not counted as deletions); ids keep counting.
   void Clear();
@@ -192,9 +287,12 @@ class MultiTracker {
                           std::span<const double> time_offsets_s);
   void Gate(common::UtcNs scan_start_ns);
   void Associate(bool confirmed);
-  void UpdateAssigned(common::UtcNs scan_start_ns, std::span<const Measurement> measurements);
+  void UpdateAssigned(common::UtcNs scan_start_ns, std::span<const Measurement> measurements,
+                      MeasurementRefiner* refiner);
   void ManageLifecycle(common::UtcNs scan_start_ns);
-  void StartTracks(common::UtcNs scan_start_ns, std::span<const Measurement> measurements);
+  void StartTracks(common::UtcNs scan_start_ns, std::span<const Measurement> measurements,
+                   MeasurementRefiner* refiner);
+  void LimitSpeed(Track& t);
   void Report(common::UtcNs scan_start_ns, ScanTracks& out) const;
   bool InsideGate(const Eigen::Vector2d& predicted_m, const Eigen::Matrix2d& predicted_cov_m2,
                   const Candidate& c, double* d2, double* log_det) const;
@@ -215,6 +313,7 @@ class MultiTracker {
   std::size_t gated_rows_ = 0;                          // tracks when gated_ was filled
   std::array<int, kMaxTracks> track_to_candidate_{};    // -1: none
   std::array<int, kMaxSegments> candidate_to_track_{};  // -1: none
+  common::FixedVector<std::size_t, kMaxTracks> absorbed_;
 };
 
 }  // namespace lrfnet::tracking

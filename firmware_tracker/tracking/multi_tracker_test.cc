@@ -16,6 +16,14 @@ constexpr common::DurationNs kPeriodNs = 40 * common::kNsPerMs;  // 25 Hz
 
 common::UtcNs ScanNs(std::int64_t k) { return kT0 + k * kPeriodNs; }
 
+// The tracker without its static-object handling: these tests feed objects that stand still.
+MultiTrackerOptions Opts() {
+  MultiTrackerOptions o;
+  o.static_objects = false;
+  o.report_coasting_s = o.coast_timeout_s;  // every coasting scan reported
+  return o;
+}
+
 Measurement Meas(double x, double y, double sigma_m = 0.05) {
   Measurement m;
   m.position_m = {x, y};
@@ -48,7 +56,7 @@ TEST(MultiTrackerOptionsTest, DefaultsValidAndEachBadValueNamesItsField) {
     const char* field;
   };
   auto with = [](auto change) {
-    MultiTrackerOptions o;
+    MultiTrackerOptions o = Opts();
     change(o);
     return o;
   };
@@ -77,7 +85,7 @@ TEST(MultiTrackerOptionsTest, DefaultsValidAndEachBadValueNamesItsField) {
 }
 
 TEST(MultiTrackerTest, ConfirmsAfterThreeOfFourScansAndHidesTentativeTracksByDefault) {
-  MultiTracker tracker{MultiTrackerOptions{}};
+  MultiTracker tracker{Opts()};
   ScanTracks out;
   const std::vector<Measurement> here = {Meas(2.0, 1.0)};
   const std::vector<Measurement> none;
@@ -98,7 +106,7 @@ TEST(MultiTrackerTest, ConfirmsAfterThreeOfFourScansAndHidesTentativeTracksByDef
 }
 
 TEST(MultiTrackerTest, TentativeTrackIsDeletedAsSoonAsItCanNoLongerBeConfirmed) {
-  MultiTrackerOptions options;
+  MultiTrackerOptions options = Opts();
   options.report_tentative = true;
   MultiTracker tracker(options);
   ScanTracks out;
@@ -115,7 +123,7 @@ TEST(MultiTrackerTest, TentativeTrackIsDeletedAsSoonAsItCanNoLongerBeConfirmed) 
 }
 
 TEST(MultiTrackerTest, OneOfOneConfirmsAtBirth) {
-  MultiTrackerOptions options;
+  MultiTrackerOptions options = Opts();
   options.confirm_hits = 1;
   options.confirm_window = 1;
   MultiTracker tracker(options);
@@ -126,7 +134,7 @@ TEST(MultiTrackerTest, OneOfOneConfirmsAtBirth) {
 }
 
 TEST(MultiTrackerTest, MahalanobisAndDistanceGates) {
-  MultiTracker tracker{MultiTrackerOptions{}};
+  MultiTracker tracker{Opts()};
   ScanTracks out;
   Feed(tracker, 0, 20, {Meas(3.0, 0.0, 0.05)}, out);
   ASSERT_EQ(out.tracks.size(), 1u);
@@ -160,7 +168,7 @@ TEST(MultiTrackerTest, MahalanobisAndDistanceGates) {
 class AmbiguousAssociationTest : public ::testing::TestWithParam<Association> {};
 
 TEST_P(AmbiguousAssociationTest, GlobalAssignmentPairsBothGreedyClosestStealsOne) {
-  MultiTrackerOptions options;
+  MultiTrackerOptions options = Opts();
   options.association = GetParam();
   MultiTracker tracker(options);
   ScanTracks out;
@@ -194,7 +202,7 @@ INSTANTIATE_TEST_SUITE_P(Rules, AmbiguousAssociationTest,
                                            Association::kClosest));
 
 TEST(MultiTrackerTest, GlobalAssignmentHandlesMoreTracksThanMeasurementsAndViceVersa) {
-  MultiTracker tracker{MultiTrackerOptions{}};
+  MultiTracker tracker{Opts()};
   ScanTracks out;
   std::vector<Measurement> five;
   for (int i = 0; i < 5; ++i) five.push_back(Meas(1.0 + 2.0 * i, 0.0));
@@ -217,7 +225,7 @@ TEST(MultiTrackerTest, GlobalAssignmentHandlesMoreTracksThanMeasurementsAndViceV
 }
 
 TEST(MultiTrackerTest, ConfirmedTrackCoastsWithItsVelocityThenTimesOut) {
-  MultiTracker tracker{MultiTrackerOptions{}};
+  MultiTracker tracker{Opts()};
   ScanTracks out;
   std::int64_t k = 0;
   for (; k < 50; ++k) {  // 2 s at 1 m/s along x
@@ -245,7 +253,7 @@ TEST(MultiTrackerTest, ConfirmedTrackCoastsWithItsVelocityThenTimesOut) {
 }
 
 TEST(MultiTrackerTest, CoastingTrackIsDeletedWhenItsPositionSigmaGrowsTooLarge) {
-  MultiTrackerOptions options;
+  MultiTrackerOptions options = Opts();
   options.coast_timeout_s = 30.0;
   options.max_position_sigma_m = 0.3;
   MultiTracker tracker(options);
@@ -270,7 +278,7 @@ TEST(MultiTrackerTest, CoastingTrackIsDeletedWhenItsPositionSigmaGrowsTooLarge) 
 }
 
 TEST(MultiTrackerTest, IdsStartAtOneAndAreNeverReused) {
-  MultiTracker tracker{MultiTrackerOptions{}};
+  MultiTracker tracker{Opts()};
   ScanTracks out;
   std::set<std::uint32_t> seen;
   std::uint32_t previous = 0;
@@ -294,7 +302,7 @@ TEST(MultiTrackerTest, IdsStartAtOneAndAreNeverReused) {
 }
 
 TEST(MultiTrackerTest, BirthsBeyondCapacityAreDroppedAndCounted) {
-  MultiTrackerOptions options;
+  MultiTrackerOptions options = Opts();
   options.max_tracks = 3;
   options.report_tentative = true;
   MultiTracker tracker(options);
@@ -310,7 +318,7 @@ TEST(MultiTrackerTest, BirthsBeyondCapacityAreDroppedAndCounted) {
 }
 
 TEST(MultiTrackerTest, MeasurementsBeyondSegmentCapacityAreCountedNotRead) {
-  MultiTrackerOptions options;
+  MultiTrackerOptions options = Opts();
   options.max_tracks = kMaxTracks;
   MultiTracker tracker(options);
   ScanTracks out;
@@ -324,7 +332,7 @@ TEST(MultiTrackerTest, MeasurementsBeyondSegmentCapacityAreCountedNotRead) {
 }
 
 TEST(MultiTrackerTest, BadMeasurementsAreRejectedAndCounted) {
-  MultiTrackerOptions options;
+  MultiTrackerOptions options = Opts();
   options.report_tentative = true;
   MultiTracker tracker(options);
   ScanTracks out;
@@ -340,7 +348,7 @@ TEST(MultiTrackerTest, BadMeasurementsAreRejectedAndCounted) {
 }
 
 TEST(MultiTrackerTest, SplitSegmentsOfOnePersonDoNotStartExtraTracks) {
-  MultiTrackerOptions options;
+  MultiTrackerOptions options = Opts();
   options.report_tentative = true;
   MultiTracker tracker(options);
   ScanTracks out;
@@ -358,7 +366,7 @@ TEST(MultiTrackerTest, SplitSegmentsOfOnePersonDoNotStartExtraTracks) {
 }
 
 TEST(MultiTrackerTest, ReportCarriesKindOrientationAndPointsOfTheLastMeasurement) {
-  MultiTracker tracker{MultiTrackerOptions{}};
+  MultiTracker tracker{Opts()};
   ScanTracks out;
   Measurement e = Meas(3.0, 1.0, 0.02);
   e.kind = MeasurementKind::kEllipse;
@@ -383,7 +391,7 @@ TEST(MultiTrackerTest, MeasurementTimeOffsetsGiveUnbiasedPositionsAtScanStart) {
   auto truth_x = [&](double t) { return 1.0 + speed * t; };
   double error_with = 0.0, error_without = 0.0;
   for (const bool use_offsets : {true, false}) {
-    MultiTracker tracker{MultiTrackerOptions{}};
+    MultiTracker tracker{Opts()};
     ScanTracks out;
     for (std::int64_t k = 0; k < 100; ++k) {
       const double t = 0.04 * static_cast<double>(k);
@@ -403,7 +411,7 @@ TEST(MultiTrackerTest, MeasurementTimeOffsetsGiveUnbiasedPositionsAtScanStart) {
 }
 
 TEST(MultiTrackerTest, SmallStepBackwardsIsCountedAndDoesNotPredict) {
-  MultiTracker tracker{MultiTrackerOptions{}};
+  MultiTracker tracker{Opts()};
   ScanTracks out;
   for (std::int64_t k = 0; k < 30; ++k) {
     tracker.Step(ScanNs(k),
@@ -426,7 +434,7 @@ TEST(MultiTrackerTest, SmallStepBackwardsIsCountedAndDoesNotPredict) {
 }
 
 TEST(MultiTrackerTest, LargeTimeJumpsResetAllTracksAndAreCounted) {
-  MultiTracker tracker{MultiTrackerOptions{}};
+  MultiTracker tracker{Opts()};
   ScanTracks out;
   Feed(tracker, 0, 10, {Meas(1.0, 0.0), Meas(3.0, 0.0)}, out);
   ASSERT_EQ(out.tracks.size(), 2u);
@@ -446,6 +454,32 @@ TEST(MultiTrackerTest, LargeTimeJumpsResetAllTracksAndAreCounted) {
                out);
   EXPECT_EQ(tracker.counters().time_resets, 4u);
   EXPECT_EQ(tracker.track_count(), 1u);
+}
+
+
+TEST(MultiTrackerTest, CoastingTracksAreReportedOnlyBrieflyButKeptUntilTheTimeout) {
+  MultiTrackerOptions options = Opts();
+  options.report_coasting_s = 0.3;
+  MultiTracker tracker(options);
+  ScanTracks out;
+  const auto at = [](std::int64_t k) {
+    return std::vector<Measurement>{Meas(2.0 + 0.04 * static_cast<double>(k), 0.0)};
+  };
+  for (std::int64_t k = 0; k < 10; ++k) tracker.Step(ScanNs(k), at(k), out);
+  ASSERT_EQ(out.tracks.size(), 1u);
+  const std::uint32_t id = out.tracks[0].track_id;
+  // Hidden: reported while coasting for 0.3 s (7 scans at 25 Hz), then not, but still there.
+  int reported = 0;
+  for (std::int64_t k = 10; k < 30; ++k) {
+    tracker.Step(ScanNs(k), std::vector<Measurement>{}, out);
+    reported += out.tracks.empty() ? 0 : 1;
+  }
+  EXPECT_EQ(reported, 7);
+  EXPECT_EQ(tracker.track_count(), 1u);
+  // Found again within the coast timeout: the same id.
+  tracker.Step(ScanNs(30), at(30), out);
+  ASSERT_EQ(out.tracks.size(), 1u);
+  EXPECT_EQ(out.tracks[0].track_id, id);
 }
 
 }  // namespace

@@ -1,41 +1,635 @@
 #include "firmware_tracker/tracking/pipeline.h"
 
+#include <Eigen/Eigenvalues>
+#include <Eigen/LU>
 #include <algorithm>
 #include <cmath>
 #include <cstdlib>
+#include <utility>
 
 #include "common/geometry.h"
 
 namespace lrfnet::tracking {
-
-std::optional<std::string> Validate(const TrackerOptions& o) {
-  if (auto e = Validate(o.background)) return "background." + *e;
-  if (auto e = Validate(o.segmentation)) return "segmentation." + *e;
-  if (auto e = Validate(o.measurement)) return "measurement." + *e;
-  if (auto e = Validate(o.tracking)) return "tracking." + *e;
-  return std::nullopt;
-}
-
 namespace {
+
+bool Positive(double v) { return std::isfinite(v) && v > 0.0; }
+
+// Updates of the flatness evidence before a track may be judged not person-like.
+constexpr std::uint32_t kMinFlatnessUpdates = 5;
+// The running mean of the flatness becomes an exponential one after this many updates.
+constexpr double kFlatnessMemory = 20.0;
+// Sizes are learned only from fits whose yaw prior is at least this certain (a walking person).
+constexpr double kMaxLearningYawSigmaRad = 0.6;
+// A track is a cylinder when its learned semi-axes differ by less than this share of a, after this
+// many updates.
+constexpr double kCylinderAxisShare = 0.1;
+constexpr std::uint32_t kMinCylinderUpdates = 25;
+// Pairing legs around a track: a single leg costs this much more than a pair.
+constexpr double kSingleLegPenaltyM = 0.25;
+// Sigma of a box's size when a track becomes one.
+constexpr double kBoxSizeSigmaM = 0.2;
+// Share of a fit's size information the track's state takes (see LearnSize).
+constexpr double kSizeLearningShare = 0.25;
+
 const TrackerOptions& Checked(const TrackerOptions& o) {
   if (Validate(o)) std::abort();
   return o;
 }
+
+TrackerOptions Resolved(TrackerOptions o) {
+  o.measurement.fit_ellipse = o.method == MeasurementMethod::kEllipse;
+  return o;
+}
+
+double Range(const Eigen::Vector2d& p) { return p.norm(); }
+
 }  // namespace
 
+std::optional<std::string> Validate(const ShapeOptions& o) {
+  if (o.mount != Mount::kTorso && o.mount != Mount::kLegs) return "mount must be torso or legs";
+  if (auto e = Validate(o.fit)) return *e;
+  if (!Positive(o.person_minor_m) || !Positive(o.person_major_m) ||
+      o.person_minor_m > o.person_major_m) {
+    return "need 0 < person_minor_m <= person_major_m";
+  }
+  if (!Positive(o.person_size_sigma_m)) return "person_size_sigma_m must be > 0";
+  if (!(std::isfinite(o.person_exponent) && o.person_exponent >= 2.0 &&
+        o.person_exponent <= 20.0)) {
+    return "person_exponent must be in [2, 20]";
+  }
+  if (!Positive(o.box_min_half_length_m) || o.box_min_half_length_m <= o.person_major_m) {
+    return "box_min_half_length_m must be > person_major_m";
+  }
+  if (!Positive(o.leg_radius_m) || !Positive(o.leg_radius_sigma_m)) {
+    return "leg_radius_m and leg_radius_sigma_m must be > 0";
+  }
+  if (!Positive(o.leg_pairing_distance_m) || o.leg_pairing_distance_m <= 2.0 * o.leg_radius_m) {
+    return "leg_pairing_distance_m must be > 2 leg_radius_m";
+  }
+  if (!(std::isfinite(o.person_min_leg_radius_m) && o.person_min_leg_radius_m >= 0.0)) {
+    return "person_min_leg_radius_m must be >= 0";
+  }
+  if (!(std::isfinite(o.hip_half_width_m) && o.hip_half_width_m >= 0.0)) {
+    return "hip_half_width_m must be >= 0";
+  }
+  if (!Positive(o.gait_sigma_m)) return "gait_sigma_m must be > 0";
+  if (!Positive(o.walking_speed_mps)) return "walking_speed_mps must be > 0";
+  if (!Positive(o.walking_yaw_sigma_rad)) return "walking_yaw_sigma_rad must be > 0";
+  if (!(std::isfinite(o.yaw_drift_rad_per_s) && o.yaw_drift_rad_per_s >= 0.0)) {
+    return "yaw_drift_rad_per_s must be >= 0";
+  }
+  if (!(std::isfinite(o.size_drift_m_per_sqrt_s) && o.size_drift_m_per_sqrt_s >= 0.0)) {
+    return "size_drift_m_per_sqrt_s must be >= 0";
+  }
+  if (!Positive(o.centre_model_sigma_m)) return "centre_model_sigma_m must be > 0";
+  if (!(std::isfinite(o.size_floor_sigma_m) && o.size_floor_sigma_m >= 0.0)) {
+    return "size_floor_sigma_m must be >= 0";
+  }
+  if (!(std::isfinite(o.centre_bias_sigma_m) && o.centre_bias_sigma_m >= 0.0)) {
+    return "centre_bias_sigma_m must be >= 0";
+  }
+  if (!(std::isfinite(o.flat_rms_m) && o.flat_rms_m >= 0.0)) return "flat_rms_m must be >= 0";
+  if (!(std::isfinite(o.flat_min_extent_m) && o.flat_min_extent_m >= 0.0)) {
+    return "flat_min_extent_m must be >= 0";
+  }
+  if (!Positive(o.association_sigma_m)) return "association_sigma_m must be > 0";
+  return std::nullopt;
+}
+
+std::optional<std::string> Validate(const TrackerOptions& o) {
+  if (auto e = Validate(o.background)) return "background." + *e;
+  if (auto e = Validate(o.segmentation)) return "segmentation." + *e;
+  if (o.method != MeasurementMethod::kCenterOfMass && o.method != MeasurementMethod::kEllipse &&
+      o.method != MeasurementMethod::kShapeFit) {
+    return "measurement.kind must be center_of_mass, ellipse or shape_fit";
+  }
+  if (auto e = Validate(o.measurement)) return "measurement." + *e;
+  if (auto e = Validate(o.shape)) return "shape." + *e;
+  if (auto e = Validate(o.tracking)) return "tracking." + *e;
+  return std::nullopt;
+}
+
+MeasurementKind KindOf(MeasurementMethod method) {
+  switch (method) {
+    case MeasurementMethod::kCenterOfMass:
+      return MeasurementKind::kCenterOfMass;
+    case MeasurementMethod::kEllipse:
+      return MeasurementKind::kEllipse;
+    case MeasurementMethod::kShapeFit:
+      return MeasurementKind::kShapeFit;
+  }
+  return MeasurementKind::kShapeFit;
+}
+
+// The shape fit of an observation with what its track knows (MeasurementRefiner).
+class TrackingPipeline::Refiner final : public MeasurementRefiner {
+ public:
+  explicit Refiner(const TrackingPipeline& pipeline) : p_(pipeline) {}
+
+  bool Refine(std::size_t source, common::UtcNs at_ns, const Eigen::Vector4d* predicted,
+              const Eigen::Matrix4d* predicted_cov, TrackShape& shape,
+              Measurement& measurement) override {
+    if (source >= p_.observations_.size()) return false;
+    const Observation& ob = p_.observations_[source];
+    const ShapeOptions& o = p_.options_.shape;
+    if (shape.shape == ObjectShape::kUnspecified) {
+      Init(ob, at_ns, shape);
+    } else {
+      // What the state forgets between scans.
+      const double dt_s = std::max(0.0, common::NsToSeconds(at_ns - shape.stamp_ns));
+      shape.size_cov_m2 += o.size_drift_m_per_sqrt_s * o.size_drift_m_per_sqrt_s * dt_s *
+                           Eigen::Matrix2d::Identity();
+      const double drift = o.yaw_drift_rad_per_s * dt_s;
+      shape.yaw_sigma_rad =
+          std::min(kUnknownYawSigmaRad,
+                   std::sqrt(shape.yaw_sigma_rad * shape.yaw_sigma_rad + drift * drift));
+    }
+    // An observation of the other kind than the track's (legs of a cart's track, a cart's outline
+    // for a person's legs): not this track's measurement.
+    if (ob.legs != (shape.model == ShapeModel::kCircle)) return false;
+    const bool ok = ob.legs ? RefineLegs(ob, predicted, shape, measurement)
+                            : RefineBody(ob, predicted, predicted_cov, shape, measurement);
+    if (!ok) return false;
+    measurement.covariance_m2 +=
+        o.centre_model_sigma_m * o.centre_model_sigma_m * Eigen::Matrix2d::Identity();
+    measurement.kind = MeasurementKind::kShapeFit;
+    // What successive measurements share goes into the report: the size state's error (never
+    // taken as smaller than the floor) and the outline's departure from the model.
+    const double size_var = std::max({shape.size_cov_m2(0, 0), shape.size_cov_m2(1, 1),
+                                      o.size_floor_sigma_m * o.size_floor_sigma_m});
+    shape.centre_bias_cov_m2 =
+        (o.centre_bias_sigma_m * o.centre_bias_sigma_m + size_var) * Eigen::Matrix2d::Identity();
+    shape.stamp_ns = at_ns;
+    ++shape.updates;
+    return true;
+  }
+
+  std::uint64_t fits = 0;
+  std::uint64_t failed = 0;
+
+ private:
+  void Init(const Observation& ob, common::UtcNs at_ns, TrackShape& shape) const {
+    const ShapeOptions& o = p_.options_.shape;
+    shape = TrackShape{};
+    if (ob.legs) {
+      shape.shape = ObjectShape::kLegs;
+      shape.model = ShapeModel::kCircle;
+      shape.size_m = Eigen::Vector2d(o.leg_radius_m, o.leg_radius_m);
+      shape.size_cov_m2 = o.leg_radius_sigma_m * o.leg_radius_sigma_m * Eigen::Matrix2d::Identity();
+    } else {
+      shape.shape = ObjectShape::kTorso;
+      shape.model = ShapeModel::kSuperellipse;
+      shape.exponent = o.person_exponent;
+      shape.size_m = Eigen::Vector2d(o.person_major_m, o.person_minor_m);
+      shape.size_cov_m2 =
+          o.person_size_sigma_m * o.person_size_sigma_m * Eigen::Matrix2d::Identity();
+    }
+    shape.stamp_ns = at_ns;
+  }
+
+  std::span<const Eigen::Vector2d> Points(const ObservationPart& part) const {
+    return p_.segments_.points_m.span().subspan(part.first_point, part.point_count);
+  }
+
+  bool RefineBody(const Observation& ob, const Eigen::Vector4d* predicted,
+                  const Eigen::Matrix4d* predicted_cov, TrackShape& shape, Measurement& m) {
+    const ShapeOptions& o = p_.options_.shape;
+    if (shape.model == ShapeModel::kSuperellipse && shape.size_m.x() > o.box_min_half_length_m) {
+      // A cart: from now on its outline is a rectangle, whose depth the person prior does not know.
+      shape.model = ShapeModel::kBox;
+      shape.size_cov_m2(0, 0) = std::max(shape.size_cov_m2(0, 0), kBoxSizeSigmaM * kBoxSizeSigmaM);
+      shape.size_cov_m2(1, 1) = std::max(shape.size_cov_m2(1, 1), kBoxSizeSigmaM * kBoxSizeSigmaM);
+    }
+    if (shape.model == ShapeModel::kSuperellipse && shape.updates >= kMinCylinderUpdates &&
+        shape.size_m.x() - shape.size_m.y() < kCylinderAxisShare * shape.size_m.x()) {
+      shape.exponent = 2.0;  // round: a cylinder
+    }
+    ShapePrior prior;
+    prior.model = shape.model;
+    prior.exponent = shape.exponent;
+    prior.size_m = shape.size_m;
+    prior.size_cov_m2 = shape.size_cov_m2;
+    prior.yaw_rad = shape.yaw_rad;
+    prior.yaw_sigma_rad = shape.yaw_sigma_rad;
+    if (predicted != nullptr) {
+      prior.centre_guess_m = predicted->head<2>();
+      const Eigen::Vector2d v = predicted->tail<2>();
+      const double speed = v.norm();
+      if (speed > o.walking_speed_mps) {
+        // Facing the walking direction: shoulders across it, a cart's length along it.
+        const double heading = std::atan2(v.y(), v.x());
+        prior.yaw_rad = shape.model == ShapeModel::kBox ? heading : heading + common::kPi / 2;
+        double direction_sigma = 0.0;
+        if (predicted_cov != nullptr) {
+          const Eigen::Matrix2d vc = predicted_cov->bottomRightCorner<2, 2>();
+          direction_sigma = std::sqrt(std::max(0.0, 0.5 * vc.trace())) / speed;
+        }
+        prior.yaw_sigma_rad = std::hypot(o.walking_yaw_sigma_rad, direction_sigma);
+      }
+    }
+    const ObservationPart& part = ob.parts[0];
+    const ShapeFitResult fit = FitShape(Points(part), part.silhouette, prior, o.fit);
+    if (!fit.ok) {
+      ++failed;
+      return false;
+    }
+    ++fits;
+    m.position_m = fit.centre_m;
+    m.covariance_m2 = fit.centre_cov_m2;
+    m.orientation_rad = fit.yaw_rad;
+    m.rms_residual_m = fit.rms_m;
+    m.point_count = part.point_count;
+    Eigen::Vector2d size = fit.size_m;
+    Eigen::Matrix2d size_cov = fit.size_cov_m2;
+    double yaw = fit.yaw_rad;
+    if (shape.model == ShapeModel::kSuperellipse && size.x() < size.y()) {
+      // The same ellipse with a the larger semi-axis.
+      std::swap(size.x(), size.y());
+      std::swap(size_cov(0, 0), size_cov(1, 1));
+      yaw += common::kPi / 2;
+    }
+    // Size learning. Only where the orientation is known: without it, what the outline shows cannot
+    // be told apart into size and orientation. And only a share kSizeLearningShare of what the scan
+    // says: model errors of successive scans are alike, not independent.
+    if (prior.yaw_sigma_rad < kMaxLearningYawSigmaRad || shape.model == ShapeModel::kBox) {
+      LearnSize(size, size_cov, shape);
+    }
+    shape.yaw_rad = std::remainder(yaw, common::kPi);
+    shape.yaw_sigma_rad = fit.yaw_sigma_rad;
+    shape.shape = shape.model == ShapeModel::kBox ? ObjectShape::kBox
+                  : shape.exponent == 2.0         ? ObjectShape::kCylinder
+                                                  : ObjectShape::kTorso;
+    // Flatness: the points' distance to their principal line beyond the range noise.
+    if (fit.extent_m >= o.flat_min_extent_m) {
+      const double range = fit.centre_m.norm();
+      const double noise = o.fit.point_sigma_m + o.fit.point_sigma_per_m * range;
+      const double v = fit.line_rms_m * fit.line_rms_m - noise * noise;
+      shape.flatness_m2 += (v - shape.flatness_m2) /
+                           std::min(kFlatnessMemory, static_cast<double>(++flat_count(shape)));
+    }
+    shape.person_like =
+        flat_count(shape) < kMinFlatnessUpdates || shape.flatness_m2 > o.flat_rms_m * o.flat_rms_m;
+    return true;
+  }
+
+  bool RefineLegs(const Observation& ob, const Eigen::Vector4d* predicted, TrackShape& shape,
+                  Measurement& m) {
+    const ShapeOptions& o = p_.options_.shape;
+    std::array<ShapeFitResult, 2> legs;
+    std::size_t points = 0;
+    ShapePrior prior;
+    prior.model = ShapeModel::kCircle;
+    prior.size_m = shape.size_m;
+    prior.size_cov_m2 = shape.size_cov_m2;
+    (void)predicted;
+    for (std::size_t k = 0; k < ob.part_count; ++k) {
+      legs[k] = FitShape(Points(ob.parts[k]), ob.parts[k].silhouette, prior, o.fit);
+      points += ob.parts[k].point_count;
+      if (!legs[k].ok) {
+        ++failed;
+        return false;
+      }
+      ++fits;
+    }
+    m.point_count = points;
+    m.orientation_rad = 0.0;
+    const double prior_info = 1.0 / std::max(shape.size_cov_m2(0, 0), 1e-12);
+    if (ob.part_count == 2) {
+      m.position_m = 0.5 * (legs[0].centre_m + legs[1].centre_m);
+      m.covariance_m2 = 0.25 * (legs[0].centre_cov_m2 + legs[1].centre_cov_m2) +
+                        o.gait_sigma_m * o.gait_sigma_m * Eigen::Matrix2d::Identity();
+      m.rms_residual_m = std::max(legs[0].rms_m, legs[1].rms_m);
+      // Both legs measured the same radius, each with the track's prior: count the prior once.
+      const double i0 = 1.0 / std::max(legs[0].size_cov_m2(0, 0), 1e-12);
+      const double i1 = 1.0 / std::max(legs[1].size_cov_m2(0, 0), 1e-12);
+      const double info = std::max(prior_info, i0 + i1 - prior_info);
+      const double radius =
+          (i0 * legs[0].size_m.x() + i1 * legs[1].size_m.x() - prior_info * shape.size_m.x()) /
+          std::max(1e-12, i0 + i1 - prior_info);
+      shape.size_m = Eigen::Vector2d::Constant(std::isfinite(radius) ? radius : shape.size_m.x());
+      shape.size_cov_m2 = Eigen::Matrix2d::Constant(1.0 / info);
+    } else {
+      // One leg: the body centre lies beside it (the hip) and ahead or behind (the stride).
+      m.position_m = legs[0].centre_m;
+      const double extent2 =
+          o.hip_half_width_m * o.hip_half_width_m + 4.0 * o.gait_sigma_m * o.gait_sigma_m;
+      m.covariance_m2 = legs[0].centre_cov_m2 + extent2 * Eigen::Matrix2d::Identity();
+      m.rms_residual_m = legs[0].rms_m;
+      shape.size_m = legs[0].size_m;
+      shape.size_cov_m2 = legs[0].size_cov_m2;
+    }
+    shape.shape = ObjectShape::kLegs;
+    ++flat_count(shape);
+    shape.person_like =
+        flat_count(shape) < kMinFlatnessUpdates || shape.size_m.x() >= o.person_min_leg_radius_m;
+    return true;
+  }
+
+  // The track's size state after a fit whose posterior (prior: the state) is (size, size_cov):
+  // the fit's information beyond the prior, scaled by kSizeLearningShare, added to the state.
+  static void LearnSize(const Eigen::Vector2d& size, const Eigen::Matrix2d& size_cov,
+                        TrackShape& shape) {
+    Eigen::Matrix2d prior_info, post_info;
+    bool ok_prior = false, ok_post = false;
+    shape.size_cov_m2.computeInverseWithCheck(prior_info, ok_prior, 1e-18);
+    size_cov.computeInverseWithCheck(post_info, ok_post, 1e-18);
+    if (!ok_prior || !ok_post) return;
+    const Eigen::Matrix2d gained = kSizeLearningShare * (post_info - prior_info);
+    const Eigen::Matrix2d info = prior_info + gained;
+    Eigen::Matrix2d cov;
+    bool ok = false;
+    info.computeInverseWithCheck(cov, ok, 1e-18);
+    if (!ok || !cov.allFinite()) return;
+    const Eigen::Vector2d mean =
+        cov * (prior_info * shape.size_m +
+               kSizeLearningShare * (post_info * size - prior_info * shape.size_m));
+    if (!mean.allFinite() || !(mean.minCoeff() > 0.0)) return;
+    shape.size_m = mean;
+    shape.size_cov_m2 = 0.5 * (cov + cov.transpose());
+  }
+
+  // Updates that carried flatness evidence (kept in the state's spare counter: updates counts all).
+  static std::uint32_t& flat_count(TrackShape& shape) { return shape.evidence_updates; }
+
+  const TrackingPipeline& p_;
+};
+
 TrackingPipeline::TrackingPipeline(const TrackerOptions& options)
-    : options_(Checked(options)), background_(options.background), tracker_(options.tracking) {}
+    : options_(Resolved(Checked(options))),
+      background_(options.background),
+      tracker_(options.tracking),
+      refiner_(std::make_unique<Refiner>(*this)) {}
+
+TrackingPipeline::~TrackingPipeline() = default;
+
+ObservationPart TrackingPipeline::MakePart(const ScanView& scan, const Segment& segment,
+                                           std::size_t first, std::size_t count) const {
+  ObservationPart part;
+  part.first_point = segment.first_point + first;
+  part.point_count = count;
+  const auto points = segments_.points_m.span().subspan(part.first_point, count);
+  // Beams of the part's first and last point (a split part does not start at the segment's).
+  const auto beam_of = [&](const Eigen::Vector2d& p) {
+    const double k = (std::atan2(p.y(), p.x()) - scan.first_angle_rad) / scan.angle_step_rad;
+    return static_cast<std::size_t>(
+        std::clamp(std::llround(k), 0LL, static_cast<long long>(scan.range_m.size()) - 1));
+  };
+  part.begin_beam = first == 0 ? segment.begin_beam : beam_of(points.front());
+  part.end_beam =
+      first + count == segment.point_count ? segment.end_beam : beam_of(points.back()) + 1;
+  Silhouette& s = part.silhouette;
+  // The outline's tangent lies between the last beam that returned it and the first that did not:
+  // half a step outwards on average with pencil beams; a beam wider than the step returns the
+  // object while its centre is still near the tangent (the beam's energy decides), so the offset
+  // shrinks with the divergence, and the width of the uncertain band grows with it.
+  const double step = std::abs(scan.angle_step_rad);
+  const double divergence = options_.shape.beam_divergence_rad;
+  const double outwards = 0.5 * std::max(0.0, step - divergence);
+  const double direction = scan.angle_step_rad < 0 ? -1.0 : 1.0;
+  s.step_rad = step;
+  s.first_edge_rad = scan.BeamAngleRad(part.begin_beam) - direction * outwards;
+  s.last_edge_rad = scan.BeamAngleRad(part.end_beam - 1) + direction * outwards;
+  // An edge is the outline's when the beam beyond it saw nothing nearer (no echo, the background,
+  // something behind): a nearer return is an occluder, and the field of view's end hides the rest.
+  const auto clear = [&](std::size_t beam, const Eigen::Vector2d& edge_point) {
+    const float r = scan.range_m[beam];
+    return !(std::isfinite(r) && r > 0.0f) || static_cast<double>(r) > Range(edge_point) - 0.1;
+  };
+  s.first_valid = part.begin_beam > 0 && clear(part.begin_beam - 1, points.front());
+  s.last_valid = part.end_beam < scan.range_m.size() && clear(part.end_beam, points.back());
+  return part;
+}
+
+void TrackingPipeline::AddObservation(const ScanView& scan, const Observation& observation) {
+  if (observations_.full()) {
+    ++counters_.dropped_segments;
+    return;
+  }
+  const ShapeOptions& o = options_.shape;
+  // First position for association: behind the nearest point of each part by the prior's extent;
+  // along the ray as uncertain as the object is large (a cart's depth is not the prior's).
+  Eigen::Vector2d centre = Eigen::Vector2d::Zero();
+  Eigen::Vector2d ray_sum = Eigen::Vector2d::Zero();
+  double extent = 0.0;
+  std::size_t points = 0;
+  for (std::size_t k = 0; k < observation.part_count; ++k) {
+    const ObservationPart& part = observation.parts[k];
+    const auto pts = segments_.points_m.span().subspan(part.first_point, part.point_count);
+    const double mid = 0.5 * (std::atan2(pts.front().y(), pts.front().x()) +
+                              std::atan2(pts.back().y(), pts.back().x()));
+    const Eigen::Vector2d ray(std::cos(mid), std::sin(mid));
+    double nearest = Range(pts.front());
+    for (const auto& p : pts) nearest = std::min(nearest, p.dot(ray));
+    const double width = (pts.back() - pts.front()).norm();
+    extent = std::max(extent, width);
+    const double depth = observation.legs
+                             ? o.leg_radius_m
+                             : std::max(0.5 * (o.person_major_m + o.person_minor_m), 0.5 * width);
+    centre += (nearest + depth) * ray;
+    ray_sum += ray;
+    points += part.point_count;
+  }
+  centre /= static_cast<double>(observation.part_count);
+  Measurement m;
+  m.kind = MeasurementKind::kShapeFit;
+  m.position_m = centre;
+  double sigma = o.association_sigma_m;
+  if (observation.legs && observation.part_count == 1)
+    sigma = std::hypot(sigma, o.hip_half_width_m);
+  const double along = std::hypot(sigma, observation.legs ? 0.0 : 0.5 * extent);
+  const Eigen::Vector2d u = ray_sum.normalized();
+  m.covariance_m2 = sigma * sigma * Eigen::Matrix2d::Identity() +
+                    (along * along - sigma * sigma) * u * u.transpose();
+  m.point_count = points;
+  const std::size_t begin = observation.parts[0].begin_beam;
+  const std::size_t end = observation.parts[observation.part_count - 1].end_beam;
+  const double beam_s = std::abs(scan.angle_step_rad) / (2.0 * common::kPi) * scan.scan_period_s;
+  const double middle_beam =
+      0.5 * static_cast<double>(std::min(begin, end) + std::max(begin, end) - 1);
+  const double offset_s =
+      options_.correct_beam_time ? std::clamp(middle_beam * beam_s, 0.0, scan.scan_period_s) : 0.0;
+  (void)observations_.push_back(observation);
+  (void)measurements_.push_back(m);
+  (void)offsets_s_.push_back(offset_s);
+}
+
+void TrackingPipeline::BuildObservations(const ScanView& scan) {
+  if (options_.shape.mount == Mount::kTorso) {
+    for (const Segment& s : segments_.segments) {
+      Observation ob;
+      ob.parts[0] = MakePart(scan, s, 0, s.point_count);
+      ob.part_count = 1;
+      AddObservation(scan, ob);
+    }
+    return;
+  }
+  // Legs: every segment narrow enough for a pair of legs holds one or two legs.
+  const ShapeOptions& o = options_.shape;
+  const double pair_width = 2.0 * (o.hip_half_width_m + o.leg_radius_m) + 0.1;
+  const double leg_width = 2.0 * o.leg_radius_m + 0.08;
+  leg_parts_.clear();
+  for (const Segment& s : segments_.segments) {
+    const auto pts = segments_.Points(s);
+    if (s.width_m > pair_width) {
+      Observation ob;
+      ob.parts[0] = MakePart(scan, s, 0, s.point_count);
+      ob.part_count = 1;
+      AddObservation(scan, ob);
+      continue;
+    }
+    std::size_t split = 0;
+    if (s.width_m > leg_width && s.point_count >= 4) {
+      // Two legs that touch: split at the widest gap between consecutive points.
+      double widest = 0.0;
+      for (std::size_t i = 1; i < pts.size(); ++i) {
+        const double gap = (pts[i] - pts[i - 1]).norm();
+        if (i >= 2 && i + 2 <= pts.size() && gap > widest) {
+          widest = gap;
+          split = i;
+        }
+      }
+    }
+    if (split == 0) {
+      (void)leg_parts_.push_back(MakePart(scan, s, 0, s.point_count));
+    } else {
+      (void)leg_parts_.push_back(MakePart(scan, s, 0, split));
+      (void)leg_parts_.push_back(MakePart(scan, s, split, s.point_count - split));
+    }
+  }
+  PairLegs(scan);
+}
+
+void TrackingPipeline::PairLegs(const ScanView& scan) {
+  const ShapeOptions& o = options_.shape;
+  const std::size_t n = leg_parts_.size();
+  for (std::size_t i = 0; i < n; ++i) {
+    const ObservationPart& part = leg_parts_[i];
+    const auto pts = segments_.points_m.span().subspan(part.first_point, part.point_count);
+    Eigen::Vector2d mean = Eigen::Vector2d::Zero();
+    for (const auto& p : pts) mean += p;
+    mean /= static_cast<double>(pts.size());
+    leg_centres_m_[i] = mean + o.leg_radius_m * mean.normalized();
+    leg_used_[i] = false;
+  }
+  const auto emit = [&](std::size_t a, std::size_t b) {
+    Observation ob;
+    ob.legs = true;
+    ob.parts[0] = leg_parts_[a];
+    ob.part_count = 1;
+    leg_used_[a] = true;
+    if (b != a) {
+      // In scan order, so the observation's beams run from its first part to its last.
+      if (leg_parts_[b].begin_beam < leg_parts_[a].begin_beam) {
+        ob.parts[1] = ob.parts[0];
+        ob.parts[0] = leg_parts_[b];
+      } else {
+        ob.parts[1] = leg_parts_[b];
+      }
+      ob.part_count = 2;
+      leg_used_[b] = true;
+      ++counters_.leg_pairs;
+    } else {
+      ++counters_.single_legs;
+    }
+    AddObservation(scan, ob);
+  };
+  // Around the live tracks, confirmed first: the pair (or single leg) nearest to the prediction.
+  const double reach = o.leg_pairing_distance_m;
+  const std::size_t tracks = tracker_.Predict(scan.stamp_ns, predictions_);
+  for (std::size_t t = 0; t < tracks; ++t) {
+    const Eigen::Vector2d& c = predictions_[t].position_m;
+    double best = 0.6 * reach;
+    std::size_t best_a = n, best_b = n;
+    for (std::size_t a = 0; a < n; ++a) {
+      if (leg_used_[a] || (leg_centres_m_[a] - c).norm() > reach) continue;
+      // A single leg counts as lying its hip offset from the centre, and as worse than a pair that
+      // fits: the other leg is usually there.
+      const double single =
+          std::max(0.0, (leg_centres_m_[a] - c).norm() - o.hip_half_width_m) + kSingleLegPenaltyM;
+      if (single < best) {
+        best = single;
+        best_a = best_b = a;
+      }
+      for (std::size_t b = a + 1; b < n; ++b) {
+        if (leg_used_[b] || (leg_centres_m_[a] - leg_centres_m_[b]).norm() > reach) continue;
+        const double d = (0.5 * (leg_centres_m_[a] + leg_centres_m_[b]) - c).norm();
+        if (d < best) {
+          best = d;
+          best_a = a;
+          best_b = b;
+        }
+      }
+    }
+    if (best_a < n) emit(best_a, best_b);
+  }
+  // The rest: nearest neighbours within the pairing distance, then single legs.
+  for (;;) {
+    double best = reach;
+    std::size_t best_a = n, best_b = n;
+    for (std::size_t a = 0; a < n; ++a) {
+      if (leg_used_[a]) continue;
+      for (std::size_t b = a + 1; b < n; ++b) {
+        if (leg_used_[b]) continue;
+        const double d = (leg_centres_m_[a] - leg_centres_m_[b]).norm();
+        if (d <= best) {
+          best = d;
+          best_a = a;
+          best_b = b;
+        }
+      }
+    }
+    if (best_a == n) break;
+    emit(best_a, best_b);
+  }
+  for (std::size_t a = 0; a < n; ++a) {
+    if (!leg_used_[a]) emit(a, a);
+  }
+}
+
+void TrackingPipeline::MeasureLegacy(const ScanView& scan) {
+  // The mirror turns 2 pi per scan period; beam 0 is measured at the scan start.
+  const double beam_s = std::abs(scan.angle_step_rad) / (2.0 * common::kPi) * scan.scan_period_s;
+  for (const Segment& s : segments_.segments) {
+    const Measurement m = MeasureSegment(segments_.Points(s), options_.measurement);
+    ++(m.kind == MeasurementKind::kEllipse ? counters_.ellipse_measurements
+                                           : counters_.com_measurements);
+    const double middle_beam = 0.5 * static_cast<double>(s.begin_beam + s.end_beam - 1);
+    const double offset_s = options_.correct_beam_time
+                                ? std::clamp(middle_beam * beam_s, 0.0, scan.scan_period_s)
+                                : 0.0;
+    Observation ob;
+    ob.parts[0] = MakePart(scan, s, 0, s.point_count);
+    ob.part_count = 1;
+    // All have kMaxSegments slots, as many as there are segments.
+    (void)observations_.push_back(ob);
+    (void)measurements_.push_back(m);
+    (void)offsets_s_.push_back(offset_s);
+  }
+}
+
+void TrackingPipeline::AbsorbStatic(const ScanView& scan) {
+  for (const std::size_t source : tracker_.absorbed_sources()) {
+    if (source >= observations_.size()) continue;
+    const Observation& ob = observations_[source];
+    for (std::size_t k = 0; k < ob.part_count; ++k) {
+      background_.Absorb(scan, ob.parts[k].begin_beam, ob.parts[k].end_beam);
+    }
+    ++counters_.absorbed_objects;
+  }
+}
 
 const ScanTracks& TrackingPipeline::Process(const ScanView& scan, std::uint32_t scan_counter) {
   ++counters_.scans;
   segments_.segments.clear();
   segments_.points_m.clear();
   segments_.dropped_segments = 0;
+  observations_.clear();
   measurements_.clear();
   offsets_s_.clear();
 
   const BackgroundResult bg = background_.Update(scan);
   last_scan_error_ = bg.scan_error;
+  const bool shape_fit = options_.method == MeasurementMethod::kShapeFit;
   if (bg.scan_error != ScanError::kNone) {
     ++counters_.rejected_scans;
   } else if (!bg.learned) {
@@ -44,23 +638,19 @@ const ScanTracks& TrackingPipeline::Process(const ScanView& scan, std::uint32_t 
     SegmentScan(scan, background_.foreground(), options_.segmentation, segments_);
     counters_.segments += segments_.segments.size();
     counters_.dropped_segments += segments_.dropped_segments;
-    // The mirror turns 2 pi per scan period; beam 0 is measured at the scan start.
-    const double beam_s = std::abs(scan.angle_step_rad) / (2.0 * common::kPi) * scan.scan_period_s;
-    for (const Segment& s : segments_.segments) {
-      const Measurement m = MeasureSegment(segments_.Points(s), options_.measurement);
-      ++(m.kind == MeasurementKind::kEllipse ? counters_.ellipse_measurements
-                                             : counters_.com_measurements);
-      const double middle_beam = 0.5 * static_cast<double>(s.begin_beam + s.end_beam - 1);
-      const double offset_s = options_.correct_beam_time
-                                  ? std::clamp(middle_beam * beam_s, 0.0, scan.scan_period_s)
-                                  : 0.0;
-      // Both have kMaxSegments slots, as many as there are segments.
-      (void)measurements_.push_back(m);
-      (void)offsets_s_.push_back(offset_s);
+    if (shape_fit) {
+      BuildObservations(scan);
+    } else {
+      MeasureLegacy(scan);
     }
   }
 
-  tracker_.Step(scan.stamp_ns, measurements_.span(), offsets_s_.span(), tracks_);
+  const std::uint64_t fits_before = refiner_->fits, failed_before = refiner_->failed;
+  tracker_.Step(scan.stamp_ns, measurements_.span(), offsets_s_.span(),
+                shape_fit ? refiner_.get() : nullptr, tracks_);
+  counters_.shape_fits += refiner_->fits - fits_before;
+  counters_.failed_shape_fits += refiner_->failed - failed_before;
+  if (bg.scan_error == ScanError::kNone && bg.learned) AbsorbStatic(scan);
   tracks_.scan_counter = scan_counter;
   tracks_.scan_period_s = bg.scan_error == ScanError::kNone ? scan.scan_period_s : 0.0;
   return tracks_;

@@ -1,28 +1,57 @@
 #pragma once
-// The per-scan tracking pipeline of one sensor (Quenzel et al., section III-B): background model ->
-// segmentation of the foreground -> one measurement (CoM or fixed-axes ellipse) per segment ->
-// multi-target tracker -> ScanTracks.
+// The per-scan tracking pipeline of one sensor (Quenzel et al., section III-B, with the body-centre
+// measurement of shape_fit.h): background model -> segmentation of the foreground -> observations
+// -> multi-target tracker -> ScanTracks.
+//
+// Observations (method kShapeFit, the default). What one person (or object) shows in a scan:
+// - mount kTorso: one segment.
+// - mount kLegs: one or two legs. A segment narrower than a leg pair (2 (hip + leg radius) + a
+//   margin) holds one leg, or two that touch (split at the widest gap between its points); wider
+//   segments are something else (a trolley) and stay whole. Legs are paired into people: first
+//   around every live track's predicted position (the pair whose midpoint is nearest, within
+//   leg_pairing_distance_m of each other, or a single leg when the other is hidden), confirmed
+//   tracks first; the legs left over pair with their nearest neighbour within
+//   leg_pairing_distance_m, the rest stay single (one track per person, not per leg).
+// Each observation gets a cheap first position for association (the middle of its silhouette,
+// behind the nearest point by the prior's extent, sigma association_sigma_m). The tracker then
+// asks for the real measurement of every observation it associated or starts a track with
+// (MeasurementRefiner): the shape fit with the track's size state as the prior, its walking
+// direction as the yaw prior (the shoulders across it; a box's length along it) and its predicted
+// position as the start; legs: a circle per leg with the track's leg radius, the body centre their
+// midpoint (plus gait_sigma_m: the legs' midpoint swings about the body's centre as they step), or
+// the one leg's centre (plus the hip and stride extent). The fit's size posterior becomes the
+// track's size state (drifting by size_drift_m_per_sqrt_s between scans), and a track whose learned
+// semi-axis a exceeds box_min_half_length_m is fitted as a box from then on. Whether an object is
+// person-like (static objects, multi_tracker.h): torso: not flat (the points' distance to their
+// principal line, range noise removed, averaged over the track's life, stays above flat_rms_m on
+// outlines longer than flat_min_extent_m); legs: leg radius at least person_min_leg_radius_m.
+//
+// Methods kCenterOfMass / kEllipse: the previous tracker (measurement.h), one measurement per
+// segment, no shape state (kept to compare against).
 //
 // Time: ScanView::stamp_ns is the time of beam 0 (scan start, gateway UTC). The mirror turns once
 // per scan_period_s and the telegram lists beams in the order they were measured, so beam i is
 // measured i * |angle_step_rad| / (2 pi) * scan_period_s after the scan start (an LMS1xx at 25 Hz
 // and 0.5 deg: 55.6 us per beam, 30 ms across 270 deg; a person at 1.5 m/s moves 4.5 cm in that
-// time). With correct_beam_time each measurement is stamped with the beam time of its segment's
-// middle beam and the tracker predicts to that instant; without it, every measurement counts as
-// taken at scan start. Either way all reported tracks are valid at the scan start.
+// time). With correct_beam_time each measurement is stamped with the beam time of its
+// observation's middle beam and the tracker predicts to that instant; without it, every
+// measurement counts as taken at scan start. Either way all reported tracks are valid at the scan
+// start.
 //
 // Rejected scans (CheckScan) and scans while the background is being learned produce no
-// measurements; existing tracks coast through them.
+// measurements; existing tracks coast through them. Static objects the tracker recognises are
+// handed to the background model (BackgroundModel::Absorb).
 //
 // Fixed allocation: every buffer is a member sized at compile time (kMaxBeams, kMaxSegments,
-// kMaxTracks); Process never allocates. The object is large (sizeof(TrackingPipeline) is
-// 337,968 bytes, ~330 KiB, on x86-64 and aarch64; most of it the per-beam background model and the
-// segment point pool): allocate it once at start-up (e.g. std::make_unique), not on the stack.
-// Process itself needs about 30 KiB of stack (the ellipse fit's per-point scratch).
-// Not thread-safe; one instance per sensor.
+// kMaxTracks); Process never allocates. The object is large (several hundred KiB; most of it the
+// per-beam background model and the segment point pool): allocate it once at start-up (e.g.
+// std::make_unique), not on the stack. Process itself needs about 30 KiB of stack (the ellipse
+// fit's per-point scratch). Not thread-safe; one instance per sensor.
 
+#include <array>
 #include <cstddef>
 #include <cstdint>
+#include <memory>
 #include <optional>
 #include <span>
 #include <string>
@@ -33,14 +62,70 @@
 #include "firmware_tracker/tracking/multi_tracker.h"
 #include "firmware_tracker/tracking/scan_view.h"
 #include "firmware_tracker/tracking/segmentation.h"
+#include "firmware_tracker/tracking/shape_fit.h"
 #include "firmware_tracker/tracking/track_report.h"
 
 namespace lrfnet::tracking {
 
+// The body-centre measurement (see the header comment). Defaults: people at upper-body or knee
+// height.
+struct ShapeOptions {
+  Mount mount = Mount::kTorso;
+  ShapeFitOptions fit;
+  // Prior of a person's upper body (torso mount): semi-axes across the shoulders and front to back
+  // (adults, arms included) and their sigma. Also the start of a cylinder's or cart's size.
+  double person_major_m = 0.23;
+  double person_minor_m = 0.14;
+  double person_size_sigma_m = 0.04;
+  // The upper body's outline: the superellipse |u/a|^p + |v/b|^p = 1 with this p (2: an ellipse;
+  // a torso with arms lies between an ellipse and a rounded box). A track whose learned semi-axes
+  // differ by less than a tenth is a cylinder, fitted with p = 2 from then on.
+  double person_exponent = 2.5;
+  // A track whose learned semi-axis a exceeds this is a cart or trolley: fitted as a box.
+  double box_min_half_length_m = 0.36;
+  // Legs mount: a leg's radius at knee height and its sigma; legs of one person are at most this
+  // far apart (centre to centre); a leg thinner than person_min_leg_radius_m is not a person's
+  // (a chair's).
+  double leg_radius_m = 0.06;
+  double leg_radius_sigma_m = 0.015;
+  double leg_pairing_distance_m = 0.7;
+  double person_min_leg_radius_m = 0.035;
+  double hip_half_width_m = 0.1;  // a leg's lateral offset from the body centre
+  double gait_sigma_m = 0.05;
+  // Yaw prior: faster than walking_speed_mps a person faces where they walk (sigma
+  // walking_yaw_sigma_rad: the torso turns with the gait, people step sideways); standing, the last
+  // orientation, less certain by yaw_drift_rad_per_s.
+  double walking_speed_mps = 0.3;
+  double walking_yaw_sigma_rad = 0.35;
+  double yaw_drift_rad_per_s = 0.5;
+  double size_drift_m_per_sqrt_s = 0.003;
+  // The body centre's error that successive measurements of a track share, reported in the
+  // track's covariance on top of the filter's (which averages its measurements as if they were
+  // independent): centre_bias_sigma_m (the outline not being the model's, the beam width at the
+  // silhouette) in quadrature with the size state's sigma, taken as at least size_floor_sigma_m.
+  double centre_bias_sigma_m = 0.035;
+  double size_floor_sigma_m = 0.02;
+  // Added in quadrature to every body-centre measurement (sigma per axis): what the fit cannot know
+  // (sway, the torso's turn, an outline that is not the model's).
+  double centre_model_sigma_m = 0.015;
+  // Flat objects (not person-like).
+  double flat_rms_m = 0.015;
+  double flat_min_extent_m = 0.25;
+  // Full beam divergence of the scanner (LMS1xx and TiM: 15 mrad, LMS5xx: 11 mrad): where a
+  // silhouette ends (see MakePart).
+  double beam_divergence_rad = 0.015;
+  // Sigma of the first position used for association (per axis).
+  double association_sigma_m = 0.08;
+};
+
+std::optional<std::string> Validate(const ShapeOptions& options);
+
 struct TrackerOptions {
   BackgroundOptions background;
   SegmentationOptions segmentation;
-  MeasurementOptions measurement;
+  MeasurementMethod method = MeasurementMethod::kShapeFit;
+  MeasurementOptions measurement;  // kCenterOfMass / kEllipse (fit_ellipse follows method)
+  ShapeOptions shape;              // kShapeFit
   MultiTrackerOptions tracking;
   // Stamp each measurement with its middle beam's time instead of the scan start (see above).
   bool correct_beam_time = true;
@@ -50,6 +135,9 @@ struct TrackerOptions {
 // "tracking.confirm_hits must be in [1, confirm_window]".
 std::optional<std::string> Validate(const TrackerOptions& options);
 
+// The wire's measurement kind of a method.
+MeasurementKind KindOf(MeasurementMethod method);
+
 struct PipelineCounters {
   std::uint64_t scans = 0;           // Process calls
   std::uint64_t rejected_scans = 0;  // failed CheckScan (reason: last_scan_error())
@@ -58,12 +146,34 @@ struct PipelineCounters {
   std::uint64_t dropped_segments = 0;  // did not fit into kMaxSegments
   std::uint64_t ellipse_measurements = 0;
   std::uint64_t com_measurements = 0;
+  std::uint64_t shape_fits = 0;         // refined measurements (kShapeFit)
+  std::uint64_t failed_shape_fits = 0;  // degenerate input
+  std::uint64_t leg_pairs = 0;          // observations of two legs (kLegs)
+  std::uint64_t single_legs = 0;        // observations of one leg
+  std::uint64_t absorbed_objects = 0;   // static objects handed to the background
+};
+
+// One piece of an observation: consecutive points of one segment and where its silhouette ends.
+struct ObservationPart {
+  std::size_t first_point = 0;  // into SegmentList::points_m
+  std::size_t point_count = 0;
+  std::size_t begin_beam = 0;
+  std::size_t end_beam = 0;  // one past the last
+  Silhouette silhouette;
+};
+
+// What one object shows in a scan: one segment (torso), or one or two legs.
+struct Observation {
+  std::array<ObservationPart, 2> parts{};
+  std::size_t part_count = 0;
+  bool legs = false;  // parts are legs (kLegs mount)
 };
 
 class TrackingPipeline {
  public:
   // Precondition: Validate(options) is nullopt (checked; aborts otherwise).
   explicit TrackingPipeline(const TrackerOptions& options);
+  ~TrackingPipeline();
 
   // Runs one scan; scans must come in time order. The result (tracks at scan.stamp_ns, with
   // scan_counter and scan.scan_period_s copied in; scan_period_s is 0 for a rejected scan) stays
@@ -76,22 +186,41 @@ class TrackingPipeline {
   const PipelineCounters& counters() const { return counters_; }
   const ScanTracks& last_tracks() const { return tracks_; }
   ScanError last_scan_error() const { return last_scan_error_; }
-  // Of the last scan: segments, their measurements (same order) and the measurements' times after
-  // the scan start in seconds.
+  // Of the last scan: segments, the observations and their first measurements (same order) and the
+  // measurements' times after the scan start in seconds.
   const SegmentList& segments() const { return segments_; }
+  std::span<const Observation> observations() const { return observations_.span(); }
   std::span<const Measurement> measurements() const { return measurements_.span(); }
   std::span<const double> measurement_offsets_s() const { return offsets_s_.span(); }
   std::size_t last_segment_count() const { return segments_.segments.size(); }
 
  private:
+  class Refiner;
+  friend class Refiner;
+
+  void MeasureLegacy(const ScanView& scan);
+  void BuildObservations(const ScanView& scan);
+  void PairLegs(const ScanView& scan);
+  void AddObservation(const ScanView& scan, const Observation& observation);
+  ObservationPart MakePart(const ScanView& scan, const Segment& segment, std::size_t first,
+                           std::size_t count) const;
+  void AbsorbStatic(const ScanView& scan);
+
   TrackerOptions options_;
   PipelineCounters counters_;
   ScanError last_scan_error_ = ScanError::kNone;
   BackgroundModel background_;
   SegmentList segments_;
+  common::FixedVector<Observation, kMaxSegments> observations_;
   common::FixedVector<Measurement, kMaxSegments> measurements_;
   common::FixedVector<double, kMaxSegments> offsets_s_;
+  // Legs: the single legs of the scan, and the live tracks' predictions used to pair them.
+  common::FixedVector<ObservationPart, 2 * kMaxSegments> leg_parts_;
+  std::array<Eigen::Vector2d, 2 * kMaxSegments> leg_centres_m_{};
+  std::array<bool, 2 * kMaxSegments> leg_used_{};
+  std::array<TrackPrediction, kMaxTracks> predictions_{};
   MultiTracker tracker_;
+  std::unique_ptr<Refiner> refiner_;
   ScanTracks tracks_;
 };
 

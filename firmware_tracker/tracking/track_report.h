@@ -15,6 +15,10 @@ namespace lrfnet::tracking {
 // Compile-time bound on simultaneous tracks of one sensor; the configured maximum is at most this.
 inline constexpr std::size_t kMaxTracks = 64;
 
+// What kind of object a track follows, as the tracker models its cross-section (the wire's
+// ObjectShape). kUnspecified: the previous tracker's measurements (no shape state).
+enum class ObjectShape : std::uint8_t { kUnspecified, kTorso, kLegs, kCylinder, kBox };
+
 enum class TrackState : std::uint8_t {
   kTentative,  // not yet confirmed (M of N)
   kConfirmed,  // confirmed and updated by a measurement in this scan
@@ -30,9 +34,17 @@ struct TrackReport {
   double vx_mps = 0.0;
   double vy_mps = 0.0;
   Eigen::Matrix4d covariance = Eigen::Matrix4d::Identity();  // of (x, y, vx, vy)
-  std::uint32_t age_scans = 0;      // scans since the track was created
-  std::uint32_t points = 0;         // points of the associated segment (0 when coasting)
-  double ellipse_yaw_rad = 0.0;     // major axis of the fitted ellipse (kind == kEllipse)
+  std::uint32_t age_scans = 0;                               // scans since the track was created
+  std::uint32_t points = 0;  // points of the associated segment(s) (0 when coasting)
+  // kEllipse: major axis of the fitted ellipse; kShapeFit: direction of the shape's axis a.
+  double ellipse_yaw_rad = 0.0;
+  // The track's shape state (kShapeFit): semi-axes a (along ellipse_yaw_rad) and b of the torso
+  // ellipse, the box's half-lengths, the cylinder's radius (both), or a leg's radius (kLegs, both);
+  // size_sigma_m: the square root of the largest eigenvalue of their covariance.
+  ObjectShape shape = ObjectShape::kUnspecified;
+  double size_major_m = 0.0;
+  double size_minor_m = 0.0;
+  double size_sigma_m = 0.0;
 };
 
 // The tracks of one scan, valid at scan_start_ns (all tracks are predicted to that time).

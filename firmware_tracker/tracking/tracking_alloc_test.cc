@@ -21,7 +21,6 @@
 #include "firmware_tracker/tracking/tracking_test_util.h"
 #include "tests/support/alloc_counter.h"
 
-
 namespace lrfnet::tracking {
 namespace {
 
@@ -135,7 +134,7 @@ TEST(TrackingAllocTest, WholePipelineOnACrowdAllocatesNothingAfterTheFirstScan) 
   EXPECT_GT(c.created, 20u);
   EXPECT_GT(c.deleted(), 0u);
   EXPECT_GT(c.associations, 10u * 2000u);
-  EXPECT_GT(pipeline->counters().ellipse_measurements, 0u);
+  EXPECT_GT(pipeline->counters().shape_fits, 10u * 2000u);
 }
 
 }  // namespace

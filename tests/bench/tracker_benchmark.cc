@@ -7,7 +7,9 @@
 // of a 30 x 20 m hall with 0, 10 and 50 people walking. The background is learned before timing.
 // Reported per case: median and p99 microseconds per scan, heap allocations in the timed loop, peak
 // RSS of the process after the case, uplink bytes per second against raw CoLa-B bytes per second.
-// A markdown table goes to stdout and to --out FILE.
+// Every input runs twice: with the previous measurement (fixed-axes ellipse, no static-object
+// handling or limits: "old") and with the body-centre shape fit (the default: "new"), so the cost
+// of each shows side by side in the same run. A markdown table goes to stdout and to --out FILE.
 //
 //   tracker_benchmark [--out FILE] [--scans N] [google benchmark flags]
 
@@ -193,7 +195,14 @@ double Quantile(std::vector<double> values, double q) {
   return values[std::min(i, values.size() - 1)];
 }
 
-void RunCase(benchmark::State& state, const Input* input) {
+struct Case {
+  const Input* input = nullptr;
+  bool old_measurement = false;
+  std::string name;
+};
+
+void RunCase(benchmark::State& state, const Case* c) {
+  const Input* input = c->input;
   lrfnet::testing::LoopbackUdpPeer receiver;
   io::UdpUplinkOptions udp_options;
   udp_options.host = "127.0.0.1";
@@ -207,6 +216,12 @@ void RunCase(benchmark::State& state, const Input* input) {
   tracker::TrackerConfig config;
   config.sensor_id = "bench";
   config.tracking.background.max_range_m = 40.0;
+  if (c->old_measurement) {
+    config.tracking.method = tracking::MeasurementMethod::kEllipse;
+    config.tracking.tracking.static_objects = false;
+    config.tracking.tracking.report_coasting_s = config.tracking.tracking.coast_timeout_s;
+    config.tracking.tracking.max_speed_mps = 1000.0;
+  }
   auto node = std::make_unique<tracker::TrackerNode>(config, 1, udp);
   cola::StreamDecoder decoder;
   Listener listener;
@@ -241,7 +256,7 @@ void RunCase(benchmark::State& state, const Input* input) {
   if (durations_us.empty()) return;
 
   Row row;
-  row.name = input->name;
+  row.name = c->name;
   row.scans = durations_us.size();
   row.median_us = Quantile(durations_us, 0.5);
   row.p99_us = Quantile(durations_us, 0.99);
@@ -272,14 +287,29 @@ void RunCase(benchmark::State& state, const Input* input) {
 
 std::string Table() {
   std::string out =
-      "| input | scans | median µs/scan | p99 µs/scan | CPU median µs | CPU p99 µs | allocations | "
-      "peak RSS MiB | uplink B/s | raw CoLa-B B/s | uplink/raw | confirmed tracks |\n"
-      "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n";
+      "| input | scans | median µs/scan | p99 µs/scan | CPU median µs | CPU p99 µs | CPU median / "
+      "empty scene | allocations | peak RSS MiB | uplink B/s | raw CoLa-B B/s | uplink/raw | "
+      "confirmed tracks |\n"
+      "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n";
   char line[512];
+  // The empty scene of the same measurement in this run.
+  auto empty_cpu = [](const Row& r) {
+    const std::string suffix = r.name.substr(r.name.rfind(','));
+    for (const Row& e : Rows()) {
+      if (e.name.find("0 people") != std::string::npos &&
+          e.name.substr(e.name.rfind(',')) == suffix) {
+        return e.cpu_median_us;
+      }
+    }
+    return 0.0;
+  };
   for (const Row& r : Rows()) {
-    std::snprintf(line, sizeof line, "| %s | %zu | %.1f | %.1f | %.1f | %.1f | %zu | %.1f | %.0f | %.0f | %.3f | %llu |\n",
+    const double empty = empty_cpu(r);
+    std::snprintf(line, sizeof line,
+                  "| %s | %zu | %.1f | %.1f | %.1f | %.1f | %.2f | %zu | %.1f | %.0f | %.0f | %.3f | "
+                  "%llu |\n",
                   r.name.c_str(), r.scans, r.median_us, r.p99_us, r.cpu_median_us, r.cpu_p99_us,
-                  r.allocations,
+                  empty > 0 ? r.cpu_median_us / empty : 0.0, r.allocations,
                   static_cast<double>(r.peak_rss_kib) / 1024.0, r.uplink_bytes_per_s,
                   r.raw_bytes_per_s, r.uplink_bytes_per_s / r.raw_bytes_per_s,
                   static_cast<unsigned long long>(r.confirmed_tracks));
@@ -315,11 +345,19 @@ int main(int argc, char** argv) {
     std::fprintf(stderr, "tracker_benchmark: LMS511 capture not found; synthetic inputs only\n");
   }
   for (int people : {0, 10, 50}) inputs.push_back(SyntheticInput(people, scans));
+  std::vector<std::unique_ptr<Case>> cases;
   for (const auto& input : inputs) {
-    // Exactly `scans` iterations: every timed scan once, in order.
-    benchmark::RegisterBenchmark(input->name.c_str(), RunCase, input.get())
-        ->Iterations(static_cast<benchmark::IterationCount>(input->timed.size()))
-        ->Unit(benchmark::kMicrosecond);
+    for (const bool old : {true, false}) {
+      auto c = std::make_unique<Case>();
+      c->input = input.get();
+      c->old_measurement = old;
+      c->name = input->name + (old ? ", old (ellipse)" : ", new (shape fit)");
+      // Exactly `scans` iterations: every timed scan once, in order.
+      benchmark::RegisterBenchmark(c->name.c_str(), RunCase, c.get())
+          ->Iterations(static_cast<benchmark::IterationCount>(input->timed.size()))
+          ->Unit(benchmark::kMicrosecond);
+      cases.push_back(std::move(c));
+    }
   }
   benchmark::RunSpecifiedBenchmarks();
   benchmark::Shutdown();
@@ -331,7 +369,9 @@ int main(int argc, char** argv) {
     out << "# lrfnet-tracker per-scan path\n\n"
         << "decode -> clock mapping -> tracking -> encode -> UDP send on loopback, one scan per "
            "iteration; allocations counted in the timed loop; peak RSS is the process's after "
-           "the case (inputs for all cases are held in memory).\n\n"
+           "the case (inputs for all cases are held in memory). old: the previous measurement "
+           "(fixed-axes ellipse), new: the body-centre shape fit (the default); CPU median / empty "
+           "scene: against the 0-people scene of the same measurement in this run.\n\n"
         << table;
   }
   return 0;

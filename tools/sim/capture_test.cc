@@ -352,7 +352,7 @@ TEST_F(SimulatedCaptures, TruthTracksListEveryTargetAtTheTruthRate) {
   std::ifstream in(*dir_ / "truth_tracks.csv");
   std::string line;
   std::getline(in, line);
-  EXPECT_EQ(line, "time_s,utc_ns,target,x_m,y_m,heading_deg,vx_mps,vy_mps");
+  EXPECT_EQ(line, "time_s,utc_ns,target,x_m,y_m,heading_deg,vx_mps,vy_mps,kind");
   int rows = 0;
   double last_post_x = 0;
   while (std::getline(in, line)) {

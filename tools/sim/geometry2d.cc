@@ -63,6 +63,59 @@ double RayEllipse(const Ray& ray, Vec2 center, double a, double b, double yaw_ra
   return t > kMinHitDistanceM ? t : kNoHit;
 }
 
+double RaySuperellipse(const Ray& ray, Vec2 center, double a, double b, double exponent,
+                       double yaw_rad) {
+  if (exponent == 2.0) return RayEllipse(ray, center, a, b, yaw_rad);
+  // The superellipse lies inside the rectangle [-a, a] x [-b, b]: start where the ray enters it.
+  const double t_box = RayBox(ray, center, a, b, yaw_rad);
+  if (t_box == kNoHit) return kNoHit;
+  const double c = std::cos(yaw_rad), s = std::sin(yaw_rad);
+  const Vec2 d = ray.origin - center;
+  // Local coordinates scaled to the unit superellipse: q(t) = o + t v.
+  const Vec2 o{(c * d.x + s * d.y) / a, (-s * d.x + c * d.y) / b};
+  const Vec2 v{(c * ray.dir.x + s * ray.dir.y) / a, (-s * ray.dir.x + c * ray.dir.y) / b};
+  const double p = exponent;
+  // F(t) = |qx|^p + |qy|^p - 1 is convex along the line; from a point where F > 0 on the near side
+  // Newton's iterates increase monotonically to the first root, or F' stops being negative (miss).
+  double t = t_box;
+  for (int iter = 0; iter < 60; ++iter) {
+    const double qx = o.x + t * v.x, qy = o.y + t * v.y;
+    const double ax = std::abs(qx), ay = std::abs(qy);
+    const double px = std::pow(ax, p - 1.0), py = std::pow(ay, p - 1.0);
+    const double f = px * ax + py * ay - 1.0;
+    if (f <= 1e-12) return t > kMinHitDistanceM ? t : kNoHit;
+    const double df = p * (px * (qx < 0 ? -v.x : v.x) + py * (qy < 0 ? -v.y : v.y));
+    if (!(df < 0.0)) return kNoHit;
+    const double step = -f / df;
+    t += step;
+    if (step < 1e-10) return t > kMinHitDistanceM ? t : kNoHit;
+  }
+  return kNoHit;
+}
+
+double RayBox(const Ray& ray, Vec2 center, double a, double b, double yaw_rad) {
+  const double c = std::cos(yaw_rad), s = std::sin(yaw_rad);
+  const Vec2 d = ray.origin - center;
+  const double o[2] = {c * d.x + s * d.y, -s * d.x + c * d.y};
+  const double v[2] = {c * ray.dir.x + s * ray.dir.y, -s * ray.dir.x + c * ray.dir.y};
+  const double half[2] = {a, b};
+  if (std::abs(o[0]) <= a && std::abs(o[1]) <= b) return kNoHit;  // origin inside
+  // Slabs: the ray is inside both between the larger entry and the smaller exit.
+  double enter = -kNoHit, leave = kNoHit;
+  for (int k = 0; k < 2; ++k) {
+    if (std::abs(v[k]) < 1e-15) {
+      if (std::abs(o[k]) > half[k]) return kNoHit;
+      continue;
+    }
+    double t0 = (-half[k] - o[k]) / v[k], t1 = (half[k] - o[k]) / v[k];
+    if (t0 > t1) std::swap(t0, t1);
+    enter = std::max(enter, t0);
+    leave = std::min(leave, t1);
+  }
+  if (enter > leave || enter <= kMinHitDistanceM) return kNoHit;
+  return enter;
+}
+
 bool SegmentsIntersect(const Segment& s, const Segment& t) {
   const int o1 = Orientation(s.a, s.b, t.a);
   const int o2 = Orientation(s.a, s.b, t.b);

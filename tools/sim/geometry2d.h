@@ -44,6 +44,14 @@ double RayCircle(const Ray& ray, Vec2 center, double radius);
 // Distance to an ellipse with semi-axes a (along the ellipse's x axis, rotated by yaw_rad) and b,
 // or kNoHit (also from inside).
 double RayEllipse(const Ray& ray, Vec2 center, double a, double b, double yaw_rad);
+// Distance to the superellipse |u/a|^p + |v/b|^p = 1 (u along the yaw_rad axis, p >= 2: 2 is the
+// ellipse, larger p is boxier), or kNoHit (also from inside). Newton's method from the side of the
+// ray origin on the convex function along the ray, so it finds the first crossing.
+double RaySuperellipse(const Ray& ray, Vec2 center, double a, double b, double exponent,
+                       double yaw_rad);
+// Distance to the rectangle with half-lengths a (along the yaw_rad axis) and b, or kNoHit (also
+// from inside).
+double RayBox(const Ray& ray, Vec2 center, double a, double b, double yaw_rad);
 
 // Whether the closed segments share a point (touching counts).
 bool SegmentsIntersect(const Segment& s, const Segment& t);

@@ -42,6 +42,43 @@ TEST(RayEllipse, AxisAAlongTheEllipseYaw) {
   EXPECT_EQ(RayEllipse(RayAt({0, 0}, 90), {4, 0}, 0.25, 0.15, 0.0), kNoHit);
 }
 
+TEST(RaySuperellipse, BetweenTheEllipseAndItsBoundingBox) {
+  constexpr double kPi = 3.14159265358979323846;
+  // On the axes every exponent gives the same hit: 4 - a along a, 4 - b along b.
+  EXPECT_NEAR(RaySuperellipse(RayAt({0, 0}, 0), {4, 0}, 0.25, 0.15, 2.7, 0.0), 3.75, 1e-9);
+  EXPECT_NEAR(RaySuperellipse(RayAt({0, 0}, 0), {4, 0}, 0.25, 0.15, 2.7, kPi / 2), 3.85, 1e-9);
+  // Exponent 2 is the ellipse.
+  const Ray oblique = RayAt({0, 0}, 1.5);
+  EXPECT_NEAR(RaySuperellipse(oblique, {4, 0}, 0.25, 0.15, 2.0, 0.7),
+              RayEllipse(oblique, {4, 0}, 0.25, 0.15, 0.7), 1e-12);
+  // Towards a corner the superellipse bulges out of the ellipse towards its box, and the hit point
+  // lies on the curve.
+  for (const double p : {2.3, 3.0, 4.0}) {
+    const Ray ray{{-3.0, -3.0}, {std::sqrt(0.5), std::sqrt(0.5)}};
+    const double t = RaySuperellipse(ray, {0, 0}, 0.25, 0.15, p, 0.0);
+    ASSERT_NE(t, kNoHit) << p;
+    EXPECT_LT(t, RayEllipse(ray, {0, 0}, 0.25, 0.15, 0.0)) << p;
+    EXPECT_GT(t, RayBox(ray, {0, 0}, 0.25, 0.15, 0.0)) << p;
+    const Vec2 hit = ray.origin + t * ray.dir;
+    EXPECT_NEAR(std::pow(std::abs(hit.x / 0.25), p) + std::pow(std::abs(hit.y / 0.15), p), 1.0,
+                1e-9)
+        << p;
+  }
+  EXPECT_EQ(RaySuperellipse(RayAt({0, 0}, 10), {4, 0}, 0.25, 0.15, 3.0, 0.0), kNoHit);
+  EXPECT_EQ(RaySuperellipse(RayAt({4, 0}, 0), {4, 0}, 0.25, 0.15, 3.0, 0.0), kNoHit);  // inside
+}
+
+TEST(RayBox, SlabsAlongTheBoxYaw) {
+  constexpr double kPi = 3.14159265358979323846;
+  EXPECT_NEAR(RayBox(RayAt({0, 0}, 0), {4, 0}, 0.5, 0.2, 0.0), 3.5, 1e-12);
+  EXPECT_NEAR(RayBox(RayAt({0, 0}, 0), {4, 0}, 0.5, 0.2, kPi / 2), 3.8, 1e-12);
+  // Rotated by 45 degrees the near corner points at the sensor.
+  EXPECT_NEAR(RayBox(RayAt({0, 0}, 0), {4, 0}, 0.5, 0.5, kPi / 4), 4.0 - 0.5 * std::sqrt(2.0),
+              1e-12);
+  EXPECT_EQ(RayBox(RayAt({0, 0}, 20), {4, 0}, 0.5, 0.2, 0.0), kNoHit);
+  EXPECT_EQ(RayBox(RayAt({4, 0}, 0), {4, 0}, 0.5, 0.2, 0.0), kNoHit);
+}
+
 TEST(Polygons, SimplePolygonChecksNameTheProblem) {
   EXPECT_FALSE(CheckSimplePolygon({{0, 0}, {1, 0}, {1, 1}, {0, 1}}).has_value());
   const auto bowtie = CheckSimplePolygon({{0, 0}, {1, 1}, {1, 0}, {0, 1}});

@@ -41,6 +41,7 @@ enum class RngStream : std::uint64_t {
   kSetup = 4,
   kRandomWalk = 5,
   kSession = 6,
+  kBody = 7,
 };
 
 class Rng {

@@ -278,13 +278,62 @@ bool CheckTarget(const Scenario& s, std::size_t i, const std::vector<NamedSegmen
   if (!ValidId(t.id)) return c.Fail(line, path + ".id", "'" + t.id + "' is not a valid id");
   if (!ids->insert(t.id).second)
     return c.Fail(line, path + ".id", "duplicate target id '" + t.id + "'");
-  if (t.shape == TargetShape::kCylinder) {
-    if (!c.Positive(line, path + ".radius_m", t.radius_m, 5.0)) return false;
-  } else {
-    if (!c.Positive(line, path + ".a_m", t.a_m, 5.0) ||
-        !c.Positive(line, path + ".b_m", t.b_m, 5.0) ||
-        !c.Range(line, path + ".sway_m", t.sway_m, 0.0, 0.5)) {
-      return false;
+  const auto check_person = [&](const PersonSpec& p, const std::string& where) {
+    const auto opt = [&](const std::optional<double>& v, const char* key, double lo, double hi) {
+      return !v || c.Range(line, where + "." + key, *v, lo, hi);
+    };
+    return opt(p.a_m, "a_m", 0.01, 5.0) && opt(p.b_m, "b_m", 0.01, 5.0) &&
+           opt(p.torso_exponent, "torso_exponent", 2.0, 20.0) &&
+           opt(p.sway_m, "sway_m", 0.0, 0.5) && opt(p.leg_radius_m, "leg_radius_m", 0.01, 0.3) &&
+           opt(p.hip_half_width_m, "hip_half_width_m", 0.0, 0.5);
+  };
+  switch (t.shape) {
+    case TargetShape::kCylinder:
+      if (!c.Positive(line, path + ".radius_m", t.radius_m, 5.0)) return false;
+      break;
+    case TargetShape::kPerson:
+      if (!check_person(t.person, path)) return false;
+      break;
+    case TargetShape::kTrolley:
+      if (!check_person(t.person, path) ||
+          !c.Positive(line, path + ".length_m", t.length_m, 10.0) ||
+          !c.Positive(line, path + ".width_m", t.width_m, 10.0)) {
+        return false;
+      }
+      break;
+    case TargetShape::kChair:
+      if (!c.Range(line, path + ".size_m", t.size_m, 0.1, 2.0) ||
+          !c.Range(line, path + ".yaw_deg", t.yaw_deg, -3600.0, 3600.0)) {
+        return false;
+      }
+      break;
+    case TargetShape::kDoor: {
+      if (!t.door) return c.Fail(line, path, "a door needs hinge, width_m and swing");
+      const DoorSpec& d = *t.door;
+      if (!c.Finite(line, path + ".hinge", d.hinge)) return false;
+      if (!InBounds(d.hinge, bounds)) {
+        return c.Fail(line, path + ".hinge",
+                      FmtPoint(d.hinge) + " is outside the world (" + BoundsText(bounds) + ")");
+      }
+      if (!c.Range(line, path + ".width_m", d.width_m, 0.1, 10.0) ||
+          !c.Range(line, path + ".thickness_m", d.thickness_m, 0.005, 0.5)) {
+        return false;
+      }
+      if (d.swing.empty()) return c.Fail(line, path + ".swing", "needs at least one keyframe");
+      for (std::size_t k = 0; k < d.swing.size(); ++k) {
+        const std::string key = path + ".swing[" + std::to_string(k) + "]";
+        if (!c.Range(line, key, d.swing[k].first, 0.0, kMaxDurationS) ||
+            !c.Range(line, key, d.swing[k].second, -3600.0, 3600.0)) {
+          return false;
+        }
+        if (k > 0 && !(d.swing[k].first > d.swing[k - 1].first)) {
+          return c.Fail(line, key, "keyframe times must increase");
+        }
+      }
+      if (!t.path.empty() || t.random_walk) {
+        return c.Fail(line, path, "a door swings on its hinge: no path or random_walk");
+      }
+      break;
     }
   }
   if (!c.Range(line, path + ".enter_s", t.enter_s, 0.0, kMaxDurationS)) return false;
@@ -293,10 +342,24 @@ bool CheckTarget(const Scenario& s, std::size_t i, const std::vector<NamedSegmen
     if (*t.leave_s <= t.enter_s) return c.Fail(line, path + ".leave_s", "must be after enter_s");
   }
   const bool has_path = !t.path.empty();
+  if (t.shape == TargetShape::kDoor) return true;
   if (has_path == t.random_walk.has_value()) {
     return c.Fail(line, path, "give either path (with speed_mps) or random_walk");
   }
+  if (!has_path && (t.wait_s != 0.0 || t.stay || !t.stops.empty())) {
+    return c.Fail(line, path, "wait_s, stay and stops belong to a path");
+  }
   if (has_path) {
+    if (!c.Range(line, path + ".wait_s", t.wait_s, 0.0, kMaxDurationS)) return false;
+    for (std::size_t k = 0; k < t.stops.size(); ++k) {
+      const std::string key = path + ".stops[" + std::to_string(k) + "]";
+      if (t.stops[k].waypoint >= t.path.size()) {
+        return c.Fail(line, key,
+                      "waypoint " + std::to_string(t.stops[k].waypoint) +
+                          " does not exist (the path has " + std::to_string(t.path.size()) + ")");
+      }
+      if (!c.Range(line, key, t.stops[k].seconds, 0.0, kMaxDurationS)) return false;
+    }
     if (t.path.size() >= 2 && !c.Positive(line, path + ".speed_mps", t.speed_mps, 10.0))
       return false;
     if (t.path.size() == 1 && !c.Range(line, path + ".speed_mps", t.speed_mps, 0.0, 10.0))
@@ -334,8 +397,41 @@ bool CheckTarget(const Scenario& s, std::size_t i, const std::vector<NamedSegmen
 }  // namespace
 
 double TargetRadius(const TargetSpec& target) {
-  return target.shape == TargetShape::kCylinder ? target.radius_m
-                                                : std::max(target.a_m, target.b_m) + target.sway_m;
+  switch (target.shape) {
+    case TargetShape::kCylinder:
+      return target.radius_m;
+    case TargetShape::kPerson: {
+      // The nominal person (0.25 x 0.15 m, 3 cm sway) where the sizes are drawn: clearances and
+      // random walks do not depend on the draw.
+      const PersonSpec& p = target.person;
+      return std::max(p.a_m.value_or(0.25), p.b_m.value_or(0.15)) + p.sway_m.value_or(0.03);
+    }
+    case TargetShape::kTrolley:
+      return 0.5 * std::hypot(target.length_m, target.width_m);
+    case TargetShape::kChair:
+      return target.size_m / std::sqrt(2.0);
+    case TargetShape::kDoor:
+      return target.door ? target.door->width_m : 0.9;
+  }
+  return 0.0;
+}
+
+const char* ToString(Mount mount) { return mount == Mount::kLegs ? "legs" : "torso"; }
+
+const char* ToString(TargetShape shape) {
+  switch (shape) {
+    case TargetShape::kCylinder:
+      return "cylinder";
+    case TargetShape::kPerson:
+      return "person";
+    case TargetShape::kTrolley:
+      return "trolley";
+    case TargetShape::kChair:
+      return "chair";
+    case TargetShape::kDoor:
+      return "door";
+  }
+  return "?";
 }
 
 std::pair<Vec2, Vec2> WorldBounds(const WorldSpec& world) {

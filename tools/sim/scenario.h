@@ -13,15 +13,30 @@
 //   box of walls and obstacles; sensors and targets must lie inside).
 // - sensors: id, model, x_m, y_m, yaw_deg, and optional range_m, fov_deg, resolution_deg,
 //   rate_hz, noise_m (σ at 0 m), noise_per_m (σ growth per metre), bias_m (systematic range
-//   error), clock {offset_s (tick at time 0, s since power-up), drift_ppm}, network {latency_ms
-//   (minimum), jitter_ms (mean of the exponential extra delay), gateway_offset_ms (the gateway
-//   clock minus UTC)}.
-// - targets: id, shape (cylinder {radius_m} | person {a_m across the shoulders, b_m front to
-//   back, sway_m lateral sway amplitude}), enter_s, leave_s, and either path [[x, y], ...] +
-//   speed_mps + loop + speed_variation {amplitude_mps, period_s} (a path of one point: standing
-//   still; a path without loop ends where the target leaves the scene), or random_walk {area
-//   polygon, speed_mps, pause_s (longest pause at a goal), speed_spread (fraction by which a
-//   leg's speed varies)}.
+//   error), mount (torso | legs: the scan plane at upper-body height, default, or at knee height,
+//   where a person shows two legs), clock {offset_s (tick at time 0, s since power-up),
+//   drift_ppm}, network {latency_ms (minimum), jitter_ms (mean of the exponential extra delay),
+//   gateway_offset_ms (the gateway clock minus UTC)}.
+// - targets: id, shape, enter_s, leave_s, and a motion:
+//   shapes: cylinder {radius_m}; person {a_m across the shoulders, b_m front to back,
+//     torso_exponent (the upper body's cross-section is the superellipse |u/a|^p + |v/b|^p = 1:
+//     2 an ellipse, larger boxier), sway_m (lateral sway amplitude while walking), leg_radius_m,
+//     hip_half_width_m (the legs' cross-sections at knee height and their lateral offset)}: what
+//     a scenario leaves out is drawn per person from the seed (a_m 0.23 ± 0.02, b_m 0.14 ± 0.015,
+//     torso_exponent 2 ... 3, sway_m 0.015 ... 0.035, leg_radius_m 0.05 ... 0.07,
+//     hip_half_width_m 0.08 ... 0.11), except that a person given a_m and b_m without
+//     torso_exponent is the ellipse a_m, b_m (DESIGN.md); trolley {length_m, width_m: a rectangle
+//     pushed ahead by a person, whose sizes are drawn as a person's; it appears in the truth as
+//     "<id>.pusher"}; chair {size_m: seat width; at torso height the scan sees its backrest, at
+//     knee height its four legs; yaw_deg}; door {hinge [x, y], width_m, swing [[t_s, angle_deg],
+//     ...]: the leaf's world angle, linear between the keyframes and held before and after;
+//     no motion keys}.
+//   motion: either path [[x, y], ...] + speed_mps + loop + speed_variation {amplitude_mps,
+//   period_s} (a path of one point: standing still; a path without loop ends where the target
+//   leaves the scene, or, with stay: true, stays at its last point until leave_s; chairs stay by
+//   default), with wait_s (stands at the first point that long after enter_s) and stops [[k, s],
+//   ...] (stands s seconds at waypoint k, every lap); or random_walk {area polygon, speed_mps,
+//   pause_s (longest pause at a goal), speed_spread (fraction by which a leg's speed varies)}.
 // Unknown keys are errors.
 
 #include <cstdint>
@@ -45,6 +60,10 @@ struct NetworkSpec {
   std::optional<double> gateway_offset_ms;  // default 0
 };
 
+// Height of a sensor's scan plane: what it sees of a person.
+enum class Mount { kTorso, kLegs };
+const char* ToString(Mount mount);
+
 struct SensorSpec {
   std::string id;
   std::string model;
@@ -53,12 +72,15 @@ struct SensorSpec {
   double yaw_deg = 0;
   DeviceOverrides overrides;
   std::optional<double> bias_m;
+  Mount mount = Mount::kTorso;
   ClockSpec clock;
   NetworkSpec network;
   int line = 0;  // in the scenario file, 1-based; 0 unknown
 };
 
-enum class TargetShape { kCylinder, kPerson };
+enum class TargetShape { kCylinder, kPerson, kTrolley, kChair, kDoor };
+// "cylinder", "person", "trolley", "chair", "door".
+const char* ToString(TargetShape shape);
 
 struct SpeedVariation {
   double amplitude_mps = 0;
@@ -72,18 +94,47 @@ struct RandomWalkSpec {
   double speed_spread = 0.2;
 };
 
+// A person's body; unset values are drawn per person (see the header comment).
+struct PersonSpec {
+  std::optional<double> a_m;               // upper body: semi-axis across the shoulders
+  std::optional<double> b_m;               // upper body: semi-axis front to back
+  std::optional<double> torso_exponent;    // superellipse exponent, >= 2 (2: ellipse)
+  std::optional<double> sway_m;            // lateral sway amplitude while walking
+  std::optional<double> leg_radius_m;      // leg cross-section at knee height
+  std::optional<double> hip_half_width_m;  // lateral offset of each leg from the body centre
+};
+
+struct DoorSpec {
+  Vec2 hinge;
+  double width_m = 0.9;
+  double thickness_m = 0.04;
+  std::vector<std::pair<double, double>> swing;  // (t_s, angle_deg), times increasing
+};
+
+// A stop on a path: the target stands `seconds` at waypoint `waypoint` (every lap of a loop).
+struct PathStop {
+  std::size_t waypoint = 0;
+  double seconds = 0;
+};
+
 struct TargetSpec {
   std::string id;
   TargetShape shape = TargetShape::kPerson;
   double radius_m = 0.25;  // cylinder
-  double a_m = 0.25;       // person: semi-axis across the shoulders
-  double b_m = 0.15;       // person: semi-axis front to back
-  double sway_m = 0.03;    // person: lateral sway amplitude while walking
+  PersonSpec person;       // person, and a trolley's pusher
+  double length_m = 0.9;   // trolley: along the direction it is pushed
+  double width_m = 0.6;    // trolley
+  double size_m = 0.45;    // chair: seat width and depth
+  double yaw_deg = 0;      // chair: the direction its seat faces
+  std::optional<DoorSpec> door;
   std::vector<Vec2> path;
   double speed_mps = 0;
   bool loop = false;
   std::optional<SpeedVariation> speed_variation;
   std::optional<RandomWalkSpec> random_walk;
+  double wait_s = 0;
+  std::optional<bool> stay;  // default: true for chairs, false otherwise
+  std::vector<PathStop> stops;
   double enter_s = 0;
   std::optional<double> leave_s;  // default: the end of the scenario
   int line = 0;

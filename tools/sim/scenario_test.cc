@@ -171,7 +171,7 @@ TEST(ScenarioErrors, TargetsAndIds) {
   EXPECT_NE(e.find("inside world.obstacles[0]"), std::string::npos) << e;
   e = ErrorOf(
       Replace(kDesignExample, "shape: cylinder, radius_m: 0.25", "shape: cylinder, a_m: 0.25"));
-  EXPECT_NE(e.find("targets[1].a_m: only for shape person"), std::string::npos) << e;
+  EXPECT_NE(e.find("targets[1].a_m: not a key of shape cylinder"), std::string::npos) << e;
   e = ErrorOf(Replace(kDesignExample, "shape: cylinder", "shape: cube"));
   EXPECT_NE(e.find("targets[1].shape: unknown shape 'cube'"), std::string::npos) << e;
   e = ErrorOf(Replace(kDesignExample, "loop: true}",
@@ -195,6 +195,79 @@ TEST(ScenarioErrors, MissingKeysAndBrokenYaml) {
   EXPECT_NE(e.find("empty"), std::string::npos) << e;
   e = ErrorOf("- just\n- a list\n");
   EXPECT_NE(e.find("expected a map"), std::string::npos) << e;
+}
+
+// Every key the people, trolleys, chairs and doors take, and mounts.
+const char* const kPeopleAndThings = R"(name: shop
+seed: 3
+duration_s: 60
+world:
+  walls: [[[0, 0], [20, 0], [20, 10], [0, 10], [0, 0]]]
+sensors:
+  - {id: knee, model: lms111, x_m: 0.5, y_m: 0.5, yaw_deg: 45, mount: legs}
+  - {id: chest, model: tim781, x_m: 19.5, y_m: 9.5, yaw_deg: -135, mount: torso}
+targets:
+  - {id: anna, shape: person, a_m: 0.22, b_m: 0.13, torso_exponent: 2.5, sway_m: 0.02,
+     leg_radius_m: 0.055, hip_half_width_m: 0.1, path: [[2, 2], [8, 2], [8, 6]], speed_mps: 1.1,
+     wait_s: 2, stops: [[1, 4]], stay: true}
+  - {id: cart, shape: trolley, length_m: 1.0, width_m: 0.55, path: [[3, 8], [15, 8]], speed_mps: 0.9}
+  - {id: seat, shape: chair, size_m: 0.5, yaw_deg: 90, path: [[12, 3], [13, 4]], speed_mps: 0.4,
+     wait_s: 20}
+  - {id: door, shape: door, hinge: [10, 0.2], width_m: 0.9, swing: [[0, 90], [5, 90], [6.5, 160]]}
+)";
+
+TEST(Scenario, PeopleTrolleysChairsDoorsAndMountsParse) {
+  Scenario s;
+  std::string error;
+  ASSERT_TRUE(ParseScenario(kPeopleAndThings, "shop.yaml", &s, &error)) << error;
+  EXPECT_EQ(s.sensors[0].mount, Mount::kLegs);
+  EXPECT_EQ(s.sensors[1].mount, Mount::kTorso);
+  ASSERT_EQ(s.targets.size(), 4u);
+  const TargetSpec& anna = s.targets[0];
+  EXPECT_EQ(anna.person.a_m, 0.22);
+  EXPECT_EQ(anna.person.torso_exponent, 2.5);
+  EXPECT_EQ(anna.person.hip_half_width_m, 0.1);
+  EXPECT_EQ(anna.wait_s, 2.0);
+  ASSERT_EQ(anna.stops.size(), 1u);
+  EXPECT_EQ(anna.stops[0].waypoint, 1u);
+  EXPECT_EQ(anna.stops[0].seconds, 4.0);
+  EXPECT_EQ(anna.stay, true);
+  EXPECT_EQ(s.targets[1].shape, TargetShape::kTrolley);
+  EXPECT_EQ(s.targets[1].length_m, 1.0);
+  EXPECT_EQ(s.targets[1].width_m, 0.55);
+  EXPECT_EQ(s.targets[2].shape, TargetShape::kChair);
+  EXPECT_EQ(s.targets[2].yaw_deg, 90.0);
+  EXPECT_FALSE(s.targets[2].stay.has_value());  // chairs stay by default
+  ASSERT_TRUE(s.targets[3].door.has_value());
+  EXPECT_EQ(s.targets[3].door->swing.size(), 3u);
+  EXPECT_EQ(s.targets[3].door->swing[2].second, 160.0);
+}
+
+TEST(ScenarioErrors, PeopleTrolleysChairsDoorsAndMounts) {
+  std::string e = ErrorOf(Replace(kPeopleAndThings, "mount: legs", "mount: ankle"));
+  EXPECT_NE(e.find("sensors[0].mount: unknown mount 'ankle' (known: torso, legs)"),
+            std::string::npos)
+      << e;
+  e = ErrorOf(Replace(kPeopleAndThings, "stops: [[1, 4]]", "stops: [[3, 4]]"));
+  EXPECT_NE(e.find("targets[0].stops[0]: waypoint 3 does not exist"), std::string::npos) << e;
+  e = ErrorOf(Replace(kPeopleAndThings, "stops: [[1, 4]]", "stops: [[1.5, 4]]"));
+  EXPECT_NE(e.find("targets[0].stops[0]: expected [waypoint index, seconds]"), std::string::npos)
+      << e;
+  e = ErrorOf(Replace(kPeopleAndThings, "torso_exponent: 2.5", "torso_exponent: 1.5"));
+  EXPECT_NE(e.find("targets[0].torso_exponent: must be in [2, 20]"), std::string::npos) << e;
+  e = ErrorOf(Replace(kPeopleAndThings, "shape: trolley,", "shape: trolley, radius_m: 1,"));
+  EXPECT_NE(e.find("targets[1].radius_m: not a key of shape trolley"), std::string::npos) << e;
+  e = ErrorOf(Replace(kPeopleAndThings, "swing: [[0, 90], [5, 90]",
+                      "path: [[1, 1]], speed_mps: 0, swing: [[0, 90], [5, 90]"));
+  EXPECT_NE(e.find("targets[3]: a door swings on its hinge"), std::string::npos) << e;
+  e = ErrorOf(Replace(kPeopleAndThings, "[5, 90], [6.5, 160]", "[5, 90], [4, 160]"));
+  EXPECT_NE(e.find("targets[3].swing[2]: keyframe times must increase"), std::string::npos) << e;
+  e = ErrorOf(Replace(kPeopleAndThings, ", swing: [[0, 90], [5, 90], [6.5, 160]]", ""));
+  EXPECT_NE(e.find("targets[3]: missing key 'swing'"), std::string::npos) << e;
+  e = ErrorOf(Replace(kPeopleAndThings, "shape: trolley,",
+                      "shape: trolley, random_walk: {area: [[1, 1], [2, 1], [2, 2]], "
+                      "speed_mps: 1}, wait_s: 3,"));
+  EXPECT_NE(e.find("targets[1]: give either path"), std::string::npos) << e;
 }
 
 TEST(ScenarioErrors, MissingFile) {

@@ -5,6 +5,7 @@
 
 #include <yaml-cpp/yaml.h>
 
+#include <algorithm>
 #include <cerrno>
 #include <cmath>
 #include <cstdlib>
@@ -215,7 +216,7 @@ class Parser {
   bool Sensor(const YAML::Node& node, const std::string& path, SensorSpec* s) {
     if (!Map(node, path,
              {"id", "model", "x_m", "y_m", "yaw_deg", "range_m", "fov_deg", "resolution_deg",
-              "rate_hz", "noise_m", "noise_per_m", "bias_m", "clock", "network"})) {
+              "rate_hz", "noise_m", "noise_per_m", "bias_m", "mount", "clock", "network"})) {
       return false;
     }
     s->line = LineOf(node);
@@ -230,6 +231,18 @@ class Parser {
         !OptNumber(node, path, "noise_per_m", &s->overrides.noise_per_m) ||
         !OptNumber(node, path, "bias_m", &s->bias_m)) {
       return false;
+    }
+    if (Has(node, "mount")) {
+      std::string mount;
+      if (!String(node, path, "mount", &mount, true)) return false;
+      if (mount == "torso") {
+        s->mount = Mount::kTorso;
+      } else if (mount == "legs") {
+        s->mount = Mount::kLegs;
+      } else {
+        return Fail(node["mount"], path + ".mount",
+                    "unknown mount '" + mount + "' (known: torso, legs)");
+      }
     }
     if (Has(node, "clock")) {
       const YAML::Node clock = node["clock"];
@@ -254,9 +267,13 @@ class Parser {
   }
 
   bool Target(const YAML::Node& node, const std::string& path, std::size_t index, TargetSpec* t) {
+    // clang-format off
     if (!Map(node, path,
-             {"id", "shape", "radius_m", "a_m", "b_m", "sway_m", "path", "speed_mps", "loop",
-              "speed_variation", "random_walk", "enter_s", "leave_s"})) {
+             {"id", "shape", "radius_m", "a_m", "b_m", "torso_exponent", "sway_m", "leg_radius_m",
+              "hip_half_width_m", "length_m", "width_m", "size_m", "yaw_deg", "hinge",
+              "thickness_m", "swing", "path", "speed_mps", "loop", "speed_variation", "random_walk",
+              "wait_s", "stay", "stops", "enter_s", "leave_s"})) {
+      // clang-format on
       return false;
     }
     t->line = LineOf(node);
@@ -264,23 +281,86 @@ class Parser {
     std::string shape;
     if (!String(node, path, "id", &t->id, false) || !String(node, path, "shape", &shape, true))
       return false;
+    // The keys each shape takes (besides id, shape, the motion and enter_s / leave_s).
+    const std::vector<const char*> person_keys = {"a_m",    "b_m",          "torso_exponent",
+                                                  "sway_m", "leg_radius_m", "hip_half_width_m"};
+    std::vector<const char*> allowed;
     if (shape == "cylinder") {
       t->shape = TargetShape::kCylinder;
-      for (const char* key : {"a_m", "b_m", "sway_m"}) {
-        if (Has(node, key)) return Fail(node[key], Join(path, key), "only for shape person");
-      }
-      if (!Number(node, path, "radius_m", &t->radius_m)) return false;
+      allowed = {"radius_m"};
     } else if (shape == "person") {
       t->shape = TargetShape::kPerson;
-      if (Has(node, "radius_m"))
-        return Fail(node["radius_m"], path + ".radius_m", "only for shape cylinder");
-      if (!OptNumber(node, path, "a_m", &t->a_m) || !OptNumber(node, path, "b_m", &t->b_m) ||
-          !OptNumber(node, path, "sway_m", &t->sway_m)) {
-        return false;
-      }
+      allowed = person_keys;
+    } else if (shape == "trolley") {
+      t->shape = TargetShape::kTrolley;
+      allowed = person_keys;
+      allowed.push_back("length_m");
+      allowed.push_back("width_m");
+    } else if (shape == "chair") {
+      t->shape = TargetShape::kChair;
+      allowed = {"size_m", "yaw_deg"};
+    } else if (shape == "door") {
+      t->shape = TargetShape::kDoor;
+      allowed = {"hinge", "width_m", "thickness_m", "swing"};
     } else {
       return Fail(node["shape"], path + ".shape",
-                  "unknown shape '" + shape + "' (known: cylinder, person)");
+                  "unknown shape '" + shape + "' (known: cylinder, person, trolley, chair, door)");
+    }
+    for (const char* key :
+         {"radius_m", "a_m", "b_m", "torso_exponent", "sway_m", "leg_radius_m", "hip_half_width_m",
+          "length_m", "width_m", "size_m", "yaw_deg", "hinge", "thickness_m", "swing"}) {
+      if (!Has(node, key)) continue;
+      if (std::find_if(allowed.begin(), allowed.end(),
+                       [&](const char* k) { return std::string(k) == key; }) == allowed.end()) {
+        return Fail(node[key], Join(path, key), "not a key of shape " + shape);
+      }
+    }
+    PersonSpec& p = t->person;
+    if (!OptNumber(node, path, "a_m", &p.a_m) || !OptNumber(node, path, "b_m", &p.b_m) ||
+        !OptNumber(node, path, "torso_exponent", &p.torso_exponent) ||
+        !OptNumber(node, path, "sway_m", &p.sway_m) ||
+        !OptNumber(node, path, "leg_radius_m", &p.leg_radius_m) ||
+        !OptNumber(node, path, "hip_half_width_m", &p.hip_half_width_m) ||
+        !OptNumber(node, path, "length_m", &t->length_m) ||
+        !OptNumber(node, path, "size_m", &t->size_m) ||
+        !OptNumber(node, path, "yaw_deg", &t->yaw_deg)) {
+      return false;
+    }
+    if (t->shape == TargetShape::kCylinder && !Number(node, path, "radius_m", &t->radius_m)) {
+      return false;
+    }
+    if (t->shape == TargetShape::kDoor) {
+      DoorSpec door;
+      if (!Require(node, path, "hinge") || !Point(node["hinge"], path + ".hinge", &door.hinge) ||
+          !OptNumber(node, path, "width_m", &door.width_m) ||
+          !OptNumber(node, path, "thickness_m", &door.thickness_m) ||
+          !Require(node, path, "swing")) {
+        return false;
+      }
+      std::vector<Vec2> keys;
+      if (!Points(node["swing"], path + ".swing", &keys)) return false;
+      for (const Vec2& k : keys) door.swing.emplace_back(k.x, k.y);
+      t->door = std::move(door);
+    } else if (!OptNumber(node, path, "width_m", &t->width_m)) {
+      return false;
+    }
+    if (!OptNumber(node, path, "wait_s", &t->wait_s)) return false;
+    if (Has(node, "stay")) {
+      bool stay = false;
+      if (!Bool(node, path, "stay", &stay)) return false;
+      t->stay = stay;
+    }
+    if (Has(node, "stops")) {
+      std::vector<Vec2> stops;
+      if (!Points(node["stops"], path + ".stops", &stops)) return false;
+      for (std::size_t k = 0; k < stops.size(); ++k) {
+        const double w = stops[k].x;
+        if (!(w >= 0.0 && w < 1e6) || w != std::floor(w)) {
+          return Fail(node["stops"], path + ".stops[" + std::to_string(k) + "]",
+                      "expected [waypoint index, seconds]");
+        }
+        t->stops.push_back({static_cast<std::size_t>(w), stops[k].y});
+      }
     }
     if (!OptNumber(node, path, "enter_s", &t->enter_s) ||
         !OptNumber(node, path, "leave_s", &t->leave_s)) {

@@ -246,6 +246,7 @@ std::string TruthYaml(const Simulator& sim, std::int64_t start_utc_ns, bool with
     const DeviceConfig& d = x.device;
     y += "  - id: " + Quoted(x.id) + "\n";
     y += "    model: " + std::string(d.model->key) + "\n";
+    y += std::string("    mount: ") + ToString(x.mount) + "\n";
     if (with_captures) {
       y += "    capture: " + Quoted(x.id + ".pcap") + "\n";
       y += "    ip: " + Quoted(IpText(DeviceEndpoint(x, i))) + "\n";
@@ -267,12 +268,34 @@ std::string TruthYaml(const Simulator& sim, std::int64_t start_utc_ns, bool with
   y += sim.targets().empty() ? " []\n" : "\n";
   for (std::size_t i = 0; i < sim.targets().size(); ++i) {
     const Target& t = sim.targets()[i];
-    const TargetSpec* spec = &s.targets[i];  // targets keep the scenario's order
+    const TargetSpec& spec = s.targets[t.spec_index()];
     const Trajectory& traj = t.trajectory();
-    std::string shape = t.shape() == TargetShape::kCylinder
-                            ? fmt::format("shape: cylinder, radius_m: {}", Num(spec->radius_m))
-                            : fmt::format("shape: person, a_m: {}, b_m: {}, sway_m: {}",
-                                          Num(spec->a_m), Num(spec->b_m), Num(spec->sway_m));
+    const PersonBody& body = t.body();
+    std::string shape;
+    switch (t.shape()) {
+      case TargetShape::kCylinder:
+        shape = fmt::format("shape: cylinder, radius_m: {}", Num(spec.radius_m));
+        break;
+      case TargetShape::kPerson:
+        shape = fmt::format(
+            "shape: person, a_m: {}, b_m: {}, torso_exponent: {}, sway_m: {}, leg_radius_m: {}, "
+            "hip_half_width_m: {}",
+            Num(body.a_m), Num(body.b_m), Num(body.exponent), Num(body.sway_m),
+            Num(body.leg_radius_m), Num(body.hip_half_width_m));
+        break;
+      case TargetShape::kTrolley:
+        shape = fmt::format("shape: trolley, length_m: {}, width_m: {}", Num(spec.length_m),
+                            Num(spec.width_m));
+        break;
+      case TargetShape::kChair:
+        shape = fmt::format("shape: chair, size_m: {}, yaw_deg: {}", Num(spec.size_m),
+                            Num(spec.yaw_deg));
+        break;
+      case TargetShape::kDoor:
+        shape = fmt::format("shape: door, hinge: [{}, {}], width_m: {}", Num(spec.door->hinge.x),
+                            Num(spec.door->hinge.y), Num(spec.door->width_m));
+        break;
+    }
     if (traj.knots().empty()) {
       y += fmt::format("  - {{id: {}, {}, present: false}}\n", Quoted(t.id()), shape);
     } else {
@@ -291,17 +314,18 @@ bool WriteTruthTracks(const Simulator& sim, std::int64_t start_utc_ns, const std
     return false;
   }
   const Scenario& s = sim.scenario();
-  out << "time_s,utc_ns,target,x_m,y_m,heading_deg,vx_mps,vy_mps\n";
+  out << "time_s,utc_ns,target,x_m,y_m,heading_deg,vx_mps,vy_mps,kind\n";
   std::string line;
   for (std::uint64_t n = 0;; ++n) {
     const double t = static_cast<double>(n) / s.truth_rate_hz;
     if (t >= s.duration_s) break;
     for (const TruthSample& ts : sim.TruthAt(t)) {
       const TargetState& st = ts.state;
-      line = fmt::format("{},{},{},{:.6f},{:.6f},{:.3f},{:.4f},{:.4f}\n", Num(t),
-                         start_utc_ns + std::llround(t * 1e9), sim.targets()[ts.target].id(),
-                         st.center.x, st.center.y, st.heading_rad * 180.0 / kPi, st.velocity_mps.x,
-                         st.velocity_mps.y);
+      const Target& target = sim.targets()[ts.target];
+      line = fmt::format("{},{},{},{:.6f},{:.6f},{:.3f},{:.4f},{:.4f},{}\n", Num(t),
+                         start_utc_ns + std::llround(t * 1e9), target.id(), st.center.x,
+                         st.center.y, st.heading_rad * 180.0 / kPi, st.velocity_mps.x,
+                         st.velocity_mps.y, ToString(target.shape()));
       out << line;
     }
   }

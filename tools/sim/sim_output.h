@@ -12,9 +12,11 @@
 // DIR/truth.yaml: sensor poses exactly as in the scenario (DESIGN.md "Poses": a `sensors` list of
 //   {id, x_m, y_m, yaw_deg}), then `devices` (model, resolved parameters, clock, network, capture
 //   file) and `targets` (shape, presence).
-// DIR/truth_tracks.csv: time_s,utc_ns,target,x_m,y_m,heading_deg,vx_mps,vy_mps for every target
-//   present at time_s = n / truth_rate_hz < duration_s (body centre including sway, facing
-//   direction, velocity of the path point); utc_ns = start_utc + time_s.
+// DIR/truth_tracks.csv: time_s,utc_ns,target,x_m,y_m,heading_deg,vx_mps,vy_mps,kind for every
+//   target present at time_s = n / truth_rate_hz < duration_s (body centre including sway, facing
+//   direction, velocity of the path point; a door: the leaf's centre and direction, its velocity);
+//   utc_ns = start_utc + time_s; kind: person, cylinder, trolley, chair or door (a trolley's pusher
+//   is a person, "<id>.pusher"). Columns are only ever added at the end.
 
 #include <cstdint>
 #include <optional>

@@ -78,6 +78,7 @@ void Simulator::SetUpSensor(std::size_t index) {
   s.y_m = spec.y_m;
   s.yaw_deg = spec.yaw_deg;
   s.bias_m = spec.bias_m.value_or(0.0);
+  s.mount = spec.mount;
 
   // Every default is drawn (in a fixed order) even when the scenario sets it, so setting one value
   // does not change the others.
@@ -231,7 +232,9 @@ ScanTiming Simulator::Timing(std::size_t sensor, std::uint64_t k) const {
   return t;
 }
 
-void Simulator::SimulateScan(std::size_t sensor, std::uint64_t k, cola::ScanTelegram* out) const {
+void Simulator::SimulateScan(std::size_t sensor, std::uint64_t k, cola::ScanTelegram* out,
+                             std::vector<std::uint32_t>* target_hits) const {
+  if (target_hits != nullptr) target_hits->assign(targets_.size(), 0);
   const SensorState& state = sensors_[sensor];
   const SensorSetup& s = state.setup;
   const DeviceConfig& d = s.device;
@@ -285,7 +288,7 @@ void Simulator::SimulateScan(std::size_t sensor, std::uint64_t k, cola::ScanTele
     double bearing_rad;
     double half_angle_rad;
   };
-  std::array<Window, kMaxTargets> windows{};
+  std::array<Window, 2 * kMaxTargets> windows{};  // a trolley is two targets
   std::size_t n_windows = 0;
   const double scan_end_s = timing.start_s + d.count * d.beam_time_s;
   const double half_width = m.divergence_rad / 2.0;
@@ -302,7 +305,7 @@ void Simulator::SimulateScan(std::size_t sensor, std::uint64_t k, cola::ScanTele
     const double dist_m = Norm(rel);
     Window w{j, std::atan2(rel.y, rel.x), kPi};
     if (dist_m > reach) w.half_angle_rad = std::asin(reach / dist_m) + half_width + 1e-9;
-    windows[n_windows++] = w;  // Validate allows at most kMaxTargets targets
+    windows[n_windows++] = w;  // Validate allows at most kMaxTargets scenario targets
   }
 
   Rng rng(MixSeed({scenario_.seed, static_cast<std::uint64_t>(RngStream::kRangeNoise), sensor, k}));
@@ -322,13 +325,16 @@ void Simulator::SimulateScan(std::size_t sensor, std::uint64_t k, cola::ScanTele
       const TargetState ts = targets_[w.target].StateAt(t_beam);
       if (!ts.present) continue;
       for (int k2 = 0; k2 < kSamplesPerBeam; ++k2) {
-        const double r = targets_[w.target].Intersect({state.origin, beam.dir[k2]}, ts);
+        const double r = targets_[w.target].Intersect({state.origin, beam.dir[k2]}, ts, s.mount);
         if (r < samples[static_cast<std::size_t>(k2)].range_m) {
           samples[static_cast<std::size_t>(k2)] = {r, kTargetSurface + static_cast<int>(w.target)};
         }
       }
     }
     if (touched) echo = Combine(samples.data(), d.range_m);
+    if (target_hits != nullptr && echo.surface >= kTargetSurface && echo.range_m <= d.range_m) {
+      ++(*target_hits)[static_cast<std::size_t>(echo.surface - kTargetSurface)];
+    }
 
     // Always the same draws per beam, so one beam's echo does not shift the noise of the others.
     const double gauss = rng.Normal();
@@ -406,7 +412,7 @@ double Simulator::NoiselessRange(std::size_t sensor, std::size_t beam_index, dou
   for (std::size_t j = 0; j < targets_.size(); ++j) {
     const TargetState ts = targets_[j].StateAt(t_s);
     for (int k = 0; k < kSamplesPerBeam; ++k) {
-      const double r = targets_[j].Intersect({state.origin, beam.dir[k]}, ts);
+      const double r = targets_[j].Intersect({state.origin, beam.dir[k]}, ts, state.setup.mount);
       if (r < samples[static_cast<std::size_t>(k)].range_m) {
         samples[static_cast<std::size_t>(k)] = {r, kTargetSurface + static_cast<int>(j)};
       }

@@ -59,6 +59,7 @@ struct SensorSetup {
   double y_m = 0;
   double yaw_deg = 0;  // as in the scenario
   double bias_m = 0;
+  Mount mount = Mount::kTorso;
   double clock_offset_s = 0;
   double drift_ppm = 0;
   SensorClock clock;
@@ -99,8 +100,10 @@ class Simulator {
 
   ScanTiming Timing(std::size_t sensor, std::uint64_t k) const;
   // Fills `out` with sensor `sensor`'s scan k (k < scan_count: callers check). Reuses out's storage
-  // (no allocation).
-  void SimulateScan(std::size_t sensor, std::uint64_t k, cola::ScanTelegram* out) const;
+  // (no allocation). With `target_hits`, also the number of beams whose echo came from each target
+  // (indexed like targets(); before noise and drop-outs), e.g. to tell which targets a scan saw.
+  void SimulateScan(std::size_t sensor, std::uint64_t k, cola::ScanTelegram* out,
+                    std::vector<std::uint32_t>* target_hits = nullptr) const;
   // Every target present at scenario time t_s.
   std::vector<TruthSample> TruthAt(double t_s) const;
 

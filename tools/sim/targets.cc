@@ -10,10 +10,13 @@ namespace lrfnet::sim {
 namespace {
 
 constexpr double kPi = 3.14159265358979323846;
-// A person's stride (two steps): one full lateral sway cycle per stride.
-constexpr double kStrideM = 1.4;
-// Shoulder rotation while walking, amplitude.
+// Shoulder rotation while walking (one cycle per stride), amplitude at walking speed.
 constexpr double kTorsoTwistRad = 4.0 * kPi / 180.0;
+// Sway and twist grow with speed up to this one (a person who shuffles barely sways).
+constexpr double kFullSwaySpeedMps = 0.8;
+// A trolley's pusher: the handle is this far behind the trolley's back, the pusher's centre one
+// body depth further.
+constexpr double kHandleGapM = 0.25;
 // Half-window for the facing direction: a person turns over about half a second at a corner.
 constexpr double kHeadingWindowS = 0.25;
 // Speed-variation paths are sampled this densely (corners are added exactly).
@@ -86,10 +89,33 @@ struct SpeedProfile {
   }
 };
 
+// The knots with t < limit, and one at limit on the way to the next (a trajectory that ends before
+// limit is kept whole).
+std::vector<Knot> CutAt(std::vector<Knot> knots, double limit) {
+  std::vector<Knot> cut;
+  for (std::size_t i = 0; i < knots.size(); ++i) {
+    if (knots[i].t_s < limit) {
+      cut.push_back(knots[i]);
+      continue;
+    }
+    if (!cut.empty()) {
+      const Knot& a = cut.back();
+      const Knot& b = knots[i];
+      const double dt = b.t_s - a.t_s;
+      const double u = dt > 0 ? (limit - a.t_s) / dt : 1.0;
+      cut.push_back(
+          {limit, a.p + u * (b.p - a.p), a.distance_m + u * (b.distance_m - a.distance_m)});
+    }
+    return cut;
+  }
+  return cut;
+}
+
 Trajectory PathTrajectory(const TargetSpec& t, double horizon_s) {
   const double t0 = t.enter_s;
   const double limit = std::min(t.leave_s.value_or(horizon_s), horizon_s);
   if (limit <= t0) return Trajectory();
+  const bool stay = t.stay.value_or(t.shape == TargetShape::kChair);
   if (t.path.size() == 1 || t.speed_mps == 0.0) {
     return Trajectory({{t0, t.path.front(), 0.0}, {limit, t.path.front(), 0.0}});
   }
@@ -99,34 +125,56 @@ Trajectory PathTrajectory(const TargetSpec& t, double horizon_s) {
     profile.amplitude = t.speed_variation->amplitude_mps;
     profile.period = t.speed_variation->period_s;
   }
-  double stop = limit;
-  if (!t.loop) stop = std::min(limit, t0 + profile.Tau(line.length_m));
+  // Moving time: waits and stops only use up time, so limit - t0 of it always suffices.
+  double stop = limit - t0;
+  if (!t.loop) stop = std::min(stop, profile.Tau(line.length_m));
 
-  std::vector<double> taus;
+  struct Tagged {
+    double tau;
+    int waypoint;  // -1: not a waypoint
+  };
+  std::vector<Tagged> taus;
+  const int n = static_cast<int>(t.path.size());
   // Corners exactly, lap after lap.
   for (double lap_start = 0.0;; lap_start += line.length_m) {
     bool beyond = false;
     for (std::size_t k = 0; k < line.cumulative_m.size(); ++k) {
       const double tau = profile.Tau(lap_start + line.cumulative_m[k]);
-      if (t0 + tau > stop) {
+      if (tau > stop) {
         beyond = true;
         break;
       }
-      taus.push_back(tau);
+      taus.push_back({tau, static_cast<int>(k) % n});
     }
     if (beyond || !t.loop) break;
   }
   if (profile.amplitude > 0.0) {
-    for (double tau = 0.0; t0 + tau < stop; tau += kVariationSampleS) taus.push_back(tau);
+    for (double tau = 0.0; tau < stop; tau += kVariationSampleS) taus.push_back({tau, -1});
   }
-  taus.push_back(stop - t0);
-  std::sort(taus.begin(), taus.end());
+  taus.push_back({stop, -1});
+  std::stable_sort(taus.begin(), taus.end(),
+                   [](const Tagged& a, const Tagged& b) { return a.tau < b.tau; });
+  std::vector<double> stop_s(static_cast<std::size_t>(n), 0.0);
+  for (const PathStop& s : t.stops) stop_s[s.waypoint] += s.seconds;
+
   std::vector<Knot> knots;
-  for (double tau : taus) {
-    if (!knots.empty() && tau - (knots.back().t_s - t0) < 1e-9) continue;
-    const double s = profile.S(tau);
-    knots.push_back({t0 + tau, line.At(s), s});
+  if (t.wait_s > 0.0) knots.push_back({t0, line.At(0.0), 0.0});
+  double paused = t.wait_s;
+  double last_tau = -1.0;
+  for (const Tagged& tag : taus) {
+    if (tag.tau - last_tau < 1e-9) continue;  // a corner first (stable sort), duplicates dropped
+    last_tau = tag.tau;
+    const double s = profile.S(tag.tau);
+    knots.push_back({t0 + paused + tag.tau, line.At(s), s});
+    if (tag.waypoint >= 0 && stop_s[static_cast<std::size_t>(tag.waypoint)] > 0.0) {
+      paused += stop_s[static_cast<std::size_t>(tag.waypoint)];
+      knots.push_back({t0 + paused + tag.tau, line.At(s), s});
+    }
   }
+  if (stay && !t.loop && knots.back().t_s < limit) {
+    knots.push_back({limit, knots.back().p, knots.back().distance_m});
+  }
+  knots = CutAt(std::move(knots), limit);
   if (knots.size() == 1) knots.push_back(knots.front());
   return Trajectory(std::move(knots));
 }
@@ -302,17 +350,104 @@ double Trajectory::LegHeading(double t_s) const {
   return leg_heading_rad_[LegIndex(std::clamp(t_s, start_s(), end_s()))];
 }
 
+double Trajectory::LegSpeed(std::size_t leg) const {
+  if (leg + 1 >= knots_.size()) return 0.0;
+  const double dt = knots_[leg + 1].t_s - knots_[leg].t_s;
+  return dt > 0 ? Norm(knots_[leg + 1].p - knots_[leg].p) / dt : 0.0;
+}
+
+// ---- People
+
+PersonBody ResolvePerson(const PersonSpec& spec, Rng& rng) {
+  const auto normal = [&](double mean, double sigma, double lo, double hi) {
+    return std::clamp(mean + sigma * rng.Normal(), lo, hi);
+  };
+  // Every value drawn, in this order, whether or not the scenario fixes it.
+  const double a = normal(0.23, 0.02, 0.18, 0.30);
+  const double b = normal(0.14, 0.015, 0.10, 0.20);
+  const double exponent = rng.Uniform(2.0, 3.0);
+  const double sway = rng.Uniform(0.015, 0.035);
+  const double leg = rng.Uniform(0.05, 0.07);
+  const double hip = rng.Uniform(0.08, 0.11);
+  PersonBody body;
+  body.a_m = spec.a_m.value_or(a);
+  body.b_m = spec.b_m.value_or(b);
+  // DESIGN.md: a person given a_m and b_m is that ellipse.
+  body.exponent = spec.torso_exponent.value_or(spec.a_m && spec.b_m ? 2.0 : exponent);
+  body.sway_m = spec.sway_m.value_or(sway);
+  body.leg_radius_m = spec.leg_radius_m.value_or(leg);
+  body.hip_half_width_m = spec.hip_half_width_m.value_or(hip);
+  return body;
+}
+
+double StrideM(double speed_mps) {
+  if (!(speed_mps > 0.0)) return 0.0;
+  return std::min(2.0, 1.4 * std::pow(speed_mps / 1.3, 0.6));
+}
+
+double FootOffsetStrides(double phase) {
+  const double u = phase - std::floor(phase);
+  if (u < kStanceFraction) return 0.3 - 0.6 * u / kStanceFraction;
+  const double s = (u - kStanceFraction) / (1.0 - kStanceFraction);
+  return -0.3 + 0.6 * 0.5 * (1.0 - std::cos(kPi * s));
+}
+
 // ---- Target
 
-Target::Target(const TargetSpec& spec, Trajectory trajectory)
-    : id_(spec.id),
-      shape_(spec.shape),
-      radius_m_(spec.radius_m),
-      a_m_(spec.a_m),
-      b_m_(spec.b_m),
-      sway_m_(spec.sway_m),
+namespace {
+
+// Farthest any part of the body can be from its centre, over all mounts.
+double BodyReach(TargetShape shape, const TargetSpec& spec, const PersonBody& body) {
+  switch (shape) {
+    case TargetShape::kCylinder:
+      return spec.radius_m;
+    case TargetShape::kPerson: {
+      // The superellipse lies in its box; legs reach 0.3 of the longest stride at knee height.
+      const double torso = std::hypot(body.a_m, body.b_m) + body.sway_m;
+      const double legs = std::hypot(body.hip_half_width_m, kKneeFraction * 0.3 * StrideM(10.0)) +
+                          body.leg_radius_m + body.sway_m;
+      return std::max(torso, legs);
+    }
+    case TargetShape::kTrolley:
+      return 0.5 * std::hypot(spec.length_m, spec.width_m);
+    case TargetShape::kChair:
+      return spec.size_m / std::sqrt(2.0);
+    case TargetShape::kDoor:
+      return spec.door ? spec.door->width_m + spec.door->thickness_m : 1.0;
+  }
+  return 1.0;
+}
+
+}  // namespace
+
+Target::Target(std::string id, TargetShape shape, std::size_t spec_index, const TargetSpec& spec,
+               const PersonBody& body, Trajectory trajectory, double behind_m)
+    : id_(std::move(id)),
+      shape_(shape),
+      spec_index_(spec_index),
+      spec_(spec),
+      body_(body),
       trajectory_(std::move(trajectory)),
-      bound_radius_m_(TargetRadius(spec)) {}
+      behind_m_(behind_m),
+      bound_radius_m_(BodyReach(shape, spec, body) + behind_m) {
+  // Gait phase at every knot: cycles = integral of distance over stride length.
+  const auto& knots = trajectory_.knots();
+  knot_phase_.assign(knots.size(), 0.0);
+  for (std::size_t i = 1; i < knots.size(); ++i) {
+    const double stride = StrideM(trajectory_.LegSpeed(i - 1));
+    const double walked = knots[i].distance_m - knots[i - 1].distance_m;
+    knot_phase_[i] = knot_phase_[i - 1] + (stride > 0 ? walked / stride : 0.0);
+  }
+}
+
+double Target::GaitPhase(double t_s) const {
+  const auto& knots = trajectory_.knots();
+  if (knots.size() < 2) return 0.0;
+  const std::size_t i = trajectory_.LegAt(t_s);
+  const double stride = StrideM(trajectory_.LegSpeed(i));
+  const double walked = trajectory_.Distance(t_s) - knots[i].distance_m;
+  return knot_phase_[i] + (stride > 0 ? walked / stride : 0.0);
+}
 
 TargetState Target::StateAt(double t_s) const {
   TargetState s;
@@ -330,23 +465,111 @@ TargetState Target::StateAt(double t_s) const {
     s.velocity_mps =
         (1.0 / (t_hi - t_lo)) * (trajectory_.Position(t_hi) - trajectory_.Position(t_lo));
   }
-  s.center = p;
-  double twist = 0.0;
-  if (shape_ == TargetShape::kPerson && sway_m_ > 0.0) {
-    const double phase = 2.0 * kPi * trajectory_.Distance(t_s) / kStrideM;
-    const double lateral = sway_m_ * std::sin(phase);
-    s.center = p + lateral * Vec2{-std::sin(s.heading_rad), std::cos(s.heading_rad)};
-    twist = kTorsoTwistRad * std::cos(phase);
+  s.speed_mps = trajectory_.LegSpeed(trajectory_.LegAt(t_s));
+  const Vec2 forward{std::cos(s.heading_rad), std::sin(s.heading_rad)};
+  const Vec2 left{-forward.y, forward.x};
+  s.center = p - behind_m_ * forward;
+  switch (shape_) {
+    case TargetShape::kPerson: {
+      s.gait_phase = GaitPhase(t_s);
+      const double walking = std::min(1.0, s.speed_mps / kFullSwaySpeedMps);
+      // The body shifts over the standing foot: one sway cycle per stride, and the shoulders turn
+      // against the hips.
+      const double angle = 2.0 * kPi * s.gait_phase;
+      const Vec2 hips = s.center;
+      s.center = s.center + (walking * body_.sway_m * std::sin(angle)) * left;
+      const double twist = walking * kTorsoTwistRad * std::cos(angle);
+      // Axis a runs across the shoulders, perpendicular to the facing direction.
+      s.body_yaw_rad = Wrap(s.heading_rad + kPi / 2.0 + twist);
+      // Legs at knee height: from the hip towards the foot, which stands while the body passes.
+      const double stride = StrideM(s.speed_mps);
+      for (int leg = 0; leg < 2; ++leg) {
+        const double side = leg == 0 ? 1.0 : -1.0;
+        const double foot = FootOffsetStrides(s.gait_phase + 0.5 * leg) * stride;
+        s.legs[leg] = hips + (side * body_.hip_half_width_m) * left +
+                      (kKneeFraction * foot) * forward +
+                      (0.5 * walking * body_.sway_m * std::sin(angle)) * left;
+      }
+      break;
+    }
+    case TargetShape::kTrolley:
+      s.body_yaw_rad = s.heading_rad;
+      break;
+    case TargetShape::kChair:
+      s.body_yaw_rad = Wrap(spec_.yaw_deg * kPi / 180.0);
+      break;
+    case TargetShape::kDoor: {
+      const DoorSpec& door = *spec_.door;
+      const auto angle_at = [&](double t) {
+        const auto& k = door.swing;
+        if (t <= k.front().first) return k.front().second;
+        for (std::size_t i = 1; i < k.size(); ++i) {
+          if (t <= k[i].first) {
+            const double u = (t - k[i - 1].first) / (k[i].first - k[i - 1].first);
+            return k[i - 1].second + u * (k[i].second - k[i - 1].second);
+          }
+        }
+        return k.back().second;
+      };
+      const auto centre_at = [&](double t) {
+        const double a = angle_at(t) * kPi / 180.0;
+        return door.hinge + (0.5 * door.width_m) * Vec2{std::cos(a), std::sin(a)};
+      };
+      s.body_yaw_rad = Wrap(angle_at(t_s) * kPi / 180.0);
+      s.heading_rad = s.body_yaw_rad;
+      s.center = centre_at(t_s);
+      s.velocity_mps = (1.0 / (2.0 * kH)) * (centre_at(t_s + kH) - centre_at(t_s - kH));
+      s.speed_mps = Norm(s.velocity_mps);
+      break;
+    }
+    case TargetShape::kCylinder:
+      s.body_yaw_rad = s.heading_rad;
+      break;
   }
-  // Axis a runs across the shoulders, perpendicular to the facing direction.
-  s.body_yaw_rad = Wrap(s.heading_rad + kPi / 2.0 + twist);
   return s;
 }
 
-double Target::Intersect(const Ray& ray, const TargetState& state) const {
+double Target::Intersect(const Ray& ray, const TargetState& state, Mount mount) const {
   if (!state.present) return kNoHit;
-  if (shape_ == TargetShape::kCylinder) return RayCircle(ray, state.center, radius_m_);
-  return RayEllipse(ray, state.center, a_m_, b_m_, state.body_yaw_rad);
+  switch (shape_) {
+    case TargetShape::kCylinder:
+      return RayCircle(ray, state.center, spec_.radius_m);
+    case TargetShape::kPerson:
+      if (mount == Mount::kLegs) {
+        return std::min(RayCircle(ray, state.legs[0], body_.leg_radius_m),
+                        RayCircle(ray, state.legs[1], body_.leg_radius_m));
+      }
+      return RaySuperellipse(ray, state.center, body_.a_m, body_.b_m, body_.exponent,
+                             state.body_yaw_rad);
+    case TargetShape::kTrolley:
+      return RayBox(ray, state.center, 0.5 * spec_.length_m, 0.5 * spec_.width_m,
+                    state.body_yaw_rad);
+    case TargetShape::kChair: {
+      const Vec2 facing{std::cos(state.body_yaw_rad), std::sin(state.body_yaw_rad)};
+      const Vec2 side{-facing.y, facing.x};
+      const double half = 0.5 * spec_.size_m;
+      if (mount == Mount::kLegs) {
+        // Four legs at the seat's corners.
+        constexpr double kLegRadiusM = 0.015;
+        double best = kNoHit;
+        for (const double f : {-1.0, 1.0}) {
+          for (const double l : {-1.0, 1.0}) {
+            const Vec2 c = state.center + (f * (half - 0.03)) * facing + (l * (half - 0.03)) * side;
+            best = std::min(best, RayCircle(ray, c, kLegRadiusM));
+          }
+        }
+        return best;
+      }
+      // The backrest: a board along the seat's back edge.
+      constexpr double kBackrestHalfDepthM = 0.025;
+      return RayBox(ray, state.center - (half - kBackrestHalfDepthM) * facing, kBackrestHalfDepthM,
+                    half, state.body_yaw_rad);
+    }
+    case TargetShape::kDoor:
+      return RayBox(ray, state.center, 0.5 * spec_.door->width_m, 0.5 * spec_.door->thickness_m,
+                    state.body_yaw_rad);
+  }
+  return kNoHit;
 }
 
 bool BuildTargets(const Scenario& scenario, std::vector<Target>* out, std::string* error) {
@@ -366,12 +589,26 @@ bool BuildTargets(const Scenario& scenario, std::vector<Target>* out, std::strin
   for (std::size_t i = 0; i < scenario.targets.size(); ++i) {
     const TargetSpec& spec = scenario.targets[i];
     Trajectory trajectory;
-    if (spec.random_walk) {
+    if (spec.shape == TargetShape::kDoor) {
+      // The hinge stays; the leaf turns (Target::StateAt).
+      const double limit =
+          std::min(spec.leave_s.value_or(scenario.duration_s), scenario.duration_s);
+      if (limit > spec.enter_s) {
+        trajectory =
+            Trajectory({{spec.enter_s, spec.door->hinge, 0.0}, {limit, spec.door->hinge, 0.0}});
+      }
+    } else if (spec.random_walk) {
       if (!WalkTrajectory(spec, i, scenario, clearance, &trajectory, error)) return false;
     } else {
       trajectory = PathTrajectory(spec, scenario.duration_s);
     }
-    out->emplace_back(spec, std::move(trajectory));
+    Rng body_rng(MixSeed({scenario.seed, static_cast<std::uint64_t>(RngStream::kBody), i}));
+    const PersonBody body = ResolvePerson(spec.person, body_rng);
+    out->emplace_back(spec.id, spec.shape, i, spec, body, trajectory);
+    if (spec.shape == TargetShape::kTrolley) {
+      out->emplace_back(spec.id + ".pusher", TargetShape::kPerson, i, spec, body,
+                        std::move(trajectory), 0.5 * spec.length_m + kHandleGapM + body.b_m);
+    }
   }
   return true;
 }

@@ -1,0 +1,456 @@
+#include "firmware_tracker/tracking/shape_fit.h"
+
+#include <Eigen/Cholesky>
+#include <Eigen/LU>
+#include <algorithm>
+#include <array>
+#include <cmath>
+
+#include "common/geometry.h"
+
+namespace lrfnet::tracking {
+namespace {
+
+using Vec5 = Eigen::Matrix<double, 5, 1>;
+using Mat5 = Eigen::Matrix<double, 5, 5>;
+
+// Parameter indices.
+constexpr int kCx = 0, kCy = 1, kYaw = 2, kA = 3, kB = 4;
+// A weak prior on the centre (1 m around the start) keeps the normal matrix invertible when the
+// data leave a direction open (one point, no silhouette edge); its variance then says so.
+constexpr double kCentrePriorSigmaM = 1.0;
+// Largest Gauss-Newton step per iteration.
+constexpr double kMaxCentreStepM = 0.25;
+constexpr double kMaxYawStepRad = 0.6;
+constexpr double kMaxSizeStepM = 0.1;
+// Steps below these end the iteration.
+constexpr double kConvergedCentreM = 0.003;
+constexpr double kConvergedYawRad = 0.05;
+constexpr std::size_t kMaxFitPoints = 64;
+
+bool Positive(double v) { return std::isfinite(v) && v > 0.0; }
+
+// Axis directions are defined modulo pi.
+double WrapHalfTurn(double a) {
+  a = std::remainder(a, common::kPi);
+  if (a <= -common::kPi / 2) a += common::kPi;
+  return a;
+}
+
+// Distance of a point from the outline and its gradient with respect to x.
+struct PointTerm {
+  double d = 0.0;
+  Vec5 grad = Vec5::Zero();
+};
+
+// |x|^p and d|x|^p / dx, the common exponents without pow or a division.
+inline void PowerTerm(double x, double p, double* value, double* derivative) {
+  if (p == 2.0) {
+    *value = x * x;
+    *derivative = 2.0 * x;
+    return;
+  }
+  const double ax = std::abs(x);
+  if (p == 2.5) {
+    const double root = std::sqrt(ax);
+    *value = x * x * root;
+    *derivative = 2.5 * x * root;
+    return;
+  }
+  const double v = std::pow(ax, p);
+  *value = v;
+  *derivative = ax > 0.0 ? p * v / x : 0.0;
+}
+
+PointTerm PointResidual(ShapeModel model, const Vec5& x, double cos_yaw, double sin_yaw,
+                        double exponent, const Eigen::Vector2d& p) {
+  PointTerm t;
+  const double dx = p.x() - x(kCx), dy = p.y() - x(kCy);
+  if (model == ShapeModel::kCircle) {
+    const double r = std::sqrt(dx * dx + dy * dy);
+    t.d = r - x(kA);
+    if (r > 1e-12) {
+      t.grad(kCx) = -dx / r;
+      t.grad(kCy) = -dy / r;
+    }
+    t.grad(kA) = -1.0;
+    return t;
+  }
+  const double a = x(kA), b = x(kB);
+  const double u = cos_yaw * dx + sin_yaw * dy;
+  const double v = -sin_yaw * dx + cos_yaw * dy;
+  // d/dq of d as (gu, gv) in the body frame; q = R^T (p - c): dq/dc = -R^T, dq/dyaw = (v, -u).
+  double gu = 0.0, gv = 0.0;
+  if (model == ShapeModel::kSuperellipse) {
+    const double inv_a = 1.0 / a, inv_b = 1.0 / b;
+    double s1 = 0.0, d1 = 0.0, s2 = 0.0, d2 = 0.0;
+    PowerTerm(u * inv_a, exponent, &s1, &d1);
+    PowerTerm(v * inv_b, exponent, &s2, &d2);
+    const double su = d1 * inv_a, sv = d2 * inv_b;  // dS/du, dS/dv
+    const double g2 = su * su + sv * sv;
+    if (!(g2 > 1e-24)) {
+      t.d = -std::min(a, b);  // at the centre
+      return t;
+    }
+    // First-order (Sampson) distance; the gradient treats the normalisation 1 / |grad S| as
+    // constant.
+    const double inv_g = 1.0 / std::sqrt(g2);
+    t.d = (s1 + s2 - 1.0) * inv_g;
+    gu = su * inv_g;
+    gv = sv * inv_g;
+    t.grad(kA) = -gu * u * inv_a;
+    t.grad(kB) = -gv * v * inv_b;
+  } else {  // box: signed distance
+    const double su = u < 0 ? -1.0 : 1.0, sv = v < 0 ? -1.0 : 1.0;
+    const double du = std::abs(u) - a, dv = std::abs(v) - b;
+    if (du > 0.0 && dv > 0.0) {
+      t.d = std::sqrt(du * du + dv * dv);
+      gu = su * du / t.d;
+      gv = sv * dv / t.d;
+      t.grad(kA) = -du / t.d;
+      t.grad(kB) = -dv / t.d;
+    } else if (du > dv) {
+      t.d = du;
+      gu = su;
+      t.grad(kA) = -1.0;
+    } else {
+      t.d = dv;
+      gv = sv;
+      t.grad(kB) = -1.0;
+    }
+  }
+  t.grad(kCx) = -(cos_yaw * gu - sin_yaw * gv);
+  t.grad(kCy) = -(sin_yaw * gu + cos_yaw * gv);
+  t.grad(kYaw) = gu * v - gv * u;
+  return t;
+}
+
+// Support function h(n; x) and its gradient with respect to (yaw, a, b).
+double Support(ShapeModel model, const Vec5& x, const Eigen::Vector2d& n, double exponent,
+               Vec5* grad) {
+  if (model == ShapeModel::kCircle) {
+    if (grad != nullptr) (*grad)(kA) = 1.0;
+    return x(kA);
+  }
+  const double c = std::cos(x(kYaw)), s = std::sin(x(kYaw));
+  const double p = n.x() * c + n.y() * s;   // n . e1
+  const double q = -n.x() * s + n.y() * c;  // n . e2; dp/dyaw = q, dq/dyaw = -p
+  const double a = x(kA), b = x(kB);
+  if (model == ShapeModel::kSuperellipse) {
+    // The dual norm: h = (|a p|^k + |b q|^k)^(1/k), 1/exponent + 1/k = 1.
+    const double k = exponent / (exponent - 1.0);
+    const double ap = std::abs(a * p), bq = std::abs(b * q);
+    // |x|^k: exponent 2.5 (the person model) has k = 5/3, x^(5/3) = x cbrt(x^2).
+    const auto power = [k](double v) {
+      if (k == 2.0) return v * v;
+      if (std::abs(k - 5.0 / 3.0) < 1e-12) return v * std::cbrt(v * v);
+      return std::pow(v, k);
+    };
+    const double tp = power(ap);
+    const double tq = power(bq);
+    const double t = tp + tq;
+    if (!(t > 0.0)) return 0.0;
+    const double h = k == 2.0 ? std::sqrt(t) : std::pow(t, 1.0 / k);
+    if (grad != nullptr) {
+      const double scale = h / t;  // h^(1 - k)
+      (*grad)(kA) = scale * tp / a;
+      (*grad)(kB) = scale * tq / b;
+      const double dtp = ap > 0.0 ? tp / p : 0.0;  // |a p|^k / p: sign of p included
+      const double dtq = bq > 0.0 ? tq / q : 0.0;
+      (*grad)(kYaw) = scale * (dtp * q - dtq * p);
+    }
+    return h;
+  }
+  if (grad != nullptr) {
+    const double sp = p < 0 ? -1.0 : 1.0, sq = q < 0 ? -1.0 : 1.0;
+    (*grad)(kYaw) = a * sp * q - b * sq * p;
+    (*grad)(kA) = std::abs(p);
+    (*grad)(kB) = std::abs(q);
+  }
+  return a * std::abs(p) + b * std::abs(q);
+}
+
+struct Edge {
+  Eigen::Vector2d n = Eigen::Vector2d::Zero();  // normal of the edge ray, away from the body
+  double weight = 0.0;                          // 1 / sigma^2
+};
+
+}  // namespace
+
+std::optional<std::string> Validate(const ShapeFitOptions& o) {
+  auto nonneg = [](double v) { return std::isfinite(v) && v >= 0.0; };
+  if (!nonneg(o.point_sigma_m) || !nonneg(o.point_sigma_per_m) || !nonneg(o.model_sigma_m) ||
+      !(o.point_sigma_m + o.model_sigma_m > 0.0)) {
+    return "point_sigma_m, point_sigma_per_m and model_sigma_m must be >= 0 and not all 0";
+  }
+  if (!Positive(o.edge_floor_sigma_m)) return "edge_floor_sigma_m must be > 0";
+  if (!(std::isfinite(o.effective_points) && o.effective_points >= 1.0)) {
+    return "effective_points must be >= 1";
+  }
+  if (!Positive(o.robust_k)) return "robust_k must be > 0";
+  if (o.max_iterations < 1 || o.max_iterations > 50) return "max_iterations must be in [1, 50]";
+  if (o.max_points < 2 || o.max_points > kMaxFitPoints) {
+    return "max_points must be in [2, " + std::to_string(kMaxFitPoints) + "]";
+  }
+  if (!Positive(o.min_size_m) || !Positive(o.max_size_m) || o.max_size_m <= o.min_size_m) {
+    return "need 0 < min_size_m < max_size_m";
+  }
+  return std::nullopt;
+}
+
+double ShapeSupport(ShapeModel model, const Eigen::Vector2d& size_m, double yaw_rad,
+                    const Eigen::Vector2d& n, double exponent) {
+  Vec5 x = Vec5::Zero();
+  x(kYaw) = yaw_rad;
+  x(kA) = size_m.x();
+  x(kB) = size_m.y();
+  return Support(model, x, n, exponent, nullptr);
+}
+
+ShapeFitResult FitShape(std::span<const Eigen::Vector2d> points, const Silhouette& silhouette,
+                        const ShapePrior& prior, const ShapeFitOptions& o) {
+  ShapeFitResult result;
+  // The points used: finite ones, evenly subsampled to max_points.
+  std::array<Eigen::Vector2d, kMaxFitPoints> pts;
+  std::size_t finite = 0;
+  for (const auto& p : points) finite += p.allFinite() ? 1 : 0;
+  if (finite == 0) return result;
+  const std::size_t want = std::min(finite, o.max_points);
+  std::size_t n = 0;
+  {
+    std::size_t seen = 0;
+    std::size_t next_pick = 0;  // index among finite points of the next one to take
+    for (const auto& p : points) {
+      if (!p.allFinite()) continue;
+      if (seen == next_pick && n < want) {
+        pts[n++] = p;
+        next_pick = want <= 1 ? finite
+                              : static_cast<std::size_t>(std::llround(
+                                    static_cast<double>(n) * static_cast<double>(finite - 1) /
+                                    static_cast<double>(want - 1)));
+      }
+      ++seen;
+    }
+  }
+  const std::span<const Eigen::Vector2d> used(pts.data(), n);
+  result.points_used = n;
+
+  // Shape of the point set: principal line and extent (flat objects: doors, boards).
+  Eigen::Vector2d mean = Eigen::Vector2d::Zero();
+  double range_sum = 0.0;
+  for (const auto& p : used) {
+    mean += p;
+    range_sum += p.norm();
+  }
+  mean /= static_cast<double>(n);
+  const double mean_range = range_sum / static_cast<double>(n);
+  Eigen::Matrix2d scatter = Eigen::Matrix2d::Zero();
+  for (const auto& p : used) scatter += (p - mean) * (p - mean).transpose();
+  scatter /= static_cast<double>(n);
+  {
+    const double half_trace = 0.5 * (scatter(0, 0) + scatter(1, 1));
+    const double half_diff = 0.5 * (scatter(0, 0) - scatter(1, 1));
+    const double smallest =
+        half_trace - std::sqrt(half_diff * half_diff + scatter(0, 1) * scatter(0, 1));
+    result.line_rms_m = std::sqrt(std::max(0.0, smallest));
+  }
+  result.extent_m = (used.front() - used.back()).norm();
+
+  const ShapeModel model = prior.model;
+  const bool circle = model == ShapeModel::kCircle;
+  Vec5 x = Vec5::Zero();
+  x(kYaw) = circle ? 0.0 : prior.yaw_rad;
+  x(kA) = std::clamp(prior.size_m.x(), o.min_size_m, o.max_size_m);
+  x(kB) = circle ? x(kA) : std::clamp(prior.size_m.y(), o.min_size_m, o.max_size_m);
+
+  // Start: on the ray through the middle of the silhouette, the body's extent behind the points.
+  const double mid_angle = 0.5 * (std::atan2(used.front().y(), used.front().x()) +
+                                  std::atan2(used.back().y(), used.back().x()));
+  const Eigen::Vector2d ray(std::cos(mid_angle), std::sin(mid_angle));
+  double nearest_along = mean_range;
+  for (const auto& p : used) nearest_along = std::min(nearest_along, p.dot(ray));
+  const double exponent = std::max(2.0, prior.exponent);
+  const double depth = Support(model, x, ray, exponent, nullptr);
+  Eigen::Vector2d start = (nearest_along + depth) * ray;
+  if (prior.centre_guess_m && prior.centre_guess_m->allFinite()) {
+    const Eigen::Vector2d& g = *prior.centre_guess_m;
+    if (g.dot(ray) > nearest_along && (g - start).norm() < 0.5) start = g;
+  }
+  x(kCx) = start.x();
+  x(kCy) = start.y();
+  const Eigen::Vector2d centre_prior = start;
+
+  // Silhouette edges, half a step outwards of the first and last hit beams.
+  std::array<Edge, 2> edges{};
+  std::size_t n_edges = 0;
+  {
+    const double range_sigma = mean_range * silhouette.step_rad / std::sqrt(12.0);
+    const double weight =
+        1.0 / (range_sigma * range_sigma + o.edge_floor_sigma_m * o.edge_floor_sigma_m);
+    const auto add = [&](double angle) {
+      Eigen::Vector2d nrm(std::sin(angle), -std::cos(angle));
+      if (nrm.dot(start) > 0.0) nrm = -nrm;
+      edges[n_edges++] = {nrm, weight};
+    };
+    if (silhouette.first_valid) add(silhouette.first_edge_rad);
+    if (silhouette.last_valid) add(silhouette.last_edge_rad);
+  }
+
+  // Per-point weights: noise and model error, discounted for correlation.
+  const double discount = std::max(1.0, static_cast<double>(n) / o.effective_points);
+  std::array<double, kMaxFitPoints> base_weight{};
+  for (std::size_t i = 0; i < n; ++i) {
+    const double noise = o.point_sigma_m + o.point_sigma_per_m * used[i].norm();
+    base_weight[i] = 1.0 / ((noise * noise + o.model_sigma_m * o.model_sigma_m) * discount);
+  }
+
+  // Priors: size information, yaw, weak centre.
+  Eigen::Matrix2d size_info = Eigen::Matrix2d::Zero();
+  if (circle) {
+    size_info(0, 0) = 1.0 / std::max(prior.size_cov_m2(0, 0), 1e-12);
+  } else {
+    bool invertible = false;
+    prior.size_cov_m2.computeInverseWithCheck(size_info, invertible, 1e-18);
+    if (!invertible) size_info = Eigen::Matrix2d::Identity() * 1e6;
+  }
+  const double yaw_info = circle ? 0.0 : 1.0 / (prior.yaw_sigma_rad * prior.yaw_sigma_rad + 1e-12);
+  const double centre_info = 1.0 / (kCentrePriorSigmaM * kCentrePriorSigmaM);
+  const Eigen::Vector2d size0(x(kA), x(kB));
+
+  // The objective at x: Huber on the points (rho(s) = s^2 within k, 2 k |s| - k^2 beyond, s the
+  // normalised distance), squares on edges and priors. Fills the Gauss-Newton normal matrix h and
+  // gradient g (halves) with the IRLS weights min(1, k / |s|) of x; one pass over the points.
+  const double k2 = o.robust_k * o.robust_k;
+  // h += w g g^T on the upper triangle (Eigen's rank update is slow at this size).
+  const auto add_outer = [](Mat5& hh, const Vec5& gr, double w) {
+    for (int r = 0; r < 5; ++r) {
+      const double wr = w * gr(r);
+      for (int col = r; col < 5; ++col) hh(r, col) += wr * gr(col);
+    }
+  };
+  auto evaluate = [&](const Vec5& at, Mat5* h, Vec5* g, double* points_sq) {
+    const double c = std::cos(at(kYaw)), s = std::sin(at(kYaw));
+    Mat5 hh = Mat5::Zero();
+    Vec5 gg = Vec5::Zero();
+    double cost = 0.0, sq = 0.0;
+    for (std::size_t i = 0; i < n; ++i) {
+      const PointTerm t = PointResidual(model, at, c, s, exponent, used[i]);
+      const double z2 = t.d * t.d * base_weight[i] * discount / k2;  // (s / k)^2
+      const double z = z2 > 1.0 ? std::sqrt(z2) : 1.0;
+      const double w = base_weight[i] / z;
+      add_outer(hh, t.grad, w);
+      gg += (w * t.d) * t.grad;
+      cost += k2 / discount * (z2 > 1.0 ? 2.0 * z - 1.0 : z2);
+      sq += t.d * t.d;
+    }
+    for (std::size_t e = 0; e < n_edges; ++e) {
+      Vec5 grad = Vec5::Zero();
+      const double r =
+          edges[e].n.dot(at.head<2>()) + Support(model, at, edges[e].n, exponent, &grad);
+      grad(kCx) = edges[e].n.x();
+      grad(kCy) = edges[e].n.y();
+      add_outer(hh, grad, edges[e].weight);
+      gg += (edges[e].weight * r) * grad;
+      cost += edges[e].weight * r * r;
+    }
+    // Priors.
+    const Eigen::Vector2d dc = at.head<2>() - centre_prior;
+    hh(kCx, kCx) += centre_info;
+    hh(kCy, kCy) += centre_info;
+    gg.head<2>() += centre_info * dc;
+    cost += centre_info * dc.squaredNorm();
+    if (circle) {
+      const double ds = at(kA) - size0.x();
+      hh(kA, kA) += size_info(0, 0);
+      gg(kA) += size_info(0, 0) * ds;
+      cost += size_info(0, 0) * ds * ds;
+      hh(kYaw, kYaw) += 1.0;  // fixed parameters: keep the matrix regular
+      hh(kB, kB) += 1.0;
+      gg(kYaw) = 0.0;
+      gg(kB) = 0.0;
+    } else {
+      const Eigen::Vector2d ds(at(kA) - size0.x(), at(kB) - size0.y());
+      hh.block<2, 2>(kA, kA) += size_info;
+      gg.segment<2>(kA) += size_info * ds;
+      cost += ds.dot(size_info * ds);
+      const double dyaw = WrapHalfTurn(at(kYaw) - prior.yaw_rad);
+      hh(kYaw, kYaw) += yaw_info;
+      gg(kYaw) += yaw_info * dyaw;
+      cost += yaw_info * dyaw * dyaw;
+    }
+    *h = hh.selfadjointView<Eigen::Upper>();
+    *g = gg;
+    if (points_sq != nullptr) *points_sq = sq;
+    return cost;
+  };
+
+  Mat5 h;
+  Vec5 g;
+  double points_cost = 0.0;
+  double cost = evaluate(x, &h, &g, &points_cost);
+  int iterations = 0;
+  for (; iterations < o.max_iterations; ++iterations) {
+    const Eigen::LDLT<Mat5> ldlt(h);
+    if (ldlt.info() != Eigen::Success) break;
+    Vec5 step = -ldlt.solve(g);
+    if (!step.allFinite()) break;
+    // Trust region in parameter units.
+    const double scale = std::max(
+        {1.0, step.head<2>().norm() / kMaxCentreStepM, std::abs(step(kYaw)) / kMaxYawStepRad,
+         std::abs(step(kA)) / kMaxSizeStepM, std::abs(step(kB)) / kMaxSizeStepM});
+    step /= scale;
+    // Converged: a step this small changes nothing that matters, and evaluating it would cost a
+    // pass over the points (the normal matrix at x serves for the covariance).
+    if (step.head<2>().norm() < kConvergedCentreM &&
+        std::abs(step(kA)) + std::abs(step(kB)) < kConvergedCentreM &&
+        std::abs(step(kYaw)) < kConvergedYawRad) {
+      x += step;
+      ++iterations;
+      break;
+    }
+    bool accepted = false;
+    for (int halving = 0; halving < 3 && !accepted; ++halving) {
+      Vec5 trial = x + step;
+      trial(kA) = std::clamp(trial(kA), o.min_size_m, o.max_size_m);
+      trial(kB) = circle ? trial(kA) : std::clamp(trial(kB), o.min_size_m, o.max_size_m);
+      Mat5 h_trial;
+      Vec5 g_trial;
+      double sq_trial = 0.0;
+      const double cost_trial = evaluate(trial, &h_trial, &g_trial, &sq_trial);
+      if (std::isfinite(cost_trial) && cost_trial <= cost) {
+        x = trial;
+        h = h_trial;
+        g = g_trial;
+        cost = cost_trial;
+        points_cost = sq_trial;
+        accepted = true;
+      } else {
+        step *= 0.5;
+      }
+    }
+    if (!accepted) break;
+  }
+
+  const Eigen::LDLT<Mat5> ldlt(h);
+  if (ldlt.info() != Eigen::Success) return result;
+  const Mat5 cov = ldlt.solve(Mat5::Identity());
+  if (!cov.allFinite()) return result;
+  result.centre_m = x.head<2>();
+  result.centre_cov_m2 = 0.5 * (cov.block<2, 2>(0, 0) + cov.block<2, 2>(0, 0).transpose());
+  if (circle) {
+    result.size_m = Eigen::Vector2d(x(kA), x(kA));
+    result.size_cov_m2 = Eigen::Matrix2d::Constant(cov(kA, kA));
+    result.yaw_rad = 0.0;
+  } else {
+    result.size_m = Eigen::Vector2d(x(kA), x(kB));
+    result.size_cov_m2 = 0.5 * (cov.block<2, 2>(kA, kA) + cov.block<2, 2>(kA, kA).transpose());
+    result.yaw_rad = WrapHalfTurn(x(kYaw));
+    result.yaw_sigma_rad = std::sqrt(std::max(0.0, cov(kYaw, kYaw)));
+  }
+  result.rms_m = std::sqrt(points_cost / static_cast<double>(n));
+  result.iterations = iterations;
+  result.ok = result.centre_m.allFinite() && result.centre_cov_m2.allFinite();
+  return result;
+}
+
+}  // namespace lrfnet::tracking

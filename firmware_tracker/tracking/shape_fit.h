@@ -1,0 +1,113 @@
+#pragma once
+// The body centre of one segment from a fit of the object's known shape, whose size is a state of
+// its track (not the centre of the visible side: the sensor sees only the near half of a body).
+//
+// Model. The object's cross-section at the scan plane is one of
+//   - kSuperellipse: |u / a|^p + |v / b|^p = 1 with semi-axes a (along yaw) and b and a fixed
+//     exponent p (2: an ellipse, a cylinder when a = b; larger: towards a rectangle), a person's
+//     upper body (between an ellipse and a rounded box: p = 2.5);
+//   - kBox: a rectangle with half-lengths a (along yaw) and b, a trolley or a cart;
+//   - kCircle: radius a (b is ignored), a leg at knee height;
+// with centre c and orientation yaw. The unknowns x = (c_x, c_y, yaw, a, b) (kCircle: (c_x, c_y,
+// a)) are found by maximising their posterior (Gauss-Newton on the sum of squares below):
+//   points:  r_i = d(p_i; x) / sigma_i,  d the distance of point p_i from the shape's outline
+//            (superellipse: the first-order (Sampson) distance (S - 1) / |grad S| with
+//            S = |u / a|^p + |v / b|^p, (u, v) = R(yaw)^T (p_i - c); box: the signed distance to
+//            the rectangle; circle: |p_i - c| - a),
+//            sigma_i^2 = (point_sigma_m + point_sigma_per_m |p_i|)^2 + model_sigma_m^2, inflated by
+//            n / effective_points when there are more points than that (model errors of
+//            neighbouring points are correlated: the data do not average them away), with Huber's
+//            loss beyond robust_k sigma against points of something else in the segment;
+//   edges:   the silhouette. The rays through the two ends of the segment's beam run, half a beam
+//            step outwards (the outline's tangent lies between the last beam that hit and the first
+//            that missed: uniform, sigma = range * step / sqrt(12)), touch the body:
+//            r_e = (n_e . c + h(n_e; x)) / sigma_e with n_e the ray's normal pointing away from the
+//            body and h the support function (superellipse: the dual norm
+//            (|a n.e1|^q + |b n.e2|^q)^(1/q), 1/p + 1/q = 1; box: a |n.e1| + b |n.e2|; circle: a).
+//            An edge whose neighbouring beam is nearer (an
+//            occluder) or outside the field of view is not a silhouette and is left out;
+//   priors:  size (a, b) ~ N(prior.size_m, prior.size_cov_m2) (the track's size state), yaw ~
+//            N(prior.yaw_rad, prior.yaw_sigma_rad^2) modulo pi (a track's walking direction; a
+//            flat prior when unknown).
+// With 2-4 points the priors and the direction to the sensor (edges) carry the fit: the centre
+// lies behind the points by the body's extent along the ray, with a covariance that grows with what
+// the data leave open. The covariance of x is the inverse of the Gauss-Newton normal matrix at the
+// solution; its (c_x, c_y) block is the measurement covariance, its (a, b) block the track's new
+// size covariance (the prior was the old state: no double counting).
+//
+// Frames: sensor frame (sensor at the origin), metres, radians. Pure and allocation-free (per-point
+// scratch on the stack, at most max_points points are used: evenly subsampled beyond that).
+
+#include <Eigen/Core>
+#include <cstddef>
+#include <cstdint>
+#include <optional>
+#include <span>
+#include <string>
+
+namespace lrfnet::tracking {
+
+enum class ShapeModel : std::uint8_t { kSuperellipse, kBox, kCircle };
+
+// Sigma of a yaw prior that says nothing (a flat prior over [0, pi)).
+inline constexpr double kUnknownYawSigmaRad = 100.0;
+
+// Where the segment's silhouette ends (see the header comment).
+struct Silhouette {
+  double first_edge_rad = 0.0;  // where the first hit beam's outline tangent is expected
+  double last_edge_rad = 0.0;   // and the last hit beam's
+  double step_rad = 0.0;        // uncertainty of those angles (a uniform width, radians)
+  bool first_valid = false;
+  bool last_valid = false;
+};
+
+struct ShapePrior {
+  ShapeModel model = ShapeModel::kSuperellipse;
+  Eigen::Vector2d size_m = Eigen::Vector2d(0.23, 0.14);  // (a, b); kCircle: (radius, unused)
+  double exponent = 2.5;                                 // kSuperellipse: p (>= 2)
+  Eigen::Matrix2d size_cov_m2 = 0.04 * 0.04 * Eigen::Matrix2d::Identity();
+  double yaw_rad = 0.0;  // direction of axis a
+  double yaw_sigma_rad = kUnknownYawSigmaRad;
+  // Where to start (e.g. the track's predicted centre); used when it lies behind the points.
+  std::optional<Eigen::Vector2d> centre_guess_m;
+};
+
+struct ShapeFitOptions {
+  double point_sigma_m = 0.015;      // range noise at 0 m (1 sigma)
+  double point_sigma_per_m = 0.001;  // range noise growth per metre
+  double model_sigma_m = 0.01;       // how far a real outline departs from the model, per point
+  double edge_floor_sigma_m = 0.01;  // mixed pixels and beam width at an edge
+  double effective_points = 8.0;     // points beyond this count as correlated (see above)
+  double robust_k = 2.0;             // Huber threshold, in sigmas
+  int max_iterations = 6;
+  std::size_t max_points = 8;
+  double min_size_m = 0.01;
+  double max_size_m = 2.0;
+};
+
+std::optional<std::string> Validate(const ShapeFitOptions& options);
+
+struct ShapeFitResult {
+  bool ok = false;  // false: degenerate input (no finite point), nothing below is meaningful
+  Eigen::Vector2d centre_m = Eigen::Vector2d::Zero();
+  Eigen::Matrix2d centre_cov_m2 = Eigen::Matrix2d::Identity();
+  Eigen::Vector2d size_m = Eigen::Vector2d::Zero();
+  Eigen::Matrix2d size_cov_m2 = Eigen::Matrix2d::Identity();
+  double yaw_rad = 0.0;
+  double yaw_sigma_rad = kUnknownYawSigmaRad;
+  double rms_m = 0.0;       // RMS of the point distances to the fitted outline
+  double line_rms_m = 0.0;  // RMS distance of the points to their principal line (flat: small)
+  double extent_m = 0.0;    // first to last point
+  std::size_t points_used = 0;
+  int iterations = 0;
+};
+
+// Precondition: options valid; prior sizes positive, covariance positive definite.
+ShapeFitResult FitShape(std::span<const Eigen::Vector2d> points, const Silhouette& silhouette,
+                        const ShapePrior& prior, const ShapeFitOptions& options);
+
+// Support function of the shape (extent from the centre in direction n, unit vector).
+double ShapeSupport(ShapeModel model, const Eigen::Vector2d& size_m, double yaw_rad,
+                    const Eigen::Vector2d& n, double exponent = 2.0);
+
+}  // namespace lrfnet::tracking

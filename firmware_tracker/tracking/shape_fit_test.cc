@@ -1,0 +1,281 @@
+#include "firmware_tracker/tracking/shape_fit.h"
+
+#include <gtest/gtest.h>
+
+#include <Eigen/Cholesky>
+#include <cmath>
+#include <vector>
+
+#include "common/geometry.h"
+#include "firmware_tracker/tracking/tracking_test_util.h"
+
+namespace lrfnet::tracking {
+namespace {
+
+using testing::Body;
+
+struct View {
+  std::vector<Eigen::Vector2d> points;
+  Silhouette silhouette;
+};
+
+// What a scanner at the origin (beams step_deg apart, range noise sigma noise_m) sees of `body`:
+// the points of the beams that hit it and the silhouette, as the pipeline passes them to the fit.
+View Look(const Body& body, double step_deg, double noise_m = 0.0, std::uint32_t seed = 1) {
+  testing::ScannerConfig config;
+  config.first_angle_rad = common::DegToRad(-90.0);
+  config.angle_step_rad = common::DegToRad(step_deg);
+  config.beams = static_cast<std::size_t>(std::lround(180.0 / step_deg)) + 1;
+  config.noise_sigma_m = noise_m;
+  config.max_range_m = 40.0;
+  config.seed = seed;
+  testing::SyntheticScanner scanner(config);
+  const std::vector<Body> bodies = {body};
+  const ScanView scan = scanner.Render(0, {}, bodies);
+  View v;
+  std::size_t first = scan.range_m.size(), last = 0;
+  for (std::size_t i = 0; i < scan.range_m.size(); ++i) {
+    if (scan.range_m[i] <= 0.0f) continue;
+    const double a = scan.BeamAngleRad(i);
+    v.points.emplace_back(scan.range_m[i] * std::cos(a), scan.range_m[i] * std::sin(a));
+    first = std::min(first, i);
+    last = i;
+  }
+  v.silhouette.step_rad = std::abs(scan.angle_step_rad);
+  v.silhouette.first_edge_rad = scan.BeamAngleRad(first) - 0.5 * scan.angle_step_rad;
+  v.silhouette.last_edge_rad = scan.BeamAngleRad(last) + 0.5 * scan.angle_step_rad;
+  v.silhouette.first_valid = v.silhouette.last_valid = true;
+  return v;
+}
+
+// Squared Mahalanobis distance of the fit's centre from the truth.
+double Nees(const ShapeFitResult& fit, const Eigen::Vector2d& truth) {
+  const Eigen::Vector2d e = fit.centre_m - truth;
+  return e.dot(fit.centre_cov_m2.ldlt().solve(e));
+}
+
+TEST(ShapeFitTest, OptionsValidate) {
+  EXPECT_EQ(Validate(ShapeFitOptions{}), std::nullopt);
+  ShapeFitOptions o;
+  o.effective_points = 0.5;
+  EXPECT_NE(Validate(o), std::nullopt);
+  o = {};
+  o.max_points = 1;
+  EXPECT_NE(Validate(o), std::nullopt);
+  o = {};
+  o.point_sigma_m = o.model_sigma_m = 0.0;
+  EXPECT_NE(Validate(o), std::nullopt);
+}
+
+TEST(ShapeFitTest, SupportFunctionsOfTheShapes) {
+  const Eigen::Vector2d size(0.3, 0.1);
+  EXPECT_NEAR(ShapeSupport(ShapeModel::kSuperellipse, size, 0.0, {1, 0}), 0.3, 1e-12);
+  EXPECT_NEAR(ShapeSupport(ShapeModel::kSuperellipse, size, 0.0, {0, 1}), 0.1, 1e-12);
+  EXPECT_NEAR(ShapeSupport(ShapeModel::kSuperellipse, size, common::kPi / 2, {1, 0}), 0.1, 1e-12);
+  const Eigen::Vector2d diagonal(std::sqrt(0.5), std::sqrt(0.5));
+  EXPECT_NEAR(ShapeSupport(ShapeModel::kBox, size, 0.0, diagonal), 0.4 * std::sqrt(0.5), 1e-12);
+  EXPECT_NEAR(ShapeSupport(ShapeModel::kCircle, size, 1.0, diagonal), 0.3, 1e-12);
+}
+
+// A cylinder of known radius at 5, 10 and 20 m, seen with 2 to 40 points (the beam step sets how
+// many): the centre, not the visible arc's middle, within what the fit says of itself.
+TEST(ShapeFitTest, CylinderOfKnownRadiusAtEveryRangeAndPointCount) {
+  const double radius = 0.25;
+  int cases = 0;
+  double nees_sum = 0.0;
+  for (const double range : {5.0, 10.0, 20.0}) {
+    for (const int points : {2, 3, 4, 6, 10, 20, 40}) {
+      // The arc subtends 2 asin(r / R); spread `points` beams over it.
+      const double span_deg = common::RadToDeg(2.0 * std::asin(radius / range));
+      const double step_deg = span_deg / (points + 0.2);
+      for (const std::uint32_t seed : {1u, 2u, 3u}) {
+        const double bearing = 0.2 * seed - 0.4;
+        const Body body = testing::Cylinder(
+            range * Eigen::Vector2d(std::cos(bearing), std::sin(bearing)), radius);
+        const View v = Look(body, step_deg, 0.012, seed);
+        ASSERT_GE(v.points.size(), 2u);
+        ShapePrior prior;
+        prior.model = ShapeModel::kCircle;
+        prior.size_m = {radius, radius};
+        prior.size_cov_m2 = 0.005 * 0.005 * Eigen::Matrix2d::Identity();
+        const ShapeFitResult fit = FitShape(v.points, v.silhouette, prior, ShapeFitOptions{});
+        ASSERT_TRUE(fit.ok);
+        const double error = (fit.centre_m - body.centre_m).norm();
+        SCOPED_TRACE("range " + std::to_string(range) + " points " +
+                     std::to_string(v.points.size()) + " error " + std::to_string(error));
+        // The centre of mass of the visible arc lies ~pi r / 4 = 0.2 m in front of the centre.
+        EXPECT_LT(error, 0.05);
+        EXPECT_LT(std::abs(fit.centre_m.norm() - range), 0.03);
+        EXPECT_LT(Nees(fit, body.centre_m), 13.8);  // 99.9 % of chi-square, 2 dof
+        EXPECT_NEAR(fit.size_m.x(), radius, 0.01);
+        nees_sum += Nees(fit, body.centre_m);
+        ++cases;
+      }
+    }
+  }
+  // The covariance is neither much too large nor too small on average (2 for an exact one).
+  EXPECT_GT(nees_sum / cases, 0.3);
+  EXPECT_LT(nees_sum / cases, 4.0);
+}
+
+// With the radius unknown (a wide prior) and many points, the fit learns it.
+TEST(ShapeFitTest, CylinderRadiusIsLearnedFromAWideArc) {
+  const Body body = testing::Cylinder({3.0, 0.5}, 0.25);
+  const View v = Look(body, 0.25, 0.005);
+  ShapePrior prior;
+  prior.model = ShapeModel::kCircle;
+  prior.size_m = {0.15, 0.15};
+  prior.size_cov_m2 = 0.1 * 0.1 * Eigen::Matrix2d::Identity();
+  const ShapeFitResult fit = FitShape(v.points, v.silhouette, prior, ShapeFitOptions{});
+  ASSERT_TRUE(fit.ok);
+  EXPECT_NEAR(fit.size_m.x(), 0.25, 0.02);
+  EXPECT_LT((fit.centre_m - body.centre_m).norm(), 0.02);
+  EXPECT_LT(std::sqrt(fit.size_cov_m2(0, 0)), 0.03);
+}
+
+// A person's upper-body ellipse at every heading and 3-10 m, with the sizes known (a track that
+// learned them) and the heading from the walking direction (20 degrees sigma).
+TEST(ShapeFitTest, EllipseAtEveryHeading) {
+  double worst = 0.0;
+  for (double yaw_deg = 0; yaw_deg < 180; yaw_deg += 15) {
+    for (const double range : {3.0, 6.0, 10.0}) {
+      const double yaw = common::DegToRad(yaw_deg);
+      const Body body{range * Eigen::Vector2d(std::cos(0.3), std::sin(0.3)), 0.23, 0.14, yaw};
+      const View v = Look(body, 0.5, 0.012, static_cast<std::uint32_t>(yaw_deg + range));
+      ShapePrior prior;
+      prior.exponent = 2.0;  // the outline is an ellipse
+      prior.size_m = {0.23, 0.14};
+      prior.size_cov_m2 = 0.01 * 0.01 * Eigen::Matrix2d::Identity();
+      prior.yaw_rad = yaw + 0.1;
+      prior.yaw_sigma_rad = 0.35;
+      const ShapeFitResult fit = FitShape(v.points, v.silhouette, prior, ShapeFitOptions{});
+      ASSERT_TRUE(fit.ok);
+      const double error = (fit.centre_m - body.centre_m).norm();
+      SCOPED_TRACE("yaw " + std::to_string(yaw_deg) + " range " + std::to_string(range) +
+                   " error " + std::to_string(error));
+      EXPECT_LT(error, 0.04);
+      EXPECT_LT(Nees(fit, body.centre_m), 13.8);
+      worst = std::max(worst, error);
+    }
+  }
+  EXPECT_GT(worst, 0.0);
+}
+
+// Two to four points of a person 15-25 m away: the prior size and the direction to the sensor put
+// the centre behind the points, and the covariance says how little the points add.
+TEST(ShapeFitTest, FewPointsStillGiveTheBodyCentreWithAnHonestCovariance) {
+  for (const double range : {15.0, 20.0, 25.0}) {
+    const Body body{range * Eigen::Vector2d(1.0, 0.0), 0.22, 0.15, common::kPi / 2};  // facing
+    const View v = Look(body, 0.5, 0.012, static_cast<std::uint32_t>(range));
+    ASSERT_GE(v.points.size(), 2u);
+    ASSERT_LE(v.points.size(), 4u);
+    ShapePrior prior;  // the population prior, orientation unknown
+    prior.exponent = 2.0;
+    const ShapeFitResult fit = FitShape(v.points, v.silhouette, prior, ShapeFitOptions{});
+    ASSERT_TRUE(fit.ok);
+    Eigen::Vector2d visible = Eigen::Vector2d::Zero();
+    for (const auto& p : v.points) visible += p;
+    visible /= static_cast<double>(v.points.size());
+    SCOPED_TRACE("range " + std::to_string(range));
+    // Behind the visible points, near the centre, within the covariance.
+    EXPECT_GT(fit.centre_m.x(), visible.x() + 0.05);
+    EXPECT_LT((fit.centre_m - body.centre_m).norm(), 0.08);
+    EXPECT_LT(Nees(fit, body.centre_m), 13.8);
+    // Along the ray the size and orientation are open: several centimetres.
+    EXPECT_GT(std::sqrt(fit.centre_cov_m2(0, 0)), 0.02);
+  }
+}
+
+TEST(ShapeFitTest, BoxOfACartAtItsCornerAndSide) {
+  // A 1.0 x 0.6 m cart (half-lengths 0.5, 0.3), its length along its heading.
+  for (const double yaw_deg : {0.0, 30.0, 60.0, 90.0}) {
+    const double yaw = common::DegToRad(yaw_deg);
+    const Eigen::Vector2d centre(4.0, 1.0);
+    // Render the rectangle as four walls.
+    const Eigen::Vector2d u(std::cos(yaw), std::sin(yaw)), w(-std::sin(yaw), std::cos(yaw));
+    const std::vector<testing::Wall> box = {
+        {centre + 0.5 * u + 0.3 * w, centre - 0.5 * u + 0.3 * w},
+        {centre - 0.5 * u + 0.3 * w, centre - 0.5 * u - 0.3 * w},
+        {centre - 0.5 * u - 0.3 * w, centre + 0.5 * u - 0.3 * w},
+        {centre + 0.5 * u - 0.3 * w, centre + 0.5 * u + 0.3 * w}};
+    testing::ScannerConfig config;
+    config.first_angle_rad = common::DegToRad(-90.0);
+    config.beams = 361;
+    config.noise_sigma_m = 0.01;
+    testing::SyntheticScanner scanner(config);
+    const ScanView scan = scanner.Render(0, box, {});
+    View v;
+    std::size_t first = scan.range_m.size(), last = 0;
+    for (std::size_t i = 0; i < scan.range_m.size(); ++i) {
+      if (scan.range_m[i] <= 0.0f) continue;
+      const double a = scan.BeamAngleRad(i);
+      v.points.emplace_back(scan.range_m[i] * std::cos(a), scan.range_m[i] * std::sin(a));
+      first = std::min(first, i);
+      last = i;
+    }
+    v.silhouette = {scan.BeamAngleRad(first) - 0.5 * scan.angle_step_rad,
+                    scan.BeamAngleRad(last) + 0.5 * scan.angle_step_rad,
+                    std::abs(scan.angle_step_rad), true, true};
+    ShapePrior prior;
+    prior.model = ShapeModel::kBox;  // a track that learned its size, give or take 5 cm
+    prior.size_m = {0.52, 0.28};
+    prior.size_cov_m2 = 0.05 * 0.05 * Eigen::Matrix2d::Identity();
+    prior.yaw_rad = yaw;
+    prior.yaw_sigma_rad = 0.2;
+    const ShapeFitResult fit = FitShape(v.points, v.silhouette, prior, ShapeFitOptions{});
+    ASSERT_TRUE(fit.ok);
+    SCOPED_TRACE("yaw " + std::to_string(yaw_deg));
+    EXPECT_LT((fit.centre_m - centre).norm(), 0.04);
+    EXPECT_LT(Nees(fit, centre), 13.8);
+  }
+}
+
+TEST(ShapeFitTest, OutlierPointsOfSomethingElseAreDownWeighted) {
+  const Body body = testing::Cylinder({5.0, 0.0}, 0.2);
+  View v = Look(body, 0.25, 0.005);
+  // Two points of a bag 15 cm in front of one side.
+  v.points[1] -= Eigen::Vector2d(0.15, 0.0);
+  v.points[2] -= Eigen::Vector2d(0.15, 0.0);
+  ShapePrior prior;
+  prior.model = ShapeModel::kCircle;
+  prior.size_m = {0.2, 0.2};
+  prior.size_cov_m2 = 0.01 * 0.01 * Eigen::Matrix2d::Identity();
+  const ShapeFitResult fit = FitShape(v.points, v.silhouette, prior, ShapeFitOptions{});
+  ASSERT_TRUE(fit.ok);
+  EXPECT_LT((fit.centre_m - body.centre_m).norm(), 0.02);
+}
+
+TEST(ShapeFitTest, FlatBoardHasASmallLineResidual) {
+  std::vector<Eigen::Vector2d> board, arc;
+  for (int i = 0; i < 10; ++i) {
+    board.emplace_back(4.0, -0.25 + 0.05 * i);
+    const double a = -1.2 + 0.24 * i;
+    arc.emplace_back(4.2 - 0.2 * std::cos(a), 0.2 * std::sin(a));
+  }
+  const Silhouette none{};
+  const ShapeFitResult flat = FitShape(board, none, ShapePrior{}, ShapeFitOptions{});
+  const ShapeFitResult round = FitShape(arc, none, ShapePrior{}, ShapeFitOptions{});
+  EXPECT_LT(flat.line_rms_m, 1e-9);
+  EXPECT_NEAR(flat.extent_m, 0.45, 1e-9);
+  EXPECT_GT(round.line_rms_m, 0.03);
+}
+
+TEST(ShapeFitTest, DegenerateInputsAreRefusedOrHonest) {
+  const Silhouette none{};
+  const std::vector<Eigen::Vector2d> nothing = {{std::nan(""), 1.0},
+                                                {std::numeric_limits<double>::infinity(), 0.0}};
+  EXPECT_FALSE(FitShape(nothing, none, ShapePrior{}, ShapeFitOptions{}).ok);
+  EXPECT_FALSE(FitShape({}, none, ShapePrior{}, ShapeFitOptions{}).ok);
+  // One point, no silhouette: the centre is behind it, and what is open is large.
+  const std::vector<Eigen::Vector2d> one = {{6.0, 0.0}};
+  const ShapeFitResult fit = FitShape(one, none, ShapePrior{}, ShapeFitOptions{});
+  ASSERT_TRUE(fit.ok);
+  EXPECT_GT(fit.centre_m.x(), 6.05);
+  EXPECT_GT(std::sqrt(fit.centre_cov_m2(1, 1)), 0.3);  // sideways: nothing known
+  // Many identical points (a stuck beam) do not break it.
+  const std::vector<Eigen::Vector2d> same(30, Eigen::Vector2d(3.0, 1.0));
+  EXPECT_TRUE(FitShape(same, none, ShapePrior{}, ShapeFitOptions{}).ok);
+}
+
+}  // namespace
+}  // namespace lrfnet::tracking
