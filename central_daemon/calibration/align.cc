@@ -290,6 +290,111 @@ class GridSampler final : public RtsIntervalSink {
   std::vector<TrackSample>* samples_;
 };
 
+constexpr std::size_t kKinds = 4;  // MeasurementKind values
+
+std::size_t KindIndex(MeasurementKind kind) {
+  const auto k = static_cast<std::size_t>(kind);
+  return k < kKinds ? k : 0;
+}
+
+// A state measured in its scan (not predicted only).
+bool Measured(const daemon::TrackObservation& o) {
+  return o.state != TrackState::kCoasting || o.points > 0;
+}
+
+// The measurement model of every sample of a piece (TrackSample): at the sample's smoothed
+// position and velocity, for each kind of the measured states within model_window_s (weighted by
+// their number; the nearest state's kind when none was measured), mixed.
+void ModelSamples(const Record* records, std::size_t n, UtcNs first_ns, UtcNs step_ns,
+                  const AlignOptions& options, GridTrack* out) {
+  const UtcNs window_ns = common::SecondsToNs(options.model_window_s);
+  std::size_t lo = 0, hi = 0;  // records with time in [t - window, t + window]
+  for (std::size_t k = 0; k < out->samples.size(); ++k) {
+    TrackSample& x = out->samples[k];
+    const UtcNs t_ns = first_ns + static_cast<UtcNs>(k) * step_ns;
+    while (lo < n && records[lo].t_ns < t_ns - window_ns) ++lo;
+    if (hi < lo) hi = lo;
+    while (hi < n && records[hi].t_ns <= t_ns + window_ns) ++hi;
+    std::array<double, kKinds> weight{};
+    std::array<const daemon::TrackObservation*, kKinds> nearest{};
+    std::array<UtcNs, kKinds> nearest_dt{};
+    double points = 0.0, measured = 0.0;
+    for (std::size_t i = lo; i < hi; ++i) {
+      const daemon::TrackObservation& o = *records[i].obs;
+      if (!Measured(o)) continue;
+      const std::size_t kind = KindIndex(o.kind);
+      weight[kind] += kind == KindIndex(MeasurementKind::kCenterOfMass) ||
+                              kind == KindIndex(MeasurementKind::kUnspecified)
+                          ? 1.0
+                          : options.model_fit_weight;
+      points += static_cast<double>(o.points);
+      measured += 1.0;
+      const UtcNs dt = records[i].t_ns > t_ns ? records[i].t_ns - t_ns : t_ns - records[i].t_ns;
+      if (nearest[kind] == nullptr || dt < nearest_dt[kind]) {
+        nearest[kind] = &o;
+        nearest_dt[kind] = dt;
+      }
+    }
+    double weight_sum = 0.0;
+    for (double w : weight) weight_sum += w;
+    if (measured == 0.0 || !(weight_sum > 0.0)) {
+      // Coasting only: the kind of the nearest state (the one the filter last used).
+      std::size_t best = 0;
+      UtcNs best_dt = std::numeric_limits<UtcNs>::max();
+      for (std::size_t i = lo > 0 ? lo - 1 : 0; i < std::min(n, hi + 1); ++i) {
+        const UtcNs dt = records[i].t_ns > t_ns ? records[i].t_ns - t_ns : t_ns - records[i].t_ns;
+        if (dt < best_dt) {
+          best_dt = dt;
+          best = i;
+        }
+      }
+      const std::size_t kind = KindIndex(records[best].obs->kind);
+      weight.fill(0.0);
+      weight[kind] = 1.0;
+      nearest[kind] = records[best].obs;
+    }
+    double total = 0.0;
+    for (double w : weight) total += w;
+    double bias = 0.0, per_major = 0.0, per_minor = 0.0, size_var = 0.0, model_var = 0.0;
+    double bias2 = 0.0;
+    std::size_t main_kind = 0;
+    for (std::size_t kind = 0; kind < kKinds; ++kind) {
+      if (weight[kind] == 0.0) continue;
+      if (weight[kind] > weight[main_kind]) main_kind = kind;
+      daemon::MeasurementContext c = daemon::ContextOf(*nearest[kind]);
+      c.x_m = x.position_m.x();
+      c.y_m = x.position_m.y();
+      c.vx_mps = x.velocity_mps.x();
+      c.vy_mps = x.velocity_mps.y();
+      const daemon::CentreBias b = daemon::CentreBiasOf(c, options.model);
+      const double f = weight[kind] / total;
+      bias += f * b.toward_sensor_m;
+      bias2 += f * b.toward_sensor_m * b.toward_sensor_m;
+      per_major += f * b.per_major_m_per_m;
+      per_minor += f * b.per_minor_m_per_m;
+      size_var += f * b.size_sigma_m * b.size_sigma_m;
+      model_var += f * b.sigma_m * b.sigma_m;
+    }
+    // Which kinds the smoother mixed, and in which proportion, is known only roughly: the
+    // spread of the kinds' biases is uncertainty of the mixture.
+    size_var += std::max(0.0, bias2 - bias * bias);
+    // Ends of the track (see AlignOptions::edge_sigma_per_m).
+    const double edge_s = static_cast<double>(std::min(k, out->samples.size() - 1 - k)) *
+                          common::NsToSeconds(step_ns);
+    const double edge_sigma = options.edge_sigma_per_m * x.position_m.norm() *
+                              std::exp(-edge_s / std::max(options.edge_time_s, 1e-9));
+    model_var += edge_sigma * edge_sigma;
+    x.kind = static_cast<MeasurementKind>(main_kind);
+    x.points = static_cast<std::uint16_t>(
+        std::min(65535.0, measured > 0.0 ? std::round(points / measured) : 0.0));
+    x.bias_m = static_cast<float>(bias);
+    x.bias_per_major = static_cast<float>(per_major);
+    x.bias_per_minor = static_cast<float>(per_minor);
+    x.bias_sigma_m = static_cast<float>(std::sqrt(size_var));
+    x.model_sigma_m = static_cast<float>(std::sqrt(model_var));
+  }
+}
+
 // Phase 5: smooths one piece and samples it on the grid into `out`. False when the piece covers no
 // grid time.
 bool SamplePiece(const SensorWork& work, const Piece& piece, UtcNs t0_ns, UtcNs step_ns,
@@ -300,12 +405,12 @@ bool SamplePiece(const SensorWork& work, const Piece& piece, UtcNs t0_ns, UtcNs 
   const UtcNs last_step = (records[n - 1].t_ns - t0_ns) / step_ns;
   if (first_step > last_step) return false;
 
-  std::array<std::size_t, 3> kinds{};
+  std::array<std::size_t, kKinds> kinds{};
   scratch->states.resize(n);
   scratch->times_ns.resize(n);
   for (std::size_t i = 0; i < n; ++i) {
     const daemon::TrackObservation& o = *records[i].obs;
-    ++kinds[static_cast<std::size_t>(o.kind) % kinds.size()];
+    ++kinds[KindIndex(o.kind)];
     scratch->times_ns[i] = records[i].t_ns;
     scratch->states[i] =
         FilteredState{common::NsToSeconds(records[i].t_ns - t0_ns), StateOf(o), CovarianceOf(o)};
@@ -332,6 +437,7 @@ bool SamplePiece(const SensorWork& work, const Piece& piece, UtcNs t0_ns, UtcNs 
     }
   }
   sampler.FillNodes(scratch->states);
+  ModelSamples(records, n, t0_ns + first_step * step_ns, step_ns, options, out);
   return true;
 }
 
@@ -365,6 +471,19 @@ std::optional<std::string> Validate(const AlignOptions& o) {
         o.min_position_sigma_m <= 10.0)) {
     return "min_position_sigma_m must be in [0, 10]";
   }
+  if (!(Finite(o.model_window_s) && o.model_window_s >= 0.0 && o.model_window_s <= 10.0)) {
+    return "model_window_s must be in [0, 10]";
+  }
+  if (!(Finite(o.model_fit_weight) && o.model_fit_weight >= 0.0 && o.model_fit_weight <= 1e3)) {
+    return "model_fit_weight must be in [0, 1000]";
+  }
+  if (!(Finite(o.edge_sigma_per_m) && o.edge_sigma_per_m >= 0.0 && o.edge_sigma_per_m <= 1.0)) {
+    return "edge_sigma_per_m must be in [0, 1]";
+  }
+  if (!(Finite(o.edge_time_s) && o.edge_time_s >= 0.0 && o.edge_time_s <= 60.0)) {
+    return "edge_time_s must be in [0, 60]";
+  }
+  if (auto e = daemon::Validate(o.model)) return "model: " + *e;
   return std::nullopt;
 }
 
@@ -378,6 +497,7 @@ AlignedTracks Align(const CalibrationInput& input, const AlignOptions& options, 
 
   AlignedTracks out;
   out.step_s = options.grid_step_s;
+  out.size_prior_sigma_m = options.model.prior_size_sigma_m;
   out.sensors.resize(sensor_count);
   std::vector<SensorWork> work(sensor_count);
 

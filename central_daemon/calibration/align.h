@@ -41,7 +41,9 @@
 // No usable state at all: t0_ns = 0, steps = 0, every sensor with no tracks.
 //
 // Output: AlignedTracks::sensors in input order; each sensor's tracks ordered by
-// (first_step, session_id, track_id). GridTrack::kind is the kind most of its states report.
+// (first_step, session_id, track_id). GridTrack::kind is the kind most of its states report;
+// every sample carries the measurement model of its own time (TrackSample, model_window_s), and
+// AlignedTracks::size_prior_sigma_m is model.prior_size_sigma_m.
 //
 // Smoothing a whole piece rather than each dynamic interval separately (the paper smooths "on each
 // time period"): a track's estimate at any time then uses all of its measurements, and the
@@ -59,6 +61,7 @@
 #include <vector>
 
 #include "central_daemon/calibration/types.h"
+#include "central_daemon/ingest/measurement_model.h"
 
 namespace lrfnet::calib {
 
@@ -78,6 +81,20 @@ struct AlignOptions {
   double min_position_sigma_m = 0.005;  // floor on a sample's position sigma, >= 0
   bool trim_coasting_tail = true;       // drop a track's trailing kCoasting states
   double max_grid_span_s = 86400.0;     // longest grid, [grid_step_s, 1e7]; caps memory
+  // The measurement model of every sample (TrackSample): evaluated at the smoothed position and
+  // velocity, mixed over the kinds of the measured states within model_window_s of the sample
+  // (about the time over which the smoother averages the measurements), [0, 10].
+  daemon::MeasurementModelOptions model{};
+  double model_window_s = 0.2;
+  // Weight of a state of each kind in that mixture, relative to a centre of mass: the trackers'
+  // filters weigh a fitted measurement (a few centimetres) more than a centre of mass (0.1 m,
+  // firmware measurement.com_sigma_m), so the smoothed position leans towards the fits. >= 0.
+  double model_fit_weight = 3.0;
+  // Near the ends of a track the smoothed position is one-sided and the person often half hidden
+  // (walking into or out of view): isotropic model sigma added, edge_sigma_per_m times the range,
+  // decaying as exp(-t / edge_time_s) with the time t to the nearer end of the track. >= 0.
+  double edge_sigma_per_m = 0.01;
+  double edge_time_s = 0.5;
 };
 
 // nullopt when valid, else the reason, naming the field first.

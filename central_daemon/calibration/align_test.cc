@@ -580,5 +580,120 @@ TEST(AlignTest, SampleCovarianceIsFlooredAndPositiveDefinite) {
   }
 }
 
+// ---------------------------------------------------------------------------------------------
+// The measurement model per sample.
+
+// A walker straight away from the sensor along x (the line of sight is along the walking
+// direction, i.e. across the shoulders' minor axis), 8 s at 25 Hz; every frame's observation
+// passed through `edit` (by frame index) first.
+template <typename Edit>
+SensorRecording ModelWalker(Edit edit) {
+  const Line away{Eigen::Vector4d(3.0, 0.0, 1.0, 0.0)};
+  SensorRecording s = LineSensor("m", 0.04, 0.0, 8.0, {{1, away, 0.0, 8.0}});
+  for (std::size_t f = 0; f < s.frames.size(); ++f) {
+    for (daemon::TrackObservation& o : s.frames[f].tracks) {
+      o.points = 8;
+      edit(f, o);
+    }
+  }
+  return s;
+}
+
+constexpr double kPi = common::kPi;
+
+// A sample in the middle of the track (away from its ends).
+const TrackSample& MiddleSample(const AlignedTracks& a) {
+  const GridTrack& t = a.sensors.at(0).tracks.at(0);
+  return t.samples[t.samples.size() / 2];
+}
+
+TEST(AlignModelTest, CentreOfMassSamplesCarryThePriorBodysBiasAndItsSensitivities) {
+  const AlignedTracks a =
+      Align(CalibrationInput{{ModelWalker([](std::size_t, daemon::TrackObservation&) {})}}, {});
+  const TrackSample& x = MiddleSample(a);
+  EXPECT_EQ(x.kind, daemon::MeasurementKind::kCenterOfMass);
+  EXPECT_EQ(x.points, 8);
+  // Seen along the walking direction: depth of the torso's minor semi-axis (0.15 m), pi/4 of it.
+  EXPECT_NEAR(x.bias_m, kPi / 4.0 * 0.15, 1e-4);
+  EXPECT_NEAR(x.bias_per_minor, kPi / 4.0, 1e-3);
+  EXPECT_NEAR(x.bias_per_major, 0.0, 1e-3);
+  EXPECT_NEAR(x.model_sigma_m, AlignOptions{}.model.com_sigma_m, 1e-3);
+  // The centre lies behind the tracked point, along the line of sight.
+  const Eigen::Vector2d c = CentreOf(x);
+  EXPECT_NEAR((c - x.position_m).norm(), x.bias_m, 1e-6);
+  EXPECT_GT(c.norm(), x.position_m.norm());
+  EXPECT_EQ(a.size_prior_sigma_m, AlignOptions{}.model.prior_size_sigma_m);
+}
+
+TEST(AlignModelTest, ShapeFitWithTheTrackersSizeIsTheBodyCentre) {
+  const AlignedTracks a =
+      Align(CalibrationInput{{ModelWalker([](std::size_t, daemon::TrackObservation& o) {
+              o.kind = daemon::MeasurementKind::kShapeFit;
+              o.shape = daemon::ObjectShape::kTorso;
+              o.size_major_m = 0.22f;
+              o.size_minor_m = 0.12f;
+              o.size_sigma_m = 0.03f;
+            })}},
+            {});
+  const TrackSample& x = MiddleSample(a);
+  EXPECT_EQ(x.kind, daemon::MeasurementKind::kShapeFit);  // not folded onto another kind
+  EXPECT_EQ(a.sensors[0].tracks[0].kind, daemon::MeasurementKind::kShapeFit);
+  EXPECT_EQ(x.bias_m, 0.0f);
+  EXPECT_EQ(x.bias_per_major, 0.0f);
+  EXPECT_EQ(x.bias_per_minor, 0.0f);
+  EXPECT_NEAR(x.bias_sigma_m, 0.03, 1e-6);
+}
+
+TEST(AlignModelTest, AnEstimatorFlippingWithThePointCountGivesTheMixtureOfBothBiases) {
+  // Every other scan the fixed-axes ellipse falls back to the centre of mass: the smoothed track
+  // carries both biases, the fits weighted as the tracker's filter weighs them.
+  const AlignedTracks a = Align(
+      CalibrationInput{{ModelWalker([](std::size_t f, daemon::TrackObservation& o) {
+        o.kind =
+            f % 2 == 0 ? daemon::MeasurementKind::kEllipse : daemon::MeasurementKind::kCenterOfMass;
+        o.ellipse_yaw_rad = 0.5f * static_cast<float>(kPi);  // major axis across the line of sight
+        o.points = f % 2 == 0 ? 6 : 3;
+      })}},
+      {});
+  const TrackSample& x = MiddleSample(a);
+  const double com = kPi / 4.0 * 0.15;  // the fit's bias on the prior body is 0
+  const double w = AlignOptions{}.model_fit_weight;
+  // 11 states in the window: 5 or 6 of either kind.
+  EXPECT_GE(x.bias_m, com * 5.0 / (5.0 + 6.0 * w) - 1e-4);
+  EXPECT_LE(x.bias_m, com * 6.0 / (6.0 + 5.0 * w) + 1e-4);
+  EXPECT_GT(x.bias_sigma_m, 0.5 * com * std::sqrt(w) / (1.0 + w));  // which mixture is uncertain
+  EXPECT_EQ(x.kind, daemon::MeasurementKind::kEllipse);
+  EXPECT_TRUE(x.points == 4 || x.points == 5) << x.points;
+}
+
+TEST(AlignModelTest, TheEndsOfATrackAreLessCertainThanItsMiddle) {
+  const AlignedTracks a =
+      Align(CalibrationInput{{ModelWalker([](std::size_t, daemon::TrackObservation&) {})}}, {});
+  const GridTrack& t = a.sensors.at(0).tracks.at(0);
+  const AlignOptions o;
+  const double middle = t.samples[t.samples.size() / 2].model_sigma_m;
+  const TrackSample& last = t.samples.back();
+  const double edge = o.edge_sigma_per_m * last.position_m.norm();
+  EXPECT_NEAR(last.model_sigma_m, std::hypot(o.model.com_sigma_m, edge), 2e-3);
+  EXPECT_GT(t.samples.front().model_sigma_m, middle + 0.002);
+  EXPECT_GT(last.model_sigma_m, middle + 0.02);
+}
+
+TEST(AlignModelTest, BadModelOptionsAreNamed) {
+  AlignOptions o;
+  o.model.prior_major_m = -1.0;
+  ASSERT_TRUE(Validate(o).has_value());
+  EXPECT_EQ(Validate(o)->rfind("model: prior_major_m", 0), 0u) << *Validate(o);
+  o = {};
+  o.model_window_s = -0.1;
+  EXPECT_TRUE(Validate(o).has_value());
+  o = {};
+  o.edge_time_s = std::nan("");
+  EXPECT_TRUE(Validate(o).has_value());
+  o = {};
+  o.model_fit_weight = -1.0;
+  EXPECT_TRUE(Validate(o).has_value());
+}
+
 }  // namespace
 }  // namespace lrfnet::calib

@@ -6,6 +6,7 @@ add_library(lrfnet_calib_global STATIC
   rotation_averaging.cc
   spectral.cc
   translations.cc
+  pose_graph.cc
   l1mc_full.cc)
 target_include_directories(lrfnet_calib_global PUBLIC ${PROJECT_SOURCE_DIR})
 target_link_libraries(lrfnet_calib_global PUBLIC lrfnet_calib_types)

@@ -488,6 +488,12 @@ std::optional<std::string> Validate(const IcpOptions& o) {
   if (!(std::isfinite(o.line_tolerance_m) && o.line_tolerance_m > 0.0)) {
     return "line_tolerance_m must be > 0";
   }
+  if (!(std::isfinite(o.residual_correlation) && o.residual_correlation >= 1.0)) {
+    return "residual_correlation must be >= 1";
+  }
+  if (!(std::isfinite(o.systematic_floor_m) && o.systematic_floor_m >= 0.0)) {
+    return "systematic_floor_m must be >= 0";
+  }
   if (!(std::isfinite(o.residual_floor_m) && o.residual_floor_m > 0.0)) {
     return "residual_floor_m must be > 0";
   }
@@ -801,8 +807,10 @@ IcpResult RefineWithBackgrounds(const BackgroundScan& r_background,
   Eigen::Matrix3d cov_scaled = Eigen::Matrix3d::Zero();
   if (free.cols() > 0) {
     const SmallMatrix reduced = free.transpose() * info.h * free;
-    cov_scaled += sigma2 * free * reduced.inverse() * free.transpose();
+    cov_scaled +=
+        options.residual_correlation * sigma2 * free * reduced.inverse() * free.transpose();
   }
+  cov_scaled += std::pow(options.systematic_floor_m, 2) * Eigen::Matrix3d::Identity();
   const double yaw_bound_m = common::DegToRad(options.max_yaw_change_deg) * info.scale_m;
   for (Eigen::Index k = 0; k < fixed.cols(); ++k) {
     const Eigen::Vector3d v = fixed.col(k);

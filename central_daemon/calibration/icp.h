@@ -108,6 +108,14 @@ struct IcpOptions {
   // Floor of the residual standard deviation of the covariance (real backgrounds have errors
   // correlated between neighbouring beams that the RMS of a near-perfect fit does not show).
   double residual_floor_m = 0.005;
+  // The residuals of neighbouring beams are correlated (a wall's points share its discretisation
+  // and the fitted lines share points): the variance from the normal equations is multiplied by
+  // this factor, as if every residual_correlation-th correspondence were independent. >= 1.
+  double residual_correlation = 4.0;
+  // Systematic floor of the covariance (beam discretisation, corners a few centimetres off, a
+  // background learnt with a person standing still): added in every direction, metres at the
+  // matched points' RMS range (for the yaw: this much at that range). >= 0.
+  double systematic_floor_m = 0.003;
   // More degenerate directions than this at the final pose: not applied (with two, the
   // backgrounds fix a single combination of x, y and yaw; that is not worth the risk).
   int max_degenerate_directions = 1;
@@ -128,11 +136,11 @@ struct IcpResult {
   double score_before = 0.0, score_after = 0.0;
   std::size_t correspondences = 0;  // trimmed correspondences at the ICP's final pose
   int iterations = 0;               // of both runs when a degenerate direction made a second one
-  // Covariance of (x_m, y_m, yaw_rad) of the ICP's pose: sigma^2 (J^T J)^-1 with sigma^2 the
-  // residual variance of the final correspondences, at least residual_floor_m^2. Still optimistic:
-  // it treats the residuals as independent. Along a degenerate direction the variance is that of
-  // the change bound (the pose there is the initial estimate, known no better than the bound). Zero
-  // when the ICP did not run.
+  // Covariance of (x_m, y_m, yaw_rad) of the ICP's pose: residual_correlation sigma^2 (J^T J)^-1
+  // with sigma^2 the residual variance of the final correspondences, at least residual_floor_m^2,
+  // plus systematic_floor_m^2 in every direction. Along a degenerate direction the variance is that
+  // of the change bound (the pose there is the initial estimate, known no better than the bound).
+  // Zero when the ICP did not run.
   Eigen::Matrix3d covariance = Eigen::Matrix3d::Zero();
   double rms_m = 0.0;              // point-to-line RMS of the final correspondences
   int degenerate_directions = 0;   // at the final pose (0..3)

@@ -3,6 +3,7 @@
 #include <spdlog/fmt/fmt.h>
 
 #include <Eigen/Cholesky>
+#include <Eigen/Eigenvalues>
 #include <Eigen/LU>
 #include <algorithm>
 #include <cmath>
@@ -47,23 +48,24 @@ std::optional<std::string> Validate(const PairwiseOptions& o) {
   if (!(o.covariance_correlation_steps >= 1.0) || !std::isfinite(o.covariance_correlation_steps)) {
     return "covariance_correlation_steps must be >= 1";
   }
+  if (!(std::isfinite(o.segment_sigma_m) && o.segment_sigma_m >= 0.0 &&
+        std::isfinite(o.segment_sigma_per_m) && o.segment_sigma_per_m >= 0.0)) {
+    return "segment_sigma_m and segment_sigma_per_m must be >= 0";
+  }
   if (o.min_matches < 3) return "min_matches must be at least 3";
   if (!positive(o.max_rms_m)) return "max_rms_m must be positive";
-  if (!(o.min_match_spread_m >= 0.0)) return "min_match_spread_m must be >= 0";
+  if (!positive(o.max_yaw_sigma_deg)) return "max_yaw_sigma_deg must be positive";
+  if (!positive(o.max_translation_sigma_m)) return "max_translation_sigma_m must be positive";
   if (!(o.max_ambiguity_ratio > 0.0 && o.max_ambiguity_ratio <= 1.0)) {
     return "max_ambiguity_ratio must be in (0, 1]";
   }
-  if (!(o.min_visible_match_fraction >= 0.0 && o.min_visible_match_fraction <= 1.0)) {
-    return "min_visible_match_fraction must be in [0, 1]";
+  if (!(o.min_match_fraction_ratio >= 0.0 && o.min_match_fraction_ratio <= 1.0)) {
+    return "min_match_fraction_ratio must be in [0, 1]";
+  }
+  if (!(o.default_detection_probability > 0.0 && o.default_detection_probability <= 1.0)) {
+    return "default_detection_probability must be in (0, 1]";
   }
   if (!positive(o.coverage_cell_m)) return "coverage_cell_m must be positive";
-  if (!std::isfinite(o.com_view_offset_prior_m) || !std::isfinite(o.ellipse_view_offset_prior_m)) {
-    return "com_view_offset_prior_m and ellipse_view_offset_prior_m must be finite";
-  }
-  if (!positive(o.com_view_offset_prior_sigma_m) ||
-      !positive(o.ellipse_view_offset_prior_sigma_m)) {
-    return "com_view_offset_prior_sigma_m and ellipse_view_offset_prior_sigma_m must be positive";
-  }
   return std::nullopt;
 }
 
@@ -76,17 +78,26 @@ constexpr std::size_t kCompetitorsExamined = 5;
 // Bounds far beyond any real track; they keep every product below finite overflow.
 constexpr double kMaxAbsPosition_m = 1e5;
 constexpr double kMaxVariance_m2 = 1e8;
+constexpr double kMaxModelValue = 100.0;
+// A range band of the detection probability needs this many visible observations to count.
+constexpr std::size_t kMinBandObservations = 20;
 
 bool Usable(const TrackSample& x) {
   if (!x.position_m.allFinite() || !x.position_cov_m2.allFinite()) return false;
   if (x.position_m.cwiseAbs().maxCoeff() > kMaxAbsPosition_m) return false;
   const Eigen::Matrix2d& c = x.position_cov_m2;
   const double off = 0.5 * (c(0, 1) + c(1, 0));
-  return c(0, 0) > 0.0 && c(1, 1) > 0.0 && c(0, 0) <= kMaxVariance_m2 &&
-         c(1, 1) <= kMaxVariance_m2 && c(0, 0) * c(1, 1) - off * off > 0.0;
+  if (!(c(0, 0) > 0.0 && c(1, 1) > 0.0 && c(0, 0) <= kMaxVariance_m2 &&
+        c(1, 1) <= kMaxVariance_m2 && c(0, 0) * c(1, 1) - off * off > 0.0)) {
+    return false;
+  }
+  // The measurement model: finite and far below anything a body could be.
+  for (const float v :
+       {x.bias_m, x.bias_per_major, x.bias_per_minor, x.bias_sigma_m, x.model_sigma_m}) {
+    if (!std::isfinite(v) || std::abs(v) > kMaxModelValue) return false;
+  }
+  return true;
 }
-
-Eigen::Matrix2d Symmetric(const Eigen::Matrix2d& c) { return 0.5 * (c + c.transpose()); }
 
 double Cross(const Eigen::Vector2d& a, const Eigen::Vector2d& b) {
   return a.x() * b.y() - a.y() * b.x();
@@ -166,26 +177,25 @@ std::optional<Pose2> ProcrustesFit(const std::vector<Eigen::Vector2d>& p,
 
 // Every simultaneous observation of the pair, grouped by grid step.
 struct Obs {
-  Eigen::Vector2d p;
-  Eigen::Matrix2d cov;
+  Eigen::Vector2d c;     // body centre at zero size correction (CentreOf)
+  Eigen::Matrix2d cov;   // CentreCovariance
+  Eigen::Matrix2d vcov;  // cov plus the prior size correction's uncertainty (verification)
+  Eigen::Matrix2d jd;    // d centre / d size correction (CentrePerSizeCorrection)
+  Eigen::Vector2d raw;   // the tracker's position (coverage: where the sensor tracks people)
   std::size_t track;
-  int offset;  // which view offset applies (OffsetClass)
 };
 
-// Which view offset an observation gets: CoM and ellipse centres are displaced differently.
-// Unspecified kinds are taken as unbiased points.
-enum OffsetClass : int { kNoOffset = -1, kComOffset = 0, kEllipseOffset = 1 };
-
-int OffsetOf(const GridTrack& t) {
-  switch (t.kind) {
-    case MeasurementKind::kCenterOfMass:
-      return kComOffset;
-    case MeasurementKind::kEllipse:
-      return kEllipseOffset;
-    default:
-      return kNoOffset;
-  }
+Obs MakeObs(const TrackSample& x, std::size_t track, double prior_var) {
+  Obs o;
+  o.c = CentreOf(x);
+  o.cov = CentreCovariance(x);
+  o.jd = CentrePerSizeCorrection(x);
+  o.vcov = o.cov + prior_var * (o.jd * o.jd.transpose());
+  o.raw = x.position_m;
+  o.track = track;
+  return o;
 }
+
 struct StepObs {
   std::size_t step;
   std::size_t r_begin, r_end, s_begin, s_end;  // ranges in PairData::r / ::s
@@ -197,9 +207,15 @@ struct PairData {
   Eigen::Vector2d r_centroid = Eigen::Vector2d::Zero();
 };
 
+double PriorVariance(const AlignedTracks& aligned) {
+  const double sigma = aligned.size_prior_sigma_m;
+  return std::isfinite(sigma) && sigma > 0.0 ? sigma * sigma : 0.0;
+}
+
 PairData BuildPairData(const AlignedTracks& aligned, std::size_t r, std::size_t s,
                        const std::vector<Interval>& intervals) {
   PairData d;
+  const double prior_var = PriorVariance(aligned);
   const auto& tr = aligned.sensors[r].tracks;
   const auto& ts = aligned.sensors[s].tracks;
   for (const Interval& in : intervals) {
@@ -208,7 +224,7 @@ PairData BuildPairData(const AlignedTracks& aligned, std::size_t r, std::size_t 
       for (std::size_t i : in.tracks_r) {
         const TrackSample& x = tr[i].At(k);
         if (Usable(x)) {
-          d.r.push_back({x.position_m, Symmetric(x.position_cov_m2), i, OffsetOf(tr[i])});
+          d.r.push_back(MakeObs(x, i, prior_var));
         } else {
           ++d.unusable;
         }
@@ -216,7 +232,7 @@ PairData BuildPairData(const AlignedTracks& aligned, std::size_t r, std::size_t 
       for (std::size_t j : in.tracks_s) {
         const TrackSample& x = ts[j].At(k);
         if (Usable(x)) {
-          d.s.push_back({x.position_m, Symmetric(x.position_cov_m2), j, OffsetOf(ts[j])});
+          d.s.push_back(MakeObs(x, j, prior_var));
         } else {
           ++d.unusable;
         }
@@ -231,7 +247,7 @@ PairData BuildPairData(const AlignedTracks& aligned, std::size_t r, std::size_t 
       }
     }
   }
-  for (const Obs& o : d.r) d.r_centroid += o.p;
+  for (const Obs& o : d.r) d.r_centroid += o.c;
   if (!d.r.empty()) d.r_centroid /= static_cast<double>(d.r.size());
   return d;
 }
@@ -270,9 +286,10 @@ MsacOutcome Msac(const GridTrack& tp, const GridTrack& tq, std::size_t first_ste
     const TrackSample& a = tp.At(k);
     const TrackSample& b = tq.At(k);
     if (!Usable(a) || !Usable(b)) continue;
-    P.push_back(a.position_m);
-    Q.push_back(b.position_m);
-    w.push_back(1.0 / (0.5 * (a.position_cov_m2.trace() + b.position_cov_m2.trace()) + model_var));
+    P.push_back(CentreOf(a));
+    Q.push_back(CentreOf(b));
+    w.push_back(1.0 /
+                (0.5 * (CentreCovariance(a).trace() + CentreCovariance(b).trace()) + model_var));
   }
   const std::size_t n = P.size();
   if (n < std::max<std::size_t>(o.min_hypothesis_inliers, 2)) return MsacOutcome::kNone;
@@ -377,12 +394,12 @@ void VisitNearest(const PairData& d, const Pose2& pose, const PairwiseOptions& o
   for (std::size_t k = 0; k < d.steps.size(); k += o.verify_stride) {
     const StepObs& so = d.steps[k];
     for (std::size_t i = so.r_begin; i < so.r_end; ++i) {
-      const Eigen::Vector2d a = R * d.r[i].p + t;
-      const Eigen::Matrix2d ca = R * d.r[i].cov * R.transpose();
+      const Eigen::Vector2d a = R * d.r[i].c + t;
+      const Eigen::Matrix2d ca = R * d.r[i].vcov * R.transpose();
       double best2 = gate2;
       std::ptrdiff_t best_j = -1;
       for (std::size_t j = so.s_begin; j < so.s_end; ++j) {
-        const double m2 = Mahalanobis2(a - d.s[j].p, ca, d.s[j].cov, model_var, gate2);
+        const double m2 = Mahalanobis2(a - d.s[j].c, ca, d.s[j].vcov, model_var, gate2);
         if (m2 < best2) {
           best2 = m2;
           best_j = static_cast<std::ptrdiff_t>(j);
@@ -440,9 +457,9 @@ std::vector<std::pair<std::size_t, std::size_t>> Associate(const PairData& d, co
   for (const StepObs& so : d.steps) {
     cand.clear();
     for (std::size_t i = so.r_begin; i < so.r_end; ++i) {
-      const Eigen::Vector2d a = R * d.r[i].p + t;
+      const Eigen::Vector2d a = R * d.r[i].c + t;
       for (std::size_t j = so.s_begin; j < so.s_end; ++j) {
-        const double d2 = (a - d.s[j].p).squaredNorm();
+        const double d2 = (a - d.s[j].c).squaredNorm();
         if (d2 < gate2) cand.push_back({d2, i, j});
       }
     }
@@ -466,104 +483,111 @@ std::vector<std::pair<std::size_t, std::size_t>> Associate(const PairData& d, co
   return out;
 }
 
-// Unit vector from the sensor to p (zero at the sensor itself).
-Eigen::Vector2d Direction(const Eigen::Vector2d& p) {
-  const double n = p.norm();
-  return n > 1e-3 ? Eigen::Vector2d(p / n) : Eigen::Vector2d::Zero();
-}
-
-// The matched observations of a refit with their offset classes.
+// The matched observations of a refit: body centres at zero size correction, their covariances,
+// their sensitivities to the size correction, and the matched track pair (segment) of each.
 struct FitInput {
   std::vector<Eigen::Vector2d> p, q;
-  std::vector<Eigen::Matrix2d> cp, cq;
-  std::vector<int> offset_p, offset_q;
+  std::vector<Eigen::Matrix2d> cp, cq, jp, jq;
+  std::vector<std::size_t> segment;
+  std::size_t segments = 0;
+  // Per segment: summed ranges of both sides and the count (the systematic floor's sigma).
+  std::vector<double> range_r, range_s, count;
 
   void Reserve(std::size_t n) {
     p.reserve(n);
     q.reserve(n);
     cp.reserve(n);
     cq.reserve(n);
-    offset_p.reserve(n);
-    offset_q.reserve(n);
+    jp.reserve(n);
+    jq.reserve(n);
+    segment.reserve(n);
   }
 
-  void Add(const Eigen::Vector2d& pp, const Eigen::Matrix2d& cpp, int offp,
-           const Eigen::Vector2d& qq, const Eigen::Matrix2d& cqq, int offq) {
-    p.push_back(pp);
-    cp.push_back(cpp);
-    offset_p.push_back(offp);
-    q.push_back(qq);
-    cq.push_back(cqq);
-    offset_q.push_back(offq);
+  void Add(const Obs& a, const Obs& b, std::size_t seg) {
+    p.push_back(a.c);
+    cp.push_back(a.cov);
+    jp.push_back(a.jd);
+    q.push_back(b.c);
+    cq.push_back(b.cov);
+    jq.push_back(b.jd);
+    segment.push_back(seg);
+    segments = std::max(segments, seg + 1);
+    if (range_r.size() < segments) {
+      range_r.resize(segments, 0.0);
+      range_s.resize(segments, 0.0);
+      count.resize(segments, 0.0);
+    }
+    range_r[seg] += a.c.norm();
+    range_s[seg] += b.c.norm();
+    count[seg] += 1.0;
   }
 };
 
+// Segment ids of matches: one per (track of r, track of s), numbered in order of appearance.
+class SegmentIds {
+ public:
+  std::size_t Of(std::size_t track_r, std::size_t track_s) {
+    const auto key = std::make_pair(track_r, track_s);
+    const auto it = std::find(keys_.begin(), keys_.end(), key);
+    if (it != keys_.end()) return static_cast<std::size_t>(it - keys_.begin());
+    keys_.push_back(key);
+    return keys_.size() - 1;
+  }
+
+ private:
+  std::vector<std::pair<std::size_t, std::size_t>> keys_;
+};
+
 // start: a fit to start from (the previous refit round); without it the closed-form weighted
-// Procrustes solution.
-RigidFit Fit(const FitInput& in, const PairwiseOptions& o, const RigidFit* start = nullptr,
-             int max_iterations = 15) {
+// Procrustes solution. prior_var: variance of each component of the size correction's prior.
+RigidFit Fit(const FitInput& in, const PairwiseOptions& o, double prior_var,
+             const RigidFit* start = nullptr, int max_iterations = 15) {
   const auto& p = in.p;
   const auto& q = in.q;
   RigidFit fit;
   const std::size_t n = p.size();
   if (n < 3) return fit;
-  const double model_var = o.model_sigma_m * o.model_sigma_m;
   const bool warm = start != nullptr && start->ok;
   Pose2 pose0;
   if (warm) {
     pose0 = start->s_from_r;
   } else {
     std::vector<double> w(n);
-    for (std::size_t i = 0; i < n; ++i) {
-      w[i] = 1.0 / (0.5 * (in.cp[i].trace() + in.cq[i].trace()) + model_var);
-    }
+    for (std::size_t i = 0; i < n; ++i) w[i] = 1.0 / (0.5 * (in.cp[i].trace() + in.cq[i].trace()));
     const auto closed_form = ProcrustesFit(p, q, w);
     if (!closed_form) return fit;
     pose0 = *closed_form;
   }
 
   // Gauss-Newton on eq. 5 (untruncated: the association gate already bounds the residuals) with
-  // full covariances and the Huber loss. x = (x, y, yaw, b_com, b_ellipse); a view offset b moves
-  // an observation of its class away from its own sensor, p + b * p/|p| (the CoM of the seen side
-  // of a person lies nearer the sensor than the person's centre; an ellipse of fixed size fitted
-  // to a body of another size is displaced along the line of sight too). The priors hold the
-  // offsets where the geometry cannot tell them from a translation; an offset without
-  // observations of its class stays at its prior mean and does not matter.
+  // full covariances and the Huber loss. x = (x, y, yaw, d_major, d_minor): the body centres of
+  // both sides move with the shared size correction d (TrackSample), which has a zero-mean prior.
+  // The observations are correlated over covariance_correlation_steps, so the sums below hold that
+  // many times more information than they carry; the prior is weighed on the same scale. Without
+  // estimate_size_correction d is held at 0 (its prior uncertainty still enters the covariance).
   using Vector5d = Eigen::Matrix<double, 5, 1>;
   using Matrix5d = Eigen::Matrix<double, 5, 5>;
-  std::vector<Eigen::Vector2d> up(n), uq(n);
-  for (std::size_t i = 0; i < n; ++i) {
-    up[i] = in.offset_p[i] != kNoOffset ? Direction(p[i]) : Eigen::Vector2d::Zero();
-    uq[i] = in.offset_q[i] != kNoOffset ? Direction(q[i]) : Eigen::Vector2d::Zero();
-  }
-  const bool with_offset = o.estimate_view_offset;
-  const double prior_mean[2] = {with_offset ? o.com_view_offset_prior_m : 0.0,
-                                with_offset ? o.ellipse_view_offset_prior_m : 0.0};
-  const double prior_info[2] = {
-      with_offset ? 1.0 / (o.com_view_offset_prior_sigma_m * o.com_view_offset_prior_sigma_m) : 1.0,
-      with_offset
-          ? 1.0 / (o.ellipse_view_offset_prior_sigma_m * o.ellipse_view_offset_prior_sigma_m)
-          : 1.0};
+  const double prior_info = prior_var > 0.0 ? o.covariance_correlation_steps / prior_var : 1e12;
+  const double solve_prior_info = o.estimate_size_correction ? prior_info : 1e12;
   Vector5d x;
-  x << pose0.x_m, pose0.y_m, pose0.yaw_rad, warm ? start->com_view_offset_m : prior_mean[0],
-      warm ? start->ellipse_view_offset_m : prior_mean[1];
+  x << pose0.x_m, pose0.y_m, pose0.yaw_rad,
+      warm ? start->size_correction_m : Eigen::Vector2d::Zero();
+  if (!o.estimate_size_correction) x.tail<2>().setZero();
 
-  // The weights (R Sigma_p R^T + Sigma_q + model)^-1 at the start rotation: the rotation moves
-  // by a fraction of a degree from there, which changes them by far less than their own
-  // uncertainty.
+  // The weights (R C_p R^T + C_q)^-1 at the start rotation: the rotation moves by a fraction of a
+  // degree from there, which changes them by far less than their own uncertainty.
   std::vector<Eigen::Matrix2d> W(n);
   {
     const Eigen::Matrix2d R = pose0.rotation();
     for (std::size_t i = 0; i < n; ++i) {
-      Eigen::Matrix2d S = R * in.cp[i] * R.transpose() + in.cq[i];
-      S.diagonal().array() += model_var;
-      W[i] = S.inverse();
+      W[i] = (R * in.cp[i] * R.transpose() + in.cq[i]).inverse();
     }
   }
-  const auto offset_of = [&](int cls) { return cls == kNoOffset ? 0.0 : x(3 + cls); };
+  std::vector<double> rho(n, 1.0);
+  std::vector<Eigen::Matrix<double, 2, 5>> J(n);
   Matrix5d h = Matrix5d::Zero();
   double chi2 = 0.0;
-  for (int iter = 0; iter < max_iterations; ++iter) {
+  const auto linearize = [&]() {
     const double c = std::cos(x(2)), s = std::sin(x(2));
     Eigen::Matrix2d R, dR;
     R << c, -s, s, c;
@@ -571,30 +595,28 @@ RigidFit Fit(const FitInput& in, const PairwiseOptions& o, const RigidFit* start
     h.setZero();
     Vector5d g = Vector5d::Zero();
     chi2 = 0.0;
+    const Eigen::Vector2d d = x.tail<2>();
     for (std::size_t i = 0; i < n; ++i) {
-      const Eigen::Vector2d pi = p[i] + offset_of(in.offset_p[i]) * up[i];
-      const Eigen::Vector2d e = R * pi + x.head<2>() - (q[i] + offset_of(in.offset_q[i]) * uq[i]);
+      const Eigen::Vector2d pi = p[i] + in.jp[i] * d;
+      const Eigen::Vector2d e = R * pi + x.head<2>() - (q[i] + in.jq[i] * d);
       const Eigen::Vector2d We = W[i] * e;
       const double m2 = e.dot(We);
-      const double rho = m2 <= o.huber_k * o.huber_k ? 1.0 : o.huber_k / std::sqrt(m2);
-      Eigen::Matrix<double, 2, 5> J = Eigen::Matrix<double, 2, 5>::Zero();
-      J.leftCols<2>().setIdentity();
-      J.col(2) = dR * pi;
-      if (with_offset) {
-        if (in.offset_p[i] != kNoOffset) J.col(3 + in.offset_p[i]) += R * up[i];
-        if (in.offset_q[i] != kNoOffset) J.col(3 + in.offset_q[i]) -= uq[i];
-      }
-      const Eigen::Matrix<double, 2, 5> WJ = W[i] * J;
-      h.noalias() += rho * (J.transpose() * WJ);
-      g.noalias() += rho * (WJ.transpose() * e);
-      chi2 += rho * m2;
+      rho[i] = m2 <= o.huber_k * o.huber_k ? 1.0 : o.huber_k / std::sqrt(m2);
+      J[i].leftCols<2>().setIdentity();
+      J[i].col(2) = dR * pi;
+      J[i].rightCols<2>() = R * in.jp[i] - in.jq[i];
+      const Eigen::Matrix<double, 2, 5> WJ = W[i] * J[i];
+      h.noalias() += rho[i] * (J[i].transpose() * WJ);
+      g.noalias() += rho[i] * (WJ.transpose() * e);
+      chi2 += rho[i] * m2;
     }
-    // The priors; without offsets they pin both at 0. The observations are correlated over
-    // covariance_correlation_steps, so the sum above holds that many times more information than
-    // they carry; the prior is weighed on the same scale.
-    for (int k = 0; k < 2; ++k) {
-      h(3 + k, 3 + k) += prior_info[k] * o.covariance_correlation_steps;
-      g(3 + k) += prior_info[k] * o.covariance_correlation_steps * (x(3 + k) - prior_mean[k]);
+    return g;
+  };
+  for (int iter = 0; iter < max_iterations; ++iter) {
+    Vector5d g = linearize();
+    for (int k = 3; k < 5; ++k) {
+      h(k, k) += solve_prior_info;
+      g(k) += solve_prior_info * x(k);
     }
     const Eigen::LDLT<Matrix5d> ldlt(h);
     if (ldlt.info() != Eigen::Success || !(ldlt.vectorD().minCoeff() > 0.0)) return fit;
@@ -607,15 +629,15 @@ RigidFit Fit(const FitInput& in, const PairwiseOptions& o, const RigidFit* start
       break;
     }
   }
+  linearize();  // h, rho and J at the solution
   fit.s_from_r = {x(0), x(1), NormalizeAngle(x(2))};
-  fit.com_view_offset_m = x(3);
-  fit.ellipse_view_offset_m = x(4);
+  fit.size_correction_m = x.tail<2>();
   const Eigen::Matrix2d R = fit.s_from_r.rotation();
   const Eigen::Vector2d t = fit.s_from_r.translation();
   double sum2 = 0.0, sum = 0.0;
   for (std::size_t i = 0; i < n; ++i) {
-    const double e = (R * (p[i] + offset_of(in.offset_p[i]) * up[i]) + t -
-                      (q[i] + offset_of(in.offset_q[i]) * uq[i]))
+    const double e = (R * (p[i] + in.jp[i] * fit.size_correction_m) + t -
+                      (q[i] + in.jq[i] * fit.size_correction_m))
                          .norm();
     sum2 += e * e;
     sum += e;
@@ -623,83 +645,52 @@ RigidFit Fit(const FitInput& in, const PairwiseOptions& o, const RigidFit* start
   fit.rms_m = std::sqrt(sum2 / static_cast<double>(n));
   fit.mean_residual_m = sum / static_cast<double>(n);
   const double dof = std::max(1.0, 2.0 * static_cast<double>(n) - 3.0);
-  // The marginal covariance of the pose: the offsets' uncertainty is included, not conditioned on.
-  const Matrix5d cov = h.inverse() * (chi2 / dof) * o.covariance_correlation_steps;
-  fit.covariance = cov.topLeftCorner<3, 3>();
-  fit.ok = fit.covariance.allFinite();
+  fit.variance_factor = chi2 / dof;
+
+  // The honest covariance (pairwise.h): the size correction marginalised with its prior, the
+  // variance factor floored at 1, the correlation in time, and each matched track pair's own
+  // systematic offset propagated through the estimator (x responds to a common offset eps of a
+  // segment's residuals by -H^-1 sum_i rho_i J_i^T W_i eps).
+  Matrix5d hc = h;
+  hc(3, 3) += prior_info;
+  hc(4, 4) += prior_info;
+  const Eigen::LDLT<Matrix5d> ldlt(hc);
+  if (ldlt.info() != Eigen::Success || !(ldlt.vectorD().minCoeff() > 0.0)) return fit;
+  const Matrix5d hc_inv = ldlt.solve(Matrix5d::Identity());
+  Matrix5d cov = hc_inv * (std::max(1.0, fit.variance_factor) * o.covariance_correlation_steps);
+  std::vector<Eigen::Matrix<double, 5, 2>> response(in.segments,
+                                                    Eigen::Matrix<double, 5, 2>::Zero());
+  for (std::size_t i = 0; i < n; ++i) {
+    response[in.segment[i]].noalias() += rho[i] * (J[i].transpose() * W[i]);
+  }
+  Matrix5d systematic = Matrix5d::Zero();
+  for (std::size_t k = 0; k < response.size(); ++k) {
+    const double count = std::max(1.0, in.count[k]);
+    const double side_r = o.segment_sigma_m + o.segment_sigma_per_m * in.range_r[k] / count;
+    const double side_s = o.segment_sigma_m + o.segment_sigma_per_m * in.range_s[k] / count;
+    const Eigen::Matrix<double, 5, 2> a = hc_inv * response[k];
+    systematic.noalias() += (side_r * side_r + side_s * side_s) * (a * a.transpose());
+  }
+  fit.segments = in.segments;
+  fit.covariance_systematic = systematic.topLeftCorner<3, 3>();
+  fit.covariance = cov.topLeftCorner<3, 3>() + fit.covariance_systematic;
+  fit.covariance = 0.5 * (fit.covariance + fit.covariance.transpose());
+  fit.ok = fit.covariance.allFinite() && fit.s_from_r.translation().allFinite() &&
+           std::isfinite(fit.s_from_r.yaw_rad);
   return fit;
 }
 
 RigidFit FitPairs(const PairData& d, const std::vector<std::pair<std::size_t, std::size_t>>& pairs,
-                  const PairwiseOptions& o, const RigidFit* start, int max_iterations) {
+                  const PairwiseOptions& o, double prior_var, const RigidFit* start,
+                  int max_iterations) {
   FitInput in;
   in.Reserve(pairs.size());
+  SegmentIds segments;
   for (const auto& [i, j] : pairs) {
-    in.Add(d.r[i].p, d.r[i].cov, d.r[i].offset, d.s[j].p, d.s[j].cov, d.s[j].offset);
+    in.Add(d.r[i], d.s[j], segments.Of(d.r[i].track, d.s[j].track));
   }
-  return Fit(in, o, start, max_iterations);
+  return Fit(in, o, prior_var, start, max_iterations);
 }
-
-// Cells (dilated by one) where s ever had a track: the area in which s demonstrably sees people.
-class Coverage {
- public:
-  Coverage(const SensorTracks& sensor, double cell_m) : cell_m_(cell_m) {
-    Eigen::Vector2d lo(kInf, kInf), hi(-kInf, -kInf);
-    for (const GridTrack& t : sensor.tracks) {
-      for (const TrackSample& x : t.samples) {
-        if (!Usable(x)) continue;
-        lo = lo.cwiseMin(x.position_m);
-        hi = hi.cwiseMax(x.position_m);
-      }
-    }
-    if (!(lo.x() <= hi.x())) return;
-    // Bounded memory whatever the data: coarser cells for a huge extent.
-    constexpr double kMaxCells = 4e6;
-    const Eigen::Vector2d extent = hi - lo;
-    while ((extent.x() / cell_m_ + 3.0) * (extent.y() / cell_m_ + 3.0) > kMaxCells) cell_m_ *= 2.0;
-    origin_ = lo - Eigen::Vector2d::Constant(cell_m_);
-    nx_ = static_cast<long>(extent.x() / cell_m_) + 3;
-    ny_ = static_cast<long>(extent.y() / cell_m_) + 3;
-    cells_.assign(static_cast<std::size_t>(nx_ * ny_), 0);
-    for (const GridTrack& t : sensor.tracks) {
-      for (const TrackSample& x : t.samples) {
-        if (!Usable(x)) continue;
-        const long cx = CellX(x.position_m), cy = CellY(x.position_m);
-        for (long dy = -1; dy <= 1; ++dy) {
-          for (long dx = -1; dx <= 1; ++dx) {
-            const long u = cx + dx, v = cy + dy;
-            if (u >= 0 && u < nx_ && v >= 0 && v < ny_)
-              cells_[static_cast<std::size_t>(v * nx_ + u)] = 1;
-          }
-        }
-      }
-    }
-  }
-
-  bool Covered(const Eigen::Vector2d& p) const {
-    if (cells_.empty() || !p.allFinite()) return false;
-    const double fx = (p.x() - origin_.x()) / cell_m_, fy = (p.y() - origin_.y()) / cell_m_;
-    if (!(fx >= 0.0 && fy >= 0.0 && fx < static_cast<double>(nx_) &&
-          fy < static_cast<double>(ny_))) {
-      return false;
-    }
-    return cells_[static_cast<std::size_t>(static_cast<long>(fy) * nx_ + static_cast<long>(fx))] !=
-           0;
-  }
-
- private:
-  long CellX(const Eigen::Vector2d& p) const {
-    return static_cast<long>((p.x() - origin_.x()) / cell_m_);
-  }
-  long CellY(const Eigen::Vector2d& p) const {
-    return static_cast<long>((p.y() - origin_.y()) / cell_m_);
-  }
-
-  double cell_m_;
-  Eigen::Vector2d origin_ = Eigen::Vector2d::Zero();
-  long nx_ = 0, ny_ = 0;
-  std::vector<std::uint8_t> cells_;
-};
 
 // Whether some track of r and some track of s are visible together for min_steps.
 bool HasLongTrackPair(const AlignedTracks& aligned, std::size_t r, std::size_t s,
@@ -719,23 +710,138 @@ bool HasLongTrackPair(const AlignedTracks& aligned, std::size_t r, std::size_t s
   return false;
 }
 
+// The per-sensor detection probability by range band (see PairwiseOptions), as the expected match
+// fraction of one direction of a pair. probability[b] < 0: not measured.
+using Detection = std::array<double, kRangeBands>;
+
+double ExpectedFraction(const VisibilityCounts& counts, const Detection& detection,
+                        double fallback) {
+  double visible = 0.0, expected = 0.0;
+  for (std::size_t b = 0; b < kRangeBands; ++b) {
+    if (counts.visible[b] == 0) continue;
+    // An unmeasured band takes the nearest measured one (detection falls with range; the nearer
+    // band on the far side is the conservative choice), else the fallback.
+    double p = -1.0;
+    for (std::size_t k = 0; k < kRangeBands && p < 0.0; ++k) {
+      if (b + k < kRangeBands && detection[b + k] >= 0.0) p = detection[b + k];
+      if (p < 0.0 && b >= k && detection[b - k] >= 0.0) p = detection[b - k];
+    }
+    if (p < 0.0) p = fallback;
+    visible += static_cast<double>(counts.visible[b]);
+    expected += static_cast<double>(counts.visible[b]) * p;
+  }
+  return visible > 0.0 ? expected / visible : fallback;
+}
+
+double ObservedFraction(const VisibilityCounts& counts, std::size_t* visible_out = nullptr) {
+  std::size_t visible = 0, matched = 0;
+  for (std::size_t b = 0; b < kRangeBands; ++b) {
+    visible += counts.visible[b];
+    matched += counts.matched[b];
+  }
+  if (visible_out != nullptr) *visible_out = visible;
+  return visible > 0 ? static_cast<double>(matched) / static_cast<double>(visible) : 1.0;
+}
+
+// The negative-evidence decision of a pair that passed everything else (pairwise.h): each
+// direction's observed match fraction against min_match_fraction_ratio times the detecting
+// sensor's expected one. Rejects with the reason, or fills the fractions.
+void JudgeVisibility(const AlignedTracks& aligned, const PairDiagnostics& diag,
+                     const Detection& detect_s, const Detection& detect_r, const PairwiseOptions& o,
+                     PairEstimate* est) {
+  struct Direction {
+    const VisibilityCounts* counts;
+    const Detection* detection;
+    std::size_t seen, seeing;  // sensor indices: whose observations, whose coverage
+  };
+  const Direction directions[2] = {{&diag.r_in_s, &detect_s, est->r, est->s},
+                                   {&diag.s_in_r, &detect_r, est->s, est->r}};
+  double worst_ratio = kInf;
+  for (const Direction& d : directions) {
+    std::size_t visible = 0;
+    const double observed = ObservedFraction(*d.counts, &visible);
+    const double expected =
+        ExpectedFraction(*d.counts, *d.detection, o.default_detection_probability);
+    const double ratio = expected > 0.0 ? observed / expected : kInf;
+    if (visible > 0 && ratio < worst_ratio) {
+      worst_ratio = ratio;
+      est->match_fraction = observed;
+      est->expected_match_fraction = expected;
+    }
+    if (visible > 0 && observed < o.min_match_fraction_ratio * expected) {
+      est->accepted = false;
+      est->weak = false;
+      est->weak_reason.clear();
+      est->reason = fmt::format(
+          "inconsistent: only {:.0f}% of the {} observations of {} mapped into the area {} sees "
+          "are "
+          "matched, where {} detects people {:.0f}% of the time (need {:.0f}% of that)",
+          100.0 * observed, visible, aligned.sensors[d.seen].id, aligned.sensors[d.seeing].id,
+          aligned.sensors[d.seeing].id, 100.0 * expected, 100.0 * o.min_match_fraction_ratio);
+      return;
+    }
+  }
+}
+
+// The observations of `from` at steps where `to` has no track at all, mapped into `to`'s coverage:
+// visible and unmatched.
+void CountUnpaired(const AlignedTracks& aligned, std::size_t from, std::size_t to,
+                   const Pose2& to_from_from, const Coverage& coverage, VisibilityCounts* out) {
+  std::size_t steps = 0;
+  for (const GridTrack& t : aligned.sensors[to].tracks) {
+    if (t.end_step() >= t.first_step) steps = std::max(steps, t.end_step());
+  }
+  for (const GridTrack& t : aligned.sensors[from].tracks) {
+    if (t.end_step() >= t.first_step) steps = std::max(steps, t.end_step());
+  }
+  steps = std::min(steps, aligned.steps);
+  std::vector<std::uint8_t> tracked(steps, 0);
+  for (const GridTrack& t : aligned.sensors[to].tracks) {
+    for (std::size_t k = t.first_step; k < std::min(t.end_step(), steps); ++k) tracked[k] = 1;
+  }
+  for (const GridTrack& t : aligned.sensors[from].tracks) {
+    for (std::size_t k = t.first_step; k < std::min(t.end_step(), steps); ++k) {
+      if (tracked[k] != 0) continue;
+      const TrackSample& x = t.At(k);
+      if (!Usable(x)) continue;
+      const Eigen::Vector2d mapped = to_from_from * x.position_m;
+      if (!coverage.Covered(mapped)) continue;
+      ++out->visible[RangeBandOf(mapped.norm())];
+    }
+  }
+}
+
+// Cells of every sensor's coverage, built once per EstimateAllPairs.
+std::vector<Coverage> Coverages(const AlignedTracks& aligned, double cell_m) {
+  std::vector<Coverage> out;
+  out.reserve(aligned.sensors.size());
+  for (const SensorTracks& sensor : aligned.sensors) out.emplace_back(sensor, cell_m);
+  return out;
+}
+
+// Everything of a pair but the negative evidence (JudgeVisibility), whose counts go into `diag`.
 PairEstimate EstimateWithIntervals(const AlignedTracks& aligned, std::size_t r, std::size_t s,
                                    const std::vector<Interval>& all_intervals,
-                                   const PairwiseOptions& o, PairDiagnostics* diagnostics) {
+                                   const Coverage& coverage_r, const Coverage& coverage_s,
+                                   const PairwiseOptions& o, PairDiagnostics& diag) {
   PairEstimate est;
   est.r = r;
   est.s = s;
   est.second_error = kInf;
-  PairDiagnostics diag;
+  diag = {};
   const auto finish = [&](std::string reason) {
     est.reason = std::move(reason);
     est.accepted = est.reason.empty();
-    if (diagnostics != nullptr) *diagnostics = diag;
+    if (!est.accepted) {
+      est.weak = false;
+      est.weak_reason.clear();
+    }
     return est;
   };
 
   const auto& tracks_r = aligned.sensors[r].tracks;
   const auto& tracks_s = aligned.sensors[s].tracks;
+  const double prior_var = PriorVariance(aligned);
 
   // Step 4: MSAC hypotheses (eq. 5) per simultaneous track pair (p, q). The paper runs MSAC per
   // interval and track pair; an interval ends whenever any track of either sensor appears or
@@ -845,14 +951,14 @@ PairEstimate EstimateWithIntervals(const AlignedTracks& aligned, std::size_t r, 
     auto next = Associate(data, pose, o.refit_gate_m);
     if (next.size() < 3) break;
     if (fit.ok && next == pairs) break;
-    RigidFit f = FitPairs(data, next, o, &fit, 3);
+    RigidFit f = FitPairs(data, next, o, prior_var, &fit, 3);
     if (!f.ok) break;
     fit = f;
     pairs = std::move(next);
     pose = fit.s_from_r;
   }
   if (fit.ok) {
-    RigidFit f = FitPairs(data, pairs, o, &fit, 15);
+    RigidFit f = FitPairs(data, pairs, o, prior_var, &fit, 15);
     if (f.ok) fit = f;
   }
   if (!fit.ok) {
@@ -867,49 +973,43 @@ PairEstimate EstimateWithIntervals(const AlignedTracks& aligned, std::size_t r, 
 
   std::vector<Eigen::Vector2d> matched_r;
   matched_r.reserve(pairs.size());
-  std::vector<std::uint8_t> is_matched(data.r.size(), 0);
+  std::vector<std::uint8_t> r_matched(data.r.size(), 0), s_matched(data.s.size(), 0);
   for (const auto& [i, j] : pairs) {
-    matched_r.push_back(data.r[i].p);
-    is_matched[i] = 1;
+    matched_r.push_back(data.r[i].c);
+    r_matched[i] = 1;
+    s_matched[j] = 1;
   }
   diag.match_spread_m = Spread(matched_r);
-  diag.com_view_offset_m = fit.com_view_offset_m;
-  diag.ellipse_view_offset_m = fit.ellipse_view_offset_m;
+  diag.size_correction_m = fit.size_correction_m;
+  diag.segments = fit.segments;
 
-  // Negative evidence: r observations mapped where s demonstrably sees people must be matched.
-  const Coverage coverage(aligned.sensors[s], o.coverage_cell_m);
-  std::size_t visible = 0, visible_matched = 0;
-  for (std::size_t i = 0; i < data.r.size(); ++i) {
-    if (is_matched[i] != 0) {
-      ++visible;
-      ++visible_matched;
-    } else if (coverage.Covered(fit.s_from_r * data.r[i].p)) {
-      ++visible;
+  // Negative evidence, counted both ways (judged by JudgeVisibility): observations of one sensor
+  // mapped where the other demonstrably sees people, and whether they were matched, by the range
+  // band of the seeing sensor.
+  const Pose2 r_from_s = fit.s_from_r.inverse();
+  const auto count = [](const std::vector<Obs>& obs, const std::vector<std::uint8_t>& matched,
+                        const Pose2& to_other, const Coverage& coverage, VisibilityCounts* out) {
+    for (std::size_t i = 0; i < obs.size(); ++i) {
+      const Eigen::Vector2d mapped = to_other * obs[i].raw;
+      if (matched[i] == 0 && !coverage.Covered(mapped)) continue;
+      const std::size_t band = RangeBandOf(mapped.norm());
+      ++out->visible[band];
+      if (matched[i] != 0) ++out->matched[band];
     }
-  }
-  diag.visible_observations = visible;
-  diag.visible_match_fraction =
-      visible > 0 ? static_cast<double>(visible_matched) / static_cast<double>(visible) : 0.0;
+  };
+  count(data.r, r_matched, fit.s_from_r, coverage_s, &diag.r_in_s);
+  count(data.s, s_matched, r_from_s, coverage_r, &diag.s_in_r);
+  // And the steps at which the other sensor tracks nobody at all (a miss counts as a miss).
+  CountUnpaired(aligned, r, s, fit.s_from_r, coverage_s, &diag.r_in_s);
+  CountUnpaired(aligned, s, r, r_from_s, coverage_r, &diag.s_in_r);
 
   if (est.matches < o.min_matches) {
     return finish(fmt::format("too few matches: {} associated observations (need {})", est.matches,
                               o.min_matches));
   }
-  if (diag.match_spread_m < o.min_match_spread_m) {
-    return finish(
-        fmt::format("degenerate motion: the matched positions span only {:.2f} m (need {:.2f} m)",
-                    diag.match_spread_m, o.min_match_spread_m));
-  }
   if (est.rms_m > o.max_rms_m) {
     return finish(fmt::format("residual too large: rms {:.3f} m over {} matches (max {:.3f} m)",
                               est.rms_m, est.matches, o.max_rms_m));
-  }
-  if (diag.visible_match_fraction < o.min_visible_match_fraction) {
-    return finish(fmt::format(
-        "inconsistent: only {:.0f}% of the {} observations of {} mapped into the area {} sees are "
-        "matched (need {:.0f}%)",
-        100.0 * diag.visible_match_fraction, visible, aligned.sensors[r].id, aligned.sensors[s].id,
-        100.0 * o.min_visible_match_fraction));
   }
   // Ambiguity: does a clearly different hypothesis explain a comparable share of the data by
   // other associations? A hypothesis a few degrees off the right one re-uses the right one's
@@ -944,46 +1044,166 @@ PairEstimate EstimateWithIntervals(const AlignedTracks& aligned, std::size_t r, 
         RadToDeg(std::abs(AngleDiff(diag.second_s_from_r->yaw_rad, fit.s_from_r.yaw_rad))),
         diag.best_gain > 0.0 ? 100.0 * diag.second_gain / diag.best_gain : 100.0));
   }
+  // Information: a pose the honest covariance leaves uncertain is a candidate only.
+  const double yaw_sigma_deg = RadToDeg(std::sqrt(std::max(0.0, est.covariance(2, 2))));
+  const Eigen::SelfAdjointEigenSolver<Eigen::Matrix2d> eig(est.covariance.topLeftCorner<2, 2>());
+  const double translation_sigma_m = std::sqrt(std::max(0.0, eig.eigenvalues().maxCoeff()));
+  if (!(yaw_sigma_deg <= o.max_yaw_sigma_deg) ||
+      !(translation_sigma_m <= o.max_translation_sigma_m)) {
+    est.weak = true;
+    est.weak_reason = fmt::format(
+        "weak: sigma {:.2f} deg / {:.3f} m from {} matches of {} track pairs spread {:.2f} m "
+        "(strong: at most {:.2f} deg / {:.3f} m)",
+        yaw_sigma_deg, translation_sigma_m, est.matches, fit.segments, diag.match_spread_m,
+        o.max_yaw_sigma_deg, o.max_translation_sigma_m);
+  }
   return finish("");
+}
+
+// Per sensor and range band, the best two detection probabilities measured by its pairs (as the
+// seeing sensor), with the pair each came from, so that a pair can be judged against its
+// partners' measurements only.
+struct BandBest {
+  double p1 = -1.0, p2 = -1.0;
+  std::size_t pair1 = static_cast<std::size_t>(-1);
+};
+
+void AddMeasurement(const VisibilityCounts& counts, std::size_t pair,
+                    std::array<BandBest, kRangeBands>* bands) {
+  for (std::size_t b = 0; b < kRangeBands; ++b) {
+    if (counts.visible[b] < kMinBandObservations) continue;
+    const double p =
+        static_cast<double>(counts.matched[b]) / static_cast<double>(counts.visible[b]);
+    BandBest& x = (*bands)[b];
+    if (p > x.p1) {
+      x.p2 = x.p1;
+      x.p1 = p;
+      x.pair1 = pair;
+    } else if (p > x.p2) {
+      x.p2 = p;
+    }
+  }
+}
+
+Detection WithoutPair(const std::array<BandBest, kRangeBands>& bands, std::size_t pair) {
+  Detection d;
+  for (std::size_t b = 0; b < kRangeBands; ++b)
+    d[b] = bands[b].pair1 == pair ? bands[b].p2 : bands[b].p1;
+  return d;
 }
 
 }  // namespace
 
+Coverage::Coverage(const SensorTracks& sensor, double cell_m) : cell_m_(cell_m) {
+  Eigen::Vector2d lo(kInf, kInf), hi(-kInf, -kInf);
+  for (const GridTrack& t : sensor.tracks) {
+    for (const TrackSample& x : t.samples) {
+      if (!Usable(x)) continue;
+      lo = lo.cwiseMin(x.position_m);
+      hi = hi.cwiseMax(x.position_m);
+    }
+  }
+  if (!(lo.x() <= hi.x())) return;
+  // Bounded memory whatever the data: coarser cells for a huge extent.
+  constexpr double kMaxCells = 4e6;
+  const Eigen::Vector2d extent = hi - lo;
+  while ((extent.x() / cell_m_ + 3.0) * (extent.y() / cell_m_ + 3.0) > kMaxCells) cell_m_ *= 2.0;
+  origin_ = lo - Eigen::Vector2d::Constant(cell_m_);
+  nx_ = static_cast<long>(extent.x() / cell_m_) + 3;
+  ny_ = static_cast<long>(extent.y() / cell_m_) + 3;
+  cells_.assign(static_cast<std::size_t>(nx_ * ny_), 0);
+  for (const GridTrack& t : sensor.tracks) {
+    for (const TrackSample& x : t.samples) {
+      if (!Usable(x)) continue;
+      const long cx = static_cast<long>((x.position_m.x() - origin_.x()) / cell_m_);
+      const long cy = static_cast<long>((x.position_m.y() - origin_.y()) / cell_m_);
+      for (long dy = -1; dy <= 1; ++dy) {
+        for (long dx = -1; dx <= 1; ++dx) {
+          const long u = cx + dx, v = cy + dy;
+          if (u >= 0 && u < nx_ && v >= 0 && v < ny_) {
+            cells_[static_cast<std::size_t>(v * nx_ + u)] = 1;
+          }
+        }
+      }
+    }
+  }
+}
+
+bool Coverage::Covered(const Eigen::Vector2d& p) const {
+  if (cells_.empty() || !p.allFinite()) return false;
+  const double fx = (p.x() - origin_.x()) / cell_m_, fy = (p.y() - origin_.y()) / cell_m_;
+  if (!(fx >= 0.0 && fy >= 0.0 && fx < static_cast<double>(nx_) && fy < static_cast<double>(ny_))) {
+    return false;
+  }
+  return cells_[static_cast<std::size_t>(static_cast<long>(fy) * nx_ + static_cast<long>(fx))] != 0;
+}
+
+std::size_t RangeBandOf(double range_m) {
+  static constexpr double kEdges[kRangeBands - 1] = {5.0, 10.0, 15.0, 20.0, 30.0, 50.0};
+  std::size_t b = 0;
+  while (b < kRangeBands - 1 && !(range_m < kEdges[b])) ++b;
+  return b;
+}
+
 PairEstimate EstimatePair(const AlignedTracks& aligned, std::size_t r, std::size_t s,
                           const PairwiseOptions& options, PairDiagnostics* diagnostics) {
   if (Validate(options)) std::abort();
-  if (r == s || r >= aligned.sensors.size() || s >= aligned.sensors.size()) {
+  PairDiagnostics diag;
+  const auto fail = [&](const char* reason, std::size_t intervals) {
     PairEstimate est;
     est.r = r;
     est.s = s;
     est.second_error = kInf;
-    est.reason = "invalid sensor pair";
+    est.intervals = intervals;
+    est.reason = reason;
     if (diagnostics != nullptr) *diagnostics = {};
     return est;
+  };
+  if (r == s || r >= aligned.sensors.size() || s >= aligned.sensors.size()) {
+    return fail("invalid sensor pair", 0);
   }
   const auto all = PairIntervals(aligned, r, s, IntervalOptions{1});
-  if (all.empty()) {
-    PairEstimate est;
-    est.r = r;
-    est.s = s;
-    est.second_error = kInf;
-    est.reason = "no simultaneous tracks";
-    if (diagnostics != nullptr) *diagnostics = {};
-    return est;
+  if (all.empty()) return fail("no simultaneous tracks", 0);
+  const Coverage coverage_r(aligned.sensors[r], options.coverage_cell_m);
+  const Coverage coverage_s(aligned.sensors[s], options.coverage_cell_m);
+  PairEstimate est =
+      EstimateWithIntervals(aligned, r, s, all, coverage_r, coverage_s, options, diag);
+  if (est.accepted) {
+    Detection unknown;
+    unknown.fill(-1.0);
+    JudgeVisibility(aligned, diag, unknown, unknown, options, &est);
   }
-  return EstimateWithIntervals(aligned, r, s, all, options, diagnostics);
+  if (diagnostics != nullptr) *diagnostics = diag;
+  return est;
 }
 
 std::vector<PairEstimate> EstimateAllPairs(const AlignedTracks& aligned,
                                            const PairwiseOptions& options) {
   if (Validate(options)) std::abort();
+  const std::size_t n = aligned.sensors.size();
+  const std::vector<Coverage> coverage = Coverages(aligned, options.coverage_cell_m);
   std::vector<PairEstimate> out;
-  for (std::size_t r = 0; r < aligned.sensors.size(); ++r) {
-    for (std::size_t s = r + 1; s < aligned.sensors.size(); ++s) {
+  std::vector<PairDiagnostics> diags;
+  for (std::size_t r = 0; r < n; ++r) {
+    for (std::size_t s = r + 1; s < n; ++s) {
       const auto all = PairIntervals(aligned, r, s, IntervalOptions{1});
       if (!HasLongTrackPair(aligned, r, s, all, options.intervals.min_steps)) continue;
-      out.push_back(EstimateWithIntervals(aligned, r, s, all, options, nullptr));
+      diags.emplace_back();
+      out.push_back(EstimateWithIntervals(aligned, r, s, all, coverage[r], coverage[s], options,
+                                          diags.back()));
     }
+  }
+  // Each sensor's detection probability by range, measured by the pairs that passed the rest.
+  std::vector<std::array<BandBest, kRangeBands>> detection(n);
+  for (std::size_t k = 0; k < out.size(); ++k) {
+    if (!out[k].accepted) continue;
+    AddMeasurement(diags[k].r_in_s, k, &detection[out[k].s]);
+    AddMeasurement(diags[k].s_in_r, k, &detection[out[k].r]);
+  }
+  for (std::size_t k = 0; k < out.size(); ++k) {
+    if (!out[k].accepted) continue;
+    JudgeVisibility(aligned, diags[k], WithoutPair(detection[out[k].s], k),
+                    WithoutPair(detection[out[k].r], k), options, &out[k]);
   }
   return out;
 }
@@ -1011,17 +1231,19 @@ RigidFit FitMatches(const AlignedTracks& aligned, std::size_t r, std::size_t s,
   if (r == s || r >= aligned.sensors.size() || s >= aligned.sensors.size()) return {};
   const auto& tr = aligned.sensors[r].tracks;
   const auto& ts = aligned.sensors[s].tracks;
+  const double prior_var = PriorVariance(aligned);
   FitInput in;
+  SegmentIds segments;
   for (const Match& m : matches) {
     if (m.track_r >= tr.size() || m.track_s >= ts.size()) continue;
     if (!tr[m.track_r].Covers(m.step) || !ts[m.track_s].Covers(m.step)) continue;
     const TrackSample& a = tr[m.track_r].At(m.step);
     const TrackSample& b = ts[m.track_s].At(m.step);
     if (!Usable(a) || !Usable(b)) continue;
-    in.Add(a.position_m, Symmetric(a.position_cov_m2), OffsetOf(tr[m.track_r]), b.position_m,
-           Symmetric(b.position_cov_m2), OffsetOf(ts[m.track_s]));
+    in.Add(MakeObs(a, m.track_r, prior_var), MakeObs(b, m.track_s, prior_var),
+           segments.Of(m.track_r, m.track_s));
   }
-  return Fit(in, options);
+  return Fit(in, options, prior_var);
 }
 
 }  // namespace lrfnet::calib

@@ -1,5 +1,5 @@
 # The whole pipeline (Calibrate) and its data assessment.
-add_library(lrfnet_calibration STATIC pipeline.cc)
+add_library(lrfnet_calibration STATIC pipeline.cc placement.cc)
 target_include_directories(lrfnet_calibration PUBLIC ${PROJECT_SOURCE_DIR})
 target_link_libraries(lrfnet_calibration PUBLIC lrfnet_calib_types lrfnet_calib_align
                       lrfnet_calib_pairwise lrfnet_calib_icp lrfnet_calib_global lrfnet_calib_refine

@@ -53,10 +53,11 @@ struct CalibrationOptions {
   bool weighted = false;
   bool use_icp = true;                       // step 6
   bool refine = true;                        // step 8
-  // ICP is kept only if the tracks still agree: the matched-track RMS under the ICP pose may
-  // exceed the one under g_rs by at most this much (the ICP may legitimately move the tracks by
-  // the centre-of-mass bias).
-  double icp_max_track_rms_increase_m = 0.05;
+  // ICP is kept only if the tracks still agree: the Mahalanobis distance between the ICP's pose
+  // and the tracks' estimate (both covariances summed) at most this (sigma units). The kept pair
+  // is then the information-weighted fusion of both (the tracks decide where the walls leave a
+  // direction open, e.g. along a corridor), strong if the fusion passes the pairwise thresholds.
+  double icp_max_disagreement_sigma = 3.5;
   double max_translation_residual_m = 0.5;   // edges beyond it are dropped from the translations
   // Minimum data: seconds of simultaneous tracks a pair needs to count as linked (assessment).
   double min_pair_overlap_s = 3.0;
@@ -110,5 +111,12 @@ using StageClock = std::function<double()>;
 // Precondition: Validate(options) is nullopt (checked: a violation gives ok = false).
 CalibrationOutcome Calibrate(const CalibrationInput& input, const CalibrationOptions& options,
                              const StageClock& clock = {});
+
+// The global step onwards (step 7 with its hypotheses, step 8) from pairwise estimates made
+// already (e.g. by EstimateAllPairs and the background ICP) on `tracks` (as Align made them): for
+// tools and tests that estimate or inspect the pairs themselves. Methods quenzel and spectral.
+CalibrationOutcome CalibrateFromPairs(AlignedTracks tracks, std::vector<PairEstimate> pairs,
+                                      const CalibrationOptions& options,
+                                      const StageClock& clock = {});
 
 }  // namespace lrfnet::calib

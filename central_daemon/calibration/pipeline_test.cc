@@ -2,8 +2,10 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <random>
+#include <tuple>
 
 namespace lrfnet::calib {
 namespace {
@@ -247,6 +249,226 @@ TEST(CalibratePipeline, StageTimesUseTheGivenClock) {
   EXPECT_EQ(outcome.result.timings.front().stage, "align + smoothing");
   EXPECT_EQ(outcome.result.timings.back().stage, "total");
   for (const StageTime& t : outcome.result.timings) EXPECT_GT(t.seconds, 0.0) << t.stage;
+}
+
+// ---------------------------------------------------------------------------------------------
+// Weak pairs, weakly cycled graphs and their hypotheses (known answers).
+
+// A walker going round a small quadrilateral (about 2 m across, times `scale`) centred at
+// (cx, cy), many times.
+Walker Loop(double cx, double cy, double enter_s = 0.0, double leave_s = 1e9,
+            double speed_mps = 1.1, double scale = 1.0) {
+  Walker w;
+  w.enter_s = enter_s;
+  w.leave_s = leave_s;
+  w.speed_mps = speed_mps;
+  for (int lap = 0; lap < 40; ++lap) {
+    w.waypoints.emplace_back(cx - 1.0 * scale, cy - 1.0 * scale);
+    w.waypoints.emplace_back(cx + 1.2 * scale, cy - 0.8 * scale);
+    w.waypoints.emplace_back(cx + 0.9 * scale, cy + 1.1 * scale);
+    w.waypoints.emplace_back(cx - 1.1 * scale, cy + 0.7 * scale);
+  }
+  return w;
+}
+
+std::size_t Accepted(const std::vector<PairEstimate>& pairs) {
+  return static_cast<std::size_t>(std::count_if(pairs.begin(), pairs.end(),
+                                                [](const PairEstimate& p) { return p.accepted; }));
+}
+
+// Four sensors on a diamond, each facing the centre, 7.5 m range: each sees its two neighbours'
+// shared corner, never the opposite sensor's. The graph is one 4-cycle a-b-c-d-a.
+std::vector<SimSensor> Ring() {
+  std::vector<SimSensor> out = {{"a", {-8.0, 0.0, 0.0}},
+                                {"b", {0.0, 8.0, DegToRad(-90.0)}},
+                                {"c", {8.0, 0.0, DegToRad(180.0)}},
+                                {"d", {0.0, -8.0, DegToRad(90.0)}}};
+  for (SimSensor& s : out) s.range_m = 7.5;
+  return out;
+}
+
+// People in every corner, each walking a loop of their own size and speed for 12 s, five after
+// one another (so every pair has several tracks, each with its own systematic offset).
+std::vector<Walker> RingWalkers() {
+  std::vector<Walker> out;
+  const double cx[4] = {-4.0, 4.0, 4.0, -4.0}, cy[4] = {4.0, 4.0, -4.0, -4.0};
+  for (int corner = 0; corner < 4; ++corner) {
+    for (int visit = 0; visit < 5; ++visit) {
+      const double enter = 12.0 * visit + 0.7 * corner;
+      out.push_back(Loop(cx[corner], cy[corner], enter, enter + 11.0, 0.9 + 0.1 * (visit + corner),
+                         0.8 + 0.1 * ((visit + 2 * corner) % 5)));
+    }
+  }
+  return out;
+}
+
+// The pairs of aligned input, with the one of ids (r, s) replaced by `edit` of it.
+template <typename Edit>
+std::vector<PairEstimate> PairsWith(const AlignedTracks& tracks, const std::string& r,
+                                    const std::string& s, Edit edit) {
+  std::vector<PairEstimate> pairs = EstimateAllPairs(tracks, {});
+  for (PairEstimate& p : pairs) {
+    if (tracks.sensors[p.r].id == r && tracks.sensors[p.s].id == s) edit(p);
+  }
+  return pairs;
+}
+
+TEST(CalibrateHypotheses, ACorruptedPairOfASingleCycleIsFoundByTheRawObservations) {
+  // One pair 6 degrees and 0.8 m off, far beyond its covariance, in the graph's only cycle: no
+  // robust average can tell which pair of the cycle is wrong (each lies in one cycle). The
+  // placements without each pair in turn are judged on all raw observations.
+  const std::vector<SimSensor> sensors = Ring();
+  const CalibrationInput input = Simulate(sensors, RingWalkers(), 60.0, 11);
+  const AlignedTracks tracks = Align(input, {});
+  const auto pairs = PairsWith(tracks, "a", "b", [](PairEstimate& p) {
+    ASSERT_TRUE(p.accepted) << p.reason;
+    p.s_from_r.yaw_rad += DegToRad(6.0);
+    p.s_from_r.x_m += 0.8;
+  });
+  ASSERT_EQ(Accepted(pairs), 4u);
+  CalibrationOptions options;
+  options.refine = false;  // the placements themselves, not what the refinement makes of them
+  options.reference = "c";
+  const CalibrationOutcome outcome = CalibrateFromPairs(tracks, pairs, options);
+  ExpectClose(outcome, sensors, 0.05, 0.2);
+  ASSERT_GE(outcome.result.hypotheses.size(), 4u);
+  for (const HypothesisReport& h : outcome.result.hypotheses) {
+    EXPECT_EQ(h.chosen, h.description == "without a-b") << h.description << " " << h.cost;
+  }
+  EXPECT_TRUE(outcome.result.ambiguity.empty()) << outcome.result.ambiguity;
+  for (const EdgeReport& e : outcome.result.edges) {
+    if (e.status.rfind("rejected", 0) == 0) continue;  // the diagonals: no common view
+    EXPECT_EQ(e.used, !(e.r == "a" && e.s == "b")) << e.r << "-" << e.s << ": " << e.status;
+  }
+  // With the refinement too.
+  options.refine = true;
+  ExpectClose(CalibrateFromPairs(tracks, pairs, options), sensors, 0.05, 0.2);
+}
+
+TEST(CalibrateHypotheses, AMisclosureTheDataCannotPlaceIsReportedNotPicked) {
+  // b's pairs were measured when nobody walked where b sees (no track of b remains in the data),
+  // and they disagree: a-b says one thing, b-c 6 degrees another. Either placement of b explains
+  // every remaining observation equally: b is refused, named, with the walks that would decide.
+  std::vector<Walker> walkers;  // c-d and d-a only
+  for (const Walker& w : RingWalkers()) {
+    if (w.waypoints[0].y() < 0.0) walkers.push_back(w);
+  }
+  const std::vector<SimSensor> sensors = Ring();
+  const CalibrationInput input = Simulate(sensors, walkers, 60.0, 12);
+  const AlignedTracks tracks = Align(input, {});
+  std::vector<PairEstimate> pairs = EstimateAllPairs(tracks, {});
+  ASSERT_EQ(Accepted(pairs), 2u);
+  const auto truth_of = [&](std::size_t r, std::size_t s) {
+    return sensors[s].world_from_sensor.inverse() * sensors[r].world_from_sensor;
+  };
+  for (const auto& [r, s, dyaw] : {std::tuple<std::size_t, std::size_t, double>{0, 1, 3.0},
+                                   std::tuple<std::size_t, std::size_t, double>{1, 2, 3.0}}) {
+    PairEstimate p;
+    p.r = r;
+    p.s = s;
+    p.accepted = true;
+    p.s_from_r = truth_of(r, s);
+    p.s_from_r.yaw_rad += DegToRad(dyaw);
+    p.covariance = Eigen::Vector3d(1e-4, 1e-4, std::pow(DegToRad(0.1), 2)).asDiagonal();
+    p.matches = 500;
+    pairs.push_back(p);
+  }
+  CalibrationOptions options;
+  options.reference = "d";
+  const CalibrationOutcome outcome = CalibrateFromPairs(tracks, pairs, options);
+  EXPECT_FALSE(outcome.ok);
+  EXPECT_NE(outcome.error.find("cannot place b"), std::string::npos) << outcome.error;
+  EXPECT_NE(outcome.error.find("explain the data equally"), std::string::npos) << outcome.error;
+  EXPECT_NE(outcome.error.find("walk where"), std::string::npos) << outcome.error;
+  EXPECT_FALSE(outcome.result.sensors[1].calibrated);
+  EXPECT_EQ(outcome.result.sensors[1].flag.rfind("ambiguous", 0), 0u);
+  // The others are placed (d at the origin, a and c by their data).
+  for (std::size_t i : {0, 2, 3}) EXPECT_TRUE(outcome.result.sensors[i].calibrated) << i;
+}
+
+TEST(CalibratePipeline, AChainOfBridgesWithShortOverlapsIsPlacedWithCovariancesThatSaySo) {
+  // Five sensors along a corridor, 10 m apart, 7 m range: neighbours share a few metres of it,
+  // walked a few times: every pair is a bridge (no cycle), most weak. Every sensor is placed,
+  // those hanging on weak pairs flagged, and the errors, which grow along the chain, stay within
+  // the reported uncertainty.
+  std::vector<SimSensor> sensors;
+  for (int i = 0; i < 5; ++i) {
+    sensors.push_back({std::string(1, static_cast<char>('a' + i)),
+                       {10.0 * i, 0.0, DegToRad(i % 2 == 0 ? 90.0 : -90.0)}});
+    sensors.back().range_m = 7.0;
+    sensors.back().half_fov_rad = DegToRad(90.0);
+  }
+  for (SimSensor& s : sensors) s.world_from_sensor.y_m = s.world_from_sensor.yaw_rad > 0 ? -2.0 : 2.0;
+  // One person at a time, zig-zagging along the corridor and back, each with a gait of their own.
+  const auto zigzag = [](double amplitude, double wavelength, double speed, double enter,
+                         double leave) {
+    Walker w;
+    w.speed_mps = speed;
+    w.enter_s = enter;
+    w.leave_s = leave;
+    for (int pass = 0; pass < 2; ++pass) {
+      for (double x = -3.0; x <= 43.0; x += wavelength / 2.0) {
+        const double at = pass == 0 ? x : 40.0 - x;
+        const int k = static_cast<int>(std::lround((at + 3.0) / (wavelength / 2.0)));
+        w.waypoints.emplace_back(at, k % 2 == 0 ? -amplitude : amplitude);
+      }
+    }
+    return w;
+  };
+  const CalibrationInput input = Simulate(
+      sensors, {zigzag(0.8, 5.0, 1.3, 0.0, 75.0), zigzag(1.1, 3.0, 1.0, 75.0, 180.0)}, 180.0, 13,
+      0.02);
+  CalibrationOptions options;
+  options.reference = "a";
+  const CalibrationOutcome outcome = Calibrate(input, options);
+  ASSERT_TRUE(outcome.ok) << outcome.error;
+  std::size_t flagged = 0;
+  for (std::size_t i = 1; i < sensors.size(); ++i) {
+    const SensorPose& got = outcome.result.sensors[i];
+    ASSERT_TRUE(got.calibrated) << got.id;
+    flagged += got.flag.empty() ? 0 : 1;
+    const Pose2 want = sensors[0].world_from_sensor.inverse() * sensors[i].world_from_sensor;
+    const double dt = common::TranslationDistanceM(got.world_from_sensor, want);
+    const double dyaw = common::RotationDistanceRad(got.world_from_sensor, want);
+    EXPECT_LT(dt, 3.0 * std::sqrt(got.covariance(0, 0) + got.covariance(1, 1))) << got.id;
+    EXPECT_LT(dyaw, 3.0 * std::sqrt(got.covariance(2, 2))) << got.id;
+    EXPECT_LT(dt, 0.5) << got.id;
+  }
+  EXPECT_GT(flagged, 0u);
+  std::size_t used = 0;
+  for (const EdgeReport& e : outcome.result.edges) used += e.used ? 1 : 0;
+  EXPECT_EQ(used, 4u);
+}
+
+TEST(CalibratePipeline, ALeafOnAWeakPairIsPlacedWithALargeCovarianceAndAFlag) {
+  // The hall's four sensors see two people everywhere; a fifth, e, looks into the hall's corner
+  // from outside and sees one of them for a few seconds only.
+  std::mt19937 rng(14);
+  std::vector<SimSensor> sensors = Hall();
+  sensors.push_back({"e", {15.0, -3.0, DegToRad(135.0)}});
+  sensors.back().range_m = 6.0;
+  std::vector<Walker> walkers = {RandomWalker(rng, 1, 11, 1, 7, 0.0),
+                                 RandomWalker(rng, 1, 11, 1, 7, 5.0)};
+  walkers.push_back(Loop(11.0, 1.0, 10.0, 13.5));
+  const CalibrationInput input = Simulate(sensors, walkers, 60.0, 15);
+  CalibrationOptions options;
+  options.reference = "a";
+  const CalibrationOutcome outcome = Calibrate(input, options);
+  ASSERT_TRUE(outcome.ok) << outcome.error;
+  const SensorPose& e = outcome.result.sensors[4];
+  ASSERT_TRUE(e.calibrated);
+  EXPECT_NE(e.flag.find("weak pair"), std::string::npos) << e.flag;
+  const Pose2 want = sensors[0].world_from_sensor.inverse() * sensors[4].world_from_sensor;
+  const double sigma_t = std::sqrt(e.covariance(0, 0) + e.covariance(1, 1));
+  EXPECT_LT(common::TranslationDistanceM(e.world_from_sensor, want), 2.0 * sigma_t);
+  EXPECT_LT(common::RotationDistanceRad(e.world_from_sensor, want),
+            2.0 * std::sqrt(e.covariance(2, 2)));
+  // Large: the hall's sensors are placed far better than the leaf.
+  for (std::size_t i = 1; i < 4; ++i) {
+    EXPECT_TRUE(outcome.result.sensors[i].flag.empty()) << outcome.result.sensors[i].flag;
+    EXPECT_GT(sigma_t, 3.0 * std::sqrt(outcome.result.sensors[i].covariance(0, 0) +
+                                       outcome.result.sensors[i].covariance(1, 1)));
+  }
 }
 
 }  // namespace

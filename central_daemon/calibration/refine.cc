@@ -8,8 +8,10 @@
 #include <array>
 #include <cmath>
 #include <iomanip>
+#include <limits>
 #include <memory>
 #include <numeric>
+#include <optional>
 #include <sstream>
 #include <utility>
 
@@ -17,30 +19,29 @@ namespace lrfnet::calib {
 namespace {
 
 constexpr std::size_t kNone = static_cast<std::size_t>(-1);
-constexpr std::size_t kKinds = 3;  // MeasurementKind values
-// Below this range the direction of the radial bias is undefined; no object sits on a sensor.
-constexpr double kMinBiasRangeM = 1e-6;
-
-std::size_t KindIndex(MeasurementKind kind) {
-  const auto k = static_cast<std::size_t>(kind);
-  return k < kKinds ? k : static_cast<std::size_t>(MeasurementKind::kUnspecified);
-}
+// Bounds far beyond any real sample; they keep every product below finite overflow.
+constexpr double kMaxModelValue = 100.0;
+// The association gate shrinks by this factor per round down to association_gate_m.
+constexpr double kGateShrink = 0.7;
 
 // One valid track sample of a calibrated sensor at a used grid step, already whitened:
-// sqrt_info = L^-1 with L L^T = S_z + (sigma_kind^2 + (sigma_per_m |z|)^2) I.
+// z = CentreOf (the body centre at zero size correction), jd = CentrePerSizeCorrection,
+// sqrt_info = L^-1 with L L^T = CentreCovariance + (sigma_per_m |z|)^2 I.
 struct StepSample {
   std::size_t sensor = 0;
-  std::size_t kind = 0;  // KindIndex
+  std::size_t group = 0;  // the track (over all sensors): its own systematic offset
   Eigen::Vector2d z = Eigen::Vector2d::Zero();
+  Eigen::Matrix2d jd = Eigen::Matrix2d::Zero();
   Eigen::Matrix2d sqrt_info = Eigen::Matrix2d::Identity();
 };
 
 struct Observation {
   std::size_t sensor = 0;
-  std::size_t kind = 0;
+  std::size_t group = 0;
   std::size_t object = 0;
   std::size_t sample = 0;  // index into the step's samples (identifies the association)
   Eigen::Vector2d z = Eigen::Vector2d::Zero();
+  Eigen::Matrix2d jd = Eigen::Matrix2d::Zero();
   Eigen::Matrix2d sqrt_info = Eigen::Matrix2d::Identity();
 };
 
@@ -72,55 +73,37 @@ struct Association {
 };
 
 using PoseParams = std::array<double, 3>;  // x_m, y_m, yaw_rad of world_from_sensor
-using BiasParams = std::array<double, kKinds>;
+using SizeParams = std::array<double, 2>;  // d_major, d_minor
 
 PoseParams ToParams(const Pose2& p) { return {p.x_m, p.y_m, p.yaw_rad}; }
 Pose2 ToPose(const PoseParams& p) { return {p[0], p[1], common::NormalizeAngle(p[2])}; }
 
-// e = v - b v/|v| - z with v = R^T (o - t), and its Jacobians with respect to the object, the
-// pose (x, y, yaw) and the bias b; unwhitened.
+// e = R^T (o - t) - z - jd d, and its Jacobians with respect to the object, the pose (x, y, yaw)
+// and the size correction d; unwhitened.
 struct Linearization {
   Eigen::Vector2d e;
   Eigen::Matrix2d d_object;
   Eigen::Matrix<double, 2, 3> d_pose;
-  Eigen::Vector2d d_bias;
+  Eigen::Matrix2d d_size;
 };
 
 // `c`, `s`: cos and sin of pose[2] (callers evaluating many observations of one sensor reuse them).
-Linearization Linearize(const Eigen::Vector2d& z, const double* object, const double* pose,
-                        double c, double s, double bias_m) {
+Linearization Linearize(const Eigen::Vector2d& z, const Eigen::Matrix2d& jd, const double* object,
+                        const double* pose, double c, double s, const double* size) {
   const double dx = object[0] - pose[0], dy = object[1] - pose[1];
-  const Eigen::Vector2d v(c * dx + s * dy, -s * dx + c * dy);
-  Eigen::Matrix2d rt;
-  rt << c, s, -s, c;
-  Eigen::Matrix<double, 2, 3> dv_pose;
-  dv_pose.leftCols<2>() = -rt;
-  dv_pose.col(2) = Eigen::Vector2d(-s * dx + c * dy, -c * dx - s * dy);
-
   Linearization l;
-  const double range = v.norm();
-  if (range < kMinBiasRangeM) {
-    l.e = v - z;
-    l.d_object = rt;
-    l.d_pose = dv_pose;
-    l.d_bias.setZero();
-    return l;
-  }
-  const Eigen::Vector2d u = v / range;
-  // d(v - b v/|v|)/dv = I - b (I - u u^T) / |v|
-  const Eigen::Matrix2d de_dv =
-      Eigen::Matrix2d::Identity() -
-      (bias_m / range) * (Eigen::Matrix2d::Identity() - u * u.transpose());
-  l.e = v - bias_m * u - z;
-  l.d_object = de_dv * rt;
-  l.d_pose = de_dv * dv_pose;
-  l.d_bias = -u;
+  l.e = Eigen::Vector2d(c * dx + s * dy, -s * dx + c * dy) - z -
+        jd * Eigen::Vector2d(size[0], size[1]);
+  l.d_object << c, s, -s, c;
+  l.d_pose.leftCols<2>() = -l.d_object;
+  l.d_pose.col(2) = Eigen::Vector2d(-s * dx + c * dy, -c * dx - s * dy);
+  l.d_size = -jd;
   return l;
 }
 
-Linearization Linearize(const Eigen::Vector2d& z, const double* object, const double* pose,
-                        double bias_m) {
-  return Linearize(z, object, pose, std::cos(pose[2]), std::sin(pose[2]), bias_m);
+Linearization Linearize(const Eigen::Vector2d& z, const Eigen::Matrix2d& jd, const double* object,
+                        const double* pose, const double* size) {
+  return Linearize(z, jd, object, pose, std::cos(pose[2]), std::sin(pose[2]), size);
 }
 
 // cos and sin of every sensor's yaw.
@@ -132,18 +115,21 @@ std::vector<std::pair<double, double>> CosSin(const std::vector<PoseParams>& par
   return out;
 }
 
-// Whitened residual of one observation; parameter blocks: object (2), sensor pose (3), radial
-// bias of the observation's kind (1). Where Quenzel et al. compare two sensors' observations by
-// their Mahalanobis distance under the summed covariances (eq. 6), every observation here is
-// compared with a common object position, so that any number of sensors share one object.
-class ObservationCost final : public ceres::SizedCostFunction<2, 2, 3, 1> {
+// Whitened residual of one observation; parameter blocks: object (2), sensor pose (3), the two
+// components of the size correction (1 each, so that either can be held). Where Quenzel et al.
+// compare two sensors' observations by their Mahalanobis distance under the summed covariances
+// (eq. 6), every observation here is compared with a common object position, so that any number
+// of sensors share one object.
+class ObservationCost final : public ceres::SizedCostFunction<2, 2, 3, 1, 1> {
  public:
-  ObservationCost(const Eigen::Vector2d& z, const Eigen::Matrix2d& sqrt_info)
-      : z_(z), sqrt_info_(sqrt_info) {}
+  ObservationCost(const Eigen::Vector2d& z, const Eigen::Matrix2d& jd,
+                  const Eigen::Matrix2d& sqrt_info)
+      : z_(z), jd_(jd), sqrt_info_(sqrt_info) {}
 
   bool Evaluate(double const* const* parameters, double* residuals,
                 double** jacobians) const override {
-    const Linearization l = Linearize(z_, parameters[0], parameters[1], parameters[2][0]);
+    const double size[2] = {parameters[2][0], parameters[3][0]};
+    const Linearization l = Linearize(z_, jd_, parameters[0], parameters[1], size);
     Eigen::Map<Eigen::Vector2d> r(residuals);
     r = sqrt_info_ * l.e;
     if (jacobians != nullptr) {
@@ -155,9 +141,11 @@ class ObservationCost final : public ceres::SizedCostFunction<2, 2, 3, 1> {
         Eigen::Map<Eigen::Matrix<double, 2, 3, Eigen::RowMajor>> j_pose(jacobians[1]);
         j_pose = sqrt_info_ * l.d_pose;
       }
-      if (jacobians[2] != nullptr) {
-        Eigen::Map<Eigen::Vector2d> j_bias(jacobians[2]);
-        j_bias = sqrt_info_ * l.d_bias;
+      for (int k = 0; k < 2; ++k) {
+        if (jacobians[2 + k] != nullptr) {
+          Eigen::Map<Eigen::Vector2d> j_size(jacobians[2 + k]);
+          j_size = sqrt_info_ * l.d_size.col(k);
+        }
       }
     }
     return true;
@@ -165,7 +153,23 @@ class ObservationCost final : public ceres::SizedCostFunction<2, 2, 3, 1> {
 
  private:
   Eigen::Vector2d z_;
+  Eigen::Matrix2d jd_;
   Eigen::Matrix2d sqrt_info_;
+};
+
+// The prior of one size-correction component: d / sigma.
+class SizePriorCost final : public ceres::SizedCostFunction<1, 1> {
+ public:
+  explicit SizePriorCost(double sigma_m) : inv_sigma_(1.0 / sigma_m) {}
+  bool Evaluate(double const* const* parameters, double* residuals,
+                double** jacobians) const override {
+    residuals[0] = inv_sigma_ * parameters[0][0];
+    if (jacobians != nullptr && jacobians[0] != nullptr) jacobians[0][0] = inv_sigma_;
+    return true;
+  }
+
+ private:
+  double inv_sigma_;
 };
 
 // A usable relative-pose constraint, whitened once.
@@ -276,45 +280,33 @@ std::pair<double, double> Rho(const ceres::LossFunction* loss, double squared_no
   return {rho[0], rho[1]};
 }
 
-double ModelSigma(std::size_t kind, const JointRefineOptions& options) {
-  switch (static_cast<MeasurementKind>(kind)) {
-    case MeasurementKind::kCenterOfMass:
-      return options.model_sigma_com_m;
-    case MeasurementKind::kEllipse:
-      return options.model_sigma_ellipse_m;
-    case MeasurementKind::kUnspecified:
-    case MeasurementKind::kShapeFit:  // body centre: no view offset; the unbiased sigma
-      break;
-  }
-  return options.model_sigma_unspecified_m;
-}
-
-BiasParams InitialBias(const JointRefineOptions& options) {
-  BiasParams b{};
-  b[KindIndex(MeasurementKind::kUnspecified)] = options.radial_bias_unspecified_m;
-  b[KindIndex(MeasurementKind::kCenterOfMass)] = options.radial_bias_com_m;
-  b[KindIndex(MeasurementKind::kEllipse)] = options.radial_bias_ellipse_m;
-  return b;
-}
-
 bool IsFinite(const Pose2& p) {
   return std::isfinite(p.x_m) && std::isfinite(p.y_m) && std::isfinite(p.yaw_rad);
 }
 
-// The valid samples of the calibrated sensors at every used step, whitened once.
-std::vector<std::vector<StepSample>> CollectSamples(const AlignedTracks& tracks,
-                                                    const std::vector<bool>& calibrated,
-                                                    std::size_t stride,
-                                                    const JointRefineOptions& options,
-                                                    std::size_t& rejected) {
+bool UsableModel(const TrackSample& x) {
+  for (const float v :
+       {x.bias_m, x.bias_per_major, x.bias_per_minor, x.bias_sigma_m, x.model_sigma_m}) {
+    if (!std::isfinite(v) || std::abs(v) > kMaxModelValue) return false;
+  }
+  return true;
+}
+
+// The valid samples of the calibrated sensors at every used step, whitened once. `groups`: the
+// number of tracks (over all sensors) that gave samples.
+std::vector<std::vector<StepSample>> CollectSamples(
+    const AlignedTracks& tracks, const std::vector<bool>& calibrated, std::size_t stride,
+    const JointRefineOptions& options, std::size_t& rejected, std::vector<double>& group_sigma) {
   const std::size_t used = tracks.steps == 0 ? 0 : (tracks.steps - 1) / stride + 1;
   std::vector<std::vector<StepSample>> per_step(used);
+  group_sigma.clear();
+  std::size_t groups = 0;
   for (std::size_t s = 0; s < tracks.sensors.size(); ++s) {
     if (!calibrated[s]) continue;
     for (const GridTrack& track : tracks.sensors[s].tracks) {
       if (track.first_step >= tracks.steps) continue;
-      const std::size_t kind = KindIndex(track.kind);
-      const double sigma = ModelSigma(kind, options);
+      const std::size_t group = groups++;
+      double range_sum = 0.0, range_count = 0.0;
       // First used step at or after the track's start; the grid end clips malformed tracks.
       std::size_t step = (track.first_step + stride - 1) / stride * stride;
       const std::size_t end = std::min(track.end_step(), tracks.steps);
@@ -322,54 +314,59 @@ std::vector<std::vector<StepSample>> CollectSamples(const AlignedTracks& tracks,
         const TrackSample& sample = track.At(step);
         const Eigen::Matrix2d& cov = sample.position_cov_m2;
         const double tolerance = 1e-9 * (1.0 + cov.cwiseAbs().maxCoeff());
-        if (!sample.position_m.allFinite() || !cov.allFinite() ||
+        if (!sample.position_m.allFinite() || !cov.allFinite() || !UsableModel(sample) ||
             std::abs(cov(0, 1) - cov(1, 0)) > tolerance || cov(0, 0) < 0.0 || cov(1, 1) < 0.0 ||
             cov.determinant() < -tolerance * tolerance) {
           ++rejected;
           continue;
         }
-        const double range_sigma = options.model_sigma_per_m * sample.position_m.norm();
+        StepSample out;
+        out.sensor = s;
+        out.group = group;
+        out.z = CentreOf(sample);
+        out.jd = CentrePerSizeCorrection(sample);
+        const double range_sigma = options.model_sigma_per_m * out.z.norm();
         const Eigen::Matrix2d total =
-            cov + (sigma * sigma + range_sigma * range_sigma) * Eigen::Matrix2d::Identity();
+            CentreCovariance(sample) + range_sigma * range_sigma * Eigen::Matrix2d::Identity();
         const Eigen::LLT<Eigen::Matrix2d> llt(total);
-        if (llt.info() != Eigen::Success || total.determinant() <= 0.0) {
+        if (!out.z.allFinite() || llt.info() != Eigen::Success || total.determinant() <= 0.0) {
           ++rejected;
           continue;
         }
-        StepSample out;
-        out.sensor = s;
-        out.kind = kind;
-        out.z = sample.position_m;
         out.sqrt_info = llt.matrixL().solve(Eigen::Matrix2d::Identity());
         if (!out.sqrt_info.allFinite()) {
           ++rejected;
           continue;
         }
         per_step[step / stride].push_back(out);
+        range_sum += out.z.norm();
+        range_count += 1.0;
+        group_sigma.resize(groups, options.segment_sigma_m);
+        group_sigma[group] =
+            options.segment_sigma_m + options.segment_sigma_per_m * range_sum / range_count;
       }
     }
   }
+  group_sigma.resize(groups, options.segment_sigma_m);
   return per_step;
 }
 
-// The object position an observation implies: z moved back out by the radial bias.
-Eigen::Vector2d Unbiased(const StepSample& sample, const BiasParams& bias) {
-  const double range = sample.z.norm();
-  if (range < kMinBiasRangeM) return sample.z;
-  return sample.z * ((range + bias[sample.kind]) / range);
+// The body centre an observation implies with the size correction d, sensor frame.
+Eigen::Vector2d CentreWith(const StepSample& sample, const SizeParams& size) {
+  return sample.z + sample.jd * Eigen::Vector2d(size[0], size[1]);
 }
 
 // Greedy agglomerative clustering at one step: candidate pairs of different sensors within the
 // gate, nearest first; two clusters merge when they share no sensor and every cross pair is
 // within the gate (complete linkage keeps two people walking side by side apart).
 void AssociateStep(const std::vector<StepSample>& samples, std::size_t step_index,
-                   const std::vector<Pose2>& poses, const BiasParams& bias, double gate_m,
+                   const std::vector<Pose2>& poses, const SizeParams& size, double gate_m,
                    Association& out) {
   const std::size_t n = samples.size();
   if (n < 2) return;
   std::vector<Eigen::Vector2d> world(n);
   for (std::size_t i = 0; i < n; ++i)
-    world[i] = poses[samples[i].sensor] * Unbiased(samples[i], bias);
+    world[i] = poses[samples[i].sensor] * CentreWith(samples[i], size);
 
   // Sweep over x to find the candidate pairs without testing all n^2.
   std::vector<std::size_t> by_x(n);
@@ -437,7 +434,7 @@ void AssociateStep(const std::vector<StepSample>& samples, std::size_t step_inde
       mean += world[i];
       const StepSample& sample = samples[i];
       out.observations.push_back(
-          {sample.sensor, sample.kind, object, i, sample.z, sample.sqrt_info});
+          {sample.sensor, sample.group, object, i, sample.z, sample.jd, sample.sqrt_info});
     }
     out.objects.push_back(mean / static_cast<double>(members[c].size()));
     out.object_step.push_back(step_index);
@@ -547,17 +544,6 @@ std::vector<bool> PruneSensors(Association& a, const std::vector<Constraint>& co
   return reached;
 }
 
-// The kinds whose bias is estimated: enough observations of that kind.
-std::array<bool, kKinds> FreeBiases(const Association& a, const JointRefineOptions& options) {
-  std::array<std::size_t, kKinds> count{};
-  for (const Observation& ob : a.observations) ++count[ob.kind];
-  std::array<bool, kKinds> free{};
-  for (std::size_t k = 0; k < kKinds; ++k) {
-    free[k] = options.estimate_radial_bias && count[k] >= options.min_bias_observations;
-  }
-  return free;
-}
-
 struct SolveOutcome {
   bool usable = false;
   std::string report;
@@ -566,20 +552,21 @@ struct SolveOutcome {
 };
 
 SolveOutcome Solve(const Association& a, const std::vector<Constraint>& constraints,
-                   const std::vector<bool>& free_sensor, const std::array<bool, kKinds>& free_bias,
-                   std::vector<PoseParams>& poses, BiasParams& bias,
+                   const std::vector<bool>& free_sensor, const std::array<bool, 2>& free_size,
+                   double size_prior_sigma_m, std::vector<PoseParams>& poses, SizeParams& size,
                    std::vector<Eigen::Vector2d>& objects, const ceres::LossFunction* loss,
                    double observation_weight, const JointRefineOptions& options) {
-  // Declared before the problem, which refers to it until destroyed.
+  // Declared before the problem, which refers to them until destroyed.
   ceres::ScaledLoss observation_loss(loss, observation_weight, ceres::DO_NOT_TAKE_OWNERSHIP);
+  ceres::CauchyLoss constraint_loss(options.constraint_loss_scale);
   ceres::Problem::Options problem_options;
   problem_options.loss_function_ownership = ceres::DO_NOT_TAKE_OWNERSHIP;
   ceres::Problem problem(problem_options);
   auto ordering = std::make_shared<ceres::ParameterBlockOrdering>();
 
-  // Objects go into the eliminated group 0; poses and biases form the reduced system.
+  // Objects go into the eliminated group 0; poses and the size correction form the reduced
+  // system.
   std::vector<bool> in_problem(poses.size(), false);
-  std::array<bool, kKinds> bias_in_problem{};
   std::size_t free_count = 0;
   auto add_pose = [&](std::size_t sensor) {
     if (in_problem[sensor]) return;
@@ -596,13 +583,14 @@ SolveOutcome Solve(const Association& a, const std::vector<Constraint>& constrai
     add_pose(c.r);
     add_pose(c.s);
   }
-  for (const Observation& ob : a.observations) {
-    add_pose(ob.sensor);
-    if (!bias_in_problem[ob.kind]) {
-      bias_in_problem[ob.kind] = true;
-      problem.AddParameterBlock(&bias[ob.kind], 1);
-      ordering->AddElementToGroup(&bias[ob.kind], 1);
-      if (!free_bias[ob.kind]) problem.SetParameterBlockConstant(&bias[ob.kind]);
+  for (const Observation& ob : a.observations) add_pose(ob.sensor);
+  for (int k = 0; k < 2; ++k) {
+    problem.AddParameterBlock(&size[k], 1);
+    ordering->AddElementToGroup(&size[k], 1);
+    if (!free_size[k] || !(size_prior_sigma_m > 0.0)) {
+      problem.SetParameterBlockConstant(&size[k]);
+    } else {
+      problem.AddResidualBlock(new SizePriorCost(size_prior_sigma_m), nullptr, &size[k]);
     }
   }
   for (Eigen::Vector2d& o : objects) {
@@ -610,13 +598,12 @@ SolveOutcome Solve(const Association& a, const std::vector<Constraint>& constrai
     ordering->AddElementToGroup(o.data(), 0);
   }
   for (const Observation& ob : a.observations) {
-    problem.AddResidualBlock(new ObservationCost(ob.z, ob.sqrt_info), &observation_loss,
-                             objects[ob.object].data(), poses[ob.sensor].data(), &bias[ob.kind]);
+    problem.AddResidualBlock(new ObservationCost(ob.z, ob.jd, ob.sqrt_info), &observation_loss,
+                             objects[ob.object].data(), poses[ob.sensor].data(), &size[0],
+                             &size[1]);
   }
   for (const Constraint& c : constraints) {
-    // No robust loss: the caller vouches for its constraints, and a down-weighted constraint
-    // would lose against thousands of observations whatever its accuracy.
-    problem.AddResidualBlock(new ConstraintCost(c.measured, c.sqrt_info), nullptr,
+    problem.AddResidualBlock(new ConstraintCost(c.measured, c.sqrt_info), &constraint_loss,
                              poses[c.r].data(), poses[c.s].data());
   }
 
@@ -665,17 +652,17 @@ std::vector<std::vector<std::size_t>> ObservationsByObject(const Association& a)
   return by_object;
 }
 
-// Every object at its optimum with poses and biases fixed: iteratively reweighted Gauss-Newton
-// per object (objects are independent once the rest is fixed), halving steps that do not lower
-// the cost (the radial bias makes the residual non-linear in the object).
+// Every object at its optimum with poses and the size correction fixed: iteratively reweighted
+// Gauss-Newton per object (objects are independent once the rest is fixed), halving steps that do
+// not lower the cost (the robust loss).
 void OptimizeObjects(const Association& a, const std::vector<PoseParams>& params,
-                     const BiasParams& bias, const ceres::LossFunction* loss,
+                     const SizeParams& size, const ceres::LossFunction* loss,
                      std::vector<Eigen::Vector2d>& objects) {
   const std::vector<std::vector<std::size_t>> by_object = ObservationsByObject(a);
   const std::vector<std::pair<double, double>> cos_sin = CosSin(params);
   auto linearize = [&](const Observation& ob, const Eigen::Vector2d& x) {
     const auto [c, s] = cos_sin[ob.sensor];
-    return Linearize(ob.z, x.data(), params[ob.sensor].data(), c, s, bias[ob.kind]);
+    return Linearize(ob.z, ob.jd, x.data(), params[ob.sensor].data(), c, s, size.data());
   };
   auto cost_of = [&](const std::vector<std::size_t>& members, const Eigen::Vector2d& x) {
     double cost = 0.0;
@@ -721,39 +708,44 @@ void OptimizeObjects(const Association& a, const std::vector<PoseParams>& params
 }
 
 struct CostSummary {
-  double cost = 0.0;            // 1/2 (weight sum rho(observations) + sum |constraints|^2)
-  double unweighted_sum = 0.0;  // sum rho(observations) + sum |constraints|^2
+  double cost = 0.0;            // 1/2 (w sum rho(obs) + sum rho_c(constraints) + size prior)
+  double unweighted_sum = 0.0;  // sum rho(observations) + sum rho_c(constraints)
   double rms_m = 0.0;
   std::size_t downweighted = 0;
   double constraint_rms = 0.0;  // whitened
 };
 
-// Robust cost (observations and constraints) and RMS of the observations, with poses and biases
-// fixed and every object at its optimum.
-CostSummary EvaluateAtOptimalObjects(const Association& a,
-                                     const std::vector<Constraint>& constraints,
-                                     const std::vector<Pose2>& poses, const BiasParams& bias,
-                                     std::vector<Eigen::Vector2d> objects,
-                                     const ceres::LossFunction* loss, double observation_weight) {
+// Robust cost (observations, constraints, the size prior) and RMS of the observations, with poses
+// and the size correction fixed and every object at its optimum.
+CostSummary EvaluateAtOptimalObjects(
+    const Association& a, const std::vector<Constraint>& constraints,
+    const std::vector<Pose2>& poses, const SizeParams& size, double size_prior_sigma_m,
+    std::vector<Eigen::Vector2d> objects, const ceres::LossFunction* loss,
+    const ceres::LossFunction* constraint_loss, double observation_weight) {
   std::vector<PoseParams> params(poses.size());
   for (std::size_t s = 0; s < poses.size(); ++s) params[s] = ToParams(poses[s]);
-  OptimizeObjects(a, params, bias, loss, objects);
+  OptimizeObjects(a, params, size, loss, objects);
   CostSummary out;
   for (const Constraint& c : constraints) {
     const ConstraintLinearization l =
         LinearizeConstraint(c.measured, params[c.r].data(), params[c.s].data());
     const double squared = (c.sqrt_info * l.e).squaredNorm();
-    out.cost += 0.5 * squared;
-    out.unweighted_sum += squared;
+    const double rho = Rho(constraint_loss, squared).first;
+    out.cost += 0.5 * rho;
+    out.unweighted_sum += rho;
     out.constraint_rms += squared;
   }
   if (!constraints.empty()) {
     out.constraint_rms = std::sqrt(out.constraint_rms / static_cast<double>(constraints.size()));
   }
+  if (size_prior_sigma_m > 0.0) {
+    out.cost +=
+        0.5 * (size[0] * size[0] + size[1] * size[1]) / (size_prior_sigma_m * size_prior_sigma_m);
+  }
   double sum_e2 = 0.0;
   for (const Observation& ob : a.observations) {
     const Linearization l =
-        Linearize(ob.z, objects[ob.object].data(), params[ob.sensor].data(), bias[ob.kind]);
+        Linearize(ob.z, ob.jd, objects[ob.object].data(), params[ob.sensor].data(), size.data());
     const auto [rho, weight] = Rho(loss, (ob.sqrt_info * l.e).squaredNorm());
     out.cost += 0.5 * observation_weight * rho;
     out.unweighted_sum += rho;
@@ -766,42 +758,54 @@ CostSummary EvaluateAtOptimalObjects(const Association& a,
   return out;
 }
 
-// Marginal covariance of the free poses: the objects eliminated from J^T W J (W = rho', IRLS
-// weights) by the Schur complement, then the reduced system over the free poses and biases
-// inverted. Returns false when it is not positive definite.
-bool PoseCovariance(const Association& a, const std::vector<Constraint>& constraints,
-                    const std::vector<PoseParams>& poses, const BiasParams& bias,
-                    const std::vector<Eigen::Vector2d>& objects,
-                    const std::vector<bool>& free_sensor, const std::array<bool, kKinds>& free_bias,
-                    const ceres::LossFunction* loss, double observation_weight, double scale,
-                    std::vector<Eigen::Matrix3d>& covariance) {
-  std::vector<std::size_t> pose_offset(poses.size(), kNone);
+// The Gauss-Newton system of the free poses and both size-correction components with the objects
+// eliminated (Schur complement of J^T W J, W = rho' IRLS weights times the observation weight),
+// and per track the response of its gradient to a unit offset of its samples (for the
+// systematic floor): d x = -H^-1 G_track eps.
+struct ReducedSystem {
+  std::vector<std::size_t> pose_offset;  // per sensor, kNone when not free
+  std::size_t size_offset = 0;           // the two size columns
   std::size_t dim = 0;
+  Eigen::MatrixXd h;                    // without the size prior
+  std::vector<Eigen::MatrixXd> groups;  // dim x 2 per track with observations (responses)
+  std::vector<double> group_sigma;      // the systematic sigma of each of them
+};
+
+ReducedSystem BuildReducedSystem(const Association& a, const std::vector<Constraint>& constraints,
+                                 const std::vector<PoseParams>& poses, const SizeParams& size,
+                                 const std::vector<Eigen::Vector2d>& objects,
+                                 const std::vector<bool>& free_sensor,
+                                 const ceres::LossFunction* loss,
+                                 const ceres::LossFunction* constraint_loss,
+                                 double observation_weight, bool with_groups,
+                                 const std::vector<double>& group_sigma = {}) {
+  ReducedSystem out;
+  out.pose_offset.assign(poses.size(), kNone);
   for (std::size_t s = 0; s < poses.size(); ++s) {
     if (free_sensor[s]) {
-      pose_offset[s] = dim;
-      dim += 3;
+      out.pose_offset[s] = out.dim;
+      out.dim += 3;
     }
   }
-  if (dim == 0) return true;
-  std::array<std::size_t, kKinds> bias_offset{};
-  for (std::size_t k = 0; k < kKinds; ++k) bias_offset[k] = free_bias[k] ? dim++ : kNone;
-  Eigen::MatrixXd reduced =
-      Eigen::MatrixXd::Zero(static_cast<Eigen::Index>(dim), static_cast<Eigen::Index>(dim));
+  out.size_offset = out.dim;
+  out.dim += 2;
+  const auto dim = static_cast<Eigen::Index>(out.dim);
+  out.h = Eigen::MatrixXd::Zero(dim, dim);
 
-  // Columns of an observation's reduced Jacobian: x, y, yaw of its sensor, then its kind's bias.
-  using Columns = std::array<std::size_t, 4>;
+  // Columns of an observation's reduced Jacobian: x, y, yaw of its sensor, then the two sizes.
+  using Columns = std::array<std::size_t, 5>;
   auto columns_of = [&](const Observation& ob) {
-    const std::size_t p = pose_offset[ob.sensor];
-    return Columns{p, p == kNone ? kNone : p + 1, p == kNone ? kNone : p + 2, bias_offset[ob.kind]};
+    const std::size_t p = out.pose_offset[ob.sensor];
+    return Columns{p, p == kNone ? kNone : p + 1, p == kNone ? kNone : p + 2, out.size_offset,
+                   out.size_offset + 1};
   };
-  auto scatter = [&](const Columns& rows, const Columns& cols, const Eigen::Matrix4d& block,
-                     double sign) {
-    for (std::size_t i = 0; i < 4; ++i) {
+  using Matrix5d = Eigen::Matrix<double, 5, 5>;
+  auto scatter = [&](const Columns& rows, const Columns& cols, const Matrix5d& block, double sign) {
+    for (std::size_t i = 0; i < 5; ++i) {
       if (rows[i] == kNone) continue;
-      for (std::size_t j = 0; j < 4; ++j) {
+      for (std::size_t j = 0; j < 5; ++j) {
         if (cols[j] == kNone) continue;
-        reduced(static_cast<Eigen::Index>(rows[i]), static_cast<Eigen::Index>(cols[j])) +=
+        out.h(static_cast<Eigen::Index>(rows[i]), static_cast<Eigen::Index>(cols[j])) +=
             sign * block(static_cast<Eigen::Index>(i), static_cast<Eigen::Index>(j));
       }
     }
@@ -810,59 +814,154 @@ bool PoseCovariance(const Association& a, const std::vector<Constraint>& constra
   for (const Constraint& c : constraints) {
     const ConstraintLinearization l =
         LinearizeConstraint(c.measured, poses[c.r].data(), poses[c.s].data());
+    const double w = Rho(constraint_loss, (c.sqrt_info * l.e).squaredNorm()).second;
     const std::array<std::size_t, 2> sensor = {c.r, c.s};
     const std::array<Eigen::Matrix3d, 2> j = {c.sqrt_info * l.d_r, c.sqrt_info * l.d_s};
     for (std::size_t u = 0; u < 2; ++u) {
-      if (pose_offset[sensor[u]] == kNone) continue;
+      if (out.pose_offset[sensor[u]] == kNone) continue;
       for (std::size_t v = 0; v < 2; ++v) {
-        if (pose_offset[sensor[v]] == kNone) continue;
-        reduced.block<3, 3>(static_cast<Eigen::Index>(pose_offset[sensor[u]]),
-                            static_cast<Eigen::Index>(pose_offset[sensor[v]])) +=
-            j[u].transpose() * j[v];
+        if (out.pose_offset[sensor[v]] == kNone) continue;
+        out.h.block<3, 3>(static_cast<Eigen::Index>(out.pose_offset[sensor[u]]),
+                          static_cast<Eigen::Index>(out.pose_offset[sensor[v]])) +=
+            w * j[u].transpose() * j[v];
       }
     }
   }
 
+  std::size_t group_count = 0;
+  for (const Observation& ob : a.observations) group_count = std::max(group_count, ob.group + 1);
+  std::vector<std::size_t> group_index(with_groups ? group_count : 0, kNone);
+  auto group_matrix = [&](std::size_t group) -> Eigen::MatrixXd& {
+    if (group_index[group] == kNone) {
+      group_index[group] = out.groups.size();
+      out.groups.push_back(Eigen::MatrixXd::Zero(dim, 2));
+      out.group_sigma.push_back(group < group_sigma.size() ? group_sigma[group] : 0.0);
+    }
+    return out.groups[group_index[group]];
+  };
+  auto scatter_rows = [&](Eigen::MatrixXd& m, const Columns& rows,
+                          const Eigen::Matrix<double, 5, 2>& block) {
+    for (std::size_t i = 0; i < 5; ++i) {
+      if (rows[i] == kNone) continue;
+      m.row(static_cast<Eigen::Index>(rows[i])) += block.row(static_cast<Eigen::Index>(i));
+    }
+  };
+
   const std::vector<std::vector<std::size_t>> by_object = ObservationsByObject(a);
-  std::vector<Eigen::Matrix<double, 2, 4>> coupling;  // H_o,reduced per observation
+  std::vector<Eigen::Matrix<double, 2, 5>> coupling;     // w J_o^T J_g per observation
+  std::vector<Eigen::Matrix<double, 2, 2>> object_side;  // w J_o^T sqrt_info per observation
   std::vector<Columns> cols;
   for (std::size_t o = 0; o < objects.size(); ++o) {
+    const std::vector<std::size_t>& members = by_object[o];
     Eigen::Matrix2d h_oo = Eigen::Matrix2d::Zero();
-    coupling.assign(by_object[o].size(), Eigen::Matrix<double, 2, 4>::Zero());
-    cols.assign(by_object[o].size(), Columns{});
-    for (std::size_t k = 0; k < by_object[o].size(); ++k) {
-      const Observation& ob = a.observations[by_object[o][k]];
+    coupling.assign(members.size(), Eigen::Matrix<double, 2, 5>::Zero());
+    object_side.assign(members.size(), Eigen::Matrix2d::Zero());
+    cols.assign(members.size(), Columns{});
+    for (std::size_t k = 0; k < members.size(); ++k) {
+      const Observation& ob = a.observations[members[k]];
       const Linearization l =
-          Linearize(ob.z, objects[o].data(), poses[ob.sensor].data(), bias[ob.kind]);
+          Linearize(ob.z, ob.jd, objects[o].data(), poses[ob.sensor].data(), size.data());
       const Eigen::Vector2d r = ob.sqrt_info * l.e;
       const double w = observation_weight * Rho(loss, r.squaredNorm()).second;
       const Eigen::Matrix2d j_o = ob.sqrt_info * l.d_object;
-      Eigen::Matrix<double, 2, 4> j_g;
+      Eigen::Matrix<double, 2, 5> j_g;
       j_g.leftCols<3>() = ob.sqrt_info * l.d_pose;
-      j_g.col(3) = ob.sqrt_info * l.d_bias;
+      j_g.rightCols<2>() = ob.sqrt_info * l.d_size;
       h_oo += w * j_o.transpose() * j_o;
       coupling[k] = w * j_o.transpose() * j_g;
+      object_side[k] = w * j_o.transpose() * ob.sqrt_info;
       cols[k] = columns_of(ob);
       scatter(cols[k], cols[k], w * j_g.transpose() * j_g, 1.0);
+      if (with_groups) {
+        scatter_rows(group_matrix(ob.group), cols[k], w * j_g.transpose() * ob.sqrt_info);
+      }
     }
     const Eigen::LDLT<Eigen::Matrix2d> ldlt(h_oo);
     if (ldlt.info() != Eigen::Success || ldlt.rcond() < 1e-12) continue;
     const Eigen::Matrix2d h_oo_inv = ldlt.solve(Eigen::Matrix2d::Identity());
-    for (std::size_t k = 0; k < by_object[o].size(); ++k) {
-      for (std::size_t m = 0; m < by_object[o].size(); ++m) {
+    for (std::size_t k = 0; k < members.size(); ++k) {
+      for (std::size_t m = 0; m < members.size(); ++m) {
         scatter(cols[k], cols[m], coupling[k].transpose() * h_oo_inv * coupling[m], -1.0);
+      }
+      if (with_groups) {
+        // The object moves with the offset too: its share of the reduced response.
+        const Eigen::Matrix<double, 2, 2> moved = h_oo_inv * object_side[k];
+        Eigen::MatrixXd& g = group_matrix(a.observations[members[k]].group);
+        for (std::size_t m = 0; m < members.size(); ++m) {
+          scatter_rows(g, cols[m], -(coupling[m].transpose() * moved));
+        }
       }
     }
   }
-  const Eigen::LLT<Eigen::MatrixXd> llt(reduced);
-  if (llt.info() != Eigen::Success) return false;
-  const Eigen::MatrixXd inverse = llt.solve(
-      Eigen::MatrixXd::Identity(static_cast<Eigen::Index>(dim), static_cast<Eigen::Index>(dim)));
-  if (!inverse.allFinite()) return false;
+  return out;
+}
+
+// Inverse of a symmetric positive definite matrix, or nullopt.
+std::optional<Eigen::MatrixXd> InverseSpd(const Eigen::MatrixXd& m) {
+  const Eigen::LLT<Eigen::MatrixXd> llt(m);
+  if (llt.info() != Eigen::Success) return std::nullopt;
+  Eigen::MatrixXd inverse = llt.solve(Eigen::MatrixXd::Identity(m.rows(), m.cols()));
+  if (!inverse.allFinite()) return std::nullopt;
+  return inverse;
+}
+
+// How well the data alone determine each size component (standard deviation, +inf when not at
+// all) and its correlation with the layout's scale (the free sensors' positions relative to the
+// reference stretched uniformly), from the reduced system without the size prior.
+void SizeObservability(const ReducedSystem& system, const std::vector<PoseParams>& poses,
+                       std::size_t reference, std::array<double, 2>& data_sigma,
+                       std::array<double, 2>& scale_correlation) {
+  data_sigma.fill(std::numeric_limits<double>::infinity());
+  scale_correlation.fill(1.0);
+  Eigen::MatrixXd h = system.h;
+  // A tiny regularisation keeps an unobservable direction finite (huge) instead of failing.
+  const double ridge = 1e-9 * std::max(1.0, h.diagonal().cwiseAbs().maxCoeff());
+  h.diagonal().array() += ridge;
+  const auto inverse = InverseSpd(h);
+  if (!inverse) return;
+  Eigen::VectorXd scale = Eigen::VectorXd::Zero(h.rows());
   for (std::size_t s = 0; s < poses.size(); ++s) {
-    if (pose_offset[s] == kNone) continue;
-    const auto p = static_cast<Eigen::Index>(pose_offset[s]);
-    const Eigen::Matrix3d c = scale * inverse.block<3, 3>(p, p);
+    if (system.pose_offset[s] == kNone) continue;
+    const auto p = static_cast<Eigen::Index>(system.pose_offset[s]);
+    scale(p) = poses[s][0] - poses[reference][0];
+    scale(p + 1) = poses[s][1] - poses[reference][1];
+  }
+  const double var_scale = scale.dot(*inverse * scale);
+  for (std::size_t k = 0; k < 2; ++k) {
+    const auto i = static_cast<Eigen::Index>(system.size_offset + k);
+    const double var = (*inverse)(i, i);
+    data_sigma[k] =
+        var > 0.0 && var < 1.0 / ridge ? std::sqrt(var) : std::numeric_limits<double>::infinity();
+    const double cov = scale.dot(inverse->col(i));
+    scale_correlation[k] =
+        var > 0.0 && var_scale > 0.0 ? std::abs(cov) / std::sqrt(var * var_scale) : 1.0;
+  }
+}
+
+// Marginal covariance of the free poses (size correction marginalised under its prior) plus the
+// systematic floor. Returns false when the system is not positive definite.
+bool PoseCovariance(const ReducedSystem& system, double size_prior_sigma_m, double scale,
+                    std::vector<Eigen::Matrix3d>& covariance) {
+  if (system.dim == 2) return true;  // no free pose
+  Eigen::MatrixXd h = system.h;
+  const double prior_info =
+      size_prior_sigma_m > 0.0 ? 1.0 / (size_prior_sigma_m * size_prior_sigma_m) : 1e12;
+  for (std::size_t k = 0; k < 2; ++k) {
+    const auto i = static_cast<Eigen::Index>(system.size_offset + k);
+    h(i, i) += prior_info;
+  }
+  const auto inverse = InverseSpd(h);
+  if (!inverse) return false;
+  Eigen::MatrixXd total = scale * *inverse;
+  for (std::size_t k = 0; k < system.groups.size(); ++k) {
+    const Eigen::MatrixXd response = *inverse * system.groups[k];
+    const double sigma = system.group_sigma[k];
+    total.noalias() += (sigma * sigma) * (response * response.transpose());
+  }
+  for (std::size_t s = 0; s < system.pose_offset.size(); ++s) {
+    if (system.pose_offset[s] == kNone) continue;
+    const auto p = static_cast<Eigen::Index>(system.pose_offset[s]);
+    const Eigen::Matrix3d c = total.block<3, 3>(p, p);
     covariance[s] = 0.5 * (c + c.transpose());
   }
   return true;
@@ -880,23 +979,26 @@ std::optional<std::string> Validate(const JointRefineOptions& o) {
   auto positive = [](double v) { return std::isfinite(v) && v > 0.0; };
   auto non_negative = [](double v) { return std::isfinite(v) && v >= 0.0; };
   if (!positive(o.association_gate_m)) return "association_gate_m must be > 0";
-  if (!non_negative(o.model_sigma_com_m) || !non_negative(o.model_sigma_ellipse_m) ||
-      !non_negative(o.model_sigma_unspecified_m)) {
-    return "model_sigma_*_m must be finite and >= 0";
+  if (!(positive(o.initial_association_gate_m) &&
+        o.initial_association_gate_m >= o.association_gate_m)) {
+    return "initial_association_gate_m must be >= association_gate_m";
   }
-  if (!std::isfinite(o.radial_bias_com_m) || !std::isfinite(o.radial_bias_ellipse_m) ||
-      !std::isfinite(o.radial_bias_unspecified_m)) {
-    return "radial_bias_*_m must be finite";
+  if (!non_negative(o.model_sigma_per_m)) return "model_sigma_per_m must be finite and >= 0";
+  if (!(o.max_size_scale_correlation > 0.0 && o.max_size_scale_correlation <= 1.0)) {
+    return "max_size_scale_correlation must be in (0, 1]";
   }
   if (o.loss != RobustLoss::kNone && o.loss != RobustLoss::kHuber &&
       o.loss != RobustLoss::kCauchy) {
     return "loss must be none, huber or cauchy";
   }
   if (!positive(o.loss_scale)) return "loss_scale must be > 0";
+  if (!positive(o.constraint_loss_scale)) return "constraint_loss_scale must be > 0";
   if (!(std::isfinite(o.observation_correlation_steps) && o.observation_correlation_steps >= 1.0)) {
     return "observation_correlation_steps must be >= 1";
   }
-  if (!non_negative(o.model_sigma_per_m)) return "model_sigma_per_m must be finite and >= 0";
+  if (!non_negative(o.segment_sigma_m) || !non_negative(o.segment_sigma_per_m)) {
+    return "segment_sigma_m and segment_sigma_per_m must be finite and >= 0";
+  }
   if (o.step_stride < 1) return "step_stride must be >= 1";
   if (o.max_steps < 1) return "max_steps must be >= 1";
   if (o.max_iterations < 1) return "max_iterations must be >= 1";
@@ -923,7 +1025,6 @@ JointRefineResult RefineJointly(const AlignedTracks& tracks,
                                 const std::vector<RelativePoseConstraint>& constraints) {
   const std::size_t n = tracks.sensors.size();
   JointRefineResult result;
-  const BiasParams initial_bias = InitialBias(options);
   auto fail = [&](std::string why) {
     result.ok = false;
     result.message = std::move(why);
@@ -931,8 +1032,8 @@ JointRefineResult RefineJointly(const AlignedTracks& tracks,
     result.covariance.assign(world_from_sensor.size(), Eigen::Matrix3d::Zero());
     result.refined.assign(world_from_sensor.size(), false);
     result.sensor_observations.assign(world_from_sensor.size(), 0);
-    result.radial_bias_m = initial_bias;
-    result.radial_bias_estimated = {};
+    result.size_correction_m.setZero();
+    result.size_correction_estimated = {};
     return result;
   };
 
@@ -951,15 +1052,21 @@ JointRefineResult RefineJointly(const AlignedTracks& tracks,
       return fail("initial pose of sensor " + tracks.sensors[s].id + " is not finite");
     }
   }
+  const double prior_sigma =
+      std::isfinite(tracks.size_prior_sigma_m) && tracks.size_prior_sigma_m > 0.0
+          ? tracks.size_prior_sigma_m
+          : 0.0;
 
   std::size_t stride = options.step_stride;
   if (tracks.steps > 0 && (tracks.steps - 1) / stride + 1 > options.max_steps) {
     stride = (tracks.steps + options.max_steps - 1) / options.max_steps;
   }
   result.stride = stride;
+  std::vector<double> group_sigma;
   const std::vector<std::vector<StepSample>> samples =
-      CollectSamples(tracks, calibrated, stride, options, result.rejected_samples);
+      CollectSamples(tracks, calibrated, stride, options, result.rejected_samples, group_sigma);
   const std::unique_ptr<ceres::LossFunction> loss = MakeLoss(options);
+  const ceres::CauchyLoss constraint_loss(options.constraint_loss_scale);
   // Smoothed tracks are correlated over observation_correlation_steps grid steps: the used
   // samples carry the information of stride / correlation_steps independent ones each.
   const double observation_weight =
@@ -968,18 +1075,21 @@ JointRefineResult RefineJointly(const AlignedTracks& tracks,
       UsableConstraints(constraints, calibrated, result.constraints_rejected);
 
   std::vector<Pose2> poses = world_from_sensor;
-  BiasParams bias = initial_bias;
+  SizeParams size{0.0, 0.0};
+  std::array<bool, 2> free_size = {options.estimate_size_correction && prior_sigma > 0.0,
+                                   options.estimate_size_correction && prior_sigma > 0.0};
   Association final_association;
   std::vector<bool> final_free(n, false);
-  std::array<bool, kKinds> final_free_bias{};
   std::vector<PoseParams> final_params;
   std::vector<Constraint> final_constraints;
   bool solved = false;
+  bool size_checked = false;
   std::string last_note;
-  for (int round = 0; round < options.association_rounds; ++round) {
+  double gate = options.initial_association_gate_m;
+  for (int round = 0; round < options.association_rounds + 2; ++round) {
     Association a;
     for (std::size_t k = 0; k < samples.size(); ++k) {
-      AssociateStep(samples[k], k, poses, bias, options.association_gate_m, a);
+      AssociateStep(samples[k], k, poses, size, gate, a);
     }
     const std::size_t associated = a.observations.size();
     const std::vector<bool> reached =
@@ -1011,19 +1121,42 @@ JointRefineResult RefineJointly(const AlignedTracks& tracks,
       break;
     }
 
-    // Same association as the last solve: that solve already is the answer.
-    if (solved && a.SameGrouping(final_association)) break;
+    const bool at_final_gate = gate <= options.association_gate_m;
+    bool converged = solved && at_final_gate && a.SameGrouping(final_association);
+    if (converged || round >= options.association_rounds) {
+      // The association has settled (or the rounds are spent): decide once whether the size
+      // correction is observable; a component that is not is held at 0 and the poses solved
+      // again.
+      if (size_checked || !(free_size[0] || free_size[1])) break;
+      size_checked = true;
+      const ReducedSystem system = BuildReducedSystem(
+          final_association, final_constraints, final_params, size, final_association.objects,
+          final_free, loss.get(), &constraint_loss, observation_weight, false);
+      SizeObservability(system, final_params, reference, result.size_data_sigma_m,
+                        result.size_scale_correlation);
+      bool changed = false;
+      for (std::size_t k = 0; k < 2; ++k) {
+        const bool observable =
+            result.size_data_sigma_m[k] <= prior_sigma &&
+            result.size_scale_correlation[k] <= options.max_size_scale_correlation;
+        if (!observable && free_size[k]) {
+          free_size[k] = false;
+          size[k] = 0.0;
+          changed = true;
+        }
+      }
+      if (!changed) break;
+    }
 
-    const std::array<bool, kKinds> free_bias = FreeBiases(a, options);
     std::vector<PoseParams> params(n);
     for (std::size_t s = 0; s < n; ++s) params[s] = ToParams(poses[s]);
-    BiasParams next_bias = bias;
+    SizeParams next_size = size;
     // Objects start at their optimum for the current poses, so that the solver's steps go to the
     // poses from the first iteration on.
-    OptimizeObjects(a, params, bias, loss.get(), a.objects);
+    OptimizeObjects(a, params, size, loss.get(), a.objects);
     const SolveOutcome outcome =
-        Solve(a, round_constraints, free_sensor, free_bias, params, next_bias, a.objects,
-              loss.get(), observation_weight, options);
+        Solve(a, round_constraints, free_sensor, free_size, prior_sigma, params, next_size,
+              a.objects, loss.get(), observation_weight, options);
     result.iterations += outcome.iterations;
     result.solver_time_s += outcome.time_s;
     ++result.rounds;
@@ -1032,27 +1165,16 @@ JointRefineResult RefineJointly(const AlignedTracks& tracks,
       last_note = "round " + std::to_string(round + 1) + " failed: " + outcome.report;
       break;
     }
-    double change_m = 0.0, change_rad = 0.0;
     for (std::size_t s = 0; s < n; ++s) {
-      if (!free_sensor[s]) continue;
-      const Pose2 next = ToPose(params[s]);
-      change_m = std::max(change_m, common::TranslationDistanceM(next, poses[s]));
-      change_rad = std::max(change_rad, common::RotationDistanceRad(next, poses[s]));
-      poses[s] = next;
+      if (free_sensor[s]) poses[s] = ToPose(params[s]);
     }
-    for (std::size_t k = 0; k < kKinds; ++k) {
-      change_m = std::max(change_m, std::abs(next_bias[k] - bias[k]));
-    }
-    bias = next_bias;
+    size = next_size;
     final_association = std::move(a);
     final_free = free_sensor;
-    final_free_bias = free_bias;
     final_params = std::move(params);
     final_constraints = std::move(round_constraints);
     solved = true;
-    // The association depends only on the poses and biases: nothing left to gain once they stand
-    // still.
-    if (change_m < 1e-6 && change_rad < 1e-7) break;
+    gate = std::max(options.association_gate_m, gate * kGateShrink);
   }
 
   for (std::size_t s = 0; s < n; ++s) {
@@ -1069,11 +1191,13 @@ JointRefineResult RefineJointly(const AlignedTracks& tracks,
   }
 
   const Association& a = final_association;
+  const SizeParams zero_size{0.0, 0.0};
   const CostSummary before =
-      EvaluateAtOptimalObjects(a, final_constraints, world_from_sensor, initial_bias, a.objects,
-                               loss.get(), observation_weight);
-  const CostSummary after = EvaluateAtOptimalObjects(a, final_constraints, poses, bias, a.objects,
-                                                     loss.get(), observation_weight);
+      EvaluateAtOptimalObjects(a, final_constraints, world_from_sensor, zero_size, prior_sigma,
+                               a.objects, loss.get(), &constraint_loss, observation_weight);
+  const CostSummary after =
+      EvaluateAtOptimalObjects(a, final_constraints, poses, size, prior_sigma, a.objects,
+                               loss.get(), &constraint_loss, observation_weight);
   if (after.cost > before.cost * (1.0 + 1e-9) + 1e-12) {
     return fail("refinement increased the robust cost (" + Fixed(before.cost, 4) + " -> " +
                 Fixed(after.cost, 4) + "); initial poses kept");
@@ -1085,8 +1209,8 @@ JointRefineResult RefineJointly(const AlignedTracks& tracks,
   result.refined = final_free;
   result.refined[reference] = true;
   result.sensor_observations = CountPerSensor(a, n);
-  result.radial_bias_m = bias;
-  result.radial_bias_estimated = final_free_bias;
+  result.size_correction_m = Eigen::Vector2d(size[0], size[1]);
+  result.size_correction_estimated = free_size;
   result.cost_before = before.cost;
   result.cost_after = after.cost;
   result.rms_before_m = before.rms_m;
@@ -1104,7 +1228,7 @@ JointRefineResult RefineJointly(const AlignedTracks& tracks,
     if (final_free[s]) ++refined_count;
   }
   unknowns += 3 * refined_count;
-  for (bool b : final_free_bias) unknowns += b ? 1 : 0;
+  for (bool b : free_size) unknowns += b ? 1 : 0;
   const std::size_t residuals = 2 * a.observations.size() + 3 * final_constraints.size();
   result.variance_factor =
       residuals > unknowns ? after.unweighted_sum / static_cast<double>(residuals - unknowns) : 0.0;
@@ -1116,6 +1240,15 @@ JointRefineResult RefineJointly(const AlignedTracks& tracks,
           << " observations of " << result.objects << " objects in " << result.rounds
           << " rounds; rms " << Fixed(result.rms_before_m, 4) << " m -> "
           << Fixed(result.rms_after_m, 4) << " m";
+  if (prior_sigma > 0.0) {
+    message << "; body size correction " << Fixed(size[0], 3) << " / " << Fixed(size[1], 3)
+            << " m (";
+    for (std::size_t k = 0; k < 2; ++k) {
+      message << (k == 0 ? "major " : ", minor ")
+              << (free_size[k] ? "estimated" : "prior: not observable apart from the scale");
+    }
+    message << ")";
+  }
   std::vector<std::string> held;
   for (std::size_t s = 0; s < n; ++s) {
     if (calibrated[s] && s != reference && !final_free[s]) held.push_back(tracks.sensors[s].id);
@@ -1128,8 +1261,10 @@ JointRefineResult RefineJointly(const AlignedTracks& tracks,
     message << "; held at the initial pose (too few observations shared with the others):";
     for (const std::string& id : held) message << ' ' << id;
   }
-  if (!PoseCovariance(a, final_constraints, final_params, bias, a.objects, final_free,
-                      final_free_bias, loss.get(), observation_weight, scale, result.covariance)) {
+  const ReducedSystem system =
+      BuildReducedSystem(a, final_constraints, final_params, size, a.objects, final_free,
+                         loss.get(), &constraint_loss, observation_weight, true, group_sigma);
+  if (!PoseCovariance(system, prior_sigma, scale, result.covariance)) {
     result.covariance.assign(n, Eigen::Matrix3d::Zero());
     message << "; covariance unavailable (reduced system not positive definite)";
   }

@@ -6,39 +6,50 @@
 //
 // Problem. At every used grid step k (every `step_stride`-th), each calibrated sensor's track
 // samples are mapped into the world with the current poses and associated across sensors into
-// objects (greedy nearest-pair clustering within `association_gate_m`, at most one observation per
+// objects (greedy nearest-pair clustering within the association gate, at most one observation per
 // sensor and object; objects seen by fewer than two sensors are dropped). Unknowns: the pose
-// (x_m, y_m, yaw_rad) of every free sensor (the reference and uncalibrated sensors are fixed) and
-// a world position o_j per object. Residual of an observation z (sensor frame, covariance S_z) of
-// object j by sensor s with world_from_sensor = (R_s, t_s):
+// (x_m, y_m, yaw_rad) of every free sensor (the reference and uncalibrated sensors are fixed), a
+// world position o_j per object, and the shared correction d = (d_major, d_minor) of the prior body
+// size of the measurement model (types.h TrackSample). Residual of a sample (sensor frame; body
+// centre c + J d by the measurement model, CentreOf / CentrePerSizeCorrection, covariance S
+// = CentreCovariance) of object j by sensor s with world_from_sensor = (R_s, t_s):
 //
-//     r = L^-1 (v - b_kind v / |v| - z),   v = R_s^T (o_j - t_s),
-//     L L^T = S_z + (sigma_kind^2 + (sigma_per_m |z|)^2) I,
+//     r = L^-1 (R_s^T (o_j - t_s) - c - J d),   L L^T = S + (model_sigma_per_m |c|)^2 I,
 //
-// i.e. whitened in the sensor frame. b_kind is the radial bias of the tracked centre toward the
-// sensor (the centre of mass of a person's visible contour lies on the near side), fixed or
-// estimated (JointRefineOptions::estimate_radial_bias). Optionally, relative poses known
-// independently of the tracks (RelativePoseConstraint, e.g. the background ICP of step 6: walls
-// fix a relative pose to millimetres where tracks give centimetres) add
+// i.e. whitened in the sensor frame; plus the prior of d, |d|^2 / prior_sigma^2 (prior_sigma =
+// AlignedTracks::size_prior_sigma_m). Optionally, relative poses known independently of the tracks
+// (RelativePoseConstraint, e.g. the background ICP of step 6: walls fix a relative pose to
+// millimetres where tracks give centimetres) add
 //
 //     r_c = L_c^-1 (x(T_s^-1 T_r) - x(s_from_r)),   L_c L_c^T = covariance,
 //
 // x = (x_m, y_m, yaw_rad), the yaw difference wrapped. Cost = 1/2 (w sum rho(|r|^2) +
-// sum |r_c|^2): rho the robust loss (Ceres' convention), w = min(1, stride /
-// observation_correlation_steps). Constraints get no robust loss: the caller vouches for them (a
-// down-weighted constraint would lose against thousands of samples whatever its accuracy).
+// sum rho_c(|r_c|^2) + |d|^2 / prior_sigma^2): rho the robust loss (Ceres' convention), rho_c a
+// Cauchy loss at constraint_loss_scale (a constraint the tracks contradict by many sigmas, e.g. an
+// ICP that slid along a wall, loses its pull), w = min(1, stride / observation_correlation_steps).
+//
+// The association gate is annealed: the first round associates within initial_association_gate_m
+// (so that poses a few degrees off at a 20 m lever arm still find their objects), every later
+// round within a geometrically smaller gate down to association_gate_m, and the rounds continue at
+// that gate until the association no longer changes (at most `association_rounds` solves).
+//
+// Size correction: estimated only where the data observe it apart from the layout's scale (a
+// size error moves every sensor's samples along its line of sight, which for views from opposite
+// sides shrinks or grows the whole layout): after a solve with d free, the correlation of each
+// component with the scale of the layout (the sensors' positions relative to the reference
+// stretched uniformly) is computed from the data alone (d's prior left out); a component
+// correlated beyond max_size_scale_correlation, or which the data determine no better than its
+// prior, is held at 0 and solved again. Either way the covariance marginalises d under its prior,
+// so the prior's uncertainty is in every pose's covariance where the data cannot remove it.
 //
 // Solved with Ceres (Levenberg-Marquardt; Schur complement with the objects eliminated, dense or
-// sparse by the number of sensors); then re-associated with the refined poses and solved again
-// until the association no longer changes (at most `association_rounds` solves).
+// sparse by the number of sensors).
 //
-// Measured on the shipped scenarios (simulator -> tracker -> alignment), started from the rotation
-// averaging + translations without ICP: mean rotation error 1-6.5x lower (schenk_C 0.78 -> 0.12
-// deg), mean translation error 1.02-4.5x lower (schenk_C 0.22 -> 0.05 m), in 2-50 ms. What stays
-// are systematic centre errors that look like sensor translations (the radial bias changes with
-// range and view, so one constant per kind is not identifiable: estimation is off by default).
-// Where walls were matched by ICP, pass those pairs as constraints: alone, the tracks pull
-// sub-millimetre ICP poses to centimetres.
+// Covariance: the Gauss-Newton approximation at the solution (objects eliminated, d marginalised,
+// robust weights rho', the correlation weight w) times max(1, variance factor), plus a systematic
+// floor: every track of every sensor carries an offset of its own (its person's size, a
+// view-dependent error) that does not average out over its samples, modelled as a constant 2D
+// offset per track (segment_sigma_*) and propagated through the estimator.
 //
 // Thread-safety: pure function over value types; concurrent calls are safe.
 
@@ -63,43 +74,25 @@ enum class RefineLinearSolver {
 
 struct JointRefineOptions {
   // Association: two observations of different sensors at one grid step may belong to one object
-  // when their world positions are at most this far apart (metres; complete linkage: every pair of
-  // an object's observations). Must exceed the spread of one person's centre between views
-  // (~0.2-0.4 m for centre-of-mass tracks) plus the error of the initial poses at range, and stay
-  // below the distance of two people walking side by side.
+  // when their world positions are at most the gate apart (metres; complete linkage: every pair of
+  // an object's observations). The final gate must exceed the spread of one person's centre
+  // between views plus the remaining pose error at range, and stay below the distance of two
+  // people walking side by side; the first round's must cover the initial poses' error at range
+  // (3 deg at 20 m is 1 m).
   double association_gate_m = 0.5;
-  // Model standard deviation added isotropically to every observation's covariance, by
-  // measurement kind: a tracked centre depends on the side the object is seen from (the centre of
-  // mass of the visible contour moves by ~0.1-0.2 m with the view; the fitted ellipse centre much
-  // less). Metres.
-  double model_sigma_com_m = 0.10;
-  double model_sigma_ellipse_m = 0.03;
-  double model_sigma_unspecified_m = 0.10;
-  // Plus this much per metre of range (added in quadrature): far away a person gets a few beams
-  // only (0.5 deg is 0.17 m at 20 m), the ellipse fit falls back to the centre of mass and the
-  // centre's error grows with the range. 0.01 was best on the shipped scenarios (0: 10-30 %
-  // larger errors on the corridor scenes, ~15 % smaller on the rooms).
-  double model_sigma_per_m = 0.01;
-  // Radial bias of the tracked centre toward the sensor, by measurement kind (metres; the value
-  // used when not estimated, the start value otherwise). The centre of mass of a person's visible
-  // contour lies ~0.1-0.2 m closer to the sensor than the person's centre (pi r / 4 for a
-  // cylinder of radius r sampled at uniform beam angles). Left unmodelled it is nearly
-  // indistinguishable from a translation of the sensor along its viewing direction and pulls
-  // every sensor toward the scene by about its size. The ellipse fit places its centre behind
-  // the visible points, leaving a small bias when a person's size differs from the fixed axes.
-  double radial_bias_com_m = 0.10;
-  double radial_bias_ellipse_m = 0.0;
-  double radial_bias_unspecified_m = 0.0;
-  // Estimate one bias per kind jointly with the poses (for kinds with at least
-  // `min_bias_observations` associated observations). Exact when the bias is one constant and
-  // the objects are seen at varied ranges from different sides; with the tracker's real centres
-  // (a bias that grows with the range as the ellipse fit falls back to the centre of mass) the
-  // constant trades against the scale of the layout and made 4 of 6 shipped scenarios worse.
-  bool estimate_radial_bias = false;
-  std::size_t min_bias_observations = 100;
+  double initial_association_gate_m = 1.5;
+  // Isotropic standard deviation per metre of range added to every sample (in quadrature with its
+  // covariance and its model's): far away a person gets a few beams only.
+  double model_sigma_per_m = 0.0;
+  // Estimate the shared size correction where it is observable (see above); false: hold it at 0
+  // (its prior uncertainty is still in the covariance).
+  bool estimate_size_correction = true;
+  double max_size_scale_correlation = 0.9;
   // Robust loss on the squared whitened residual; scale in whitened units (standard deviations).
   RobustLoss loss = RobustLoss::kCauchy;
   double loss_scale = 3.0;
+  // Cauchy scale of the relative-pose constraints, whitened units.
+  double constraint_loss_scale = 3.0;
   // Use every k-th grid step (smoothed tracks are strongly correlated from step to step; this
   // bounds the problem size). If more than `max_steps` steps would be used, the stride grows.
   std::size_t step_stride = 4;
@@ -109,15 +102,19 @@ struct JointRefineOptions {
   // change a track-only solution, but it keeps the covariance honest and lets relative-pose
   // constraints weigh what they should against thousands of samples.
   double observation_correlation_steps = 20.0;
+  // The systematic floor of the covariance: one standard deviation of each track's own constant
+  // offset (metres, 2D), segment_sigma_m plus segment_sigma_per_m times the track's mean range.
+  double segment_sigma_m = 0.015;
+  double segment_sigma_per_m = 0.003;
   int max_iterations = 50;     // per solve
-  int association_rounds = 3;  // solves, each after a (re-)association with the current poses
+  int association_rounds = 5;  // solves, each after a (re-)association with the current poses
   // Too little data: fewer associated observations in total, or fewer for a sensor (that sensor
   // is then held at its initial pose and reported as not refined).
   std::size_t min_observations = 20;
   std::size_t min_sensor_observations = 10;
   // Safety net: a sensor moving farther than this from its initial pose means the association
   // went wrong; the result is then rejected (ok = false, initial poses kept).
-  double max_correction_m = 1.0;
+  double max_correction_m = 2.0;
   double max_correction_rad = 0.0872664626;  // 5 degrees
   RefineLinearSolver linear_solver = RefineLinearSolver::kAuto;
   std::size_t dense_schur_max_sensors = 40;
@@ -146,24 +143,26 @@ struct JointRefineResult {
   std::string message;  // why not (too few observations, solver failure, ...); notes when ok
   // Refined (== initial for sensors not refined and on failure).
   std::vector<Pose2> world_from_sensor;
-  // (x_m, y_m, yaw_rad) per sensor from the Gauss-Newton approximation J^T W J at the solution
-  // (objects and estimated biases marginalised, robust weights rho', the correlation weight w),
-  // times max(1, variance_factor) when scale_covariance_by_variance_factor. Systematic centre
-  // errors are not in it. Zero for the reference and for sensors not refined (and on failure).
+  // (x_m, y_m, yaw_rad) per sensor (see "Covariance" above). Zero for the reference and for
+  // sensors not refined (and on failure).
   std::vector<Eigen::Matrix3d> covariance;
   // Per sensor: took part (calibrated, connected to the reference through shared objects or
   // constraints, with enough observations or a constraint). The reference counts as refined.
   std::vector<bool> refined;
   std::vector<std::size_t> sensor_observations;  // associated observations per sensor (last round)
-  // Cost (see above) at the initial poses and biases and at the final ones, both with the final
-  // association and the object positions optimal for those poses.
+  // Cost (see above) at the initial poses and size correction and at the final ones, both with the
+  // final association and the object positions optimal for those poses.
   double cost_before = 0.0, cost_after = 0.0;
   // RMS over observations of |R_s^T (o - t_s) - z| (metres), before and after, like the costs.
   double rms_before_m = 0.0, rms_after_m = 0.0;
-  // Radial bias per measurement kind at the solution, indexed by MeasurementKind (kUnspecified,
-  // kCenterOfMass, kEllipse); `radial_bias_estimated` says which were estimated (else as given).
-  std::array<double, 3> radial_bias_m{};
-  std::array<bool, 3> radial_bias_estimated{};
+  // The shared size correction (d_major, d_minor) at the solution, whether each component was
+  // estimated (else held at 0: not observable apart from the layout's scale), the correlation of
+  // each with the layout's scale and its standard deviation from the data alone (before the
+  // decision; +inf: the data do not determine it).
+  Eigen::Vector2d size_correction_m = Eigen::Vector2d::Zero();
+  std::array<bool, 2> size_correction_estimated{};
+  std::array<double, 2> size_scale_correlation{};
+  std::array<double, 2> size_data_sigma_m{};
   // (sum rho(|r|^2) + sum |r_c|^2) / (residuals - unknowns) at the solution, without w.
   double variance_factor = 0.0;
   std::size_t observations = 0;      // associated observations in the final problem

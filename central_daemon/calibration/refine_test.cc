@@ -5,6 +5,7 @@
 #include <Eigen/Cholesky>
 #include <cmath>
 #include <functional>
+#include <optional>
 #include <random>
 #include <string>
 #include <vector>
@@ -24,6 +25,11 @@ struct SynthOptions {
   double noise_m = 0.02;           // white position noise per sample
   double reported_sigma_m = 0.02;  // the sample covariance is reported_sigma^2 I
   double com_bias_m = 0.0;         // observed centre shifted this far toward the sensor
+  // What the measurement model says the shift is (default: what it is), its sensitivity to a
+  // correction of the prior's minor semi-axis and the prior's sigma (types.h TrackSample).
+  std::optional<double> model_bias_m;
+  double model_per_minor = 0.0;
+  double size_prior_sigma_m = 0.05;
   MeasurementKind kind = MeasurementKind::kEllipse;
   unsigned seed = 1;
 };
@@ -36,6 +42,7 @@ AlignedTracks MakeTracks(const std::vector<Pose2>& world_from_sensor,
   AlignedTracks tracks;
   tracks.step_s = o.step_s;
   tracks.steps = o.steps;
+  tracks.size_prior_sigma_m = o.size_prior_sigma_m;
   for (std::size_t s = 0; s < world_from_sensor.size(); ++s) {
     SensorTracks sensor;
     sensor.id = "s" + std::to_string(s);
@@ -63,6 +70,9 @@ AlignedTracks MakeTracks(const std::vector<Pose2>& world_from_sensor,
             sensor_from_world * seen + o.noise_m * Eigen::Vector2d(noise(rng), noise(rng));
         sample.position_cov_m2 =
             o.reported_sigma_m * o.reported_sigma_m * Eigen::Matrix2d::Identity();
+        sample.kind = o.kind;
+        sample.bias_m = static_cast<float>(o.model_bias_m.value_or(o.com_bias_m));
+        sample.bias_per_minor = static_cast<float>(o.model_per_minor);
         open->samples.push_back(sample);
       }
     }
@@ -124,7 +134,6 @@ double MaxRotationError(const std::vector<Pose2>& a, const std::vector<Pose2>& b
 // The synthetic tracks' only error is their reported white noise.
 JointRefineOptions EllipseOptions() {
   JointRefineOptions o;
-  o.model_sigma_ellipse_m = 0.0;
   o.model_sigma_per_m = 0.0;
   return o;
 }
@@ -136,7 +145,13 @@ TEST(JointRefineOptionsTest, DefaultsAreValidAndBadValuesAreNamed) {
   ASSERT_TRUE(Validate(o).has_value());
   EXPECT_NE(Validate(o)->find("association_gate_m"), std::string::npos);
   o = {};
-  o.model_sigma_com_m = -0.1;
+  o.initial_association_gate_m = 0.4;  // below the final gate
+  EXPECT_TRUE(Validate(o).has_value());
+  o = {};
+  o.segment_sigma_per_m = -0.1;
+  EXPECT_TRUE(Validate(o).has_value());
+  o = {};
+  o.max_size_scale_correlation = 0.0;
   EXPECT_TRUE(Validate(o).has_value());
   o = {};
   o.loss_scale = std::nan("");
@@ -374,6 +389,8 @@ TEST(RefineJointlyTest, ReassociationRecoversObservationsOutsideTheFirstGate) {
   initial[1].yaw_rad += DegToRad(3.0);
   JointRefineOptions one = EllipseOptions();
   one.association_rounds = 1;
+  one.initial_association_gate_m = one.association_gate_m;
+  one.estimate_size_correction = false;
   const JointRefineResult once = RefineJointly(tracks, initial, std::vector<bool>(4, true), 0, one);
   const JointRefineResult again =
       RefineJointly(tracks, initial, std::vector<bool>(4, true), 0, EllipseOptions());
@@ -386,37 +403,106 @@ TEST(RefineJointlyTest, ReassociationRecoversObservationsOutsideTheFirstGate) {
   EXPECT_LT(RadToDeg(common::RotationDistanceRad(again.world_from_sensor[1], truth[1])), 0.05);
 }
 
-TEST(RefineJointlyTest, CentreOfMassBiasIsEstimatedInsteadOfMovingTheSensors) {
+RelativePoseConstraint TrueConstraint(const std::vector<Pose2>& truth, std::size_t r, std::size_t s,
+                                      double sigma_m, double sigma_rad);
+
+TEST(RefineJointlyTest, SizeErrorIsEstimatedWhereTheDataObserveIt) {
+  // A cylinder larger than the model's prior body: every centre of mass lies 0.04 m nearer its
+  // sensor than the model says. Four sensors in the corners see it from every side, and the
+  // background (a wall both 0 and 1 see) fixes the layout's scale: the size correction is
+  // observable apart from the scale, estimated, and the poses are right.
   const std::vector<Pose2> truth = RoomSensors();
   SynthOptions synth;
   synth.kind = MeasurementKind::kCenterOfMass;
-  synth.com_bias_m = 0.16;  // pi r / 4 of a 0.2 m cylinder: every view is pulled toward its sensor
+  synth.com_bias_m = 0.16;
+  synth.model_bias_m = 0.12;
+  synth.model_per_minor = common::kPi / 4.0;
   synth.noise_m = 0.03;
   synth.reported_sigma_m = 0.03;
   const AlignedTracks tracks = MakeTracks(truth, RoomPaths(), synth);
   const std::vector<Pose2> initial = Perturb(truth, 0, 0.10, DegToRad(1.5));
   const std::vector<bool> all(4, true);
-
-  JointRefineOptions options;
-  options.estimate_radial_bias = true;
-  const JointRefineResult r = RefineJointly(tracks, initial, all, 0, options);
+  const std::vector<RelativePoseConstraint> wall = {
+      TrueConstraint(truth, 0, 1, 0.003, DegToRad(0.03))};
+  const JointRefineResult r = RefineJointly(tracks, initial, all, 0, {}, wall);
   ASSERT_TRUE(r.ok) << r.message;
-  const auto com = static_cast<std::size_t>(MeasurementKind::kCenterOfMass);
-  EXPECT_TRUE(r.radial_bias_estimated[com]);
-  EXPECT_NEAR(r.radial_bias_m[com], 0.16, 0.01);
+  EXPECT_TRUE(r.size_correction_estimated[1]) << r.message;
+  EXPECT_LT(r.size_scale_correlation[1], 0.9);
+  EXPECT_NEAR(r.size_correction_m.y(), 0.04 / (common::kPi / 4.0), 0.01);
   for (std::size_t s = 1; s < 4; ++s) {
     EXPECT_LT(common::TranslationDistanceM(r.world_from_sensor[s], truth[s]), 0.01) << s;
     EXPECT_LT(RadToDeg(common::RotationDistanceRad(r.world_from_sensor[s], truth[s])), 0.05) << s;
   }
+  // Held at the prior, the error goes into the sensors' positions, but no farther than the
+  // covariance, which carries the prior's uncertainty, says.
+  JointRefineOptions held;
+  held.estimate_size_correction = false;
+  const JointRefineResult h = RefineJointly(tracks, initial, all, 0, held, wall);
+  ASSERT_TRUE(h.ok) << h.message;
+  EXPECT_GT(MaxTranslationError(h.world_from_sensor, truth), 0.02);
+  for (std::size_t s = 1; s < 4; ++s) {
+    const double sigma = std::sqrt(h.covariance[s](0, 0) + h.covariance[s](1, 1));
+    EXPECT_LT(common::TranslationDistanceM(h.world_from_sensor[s], truth[s]), 2.0 * sigma) << s;
+  }
+}
 
-  // Unmodelled, the bias looks like every sensor sitting closer to the scene: the corner sensors
-  // end up several centimetres off, no better than where they started.
-  JointRefineOptions fixed_bias;
-  fixed_bias.estimate_radial_bias = false;
-  fixed_bias.radial_bias_com_m = 0.0;
-  const JointRefineResult unmodelled = RefineJointly(tracks, initial, all, 0, fixed_bias);
-  ASSERT_TRUE(unmodelled.ok) << unmodelled.message;
-  EXPECT_GT(MaxTranslationError(unmodelled.world_from_sensor, truth), 0.05);
+TEST(RefineJointlyTest, SizeErrorThatLooksLikeTheScaleIsNotEstimatedAndItsPriorCoversTheError) {
+  // Two sensors 18 m apart facing each other, the cylinder walking near the line between them:
+  // both see it from opposite sides, so a larger body and sensors nearer each other explain the
+  // data alike. The correction is held at the prior (not observable apart from the scale) and
+  // the reported covariance covers the error it leaves.
+  const std::vector<Pose2> truth = {{0.0, 0.0, 0.0}, {18.0, 0.5, common::kPi}};
+  const std::vector<Path> paths = {[](double t) {
+    return Eigen::Vector2d(9.0 + 6.0 * std::sin(0.2 * t), 0.3 * std::sin(0.7 * t));
+  }};
+  SynthOptions synth;
+  synth.kind = MeasurementKind::kCenterOfMass;
+  synth.com_bias_m = 0.20;
+  synth.model_bias_m = 0.15;
+  synth.model_per_minor = common::kPi / 4.0;
+  const AlignedTracks tracks = MakeTracks(truth, paths, synth);
+  const JointRefineResult r =
+      RefineJointly(tracks, Perturb(truth, 0, 0.05, DegToRad(0.5)), {true, true}, 0, {});
+  ASSERT_TRUE(r.ok) << r.message;
+  EXPECT_FALSE(r.size_correction_estimated[0]);
+  EXPECT_FALSE(r.size_correction_estimated[1]);
+  EXPECT_GT(r.size_scale_correlation[1], 0.9);
+  EXPECT_EQ(r.size_correction_m.y(), 0.0);
+  EXPECT_NE(r.message.find("not observable apart from the scale"), std::string::npos) << r.message;
+  // The sensors sit 2 x 0.05 m nearer each other than they are...
+  const double error = common::TranslationDistanceM(r.world_from_sensor[1], truth[1]);
+  EXPECT_GT(error, 0.06);
+  // ...which the prior's uncertainty (0.05 m of the minor semi-axis, pi/4 of it per sensor) in
+  // the covariance covers.
+  const double sigma = std::sqrt(r.covariance[1](0, 0) + r.covariance[1](1, 1));
+  EXPECT_LT(error, 2.0 * sigma);
+  EXPECT_LT(sigma, 0.3);
+}
+
+TEST(RefineJointlyTest, AnnealedGateRecoversDegreesAtALongLeverArm) {
+  // A sensor 25 m from the reference, its initial yaw 3 degrees off: its observations of the
+  // people near the reference are displaced by more than a metre, beyond the final gate.
+  const std::vector<Pose2> truth = {{0.0, 0.0, 0.0}, {25.0, 0.0, common::kPi}};
+  const std::vector<Path> paths = {
+      [](double t) {
+        return Eigen::Vector2d(4.0 + 3.0 * std::cos(0.3 * t), 2.0 * std::sin(0.45 * t));
+      },
+      [](double t) {
+        return Eigen::Vector2d(5.0 + 2.0 * std::sin(0.25 * t), 3.0 * std::cos(0.35 * t));
+      }};
+  const AlignedTracks tracks = MakeTracks(truth, paths, {});
+  std::vector<Pose2> initial = truth;
+  initial[1].yaw_rad += DegToRad(3.0);
+  const JointRefineResult r = RefineJointly(tracks, initial, {true, true}, 0, EllipseOptions());
+  ASSERT_TRUE(r.ok) << r.message;
+  EXPECT_LT(RadToDeg(common::RotationDistanceRad(r.world_from_sensor[1], truth[1])), 0.05);
+  EXPECT_LT(common::TranslationDistanceM(r.world_from_sensor[1], truth[1]), 0.02);
+  // With the final gate from the start, the far objects never associate.
+  JointRefineOptions fixed_gate = EllipseOptions();
+  fixed_gate.initial_association_gate_m = fixed_gate.association_gate_m;
+  const JointRefineResult f = RefineJointly(tracks, initial, {true, true}, 0, fixed_gate);
+  EXPECT_TRUE(!f.ok ||
+              RadToDeg(common::RotationDistanceRad(f.world_from_sensor[1], truth[1])) > 0.5);
 }
 
 RelativePoseConstraint TrueConstraint(const std::vector<Pose2>& truth, std::size_t r, std::size_t s,
@@ -430,35 +516,50 @@ RelativePoseConstraint TrueConstraint(const std::vector<Pose2>& truth, std::size
   return c;
 }
 
-TEST(RefineJointlyTest, RelativePoseConstraintsOutweighBiasedTracks) {
+TEST(RefineJointlyTest, RelativePoseConstraintsFixWhatTheTracksModelLeavesOpen) {
+  // The tracks' model misses a size error, and the corner views cannot tell it from the layout's
+  // scale: alone, the tracks pull the sensors inward. Walls (background ICP) fixing 0-1 and 1-2 to
+  // a few millimetres fix the scale, and with it the size and sensor 3, which has only tracks.
   const std::vector<Pose2> truth = RoomSensors();
   SynthOptions synth;
   synth.kind = MeasurementKind::kCenterOfMass;
   synth.com_bias_m = 0.16;
+  synth.model_bias_m = 0.10;
+  synth.model_per_minor = common::kPi / 4.0;
   const AlignedTracks tracks = MakeTracks(truth, RoomPaths(), synth);
   const std::vector<Pose2> initial = Perturb(truth, 0, 0.05, DegToRad(1.0));
   const std::vector<bool> all(4, true);
-  JointRefineOptions options;
-  options.radial_bias_com_m = 0.0;  // unmodelled: the tracks alone pull the sensors inward
-
-  const JointRefineResult tracks_only = RefineJointly(tracks, initial, all, 0, options);
+  const JointRefineResult tracks_only = RefineJointly(tracks, initial, all, 0, {});
   ASSERT_TRUE(tracks_only.ok) << tracks_only.message;
-  EXPECT_GT(common::TranslationDistanceM(tracks_only.world_from_sensor[1], truth[1]), 0.05);
+  EXPECT_GT(common::TranslationDistanceM(tracks_only.world_from_sensor[2], truth[2]), 0.03);
 
-  // Walls (background ICP) fix 0-1 and 1-2 to a millimetre; sensor 3 has only tracks.
   const std::vector<RelativePoseConstraint> constraints = {
-      TrueConstraint(truth, 0, 1, 0.001, DegToRad(0.01)),
-      TrueConstraint(truth, 1, 2, 0.001, DegToRad(0.01))};
-  const JointRefineResult r = RefineJointly(tracks, initial, all, 0, options, constraints);
+      TrueConstraint(truth, 0, 1, 0.002, DegToRad(0.02)),
+      TrueConstraint(truth, 1, 2, 0.002, DegToRad(0.02))};
+  const JointRefineResult r = RefineJointly(tracks, initial, all, 0, {}, constraints);
   ASSERT_TRUE(r.ok) << r.message;
   EXPECT_EQ(r.constraints_used, 2u);
   EXPECT_EQ(r.constraints_rejected, 0u);
-  for (std::size_t s = 1; s < 3; ++s) {
+  for (std::size_t s = 1; s < 4; ++s) {
     EXPECT_LT(common::TranslationDistanceM(r.world_from_sensor[s], truth[s]), 0.01) << s;
     EXPECT_LT(RadToDeg(common::RotationDistanceRad(r.world_from_sensor[s], truth[s])), 0.05) << s;
   }
   EXPECT_LT(r.constraint_rms_sigma, 3.0);
   EXPECT_NE(r.message.find("2 relative-pose constraints"), std::string::npos) << r.message;
+}
+
+TEST(RefineJointlyTest, AWrongConstraintLosesAgainstTheTracks) {
+  // An ICP that slid half a metre along a wall, claiming 2 mm: robust like the observations, it
+  // cannot drag the sensor away from what thousands of consistent observations say.
+  const std::vector<Pose2> truth = RoomSensors();
+  const AlignedTracks tracks = MakeTracks(truth, RoomPaths(), {});
+  RelativePoseConstraint slid = TrueConstraint(truth, 0, 1, 0.002, DegToRad(0.02));
+  slid.s_from_r.x_m += 0.5;
+  const JointRefineResult r = RefineJointly(tracks, Perturb(truth, 0, 0.05, DegToRad(1.0)),
+                                            std::vector<bool>(4, true), 0, {}, {slid});
+  ASSERT_TRUE(r.ok) << r.message;
+  EXPECT_LT(MaxTranslationError(r.world_from_sensor, truth), 0.02);
+  EXPECT_GT(r.constraint_rms_sigma, 100.0);
 }
 
 TEST(RefineJointlyTest, ConstraintLinksASensorWithoutSharedTracks) {
@@ -505,6 +606,8 @@ TEST(RefineJointlyTest, CovarianceMatchesTheSpreadOverNoiseDraws) {
   options.loss = RobustLoss::kNone;
   options.step_stride = 8;
   options.observation_correlation_steps = 1.0;  // white noise: every sample is independent
+  options.segment_sigma_m = 0.0;                // and no track has an offset of its own
+  options.segment_sigma_per_m = 0.0;
   double nees_sum = 0.0;
   constexpr int kRuns = 20;
   for (int run = 0; run < kRuns; ++run) {
