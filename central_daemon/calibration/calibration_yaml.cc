@@ -278,18 +278,20 @@ std::string CalibrationYaml(const CalibrationResult& result, const YamlContext& 
     if (s.calibrated && !Readable(s)) {
       y += "  # the estimate of this sensor's pose is not finite or absurdly far away\n";
     }
+    // What a person should know about the pose (types.h SensorPose::flag).
+    const std::string flag = s.flag.empty() ? "" : ", flag: " + Quoted(s.flag);
     if (!s.calibrated || !Readable(s)) {
-      y += "  - {id: " + Quoted(s.id) + ", calibrated: false}\n";
+      y += "  - {id: " + Quoted(s.id) + ", calibrated: false" + flag + "}\n";
       continue;
     }
     ++calibrated;
     const Pose2& p = s.world_from_sensor;
     y += fmt::format(
         "  - {{id: {}, x_m: {}, y_m: {}, yaw_deg: {}, sigma_x_m: {}, sigma_y_m: {}, "
-        "sigma_yaw_deg: {}}}\n",
+        "sigma_yaw_deg: {}, cov_xy_m2: {}{}}}\n",
         Quoted(s.id), Exact(p.x_m), Exact(p.y_m), Exact(common::RadToDeg(p.yaw_rad)),
         Short(SigmaOf(s.covariance, 0)), Short(SigmaOf(s.covariance, 1)),
-        Short(common::RadToDeg(SigmaOf(s.covariance, 2))));
+        Short(common::RadToDeg(SigmaOf(s.covariance, 2))), Short(s.covariance(0, 1)), flag);
   }
 
   std::size_t used = 0;
@@ -298,6 +300,8 @@ std::string CalibrationYaml(const CalibrationResult& result, const YamlContext& 
   y += fmt::format("  sensors_calibrated: {}\n  sensors_total: {}\n", calibrated,
                    result.sensors.size());
   y += fmt::format("  edges_used: {}\n  edges_not_used: {}\n", used, result.edges.size() - used);
+  // Where the pose graph could not decide: what was refused and what walk would decide.
+  if (!result.ambiguity.empty()) y += "  ambiguity: " + Quoted(result.ambiguity) + "\n";
   y += "  edges:";
   y += result.edges.empty() ? " []\n" : "\n";
   for (const EdgeReport& e : result.edges) {

@@ -79,6 +79,27 @@ TEST(CalibrationYaml, RoundTripGivesTheSamePoses) {
   }
 }
 
+TEST(CalibrationYaml, FlagsAndTheAmbiguityAreWrittenAndThePosesStillRead) {
+  CalibrationResult result = MakeResult();
+  result.sensors[1].flag = "placed by a weak pair only: \"few\" matches";
+  result.sensors[4].flag = "ambiguous: two placements explain the data equally";
+  result.ambiguity = "s5: two placements explain the data equally; walk where s1 and s5 see";
+  const std::string yaml = CalibrationYaml(result, {});
+  const YAML::Node root = YAML::Load(yaml);
+  EXPECT_EQ(root["sensors"][1]["flag"].as<std::string>(), result.sensors[1].flag);
+  EXPECT_FALSE(root["sensors"][1]["cov_xy_m2"].IsNull());
+  EXPECT_FALSE(root["sensors"][0]["flag"].IsDefined());
+  EXPECT_EQ(root["sensors"][4]["flag"].as<std::string>(), result.sensors[4].flag);
+  EXPECT_FALSE(root["sensors"][4]["calibrated"].as<bool>());
+  EXPECT_EQ(root["quality"]["ambiguity"].as<std::string>(), result.ambiguity);
+  // Readers of poses are not disturbed.
+  PoseFile file;
+  std::string error;
+  ASSERT_TRUE(ParsePoseYaml(yaml, &file, &error)) << error;
+  EXPECT_TRUE(file.calibrated[1]);
+  EXPECT_FALSE(file.calibrated[4]);
+}
+
 TEST(CalibrationYaml, PoseFileOfMatchesWhatTheFileReadsBack) {
   const CalibrationResult result = MakeResult();
   PoseFile read;

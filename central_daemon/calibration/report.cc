@@ -2,6 +2,7 @@
 
 #include <spdlog/fmt/fmt.h>
 
+#include <Eigen/Eigenvalues>
 #include <algorithm>
 #include <cmath>
 #include <filesystem>
@@ -10,6 +11,7 @@
 #include <limits>
 #include <map>
 #include <memory>
+#include <numbers>
 #include <optional>
 
 #include "central_daemon/calibration/eval.h"
@@ -38,6 +40,7 @@ constexpr Rgba kGhost{120, 120, 120, 200};
 constexpr Rgba kUsedEdge{44, 160, 44};
 constexpr Rgba kUnusedEdge{255, 127, 14};
 constexpr Rgba kRejectedEdge{214, 39, 40};
+constexpr Rgba kFlag{200, 0, 0};
 
 Rgba SensorColor(std::size_t i) { return kPalette[i % std::size(kPalette)]; }
 Rgba WithAlpha(Rgba c, std::uint8_t a) { return {c.r, c.g, c.b, a}; }
@@ -546,6 +549,25 @@ std::vector<std::pair<std::string, Pose2>> GhostPoses(const ReportInput& in) {
   return out;
 }
 
+// The k-sigma ellipse of a sensor's position (closed ring in the reference frame, 64 vertices);
+// empty when the covariance is not finite or zero (the reference). Semi-axes capped at 1 km.
+std::vector<Vector2d> SigmaEllipseWorld(const SensorPose& sp, double k) {
+  const Eigen::Matrix2d c = sp.covariance.topLeftCorner<2, 2>();
+  if (!c.allFinite()) return {};
+  const Eigen::SelfAdjointEigenSolver<Eigen::Matrix2d> eig(0.5 * (c + c.transpose()));
+  const Vector2d axes = eig.eigenvalues().cwiseMax(0.0).cwiseSqrt() * k;
+  if (axes.maxCoeff() <= 0.0) return {};
+  std::vector<Vector2d> ring;
+  constexpr int kVertices = 64;
+  for (int i = 0; i <= kVertices; ++i) {
+    const double a = 2.0 * std::numbers::pi * i / kVertices;
+    ring.push_back(sp.world_from_sensor.translation() +
+                   eig.eigenvectors() * Vector2d(std::min(axes.x(), 1000.0) * std::cos(a),
+                                                 std::min(axes.y(), 1000.0) * std::sin(a)));
+  }
+  return ring;
+}
+
 std::vector<SensorScene> BuildScenes(const ReportInput& in) {
   std::map<std::string, const SensorTracks*> by_id;
   if (in.tracks != nullptr)
@@ -652,20 +674,45 @@ void DrawWorld(Painter& p, const View& v, const ReportInput& in,
     p.Marker(c, marker_px + 3, kGhost, true, "truth: " + id);
     p.Line(c, h, 1.5, kGhost, true, "");
   }
+  bool any_flag = false;
   for (const SensorScene& s : scenes) {
+    const SensorPose& sp = in.result->sensors[s.index];
+    // The 2-sigma ellipse of the position (95 % for 2 dof is 2.45 sigma; 2 sigma is 86 %) and the
+    // heading's 2-sigma fan: drawn at true scale, so a well-placed sensor shows a dot.
+    const std::vector<Vector2d> ellipse = SigmaEllipseWorld(sp, 2.0);
+    if (!ellipse.empty()) {
+      std::vector<PixelPoint> ring;
+      for (const Vector2d& w : ellipse) ring.push_back(v.ToPx(w));
+      p.Polygon(ring, WithAlpha(s.color, 60));
+      p.Polyline(ring, 1.5, sp.flag.empty() ? kBlack : kFlag);
+    }
+    const double yaw_sigma = std::sqrt(std::max(0.0, sp.covariance(2, 2)));
+    if (std::isfinite(yaw_sigma) && yaw_sigma > 0.0) {
+      for (const double k : {-2.0, 2.0}) {
+        const Pose2 edge{s.pose.x_m, s.pose.y_m, s.pose.yaw_rad + k * std::min(yaw_sigma, 1.5)};
+        p.Line(v.ToPx(s.pose.translation()), v.ToPx(edge * Vector2d(heading_px / v.px_per_m, 0.0)),
+               1.0, kBlack, true, "");
+      }
+    }
     const PixelPoint c = v.ToPx(s.pose.translation());
     const PixelPoint h = v.ToPx(s.pose * Vector2d(heading_px / v.px_per_m, 0.0));
     p.Line(c, h, 2.5, kBlack, false, "");
-    const SensorPose& sp = in.result->sensors[s.index];
     p.Marker(c, marker_px, s.color, false,
-             fmt::format("{}: x={:.3f} m, y={:.3f} m, yaw={:.2f} deg", sp.id, s.pose.x_m,
-                         s.pose.y_m, common::RadToDeg(s.pose.yaw_rad)));
-    p.Text(LabelAt(c, s.id, 10, v), s.id, 2, kBlack);
+             fmt::format(
+                 "{}: x={:.3f} m, y={:.3f} m, yaw={:.2f} deg; 2 sigma: {:.3f} m, {:.2f} deg{}",
+                 sp.id, s.pose.x_m, s.pose.y_m, common::RadToDeg(s.pose.yaw_rad),
+                 2.0 * std::sqrt(std::max(0.0, sp.covariance.topLeftCorner<2, 2>().trace())),
+                 common::RadToDeg(2.0 * yaw_sigma), sp.flag.empty() ? "" : " (" + sp.flag + ")"));
+    const std::string label = sp.flag.empty() ? s.id : s.id + " (!)";
+    any_flag = any_flag || !sp.flag.empty();
+    p.Text(LabelAt(c, label, 10, v), label, 2, sp.flag.empty() ? kBlack : kFlag);
   }
 
   std::vector<LegendEntry> legend;
   for (const SensorScene& s : scenes) legend.push_back({s.id, s.color});
   if (!ghosts.empty()) legend.push_back({"truth (ghost)", kGhost});
+  legend.push_back({"2 sigma position, heading", kBlack, LegendEntry::kLine});
+  if (any_flag) legend.push_back({"(!) flagged: see report.md", kFlag, LegendEntry::kLine});
   std::size_t uncalibrated = 0;
   for (const SensorPose& s : in.result->sensors) uncalibrated += s.calibrated ? 0 : 1;
   DrawLegendBox(p, v, legend);
@@ -686,9 +733,12 @@ struct EdgeRow {
   const PairEstimate* pair = nullptr;
   const EdgeReport* report = nullptr;
 
+  // A pair the pairwise step rejected is rejected whatever the global step's report says of it
+  // (it reports every pair, the rejected ones as not used).
   EdgeClass Class() const {
+    if (pair != nullptr && !pair->accepted) return EdgeClass::kRejected;
     if (report != nullptr) return report->used ? EdgeClass::kUsed : EdgeClass::kNotUsed;
-    return pair != nullptr && pair->accepted ? EdgeClass::kNotUsed : EdgeClass::kRejected;
+    return pair != nullptr ? EdgeClass::kNotUsed : EdgeClass::kRejected;
   }
   std::string Status() const {
     if (report != nullptr) return report->status;
@@ -757,7 +807,9 @@ void DrawGraph(Painter& p, const View& v, const ReportInput& in,
                          : cls == EdgeClass::kNotUsed ? kUnusedEdge
                                                       : WithAlpha(kRejectedEdge, 200);
       std::string tooltip = e.r + " - " + e.s + ": " + e.Status();
-      if (!e.Reason().empty() && e.Reason() != e.Status()) tooltip += " (" + e.Reason() + ")";
+      if (!e.Reason().empty() && e.Status().find(e.Reason()) == std::string::npos) {
+        tooltip += " (" + e.Reason() + ")";
+      }
       tooltip += fmt::format(", matches {}, rms {:.4f} m", e.Matches(), e.RmsM());
       p.Line(a, b, cls == EdgeClass::kRejected ? 1.5 : 2.5, color, cls == EdgeClass::kRejected,
              tooltip);
@@ -926,25 +978,46 @@ std::string SummaryMd(const ReportInput& in, const std::vector<EdgeRow>& edges) 
   } else {
     md += "- joint refinement: not applied\n";
   }
-  md += fmt::format("- track residual rms: {} m\n\n", Num(r.track_residual_rms_m, 4));
+  md += fmt::format("- track residual rms: {} m\n", Num(r.track_residual_rms_m, 4));
+  std::size_t flagged = 0;
+  for (const SensorPose& s : r.sensors) flagged += s.flag.empty() ? 0 : 1;
+  md += fmt::format("- sensors flagged: {}\n", flagged);
+  for (const SensorPose& s : r.sensors) {
+    if (!s.flag.empty()) md += "  - " + Md(s.id) + ": " + Md(s.flag) + "\n";
+  }
+  if (!r.ambiguity.empty()) md += "- not decided by the data: " + Md(r.ambiguity) + "\n";
+  if (!r.hypotheses.empty()) {
+    md +=
+        "- placements compared where the pose graph's cycles could not decide (robust cost over "
+        "all observations, lower is better):\n";
+    for (const HypothesisReport& h : r.hypotheses) {
+      md += fmt::format("  - {}: {}{}\n", Md(h.description), Num(h.cost, 1),
+                        h.chosen ? " (chosen)" : "");
+    }
+  }
+  md += "\n";
   md +=
       "![sensors, fields of view, background scans and tracks in the reference frame]"
       "(calibration.png)\n\n![pairwise graph](graph.png)\n\n";
 
-  md += "## Poses\n\nIn the frame of the reference sensor; sigma = one standard deviation.\n\n";
+  md +=
+      "## Poses\n\nIn the frame of the reference sensor; sigma = one standard deviation (the "
+      "picture draws 2 sigma).\n\n";
   md += "| sensor | x [m] | y [m] | yaw [deg] | sigma x [m] | sigma y [m] | sigma yaw [deg] |";
   md += eval ? " d_R [deg] | d_t [m] |\n" : "\n";
   md += eval ? "|---|--:|--:|--:|--:|--:|--:|--:|--:|\n" : "|---|--:|--:|--:|--:|--:|--:|\n";
   for (const SensorPose& s : r.sensors) {
     if (!s.calibrated) {
-      md += "| " + Md(s.id) + " | not calibrated | | | | | |" + (eval ? " | |\n" : "\n");
+      md += "| " + Md(s.id) + (s.flag.empty() ? "" : " (!)") + " | not calibrated | | | | | |" +
+            (eval ? " | |\n" : "\n");
       continue;
     }
     const Pose2& p = s.world_from_sensor;
     const auto sigma = [&](int i) { return std::sqrt(std::max(0.0, s.covariance(i, i))); };
-    md += fmt::format("| {} | {} | {} | {} | {} | {} | {} |", Md(s.id), Num(p.x_m, 4),
-                      Num(p.y_m, 4), Num(common::RadToDeg(p.yaw_rad), 3), Num(sigma(0), 4),
-                      Num(sigma(1), 4), Num(common::RadToDeg(sigma(2)), 3));
+    md += fmt::format("| {}{} | {} | {} | {} | {} | {} | {} |", Md(s.id),
+                      s.flag.empty() ? "" : " (!)", Num(p.x_m, 4), Num(p.y_m, 4),
+                      Num(common::RadToDeg(p.yaw_rad), 3), Num(sigma(0), 4), Num(sigma(1), 4),
+                      Num(common::RadToDeg(sigma(2)), 3));
     if (eval) {
       const SensorError* e = error_of(s.id);
       md += e != nullptr ? fmt::format(" {:.4f} | {:.4f} |", e->d_r_deg, e->d_t_m)
@@ -976,8 +1049,10 @@ std::string SummaryMd(const ReportInput& in, const std::vector<EdgeRow>& edges) 
       "| track rms [m] | ICP |\n|---|---|---|--:|--:|--:|--:|--:|---|\n";
   std::vector<double> rot, trans, track;
   for (const EdgeRow& e : edges) {
+    // The reason once: a status that already says it ("rejected: <reason>") stays as it is.
     std::string status = e.Status();
-    if (!e.Reason().empty() && e.Reason() != status) status += ": " + e.Reason();
+    const std::string reason = e.Reason();
+    if (!reason.empty() && status.find(reason) == std::string::npos) status += ": " + reason;
     const EdgeReport* er = e.report;
     md += fmt::format(
         "| {} | {} | {} | {} | {} | {} | {} | {} | {} |\n", Md(e.r), Md(e.s), Md(status),

@@ -267,7 +267,7 @@ TEST_F(ReportTest, WorldPictureShowsTheCalibratedSensorsInTheirColours) {
   const std::vector<Marker> markers = SensorMarkers(svg);
   ASSERT_EQ(markers.size(), 3u);                  // s4 is not calibrated: not drawn
   EXPECT_EQ(Count(svg, "class=\"ghost\""), 4u);   // truth of all four
-  EXPECT_EQ(Count(svg, "<polyline"), 3u);         // one track per calibrated sensor
+  EXPECT_EQ(Count(svg, "<polyline"), 6u);  // one track and one 2-sigma ring per calibrated sensor
   EXPECT_EQ(Count(svg, "class=\"points\""), 3u);  // one background per calibrated sensor
   // Three FoV wedges, translucent.
   EXPECT_GE(Count(svg, "fill-opacity=\"0.133\""), 3u);
@@ -357,6 +357,59 @@ TEST_F(ReportTest, SummaryHasPosesTruthErrorsEdgesAndTimings) {
   EXPECT_NE(md.find("| total | 0.2100 |"), std::string::npos) << md;
   EXPECT_NE(md.find("- s4 \\| not connected"), std::string::npos) << md;  // '|' escaped
   EXPECT_NE(md.find("Residuals over the 1 used edges"), std::string::npos) << md;
+}
+
+TEST_F(ReportTest, RejectedPairsAreCountedAsRejectedWithTheirReasonOnce) {
+  // The global step reports every pair, the rejected ones as "rejected: <reason>", not used.
+  MakeScene();
+  EdgeReport rejected;
+  rejected.r = "<s&1>";
+  rejected.s = "s3";
+  rejected.status = "rejected: ambiguous: two hypotheses explain the tracks";
+  input_.pairs[2].reason = "ambiguous: two hypotheses explain the tracks";
+  result_.edges.push_back(rejected);
+  std::string error;
+  ASSERT_TRUE(WriteReport(dir_.string(), input_, &error)) << error;
+  const std::string md = ReadText(dir_ / "summary.md");
+  EXPECT_NE(md.find("pairs: 3 (used 1, accepted but not used 1, rejected 1)"), std::string::npos)
+      << md;
+  EXPECT_EQ(Count(md, "ambiguous: two hypotheses"), 1u) << md;
+  // The tooltip says it once (the edge's label is a shortened copy).
+  EXPECT_EQ(Count(ReadText(dir_ / "graph.svg"), "ambiguous: two hypotheses explain the tracks"), 1u);
+}
+
+TEST_F(ReportTest, FlagsAndTheUncertaintyEllipsesAreShown) {
+  MakeScene();
+  // s3 hangs on a weak pair: 1.5 m sigma along x, 0.3 m along y.
+  result_.sensors[2].flag = "placed by a weak pair only (few matches)";
+  result_.sensors[2].covariance = Eigen::Vector3d(2.25, 0.09, 1e-4).asDiagonal();
+  result_.sensors[3].flag = "ambiguous: two placements explain the data equally";
+  result_.ambiguity = "s4: two placements explain the data equally; walk where s1 and s4 see";
+  std::string error;
+  ASSERT_TRUE(WriteReport(dir_.string(), input_, &error)) << error;
+  const std::string md = ReadText(dir_ / "summary.md");
+  EXPECT_NE(md.find("- sensors flagged: 2"), std::string::npos) << md;
+  EXPECT_NE(md.find("  - s3: placed by a weak pair only (few matches)"), std::string::npos) << md;
+  EXPECT_NE(md.find("| s3 (!) | 10.0000 |"), std::string::npos) << md;
+  EXPECT_NE(md.find("| s4 (!) | not calibrated |"), std::string::npos) << md;
+  EXPECT_NE(md.find("not decided by the data: s4: two placements"), std::string::npos) << md;
+
+  // s3's ring: 2 sigma = 3 m along x and 0.6 m along y around (10, 11), in the flag colour.
+  const std::string svg = ReadText(dir_ / "calibration.svg");
+  EXPECT_NE(svg.find("s3 (!)"), std::string::npos);
+  const std::regex ring_re("<polyline fill=\"none\" stroke=\"#c80000\"[^>]*points=\"([^\"]*)\"");
+  std::smatch m;
+  ASSERT_TRUE(std::regex_search(svg, m, ring_re)) << svg;
+  std::istringstream points(m[1].str());
+  double min_x = 1e9, max_x = -1e9, min_y = 1e9, max_y = -1e9;
+  for (std::string xy; points >> xy;) {
+    const std::size_t comma = xy.find(',');
+    const double x = std::stod(xy.substr(0, comma)), y = std::stod(xy.substr(comma + 1));
+    min_x = std::min(min_x, x), max_x = std::max(max_x, x);
+    min_y = std::min(min_y, y), max_y = std::max(max_y, y);
+  }
+  // Five times wider than high, as 3 m to 0.6 m.
+  EXPECT_NEAR((max_x - min_x) / (max_y - min_y), 5.0, 0.3);
 }
 
 TEST_F(ReportTest, DegenerateCaseOneSensorNoTracks) {
