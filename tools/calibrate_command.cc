@@ -31,15 +31,19 @@ void PrintSummary(const calib::CalibrationOutcome& outcome) {
               "sigma_deg");
   for (const calib::SensorPose& s : r.sensors) {
     if (!s.calibrated) {
-      std::printf("%-12s %10s\n", s.id.c_str(), "not calibrated");
+      std::printf("%-12s %10s%s%s\n", s.id.c_str(), "not calibrated", s.flag.empty() ? "" : ": ",
+                  s.flag.c_str());
       continue;
     }
     const double sigma_m = std::sqrt(std::max(0.0, s.covariance(0, 0) + s.covariance(1, 1)));
     const double sigma_deg = common::RadToDeg(std::sqrt(std::max(0.0, s.covariance(2, 2))));
-    std::printf("%-12s %10.4f %10.4f %9.3f %9.4f %9.4f\n", s.id.c_str(),
+    // A flagged pose is printed with what is wrong with it (e.g. placed by a weak pair only).
+    std::printf("%-12s %10.4f %10.4f %9.3f %9.4f %9.4f%s%s\n", s.id.c_str(),
                 s.world_from_sensor.x_m, s.world_from_sensor.y_m,
-                common::RadToDeg(s.world_from_sensor.yaw_rad), sigma_m, sigma_deg);
+                common::RadToDeg(s.world_from_sensor.yaw_rad), sigma_m, sigma_deg,
+                s.flag.empty() ? "" : "  ! ", s.flag.c_str());
   }
+  if (!r.ambiguity.empty()) std::printf("not decided by the data: %s\n", r.ambiguity.c_str());
   std::size_t used = 0, rejected = 0, outliers = 0;
   for (const calib::EdgeReport& e : r.edges) {
     if (e.used) {

@@ -15,8 +15,13 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <Eigen/Cholesky>
+#include <Eigen/LU>
 #include <algorithm>
 #include <chrono>
+#include <cmath>
+#include <cstdlib>
+#include <limits>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
@@ -92,8 +97,38 @@ std::vector<Variant> Variants() {
 struct Tally {
   std::vector<double> d_r_deg, d_t_m;
   std::size_t runs = 0, failed_runs = 0, sensors_missing = 0;
+  // Reported uncertainty against the error, per placed non-reference sensor: within 2 sigma
+  // (d_t <= 2 sqrt(sigma_x^2 + sigma_y^2) and d_R <= 2 sigma_yaw), and the 2-dof NEES of the
+  // position error; runs in which some sensor's error exceeds 3 times its reported sigma.
+  std::size_t within_2sigma = 0, judged = 0;
+  std::vector<double> nees;
+  std::size_t beyond_3sigma_runs = 0;
   std::map<std::string, double> stage_s;  // summed over runs
 };
+
+struct Coverage {
+  bool within_2sigma = false;
+  bool beyond_3sigma = false;
+  double nees = 0.0;
+};
+
+// The error of a calibrated sensor against the truth, both in the reference sensor's frame, and
+// its reported covariance (the calibration's world is the reference's frame).
+Coverage JudgeUncertainty(const calib::SensorPose& sensor, const common::Pose2& truth_ref_from_sensor) {
+  Coverage c;
+  const Eigen::Vector2d e = sensor.world_from_sensor.translation() - truth_ref_from_sensor.translation();
+  const double d_yaw = std::abs(common::AngleDiff(sensor.world_from_sensor.yaw_rad, truth_ref_from_sensor.yaw_rad));
+  const Eigen::Matrix2d cov = sensor.covariance.topLeftCorner<2, 2>();
+  const double sigma_t = std::sqrt(std::max(0.0, cov.trace()));
+  const double sigma_yaw = std::sqrt(std::max(0.0, sensor.covariance(2, 2)));
+  c.within_2sigma = e.norm() <= 2.0 * sigma_t && d_yaw <= 2.0 * sigma_yaw;
+  c.beyond_3sigma = e.norm() > 3.0 * sigma_t || d_yaw > 3.0 * sigma_yaw;
+  const Eigen::LDLT<Eigen::Matrix2d> ldlt(cov);
+  c.nees = ldlt.info() == Eigen::Success && ldlt.isPositive() && cov.determinant() > 0.0
+               ? e.dot(ldlt.solve(e))
+               : std::numeric_limits<double>::infinity();
+  return c;
+}
 
 double Mean(const std::vector<double>& v) {
   if (v.empty()) return 0.0;
@@ -124,6 +159,8 @@ int main(int argc, char** argv) {
   const int seeds = std::stoi(Arg(argc, argv, "--seeds", "3"));
   const std::string only = Arg(argc, argv, "--only", "");
   const std::string out_path = Arg(argc, argv, "--out", "");
+  const std::string cache = Arg(argc, argv, "--cache", "");
+  const std::string variant_filter = Arg(argc, argv, "--variants", "");
   if (tool.empty() || tracker.empty()) {
     std::fprintf(stderr,
                  "usage: calibration_benchmark --tool LRFNET --tracker TRACKER [--scenarios DIR] "
@@ -135,7 +172,9 @@ int main(int argc, char** argv) {
     if (entry.path().extension() == ".yaml") scenarios.push_back(entry.path().stem().string());
   }
   std::sort(scenarios.begin(), scenarios.end());
-  const fs::path work = fs::temp_directory_path() / ("calibration_benchmark_" + std::to_string(getpid()));
+  const fs::path work = !cache.empty() ? fs::path(cache)
+                                        : fs::temp_directory_path() /
+                                              ("calibration_benchmark_" + std::to_string(getpid()));
   const std::string log = (work / "log.txt").string();
   fs::create_directories(work);
   const std::vector<Variant> variants = Variants();
@@ -156,7 +195,8 @@ int main(int argc, char** argv) {
     for (int seed = 1; seed <= seeds; ++seed) {
       const fs::path dir = work / (scenario + "_" + std::to_string(seed));
       fs::create_directories(dir);
-      if (RunProcess({tool, "sim", (fs::path(scenarios_dir) / (scenario + ".yaml")).string(),
+      const bool cached = !cache.empty() && fs::exists(dir / "sim/truth.yaml");
+      if (!cached && RunProcess({tool, "sim", (fs::path(scenarios_dir) / (scenario + ".yaml")).string(),
                       "--out", (dir / "sim").string(), "--seed", std::to_string(seed), "--jobs",
                       "2", "--log-level", "warn"},
                      log) != 0) {
@@ -178,7 +218,7 @@ int main(int argc, char** argv) {
         std::vector<std::string> recordings;
         for (const auto& [id, pose] : truth.sensors) {
           const std::string rec = (dir / (id + "." + measurement + ".rec")).string();
-          if (RunProcess({tracker, "--replay", (dir / ("sim/" + id + ".pcap")).string(),
+          if (!(cached && fs::exists(rec)) && RunProcess({tracker, "--replay", (dir / ("sim/" + id + ".pcap")).string(),
                           "--sensor-id", id, "--out", rec, "--config", config.string(),
                           "--log-level", "warn"},
                          log) != 0) {
@@ -193,6 +233,7 @@ int main(int argc, char** argv) {
         }
       }
       for (const Variant& v : variants) {
+        if (!variant_filter.empty() && v.name.find(variant_filter) == std::string::npos) continue;
         const auto start = std::chrono::steady_clock::now();
         const calib::CalibrationOutcome outcome = calib::Calibrate(
             inputs[v.measurement], v.options, [start] {
@@ -218,20 +259,79 @@ int main(int argc, char** argv) {
           tally.d_t_m.push_back(e.d_t_m);
         }
         tally.sensors_missing += eval.missing.size();
+        const auto ref_in_truth = truth.Find(eval.reference);
+        bool beyond = false;
+        for (const calib::SensorPose& sp : outcome.result.sensors) {
+          const auto t = truth.Find(sp.id);
+          if (!sp.calibrated || sp.id == eval.reference || !t || !ref_in_truth) continue;
+          const common::Pose2 truth_rel =
+              truth.sensors[*ref_in_truth].second.inverse() * truth.sensors[*t].second;
+          const Coverage c = JudgeUncertainty(sp, truth_rel);
+          ++tally.judged;
+          tally.within_2sigma += c.within_2sigma ? 1 : 0;
+          tally.nees.push_back(c.nees);
+          beyond |= c.beyond_3sigma;
+        }
+        if (beyond) ++tally.beyond_3sigma_runs;
+        if (std::getenv("LRFNET_BENCH_VERBOSE") != nullptr) {
+          std::fprintf(stderr, "%s seed %d %s: ok %d %s\n", scenario.c_str(), seed, v.name.c_str(),
+                       outcome.ok ? 1 : 0, outcome.error.c_str());
+          std::fprintf(stderr,
+                       "  size correction %.3f %.3f estimated %d %d (scale correlation %.3f %.3f, "
+                       "data sigma %.3f %.3f)\n",
+                       outcome.result.size_correction_m.x(), outcome.result.size_correction_m.y(),
+                       outcome.result.size_estimated[0] ? 1 : 0,
+                       outcome.result.size_estimated[1] ? 1 : 0,
+                       outcome.result.size_scale_correlation[0],
+                       outcome.result.size_scale_correlation[1],
+                       outcome.result.size_data_sigma_m[0], outcome.result.size_data_sigma_m[1]);
+          for (const calib::SensorPose& sp : outcome.result.sensors) {
+            const auto t = truth.Find(sp.id);
+            if (!sp.calibrated || !t || !ref_in_truth) continue;
+            const common::Pose2 truth_rel =
+                truth.sensors[*ref_in_truth].second.inverse() * truth.sensors[*t].second;
+            const Coverage c = JudgeUncertainty(sp, truth_rel);
+            std::fprintf(stderr,
+                         "  %-10s dt %.4f (sigma %.4f) dR %.4f (sigma %.4f) nees %.2f%s\n",
+                         sp.id.c_str(),
+                         (sp.world_from_sensor.translation() - truth_rel.translation()).norm(),
+                         std::sqrt(sp.covariance(0, 0) + sp.covariance(1, 1)),
+                         common::RadToDeg(std::abs(common::AngleDiff(sp.world_from_sensor.yaw_rad,
+                                                                     truth_rel.yaw_rad))),
+                         common::RadToDeg(std::sqrt(std::max(0.0, sp.covariance(2, 2)))), c.nees,
+                         c.beyond_3sigma ? "  > 3 sigma" : "");
+          }
+          for (const calib::EdgeReport& e : outcome.result.edges) {
+            std::fprintf(stderr, "  edge %s-%s: %s (matches %zu rms %.3f)\n", e.r.c_str(),
+                         e.s.c_str(), e.status.c_str(), e.matches, e.rms_m);
+          }
+          for (const std::string& w : outcome.result.warnings) {
+            std::fprintf(stderr, "  warning: %s\n", w.c_str());
+          }
+        }
       }
       std::fprintf(stderr, "%s seed %d done\n", scenario.c_str(), seed);
     }
     table << "## " << scenario << "\n\n"
-          << "| method | d_R mean | d_R median | d_t mean | d_t median | failed | missing | "
-             "time [s] |\n|---|---:|---:|---:|---:|---:|---:|---:|\n";
+          << "| method | d_R mean | d_R median | d_t mean | d_t median | within 2σ | NEES | "
+             "failed | > 3σ | missing | time [s] |\n|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n";
     for (const Variant& v : variants) {
       const Tally& t = tallies[v.name];
       char row[512];
       const double runs = static_cast<double>(t.runs);
       const double total = t.runs > 0 && t.stage_s.count("total") ? t.stage_s.at("total") / runs : 0.0;
-      std::snprintf(row, sizeof row, "| %s | %.4f | %.4f | %.4f | %.4f | %zu/%zu | %zu | %.3f |\n",
+      const std::string within =
+          t.judged > 0 ? std::to_string(static_cast<int>(std::lround(
+                             100.0 * static_cast<double>(t.within_2sigma) / static_cast<double>(t.judged)))) +
+                             " %"
+                       : "-";
+      char nees[32] = "-";
+      if (!t.nees.empty()) std::snprintf(nees, sizeof nees, "%.2f", Mean(t.nees));
+      std::snprintf(row, sizeof row,
+                    "| %s | %.4f | %.4f | %.4f | %.4f | %s | %s | %zu/%zu | %zu/%zu | %zu | %.3f |\n",
                     v.name.c_str(), Mean(t.d_r_deg), Median(t.d_r_deg), Mean(t.d_t_m),
-                    Median(t.d_t_m), t.failed_runs, t.runs, t.sensors_missing, total);
+                    Median(t.d_t_m), within.c_str(), nees, t.failed_runs, t.runs,
+                    t.beyond_3sigma_runs, t.runs, t.sensors_missing, total);
       table << row;
       for (const auto& [stage, s] : t.stage_s) {
         stage_means[v.name][stage] += t.runs > 0 ? s / runs : 0.0;
@@ -260,6 +360,6 @@ int main(int argc, char** argv) {
     }
   }
   std::error_code ec;
-  fs::remove_all(work, ec);
+  if (cache.empty()) fs::remove_all(work, ec);
   return 0;
 }
