@@ -24,6 +24,7 @@ demo_pkgs=(
   libeigen3-dev libboost-dev libboost-program-options-dev
   libprotobuf-dev protobuf-compiler libspdlog-dev libfmt-dev
   libpcap-dev libyaml-cpp-dev nlohmann-json3-dev nanopb libnanopb-dev
+  libsodium-dev                       # authenticated datagrams (common/datagram_auth)
   libgtest-dev libgmock-dev libbenchmark-dev
   libceres-dev coinor-libclp-dev zlib1g-dev   # calibration: joint refinement, LP oracle in tests, PNG report
   libmosquitto-dev                    # lrfnetd's MQTT output
@@ -40,7 +41,7 @@ test_pkgs=(
 cross_pkgs=(
   g++-aarch64-linux-gnu qemu-user
   libpcap-dev:arm64 libboost-dev:arm64 libboost-program-options-dev:arm64
-  libspdlog-dev:arm64 libfmt-dev:arm64 libgtest-dev:arm64 libnanopb-dev:arm64
+  libspdlog-dev:arm64 libfmt-dev:arm64 libgtest-dev:arm64 libnanopb-dev:arm64 libsodium-dev:arm64
   libyaml-cpp0.7:arm64                # runtime only: libyaml-cpp-dev is not co-installable, the host headers serve both
 )
 host_pkgs=("${demo_pkgs[@]}")
