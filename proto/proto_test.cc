@@ -5,10 +5,11 @@
 namespace lrfnet::proto {
 namespace {
 
-// A full track frame of a crowded scan must fit the 1400-byte datagram budget when split into parts of
-// this many tracks (the uplink's part size).
-constexpr int kTracksPerPart = 14;
-constexpr std::size_t kMaxDatagramBytes = 1400;
+// A full track frame of a crowded scan must fit the payload budget when split into parts of this many
+// tracks (the uplink's part size): 1400 bytes per datagram less the widest authenticated envelope
+// (common/datagram_auth.h: 24 + 32 + 16 bytes).
+constexpr int kTracksPerPart = 13;
+constexpr std::size_t kMaxPayloadBytes = 1400 - 72;
 
 TEST(ProtoTest, DatagramRoundTripsAllFields) {
   Datagram d;
@@ -63,7 +64,7 @@ TEST(ProtoTest, WorstCaseTrackPartFitsOneDatagram) {
     t->set_points(~0u);
     t->set_ellipse_yaw_rad(-3.0f);
   }
-  EXPECT_LE(d.ByteSizeLong(), kMaxDatagramBytes);
+  EXPECT_LE(d.ByteSizeLong(), kMaxPayloadBytes);
 }
 
 }  // namespace

@@ -32,6 +32,18 @@ void VisitSensor(TrackerConfig& c, ConfigVisitor& v) {
           "Empty: no UDP. --uplink.");
 }
 
+void VisitAuth(TrackerConfig& c, ConfigVisitor& v) {
+  v.Section("auth",
+            "Authenticated datagrams: with a key, every datagram is sealed (key epoch, counter and "
+            "a 16-byte tag; lrfnet.proto) and only sealed Requests from lrfnetd are served.");
+  v.Field("key", c.key_file,
+          "This sensor's key file (lrfnet keys derive; mode 0600), or "
+          "$CREDENTIALS_DIRECTORY/NAME for a systemd credential. Empty: not authenticated. --key.");
+  v.Field("encrypt", c.encrypt,
+          "Also encrypt the datagrams' content (tracks of people can be personal data); needs a "
+          "key. --encrypt.");
+}
+
 void VisitLink(io::SickClientOptions& o, ConfigVisitor& v) {
   v.Section("link", "The CoLa-B session with the scanner (live mode).");
   VisitMs(v, "connect_timeout_ms", o.connect_timeout,
@@ -325,6 +337,7 @@ std::optional<std::string> Validate(const PublishOptions& o) {
 
 void VisitTrackerConfig(TrackerConfig& c, ConfigVisitor& v) {
   VisitSensor(c, v);
+  VisitAuth(c, v);
   VisitLink(c.link, v);
   VisitClock(c.clock, c.clock_status.max_esterror_s, v);
   VisitBackground(c.tracking.background, v);
@@ -338,6 +351,7 @@ void VisitTrackerConfig(TrackerConfig& c, ConfigVisitor& v) {
 std::optional<std::string> Validate(const TrackerConfig& c) {
   if (!c.sensor_id.empty() && !io::IsValidSensorId(c.sensor_id))
     return "sensor.id: '" + c.sensor_id + "' is not 1 to 32 letters, digits, '_', '.' or '-'";
+  if (c.encrypt && c.key_file.empty()) return "auth.encrypt: needs auth.key (--key)";
   // The link's host is checked where it is set (the live mode); validate the rest with a
   // placeholder so a config without an address passes.
   io::SickClientOptions link = c.link;

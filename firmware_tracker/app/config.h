@@ -33,6 +33,8 @@ struct TrackerConfig {
   std::string sensor_id;        // [A-Za-z0-9_.-]{1,32}
   std::string sensor_address;   // HOST[:PORT] of the scanner (live)
   std::string uplink_address;   // HOST:PORT of lrfnetd (empty: no UDP)
+  std::string key_file;         // this sensor's key file (empty: datagrams are not sealed)
+  bool encrypt = false;         // encrypt the payload of the sealed datagrams
   io::SickClientOptions link;
   tracking::ClockMapperOptions clock;
   io::ClockStatusOptions clock_status;
@@ -40,7 +42,7 @@ struct TrackerConfig {
   PublishOptions publish;
 };
 
-// Lists every option of `config` (sections sensor, link, clock, background, segmentation,
+// Lists every option of `config` (sections sensor, auth, link, clock, background, segmentation,
 // measurement, shape, tracking, publish).
 void VisitTrackerConfig(TrackerConfig& config, ConfigVisitor& visitor);
 

@@ -36,7 +36,9 @@
 #include <string>
 
 #include "common/capture/capture_stream.h"
+#include "common/datagram_auth.h"
 #include "common/host_port.h"
+#include "common/key_file.h"
 #include "common/systemd_notify.h"
 #include "common/time.h"
 #include "firmware_tracker/app/config.h"
@@ -45,6 +47,7 @@
 #include "firmware_tracker/cola/stream_decoder.h"
 #include "firmware_tracker/io/datagram_encoder.h"
 #include "firmware_tracker/io/recording_writer.h"
+#include "firmware_tracker/io/sealing_sink.h"
 #include "firmware_tracker/io/sick_client.h"
 #include "firmware_tracker/io/system_clock.h"
 #include "firmware_tracker/io/udp_uplink.h"
@@ -101,6 +104,24 @@ class Outputs {
  public:
   std::optional<std::string> Open(const TrackerConfig& config, const std::string& record_path,
                                    common::UtcNs created_ns) {
+    std::optional<auth::SensorKeys> keys;
+    if (!config.key_file.empty()) {
+      auth::KeyFile key;
+      if (!auth::Init()) return "--key: libsodium cannot be initialised";
+      if (auto e = auth::LoadSensorKey(config.key_file, config.sensor_id, &key)) return "--key " + *e;
+      keys = auth::DeriveSensorKeys(key.key, key.epoch);
+      // Sealed before both outputs. The counter starts at the wall clock's now (also in replay), so
+      // it is beyond every counter of an earlier start of this sensor (datagram_auth.h).
+      auth::SealerOptions sealer;
+      sealer.sensor_id = config.sensor_id;
+      sealer.keys = *keys;
+      sealer.encrypt = config.encrypt;
+      auth::RandomBytes(std::span(reinterpret_cast<std::uint8_t*>(&sealer.salt), sizeof sealer.salt));
+      sealer.first_counter = static_cast<std::uint64_t>(io::NowUtcNs());
+      sealing_ = std::make_unique<io::SealingSink>(sealer, fanout_);
+      spdlog::info("datagrams sealed with the key of {} (epoch {}){}", config.sensor_id, key.epoch,
+                   config.encrypt ? ", content encrypted" : "");
+    }
     if (!config.uplink_address.empty()) {
       std::string error;
       const auto endpoint = ParseHostPort(config.uplink_address, "--uplink", 0, &error);
@@ -109,6 +130,7 @@ class Outputs {
       options.host = endpoint->host;
       options.port = endpoint->port;
       options.sensor_id = config.sensor_id;
+      options.keys = keys;
       if (auto e = io::Validate(options)) return "--uplink: " + *e;
       udp_ = std::make_unique<io::UdpUplink>(options);
       if (auto e = udp_->Open()) return "--uplink " + config.uplink_address + ": " + *e;
@@ -127,7 +149,10 @@ class Outputs {
     return std::nullopt;
   }
 
-  io::DatagramSink& sink() { return fanout_; }
+  io::DatagramSink& sink() {
+    if (sealing_) return *sealing_;
+    return fanout_;
+  }
 
   // Reads the daemon's Request datagrams (non-blocking) and hands them to the node.
   void ServeRequests(TrackerNode& node) {
@@ -159,6 +184,10 @@ class Outputs {
       const io::UdpUplinkCounters& c = udp_->counters();
       out += fmt::format(" udp_sent={} udp_bytes={} udp_send_errors={} requests={}",
                          c.datagrams_sent, c.bytes_sent, c.send_errors, c.received);
+      const io::RequestDecoderCounters& r = udp_->request_counters();
+      std::uint64_t refused = 0;
+      for (const std::uint64_t n : r.rejected) refused += n;
+      out += fmt::format(" requests_accepted={} requests_refused={}", r.accepted, refused);
     }
     if (recording_) {
       const io::RecordingCounters& c = recording_->counters();
@@ -170,6 +199,7 @@ class Outputs {
 
  private:
   io::DatagramFanout fanout_;
+  std::unique_ptr<io::SealingSink> sealing_;
   std::unique_ptr<io::UdpUplink> udp_;
   std::unique_ptr<io::RecordingWriter> recording_;
 };
@@ -547,6 +577,10 @@ int Run(int argc, char** argv) {
       "name of this sensor in every datagram (required here or in the config)")(
       "uplink", po::value<std::string>(&uplink), "send datagrams over UDP to lrfnetd at HOST:PORT")(
       "out", po::value<std::string>(&out), "write the datagrams to this recording file")(
+      "key", po::value<std::string>(),
+      "seal every datagram with this sensor's key file (lrfnet keys derive) and serve only sealed "
+      "Requests (auth.key)")(
+      "encrypt", "also encrypt the datagrams' content (auth.encrypt; needs --key)")(
       "print-every", po::value<long long>(&print_every)->default_value(0),
       "print the tracks of every N-th scan (0: none)")(
       "speed", po::value<double>(&speed)->default_value(0.0),
@@ -595,6 +629,8 @@ int Run(int argc, char** argv) {
   if (!sensor.empty()) config.sensor_address = sensor;
   if (!sensor_id.empty()) config.sensor_id = sensor_id;
   if (!uplink.empty()) config.uplink_address = uplink;
+  if (vm.count("key") != 0) config.key_file = vm["key"].as<std::string>();
+  if (vm.count("encrypt") != 0) config.encrypt = true;
   if (vm.count("connect-timeout-ms") != 0)
     config.link.connect_timeout = std::chrono::milliseconds(connect_timeout_ms);
   if (vm.count("reply-timeout-ms") != 0)

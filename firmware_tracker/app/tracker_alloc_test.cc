@@ -1,7 +1,8 @@
 // Zero heap allocations per scan on the tracker's whole path after start-up (issue: fixed
 // allocation): capture file -> TCP reassembly -> CoLa-B decoding -> clock mapping -> tracking ->
-// datagram encoding -> UDP send (to a receiver on loopback) and recording write, over all scans of
-// the shipped captures (several passes) and over thousands of scans of a synthetic crowd.
+// datagram encoding -> sealing (authenticated datagrams, some passes encrypted) -> UDP send (to a
+// receiver on loopback) and recording write, over all scans of the shipped captures (several
+// passes, sealed and not) and over thousands of scans of a synthetic crowd (sealed, encrypted).
 
 #include <gtest/gtest.h>
 #include <unistd.h>
@@ -19,6 +20,7 @@
 #include "firmware_tracker/cola/framer.h"
 #include "firmware_tracker/cola/stream_decoder.h"
 #include "firmware_tracker/io/recording_writer.h"
+#include "firmware_tracker/io/sealing_sink.h"
 #include "firmware_tracker/io/udp_uplink.h"
 #include "tests/support/alloc_counter.h"
 #include "tests/support/test_data.h"
@@ -28,12 +30,20 @@ namespace lrfnet::tracker {
 namespace {
 
 // Everything a running tracker holds, built before counting starts.
+enum class Sealing { kNone, kSigned, kEncrypted };
+
 struct Tracker : cola::TelegramListener {
-  Tracker(const std::string& id, std::uint16_t port, const std::string& recording) {
+  Tracker(const std::string& id, std::uint16_t port, const std::string& recording,
+          Sealing sealing = Sealing::kNone) {
+    EXPECT_TRUE(auth::Init());
+    auth::Key site{};
+    site.fill(5);
+    const auth::SensorKeys keys = auth::DeriveSensorKeys(auth::DeriveSensorKey(site, id), 1);
     io::UdpUplinkOptions udp_options;
     udp_options.host = "127.0.0.1";
     udp_options.port = port;
     udp_options.sensor_id = id;
+    if (sealing != Sealing::kNone) udp_options.keys = keys;
     udp = std::make_unique<io::UdpUplink>(udp_options);
     EXPECT_EQ(udp->Open(), std::nullopt);
     io::RecordingWriterOptions rec_options;
@@ -43,9 +53,19 @@ struct Tracker : cola::TelegramListener {
     EXPECT_EQ(writer->Open(1'600'000'000 * common::kNsPerS), std::nullopt);
     EXPECT_TRUE(fanout.Add(udp.get()));
     EXPECT_TRUE(fanout.Add(writer.get()));
+    if (sealing != Sealing::kNone) {
+      auth::SealerOptions sealer;
+      sealer.sensor_id = id;
+      sealer.keys = keys;
+      sealer.encrypt = sealing == Sealing::kEncrypted;
+      sealer.salt = 77;
+      sealer.first_counter = 1'700'000'000'000'000'000ULL;
+      sealing_sink = std::make_unique<io::SealingSink>(sealer, fanout);
+    }
     TrackerConfig config;
     config.sensor_id = id;
-    node = std::make_unique<TrackerNode>(config, 42, fanout);
+    node = std::make_unique<TrackerNode>(
+        config, 42, sealing_sink ? static_cast<io::DatagramSink&>(*sealing_sink) : fanout);
     node->SetDeviceIdentity("LMS511", "12345678", "V3.10");
     clock.sync = io::ClockSync::kReplay;
   }
@@ -64,6 +84,7 @@ struct Tracker : cola::TelegramListener {
   std::unique_ptr<io::UdpUplink> udp;
   std::unique_ptr<io::RecordingWriter> writer;
   io::DatagramFanout fanout;
+  std::unique_ptr<io::SealingSink> sealing_sink;
   std::unique_ptr<TrackerNode> node;
   std::unique_ptr<cola::StreamDecoder> decoder = std::make_unique<cola::StreamDecoder>();
   io::ClockStatus clock;
@@ -97,7 +118,10 @@ TEST(TrackerAllocTest, ShippedCapturesAllocateNothingPerScan) {
     std::size_t allocations = 0;
     // Several passes, each a fresh tracker start: the capture is short (4-9 s).
     for (int pass = 0; pass < 5; ++pass) {
-      Tracker tracker("alloc", receiver.port(), recording);
+      // Passes 1 and 3 sealed (3 encrypted), the others not.
+      const Sealing sealing =
+          pass == 1 ? Sealing::kSigned : (pass == 3 ? Sealing::kEncrypted : Sealing::kNone);
+      Tracker tracker("alloc", receiver.port(), recording, sealing);
       std::string error;
       auto capture = capture::CaptureStream::Open(*path, capture::CaptureStreamOptions{}, &error);
       ASSERT_NE(capture, nullptr) << error;
@@ -118,6 +142,9 @@ TEST(TrackerAllocTest, ShippedCapturesAllocateNothingPerScan) {
       counted_scans += tracker.scans - scans_at_start;
       EXPECT_GT(tracker.node->counters().frames, 0u);
       EXPECT_EQ(tracker.udp->counters().send_errors, 0u);
+      if (tracker.sealing_sink) {
+        EXPECT_EQ(tracker.sealing_sink->counters().sealed, tracker.node->encoder().counters().datagrams);
+      }
       receiver.Drain();
     }
     std::filesystem::remove(recording);
@@ -132,7 +159,7 @@ TEST(TrackerAllocTest, ShippedCapturesAllocateNothingPerScan) {
 TEST(TrackerAllocTest, SyntheticCrowdAllocatesNothingPerScan) {
   lrfnet::testing::LoopbackUdpPeer receiver;  // lrfnetd's end, drained between passes
   const std::string recording = TempPath("alloc_crowd");
-  Tracker tracker("crowd", receiver.port(), recording);
+  Tracker tracker("crowd", receiver.port(), recording, Sealing::kEncrypted);
   testing::ScannerConfig scanner;  // LMS1xx: 541 beams, 25 Hz
   testing::SyntheticDevice device(scanner);
   const auto room = testing::Room();
@@ -181,6 +208,7 @@ TEST(TrackerAllocTest, SyntheticCrowdAllocatesNothingPerScan) {
   EXPECT_EQ(tracker.scans, static_cast<std::size_t>(kScans));
   EXPECT_GE(tracker.node->pipeline().tracker().counters().confirmed, 15u);
   EXPECT_GE(tracker.node->counters().snapshots, 1u);
+  EXPECT_EQ(tracker.sealing_sink->counters().sealed, tracker.node->encoder().counters().datagrams);
   std::filesystem::remove(recording);
 }
 

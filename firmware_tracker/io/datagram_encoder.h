@@ -1,5 +1,6 @@
 #pragma once
-// Serialises the tracker's reports into lrfnet.proto `Datagram`s of at most 1400 bytes each.
+// Serialises the tracker's reports into lrfnet.proto `Datagram`s of at most kMaxPayloadBytes (1328)
+// each, so that they stay within 1400 bytes when sealed (SealingSink).
 //
 // Runtime: nanopb, not libprotobuf(-lite). nanopb generates plain C structs from the same .proto,
 // with every string, bytes and repeated field a fixed array sized in lrfnet.options (a field
@@ -40,6 +41,7 @@
 #include <string>
 #include <string_view>
 
+#include "common/datagram_auth.h"
 #include "common/time.h"
 #include "firmware_tracker/io/system_clock.h"
 #include "firmware_tracker/tracking/measurement.h"
@@ -49,9 +51,13 @@
 namespace lrfnet::io {
 
 inline constexpr std::size_t kMaxDatagramBytes = 1400;
-// Measured worst cases (uplink tests): 11 tracks -> 1298 bytes, 422 beams -> 1400 bytes.
+// What the encoder may use of a datagram: the rest is room for the authenticated envelope
+// (SealingSink, common/datagram_auth.h), so that a sealed datagram stays within 1400 bytes.
+// Unsealed datagrams keep the same parts.
+inline constexpr std::size_t kMaxPayloadBytes = kMaxDatagramBytes - auth::kMaxOverheadBytes;
+// Measured worst cases (uplink tests): 11 tracks -> 1298 bytes, 398 beams -> 1328 bytes.
 inline constexpr std::size_t kTracksPerPart = 11;
-inline constexpr std::size_t kBeamsPerPart = 422;
+inline constexpr std::size_t kBeamsPerPart = 398;
 inline constexpr std::uint32_t kMaxRangeMm = (1u << 21) - 1;  // 3 varint bytes
 inline constexpr std::size_t kMaxSensorIdLength = 32;
 // An encoded Track (without its tag and length in the frame): at most 106 bytes (lrfnet.options).
@@ -67,7 +73,7 @@ static_assert(sizeof(lrfnet_proto_Datagram::sensor_id) == kMaxSensorIdLength + 1
 class DatagramSink {
  public:
   virtual ~DatagramSink() = default;
-  // One serialised Datagram of at most kMaxDatagramBytes; the bytes are valid during the call only.
+  // One serialised Datagram of at most kMaxPayloadBytes; the bytes are valid during the call only.
   // sent_ns is the datagram's own sent_ns field.
   virtual void Send(std::span<const std::uint8_t> datagram, common::UtcNs sent_ns) = 0;
 };
@@ -188,7 +194,7 @@ class DatagramEncoder {
   std::uint32_t snapshot_id_ = 0;
   DatagramEncoderCounters counters_;
   lrfnet_proto_Datagram message_{};
-  std::array<std::uint8_t, kMaxDatagramBytes> buffer_{};
+  std::array<std::uint8_t, kMaxPayloadBytes> buffer_{};
   std::array<std::array<std::uint8_t, kMaxTrackBytes>, tracking::kMaxTracks> track_bytes_{};
   std::array<std::size_t, tracking::kMaxTracks> track_sizes_{};
 };

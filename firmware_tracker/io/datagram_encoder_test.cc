@@ -190,7 +190,7 @@ TEST(DatagramEncoderTest, SixtyFourWorstCaseTracksSplitIntoPartsOfEleven) {
   std::size_t largest = 0;
   for (std::size_t p = 0; p < sink.datagrams.size(); ++p) {
     largest = std::max(largest, sink.datagrams[p].size());
-    EXPECT_LE(sink.datagrams[p].size(), kMaxDatagramBytes);
+    EXPECT_LE(sink.datagrams[p].size(), kMaxPayloadBytes);
     const lrfnet_proto_Datagram d = Decode(sink.datagrams[p]);
     EXPECT_EQ(d.sequence, p);
     const lrfnet_proto_TrackFrame& f = d.payload.track_frame;
@@ -205,7 +205,7 @@ TEST(DatagramEncoderTest, SixtyFourWorstCaseTracksSplitIntoPartsOfEleven) {
   RecordProperty("worst_case_11_track_datagram_bytes", static_cast<int>(largest));
 
   // 11 is the most that fits: the widest header (every varint at 10 bytes) plus 11 widest tracks
-  // stays within 1400 bytes, one more track would not.
+  // stays within the payload budget (1400 bytes less the widest envelope), one more would not.
   lrfnet_proto_Datagram d = Decode(sink.datagrams[0]);
   d.sequence = ~0ull;
   d.session_id = ~0ull;
@@ -217,7 +217,8 @@ TEST(DatagramEncoderTest, SixtyFourWorstCaseTracksSplitIntoPartsOfEleven) {
   ASSERT_TRUE(pb_get_encoded_size(&track_bytes, lrfnet_proto_Track_fields,
                                   &d.payload.track_frame.tracks[0]));
   const std::size_t one_more = stream.bytes_written + 1 /* tag */ + 1 /* length */ + track_bytes;
-  EXPECT_GT(one_more, kMaxDatagramBytes) << "a 12th track would fit: raise kTracksPerPart";
+  EXPECT_LE(stream.bytes_written, kMaxPayloadBytes);
+  EXPECT_GT(one_more, kMaxPayloadBytes) << "a 12th track would fit: raise kTracksPerPart";
   RecordProperty("widest_11_track_datagram_bytes", static_cast<int>(stream.bytes_written));
 }
 
@@ -289,10 +290,10 @@ TEST(DatagramEncoderTest, BackgroundSnapshotOf4561BeamsReassembles) {
   view.first_angle_rad = -1.658;
   view.angle_step_rad = 0.000727;
   view.range_m = ranges;
-  ASSERT_EQ(encoder.EncodeBackground(view, kSentNs, sink), 11u);
+  ASSERT_EQ(encoder.EncodeBackground(view, kSentNs, sink), 12u);
   std::vector<std::uint32_t> mm(ranges.size(), 0xdeadbeef);
   for (std::size_t p = 0; p < sink.datagrams.size(); ++p) {
-    EXPECT_LE(sink.datagrams[p].size(), kMaxDatagramBytes);
+    EXPECT_LE(sink.datagrams[p].size(), kMaxPayloadBytes);
     const lrfnet_proto_Datagram d = Decode(sink.datagrams[p]);
     ASSERT_EQ(d.which_payload, lrfnet_proto_Datagram_background_tag);
     const lrfnet_proto_BackgroundSnapshot& s = d.payload.background;
@@ -302,7 +303,7 @@ TEST(DatagramEncoderTest, BackgroundSnapshotOf4561BeamsReassembles) {
     EXPECT_EQ(s.angle_step_rad, 0.000727);
     EXPECT_EQ(s.beam_count, 4561u);
     EXPECT_EQ(s.part, p);
-    EXPECT_EQ(s.part_count, 11u);
+    EXPECT_EQ(s.part_count, 12u);
     EXPECT_EQ(s.first_beam, p * kBeamsPerPart);
     for (pb_size_t i = 0; i < s.ranges_mm_count; ++i) mm[s.first_beam + i] = s.ranges_mm[i];
   }
@@ -311,10 +312,10 @@ TEST(DatagramEncoderTest, BackgroundSnapshotOf4561BeamsReassembles) {
   }
   // The next snapshot has the next id.
   sink.datagrams.clear();
-  ASSERT_EQ(encoder.EncodeBackground(view, kSentNs, sink), 11u);
+  ASSERT_EQ(encoder.EncodeBackground(view, kSentNs, sink), 12u);
   EXPECT_EQ(Decode(sink.datagrams[0]).payload.background.snapshot_id, 1u);
   EXPECT_EQ(encoder.counters().snapshots, 2u);
-  EXPECT_EQ(encoder.counters().snapshot_parts, 22u);
+  EXPECT_EQ(encoder.counters().snapshot_parts, 24u);
 }
 
 TEST(DatagramEncoderTest, WidestSnapshotPartIsExactlyTheBudget) {
@@ -335,7 +336,7 @@ TEST(DatagramEncoderTest, WidestSnapshotPartIsExactlyTheBudget) {
   d.payload.background.first_beam = ~0u;
   std::size_t size = 0;
   ASSERT_TRUE(pb_get_encoded_size(&size, lrfnet_proto_Datagram_fields, &d));
-  EXPECT_EQ(size, kMaxDatagramBytes);
+  EXPECT_EQ(size, kMaxPayloadBytes);
   RecordProperty("widest_snapshot_part_bytes", static_cast<int>(size));
 }
 
@@ -445,7 +446,7 @@ TEST(DatagramEncoderTest, SensorInfoStringsAreBoundedAndPrintable) {
   EXPECT_EQ(p.accel_psd_m2ps3, 2.0);
   EXPECT_EQ(p.max_speed_mps, 6.0);
   EXPECT_EQ(encoder.counters().truncated_strings, 1u);
-  EXPECT_LE(sink.datagrams[0].size(), kMaxDatagramBytes);
+  EXPECT_LE(sink.datagrams[0].size(), kMaxPayloadBytes);
 }
 
 TEST(DatagramEncoderTest, SequenceCountsEveryDatagramOfTheSession) {

@@ -25,15 +25,30 @@ const char* ToString(RequestReject reason) {
       return "not a request";
     case RequestReject::kOtherSensor:
       return "addressed to another sensor";
+    case RequestReject::kUnsigned:
+      return "not sealed";
+    case RequestReject::kEnvelope:
+      return "malformed envelope";
+    case RequestReject::kWrongEpoch:
+      return "sealed with another key epoch";
+    case RequestReject::kWrongKey:
+      return "sealed with another key";
+    case RequestReject::kBadTag:
+      return "bad tag";
+    case RequestReject::kReplayed:
+      return "replayed";
     case RequestReject::kCount:
       break;
   }
   return "unknown";
 }
 
-RequestDecoder::RequestDecoder(std::string_view sensor_id) {
+RequestDecoder::RequestDecoder(std::string_view sensor_id,
+                               const std::optional<auth::SensorKeys>& keys)
+    : keys_(keys) {
   const std::size_t n = std::min(sensor_id.size(), kMaxSensorIdLength);
   if (n > 0) std::memcpy(sensor_id_.data(), sensor_id.data(), n);
+  sensor_id_length_ = n;
 }
 
 DecodedRequest RequestDecoder::Reject(RequestReject reason) {
@@ -46,6 +61,29 @@ DecodedRequest RequestDecoder::Reject(RequestReject reason) {
 DecodedRequest RequestDecoder::Decode(std::span<const std::uint8_t> datagram) {
   if (datagram.empty()) return Reject(RequestReject::kEmpty);
   if (datagram.size() > kMaxDatagramBytes) return Reject(RequestReject::kTooLarge);
+  if (!keys_) return DecodeProtobuf(datagram);
+  // Authenticated: everything about the envelope is checked before the protobuf is read.
+  if (!auth::LooksSealed(datagram)) return Reject(RequestReject::kUnsigned);
+  auth::Envelope e;
+  if (auth::ParseEnvelope(datagram, &e) != auth::HeaderError::kNone ||
+      e.direction != auth::Direction::kToTracker) {
+    return Reject(RequestReject::kEnvelope);
+  }
+  if (e.sensor_id != std::string_view(sensor_id_.data(), sensor_id_length_))
+    return Reject(RequestReject::kOtherSensor);
+  if (e.epoch != keys_->epoch) return Reject(RequestReject::kWrongEpoch);
+  if (e.key_id != keys_->key_id) return Reject(RequestReject::kWrongKey);
+  if (window_.Check(e.counter) != auth::ReplayWindow::Verdict::kFresh)
+    return Reject(RequestReject::kReplayed);
+  std::span<const std::uint8_t> payload;
+  if (!auth::OpenEnvelope(e, *keys_, plain_, &payload)) return Reject(RequestReject::kBadTag);
+  const DecodedRequest r = DecodeProtobuf(payload);
+  if (r.reject == RequestReject::kNone) window_.Commit(e.counter);
+  return r;
+}
+
+DecodedRequest RequestDecoder::DecodeProtobuf(std::span<const std::uint8_t> datagram) {
+  if (datagram.empty()) return Reject(RequestReject::kEmpty);
   pb_istream_t stream = pb_istream_from_buffer(datagram.data(), datagram.size());
   message_ = lrfnet_proto_Datagram{};  // nothing of an earlier datagram survives, padding included
   if (!pb_decode(&stream, lrfnet_proto_Datagram_fields, &message_))

@@ -43,7 +43,7 @@ std::optional<std::string> Validate(const UdpUplinkOptions& options) {
 }
 
 UdpUplink::UdpUplink(const UdpUplinkOptions& options)
-    : options_(options), decoder_(options.sensor_id) {
+    : options_(options), decoder_(options.sensor_id, options.keys) {
   if (const auto error = Validate(options)) {
     std::fprintf(stderr, "UdpUplink: invalid options: %s\n", error->c_str());
     std::abort();

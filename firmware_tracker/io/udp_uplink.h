@@ -10,7 +10,8 @@
 // - Poll() reads the datagrams queued on the socket (at most max_datagrams_per_poll per call) and
 //   decodes Requests (RequestDecoder). Because the socket is connected, the kernel delivers only
 //   datagrams from the daemon's address: the daemon answers from the socket the tracker sends to,
-//   to the tracker's source address. The pending flags accumulate until TakeRequests().
+//   to the tracker's source address. With keys, only sealed Requests count (see RequestDecoder).
+//   The pending flags accumulate until TakeRequests().
 // Not thread-safe: one thread sends and polls (or the caller serialises).
 
 #include <array>
@@ -32,6 +33,9 @@ struct UdpUplinkOptions {
   std::string sensor_id;      // this tracker's id: Requests for other ids are ignored
   int send_buffer_bytes = 0;  // SO_SNDBUF; 0 keeps the system default
   std::size_t max_datagrams_per_poll = 16;
+  // This sensor's keys when the uplink is authenticated: Requests must then be sealed for it
+  // (RequestDecoder). The datagrams sent are sealed before they reach Send (SealingSink).
+  std::optional<auth::SensorKeys> keys;
 };
 std::optional<std::string> Validate(const UdpUplinkOptions& options);
 

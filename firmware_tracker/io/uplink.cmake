@@ -22,9 +22,11 @@ add_library(lrfnet_uplink STATIC
   datagram_encoder.cc
   request_decoder.cc
   udp_uplink.cc
+  sealing_sink.cc
   recording_writer.cc)
 target_include_directories(lrfnet_uplink PUBLIC ${PROJECT_SOURCE_DIR} ${LRFNET_NANOPB_DIR})
-target_link_libraries(lrfnet_uplink PUBLIC lrfnet_tracking lrfnet_common nanopb::protobuf-nanopb-static)
+target_link_libraries(lrfnet_uplink PUBLIC lrfnet_tracking lrfnet_common lrfnet_auth
+                                           nanopb::protobuf-nanopb-static)
 lrfnet_warnings(lrfnet_uplink)
 if(LRFNET_FUZZ)
   target_compile_options(lrfnet_uplink PRIVATE -fsanitize=fuzzer-no-link,address,undefined)
@@ -34,7 +36,7 @@ endif()
 # so these also run in the tracker-only (aarch64) build.
 lrfnet_test(uplink_test
   SOURCES datagram_encoder_test.cc request_decoder_test.cc recording_writer_test.cc
-          udp_uplink_test.cc system_clock_test.cc
+          udp_uplink_test.cc system_clock_test.cc sealed_uplink_test.cc
   LIBS lrfnet_uplink)
 
 # Replaces the global allocation functions, so it is its own binary.

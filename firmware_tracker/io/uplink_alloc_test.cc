@@ -1,7 +1,8 @@
 // Zero heap allocations per scan on the uplink path after start-up (DESIGN.md quality bar): the
 // global operator new and (outside sanitizer builds) malloc and friends are replaced with counting
 // versions, and thousands of scans go through clock mapping, track-frame encoding, UDP send,
-// recording write, request polling, health, sensor info and background snapshots.
+// recording write, request polling, health, sensor info and background snapshots; unsealed, sealed
+// (SealingSink, sealed Requests verified) and sealed with encryption.
 
 #include <arpa/inet.h>
 #include <gtest/gtest.h>
@@ -17,10 +18,12 @@
 #include <filesystem>
 #include <memory>
 #include <new>
+#include <optional>
 #include <vector>
 
 #include "firmware_tracker/io/datagram_encoder.h"
 #include "firmware_tracker/io/recording_writer.h"
+#include "firmware_tracker/io/sealing_sink.h"
 #include "firmware_tracker/io/request_decoder.h"
 #include "firmware_tracker/io/system_clock.h"
 #include "firmware_tracker/io/udp_uplink.h"
@@ -46,29 +49,64 @@ TEST(UplinkAllocTest, CounterSeesAllocations) {
   }
 }
 
+enum class Sealing { kNone, kSigned, kEncrypted };
+
+auth::SensorKeys Keys() {
+  auth::Key site{};
+  site.fill(3);
+  return auth::DeriveSensorKeys(auth::DeriveSensorKey(site, kId), 1);
+}
+
+std::optional<auth::SensorKeys> KeysFor(Sealing sealing) {
+  if (sealing == Sealing::kNone) return std::nullopt;
+  return Keys();
+}
+
+auth::SealerOptions SealerFor(Sealing sealing, auth::Direction direction) {
+  auth::SealerOptions o;
+  o.sensor_id = kId;
+  o.keys = Keys();
+  o.direction = direction;
+  o.encrypt = sealing == Sealing::kEncrypted;
+  o.salt = 9;
+  o.first_counter = static_cast<std::uint64_t>(NowUtcNs());
+  return o;
+}
+
 struct Path {
   tracking::ClockMapper clock;
   DatagramEncoder encoder;
   UdpUplink uplink;
   RecordingWriter recording;
   DatagramFanout fanout;
+  std::optional<SealingSink> sealing;
   tracking::ScanTracks scan;
   std::vector<float> background;
-  Path(std::uint16_t port, const std::string& recording_path)
+  Path(std::uint16_t port, const std::string& recording_path, Sealing mode)
       : encoder(DatagramEncoderOptions{kId, 42}),
-        uplink(UdpUplinkOptions{"127.0.0.1", port, kId, 0, 16}),
+        uplink(UdpUplinkOptions{"127.0.0.1", port, kId, 0, 16, KeysFor(mode)}),
         recording(RecordingWriterOptions{recording_path, "lrfnet-tracker test",
                                          TrackerRecordSource(kId), 64 * 1024, 1.0}),
-        background(4561) {}
+        background(4561) {
+    if (mode != Sealing::kNone) sealing.emplace(SealerFor(mode, auth::Direction::kToDaemon), fanout);
+  }
+  DatagramSink& sink() {
+    if (sealing) return *sealing;
+    return fanout;
+  }
 };
 
-TEST(UplinkAllocTest, NoHeapAllocationPerScanAfterStart) {
+class UplinkAllocPathTest : public ::testing::TestWithParam<Sealing> {};
+
+TEST_P(UplinkAllocPathTest, NoHeapAllocationPerScanAfterStart) {
+  ASSERT_TRUE(auth::Init());
+  const Sealing mode = GetParam();
   // The daemon on loopback: receives the datagrams (drained, not checked) and sends Requests.
   ::lrfnet::testing::LoopbackUdpPeer daemon;
   ASSERT_TRUE(daemon.ok());
   const auto recording_path = std::filesystem::temp_directory_path() /
                               ("lrfnet_uplink_alloc_" + std::to_string(::getpid()) + ".rec");
-  auto path = std::make_unique<Path>(daemon.port(), recording_path.string());  // start-up
+  auto path = std::make_unique<Path>(daemon.port(), recording_path.string(), mode);  // start-up
   ASSERT_EQ(path->uplink.Open(), std::nullopt);
   ASSERT_EQ(path->recording.Open(NowUtcNs()), std::nullopt);
   ASSERT_TRUE(path->fanout.Add(&path->uplink));
@@ -76,7 +114,7 @@ TEST(UplinkAllocTest, NoHeapAllocationPerScanAfterStart) {
   for (std::size_t i = 0; i < path->background.size(); ++i)
     path->background[i] = i % 11 == 0 ? 0.0f : 2.0f + 0.001f * static_cast<float>(i);
   // The daemon learns the tracker's address from its first datagram.
-  path->encoder.EncodeHealth({}, NowUtcNs(), path->fanout);
+  path->encoder.EncodeHealth({}, NowUtcNs(), path->sink());
   {
     std::array<std::uint8_t, 2048> buf{};
     ASSERT_GT(daemon.ReceiveInto(buf, 1000), 0);
@@ -88,6 +126,9 @@ TEST(UplinkAllocTest, NoHeapAllocationPerScanAfterStart) {
   m.send_sensor_info = true;
   const std::size_t request_size = EncodeRequest(m, request);
   ASSERT_GT(request_size, 0u);
+  // The daemon seals every Request anew (a repeated one would be refused as replayed).
+  auth::Sealer daemon_sealer(SealerFor(mode, auth::Direction::kToTracker));
+  std::array<std::uint8_t, 64 + auth::kMaxOverheadBytes> sealed_request{};
 
   constexpr int kScans = 5000;  // 200 s at 25 Hz
   std::size_t requests_answered = 0, snapshots = 0, valid_stamps = 0;
@@ -115,7 +156,7 @@ TEST(UplinkAllocTest, NoHeapAllocationPerScanAfterStart) {
       t->kind =
           i % 2 ? tracking::MeasurementKind::kEllipse : tracking::MeasurementKind::kCenterOfMass;
     }
-    p.encoder.EncodeTracks(p.scan, receive, p.fanout);
+    p.encoder.EncodeTracks(p.scan, receive, p.sink());
 
     if (k % 25 == 0) {  // once a second: health and the daemon's requests
       const ClockStatus clock = ReadClockStatus();
@@ -128,10 +169,16 @@ TEST(UplinkAllocTest, NoHeapAllocationPerScanAfterStart) {
       h.clock_error_estimate_s = static_cast<float>(clock.esterror_s);
       h.tick_offset_s = mapping.offset_s;
       h.tick_drift_ppm = mapping.drift_ppm;
-      p.encoder.EncodeHealth(h, receive, p.fanout);
+      p.encoder.EncodeHealth(h, receive, p.sink());
       daemon.Drain();
       if (k % 500 == 0) {
-        daemon.Reply(std::span<const std::uint8_t>(request).first(request_size));
+        if (mode == Sealing::kNone) {
+          daemon.Reply(std::span<const std::uint8_t>(request).first(request_size));
+        } else {
+          const std::size_t sealed_size = daemon_sealer.Seal(
+              std::span<const std::uint8_t>(request).first(request_size), sealed_request);
+          daemon.Reply(std::span<const std::uint8_t>(sealed_request).first(sealed_size));
+        }
       }
       p.uplink.Poll();
       const PendingRequests pending = p.uplink.TakeRequests();
@@ -142,7 +189,7 @@ TEST(UplinkAllocTest, NoHeapAllocationPerScanAfterStart) {
         info.firmware = "V1.80";
         info.tracker_version = "test";
         info.beam_count = 4561;
-        p.encoder.EncodeSensorInfo(info, receive, p.fanout);
+        p.encoder.EncodeSensorInfo(info, receive, p.sink());
         ++requests_answered;
       }
       if (pending.send_background) {
@@ -151,7 +198,7 @@ TEST(UplinkAllocTest, NoHeapAllocationPerScanAfterStart) {
         view.first_angle_rad = -0.0873;
         view.angle_step_rad = 0.000727;
         view.range_m = p.background;
-        snapshots += p.encoder.EncodeBackground(view, receive, p.fanout) > 0 ? 1 : 0;
+        snapshots += p.encoder.EncodeBackground(view, receive, p.sink()) > 0 ? 1 : 0;
       }
     }
   }
@@ -168,9 +215,27 @@ TEST(UplinkAllocTest, NoHeapAllocationPerScanAfterStart) {
   EXPECT_GE(requests_answered, 5u);
   EXPECT_GE(snapshots, 5u);
   EXPECT_TRUE(p.clock.status().valid);
+  if (mode != Sealing::kNone) {
+    EXPECT_EQ(p.sealing->counters().sealed, p.encoder.counters().datagrams);
+    EXPECT_EQ(p.uplink.request_counters().accepted, p.uplink.counters().received);
+  }
   path->recording.Close();
   std::filesystem::remove(recording_path);
 }
+
+INSTANTIATE_TEST_SUITE_P(Sealing, UplinkAllocPathTest,
+                         ::testing::Values(Sealing::kNone, Sealing::kSigned, Sealing::kEncrypted),
+                         [](const ::testing::TestParamInfo<Sealing>& param) {
+                           switch (param.param) {
+                             case Sealing::kNone:
+                               return std::string("Unsealed");
+                             case Sealing::kSigned:
+                               return std::string("Signed");
+                             case Sealing::kEncrypted:
+                               return std::string("Encrypted");
+                           }
+                           return std::string("Unknown");
+                         });
 
 }  // namespace
 }  // namespace lrfnet::io

@@ -145,11 +145,11 @@ TEST(UplinkWireTest, ElevenWorstCaseTracksFitAndTwelveDoNot) {
   ASSERT_EQ(encoder.EncodeTracks(scan, -1, sink), 6u);
   std::size_t total = 0;
   for (const std::string& bytes : sink.datagrams) {
-    EXPECT_LE(bytes.size(), kMaxDatagramBytes);
+    EXPECT_LE(bytes.size(), kMaxPayloadBytes);
     total += static_cast<std::size_t>(Parse(bytes).track_frame().tracks_size());
   }
   EXPECT_EQ(total, tracking::kMaxTracks);
-  // Widen the header to its limits; 11 tracks still fit, a 12th does not.
+  // Widen the header to its limits; 11 tracks still fit the payload budget, a 12th does not.
   pb::Datagram d = Parse(sink.datagrams[0]);
   d.set_sequence(~0ull);
   d.set_session_id(~0ull);
@@ -157,9 +157,9 @@ TEST(UplinkWireTest, ElevenWorstCaseTracksFitAndTwelveDoNot) {
   d.mutable_track_frame()->set_part_count(~0u);
   ASSERT_EQ(d.track_frame().tracks_size(), 11);
   const std::size_t widest = d.ByteSizeLong();
-  EXPECT_LE(widest, kMaxDatagramBytes);
+  EXPECT_LE(widest, kMaxPayloadBytes);
   *d.mutable_track_frame()->add_tracks() = d.track_frame().tracks(0);
-  EXPECT_GT(d.ByteSizeLong(), kMaxDatagramBytes);
+  EXPECT_GT(d.ByteSizeLong(), kMaxPayloadBytes);
   RecordProperty("widest_11_track_datagram_bytes", static_cast<int>(widest));
 }
 
@@ -175,10 +175,10 @@ TEST(UplinkWireTest, BackgroundSnapshotOf4561BeamsReassembles) {
   view.first_angle_rad = -0.0873;
   view.angle_step_rad = 0.000727;
   view.range_m = ranges;
-  ASSERT_EQ(encoder.EncodeBackground(view, kSentNs, sink), 11u);
+  ASSERT_EQ(encoder.EncodeBackground(view, kSentNs, sink), 12u);
   std::vector<std::uint32_t> mm(ranges.size(), 0xdeadbeef);
   for (std::size_t p = 0; p < sink.datagrams.size(); ++p) {
-    EXPECT_LE(sink.datagrams[p].size(), kMaxDatagramBytes);
+    EXPECT_LE(sink.datagrams[p].size(), kMaxPayloadBytes);
     const pb::Datagram d = Parse(sink.datagrams[p]);
     ASSERT_EQ(d.payload_case(), pb::Datagram::kBackground);
     const pb::BackgroundSnapshot& s = d.background();
@@ -188,7 +188,7 @@ TEST(UplinkWireTest, BackgroundSnapshotOf4561BeamsReassembles) {
     EXPECT_EQ(s.angle_step_rad(), 0.000727);
     EXPECT_EQ(s.beam_count(), 4561u);
     EXPECT_EQ(s.part(), p);
-    EXPECT_EQ(s.part_count(), 11u);
+    EXPECT_EQ(s.part_count(), 12u);
     for (int i = 0; i < s.ranges_mm_size(); ++i)
       mm.at(s.first_beam() + static_cast<std::uint32_t>(i)) = s.ranges_mm(i);
   }
@@ -216,9 +216,9 @@ TEST(UplinkWireTest, BeamsPerPartIsTheMostThatFits) {
   s->set_part(~0u);
   s->set_part_count(~0u);
   s->set_first_beam(~0u);
-  EXPECT_EQ(d.ByteSizeLong(), kMaxDatagramBytes);
+  EXPECT_EQ(d.ByteSizeLong(), kMaxPayloadBytes);
   s->add_ranges_mm(kMaxRangeMm);
-  EXPECT_GT(d.ByteSizeLong(), kMaxDatagramBytes);
+  EXPECT_GT(d.ByteSizeLong(), kMaxPayloadBytes);
 }
 
 TEST(UplinkWireTest, HealthAndSensorInfoParse) {
