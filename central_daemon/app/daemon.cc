@@ -3,6 +3,7 @@
 #include <fmt/format.h>
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
@@ -86,7 +87,19 @@ void Daemon::OnTick(common::UtcNs now_ns) {
   if (!options_.send_requests || requests_ == nullptr) return;
   for (const PendingRequest& r : ingest_.TakeRequests(now_ns)) {
     const auto bytes = EncodeRequestDatagram(r, request_sequence_++, now_ns, session_id_);
-    if (requests_->SendTo(r.source, bytes)) {
+    std::span<const std::uint8_t> out = bytes;
+    std::array<std::uint8_t, kMaxDatagramBytes> sealed{};
+    if (ingest_.authenticated()) {
+      // Sealed with the sensor's key for the tracker direction; a sensor without a verified
+      // datagram gets none (it cannot have asked for anything).
+      const std::size_t n = ingest_.SealRequest(r.sensor_id, bytes, sealed);
+      if (n == 0) {
+        ++requests_dropped_;
+        continue;
+      }
+      out = std::span<const std::uint8_t>(sealed).first(n);
+    }
+    if (requests_->SendTo(r.source, out)) {
       ++requests_sent_;
     } else {
       ++requests_dropped_;
@@ -187,6 +200,24 @@ std::string Daemon::StatusLine(common::UtcNs now_ns) {
                         ClockText(*r.status));
   }
   if (rows.size() > shown) line += fmt::format(" | +{} more", rows.size() - shown);
+  // Authentication: what was refused since the start, by reason (all sensors and unattributed).
+  if (!ingest_.authenticated()) {
+    line += " | UNAUTHENTICATED (no --keys)";
+  } else {
+    std::array<std::uint64_t, kRejectReasonCount> refused = c.unattributed;
+    for (const SensorStatus& s : sensors) {
+      for (std::size_t i = 0; i < kRejectReasonCount; ++i) refused[i] += s.counters.rejected[i];
+    }
+    std::string reasons;
+    for (std::size_t i = static_cast<std::size_t>(RejectReason::kUnsigned); i < kRejectReasonCount;
+         ++i) {
+      if (refused[i] == 0) continue;
+      reasons += fmt::format("{}{} {}", reasons.empty() ? "" : ", ",
+                             ToString(static_cast<RejectReason>(i)), refused[i]);
+    }
+    line += fmt::format(" | auth: {} verified, refused {}", c.verified,
+                        reasons.empty() ? "none" : reasons);
+  }
 
   status_since_ns_ = now_ns;
   status_counters_ = c;

@@ -72,6 +72,10 @@ class Daemon final : public IngestListener {
   void OnTick(common::UtcNs now_ns);
   // Applies what may change at run time (validation, silence, requests, retention).
   void Reconfigure(const DaemonOptions& options);
+  // The authentication state of an earlier run (lrfnetd's state directory).
+  void RestoreAuthState(const std::vector<StoredAuthState>& state) {
+    ingest_.RestoreAuthState(state);
+  }
 
   // One line: sensors (active/silent), datagram rate and accepted/invalid since the last status
   // line, loss, store size, and per sensor (the worst few when there are many): rate, loss and

@@ -21,6 +21,9 @@ nlohmann::json StatsJson(const Ingest& ingest, const TrackStore& store) {
   j["accepted"] = c.accepted;
   j["rejected"] = c.rejected;
   j["unattributed"] = Reasons(c.unattributed);
+  j["authenticated"] = ingest.authenticated();
+  j["verified"] = c.verified;
+  j["unverified"] = c.unverified;
   j["store"] = {{"frames", store.frames()},
                 {"bytes_used", store.bytes_used()},
                 {"frames_added", store.counters().frames_added},

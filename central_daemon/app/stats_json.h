@@ -1,6 +1,7 @@
 #pragma once
 // The daemon's counters as JSON (lrfnetd --stats-out, tests, benchmarks): totals, rejections by
-// reason (RejectReason names), and per sensor its datagrams by kind, rejections, sequence state,
+// reason (RejectReason names), authentication (authenticated: keys configured; verified /
+// unverified: accepted sealed datagrams read with / without keys), and per sensor its datagrams by kind, rejections, sequence state,
 // silence, clock state, description and store size.
 
 #include <nlohmann/json.hpp>

@@ -84,6 +84,26 @@ const char* ToString(RejectReason reason) {
       return "timestamp";
     case RejectReason::kDuplicate:
       return "duplicate";
+    case RejectReason::kUnsigned:
+      return "unsigned";
+    case RejectReason::kAuthHeader:
+      return "auth_header";
+    case RejectReason::kUnknownSensor:
+      return "unknown_sensor";
+    case RejectReason::kWrongEpoch:
+      return "wrong_epoch";
+    case RejectReason::kWrongKey:
+      return "wrong_key";
+    case RejectReason::kReplayed:
+      return "replayed";
+    case RejectReason::kStale:
+      return "stale";
+    case RejectReason::kBadTag:
+      return "bad_tag";
+    case RejectReason::kEncrypted:
+      return "encrypted";
+    case RejectReason::kAuthMismatch:
+      return "auth_mismatch";
     case RejectReason::kCount:
       break;
   }
@@ -129,6 +149,7 @@ std::optional<std::string> Validate(const ValidationOptions& o) {
 
 std::optional<std::string> Validate(const IngestOptions& o) {
   if (auto error = Validate(o.validation)) return error;
+  if (auto error = Validate(o.auth)) return "auth." + *error;
   if (o.max_sensors == 0 || o.max_sensors > 1'000'000) return "max_sensors must be in [1, 1000000]";
   if (o.reorder_window_datagrams == 0 || o.reorder_window_datagrams > kMaxSequenceWindow)
     return "reorder_window_datagrams must be in [1, 65536]";
@@ -169,6 +190,7 @@ Ingest::Ingest(const IngestOptions& options, IngestListener* listener)
     std::abort();
   }
   decoder_ = std::make_unique<DatagramDecoder>(options.validation);
+  verifier_ = std::make_unique<DatagramVerifier>(options.auth);
 }
 
 Ingest::~Ingest() = default;
@@ -177,6 +199,7 @@ void Ingest::Reconfigure(const IngestOptions& options) {
   IngestOptions merged = options;
   merged.max_sensors = options_.max_sensors;
   merged.reorder_window_datagrams = options_.reorder_window_datagrams;
+  merged.auth = options_.auth;
   if (const auto error = Validate(merged)) {
     std::fprintf(stderr, "Ingest::Reconfigure: invalid options: %s\n", error->c_str());
     std::abort();
@@ -225,14 +248,70 @@ Ingest::SensorState* Ingest::FindOrAdd(std::string_view sensor_id, common::UtcNs
   return sensor;
 }
 
+namespace {
+
+RejectReason ReasonOf(AuthFailure failure) {
+  switch (failure) {
+    case AuthFailure::kUnsigned:
+      return RejectReason::kUnsigned;
+    case AuthFailure::kHeader:
+      return RejectReason::kAuthHeader;
+    case AuthFailure::kUnknownSensor:
+      return RejectReason::kUnknownSensor;
+    case AuthFailure::kWrongEpoch:
+      return RejectReason::kWrongEpoch;
+    case AuthFailure::kWrongKey:
+      return RejectReason::kWrongKey;
+    case AuthFailure::kAhead:
+      return RejectReason::kTimestamp;
+    case AuthFailure::kReplayed:
+      return RejectReason::kReplayed;
+    case AuthFailure::kStale:
+      return RejectReason::kStale;
+    case AuthFailure::kBadTag:
+      return RejectReason::kBadTag;
+    case AuthFailure::kEncrypted:
+      return RejectReason::kEncrypted;
+    case AuthFailure::kNone:
+      break;
+  }
+  return RejectReason::kCount;
+}
+
+}  // namespace
+
+Disposition Ingest::RejectUnverified(RejectReason reason, std::string_view sensor_id,
+                                     const std::string& detail, std::string_view source) {
+  // Counted at the envelope's sensor only when it is known already: a forged datagram must not
+  // create sensors, count as a sign of life or change the address Requests go to.
+  SensorState* sensor = nullptr;
+  if (!sensor_id.empty()) {
+    if (const auto it = sensors_.find(sensor_id); it != sensors_.end()) sensor = it->second.get();
+  }
+  if (sensor != nullptr) ++sensor->status.counters.datagrams;
+  return Reject(reason, sensor, detail + " (from " + std::string(source) + ")");
+}
+
 Disposition Ingest::OnDatagram(std::span<const std::uint8_t> bytes, std::string_view source,
                                common::UtcNs receive_ns) {
   ++counters_.datagrams;
   counters_.bytes += bytes.size();
-  const DecodeStatus status = decoder_->Decode(bytes, receive_ns);
+  // Verified before anything of the protobuf is read (sizes first: their reasons stay the same).
+  AuthResult auth;
+  auth.payload = bytes;
+  if (!bytes.empty() && bytes.size() <= kMaxDatagramBytes) {
+    auth = verifier_->Verify(bytes, receive_ns);
+    if (!auth.ok())
+      return RejectUnverified(ReasonOf(auth.failure), auth.sensor_id, auth.detail, source);
+  }
+  const DecodeStatus status = decoder_->Decode(auth.payload, receive_ns);
   if (!status.attributed) return Reject(status.reason, nullptr, decoder_->detail());
 
   const proto::Datagram& d = decoder_->datagram();
+  if (auth.sealed && d.sensor_id() != auth.sensor_id) {
+    return RejectUnverified(RejectReason::kAuthMismatch, auth.sensor_id,
+                            "the datagram names sensor '" + d.sensor_id() + "'", source);
+  }
   SensorState* sensor = FindOrAdd(d.sensor_id(), receive_ns);
   if (sensor == nullptr) {
     return Reject(RejectReason::kTooManySensors, nullptr, "the table of sensors is full");
@@ -294,6 +373,14 @@ Disposition Ingest::OnDatagram(std::span<const std::uint8_t> bytes, std::string_
   }
   sensor->receive_minus_sent_s.Add(receive_ns, common::NsToSeconds(receive_minus_sent_ns));
   ++counters_.accepted;
+  if (auth.sealed) {
+    if (auth.verified) {
+      verifier_->Commit(auth);
+      ++counters_.verified;
+    } else {
+      ++counters_.unverified;
+    }
+  }
 
   switch (d.payload_case()) {
     case proto::Datagram::kTrackFrame:
@@ -375,6 +462,21 @@ SensorStatus Ingest::StatusOf(const SensorState& sensor) const {
   out.counters.backgrounds_abandoned = sensor.background.counters().abandoned;
   out.receive_minus_sent_s = sensor.receive_minus_sent_s.Value();
   return out;
+}
+
+bool Ingest::authenticated() const { return verifier_->enabled(); }
+
+std::vector<StoredAuthState> Ingest::AuthState() const { return verifier_->State(); }
+
+void Ingest::RestoreAuthState(const std::vector<StoredAuthState>& state) {
+  verifier_->Restore(state);
+}
+
+std::uint64_t Ingest::auth_changes() const { return verifier_->changes(); }
+
+std::size_t Ingest::SealRequest(std::string_view sensor_id, std::span<const std::uint8_t> payload,
+                                std::span<std::uint8_t> out) {
+  return verifier_->SealRequest(sensor_id, payload, out);
 }
 
 std::vector<SensorStatus> Ingest::Sensors() const {

@@ -1,6 +1,9 @@
 #pragma once
 // The daemon's ingest core (pure: no socket, no clock, no logging; time is passed in). Every
-// received datagram goes through OnDatagram: it is decoded (libprotobuf-lite), validated, checked
+// received datagram goes through OnDatagram: it is verified against the sensor keys when keys are
+// configured (datagram_verifier.h: before anything of its protobuf is read; a datagram refused
+// there counts at its sensor only when that sensor is known already, never creates one, is no
+// sign of life and changes no source address), decoded (libprotobuf-lite), validated, checked
 // against its sensor's sequence state, turned into the value types of sensor_data.h and handed to
 // the listener. An invalid datagram is counted per sensor and reason (or, when it names no valid
 // sensor, per reason under "unattributed") and dropped; nothing in it can crash the ingest or make
@@ -51,6 +54,7 @@
 #include <string_view>
 #include <vector>
 
+#include "central_daemon/ingest/datagram_verifier.h"
 #include "central_daemon/ingest/sensor_data.h"
 #include "common/time.h"
 
@@ -74,6 +78,17 @@ enum class RejectReason : std::uint8_t {
   kPart,            // "part": part >= part_count, part_count 0 or above the bound, beams outside
   kTimestamp,       // "timestamp": outside the accepted window (see ValidationOptions)
   kDuplicate,       // "duplicate": sequence number already received in this session
+  // Authentication (datagram_verifier.h says when each applies).
+  kUnsigned,        // "unsigned": keys configured, datagram not sealed
+  kAuthHeader,      // "auth_header": malformed envelope, or sealed for the other direction
+  kUnknownSensor,   // "unknown_sensor": no key for the envelope's sensor id
+  kWrongEpoch,      // "wrong_epoch": no key of that epoch, or an epoch older than the one in use
+  kWrongKey,        // "wrong_key": sealed with another key (key id)
+  kReplayed,        // "replayed": envelope counter accepted before
+  kStale,           // "stale": counter older than the window or than the state stored at restart
+  kBadTag,          // "bad_tag": forged or damaged
+  kEncrypted,       // "encrypted": encrypted, and no keys to read it
+  kAuthMismatch,    // "auth_mismatch": the Datagram names another sensor than its envelope
   kCount
 };
 inline constexpr std::size_t kRejectReasonCount = static_cast<std::size_t>(RejectReason::kCount);
@@ -99,6 +114,7 @@ std::optional<std::string> Validate(const ValidationOptions& options);
 
 struct IngestOptions {
   ValidationOptions validation;
+  AuthOptions auth;  // keys: fixed for the ingest's life (Reconfigure keeps them)
   std::size_t max_sensors = 1024;
   std::uint32_t reorder_window_datagrams = 1024;  // <= 65536
   std::uint64_t max_sequence_jump = 1000000;
@@ -186,6 +202,8 @@ struct IngestCounters {
   std::uint64_t bytes = 0;
   std::uint64_t accepted = 0;
   std::uint64_t rejected = 0;
+  std::uint64_t verified = 0;    // accepted, sealed and verified with the sensor's key
+  std::uint64_t unverified = 0;  // accepted, sealed but read without keys (not verified)
   // Rejected datagrams that name no valid sensor (malformed, bad sensor id, too many sensors...).
   std::array<std::uint64_t, kRejectReasonCount> unattributed{};
 };
@@ -223,6 +241,17 @@ class Ingest {
   // max_sensors and the reorder window keep their values. Precondition: Validate(options).
   void Reconfigure(const IngestOptions& options);
 
+  // Keys configured: every datagram must be sealed.
+  bool authenticated() const;
+  // The verifier's state to store across restarts, and to restore at start; auth_changes() grows
+  // with every accepted sealed datagram.
+  std::vector<StoredAuthState> AuthState() const;
+  void RestoreAuthState(const std::vector<StoredAuthState>& state);
+  std::uint64_t auth_changes() const;
+  // Seals a Request for `sensor_id` (see DatagramVerifier::SealRequest); 0 when it cannot.
+  std::size_t SealRequest(std::string_view sensor_id, std::span<const std::uint8_t> payload,
+                          std::span<std::uint8_t> out);
+
   std::vector<SensorStatus> Sensors() const;  // sorted by sensor id
   std::optional<SensorStatus> Sensor(std::string_view sensor_id) const;
   const IngestCounters& counters() const { return counters_; }
@@ -239,7 +268,11 @@ class Ingest {
   void Emit(SensorEventKind kind, const std::string& sensor_id, common::UtcNs time_ns);
   SensorStatus StatusOf(const SensorState& sensor) const;
 
+  Disposition RejectUnverified(RejectReason reason, std::string_view sensor_id,
+                               const std::string& detail, std::string_view source);
+
   std::unique_ptr<DatagramDecoder> decoder_;
+  std::unique_ptr<DatagramVerifier> verifier_;
   TrackFrameData frame_;       // reused for every track frame handed to the listener
   BackgroundScan background_;  // filled when a snapshot completes
 };
