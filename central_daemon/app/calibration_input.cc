@@ -30,9 +30,10 @@ calib::CalibrationInput CalibrationInputFrom(const Ingest& ingest, const TrackSt
 
 bool LoadCalibrationInput(const std::vector<std::string>& paths, std::uint16_t udp_port,
                           calib::CalibrationInput* input, LoadCounters* counters,
-                          std::string* error) {
+                          std::string* error, const AuthOptions& auth) {
   DaemonOptions options;
   options.send_requests = false;
+  options.ingest.auth = auth;
   // Offline: keep everything the files hold (no tick, so no age eviction; memory stays bounded
   // by the store's byte limit).
   Daemon core(options, nullptr, nullptr, /*session_id=*/1);
@@ -59,6 +60,8 @@ bool LoadCalibrationInput(const std::vector<std::string>& paths, std::uint16_t u
     }
   }
   local.invalid = core.ingest().counters().rejected;
+  local.verified = core.ingest().counters().verified;
+  local.unverified = core.ingest().counters().unverified;
   *input = CalibrationInputFrom(core.ingest(), core.store());
   if (counters != nullptr) *counters = local;
   return true;

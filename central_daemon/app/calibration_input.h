@@ -24,14 +24,19 @@ calib::CalibrationInput CalibrationInputFrom(
 struct LoadCounters {
   std::uint64_t files = 0;
   std::uint64_t datagrams = 0;
-  std::uint64_t invalid = 0;  // rejected by the ingest's validation
+  std::uint64_t invalid = 0;     // rejected by the ingest (validation, and the keys when given)
+  std::uint64_t verified = 0;    // sealed and verified with the keys
+  std::uint64_t unverified = 0;  // sealed, read without keys
 };
 
 // Reads every file (recordings, with their rotation parts, or pcap/pcapng captures of the UDP
 // stream: only datagrams to udp_port, 0 = all) in order. False with a one-line *error naming the
-// file when one cannot be opened or is corrupt; invalid datagrams are only counted.
+// file when one cannot be opened or is corrupt; invalid datagrams are only counted. With keys
+// (auth.keys), every datagram is verified as lrfnetd does (fresh windows: forged and repeated ones
+// in the files are dropped); without, sealed plain datagrams are read unverified and encrypted
+// ones dropped (datagram_verifier.h).
 bool LoadCalibrationInput(const std::vector<std::string>& paths, std::uint16_t udp_port,
                           calib::CalibrationInput* input, LoadCounters* counters,
-                          std::string* error);
+                          std::string* error, const AuthOptions& auth = {});
 
 }  // namespace lrfnet::daemon

@@ -42,6 +42,23 @@ void VisitRecord(DaemonConfig& c, ConfigVisitor& v) {
           "Data reaches the file at least this often: a kill loses at most this much.");
 }
 
+void VisitAuth(DaemonConfig& c, ConfigVisitor& v) {
+  v.Section("auth",
+            "Authenticated datagrams (lrfnet.proto, common/datagram_auth.h): with keys, a datagram "
+            "is verified before it is decoded, and unsigned, forged, replayed, stale and wrong-key "
+            "datagrams are dropped and counted per reason; Requests go out sealed. Without keys "
+            "the network is unauthenticated (warned at start, in the status line and the live "
+            "view). Changes need a restart.");
+  v.Field("keys", c.auth_keys_dir,
+          "Folder of the sensor keys (sensor-<id>-e<epoch>.key from lrfnet keys derive; every "
+          "sensor with a key is known, others are refused), or $CREDENTIALS_DIRECTORY for "
+          "systemd credentials. Empty: unauthenticated. --keys.");
+  v.Field("state_dir", c.auth_state_dir,
+          "Where the newest epoch and highest counter of every sensor are kept, so that a "
+          "restarted daemon refuses yesterday's datagrams. Empty: $STATE_DIRECTORY (systemd's "
+          "StateDirectory) when set, else not kept. --state-dir.");
+}
+
 void VisitValidation(ValidationOptions& o, ConfigVisitor& v) {
   v.Section("validation",
             "Datagrams outside these bounds are dropped and counted per sensor and reason.");
@@ -237,6 +254,11 @@ void VisitLiveView(DaemonConfig& c, ConfigVisitor& v) {
   VisitInteger(v, "max_clients", c.live_view_max_clients, "Browser connections served at most.");
   VisitInteger(v, "background_points", c.live_view_background_points,
                "Background points per sensor sent to the page (decimated).");
+  v.Field("token_file", c.live_view_token_file,
+          "A file holding the access token (lrfnet keys token; mode 0600), or "
+          "$CREDENTIALS_DIRECTORY/NAME. With a token, the page, /state and the WebSocket need it "
+          "(?token=... in the URL, or an 'Authorization: Bearer' header). Required when listen "
+          "is not a loopback address. --live-view-token-file.");
 }
 
 void VisitZones(DaemonConfig& c, ConfigVisitor& v) {
@@ -402,9 +424,25 @@ std::optional<std::string> ValidateZonesAndMqtt(DaemonConfig& c) {
 
 }  // namespace
 
+bool IsLoopbackHost(std::string_view host) {
+  if (host == "localhost" || host == "::1" || host == "0:0:0:0:0:0:0:1") return true;
+  // 127.0.0.0/8 as a dotted quad.
+  if (host.rfind("127.", 0) != 0) return false;
+  int dots = 0;
+  for (const char ch : host) {
+    if (ch == '.') {
+      ++dots;
+    } else if (ch < '0' || ch > '9') {
+      return false;
+    }
+  }
+  return dots == 3;
+}
+
 void VisitDaemonConfig(DaemonConfig& c, ConfigVisitor& v) {
   VisitListen(c, v);
   VisitRecord(c, v);
+  VisitAuth(c, v);
   VisitValidation(c.ingest.validation, v);
   VisitSensors(c, v);
   VisitStore(c, v);
@@ -448,9 +486,18 @@ std::optional<std::string> Validate(DaemonConfig& c) {
   if (!(c.fusion_publish_hz >= 0.1 && c.fusion_publish_hz <= 1000.0))
     return "fusion.publish_hz: must be in [0.1, 1000]";
   if (auto e = Prefixed("fusion", fusion::Validate(c.fusion))) return e;
-  if (!c.live_view_listen.empty() &&
-      !common::ParseHostPort(c.live_view_listen, "live_view.listen", 0, &error, true))
-    return error;
+  if (!c.live_view_listen.empty()) {
+    // A bare port: loopback only.
+    if (c.live_view_listen.find_first_not_of("0123456789") == std::string::npos)
+      c.live_view_listen = "127.0.0.1:" + c.live_view_listen;
+    const auto live = common::ParseHostPort(c.live_view_listen, "live_view.listen", 0, &error, true);
+    if (!live) return error;
+    if (!IsLoopbackHost(live->host) && c.live_view_token_file.empty()) {
+      return "live_view.listen: " + c.live_view_listen +
+             " is reachable from other hosts: set live_view.token_file (lrfnet keys token) or "
+             "listen on 127.0.0.1";
+    }
+  }
   if (!(c.live_view_publish_hz >= 0.1 && c.live_view_publish_hz <= 100.0))
     return "live_view.publish_hz: must be in [0.1, 100]";
   if (c.live_view_max_clients < 1 || c.live_view_max_clients > 10000)

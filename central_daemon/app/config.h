@@ -88,11 +88,18 @@ struct DaemonConfig {
   double zones_update_hz = 10.0;
   // MQTT (section `mqtt`).
   MqttConfig mqtt;
+  std::string live_view_token_file;  // access token; required when listening beyond loopback
+  // Authenticated datagrams (section `auth`); changes need a restart.
+  std::string auth_keys_dir;   // folder of sensor keys; empty: not authenticated
+  std::string auth_state_dir;  // where the replay state is kept; empty: $STATE_DIRECTORY
 };
 
-// Lists every option (sections listen, record, validation, sensors, store, status, calibration,
-// fusion, live_view, zones, mqtt).
+// Lists every option (sections listen, record, auth, validation, sensors, store, status,
+// calibration, fusion, live_view, zones, mqtt).
 void VisitDaemonConfig(DaemonConfig& config, common::ConfigVisitor& visitor);
+
+// 127.0.0.0/8, ::1 or localhost: an address only this host can reach.
+bool IsLoopbackHost(std::string_view host);
 
 // Every option, with the prefix of its section ("store.max_age_s: must be > 0"). Also parses
 // `listen` into receiver.address/port and `zones.list` into zones.

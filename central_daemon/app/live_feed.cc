@@ -51,6 +51,7 @@ LiveState LiveFeed::Build(const Daemon& daemon, const CalibrationService& calibr
   LiveState state;
   state.stamp_ns = fusion.now_ns() != 0 ? fusion.now_ns() : now_ns;
   state.version = version;
+  state.authenticated = daemon.ingest().authenticated();
 
   // Calibration.
   const auto& latest = calibration.latest();

@@ -304,6 +304,8 @@ std::string LiveStateJson(const LiveState& state) {
   w.Int(state.stamp_ns);
   w.Key("version");
   w.String(state.version);
+  w.Key("authenticated");
+  w.Bool(state.authenticated);
   w.Key("calibration");
   WriteCalibration(w, state.calibration);
   w.Key("sensors");

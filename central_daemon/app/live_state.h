@@ -76,6 +76,9 @@ struct LiveZone {
 struct LiveState {
   common::UtcNs stamp_ns = 0;
   std::string version;
+  // Keys configured (lrfnetd --keys): false makes the page warn that the network is
+  // unauthenticated.
+  bool authenticated = true;
   LiveCalibration calibration;
   std::vector<LiveSensor> sensors;
   std::vector<LiveTrack> tracks;
@@ -84,7 +87,7 @@ struct LiveState {
 };
 
 // One JSON object, e.g.
-// {"type":"state","stamp_ns":..,"version":"..","calibration":{"state":"calibrated",...},
+// {"type":"state","stamp_ns":..,"version":"..","authenticated":true,"calibration":{"state":"calibrated",...},
 //  "sensors":[{"id":"s1","placed":true,"x_m":..,"y_m":..,"yaw_rad":..,"first_angle_rad":..,
 //   "fov_rad":..,"max_range_m":..,"status":"active",...,"background":[[x,y],...]}],
 //  "tracks":[{"sensor":"s1","id":3,"state":"confirmed","x_m":..,...,"fused":7}],

@@ -37,6 +37,7 @@
 #include <string>
 #include <vector>
 
+#include "central_daemon/app/auth_files.h"
 #include "central_daemon/app/calibration_input.h"
 #include "central_daemon/app/calibration_service.h"
 #include "central_daemon/app/config.h"
@@ -53,6 +54,7 @@
 #include "central_daemon/io/live_view_server.h"
 #include "central_daemon/io/recording_writer.h"
 #include "central_daemon/io/udp_receiver.h"
+#include "common/datagram_auth.h"
 #include "common/host_port.h"
 #include "common/systemd_notify.h"
 #include "google/protobuf/stubs/logging.h"
@@ -174,6 +176,9 @@ struct RunOptions {
   std::optional<std::string> fused_udp_flag;
   std::optional<std::string> mqtt_flag;
   std::optional<std::string> mqtt_site_flag;
+  std::optional<std::string> keys_flag;
+  std::optional<std::string> state_dir_flag;
+  std::optional<std::string> live_view_token_flag;
   double duration_s = 0.0;
   std::string stats_out;
 };
@@ -201,6 +206,9 @@ std::optional<std::string> LoadConfig(const RunOptions& run, DaemonConfig* confi
   if (run.fused_udp_flag) c.fusion_publish = *run.fused_udp_flag;
   if (run.mqtt_flag) c.mqtt.broker = *run.mqtt_flag;
   if (run.mqtt_site_flag) c.mqtt.site = *run.mqtt_site_flag;
+  if (run.keys_flag) c.auth_keys_dir = *run.keys_flag;
+  if (run.state_dir_flag) c.auth_state_dir = *run.state_dir_flag;
+  if (run.live_view_token_flag) c.live_view_token_file = *run.live_view_token_flag;
   if (auto e = Validate(c)) return (run.config_path.empty() ? "" : run.config_path + ": ") + *e;
   *config = c;
   return std::nullopt;
@@ -326,7 +334,32 @@ LiveViewOptions LiveOptions(const DaemonConfig& config) {
   return o;
 }
 
+// auth.keys: the sensor keys into the ingest's options (live: also the counter check and the
+// Requests' salt and counter). Without keys, the warning that the network is unauthenticated.
+std::optional<std::string> SetUpAuth(DaemonConfig& config, bool live) {
+  if (config.auth_keys_dir.empty()) {
+    spdlog::warn("no --keys: the network is unauthenticated; any host that can send to this "
+                 "port can feed tracks into calibration and fusion (README: Keys)");
+    return std::nullopt;
+  }
+  if (!auth::Init()) return std::string("--keys: libsodium cannot be initialised");
+  AuthOptions& a = config.ingest.auth;
+  if (auto e = LoadSensorKeys(config.auth_keys_dir, &a)) return "--keys " + *e;
+  if (live) {
+    a.max_counter_ahead_s = config.ingest.validation.max_future_s;
+    auth::RandomBytes(std::span(reinterpret_cast<std::uint8_t*>(&a.request_salt), sizeof a.request_salt));
+    a.request_first_counter = static_cast<std::uint64_t>(NowUtcNs());
+  }
+  spdlog::info("authenticated datagrams: {} sensor key(s) from {}", a.keys.size(),
+               config.auth_keys_dir);
+  return std::nullopt;
+}
+
 int RunLive(const RunOptions& run, DaemonConfig config) {
+  if (auto e = SetUpAuth(config, true)) {
+    std::fprintf(stderr, "lrfnetd: %s\n", e->c_str());
+    return kExitFailure;
+  }
   asio::io_context io;
   std::optional<Recorder> recorder;
   if (!config.record_path.empty()) {
@@ -338,6 +371,21 @@ int RunLive(const RunOptions& run, DaemonConfig config) {
   }
   Replies replies;
   Daemon daemon(CoreOptions(config), recorder ? &*recorder : nullptr, &replies, RandomSessionId());
+  AuthStateFile auth_state(config.auth_state_dir);
+  if (daemon.ingest().authenticated()) {
+    std::vector<StoredAuthState> stored;
+    if (auto e = auth_state.Load(&stored)) {
+      std::fprintf(stderr, "lrfnetd: auth state: %s\n", e->c_str());
+      return kExitFailure;
+    }
+    daemon.RestoreAuthState(stored);
+    if (auth_state.path().empty()) {
+      spdlog::warn("no --state-dir (nor $STATE_DIRECTORY): after a restart this daemon would "
+                   "accept datagrams of its earlier run once more");
+    } else {
+      spdlog::info("replay state {} ({} sensors)", auth_state.path(), stored.size());
+    }
+  }
   CalibrationService calibration(io, config);
   FusionService fusion(io, config);
   if (std::string e = fusion.Open(); !e.empty()) {
@@ -365,7 +413,14 @@ int RunLive(const RunOptions& run, DaemonConfig config) {
   std::optional<LiveViewServer> live_view;
   LiveFeed live_feed(static_cast<std::size_t>(config.live_view_background_points));
   if (!config.live_view_listen.empty()) {
-    live_view.emplace(io, LiveOptions(config));
+    LiveViewOptions live_options = LiveOptions(config);
+    if (!config.live_view_token_file.empty()) {
+      if (auto e = LoadAccessToken(config.live_view_token_file, &live_options.access_token)) {
+        std::fprintf(stderr, "lrfnetd: live_view.token_file %s\n", e->c_str());
+        return kExitFailure;
+      }
+    }
+    live_view.emplace(io, live_options);
     std::string error;
     if (!live_view->Start(&error)) {
       std::fprintf(stderr, "lrfnetd: --live-view %s: %s\n", config.live_view_listen.c_str(),
@@ -424,6 +479,8 @@ int RunLive(const RunOptions& run, DaemonConfig config) {
       daemon.OnTick(NowUtcNs());
       notifier.Watchdog(common::SteadyNowNs());
       LogEvents(daemon, config.ingest.silent_after_s);
+      if (const std::string e = auth_state.Save(daemon.ingest(), MonotonicS(), false); !e.empty())
+        spdlog::error("auth state: {}", e);
       calibration.OnTick(MonotonicS(), daemon);
       if (calibration.counters().successes != applied_calibrations && calibration.latest()) {
         applied_calibrations = calibration.counters().successes;
@@ -594,6 +651,10 @@ int RunLive(const RunOptions& run, DaemonConfig config) {
   LogEvents(daemon, config.ingest.silent_after_s);
   StopMqtt(&mqtt, zones, NowUtcNs(), 2.0);
   int exit_code = kExitOk;
+  if (const std::string e = auth_state.Save(daemon.ingest(), MonotonicS(), true); !e.empty()) {
+    spdlog::error("auth state: {}", e);
+    exit_code = kExitFailure;
+  }
   if (recorder) {
     if (auto e = recorder->Close()) {
       spdlog::error("{}", *e);
@@ -617,8 +678,14 @@ int RunLive(const RunOptions& run, DaemonConfig config) {
 
 // Offline: the datagrams of recordings and UDP captures through the same core, with their
 // recorded receive times as the clock.
-int RunOffline(const RunOptions& run, const DaemonConfig& config,
-               const std::vector<std::string>& inputs, std::uint16_t udp_port) {
+int RunOffline(const RunOptions& run, DaemonConfig config, const std::vector<std::string>& inputs,
+               std::uint16_t udp_port) {
+  // Offline: verified with fresh windows (no state: the input is what was recorded), no counter
+  // check against the receive time (old files).
+  if (auto e = SetUpAuth(config, false)) {
+    std::fprintf(stderr, "lrfnetd: %s\n", e->c_str());
+    return kExitFailure;
+  }
   std::optional<Recorder> recorder;
   if (!config.record_path.empty()) recorder.emplace(RecordingOptions(config, Writer()));
   struct Tee final : RecordSink {
@@ -804,6 +871,13 @@ int Run(int argc, char** argv) {
       "publish objects, zones, calibration and health to the MQTT broker at HOST:PORT (overrides "
       "mqtt.broker)")("mqtt-site", po::value<std::string>(),
                       "the site's name in the MQTT topics (overrides mqtt.site)")(
+      "keys", po::value<std::string>(),
+      "authenticate every datagram with the sensor keys in this folder (lrfnet keys derive); "
+      "unsigned, forged and replayed ones are dropped (overrides auth.keys)")(
+      "state-dir", po::value<std::string>(),
+      "keep the replay state here across restarts (overrides auth.state_dir)")(
+      "live-view-token-file", po::value<std::string>(),
+      "the live view's access token (overrides live_view.token_file)")(
       "stats-out", po::value<std::string>(&run.stats_out),
       "at exit, write every counter (per sensor and reason) as JSON to this file")(
       "log-level", po::value<std::string>(&log_level)->default_value("info"),
@@ -830,7 +904,9 @@ int Run(int argc, char** argv) {
        {std::pair{"calibration-in", &run.calibration_in_flag},
         std::pair{"live-view", &run.live_view_flag}, std::pair{"fused-out", &run.fused_out_flag},
         std::pair{"fused-udp", &run.fused_udp_flag}, std::pair{"mqtt", &run.mqtt_flag},
-        std::pair{"mqtt-site", &run.mqtt_site_flag}}) {
+        std::pair{"mqtt-site", &run.mqtt_site_flag}, std::pair{"keys", &run.keys_flag},
+        std::pair{"state-dir", &run.state_dir_flag},
+        std::pair{"live-view-token-file", &run.live_view_token_flag}}) {
     if (vm.count(flag) != 0) *target = vm[flag].as<std::string>();
   }
   if (udp_port < 0 || udp_port > 65535) return UsageError("--udp-port must be 0..65535");
