@@ -38,7 +38,8 @@ endif()
 add_library(lrfnet_live_view_http STATIC live_view_http.cc foxglove_protocol.cc
                                          ${CMAKE_CURRENT_BINARY_DIR}/live_view_page.cc)
 target_include_directories(lrfnet_live_view_http PUBLIC ${PROJECT_SOURCE_DIR})
-target_link_libraries(lrfnet_live_view_http PUBLIC Boost::boost PRIVATE nlohmann_json::nlohmann_json)
+target_link_libraries(lrfnet_live_view_http PUBLIC Boost::boost PRIVATE nlohmann_json::nlohmann_json
+                                                                   lrfnet_auth)
 lrfnet_warnings(lrfnet_live_view_http)
 if(LRFNET_FUZZ)
   # Coverage feedback from the request handling itself, not only from the fuzz target.

@@ -9,6 +9,8 @@
 #include <cstdint>
 #include <limits>
 
+#include "common/datagram_auth.h"
+
 namespace lrfnet::daemon {
 namespace {
 
@@ -160,6 +162,42 @@ const char* ToString(LiveViewRoute route) {
   return "unknown";
 }
 
+Admission AdmitRequest(const HttpRequest& request, std::string_view access_token) {
+  if (access_token.empty()) return Admission::kAdmitted;
+  bool admitted = false;
+  // Every candidate is compared (no early exit), so the time does not say which one matched.
+  const std::string_view target(request.target().data(), request.target().size());
+  const std::size_t query = target.find('?');
+  if (query != std::string_view::npos) {
+    std::string_view rest = target.substr(query + 1);
+    while (!rest.empty()) {
+      const std::size_t amp = rest.find('&');
+      const std::string_view pair = rest.substr(0, amp);
+      rest = amp == std::string_view::npos ? std::string_view() : rest.substr(amp + 1);
+      if (pair.rfind("token=", 0) == 0) {
+        admitted |= auth::ConstantTimeEquals(pair.substr(6), access_token);
+      }
+    }
+  }
+  const auto authorization = request.find(http::field::authorization);
+  if (authorization != request.end()) {
+    const std::string_view value(authorization->value().data(), authorization->value().size());
+    if (value.size() > 7 && EqualsIgnoringCase(value.substr(0, 7), "bearer ")) {
+      admitted |= auth::ConstantTimeEquals(value.substr(7), access_token);
+    }
+  }
+  return admitted ? Admission::kAdmitted : Admission::kUnauthorized;
+}
+
+HttpResponse UnauthorizedResponse(const HttpRequest& request) {
+  HttpResponse r = Response(request, http::status::unauthorized, "text/plain",
+                            "the live view needs its access token: open /?token=TOKEN (the "
+                            "token in lrfnetd's live_view.token_file)\n");
+  r.set(http::field::www_authenticate, "Bearer");
+  r.keep_alive(false);
+  return r;
+}
+
 LiveViewRoute RouteOf(const HttpRequest& request) {
   const std::string_view path = PathOf(request);
   // A WebSocket client (Foxglove) given only the address connects to "/".
@@ -184,6 +222,8 @@ HttpResponse RespondTo(const HttpRequest& request, LiveViewRoute route,
           Response(request, http::status::ok, "text/html; charset=utf-8", LiveViewPage());
       r.set("Content-Security-Policy", Bsv(kPagePolicy));
       r.set("X-Frame-Options", "DENY");
+      // The URL may hold the access token: never sent on as a referrer.
+      r.set("Referrer-Policy", "no-referrer");
       return r;
     }
     case LiveViewRoute::kState:

@@ -70,6 +70,18 @@ class RequestReader {
   std::string error_;
 };
 
+// Request admission, the first step for every request before it is routed (the page, /state, the
+// WebSocket and any other upgrade or path): with an access token configured (non-empty), a
+// request must carry it, as a `token` query parameter (?token=...) or as "Authorization: Bearer
+// <token>"; the comparison takes the same time wherever the strings differ
+// (auth::ConstantTimeEquals). Without a token every request is admitted (the server then listens
+// on loopback only: the daemon's config refuses anything else).
+enum class Admission { kAdmitted, kUnauthorized };
+Admission AdmitRequest(const HttpRequest& request, std::string_view access_token);
+
+// 401 with "WWW-Authenticate: Bearer" and a plain-text hint; the connection is closed.
+HttpResponse UnauthorizedResponse(const HttpRequest& request);
+
 enum class LiveViewRoute {
   kPage,              // GET/HEAD /
   kState,             // GET/HEAD /state

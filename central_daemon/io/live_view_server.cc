@@ -406,6 +406,12 @@ class HttpSession : public std::enable_shared_from_this<HttpSession> {
 
   void OnRequest(HttpRequest request) {
     ++impl_->counters.http_requests;
+    // Admission before routing: no page, state or upgrade of any kind without the token.
+    if (AdmitRequest(request, impl_->options.access_token) != Admission::kAdmitted) {
+      ++impl_->counters.unauthorized;
+      Respond(UnauthorizedResponse(request));
+      return;
+    }
     const LiveViewRoute route = RouteOf(request);
     switch (route) {
       case LiveViewRoute::kWebSocket:

@@ -10,6 +10,8 @@
 //                    the channels of PublishFoxglove; a client subscribes to the channels it wants
 //   anything else    404; methods other than GET/HEAD: 405; malformed requests: 400 and the
 //                    connection closed
+// Admission: with an access token, every request (page, state, WebSocket, any upgrade) must carry
+// it, else 401 (AdmitRequest in live_view_http.h, the one place that decides).
 // Robustness: request header and body sizes are limited, idle and slow clients time out, at most
 // max_clients connections are served (more are refused), and a WebSocket client that cannot keep
 // up never queues more than one pending message (the newest replaces an unsent one). Every
@@ -29,6 +31,8 @@ struct LiveViewOptions {
   std::string bind_address = "127.0.0.1";  // IPv4 or IPv6 literal, or a host name
   std::uint16_t port = 0;                  // 0: any free port (see LiveViewServer::port())
   std::size_t max_clients = 32;
+  // Required of every request when set (AdmitRequest, live_view_http.h); compared in constant time.
+  std::string access_token;
   std::size_t max_request_bytes = 8192;
   double idle_timeout_s = 30.0;  // HTTP keep-alive and WebSocket handshake
   // A WebSocket client is pinged after half of this without data from it and dropped after all of
@@ -58,6 +62,7 @@ struct LiveViewCounters {
   std::uint64_t foxglove_messages_sent = 0;      // message-data frames written
   std::uint64_t foxglove_messages_replaced = 0;  // a slow client's unsent channel message replaced
   std::uint64_t foxglove_refused_messages = 0;   // client messages malformed or not supported
+  std::uint64_t unauthorized = 0;         // requests without the access token (401)
 };
 
 // One message of a Foxglove channel (JSON encoding). The channel is advertised the first time its

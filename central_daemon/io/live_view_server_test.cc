@@ -582,6 +582,66 @@ TEST_F(LiveViewServerTest, FoxgloveWebAppIsTheOnlyForeignOriginAllowed) {
   EXPECT_FALSE(feed.Connect(port_, "https://app.foxglove.dev"));
 }
 
+TEST_F(LiveViewServerTest, WithATokenEveryRequestAndUpgradeNeedsIt) {
+  LiveViewOptions options = QuickOptions();
+  options.access_token = "9f86d081884c7d659a2feaa0c55ad015";
+  StartServer(options);
+  Publish(R"({"type":"state"})");
+  std::size_t refused = 0;
+  for (const std::string target : {"/", "/state", "/ws", "/nothing", "/?token=", "/?token=9f86d081",
+                                   "/?token=9f86d081884c7d659a2feaa0c55ad016",
+                                   "/?tok=9f86d081884c7d659a2feaa0c55ad015"}) {
+    const auto r = Request(port_, http::verb::get, target);
+    ASSERT_TRUE(r.has_value()) << target;
+    EXPECT_EQ(r->result_int(), 401) << target;
+    EXPECT_EQ(r->body().find("state"), std::string::npos) << "nothing of the state leaks";
+    ++refused;
+  }
+  // The page and the state with the token, in the query or as a bearer token.
+  auto page = Request(port_, http::verb::get, "/?token=9f86d081884c7d659a2feaa0c55ad015");
+  ASSERT_TRUE(page.has_value());
+  EXPECT_EQ(page->result_int(), 200);
+  EXPECT_EQ(page->body(), LiveViewPage());
+  EXPECT_EQ((*page)["Referrer-Policy"], "no-referrer");
+  {
+    HttpClient client(port_);
+    ASSERT_TRUE(client.ok());
+    const auto state = client.Send(http::verb::get, "/state",
+                                   {{"Authorization", "Bearer 9f86d081884c7d659a2feaa0c55ad015"}});
+    ASSERT_TRUE(state.has_value());
+    EXPECT_EQ(state->result_int(), 200);
+    EXPECT_EQ(state->body(), R"({"type":"state"})");
+    const auto wrong = client.Send(http::verb::get, "/state", {{"Authorization", "Bearer nope"}});
+    ASSERT_TRUE(wrong.has_value());
+    EXPECT_EQ(wrong->result_int(), 401);
+    ++refused;
+  }
+  const auto state = Request(port_, http::verb::get, "/state?x=1&token=9f86d081884c7d659a2feaa0c55ad015");
+  ASSERT_TRUE(state.has_value());
+  EXPECT_EQ(state->result_int(), 200);
+  // The WebSocket: refused without the token, served with it.
+  WsClient without;
+  EXPECT_FALSE(without.Connect(port_));
+  ++refused;
+  WsClient with;
+  ASSERT_TRUE(with.Connect(port_, std::nullopt, std::nullopt,
+                           "/ws?token=9f86d081884c7d659a2feaa0c55ad015"));
+  const auto message = with.Read();
+  ASSERT_TRUE(message.has_value());
+  EXPECT_EQ(*message, R"({"type":"state"})");
+  // Foxglove's upgrade goes through the same admission.
+  WsClient fox_without;
+  EXPECT_FALSE(fox_without.Connect(port_, std::nullopt, "foxglove.websocket.v1", "/"));
+  EXPECT_EQ(fox_without.handshake_response().result_int(), 401);
+  ++refused;
+  WsClient fox_with;
+  EXPECT_TRUE(fox_with.Connect(port_, std::nullopt, "foxglove.websocket.v1",
+                               "/?token=9f86d081884c7d659a2feaa0c55ad015"));
+  EXPECT_TRUE(WaitFor([&] { return Counters().unauthorized == refused; }))
+      << Counters().unauthorized << " of " << refused;
+  EXPECT_EQ(Counters().websocket_clients, 2u);
+}
+
 TEST_F(LiveViewServerTest, WebSocketFromAnotherOriginIsRefused) {
   StartServer();
   WsClient foreign;
@@ -937,6 +997,34 @@ TEST(LiveViewHttpTest, OriginMustMatchTheHost) {
   EXPECT_EQ(route("http://x:1.evil", "x:1"), LiveViewRoute::kForbiddenOrigin);
   EXPECT_EQ(route("null", "x:1"), LiveViewRoute::kForbiddenOrigin);
   EXPECT_EQ(route("http://x:1", nullptr), LiveViewRoute::kForbiddenOrigin);
+}
+
+TEST(LiveViewHttpTest, AdmissionWithoutATokenAdmitsEverythingAndWithOneOnlyTheToken) {
+  const auto parse = [](const std::string& raw) {
+    const ParsedRequest p = ParseRequest(raw, 8192);
+    EXPECT_EQ(p.status, RequestReader::Status::kComplete) << raw;
+    return p.request;
+  };
+  const HttpRequest plain = parse("GET /ws HTTP/1.1\r\nHost: h\r\n\r\n");
+  EXPECT_EQ(AdmitRequest(plain, ""), Admission::kAdmitted);
+  EXPECT_EQ(AdmitRequest(plain, "secret-token-0123"), Admission::kUnauthorized);
+  EXPECT_EQ(AdmitRequest(parse("GET /x?a=b&token=secret-token-0123&c HTTP/1.1\r\nHost: h\r\n\r\n"),
+                         "secret-token-0123"),
+            Admission::kAdmitted);
+  EXPECT_EQ(AdmitRequest(parse("GET /x?token=secret-token-0123x HTTP/1.1\r\nHost: h\r\n\r\n"),
+                         "secret-token-0123"),
+            Admission::kUnauthorized);
+  EXPECT_EQ(AdmitRequest(parse("GET / HTTP/1.1\r\nHost: h\r\nAuthorization: bearer "
+                               "secret-token-0123\r\n\r\n"),
+                         "secret-token-0123"),
+            Admission::kAdmitted);
+  EXPECT_EQ(AdmitRequest(parse("GET / HTTP/1.1\r\nHost: h\r\nAuthorization: Basic "
+                               "secret-token-0123\r\n\r\n"),
+                         "secret-token-0123"),
+            Admission::kUnauthorized);
+  const HttpResponse r = UnauthorizedResponse(plain);
+  EXPECT_EQ(r.result_int(), 401);
+  EXPECT_FALSE(r.keep_alive());
 }
 
 TEST(LiveViewHttpTest, BusyResponseIsOneWellFormedResponse) {
