@@ -10,12 +10,14 @@
 #include <string>
 #include <vector>
 
+#include "central_daemon/app/auth_files.h"
 #include "central_daemon/app/calibration_input.h"
 #include "central_daemon/app/calibration_service.h"
 #include "central_daemon/calibration/calibration_yaml.h"
 #include "central_daemon/calibration/eval.h"
 #include "central_daemon/calibration/pipeline.h"
 #include "central_daemon/calibration/report.h"
+#include "common/datagram_auth.h"
 #include "tools/subcommands.h"
 
 namespace lrfnet::tools {
@@ -83,6 +85,8 @@ nlohmann::json StatsJson(const calib::CalibrationOutcome& outcome,
   j["files"] = load.files;
   j["datagrams"] = load.datagrams;
   j["invalid_datagrams"] = load.invalid;
+  j["verified_datagrams"] = load.verified;
+  j["unverified_datagrams"] = load.unverified;
   j["track_residual_rms_m"] = outcome.result.track_residual_rms_m;
   j["refined"] = outcome.result.refined;
   j["refine_cost_before"] = outcome.result.refine_cost_before;
@@ -158,6 +162,9 @@ int RunCalibrate(int argc, char** argv) {
       "write a JSON summary (timings, edges, errors against --truth) to this file")(
       "udp-port", po::value<int>(&udp_port)->default_value(0),
       "captures: only UDP datagrams to this port (0 = any)")(
+      "keys", po::value<std::string>(),
+      "verify sealed datagrams with the sensor keys in this folder, as lrfnetd --keys does "
+      "(without: sealed plain datagrams are read unverified, encrypted ones skipped)")(
       "log-level", po::value<std::string>(&log_level)->default_value("warn"),
       "trace, debug, info, warn, error or off (stderr)");
   po::options_description hidden;
@@ -213,13 +220,24 @@ int RunCalibrate(int argc, char** argv) {
   const std::vector<std::string> inputs = vm["inputs"].as<std::vector<std::string>>();
   calib::CalibrationInput input;
   daemon::LoadCounters load;
+  daemon::AuthOptions auth_options;
+  if (vm.count("keys") != 0) {
+    if (!auth::Init()) return UsageError("calibrate", "--keys: libsodium cannot be initialised");
+    if (auto e = daemon::LoadSensorKeys(vm["keys"].as<std::string>(), &auth_options))
+      return UsageError("calibrate", "--keys " + *e);
+  }
   if (!daemon::LoadCalibrationInput(inputs, static_cast<std::uint16_t>(udp_port), &input, &load,
-                                    &error)) {
+                                    &error, auth_options)) {
     std::fprintf(stderr, "lrfnet calibrate: %s\n", error.c_str());
     return kExitFailure;
   }
   spdlog::info("read {} datagrams ({} invalid) from {} files: {} sensors", load.datagrams,
                load.invalid, load.files, input.sensors.size());
+  if (load.unverified > 0) {
+    spdlog::warn("{} sealed datagrams were read without verifying them (no --keys): forged "
+                 "datagrams in the files would be used",
+                 load.unverified);
+  }
 
   const auto start = std::chrono::steady_clock::now();
   const calib::StageClock clock = [start] {

@@ -7,6 +7,7 @@
 #include <optional>
 #include <string>
 
+#include "common/datagram_auth.h"
 #include "lrfnet.pb.h"
 
 namespace lrfnet::tools {
@@ -163,6 +164,76 @@ std::optional<proto::Datagram> Parse(std::span<const std::uint8_t> bytes) {
   return datagram;
 }
 
+// A datagram's protobuf bytes and what its envelope said (see the header).
+struct Opened {
+  std::span<const std::uint8_t> payload;  // empty when it cannot be read
+  bool sealed = false;
+  bool verified = false;
+  bool refused = false;
+  json auth;  // null when not sealed
+};
+
+Opened Open(std::span<const std::uint8_t> bytes, daemon::DatagramVerifier* verifier) {
+  Opened o;
+  o.payload = bytes;
+  if (!auth::LooksSealed(bytes)) return o;
+  o.sealed = true;
+  o.payload = {};
+  auth::Envelope e;
+  const auth::HeaderError header = auth::ParseEnvelope(bytes, &e);
+  if (header != auth::HeaderError::kNone) {
+    o.refused = true;
+    o.auth = {{"verified", false}, {"error", "auth_header"}, {"detail", auth::ToString(header)}};
+    return o;
+  }
+  o.auth = {{"sensor_id", std::string(e.sensor_id)},
+            {"epoch", e.epoch},
+            {"key_id", e.key_id},
+            {"counter", e.counter},
+            {"encrypted", e.encrypted},
+            {"direction", e.direction == auth::Direction::kToDaemon ? "to_daemon" : "to_tracker"},
+            {"verified", false}};
+  if (verifier == nullptr) {
+    if (e.encrypted) {
+      o.refused = true;
+      o.auth["error"] = "encrypted";
+    } else {
+      o.payload = e.payload;
+    }
+    return o;
+  }
+  const daemon::AuthResult r = verifier->Verify(bytes, 0);
+  if (!r.ok()) {
+    o.refused = true;
+    o.auth["error"] = daemon::ToString(r.failure);
+    return o;
+  }
+  verifier->Commit(r);
+  o.verified = true;
+  o.auth["verified"] = true;
+  o.payload = r.payload;
+  return o;
+}
+
+json OpenedJson(common::UtcNs receive_ns, std::string_view source, std::size_t size,
+                const Opened& opened) {
+  std::optional<proto::Datagram> datagram;
+  if (!opened.payload.empty()) datagram = Parse(opened.payload);
+  json j;
+  if (datagram) {
+    j = DatagramFieldsJson(*datagram);
+  } else if (!opened.refused) {
+    j = json{{"error", kNotADatagram}};
+  } else {
+    j = json::object();
+  }
+  if (opened.sealed) j["auth"] = opened.auth;
+  j["receive_ns"] = receive_ns;
+  j["source"] = std::string(source);
+  j["size"] = size;
+  return j;
+}
+
 }  // namespace
 
 std::string_view DatagramKindName(const proto::Datagram& datagram) {
@@ -213,43 +284,58 @@ json DatagramFieldsJson(const proto::Datagram& d) {
 }
 
 json DatagramJson(common::UtcNs receive_ns, std::string_view source,
-                  std::span<const std::uint8_t> bytes) {
-  const std::optional<proto::Datagram> datagram = Parse(bytes);
-  json j = datagram ? DatagramFieldsJson(*datagram) : json{{"error", kNotADatagram}};
-  j["receive_ns"] = receive_ns;
-  j["source"] = std::string(source);
-  j["size"] = bytes.size();
-  return j;
+                  std::span<const std::uint8_t> bytes, daemon::DatagramVerifier* verifier) {
+  return OpenedJson(receive_ns, source, bytes.size(), Open(bytes, verifier));
 }
 
 std::string DatagramJsonLine(common::UtcNs receive_ns, std::string_view source,
-                             std::span<const std::uint8_t> bytes) {
-  return Dump(DatagramJson(receive_ns, source, bytes));
+                             std::span<const std::uint8_t> bytes,
+                             daemon::DatagramVerifier* verifier) {
+  return Dump(DatagramJson(receive_ns, source, bytes, verifier));
 }
 
-void DatagramSummary::Add(common::UtcNs receive_ns, std::span<const std::uint8_t> datagram_bytes) {
-  ++datagrams;
-  bytes += datagram_bytes.size();
-  if (!first_receive_ns) first_receive_ns = receive_ns;
-  if (last_receive_ns && receive_ns < *last_receive_ns) ++receive_time_steps_back;
-  last_receive_ns = receive_ns;
-  const std::optional<proto::Datagram> datagram = Parse(datagram_bytes);
-  if (!datagram) {
-    ++parse_errors;
+namespace {
+
+void AddOpened(DatagramSummary& s, common::UtcNs receive_ns, std::size_t size,
+               const Opened& opened) {
+  ++s.datagrams;
+  s.bytes += size;
+  if (!s.first_receive_ns) s.first_receive_ns = receive_ns;
+  if (s.last_receive_ns && receive_ns < *s.last_receive_ns) ++s.receive_time_steps_back;
+  s.last_receive_ns = receive_ns;
+  s.sealed += opened.sealed ? 1 : 0;
+  s.verified += opened.verified ? 1 : 0;
+  if (opened.refused) {
+    ++s.auth_refused;
     return;
   }
+  const std::optional<proto::Datagram> datagram =
+      opened.payload.empty() ? std::nullopt : Parse(opened.payload);
+  if (!datagram) {
+    ++s.parse_errors;
+    return;
+  }
+  auto& by_kind = s.by_kind;
+  auto& by_sensor_kind = s.by_sensor_kind;
   const std::string kind(DatagramKindName(*datagram));
   ++by_kind[kind];
   auto sensor = by_sensor_kind.find(datagram->sensor_id());
   if (sensor == by_sensor_kind.end()) {
     if (by_sensor_kind.size() >= kMaxSummarySensors) {
-      ++sensors_over_limit;
+      ++s.sensors_over_limit;
       return;
     }
     sensor =
         by_sensor_kind.emplace(datagram->sensor_id(), std::map<std::string, std::uint64_t>{}).first;
   }
   ++sensor->second[kind];
+}
+
+}  // namespace
+
+void DatagramSummary::Add(common::UtcNs receive_ns, std::span<const std::uint8_t> datagram_bytes,
+                          daemon::DatagramVerifier* verifier) {
+  AddOpened(*this, receive_ns, datagram_bytes.size(), Open(datagram_bytes, verifier));
 }
 
 std::string DatagramSummaryJson(const DatagramSummary& s, const daemon::DatagramSource& source) {
@@ -271,6 +357,9 @@ std::string DatagramSummaryJson(const DatagramSummary& s, const daemon::Datagram
   json j = {{"datagrams", s.datagrams},
             {"bytes", s.bytes},
             {"parse_errors", s.parse_errors},
+            {"sealed", s.sealed},
+            {"verified", s.verified},
+            {"auth_refused", s.auth_refused},
             {"first_receive_ns", s.first_receive_ns ? json(*s.first_receive_ns) : json(nullptr)},
             {"last_receive_ns", s.last_receive_ns ? json(*s.last_receive_ns) : json(nullptr)},
             {"receive_time_steps_back", s.receive_time_steps_back},
@@ -283,7 +372,7 @@ std::string DatagramSummaryJson(const DatagramSummary& s, const daemon::Datagram
 }
 
 bool DumpDatagrams(daemon::DatagramSource& source, std::ostream* out, DatagramSummary* summary,
-                   std::string* error) {
+                   std::string* error, daemon::DatagramVerifier* verifier) {
   daemon::ReceivedDatagram datagram;
   while (true) {
     const daemon::SourceStatus status = source.Next(&datagram);
@@ -292,9 +381,13 @@ bool DumpDatagrams(daemon::DatagramSource& source, std::ostream* out, DatagramSu
       *error = source.error();
       return false;
     }
-    if (out != nullptr)
-      *out << DatagramJsonLine(datagram.receive_ns, datagram.source, datagram.bytes) << '\n';
-    if (summary != nullptr) summary->Add(datagram.receive_ns, datagram.bytes);
+    // Opened once: with keys, a second verification would see its own counter as replayed.
+    const Opened opened = Open(datagram.bytes, verifier);
+    if (out != nullptr) {
+      *out << Dump(OpenedJson(datagram.receive_ns, datagram.source, datagram.bytes.size(), opened))
+           << '\n';
+    }
+    if (summary != nullptr) AddOpened(*summary, datagram.receive_ns, datagram.bytes.size(), opened);
   }
 }
 

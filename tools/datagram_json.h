@@ -21,6 +21,13 @@
 //   64-bit integers as JSON numbers (exact); floats with float precision (0.1f prints 0.1);
 //   NaN and infinities as null. Fields at their default value are printed too.
 // Bytes that do not parse: {"error": "not a lrfnet datagram", "receive_ns", "size", "source"}.
+// A sealed datagram (common/datagram_auth.h) also has
+//   "auth": {sensor_id, epoch, key_id, counter, encrypted, direction ("to_daemon" | "to_tracker"),
+//            verified, and error (a reason name of the daemon's ingest) when it was refused}
+// and its payload's fields when it could be read: with keys (a DatagramVerifier) only when it
+// verifies (then the window refuses a repeated counter as "replayed"); without keys, a plain
+// payload is shown unverified ("verified": false) and an encrypted one not at all
+// ("error": "encrypted").
 //
 // Pure: no I/O besides the ostream a caller passes.
 
@@ -33,6 +40,7 @@
 #include <string>
 #include <string_view>
 
+#include "central_daemon/ingest/datagram_verifier.h"
 #include "central_daemon/io/datagram_source.h"
 #include "common/time.h"
 
@@ -50,12 +58,15 @@ std::string_view DatagramKindName(const proto::Datagram& datagram);
 // The datagram's fields (version, sensor_id, ..., kind, payload), without the receive fields.
 nlohmann::json DatagramFieldsJson(const proto::Datagram& datagram);
 
-// One received datagram as a JSON object (format above).
+// One received datagram as a JSON object (format above); `verifier` (may be null: no keys) checks
+// sealed datagrams.
 nlohmann::json DatagramJson(common::UtcNs receive_ns, std::string_view source,
-                            std::span<const std::uint8_t> bytes);
+                            std::span<const std::uint8_t> bytes,
+                            daemon::DatagramVerifier* verifier = nullptr);
 // The same as one line of text (no trailing newline).
 std::string DatagramJsonLine(common::UtcNs receive_ns, std::string_view source,
-                             std::span<const std::uint8_t> bytes);
+                             std::span<const std::uint8_t> bytes,
+                             daemon::DatagramVerifier* verifier = nullptr);
 
 // Counts over the datagrams of a file. Distinct sensor ids are bounded by kMaxSummarySensors; the
 // datagrams of further ids are counted in sensors_over_limit only.
@@ -65,6 +76,9 @@ struct DatagramSummary {
   std::uint64_t datagrams = 0;
   std::uint64_t bytes = 0;
   std::uint64_t parse_errors = 0;                 // not a lrfnet datagram
+  std::uint64_t sealed = 0;                       // in an envelope
+  std::uint64_t verified = 0;                     // ... and verified with a key
+  std::uint64_t auth_refused = 0;                 // ... and refused by the keys (or encrypted)
   std::optional<common::UtcNs> first_receive_ns;  // in file order
   std::optional<common::UtcNs> last_receive_ns;
   std::uint64_t receive_time_steps_back = 0;  // receive_ns smaller than the one before
@@ -72,11 +86,12 @@ struct DatagramSummary {
   std::map<std::string, std::map<std::string, std::uint64_t>> by_sensor_kind;  // sensor -> kind
   std::uint64_t sensors_over_limit = 0;
 
-  void Add(common::UtcNs receive_ns, std::span<const std::uint8_t> bytes);
+  void Add(common::UtcNs receive_ns, std::span<const std::uint8_t> bytes,
+           daemon::DatagramVerifier* verifier = nullptr);
 };
 
 // The summary and the file's counters as one JSON object (one line, no trailing newline):
-//   datagrams, bytes, parse_errors, first_receive_ns, last_receive_ns (null when empty),
+//   datagrams, bytes, parse_errors, sealed, verified, auth_refused, first_receive_ns, last_receive_ns (null when empty),
 //   receive_time_steps_back, kinds {kind: n}, sensors {sensor_id: {kind: n}}, sensors_over_limit,
 //   file {kind: "recording" | "capture", datagrams, files, packets, malformed_packets,
 //   other_packets, and for recordings format_version, created_ns, writer}, and error (the
@@ -88,6 +103,6 @@ std::string DatagramSummaryJson(const DatagramSummary& summary,
 // *summary (nullptr: not counted). False with *error (one line) when the source ended in an error;
 // the datagrams before it were written.
 bool DumpDatagrams(daemon::DatagramSource& source, std::ostream* out, DatagramSummary* summary,
-                   std::string* error);
+                   std::string* error, daemon::DatagramVerifier* verifier = nullptr);
 
 }  // namespace lrfnet::tools

@@ -6,7 +6,9 @@
 #include <memory>
 #include <string>
 
+#include "central_daemon/app/auth_files.h"
 #include "central_daemon/io/datagram_source.h"
+#include "common/datagram_auth.h"
 #include "tools/datagram_json.h"
 #include "tools/dump.h"
 #include "tools/subcommands.h"
@@ -34,7 +36,8 @@ int DumpScans(const std::string& path, std::uint16_t port, bool summary_only) {
   return kExitOk;
 }
 
-int DumpDatagramFile(const std::string& path, std::uint16_t udp_port, bool summary_only) {
+int DumpDatagramFile(const std::string& path, std::uint16_t udp_port, bool summary_only,
+                     daemon::DatagramVerifier* verifier) {
   daemon::DatagramSourceOptions options;
   options.udp_port = udp_port;
   std::string error;
@@ -45,7 +48,8 @@ int DumpDatagramFile(const std::string& path, std::uint16_t udp_port, bool summa
     return kExitFailure;
   }
   DatagramSummary summary;
-  const bool ok = DumpDatagrams(*source, summary_only ? nullptr : &std::cout, &summary, &error);
+  const bool ok =
+      DumpDatagrams(*source, summary_only ? nullptr : &std::cout, &summary, &error, verifier);
   if (summary_only) std::cout << DatagramSummaryJson(summary, *source) << "\n";
   std::cout.flush();
   if (!ok) {
@@ -70,7 +74,8 @@ int RunDump(int argc, char** argv) {
       "datagram,\n"
       "  {receive_ns, source, size, version, sensor_id, sequence, sent_ns, session_id, kind, "
       "<payload>},\n"
-      "  field names as in lrfnet.proto, or {..., \"error\": \"not a lrfnet datagram\"}.\n"
+      "  field names as in lrfnet.proto, or {..., \"error\": \"not a lrfnet datagram\"}; sealed "
+      "datagrams\n  also {\"auth\": {sensor_id, epoch, counter, encrypted, verified, ...}}.\n"
       "Options",
       100, 50);
   int port = 2112;
@@ -85,6 +90,9 @@ int RunDump(int argc, char** argv) {
       "datagrams", "print the UDP datagrams of a capture even when it holds a scanner stream")(
       "udp-port", po::value<int>(&udp_port)->default_value(0),
       "captures: only UDP datagrams to this port (0 = any)")(
+      "keys", po::value<std::string>(),
+      "verify sealed datagrams with the sensor keys in this folder (and decrypt them); without, "
+      "their header is shown and a plain payload read unverified")(
       "log-level", po::value<std::string>(&log_level)->default_value("warn"),
       "trace, debug, info, warn, error or off (stderr)");
   po::variables_map vm;
@@ -105,7 +113,15 @@ int RunDump(int argc, char** argv) {
                               ? DumpInput::kDatagrams
                               : ChooseDumpInput(InspectCapture(path, tcp_port, datagram_port));
   if (input == DumpInput::kScans) return DumpScans(path, tcp_port, summary_only);
-  return DumpDatagramFile(path, datagram_port, summary_only);
+  std::unique_ptr<daemon::DatagramVerifier> verifier;
+  if (vm.count("keys") != 0) {
+    daemon::AuthOptions auth_options;
+    if (!auth::Init()) return UsageError("dump", "--keys: libsodium cannot be initialised");
+    if (auto e = daemon::LoadSensorKeys(vm["keys"].as<std::string>(), &auth_options))
+      return UsageError("dump", "--keys " + *e);
+    verifier = std::make_unique<daemon::DatagramVerifier>(auth_options);
+  }
+  return DumpDatagramFile(path, datagram_port, summary_only, verifier.get());
 }
 
 }  // namespace lrfnet::tools

@@ -28,6 +28,7 @@ constexpr Subcommand kSubcommands[] = {
     {"emulate", "serve a capture's scans (or synthetic ones) as a SICK device on TCP", RunEmulate},
     {"eval", "errors d_R, d_t of a calibration against the truth, per sensor", RunEval},
     {"export", "a calibration as ROS 2 static transforms, URDF or CSV", RunExport},
+    {"keys", "site and sensor keys of authenticated datagrams, the live view's token", RunKeys},
     {"replay", "send a recording or UDP capture to HOST:PORT over UDP with its timing", RunReplay},
     {"sim", "simulate a scenario: per-sensor captures and ground truth, or live devices", RunSim},
 };

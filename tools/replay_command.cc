@@ -17,7 +17,9 @@
 #include <string>
 #include <vector>
 
+#include "central_daemon/app/auth_files.h"
 #include "central_daemon/io/datagram_source.h"
+#include "common/datagram_auth.h"
 #include "common/host_port.h"
 #include "tools/replay.h"
 #include "tools/subcommands.h"
@@ -35,6 +37,7 @@ struct ReplayCounters {
   std::uint64_t bytes_sent = 0;
   std::uint64_t send_errors = 0;
   std::uint64_t replies = 0;
+  std::uint64_t refused = 0;  // --keys: not sent, they did not verify
 };
 
 // Sends the datagrams of a source to one endpoint on the schedule of ReplaySchedule, from one
@@ -66,6 +69,9 @@ class UdpReplayer {
   const ReplaySchedule& schedule() const { return schedule_; }
   std::size_t senders() const { return slots_.slots_used(); }
   bool interrupted() const { return interrupted_; }
+  // --keys: only what verifies with the sensor keys is sent (forged and repeated datagrams of
+  // the recording stay behind).
+  void set_verifier(daemon::DatagramVerifier* verifier) { verifier_ = verifier; }
   double elapsed_s() const { return std::chrono::duration<double>(end_ - start_).count(); }
 
  private:
@@ -122,6 +128,14 @@ class UdpReplayer {
   }
 
   void Send(const daemon::ReceivedDatagram& datagram) {
+    if (verifier_ != nullptr) {
+      const daemon::AuthResult r = verifier_->Verify(datagram.bytes, 0);
+      if (!r.ok()) {
+        ++counters_.refused;
+        return;
+      }
+      verifier_->Commit(r);
+    }
     Sender& sender = SenderFor(datagram.source);
     boost::system::error_code ec;
     if (!sender.socket.is_open()) {
@@ -197,6 +211,7 @@ class UdpReplayer {
   SenderSlots slots_;
   asio::steady_timer timer_;
   std::function<void()> done_;
+  daemon::DatagramVerifier* verifier_ = nullptr;
   std::vector<std::unique_ptr<Sender>> senders_;
   daemon::ReceivedDatagram pending_;
   bool have_pending_ = false;
@@ -247,6 +262,9 @@ int RunReplay(int argc, char** argv) {
       "shorten gaps longer than this many seconds of recording time to it (0 = off)")(
       "udp-port", po::value<int>(&udp_port)->default_value(0),
       "captures: only UDP datagrams to this port (0 = any)")(
+      "keys", po::value<std::string>(),
+      "send only the datagrams that verify with the sensor keys in this folder (without: every "
+      "datagram as recorded, sealed ones stay sealed)")(
       "log-level", po::value<std::string>(&log_level)->default_value("info"),
       "trace, debug, info, warn, error or off (stderr)");
   po::variables_map vm;
@@ -283,11 +301,21 @@ int RunReplay(int argc, char** argv) {
     return kExitFailure;
   }
 
+  std::unique_ptr<daemon::DatagramVerifier> verifier;
+  if (vm.count("keys") != 0) {
+    daemon::AuthOptions auth_options;
+    if (!auth::Init()) return UsageError("replay", "--keys: libsodium cannot be initialised");
+    if (auto e = daemon::LoadSensorKeys(vm["keys"].as<std::string>(), &auth_options))
+      return UsageError("replay", "--keys " + *e);
+    verifier = std::make_unique<daemon::DatagramVerifier>(auth_options);
+  }
+
   asio::signal_set signals(io, SIGINT, SIGTERM);
   UdpReplayer replayer(io, *source, *endpoint, schedule, [&signals] {
     boost::system::error_code ignored;
     signals.cancel(ignored);
   });
+  replayer.set_verifier(verifier.get());
   signals.async_wait([&replayer](const boost::system::error_code& ec, int) {
     if (!ec) replayer.Stop();
   });
@@ -301,13 +329,13 @@ int RunReplay(int argc, char** argv) {
   const ReplayCounters& c = replayer.counters();
   std::printf(
       "summary: datagrams=%llu bytes=%llu send_errors=%llu replies=%llu elapsed_s=%.3f "
-      "senders=%zu steps_back=%llu shortened_gaps=%llu interrupted=%s\n",
+      "senders=%zu steps_back=%llu shortened_gaps=%llu refused=%llu interrupted=%s\n",
       static_cast<unsigned long long>(c.datagrams_sent),
       static_cast<unsigned long long>(c.bytes_sent), static_cast<unsigned long long>(c.send_errors),
       static_cast<unsigned long long>(c.replies), replayer.elapsed_s(), replayer.senders(),
       static_cast<unsigned long long>(replayer.schedule().steps_back()),
       static_cast<unsigned long long>(replayer.schedule().shortened_gaps()),
-      replayer.interrupted() ? "yes" : "no");
+      static_cast<unsigned long long>(c.refused), replayer.interrupted() ? "yes" : "no");
   std::fflush(stdout);
   if (!replayer.interrupted() && !source->error().empty()) {
     std::fprintf(stderr, "lrfnet replay: %s\n", source->error().c_str());

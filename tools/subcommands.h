@@ -20,6 +20,7 @@ int RunDump(int argc, char** argv);
 int RunEmulate(int argc, char** argv);
 int RunEval(int argc, char** argv);
 int RunExport(int argc, char** argv);
+int RunKeys(int argc, char** argv);
 int RunReplay(int argc, char** argv);
 int RunSim(int argc, char** argv);
 
