@@ -26,3 +26,14 @@ mkdir -p results
 "$build_dir/tests/bench/fusion_benchmark" --out results/fusion_benchmark.md
 # The outputs for other systems: zones, MQTT object lists, Publish with a real, a stalled and no broker.
 "$build_dir/tests/bench/outputs_benchmark" --out results/outputs_benchmark.md
+# Authenticated datagrams: cost per datagram here, and its ratio to the unsealed path on the gateway's
+# architecture (the aarch64 build under qemu-user, as scripts/test.sh configures it).
+cmake --build "$build_dir" --target auth_benchmark >/dev/null
+"$build_dir/tests/bench/auth_benchmark" --out results/auth_benchmark.md --platform "$(uname -m), native"
+if [ "${LRFNET_SKIP_CROSS:-0}" != 1 ] && command -v qemu-aarch64 >/dev/null; then
+  [ -f build-aarch64/build.ninja ] || cmake -S . -B build-aarch64 -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo \
+    -DCMAKE_TOOLCHAIN_FILE="$(pwd)/cmake/aarch64-linux-gnu.cmake" -DLRFNET_TRACKER_ONLY=ON >/dev/null
+  cmake --build build-aarch64 --target auth_benchmark >/dev/null
+  qemu-aarch64 -L /usr/aarch64-linux-gnu build-aarch64/auth_benchmark --datagrams 5000 --append \
+    --out results/auth_benchmark.md --platform "aarch64 under qemu-user (tracker only: no daemon)"
+fi

@@ -61,8 +61,11 @@ endif()
 
 # lrfnetd as a process: several tracker replays -> daemon -> recording identical to what was sent;
 # loss / reordering / duplicates / restart; hostile datagrams; SIGKILL durability; SIGHUP; --input.
-lrfnet_test(daemon_cli_test SOURCES daemon_cli_test.cc
-            LIBS lrfnet_daemon_io lrfnet_uplink lrfnet_proto nlohmann_json::nlohmann_json)
+# auth_cli_test.cc: authenticated datagrams end to end: lrfnet keys, tracker --key -> lrfnetd --keys
+# over UDP, forged / bit-flipped / wrong-epoch / wrong-key / unknown / unsigned / replayed datagrams
+# counted and refused, the stored state after a restart, the offline readers with and without keys.
+lrfnet_test(daemon_cli_test SOURCES daemon_cli_test.cc auth_cli_test.cc
+            LIBS lrfnet_daemon_io lrfnet_uplink lrfnet_auth lrfnet_proto nlohmann_json::nlohmann_json)
 lrfnet_uses_binaries(daemon_cli_test)
 if(TARGET daemon_cli_test)
   target_compile_definitions(daemon_cli_test PRIVATE

@@ -1,7 +1,8 @@
 // The whole chain as processes on loopback, like the demo: `lrfnet sim --serve` (one emulated SICK
 // device per sensor, CoLa-B over TCP) → one `lrfnet-tracker` per device (tracks over UDP) →
-// `lrfnetd` (collects, calibrates by itself, fuses, serves the live view). One tracker is killed and
-// restarted while the daemon fuses. Asserts the calibration against the simulator's truth, the
+// `lrfnetd` (collects, calibrates by itself, fuses, serves the live view), with authenticated
+// datagrams: a site key, one key per sensor (`lrfnet keys`), trackers with --key, the daemon with
+// --keys. One tracker is killed and restarted while the daemon fuses. Asserts the calibration against the simulator's truth, the
 // continuity of the fused tracks, and the live view's state.
 
 #include <arpa/inet.h>
@@ -102,6 +103,15 @@ TEST(SystemTest, SimTrackersDaemonCalibrateFuseAndSurviveATrackerRestart) {
               "calibration:\n  attempt_interval_s: 2.0\n  min_pair_overlap_s: 8.0\n"
               "fusion:\n  publish_hz: 10.0\n";
   }
+  // The keys: the site's and one per sensor.
+  {
+    Process init(LRFNET_TOOL_BINARY, {"keys", "init", "--dir", dir / "keys"});
+    ASSERT_EQ(init.Wait(), 0) << init.err();
+    for (const char* id : {"s1", "s2", "s3"}) {
+      Process derive(LRFNET_TOOL_BINARY, {"keys", "derive", "--dir", dir / "keys", id});
+      ASSERT_EQ(derive.Wait(), 0) << derive.err();
+    }
+  }
   Process sim(LRFNET_TOOL_BINARY, {"sim", dir / "scenario.yaml", "--serve", "--speed",
                                    std::to_string(kSpeed), "--out", dir / "sim", "--log-level",
                                    "warn"});
@@ -124,7 +134,8 @@ TEST(SystemTest, SimTrackersDaemonCalibrateFuseAndSurviveATrackerRestart) {
   Process daemon(LRFNET_DAEMON_BINARY,
                  {"--listen", "127.0.0.1:0", "--config", dir / "lrfnetd.yaml", "--calibration-out",
                   dir / "calibration.yaml", "--fused-out", dir / "fused.jsonl", "--fused-udp",
-                  fused_udp, "--live-view", "127.0.0.1:0", "--stats-out", dir / "stats.json"});
+                  fused_udp, "--live-view", "127.0.0.1:0", "--stats-out", dir / "stats.json",
+                  "--keys", dir / "keys", "--state-dir", dir / "state"});
   ASSERT_TRUE(daemon.WaitForOutput("live view http://", seconds(10))) << daemon.err();
   std::string uplink, live_port;
   {
@@ -141,9 +152,11 @@ TEST(SystemTest, SimTrackersDaemonCalibrateFuseAndSurviveATrackerRestart) {
 
   auto start_tracker = [&](const std::pair<std::string, std::string>& device) {
     return std::make_unique<Process>(
-        LRFNET_TRACKER_BINARY, std::vector<std::string>{"--sensor", device.second, "--sensor-id",
-                                                        device.first, "--uplink", uplink,
-                                                        "--log-level", "warn"});
+        LRFNET_TRACKER_BINARY,
+        std::vector<std::string>{"--sensor", device.second, "--sensor-id", device.first,
+                                 "--uplink", uplink, "--key",
+                                 dir / ("keys/sensor-" + device.first + "-e1.key"),
+                                 "--log-level", "warn"});
   };
   std::vector<std::unique_ptr<Process>> trackers;
   for (const auto& device : devices) trackers.push_back(start_tracker(device));
@@ -164,6 +177,7 @@ TEST(SystemTest, SimTrackersDaemonCalibrateFuseAndSurviveATrackerRestart) {
                             nullptr, false);
   ASSERT_TRUE(live.is_object()) << "GET /state";
   EXPECT_EQ(live["calibration"]["state"], "calibrated");
+  EXPECT_EQ(live["authenticated"], true);
   ASSERT_EQ(live["sensors"].size(), 3u);
   for (const auto& sensor : live["sensors"]) EXPECT_TRUE(sensor["placed"].get<bool>()) << sensor;
   EXPECT_GE(live["fused"].size(), 1u);
@@ -190,6 +204,24 @@ TEST(SystemTest, SimTrackersDaemonCalibrateFuseAndSurviveATrackerRestart) {
   ASSERT_EQ(daemon.Wait(seconds(20)), 0) << daemon.err();
   for (auto& tracker : trackers) tracker->Signal(SIGTERM);
   EXPECT_NE(daemon.err().find("tracker restarted"), std::string::npos) << daemon.err();
+  // Every datagram sealed and verified, none refused by the keys (the restarted tracker's new
+  // start is a new counter base above the old one).
+  {
+    const nlohmann::json stats = nlohmann::json::parse(ReadText(dir / "stats.json"), nullptr, false);
+    ASSERT_TRUE(stats.is_object());
+    EXPECT_TRUE(stats["authenticated"].get<bool>());
+    EXPECT_EQ(stats["verified"], stats["accepted"]);
+    EXPECT_GT(stats["verified"].get<std::uint64_t>(), 1000u);
+    for (const auto& sensor : stats["sensors"]) {
+      for (const char* reason : {"unsigned", "bad_tag", "replayed", "stale", "wrong_key",
+                                 "wrong_epoch", "auth_header", "auth_mismatch"}) {
+        EXPECT_FALSE(sensor["rejected"].contains(reason)) << sensor["sensor_id"] << " " << reason;
+      }
+      EXPECT_GE(sensor["requests_sent"].get<std::uint64_t>(), 1u) << "sealed Requests went out";
+    }
+    std::ifstream state(dir / "state/auth-state");
+    EXPECT_TRUE(state.good()) << "the replay state is kept";
+  }
 
   // Calibration against the truth.
   Process eval(LRFNET_TOOL_BINARY,

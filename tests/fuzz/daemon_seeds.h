@@ -10,5 +10,7 @@ namespace lrfnet::fuzz {
 void WriteDatagramSeeds(const std::string& dir);
 // recording_fuzz: small recordings and UDP captures, whole and damaged.
 void WriteRecordingSeeds(const std::string& dir);
+// auth_fuzz: datagrams sealed with its keys, damaged copies, unsigned datagrams.
+void WriteAuthSeeds(const std::string& dir);
 
 }  // namespace lrfnet::fuzz

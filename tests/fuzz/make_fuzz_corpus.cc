@@ -74,7 +74,9 @@ int main(int argc, char** argv) {
   const std::string request_dir = (out / "request_fuzz").string();
   const std::string datagram_dir = (out / "datagram_fuzz").string();
   const std::string recording_dir = (out / "recording_fuzz").string();
-  for (const auto& d : {cola_dir, reassembler_dir, packet_dir, request_dir, datagram_dir, recording_dir})
+  const std::string auth_dir = (out / "auth_fuzz").string();
+  for (const auto& d :
+       {cola_dir, reassembler_dir, packet_dir, request_dir, datagram_dir, recording_dir, auth_dir})
     std::filesystem::create_directories(d);
 
   std::vector<std::vector<std::uint8_t>> streams;
@@ -91,6 +93,7 @@ int main(int argc, char** argv) {
   WriteRequestSeeds(request_dir);
   lrfnet::fuzz::WriteDatagramSeeds(datagram_dir);
   lrfnet::fuzz::WriteRecordingSeeds(recording_dir);
+  lrfnet::fuzz::WriteAuthSeeds(auth_dir);
   lrfnet::fuzz::WriteLiveViewSeeds((out / "http_request_fuzz").string());
   lrfnet::fuzz::WriteFoxgloveSeeds((out / "foxglove_fuzz").string());
   lrfnet::fuzz::WriteSopasSeeds((out / "sopas_fuzz").string());
