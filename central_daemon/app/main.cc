@@ -335,13 +335,9 @@ LiveViewOptions LiveOptions(const DaemonConfig& config) {
 }
 
 // auth.keys: the sensor keys into the ingest's options (live: also the counter check and the
-// Requests' salt and counter). Without keys, the warning that the network is unauthenticated.
+// Requests' salt and counter).
 std::optional<std::string> SetUpAuth(DaemonConfig& config, bool live) {
-  if (config.auth_keys_dir.empty()) {
-    spdlog::warn("no --keys: the network is unauthenticated; any host that can send to this "
-                 "port can feed tracks into calibration and fusion (README: Keys)");
-    return std::nullopt;
-  }
+  if (config.auth_keys_dir.empty()) return std::nullopt;
   if (!auth::Init()) return std::string("--keys: libsodium cannot be initialised");
   AuthOptions& a = config.ingest.auth;
   if (auto e = LoadSensorKeys(config.auth_keys_dir, &a)) return "--keys " + *e;
@@ -444,6 +440,11 @@ int RunLive(const RunOptions& run, DaemonConfig config) {
                  "(net.core.rmem_max); bursts may be dropped",
                  receiver.receive_buffer_bytes() / 1024,
                  config.receiver.receive_buffer_bytes / 1024);
+  if (!daemon.ingest().authenticated()) {
+    spdlog::warn("no --keys: the network is unauthenticated; any host that can send to {} can "
+                 "feed tracks into calibration and fusion (README: Keys)",
+                 receiver.local_address());
+  }
   // Printed on stdout for scripts and tests that bind port 0.
   std::printf("listening %s\n", receiver.local_address().c_str());
   // Under systemd (Type=notify): ready once the socket is bound; the watchdog is fed from the tick
@@ -607,8 +608,10 @@ int RunLive(const RunOptions& run, DaemonConfig config) {
       } else {
         if (reloaded.listen != config.listen || reloaded.record_path != config.record_path ||
             reloaded.record_max_file_mb != config.record_max_file_mb ||
-            reloaded.ingest.max_sensors != config.ingest.max_sensors)
-          spdlog::warn("SIGHUP: listen, record and sensors.max_sensors changes need a restart");
+            reloaded.ingest.max_sensors != config.ingest.max_sensors ||
+            reloaded.auth_keys_dir != config.auth_keys_dir ||
+            reloaded.auth_state_dir != config.auth_state_dir)
+          spdlog::warn("SIGHUP: listen, record, auth and sensors.max_sensors changes need a restart");
         const bool status_changed = reloaded.status_interval_s != config.status_interval_s;
         config.ingest.validation = reloaded.ingest.validation;
         config.ingest.silent_after_s = reloaded.ingest.silent_after_s;
@@ -773,6 +776,17 @@ int RunOffline(const RunOptions& run, DaemonConfig config, const std::vector<std
   }
   if (last_ns != 0) core.OnTick(last_ns);
   LogEvents(core, config.ingest.silent_after_s);
+  if (!core.ingest().authenticated()) {
+    const IngestCounters& c = core.ingest().counters();
+    std::uint64_t encrypted = c.unattributed[static_cast<std::size_t>(RejectReason::kEncrypted)];
+    for (const SensorStatus& s : core.ingest().Sensors())
+      encrypted += s.counters.rejected[static_cast<std::size_t>(RejectReason::kEncrypted)];
+    if (c.unverified > 0 || encrypted > 0) {
+      spdlog::warn("without --keys: {} sealed datagrams read unverified (forged ones would count), "
+                   "{} encrypted ones could not be read",
+                   c.unverified, encrypted);
+    }
+  }
   core.set_frame_listener(nullptr);
   if (fusion.calibrated()) {
     fusion.Close();

@@ -19,6 +19,18 @@ std::string ReadFile(const std::string& path) {
   return text.str();
 }
 
+TEST(TrackerConfig, EncryptionNeedsAKey) {
+  TrackerConfig config;
+  const auto error = LoadTrackerConfig("auth:\n  encrypt: true\n", config);
+  ASSERT_TRUE(error.has_value());
+  EXPECT_NE(error->find("auth.encrypt"), std::string::npos) << *error;
+  TrackerConfig keyed;
+  ASSERT_EQ(LoadTrackerConfig("auth:\n  key: /etc/lrfnet/sensor.key\n  encrypt: true\n", keyed),
+            std::nullopt);
+  EXPECT_EQ(keyed.key_file, "/etc/lrfnet/sensor.key");
+  EXPECT_TRUE(keyed.encrypt);
+}
+
 TEST(TrackerConfig, DefaultsAreValid) {
   TrackerConfig config;
   EXPECT_EQ(Validate(config), std::nullopt);
