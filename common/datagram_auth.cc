@@ -52,7 +52,8 @@ std::array<std::uint8_t, kNonceBytes> Nonce(std::uint32_t salt, std::uint64_t co
 bool Init() { return sodium_init() >= 0; }
 
 bool IsValidSensorId(std::string_view id) {
-  return !id.empty() && id.size() <= kMaxSensorIdBytes && std::all_of(id.begin(), id.end(), IsIdChar);
+  return !id.empty() && id.size() <= kMaxSensorIdBytes &&
+         std::all_of(id.begin(), id.end(), IsIdChar);
 }
 
 Key DeriveSensorKey(const Key& site_key, std::string_view sensor_id) {
@@ -67,8 +68,15 @@ Key DeriveSensorKey(const Key& site_key, std::string_view sensor_id) {
     for (std::size_t j = 0; j < 8 && i * 8 + j < n; ++j) {
       chunk |= std::uint64_t{static_cast<unsigned char>(sensor_id[i * 8 + j])} << (8 * j);
     }
-    char context[9] = {'l', 'r', 'f', 'n', 'S', static_cast<char>('0' + i),
-                       static_cast<char>('0' + n / 10), static_cast<char>('0' + n % 10), '\0'};
+    char context[9] = {'l',
+                       'r',
+                       'f',
+                       'n',
+                       'S',
+                       static_cast<char>('0' + i),
+                       static_cast<char>('0' + n / 10),
+                       static_cast<char>('0' + n % 10),
+                       '\0'};
     Key next{};
     crypto_kdf_derive_from_key(next.data(), next.size(), chunk, context, key.data());
     key = next;
@@ -106,8 +114,8 @@ const char* ToString(HeaderError error) {
 }
 
 HeaderError ParseEnvelope(std::span<const std::uint8_t> bytes, Envelope* out) {
-  if (bytes.size() < 4) return bytes.empty() || bytes[0] == kMagic ? HeaderError::kTooShort
-                                                                  : HeaderError::kNotEnvelope;
+  if (bytes.size() < 4)
+    return bytes.empty() || bytes[0] == kMagic ? HeaderError::kTooShort : HeaderError::kNotEnvelope;
   if (bytes[0] != kMagic) return HeaderError::kNotEnvelope;
   if (bytes[1] != kEnvelopeVersion) return HeaderError::kVersion;
   const std::uint8_t flags = bytes[2];
@@ -143,9 +151,9 @@ bool OpenEnvelope(const Envelope& e, const SensorKeys& keys, std::span<std::uint
     const std::size_t ad_bytes = e.header.size() + e.payload.size();
     // Nothing to decrypt: the message is empty (libsodium still wants valid pointers).
     std::uint8_t none = 0;
-    if (crypto_aead_chacha20poly1305_ietf_decrypt_detached(&none, nullptr, &none, 0,
-                                                           e.tag.data(), e.header.data(), ad_bytes,
-                                                           nonce.data(), key.data()) != 0) {
+    if (crypto_aead_chacha20poly1305_ietf_decrypt_detached(&none, nullptr, &none, 0, e.tag.data(),
+                                                           e.header.data(), ad_bytes, nonce.data(),
+                                                           key.data()) != 0) {
       return false;
     }
     *payload = e.payload;
@@ -183,8 +191,9 @@ std::size_t Sealer::Seal(std::span<const std::uint8_t> payload, std::span<std::u
   std::uint8_t* p = out.data();
   p[0] = kMagic;
   p[1] = kEnvelopeVersion;
-  p[2] = static_cast<std::uint8_t>((options_.encrypt ? kFlagEncrypted : 0) |
-                                   (options_.direction == Direction::kToTracker ? kFlagToTracker : 0));
+  p[2] =
+      static_cast<std::uint8_t>((options_.encrypt ? kFlagEncrypted : 0) |
+                                (options_.direction == Direction::kToTracker ? kFlagToTracker : 0));
   p[3] = static_cast<std::uint8_t>(n);
   std::memcpy(p + 4, options_.sensor_id.data(), n);
   common::StoreBe32(p + 4 + n, options_.keys.epoch);

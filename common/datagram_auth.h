@@ -98,11 +98,11 @@ inline bool LooksSealed(std::span<const std::uint8_t> bytes) {
 
 enum class HeaderError : std::uint8_t {
   kNone = 0,
-  kTooShort,   // shorter than its header + tag
+  kTooShort,     // shorter than its header + tag
   kNotEnvelope,  // not an envelope
-  kVersion,    // an envelope version this program does not know
-  kFlags,      // reserved flag bits set
-  kSensorId,   // length 0 or > 32, or a byte outside [A-Za-z0-9_.-]
+  kVersion,      // an envelope version this program does not know
+  kFlags,        // reserved flag bits set
+  kSensorId,     // length 0 or > 32, or a byte outside [A-Za-z0-9_.-]
 };
 const char* ToString(HeaderError error);
 
@@ -131,11 +131,11 @@ bool OpenEnvelope(const Envelope& envelope, const SensorKeys& keys, std::span<st
                   std::span<const std::uint8_t>* payload);
 
 struct SealerOptions {
-  std::string sensor_id;         // IsValidSensorId
+  std::string sensor_id;  // IsValidSensorId
   SensorKeys keys;
   Direction direction = Direction::kToDaemon;
-  bool encrypt = false;          // encrypt the payload (tracks of people can be personal data)
-  std::uint32_t salt = 0;        // random per start (the caller draws it)
+  bool encrypt = false;             // encrypt the payload (tracks of people can be personal data)
+  std::uint32_t salt = 0;           // random per start (the caller draws it)
   std::uint64_t first_counter = 0;  // the sender's UTC start time in ns
 };
 std::optional<std::string> Validate(const SealerOptions& options);

@@ -3,6 +3,8 @@
 // padded to 16 bytes, personal = context padded to 16 bytes) and ChaCha20-Poly1305 IETF (Python's
 // cryptography package), so they pin the byte layout and the derivation, not only a round trip.
 
+#include "common/datagram_auth.h"
+
 #include <gtest/gtest.h>
 #include <sys/stat.h>
 
@@ -13,7 +15,6 @@
 #include <string>
 #include <vector>
 
-#include "common/datagram_auth.h"
 #include "common/key_file.h"
 
 namespace lrfnet::auth {
@@ -63,9 +64,21 @@ TEST_F(AuthTest, DirectionKeysAndKeyIdKnownAnswers) {
 TEST_F(AuthTest, IdsThatShareAPrefixOrPaddingGetDifferentKeys) {
   // Same first chunk, different lengths; ids that differ only beyond 8 bytes; every length.
   std::set<std::string> keys;
-  const std::vector<std::string> ids = {"a", "aa", "aaaaaaaa", "aaaaaaaaa", "aaaaaaaab",
-                                        "aaaaaaaaaaaaaaaa", "aaaaaaaaaaaaaaaaa", "b", "A", "a-", "a.",
-                                        "a_", "0", std::string(32, 'z'), std::string(31, 'z')};
+  const std::vector<std::string> ids = {"a",
+                                        "aa",
+                                        "aaaaaaaa",
+                                        "aaaaaaaaa",
+                                        "aaaaaaaab",
+                                        "aaaaaaaaaaaaaaaa",
+                                        "aaaaaaaaaaaaaaaaa",
+                                        "b",
+                                        "A",
+                                        "a-",
+                                        "a.",
+                                        "a_",
+                                        "0",
+                                        std::string(32, 'z'),
+                                        std::string(31, 'z')};
   for (const std::string& id : ids) keys.insert(ToHex(DeriveSensorKey(SiteKey(), id)));
   EXPECT_EQ(keys.size(), ids.size());
   Key other = SiteKey();
@@ -297,8 +310,8 @@ TEST_F(AuthTest, KeyFilesRoundTripAndBadFilesSayWhy) {
 }
 
 TEST_F(AuthTest, SecretFilesAreCreatedPrivateAndRefusedWhenOthersMayReadThem) {
-  const auto dir = std::filesystem::path(::testing::TempDir()) /
-                   ("lrfnet_keys_" + std::to_string(::getpid()));
+  const auto dir =
+      std::filesystem::path(::testing::TempDir()) / ("lrfnet_keys_" + std::to_string(::getpid()));
   std::filesystem::create_directories(dir);
   KeyFile f;
   f.key = SiteKey();

@@ -21,8 +21,10 @@ std::string Errno(const std::string& what, const std::string& path) {
 }
 
 std::string_view Trim(std::string_view s) {
-  while (!s.empty() && (s.front() == ' ' || s.front() == '\t' || s.front() == '\r')) s.remove_prefix(1);
-  while (!s.empty() && (s.back() == ' ' || s.back() == '\t' || s.back() == '\r')) s.remove_suffix(1);
+  while (!s.empty() && (s.front() == ' ' || s.front() == '\t' || s.front() == '\r'))
+    s.remove_prefix(1);
+  while (!s.empty() && (s.back() == ' ' || s.back() == '\t' || s.back() == '\r'))
+    s.remove_suffix(1);
   return s;
 }
 
@@ -31,8 +33,9 @@ std::string_view Trim(std::string_view s) {
 std::string FormatKeyFile(const KeyFile& f) {
   std::string text;
   if (f.kind == KeyFile::Kind::kSite) {
-    text += "# lrfnet site key: keep it secret (mode 0600) and on the daemon's host. The sensors'\n"
-            "# keys are derived from it (lrfnet keys derive).\n";
+    text +=
+        "# lrfnet site key: keep it secret (mode 0600) and on the daemon's host. The sensors'\n"
+        "# keys are derived from it (lrfnet keys derive).\n";
   } else {
     text += "# lrfnet sensor key of '" + f.sensor_id +
             "': keep it secret (mode 0600); for this sensor's\n"

@@ -5,9 +5,9 @@
 namespace lrfnet::proto {
 namespace {
 
-// A full track frame of a crowded scan must fit the payload budget when split into parts of this many
-// tracks (the uplink's part size): 1400 bytes per datagram less the widest authenticated envelope
-// (common/datagram_auth.h: 24 + 32 + 16 bytes).
+// A full track frame of a crowded scan must fit the payload budget when split into parts of this
+// many tracks (the uplink's part size): 1400 bytes per datagram less the widest authenticated
+// envelope (common/datagram_auth.h: 24 + 32 + 16 bytes).
 constexpr int kTracksPerPart = 13;
 constexpr std::size_t kMaxPayloadBytes = 1400 - 72;
 

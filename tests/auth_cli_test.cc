@@ -13,12 +13,12 @@
 #include <unistd.h>
 
 #include <csignal>
-#include <map>
-#include <thread>
 #include <fstream>
+#include <map>
 #include <nlohmann/json.hpp>
 #include <sstream>
 #include <string>
+#include <thread>
 #include <vector>
 
 #include "central_daemon/io/datagram_source.h"
@@ -68,8 +68,8 @@ bool SendUdp(std::uint16_t port, const Bytes& bytes) {
   a.sin_family = AF_INET;
   a.sin_port = htons(port);
   a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
-  const ssize_t n = ::sendto(fd, bytes.data(), bytes.size(), 0, reinterpret_cast<sockaddr*>(&a),
-                             sizeof a);
+  const ssize_t n =
+      ::sendto(fd, bytes.data(), bytes.size(), 0, reinterpret_cast<sockaddr*>(&a), sizeof a);
   ::close(fd);
   return n == static_cast<ssize_t>(bytes.size());
 }
@@ -169,7 +169,7 @@ TEST(AuthCliTest, KeysCommandWritesPrivateFilesAndRefusesToOverwrite) {
   EXPECT_EQ(ReadText(keys + "/live-view.token").size(), 33u);
   // A key that others may read is refused by the tracker (an empty capture to replay).
   {
-    const std::uint8_t pcap_header[24] = {0xd4, 0xc3, 0xb2, 0xa1, 2, 0, 4, 0, 0, 0, 0, 0,
+    const std::uint8_t pcap_header[24] = {0xd4, 0xc3, 0xb2, 0xa1, 2,    0,    4, 0, 0, 0, 0, 0,
                                           0,    0,    0,    0,    0xff, 0xff, 0, 0, 1, 0, 0, 0};
     std::ofstream(dir / "empty.pcap", std::ios::binary)
         .write(reinterpret_cast<const char*>(pcap_header), sizeof pcap_header);
@@ -189,12 +189,12 @@ TEST(AuthCliTest, OnlyTheTrackersSealedDatagramsAreAcceptedOverUdp) {
   ASSERT_TRUE(auth::Init());
   ScratchDir dir;
   const std::string keys = dir / "keys", other_site = dir / "other";
-  for (const auto& args : std::vector<std::vector<std::string>>{
-           {"keys", "init", "--dir", keys},
-           {"keys", "derive", "--dir", keys, "s1"},
-           {"keys", "init", "--dir", other_site},
-           {"keys", "derive", "--dir", other_site, "s1"},
-           {"keys", "derive", "--dir", other_site, "s9"}}) {
+  for (const auto& args :
+       std::vector<std::vector<std::string>>{{"keys", "init", "--dir", keys},
+                                             {"keys", "derive", "--dir", keys, "s1"},
+                                             {"keys", "init", "--dir", other_site},
+                                             {"keys", "derive", "--dir", other_site, "s1"},
+                                             {"keys", "derive", "--dir", other_site, "s9"}}) {
     Process p(LRFNET_TOOL_BINARY, args);
     ASSERT_EQ(p.Wait(), 0) << p.err();
   }
@@ -204,8 +204,8 @@ TEST(AuthCliTest, OnlyTheTrackersSealedDatagramsAreAcceptedOverUdp) {
 
   // The daemon, with the keys and a state directory.
   const std::vector<std::string> daemon_args = {
-      "--listen", "127.0.0.1:0", "--keys", keys, "--state-dir", dir / "state",
-      "--status-interval-s", "0", "--log-level", "warn"};
+      "--listen",    "127.0.0.1:0",         "--keys", keys,          "--state-dir",
+      dir / "state", "--status-interval-s", "0",      "--log-level", "warn"};
   auto with = [&](std::vector<std::string> args, const std::vector<std::string>& more) {
     args.insert(args.end(), more.begin(), more.end());
     return args;
@@ -254,10 +254,12 @@ TEST(AuthCliTest, OnlyTheTrackersSealedDatagramsAreAcceptedOverUdp) {
     ASSERT_TRUE(SendUdp(port, SealWith("s1", epoch2, next + 1, payload)));
     ++expected["wrong_epoch"];
     const auth::KeyFile other = ReadKey(other_site + "/sensor-s1-e1.key");
-    ASSERT_TRUE(SendUdp(port, SealWith("s1", auth::DeriveSensorKeys(other.key, 1), next + 2, payload)));
+    ASSERT_TRUE(
+        SendUdp(port, SealWith("s1", auth::DeriveSensorKeys(other.key, 1), next + 2, payload)));
     ++expected["wrong_key"];
     const auth::KeyFile stranger = ReadKey(other_site + "/sensor-s9-e1.key");
-    ASSERT_TRUE(SendUdp(port, SealWith("s9", auth::DeriveSensorKeys(stranger.key, 1), next, UnsignedHealth("s9"))));
+    ASSERT_TRUE(SendUdp(
+        port, SealWith("s9", auth::DeriveSensorKeys(stranger.key, 1), next, UnsignedHealth("s9"))));
     ++expected["unknown_sensor"];
     ASSERT_TRUE(SendUdp(port, payload));
     ++expected["unsigned"];
@@ -292,8 +294,8 @@ TEST(AuthCliTest, OnlyTheTrackersSealedDatagramsAreAcceptedOverUdp) {
   daemon = std::make_unique<Process>(LRFNET_DAEMON_BINARY,
                                      with(daemon_args, {"--stats-out", dir / "stats2.json"}));
   ASSERT_TRUE(daemon->WaitForOutput("listening ", seconds(10))) << daemon->err();
-  Process yesterday(LRFNET_TOOL_BINARY,
-                    {"replay", dir / "tracker.rec", "--to", ListenAddress(*daemon), "--speed", "0"});
+  Process yesterday(LRFNET_TOOL_BINARY, {"replay", dir / "tracker.rec", "--to",
+                                         ListenAddress(*daemon), "--speed", "0"});
   ASSERT_EQ(yesterday.Wait(milliseconds(30'000)), 0) << yesterday.err();
   std::this_thread::sleep_for(milliseconds(500));
   daemon->Signal(SIGINT);
@@ -329,8 +331,7 @@ TEST(AuthCliTest, OnlyTheTrackersSealedDatagramsAreAcceptedOverUdp) {
             stats["sensors"][0]["track_frames"].get<std::uint64_t>());
   Process dump_plain(LRFNET_TOOL_BINARY, {"dump", dir / "tracker.rec"});
   ASSERT_EQ(dump_plain.Wait(), 0) << dump_plain.err();
-  const nlohmann::json line =
-      nlohmann::json::parse(FirstLine(dump_plain.out()), nullptr, false);
+  const nlohmann::json line = nlohmann::json::parse(FirstLine(dump_plain.out()), nullptr, false);
   ASSERT_TRUE(line.is_object()) << dump_plain.out().substr(0, 300);
   EXPECT_EQ(line["auth"]["sensor_id"], "s1");
   EXPECT_EQ(line["auth"]["encrypted"], true);

@@ -2,8 +2,8 @@
 // device per sensor, CoLa-B over TCP) → one `lrfnet-tracker` per device (tracks over UDP) →
 // `lrfnetd` (collects, calibrates by itself, fuses, serves the live view), with authenticated
 // datagrams: a site key, one key per sensor (`lrfnet keys`), trackers with --key, the daemon with
-// --keys. One tracker is killed and restarted while the daemon fuses. Asserts the calibration against the simulator's truth, the
-// continuity of the fused tracks, and the live view's state.
+// --keys. One tracker is killed and restarted while the daemon fuses. Asserts the calibration
+// against the simulator's truth, the continuity of the fused tracks, and the live view's state.
 
 #include <arpa/inet.h>
 #include <gtest/gtest.h>
@@ -153,9 +153,8 @@ TEST(SystemTest, SimTrackersDaemonCalibrateFuseAndSurviveATrackerRestart) {
   auto start_tracker = [&](const std::pair<std::string, std::string>& device) {
     return std::make_unique<Process>(
         LRFNET_TRACKER_BINARY,
-        std::vector<std::string>{"--sensor", device.second, "--sensor-id", device.first,
-                                 "--uplink", uplink, "--key",
-                                 dir / ("keys/sensor-" + device.first + "-e1.key"),
+        std::vector<std::string>{"--sensor", device.second, "--sensor-id", device.first, "--uplink",
+                                 uplink, "--key", dir / ("keys/sensor-" + device.first + "-e1.key"),
                                  "--log-level", "warn"});
   };
   std::vector<std::unique_ptr<Process>> trackers;
@@ -207,7 +206,8 @@ TEST(SystemTest, SimTrackersDaemonCalibrateFuseAndSurviveATrackerRestart) {
   // Every datagram sealed and verified, none refused by the keys (the restarted tracker's new
   // start is a new counter base above the old one).
   {
-    const nlohmann::json stats = nlohmann::json::parse(ReadText(dir / "stats.json"), nullptr, false);
+    const nlohmann::json stats =
+        nlohmann::json::parse(ReadText(dir / "stats.json"), nullptr, false);
     ASSERT_TRUE(stats.is_object());
     EXPECT_TRUE(stats["authenticated"].get<bool>());
     EXPECT_EQ(stats["verified"], stats["accepted"]);

@@ -139,8 +139,8 @@ int RunCalibrate(int argc, char** argv) {
   int udp_port = 0;
   double grid_step_s = 0.0;
   double min_overlap_s = 0.0;
-  visible.add_options()("help,h", "this help")(
-      "out", po::value<std::string>(&out_path), "write the calibration here (YAML)")(
+  visible.add_options()("help,h", "this help")("out", po::value<std::string>(&out_path),
+                                               "write the calibration here (YAML)")(
       "report", po::value<std::string>(&report_dir), "write the report into this folder")(
       "method", po::value<std::string>(&method_name)->default_value("quenzel"),
       "quenzel (robust: MSAC + verification, ICP, L1 rotation averaging, joint refinement), "
@@ -234,9 +234,10 @@ int RunCalibrate(int argc, char** argv) {
   spdlog::info("read {} datagrams ({} invalid) from {} files: {} sensors", load.datagrams,
                load.invalid, load.files, input.sensors.size());
   if (load.unverified > 0) {
-    spdlog::warn("{} sealed datagrams were read without verifying them (no --keys): forged "
-                 "datagrams in the files would be used",
-                 load.unverified);
+    spdlog::warn(
+        "{} sealed datagrams were read without verifying them (no --keys): forged "
+        "datagrams in the files would be used",
+        load.unverified);
   }
 
   const auto start = std::chrono::steady_clock::now();

@@ -91,11 +91,11 @@ struct DatagramSummary {
 };
 
 // The summary and the file's counters as one JSON object (one line, no trailing newline):
-//   datagrams, bytes, parse_errors, sealed, verified, auth_refused, first_receive_ns, last_receive_ns (null when empty),
-//   receive_time_steps_back, kinds {kind: n}, sensors {sensor_id: {kind: n}}, sensors_over_limit,
-//   file {kind: "recording" | "capture", datagrams, files, packets, malformed_packets,
-//   other_packets, and for recordings format_version, created_ns, writer}, and error (the
-//   source's error line) when the file ended in an error.
+//   datagrams, bytes, parse_errors, sealed, verified, auth_refused, first_receive_ns,
+//   last_receive_ns (null when empty), receive_time_steps_back, kinds {kind: n}, sensors
+//   {sensor_id: {kind: n}}, sensors_over_limit, file {kind: "recording" | "capture", datagrams,
+//   files, packets, malformed_packets, other_packets, and for recordings format_version,
+//   created_ns, writer}, and error (the source's error line) when the file ended in an error.
 std::string DatagramSummaryJson(const DatagramSummary& summary,
                                 const daemon::DatagramSource& source);
 

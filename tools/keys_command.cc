@@ -84,7 +84,8 @@ int RunKeys(int argc, char** argv) {
       "lrfnet keys rotate --dir DIR          the next epoch's site key, and the keys of every "
       "sensor of the\n"
       "                                      epoch before; prints the paths\n"
-      "lrfnet keys token --dir DIR           an access token for the live view: DIR/live-view.token\n"
+      "lrfnet keys token --dir DIR           an access token for the live view: "
+      "DIR/live-view.token\n"
       "lrfnet keys list --dir DIR            epochs and sensors (no secrets)\n"
       "Keys of authenticated datagrams: lrfnetd --keys DIR reads DIR's sensor keys, each gateway "
       "gets its own\nsensor key file (lrfnet-tracker --key FILE). Files are created with mode 0600 "
@@ -92,8 +93,8 @@ int RunKeys(int argc, char** argv) {
       100, 50);
   std::string dir;
   std::uint32_t epoch = 0;
-  visible.add_options()("help,h", "this help")(
-      "dir", po::value<std::string>(&dir), "the key folder (created with mode 0700)")(
+  visible.add_options()("help,h", "this help")("dir", po::value<std::string>(&dir),
+                                               "the key folder (created with mode 0700)")(
       "epoch", po::value<std::uint32_t>(&epoch), "derive: the site key of this epoch");
   po::options_description hidden;
   hidden.add_options()("action", po::value<std::string>(), "action")(
@@ -113,7 +114,8 @@ int RunKeys(int argc, char** argv) {
     std::cout << visible << "\n";
     return kExitOk;
   }
-  if (vm.count("action") == 0) return UsageError("keys", "missing init, derive, rotate, token or list");
+  if (vm.count("action") == 0)
+    return UsageError("keys", "missing init, derive, rotate, token or list");
   const std::string action = vm["action"].as<std::string>();
   if (dir.empty()) return UsageError("keys", "missing --dir DIR");
   const std::string sensor_id = vm.count("sensor") != 0 ? vm["sensor"].as<std::string>() : "";
@@ -156,7 +158,8 @@ int RunKeys(int argc, char** argv) {
     if (epoch != 0) {
       const auto it = std::find_if(sites.begin(), sites.end(),
                                    [&](const auth::KeyFile& k) { return k.epoch == epoch; });
-      if (it == sites.end()) return Fail("no site key of epoch " + std::to_string(epoch) + " in " + dir);
+      if (it == sites.end())
+        return Fail("no site key of epoch " + std::to_string(epoch) + " in " + dir);
       site = &*it;
     }
     if (auto e = WriteSensorKey(dir, *site, sensor_id, &path)) return Fail(*e);

@@ -490,7 +490,8 @@ std::optional<std::string> Validate(DaemonConfig& c) {
     // A bare port: loopback only.
     if (c.live_view_listen.find_first_not_of("0123456789") == std::string::npos)
       c.live_view_listen = "127.0.0.1:" + c.live_view_listen;
-    const auto live = common::ParseHostPort(c.live_view_listen, "live_view.listen", 0, &error, true);
+    const auto live =
+        common::ParseHostPort(c.live_view_listen, "live_view.listen", 0, &error, true);
     if (!live) return error;
     if (!IsLoopbackHost(live->host) && c.live_view_token_file.empty()) {
       return "live_view.listen: " + c.live_view_listen +

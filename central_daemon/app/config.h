@@ -81,6 +81,7 @@ struct DaemonConfig {
   double live_view_publish_hz = 5.0;
   std::uint64_t live_view_max_clients = 32;
   std::uint64_t live_view_background_points = 720;  // per sensor, decimated
+  std::string live_view_token_file;  // access token; required when listening beyond loopback
   // Zones (section `zones`).
   std::string zones_list = "[]";   // the zones as YAML text (flow style), parsed by Validate
   std::vector<zones::Zone> zones;  // from zones_list
@@ -88,7 +89,6 @@ struct DaemonConfig {
   double zones_update_hz = 10.0;
   // MQTT (section `mqtt`).
   MqttConfig mqtt;
-  std::string live_view_token_file;  // access token; required when listening beyond loopback
   // Authenticated datagrams (section `auth`); changes need a restart.
   std::string auth_keys_dir;   // folder of sensor keys; empty: not authenticated
   std::string auth_state_dir;  // where the replay state is kept; empty: $STATE_DIRECTORY

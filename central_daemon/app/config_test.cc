@@ -68,7 +68,8 @@ TEST(DaemonConfigTest, LiveViewBeyondLoopbackNeedsAToken) {
   EXPECT_EQ(c.live_view_listen, "127.0.0.1:8080") << "a bare port is loopback only";
   for (const char* listen : {"0.0.0.0:8080", "[::]:8080", "192.168.1.5:80", "viewer.local:80"}) {
     DaemonConfig open;
-    const auto error = LoadDaemonConfig(std::string("live_view:\n  listen: \"") + listen + "\"\n", open);
+    const auto error =
+        LoadDaemonConfig(std::string("live_view:\n  listen: \"") + listen + "\"\n", open);
     ASSERT_TRUE(error.has_value()) << listen;
     EXPECT_NE(error->find("token_file"), std::string::npos) << *error;
     DaemonConfig with_token;
@@ -78,12 +79,14 @@ TEST(DaemonConfigTest, LiveViewBeyondLoopbackNeedsAToken) {
               std::nullopt)
         << listen;
   }
-  for (const char* host : {"127.0.0.1", "127.1.2.3", "::1", "localhost"}) EXPECT_TRUE(IsLoopbackHost(host)) << host;
+  for (const char* host : {"127.0.0.1", "127.1.2.3", "::1", "localhost"})
+    EXPECT_TRUE(IsLoopbackHost(host)) << host;
   for (const char* host : {"0.0.0.0", "::", "127.0.0", "127.0.0.1.5", "1.127.0.0", "127.a.0.1", ""})
     EXPECT_FALSE(IsLoopbackHost(host)) << host;
   DaemonConfig auth;
-  ASSERT_EQ(LoadDaemonConfig("auth:\n  keys: /etc/lrfnet/keys\n  state_dir: /var/lib/lrfnet\n", auth),
-            std::nullopt);
+  ASSERT_EQ(
+      LoadDaemonConfig("auth:\n  keys: /etc/lrfnet/keys\n  state_dir: /var/lib/lrfnet\n", auth),
+      std::nullopt);
   EXPECT_EQ(auth.auth_keys_dir, "/etc/lrfnet/keys");
   EXPECT_EQ(auth.auth_state_dir, "/var/lib/lrfnet");
 }

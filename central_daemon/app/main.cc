@@ -343,7 +343,8 @@ std::optional<std::string> SetUpAuth(DaemonConfig& config, bool live) {
   if (auto e = LoadSensorKeys(config.auth_keys_dir, &a)) return "--keys " + *e;
   if (live) {
     a.max_counter_ahead_s = config.ingest.validation.max_future_s;
-    auth::RandomBytes(std::span(reinterpret_cast<std::uint8_t*>(&a.request_salt), sizeof a.request_salt));
+    auth::RandomBytes(
+        std::span(reinterpret_cast<std::uint8_t*>(&a.request_salt), sizeof a.request_salt));
     a.request_first_counter = static_cast<std::uint64_t>(NowUtcNs());
   }
   spdlog::info("authenticated datagrams: {} sensor key(s) from {}", a.keys.size(),
@@ -376,8 +377,9 @@ int RunLive(const RunOptions& run, DaemonConfig config) {
     }
     daemon.RestoreAuthState(stored);
     if (auth_state.path().empty()) {
-      spdlog::warn("no --state-dir (nor $STATE_DIRECTORY): after a restart this daemon would "
-                   "accept datagrams of its earlier run once more");
+      spdlog::warn(
+          "no --state-dir (nor $STATE_DIRECTORY): after a restart this daemon would "
+          "accept datagrams of its earlier run once more");
     } else {
       spdlog::info("replay state {} ({} sensors)", auth_state.path(), stored.size());
     }
@@ -441,9 +443,10 @@ int RunLive(const RunOptions& run, DaemonConfig config) {
                  receiver.receive_buffer_bytes() / 1024,
                  config.receiver.receive_buffer_bytes / 1024);
   if (!daemon.ingest().authenticated()) {
-    spdlog::warn("no --keys: the network is unauthenticated; any host that can send to {} can "
-                 "feed tracks into calibration and fusion (README: Keys)",
-                 receiver.local_address());
+    spdlog::warn(
+        "no --keys: the network is unauthenticated; any host that can send to {} can "
+        "feed tracks into calibration and fusion (README: Keys)",
+        receiver.local_address());
   }
   // Printed on stdout for scripts and tests that bind port 0.
   std::printf("listening %s\n", receiver.local_address().c_str());
@@ -611,7 +614,8 @@ int RunLive(const RunOptions& run, DaemonConfig config) {
             reloaded.ingest.max_sensors != config.ingest.max_sensors ||
             reloaded.auth_keys_dir != config.auth_keys_dir ||
             reloaded.auth_state_dir != config.auth_state_dir)
-          spdlog::warn("SIGHUP: listen, record, auth and sensors.max_sensors changes need a restart");
+          spdlog::warn(
+              "SIGHUP: listen, record, auth and sensors.max_sensors changes need a restart");
         const bool status_changed = reloaded.status_interval_s != config.status_interval_s;
         config.ingest.validation = reloaded.ingest.validation;
         config.ingest.silent_after_s = reloaded.ingest.silent_after_s;
@@ -782,9 +786,10 @@ int RunOffline(const RunOptions& run, DaemonConfig config, const std::vector<std
     for (const SensorStatus& s : core.ingest().Sensors())
       encrypted += s.counters.rejected[static_cast<std::size_t>(RejectReason::kEncrypted)];
     if (c.unverified > 0 || encrypted > 0) {
-      spdlog::warn("without --keys: {} sealed datagrams read unverified (forged ones would count), "
-                   "{} encrypted ones could not be read",
-                   c.unverified, encrypted);
+      spdlog::warn(
+          "without --keys: {} sealed datagrams read unverified (forged ones would count), "
+          "{} encrypted ones could not be read",
+          c.unverified, encrypted);
     }
   }
   core.set_frame_listener(nullptr);

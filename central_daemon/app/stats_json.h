@@ -1,8 +1,8 @@
 #pragma once
 // The daemon's counters as JSON (lrfnetd --stats-out, tests, benchmarks): totals, rejections by
 // reason (RejectReason names), authentication (authenticated: keys configured; verified /
-// unverified: accepted sealed datagrams read with / without keys), and per sensor its datagrams by kind, rejections, sequence state,
-// silence, clock state, description and store size.
+// unverified: accepted sealed datagrams read with / without keys), and per sensor its datagrams by
+// kind, rejections, sequence state, silence, clock state, description and store size.
 
 #include <nlohmann/json.hpp>
 

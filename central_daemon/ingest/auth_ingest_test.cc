@@ -68,7 +68,8 @@ struct Listener final : IngestListener {
 
 IngestOptions KeyedOptions() {
   IngestOptions o;
-  o.auth.keys = {SensorKeyFile("gate-3", 1), SensorKeyFile("gate-3", 2), SensorKeyFile("gate-4", 1)};
+  o.auth.keys = {SensorKeyFile("gate-3", 1), SensorKeyFile("gate-3", 2),
+                 SensorKeyFile("gate-4", 1)};
   o.auth.max_counter_ahead_s = 300.0;
   o.auth.request_salt = 7;
   o.auth.request_first_counter = static_cast<std::uint64_t>(kT0);
@@ -133,10 +134,10 @@ TEST_F(AuthIngestTest, EveryAuthenticationFailureIsCountedUnderItsReasonAndNoneI
     cases.push_back(
         {"unknown epoch", Seal(unknown_epoch, plain), RejectReason::kWrongEpoch, "gate-3"});
     auth::Sealer other_site = TrackerSealer("gate-3", 2, start + 1'000'000, false, 50);
-    cases.push_back({"other site's key", Seal(other_site, plain), RejectReason::kWrongKey, "gate-3"});
-    auth::Sealer stranger = TrackerSealer("gate-9", 1, start + 1'000'000);
     cases.push_back(
-        {"unknown sensor", Seal(stranger, plain), RejectReason::kUnknownSensor, ""});
+        {"other site's key", Seal(other_site, plain), RejectReason::kWrongKey, "gate-3"});
+    auth::Sealer stranger = TrackerSealer("gate-9", 1, start + 1'000'000);
+    cases.push_back({"unknown sensor", Seal(stranger, plain), RejectReason::kUnknownSensor, ""});
     auth::Sealer future = TrackerSealer("gate-3", 2, static_cast<std::uint64_t>(kT0 + 400 * kS));
     cases.push_back({"counter ahead", Seal(future, plain), RejectReason::kTimestamp, "gate-3"});
     auth::Sealer yesterday = TrackerSealer("gate-3", 2, start - 86400ULL * 1'000'000'000ULL);
@@ -151,8 +152,8 @@ TEST_F(AuthIngestTest, EveryAuthenticationFailureIsCountedUnderItsReasonAndNoneI
     o.direction = auth::Direction::kToTracker;
     o.first_counter = sealer.next_counter() + 20;
     auth::Sealer reflected(o);
-    cases.push_back({"sealed for a tracker", Seal(reflected, plain), RejectReason::kAuthHeader,
-                     "gate-3"});
+    cases.push_back(
+        {"sealed for a tracker", Seal(reflected, plain), RejectReason::kAuthHeader, "gate-3"});
     Bytes b = Seal(sealer, plain);
     b[1] = 9;  // envelope version
     cases.push_back({"bad envelope", b, RejectReason::kAuthHeader, ""});
@@ -226,7 +227,8 @@ TEST_F(AuthIngestTest, StoredStateRefusesYesterdaysDatagramsAfterARestart) {
   EXPECT_EQ(Rejected(restarted, RejectReason::kStale), 10u);
   // Today's tracker (a new start: a new counter base) is accepted.
   auth::Sealer today = TrackerSealer("gate-4", 1, static_cast<std::uint64_t>(kT0 - 5 * kS));
-  EXPECT_TRUE(restarted.OnDatagram(Seal(today, tracker.Tracks(1, kT0 - kMs)[0]), "c:3", kT0).accepted);
+  EXPECT_TRUE(
+      restarted.OnDatagram(Seal(today, tracker.Tracks(1, kT0 - kMs)[0]), "c:3", kT0).accepted);
   std::vector<StoredAuthState> bad;
   EXPECT_NE(ParseAuthState("gate-4 1\n", &bad), std::nullopt);
   EXPECT_NE(ParseAuthState("gate/4 1 2\n", &bad), std::nullopt);

@@ -11,8 +11,8 @@ namespace lrfnet::daemon {
 struct DatagramVerifier::Sensor {
   std::vector<auth::SensorKeys> keys;  // one per epoch
   auth::ReplayWindow window;
-  std::uint32_t epoch = 0;  // newest epoch accepted (0: none yet)
-  bool has_state = false;   // a datagram was accepted, or a state restored
+  std::uint32_t epoch = 0;    // newest epoch accepted (0: none yet)
+  bool has_state = false;     // a datagram was accepted, or a state restored
   std::uint64_t counter = 0;  // highest counter accepted or restored
 
   const auth::SensorKeys* KeysOf(std::uint32_t e) const {
@@ -78,7 +78,8 @@ std::string FormatAuthState(const std::vector<StoredAuthState>& state) {
   return text;
 }
 
-std::optional<std::string> ParseAuthState(std::string_view text, std::vector<StoredAuthState>* out) {
+std::optional<std::string> ParseAuthState(std::string_view text,
+                                          std::vector<StoredAuthState>* out) {
   std::vector<StoredAuthState> state;
   std::size_t line_number = 0;
   while (!text.empty()) {

@@ -11,8 +11,8 @@
 //   wrong_key       the key id differs from the key of that sensor and epoch (another site's key,
 //                   an old copy)
 //   timestamp       (live only, max_counter_ahead_s > 0) the counter, the sender's start time in
-//                   ns, lies further ahead of the receive time than that: a gateway clock far in the
-//                   future would otherwise move the window beyond every later counter
+//                   ns, lies further ahead of the receive time than that: a gateway clock far in
+//                   the future would otherwise move the window beyond every later counter
 //   replayed        the counter was accepted before (inside the window)
 //   stale           the counter is older than the window, or not above the stored floor (the
 //                   highest counter accepted before the daemon restarted: yesterday's recording)
@@ -71,8 +71,8 @@ const char* ToString(AuthFailure failure);
 
 struct AuthResult {
   AuthFailure failure = AuthFailure::kNone;
-  bool sealed = false;    // the datagram came in an envelope
-  bool verified = false;  // ... and its tag was verified with the sensor's key
+  bool sealed = false;         // the datagram came in an envelope
+  bool verified = false;       // ... and its tag was verified with the sensor's key
   std::string_view sensor_id;  // of the envelope (empty when unsigned or unparseable)
   std::uint32_t epoch = 0;
   std::uint64_t counter = 0;

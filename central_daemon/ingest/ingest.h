@@ -79,16 +79,16 @@ enum class RejectReason : std::uint8_t {
   kTimestamp,       // "timestamp": outside the accepted window (see ValidationOptions)
   kDuplicate,       // "duplicate": sequence number already received in this session
   // Authentication (datagram_verifier.h says when each applies).
-  kUnsigned,        // "unsigned": keys configured, datagram not sealed
-  kAuthHeader,      // "auth_header": malformed envelope, or sealed for the other direction
-  kUnknownSensor,   // "unknown_sensor": no key for the envelope's sensor id
-  kWrongEpoch,      // "wrong_epoch": no key of that epoch, or an epoch older than the one in use
-  kWrongKey,        // "wrong_key": sealed with another key (key id)
-  kReplayed,        // "replayed": envelope counter accepted before
-  kStale,           // "stale": counter older than the window or than the state stored at restart
-  kBadTag,          // "bad_tag": forged or damaged
-  kEncrypted,       // "encrypted": encrypted, and no keys to read it
-  kAuthMismatch,    // "auth_mismatch": the Datagram names another sensor than its envelope
+  kUnsigned,       // "unsigned": keys configured, datagram not sealed
+  kAuthHeader,     // "auth_header": malformed envelope, or sealed for the other direction
+  kUnknownSensor,  // "unknown_sensor": no key for the envelope's sensor id
+  kWrongEpoch,     // "wrong_epoch": no key of that epoch, or an epoch older than the one in use
+  kWrongKey,       // "wrong_key": sealed with another key (key id)
+  kReplayed,       // "replayed": envelope counter accepted before
+  kStale,          // "stale": counter older than the window or than the state stored at restart
+  kBadTag,         // "bad_tag": forged or damaged
+  kEncrypted,      // "encrypted": encrypted, and no keys to read it
+  kAuthMismatch,   // "auth_mismatch": the Datagram names another sensor than its envelope
   kCount
 };
 inline constexpr std::size_t kRejectReasonCount = static_cast<std::size_t>(RejectReason::kCount);

@@ -588,12 +588,14 @@ TEST(IngestOptionsTest, DefaultsAreValidAndBoundsAreChecked) {
 }
 
 TEST(IngestNamesTest, EveryReasonAndEventHasItsDocumentedName) {
-  const char* expected[] = {
-      "oversize",         "empty",        "malformed",       "version",    "sensor_id",
-      "too_many_sensors", "unknown_kind", "unexpected_kind", "not_finite", "covariance",
-      "out_of_range",     "part",         "timestamp",       "duplicate",  "unsigned",
-      "auth_header",      "unknown_sensor", "wrong_epoch",   "wrong_key",  "replayed",
-      "stale",            "bad_tag",      "encrypted",       "auth_mismatch"};
+  const char* expected[] = {"oversize",     "empty",           "malformed",
+                            "version",      "sensor_id",       "too_many_sensors",
+                            "unknown_kind", "unexpected_kind", "not_finite",
+                            "covariance",   "out_of_range",    "part",
+                            "timestamp",    "duplicate",       "unsigned",
+                            "auth_header",  "unknown_sensor",  "wrong_epoch",
+                            "wrong_key",    "replayed",        "stale",
+                            "bad_tag",      "encrypted",       "auth_mismatch"};
   ASSERT_EQ(std::size(expected), kRejectReasonCount);
   for (std::size_t i = 0; i < kRejectReasonCount; ++i) {
     EXPECT_STREQ(ToString(static_cast<RejectReason>(i)), expected[i]);

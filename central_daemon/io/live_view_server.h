@@ -62,7 +62,7 @@ struct LiveViewCounters {
   std::uint64_t foxglove_messages_sent = 0;      // message-data frames written
   std::uint64_t foxglove_messages_replaced = 0;  // a slow client's unsent channel message replaced
   std::uint64_t foxglove_refused_messages = 0;   // client messages malformed or not supported
-  std::uint64_t unauthorized = 0;         // requests without the access token (401)
+  std::uint64_t unauthorized = 0;                // requests without the access token (401)
 };
 
 // One message of a Foxglove channel (JSON encoding). The channel is advertised the first time its

@@ -588,9 +588,9 @@ TEST_F(LiveViewServerTest, WithATokenEveryRequestAndUpgradeNeedsIt) {
   StartServer(options);
   Publish(R"({"type":"state"})");
   std::size_t refused = 0;
-  for (const std::string target : {"/", "/state", "/ws", "/nothing", "/?token=", "/?token=9f86d081",
-                                   "/?token=9f86d081884c7d659a2feaa0c55ad016",
-                                   "/?tok=9f86d081884c7d659a2feaa0c55ad015"}) {
+  for (const std::string target :
+       {"/", "/state", "/ws", "/nothing", "/?token=", "/?token=9f86d081",
+        "/?token=9f86d081884c7d659a2feaa0c55ad016", "/?tok=9f86d081884c7d659a2feaa0c55ad015"}) {
     const auto r = Request(port_, http::verb::get, target);
     ASSERT_TRUE(r.has_value()) << target;
     EXPECT_EQ(r->result_int(), 401) << target;
@@ -616,7 +616,8 @@ TEST_F(LiveViewServerTest, WithATokenEveryRequestAndUpgradeNeedsIt) {
     EXPECT_EQ(wrong->result_int(), 401);
     ++refused;
   }
-  const auto state = Request(port_, http::verb::get, "/state?x=1&token=9f86d081884c7d659a2feaa0c55ad015");
+  const auto state =
+      Request(port_, http::verb::get, "/state?x=1&token=9f86d081884c7d659a2feaa0c55ad015");
   ASSERT_TRUE(state.has_value());
   EXPECT_EQ(state->result_int(), 200);
   // The WebSocket: refused without the token, served with it.

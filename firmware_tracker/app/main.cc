@@ -108,7 +108,8 @@ class Outputs {
     if (!config.key_file.empty()) {
       auth::KeyFile key;
       if (!auth::Init()) return "--key: libsodium cannot be initialised";
-      if (auto e = auth::LoadSensorKey(config.key_file, config.sensor_id, &key)) return "--key " + *e;
+      if (auto e = auth::LoadSensorKey(config.key_file, config.sensor_id, &key))
+        return "--key " + *e;
       keys = auth::DeriveSensorKeys(key.key, key.epoch);
       // Sealed before both outputs. The counter starts at the wall clock's now (also in replay), so
       // it is beyond every counter of an earlier start of this sensor (datagram_auth.h).
@@ -116,7 +117,8 @@ class Outputs {
       sealer.sensor_id = config.sensor_id;
       sealer.keys = *keys;
       sealer.encrypt = config.encrypt;
-      auth::RandomBytes(std::span(reinterpret_cast<std::uint8_t*>(&sealer.salt), sizeof sealer.salt));
+      auth::RandomBytes(
+          std::span(reinterpret_cast<std::uint8_t*>(&sealer.salt), sizeof sealer.salt));
       sealer.first_counter = static_cast<std::uint64_t>(io::NowUtcNs());
       sealing_ = std::make_unique<io::SealingSink>(sealer, fanout_);
       spdlog::info("datagrams sealed with the key of {} (epoch {}){}", config.sensor_id, key.epoch,
@@ -579,17 +581,16 @@ int Run(int argc, char** argv) {
       "out", po::value<std::string>(&out), "write the datagrams to this recording file")(
       "key", po::value<std::string>(),
       "seal every datagram with this sensor's key file (lrfnet keys derive) and serve only sealed "
-      "Requests (auth.key)")(
-      "encrypt", "also encrypt the datagrams' content (auth.encrypt; needs --key)")(
+      "Requests (auth.key)")("encrypt",
+                             "also encrypt the datagrams' content (auth.encrypt; needs --key)")(
       "print-every", po::value<long long>(&print_every)->default_value(0),
       "print the tracks of every N-th scan (0: none)")(
       "speed", po::value<double>(&speed)->default_value(0.0),
       "replay: play the capture at this multiple of its recorded pace (1: real time; 0: as fast "
-      "as possible)")(
-      "max-scans", po::value<long long>(&max_scans)->default_value(0),
-      "stop after N scans (0: never)")("capture-port",
-                                       po::value<int>(&capture_port)->default_value(2112),
-                                       "replay: the scanner's TCP port in the capture")(
+      "as possible)")("max-scans", po::value<long long>(&max_scans)->default_value(0),
+                      "stop after N scans (0: never)")(
+      "capture-port", po::value<int>(&capture_port)->default_value(2112),
+      "replay: the scanner's TCP port in the capture")(
       "connect-timeout-ms", po::value<long long>(&connect_timeout_ms),
       "live: TCP connect deadline (link.connect_timeout_ms)")(
       "reply-timeout-ms", po::value<long long>(&reply_timeout_ms),

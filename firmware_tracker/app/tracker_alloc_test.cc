@@ -143,7 +143,8 @@ TEST(TrackerAllocTest, ShippedCapturesAllocateNothingPerScan) {
       EXPECT_GT(tracker.node->counters().frames, 0u);
       EXPECT_EQ(tracker.udp->counters().send_errors, 0u);
       if (tracker.sealing_sink) {
-        EXPECT_EQ(tracker.sealing_sink->counters().sealed, tracker.node->encoder().counters().datagrams);
+        EXPECT_EQ(tracker.sealing_sink->counters().sealed,
+                  tracker.node->encoder().counters().datagrams);
       }
       receiver.Drain();
     }

@@ -23,8 +23,8 @@
 
 #include "firmware_tracker/io/datagram_encoder.h"
 #include "firmware_tracker/io/recording_writer.h"
-#include "firmware_tracker/io/sealing_sink.h"
 #include "firmware_tracker/io/request_decoder.h"
+#include "firmware_tracker/io/sealing_sink.h"
 #include "firmware_tracker/io/system_clock.h"
 #include "firmware_tracker/io/udp_uplink.h"
 #include "firmware_tracker/tracking/clock_mapper.h"
@@ -88,7 +88,8 @@ struct Path {
         recording(RecordingWriterOptions{recording_path, "lrfnet-tracker test",
                                          TrackerRecordSource(kId), 64 * 1024, 1.0}),
         background(4561) {
-    if (mode != Sealing::kNone) sealing.emplace(SealerFor(mode, auth::Direction::kToDaemon), fanout);
+    if (mode != Sealing::kNone)
+      sealing.emplace(SealerFor(mode, auth::Direction::kToDaemon), fanout);
   }
   DatagramSink& sink() {
     if (sealing) return *sealing;

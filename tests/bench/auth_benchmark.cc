@@ -129,8 +129,9 @@ int main(int argc, char** argv) {
     } else if (a == "--datagrams" && i + 1 < argc) {
       n = static_cast<std::size_t>(std::stoul(argv[++i]));
     } else {
-      std::fprintf(stderr,
-                   "usage: auth_benchmark [--out FILE] [--append] [--platform NAME] [--datagrams N]\n");
+      std::fprintf(
+          stderr,
+          "usage: auth_benchmark [--out FILE] [--append] [--platform NAME] [--datagrams N]\n");
       return 2;
     }
   }
@@ -218,13 +219,16 @@ int main(int argc, char** argv) {
     std::ofstream out(out_path, append ? std::ios::app : std::ios::trunc);
     if (!append) {
       out << "# Authenticated datagrams: cost per datagram\n\n"
-             "`scripts/bench.sh` (tests/bench/auth_benchmark.cc): the tracker's encoder alone, with "
+             "`scripts/bench.sh` (tests/bench/auth_benchmark.cc): the tracker's encoder alone, "
+             "with "
              "the envelope's tag (SealingSink: ChaCha20-Poly1305 over the whole datagram) and with "
              "the payload encrypted; the daemon's verification (DatagramVerifier: envelope checks, "
-             "replay window, tag, decryption). Sensor id of 17 characters. Thread CPU time per datagram, "
+             "replay window, tag, decryption). Sensor id of 17 characters. Thread CPU time per "
+             "datagram, "
              "median of 7 runs of "
-             << n << " datagrams, one core. The aarch64 section runs under qemu-user on the same "
-                     "machine: read its ratios, not its times.\n";
+          << n
+          << " datagrams, one core. The aarch64 section runs under qemu-user on the same "
+             "machine: read its ratios, not its times.\n";
     }
     out << table;
   }

@@ -7,7 +7,8 @@
 //   - with keys, an accepted datagram was verified, sealing its payload again with the same header
 //     gives the same bytes (no other input can pass), and the same bytes a second time are refused
 //     as replayed; a refused one yields no payload;
-//   - without keys, an unsigned datagram passes unchanged and a sealed plain one yields its payload;
+//   - without keys, an unsigned datagram passes unchanged and a sealed plain one yields its
+//   payload;
 //   - the tracker's decoder counts every call once and a refused request sets no flag.
 
 #include <cstddef>
