@@ -108,7 +108,7 @@ for deb in "$tracker_amd64" "$tracker_arm64"; do
      expect_field $deb Version $version && expect_field $deb Architecture $arch"
   check "$name: Depends (shlibdeps) and Recommends chrony" bash -c \
     "$(declare -f field expect_field depends_on); depends_on $deb libc6 libstdc++6 libpcap0.8 \
-       libyaml-cpp0.7 libboost-program-options1.74.0 libspdlog1.10-fmt9 &&
+       libyaml-cpp0.7 libboost-program-options1.74.0 libspdlog1.10-fmt9 libsodium23 &&
      expect_field $deb Recommends chrony"
   check "$name: files" files_are "$deb" /usr/bin/lrfnet-tracker /etc/lrfnet/lrfnet-tracker.yaml \
     "/lib/systemd/system/lrfnet-tracker@.service" /usr/lib/sysusers.d/lrfnet-tracker.conf \
@@ -126,7 +126,7 @@ check "lrfnetd: Package, Version, Architecture, Recommends chrony" bash -c \
    expect_field $daemon_deb Recommends chrony"
 check "lrfnetd: Depends (shlibdeps)" bash -c \
   "$(declare -f field depends_on); depends_on $daemon_deb libc6 libstdc++6 libpcap0.8 \
-     libprotobuf-lite32 libyaml-cpp0.7 libspdlog1.10-fmt9"
+     libprotobuf-lite32 libyaml-cpp0.7 libspdlog1.10-fmt9 libsodium23"
 check "lrfnetd: files" files_are "$daemon_deb" /usr/bin/lrfnetd /etc/lrfnet/lrfnetd.yaml \
   /lib/systemd/system/lrfnetd.service /usr/lib/sysusers.d/lrfnetd.conf \
   /usr/share/man/man1/lrfnetd.1.gz
@@ -137,7 +137,7 @@ check "lrfnetd holds no tracker code (no lrfnet::io/cola/tracking/tracker symbol
   "! nm -C build/central_daemon/app/lrfnetd | grep -E 'lrfnet::(io|cola|tracking|tracker)::'"
 check "lrfnet: Package, Architecture, Depends" bash -c \
   "$(declare -f field expect_field depends_on); expect_field $tools_deb Package lrfnet &&
-   expect_field $tools_deb Architecture amd64 && depends_on $tools_deb libc6 libpcap0.8"
+   expect_field $tools_deb Architecture amd64 && depends_on $tools_deb libc6 libpcap0.8 libsodium23"
 check "lrfnet: files (binary, man page, every shipped scenario)" files_are "$tools_deb" \
   /usr/bin/lrfnet /usr/share/man/man1/lrfnet.1.gz "${scenarios[@]}"
 
