@@ -18,6 +18,20 @@ bool Positive(double v) { return std::isfinite(v) && v > 0.0; }
 constexpr std::uint32_t kMinFlatnessUpdates = 5;
 // The running mean of the flatness becomes an exponential one after this many updates.
 constexpr double kFlatnessMemory = 20.0;
+// Fits with fewer points carry no flatness evidence (two points always lie on a line).
+constexpr std::size_t kMinFlatnessPoints = 4;
+// RMS distance to their principal line of points spread evenly over an arc of sagitta s: the
+// parabola v = k u^2 on [-h, h] less its mean, sqrt(1/5 - 1/9) k h^2 = 0.298 s.
+constexpr double kArcLineRmsShare = 0.298;
+
+// What the points of a person's back (the prior's upper body seen from behind, its flattest view)
+// spread over extent_m show of their principal line: kArcLineRmsShare times the sagitta of the
+// superellipse |u/a|^p + |v/b|^p = 1 over |u| <= extent_m / 2.
+double PersonBackLineRms(const ShapeOptions& o, double extent_m) {
+  const double u = std::min(1.0, 0.5 * extent_m / o.person_major_m);
+  const double v = std::pow(1.0 - std::pow(u, o.person_exponent), 1.0 / o.person_exponent);
+  return kArcLineRmsShare * o.person_minor_m * (1.0 - v);
+}
 // Sizes are learned only from fits whose yaw prior is at least this certain (a walking person).
 constexpr double kMaxLearningYawSigmaRad = 0.6;
 // A track is a cylinder when its learned semi-axes differ by less than this share of a, after this
@@ -259,10 +273,13 @@ class TrackingPipeline::Refiner final : public MeasurementRefiner {
     shape.shape = shape.model == ShapeModel::kBox ? ObjectShape::kBox
                   : shape.exponent == 2.0         ? ObjectShape::kCylinder
                                                   : ObjectShape::kTorso;
-    // Flatness: the points' distance to their principal line beyond the range noise.
-    if (fit.extent_m >= o.flat_min_extent_m) {
-      const double range = fit.centre_m.norm();
-      const double noise = o.fit.point_sigma_m + o.fit.point_sigma_per_m * range;
+    // Flatness: the points' distance to their principal line beyond the range noise. Evidence only
+    // where the points can tell a person from a board: a person's back over this extent would stand
+    // out of the range noise (far away, a few points of a back are as straight as a board's).
+    const double range = fit.centre_m.norm();
+    const double noise = o.fit.point_sigma_m + o.fit.point_sigma_per_m * range;
+    if (fit.extent_m >= o.flat_min_extent_m && fit.points_used >= kMinFlatnessPoints &&
+        PersonBackLineRms(o, fit.extent_m) > noise) {
       const double v = fit.line_rms_m * fit.line_rms_m - noise * noise;
       shape.flatness_m2 += (v - shape.flatness_m2) /
                            std::min(kFlatnessMemory, static_cast<double>(++flat_count(shape)));

@@ -618,6 +618,24 @@ TEST(PipelineScenarioTest, BoardMovedAndLeftBecomesBackgroundAndAPersonWhoStopsI
   EXPECT_EQ(run.pipeline->counters().absorbed_objects, 1u);
 }
 
+TEST(PipelineScenarioTest, APersonWhoStopsFarFromTheSensorWithTheirBackToItIsKept) {
+  // Walks away from the sensor and stands 10 m from it for 10 s, the back towards it: 4 or 5
+  // points of a 0.23 x 0.14 m back, whose curvature is about the size of the range noise there.
+  // Still a person, never background.
+  Scene scene;
+  const Eigen::Vector2d stop(10.0, 2.5);
+  const Eigen::Vector2d start(2.0, 2.5);
+  const double arrive_s = 8.0 + (stop - start).norm() / 1.2;
+  scene.walkers = {Walker({{8.0, start}, {arrive_s, stop}, {arrive_s + 10.0, stop}})};
+  scene.sizes = {{0.23, 0.14}};
+  const SceneRun run = Simulate(scene, arrive_s + 10.0, Synthetic());
+  const Follow standing = FollowWalker(run, scene.walkers[0], 0, arrive_s + 0.5, arrive_s + 9.9);
+  SCOPED_TRACE(Describe(standing));
+  EXPECT_EQ(standing.unmatched, 0);
+  EXPECT_EQ(standing.frames_per_id.size(), 1u);
+  EXPECT_EQ(run.pipeline->counters().absorbed_objects, 0u);
+}
+
 TEST(PipelineScenarioTest, AnObjectThatNeverMovesBecomesBackgroundWithoutBeingReported) {
   // A box put down at t = 8 s where the sensor did not see it arrive (it appears at once).
   Scene scene;
