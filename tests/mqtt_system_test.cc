@@ -41,8 +41,8 @@ using testing::ScratchDir;
 // corners, a door line at x = 6 (from (6, 1) to (6, 7): its left side, the inbound side, is
 // x < 6) and a "lobby" area in the south-east. People leave the room through the doorway and out
 // of the sensors' view, as people do (a simulated target vanishes where its path ends).
-//   p1 walks west -> east across the door line (outbound) into the lobby and stands there
-//      (p1_stands: the same person, standing, until the end);
+//   p1 walks west -> east across the door line (outbound) into the lobby and stands there until
+//      the end;
 //   p2 walks east -> west across the door line (inbound) and out through the doorway;
 //   p3 starts in the lobby, walks to the door line, then 4.7 m *along* it (on the line), then west
 //      (one inbound crossing; one lobby exit);
@@ -60,8 +60,7 @@ sensors:
   - {id: s1, model: lms111, x_m: 0.3, y_m: 0.3, yaw_deg: 35}
   - {id: s2, model: lms111, x_m: 11.7, y_m: 7.7, yaw_deg: -145}
 targets:
-  - {id: p1, shape: person, path: [[2, 3], [10, 3]], speed_mps: 1.2, enter_s: 6}
-  - {id: p1_stands, shape: person, path: [[10, 3]], enter_s: 12.67}
+  - {id: p1, shape: person, path: [[2, 3], [10, 3]], speed_mps: 1.2, enter_s: 6, stay: true}
   - {id: p2, shape: person, path: [[10.5, 5.5], [-1, 5.5], [-1.5, 2]], speed_mps: 1.2, enter_s: 7.5}
   - {id: p3, shape: person, path: [[9, 1.8], [6.05, 1.8], [6.05, 6.5], [3, 6.5], [0.5, 5.5]], speed_mps: 1.2, enter_s: 9.5}
   - {id: p4, shape: person, path: [[3, 4.3], [5.3, 4.3], [3, 4.3], [0.5, 5.2], [-1, 5.2]], speed_mps: 1.0, enter_s: 11.5}
