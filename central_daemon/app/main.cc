@@ -744,6 +744,10 @@ int RunOffline(const RunOptions& run, DaemonConfig config, const std::vector<std
   int exit_code = kExitOk;
   common::UtcNs last_tick_ns = 0;
   common::UtcNs last_ns = 0;
+  // Every input at once, in receive order: the sensors' recordings of one session interleave as
+  // the daemon would have received them (read one after the other, fusion and zones would see
+  // one sensor's whole session before the next one's).
+  std::vector<std::unique_ptr<DatagramSource>> sources;
   for (const std::string& path : inputs) {
     std::string error;
     DatagramSourceOptions options;
@@ -753,30 +757,35 @@ int RunOffline(const RunOptions& run, DaemonConfig config, const std::vector<std
       std::fprintf(stderr, "lrfnetd: --input %s: %s\n", path.c_str(), error.c_str());
       return kExitFailure;
     }
-    ReceivedDatagram d;
-    SourceStatus status;
-    while ((status = source->Next(&d)) == SourceStatus::kDatagram) {
-      core.OnDatagram(d.bytes, d.source, d.receive_ns);
-      if (last_ns == 0 && mqtt.service) mqtt.service->PublishStatus(true, d.receive_ns);
-      last_ns = d.receive_ns;
-      if (fusion.calibrated() && (d.receive_ns - last_fusion_ns >= fusion_period_ns ||
-                                  d.receive_ns < last_fusion_ns)) {
-        fusion.OnTick(static_cast<double>(d.receive_ns) * 1e-9);
-        last_fusion_ns = d.receive_ns;
-      }
-      zones.OnTick(fusion);
-      if (mqtt.service) mqtt.service->OnTick(d.receive_ns, core, fusion, zones);
-      if (d.receive_ns - last_tick_ns >= kTickPeriodNs || d.receive_ns < last_tick_ns) {
-        core.OnTick(d.receive_ns);
-        LogEvents(core, config.ingest.silent_after_s);
-        last_tick_ns = d.receive_ns;
-      }
-    }
+    sources.push_back(std::move(source));
+  }
+  MergedDatagramSource merged(std::move(sources));
+  ReceivedDatagram d;
+  std::size_t index = 0;
+  for (SourceStatus status; (status = merged.Next(&d, &index)) != SourceStatus::kEnd;) {
     if (status == SourceStatus::kError) {
-      spdlog::error("--input {}", source->error());
+      spdlog::error("--input {}", merged.source(index).error());
       exit_code = kExitFailure;
+      continue;
     }
-    spdlog::info("input {}: {} datagrams", path, source->counters().datagrams);
+    core.OnDatagram(d.bytes, d.source, d.receive_ns);
+    if (last_ns == 0 && mqtt.service) mqtt.service->PublishStatus(true, d.receive_ns);
+    last_ns = d.receive_ns;
+    if (fusion.calibrated() && (d.receive_ns - last_fusion_ns >= fusion_period_ns ||
+                                d.receive_ns < last_fusion_ns)) {
+      fusion.OnTick(static_cast<double>(d.receive_ns) * 1e-9);
+      last_fusion_ns = d.receive_ns;
+    }
+    zones.OnTick(fusion);
+    if (mqtt.service) mqtt.service->OnTick(d.receive_ns, core, fusion, zones);
+    if (d.receive_ns - last_tick_ns >= kTickPeriodNs || d.receive_ns < last_tick_ns) {
+      core.OnTick(d.receive_ns);
+      LogEvents(core, config.ingest.silent_after_s);
+      last_tick_ns = d.receive_ns;
+    }
+  }
+  for (std::size_t i = 0; i < merged.size(); ++i) {
+    spdlog::info("input {}: {} datagrams", inputs[i], merged.source(i).counters().datagrams);
   }
   if (last_ns != 0) core.OnTick(last_ns);
   LogEvents(core, config.ingest.silent_after_s);

@@ -7,6 +7,7 @@
 #include <array>
 #include <cerrno>
 #include <cstring>
+#include <utility>
 
 #include "central_daemon/io/recording_file_source.h"
 #include "central_daemon/io/udp_capture_source.h"
@@ -80,6 +81,35 @@ std::vector<std::string> RecordingFiles(const std::string& path) {
     files.push_back(std::move(file));
   }
   return files;
+}
+
+MergedDatagramSource::MergedDatagramSource(std::vector<std::unique_ptr<DatagramSource>> sources) {
+  heads_.reserve(sources.size());
+  for (auto& source : sources) heads_.push_back({std::move(source), {}, SourceStatus::kDatagram});
+}
+
+SourceStatus MergedDatagramSource::Next(ReceivedDatagram* datagram, std::size_t* index) {
+  std::size_t first = heads_.size();
+  for (std::size_t i = 0; i < heads_.size(); ++i) {
+    Head& h = heads_[i];
+    if (!h.loaded) {
+      h.status = h.source->Next(&h.next);
+      h.loaded = true;
+    }
+    if (h.status == SourceStatus::kError && !h.reported) {
+      h.reported = true;
+      *index = i;
+      return SourceStatus::kError;
+    }
+    if (h.status != SourceStatus::kDatagram) continue;
+    if (first == heads_.size() || h.next.receive_ns < heads_[first].next.receive_ns) first = i;
+  }
+  if (first == heads_.size()) return SourceStatus::kEnd;
+  Head& h = heads_[first];
+  std::swap(*datagram, h.next);
+  h.loaded = false;
+  *index = first;
+  return SourceStatus::kDatagram;
 }
 
 }  // namespace lrfnet::daemon

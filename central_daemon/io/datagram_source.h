@@ -72,4 +72,28 @@ std::unique_ptr<DatagramSource> OpenDatagramFile(const std::string& path,
 // The files of a recording that was rotated: path, path.1, path.2, ... as long as they exist.
 std::vector<std::string> RecordingFiles(const std::string& path);
 
+// Several sources read as one stream in receive order, as a daemon received them (the per-sensor
+// recordings or captures of one session): the source whose next datagram was received first goes
+// first, ties to the earlier source. A source ending in kError is reported once and the others go
+// on.
+class MergedDatagramSource {
+ public:
+  explicit MergedDatagramSource(std::vector<std::unique_ptr<DatagramSource>> sources);
+  // kDatagram: the next datagram, *index its source. kError: source *index ended with an error
+  // (once per source; its error() says what). kEnd: every source has ended.
+  SourceStatus Next(ReceivedDatagram* datagram, std::size_t* index);
+  std::size_t size() const { return heads_.size(); }
+  const DatagramSource& source(std::size_t i) const { return *heads_[i].source; }
+
+ private:
+  struct Head {
+    std::unique_ptr<DatagramSource> source;
+    ReceivedDatagram next;
+    SourceStatus status = SourceStatus::kDatagram;
+    bool loaded = false;    // `next` and `status` are read ahead
+    bool reported = false;  // its end was returned (kError)
+  };
+  std::vector<Head> heads_;
+};
+
 }  // namespace lrfnet::daemon

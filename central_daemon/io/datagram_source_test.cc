@@ -391,6 +391,76 @@ TEST_F(DatagramSourceTest, CaptureOfAnUnknownLinkTypeIsRefused) {
   EXPECT_TRUE(Contains(error, path)) << error;
 }
 
+// A recording of datagrams received at kT0 + the given milliseconds from `sender`.
+void WriteRecording(const std::string& path, const std::vector<int>& ms,
+                    const std::string& sender) {
+  RecordingWriterOptions options;
+  options.path = path;
+  RecordingWriter writer(options);
+  ASSERT_EQ(writer.Open(kT0), std::nullopt);
+  for (const int t : ms) {
+    writer.Append(MakeDatagram(10, static_cast<std::uint32_t>(t)), sender, kT0 + t * kMs);
+  }
+  ASSERT_EQ(writer.Close(), std::nullopt);
+}
+
+TEST_F(DatagramSourceTest, MergedFilesGiveEveryDatagramInReceiveOrder) {
+  // Two sensors' recordings of one session: read as the daemon received them, not file by file.
+  WriteRecording(TempPath("merge_a.rec"), {0, 2, 4, 6}, "tracker:a");
+  WriteRecording(TempPath("merge_b.rec"), {1, 2, 3, 10}, "tracker:b");
+  std::string error;
+  std::vector<std::unique_ptr<DatagramSource>> sources;
+  sources.push_back(Open(TempPath("merge_a.rec"), &error));
+  sources.push_back(Open(TempPath("merge_b.rec"), &error));
+  ASSERT_TRUE(sources[0] && sources[1]) << error;
+  MergedDatagramSource merged(std::move(sources));
+  ReceivedDatagram d;
+  std::size_t index = 9;
+  std::vector<std::pair<int, std::size_t>> got;
+  SourceStatus status;
+  while ((status = merged.Next(&d, &index)) == SourceStatus::kDatagram) {
+    got.emplace_back(static_cast<int>((d.receive_ns - kT0) / kMs), index);
+    EXPECT_EQ(d.source, index == 0 ? "tracker:a" : "tracker:b");
+    EXPECT_EQ(d.bytes, MakeDatagram(10, static_cast<std::uint32_t>(got.back().first)));
+  }
+  EXPECT_EQ(status, SourceStatus::kEnd);
+  EXPECT_EQ(merged.Next(&d, &index), SourceStatus::kEnd);
+  const std::vector<std::pair<int, std::size_t>> want = {{0, 0}, {1, 1}, {2, 0}, {2, 1},
+                                                         {3, 1}, {4, 0}, {6, 0}, {10, 1}};
+  EXPECT_EQ(got, want);
+  EXPECT_EQ(merged.source(0).counters().datagrams, 4u);
+  EXPECT_EQ(merged.source(1).counters().datagrams, 4u);
+}
+
+TEST_F(DatagramSourceTest, MergedFilesReportATornOneOnceAndGoOnWithTheOthers) {
+  WriteRecording(TempPath("merge_ok.rec"), {0, 5, 9}, "tracker:a");
+  WriteRecording(TempPath("merge_torn.rec"), {1, 3, 7}, "tracker:b");
+  Bytes torn = ReadBytes(TempPath("merge_torn.rec"));
+  torn.resize(torn.size() - 3);  // the last entry is cut
+  WriteBytes(TempPath("merge_torn.rec"), torn);
+  std::string error;
+  std::vector<std::unique_ptr<DatagramSource>> sources;
+  sources.push_back(Open(TempPath("merge_ok.rec"), &error));
+  sources.push_back(Open(TempPath("merge_torn.rec"), &error));
+  ASSERT_TRUE(sources[0] && sources[1]) << error;
+  MergedDatagramSource merged(std::move(sources));
+  ReceivedDatagram d;
+  std::size_t index = 9;
+  std::vector<int> got;
+  int errors = 0;
+  for (SourceStatus status; (status = merged.Next(&d, &index)) != SourceStatus::kEnd;) {
+    if (status == SourceStatus::kError) {
+      ++errors;
+      EXPECT_EQ(index, 1u);
+      EXPECT_TRUE(Contains(merged.source(1).error(), "merge_torn.rec")) << merged.source(1).error();
+      continue;
+    }
+    got.push_back(static_cast<int>((d.receive_ns - kT0) / kMs));
+  }
+  EXPECT_EQ(errors, 1);
+  EXPECT_EQ(got, (std::vector<int>{0, 1, 3, 5, 9}));
+}
+
 TEST(FormatUdpSourceTest, Ipv4Ipv6AndMapped) {
   capture::IpAddress v4;
   v4.family = capture::IpFamily::kIpv4;
