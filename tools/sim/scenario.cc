@@ -217,6 +217,99 @@ bool CheckSensor(const Scenario& s, std::size_t i, const std::vector<NamedSegmen
   return true;
 }
 
+// Where a sensor stands after a move: the checks of CheckSensor's pose.
+bool CheckMovedPlace(const Scenario& s, const std::string& path, int line, const std::string& id,
+                     const SensorMove& move, const std::vector<NamedSegment>& segments,
+                     const std::pair<Vec2, Vec2>& bounds, Checker& c) {
+  const Vec2 p{move.x_m, move.y_m};
+  if (!c.Finite(line, path, p)) return false;
+  if (!c.Range(line, path + ".yaw_deg", move.yaw_deg, -3600.0, 3600.0)) return false;
+  if (!InBounds(p, bounds)) {
+    return c.Fail(line, path,
+                  "sensor '" + id + "' moves to " + FmtPoint(p) + ", outside the world (" +
+                      BoundsText(bounds) + ")");
+  }
+  for (std::size_t k = 0; k < s.world.obstacles.size(); ++k) {
+    if (PointInPolygon(p, s.world.obstacles[k])) {
+      return c.Fail(line, path,
+                    "sensor '" + id + "' moves inside world.obstacles[" + std::to_string(k) + "]");
+    }
+  }
+  for (const NamedSegment& seg : segments) {
+    const double d = PointSegmentDistance(p, seg.segment);
+    if (d < kSensorWallClearanceM) {
+      return c.Fail(line, path,
+                    "sensor '" + id + "' moves to " + Fmt(d) + " m from " + seg.name +
+                        " (keep >= " + Fmt(kSensorWallClearanceM) + " m)");
+    }
+  }
+  return true;
+}
+
+bool CheckSensorMoves(const Scenario& s, std::size_t i, const std::vector<NamedSegment>& segments,
+                      const std::pair<Vec2, Vec2>& bounds, Checker& c) {
+  const SensorSpec& sensor = s.sensors[i];
+  double previous_s = 0.0;
+  for (std::size_t k = 0; k < sensor.moves.size(); ++k) {
+    const SensorMove& m = sensor.moves[k];
+    const std::string path = "sensors[" + std::to_string(i) + "].moves[" + std::to_string(k) + "]";
+    if (!(std::isfinite(m.at_s) && m.at_s > previous_s && m.at_s < s.duration_s)) {
+      return c.Fail(sensor.line, path + ".at_s",
+                    "must lie after " + Fmt(previous_s) +
+                        " s (the pose before) and before duration_s " + Fmt(s.duration_s) +
+                        ", got " + Fmt(m.at_s));
+    }
+    previous_s = m.at_s;
+    if (!CheckMovedPlace(s, path, sensor.line, sensor.id, m, segments, bounds, c)) return false;
+  }
+  return true;
+}
+
+bool CheckWorldChanges(const Scenario& s, Checker& c) {
+  const WorldSpec& w = s.world;
+  std::set<std::size_t> removed;
+  double previous_s = 0.0;
+  for (std::size_t k = 0; k < w.changes.size(); ++k) {
+    const WorldChange& change = w.changes[k];
+    const std::string path = "world.changes[" + std::to_string(k) + "]";
+    if (!(std::isfinite(change.at_s) && change.at_s >= previous_s && change.at_s > 0.0 &&
+          change.at_s < s.duration_s)) {
+      return c.Fail(change.line, path + ".at_s",
+                    "must lie in (0, duration_s " + Fmt(s.duration_s) +
+                        ") and not before the change before, got " + Fmt(change.at_s));
+    }
+    previous_s = change.at_s;
+    if (change.remove.has_value() == !change.add.empty()) {
+      return c.Fail(change.line, path, "give exactly one of remove (an obstacle index) and add");
+    }
+    if (change.remove) {
+      if (*change.remove >= w.obstacles.size()) {
+        return c.Fail(change.line, path + ".remove",
+                      "no obstacle " + std::to_string(*change.remove) + " (world.obstacles has " +
+                          std::to_string(w.obstacles.size()) + ")");
+      }
+      if (!removed.insert(*change.remove).second) {
+        return c.Fail(change.line, path + ".remove",
+                      "obstacle " + std::to_string(*change.remove) + " is already removed");
+      }
+      continue;
+    }
+    for (const Vec2& p : change.add) {
+      if (!c.Finite(change.line, path + ".add", p)) return false;
+    }
+    if (auto e = CheckSimplePolygon(change.add)) return c.Fail(change.line, path + ".add", *e);
+    for (const SensorSpec& sensor : s.sensors) {
+      for (const SensorPoseSpan& span : PoseSpans(sensor, s.duration_s)) {
+        if (PointInPolygon({span.x_m, span.y_m}, change.add)) {
+          return c.Fail(change.line, path + ".add",
+                        "the polygon covers sensor '" + sensor.id + "'");
+        }
+      }
+    }
+  }
+  return true;
+}
+
 bool CheckPathGeometry(const Scenario& s, const TargetSpec& t, const std::string& path, int line,
                        const std::vector<NamedSegment>& segments,
                        const std::pair<Vec2, Vec2>& bounds, Checker& c) {
@@ -450,6 +543,16 @@ std::pair<Vec2, Vec2> WorldBounds(const WorldSpec& world) {
   return {lo, hi};
 }
 
+std::vector<SensorPoseSpan> PoseSpans(const SensorSpec& sensor, double duration_s) {
+  std::vector<SensorPoseSpan> out;
+  out.push_back({0.0, duration_s, sensor.x_m, sensor.y_m, sensor.yaw_deg});
+  for (const SensorMove& m : sensor.moves) {
+    out.back().to_s = m.at_s;
+    out.push_back({m.at_s, duration_s, m.x_m, m.y_m, m.yaw_deg});
+  }
+  return out;
+}
+
 std::optional<std::string> Validate(const Scenario& s) {
   Checker c(s);
   const auto done = [&]() { return c.error; };
@@ -483,7 +586,9 @@ std::optional<std::string> Validate(const Scenario& s) {
   std::set<std::string> ids;
   for (std::size_t i = 0; i < s.sensors.size(); ++i) {
     if (!CheckSensor(s, i, segments, bounds, &ids, c)) return done();
+    if (!CheckSensorMoves(s, i, segments, bounds, c)) return done();
   }
+  if (!CheckWorldChanges(s, c)) return done();
   std::set<std::string> target_ids;
   for (std::size_t i = 0; i < s.targets.size(); ++i) {
     if (!CheckTarget(s, i, walkable_limits, bounds, &target_ids, c)) return done();

@@ -16,7 +16,14 @@
 //   error), mount (torso | legs: the scan plane at upper-body height, default, or at knee height,
 //   where a person shows two legs), clock {offset_s (tick at time 0, s since power-up),
 //   drift_ppm}, network {latency_ms (minimum), jitter_ms (mean of the exponential extra delay),
-//   gateway_offset_ms (the gateway clock minus UTC)}.
+//   gateway_offset_ms (the gateway clock minus UTC)}, moves [{at_s, x_m, y_m, yaw_deg}, ...] (the
+//   sensor is bumped or remounted: from at_s on it scans from this pose; times increasing, inside
+//   the run; the scan that starts at or after at_s is the first from the new pose).
+// - world.changes [{at_s, remove: obstacle index} | {at_s, add: polygon}, ...]: furniture moved
+//   during the run (times not decreasing, inside the run). `remove` names an index of
+//   world.obstacles (each at most once); `add` puts a new obstacle polygon in the scan plane. The
+//   targets' paths are checked against the initial world only: a scenario keeps added furniture
+//   off the paths.
 // - targets: id, shape, enter_s, leave_s, and a motion:
 //   shapes: cylinder {radius_m}; person {a_m across the shoulders, b_m front to back,
 //     torso_exponent (the upper body's cross-section is the superellipse |u/a|^p + |v/b|^p = 1:
@@ -64,6 +71,14 @@ struct NetworkSpec {
 enum class Mount { kTorso, kLegs };
 const char* ToString(Mount mount);
 
+// A sensor bumped or remounted during the run: its pose from at_s on.
+struct SensorMove {
+  double at_s = 0;
+  double x_m = 0;
+  double y_m = 0;
+  double yaw_deg = 0;
+};
+
 struct SensorSpec {
   std::string id;
   std::string model;
@@ -75,7 +90,8 @@ struct SensorSpec {
   Mount mount = Mount::kTorso;
   ClockSpec clock;
   NetworkSpec network;
-  int line = 0;  // in the scenario file, 1-based; 0 unknown
+  std::vector<SensorMove> moves;  // times increasing
+  int line = 0;                   // in the scenario file, 1-based; 0 unknown
 };
 
 enum class TargetShape { kCylinder, kPerson, kTrolley, kChair, kDoor };
@@ -140,12 +156,22 @@ struct TargetSpec {
   int line = 0;
 };
 
+// Furniture moved during the run: at at_s, obstacle `remove` (an index of WorldSpec::obstacles)
+// disappears, or the polygon `add` appears (exactly one of the two).
+struct WorldChange {
+  double at_s = 0;
+  std::optional<std::size_t> remove;
+  std::vector<Vec2> add;  // open polygon; empty when `remove` is set
+  int line = 0;
+};
+
 struct WorldSpec {
   std::vector<std::vector<Vec2>> walls;      // polylines
   std::vector<std::vector<Vec2>> obstacles;  // open polygons
   // Furniture below the scan plane (desks, tables): targets walk around it, beams pass over it.
   std::vector<std::vector<Vec2>> low_obstacles;
   std::optional<std::pair<Vec2, Vec2>> bounds;
+  std::vector<WorldChange> changes;  // times not decreasing
   std::vector<int> wall_lines;
   std::vector<int> obstacle_lines;
   std::vector<int> low_obstacle_lines;
@@ -168,6 +194,17 @@ inline constexpr std::size_t kMaxTargets = 64;
 
 // Geometry the targets must keep clear of (radius of a target's footprint).
 double TargetRadius(const TargetSpec& target);
+
+// A sensor's pose over the run: one entry per pose, from_s = 0 for the scenario's pose, then one
+// per move; to_s is the next entry's from_s, or duration_s for the last.
+struct SensorPoseSpan {
+  double from_s = 0;
+  double to_s = 0;
+  double x_m = 0;
+  double y_m = 0;
+  double yaw_deg = 0;
+};
+std::vector<SensorPoseSpan> PoseSpans(const SensorSpec& sensor, double duration_s);
 
 // The rectangle sensors and targets must lie in: world.bounds, else the bounding box of walls and
 // obstacles.

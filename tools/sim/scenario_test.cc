@@ -270,6 +270,81 @@ TEST(ScenarioErrors, PeopleTrolleysChairsDoorsAndMounts) {
   EXPECT_NE(e.find("targets[1]: give either path"), std::string::npos) << e;
 }
 
+// Sensors bumped and furniture moved during the run.
+TEST(Scenario, SensorMovesAndWorldChangesParse) {
+  std::string text = Replace(kDesignExample, "clock: {offset_s: 812.3, drift_ppm: 15}}",
+                             "clock: {offset_s: 812.3, drift_ppm: 15},\n"
+                             "     moves: [{at_s: 20, x_m: 19.4, y_m: 9.5, yaw_deg: -133},\n"
+                             "             {at_s: 40.5, x_m: 19.5, y_m: 9.4, yaw_deg: -140}]}");
+  text =
+      Replace(text, "obstacles: [[[4, 4], [6, 4], [6, 6], [4, 6]]]",
+              "obstacles: [[[4, 4], [6, 4], [6, 6], [4, 6]]]\n"
+              "  changes: [{at_s: 10, remove: 0}, {at_s: 10, add: [[12, 6], [13, 6], [13, 7]]}]");
+  Scenario s;
+  std::string error;
+  ASSERT_TRUE(ParseScenario(text, "moves.yaml", &s, &error)) << error;
+  ASSERT_EQ(s.sensors[1].moves.size(), 2u);
+  EXPECT_DOUBLE_EQ(s.sensors[1].moves[1].at_s, 40.5);
+  EXPECT_DOUBLE_EQ(s.sensors[1].moves[1].yaw_deg, -140.0);
+  ASSERT_EQ(s.world.changes.size(), 2u);
+  EXPECT_EQ(s.world.changes[0].remove, std::optional<std::size_t>(0));
+  EXPECT_EQ(s.world.changes[1].add.size(), 3u);
+
+  const std::vector<SensorPoseSpan> spans = PoseSpans(s.sensors[1], s.duration_s);
+  ASSERT_EQ(spans.size(), 3u);
+  EXPECT_DOUBLE_EQ(spans[0].to_s, 20.0);
+  EXPECT_DOUBLE_EQ(spans[0].yaw_deg, -135.0);
+  EXPECT_DOUBLE_EQ(spans[1].from_s, 20.0);
+  EXPECT_DOUBLE_EQ(spans[1].x_m, 19.4);
+  EXPECT_DOUBLE_EQ(spans[2].to_s, 60.0);
+  EXPECT_EQ(PoseSpans(s.sensors[0], s.duration_s).size(), 1u);
+}
+
+TEST(ScenarioErrors, SensorMovesAndWorldChanges) {
+  const auto with_moves = [](const std::string& moves) {
+    return Replace(kDesignExample, "clock: {offset_s: 812.3, drift_ppm: 15}}",
+                   "clock: {offset_s: 812.3, drift_ppm: 15}, moves: " + moves + "}");
+  };
+  std::string e = ErrorOf(with_moves("[{at_s: 20, x_m: 25, y_m: 9.5, yaw_deg: 0}]"));
+  EXPECT_NE(e.find("sensors[1].moves[0]: sensor 's2' moves to [25, 9.5], outside the world"),
+            std::string::npos)
+      << e;
+  e = ErrorOf(with_moves("[{at_s: 20, x_m: 5, y_m: 5, yaw_deg: 0}]"));
+  EXPECT_NE(e.find("moves inside world.obstacles[0]"), std::string::npos) << e;
+  e =
+      ErrorOf(with_moves("[{at_s: 30, x_m: 19, y_m: 9, yaw_deg: 0}, "
+                         "{at_s: 30, x_m: 19, y_m: 9, yaw_deg: 1}]"));
+  EXPECT_NE(e.find("sensors[1].moves[1].at_s: must lie after 30 s"), std::string::npos) << e;
+  e = ErrorOf(with_moves("[{at_s: 60, x_m: 19, y_m: 9, yaw_deg: 0}]"));
+  EXPECT_NE(e.find("moves[0].at_s"), std::string::npos) << e;
+  e = ErrorOf(with_moves("[{at_s: 10, x_m: 19, y_m: 9}]"));
+  EXPECT_NE(e.find("sensors[1].moves[0]: missing key 'yaw_deg'"), std::string::npos) << e;
+  e = ErrorOf(with_moves("[{at_s: 10, x_m: 19, y_m: 9, yaw_deg: 0, z_m: 1}]"));
+  EXPECT_NE(e.find("sensors[1].moves[0].z_m: unknown key"), std::string::npos) << e;
+
+  const auto with_changes = [](const std::string& changes) {
+    return Replace(kDesignExample, "obstacles: [[[4, 4], [6, 4], [6, 6], [4, 6]]]",
+                   "obstacles: [[[4, 4], [6, 4], [6, 6], [4, 6]]]\n  changes: " + changes);
+  };
+  e = ErrorOf(with_changes("[{at_s: 10, remove: 1}]"));
+  EXPECT_NE(e.find("world.changes[0].remove: no obstacle 1 (world.obstacles has 1)"),
+            std::string::npos)
+      << e;
+  e = ErrorOf(with_changes("[{at_s: 10, remove: 0}, {at_s: 12, remove: 0}]"));
+  EXPECT_NE(e.find("world.changes[1].remove: obstacle 0 is already removed"), std::string::npos)
+      << e;
+  e = ErrorOf(with_changes("[{at_s: 10, remove: 0, add: [[1, 1], [2, 1], [2, 2]]}]"));
+  EXPECT_NE(e.find("world.changes[0]: give exactly one of remove"), std::string::npos) << e;
+  e = ErrorOf(with_changes("[{at_s: 10}]"));
+  EXPECT_NE(e.find("world.changes[0]: give exactly one of remove"), std::string::npos) << e;
+  e = ErrorOf(with_changes("[{at_s: 20, remove: 0}, {at_s: 10, add: [[1, 1], [2, 1], [2, 2]]}]"));
+  EXPECT_NE(e.find("world.changes[1].at_s"), std::string::npos) << e;
+  e = ErrorOf(with_changes("[{at_s: 10, remove: -1}]"));
+  EXPECT_NE(e.find("world.changes[0].remove: expected an obstacle index"), std::string::npos) << e;
+  e = ErrorOf(with_changes("[{at_s: 10, add: [[0.2, 0.2], [1, 0.2], [1, 1], [0.2, 1]]}]"));
+  EXPECT_NE(e.find("world.changes[0].add: the polygon covers sensor 's1'"), std::string::npos) << e;
+}
+
 TEST(ScenarioErrors, MissingFile) {
   Scenario s;
   std::string error;

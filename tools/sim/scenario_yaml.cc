@@ -168,7 +168,8 @@ class Parser {
   }
 
   bool World(const YAML::Node& node, WorldSpec* w) {
-    if (!Map(node, "world", {"walls", "obstacles", "low_obstacles", "bounds"})) return false;
+    if (!Map(node, "world", {"walls", "obstacles", "low_obstacles", "bounds", "changes"}))
+      return false;
     if (Has(node, "walls")) {
       const YAML::Node walls = node["walls"];
       if (!walls.IsSequence()) return Fail(walls, "world.walls", "expected a list of polylines");
@@ -210,13 +211,54 @@ class Parser {
       }
       w->bounds = std::make_pair(corners[0], corners[1]);
     }
+    return Has(node, "changes") ? WorldChanges(node["changes"], w) : true;
+  }
+
+  // world.changes: [{at_s, remove: index} | {at_s, add: polygon}, ...]
+  bool WorldChanges(const YAML::Node& node, WorldSpec* w) {
+    if (!node.IsSequence()) return Fail(node, "world.changes", "expected a list of changes");
+    for (std::size_t i = 0; i < node.size(); ++i) {
+      const std::string path = "world.changes[" + std::to_string(i) + "]";
+      const YAML::Node c = node[i];
+      WorldChange change;
+      change.line = LineOf(c);
+      if (!Map(c, path, {"at_s", "remove", "add"}) || !Number(c, path, "at_s", &change.at_s))
+        return false;
+      if (Has(c, "remove")) {
+        double index = 0;
+        if (!ParseNumber(c["remove"], path + ".remove", &index)) return false;
+        if (index < 0 || index > 1e6 || index != std::floor(index))
+          return Fail(c["remove"], path + ".remove", "expected an obstacle index (0, 1, ...)");
+        change.remove = static_cast<std::size_t>(index);
+      }
+      if (Has(c, "add") && !Polygon(c["add"], path + ".add", &change.add)) return false;
+      if (Has(c, "add") && change.add.empty())
+        return Fail(c["add"], path + ".add", "expected a polygon");
+      w->changes.push_back(std::move(change));
+    }
+    return true;
+  }
+
+  // sensors[i].moves: [{at_s, x_m, y_m, yaw_deg}, ...]
+  bool SensorMoves(const YAML::Node& node, const std::string& path, SensorSpec* s) {
+    if (!node.IsSequence()) return Fail(node, path, "expected a list of moves");
+    for (std::size_t i = 0; i < node.size(); ++i) {
+      const std::string mpath = path + "[" + std::to_string(i) + "]";
+      SensorMove m;
+      if (!Map(node[i], mpath, {"at_s", "x_m", "y_m", "yaw_deg"}) ||
+          !Number(node[i], mpath, "at_s", &m.at_s) || !Number(node[i], mpath, "x_m", &m.x_m) ||
+          !Number(node[i], mpath, "y_m", &m.y_m) || !Number(node[i], mpath, "yaw_deg", &m.yaw_deg))
+        return false;
+      s->moves.push_back(m);
+    }
     return true;
   }
 
   bool Sensor(const YAML::Node& node, const std::string& path, SensorSpec* s) {
     if (!Map(node, path,
              {"id", "model", "x_m", "y_m", "yaw_deg", "range_m", "fov_deg", "resolution_deg",
-              "rate_hz", "noise_m", "noise_per_m", "bias_m", "mount", "clock", "network"})) {
+              "rate_hz", "noise_m", "noise_per_m", "bias_m", "mount", "clock", "network",
+              "moves"})) {
       return false;
     }
     s->line = LineOf(node);
@@ -244,6 +286,7 @@ class Parser {
                     "unknown mount '" + mount + "' (known: torso, legs)");
       }
     }
+    if (Has(node, "moves") && !SensorMoves(node["moves"], path + ".moves", s)) return false;
     if (Has(node, "clock")) {
       const YAML::Node clock = node["clock"];
       const std::string cpath = path + ".clock";

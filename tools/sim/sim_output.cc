@@ -222,13 +222,43 @@ bool WriteCapture(const Simulator& sim, std::size_t sensor_index, const std::str
   return pcap->Close(error);
 }
 
+std::string PoseHistoryYaml(const Scenario& s, std::int64_t start_utc_ns) {
+  std::string y = "poses:\n";
+  for (const SensorSpec& sensor : s.sensors) {
+    for (const SensorPoseSpan& p : PoseSpans(sensor, s.duration_s)) {
+      y += fmt::format(
+          "  - {{id: {}, from_s: {}, to_s: {}, from_utc_ns: {}, x_m: {}, y_m: {}, yaw_deg: {}}}\n",
+          Quoted(sensor.id), Num(p.from_s), Num(p.to_s),
+          start_utc_ns + static_cast<std::int64_t>(std::llround(p.from_s * 1e9)), Num(p.x_m),
+          Num(p.y_m), Num(p.yaw_deg));
+    }
+  }
+  if (s.world.changes.empty()) return y;
+  y += "world_changes:\n";
+  for (const WorldChange& c : s.world.changes) {
+    if (c.remove) {
+      y += fmt::format("  - {{at_s: {}, remove: {}}}\n", Num(c.at_s), *c.remove);
+    } else {
+      std::string polygon;
+      for (const Vec2& v : c.add) {
+        polygon += fmt::format("{}[{}, {}]", polygon.empty() ? "" : ", ", Num(v.x), Num(v.y));
+      }
+      y += fmt::format("  - {{at_s: {}, add: [{}]}}\n", Num(c.at_s), polygon);
+    }
+  }
+  return y;
+}
+
 std::string TruthYaml(const Simulator& sim, std::int64_t start_utc_ns, bool with_captures) {
   const Scenario& s = sim.scenario();
   std::string y;
   y += "# Ground truth written by lrfnet sim. `sensors`: poses in the world frame exactly as in "
        "the\n";
   y += "# scenario (x forward = the telegram's 90 deg beam, yaw counter-clockwise, metres, "
-       "degrees).\n";
+       "degrees);\n";
+  y += "# a sensor that moves during the run is listed with its pose at the end, and `poses` "
+       "gives\n";
+  y += "# every pose with its time range (scenario seconds, [from_s, to_s)).\n";
   y += "scenario: " + Quoted(s.name) + "\n";
   y += "seed: " + std::to_string(s.seed) + "\n";
   y += "duration_s: " + Num(s.duration_s) + "\n";
@@ -236,10 +266,11 @@ std::string TruthYaml(const Simulator& sim, std::int64_t start_utc_ns, bool with
   y += "start_utc_ns: " + std::to_string(start_utc_ns) + "\n";
   y += "sensors:\n";
   for (std::size_t i = 0; i < sim.sensor_count(); ++i) {
-    const SensorSetup& x = sim.sensor(i);
-    y += fmt::format("  - {{id: {}, x_m: {}, y_m: {}, yaw_deg: {}}}\n", Quoted(x.id), Num(x.x_m),
-                     Num(x.y_m), Num(x.yaw_deg));
+    const SensorPoseSpan last = PoseSpans(s.sensors[i], s.duration_s).back();
+    y += fmt::format("  - {{id: {}, x_m: {}, y_m: {}, yaw_deg: {}}}\n", Quoted(sim.sensor(i).id),
+                     Num(last.x_m), Num(last.y_m), Num(last.yaw_deg));
   }
+  y += PoseHistoryYaml(s, start_utc_ns);
   y += "devices:\n";
   for (std::size_t i = 0; i < sim.sensor_count(); ++i) {
     const SensorSetup& x = sim.sensor(i);

@@ -10,8 +10,10 @@
 //   latency (latency_ms + an exponential delay of mean jitter_ms, never overtaking the previous
 //   scan) + its segments' time on a 100 Mbit/s wire. The dialogue ends just before the first scan.
 // DIR/truth.yaml: sensor poses exactly as in the scenario (DESIGN.md "Poses": a `sensors` list of
-//   {id, x_m, y_m, yaw_deg}), then `devices` (model, resolved parameters, clock, network, capture
-//   file) and `targets` (shape, presence).
+//   {id, x_m, y_m, yaw_deg}; a sensor with `moves` at its pose at the end of the run), `poses`
+//   (every sensor's poses with their time ranges: {id, from_s, to_s, from_utc_ns, x_m, y_m,
+//   yaw_deg}), `world_changes` (when the scenario has any), then `devices` (model, resolved
+//   parameters, clock, network, capture file) and `targets` (shape, presence).
 // DIR/truth_tracks.csv: time_s,utc_ns,target,x_m,y_m,heading_deg,vx_mps,vy_mps,kind for every
 //   target present at time_s = n / truth_rate_hz < duration_s (body centre including sway, facing
 //   direction, velocity of the path point; a door: the leaf's centre and direction, its velocity);
@@ -51,6 +53,8 @@ bool WriteCapture(const Simulator& sim, std::size_t sensor, const std::string& p
 // writing captures; the wall clock at start when serving); `with_captures` adds each device's
 // capture file name.
 std::string TruthYaml(const Simulator& sim, std::int64_t start_utc_ns, bool with_captures);
+// The `poses` (and `world_changes`) sections of truth.yaml.
+std::string PoseHistoryYaml(const Scenario& scenario, std::int64_t start_utc_ns);
 bool WriteTruthTracks(const Simulator& sim, std::int64_t start_utc_ns, const std::string& path,
                       std::string* error);
 

@@ -37,20 +37,67 @@ void SetName(cola::ScanChannel* channel, const char* name5) {
 
 Simulator::Simulator(const Scenario& scenario) : scenario_(scenario) {
   const WorldSpec& w = scenario_.world;
+  StaticWorld& world = worlds_.emplace_back();
   for (std::size_t i = 0; i < w.walls.size(); ++i) {
     for (std::size_t k = 0; k + 1 < w.walls[i].size(); ++k) {
-      segments_.push_back({w.walls[i][k], w.walls[i][k + 1]});
-      segment_surface_.push_back(static_cast<int>(surface_remission_.size()));
+      world.segments.push_back({w.walls[i][k], w.walls[i][k + 1]});
+      world.surfaces.push_back(static_cast<int>(surface_remission_.size()));
     }
     surface_remission_.push_back(kWallRemission);
   }
   for (const auto& o : w.obstacles) {
     for (const Segment& e : PolygonEdges(o)) {
-      segments_.push_back(e);
-      segment_surface_.push_back(static_cast<int>(surface_remission_.size()));
+      world.segments.push_back(e);
+      world.surfaces.push_back(static_cast<int>(surface_remission_.size()));
     }
     surface_remission_.push_back(kObstacleRemission);
   }
+  AddWorldChanges();
+}
+
+void Simulator::AddWorldChanges() {
+  // Surfaces keep their index: walls, the scenario's obstacles, then every added polygon.
+  const WorldSpec& w = scenario_.world;
+  const int first_obstacle = static_cast<int>(w.walls.size());
+  for (const WorldChange& change : w.changes) {
+    if (change.at_s > worlds_.back().from_s) {
+      StaticWorld next = worlds_.back();
+      next.from_s = change.at_s;
+      worlds_.push_back(std::move(next));
+    }
+    StaticWorld& world = worlds_.back();
+    if (change.remove) {
+      const int surface = first_obstacle + static_cast<int>(*change.remove);
+      std::vector<Segment> kept;
+      std::vector<int> kept_surfaces;
+      for (std::size_t i = 0; i < world.segments.size(); ++i) {
+        if (world.surfaces[i] == surface) continue;
+        kept.push_back(world.segments[i]);
+        kept_surfaces.push_back(world.surfaces[i]);
+      }
+      world.segments = std::move(kept);
+      world.surfaces = std::move(kept_surfaces);
+    } else {
+      for (const Segment& e : PolygonEdges(change.add)) {
+        world.segments.push_back(e);
+        world.surfaces.push_back(static_cast<int>(surface_remission_.size()));
+      }
+      surface_remission_.push_back(kObstacleRemission);
+    }
+  }
+}
+
+const Simulator::StaticWorld& Simulator::WorldAt(double t_s) const {
+  std::size_t i = 0;
+  while (i + 1 < worlds_.size() && worlds_[i + 1].from_s <= t_s) ++i;
+  return worlds_[i];
+}
+
+const Simulator::Placement& Simulator::PlacementAt(std::size_t sensor, double t_s) const {
+  const std::vector<Placement>& p = sensors_[sensor].placements;
+  std::size_t i = 0;
+  while (i + 1 < p.size() && p[i + 1].from_s <= t_s) ++i;
+  return p[i];
 }
 
 Simulator::~Simulator() = default;
@@ -107,28 +154,47 @@ void Simulator::SetUpSensor(std::size_t index) {
   const double span = end_tick - static_cast<double>(s.first_scan_tick_us);
   s.scan_count = span <= 0 ? 0 : static_cast<std::uint64_t>(std::ceil(span / s.period_us));
 
-  state.origin = {spec.x_m, spec.y_m};
-  state.yaw_rad = spec.yaw_deg * kPi / 180.0;
-  const DeviceConfig& d = s.device;
+  // One placement per pose and world: the sensor's moves and the world's changes, in time order.
+  const std::vector<SensorPoseSpan> spans = PoseSpans(spec, scenario_.duration_s);
+  std::vector<double> starts;
+  for (const SensorPoseSpan& p : spans) starts.push_back(p.from_s);
+  for (const StaticWorld& world : worlds_) starts.push_back(world.from_s);
+  std::sort(starts.begin(), starts.end());
+  starts.erase(std::unique(starts.begin(), starts.end()), starts.end());
+  for (const double from_s : starts) {
+    std::size_t k = 0;
+    while (k + 1 < spans.size() && spans[k + 1].from_s <= from_s) ++k;
+    PlaceSensor(index, from_s, {spans[k].x_m, spans[k].y_m}, spans[k].yaw_deg * kPi / 180.0);
+  }
+}
+
+void Simulator::PlaceSensor(std::size_t index, double from_s, Vec2 origin, double yaw_rad) {
+  SensorState& state = sensors_[index];
+  Placement& place = state.placements.emplace_back();
+  place.from_s = from_s;
+  place.origin = origin;
+  place.yaw_rad = yaw_rad;
+  const StaticWorld& world = WorldAt(from_s);
+  const DeviceConfig& d = state.setup.device;
   const double half_width = d.model->divergence_rad / 2.0;
-  state.beams.resize(d.count);
+  place.beams.resize(d.count);
   for (std::size_t b = 0; b < d.count; ++b) {
-    Beam& beam = state.beams[b];
-    beam.angle_rad = state.yaw_rad + d.first_angle_rad + static_cast<double>(b) * d.step_rad;
+    Beam& beam = place.beams[b];
+    beam.angle_rad = place.yaw_rad + d.first_angle_rad + static_cast<double>(b) * d.step_rad;
     for (int k = 0; k < kSamplesPerBeam; ++k) {
       const double a = beam.angle_rad + kSampleOffset[static_cast<std::size_t>(k)] * half_width;
       beam.dir[k] = {std::cos(a), std::sin(a)};
-      beam.static_samples[k] = CastStatic({state.origin, beam.dir[k]});
+      beam.static_samples[k] = CastStatic(world, {place.origin, beam.dir[k]});
     }
     beam.static_combined = Combine(beam.static_samples, d.range_m);
   }
 }
 
-Simulator::Sample Simulator::CastStatic(const Ray& ray) const {
+Simulator::Sample Simulator::CastStatic(const StaticWorld& world, const Ray& ray) const {
   Sample best;
-  for (std::size_t i = 0; i < segments_.size(); ++i) {
-    const double r = RaySegment(ray, segments_[i]);
-    if (r < best.range_m) best = {r, segment_surface_[i]};
+  for (std::size_t i = 0; i < world.segments.size(); ++i) {
+    const double r = RaySegment(ray, world.segments[i]);
+    if (r < best.range_m) best = {r, world.surfaces[i]};
   }
   return best;
 }
@@ -235,11 +301,11 @@ ScanTiming Simulator::Timing(std::size_t sensor, std::uint64_t k) const {
 void Simulator::SimulateScan(std::size_t sensor, std::uint64_t k, cola::ScanTelegram* out,
                              std::vector<std::uint32_t>* target_hits) const {
   if (target_hits != nullptr) target_hits->assign(targets_.size(), 0);
-  const SensorState& state = sensors_[sensor];
-  const SensorSetup& s = state.setup;
+  const SensorSetup& s = sensors_[sensor].setup;
   const DeviceConfig& d = s.device;
   const DeviceModel& m = *d.model;
   const ScanTiming timing = Timing(sensor, k);
+  const Placement& state = PlacementAt(sensor, timing.start_s);
 
   // Field by field: assigning a fresh ScanTelegram would build a 100 kB temporary per scan.
   cola::ScanTelegram& scan = *out;
@@ -393,32 +459,33 @@ std::vector<TruthSample> Simulator::TruthAt(double t_s) const {
 }
 
 bool Simulator::Sees(std::size_t sensor, Vec2 p) const {
-  const SensorState& state = sensors_[sensor];
-  const DeviceConfig& d = state.setup.device;
+  const Placement& state = sensors_[sensor].placements.front();
+  const DeviceConfig& d = sensors_[sensor].setup.device;
   const Vec2 rel = p - state.origin;
   const double dist = Norm(rel);
   if (dist > d.range_m || dist < kMinRangeM) return false;
   const double bearing = WrapAngle(std::atan2(rel.y, rel.x) - state.yaw_rad);
   const double half_fov = d.fov_deg / 2.0 * kPi / 180.0;
   if (std::abs(bearing) > half_fov) return false;
-  return CastStatic({state.origin, {rel.x / dist, rel.y / dist}}).range_m > dist;
+  return CastStatic(worlds_.front(), {state.origin, {rel.x / dist, rel.y / dist}}).range_m > dist;
 }
 
 double Simulator::NoiselessRange(std::size_t sensor, std::size_t beam_index, double t_s) const {
-  const SensorState& state = sensors_[sensor];
+  const Placement& state = PlacementAt(sensor, t_s);
   const Beam& beam = state.beams[beam_index];
   std::array<Sample, kSamplesPerBeam> samples{};
   std::copy(std::begin(beam.static_samples), std::end(beam.static_samples), samples.begin());
   for (std::size_t j = 0; j < targets_.size(); ++j) {
     const TargetState ts = targets_[j].StateAt(t_s);
     for (int k = 0; k < kSamplesPerBeam; ++k) {
-      const double r = targets_[j].Intersect({state.origin, beam.dir[k]}, ts, state.setup.mount);
+      const double r =
+          targets_[j].Intersect({state.origin, beam.dir[k]}, ts, sensors_[sensor].setup.mount);
       if (r < samples[static_cast<std::size_t>(k)].range_m) {
         samples[static_cast<std::size_t>(k)] = {r, kTargetSurface + static_cast<int>(j)};
       }
     }
   }
-  const Sample s = Combine(samples.data(), state.setup.device.range_m);
+  const Sample s = Combine(samples.data(), sensors_[sensor].setup.device.range_m);
   return s.range_m;
 }
 

@@ -108,7 +108,8 @@ class Simulator {
   std::vector<TruthSample> TruthAt(double t_s) const;
 
   // Whether `sensor` has a clear line of sight to world point `p`: within its range and field of
-  // view, no wall or obstacle in between (targets are ignored). For checking scenario designs.
+  // view, no wall or obstacle in between (targets are ignored), from its pose at the start and in
+  // the world at the start. For checking scenario designs.
   bool Sees(std::size_t sensor, Vec2 p) const;
 
   // The range (m, before noise and quantisation; kNoHit for no echo) beam `beam` of `sensor` would
@@ -128,22 +129,37 @@ class Simulator {
     Sample static_samples[kSamplesPerBeam];
     Sample static_combined;  // what the beam measures when no target is near it
   };
-  struct SensorState {
-    SensorSetup setup;
+  // The static world from from_s on (world.changes start a new one).
+  struct StaticWorld {
+    double from_s = 0;
+    std::vector<Segment> segments;
+    std::vector<int> surfaces;  // per segment
+  };
+  // A sensor's pose and its beams against the static world from from_s on (a new one at every
+  // move of the sensor and every change of the world).
+  struct Placement {
+    double from_s = 0;
     Vec2 origin;
     double yaw_rad = 0;
     std::vector<Beam> beams;
   };
+  struct SensorState {
+    SensorSetup setup;
+    std::vector<Placement> placements;  // from_s increasing, the first at 0
+  };
 
   explicit Simulator(const Scenario& scenario);
   void SetUpSensor(std::size_t index);
-  Sample CastStatic(const Ray& ray) const;
+  void AddWorldChanges();
+  void PlaceSensor(std::size_t index, double from_s, Vec2 origin, double yaw_rad);
+  const Placement& PlacementAt(std::size_t sensor, double t_s) const;
+  const StaticWorld& WorldAt(double t_s) const;
+  Sample CastStatic(const StaticWorld& world, const Ray& ray) const;
   double Remission(int surface) const;
   Sample Combine(const Sample* samples, double range_limit_m) const;
 
   Scenario scenario_;
-  std::vector<Segment> segments_;
-  std::vector<int> segment_surface_;
+  std::vector<StaticWorld> worlds_;  // from_s increasing, the first at 0
   std::vector<double> surface_remission_;
   std::vector<SensorState> sensors_;
   std::vector<Target> targets_;

@@ -10,6 +10,7 @@
 #include <vector>
 
 #include "common/time.h"
+#include "tools/sim/sim_output.h"
 
 namespace lrfnet::sim {
 namespace {
@@ -634,6 +635,76 @@ TEST(Targets, StopsWaitsAndStayShapeAPath) {
   EXPECT_NEAR(t.StateAt(7.0).center.y, 1.0, 1e-9);
   ASSERT_TRUE(t.StateAt(29.0).present);  // stays at the end
   EXPECT_NEAR(t.StateAt(29.0).center.y, 2.0, 1e-9);
+}
+
+TEST(Simulator, AMovedSensorScansFromItsNewPoseFromTheMoveOn) {
+  // Before 0.5 s straight ahead at the wall x = 10; then turned 90° left and 2 m back: the wall is
+  // 12 m away at beam −90°.
+  Scenario s = WallScenario();
+  s.sensors[0].moves.push_back({0.5, -0.5, 0.0, 90.0});
+  s.world.bounds = std::make_pair(Vec2{-3, -21}, Vec2{11, 21});
+  auto sim = Make(s);
+  ASSERT_NE(sim, nullptr);
+  EXPECT_NEAR(sim->NoiselessRange(0, BeamAt(0), 0.2), 10.0, 2e-4);
+  EXPECT_NEAR(sim->NoiselessRange(0, BeamAt(-90), 0.7), 10.5, 2e-4);
+  EXPECT_EQ(sim->NoiselessRange(0, BeamAt(0), 0.7), kNoHit);
+  // The scans: every scan that starts before the move sees the wall ahead, every later one not.
+  cola::ScanTelegram scan;
+  std::size_t before = 0, after = 0;
+  for (std::uint64_t k = 0; k < sim->sensor(0).scan_count; ++k) {
+    sim->SimulateScan(0, k, &scan);
+    const std::uint16_t ahead = scan.channels16[0].raw[BeamAt(0)];
+    if (sim->Timing(0, k).start_s < 0.5) {
+      ++before;
+      EXPECT_NEAR(ahead, 10000, 60) << k;
+    } else {
+      ++after;
+      EXPECT_EQ(ahead, 0) << k;
+    }
+  }
+  EXPECT_GT(before, 5u);
+  EXPECT_GT(after, 5u);
+}
+
+TEST(Simulator, TruthListsEveryPoseWithItsTimeRange) {
+  Scenario s = WallScenario();
+  s.sensors[0].moves.push_back({0.5, -0.5, 0.25, 90.0});
+  s.world.bounds = std::make_pair(Vec2{-3, -21}, Vec2{11, 21});
+  auto sim = Make(s);
+  ASSERT_NE(sim, nullptr);
+  const std::string truth = TruthYaml(*sim, s.start_utc_ns, false);
+  // `sensors` holds the pose at the end; `poses` both with their time ranges.
+  EXPECT_NE(truth.find("sensors:\n  - {id: \"s\", x_m: -0.5, y_m: 0.25, yaw_deg: 90}"),
+            std::string::npos)
+      << truth;
+  EXPECT_NE(truth.find("  - {id: \"s\", from_s: 0, to_s: 0.5, from_utc_ns: 1609502400000000000, "
+                       "x_m: 0, y_m: 0, yaw_deg: 0}"),
+            std::string::npos)
+      << truth;
+  EXPECT_NE(truth.find("  - {id: \"s\", from_s: 0.5, to_s: 1, from_utc_ns: 1609502400500000000, "
+                       "x_m: -0.5, y_m: 0.25, yaw_deg: 90}"),
+            std::string::npos)
+      << truth;
+}
+
+TEST(Simulator, FurnitureRemovedAndAddedChangesTheStaticScene) {
+  // A box 5 m ahead, removed at 0.3 s; a new one at 3 m appears at 0.6 s.
+  Scenario s = WallScenario();
+  s.world.obstacles = {{{5, -0.5}, {6, -0.5}, {6, 0.5}, {5, 0.5}}};
+  WorldChange remove;
+  remove.at_s = 0.3;
+  remove.remove = 0;
+  WorldChange add;
+  add.at_s = 0.6;
+  add.add = {{3, -0.5}, {3.5, -0.5}, {3.5, 0.5}, {3, 0.5}};
+  s.world.changes = {remove, add};
+  auto sim = Make(s);
+  ASSERT_NE(sim, nullptr);
+  EXPECT_NEAR(sim->NoiselessRange(0, BeamAt(0), 0.1), 5.0, 2e-4);
+  EXPECT_NEAR(sim->NoiselessRange(0, BeamAt(0), 0.4), 10.0, 2e-4);
+  EXPECT_NEAR(sim->NoiselessRange(0, BeamAt(0), 0.8), 3.0, 2e-4);
+  // Sees() keeps to the world at the start.
+  EXPECT_FALSE(sim->Sees(0, {8, 0}));
 }
 
 }  // namespace
