@@ -1,13 +1,16 @@
-// lrfnet eval CALIBRATION TRUTH [--reference ID] [--json]
+// lrfnet eval CALIBRATION TRUTH [--reference ID] [--at SECONDS] [--json]
 
 #include <boost/program_options.hpp>
 #include <cstdio>
+#include <fstream>
 #include <iostream>
 #include <optional>
+#include <sstream>
 #include <string>
 
 #include "central_daemon/calibration/calibration_yaml.h"
 #include "central_daemon/calibration/eval.h"
+#include "central_daemon/calibration/pose_history.h"
 #include "tools/subcommands.h"
 
 namespace lrfnet::tools {
@@ -21,14 +24,18 @@ int RunEval(int argc, char** argv) {
       "of lrfnet sim,\nor any file with the same `sensors` list) like Tables II-III of Quenzel et "
       "al.: both pose sets are\nexpressed in the frame of the reference sensor, then per sensor "
       "d_R = |yaw difference| [deg] and\nd_t = position distance [m], with their mean and median. "
-      "Sensors of the truth that are not\ncalibrated are listed. Exit 0, or 1 when a file is "
-      "unreadable or the two do not match. Options",
+      "Sensors of the truth that are not\ncalibrated are listed. A sensor the scenario moves "
+      "during the run is in TRUTH's `sensors` with\nits last pose (what a calibration kept up to "
+      "date by lrfnetd ends with); --at compares with the\nposes at a given scenario time "
+      "instead. Exit 0, or 1 when a file is unreadable or the two do not\nmatch. Options",
       100, 50);
   std::string reference;
   visible.add_options()("help,h", "this help")(
       "reference", po::value<std::string>(&reference),
       "the sensor both pose sets are expressed in (default: the calibration's `reference`)")(
-      "json", "print one JSON object instead of the table");
+      "json", "print one JSON object instead of the table")(
+      "at", po::value<double>(),
+      "compare with the truth poses at this scenario time [s] (TRUTH's `poses` list)");
   po::options_description hidden;
   hidden.add_options()("files", po::value<std::vector<std::string>>(), "CALIBRATION TRUTH");
   po::options_description all;
@@ -63,6 +70,16 @@ int RunEval(int argc, char** argv) {
       !calib::ReadPoseFile(files[1], &truth, &error)) {
     std::fprintf(stderr, "lrfnet eval: %s\n", error.c_str());
     return kExitFailure;
+  }
+  if (vm.count("at") != 0) {
+    // ReadPoseFile above has checked the file and its size.
+    std::ifstream in(files[1], std::ios::binary);
+    std::stringstream text;
+    text << in.rdbuf();
+    if (!calib::TruthPosesAt(text.str(), vm["at"].as<double>(), &truth, &error)) {
+      std::fprintf(stderr, "lrfnet eval: %s: %s\n", files[1].c_str(), error.c_str());
+      return kExitFailure;
+    }
   }
   const calib::EvalResult result = calib::Evaluate(
       calibration, truth, reference.empty() ? std::nullopt : std::optional<std::string>(reference));
