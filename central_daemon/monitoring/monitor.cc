@@ -1,0 +1,449 @@
+#include "central_daemon/monitoring/monitor.h"
+
+#include <fmt/format.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+
+namespace lrfnet::monitoring {
+
+namespace {
+
+// Two estimates of a pose this close agree (a settled background).
+constexpr double kAgreeYawDeg = 0.05;
+constexpr double kAgreeTranslationM = 0.005;
+
+common::UtcNs SecondsToNs(double s) { return static_cast<common::UtcNs>(std::llround(s * 1e9)); }
+
+std::string MotionText(const Pose2& m) {
+  return fmt::format("{:+.2f} deg, {:.3f} m", common::RadToDeg(m.yaw_rad),
+                     std::hypot(m.x_m, m.y_m));
+}
+
+std::string PoseText(const Pose2& p) {
+  return fmt::format("x {:.3f} m, y {:.3f} m, yaw {:.2f} deg", p.x_m, p.y_m,
+                     common::RadToDeg(p.yaw_rad));
+}
+
+Eigen::Matrix3d Symmetric(const Eigen::Matrix3d& m) { return 0.5 * (m + m.transpose()); }
+
+}  // namespace
+
+const char* ToString(WatchState state) {
+  switch (state) {
+    case WatchState::kWatched:
+      return "ok";
+    case WatchState::kMoved:
+      return "moved";
+  }
+  return "?";
+}
+
+const char* ToString(MonitorEventKind kind) {
+  switch (kind) {
+    case MonitorEventKind::kMoved:
+      return "moved";
+    case MonitorEventKind::kCorrected:
+      return "corrected";
+    case MonitorEventKind::kBackgroundRelearned:
+      return "background_relearned";
+  }
+  return "?";
+}
+
+std::optional<std::string> Validate(const MonitorOptions& o) {
+  if (auto e = Validate(o.background)) return "background." + *e;
+  if (auto e = Validate(o.tracks)) return "tracks." + *e;
+  const auto positive = [](double v, double hi) { return std::isfinite(v) && v > 0.0 && v <= hi; };
+  if (!positive(o.track_window_s, 3600.0)) return "track_window_s must be in (0, 3600]";
+  if (!positive(o.track_period_s, 3600.0)) return "track_period_s must be in (0, 3600]";
+  if (o.track_confirmations < 1 || o.track_confirmations > 100) {
+    return "track_confirmations must be in [1, 100]";
+  }
+  if (!(o.correct_min_inliers >= 0.0 && o.correct_min_inliers <= 1.0)) {
+    return "correct_min_inliers must be in [0, 1]";
+  }
+  if (!positive(o.correction_min_tracks_s, 3600.0)) {
+    return "correction_min_tracks_s must be in (0, 3600]";
+  }
+  if (!(o.correction_max_tracks_s >= o.correction_min_tracks_s &&
+        o.correction_max_tracks_s <= 3600)) {
+    return "correction_max_tracks_s must be in [correction_min_tracks_s, 3600]";
+  }
+  if (!positive(o.correction_max_rms_m, 10.0)) return "correction_max_rms_m must be in (0, 10]";
+  if (!(o.refine_max_yaw_deg >= 0.0 && o.refine_max_yaw_deg <= 180.0)) {
+    return "refine_max_yaw_deg must be in [0, 180]";
+  }
+  if (!(o.refine_max_translation_m >= 0.0 && o.refine_max_translation_m <= 100.0)) {
+    return "refine_max_translation_m must be in [0, 100]";
+  }
+  if (!(o.settled_min_inliers >= 0.0 && o.settled_min_inliers <= 1.0)) {
+    return "settled_min_inliers must be in [0, 1]";
+  }
+  if (!(o.relearn_hold_s >= 0.0 && o.relearn_hold_s <= 86400.0)) {
+    return "relearn_hold_s must be in [0, 86400]";
+  }
+  return std::nullopt;
+}
+
+Monitor::Monitor(const MonitorOptions& options) : options_(options) {
+  if (auto e = Validate(options)) {
+    std::fprintf(stderr, "Monitor: invalid options: %s\n", e->c_str());
+    std::abort();
+  }
+}
+
+void Monitor::SetOptions(const MonitorOptions& options) {
+  if (auto e = Validate(options)) {
+    std::fprintf(stderr, "Monitor: invalid options: %s\n", e->c_str());
+    std::abort();
+  }
+  options_ = options;
+}
+
+void Monitor::SetPoses(const std::vector<SensorPose>& poses,
+                       const std::map<std::string, daemon::BackgroundScan>& backgrounds) {
+  std::map<std::string, SensorWatch> next;
+  for (const SensorPose& p : poses) {
+    SensorWatch watch;
+    const auto old = sensors_.find(p.id);
+    const bool same_pose =
+        old != sensors_.end() &&
+        common::TranslationDistanceM(old->second.world_from_sensor, p.world_from_sensor) < 1e-9 &&
+        common::RotationDistanceRad(old->second.world_from_sensor, p.world_from_sensor) < 1e-12;
+    if (old != sensors_.end()) {
+      // Counters go on; the decision state starts again from the new pose.
+      watch.snapshots_checked = old->second.snapshots_checked;
+      watch.track_checks = old->second.track_checks;
+      watch.moves = old->second.moves;
+      watch.corrections = old->second.corrections;
+      watch.relearns = old->second.relearns;
+      if (same_pose && old->second.state == WatchState::kWatched) {
+        watch.reference = old->second.reference;
+        watch.reference_from_sensor = old->second.reference_from_sensor;
+      }
+    }
+    watch.id = p.id;
+    watch.world_from_sensor = p.world_from_sensor;
+    watch.covariance = p.covariance;
+    if (const auto b = backgrounds.find(p.id); b != backgrounds.end()) {
+      watch.reference = b->second;
+      watch.reference_from_sensor = Pose2::Identity();
+    }
+    next.emplace(p.id, std::move(watch));
+  }
+  sensors_ = std::move(next);
+}
+
+void Monitor::OnBackground(const std::string& sensor_id, const daemon::BackgroundScan& snapshot,
+                           common::UtcNs now_ns) {
+  const auto it = sensors_.find(sensor_id);
+  if (it == sensors_.end()) return;
+  SensorWatch& watch = it->second;
+  if (!watch.reference) {
+    // The first snapshot since the pose was set: the reference, unless it cannot be used.
+    if (!calib::CheckBackground(snapshot)) {
+      watch.reference = snapshot;
+      watch.reference_from_sensor = Pose2::Identity();
+      watch.detail = "reference background taken";
+    }
+    return;
+  }
+  ++watch.snapshots_checked;
+  const BackgroundVerdict v = CheckBackgrounds(
+      *watch.reference, snapshot, options_.background,
+      watch.state == WatchState::kMoved ? watch.reference_from_sensor * watch.estimated_motion
+                                        : watch.reference_from_sensor);
+  watch.detail = std::string("background: ") + ToString(v.kind) + ": " + v.reason;
+  if (v.kind == BackgroundVerdictKind::kUnusable) return;
+
+  if (watch.state == WatchState::kMoved) {
+    // A snapshot that aligns with the reference as a whole gives the pose (checked against the
+    // tracks in Update); a partial one refines the estimate only.
+    const Pose2 motion = watch.reference_from_sensor.inverse() * v.reference_from_current;
+    if (v.inliers_after >= options_.correct_min_inliers && !v.partial &&
+        v.kind != BackgroundVerdictKind::kSceneChanged) {
+      watch.background_candidate = motion;
+      watch.background_candidate_covariance = v.covariance;
+      watch.background_candidate_detail = v.reason;
+    } else if (v.kind == BackgroundVerdictKind::kMoved) {
+      watch.estimated_motion = motion;
+    }
+    return;
+  }
+
+  // After a move the tracker re-learns its background beam by beam (see background_check.h):
+  // until a snapshot holds the whole new scene, its verdicts are about the tracker, not the
+  // sensor. Such a settled snapshot refines a pose that came from tracks.
+  const bool settling = watch.tracks_valid_from_ns != 0 &&
+                        now_ns - watch.tracks_valid_from_ns < SecondsToNs(options_.relearn_hold_s);
+  const bool settled = !v.partial && v.kind != BackgroundVerdictKind::kSceneChanged &&
+                       v.inliers_after >= options_.settled_min_inliers &&
+                       v.inliers_after >= v.inliers_before;
+  if (watch.provisional && !v.partial && v.kind != BackgroundVerdictKind::kSceneChanged &&
+      v.inliers_after >= options_.correct_min_inliers && v.inliers_after >= v.inliers_before) {
+    // Each such snapshot refines the pose until one agrees with it: the tracker's background has
+    // then stopped changing.
+    const Pose2 motion = watch.reference_from_sensor.inverse() * v.reference_from_current;
+    const bool agrees = std::abs(common::RadToDeg(motion.yaw_rad)) <= kAgreeYawDeg &&
+                        std::hypot(motion.x_m, motion.y_m) <= kAgreeTranslationM;
+    if (!agrees) {
+      Correct(watch, now_ns, "background", watch.world_from_sensor * motion,
+              MovedCovariance(watch, v.covariance), "refined by the background: " + v.reason);
+      watch.provisional = true;
+    } else {
+      watch.provisional = false;
+    }
+    return;
+  }
+  if (settling && !settled) return;
+
+  switch (v.kind) {
+    case BackgroundVerdictKind::kMoved: {
+      const Pose2 motion = v.motion;
+      Flag(watch, now_ns, v.partial ? "background (changed part)" : "background", motion, v.reason);
+      // A snapshot that already holds the whole new scene is the correction too.
+      if (!v.partial && v.inliers_after >= options_.correct_min_inliers) {
+        watch.background_candidate = motion;
+        watch.background_candidate_covariance = v.covariance;
+        watch.background_candidate_detail = v.reason;
+      }
+      break;
+    }
+    case BackgroundVerdictKind::kSceneChanged:
+      if (options_.relearn_background) {
+        watch.pending_relearn = snapshot;
+        watch.pending_relearn_ns = now_ns;
+      }
+      break;
+    case BackgroundVerdictKind::kUnchanged:
+      watch.pending_relearn.reset();
+      // After a correction the reference is still the old snapshot with the motion expected; a
+      // settled snapshot that agrees with that replaces it. So does one that follows a tracker's
+      // first snapshot of a session, which it sends as soon as it has learned (from the farthest
+      // stable returns: a few centimetres too far until its background has settled).
+      if (settled &&
+          (watch.reference->snapshot_id == 0 ||
+           !(watch.reference_from_sensor.x_m == 0.0 && watch.reference_from_sensor.y_m == 0.0 &&
+             watch.reference_from_sensor.yaw_rad == 0.0))) {
+        watch.reference = snapshot;
+        watch.reference_from_sensor = Pose2::Identity();
+      }
+      break;
+    case BackgroundVerdictKind::kUnusable:
+      break;
+  }
+}
+
+std::vector<PlacedFrames> Monitor::Others(
+    const std::string& sensor_id,
+    const std::map<std::string, std::vector<daemon::TrackFrameData>>& frames) const {
+  std::vector<PlacedFrames> out;
+  for (const auto& [id, watch] : sensors_) {
+    if (id == sensor_id || watch.state != WatchState::kWatched) continue;
+    const auto f = frames.find(id);
+    if (f == frames.end() || f->second.empty()) continue;
+    out.push_back({id, watch.world_from_sensor, &f->second});
+  }
+  return out;
+}
+
+void Monitor::Update(common::UtcNs now_ns, const FrameSource& source) {
+  if (sensors_.empty()) return;
+  const common::UtcNs period_ns = SecondsToNs(options_.track_period_s);
+  if (last_track_check_ns_ != 0 && now_ns >= last_track_check_ns_ &&
+      now_ns - last_track_check_ns_ < period_ns) {
+    return;
+  }
+  last_track_check_ns_ = now_ns;
+  const common::UtcNs window_ns = SecondsToNs(options_.track_window_s);
+  const common::UtcNs from_ns = now_ns > window_ns ? now_ns - window_ns : 0;
+  std::map<std::string, std::vector<daemon::TrackFrameData>> window;
+  for (const auto& [id, watch] : sensors_) {
+    if (watch.state == WatchState::kWatched) {
+      window[id] = source.Frames(id, std::max(from_ns, watch.tracks_valid_from_ns), now_ns + 1);
+    }
+  }
+
+  // The sensor to flag by its tracks this round: the most significant of those confirmed.
+  SensorWatch* to_flag = nullptr;
+  TrackFit flag_fit;
+  for (auto& [id, watch] : sensors_) {
+    if (watch.state == WatchState::kWatched) {
+      const std::vector<PlacedFrames> others = Others(id, window);
+      if (others.empty()) continue;
+      ++watch.track_checks;
+      const TrackFit fit =
+          CheckTracks(window[id], watch.world_from_sensor, others, options_.tracks);
+      if (fit.moved && watch.provisional && fit.rms_m <= options_.correction_max_rms_m &&
+          std::abs(common::RadToDeg(fit.correction.yaw_rad)) <= options_.refine_max_yaw_deg &&
+          std::hypot(fit.correction.x_m, fit.correction.y_m) <= options_.refine_max_translation_m) {
+        // The same move, estimated better from more (and cleaner) tracks.
+        Correct(watch, now_ns, "tracks", fit.world_from_sensor, Symmetric(fit.covariance),
+                "refined: " + fit.reason);
+        watch.provisional = true;
+        continue;
+      }
+      if (fit.moved) {
+        if (++watch.track_strikes >= options_.track_confirmations &&
+            (to_flag == nullptr || fit.chi2 > flag_fit.chi2)) {
+          to_flag = &watch;
+          flag_fit = fit;
+        }
+      } else if (fit.enough) {
+        watch.track_strikes = 0;
+        // The tracks agree: a changed scene is furniture, not a move.
+        if (watch.pending_relearn && watch.pending_relearn_ns <= now_ns) {
+          watch.reference = *watch.pending_relearn;
+          watch.reference_from_sensor = Pose2::Identity();
+          watch.pending_relearn.reset();
+          ++watch.relearns;
+          Emit(MonitorEventKind::kBackgroundRelearned, watch, now_ns, "tracks",
+               "the scene changed, the tracks agree with the pose (" + fit.reason +
+                   "): the reference background is re-learned",
+               std::nullopt, std::nullopt);
+        }
+      }
+      continue;
+    }
+
+    // kMoved: correct from the background, checked by the tracks when they can; else from the
+    // tracks since the flag (the sensor's and the others', each from when its pose holds).
+    const common::UtcNs max_ns = SecondsToNs(options_.correction_max_tracks_s);
+    const common::UtcNs since_ns =
+        std::max(watch.flagged_ns, now_ns > max_ns ? now_ns - max_ns : 0);
+    const std::vector<daemon::TrackFrameData> own = source.Frames(id, since_ns, now_ns + 1);
+    std::map<std::string, std::vector<daemon::TrackFrameData>> fresh;
+    for (const auto& [other_id, other] : sensors_) {
+      if (other_id != id && other.state == WatchState::kWatched) {
+        fresh[other_id] =
+            source.Frames(other_id, std::max(since_ns, other.tracks_valid_from_ns), now_ns + 1);
+      }
+    }
+    const std::vector<PlacedFrames> others = Others(id, fresh);
+    if (watch.background_candidate) {
+      const Pose2 candidate = watch.world_from_sensor * *watch.background_candidate;
+      const TrackFit check =
+          others.empty() ? TrackFit{} : CheckTracks(own, candidate, others, options_.tracks);
+      if (!check.moved) {
+        Correct(watch, now_ns, "background", candidate,
+                MovedCovariance(watch, watch.background_candidate_covariance),
+                watch.background_candidate_detail +
+                    (check.enough ? "; the tracks agree (" + check.reason + ")"
+                                  : "; too few tracks since the move to check it"));
+        continue;
+      }
+      watch.detail = "the background suggests " + MotionText(*watch.background_candidate) +
+                     ", the tracks disagree: " + check.reason;
+      watch.background_candidate.reset();
+    }
+    if (others.empty() || own.empty()) continue;
+    const double tracked_s =
+        static_cast<double>(own.back().scan_start_ns - own.front().scan_start_ns) * 1e-9;
+    if (tracked_s < options_.correction_min_tracks_s) continue;
+    const TrackFit fit = EstimateFromTracks(own, watch.world_from_sensor * watch.estimated_motion,
+                                            others, options_.tracks);
+    if (!fit.enough || fit.rms_m > options_.correction_max_rms_m) {
+      watch.detail = "waiting for tracks to correct the pose: " + fit.reason;
+      continue;
+    }
+    Correct(watch, now_ns, "tracks", fit.world_from_sensor, Symmetric(fit.covariance),
+            fit.reason + (fit.from_search ? " (searched from scratch)" : ""));
+    watch.provisional = true;
+  }
+  if (to_flag != nullptr) {
+    Flag(*to_flag, now_ns, "tracks", flag_fit.correction, flag_fit.reason);
+  }
+  for (auto& [id, watch] : sensors_) {
+    if (watch.state == WatchState::kWatched && &watch != to_flag && watch.track_strikes > 0 &&
+        to_flag != nullptr) {
+      // Their strikes may come from the flagged sensor's tracks; count again without them.
+      watch.track_strikes = 0;
+    }
+  }
+}
+
+Eigen::Matrix3d Monitor::MovedCovariance(const SensorWatch& watch,
+                                         const Eigen::Matrix3d& motion_covariance) {
+  Eigen::Matrix3d j = Eigen::Matrix3d::Identity();
+  j.topLeftCorner<2, 2>() = watch.world_from_sensor.rotation();
+  return Symmetric(watch.covariance + j * motion_covariance * j.transpose());
+}
+
+void Monitor::Flag(SensorWatch& watch, common::UtcNs now_ns, const std::string& method,
+                   const Pose2& motion, const std::string& detail) {
+  watch.state = WatchState::kMoved;
+  watch.flagged_ns = now_ns;
+  watch.flag_method = method;
+  watch.estimated_motion = motion;
+  watch.track_strikes = 0;
+  watch.pending_relearn.reset();
+  watch.background_candidate.reset();
+  watch.detail = detail;
+  ++watch.moves;
+  Emit(MonitorEventKind::kMoved, watch, now_ns, method,
+       "moved by about " + MotionText(motion) + ": " + detail, watch.world_from_sensor,
+       watch.world_from_sensor * motion);
+}
+
+void Monitor::Correct(SensorWatch& watch, common::UtcNs now_ns, const std::string& method,
+                      const Pose2& world_from_sensor, const Eigen::Matrix3d& covariance,
+                      const std::string& detail) {
+  const Pose2 before = watch.world_from_sensor;
+  // The reference snapshot stays, with the motion since it expected (see the header comment).
+  watch.reference_from_sensor =
+      watch.reference_from_sensor * (before.inverse() * world_from_sensor);
+  if (watch.state == WatchState::kMoved) watch.tracks_valid_from_ns = watch.flagged_ns;
+  watch.world_from_sensor = world_from_sensor;
+  watch.covariance = covariance;
+  watch.state = WatchState::kWatched;
+  watch.provisional = false;
+  watch.background_candidate.reset();
+  watch.estimated_motion = Pose2::Identity();
+  watch.track_strikes = 0;
+  watch.detail = "corrected (" + method + ")";
+  ++watch.corrections;
+  Emit(MonitorEventKind::kCorrected, watch, now_ns, method,
+       "pose corrected by " + MotionText(before.inverse() * world_from_sensor) + " to " +
+           PoseText(world_from_sensor) + ": " + detail,
+       before, world_from_sensor);
+}
+
+void Monitor::Emit(MonitorEventKind kind, const SensorWatch& watch, common::UtcNs stamp_ns,
+                   const std::string& method, const std::string& detail,
+                   std::optional<Pose2> before, std::optional<Pose2> after) {
+  MonitorEvent e;
+  e.kind = kind;
+  e.sensor_id = watch.id;
+  e.stamp_ns = stamp_ns;
+  e.method = method;
+  e.detail = detail;
+  e.before = before;
+  e.after = after;
+  events_.push_back(std::move(e));
+  // Bounded: a caller that never takes them loses the oldest.
+  if (events_.size() > 1000) events_.erase(events_.begin());
+}
+
+std::vector<MonitorEvent> Monitor::TakeEvents() {
+  std::vector<MonitorEvent> out;
+  out.swap(events_);
+  return out;
+}
+
+bool Monitor::Excluded(const std::string& sensor_id) const {
+  const auto it = sensors_.find(sensor_id);
+  return it != sensors_.end() && it->second.state == WatchState::kMoved;
+}
+
+std::vector<SensorPose> Monitor::Poses() const {
+  std::vector<SensorPose> out;
+  for (const auto& [id, watch] : sensors_) {
+    out.push_back({id, watch.world_from_sensor, watch.covariance});
+  }
+  return out;
+}
+
+}  // namespace lrfnet::monitoring

@@ -1,0 +1,206 @@
+#include "central_daemon/monitoring/monitor.h"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <map>
+
+#include "central_daemon/monitoring/monitoring_test_util.h"
+
+namespace lrfnet::monitoring {
+namespace {
+
+using testing::Room;
+using testing::Snapshot;
+using testing::TwoPeople;
+
+constexpr common::UtcNs kStart = 1'700'000'000'000'000'000;
+const Pose2 kS1{0.3, 0.3, common::DegToRad(40.0)};
+const Pose2 kS2{11.7, 0.3, common::DegToRad(140.0)};
+const Pose2 kS3{11.7, 7.7, common::DegToRad(-140.0)};
+
+common::UtcNs At(double t_s) {
+  return kStart + static_cast<common::UtcNs>(std::llround(t_s * 1e9));
+}
+
+// The frames of three sensors watching two people for `duration_s`; s2 stands at its pose of the
+// time (poses_s2: (from_s, pose), increasing).
+class FakeFrames final : public FrameSource {
+ public:
+  FakeFrames(double duration_s, const std::vector<std::pair<double, Pose2>>& poses_s2) {
+    frames_["s1"] = testing::Frames(TwoPeople(), kS1, 0, duration_s, kStart, 11, 1);
+    frames_["s3"] = testing::Frames(TwoPeople(), kS3, 0, duration_s, kStart, 13, 3);
+    auto& s2 = frames_["s2"];
+    for (std::size_t i = 0; i < poses_s2.size(); ++i) {
+      const double to = i + 1 < poses_s2.size() ? poses_s2[i + 1].first : duration_s;
+      for (auto& f : testing::Frames(TwoPeople(), poses_s2[i].second, poses_s2[i].first, to, kStart,
+                                     12, static_cast<std::uint32_t>(2 + i))) {
+        s2.push_back(std::move(f));
+      }
+    }
+  }
+  std::vector<daemon::TrackFrameData> Frames(const std::string& id, common::UtcNs from_ns,
+                                             common::UtcNs to_ns) const override {
+    std::vector<daemon::TrackFrameData> out;
+    const auto it = frames_.find(id);
+    if (it == frames_.end()) return out;
+    for (const auto& f : it->second) {
+      if (f.scan_start_ns >= from_ns && f.scan_start_ns < to_ns) out.push_back(f);
+    }
+    return out;
+  }
+
+ private:
+  std::map<std::string, std::vector<daemon::TrackFrameData>> frames_;
+};
+
+std::vector<SensorPose> Calibrated() {
+  return {{"s1", kS1, Eigen::Matrix3d::Identity() * 1e-6},
+          {"s2", kS2, Eigen::Matrix3d::Identity() * 1e-6},
+          {"s3", kS3, Eigen::Matrix3d::Identity() * 1e-6}};
+}
+
+std::map<std::string, daemon::BackgroundScan> References() {
+  return {{"s1", Snapshot(Room(), kS1, 0.005, 1)},
+          {"s2", Snapshot(Room(), kS2, 0.005, 2)},
+          {"s3", Snapshot(Room(), kS3, 0.005, 3)}};
+}
+
+const SensorWatch& Watch(const Monitor& m, const std::string& id) { return m.sensors().at(id); }
+
+TEST(Monitor, ABumpedSensorIsFlaggedExcludedAndCorrectedFromItsBackground) {
+  Monitor monitor(MonitorOptions{});
+  monitor.SetPoses(Calibrated(), References());
+  const Pose2 bumped = kS2 * Pose2{0.05, 0.1, common::DegToRad(2.0)};
+  const FakeFrames frames(40.0, {{0.0, kS2}, {20.0, bumped}});
+  for (double t = 1.0; t <= 20.0; t += 1.0) monitor.Update(At(t), frames);
+  EXPECT_TRUE(monitor.TakeEvents().empty()) << "a false flag before the bump";
+  EXPECT_FALSE(monitor.Excluded("s2"));
+
+  // The first snapshot after the bump: flagged at once, with the motion, left out.
+  monitor.OnBackground("s2", Snapshot(Room(), bumped, 0.005, 9, 2), At(21.0));
+  EXPECT_TRUE(monitor.Excluded("s2"));
+  std::vector<MonitorEvent> events = monitor.TakeEvents();
+  ASSERT_GE(events.size(), 1u);
+  EXPECT_EQ(events[0].kind, MonitorEventKind::kMoved);
+  EXPECT_EQ(events[0].sensor_id, "s2");
+  EXPECT_EQ(events[0].stamp_ns, At(21.0));
+  EXPECT_EQ(events[0].method, "background");
+  ASSERT_TRUE(events[0].after.has_value());
+  EXPECT_LT(common::TranslationDistanceM(*events[0].after, bumped), 0.01);
+  // The whole new scene was in it: corrected at the next update, and fused again.
+  monitor.Update(At(22.0), frames);
+  events = monitor.TakeEvents();
+  ASSERT_EQ(events.size(), 1u);
+  EXPECT_EQ(events[0].kind, MonitorEventKind::kCorrected);
+  EXPECT_EQ(events[0].method, "background");
+  EXPECT_FALSE(monitor.Excluded("s2"));
+  const Pose2 corrected = Watch(monitor, "s2").world_from_sensor;
+  EXPECT_LT(common::TranslationDistanceM(corrected, bumped), 0.01);
+  EXPECT_LT(common::RadToDeg(common::RotationDistanceRad(corrected, bumped)), 0.05);
+  // The others never moved, and s2 at its new pose agrees with them from now on.
+  for (double t = 23.0; t <= 40.0; t += 1.0) monitor.Update(At(t), frames);
+  monitor.OnBackground("s2", Snapshot(Room(), bumped, 0.005, 10, 3), At(40.0));
+  EXPECT_TRUE(monitor.TakeEvents().empty());
+  EXPECT_EQ(Watch(monitor, "s1").world_from_sensor.x_m, kS1.x_m);
+  EXPECT_EQ(Watch(monitor, "s2").moves, 1u);
+}
+
+TEST(Monitor, WithoutBackgroundsTheTracksFlagAndCorrect) {
+  MonitorOptions options;
+  Monitor monitor(options);
+  monitor.SetPoses(Calibrated(), {});
+  const Pose2 bumped = kS2 * Pose2{0.0, 0.0, common::DegToRad(3.0)};
+  const FakeFrames frames(60.0, {{0.0, kS2}, {20.0, bumped}});
+  common::UtcNs flagged = 0;
+  for (double t = 1.0; t <= 60.0 && !flagged; t += 1.0) {
+    monitor.Update(At(t), frames);
+    for (const MonitorEvent& e : monitor.TakeEvents()) {
+      ASSERT_EQ(e.kind, MonitorEventKind::kMoved) << e.detail;
+      EXPECT_EQ(e.sensor_id, "s2") << e.detail;
+      EXPECT_EQ(e.method, "tracks");
+      flagged = e.stamp_ns;
+    }
+  }
+  ASSERT_NE(flagged, 0);
+  EXPECT_GT(flagged, At(20.0));
+  EXPECT_LE(flagged, At(20.0 + options.track_window_s)) << "flagged late";
+  EXPECT_TRUE(monitor.Excluded("s2"));
+  // Corrected from the tracks since the flag, once there are enough of them.
+  common::UtcNs corrected_at = 0;
+  for (double t = 1.0; corrected_at == 0 && At(t) <= At(60.0); t += 1.0) {
+    if (At(t) <= flagged) continue;
+    monitor.Update(At(t), frames);
+    for (const MonitorEvent& e : monitor.TakeEvents()) {
+      if (e.kind == MonitorEventKind::kCorrected) corrected_at = e.stamp_ns;
+    }
+  }
+  ASSERT_NE(corrected_at, 0);
+  EXPECT_GE(corrected_at - flagged,
+            static_cast<common::UtcNs>(options.correction_min_tracks_s * 1e9) - 1'000'000'000);
+  const Pose2 corrected = Watch(monitor, "s2").world_from_sensor;
+  EXPECT_LT(common::TranslationDistanceM(corrected, bumped), 0.05);
+  EXPECT_LT(common::RadToDeg(common::RotationDistanceRad(corrected, bumped)), 0.2);
+  EXPECT_FALSE(monitor.Excluded("s2"));
+}
+
+TEST(Monitor, FurnitureMovedWhileTheTracksAgreeReLearnsTheBackground) {
+  Monitor monitor(MonitorOptions{});
+  monitor.SetPoses(Calibrated(), References());
+  const FakeFrames frames(30.0, {{0.0, kS2}});
+  std::vector<testing::Wall> changed = Room();
+  testing::AddBox(&changed, 8.6, 1.4, 9.6, 2.6);
+  const daemon::BackgroundScan with_cupboard = Snapshot(changed, kS2, 0.005, 4, 2);
+  monitor.OnBackground("s2", with_cupboard, At(12.0));
+  EXPECT_FALSE(monitor.Excluded("s2"));
+  for (double t = 12.0; t <= 14.0; t += 1.0) monitor.Update(At(t), frames);
+  const std::vector<MonitorEvent> events = monitor.TakeEvents();
+  ASSERT_EQ(events.size(), 1u);
+  EXPECT_EQ(events[0].kind, MonitorEventKind::kBackgroundRelearned);
+  EXPECT_EQ(events[0].sensor_id, "s2");
+  EXPECT_EQ(Watch(monitor, "s2").relearns, 1u);
+  EXPECT_EQ(Watch(monitor, "s2").reference->ranges_mm, with_cupboard.ranges_mm);
+  // The next snapshot of the new scene is unchanged against the new reference.
+  monitor.OnBackground("s2", Snapshot(changed, kS2, 0.005, 5, 3), At(20.0));
+  EXPECT_TRUE(monitor.TakeEvents().empty());
+  EXPECT_EQ(Watch(monitor, "s2").state, WatchState::kWatched);
+}
+
+TEST(Monitor, ANewCalibrationReplacesThePosesAndAReferenceIsTakenWhenMissing) {
+  Monitor monitor(MonitorOptions{});
+  monitor.SetPoses(Calibrated(), {});
+  EXPECT_FALSE(Watch(monitor, "s2").reference.has_value());
+  monitor.OnBackground("s2", Snapshot(Room(), kS2, 0.005, 1, 0), At(1.0));
+  EXPECT_TRUE(Watch(monitor, "s2").reference.has_value());
+  EXPECT_TRUE(monitor.TakeEvents().empty());
+  // Sensors not in a new calibration are no longer watched.
+  monitor.SetPoses({{"s1", kS1, Eigen::Matrix3d::Zero()}}, {});
+  EXPECT_EQ(monitor.sensors().size(), 1u);
+  monitor.OnBackground("s2", Snapshot(Room(), kS2 * Pose2{0, 0, 0.1}, 0.005, 2), At(2.0));
+  EXPECT_TRUE(monitor.TakeEvents().empty());
+  EXPECT_FALSE(monitor.Excluded("s2"));
+  ASSERT_EQ(monitor.Poses().size(), 1u);
+  EXPECT_EQ(monitor.Poses()[0].id, "s1");
+}
+
+TEST(Monitor, OptionsAreValidated) {
+  EXPECT_FALSE(Validate(MonitorOptions{}).has_value());
+  MonitorOptions o;
+  o.track_window_s = 0;
+  EXPECT_NE(Validate(o).value_or("").find("track_window_s"), std::string::npos);
+  o = {};
+  o.track_confirmations = 0;
+  EXPECT_NE(Validate(o).value_or("").find("track_confirmations"), std::string::npos);
+  o = {};
+  o.correction_max_tracks_s = 1.0;
+  EXPECT_NE(Validate(o).value_or("").find("correction_max_tracks_s"), std::string::npos);
+  o = {};
+  o.tracks.min_matches = 1;
+  EXPECT_NE(Validate(o).value_or("").find("tracks.min_matches"), std::string::npos);
+  o = {};
+  o.background.min_yaw_deg = -1;
+  EXPECT_NE(Validate(o).value_or("").find("background.min_yaw_deg"), std::string::npos);
+}
+
+}  // namespace
+}  // namespace lrfnet::monitoring

@@ -1,0 +1,141 @@
+#include "central_daemon/monitoring/track_check.h"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+
+#include "central_daemon/monitoring/monitoring_test_util.h"
+
+namespace lrfnet::monitoring {
+namespace {
+
+using testing::Frames;
+using testing::TwoPeople;
+
+constexpr common::UtcNs kStart = 1'700'000'000'000'000'000;
+const Pose2 kS1{0.3, 0.3, common::DegToRad(40.0)};
+const Pose2 kS2{11.7, 0.3, common::DegToRad(140.0)};
+const Pose2 kS3{11.7, 7.7, common::DegToRad(-140.0)};
+
+struct Scene {
+  std::vector<daemon::TrackFrameData> s1, s2, s3;
+  std::vector<PlacedFrames> Others() const { return {{"s1", kS1, &s1}, {"s3", kS3, &s3}}; }
+};
+
+// Ten seconds of two people seen by three sensors; s2 stands at `s2_true`.
+Scene Walk(const Pose2& s2_true, double t0_s = 0.0, double t1_s = 10.0) {
+  Scene s;
+  s.s1 = Frames(TwoPeople(), kS1, t0_s, t1_s, kStart, 11, 1);
+  s.s2 = Frames(TwoPeople(), s2_true, t0_s, t1_s, kStart, 12, 2);
+  s.s3 = Frames(TwoPeople(), kS3, t0_s, t1_s, kStart, 13, 3);
+  return s;
+}
+
+TEST(TrackCheck, TracksThatAgreeFindNoMove) {
+  const Scene scene = Walk(kS2);
+  const TrackFit fit = CheckTracks(scene.s2, kS2, scene.Others(), {});
+  ASSERT_TRUE(fit.enough) << fit.reason;
+  EXPECT_FALSE(fit.moved) << fit.reason;
+  EXPECT_LT(fit.chi2, 25.0) << fit.reason;
+  EXPECT_LT(std::abs(common::RadToDeg(fit.correction.yaw_rad)), 0.2) << fit.reason;
+  EXPECT_LT(std::hypot(fit.correction.x_m, fit.correction.y_m), 0.03) << fit.reason;
+}
+
+TEST(TrackCheck, ATrackOffsetIsAMoveWithItsCorrection) {
+  // s2 was turned by 2 degrees and pushed 10 cm; the calibration still has the old pose.
+  for (const Pose2& bump : {Pose2{0, 0, common::DegToRad(2.0)}, Pose2{0.1, 0.0, 0.0},
+                            Pose2{0.0, 0.1, common::DegToRad(-1.0)}}) {
+    const Pose2 moved = kS2 * bump;
+    const Scene scene = Walk(moved);
+    const TrackFit fit = CheckTracks(scene.s2, kS2, scene.Others(), {});
+    ASSERT_TRUE(fit.enough) << fit.reason;
+    EXPECT_TRUE(fit.moved) << fit.reason;
+    EXPECT_NEAR(common::RadToDeg(common::AngleDiff(fit.correction.yaw_rad, bump.yaw_rad)), 0.0,
+                0.15)
+        << fit.reason;
+    EXPECT_NEAR(fit.correction.x_m, bump.x_m, 0.03) << fit.reason;
+    EXPECT_NEAR(fit.correction.y_m, bump.y_m, 0.03) << fit.reason;
+    // The fitted pose is the new truth.
+    EXPECT_LT(common::TranslationDistanceM(fit.world_from_sensor, moved), 0.03) << fit.reason;
+  }
+}
+
+TEST(TrackCheck, ALargeMoveIsFoundBySearchingFromScratch) {
+  // 10 degrees: at 8 m the tracks land 1.4 m away, beyond the association gate.
+  const Pose2 moved = kS2 * Pose2{0.0, 0.0, common::DegToRad(10.0)};
+  const Scene scene = Walk(moved, 0.0, 20.0);
+  const TrackFit detect = CheckTracks(scene.s2, kS2, scene.Others(), {});
+  EXPECT_TRUE(detect.moved) << detect.reason;
+  const TrackFit fit = EstimateFromTracks(scene.s2, kS2, scene.Others(), {});
+  ASSERT_TRUE(fit.enough) << fit.reason;
+  EXPECT_NEAR(common::RadToDeg(common::AngleDiff(fit.world_from_sensor.yaw_rad, moved.yaw_rad)),
+              0.0, 0.2)
+      << fit.reason;
+  EXPECT_LT(common::TranslationDistanceM(fit.world_from_sensor, moved), 0.05) << fit.reason;
+}
+
+TEST(TrackCheck, TooFewTracksAreNotEnoughNeverAMove) {
+  const Scene scene = Walk(kS2 * Pose2{0.0, 0.0, common::DegToRad(5.0)}, 0.0, 1.5);
+  const TrackFit fit = CheckTracks(scene.s2, kS2, scene.Others(), {});
+  EXPECT_FALSE(fit.enough);
+  EXPECT_FALSE(fit.moved);
+  EXPECT_FALSE(fit.reason.empty());
+  // Nobody else to compare with.
+  EXPECT_FALSE(CheckTracks(scene.s2, kS2, {}, {}).enough);
+  // A person standing still fixes no rotation, and a box does not count at all.
+  const std::vector<testing::Walker> standing = {{{{6, 4}, {6.001, 4}}, 0.0001, 0.0}};
+  const auto s1 = Frames(standing, kS1, 0, 10, kStart, 11, 1);
+  const auto s2 = Frames(standing, kS2 * Pose2{0.2, 0, 0}, 0, 10, kStart, 12, 2);
+  const std::vector<PlacedFrames> others = {{"s1", kS1, &s1}};
+  const TrackFit still = CheckTracks(s2, kS2, others, {});
+  EXPECT_FALSE(still.enough) << still.reason;
+  EXPECT_FALSE(still.moved) << still.reason;
+}
+
+TEST(TrackCheck, HostileTracksAreIgnored) {
+  Scene scene = Walk(kS2);
+  for (auto& f : scene.s2) {
+    daemon::TrackObservation bad = f.tracks.front();
+    bad.track_id = 99;
+    bad.x_m = std::nanf("");
+    f.tracks.push_back(bad);
+    bad.track_id = 98;
+    bad.x_m = 1e30f;
+    bad.covariance.fill(-1.0f);
+    f.tracks.push_back(bad);
+  }
+  const TrackFit fit = CheckTracks(scene.s2, kS2, scene.Others(), {});
+  ASSERT_TRUE(fit.enough) << fit.reason;
+  EXPECT_FALSE(fit.moved) << fit.reason;
+  EXPECT_TRUE(std::isfinite(fit.world_from_sensor.x_m));
+}
+
+TEST(TrackCheck, TheWorldRecordingRotatesPositionsVelocitiesAndCovariances) {
+  daemon::TrackFrameData f;
+  f.session_id = 5;
+  f.scan_start_ns = kStart;
+  daemon::TrackObservation o;
+  o.track_id = 3;
+  o.x_m = 1.0f;
+  o.y_m = 0.0f;
+  o.vx_mps = 1.0f;
+  o.covariance = {0.04f, 0, 0, 0, 0.01f, 0, 0, 1.0f, 0, 1.0f};
+  o.kind = daemon::MeasurementKind::kCenterOfMass;
+  f.tracks.push_back(o);
+  const std::vector<daemon::TrackFrameData> frames = {f};
+  const Pose2 pose{2.0, 3.0, common::DegToRad(90.0)};
+  const calib::SensorRecording w = WorldRecording({{"a", pose, &frames}});
+  ASSERT_EQ(w.frames.size(), 1u);
+  const daemon::TrackObservation& t = w.frames[0].tracks[0];
+  EXPECT_NEAR(t.x_m, 2.0, 1e-6);
+  EXPECT_NEAR(t.y_m, 4.0, 1e-6);
+  EXPECT_NEAR(t.vx_mps, 0.0, 1e-6);
+  EXPECT_NEAR(t.vy_mps, 1.0, 1e-6);
+  EXPECT_NEAR(t.covariance[0], 0.01, 1e-6);  // xx <- yy
+  EXPECT_NEAR(t.covariance[4], 0.04, 1e-6);  // yy <- xx
+  EXPECT_EQ(t.kind, daemon::MeasurementKind::kUnspecified);
+  EXPECT_NE(w.frames[0].session_id, 5u);
+}
+
+}  // namespace
+}  // namespace lrfnet::monitoring
