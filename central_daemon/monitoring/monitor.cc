@@ -62,6 +62,9 @@ std::optional<std::string> Validate(const MonitorOptions& o) {
   if (o.track_confirmations < 1 || o.track_confirmations > 100) {
     return "track_confirmations must be in [1, 100]";
   }
+  if (o.track_baseline_checks < 1 || o.track_baseline_checks > 1000) {
+    return "track_baseline_checks must be in [1, 1000]";
+  }
   if (!(o.correct_min_inliers >= 0.0 && o.correct_min_inliers <= 1.0)) {
     return "correct_min_inliers must be in [0, 1]";
   }
@@ -196,6 +199,7 @@ void Monitor::OnBackground(const std::string& sensor_id, const daemon::Backgroun
     } else {
       watch.provisional = false;
     }
+    watch.background_refined = true;
     return;
   }
   if (settling && !settled) return;
@@ -275,22 +279,47 @@ void Monitor::Update(common::UtcNs now_ns, const FrameSource& source) {
       const std::vector<PlacedFrames> others = Others(id, window);
       if (others.empty()) continue;
       ++watch.track_checks;
-      const TrackFit fit =
-          CheckTracks(window[id], watch.world_from_sensor, others, options_.tracks);
-      if (fit.moved && watch.provisional && fit.rms_m <= options_.correction_max_rms_m &&
+      const TrackFit fit = CheckTracks(window[id], watch.world_from_sensor, others, options_.tracks,
+                                       watch.track_baseline);
+      if (watch.baseline_checks < options_.track_baseline_checks) {
+        // Learning what "nothing moved" looks like to the tracks.
+        if (fit.enough && fit.rms_m <= options_.tracks.max_fit_rms_m &&
+            fit.matches >= 2 * options_.tracks.min_matches) {
+          watch.baseline_sum +=
+              Eigen::Vector3d(fit.correction.x_m, fit.correction.y_m, fit.correction.yaw_rad);
+          ++watch.baseline_checks;
+          const Eigen::Vector3d mean = watch.baseline_sum / watch.baseline_checks;
+          watch.track_baseline = Pose2{mean.x(), mean.y(), mean.z()};
+        }
+        continue;
+      }
+      if (fit.moved && watch.provisional && !watch.background_refined &&
+          fit.rms_m <= options_.correction_max_rms_m &&
           std::abs(common::RadToDeg(fit.correction.yaw_rad)) <= options_.refine_max_yaw_deg &&
           std::hypot(fit.correction.x_m, fit.correction.y_m) <= options_.refine_max_translation_m) {
         // The same move, estimated better from more (and cleaner) tracks.
-        Correct(watch, now_ns, "tracks", fit.world_from_sensor, Symmetric(fit.covariance),
-                "refined: " + fit.reason);
+        Correct(watch, now_ns, "tracks", fit.world_from_sensor * watch.track_baseline.inverse(),
+                Symmetric(fit.covariance), "refined: " + fit.reason);
         watch.provisional = true;
         continue;
       }
-      if (fit.moved) {
+      // Within relearn_hold_s of its last move the sensor's tracker is still re-learning its
+      // background (wall pieces merge with people near them): only a new bump beyond the
+      // refinement bounds counts then; the background watches the rest.
+      const bool settling =
+          watch.tracks_valid_from_ns != 0 &&
+          now_ns - watch.tracks_valid_from_ns < SecondsToNs(options_.relearn_hold_s);
+      const Pose2 motion = watch.track_baseline.inverse() * fit.correction;
+      const bool beyond_refinement =
+          std::abs(common::RadToDeg(motion.yaw_rad)) > options_.refine_max_yaw_deg ||
+          std::hypot(motion.x_m, motion.y_m) > options_.refine_max_translation_m;
+      if (fit.moved && (!settling || beyond_refinement)) {
         if (++watch.track_strikes >= options_.track_confirmations &&
             (to_flag == nullptr || fit.chi2 > flag_fit.chi2)) {
           to_flag = &watch;
           flag_fit = fit;
+          // The motion since "nothing moved".
+          flag_fit.correction = watch.track_baseline.inverse() * fit.correction;
         }
       } else if (fit.enough) {
         watch.track_strikes = 0;
@@ -325,8 +354,9 @@ void Monitor::Update(common::UtcNs now_ns, const FrameSource& source) {
     const std::vector<PlacedFrames> others = Others(id, fresh);
     if (watch.background_candidate) {
       const Pose2 candidate = watch.world_from_sensor * *watch.background_candidate;
-      const TrackFit check =
-          others.empty() ? TrackFit{} : CheckTracks(own, candidate, others, options_.tracks);
+      const TrackFit check = others.empty() ? TrackFit{}
+                                            : CheckTracks(own, candidate, others, options_.tracks,
+                                                          watch.track_baseline);
       if (!check.moved) {
         Correct(watch, now_ns, "background", candidate,
                 MovedCovariance(watch, watch.background_candidate_covariance),
@@ -343,13 +373,15 @@ void Monitor::Update(common::UtcNs now_ns, const FrameSource& source) {
     const double tracked_s =
         static_cast<double>(own.back().scan_start_ns - own.front().scan_start_ns) * 1e-9;
     if (tracked_s < options_.correction_min_tracks_s) continue;
-    const TrackFit fit = EstimateFromTracks(own, watch.world_from_sensor * watch.estimated_motion,
-                                            others, options_.tracks);
+    const TrackFit fit = EstimateFromTracks(
+        own, watch.world_from_sensor * watch.estimated_motion * watch.track_baseline, others,
+        options_.tracks, watch.track_baseline);
     if (!fit.enough || fit.rms_m > options_.correction_max_rms_m) {
       watch.detail = "waiting for tracks to correct the pose: " + fit.reason;
       continue;
     }
-    Correct(watch, now_ns, "tracks", fit.world_from_sensor, Symmetric(fit.covariance),
+    Correct(watch, now_ns, "tracks", fit.world_from_sensor * watch.track_baseline.inverse(),
+            Symmetric(fit.covariance),
             fit.reason + (fit.from_search ? " (searched from scratch)" : ""));
     watch.provisional = true;
   }
@@ -381,6 +413,7 @@ void Monitor::Flag(SensorWatch& watch, common::UtcNs now_ns, const std::string& 
   watch.track_strikes = 0;
   watch.pending_relearn.reset();
   watch.background_candidate.reset();
+  watch.background_refined = false;
   watch.detail = detail;
   ++watch.moves;
   Emit(MonitorEventKind::kMoved, watch, now_ns, method,

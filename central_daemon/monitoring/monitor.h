@@ -64,6 +64,10 @@ struct MonitorOptions {
   double track_window_s = 10.0;  // the sliding window of the track check
   double track_period_s = 1.0;   // how often the tracks are checked
   int track_confirmations = 2;   // consecutive "moved" track checks that flag a sensor
+  // After a pose is set, the mean correction of this many track checks with twice the matches
+  // they need is what "nothing moved" looks like to the tracks (track_check.h, baseline); tracks
+  // flag nothing before.
+  int track_baseline_checks = 10;
   // A background correction needs this share of the snapshot's points on the reference scene.
   double correct_min_inliers = 0.9;
   // A snapshot holds the whole new scene (the tracker has re-learned its background after a
@@ -155,6 +159,12 @@ struct SensorWatch {
   bool provisional = false;
   // Tracks before this time were taken at another pose (before the last move).
   common::UtcNs tracks_valid_from_ns = 0;
+  // The tracks' own correction with the calibration's pose (see track_baseline_checks).
+  Pose2 track_baseline;
+  int baseline_checks = 0;
+  Eigen::Vector3d baseline_sum = Eigen::Vector3d::Zero();
+  // A settled snapshot refined the pose since the last flag: the tracks no longer refine it.
+  bool background_refined = false;
 };
 
 class Monitor {

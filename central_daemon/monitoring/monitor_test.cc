@@ -147,13 +147,15 @@ TEST(Monitor, WithoutBackgroundsTheTracksFlagAndCorrect) {
 TEST(Monitor, FurnitureMovedWhileTheTracksAgreeReLearnsTheBackground) {
   Monitor monitor(MonitorOptions{});
   monitor.SetPoses(Calibrated(), References());
-  const FakeFrames frames(30.0, {{0.0, kS2}});
+  const FakeFrames frames(40.0, {{0.0, kS2}});
+  // The tracks first learn what "nothing moved" looks like.
+  for (double t = 1.0; t <= 20.0; t += 1.0) monitor.Update(At(t), frames);
   std::vector<testing::Wall> changed = Room();
   testing::AddBox(&changed, 8.6, 1.4, 9.6, 2.6);
   const daemon::BackgroundScan with_cupboard = Snapshot(changed, kS2, 0.005, 4, 2);
-  monitor.OnBackground("s2", with_cupboard, At(12.0));
+  monitor.OnBackground("s2", with_cupboard, At(21.0));
   EXPECT_FALSE(monitor.Excluded("s2"));
-  for (double t = 12.0; t <= 14.0; t += 1.0) monitor.Update(At(t), frames);
+  for (double t = 21.0; t <= 23.0; t += 1.0) monitor.Update(At(t), frames);
   const std::vector<MonitorEvent> events = monitor.TakeEvents();
   ASSERT_EQ(events.size(), 1u);
   EXPECT_EQ(events[0].kind, MonitorEventKind::kBackgroundRelearned);
@@ -161,7 +163,7 @@ TEST(Monitor, FurnitureMovedWhileTheTracksAgreeReLearnsTheBackground) {
   EXPECT_EQ(Watch(monitor, "s2").relearns, 1u);
   EXPECT_EQ(Watch(monitor, "s2").reference->ranges_mm, with_cupboard.ranges_mm);
   // The next snapshot of the new scene is unchanged against the new reference.
-  monitor.OnBackground("s2", Snapshot(changed, kS2, 0.005, 5, 3), At(20.0));
+  monitor.OnBackground("s2", Snapshot(changed, kS2, 0.005, 5, 3), At(30.0));
   EXPECT_TRUE(monitor.TakeEvents().empty());
   EXPECT_EQ(Watch(monitor, "s2").state, WatchState::kWatched);
 }

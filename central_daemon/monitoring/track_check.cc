@@ -143,21 +143,25 @@ TrackFit FitFrom(const calib::AlignedTracks& aligned, const Pose2& start,
   return out;
 }
 
-void Judge(const Pose2& current, const TrackCheckOptions& options, TrackFit* fit) {
+void Judge(const Pose2& current, const Pose2& baseline, const TrackCheckOptions& options,
+           TrackFit* fit) {
   if (!fit->enough) return;
+  // What the tracks would put at `current` when nothing moved: current * baseline.
+  const Pose2 expected = current * baseline;
   fit->correction = current.inverse() * fit->world_from_sensor;
-  const Eigen::Vector3d delta(fit->world_from_sensor.x_m - current.x_m,
-                              fit->world_from_sensor.y_m - current.y_m,
-                              common::AngleDiff(fit->world_from_sensor.yaw_rad, current.yaw_rad));
+  const Pose2 motion = expected.inverse() * fit->world_from_sensor;
+  const Eigen::Vector3d delta(fit->world_from_sensor.x_m - expected.x_m,
+                              fit->world_from_sensor.y_m - expected.y_m,
+                              common::AngleDiff(fit->world_from_sensor.yaw_rad, expected.yaw_rad));
   fit->chi2 = Chi2(delta, fit->covariance);
-  const double yaw_deg = common::RadToDeg(fit->correction.yaw_rad);
-  const double shift_m = std::hypot(fit->correction.x_m, fit->correction.y_m);
+  const double yaw_deg = common::RadToDeg(motion.yaw_rad);
+  const double shift_m = std::hypot(motion.x_m, motion.y_m);
   const bool large =
       std::abs(yaw_deg) >= options.min_yaw_deg || shift_m >= options.min_translation_m;
   fit->moved = large && fit->chi2 >= options.min_chi2 && fit->rms_m <= options.max_fit_rms_m;
   fit->reason = fmt::format(
-      "{} associated observations over {:.1f} m, residual {:.3f} m rms; best correction {:.2f} "
-      "deg, {:.3f} m (chi2 {:.0f})",
+      "{} associated observations over {:.1f} m, residual {:.3f} m rms; moved by {:.2f} deg, "
+      "{:.3f} m (chi2 {:.0f})",
       fit->matches, fit->spread_m, fit->rms_m, yaw_deg, shift_m, fit->chi2);
 }
 
@@ -234,7 +238,8 @@ calib::SensorRecording WorldRecording(const std::vector<PlacedFrames>& others) {
 }
 
 TrackFit CheckTracks(const std::vector<TrackFrameData>& sensor, const Pose2& world_from_sensor,
-                     const std::vector<PlacedFrames>& others, const TrackCheckOptions& options) {
+                     const std::vector<PlacedFrames>& others, const TrackCheckOptions& options,
+                     const Pose2& baseline) {
   if (auto e = Validate(options)) {
     std::fprintf(stderr, "CheckTracks: invalid options: %s\n", e->c_str());
     std::abort();
@@ -257,13 +262,13 @@ TrackFit CheckTracks(const std::vector<TrackFrameData>& sensor, const Pose2& wor
       }
     }
   }
-  Judge(world_from_sensor, options, &fit);
+  Judge(world_from_sensor, baseline, options, &fit);
   return fit;
 }
 
 TrackFit EstimateFromTracks(const std::vector<TrackFrameData>& sensor, const Pose2& initial,
                             const std::vector<PlacedFrames>& others,
-                            const TrackCheckOptions& options) {
+                            const TrackCheckOptions& options, const Pose2& baseline) {
   if (auto e = Validate(options)) {
     std::fprintf(stderr, "EstimateFromTracks: invalid options: %s\n", e->c_str());
     std::abort();
@@ -281,7 +286,7 @@ TrackFit EstimateFromTracks(const std::vector<TrackFrameData>& sensor, const Pos
       }
     }
   }
-  Judge(initial, options, &fit);
+  Judge(initial, baseline, options, &fit);
   return fit;
 }
 

@@ -17,11 +17,15 @@
 // associated observations, Huber-weighted, so that a few wrong associations do not count):
 //   correction = world_from_sensor(current)^-1 * world_from_sensor(fitted)
 // in the sensor's frame (the convention of background_check.h: the sensor's new frame in its old
-// one). It is tested against the fit's covariance (chi^2 of the fitted pose minus the current one,
-// (x_m, y_m, yaw_rad), 3 dof): moved when chi^2 >= min_chi2 and the correction is at least
-// min_yaw_deg or min_translation_m. Too few associated observations (min_matches) or too little
-// spread of the sensor's matched positions (min_match_spread_m: one standing person fixes no
-// rotation) is "not enough data", never "moved".
+// one). A calibration leaves each sensor with a small correction of its own (its models of the
+// object centres are not these; its poses carry their errors): `baseline`, the correction measured
+// right after the pose was set, is what "nothing moved" looks like. The motion
+// baseline^-1 * correction is tested against the fit's covariance (chi^2 of the fitted pose minus
+// current * baseline, (x_m, y_m, yaw_rad), 3 dof): moved when chi^2 >= min_chi2, the motion is at
+// least min_yaw_deg or min_translation_m and the fit's residual is at most max_fit_rms_m. Too few
+// associated observations (min_matches) or too little spread of the sensor's matched positions
+// (min_match_spread_m: one standing person fixes no rotation) is "not enough data", never
+// "moved".
 //
 // EstimateFromTracks (correction): the same fit started from `initial` (e.g. the pose the
 // background or the detection suggests); when that associates too little, the pairwise MSAC of
@@ -81,7 +85,7 @@ struct TrackFit {
   bool moved = false;       // CheckTracks: the correction is large and significant
   std::string reason;       // a line for a person (why not enough, or the figures)
   Pose2 world_from_sensor;  // fitted (current when !enough)
-  Pose2 correction;         // current^-1 * fitted, sensor frame
+  Pose2 correction;         // current^-1 * fitted, sensor frame (the baseline included)
   Eigen::Matrix3d covariance = Eigen::Matrix3d::Zero();  // of the fitted (x_m, y_m, yaw_rad)
   double chi2 = 0.0;
   std::size_t matches = 0;
@@ -93,11 +97,15 @@ struct TrackFit {
 // `sensor`: the sensor's frames; `others`: the other placed sensors (not the sensor itself; sensors
 // known to be misplaced left out by the caller). Precondition: Validate(options).
 TrackFit CheckTracks(const std::vector<TrackFrameData>& sensor, const Pose2& world_from_sensor,
-                     const std::vector<PlacedFrames>& others, const TrackCheckOptions& options);
+                     const std::vector<PlacedFrames>& others, const TrackCheckOptions& options,
+                     const Pose2& baseline = Pose2::Identity());
 
+// The fitted pose is what the tracks say (world_from_sensor); the sensor's pose in the
+// calibration's terms is world_from_sensor * baseline^-1.
 TrackFit EstimateFromTracks(const std::vector<TrackFrameData>& sensor, const Pose2& initial,
                             const std::vector<PlacedFrames>& others,
-                            const TrackCheckOptions& options);
+                            const TrackCheckOptions& options,
+                            const Pose2& baseline = Pose2::Identity());
 
 // The other sensors' frames as one recording in the world frame (positions, velocities and their
 // covariance rotated and shifted by each pose; sessions and kinds as described above). Exposed
