@@ -9,9 +9,11 @@
 #include <filesystem>
 #include <fstream>
 #include <nlohmann/json.hpp>
+#include <sstream>
 #include <string>
 #include <vector>
 
+#include "central_daemon/calibration/calibration_yaml.h"
 #include "tests/process_harness.h"
 
 namespace lrfnet {
@@ -209,6 +211,154 @@ TEST_F(CalibrationChain, BaselinesRunThroughTheCommandLine) {
       EXPECT_FALSE(stats["error"].get<std::string>().empty());
     }
   }
+}
+
+// A site that stays calibrated, offline: the room is calibrated from its first 40 s (`lrfnet
+// calibrate`), then `lrfnetd --input` replays the whole run, in which s2 is turned by 2 degrees and
+// pushed 5 cm at 50 s, starting from that calibration. The daemon must flag s2 (and only s2), keep
+// it out of the fused output until its pose is estimated again, and write a calibration whose s2 is
+// the new truth within the issue's bound, with both events in its history.
+constexpr const char* kRoomBefore = R"(name: room
+seed: 9
+duration_s: 40
+world:
+  walls:
+    - [[0, 0], [12, 0], [12, 8], [0, 8], [0, 0]]
+  obstacles:
+    - [[5.5, 7.0], [7.5, 7.0], [7.5, 7.6], [5.5, 7.6]]
+    - [[2.0, 7.4], [3.5, 7.4], [3.5, 7.9], [2.0, 7.9]]
+sensors:
+  - {id: s1, model: tim561, x_m: 0.3, y_m: 0.3, yaw_deg: 40}
+  - {id: s2, model: tim561, x_m: 11.7, y_m: 0.3, yaw_deg: 140}
+  - {id: s3, model: tim561, x_m: 11.7, y_m: 7.7, yaw_deg: -140}
+targets:
+  - {shape: person, path: [[2.5, 2], [9.5, 2], [9.5, 5.5], [2.5, 5.5]], speed_mps: 1.2, loop: true}
+  - {shape: person, path: [[4, 3.5], [8.5, 3.5], [6.5, 6]], speed_mps: 1.0, loop: true}
+)";
+
+std::string Replace(std::string text, const std::string& from, const std::string& to) {
+  const std::size_t at = text.find(from);
+  if (at != std::string::npos) text.replace(at, from.size(), to);
+  return text;
+}
+
+// `lrfnet sim` of `scenario` into dir/sim and each sensor's tracker replay into dir/<id>.rec.
+void SimulateAndTrack(const TempDir& dir, const std::string& scenario) {
+  std::ofstream(dir / "scenario.yaml") << scenario;
+  Process sim(LRFNET_TOOL_BINARY, {"sim", dir / "scenario.yaml", "--out", dir / "sim"});
+  ASSERT_EQ(sim.Wait(milliseconds(60'000)), 0) << sim.err();
+  for (const char* id : {"s1", "s2", "s3"}) {
+    Process tracker(LRFNET_TRACKER_BINARY,
+                    {"--replay", dir / ("sim/" + std::string(id) + ".pcap"), "--sensor-id", id,
+                     "--out", dir / (std::string(id) + ".rec"), "--log-level", "warn"});
+    ASSERT_EQ(tracker.Wait(milliseconds(60'000)), 0) << tracker.err();
+  }
+}
+
+TEST(MonitoringChain, TheDaemonFlagsAMovedSensorFusesWithoutItAndCorrectsItsPose) {
+  TempDir before, run, out;
+  SimulateAndTrack(before, kRoomBefore);
+  std::string whole = Replace(kRoomBefore, "duration_s: 40", "duration_s: 100");
+  whole = Replace(whole, "{id: s2, model: tim561, x_m: 11.7, y_m: 0.3, yaw_deg: 140}",
+                  "{id: s2, model: tim561, x_m: 11.7, y_m: 0.3, yaw_deg: 140,\n"
+                  "     moves: [{at_s: 50, x_m: 11.66, y_m: 0.33, yaw_deg: 142}]}");
+  SimulateAndTrack(run, whole);
+
+  // The site's calibration, from before the move; it matches the truth of that time.
+  Process calibrate(LRFNET_TOOL_BINARY, {"calibrate", before / "s1.rec", before / "s2.rec",
+                                         before / "s3.rec", "--out", out / "initial.yaml"});
+  ASSERT_EQ(calibrate.Wait(milliseconds(60'000)), 0) << calibrate.err();
+  Process at_start(LRFNET_TOOL_BINARY,
+                   {"eval", out / "initial.yaml", run / "sim/truth.yaml", "--at", "10", "--json"});
+  ASSERT_EQ(at_start.Wait(), 0) << at_start.err();
+  const nlohmann::json initial = nlohmann::json::parse(at_start.out(), nullptr, false);
+  ASSERT_TRUE(initial.is_object()) << at_start.out();
+  ASSERT_LT(initial["mean_d_r_deg"].get<double>(), 0.3) << at_start.out();
+  ASSERT_LT(initial["mean_d_t_m"].get<double>(), 0.1) << at_start.out();
+
+  Process daemon(LRFNET_DAEMON_BINARY,
+                 {"--input", run / "s1.rec", run / "s2.rec", run / "s3.rec", "--calibration-in",
+                  out / "initial.yaml", "--calibration-out", out / "calibration.yaml",
+                  "--fused-out", out / "fused.jsonl", "--stats-out", out / "stats.json"});
+  ASSERT_EQ(daemon.Wait(milliseconds(120'000)), 0) << daemon.err();
+  EXPECT_NE(daemon.err().find("sensor s2 MOVED"), std::string::npos) << daemon.err();
+
+  // Only s2 was flagged, once, and corrected.
+  const nlohmann::json stats = ReadJson(out / "stats.json");
+  ASSERT_TRUE(stats.is_object());
+  const nlohmann::json& m = stats["monitoring"];
+  EXPECT_EQ(m["moved"], 1) << m.dump(2);
+  EXPECT_GE(m["corrected"].get<int>(), 1) << m.dump(2);
+  EXPECT_EQ(m["sensors"]["s1"]["moves"], 0) << m.dump(2);
+  EXPECT_EQ(m["sensors"]["s3"]["moves"], 0) << m.dump(2);
+  EXPECT_EQ(m["sensors"]["s2"]["state"], "ok") << m.dump(2);
+  std::int64_t moved_ns = 0, corrected_ns = 0;
+  for (const auto& e : m["history"]) {
+    if (e["event"] == "moved") moved_ns = e["stamp_ns"].get<std::int64_t>();
+    if (e["event"] == "corrected" && corrected_ns == 0) corrected_ns = e["stamp_ns"].get<std::int64_t>();
+  }
+  ASSERT_GT(moved_ns, 0) << m.dump(2);
+  ASSERT_GT(corrected_ns, moved_ns) << m.dump(2);
+  // The move happened 50 s into the run (start_utc 2021-01-01T12:00:00Z): flagged within 10 s.
+  constexpr std::int64_t kMoveNs = 1609502400LL * 1000000000LL + 50LL * 1000000000LL;
+  EXPECT_GT(moved_ns, kMoveNs);
+  EXPECT_LT(moved_ns - kMoveNs, 10LL * 1000000000LL);
+
+  // Between the flag and the correction, no fused track holds s2.
+  std::size_t lines = 0, with_s2_while_flagged = 0, with_s2_after = 0;
+  std::istringstream fused(ReadText(out / "fused.jsonl"));
+  for (std::string line; std::getline(fused, line);) {
+    const nlohmann::json f = nlohmann::json::parse(line, nullptr, false);
+    ASSERT_TRUE(f.is_object()) << line;
+    ++lines;
+    const std::int64_t stamp = f["stamp_ns"].get<std::int64_t>();
+    for (const auto& t : f["tracks"]) {
+      for (const auto& source : t["sources"]) {
+        if (source["sensor"] != "s2") continue;
+        if (stamp > moved_ns && stamp < corrected_ns) ++with_s2_while_flagged;
+        if (stamp > corrected_ns) ++with_s2_after;
+      }
+    }
+  }
+  EXPECT_GT(lines, 500u);
+  EXPECT_EQ(with_s2_while_flagged, 0u);
+  EXPECT_GT(with_s2_after, 0u) << "s2 is fused again after its correction";
+
+  // The written calibration: s1 and s3 exactly as calibrated; s2 moved by what it was moved by
+  // (goal: within 0.2 deg / 0.05 m). The motion is compared, not the pose, so that the error of
+  // the calibration it started from does not count twice.
+  calib::PoseFile before_file, after_file;
+  std::string error;
+  ASSERT_TRUE(calib::ReadPoseFile(out / "initial.yaml", &before_file, &error)) << error;
+  ASSERT_TRUE(calib::ReadPoseFile(out / "calibration.yaml", &after_file, &error)) << error;
+  for (const char* id : {"s1", "s3"}) {
+    const auto a = before_file.Find(id), b = after_file.Find(id);
+    ASSERT_TRUE(a && b) << id;
+    EXPECT_EQ(before_file.sensors[*a].second.x_m, after_file.sensors[*b].second.x_m) << id;
+    EXPECT_EQ(before_file.sensors[*a].second.yaw_rad, after_file.sensors[*b].second.yaw_rad) << id;
+  }
+  const common::Pose2 old_truth{11.7, 0.3, common::DegToRad(140.0)};
+  const common::Pose2 new_truth{11.66, 0.33, common::DegToRad(142.0)};
+  const common::Pose2 true_motion = old_truth.inverse() * new_truth;
+  const common::Pose2 motion = before_file.sensors[*before_file.Find("s2")].second.inverse() *
+                               after_file.sensors[*after_file.Find("s2")].second;
+  EXPECT_LT(common::RadToDeg(common::RotationDistanceRad(motion, true_motion)), 0.2)
+      << common::RadToDeg(motion.yaw_rad);
+  EXPECT_LT(common::TranslationDistanceM(motion, true_motion), 0.05)
+      << motion.x_m << " " << motion.y_m << " vs " << true_motion.x_m << " " << true_motion.y_m;
+  // ... and `lrfnet eval` against the truth at the end is as good as the calibration was before.
+  Process eval(LRFNET_TOOL_BINARY,
+               {"eval", out / "calibration.yaml", run / "sim/truth.yaml", "--json"});
+  ASSERT_EQ(eval.Wait(), 0) << eval.err();
+  const nlohmann::json e = nlohmann::json::parse(eval.out(), nullptr, false);
+  ASSERT_TRUE(e.is_object()) << eval.out();
+  EXPECT_LT(e["mean_d_r_deg"].get<double>(), initial["mean_d_r_deg"].get<double>() + 0.2)
+      << eval.out();
+  EXPECT_LT(e["mean_d_t_m"].get<double>(), initial["mean_d_t_m"].get<double>() + 0.05)
+      << eval.out();
+  const std::string written = ReadText(out / "calibration.yaml");
+  EXPECT_NE(written.find("event: \"moved\""), std::string::npos) << written;
+  EXPECT_NE(written.find("event: \"corrected\""), std::string::npos) << written;
 }
 
 }  // namespace

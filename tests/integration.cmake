@@ -74,7 +74,8 @@ endif()
 
 # The calibration chain as processes: lrfnet sim → lrfnet-tracker --replay per sensor → lrfnet calibrate /
 # lrfnetd --input → lrfnet eval; accuracy bounds on the simulated setup of Quenzel et al.; one-line errors.
-lrfnet_test(calibration_cli_test SOURCES calibration_cli_test.cc LIBS nlohmann_json::nlohmann_json yaml-cpp)
+lrfnet_test(calibration_cli_test SOURCES calibration_cli_test.cc
+            LIBS lrfnet_calib_output nlohmann_json::nlohmann_json yaml-cpp)
 lrfnet_uses_binaries(calibration_cli_test)
 
 # The whole chain live, like the demo: lrfnet sim --serve → lrfnet-tracker per device → lrfnetd

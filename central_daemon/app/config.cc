@@ -422,6 +422,77 @@ std::optional<std::string> ValidateZonesAndMqtt(DaemonConfig& c) {
   return std::nullopt;
 }
 
+void VisitMonitoring(DaemonConfig& c, ConfigVisitor& v) {
+  monitoring::MonitorOptions& o = c.monitoring;
+  monitoring::BackgroundCheckOptions& b = o.background;
+  monitoring::TrackCheckOptions& t = o.tracks;
+  v.Section("monitoring",
+            "Once calibrated, whether every sensor still stands where the calibration put it. Each "
+            "new background snapshot of a sensor is aligned with the one in place when its pose "
+            "was set (point-to-line ICP): when the whole static scene moved together (or the part "
+            "the tracker has re-learned so far), the sensor moved. Every track_period_s its tracks "
+            "of the last track_window_s are compared with the other sensors' (the rigid "
+            "correction that fits them best, tested against its covariance). A moved sensor is "
+            "flagged (log, status line, live view, stats), its tracks leave the fused output at "
+            "once, its pose is estimated again with the others held fixed (from the background "
+            "where the scene has structure, else from its tracks) and calibration.output is "
+            "rewritten with the event in its `history`; then it is fused again. A scene that "
+            "changed while the tracks agree (furniture moved) becomes the new reference "
+            "background instead.");
+  v.Field("enabled", c.monitoring_enabled, "Watch the sensors once calibrated.");
+  v.Field("background_min_yaw_deg", b.min_yaw_deg,
+          "A background motion this large (degrees) or background_min_translation_m is a move.");
+  v.Field("background_min_translation_m", b.min_translation_m, "See background_min_yaw_deg.");
+  v.Field("background_min_chi2", b.min_chi2,
+          "... and only when this significant: chi^2 of (x, y, yaw) against the ICP covariance "
+          "(inflated by 9; 3 dof).");
+  v.Field("background_inlier_distance_m", b.inlier_distance_m,
+          "A snapshot point within this distance of the reference polyline lies on the scene.");
+  v.Field("background_min_inlier_gain", b.min_inlier_gain,
+          "The share of the snapshot's points on the reference scene must grow by this much "
+          "under the motion (0..1): the whole scene moved, not a cart.");
+  VisitInteger(v, "background_min_changed_points", b.min_changed_points,
+               "Points off the reference scene needed to judge the changed part alone (while the "
+               "tracker re-learns its background after a move).");
+  v.Field("background_unchanged_margin_m", b.unchanged_margin_m,
+          "The trackers' background margin: under the motion of the changed part, the unchanged "
+          "points must stay this close to the reference scene.");
+  v.Field("background_min_changed_fraction", b.min_changed_fraction,
+          "A snapshot with this share of its points off the reference scene and no common motion "
+          "changed by itself (furniture): re-learned once the tracks agree.");
+  v.Field("track_window_s", o.track_window_s, "Seconds of tracks in each track check.");
+  v.Field("track_period_s", o.track_period_s, "A track check this often, seconds.");
+  VisitInteger(v, "track_confirmations", o.track_confirmations,
+               "Consecutive track checks that must find a move before the sensor is flagged.");
+  VisitInteger(v, "tracks_min_matches", t.min_matches,
+               "Associated observations (0.05 s grid steps) a track check needs.");
+  v.Field("tracks_min_yaw_deg", t.min_yaw_deg,
+          "A track correction this large (degrees) or tracks_min_translation_m is a move.");
+  v.Field("tracks_min_translation_m", t.min_translation_m, "See tracks_min_yaw_deg.");
+  v.Field("tracks_min_chi2", t.min_chi2,
+          "... and only when this significant: chi^2 of the correction against the fit's "
+          "covariance (3 dof).");
+  v.Field("correct_min_inliers", o.correct_min_inliers,
+          "A snapshot corrects a moved sensor's pose when this share of its points lies on the "
+          "reference scene under the ICP's motion.");
+  v.Field("correction_min_tracks_s", o.correction_min_tracks_s,
+          "Without such a snapshot, the pose is estimated from the tracks since the flag once "
+          "there are this many seconds of them.");
+  v.Field("relearn_background", o.relearn_background,
+          "Re-learn the reference background of a sensor whose scene changed while its tracks "
+          "agree.");
+}
+
+std::optional<std::string> ValidateMonitoring(const DaemonConfig& c) {
+  std::optional<std::string> e = monitoring::Validate(c.monitoring);
+  if (!e) return std::nullopt;
+  // "background.min_yaw_deg ..." names the key background_min_yaw_deg of the section.
+  for (const char* group : {"background.", "tracks."}) {
+    if (e->rfind(group, 0) == 0) (*e)[std::string_view(group).size() - 1] = '_';
+  }
+  return "monitoring." + *e;
+}
+
 }  // namespace
 
 bool IsLoopbackHost(std::string_view host) {
@@ -452,6 +523,7 @@ void VisitDaemonConfig(DaemonConfig& c, ConfigVisitor& v) {
   VisitLiveView(c, v);
   VisitZones(c, v);
   VisitMqtt(c, v);
+  VisitMonitoring(c, v);
 }
 
 std::optional<std::string> Validate(DaemonConfig& c) {
@@ -506,6 +578,7 @@ std::optional<std::string> Validate(DaemonConfig& c) {
   if (c.live_view_background_points > 100000)
     return "live_view.background_points: must be <= 100000";
   if (auto e = ValidateZonesAndMqtt(c)) return e;
+  if (auto e = ValidateMonitoring(c)) return e;
   return std::nullopt;
 }
 

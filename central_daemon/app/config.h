@@ -16,6 +16,7 @@
 #include "central_daemon/ingest/ingest.h"
 #include "central_daemon/io/recording_writer.h"
 #include "central_daemon/io/udp_receiver.h"
+#include "central_daemon/monitoring/monitor.h"
 #include "central_daemon/store/track_store.h"
 #include "central_daemon/zones/zones.h"
 #include "common/config_yaml.h"
@@ -92,10 +93,13 @@ struct DaemonConfig {
   // Authenticated datagrams (section `auth`); changes need a restart.
   std::string auth_keys_dir;   // folder of sensor keys; empty: not authenticated
   std::string auth_state_dir;  // where the replay state is kept; empty: $STATE_DIRECTORY
+  // Monitoring (section `monitoring`): moved sensors flagged, left out of the fusion, corrected.
+  bool monitoring_enabled = true;
+  monitoring::MonitorOptions monitoring;
 };
 
 // Lists every option (sections listen, record, auth, validation, sensors, store, status,
-// calibration, fusion, live_view, zones, mqtt).
+// calibration, fusion, live_view, zones, mqtt, monitoring).
 void VisitDaemonConfig(DaemonConfig& config, common::ConfigVisitor& visitor);
 
 // 127.0.0.0/8, ::1 or localhost: an address only this host can reach.

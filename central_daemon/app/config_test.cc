@@ -128,6 +128,10 @@ TEST(DaemonConfigTest, ErrorsNameTheKey) {
       {"fusion: {centre_lateral_fraction: 2}", "fusion.centre_lateral_fraction"},
       {"fusion: {max_coast_s: -1}", "fusion.max_coast_s"},
       {"fusion: {binding_bonus: .nan}", "fusion.binding_bonus"},
+      {"monitoring: {track_window_s: 0}", "monitoring.track_window_s"},
+      {"monitoring: {background_min_yaw_deg: -1}", "monitoring.background_min_yaw_deg"},
+      {"monitoring: {tracks_min_matches: 2}", "monitoring.tracks_min_matches"},
+      {"monitoring: {correct_min_inliers: 2}", "monitoring.correct_min_inliers"},
   };
   for (const Case& c : cases) {
     DaemonConfig config;

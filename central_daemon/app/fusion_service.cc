@@ -57,7 +57,7 @@ void FusionService::Reconfigure(const DaemonConfig& config) {
   if (config.fusion == config_.fusion) return;  // the fuser keeps its tracks
   config_.fusion = config.fusion;
   fuser_ = fusion::Fuser(config_.fusion);
-  fuser_.SetPlacements(placements_);
+  SetExcluded(excluded_);  // the placements without the excluded sensors
   for (const auto& [sensor_id, psd] : tracker_accel_psd_) fuser_.SetTrackerModel(sensor_id, psd);
   spdlog::info("fusion: options changed, fused tracks start afresh (method {})",
                fusion::ToString(config_.fusion.method));
@@ -65,9 +65,18 @@ void FusionService::Reconfigure(const DaemonConfig& config) {
 
 void FusionService::SetCalibration(const calib::CalibrationResult& result) {
   placements_ = PlacementsOf(result);
-  fuser_.SetPlacements(placements_);
   calibrated_ = true;
   ++counters_.calibrations;
+  SetExcluded(excluded_);
+}
+
+void FusionService::SetExcluded(const std::set<std::string>& sensor_ids) {
+  excluded_ = sensor_ids;
+  std::vector<fusion::SensorPlacement> placed;
+  for (const fusion::SensorPlacement& p : placements_) {
+    if (excluded_.count(p.id) == 0) placed.push_back(p);
+  }
+  if (calibrated_) fuser_.SetPlacements(placed);
 }
 
 void FusionService::OnSensorInfo(const std::string& sensor_id, const SensorDescription& info) {
@@ -78,7 +87,9 @@ void FusionService::OnSensorInfo(const std::string& sensor_id, const SensorDescr
 
 void FusionService::OnFrame(const std::string& sensor_id, const TrackFrameData& frame) {
   now_ns_ = std::max(now_ns_, frame.scan_start_ns);
-  if (calibrated_ && config_.fusion_enabled) fuser_.AddFrame(sensor_id, frame);
+  if (calibrated_ && config_.fusion_enabled && excluded_.count(sensor_id) == 0) {
+    fuser_.AddFrame(sensor_id, frame);
+  }
 }
 
 void FusionService::OnTick(double now_s) {

@@ -14,6 +14,7 @@
 #include <map>
 #include <memory>
 #include <optional>
+#include <set>
 #include <string>
 #include <vector>
 
@@ -51,6 +52,11 @@ class FusionService final : public FrameListener {
   // A new calibration: its calibrated sensors are placed (fused ids are kept).
   void SetCalibration(const calib::CalibrationResult& result);
   bool calibrated() const { return calibrated_; }
+  // Sensors whose frames are not fused (the monitoring found them moved): from now on their frames
+  // do not reach the fuser and their bindings are dropped at once (they lose their placement).
+  // Replaces the previous set; a sensor left out of it is placed again.
+  void SetExcluded(const std::set<std::string>& sensor_ids);
+  const std::set<std::string>& excluded() const { return excluded_; }
 
   void OnFrame(const std::string& sensor_id, const TrackFrameData& frame) override;
   void OnSensorInfo(const std::string& sensor_id, const SensorDescription& info) override;
@@ -73,6 +79,8 @@ class FusionService final : public FrameListener {
   std::vector<fusion::SensorPlacement> placements_;  // of the latest calibration
   std::map<std::string, double> tracker_accel_psd_;  // per sensor, from its SensorInfo
   bool calibrated_ = false;
+  std::vector<fusion::SensorPlacement> placements_;  // of the calibration, excluded ones too
+  std::set<std::string> excluded_;
   common::UtcNs now_ns_ = 0;
   std::optional<double> last_publish_s_;
   std::optional<boost::asio::ip::udp::socket> socket_;

@@ -195,6 +195,21 @@ void WriteCalibration(Writer& w, const LiveCalibration& c) {
   w.EndObject();
 }
 
+// The monitoring state of a sensor: {"state","detail"}, or null when it is not watched.
+void WriteMonitor(Writer& w, const LiveSensor& s) {
+  w.Key("monitor");
+  if (s.monitor_state.empty()) {
+    w.Null();
+    return;
+  }
+  w.BeginObject();
+  w.Key("state");
+  w.String(s.monitor_state);
+  w.Key("detail");
+  w.String(s.monitor_detail);
+  w.EndObject();
+}
+
 void WriteSensor(Writer& w, const LiveSensor& s) {
   w.BeginObject();
   w.Key("id");
@@ -234,6 +249,7 @@ void WriteSensor(Writer& w, const LiveSensor& s) {
     w.EndArray();
   }
   w.EndArray();
+  WriteMonitor(w, s);
   w.EndObject();
 }
 

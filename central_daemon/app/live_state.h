@@ -37,6 +37,10 @@ struct LiveSensor {
   double background_first_angle_rad = 0.0;
   double background_angle_step_rad = 0.0;
   std::vector<float> background_ranges_m;  // 0: no static return
+  // Monitoring once calibrated: "ok", "moved" (flagged, not fused until its pose is estimated
+  // again); empty when not watched. `monitor_detail`: what was last found, one line.
+  std::string monitor_state;
+  std::string monitor_detail;
 };
 
 struct LiveTrack {
@@ -89,7 +93,8 @@ struct LiveState {
 // One JSON object, e.g.
 // {"type":"state","stamp_ns":..,"version":"..","authenticated":true,"calibration":{"state":"calibrated",...},
 //  "sensors":[{"id":"s1","placed":true,"x_m":..,"y_m":..,"yaw_rad":..,"first_angle_rad":..,
-//   "fov_rad":..,"max_range_m":..,"status":"active",...,"background":[[x,y],...]}],
+//   "fov_rad":..,"max_range_m":..,"status":"active",...,"background":[[x,y],...],
+//   "monitor":{"state":"moved","detail":".."} or null}],
 //  "tracks":[{"sensor":"s1","id":3,"state":"confirmed","x_m":..,...,"fused":7}],
 //  "fused":[{"id":7,"state":"confirmed","x_m":..,...,"sensors":["s1","s2"]}],
 //  "zones":[{"name":"door","kind":"line","points":[[x,y],...],"occupancy":0,"inbound":3,

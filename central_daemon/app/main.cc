@@ -11,7 +11,9 @@
 // all the input. Once calibrated, tracks are fused (section `fusion`: JSON over UDP and/or JSON
 // lines) and the live view (section `live_view`, --live-view) shows it all in a browser. With
 // --mqtt (section `mqtt`) the objects, the zones' counts (section `zones`), the calibration and
-// every sensor's health are published to an MQTT broker.
+// every sensor's health are published to an MQTT broker. Once calibrated, the sensors are watched
+// (section `monitoring`): a moved one is left out of the fusion, its pose estimated again and
+// calibration.output rewritten with the event.
 
 #include <fcntl.h>
 #include <spdlog/sinks/stdout_color_sinks.h>
@@ -47,6 +49,7 @@
 #include "central_daemon/app/live_feed.h"
 #include "central_daemon/app/live_state.h"
 #include "central_daemon/app/mqtt_service.h"
+#include "central_daemon/app/monitoring_service.h"
 #include "central_daemon/app/stats_json.h"
 #include "central_daemon/app/zone_service.h"
 #include "central_daemon/calibration/calibration_yaml.h"
@@ -276,10 +279,12 @@ nlohmann::json MqttJson(const MqttOutput& mqtt) {
 }
 
 bool WriteStats(const std::string& path, const Daemon& daemon, const UdpReceiver* receiver,
-                const Recorder* recorder, const MqttOutput* mqtt = nullptr) {
+                const Recorder* recorder, const MonitoringService& monitoring,
+                const MqttOutput* mqtt = nullptr) {
   if (path.empty()) return true;
   nlohmann::json j = StatsJson(daemon.ingest(), daemon.store());
   if (mqtt != nullptr && mqtt->publisher) j["mqtt"] = MqttJson(*mqtt);
+  j["monitoring"] = monitoring.StatsJson();
   j["requests_sent"] = daemon.requests_sent();
   j["requests_dropped"] = daemon.requests_dropped();
   if (receiver != nullptr) j["receiver"] = ReceiverJson(receiver->counters());
@@ -303,12 +308,21 @@ std::string Summary(const Daemon& daemon) {
                      daemon.store().frames());
 }
 
-// calibration.initial: the poses of a calibration.yaml as a calibration outcome.
+// calibration.initial: the poses of a calibration.yaml as a calibration outcome, and the file's
+// text (its history).
 std::optional<std::string> LoadInitialCalibration(const std::string& path,
-                                                  calib::CalibrationOutcome* outcome) {
+                                                  calib::CalibrationOutcome* outcome,
+                                                  std::string* text = nullptr) {
   calib::PoseFile file;
   std::string error;
   if (!calib::ReadPoseFile(path, &file, &error)) return "calibration.initial: " + error;
+  if (text != nullptr) {
+    // ReadPoseFile checked the file and its size.
+    std::ifstream in(path, std::ios::binary);
+    std::stringstream content;
+    content << in.rdbuf();
+    *text = content.str();
+  }
   outcome->ok = true;
   outcome->result.method = "file";
   outcome->result.reference = file.reference.value_or("");
@@ -386,6 +400,7 @@ int RunLive(const RunOptions& run, DaemonConfig config) {
   }
   CalibrationService calibration(io, config);
   FusionService fusion(io, config);
+  MonitoringService monitoring(config);
   if (std::string e = fusion.Open(); !e.empty()) {
     std::fprintf(stderr, "lrfnetd: %s\n", e.c_str());
     return kExitFailure;
@@ -398,7 +413,8 @@ int RunLive(const RunOptions& run, DaemonConfig config) {
   std::uint64_t applied_calibrations = 0;
   if (!config.calibration_initial.empty()) {
     calib::CalibrationOutcome initial;
-    if (auto e = LoadInitialCalibration(config.calibration_initial, &initial)) {
+    std::string text;
+    if (auto e = LoadInitialCalibration(config.calibration_initial, &initial, &text)) {
       std::fprintf(stderr, "lrfnetd: %s\n", e->c_str());
       return kExitFailure;
     }
@@ -406,6 +422,7 @@ int RunLive(const RunOptions& run, DaemonConfig config) {
                  initial.result.sensors.size());
     fusion.SetCalibration(initial.result);
     if (mqtt.service) mqtt.service->PublishCalibration(initial.result, NowUtcNs());
+    monitoring.SetCalibration(initial.result, daemon, "loaded", text);
     calibration.SetInitial(std::move(initial));
   }
   std::optional<LiveViewServer> live_view;
@@ -488,6 +505,11 @@ int RunLive(const RunOptions& run, DaemonConfig config) {
       calibration.OnTick(MonotonicS(), daemon);
       if (calibration.counters().successes != applied_calibrations && calibration.latest()) {
         applied_calibrations = calibration.counters().successes;
+        monitoring.SetCalibration(calibration.latest()->result, daemon, "calibrated");
+        if (std::string e = monitoring.WriteCalibration(); !e.empty()) {
+          spdlog::error("monitoring: {}", e);
+        }
+        fusion.SetExcluded(monitoring.excluded());
         fusion.SetCalibration(calibration.latest()->result);
         if (mqtt.service)
           mqtt.service->PublishCalibration(calibration.latest()->result, NowUtcNs());
@@ -496,6 +518,15 @@ int RunLive(const RunOptions& run, DaemonConfig config) {
                                             ? "(not written)"
                                             : config.calibration_output.c_str());
         std::fflush(stdout);
+      }
+      if (monitoring.OnTick(daemon)) {
+        // A sensor flagged (left out of the fusion) or its pose corrected (placed again).
+        fusion.SetCalibration(monitoring.result());
+        fusion.SetExcluded(monitoring.excluded());
+        calib::CalibrationOutcome in_use;
+        in_use.ok = true;
+        in_use.result = monitoring.result();
+        calibration.SetInitial(std::move(in_use));
       }
       schedule_tick();
     });
@@ -513,6 +544,7 @@ int RunLive(const RunOptions& run, DaemonConfig config) {
       std::string line = daemon.StatusLine(NowUtcNs());
       if (r.kernel_drops > 0) line += fmt::format(" | kernel drops {}", r.kernel_drops);
       line += " | " + calibration.StatusText();
+      if (const std::string moved = monitoring.StatusText(); !moved.empty()) line += " | " + moved;
       if (fusion.calibrated()) {
         line += fmt::format(" | fused tracks {}", fusion.fuser().Snapshot(fusion.now_ns()).size());
       }
@@ -572,8 +604,8 @@ int RunLive(const RunOptions& run, DaemonConfig config) {
         std::chrono::duration<double>(1.0 / config.live_view_publish_hz)));
     live_timer.async_wait([&](const boost::system::error_code& ec) {
       if (ec || stopping) return;
-      const LiveState state =
-          live_feed.Build(daemon, calibration, fusion, NowUtcNs(), Writer(), &zones);
+      LiveState state = live_feed.Build(daemon, calibration, fusion, NowUtcNs(), Writer(), &zones);
+      monitoring.Annotate(&state);
       live_view->PublishFoxglove(FoxgloveMessagesOf(state));
       live_view->Publish(LiveStateJson(state));
       schedule_live();
@@ -635,9 +667,12 @@ int RunLive(const RunOptions& run, DaemonConfig config) {
         config.fusion_enabled = reloaded.fusion_enabled;
         config.fusion_publish_hz = reloaded.fusion_publish_hz;
         config.fusion = reloaded.fusion;
+        config.monitoring_enabled = reloaded.monitoring_enabled;
+        config.monitoring = reloaded.monitoring;
         daemon.Reconfigure(CoreOptions(config));
         calibration.Reconfigure(config);
         fusion.Reconfigure(config);
+        monitoring.Reconfigure(config);
         if (status_changed) {
           status.cancel();
           schedule_status();
@@ -668,7 +703,8 @@ int RunLive(const RunOptions& run, DaemonConfig config) {
       exit_code = kExitFailure;
     }
   }
-  if (!WriteStats(run.stats_out, daemon, &receiver, recorder ? &*recorder : nullptr, &mqtt))
+  if (!WriteStats(run.stats_out, daemon, &receiver, recorder ? &*recorder : nullptr, monitoring,
+                  &mqtt))
     exit_code = kExitFailure;
   std::printf("%s received=%llu kernel_drops=%llu requests_sent=%llu%s\n", Summary(daemon).c_str(),
               static_cast<unsigned long long>(receiver.counters().datagrams),
@@ -684,7 +720,10 @@ int RunLive(const RunOptions& run, DaemonConfig config) {
 }
 
 // Offline: the datagrams of recordings and UDP captures through the same core, with their
-// recorded receive times as the clock.
+// recorded receive times as the clock; several files are read as one stream in receive-time
+// order (as they arrived live). With a calibration to start from, the input is fused and
+// monitored as it is read, and --calibration-out receives that calibration with what the
+// monitoring changed (instead of a new calibration over all the input).
 int RunOffline(const RunOptions& run, DaemonConfig config, const std::vector<std::string>& inputs,
                std::uint16_t udp_port) {
   // Offline: verified with fresh windows (no state: the input is what was recorded), no counter
@@ -724,9 +763,11 @@ int RunOffline(const RunOptions& run, DaemonConfig config, const std::vector<std
       spdlog::warn("mqtt: not connected to {} after 10 s ({}); publishing what can be",
                    config.mqtt.broker, mqtt.publisher->last_error());
   }
+  MonitoringService monitoring(config);
   if (!config.calibration_initial.empty()) {
     calib::CalibrationOutcome initial;
-    if (auto e = LoadInitialCalibration(config.calibration_initial, &initial)) {
+    std::string text;
+    if (auto e = LoadInitialCalibration(config.calibration_initial, &initial, &text)) {
       std::fprintf(stderr, "lrfnetd: %s\n", e->c_str());
       return kExitFailure;
     }
@@ -735,6 +776,7 @@ int RunOffline(const RunOptions& run, DaemonConfig config, const std::vector<std
       return kExitFailure;
     }
     fusion.SetCalibration(initial.result);
+    monitoring.SetCalibration(initial.result, core, "loaded", text);
     core.set_frame_listener(&fusion);
     if (mqtt.service) mqtt.service->PublishCalibration(initial.result, 0);
   }
@@ -782,6 +824,10 @@ int RunOffline(const RunOptions& run, DaemonConfig config, const std::vector<std
       core.OnTick(d.receive_ns);
       LogEvents(core, config.ingest.silent_after_s);
       last_tick_ns = d.receive_ns;
+      if (monitoring.OnTick(core)) {
+        fusion.SetCalibration(monitoring.result());
+        fusion.SetExcluded(monitoring.excluded());
+      }
     }
   }
   for (std::size_t i = 0; i < merged.size(); ++i) {
@@ -818,8 +864,21 @@ int RunOffline(const RunOptions& run, DaemonConfig config, const std::vector<std
     }
   }
   spdlog::info("status: {}", core.StatusLine(last_ns));
-  if ((config.calibration_auto && config.calibration_initial.empty()) ||
-      !config.calibration_output.empty()) {
+  if (monitoring.active()) {
+    if (const std::string moved = monitoring.StatusText(); !moved.empty()) {
+      spdlog::warn("monitoring: {}", moved);
+    }
+    if (!config.calibration_output.empty()) {
+      if (std::string e = monitoring.WriteCalibration(); !e.empty()) {
+        spdlog::error("monitoring: {}", e);
+        exit_code = kExitFailure;
+      } else {
+        spdlog::info("monitoring: wrote {} ({} events in its history)", config.calibration_output,
+                     monitoring.history().size());
+      }
+    }
+  } else if ((config.calibration_auto && config.calibration_initial.empty()) ||
+             !config.calibration_output.empty()) {
     const auto start = std::chrono::steady_clock::now();
     const calib::CalibrationOutcome outcome = calib::Calibrate(
         CalibrationInputFrom(core.ingest(), core.store()), config.calibration,
@@ -844,7 +903,7 @@ int RunOffline(const RunOptions& run, DaemonConfig config, const std::vector<std
   }
   StopMqtt(&mqtt, zones, last_ns, 30.0);
   if (!WriteStats(run.stats_out, core, nullptr, recorder && tee.opened ? &*recorder : nullptr,
-                  &mqtt))
+                  monitoring, &mqtt))
     exit_code = kExitFailure;
   std::printf("%s\n", Summary(core).c_str());
   std::fflush(stdout);
