@@ -98,5 +98,33 @@ TEST(PoseHistory, TruthPosesAtATime) {
   EXPECT_NE(error.find("poses[0].to_s"), std::string::npos) << error;
 }
 
+TEST(PoseHistory, TruncatedAndCorruptedFilesNeverCrash) {
+  // Every prefix of a real file, and every byte flipped: a result or a one-line error.
+  const std::string yaml = "reference: \"s1\"\nsensors: []\n" + HistoryYaml({Moved(), Moved()});
+  std::size_t read = 0;
+  for (std::size_t n = 0; n <= yaml.size(); ++n) {
+    std::vector<CalibrationEvent> out;
+    std::string error;
+    if (ParseHistoryYaml(yaml.substr(0, n), &out, &error)) {
+      ++read;
+      EXPECT_LE(out.size(), 2u);
+    } else {
+      EXPECT_EQ(error.find('\n'), std::string::npos) << error;
+    }
+    PoseFile at;
+    TruthPosesAt(yaml.substr(0, n), 1.0, &at, &error);
+  }
+  EXPECT_GT(read, 0u);
+  for (std::size_t i = 0; i < yaml.size(); ++i) {
+    std::string bad = yaml;
+    bad[i] = static_cast<char>(bad[i] ^ 0x5a);
+    std::vector<CalibrationEvent> out;
+    std::string error;
+    if (!ParseHistoryYaml(bad, &out, &error)) {
+      EXPECT_EQ(error.find('\n'), std::string::npos) << error;
+    }
+  }
+}
+
 }  // namespace
 }  // namespace lrfnet::calib
