@@ -38,7 +38,8 @@ struct LiveSensor {
   double background_angle_step_rad = 0.0;
   std::vector<float> background_ranges_m;  // 0: no static return
   // Monitoring once calibrated: "ok", "moved" (flagged, not fused until its pose is estimated
-  // again); empty when not watched. `monitor_detail`: what was last found, one line.
+  // again), "settling" (corrected, fused again once its tracker has re-learned its background);
+  // empty when not watched. `monitor_detail`: what was last found, one line.
   std::string monitor_state;
   std::string monitor_detail;
 };

@@ -109,7 +109,6 @@ bool MonitoringService::OnTick(const Daemon& daemon) {
   monitor_.Update(now_ns, StoreFrames(store));
 
   const std::vector<monitoring::MonitorEvent> events = monitor_.TakeEvents();
-  if (events.empty()) return false;
   bool poses_changed = false;
   for (const monitoring::MonitorEvent& e : events) {
     Log(e);
@@ -158,12 +157,17 @@ bool MonitoringService::OnTick(const Daemon& daemon) {
   }
   std::set<std::string> excluded;
   for (const auto& [id, watch] : monitor_.sensors()) {
-    if (watch.state == monitoring::WatchState::kMoved) excluded.insert(id);
+    if (watch.state != monitoring::WatchState::kWatched) excluded.insert(id);
+  }
+  for (const std::string& id : excluded_) {
+    if (excluded.count(id) == 0) spdlog::info("monitoring: sensor {} fused again", id);
   }
   const bool exclusions_changed = excluded != excluded_;
   excluded_ = std::move(excluded);
-  if (std::string error = WriteCalibration(); !error.empty()) {
-    spdlog::error("monitoring: {}", error);
+  if (!events.empty()) {
+    if (std::string error = WriteCalibration(); !error.empty()) {
+      spdlog::error("monitoring: {}", error);
+    }
   }
   return poses_changed || exclusions_changed;
 }
@@ -189,8 +193,8 @@ void MonitoringService::Log(const monitoring::MonitorEvent& e) const {
                    e.sensor_id, e.method, e.detail);
       break;
     case monitoring::MonitorEventKind::kCorrected:
-      spdlog::info("monitoring: sensor {} pose corrected ({}, {}), fused again: {}", e.sensor_id,
-                   e.method, e.before && e.after ? MotionText(*e.before, *e.after) : "", e.detail);
+      spdlog::info("monitoring: sensor {} pose corrected ({}, {}): {}", e.sensor_id, e.method,
+                   e.before && e.after ? MotionText(*e.before, *e.after) : "", e.detail);
       break;
     case monitoring::MonitorEventKind::kBackgroundRelearned:
       spdlog::info("monitoring: sensor {}: {}", e.sensor_id, e.detail);
@@ -202,7 +206,12 @@ std::string MonitoringService::StatusText() const {
   if (!active()) return "";
   std::string moved;
   for (const auto& [id, watch] : monitor_.sensors()) {
-    if (watch.state != monitoring::WatchState::kMoved) continue;
+    if (watch.state == monitoring::WatchState::kWatched) continue;
+    if (watch.state == monitoring::WatchState::kSettling) {
+      moved +=
+          fmt::format("{}{} (corrected, its tracker re-learning)", moved.empty() ? "" : ", ", id);
+      continue;
+    }
     moved += fmt::format("{}{} ({}, about {:+.1f} deg {:.2f} m)", moved.empty() ? "" : ", ", id,
                          watch.flag_method, common::RadToDeg(watch.estimated_motion.yaw_rad),
                          std::hypot(watch.estimated_motion.x_m, watch.estimated_motion.y_m));

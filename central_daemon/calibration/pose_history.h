@@ -35,7 +35,8 @@ struct CalibrationEvent {
   common::UtcNs stamp_ns = 0;  // gateway UTC of the data that showed it (0 = unknown)
   std::string sensor;
   // "calibrated" (a full calibration), "moved" (the sensor was found moved and left out of the
-  // fusion), "corrected" (its pose was estimated again and it is fused again),
+  // fusion), "corrected" (its pose was estimated again; fused again once its tracker has re-learned
+  // its background),
   // "background_relearned" (its scene changed, the sensor did not: the reference background was
   // replaced).
   std::string event;

@@ -310,7 +310,6 @@ BackgroundVerdict CheckBackgrounds(const BackgroundScan& reference, const Backgr
   if (changed_points.size() >= options.min_changed_points) {
     calib::IcpOptions icp = options.icp;
     icp.min_correspondences = std::min(icp.min_correspondences, options.min_changed_points);
-    icp.max_degenerate_directions = 0;
     const Candidate part = BestMotion(reference, changed, starts, icp, [&](const Pose2& m) {
       return share_within(changed_points, m, tau);
     });

@@ -37,6 +37,8 @@ const char* ToString(WatchState state) {
       return "ok";
     case WatchState::kMoved:
       return "moved";
+    case WatchState::kSettling:
+      return "settling";
   }
   return "?";
 }
@@ -169,6 +171,7 @@ void Monitor::OnBackground(const std::string& sensor_id, const daemon::Backgroun
     if (v.inliers_after >= options_.correct_min_inliers && !v.partial &&
         v.kind != BackgroundVerdictKind::kSceneChanged) {
       watch.background_candidate = motion;
+      watch.background_candidate_inliers = v.inliers_after;
       watch.background_candidate_covariance = v.covariance;
       watch.background_candidate_detail = v.reason;
     } else if (v.kind == BackgroundVerdictKind::kMoved) {
@@ -194,13 +197,18 @@ void Monitor::OnBackground(const std::string& sensor_id, const daemon::Backgroun
                         std::hypot(motion.x_m, motion.y_m) <= kAgreeTranslationM;
     if (!agrees) {
       Correct(watch, now_ns, "background", watch.world_from_sensor * motion,
-              MovedCovariance(watch, v.covariance), "refined by the background: " + v.reason);
+              MovedCovariance(watch, v.covariance), "refined by the background: " + v.reason,
+              settled);
       watch.provisional = true;
     } else {
       watch.provisional = false;
+      if (settled) watch.state = WatchState::kWatched;
     }
     watch.background_refined = true;
     return;
+  }
+  if (watch.state == WatchState::kSettling && settled) {
+    watch.state = WatchState::kWatched;
   }
   if (settling && !settled) return;
 
@@ -211,6 +219,7 @@ void Monitor::OnBackground(const std::string& sensor_id, const daemon::Backgroun
       // A snapshot that already holds the whole new scene is the correction too.
       if (!v.partial && v.inliers_after >= options_.correct_min_inliers) {
         watch.background_candidate = motion;
+        watch.background_candidate_inliers = v.inliers_after;
         watch.background_candidate_covariance = v.covariance;
         watch.background_candidate_detail = v.reason;
       }
@@ -265,8 +274,13 @@ void Monitor::Update(common::UtcNs now_ns, const FrameSource& source) {
   const common::UtcNs window_ns = SecondsToNs(options_.track_window_s);
   const common::UtcNs from_ns = now_ns > window_ns ? now_ns - window_ns : 0;
   std::map<std::string, std::vector<daemon::TrackFrameData>> window;
-  for (const auto& [id, watch] : sensors_) {
-    if (watch.state == WatchState::kWatched) {
+  for (auto& [id, watch] : sensors_) {
+    // A corrected sensor whose tracker has had relearn_hold_s to re-learn is fused again.
+    if (watch.state == WatchState::kSettling &&
+        now_ns - watch.flagged_ns >= SecondsToNs(options_.relearn_hold_s)) {
+      watch.state = WatchState::kWatched;
+    }
+    if (watch.state != WatchState::kMoved) {
       window[id] = source.Frames(id, std::max(from_ns, watch.tracks_valid_from_ns), now_ns + 1);
     }
   }
@@ -275,7 +289,7 @@ void Monitor::Update(common::UtcNs now_ns, const FrameSource& source) {
   SensorWatch* to_flag = nullptr;
   TrackFit flag_fit;
   for (auto& [id, watch] : sensors_) {
-    if (watch.state == WatchState::kWatched) {
+    if (watch.state != WatchState::kMoved) {
       const std::vector<PlacedFrames> others = Others(id, window);
       if (others.empty()) continue;
       ++watch.track_checks;
@@ -299,7 +313,7 @@ void Monitor::Update(common::UtcNs now_ns, const FrameSource& source) {
           std::hypot(fit.correction.x_m, fit.correction.y_m) <= options_.refine_max_translation_m) {
         // The same move, estimated better from more (and cleaner) tracks.
         Correct(watch, now_ns, "tracks", fit.world_from_sensor * watch.track_baseline.inverse(),
-                Symmetric(fit.covariance), "refined: " + fit.reason);
+                Symmetric(fit.covariance), "refined: " + fit.reason, false);
         watch.provisional = true;
         continue;
       }
@@ -313,7 +327,8 @@ void Monitor::Update(common::UtcNs now_ns, const FrameSource& source) {
       const bool beyond_refinement =
           std::abs(common::RadToDeg(motion.yaw_rad)) > options_.refine_max_yaw_deg ||
           std::hypot(motion.x_m, motion.y_m) > options_.refine_max_translation_m;
-      if (fit.moved && (!settling || beyond_refinement)) {
+      // With one other sensor, a disagreement does not say which of the two moved.
+      if (fit.moved && others.size() >= 2 && (!settling || beyond_refinement)) {
         if (++watch.track_strikes >= options_.track_confirmations &&
             (to_flag == nullptr || fit.chi2 > flag_fit.chi2)) {
           to_flag = &watch;
@@ -323,8 +338,13 @@ void Monitor::Update(common::UtcNs now_ns, const FrameSource& source) {
         }
       } else if (fit.enough) {
         watch.track_strikes = 0;
-        // The tracks agree: a changed scene is furniture, not a move.
-        if (watch.pending_relearn && watch.pending_relearn_ns <= now_ns) {
+        // The tracks agree (a clean fit, no motion to speak of): a changed scene is furniture,
+        // not a move.
+        const bool agree =
+            fit.rms_m <= options_.tracks.max_fit_rms_m && fit.chi2 < options_.tracks.min_chi2 &&
+            std::abs(common::RadToDeg(motion.yaw_rad)) < options_.tracks.min_yaw_deg &&
+            std::hypot(motion.x_m, motion.y_m) < options_.tracks.min_translation_m;
+        if (agree && watch.pending_relearn && watch.pending_relearn_ns <= now_ns) {
           watch.reference = *watch.pending_relearn;
           watch.reference_from_sensor = Pose2::Identity();
           watch.pending_relearn.reset();
@@ -362,7 +382,8 @@ void Monitor::Update(common::UtcNs now_ns, const FrameSource& source) {
                 MovedCovariance(watch, watch.background_candidate_covariance),
                 watch.background_candidate_detail +
                     (check.enough ? "; the tracks agree (" + check.reason + ")"
-                                  : "; too few tracks since the move to check it"));
+                                  : "; too few tracks since the move to check it"),
+                watch.background_candidate_inliers >= options_.settled_min_inliers);
         continue;
       }
       watch.detail = "the background suggests " + MotionText(*watch.background_candidate) +
@@ -382,7 +403,7 @@ void Monitor::Update(common::UtcNs now_ns, const FrameSource& source) {
     }
     Correct(watch, now_ns, "tracks", fit.world_from_sensor * watch.track_baseline.inverse(),
             Symmetric(fit.covariance),
-            fit.reason + (fit.from_search ? " (searched from scratch)" : ""));
+            fit.reason + (fit.from_search ? " (searched from scratch)" : ""), false);
     watch.provisional = true;
   }
   if (to_flag != nullptr) {
@@ -416,6 +437,8 @@ void Monitor::Flag(SensorWatch& watch, common::UtcNs now_ns, const std::string& 
   watch.background_refined = false;
   watch.detail = detail;
   ++watch.moves;
+  // The others' track checks compared them with this sensor's tracks too: count again without.
+  for (auto& [id, other] : sensors_) other.track_strikes = 0;
   Emit(MonitorEventKind::kMoved, watch, now_ns, method,
        "moved by about " + MotionText(motion) + ": " + detail, watch.world_from_sensor,
        watch.world_from_sensor * motion);
@@ -423,7 +446,7 @@ void Monitor::Flag(SensorWatch& watch, common::UtcNs now_ns, const std::string& 
 
 void Monitor::Correct(SensorWatch& watch, common::UtcNs now_ns, const std::string& method,
                       const Pose2& world_from_sensor, const Eigen::Matrix3d& covariance,
-                      const std::string& detail) {
+                      const std::string& detail, bool settled) {
   const Pose2 before = watch.world_from_sensor;
   // The reference snapshot stays, with the motion since it expected (see the header comment).
   watch.reference_from_sensor =
@@ -431,7 +454,12 @@ void Monitor::Correct(SensorWatch& watch, common::UtcNs now_ns, const std::strin
   if (watch.state == WatchState::kMoved) watch.tracks_valid_from_ns = watch.flagged_ns;
   watch.world_from_sensor = world_from_sensor;
   watch.covariance = covariance;
-  watch.state = WatchState::kWatched;
+  // Fused again once its tracker has re-learned its background (see kSettling).
+  if (settled) {
+    watch.state = WatchState::kWatched;
+  } else if (watch.state == WatchState::kMoved) {
+    watch.state = WatchState::kSettling;
+  }
   watch.provisional = false;
   watch.background_candidate.reset();
   watch.estimated_motion = Pose2::Identity();
@@ -468,7 +496,7 @@ std::vector<MonitorEvent> Monitor::TakeEvents() {
 
 bool Monitor::Excluded(const std::string& sensor_id) const {
   const auto it = sensors_.find(sensor_id);
-  return it != sensors_.end() && it->second.state == WatchState::kMoved;
+  return it != sensors_.end() && it->second.state != WatchState::kWatched;
 }
 
 std::vector<SensorPose> Monitor::Poses() const {

@@ -14,7 +14,12 @@
 //              changed part, see background_check.h), or when track_confirmations consecutive track
 //              checks say so. The flag names the sensor, the time (the gateway time of the data
 //              that showed it) and the estimated motion.
-//   back to kWatched with a corrected pose (event kCorrected), from
+//   kSettling  its pose is corrected, but its tracker is still re-learning its background after
+//              the move (wall pieces it takes for people, tracks bent by them): still left out of
+//              the fusion and of the other sensors' track checks, until a snapshot holds the whole
+//              new scene (settled_min_inliers of it on the reference scene at the corrected pose)
+//              or relearn_hold_s have passed since the flag; then kWatched again.
+//   The pose is corrected (event kCorrected) from
 //     - the background, when a snapshot taken after the flag aligns with the reference as a whole
 //       (stage 1 with at least correct_min_inliers of its points on the reference scene): the
 //       pose is the old one times the ICP's motion (exact where the scene has structure). When
@@ -25,10 +30,11 @@
 //       every other pose fixed (the calibration's pairwise association, refit and MSAC search).
 //   A pose corrected from tracks is refined by the first snapshot after it that aligns with the
 //   reference as a whole (event kCorrected again, method "background").
-//   Only one sensor is flagged by tracks per check: when one sensor moved, the others' tracks
-//   are compared with its tracks too and look a little off; once it is flagged and left out, they
-//   agree again. (With only two sensors the tracks cannot tell which of them moved; the background
-//   can.)
+//   Only one sensor is flagged by tracks per check, and only against at least two other watched
+//   sensors: when one sensor moved, the others' tracks are compared with its tracks too and look a
+//   little off; once it is flagged and left out, they agree again (every sensor's strikes start
+//   over at any flag). With one other sensor the tracks cannot tell which of the two moved; the
+//   background can.
 //   A sensor whose scene changed by itself (kSceneChanged: furniture, a parked cart) is not
 //   flagged; once a track check after that snapshot finds enough data and no motion, the snapshot
 //   becomes the reference (event kBackgroundRelearned). Without people to check against, the
@@ -111,7 +117,7 @@ class FrameSource {
                                                      common::UtcNs to_ns) const = 0;
 };
 
-enum class WatchState { kWatched, kMoved };
+enum class WatchState { kWatched, kMoved, kSettling };
 const char* ToString(WatchState state);
 
 enum class MonitorEventKind { kMoved, kCorrected, kBackgroundRelearned };
@@ -153,6 +159,7 @@ struct SensorWatch {
   std::optional<daemon::BackgroundScan> pending_relearn;  // a changed scene awaiting the tracks
   common::UtcNs pending_relearn_ns = 0;
   std::optional<Pose2> background_candidate;  // a correction from a snapshot, awaiting checks
+  double background_candidate_inliers = 0.0;
   Eigen::Matrix3d background_candidate_covariance = Eigen::Matrix3d::Zero();
   std::string background_candidate_detail;
   // The pose came from tracks: the first snapshot that aligns as a whole refines it.
@@ -195,9 +202,10 @@ class Monitor {
  private:
   void Flag(SensorWatch& watch, common::UtcNs now_ns, const std::string& method,
             const Pose2& motion, const std::string& detail);
+  // `settled`: the sensor's background holds the whole new scene (fused again at once).
   void Correct(SensorWatch& watch, common::UtcNs now_ns, const std::string& method,
                const Pose2& world_from_sensor, const Eigen::Matrix3d& covariance,
-               const std::string& detail);
+               const std::string& detail, bool settled);
   // The pose after a motion (sensor frame) and its covariance: the old pose's plus the motion's,
   // rotated into the world.
   static Eigen::Matrix3d MovedCovariance(const SensorWatch& watch,

@@ -111,7 +111,7 @@ TEST(Monitor, WithoutBackgroundsTheTracksFlagAndCorrect) {
   Monitor monitor(options);
   monitor.SetPoses(Calibrated(), {});
   const Pose2 bumped = kS2 * Pose2{0.0, 0.0, common::DegToRad(3.0)};
-  const FakeFrames frames(60.0, {{0.0, kS2}, {20.0, bumped}});
+  const FakeFrames frames(90.0, {{0.0, kS2}, {20.0, bumped}});
   common::UtcNs flagged = 0;
   for (double t = 1.0; t <= 60.0 && !flagged; t += 1.0) {
     monitor.Update(At(t), frames);
@@ -141,7 +141,20 @@ TEST(Monitor, WithoutBackgroundsTheTracksFlagAndCorrect) {
   const Pose2 corrected = Watch(monitor, "s2").world_from_sensor;
   EXPECT_LT(common::TranslationDistanceM(corrected, bumped), 0.05);
   EXPECT_LT(common::RadToDeg(common::RotationDistanceRad(corrected, bumped)), 0.2);
+  // Without a snapshot to show that its tracker has re-learned its background, it is fused again
+  // only relearn_hold_s after the flag.
+  EXPECT_EQ(Watch(monitor, "s2").state, WatchState::kSettling);
+  EXPECT_TRUE(monitor.Excluded("s2"));
+  const double flagged_s = static_cast<double>(flagged - kStart) * 1e-9;
+  for (double t = flagged_s + 10.0; t < flagged_s + options.relearn_hold_s - 1.0; t += 1.0) {
+    monitor.Update(At(t), frames);
+  }
+  EXPECT_TRUE(monitor.Excluded("s2"));
+  monitor.Update(At(flagged_s + options.relearn_hold_s + 1.0), frames);
   EXPECT_FALSE(monitor.Excluded("s2"));
+  for (const MonitorEvent& e : monitor.TakeEvents()) {
+    EXPECT_NE(e.kind, MonitorEventKind::kMoved) << "flagged again: " << e.detail;
+  }
 }
 
 TEST(Monitor, FurnitureMovedWhileTheTracksAgreeReLearnsTheBackground) {
