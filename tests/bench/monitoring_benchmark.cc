@@ -1,0 +1,389 @@
+// A site that stays calibrated: how soon lrfnetd flags a moved sensor, how well it corrects it,
+// and how often it flags one that did not move. Per case and seed, through the whole chain:
+//
+//   `lrfnet sim` of a 12 x 8 m room (three TiM561, two people walking, two pieces of furniture)
+//   for 40 s without a move → `lrfnet-tracker --replay` per sensor → `lrfnet calibrate` (the site's
+//   calibration); then the same room for 100 s in which, at a random time between 35 s and 65 s,
+//   s2 is turned (0.5, 2, 10 deg) or pushed (0.02, 0.1, 0.5 m in a random direction), or only the
+//   furniture is moved (a cabinet removed, a cart parked) → trackers → `lrfnetd --input
+//   --calibration-in` (monitoring on, default options) → its stats, fused tracks and calibration.
+//
+//   monitoring_benchmark --tool LRFNET --tracker TRACKER --daemon LRFNETD [--seeds 5]
+//                        [--out results/monitoring_benchmark.md]
+//
+// Per case: runs flagged, time from the move to the flag (gateway time), the method that flagged,
+// the error of the corrected pose against the new truth (the motion the daemon applied to the
+// site's calibration vs the true motion, so that the calibration's own error does not count; and
+// the final pose against the new truth in absolute terms), fused track snapshots that held s2
+// between the move and the flag and between the flag and the first correction (the latter should
+// be none), false flags (any flag of a sensor that had not moved, or before the move) per
+// sensor-hour.
+
+#include <fcntl.h>
+#include <spawn.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <map>
+#include <nlohmann/json.hpp>
+#include <random>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include "central_daemon/calibration/calibration_yaml.h"
+#include "common/geometry.h"
+
+extern char** environ;
+
+namespace {
+
+namespace fs = std::filesystem;
+using namespace lrfnet;
+
+int RunProcess(const std::vector<std::string>& args, const std::string& log) {
+  std::vector<std::string> copy = args;
+  std::vector<char*> argv;
+  for (std::string& s : copy) argv.push_back(s.data());
+  argv.push_back(nullptr);
+  posix_spawn_file_actions_t actions;
+  posix_spawn_file_actions_init(&actions);
+  posix_spawn_file_actions_addopen(&actions, 1, log.c_str(), O_WRONLY | O_CREAT | O_APPEND, 0644);
+  posix_spawn_file_actions_addopen(&actions, 2, log.c_str(), O_WRONLY | O_CREAT | O_APPEND, 0644);
+  pid_t pid = 0;
+  const int rc = posix_spawn(&pid, copy[0].c_str(), &actions, nullptr, argv.data(), environ);
+  posix_spawn_file_actions_destroy(&actions);
+  if (rc != 0) return -1;
+  int status = 0;
+  waitpid(pid, &status, 0);
+  return WIFEXITED(status) ? WEXITSTATUS(status) : -2;
+}
+
+std::string Arg(int argc, char** argv, const std::string& name, const std::string& fallback) {
+  for (int i = 1; i + 1 < argc; ++i) {
+    if (argv[i] == name) return argv[i + 1];
+  }
+  return fallback;
+}
+
+std::string ReadText(const fs::path& path) {
+  std::ifstream in(path);
+  std::stringstream text;
+  text << in.rdbuf();
+  return text.str();
+}
+
+constexpr double kDurationS = 100.0;
+constexpr double kCalibrationS = 40.0;
+
+// The room; `s2_moves` and `changes` are YAML flow lists (possibly empty).
+std::string Scenario(int seed, double duration_s, const std::string& s2_moves,
+                     const std::string& changes) {
+  std::ostringstream s;
+  s << "name: monitoring_room\nseed: " << seed << "\nduration_s: " << duration_s << R"(
+world:
+  walls:
+    - [[0, 0], [12, 0], [12, 8], [0, 8], [0, 0]]
+  obstacles:
+    - [[5.5, 7.0], [7.5, 7.0], [7.5, 7.6], [5.5, 7.6]]
+    - [[2.0, 7.4], [3.5, 7.4], [3.5, 7.9], [2.0, 7.9]]
+  changes: )"
+    << changes << R"(
+sensors:
+  - {id: s1, model: tim561, x_m: 0.3, y_m: 0.3, yaw_deg: 40}
+  - {id: s2, model: tim561, x_m: 11.7, y_m: 0.3, yaw_deg: 140, moves: )"
+    << s2_moves << R"(}
+  - {id: s3, model: tim561, x_m: 11.7, y_m: 7.7, yaw_deg: -140}
+targets:
+  - {shape: person, path: [[2.5, 2], [9.5, 2], [9.5, 5.5], [2.5, 5.5]], speed_mps: 1.2, loop: true}
+  - {shape: person, path: [[4, 3.5], [8.5, 3.5], [6.5, 6]], speed_mps: 1.0, loop: true}
+)";
+  return s.str();
+}
+
+struct Case {
+  std::string name;
+  double yaw_deg = 0.0;        // turn of s2
+  double translation_m = 0.0;  // push of s2 (random direction)
+  bool furniture = false;      // only the furniture moves
+};
+
+struct Tally {
+  int runs = 0, failed = 0, flagged = 0, corrected = 0;
+  std::vector<double> flag_delay_s, motion_err_deg, motion_err_m, pose_err_deg, pose_err_m;
+  std::map<std::string, int> methods;
+  std::size_t fused_before_flag = 0, fused_while_flagged = 0;
+  int false_flags = 0;
+  double watched_sensor_s = 0.0;  // time of sensors that had not moved
+};
+
+double Mean(const std::vector<double>& v) {
+  double s = 0.0;
+  for (double x : v) s += x;
+  return v.empty() ? std::nan("") : s / static_cast<double>(v.size());
+}
+double Max(const std::vector<double>& v) {
+  return v.empty() ? std::nan("") : *std::max_element(v.begin(), v.end());
+}
+std::string Num(double v, const char* format) {
+  if (std::isnan(v)) return "–";
+  char buf[64];
+  std::snprintf(buf, sizeof buf, format, v);
+  return buf;
+}
+
+// Simulates `scenario` into dir/sim and replays each capture through the tracker into dir/ID.rec.
+bool SimulateAndTrack(const fs::path& dir, const std::string& scenario, const std::string& tool,
+                      const std::string& tracker, const std::string& log) {
+  fs::create_directories(dir);
+  std::ofstream(dir / "scenario.yaml") << scenario;
+  if (RunProcess({tool, "sim", (dir / "scenario.yaml").string(), "--out", (dir / "sim").string(),
+                  "--log-level", "warn"},
+                 log) != 0) {
+    return false;
+  }
+  for (const char* id : {"s1", "s2", "s3"}) {
+    if (RunProcess({tracker, "--replay", (dir / "sim" / (std::string(id) + ".pcap")).string(),
+                    "--sensor-id", id, "--out", (dir / (std::string(id) + ".rec")).string(),
+                    "--log-level", "warn"},
+                   log) != 0) {
+      return false;
+    }
+  }
+  return true;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  const std::string tool = Arg(argc, argv, "--tool", "");
+  const std::string tracker = Arg(argc, argv, "--tracker", "");
+  const std::string daemon = Arg(argc, argv, "--daemon", "");
+  const int seeds = std::stoi(Arg(argc, argv, "--seeds", "5"));
+  const std::string out_path = Arg(argc, argv, "--out", "");
+  if (tool.empty() || tracker.empty() || daemon.empty()) {
+    std::fprintf(stderr,
+                 "usage: monitoring_benchmark --tool LRFNET --tracker TRACKER --daemon LRFNETD "
+                 "[--seeds N] [--out FILE]\n");
+    return 2;
+  }
+  const fs::path work =
+      fs::temp_directory_path() / ("monitoring_benchmark_" + std::to_string(getpid()));
+  fs::create_directories(work);
+  const std::string log = (work / "log.txt").string();
+
+  const std::vector<Case> cases = {
+      {"turned 0.5°", 0.5, 0.0, false},  {"turned 2°", 2.0, 0.0, false},
+      {"turned 10°", 10.0, 0.0, false},  {"pushed 0.02 m", 0.0, 0.02, false},
+      {"pushed 0.1 m", 0.0, 0.1, false}, {"pushed 0.5 m", 0.0, 0.5, false},
+      {"furniture only", 0.0, 0.0, true}};
+  const common::Pose2 s2_before{11.7, 0.3, common::DegToRad(140.0)};
+  std::map<std::string, Tally> tallies;
+
+  for (int seed = 1; seed <= seeds; ++seed) {
+    // The site's calibration, from 40 s before any move (same room and seed).
+    const fs::path calib_dir = work / ("calibration_" + std::to_string(seed));
+    if (!SimulateAndTrack(calib_dir, Scenario(seed, kCalibrationS, "[]", "[]"), tool, tracker,
+                          log) ||
+        RunProcess(
+            {tool, "calibrate", (calib_dir / "s1.rec").string(), (calib_dir / "s2.rec").string(),
+             (calib_dir / "s3.rec").string(), "--out", (calib_dir / "calibration.yaml").string()},
+            log) != 0) {
+      std::fprintf(stderr, "seed %d: the site's calibration failed (see %s)\n", seed, log.c_str());
+      for (const Case& c : cases) ++tallies[c.name].failed;
+      continue;
+    }
+    calib::PoseFile initial;
+    std::string error;
+    if (!calib::ReadPoseFile((calib_dir / "calibration.yaml").string(), &initial, &error) ||
+        !initial.Find("s2")) {
+      std::fprintf(stderr, "seed %d: %s\n", seed, error.c_str());
+      continue;
+    }
+    const common::Pose2 s2_calibrated = initial.sensors[*initial.Find("s2")].second;
+
+    for (std::size_t ci = 0; ci < cases.size(); ++ci) {
+      const Case& c = cases[ci];
+      Tally& tally = tallies[c.name];
+      std::mt19937 rng(static_cast<std::uint32_t>(seed * 1000 + static_cast<int>(ci)));
+      // Whole tenths of a second, so that the scenario holds the time exactly.
+      const double at_s =
+          std::round(std::uniform_real_distribution<double>(35.0, 65.0)(rng) * 10.0) / 10.0;
+      const double direction = std::uniform_real_distribution<double>(-M_PI, M_PI)(rng);
+      common::Pose2 s2_after = s2_before;
+      std::string moves = "[]", changes = "[]";
+      char text[256];
+      if (c.furniture) {
+        std::snprintf(text, sizeof text,
+                      "[{at_s: %.1f, remove: 1}, {at_s: %.1f, add: [[8.0, 0.8], [8.9, 0.8], "
+                      "[8.9, 1.4], [8.0, 1.4]]}]",
+                      at_s, at_s);
+        changes = text;
+      } else {
+        s2_after = common::Pose2{s2_before.x_m + c.translation_m * std::cos(direction),
+                                 s2_before.y_m + c.translation_m * std::sin(direction),
+                                 s2_before.yaw_rad + common::DegToRad(c.yaw_deg)};
+        std::snprintf(text, sizeof text, "[{at_s: %.1f, x_m: %.4f, y_m: %.4f, yaw_deg: %.4f}]",
+                      at_s, s2_after.x_m, s2_after.y_m, common::RadToDeg(s2_after.yaw_rad));
+        moves = text;
+      }
+      const fs::path dir = work / ("run_" + std::to_string(seed) + "_" + std::to_string(ci));
+      ++tally.runs;
+      if (!SimulateAndTrack(dir, Scenario(seed, kDurationS, moves, changes), tool, tracker, log) ||
+          RunProcess(
+              {daemon, "--input", (dir / "s1.rec").string(), (dir / "s2.rec").string(),
+               (dir / "s3.rec").string(), "--calibration-in",
+               (calib_dir / "calibration.yaml").string(), "--calibration-out",
+               (dir / "calibration.yaml").string(), "--fused-out", (dir / "fused.jsonl").string(),
+               "--stats-out", (dir / "stats.json").string(), "--log-level", "warn"},
+              log) != 0) {
+        std::fprintf(stderr, "%s seed %d: the chain failed (see %s)\n", c.name.c_str(), seed,
+                     log.c_str());
+        ++tally.failed;
+        continue;
+      }
+      // The run's start (gateway UTC): the first pose's from_utc_ns.
+      const std::string truth_text = ReadText(dir / "sim/truth.yaml");
+      const std::size_t start_at = truth_text.find("from_utc_ns: ");
+      if (start_at == std::string::npos) {
+        ++tally.failed;
+        continue;
+      }
+      const std::int64_t start_ns = std::stoll(truth_text.substr(start_at + 13));
+      const std::int64_t move_ns = start_ns + static_cast<std::int64_t>(std::llround(at_s * 1e9));
+
+      const nlohmann::json stats =
+          nlohmann::json::parse(ReadText(dir / "stats.json"), nullptr, false);
+      if (!stats.is_object() || !stats["monitoring"].is_object()) {
+        ++tally.failed;
+        continue;
+      }
+      std::int64_t flagged_ns = 0, corrected_ns = 0;
+      for (const auto& e : stats["monitoring"]["history"]) {
+        const std::int64_t stamp = e.value("stamp_ns", std::int64_t{0});
+        const std::string sensor = e.value("sensor", "");
+        const std::string event = e.value("event", "");
+        if (event != "moved") {
+          if (event == "corrected" && sensor == "s2" && flagged_ns != 0 && corrected_ns == 0) {
+            corrected_ns = stamp;
+          }
+          continue;
+        }
+        const bool true_flag =
+            !c.furniture && sensor == "s2" && stamp >= move_ns && flagged_ns == 0;
+        if (!true_flag) {
+          ++tally.false_flags;
+          continue;
+        }
+        flagged_ns = stamp;
+        ++tally.methods[e.value("method", "?")];
+      }
+      tally.watched_sensor_s += c.furniture ? 3.0 * kDurationS : 2.0 * kDurationS + at_s;
+      if (flagged_ns != 0) {
+        ++tally.flagged;
+        tally.flag_delay_s.push_back(static_cast<double>(flagged_ns - move_ns) * 1e-9);
+      }
+      if (corrected_ns != 0) ++tally.corrected;
+
+      // Fused snapshots holding a track from s2 while its pose was wrong.
+      std::istringstream fused(ReadText(dir / "fused.jsonl"));
+      for (std::string line; std::getline(fused, line);) {
+        const nlohmann::json f = nlohmann::json::parse(line, nullptr, false);
+        if (!f.is_object() || c.furniture) continue;
+        const std::int64_t stamp = f.value("stamp_ns", std::int64_t{0});
+        if (stamp < move_ns) continue;
+        bool with_s2 = false;
+        for (const auto& t : f["tracks"]) {
+          for (const auto& source : t["sources"]) with_s2 = with_s2 || source["sensor"] == "s2";
+        }
+        if (!with_s2) continue;
+        if (flagged_ns == 0 || stamp < flagged_ns) {
+          ++tally.fused_before_flag;
+        } else if (corrected_ns == 0 || stamp < corrected_ns) {
+          ++tally.fused_while_flagged;
+        }
+      }
+
+      // The pose the daemon ends with against the new truth.
+      calib::PoseFile final_file;
+      if (!c.furniture &&
+          calib::ReadPoseFile((dir / "calibration.yaml").string(), &final_file, &error) &&
+          final_file.Find("s2")) {
+        const common::Pose2 s2_final = final_file.sensors[*final_file.Find("s2")].second;
+        const common::Pose2 motion = s2_calibrated.inverse() * s2_final;
+        const common::Pose2 true_motion = s2_before.inverse() * s2_after;
+        // A move that was not flagged leaves the pose as calibrated: its error is the move.
+        tally.motion_err_deg.push_back(
+            common::RadToDeg(common::RotationDistanceRad(motion, true_motion)));
+        tally.motion_err_m.push_back(common::TranslationDistanceM(motion, true_motion));
+        tally.pose_err_deg.push_back(
+            common::RadToDeg(common::RotationDistanceRad(s2_final, s2_after)));
+        tally.pose_err_m.push_back(common::TranslationDistanceM(s2_final, s2_after));
+      }
+      std::fprintf(
+          stderr, "%s seed %d: move at %.1f s, flagged %s, corrected %s\n", c.name.c_str(), seed,
+          at_s,
+          flagged_ns ? Num(static_cast<double>(flagged_ns - move_ns) * 1e-9, "%.1f s after").c_str()
+                     : "no",
+          corrected_ns ? "yes" : "no");
+    }
+  }
+
+  std::ostringstream table;
+  table << "# Monitoring benchmark\n\n"
+        << "`tests/bench/monitoring_benchmark`, " << seeds
+        << " seeds per case. Per seed: a 12 x 8 m room with three TiM561, two people walking "
+           "loops and two pieces of furniture; the site is calibrated (`lrfnet calibrate`) from "
+           "40 s without a move, then `lrfnetd --input --calibration-in` (monitoring on, default "
+           "options) replays 100 s of the same room in which, at a random time between 35 and "
+           "65 s, s2 is turned or pushed (random direction), or only the furniture moves (a "
+           "cabinet taken away, a cart parked). Times are gateway time from the move to the "
+           "flag. *Motion error*: the correction the daemon applied to the site's calibration "
+           "against the true motion (the calibration's own error does not count); *pose error*: "
+           "the final pose against the new truth (includes it). A move that is never flagged "
+           "keeps its calibrated pose, so its error is the move itself. *Fused before flag*: "
+           "fused snapshots (15 Hz) holding a track from s2 between the move and the flag; "
+           "*while flagged*: between the flag and the first correction (goal: 0). *False flags*: "
+           "flags of a sensor that had not moved (or before its move), per sensor-hour.\n\n"
+        << "| case | runs | flagged | move → flag mean / max [s] | flagged by | corrected | "
+           "motion error mean / max [°] | [m] | pose error mean / max [°] | [m] | fused before "
+           "flag | while flagged | false flags | per sensor-hour |\n"
+        << "|---|---:|---:|---:|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n";
+  for (const Case& c : cases) {
+    const Tally& t = tallies[c.name];
+    std::string methods;
+    for (const auto& [m, n] : t.methods) {
+      methods += (methods.empty() ? "" : ", ") + m + " ×" + std::to_string(n);
+    }
+    const double hours = t.watched_sensor_s / 3600.0;
+    table << "| " << c.name << " | " << t.runs - t.failed
+          << (t.failed ? " (+" + std::to_string(t.failed) + " failed)" : "") << " | "
+          << (c.furniture ? "–" : std::to_string(t.flagged)) << " | "
+          << Num(Mean(t.flag_delay_s), "%.1f") << " / " << Num(Max(t.flag_delay_s), "%.1f") << " | "
+          << (methods.empty() ? "–" : methods) << " | "
+          << (c.furniture ? "–" : std::to_string(t.corrected)) << " | "
+          << Num(Mean(t.motion_err_deg), "%.3f") << " / " << Num(Max(t.motion_err_deg), "%.3f")
+          << " | " << Num(Mean(t.motion_err_m), "%.3f") << " / " << Num(Max(t.motion_err_m), "%.3f")
+          << " | " << Num(Mean(t.pose_err_deg), "%.3f") << " / " << Num(Max(t.pose_err_deg), "%.3f")
+          << " | " << Num(Mean(t.pose_err_m), "%.3f") << " / " << Num(Max(t.pose_err_m), "%.3f")
+          << " | " << (c.furniture ? "–" : std::to_string(t.fused_before_flag)) << " | "
+          << (c.furniture ? "–" : std::to_string(t.fused_while_flagged)) << " | " << t.false_flags
+          << " | " << Num(hours > 0 ? t.false_flags / hours : std::nan(""), "%.1f") << " |\n";
+  }
+  std::printf("%s", table.str().c_str());
+  if (!out_path.empty()) {
+    std::ofstream out(out_path, std::ios::trunc);
+    out << table.str();
+    if (!out.good()) {
+      std::fprintf(stderr, "cannot write %s\n", out_path.c_str());
+      return 1;
+    }
+  }
+  fs::remove_all(work);
+  return 0;
+}
