@@ -257,6 +257,19 @@ void StopMqtt(MqttOutput* mqtt, const ZoneService& zones, common::UtcNs now_ns, 
       c.dropped_queue_full, c.dropped_disconnected, c.lost_in_flight, c.connects, c.disconnects);
 }
 
+// What the monitoring changed, to MQTT: each watched sensor's state (in its health) and the poses
+// in use (retained calibration).
+void PublishMonitoring(const MonitoringService& monitoring, MqttOutput* mqtt,
+                       common::UtcNs stamp_ns) {
+  if (!mqtt->service) return;
+  std::map<std::string, std::string, std::less<>> states;
+  for (const auto& [id, watch] : monitoring.monitor().sensors()) {
+    states[id] = monitoring::ToString(watch.state);
+  }
+  mqtt->service->SetMonitorStates(std::move(states));
+  mqtt->service->PublishCalibration(monitoring.result(), stamp_ns);
+}
+
 nlohmann::json MqttJson(const MqttOutput& mqtt) {
   const MqttCounters c = mqtt.publisher->counters();
   const MqttServiceCounters& s = mqtt.service->counters();
@@ -527,6 +540,7 @@ int RunLive(const RunOptions& run, DaemonConfig config) {
         in_use.ok = true;
         in_use.result = monitoring.result();
         calibration.SetInitial(std::move(in_use));
+        PublishMonitoring(monitoring, &mqtt, NowUtcNs());
       }
       schedule_tick();
     });
@@ -827,6 +841,7 @@ int RunOffline(const RunOptions& run, DaemonConfig config, const std::vector<std
       if (monitoring.OnTick(core)) {
         fusion.SetCalibration(monitoring.result());
         fusion.SetExcluded(monitoring.excluded());
+        PublishMonitoring(monitoring, &mqtt, d.receive_ns);
       }
     }
   }

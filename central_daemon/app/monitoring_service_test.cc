@@ -9,6 +9,8 @@
 #include <sstream>
 
 #include "central_daemon/app/fusion_service.h"
+#include "central_daemon/app/mqtt_service.h"
+#include "central_daemon/app/zone_service.h"
 #include "central_daemon/calibration/calibration_yaml.h"
 #include "central_daemon/monitoring/monitoring_test_util.h"
 #include "firmware_tracker/io/datagram_encoder.h"
@@ -172,6 +174,29 @@ TEST(MonitoringService, AMovedSensorIsExcludedFromTheFusionAndTheCalibrationKeep
   fusion.OnFrame("s1", frame);
   EXPECT_EQ(fusion.fuser().counters().frames, 1u);
   EXPECT_FALSE(fusion.fuser().HasPlacement("s2"));
+
+  // MQTT: s2's health says "moved" (the others as they are), published at once.
+  struct Sink : MqttSink {
+    std::map<std::string, std::string> last;
+    void Publish(const std::string& topic, std::string payload, int, bool) override {
+      last[topic] = std::move(payload);
+    }
+  } sink;
+  MqttService mqtt(config, &sink, "test");
+  const ZoneService zones(config);
+  std::map<std::string, std::string, std::less<>> states;
+  for (const auto& [id, watch] : monitoring.monitor().sensors()) {
+    states[id] = monitoring::ToString(watch.state);
+  }
+  mqtt.SetMonitorStates(states);
+  mqtt.OnTick(kT0 + 6000 * kMs, daemon, fusion, zones);
+  EXPECT_NE(sink.last[mqtt.Topic("sensors/s2/health")].find("\"state\":\"moved\""),
+            std::string::npos)
+      << sink.last[mqtt.Topic("sensors/s2/health")];
+  EXPECT_NE(sink.last[mqtt.Topic("sensors/s1/health")].find("\"state\":\"active\""),
+            std::string::npos)
+      << sink.last[mqtt.Topic("sensors/s1/health")];
+
   fusion.SetExcluded({});
   EXPECT_TRUE(fusion.fuser().HasPlacement("s2"));
 

@@ -50,7 +50,8 @@ std::string CalibrationJson(const std::string& site, common::UtcNs stamp_ns,
                             const calib::CalibrationResult& result);
 
 // What is reported of a sensor's health. `state` is one of "waiting" (known, no tracks yet),
-// "active", "silent"; more states may be added (consumers should show unknown ones as they are).
+// "active", "silent", "moved", "settling" (see HealthReportOf); more states may be added
+// (consumers should show unknown ones as they are).
 struct SensorHealthReport {
   std::string sensor_id;
   std::string state;

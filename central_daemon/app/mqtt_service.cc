@@ -149,10 +149,12 @@ void MqttService::PublishZonesDue(const ZoneService& zones, bool force) {
   }
 }
 
-SensorHealthReport HealthReportOf(const SensorStatus& s, bool placed) {
+SensorHealthReport HealthReportOf(const SensorStatus& s, bool placed,
+                                  std::string_view monitor_state) {
   SensorHealthReport h;
   h.sensor_id = s.sensor_id;
   h.state = s.silent ? "silent" : (s.counters.track_frames > 0 ? "active" : "waiting");
+  if (!s.silent && !monitor_state.empty() && monitor_state != "ok") h.state = monitor_state;
   h.placed = placed;
   if (s.info) h.model = s.info->model;
   const double received = static_cast<double>(s.counters.sequence.received);
@@ -171,8 +173,10 @@ void MqttService::PublishHealthDue(common::UtcNs now_ns, const Daemon& daemon,
   for (const SensorStatus& s : daemon.ingest().Sensors()) {
     HealthMark& mark = health_marks_[s.sensor_id];
     const auto placed = placed_.find(s.sensor_id);
+    const auto monitor = monitor_states_.find(s.sensor_id);
     SensorHealthReport h =
-        HealthReportOf(s, fusion.calibrated() && placed != placed_.end() && placed->second);
+        HealthReportOf(s, fusion.calibrated() && placed != placed_.end() && placed->second,
+                       monitor != monitor_states_.end() ? monitor->second : std::string_view{});
     const bool changed = h.state != mark.state || h.placed != mark.placed;
     if (!changed && !Due(now_ns, mark.published_ns, health_interval_ns_)) continue;
     if (mark.datagrams_at_ns != 0 && now_ns > mark.datagrams_at_ns) {

@@ -29,8 +29,11 @@ namespace lrfnet::daemon {
 
 // A sensor's health report from what the ingest knows (without the rate, which needs two
 // readings). A new sensor state (e.g. a sensor that moved) is added here and in
-// SensorHealthReport's list of states; a change of state is published at once.
-SensorHealthReport HealthReportOf(const SensorStatus& status, bool placed);
+// SensorHealthReport's list of states; a change of state is published at once. `monitor_state`:
+// the monitoring's verdict on the sensor ("moved", "settling"; "" or "ok": nothing found), which
+// is its state while it is not silent.
+SensorHealthReport HealthReportOf(const SensorStatus& status, bool placed,
+                                  std::string_view monitor_state = {});
 
 class MqttSink {
  public:
@@ -65,6 +68,11 @@ class MqttService {
               const ZoneService& zones);
   // Every zone's state at once (at the end of an offline run).
   void PublishZones(const ZoneService& zones);
+  // The monitoring's state of each watched sensor (see HealthReportOf); a change is published
+  // with the next health reports.
+  void SetMonitorStates(std::map<std::string, std::string, std::less<>> states) {
+    monitor_states_ = std::move(states);
+  }
 
   const MqttServiceCounters& counters() const { return counters_; }
 
@@ -110,6 +118,7 @@ class MqttService {
   };
   std::map<std::string, HealthMark, std::less<>> health_marks_;
   std::map<std::string, bool, std::less<>> placed_;
+  std::map<std::string, std::string, std::less<>> monitor_states_;
   MqttServiceCounters counters_;
 };
 
