@@ -6,7 +6,7 @@ cd "$(dirname "$0")/.."
 build_dir=${1:-build}
 cmake --build "$build_dir" --target decode_benchmark tracker_benchmark store_benchmark daemon_benchmark \
   rotation_averaging_benchmark calibration_benchmark fusion_benchmark outputs_benchmark tracking_benchmark \
-  lrfnet lrfnet-tracker \
+  monitoring_benchmark lrfnet lrfnet-tracker lrfnetd \
   >/dev/null
 mkdir -p results
 "$build_dir/tests/bench/decode_benchmark" --out results/decode_benchmark.md
@@ -37,3 +37,7 @@ if [ "${LRFNET_SKIP_CROSS:-0}" != 1 ] && command -v qemu-aarch64 >/dev/null; the
   qemu-aarch64 -L /usr/aarch64-linux-gnu build-aarch64/auth_benchmark --datagrams 5000 --append \
     --out results/auth_benchmark.md --platform "aarch64 under qemu-user (tracker only: no daemon)"
 fi
+# A moved sensor (0.5/2/10 deg, 0.02/0.1/0.5 m) and furniture only, through sim → trackers → lrfnetd --input.
+"$build_dir/tests/bench/monitoring_benchmark" --tool "$build_dir/tools/lrfnet" \
+  --tracker "$build_dir/firmware_tracker/app/lrfnet-tracker" --daemon "$build_dir/central_daemon/app/lrfnetd" \
+  --seeds 5 --out results/monitoring_benchmark.md

@@ -37,6 +37,8 @@
 #include <vector>
 
 #include "central_daemon/calibration/calibration_yaml.h"
+#include "central_daemon/calibration/eval.h"
+#include "central_daemon/calibration/pose_history.h"
 #include "common/geometry.h"
 
 extern char** environ;
@@ -119,6 +121,7 @@ struct Tally {
   std::map<std::string, int> methods;
   std::size_t fused_before_flag = 0, fused_while_flagged = 0;
   int false_flags = 0;
+  int flagged_again = 0;          // the moved sensor flagged again after its first flag
   double watched_sensor_s = 0.0;  // time of sensors that had not moved
 };
 
@@ -176,6 +179,7 @@ int main(int argc, char** argv) {
       fs::temp_directory_path() / ("monitoring_benchmark_" + std::to_string(getpid()));
   fs::create_directories(work);
   const std::string log = (work / "log.txt").string();
+  bool keep_work = false;  // for a look at what failed
 
   const std::vector<Case> cases = {
       {"turned 0.5°", 0.5, 0.0, false},  {"turned 2°", 2.0, 0.0, false},
@@ -214,7 +218,9 @@ int main(int argc, char** argv) {
       // Whole tenths of a second, so that the scenario holds the time exactly.
       const double at_s =
           std::round(std::uniform_real_distribution<double>(35.0, 65.0)(rng) * 10.0) / 10.0;
-      const double direction = std::uniform_real_distribution<double>(-M_PI, M_PI)(rng);
+      // Into the room (s2 stands in a corner): 146 deg (towards the room's middle) +- 45 deg.
+      const double direction =
+          common::DegToRad(146.0 + std::uniform_real_distribution<double>(-45.0, 45.0)(rng));
       common::Pose2 s2_after = s2_before;
       std::string moves = "[]", changes = "[]";
       char text[256];
@@ -245,6 +251,7 @@ int main(int argc, char** argv) {
         std::fprintf(stderr, "%s seed %d: the chain failed (see %s)\n", c.name.c_str(), seed,
                      log.c_str());
         ++tally.failed;
+        keep_work = true;
         continue;
       }
       // The run's start (gateway UTC): the first pose's from_utc_ns.
@@ -341,19 +348,24 @@ int main(int argc, char** argv) {
            "loops and two pieces of furniture; the site is calibrated (`lrfnet calibrate`) from "
            "40 s without a move, then `lrfnetd --input --calibration-in` (monitoring on, default "
            "options) replays 100 s of the same room in which, at a random time between 35 and "
-           "65 s, s2 is turned or pushed (random direction), or only the furniture moves (a "
+           "65 s, s2 is turned or pushed (into the room, random direction within 45° of its "
+           "middle), or only the furniture moves (a "
            "cabinet taken away, a cart parked). Times are gateway time from the move to the "
            "flag. *Motion error*: the correction the daemon applied to the site's calibration "
            "against the true motion (the calibration's own error does not count); *pose error*: "
-           "the final pose against the new truth (includes it). A move that is never flagged "
+           "the final pose against the new truth in s1's frame, as `lrfnet eval` (includes it). A "
+           "move "
+           "that is never flagged "
            "keeps its calibrated pose, so its error is the move itself. *Fused before flag*: "
            "fused snapshots (15 Hz) holding a track from s2 between the move and the flag; "
-           "*while flagged*: between the flag and the first correction (goal: 0). *False flags*: "
-           "flags of a sensor that had not moved (or before its move), per sensor-hour.\n\n"
+           "*while flagged*: between the flag and the first correction (goal: 0). *Flagged again*: "
+           "the moved sensor flagged once more after its first flag (its correction was doubted). "
+           "*False flags*: flags of a sensor that had not moved (or before its move), per "
+           "sensor-hour.\n\n"
         << "| case | runs | flagged | move → flag mean / max [s] | flagged by | corrected | "
            "motion error mean / max [°] | [m] | pose error mean / max [°] | [m] | fused before "
-           "flag | while flagged | false flags | per sensor-hour |\n"
-        << "|---|---:|---:|---:|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n";
+           "flag | while flagged | flagged again | false flags | per sensor-hour |\n"
+        << "|---|---:|---:|---:|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n";
   for (const Case& c : cases) {
     const Tally& t = tallies[c.name];
     std::string methods;
@@ -372,7 +384,8 @@ int main(int argc, char** argv) {
           << " | " << Num(Mean(t.pose_err_deg), "%.3f") << " / " << Num(Max(t.pose_err_deg), "%.3f")
           << " | " << Num(Mean(t.pose_err_m), "%.3f") << " / " << Num(Max(t.pose_err_m), "%.3f")
           << " | " << (c.furniture ? "–" : std::to_string(t.fused_before_flag)) << " | "
-          << (c.furniture ? "–" : std::to_string(t.fused_while_flagged)) << " | " << t.false_flags
+          << (c.furniture ? "–" : std::to_string(t.fused_while_flagged)) << " | "
+          << (c.furniture ? "–" : std::to_string(t.flagged_again)) << " | " << t.false_flags
           << " | " << Num(hours > 0 ? t.false_flags / hours : std::nan(""), "%.1f") << " |\n";
   }
   std::printf("%s", table.str().c_str());
@@ -384,6 +397,6 @@ int main(int argc, char** argv) {
       return 1;
     }
   }
-  fs::remove_all(work);
+  if (!keep_work) fs::remove_all(work);
   return 0;
 }
