@@ -377,7 +377,12 @@ void Monitor::Update(common::UtcNs now_ns, const FrameSource& source) {
       const TrackFit check = others.empty() ? TrackFit{}
                                             : CheckTracks(own, candidate, others, options_.tracks,
                                                           watch.track_baseline);
-      if (!check.moved) {
+      // Unchecked by tracks, only a snapshot that holds the whole new scene gives the pose: one
+      // taken while the tracker re-learns its background mixes the old scene and the new, and its
+      // motion falls short of the move.
+      const bool unchecked_and_mixed =
+          !check.enough && watch.background_candidate_inliers < options_.settled_min_inliers;
+      if (!check.moved && !unchecked_and_mixed) {
         Correct(watch, now_ns, "background", candidate,
                 MovedCovariance(watch, watch.background_candidate_covariance),
                 watch.background_candidate_detail +
@@ -386,9 +391,14 @@ void Monitor::Update(common::UtcNs now_ns, const FrameSource& source) {
                 watch.background_candidate_inliers >= options_.settled_min_inliers);
         continue;
       }
-      watch.detail = "the background suggests " + MotionText(*watch.background_candidate) +
-                     ", the tracks disagree: " + check.reason;
-      watch.background_candidate.reset();
+      if (check.moved) {
+        watch.detail = "the background suggests " + MotionText(*watch.background_candidate) +
+                       ", the tracks disagree: " + check.reason;
+        watch.background_candidate.reset();
+      } else {
+        watch.detail = "the background suggests " + MotionText(*watch.background_candidate) +
+                       ", waiting for tracks to check it or a settled snapshot";
+      }
     }
     if (others.empty() || own.empty()) continue;
     const double tracked_s =

@@ -24,7 +24,9 @@
 //       (stage 1 with at least correct_min_inliers of its points on the reference scene): the
 //       pose is the old one times the ICP's motion (exact where the scene has structure). When
 //       the tracks since the flag associate enough, they must agree with it (CheckTracks not
-//       "moved" under the corrected pose); otherwise the next snapshot is tried;
+//       "moved" under the corrected pose); otherwise the next snapshot is tried. Without enough
+//       tracks to check it, only a snapshot with settled_min_inliers on the reference scene (one
+//       that holds the whole new scene, not a mix of the old and the new) gives the pose;
 //     - else the tracks since the flag (from correction_min_tracks_s of them on, every
 //       track_period_s): EstimateFromTracks started from the pose the detection suggested, with
 //       every other pose fixed (the calibration's pairwise association, refit and MSAC search).

@@ -9,7 +9,7 @@
 //   --calibration-in` (monitoring on, default options) → its stats, fused tracks and calibration.
 //
 //   monitoring_benchmark --tool LRFNET --tracker TRACKER --daemon LRFNETD [--seeds 5]
-//                        [--out results/monitoring_benchmark.md]
+//                        [--out results/monitoring_benchmark.md] [--only CASE] [--keep yes]
 //
 // Per case: runs flagged, time from the move to the flag (gateway time), the method that flagged,
 // the error of the corrected pose against the new truth (the motion the daemon applied to the
@@ -32,6 +32,7 @@
 #include <map>
 #include <nlohmann/json.hpp>
 #include <random>
+#include <set>
 #include <sstream>
 #include <string>
 #include <vector>
@@ -119,7 +120,7 @@ struct Tally {
   int runs = 0, failed = 0, flagged = 0, corrected = 0;
   std::vector<double> flag_delay_s, motion_err_deg, motion_err_m, pose_err_deg, pose_err_m;
   std::map<std::string, int> methods;
-  std::size_t fused_before_flag = 0, fused_while_flagged = 0;
+  std::size_t fused_before_flag = 0, fused_while_flagged = 0, coasting_after_flag = 0;
   int false_flags = 0;
   int flagged_again = 0;          // the moved sensor flagged again after its first flag
   double watched_sensor_s = 0.0;  // time of sensors that had not moved
@@ -179,7 +180,8 @@ int main(int argc, char** argv) {
       fs::temp_directory_path() / ("monitoring_benchmark_" + std::to_string(getpid()));
   fs::create_directories(work);
   const std::string log = (work / "log.txt").string();
-  bool keep_work = false;  // for a look at what failed
+  const std::string only = Arg(argc, argv, "--only", "");     // one case by name
+  bool keep_work = Arg(argc, argv, "--keep", "no") == "yes";  // or for a look at what failed
 
   const std::vector<Case> cases = {
       {"turned 0.5°", 0.5, 0.0, false},  {"turned 2°", 2.0, 0.0, false},
@@ -213,6 +215,7 @@ int main(int argc, char** argv) {
 
     for (std::size_t ci = 0; ci < cases.size(); ++ci) {
       const Case& c = cases[ci];
+      if (!only.empty() && c.name != only) continue;
       Tally& tally = tallies[c.name];
       std::mt19937 rng(static_cast<std::uint32_t>(seed * 1000 + static_cast<int>(ci)));
       // Whole tenths of a second, so that the scenario holds the time exactly.
@@ -281,10 +284,18 @@ int main(int argc, char** argv) {
           }
           continue;
         }
-        const bool true_flag =
-            !c.furniture && sensor == "s2" && stamp >= move_ns && flagged_ns == 0;
-        if (!true_flag) {
+        const double at = static_cast<double>(stamp - start_ns) * 1e-9;
+        const bool moved_sensor = !c.furniture && sensor == "s2" && stamp >= move_ns;
+        if (moved_sensor && flagged_ns != 0) {
+          ++tally.flagged_again;
+          std::fprintf(stderr, "  %s flagged again at %.1f s: %s\n", sensor.c_str(), at,
+                       e.value("detail", "").c_str());
+          continue;
+        }
+        if (!moved_sensor) {
           ++tally.false_flags;
+          std::fprintf(stderr, "  false flag of %s at %.1f s: %s\n", sensor.c_str(), at,
+                       e.value("detail", "").c_str());
           continue;
         }
         flagged_ns = stamp;
@@ -297,19 +308,33 @@ int main(int argc, char** argv) {
       }
       if (corrected_ns != 0) ++tally.corrected;
 
-      // Fused snapshots holding a track from s2 while its pose was wrong.
+      // Fused snapshots holding a track from s2 while its pose was wrong (a snapshot stamped at
+      // the flag's own time was published before it), and fused tracks fed by s2 alone before the
+      // flag that coast on after it (until fusion.max_coast_s).
+      std::set<std::uint64_t> s2_only;
       std::istringstream fused(ReadText(dir / "fused.jsonl"));
       for (std::string line; std::getline(fused, line);) {
         const nlohmann::json f = nlohmann::json::parse(line, nullptr, false);
         if (!f.is_object() || c.furniture) continue;
         const std::int64_t stamp = f.value("stamp_ns", std::int64_t{0});
         if (stamp < move_ns) continue;
+        const bool after_flag = flagged_ns != 0 && stamp > flagged_ns;
         bool with_s2 = false;
         for (const auto& t : f["tracks"]) {
-          for (const auto& source : t["sources"]) with_s2 = with_s2 || source["sensor"] == "s2";
+          bool only_s2 = !t["sources"].empty();
+          for (const auto& source : t["sources"]) {
+            with_s2 = with_s2 || source["sensor"] == "s2";
+            only_s2 = only_s2 && source["sensor"] == "s2";
+          }
+          const std::uint64_t id = t.value("id", std::uint64_t{0});
+          if (!after_flag && only_s2) s2_only.insert(id);
+          if (after_flag && (corrected_ns == 0 || stamp < corrected_ns) && t["sources"].empty() &&
+              s2_only.count(id) != 0) {
+            ++tally.coasting_after_flag;
+          }
         }
         if (!with_s2) continue;
-        if (flagged_ns == 0 || stamp < flagged_ns) {
+        if (!after_flag) {
           ++tally.fused_before_flag;
         } else if (corrected_ns == 0 || stamp < corrected_ns) {
           ++tally.fused_while_flagged;
@@ -328,9 +353,17 @@ int main(int argc, char** argv) {
         tally.motion_err_deg.push_back(
             common::RadToDeg(common::RotationDistanceRad(motion, true_motion)));
         tally.motion_err_m.push_back(common::TranslationDistanceM(motion, true_motion));
-        tally.pose_err_deg.push_back(
-            common::RadToDeg(common::RotationDistanceRad(s2_final, s2_after)));
-        tally.pose_err_m.push_back(common::TranslationDistanceM(s2_final, s2_after));
+        // Against the truth at the end, in s1's frame (the calibration's world is its reference
+        // sensor's frame), as `lrfnet eval`.
+        calib::PoseFile truth_end;
+        if (calib::TruthPosesAt(truth_text, kDurationS, &truth_end, &error)) {
+          const calib::EvalResult eval = calib::Evaluate(final_file, truth_end, "s1");
+          for (const calib::SensorError& se : eval.sensors) {
+            if (se.id != "s2") continue;
+            tally.pose_err_deg.push_back(se.d_r_deg);
+            tally.pose_err_m.push_back(se.d_t_m);
+          }
+        }
       }
       std::fprintf(
           stderr, "%s seed %d: move at %.1f s, flagged %s, corrected %s\n", c.name.c_str(), seed,
@@ -358,15 +391,19 @@ int main(int argc, char** argv) {
            "that is never flagged "
            "keeps its calibrated pose, so its error is the move itself. *Fused before flag*: "
            "fused snapshots (15 Hz) holding a track from s2 between the move and the flag; "
-           "*while flagged*: between the flag and the first correction (goal: 0). *Flagged again*: "
+           "*while flagged*: after the flag and before the first correction (goal: 0). *Coasting "
+           "after flag*: track-snapshots of fused tracks fed by s2 alone before the flag that "
+           "coast on (no source, predicted) after it until the fusion drops them. *Flagged again*: "
            "the moved sensor flagged once more after its first flag (its correction was doubted). "
            "*False flags*: flags of a sensor that had not moved (or before its move), per "
            "sensor-hour.\n\n"
         << "| case | runs | flagged | move → flag mean / max [s] | flagged by | corrected | "
            "motion error mean / max [°] | [m] | pose error mean / max [°] | [m] | fused before "
-           "flag | while flagged | flagged again | false flags | per sensor-hour |\n"
-        << "|---|---:|---:|---:|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n";
+           "flag | while flagged | coasting after flag | flagged again | false flags | per "
+           "sensor-hour |\n"
+        << "|---|---:|---:|---:|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n";
   for (const Case& c : cases) {
+    if (!only.empty() && c.name != only) continue;
     const Tally& t = tallies[c.name];
     std::string methods;
     for (const auto& [m, n] : t.methods) {
@@ -385,6 +422,7 @@ int main(int argc, char** argv) {
           << " | " << Num(Mean(t.pose_err_m), "%.3f") << " / " << Num(Max(t.pose_err_m), "%.3f")
           << " | " << (c.furniture ? "–" : std::to_string(t.fused_before_flag)) << " | "
           << (c.furniture ? "–" : std::to_string(t.fused_while_flagged)) << " | "
+          << (c.furniture ? "–" : std::to_string(t.coasting_after_flag)) << " | "
           << (c.furniture ? "–" : std::to_string(t.flagged_again)) << " | " << t.false_flags
           << " | " << Num(hours > 0 ? t.false_flags / hours : std::nan(""), "%.1f") << " |\n";
   }
