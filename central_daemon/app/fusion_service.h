@@ -76,10 +76,9 @@ class FusionService final : public FrameListener {
   boost::asio::io_context& io_;
   DaemonConfig config_;
   fusion::Fuser fuser_;
-  std::vector<fusion::SensorPlacement> placements_;  // of the latest calibration
+  std::vector<fusion::SensorPlacement> placements_;  // of the latest calibration, excluded ones too
   std::map<std::string, double> tracker_accel_psd_;  // per sensor, from its SensorInfo
   bool calibrated_ = false;
-  std::vector<fusion::SensorPlacement> placements_;  // of the calibration, excluded ones too
   std::set<std::string> excluded_;
   common::UtcNs now_ns_ = 0;
   std::optional<double> last_publish_s_;
