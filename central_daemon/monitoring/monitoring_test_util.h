@@ -109,7 +109,8 @@ inline std::vector<Walker> TwoPeople() {
 }
 
 // Track frames at rate_hz over [t0_s, t1_s) of `people` as a sensor at world_from_sensor reports
-// them (sensor frame, confirmed, 2 cm noise, covariance to match), scan times from start_ns.
+// them (sensor frame, confirmed, 2 cm noise, covariance to match; body centres, i.e. a shape fit
+// with the person's size), scan times from start_ns.
 inline std::vector<daemon::TrackFrameData> Frames(const std::vector<Walker>& people,
                                                   const Pose2& world_from_sensor, double t0_s,
                                                   double t1_s, common::UtcNs start_ns,
@@ -134,7 +135,14 @@ inline std::vector<daemon::TrackFrameData> Frames(const std::vector<Walker>& peo
       daemon::TrackObservation o;
       o.track_id = static_cast<std::uint32_t>(k + 1);
       o.state = daemon::TrackState::kConfirmed;
-      o.kind = daemon::MeasurementKind::kEllipse;
+      // The walker's own position: a body centre, as a shape fit with the person's size reports it.
+      o.kind = daemon::MeasurementKind::kShapeFit;
+      o.shape = daemon::ObjectShape::kTorso;
+      o.size_major_m = 0.25f;
+      o.size_minor_m = 0.15f;
+      o.size_sigma_m = 0.02f;
+      o.ellipse_yaw_rad = static_cast<float>(std::atan2(vs.y(), vs.x()) + 0.5 * M_PI);
+      o.points = 12;
       o.x_m = static_cast<float>(p.x() + noise(rng));
       o.y_m = static_cast<float>(p.y() + noise(rng));
       o.vx_mps = static_cast<float>(vs.x());

@@ -92,8 +92,20 @@ calib::AlignedTracks AlignPair(const std::vector<TrackFrameData>& sensor,
   own.id = "sensor";
   own.frames = sensor;
   input.sensors.push_back(std::move(own));
-  input.sensors.push_back(WorldRecording(others));
+  input.sensors.push_back(WorldRecording(others, options.align.model));
   calib::AlignedTracks aligned = calib::Align(input, options.align);
+  // W's positions are body centres already, corrected in their own sensors' frames (see
+  // WorldRecording): no measurement model on top (Align's would take the world origin for their
+  // sensor and add a bias along the wrong line of sight).
+  for (calib::GridTrack& t : aligned.sensors[kWorld].tracks) {
+    for (calib::TrackSample& x : t.samples) {
+      x.bias_m = 0.0f;
+      x.bias_per_major = 0.0f;
+      x.bias_per_minor = 0.0f;
+      x.bias_sigma_m = 0.0f;
+      x.model_sigma_m = 0.0f;
+    }
+  }
   // Leave out what stands still (see TrackCheckOptions::min_track_spread_m).
   for (calib::SensorTracks& sensor_tracks : aligned.sensors) {
     std::vector<calib::GridTrack> kept;
@@ -196,7 +208,8 @@ std::optional<std::string> Validate(const TrackCheckOptions& o) {
   return std::nullopt;
 }
 
-calib::SensorRecording WorldRecording(const std::vector<PlacedFrames>& others) {
+calib::SensorRecording WorldRecording(const std::vector<PlacedFrames>& others,
+                                      const daemon::MeasurementModelOptions& model) {
   calib::SensorRecording world;
   world.id = "world";
   for (std::size_t i = 0; i < others.size(); ++i) {
@@ -210,7 +223,10 @@ calib::SensorRecording WorldRecording(const std::vector<PlacedFrames>& others) {
       TrackFrameData out = frame;
       out.session_id = MixSession(frame.session_id, i);
       for (daemon::TrackObservation& t : out.tracks) {
-        const Eigen::Vector2d p = pose * Eigen::Vector2d(t.x_m, t.y_m);
+        // The body centre the measurement model implies, in the sensor's own frame (its line of
+        // sight), with what the model does not know added to the covariance.
+        const daemon::CorrectedPosition centre = daemon::CorrectedPositionOf(t, model);
+        const Eigen::Vector2d p = pose * Eigen::Vector2d(centre.x_m, centre.y_m);
         const Eigen::Vector2d v = r * Eigen::Vector2d(t.vx_mps, t.vy_mps);
         const auto& c = t.covariance;
         Eigen::Matrix4d cov;
@@ -218,6 +234,10 @@ calib::SensorRecording WorldRecording(const std::vector<PlacedFrames>& others) {
             c[1], c[4], c[5], c[6],     //
             c[2], c[5], c[7], c[8],     //
             c[3], c[6], c[8], c[9];
+        if (std::isfinite(centre.extra_variance_m2) && centre.extra_variance_m2 > 0.0) {
+          cov(0, 0) += centre.extra_variance_m2;
+          cov(1, 1) += centre.extra_variance_m2;
+        }
         const Eigen::Matrix4d w = j * cov * j.transpose();
         t.x_m = static_cast<float>(p.x());
         t.y_m = static_cast<float>(p.y());
@@ -228,8 +248,8 @@ calib::SensorRecording WorldRecording(const std::vector<PlacedFrames>& others) {
                         static_cast<float>(w(1, 1)), static_cast<float>(w(1, 2)),
                         static_cast<float>(w(1, 3)), static_cast<float>(w(2, 2)),
                         static_cast<float>(w(2, 3)), static_cast<float>(w(3, 3))};
-        // Centres seen from several sensors, whose view offsets point different ways: unbiased.
-        t.kind = daemon::MeasurementKind::kUnspecified;
+        // A body centre: AlignPair leaves W's samples without a model of their own.
+        t.kind = daemon::MeasurementKind::kShapeFit;
       }
       world.frames.push_back(std::move(out));
     }

@@ -8,9 +8,11 @@
 // grid, calib::AssociatePair, calib::FitMatches, calib::EstimatePair) then gives
 // W_from_sensor = world_from_sensor directly, and its covariance. A person seen by several other
 // sensors appears in W once per sensor; the one-to-one association takes the nearest and leaves
-// the others unmatched. W's tracks are taken as unbiased (MeasurementKind kUnspecified); the
-// sensor's own tracks keep their kind, so the view offset of its centres is estimated as in the
-// calibration (pairwise.h).
+// the others unmatched. Each of W's positions is the body centre the measurement model
+// (ingest/measurement_model.h) implies in its own sensor's frame, along that sensor's line of
+// sight, with the model's uncertainty added to its covariance; W's samples then carry no model of
+// their own. The sensor's own tracks keep their kind and go through the model as in the
+// calibration (pairwise.h), the shared size correction included.
 //
 // CheckTracks (detection): the residuals of the sensor's tracks against W under its current pose,
 // over the window given, summarised by the rigid correction that minimises them (FitMatches on the
@@ -108,8 +110,9 @@ TrackFit EstimateFromTracks(const std::vector<TrackFrameData>& sensor, const Pos
                             const Pose2& baseline = Pose2::Identity());
 
 // The other sensors' frames as one recording in the world frame (positions, velocities and their
-// covariance rotated and shifted by each pose; sessions and kinds as described above). Exposed
-// for tests.
-calib::SensorRecording WorldRecording(const std::vector<PlacedFrames>& others);
+// covariance rotated and shifted by each pose; positions corrected by `model` and kinds as
+// described above). Exposed for tests.
+calib::SensorRecording WorldRecording(const std::vector<PlacedFrames>& others,
+                                      const daemon::MeasurementModelOptions& model = {});
 
 }  // namespace lrfnet::monitoring
