@@ -52,6 +52,7 @@
 #include <thread>
 #include <vector>
 
+#include "central_daemon/fusion/assignment.h"
 #include "central_daemon/fusion/fusion.h"
 #include "common/geometry.h"
 #include "firmware_tracker/cola/scan_telegram.h"
@@ -84,60 +85,6 @@ struct Hypothesis {
   Matrix2d cov = Matrix2d::Identity();
   bool measured = false;
 };
-
-// Minimum-cost assignment (Hungarian, shortest augmenting paths), rows <= cols; cost(i, j).
-std::vector<int> Assign(const std::vector<std::vector<double>>& cost) {
-  const std::size_t n = cost.size();
-  if (n == 0) return {};
-  const std::size_t m = cost[0].size();
-  constexpr double kInf = std::numeric_limits<double>::infinity();
-  std::vector<double> u(n + 1, 0.0), v(m + 1, 0.0), slack(m + 1);
-  std::vector<std::size_t> p(m + 1, 0), way(m + 1, 0);
-  std::vector<bool> used(m + 1);
-  for (std::size_t i = 1; i <= n; ++i) {
-    p[0] = i;
-    std::size_t j0 = 0;
-    std::fill(slack.begin(), slack.end(), kInf);
-    std::fill(used.begin(), used.end(), false);
-    do {
-      used[j0] = true;
-      const std::size_t i0 = p[j0];
-      double delta = kInf;
-      std::size_t j1 = 0;
-      for (std::size_t j = 1; j <= m; ++j) {
-        if (used[j]) continue;
-        const double c = cost[i0 - 1][j - 1] - u[i0] - v[j];
-        if (c < slack[j]) {
-          slack[j] = c;
-          way[j] = j0;
-        }
-        if (slack[j] < delta) {
-          delta = slack[j];
-          j1 = j;
-        }
-      }
-      for (std::size_t j = 0; j <= m; ++j) {
-        if (used[j]) {
-          u[p[j]] += delta;
-          v[j] -= delta;
-        } else {
-          slack[j] -= delta;
-        }
-      }
-      j0 = j1;
-    } while (p[j0] != 0);
-    do {
-      const std::size_t j1 = way[j0];
-      p[j0] = p[j1];
-      j0 = j1;
-    } while (j0 != 0);
-  }
-  std::vector<int> row_to_col(n, -1);
-  for (std::size_t j = 1; j <= m; ++j) {
-    if (p[j] != 0) row_to_col[p[j] - 1] = static_cast<int>(j - 1);
-  }
-  return row_to_col;
-}
 
 struct Mot {
   double objects = 0, matches = 0, misses = 0, false_positives = 0, id_switches = 0, fragments = 0;
@@ -217,24 +164,20 @@ class MotSequence {
       if (!hyp_taken[h]) cols.push_back(h);
     }
     if (!rows.empty() && !cols.empty()) {
-      const bool transpose = rows.size() > cols.size();
-      const auto& r = transpose ? cols : rows;
-      const auto& c = transpose ? rows : cols;
-      std::vector<std::vector<double>> cost(r.size(), std::vector<double>(c.size()));
-      for (std::size_t i = 0; i < r.size(); ++i) {
-        for (std::size_t j = 0; j < c.size(); ++j) {
-          const std::size_t t = transpose ? c[j] : r[i];
-          const std::size_t h = transpose ? r[i] : c[j];
-          const double d = (hyps[h].p - truths[t].p).norm();
-          cost[i][j] = d <= kMatchRadiusM ? d : 1e6;
+      Eigen::MatrixXd cost(static_cast<Eigen::Index>(rows.size()),
+                           static_cast<Eigen::Index>(cols.size()));
+      for (std::size_t i = 0; i < rows.size(); ++i) {
+        for (std::size_t j = 0; j < cols.size(); ++j) {
+          const double d = (hyps[cols[j]].p - truths[rows[i]].p).norm();
+          cost(static_cast<Eigen::Index>(i), static_cast<Eigen::Index>(j)) =
+              d <= kMatchRadiusM ? d : fusion::kForbiddenCost;
         }
       }
-      const std::vector<int> a = Assign(cost);
-      for (std::size_t i = 0; i < r.size(); ++i) {
-        if (a[i] < 0 || cost[i][static_cast<std::size_t>(a[i])] > kMatchRadiusM) continue;
-        const std::size_t t = transpose ? c[static_cast<std::size_t>(a[i])] : r[i];
-        const std::size_t h = transpose ? r[i] : c[static_cast<std::size_t>(a[i])];
-        truth_to_hyp[t] = static_cast<int>(h);
+      const std::vector<int> a = fusion::SolveAssignment(cost);
+      for (std::size_t i = 0; i < rows.size(); ++i) {
+        if (a[i] < 0) continue;
+        const std::size_t h = cols[static_cast<std::size_t>(a[i])];
+        truth_to_hyp[rows[i]] = static_cast<int>(h);
         hyp_taken[h] = true;
       }
     }
