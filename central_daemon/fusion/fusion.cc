@@ -49,6 +49,29 @@ void Predict(double dt_s, double accel_psd, CvState& x, CvCovariance& p) {
   p = 0.5 * (p + p.transpose()).eval();
 }
 
+std::optional<FusedTrack> PredictedFusedTrack(std::uint64_t id, bool confirmed, UtcNs first_ns,
+                                              UtcNs stamp_ns, std::uint64_t updates, CvState x,
+                                              CvCovariance p, const FusionOptions& options,
+                                              UtcNs now_ns) {
+  const double age = Seconds(now_ns, stamp_ns);
+  if (age > options.max_coast_s || -age > options.max_coast_s) return std::nullopt;
+  Predict(age, options.accel_psd, x, p);
+  FusedTrack t;
+  t.id = id;
+  t.state = !confirmed                    ? FusedState::kTentative
+            : age > options.coast_after_s ? FusedState::kCoasting
+                                          : FusedState::kConfirmed;
+  t.stamp_ns = now_ns;
+  t.first_ns = first_ns;
+  t.x_m = x(0);
+  t.y_m = x(1);
+  t.vx_mps = x(2);
+  t.vy_mps = x(3);
+  t.covariance = p;
+  t.updates = updates;
+  return t;
+}
+
 double Mahalanobis2(const Eigen::Vector2d& a, const Eigen::Matrix2d& pa, const Eigen::Vector2d& b,
                     const Eigen::Matrix2d& pb, double* log_det) {
   const Eigen::Matrix2d s = pa + pb;

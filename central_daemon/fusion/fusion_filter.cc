@@ -1129,44 +1129,20 @@ std::vector<FusedTrack> FusedFilterEngine::Snapshot(UtcNs now_ns, bool include_t
   std::vector<FusedTrack> out;
   for (const auto& [id, f] : tracks_) {
     if (f.updates == 0 || (!f.confirmed && !include_tentative)) continue;
-    const double age = Seconds(now_ns, f.stamp_ns);
-    if (age > options_.max_coast_s || -age > options_.max_coast_s) continue;
-    CvState x = f.x.head<4>();
-    CvCovariance p = f.p.topLeftCorner<4, 4>();
-    internal::Predict(age, options_.accel_psd, x, p);
-    FusedTrack t;
-    t.id = id;
-    t.state = !f.confirmed                   ? FusedState::kTentative
-              : age > options_.coast_after_s ? FusedState::kCoasting
-                                             : FusedState::kConfirmed;
-    t.stamp_ns = now_ns;
-    t.first_ns = f.first_ns;
-    t.x_m = x(0);
-    t.y_m = x(1);
-    t.vx_mps = x(2);
-    t.vy_mps = x(3);
-    t.covariance = p;
-    t.updates = f.updates;
+    std::optional<FusedTrack> t = PredictedFusedTrack(
+        id, f.confirmed, f.first_ns, f.stamp_ns, f.updates, f.x.head<4>(), f.p.topLeftCorner<4, 4>(), options_, now_ns);
+    if (!t) continue;
     for (const SourceKey& k : f.sources) {
       const LocalTrack* lt = Find(k);
-      t.sources.push_back(FusedSource{k.sensor_id, k.track_id, lt != nullptr ? lt->stamp() : 0});
+      t->sources.push_back(FusedSource{k.sensor_id, k.track_id, lt != nullptr ? lt->stamp() : 0});
     }
-    out.push_back(std::move(t));
+    out.push_back(std::move(*t));
   }
   return out;
 }
 
 std::vector<WorldTrack> FusedFilterEngine::WorldTracks(UtcNs now_ns) const {
-  std::vector<WorldTrack> out;
-  for (const auto& [sensor_id, ss] : sensors_) {
-    for (const auto& [tid, lt] : ss.tracks) {
-      if (std::abs(Seconds(now_ns, lt.stamp())) > options_.source_timeout_s) continue;
-      WorldTrack w = lt.world;
-      w.fused_id = lt.fused_id;
-      out.push_back(std::move(w));
-    }
-  }
-  return out;
+  return RecentWorldTracks(sensors_, options_.source_timeout_s, now_ns);
 }
 
 }  // namespace

@@ -13,6 +13,7 @@
 #include <limits>
 #include <map>
 #include <memory>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -111,6 +112,32 @@ bool IsCovariance(const Eigen::Matrix<double, N, N>& m) {
 // P <- F(dt) P F(dt)^T + Q(|dt|, q). Backwards the process noise is still added: going back in
 // time is no more certain than going forward.
 void Predict(double dt_s, double accel_psd, common::CvState& x, common::CvCovariance& p);
+
+// What a snapshot reports of a fused track whose estimate (x, p) is from stamp_ns: predicted to
+// now_ns, its state by its age (coasting after coast_after_s), without sources (the caller's);
+// nothing once it is older or newer than max_coast_s.
+std::optional<FusedTrack> PredictedFusedTrack(std::uint64_t id, bool confirmed, common::UtcNs first_ns,
+                                              common::UtcNs stamp_ns, std::uint64_t updates,
+                                              common::CvState x, common::CvCovariance p,
+                                              const FusionOptions& options, common::UtcNs now_ns);
+
+// Every sensor's local tracks heard within source_timeout_s of now_ns, in the world frame with
+// the fused track they are bound to. Sensors: a map of sensor id to a state with `tracks`, a map
+// of local tracks with `world`, `fused_id` and `stamp()`.
+template <typename Sensors>
+std::vector<WorldTrack> RecentWorldTracks(const Sensors& sensors, double source_timeout_s,
+                                          common::UtcNs now_ns) {
+  std::vector<WorldTrack> out;
+  for (const auto& [sensor_id, ss] : sensors) {
+    for (const auto& [tid, lt] : ss.tracks) {
+      if (std::abs(Seconds(now_ns, lt.stamp())) > source_timeout_s) continue;
+      WorldTrack w = lt.world;
+      w.fused_id = lt.fused_id;
+      out.push_back(std::move(w));
+    }
+  }
+  return out;
+}
 
 // Squared Mahalanobis distance of two 2-vectors with the sum of their covariances; +inf when that
 // is not positive definite. log_det (optional): ln det of the sum.
