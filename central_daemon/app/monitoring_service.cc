@@ -241,6 +241,7 @@ nlohmann::json MonitoringService::StatsJson() const {
     s["moves"] = w.moves;
     s["corrections"] = w.corrections;
     s["relearns"] = w.relearns;
+    s["max_track_chi2"] = w.max_track_chi2;
     s["detail"] = w.detail;
     sensors[id] = std::move(s);
   }

@@ -70,6 +70,10 @@ std::optional<std::string> Validate(const MonitorOptions& o) {
   if (!(o.correct_min_inliers >= 0.0 && o.correct_min_inliers <= 1.0)) {
     return "correct_min_inliers must be in [0, 1]";
   }
+  if (!positive(o.check_max_yaw_sigma_deg, 180.0)) return "check_max_yaw_sigma_deg must be in (0, 180]";
+  if (!positive(o.check_max_translation_sigma_m, 1000.0)) {
+    return "check_max_translation_sigma_m must be in (0, 1000]";
+  }
   if (!positive(o.correction_min_tracks_s, 3600.0)) {
     return "correction_min_tracks_s must be in (0, 3600]";
   }
@@ -125,6 +129,7 @@ void Monitor::SetPoses(const std::vector<SensorPose>& poses,
       watch.moves = old->second.moves;
       watch.corrections = old->second.corrections;
       watch.relearns = old->second.relearns;
+      watch.max_track_chi2 = old->second.max_track_chi2;
       if (same_pose && old->second.state == WatchState::kWatched) {
         watch.reference = old->second.reference;
         watch.reference_from_sensor = old->second.reference_from_sensor;
@@ -168,13 +173,18 @@ void Monitor::OnBackground(const std::string& sensor_id, const daemon::Backgroun
     // A snapshot that aligns with the reference as a whole gives the pose (checked against the
     // tracks in Update); a partial one refines the estimate only.
     const Pose2 motion = watch.reference_from_sensor.inverse() * v.reference_from_current;
+    // Short of settled_min_inliers the snapshot mixes the old scene (the nearer returns the
+    // tracker keeps as foreground until absorb_after_s) with the new one, and the whole-scene
+    // motion falls between the two: a candidate only when the tracks can check it to within the
+    // correction's bounds (Update), a changed-part estimate otherwise.
+    const bool whole = v.inliers_after >= options_.settled_min_inliers;
     if (v.inliers_after >= options_.correct_min_inliers && !v.partial &&
         v.kind != BackgroundVerdictKind::kSceneChanged) {
       watch.background_candidate = motion;
       watch.background_candidate_inliers = v.inliers_after;
       watch.background_candidate_covariance = v.covariance;
       watch.background_candidate_detail = v.reason;
-    } else if (v.kind == BackgroundVerdictKind::kMoved) {
+    } else if (v.kind == BackgroundVerdictKind::kMoved && (v.partial || whole)) {
       watch.estimated_motion = motion;
     }
     return;
@@ -188,21 +198,41 @@ void Monitor::OnBackground(const std::string& sensor_id, const daemon::Backgroun
   const bool settled = !v.partial && v.kind != BackgroundVerdictKind::kSceneChanged &&
                        v.inliers_after >= options_.settled_min_inliers &&
                        v.inliers_after >= v.inliers_before;
-  if (watch.provisional && !v.partial && v.kind != BackgroundVerdictKind::kSceneChanged &&
-      v.inliers_after >= options_.correct_min_inliers && v.inliers_after >= v.inliers_before) {
-    // Each such snapshot refines the pose until one agrees with it: the tracker's background has
-    // then stopped changing.
-    const Pose2 motion = watch.reference_from_sensor.inverse() * v.reference_from_current;
+  const Pose2 refinement = watch.reference_from_sensor.inverse() * v.reference_from_current;
+  const bool within_refinement =
+      std::abs(common::RadToDeg(refinement.yaw_rad)) <= options_.refine_max_yaw_deg &&
+      std::hypot(refinement.x_m, refinement.y_m) <= options_.refine_max_translation_m;
+  // Within relearn_hold_s of the move even a snapshot with settled_min_inliers may still hold a
+  // few of the old scene's nearer returns (the tracker absorbs them after absorb_after_s), enough
+  // to pull its motion by a few tenths of a degree: every settled snapshot until then refines the
+  // pose (a motion beyond the refinement bounds is a new move, judged below).
+  if (settling && settled && within_refinement && !watch.provisional) {
+    const bool agrees = std::abs(common::RadToDeg(refinement.yaw_rad)) <= kAgreeYawDeg &&
+                        std::hypot(refinement.x_m, refinement.y_m) <= kAgreeTranslationM;
+    if (!agrees) {
+      Correct(watch, now_ns, "background", watch.world_from_sensor * refinement,
+              MovedCovariance(watch, v.covariance), "refined by the background: " + v.reason,
+              true);
+    } else if (watch.state == WatchState::kSettling) {
+      watch.state = WatchState::kWatched;
+    }
+    watch.background_refined = true;
+    return;
+  }
+  if (watch.provisional && settled) {
+    // Each settled snapshot refines a pose from tracks until one agrees with it: the tracker's
+    // background has then stopped changing. (A mixed one would pull it towards the old scene.)
+    const Pose2 motion = refinement;
     const bool agrees = std::abs(common::RadToDeg(motion.yaw_rad)) <= kAgreeYawDeg &&
                         std::hypot(motion.x_m, motion.y_m) <= kAgreeTranslationM;
     if (!agrees) {
       Correct(watch, now_ns, "background", watch.world_from_sensor * motion,
               MovedCovariance(watch, v.covariance), "refined by the background: " + v.reason,
-              settled);
+              true);
       watch.provisional = true;
     } else {
       watch.provisional = false;
-      if (settled) watch.state = WatchState::kWatched;
+      watch.state = WatchState::kWatched;
     }
     watch.background_refined = true;
     return;
@@ -216,7 +246,8 @@ void Monitor::OnBackground(const std::string& sensor_id, const daemon::Backgroun
     case BackgroundVerdictKind::kMoved: {
       const Pose2 motion = v.motion;
       Flag(watch, now_ns, v.partial ? "background (changed part)" : "background", motion, v.reason);
-      // A snapshot that already holds the whole new scene is the correction too.
+      // A snapshot that already holds the whole new scene is the correction too (checked by the
+      // tracks in Update when it holds less than settled_min_inliers of it).
       if (!v.partial && v.inliers_after >= options_.correct_min_inliers) {
         watch.background_candidate = motion;
         watch.background_candidate_inliers = v.inliers_after;
@@ -327,6 +358,9 @@ void Monitor::Update(common::UtcNs now_ns, const FrameSource& source) {
       const bool beyond_refinement =
           std::abs(common::RadToDeg(motion.yaw_rad)) > options_.refine_max_yaw_deg ||
           std::hypot(motion.x_m, motion.y_m) > options_.refine_max_translation_m;
+      if (fit.enough && others.size() >= 2 && !settling) {
+        watch.max_track_chi2 = std::max(watch.max_track_chi2, fit.chi2);
+      }
       // With one other sensor, a disagreement does not say which of the two moved.
       if (fit.moved && others.size() >= 2 && (!settling || beyond_refinement)) {
         if (++watch.track_strikes >= options_.track_confirmations &&
@@ -377,12 +411,27 @@ void Monitor::Update(common::UtcNs now_ns, const FrameSource& source) {
       const TrackFit check = others.empty() ? TrackFit{}
                                             : CheckTracks(own, candidate, others, options_.tracks,
                                                           watch.track_baseline);
-      // Unchecked by tracks, only a snapshot that holds the whole new scene gives the pose: one
-      // taken while the tracker re-learns its background mixes the old scene and the new, and its
-      // motion falls short of the move.
-      const bool unchecked_and_mixed =
-          !check.enough && watch.background_candidate_inliers < options_.settled_min_inliers;
-      if (!check.moved && !unchecked_and_mixed) {
+      // Only a snapshot that holds the whole new scene gives the pose on its own: one taken while
+      // the tracker re-learns its background mixes the old scene and the new, and its motion falls
+      // between the two (by a degree after a 2 degree turn, which a few seconds of tracks cannot
+      // tell from nothing at chi^2 < min_chi2). Such a snapshot counts only when the tracks place
+      // the sensor to within check_max_yaw_sigma_deg / check_max_translation_sigma_m (one
+      // standard deviation) and put it within twice that of the snapshot's pose.
+      const bool mixed = watch.background_candidate_inliers < options_.settled_min_inliers;
+      bool confirmed = false;
+      if (check.enough) {
+        const double yaw_bound_rad = common::DegToRad(options_.check_max_yaw_sigma_deg);
+        const double shift_bound_m = options_.check_max_translation_sigma_m;
+        const Pose2 off = candidate.inverse() * check.world_from_sensor *
+                          watch.track_baseline.inverse();
+        confirmed =
+            std::sqrt(std::max(0.0, check.covariance(2, 2))) <= yaw_bound_rad &&
+            std::sqrt(std::max(0.0, std::max(check.covariance(0, 0), check.covariance(1, 1)))) <=
+                shift_bound_m &&
+            std::abs(off.yaw_rad) <= 2.0 * yaw_bound_rad &&
+            std::hypot(off.x_m, off.y_m) <= 2.0 * shift_bound_m;
+      }
+      if (!check.moved && (!mixed || confirmed)) {
         Correct(watch, now_ns, "background", candidate,
                 MovedCovariance(watch, watch.background_candidate_covariance),
                 watch.background_candidate_detail +
@@ -397,7 +446,9 @@ void Monitor::Update(common::UtcNs now_ns, const FrameSource& source) {
         watch.background_candidate.reset();
       } else {
         watch.detail = "the background suggests " + MotionText(*watch.background_candidate) +
-                       ", waiting for tracks to check it or a settled snapshot";
+                       " from a snapshot that still mixes the old scene with the new, waiting "
+                       "for a settled snapshot or the tracks" +
+                       (check.enough ? " (" + check.reason + ")" : "");
       }
     }
     if (others.empty() || own.empty()) continue;

@@ -76,8 +76,13 @@ struct MonitorOptions {
   // they need is what "nothing moved" looks like to the tracks (track_check.h, baseline); tracks
   // flag nothing before.
   int track_baseline_checks = 10;
-  // A background correction needs this share of the snapshot's points on the reference scene.
+  // A background correction needs this share of the snapshot's points on the reference scene;
+  // short of settled_min_inliers (a snapshot that may mix the old scene and the new) also the
+  // tracks since the flag placing the sensor to within these standard deviations, and within
+  // twice them of the snapshot's pose.
   double correct_min_inliers = 0.9;
+  double check_max_yaw_sigma_deg = 0.1;
+  double check_max_translation_sigma_m = 0.025;
   // A snapshot holds the whole new scene (the tracker has re-learned its background after a
   // move) when this share of its points lies on the reference scene under the ICP's motion; such
   // a snapshot refines a pose that came from tracks.
@@ -156,6 +161,10 @@ struct SensorWatch {
   std::uint64_t moves = 0;
   std::uint64_t corrections = 0;
   std::uint64_t relearns = 0;
+  // The largest chi^2 of a track check that could flag (after the baseline, against two or more
+  // other sensors, not while re-learning after a move): how close the tracks of a sensor that
+  // stays put come to tracks.min_chi2.
+  double max_track_chi2 = 0.0;
   // Internal decision state.
   int track_strikes = 0;
   std::optional<daemon::BackgroundScan> pending_relearn;  // a changed scene awaiting the tracks
