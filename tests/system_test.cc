@@ -36,11 +36,14 @@ using std::chrono::milliseconds;
 using std::chrono::seconds;
 
 // A 12 x 8 m room, three TiM561 (10 m, 15 Hz) in three corners, two people walking loops the
-// whole time, a cabinet for the background; s3 is bumped at kMoveS.
-constexpr double kMoveS = 42.0;
+// whole time, a cabinet for the background; s3 is bumped at kMoveS (the daemon calibrates after
+// about 15 s, then a tracker is restarted). The scenario lasts long enough for the correction
+// (kCorrectedWithinS); it is stopped as soon as the live view shows s3 fused again.
+constexpr double kMoveS = 32.0;
+constexpr double kCorrectedWithinS = 22.0;
 constexpr const char* kScenario = R"(name: system_room
 seed: 5
-duration_s: 66
+duration_s: 56
 world:
   walls:
     - [[0, 0], [12, 0], [12, 8], [0, 8], [0, 0]]
@@ -50,7 +53,7 @@ sensors:
   - {id: s1, model: tim561, x_m: 0.3, y_m: 0.3, yaw_deg: 40}
   - {id: s2, model: tim561, x_m: 11.7, y_m: 0.3, yaw_deg: 140}
   - {id: s3, model: tim561, x_m: 11.7, y_m: 7.7, yaw_deg: -140,
-     moves: [{at_s: 42, x_m: 11.64, y_m: 7.63, yaw_deg: -137}]}
+     moves: [{at_s: 32, x_m: 11.64, y_m: 7.63, yaw_deg: -137}]}
 targets:
   - {shape: person, a_m: 0.25, b_m: 0.15, path: [[2.5, 2], [9.5, 2], [9.5, 5.5], [2.5, 5.5]], speed_mps: 1.2, loop: true}
   - {shape: person, a_m: 0.22, b_m: 0.14, path: [[4, 3.5], [8.5, 3.5], [6.5, 6]], speed_mps: 1.0, loop: true}
@@ -208,7 +211,7 @@ TEST(SystemTest, SimTrackersDaemonCalibrateFuseSurviveATrackerRestartAndCorrectA
 
   // The bump: the live view shows s3 as moved (and only s3), then fused again with its new pose.
   bool seen_moved = false, seen_back = false, others_moved = false;
-  const auto deadline = started + seconds(static_cast<int>(kMoveS) + 22);
+  const auto deadline = started + seconds(static_cast<int>(kMoveS + kCorrectedWithinS));
   while (std::chrono::steady_clock::now() < deadline && !seen_back) {
     const nlohmann::json state = nlohmann::json::parse(
         HttpGet(static_cast<std::uint16_t>(std::stoi(live_port)), "/state"), nullptr, false);
@@ -227,11 +230,14 @@ TEST(SystemTest, SimTrackersDaemonCalibrateFuseSurviveATrackerRestartAndCorrectA
     std::this_thread::sleep_for(milliseconds(200));
   }
   EXPECT_TRUE(seen_moved) << "s3 never shown as moved: " << daemon.err();
-  EXPECT_TRUE(seen_back) << "s3 not corrected within 22 s of the bump: " << daemon.err();
+  EXPECT_TRUE(seen_back) << "s3 not corrected within " << kCorrectedWithinS
+                         << " s of the bump: " << daemon.err();
   EXPECT_FALSE(others_moved) << daemon.err();
 
-  // The scenario ends; the daemon stops on SIGINT.
-  EXPECT_EQ(sim.Wait(seconds(60)), 0) << sim.err();
+  // Nothing more to see: the devices stop (the rest of the scenario adds nothing the checks below
+  // need), then the daemon on SIGINT.
+  sim.Signal(SIGINT);
+  EXPECT_EQ(sim.Wait(seconds(20)), 0) << sim.err();
   daemon.Signal(SIGINT);
   ASSERT_EQ(daemon.Wait(seconds(20)), 0) << daemon.err();
   for (auto& tracker : trackers) tracker->Signal(SIGTERM);
@@ -299,7 +305,10 @@ TEST(SystemTest, SimTrackersDaemonCalibrateFuseSurviveATrackerRestartAndCorrectA
   {
     std::ifstream truth(dir / "sim/truth.yaml");
     for (std::string line; std::getline(truth, line);) {
-      if (line.find("id: \"s3\", from_s: 42") == std::string::npos) continue;
+      if (line.find("id: \"s3\", from_s: " + std::to_string(static_cast<int>(kMoveS))) ==
+          std::string::npos) {
+        continue;
+      }
       const auto at = line.find("from_utc_ns: ");
       if (at != std::string::npos) bump_ns = std::stoll(line.substr(at + 13));
     }
