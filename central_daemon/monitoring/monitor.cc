@@ -324,8 +324,8 @@ void Monitor::Update(common::UtcNs now_ns, const FrameSource& source) {
       const std::vector<PlacedFrames> others = Others(id, window);
       if (others.empty()) continue;
       ++watch.track_checks;
-      const TrackFit fit = CheckTracks(window[id], watch.world_from_sensor, others, options_.tracks,
-                                       watch.track_baseline);
+      TrackFit fit = CheckTracks(window[id], watch.world_from_sensor, others, options_.tracks,
+                                 watch.track_baseline);
       if (watch.baseline_checks < options_.track_baseline_checks) {
         // Learning what "nothing moved" looks like to the tracks.
         if (fit.enough && fit.rms_m <= options_.tracks.max_fit_rms_m &&
@@ -337,6 +337,29 @@ void Monitor::Update(common::UtcNs now_ns, const FrameSource& source) {
           watch.track_baseline = Pose2{mean.x(), mean.y(), mean.z()};
         }
         continue;
+      }
+      if (fit.enough && !fit.moved && fit.rms_m > options_.tracks.max_fit_rms_m) {
+        // The residuals disagree within the window: a move inside it leaves the tracks before it
+        // and after it at two poses (after 5 degrees, half a metre apart at 6 m), which no rigid
+        // correction fits. The newest half of the window alone, tested against its own (larger)
+        // covariance.
+        const common::UtcNs half_from_ns = now_ns - window_ns / 2;
+        std::map<std::string, std::vector<daemon::TrackFrameData>> recent;
+        for (const auto& [other_id, frames] : window) {
+          auto& kept = recent[other_id];
+          for (const daemon::TrackFrameData& f : frames) {
+            if (f.scan_start_ns >= half_from_ns) kept.push_back(f);
+          }
+        }
+        const std::vector<PlacedFrames> recent_others = Others(id, recent);
+        if (recent_others.size() >= 2) {
+          TrackFit tail = CheckTracks(recent[id], watch.world_from_sensor, recent_others,
+                                      options_.tracks, watch.track_baseline);
+          if (tail.moved) {
+            tail.reason += " (the newest half of the window)";
+            fit = tail;
+          }
+        }
       }
       if (fit.moved && watch.provisional && !watch.background_refined &&
           fit.rms_m <= options_.correction_max_rms_m &&

@@ -209,6 +209,31 @@ TEST(Monitor, WithoutBackgroundsTheTracksFlagAndCorrect) {
   }
 }
 
+TEST(Monitor, ALargeTurnIsFlaggedByTheTracksBeforeTheirWindowHasPassed) {
+  // Tracks before and after a 6 degree turn lie at two poses that no rigid correction of the
+  // whole window fits; the newest half of it shows the move.
+  MonitorOptions options;
+  Monitor monitor(options);
+  monitor.SetPoses(Calibrated(), {});
+  const Pose2 bumped = kS2 * Pose2{0.0, 0.0, common::DegToRad(6.0)};
+  const FakeFrames frames(40.0, {{0.0, kS2}, {20.0, bumped}});
+  common::UtcNs flagged = 0;
+  std::string detail;
+  for (double t = 1.0; t <= 40.0 && !flagged; t += 1.0) {
+    monitor.Update(At(t), frames);
+    for (const MonitorEvent& e : monitor.TakeEvents()) {
+      ASSERT_EQ(e.kind, MonitorEventKind::kMoved) << e.detail;
+      EXPECT_EQ(e.sensor_id, "s2") << e.detail;
+      flagged = e.stamp_ns;
+      detail = e.detail;
+    }
+  }
+  ASSERT_NE(flagged, 0);
+  EXPECT_LE(flagged, At(20.0 + 0.75 * options.track_window_s)) << detail;
+  ASSERT_TRUE(Watch(monitor, "s2").estimated_motion.yaw_rad != 0.0);
+  EXPECT_NEAR(common::RadToDeg(Watch(monitor, "s2").estimated_motion.yaw_rad), 6.0, 1.0) << detail;
+}
+
 TEST(Monitor, FurnitureMovedWhileTheTracksAgreeReLearnsTheBackground) {
   Monitor monitor(MonitorOptions{});
   monitor.SetPoses(Calibrated(), References());
