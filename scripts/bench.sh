@@ -37,7 +37,8 @@ if [ "${LRFNET_SKIP_CROSS:-0}" != 1 ] && command -v qemu-aarch64 >/dev/null; the
   qemu-aarch64 -L /usr/aarch64-linux-gnu build-aarch64/auth_benchmark --datagrams 5000 --append \
     --out results/auth_benchmark.md --platform "aarch64 under qemu-user (tracker only: no daemon)"
 fi
-# A moved sensor (0.5/2/10 deg, 0.02/0.1/0.5 m) and furniture only, through sim → trackers → lrfnetd --input.
+# A moved sensor (0.5/2/10 deg, 0.02/0.1/0.5 m; 2/5 deg, 0.1/0.2 m with the tracks alone) and furniture only,
+# through sim → trackers → lrfnetd --input.
 "$build_dir/tests/bench/monitoring_benchmark" --tool "$build_dir/tools/lrfnet" \
   --tracker "$build_dir/firmware_tracker/app/lrfnet-tracker" --daemon "$build_dir/central_daemon/app/lrfnetd" \
   --seeds 5 --out results/monitoring_benchmark.md
