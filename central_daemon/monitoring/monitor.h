@@ -8,7 +8,8 @@
 //   kWatched   placed, fused. Every new background snapshot is checked against the reference (the
 //              snapshot in place when the pose was set; without one, the first snapshot after it);
 //              every track_period_s its tracks of the last track_window_s are checked against the
-//              other watched sensors' tracks.
+//              other watched sensors' tracks (and those of the newest half of the window alone
+//              when the whole window fits no rigid correction: a move inside it).
 //   kMoved     flagged: its tracks must not feed the fused output (Excluded() is true from the
 //              moment of the flag). Flagged when a snapshot says the whole scene moved (or its
 //              changed part, see background_check.h), or when track_confirmations consecutive track
@@ -24,14 +25,19 @@
 //       (stage 1 with at least correct_min_inliers of its points on the reference scene): the
 //       pose is the old one times the ICP's motion (exact where the scene has structure). When
 //       the tracks since the flag associate enough, they must agree with it (CheckTracks not
-//       "moved" under the corrected pose); otherwise the next snapshot is tried. Without enough
-//       tracks to check it, only a snapshot with settled_min_inliers on the reference scene (one
-//       that holds the whole new scene, not a mix of the old and the new) gives the pose;
+//       "moved" under the corrected pose); otherwise the next snapshot is tried. A snapshot with
+//       less than settled_min_inliers on the reference scene may mix the old scene (nearer
+//       returns the tracker keeps as foreground until it absorbs them) with the new, and its
+//       motion falls between the two: it gives the pose only when the tracks since the flag place
+//       the sensor to within check_max_yaw_sigma_deg / check_max_translation_sigma_m and within
+//       twice that of it;
 //     - else the tracks since the flag (from correction_min_tracks_s of them on, every
 //       track_period_s): EstimateFromTracks started from the pose the detection suggested, with
 //       every other pose fixed (the calibration's pairwise association, refit and MSAC search).
-//   A pose corrected from tracks is refined by the first snapshot after it that aligns with the
-//   reference as a whole (event kCorrected again, method "background").
+//   A pose corrected from tracks is refined by each settled snapshot after it until one agrees
+//   with it (event kCorrected again, method "background"); so is one corrected from the
+//   background, by every settled snapshot within relearn_hold_s of the move whose motion stays
+//   within the refinement bounds (a settled snapshot may still hold a few old returns).
 //   Only one sensor is flagged by tracks per check, and only against at least two other watched
 //   sensors: when one sensor moved, the others' tracks are compared with its tracks too and look a
 //   little off; once it is flagged and left out, they agree again (every sensor's strikes start
