@@ -287,6 +287,12 @@ TEST(Monitor, OptionsAreValidated) {
   o.correction_max_tracks_s = 1.0;
   EXPECT_NE(Validate(o).value_or("").find("correction_max_tracks_s"), std::string::npos);
   o = {};
+  o.check_max_yaw_sigma_deg = 0.0;
+  EXPECT_NE(Validate(o).value_or("").find("check_max_yaw_sigma_deg"), std::string::npos);
+  o = {};
+  o.check_max_translation_sigma_m = std::nan("");
+  EXPECT_NE(Validate(o).value_or("").find("check_max_translation_sigma_m"), std::string::npos);
+  o = {};
   o.tracks.min_matches = 1;
   EXPECT_NE(Validate(o).value_or("").find("tracks.min_matches"), std::string::npos);
   o = {};
