@@ -476,8 +476,8 @@ void VisitMonitoring(DaemonConfig& c, ConfigVisitor& v) {
           "A snapshot corrects a moved sensor's pose when this share of its points lies on the "
           "reference scene under the ICP's motion; short of 0.97 (a snapshot that may still mix "
           "the old scene with the new while the tracker re-learns) only when the tracks since "
-          "the flag place the sensor to within 0.1 deg / 0.025 m (one standard deviation) and within "
-          "twice that of it.");
+          "the flag place the sensor to within 0.1 deg / 0.025 m (one standard deviation) and "
+          "within twice that of it.");
   v.Field("correction_min_tracks_s", o.correction_min_tracks_s,
           "Without such a snapshot, the pose is estimated from the tracks since the flag once "
           "there are this many seconds of them.");

@@ -70,7 +70,9 @@ std::optional<std::string> Validate(const MonitorOptions& o) {
   if (!(o.correct_min_inliers >= 0.0 && o.correct_min_inliers <= 1.0)) {
     return "correct_min_inliers must be in [0, 1]";
   }
-  if (!positive(o.check_max_yaw_sigma_deg, 180.0)) return "check_max_yaw_sigma_deg must be in (0, 180]";
+  if (!positive(o.check_max_yaw_sigma_deg, 180.0)) {
+    return "check_max_yaw_sigma_deg must be in (0, 180]";
+  }
   if (!positive(o.check_max_translation_sigma_m, 1000.0)) {
     return "check_max_translation_sigma_m must be in (0, 1000]";
   }
@@ -211,8 +213,7 @@ void Monitor::OnBackground(const std::string& sensor_id, const daemon::Backgroun
                         std::hypot(refinement.x_m, refinement.y_m) <= kAgreeTranslationM;
     if (!agrees) {
       Correct(watch, now_ns, "background", watch.world_from_sensor * refinement,
-              MovedCovariance(watch, v.covariance), "refined by the background: " + v.reason,
-              true);
+              MovedCovariance(watch, v.covariance), "refined by the background: " + v.reason, true);
     } else if (watch.state == WatchState::kSettling) {
       watch.state = WatchState::kWatched;
     }
@@ -227,8 +228,7 @@ void Monitor::OnBackground(const std::string& sensor_id, const daemon::Backgroun
                         std::hypot(motion.x_m, motion.y_m) <= kAgreeTranslationM;
     if (!agrees) {
       Correct(watch, now_ns, "background", watch.world_from_sensor * motion,
-              MovedCovariance(watch, v.covariance), "refined by the background: " + v.reason,
-              true);
+              MovedCovariance(watch, v.covariance), "refined by the background: " + v.reason, true);
       watch.provisional = true;
     } else {
       watch.provisional = false;
@@ -445,8 +445,8 @@ void Monitor::Update(common::UtcNs now_ns, const FrameSource& source) {
       if (check.enough) {
         const double yaw_bound_rad = common::DegToRad(options_.check_max_yaw_sigma_deg);
         const double shift_bound_m = options_.check_max_translation_sigma_m;
-        const Pose2 off = candidate.inverse() * check.world_from_sensor *
-                          watch.track_baseline.inverse();
+        const Pose2 off =
+            candidate.inverse() * check.world_from_sensor * watch.track_baseline.inverse();
         confirmed =
             std::sqrt(std::max(0.0, check.covariance(2, 2))) <= yaw_bound_rad &&
             std::sqrt(std::max(0.0, std::max(check.covariance(0, 0), check.covariance(1, 1)))) <=

@@ -267,8 +267,7 @@ int main(int argc, char** argv) {
       }
       for (const auto& [id, sensor] : stats["monitoring"]["sensors"].items()) {
         if (id == "s2" && !c.furniture) continue;
-        tally.max_track_chi2 =
-            std::max(tally.max_track_chi2, sensor.value("max_track_chi2", 0.0));
+        tally.max_track_chi2 = std::max(tally.max_track_chi2, sensor.value("max_track_chi2", 0.0));
       }
       std::int64_t flagged_ns = 0, corrected_ns = 0;
       for (const auto& e : stats["monitoring"]["history"]) {
