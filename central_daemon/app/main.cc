@@ -50,6 +50,7 @@
 #include "central_daemon/app/live_state.h"
 #include "central_daemon/app/monitoring_service.h"
 #include "central_daemon/app/mqtt_service.h"
+#include "central_daemon/app/recorder.h"
 #include "central_daemon/app/run_setup.h"
 #include "central_daemon/app/stats_json.h"
 #include "central_daemon/app/zone_service.h"
@@ -73,36 +74,6 @@ int UsageError(const std::string& message) {
   std::fprintf(stderr, "lrfnetd: %s (see lrfnetd --help)\n", message.c_str());
   return kExitUsage;
 }
-
-// RecordSink over the recording writer; logs write errors once per burst.
-class Recorder final : public RecordSink {
- public:
-  explicit Recorder(const RecordingWriterOptions& options) : writer_(options) {}
-  std::optional<std::string> Open(common::UtcNs now_ns) { return writer_.Open(now_ns); }
-  std::optional<std::string> Close() { return writer_.Close(); }
-  void Record(std::span<const std::uint8_t> datagram, std::string_view source,
-              common::UtcNs receive_ns) override {
-    writer_.Append(datagram, source, receive_ns);
-    CheckErrors();
-  }
-  void FlushIfDue(common::UtcNs now_ns) override {
-    writer_.FlushIfDue(now_ns);
-    CheckErrors();
-  }
-  const RecordingWriter& writer() const { return writer_; }
-
- private:
-  void CheckErrors() {
-    const RecordingWriterCounters& c = writer_.counters();
-    if (c.write_errors != reported_errors_) {
-      spdlog::error("recording {}: write error ({}), {} entries lost so far",
-                    writer_.current_path(), std::strerror(c.last_errno), c.dropped_entries);
-      reported_errors_ = c.write_errors;
-    }
-  }
-  RecordingWriter writer_;
-  std::uint64_t reported_errors_ = 0;
-};
 
 class Replies final : public RequestSink {
  public:
