@@ -49,6 +49,7 @@
 #include "central_daemon/app/live_feed.h"
 #include "central_daemon/app/live_state.h"
 #include "central_daemon/app/monitoring_service.h"
+#include "central_daemon/app/mqtt_output.h"
 #include "central_daemon/app/mqtt_service.h"
 #include "central_daemon/app/recorder.h"
 #include "central_daemon/app/run_setup.h"
@@ -105,80 +106,6 @@ void LogEvents(Daemon& daemon, double silent_after_s) {
         break;
     }
   }
-}
-
-// The MQTT output of a run: the service, its publisher and the sink between them.
-struct MqttOutput {
-  std::unique_ptr<MqttPublisher> publisher;
-  std::unique_ptr<MqttPublisherSink> sink;
-  std::unique_ptr<MqttService> service;
-};
-
-// Starts the MQTT output when configured. False (with the error printed) when it cannot start.
-bool StartMqtt(const DaemonConfig& config, bool offline, MqttOutput* out) {
-  if (config.mqtt.broker.empty()) return true;
-  out->sink = std::make_unique<MqttPublisherSink>(nullptr);
-  out->service = std::make_unique<MqttService>(config, out->sink.get(), Writer());
-  MqttOptions options = PublisherOptions(config, *out->service);
-  options.wait_when_full = offline;
-  out->publisher = std::make_unique<MqttPublisher>(options);
-  out->sink->set_publisher(out->publisher.get());
-  std::string error;
-  if (!out->publisher->Start(&error)) {
-    std::fprintf(stderr, "lrfnetd: %s\n", error.c_str());
-    return false;
-  }
-  spdlog::info("mqtt: publishing to {} as {}/{}/...", config.mqtt.broker, config.mqtt.topic_prefix,
-               config.mqtt.site);
-  return true;
-}
-
-// The final zone states and "offline", then a clean disconnect (the will is not used).
-void StopMqtt(MqttOutput* mqtt, const ZoneService& zones, common::UtcNs now_ns, double timeout_s) {
-  if (!mqtt->service) return;
-  mqtt->service->PublishZones(zones);
-  mqtt->service->PublishStatus(false, now_ns);
-  mqtt->publisher->Stop(timeout_s);
-  const MqttCounters c = mqtt->publisher->counters();
-  spdlog::info(
-      "mqtt: {} messages sent, {} dropped (queue full {}, broker unreachable {}, lost in "
-      "flight {}), {} connects, {} lost connections",
-      c.sent, c.dropped_queue_full + c.dropped_disconnected + c.lost_in_flight,
-      c.dropped_queue_full, c.dropped_disconnected, c.lost_in_flight, c.connects, c.disconnects);
-}
-
-// What the monitoring changed, to MQTT: each watched sensor's state (in its health) and the poses
-// in use (retained calibration).
-void PublishMonitoring(const MonitoringService& monitoring, MqttOutput* mqtt,
-                       common::UtcNs stamp_ns) {
-  if (!mqtt->service) return;
-  std::map<std::string, std::string, std::less<>> states;
-  for (const auto& [id, watch] : monitoring.monitor().sensors()) {
-    states[id] = monitoring::ToString(watch.state);
-  }
-  mqtt->service->SetMonitorStates(std::move(states));
-  mqtt->service->PublishCalibration(monitoring.result(), stamp_ns);
-}
-
-nlohmann::json MqttJson(const MqttOutput& mqtt) {
-  const MqttCounters c = mqtt.publisher->counters();
-  const MqttServiceCounters& s = mqtt.service->counters();
-  return {{"submitted", c.submitted},
-          {"sent", c.sent},
-          {"dropped_queue_full", c.dropped_queue_full},
-          {"dropped_disconnected", c.dropped_disconnected},
-          {"lost_in_flight", c.lost_in_flight},
-          {"retained_replaced", c.retained_replaced},
-          {"publish_errors", c.publish_errors},
-          {"connects", c.connects},
-          {"connect_failures", c.connect_failures},
-          {"disconnects", c.disconnects},
-          {"resent", c.resent},
-          {"unsent", c.queued + c.in_flight},
-          {"objects", s.objects},
-          {"zones", s.zones},
-          {"calibrations", s.calibrations},
-          {"health", s.health}};
 }
 
 bool WriteStats(const std::string& path, const Daemon& daemon, const UdpReceiver* receiver,
