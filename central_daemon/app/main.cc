@@ -15,63 +15,28 @@
 // (section `monitoring`): a moved one is left out of the fusion, its pose estimated again and
 // calibration.output rewritten with the event.
 
-#include <fcntl.h>
 #include <spdlog/sinks/stdout_color_sinks.h>
 #include <spdlog/spdlog.h>
-#include <time.h>
-#include <unistd.h>
 
-#include <boost/asio/io_context.hpp>
-#include <boost/asio/signal_set.hpp>
-#include <boost/asio/steady_timer.hpp>
 #include <boost/program_options.hpp>
-#include <chrono>
 #include <csignal>
 #include <cstdio>
 #include <exception>
-#include <fstream>
 #include <iostream>
-#include <memory>
-#include <nlohmann/json.hpp>
 #include <optional>
-#include <random>
-#include <sstream>
 #include <string>
+#include <utility>
 #include <vector>
 
-#include "central_daemon/app/auth_files.h"
-#include "central_daemon/app/calibration_input.h"
-#include "central_daemon/app/calibration_service.h"
 #include "central_daemon/app/config.h"
-#include "central_daemon/app/daemon.h"
-#include "central_daemon/app/foxglove_feed.h"
-#include "central_daemon/app/fusion_service.h"
-#include "central_daemon/app/live_feed.h"
 #include "central_daemon/app/live_run.h"
-#include "central_daemon/app/live_state.h"
-#include "central_daemon/app/monitoring_service.h"
-#include "central_daemon/app/mqtt_output.h"
-#include "central_daemon/app/mqtt_service.h"
 #include "central_daemon/app/offline_run.h"
-#include "central_daemon/app/recorder.h"
-#include "central_daemon/app/run_report.h"
 #include "central_daemon/app/run_setup.h"
-#include "central_daemon/app/stats_json.h"
-#include "central_daemon/app/zone_service.h"
-#include "central_daemon/calibration/calibration_yaml.h"
-#include "central_daemon/io/datagram_source.h"
-#include "central_daemon/io/live_view_server.h"
-#include "central_daemon/io/recording_writer.h"
-#include "central_daemon/io/udp_receiver.h"
-#include "common/datagram_auth.h"
-#include "common/host_port.h"
-#include "common/systemd_notify.h"
 #include "google/protobuf/stubs/logging.h"
 
 namespace lrfnet::daemon {
 namespace {
 
-namespace asio = boost::asio;
 namespace po = boost::program_options;
 
 int UsageError(const std::string& message) {
