@@ -42,6 +42,7 @@
 #include "common/systemd_notify.h"
 #include "common/time.h"
 #include "firmware_tracker/app/config.h"
+#include "firmware_tracker/app/run_setup.h"
 #include "firmware_tracker/app/tracker_node.h"
 #include "firmware_tracker/cola/commands.h"
 #include "firmware_tracker/cola/stream_decoder.h"
@@ -61,10 +62,6 @@ namespace {
 
 namespace asio = boost::asio;
 namespace po = boost::program_options;
-
-constexpr int kExitOk = 0;
-constexpr int kExitFailure = 1;
-constexpr int kExitUsage = 2;
 
 int UsageError(const std::string& message) {
   std::fprintf(stderr, "lrfnet-tracker: %s (see lrfnet-tracker --help)\n", message.c_str());
@@ -92,11 +89,6 @@ std::string DecoderSummary(const cola::StreamCounters& c) {
       "bad_headers={} scan_decode_errors={}",
       c.framer.frames, c.framer.bad_checksum, c.framer.oversize_length, c.framer.garbage_bytes,
       c.other_telegrams, c.bad_headers, c.scan_decode_errors);
-}
-
-std::uint64_t RandomSessionId() {
-  std::random_device device;
-  return (static_cast<std::uint64_t>(device()) << 32) ^ device();
 }
 
 // Where the datagrams go: UDP, a recording, both, or only counted.
@@ -250,11 +242,6 @@ std::string NodeSummary(const TrackerNode& node) {
       t.created, t.confirmed, e.datagrams, e.bytes, node.counters().frames,
       node.counters().snapshots, clock.offset_s, clock.drift_ppm,
       node.clock().counters().device_restarts);
-}
-
-double ElapsedUs(std::chrono::steady_clock::time_point since) {
-  return std::chrono::duration<double, std::micro>(std::chrono::steady_clock::now() - since)
-      .count();
 }
 
 int RunLive(const TrackerConfig& config, const std::string& record_path, ScanLog& log) {
