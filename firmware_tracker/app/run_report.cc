@@ -1,0 +1,61 @@
+#include "firmware_tracker/app/run_report.h"
+
+#include <spdlog/fmt/fmt.h>
+
+#include <cstdio>
+#include <ctime>
+
+namespace lrfnet::tracker {
+
+std::string FormatUtc(common::UtcNs t_ns) {
+  const std::time_t seconds =
+      static_cast<std::time_t>(t_ns / common::kNsPerS) - (t_ns % common::kNsPerS < 0 ? 1 : 0);
+  const auto micros =
+      static_cast<long>(((t_ns % common::kNsPerS) + common::kNsPerS) % common::kNsPerS / 1000);
+  std::tm tm{};
+  gmtime_r(&seconds, &tm);
+  return fmt::format("{:04}-{:02}-{:02}T{:02}:{:02}:{:02}.{:06}Z", tm.tm_year + 1900, tm.tm_mon + 1,
+                     tm.tm_mday, tm.tm_hour, tm.tm_min, tm.tm_sec, micros);
+}
+
+std::string DecoderSummary(const cola::StreamCounters& c) {
+  return fmt::format(
+      "frames={} bad_checksums={} oversize_lengths={} garbage_bytes={} other_telegrams={} "
+      "bad_headers={} scan_decode_errors={}",
+      c.framer.frames, c.framer.bad_checksum, c.framer.oversize_length, c.framer.garbage_bytes,
+      c.other_telegrams, c.bad_headers, c.scan_decode_errors);
+}
+
+std::string NodeSummary(const TrackerNode& node) {
+  const tracking::MultiTrackerCounters& t = node.pipeline().tracker().counters();
+  const io::DatagramEncoderCounters& e = node.encoder().counters();
+  const tracking::ClockMapperStatus clock = node.clock().status();
+  return fmt::format(
+      "tracks_created={} tracks_confirmed={} datagrams={} datagram_bytes={} frames={} "
+      "snapshots={} tick_offset_s={:.6f} drift_ppm={:.2f} device_restarts={}",
+      t.created, t.confirmed, e.datagrams, e.bytes, node.counters().frames,
+      node.counters().snapshots, clock.offset_s, clock.drift_ppm,
+      node.clock().counters().device_restarts);
+}
+
+bool ScanLog::OnScan(const std::string& sensor_id, const cola::ScanTelegram& scan,
+                     common::UtcNs receive_time_ns, const TrackerNode& node) {
+  ++scans_;
+  if (print_every_ > 0 && (scans_ - 1) % print_every_ == 0) {
+    const tracking::ScanTracks& tracks = node.pipeline().last_tracks();
+    std::string list;
+    for (const tracking::TrackReport& t : tracks.tracks) {
+      list +=
+          fmt::format("{}{}@({:.2f},{:.2f})", list.empty() ? "" : " ", t.track_id, t.x_m, t.y_m);
+    }
+    const cola::ScanChannel* dist = scan.FindChannel("DIST1");
+    fmt::print("{} tc={} sc={} points={} rx={} scan_start={} tracks={} [{}]\n", sensor_id,
+               scan.telegram_counter, scan.scan_counter, dist != nullptr ? dist->count : 0,
+               FormatUtc(receive_time_ns), FormatUtc(tracks.scan_start_ns), tracks.tracks.size(),
+               list);
+    std::fflush(stdout);
+  }
+  return max_scans_ == 0 || scans_ < max_scans_;
+}
+
+}  // namespace lrfnet::tracker

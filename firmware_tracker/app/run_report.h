@@ -1,0 +1,43 @@
+#pragma once
+
+// What lrfnet-tracker prints: the scan lines (--print-every) with the stop rule (--max-scans), and
+// the parts of the summary line.
+
+#include <cstdint>
+#include <string>
+
+#include "common/time.h"
+#include "firmware_tracker/app/tracker_node.h"
+#include "firmware_tracker/cola/scan_telegram.h"
+#include "firmware_tracker/cola/stream_decoder.h"
+
+namespace lrfnet::tracker {
+
+// UTC as 2021-01-01T12:00:03.123456Z.
+std::string FormatUtc(common::UtcNs t_ns);
+
+// The decoder's counters as "frames=N bad_checksums=N ... scan_decode_errors=N".
+std::string DecoderSummary(const cola::StreamCounters& c);
+
+// The node's counters as "tracks_created=N ... device_restarts=N".
+std::string NodeSummary(const TrackerNode& node);
+
+// Scan printing and the stop rule, shared by both modes. Prints on stdout.
+class ScanLog {
+ public:
+  ScanLog(std::uint64_t print_every, std::uint64_t max_scans)
+      : print_every_(print_every), max_scans_(max_scans) {}
+
+  // Prints every print_every-th scan (the first one included) with the node's last tracks.
+  // Returns false once max_scans were seen (the caller stops).
+  bool OnScan(const std::string& sensor_id, const cola::ScanTelegram& scan,
+              common::UtcNs receive_time_ns, const TrackerNode& node);
+  std::uint64_t scans() const { return scans_; }
+
+ private:
+  std::uint64_t print_every_;
+  std::uint64_t max_scans_;
+  std::uint64_t scans_ = 0;
+};
+
+}  // namespace lrfnet::tracker
