@@ -11,60 +11,30 @@
 // --uplink and --out may be combined in either mode. SIGINT / SIGTERM stop cleanly (the recording
 // is flushed and closed) and print the counters.
 
-#include <spdlog/fmt/fmt.h>
 #include <spdlog/sinks/stdout_color_sinks.h>
 #include <spdlog/spdlog.h>
 
-#include <boost/asio/io_context.hpp>
-#include <boost/asio/post.hpp>
-#include <boost/asio/signal_set.hpp>
-#include <boost/asio/steady_timer.hpp>
 #include <boost/program_options.hpp>
 #include <chrono>
-#include <csignal>
 #include <cstdint>
 #include <cstdio>
-#include <ctime>
 #include <exception>
 #include <fstream>
-#include <functional>
 #include <iostream>
-#include <memory>
-#include <optional>
-#include <random>
 #include <sstream>
 #include <string>
 
 #include "common/capture/capture_stream.h"
-#include "common/datagram_auth.h"
 #include "common/host_port.h"
-#include "common/key_file.h"
-#include "common/systemd_notify.h"
-#include "common/time.h"
 #include "firmware_tracker/app/config.h"
 #include "firmware_tracker/app/live_run.h"
-#include "firmware_tracker/app/outputs.h"
 #include "firmware_tracker/app/replay_run.h"
 #include "firmware_tracker/app/run_report.h"
 #include "firmware_tracker/app/run_setup.h"
-#include "firmware_tracker/app/tracker_node.h"
-#include "firmware_tracker/cola/commands.h"
-#include "firmware_tracker/cola/stream_decoder.h"
-#include "firmware_tracker/io/datagram_encoder.h"
-#include "firmware_tracker/io/recording_writer.h"
-#include "firmware_tracker/io/sealing_sink.h"
-#include "firmware_tracker/io/sick_client.h"
-#include "firmware_tracker/io/system_clock.h"
-#include "firmware_tracker/io/udp_uplink.h"
-
-#ifndef LRFNET_VERSION
-#define LRFNET_VERSION "unknown"
-#endif
 
 namespace lrfnet::tracker {
 namespace {
 
-namespace asio = boost::asio;
 namespace po = boost::program_options;
 
 int UsageError(const std::string& message) {
@@ -72,7 +42,6 @@ int UsageError(const std::string& message) {
   return kExitUsage;
 }
 
-using common::HostPort;
 using common::ParseHostPort;
 
 int Run(int argc, char** argv) {
