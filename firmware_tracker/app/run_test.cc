@@ -1,0 +1,167 @@
+// The parts of lrfnet-tracker's runs that need no process: the scan lines and the stop rule, the
+// summary's parts and the outputs.
+
+#include <gtest/gtest.h>
+#include <unistd.h>
+
+#include <cstdint>
+#include <filesystem>
+#include <string>
+#include <vector>
+
+#include "firmware_tracker/app/node_test_util.h"
+#include "firmware_tracker/app/outputs.h"
+#include "firmware_tracker/app/run_report.h"
+#include "firmware_tracker/app/tracker_node.h"
+
+namespace lrfnet::tracker {
+namespace {
+
+namespace fs = std::filesystem;
+using testing::SyntheticDevice;
+using testing::Wall;
+
+TrackerConfig Config() {
+  TrackerConfig config;
+  config.sensor_id = "run.s1";
+  return config;
+}
+
+std::vector<std::string> Lines(const std::string& text) {
+  std::vector<std::string> lines;
+  std::size_t start = 0;
+  for (std::size_t end; (end = text.find('\n', start)) != std::string::npos; start = end + 1) {
+    lines.push_back(text.substr(start, end - start));
+  }
+  return lines;
+}
+
+TEST(TrackerRun, FormatUtcIsMicrosecondsInUtc) {
+  EXPECT_EQ(FormatUtc(0), "1970-01-01T00:00:00.000000Z");
+  EXPECT_EQ(FormatUtc(1'609'502'403'123'456'789), "2021-01-01T12:00:03.123456Z");
+  // Before 1970 the fraction still counts forward from the whole second below.
+  EXPECT_EQ(FormatUtc(-1), "1969-12-31T23:59:59.999999Z");
+  EXPECT_EQ(FormatUtc(-1'500'000'000), "1969-12-31T23:59:58.500000Z");
+}
+
+TEST(TrackerRun, DecoderSummaryNamesEveryCounter) {
+  cola::StreamCounters c;
+  c.framer.frames = 7;
+  c.framer.bad_checksum = 1;
+  c.framer.oversize_length = 2;
+  c.framer.garbage_bytes = 3;
+  c.other_telegrams = 4;
+  c.bad_headers = 5;
+  c.scan_decode_errors = 6;
+  EXPECT_EQ(DecoderSummary(c),
+            "frames=7 bad_checksums=1 oversize_lengths=2 garbage_bytes=3 other_telegrams=4 "
+            "bad_headers=5 scan_decode_errors=6");
+}
+
+TEST(TrackerRun, ScanLogPrintsEveryNthScanAndStopsAtMaxScans) {
+  testing::CollectingSink sink;
+  TrackerNode node(Config(), 1, sink);
+  SyntheticDevice device;
+  const std::vector<Wall> walls = testing::Room();
+  ScanLog log(/*print_every=*/2, /*max_scans=*/3);
+  std::vector<bool> go_on;
+  std::vector<common::UtcNs> receive_ns;
+  ::testing::internal::CaptureStdout();
+  for (std::int64_t k = 0; k < 3; ++k) {
+    common::UtcNs rx = 0;
+    const cola::ScanTelegram& scan = device.Scan(k, walls, {}, &rx);
+    node.OnScan(scan, rx, rx);
+    go_on.push_back(log.OnScan("run.s1", scan, rx, node));
+    receive_ns.push_back(rx);
+  }
+  const std::vector<std::string> lines = Lines(::testing::internal::GetCapturedStdout());
+  EXPECT_EQ(go_on, (std::vector<bool>{true, true, false}));
+  EXPECT_EQ(log.scans(), 3u);
+  ASSERT_EQ(lines.size(), 2u);  // scans 1 and 3
+  const std::string points = std::to_string(device.scanner().config().beams);
+  EXPECT_EQ(lines[0].rfind("run.s1 tc=1 sc=1 points=" + points + " rx=" + FormatUtc(receive_ns[0]) +
+                               " scan_start=",
+                           0),
+            0u)
+      << lines[0];
+  EXPECT_EQ(
+      lines[1].rfind("run.s1 tc=3 sc=3 points=" + points + " rx=" + FormatUtc(receive_ns[2]), 0),
+      0u)
+      << lines[1];
+  EXPECT_NE(lines[1].find(" tracks=0 []"), std::string::npos) << lines[1];
+
+  ScanLog endless(0, 0);  // neither printing nor stopping
+  common::UtcNs rx = 0;
+  ::testing::internal::CaptureStdout();
+  for (std::int64_t k = 3; k < 6; ++k) {
+    EXPECT_TRUE(endless.OnScan("run.s1", device.Scan(k, walls, {}, &rx), rx, node));
+  }
+  EXPECT_EQ(::testing::internal::GetCapturedStdout(), "");
+}
+
+class TrackerOutputs : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    dir_ = fs::temp_directory_path() / ("lrfnet_tracker_run_test_" + std::to_string(::getpid()));
+    fs::remove_all(dir_);
+    fs::create_directories(dir_);
+  }
+  void TearDown() override { fs::remove_all(dir_); }
+  fs::path dir_;
+};
+
+TEST_F(TrackerOutputs, RecordingCountsEveryDatagramOfTheNode) {
+  Outputs outputs;
+  const std::string path = (dir_ / "s1.lrfrec").string();
+  ASSERT_EQ(outputs.Open(Config(), path, 1'700'000'000'000'000'000), std::nullopt);
+  TrackerNode node(Config(), 7, outputs.sink());
+  SyntheticDevice device;
+  const std::vector<Wall> walls = testing::Room();
+  for (std::int64_t k = 0; k < 30; ++k) {
+    common::UtcNs rx = 0;
+    node.OnScan(device.Scan(k, walls, {}, &rx), rx, rx);
+    node.OnTick(rx, LinkHealth{}, io::ClockStatus{});
+  }
+  ASSERT_TRUE(outputs.Close());
+  const std::uint64_t datagrams = node.encoder().counters().datagrams;
+  ASSERT_GT(datagrams, 0u);
+  EXPECT_EQ(outputs.send_errors(), 0u);
+  const std::string summary = outputs.Summary();
+  EXPECT_EQ(summary.rfind(" recorded=" + std::to_string(datagrams) + " recording_bytes=", 0), 0u)
+      << summary;
+  EXPECT_NE(summary.find(" write_errors=0"), std::string::npos) << summary;
+  EXPECT_EQ(summary.find("udp_sent"), std::string::npos) << summary;
+  EXPECT_GT(fs::file_size(path), node.encoder().counters().bytes);
+}
+
+TEST_F(TrackerOutputs, NoOutputsCountOnly) {
+  Outputs outputs;
+  ASSERT_EQ(outputs.Open(Config(), "", 0), std::nullopt);
+  EXPECT_EQ(outputs.Summary(), "");
+  EXPECT_TRUE(outputs.Close());
+}
+
+TEST_F(TrackerOutputs, ErrorsNameTheFlag) {
+  const std::string missing_dir = (dir_ / "no_such_dir" / "s1.lrfrec").string();
+  Outputs out;
+  const auto e = out.Open(Config(), missing_dir, 0);
+  ASSERT_TRUE(e.has_value());
+  EXPECT_EQ(e->rfind("--out " + missing_dir + ": ", 0), 0u) << *e;
+
+  TrackerConfig config = Config();
+  config.uplink_address = "127.0.0.1";  // no port
+  Outputs uplink;
+  const auto u = uplink.Open(config, "", 0);
+  ASSERT_TRUE(u.has_value());
+  EXPECT_NE(u->find("--uplink"), std::string::npos) << *u;
+
+  config = Config();
+  config.key_file = (dir_ / "no_such.key").string();
+  Outputs keyed;
+  const auto k = keyed.Open(config, "", 0);
+  ASSERT_TRUE(k.has_value());
+  EXPECT_EQ(k->rfind("--key ", 0), 0u) << *k;
+}
+
+}  // namespace
+}  // namespace lrfnet::tracker
