@@ -456,14 +456,34 @@ void ApplyIcp(const AlignedTracks& tracks, const CalibrationOptions& options,
     const Eigen::Matrix3d icp_cov = 0.5 * (icp.covariance + icp.covariance.transpose());
     const Eigen::Vector3d delta(icp.s_from_r.x_m - p.s_from_r.x_m, icp.s_from_r.y_m - p.s_from_r.y_m,
                                 common::AngleDiff(icp.s_from_r.yaw_rad, p.s_from_r.yaw_rad));
-    const Eigen::LLT<Eigen::Matrix3d> sum(pair_info_cov + icp_cov);
+    // The tracks may carry a bias the model does not know (pipeline.h icp_track_bias_sigma_m).
+    Eigen::Matrix3d test_cov = pair_info_cov + icp_cov;
+    test_cov.topLeftCorner<2, 2>() +=
+        options.icp_track_bias_sigma_m * options.icp_track_bias_sigma_m * Eigen::Matrix2d::Identity();
+    const Eigen::LLT<Eigen::Matrix3d> sum(test_cov);
     const Eigen::LLT<Eigen::Matrix3d> icp_llt(icp_cov), pair_llt(pair_info_cov);
     if (sum.info() != Eigen::Success || icp_llt.info() != Eigen::Success ||
         pair_llt.info() != Eigen::Success) {
       continue;
     }
     const double d = std::sqrt(std::max(0.0, delta.dot(sum.solve(delta))));
-    if (!(d <= options.icp_max_disagreement_sigma)) continue;
+    if (!std::isfinite(d)) continue;
+    if (d > options.icp_max_disagreement_sigma) {
+      // Walls and tracks that disagree: one of the two carries an error its covariance does not
+      // know, and the pair cannot tell which. The tracks' estimate stays, the variance of each
+      // component widened by the square of its disagreement (not only along the disagreement:
+      // several pairs of one sensor disagree alike, and rank-one widenings along their different
+      // directions would cancel in the least squares), and the pair becomes a candidate that the
+      // rest of the graph has to confirm.
+      p.covariance = pair_info_cov;
+      p.covariance.diagonal() += delta.cwiseProduct(delta);
+      p.weak = true;
+      p.weak_reason = fmt::format(
+          "the backgrounds' alignment disagrees with the tracks by {:.1f} sigma ({:.2f} m, "
+          "{:.2f} deg)",
+          d, delta.head<2>().norm(), common::RadToDeg(std::abs(delta.z())));
+      continue;
+    }
     // Information-weighted fusion about the tracks' estimate.
     const Eigen::Matrix3d icp_info = icp_llt.solve(Eigen::Matrix3d::Identity());
     const Eigen::Matrix3d pair_info = pair_llt.solve(Eigen::Matrix3d::Identity());
@@ -492,10 +512,27 @@ void ApplyIcp(const AlignedTracks& tracks, const CalibrationOptions& options,
   }
 }
 
+// The smallest covariance (in the PSD order, approximately) that is at least both `a` and `b`:
+// `a` plus the positive part of b - a in a's whitened coordinates.
+Eigen::Matrix3d AtLeast(const Eigen::Matrix3d& a, const Eigen::Matrix3d& b) {
+  const Eigen::Matrix3d as = 0.5 * (a + a.transpose()), bs = 0.5 * (b + b.transpose());
+  const Eigen::LLT<Eigen::Matrix3d> llt(as);
+  if (llt.info() != Eigen::Success) return bs;
+  const Eigen::Matrix3d l = llt.matrixL();
+  const Eigen::Matrix3d l_inv = l.inverse();
+  const Eigen::Matrix3d w = l_inv * bs * l_inv.transpose();  // b in a's whitened coordinates
+  const Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> eig(0.5 * (w + w.transpose()));
+  const Eigen::Vector3d grown = eig.eigenvalues().cwiseMax(1.0);
+  const Eigen::Matrix3d out =
+      l * (eig.eigenvectors() * grown.asDiagonal() * eig.eigenvectors().transpose()) * l.transpose();
+  return out.allFinite() ? Eigen::Matrix3d(0.5 * (out + out.transpose())) : bs;
+}
+
 // The refinement of one placement (the used pairs' ICP alignments as constraints); `refined`
 // false when it did not apply (the poses and covariances are then those given).
 struct Refined {
   bool refined = false;
+  std::string rejected;  // why a refinement that lowered its cost was not kept ("" otherwise)
   JointRefineResult joint;
   std::vector<Pose2> poses;
   std::vector<Eigen::Matrix3d> covariance;
@@ -505,7 +542,7 @@ Refined Refine(const AlignedTracks& tracks, std::size_t reference,
                const std::vector<RelativeMeasurement>& measurements, const std::vector<bool>& used,
                const std::vector<const PairEstimate*>& pair_of, const std::vector<Pose2>& poses,
                const std::vector<Eigen::Matrix3d>& covariance, const std::vector<bool>& placed,
-               const JointRefineOptions& options) {
+               const JointRefineOptions& options, double max_disagreement_sigma) {
   // Pairs aligned on their backgrounds are constraints: without them the tracks' systematic
   // errors would pull wall-accurate poses apart.
   std::vector<RelativePoseConstraint> constraints;
@@ -519,10 +556,39 @@ Refined Refine(const AlignedTracks& tracks, std::size_t reference,
   out.covariance = covariance;
   out.joint = RefineJointly(tracks, poses, placed, reference, options, constraints);
   if (!out.joint.ok || !(out.joint.cost_after < out.joint.cost_before)) return out;
+  // The refinement uses the same tracks as the pairs: a sensor it moves farther than the two
+  // covariances allow from the least squares on the pairs (and their ICP alignments) shows that
+  // its model of those tracks is wrong, not that it knows better (pipeline.h).
+  double worst_sigma = 0.0;
+  std::size_t worst = reference;
+  for (std::size_t i = 0; i < poses.size(); ++i) {
+    if (i == reference || !placed[i] || !out.joint.refined[i]) continue;
+    const Pose2& a = poses[i];
+    const Pose2& b = out.joint.world_from_sensor[i];
+    const Eigen::Vector3d delta(b.x_m - a.x_m, b.y_m - a.y_m,
+                                common::AngleDiff(b.yaw_rad, a.yaw_rad));
+    const Eigen::Matrix3d sum = covariance[i] + out.joint.covariance[i];
+    const Eigen::LLT<Eigen::Matrix3d> llt(0.5 * (sum + sum.transpose()));
+    if (llt.info() != Eigen::Success) continue;
+    const double d = std::sqrt(std::max(0.0, delta.dot(llt.solve(delta))));
+    if (d > worst_sigma) {
+      worst_sigma = d;
+      worst = i;
+    }
+  }
+  if (worst_sigma > max_disagreement_sigma) {
+    out.rejected = fmt::format(
+        "joint refinement moved {} {:.1f} sigma away from the pairs' least squares (at most "
+        "{:.1f}); not applied",
+        tracks.sensors[worst].id, worst_sigma, max_disagreement_sigma);
+    return out;
+  }
   out.refined = true;
   out.poses = out.joint.world_from_sensor;
   for (std::size_t i = 0; i < poses.size(); ++i) {
-    if (out.joint.refined[i] && i != reference) out.covariance[i] = out.joint.covariance[i];
+    if (out.joint.refined[i] && i != reference) {
+      out.covariance[i] = AtLeast(out.joint.covariance[i], covariance[i]);
+    }
   }
   return out;
 }
@@ -712,7 +778,8 @@ GlobalSolution SolveRobust(const AlignedTracks& tracks, std::size_t reference,
       const auto evaluate = [&](Placement& h) {
         if (options.refine) {
           h.refined = Refine(tracks, reference, measurements, h.used, pair_of, h.poses,
-                             h.covariance, core.placed, quick);
+                             h.covariance, core.placed, quick,
+                             options.refine_max_disagreement_sigma);
         } else {
           h.refined.poses = h.poses;
           h.refined.covariance = h.covariance;
@@ -818,7 +885,8 @@ GlobalSolution SolveRobust(const AlignedTracks& tracks, std::size_t reference,
   // The final placement: its least squares, refined.
   if (tried.empty() && options.refine) {
     best.refined = Refine(tracks, reference, measurements, best.used, pair_of, best.poses,
-                          best.covariance, core.placed, options.joint);
+                          best.covariance, core.placed, options.joint,
+                          options.refine_max_disagreement_sigma);
   } else if (!options.refine) {
     best.refined.poses = best.poses;
     best.refined.covariance = best.covariance;
@@ -835,6 +903,8 @@ GlobalSolution SolveRobust(const AlignedTracks& tracks, std::size_t reference,
     result->size_data_sigma_m = joint.size_data_sigma_m;
     if (!joint.ok) {
       out.warnings.push_back("joint refinement not applied: " + joint.message);
+    } else if (!best.refined.rejected.empty()) {
+      out.warnings.push_back(best.refined.rejected);
     } else if (!best.refined.refined) {
       out.warnings.push_back("joint refinement did not lower the cost; not applied");
     } else {
@@ -885,6 +955,12 @@ std::optional<std::string> Validate(const CalibrationOptions& options) {
   if (!(options.icp_max_disagreement_sigma > 0.0) ||
       !std::isfinite(options.icp_max_disagreement_sigma)) {
     return "icp_max_disagreement_sigma must be a finite value > 0";
+  }
+  if (!(options.icp_track_bias_sigma_m >= 0.0) || !std::isfinite(options.icp_track_bias_sigma_m)) {
+    return "icp_track_bias_sigma_m must be a finite value >= 0";
+  }
+  if (!(options.refine_max_disagreement_sigma > 0.0)) {
+    return "refine_max_disagreement_sigma must be > 0";
   }
   if (!(options.max_translation_residual_m > 0.0) ||
       !std::isfinite(options.max_translation_residual_m)) {

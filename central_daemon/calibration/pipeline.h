@@ -58,6 +58,18 @@ struct CalibrationOptions {
   // is then the information-weighted fusion of both (the tracks decide where the walls leave a
   // direction open, e.g. along a corridor), strong if the fusion passes the pairwise thresholds.
   double icp_max_disagreement_sigma = 3.5;
+  // In that test only, the tracks' estimate carries in addition this isotropic standard deviation
+  // of its translation (metres): a bias the measurement model does not know and that does not
+  // average out, e.g. a scanner at knee height whose tracker fits a torso to a pair of legs (its
+  // centres lie ~0.1 m behind the body centre). Walls that agree all round (no degenerate
+  // direction) then win over such tracks instead of being dropped; the tracks still decide along a
+  // direction the walls leave open.
+  double icp_track_bias_sigma_m = 0.1;
+  // The joint refinement is kept only if no sensor moves farther from the weighted least squares
+  // on the pairs (the ICP alignments included) than this (Mahalanobis, 3 dof, both covariances
+  // summed): it uses the same tracks, so a larger move means its model of them is wrong (a bias
+  // it absorbs into the shared size correction, a wall constraint it overruled).
+  double refine_max_disagreement_sigma = 3.5;
   double max_translation_residual_m = 0.5;   // edges beyond it are dropped from the translations
   // Minimum data: seconds of simultaneous tracks a pair needs to count as linked (assessment).
   double min_pair_overlap_s = 3.0;

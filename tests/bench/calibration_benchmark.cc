@@ -287,6 +287,24 @@ int main(int argc, char** argv) {
             std::fprintf(stderr, "  edge %s-%s: %s (matches %zu rms %.3f)\n", e.r.c_str(),
                          e.s.c_str(), e.status.c_str(), e.matches, e.rms_m);
           }
+          for (const calib::PairEstimate& p : outcome.pairs) {
+            if (!p.accepted) continue;
+            const auto tr = truth.Find(outcome.tracks.sensors[p.r].id);
+            const auto ts = truth.Find(outcome.tracks.sensors[p.s].id);
+            if (!tr || !ts) continue;
+            const common::Pose2 truth_s_from_r =
+                truth.sensors[*ts].second.inverse() * truth.sensors[*tr].second;
+            std::fprintf(stderr,
+                         "  pair %s-%s: %s icp %d (score %.3f -> %.3f) dt %.4f (sigma %.4f) dR "
+                         "%.3f (sigma %.3f)\n",
+                         outcome.tracks.sensors[p.r].id.c_str(),
+                         outcome.tracks.sensors[p.s].id.c_str(), p.weak ? "weak" : "strong",
+                         p.icp_applied ? 1 : 0, p.icp_score_before, p.icp_score_after,
+                         common::TranslationDistanceM(p.s_from_r, truth_s_from_r),
+                         std::sqrt(p.covariance(0, 0) + p.covariance(1, 1)),
+                         common::RadToDeg(common::RotationDistanceRad(p.s_from_r, truth_s_from_r)),
+                         common::RadToDeg(std::sqrt(std::max(0.0, p.covariance(2, 2)))));
+          }
           for (const std::string& w : outcome.result.warnings) {
             std::fprintf(stderr, "  warning: %s\n", w.c_str());
           }
