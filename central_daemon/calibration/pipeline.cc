@@ -556,13 +556,16 @@ Refined Refine(const AlignedTracks& tracks, std::size_t reference,
   out.covariance = covariance;
   out.joint = RefineJointly(tracks, poses, placed, reference, options, constraints);
   if (!out.joint.ok || !(out.joint.cost_after < out.joint.cost_before)) return out;
-  // The refinement uses the same tracks as the pairs: a sensor it moves farther than the two
-  // covariances allow from the least squares on the pairs (and their ICP alignments) shows that
-  // its model of those tracks is wrong, not that it knows better (pipeline.h).
+  // A sensor whose pairs' least squares rests on walls (a used pair aligned on the backgrounds)
+  // and that the refinement, from the tracks, moves farther than the two covariances allow: the
+  // refinement's model of the tracks is wrong, the walls are not (pipeline.h). Elsewhere the
+  // refinement uses the pairs' tracks better (all sensors at once) and may correct a pair.
+  std::vector<bool> on_walls(poses.size(), false);
+  for (const RelativePoseConstraint& c : constraints) on_walls[c.r] = on_walls[c.s] = true;
   double worst_sigma = 0.0;
   std::size_t worst = reference;
   for (std::size_t i = 0; i < poses.size(); ++i) {
-    if (i == reference || !placed[i] || !out.joint.refined[i]) continue;
+    if (i == reference || !placed[i] || !out.joint.refined[i] || !on_walls[i]) continue;
     const Pose2& a = poses[i];
     const Pose2& b = out.joint.world_from_sensor[i];
     const Eigen::Vector3d delta(b.x_m - a.x_m, b.y_m - a.y_m,

@@ -65,10 +65,11 @@ struct CalibrationOptions {
   // direction) then win over such tracks instead of being dropped; the tracks still decide along a
   // direction the walls leave open.
   double icp_track_bias_sigma_m = 0.1;
-  // The joint refinement is kept only if no sensor moves farther from the weighted least squares
-  // on the pairs (the ICP alignments included) than this (Mahalanobis, 3 dof, both covariances
-  // summed): it uses the same tracks, so a larger move means its model of them is wrong (a bias
-  // it absorbs into the shared size correction, a wall constraint it overruled).
+  // The joint refinement is kept only if no sensor with a used pair aligned on the backgrounds
+  // moves farther from the weighted least squares on the pairs than this (Mahalanobis, 3 dof,
+  // both covariances summed): from the tracks alone it cannot know better than the walls, so a
+  // larger move means its model of the tracks is wrong (a bias it absorbs into the shared size
+  // correction, a wall constraint its robust loss gave up).
   double refine_max_disagreement_sigma = 3.5;
   double max_translation_residual_m = 0.5;   // edges beyond it are dropped from the translations
   // Minimum data: seconds of simultaneous tracks a pair needs to count as linked (assessment).
