@@ -46,6 +46,7 @@ void PrintSummary(const calib::CalibrationOutcome& outcome) {
                 s.flag.empty() ? "" : "  ! ", s.flag.c_str());
   }
   if (!r.ambiguity.empty()) std::printf("not decided by the data: %s\n", r.ambiguity.c_str());
+  if (!r.scale_note.empty()) std::printf("%s\n", r.scale_note.c_str());
   std::size_t used = 0, rejected = 0, outliers = 0;
   for (const calib::EdgeReport& e : r.edges) {
     if (e.used) {
@@ -89,6 +90,7 @@ nlohmann::json StatsJson(const calib::CalibrationOutcome& outcome,
   j["unverified_datagrams"] = load.unverified;
   j["track_residual_rms_m"] = outcome.result.track_residual_rms_m;
   j["refined"] = outcome.result.refined;
+  j["scale_note"] = outcome.result.scale_note;
   j["refine_cost_before"] = outcome.result.refine_cost_before;
   j["refine_cost_after"] = outcome.result.refine_cost_after;
   nlohmann::json timings = nlohmann::json::object();

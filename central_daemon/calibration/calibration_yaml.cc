@@ -37,6 +37,8 @@ constexpr const char* kHeader =
     "#   joint_refinement  robust cost over all associated observations before/after the joint\n"
     "#               least-squares refinement of all poses (applied: false = not run or no gain)\n"
     "#   track_residual_rms_m  all matched observations under the final poses [m]\n"
+    "#   scale       present when the layout's scale is not observable apart from the people's\n"
+    "#               size: what that means for the poses and what data would fix it\n"
     "#   warnings    anything a person should check\n"
     "#   timings_s   wall time of each stage [s]\n";
 
@@ -302,6 +304,8 @@ std::string CalibrationYaml(const CalibrationResult& result, const YamlContext& 
   y += fmt::format("  edges_used: {}\n  edges_not_used: {}\n", used, result.edges.size() - used);
   // Where the pose graph could not decide: what was refused and what walk would decide.
   if (!result.ambiguity.empty()) y += "  ambiguity: " + Quoted(result.ambiguity) + "\n";
+  // The layout's scale not told apart from the people's size (and what would fix it).
+  if (!result.scale_note.empty()) y += "  scale: " + Quoted(result.scale_note) + "\n";
   y += "  edges:";
   y += result.edges.empty() ? " []\n" : "\n";
   for (const EdgeReport& e : result.edges) {

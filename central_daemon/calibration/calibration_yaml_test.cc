@@ -92,6 +92,11 @@ TEST(CalibrationYaml, FlagsAndTheAmbiguityAreWrittenAndThePosesStillRead) {
   EXPECT_EQ(root["sensors"][4]["flag"].as<std::string>(), result.sensors[4].flag);
   EXPECT_FALSE(root["sensors"][4]["calibrated"].as<bool>());
   EXPECT_EQ(root["quality"]["ambiguity"].as<std::string>(), result.ambiguity);
+  EXPECT_FALSE(root["quality"]["scale"].IsDefined());
+  result.scale_note =
+      "scale not observable: the people's size and the layout's scale explain the data alike";
+  EXPECT_EQ(YAML::Load(CalibrationYaml(result, {}))["quality"]["scale"].as<std::string>(),
+            result.scale_note);
   // Readers of poses are not disturbed.
   PoseFile file;
   std::string error;

@@ -458,8 +458,8 @@ void ApplyIcp(const AlignedTracks& tracks, const CalibrationOptions& options,
                                 common::AngleDiff(icp.s_from_r.yaw_rad, p.s_from_r.yaw_rad));
     // The tracks may carry a bias the model does not know (pipeline.h icp_track_bias_sigma_m).
     Eigen::Matrix3d test_cov = pair_info_cov + icp_cov;
-    test_cov.topLeftCorner<2, 2>() +=
-        options.icp_track_bias_sigma_m * options.icp_track_bias_sigma_m * Eigen::Matrix2d::Identity();
+    test_cov.topLeftCorner<2, 2>() += options.icp_track_bias_sigma_m *
+                                      options.icp_track_bias_sigma_m * Eigen::Matrix2d::Identity();
     const Eigen::LLT<Eigen::Matrix3d> sum(test_cov);
     const Eigen::LLT<Eigen::Matrix3d> icp_llt(icp_cov), pair_llt(pair_info_cov);
     if (sum.info() != Eigen::Success || icp_llt.info() != Eigen::Success ||
@@ -524,7 +524,8 @@ Eigen::Matrix3d AtLeast(const Eigen::Matrix3d& a, const Eigen::Matrix3d& b) {
   const Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> eig(0.5 * (w + w.transpose()));
   const Eigen::Vector3d grown = eig.eigenvalues().cwiseMax(1.0);
   const Eigen::Matrix3d out =
-      l * (eig.eigenvectors() * grown.asDiagonal() * eig.eigenvectors().transpose()) * l.transpose();
+      l * (eig.eigenvectors() * grown.asDiagonal() * eig.eigenvectors().transpose()) *
+      l.transpose();
   return out.allFinite() ? Eigen::Matrix3d(0.5 * (out + out.transpose())) : bs;
 }
 
@@ -659,6 +660,38 @@ Placement SolvePlacement(std::size_t n, std::size_t reference,
   return out;
 }
 
+// The statement of CalibrationResult::scale_note from a joint refinement ("" when the scale is
+// observable).
+std::string ScaleNote(const JointRefineResult& joint, const JointRefineOptions& options,
+                      const std::vector<std::string>& id, const std::vector<bool>& placed,
+                      const std::vector<Eigen::Matrix3d>& covariance) {
+  double correlation = 0.0;
+  for (std::size_t k = 0; k < 2; ++k) {
+    if (!joint.size_correction_estimated[k] &&
+        joint.size_scale_correlation[k] > options.max_size_scale_correlation) {
+      correlation = std::max(correlation, joint.size_scale_correlation[k]);
+    }
+  }
+  if (correlation <= 0.0) return "";
+  double worst_m = 0.0;
+  std::size_t worst = 0;
+  for (std::size_t i = 0; i < placed.size() && i < covariance.size(); ++i) {
+    const double sigma_m =
+        placed[i] ? std::sqrt(std::max(0.0, covariance[i].topLeftCorner<2, 2>().trace())) : 0.0;
+    if (sigma_m > worst_m) {
+      worst_m = sigma_m;
+      worst = i;
+    }
+  }
+  return fmt::format(
+      "scale not observable: the people's size and the layout's scale explain the data alike "
+      "(correlation {:.2f}), so the distances between the sensors are known only as well as the "
+      "size prior; positions uncertain by up to {:.2f} m (1 sigma, {}), in the covariances. Walls "
+      "that two sensors both see, or people walking across the line between two sensors, would "
+      "fix it",
+      correlation, worst_m, placed.empty() ? "" : id[worst]);
+}
+
 // Whether two placements put some sensor materially apart: farther than three of its standard
 // deviations in `a` and than kMaterial*.
 constexpr double kMaterialM = 0.05;
@@ -780,9 +813,9 @@ GlobalSolution SolveRobust(const AlignedTracks& tracks, std::size_t reference,
       quick.association_rounds = std::min(quick.association_rounds, 3);
       const auto evaluate = [&](Placement& h) {
         if (options.refine) {
-          h.refined = Refine(tracks, reference, measurements, h.used, pair_of, h.poses,
-                             h.covariance, core.placed, quick,
-                             options.refine_max_disagreement_sigma);
+          h.refined =
+              Refine(tracks, reference, measurements, h.used, pair_of, h.poses, h.covariance,
+                     core.placed, quick, options.refine_max_disagreement_sigma);
         } else {
           h.refined.poses = h.poses;
           h.refined.covariance = h.covariance;
@@ -887,9 +920,9 @@ GlobalSolution SolveRobust(const AlignedTracks& tracks, std::size_t reference,
 
   // The final placement: its least squares, refined.
   if (tried.empty() && options.refine) {
-    best.refined = Refine(tracks, reference, measurements, best.used, pair_of, best.poses,
-                          best.covariance, core.placed, options.joint,
-                          options.refine_max_disagreement_sigma);
+    best.refined =
+        Refine(tracks, reference, measurements, best.used, pair_of, best.poses, best.covariance,
+               core.placed, options.joint, options.refine_max_disagreement_sigma);
   } else if (!options.refine) {
     best.refined.poses = best.poses;
     best.refined.covariance = best.covariance;
@@ -904,6 +937,10 @@ GlobalSolution SolveRobust(const AlignedTracks& tracks, std::size_t reference,
     result->size_estimated = joint.size_correction_estimated;
     result->size_scale_correlation = joint.size_scale_correlation;
     result->size_data_sigma_m = joint.size_data_sigma_m;
+    if (joint.ok) {
+      result->scale_note =
+          ScaleNote(joint, options.joint, id, core.placed, best.refined.covariance);
+    }
     if (!joint.ok) {
       out.warnings.push_back("joint refinement not applied: " + joint.message);
     } else if (!best.refined.rejected.empty()) {

@@ -130,8 +130,8 @@ BackgroundScan CastBackground(const std::vector<Eigen::Vector2d>& room,
       const double u = cross(a - origin, dir) / denom;
       if (t > 1e-6 && u >= 0.0 && u <= 1.0) best = std::min(best, t);
     }
-    scan.ranges_mm.push_back(
-        best <= 20.0 ? static_cast<std::uint32_t>(std::lround(best * 1000.0)) : 0u);
+    scan.ranges_mm.push_back(best <= 20.0 ? static_cast<std::uint32_t>(std::lround(best * 1000.0))
+                                          : 0u);
   }
   return scan;
 }
@@ -509,19 +509,20 @@ TEST(CalibratePipeline, ALeafOnAWeakPairIsPlacedWithALargeCovarianceAndAFlag) {
 // by `bias_m` the model does not know, and recorded while c was turned by `tracks_turn_deg` from
 // where it learnt its background.
 CalibrationOutcome HallWithWallsAndABiasedSensor(double bias_m, double tracks_turn_deg,
-                                                 std::vector<SimSensor>* sensors) {
+                                                 std::vector<SimSensor>* sensors,
+                                                 double others_bias_m = 0.0) {
   std::mt19937 rng(16);
   *sensors = Hall();
+  for (SimSensor& s : *sensors) s.unknown_bias_m = others_bias_m;
   (*sensors)[2].unknown_bias_m = bias_m;
   std::vector<SimSensor> while_tracking = *sensors;
   while_tracking[2].world_from_sensor.yaw_rad += DegToRad(tracks_turn_deg);
   const std::vector<Walker> walkers = {RandomWalker(rng, 1, 11, 1, 7, 0.0),
                                        RandomWalker(rng, 1, 11, 1, 7, 5.0)};
   CalibrationInput input = Simulate(while_tracking, walkers, 60.0, 17);
-  const std::vector<Eigen::Vector2d> room = {{-1.0, -1.0}, {5.0, -1.0}, {5.0, -1.6}, {7.0, -1.6},
-                                             {7.0, -1.0}, {13.0, -1.0}, {13.0, 3.5},
-                                             {13.6, 3.5}, {13.6, 4.5}, {13.0, 4.5}, {13.0, 9.0},
-                                             {-1.0, 9.0}};
+  const std::vector<Eigen::Vector2d> room = {{-1.0, -1.0}, {5.0, -1.0},  {5.0, -1.6}, {7.0, -1.6},
+                                             {7.0, -1.0},  {13.0, -1.0}, {13.0, 3.5}, {13.6, 3.5},
+                                             {13.6, 4.5},  {13.0, 4.5},  {13.0, 9.0}, {-1.0, 9.0}};
   for (std::size_t i = 0; i < sensors->size(); ++i) {
     input.sensors[i].background = CastBackground(room, (*sensors)[i].world_from_sensor);
   }
@@ -584,8 +585,8 @@ TEST(CalibratePipeline, TracksThatContradictTheWallsLeaveTheirPairsUncertainNotW
   }
   sensors[2].world_from_sensor.yaw_rad += DegToRad(1.6);
   const Judged tracks_pose = Judge(outcome, sensors, 2);
-  EXPECT_TRUE(tracks_pose.covered) << tracks_pose.dt_m << " m " << RadToDeg(tracks_pose.dyaw_rad)
-                                   << " deg";
+  EXPECT_TRUE(tracks_pose.covered)
+      << tracks_pose.dt_m << " m " << RadToDeg(tracks_pose.dyaw_rad) << " deg";
   EXPECT_FALSE(outcome.result.sensors[2].flag.empty());
   std::size_t disagreeing = 0;
   for (const PairEstimate& p : outcome.pairs) {
@@ -595,6 +596,39 @@ TEST(CalibratePipeline, TracksThatContradictTheWallsLeaveTheirPairsUncertainNotW
     }
   }
   EXPECT_GE(disagreeing, 1u);
+}
+
+TEST(CalibrateScale, ALayoutWhoseScaleThePeoplesSizeExplainsSaysSoAndItsSigmaCoversTheError) {
+  // The diamond: every person is seen by two neighbours from directions 90 degrees apart across
+  // the layout, and the people are larger than the model's prior (their positions come 0.08 m
+  // closer to each sensor than it expects). A larger size and a smaller layout explain the data
+  // alike: the size is held at its prior, the result says the scale is not observable, and the
+  // prior's uncertainty in the covariances covers the error.
+  std::vector<SimSensor> sensors = Ring();
+  for (SimSensor& s : sensors) s.unknown_bias_m = -0.08;
+  const CalibrationInput input = Simulate(sensors, RingWalkers(), 60.0, 18);
+  CalibrationOptions options;
+  options.reference = "a";
+  const CalibrationOutcome outcome = Calibrate(input, options);
+  ASSERT_TRUE(outcome.ok) << outcome.error;
+  EXPECT_EQ(outcome.result.scale_note.rfind("scale not observable", 0), 0u)
+      << outcome.result.scale_note;
+  double worst_m = 0.0;
+  for (std::size_t i = 1; i < sensors.size(); ++i) {
+    const Judged j = Judge(outcome, sensors, i);
+    worst_m = std::max(worst_m, j.dt_m);
+    EXPECT_TRUE(j.covered) << sensors[i].id << " " << j.dt_m << " m " << RadToDeg(j.dyaw_rad)
+                           << " deg";
+  }
+  EXPECT_GT(worst_m, 0.1);  // the layout did shrink: the statement is not idle
+
+  // The hall with the same people, but walls that every sensor sees: the walls fix the scale,
+  // nothing is said about it, and the poses are right.
+  std::vector<SimSensor> hall;
+  const CalibrationOutcome observable = HallWithWallsAndABiasedSensor(-0.08, 0.0, &hall, -0.08);
+  ASSERT_TRUE(observable.ok) << observable.error;
+  EXPECT_TRUE(observable.result.scale_note.empty()) << observable.result.scale_note;
+  ExpectClose(observable, hall, 0.03, 0.2);
 }
 
 }  // namespace

@@ -986,6 +986,7 @@ std::string SummaryMd(const ReportInput& in, const std::vector<EdgeRow>& edges) 
     if (!s.flag.empty()) md += "  - " + Md(s.id) + ": " + Md(s.flag) + "\n";
   }
   if (!r.ambiguity.empty()) md += "- not decided by the data: " + Md(r.ambiguity) + "\n";
+  if (!r.scale_note.empty()) md += "- " + Md(r.scale_note) + "\n";
   if (!r.hypotheses.empty()) {
     md +=
         "- placements compared where the pose graph's cycles could not decide (robust cost over "

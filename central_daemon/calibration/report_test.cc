@@ -385,6 +385,8 @@ TEST_F(ReportTest, FlagsAndTheUncertaintyEllipsesAreShown) {
   result_.sensors[2].covariance = Eigen::Vector3d(2.25, 0.09, 1e-4).asDiagonal();
   result_.sensors[3].flag = "ambiguous: two placements explain the data equally";
   result_.ambiguity = "s4: two placements explain the data equally; walk where s1 and s4 see";
+  result_.scale_note =
+      "scale not observable: the people's size and the layout's scale explain the data alike";
   std::string error;
   ASSERT_TRUE(WriteReport(dir_.string(), input_, &error)) << error;
   const std::string md = ReadText(dir_ / "summary.md");
@@ -393,6 +395,7 @@ TEST_F(ReportTest, FlagsAndTheUncertaintyEllipsesAreShown) {
   EXPECT_NE(md.find("| s3 (!) | 10.0000 |"), std::string::npos) << md;
   EXPECT_NE(md.find("| s4 (!) | not calibrated |"), std::string::npos) << md;
   EXPECT_NE(md.find("not decided by the data: s4: two placements"), std::string::npos) << md;
+  EXPECT_NE(md.find("- scale not observable: the people"), std::string::npos) << md;
 
   // s3's ring: 2 sigma = 3 m along x and 0.6 m along y around (10, 11), in the flag colour.
   const std::string svg = ReadText(dir_ / "calibration.svg");

@@ -246,6 +246,12 @@ struct CalibrationResult {
   // data cannot decide and what walk would ("" otherwise).
   std::vector<HypothesisReport> hypotheses;
   std::string ambiguity;
+  // When the layout's scale cannot be told apart from the people's size (a size component held at
+  // its prior because it correlates with the scale beyond JointRefineOptions::
+  // max_size_scale_correlation): what that means for the poses and what data would fix it ("" when
+  // the scale is observable, or without the joint refinement). The covariances carry the size
+  // prior's uncertainty either way.
+  std::string scale_note;
   std::vector<std::string> warnings;
 };
 
