@@ -469,6 +469,7 @@ void ApplyIcp(const AlignedTracks& tracks, const CalibrationOptions& options,
     const double d = std::sqrt(std::max(0.0, delta.dot(sum.solve(delta))));
     if (!std::isfinite(d)) continue;
     if (d > options.icp_max_disagreement_sigma) {
+      if (!options.conflicts_widen_covariance) continue;
       // Walls and tracks that disagree: one of the two carries an error its covariance does not
       // know, and the pair cannot tell which. The tracks' estimate stays, the variance of each
       // component widened by the square of its disagreement (not only along the disagreement:
@@ -543,7 +544,8 @@ Refined Refine(const AlignedTracks& tracks, std::size_t reference,
                const std::vector<RelativeMeasurement>& measurements, const std::vector<bool>& used,
                const std::vector<const PairEstimate*>& pair_of, const std::vector<Pose2>& poses,
                const std::vector<Eigen::Matrix3d>& covariance, const std::vector<bool>& placed,
-               const JointRefineOptions& options, double max_disagreement_sigma) {
+               const JointRefineOptions& options, double max_disagreement_sigma,
+               bool keep_pairs_uncertainty) {
   // Pairs aligned on their backgrounds are constraints: without them the tracks' systematic
   // errors would pull wall-accurate poses apart.
   std::vector<RelativePoseConstraint> constraints;
@@ -591,7 +593,9 @@ Refined Refine(const AlignedTracks& tracks, std::size_t reference,
   out.poses = out.joint.world_from_sensor;
   for (std::size_t i = 0; i < poses.size(); ++i) {
     if (out.joint.refined[i] && i != reference) {
-      out.covariance[i] = AtLeast(out.joint.covariance[i], covariance[i]);
+      out.covariance[i] = keep_pairs_uncertainty
+                              ? AtLeast(out.joint.covariance[i], covariance[i])
+                              : out.joint.covariance[i];
     }
   }
   return out;
@@ -815,7 +819,8 @@ GlobalSolution SolveRobust(const AlignedTracks& tracks, std::size_t reference,
         if (options.refine) {
           h.refined =
               Refine(tracks, reference, measurements, h.used, pair_of, h.poses, h.covariance,
-                     core.placed, quick, options.refine_max_disagreement_sigma);
+                     core.placed, quick, options.refine_max_disagreement_sigma,
+                     options.conflicts_widen_covariance);
         } else {
           h.refined.poses = h.poses;
           h.refined.covariance = h.covariance;
@@ -922,7 +927,8 @@ GlobalSolution SolveRobust(const AlignedTracks& tracks, std::size_t reference,
   if (tried.empty() && options.refine) {
     best.refined =
         Refine(tracks, reference, measurements, best.used, pair_of, best.poses, best.covariance,
-               core.placed, options.joint, options.refine_max_disagreement_sigma);
+               core.placed, options.joint, options.refine_max_disagreement_sigma,
+               options.conflicts_widen_covariance);
   } else if (!options.refine) {
     best.refined.poses = best.poses;
     best.refined.covariance = best.covariance;

@@ -71,6 +71,13 @@ struct CalibrationOptions {
   // larger move means its model of the tracks is wrong (a bias it absorbs into the shared size
   // correction, a wall constraint its robust loss gave up).
   double refine_max_disagreement_sigma = 3.5;
+  // Tracks and walls that disagree beyond icp_max_disagreement_sigma leave their pair a
+  // candidate with each component's variance widened by the square of its disagreement, and a
+  // kept refinement reports no less uncertainty than the pairs' least squares (the refinement
+  // cannot see such conflicts). false: neither (the method before them; with
+  // icp_track_bias_sigma_m = 0 and refine_max_disagreement_sigma = inf it is the benchmark's
+  // "before" row).
+  bool conflicts_widen_covariance = true;
   double max_translation_residual_m = 0.5;   // edges beyond it are dropped from the translations
   // Minimum data: seconds of simultaneous tracks a pair needs to count as linked (assessment).
   double min_pair_overlap_s = 3.0;

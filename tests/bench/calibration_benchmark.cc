@@ -69,6 +69,16 @@ std::vector<Variant> Variants() {
       false);
   add("ours, ellipse, ICP + refinement, N/d weights", "ellipse", calib::Method::kQuenzel, true,
       true, true);
+  // The same before walls won over biased tracks (no bias allowance in the ICP test, conflicts
+  // not widened, the refinement kept whenever it lowers its own cost).
+  for (const char* measurement : {"ellipse", "com"}) {
+    add(std::string("ours, ") + (measurement == std::string("com") ? "CoM" : "ellipse") +
+            ", ICP + refinement, before (tracks over walls)",
+        measurement, calib::Method::kQuenzel, true, true, false);
+    out.back().options.icp_track_bias_sigma_m = 0.0;
+    out.back().options.refine_max_disagreement_sigma = std::numeric_limits<double>::infinity();
+    out.back().options.conflicts_widen_covariance = false;
+  }
   add("ours, CoM, ICP + refinement", "com", calib::Method::kQuenzel, true, true, false);
   add("ours, CoM, neither", "com", calib::Method::kQuenzel, false, false, false);
   add("spectral [21], ellipse, N/d weights", "ellipse", calib::Method::kSpectral, true, false,
