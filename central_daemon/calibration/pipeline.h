@@ -7,7 +7,7 @@
 //            pairwise MSAC + verification (eqs. 5-8) → point-to-line ICP on the backgrounds →
 //            L1 rotation averaging (Algorithm 1, node-angle form) → least-squares translations →
 //            joint refinement over all associated observations (Ceres; kept only if it lowers the
-//            cost).
+//            cost and moves no sensor placed on walls beyond refine_max_disagreement_sigma).
 //   spectral the same pairwise estimates, then weighted spectral relaxation [21] and weighted
 //            least-squares translations (Quenzel et al.'s non-robust comparison).
 //   schenk   Schenk et al.: SVD track association, N/d weights, greedy placement, mass-spring
