@@ -126,13 +126,13 @@ PointTerm PointResidual(ShapeModel model, const Vec5& x, double cos_yaw, double 
 }
 
 // Support function h(n; x) and its gradient with respect to (yaw, a, b).
-double Support(ShapeModel model, const Vec5& x, const Eigen::Vector2d& n, double exponent,
-               Vec5* grad) {
+// (cos_yaw, sin_yaw) of x(kYaw): the caller's, computed once per evaluation.
+double Support(ShapeModel model, const Vec5& x, double c, double s, const Eigen::Vector2d& n,
+               double exponent, Vec5* grad) {
   if (model == ShapeModel::kCircle) {
     if (grad != nullptr) (*grad)(kA) = 1.0;
     return x(kA);
   }
-  const double c = std::cos(x(kYaw)), s = std::sin(x(kYaw));
   const double p = n.x() * c + n.y() * s;   // n . e1
   const double q = -n.x() * s + n.y() * c;  // n . e2; dp/dyaw = q, dq/dyaw = -p
   const double a = x(kA), b = x(kB);
@@ -175,6 +175,98 @@ struct Edge {
   double weight = 0.0;                          // 1 / sigma^2
 };
 
+// The normal matrix is symmetric positive definite by construction (weighted outer products plus
+// the priors, each of which bounds a parameter). A 5 x 5 Cholesky by hand: Eigen's pivoted LDLT
+// and its general solve against the identity for the covariance cost more than a pass over the
+// points at this size. A pivot that is not positive (rounding on a nearly singular matrix) falls
+// back to the pivoted LDLT.
+class NormalSolver {
+ public:
+  bool Factor(const Mat5& h) {
+    use_ldlt_ = false;
+    for (int j = 0; j < 5; ++j) {
+      double d = h(j, j);
+      for (int k = 0; k < j; ++k) d -= l_[j][k] * l_[j][k];
+      if (!(d > 0.0) || !std::isfinite(d)) return FactorLdlt(h);
+      l_[j][j] = std::sqrt(d);
+      inv_diag_[j] = 1.0 / l_[j][j];
+      for (int i = j + 1; i < 5; ++i) {
+        double v = h(i, j);
+        for (int k = 0; k < j; ++k) v -= l_[i][k] * l_[j][k];
+        l_[i][j] = v * inv_diag_[j];
+      }
+    }
+    return true;
+  }
+  // h^-1 b.
+  Vec5 Solve(const Vec5& b) const {
+    if (use_ldlt_) return ldlt_.solve(b);
+    std::array<double, 5> y{};
+    for (int i = 0; i < 5; ++i) {
+      double v = b(i);
+      for (int k = 0; k < i; ++k) v -= l_[i][k] * y[k];
+      y[i] = v * inv_diag_[i];
+    }
+    Vec5 x;
+    for (int i = 4; i >= 0; --i) {
+      double v = y[i];
+      for (int k = i + 1; k < 5; ++k) v -= l_[k][i] * x(k);
+      x(i) = v * inv_diag_[i];
+    }
+    return x;
+  }
+  // h^-1 = L^-T L^-1.
+  Mat5 Inverse() const {
+    if (use_ldlt_) return ldlt_.solve(Mat5::Identity());
+    double m[5][5] = {};  // L^-1, lower triangular
+    for (int j = 0; j < 5; ++j) {
+      m[j][j] = inv_diag_[j];
+      for (int i = j + 1; i < 5; ++i) {
+        double v = 0.0;
+        for (int k = j; k < i; ++k) v -= l_[i][k] * m[k][j];
+        m[i][j] = v * inv_diag_[i];
+      }
+    }
+    Mat5 inv;
+    for (int i = 0; i < 5; ++i) {
+      for (int j = i; j < 5; ++j) {
+        double v = 0.0;
+        for (int k = j; k < 5; ++k) v += m[k][i] * m[k][j];
+        inv(i, j) = v;
+        inv(j, i) = v;
+      }
+    }
+    return inv;
+  }
+
+ private:
+  bool FactorLdlt(const Mat5& h) {
+    use_ldlt_ = true;
+    ldlt_.compute(h);
+    return ldlt_.info() == Eigen::Success;
+  }
+
+  double l_[5][5] = {};
+  std::array<double, 5> inv_diag_{};
+  bool use_ldlt_ = false;
+  Eigen::LDLT<Mat5> ldlt_;
+};
+
+// Eigen's pivoted LDLT for every solve: what FitShape used before NormalSolver, kept as the
+// reference of the equivalence test (internal::FitShapeWithPivotedLdlt).
+class PivotedLdltSolver {
+ public:
+  bool Factor(const Mat5& h) {
+    ldlt_.compute(h);
+    return ldlt_.info() == Eigen::Success;
+  }
+  Vec5 Solve(const Vec5& b) const { return ldlt_.solve(b); }
+  Mat5 Inverse() const { return ldlt_.solve(Mat5::Identity()); }
+
+ private:
+  Eigen::LDLT<Mat5> ldlt_;
+};
+
 }  // namespace
 
 std::optional<std::string> Validate(const ShapeFitOptions& o) {
@@ -204,11 +296,14 @@ double ShapeSupport(ShapeModel model, const Eigen::Vector2d& size_m, double yaw_
   x(kYaw) = yaw_rad;
   x(kA) = size_m.x();
   x(kB) = size_m.y();
-  return Support(model, x, n, exponent, nullptr);
+  return Support(model, x, std::cos(yaw_rad), std::sin(yaw_rad), n, exponent, nullptr);
 }
 
-ShapeFitResult FitShape(std::span<const Eigen::Vector2d> points, const Silhouette& silhouette,
-                        const ShapePrior& prior, const ShapeFitOptions& o) {
+namespace {
+
+template <class Solver>
+ShapeFitResult Fit(std::span<const Eigen::Vector2d> points, const Silhouette& silhouette,
+                   const ShapePrior& prior, const ShapeFitOptions& o) {
   ShapeFitResult result;
   // The points used: finite ones, evenly subsampled to max_points.
   std::array<Eigen::Vector2d, kMaxFitPoints> pts;
@@ -270,7 +365,8 @@ ShapeFitResult FitShape(std::span<const Eigen::Vector2d> points, const Silhouett
   double nearest_along = mean_range;
   for (const auto& p : used) nearest_along = std::min(nearest_along, p.dot(ray));
   const double exponent = std::max(2.0, prior.exponent);
-  const double depth = Support(model, x, ray, exponent, nullptr);
+  const double depth =
+      Support(model, x, std::cos(x(kYaw)), std::sin(x(kYaw)), ray, exponent, nullptr);
   Eigen::Vector2d start = (nearest_along + depth) * ray;
   if (prior.centre_guess_m && prior.centre_guess_m->allFinite()) {
     const Eigen::Vector2d& g = *prior.centre_guess_m;
@@ -346,7 +442,7 @@ ShapeFitResult FitShape(std::span<const Eigen::Vector2d> points, const Silhouett
     for (std::size_t e = 0; e < n_edges; ++e) {
       Vec5 grad = Vec5::Zero();
       const double r =
-          edges[e].n.dot(at.head<2>()) + Support(model, at, edges[e].n, exponent, &grad);
+          edges[e].n.dot(at.head<2>()) + Support(model, at, c, s, edges[e].n, exponent, &grad);
       grad(kCx) = edges[e].n.x();
       grad(kCy) = edges[e].n.y();
       add_outer(hh, grad, edges[e].weight);
@@ -389,10 +485,14 @@ ShapeFitResult FitShape(std::span<const Eigen::Vector2d> points, const Silhouett
   double points_cost = 0.0;
   double cost = evaluate(x, &h, &g, &points_cost);
   int iterations = 0;
+  // The solver holds the factorisation of h while `factored`: the covariance at the end reuses it
+  // when the last step changed nothing (converged or rejected).
+  Solver solver;
+  bool factored = false;
   for (; iterations < o.max_iterations; ++iterations) {
-    const Eigen::LDLT<Mat5> ldlt(h);
-    if (ldlt.info() != Eigen::Success) break;
-    Vec5 step = -ldlt.solve(g);
+    factored = solver.Factor(h);
+    if (!factored) break;
+    Vec5 step = -solver.Solve(g);
     if (!step.allFinite()) break;
     // Trust region in parameter units.
     const double scale = std::max(
@@ -424,6 +524,7 @@ ShapeFitResult FitShape(std::span<const Eigen::Vector2d> points, const Silhouett
         cost = cost_trial;
         points_cost = sq_trial;
         accepted = true;
+        factored = false;
       } else {
         step *= 0.5;
       }
@@ -431,9 +532,8 @@ ShapeFitResult FitShape(std::span<const Eigen::Vector2d> points, const Silhouett
     if (!accepted) break;
   }
 
-  const Eigen::LDLT<Mat5> ldlt(h);
-  if (ldlt.info() != Eigen::Success) return result;
-  const Mat5 cov = ldlt.solve(Mat5::Identity());
+  if (!factored && !solver.Factor(h)) return result;
+  const Mat5 cov = solver.Inverse();
   if (!cov.allFinite()) return result;
   result.centre_m = x.head<2>();
   result.centre_cov_m2 = 0.5 * (cov.block<2, 2>(0, 0) + cov.block<2, 2>(0, 0).transpose());
@@ -452,5 +552,22 @@ ShapeFitResult FitShape(std::span<const Eigen::Vector2d> points, const Silhouett
   result.ok = result.centre_m.allFinite() && result.centre_cov_m2.allFinite();
   return result;
 }
+
+}  // namespace
+
+ShapeFitResult FitShape(std::span<const Eigen::Vector2d> points, const Silhouette& silhouette,
+                        const ShapePrior& prior, const ShapeFitOptions& options) {
+  return Fit<NormalSolver>(points, silhouette, prior, options);
+}
+
+namespace internal {
+
+ShapeFitResult FitShapeWithPivotedLdlt(std::span<const Eigen::Vector2d> points,
+                                       const Silhouette& silhouette, const ShapePrior& prior,
+                                       const ShapeFitOptions& options) {
+  return Fit<PivotedLdltSolver>(points, silhouette, prior, options);
+}
+
+}  // namespace internal
 
 }  // namespace lrfnet::tracking

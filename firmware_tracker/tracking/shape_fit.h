@@ -106,6 +106,15 @@ struct ShapeFitResult {
 ShapeFitResult FitShape(std::span<const Eigen::Vector2d> points, const Silhouette& silhouette,
                         const ShapePrior& prior, const ShapeFitOptions& options);
 
+namespace internal {
+// FitShape with Eigen's pivoted LDLT for every solve of the normal equations, as FitShape solved
+// them before its own 5 x 5 Cholesky: the same iterations, so the same result up to rounding. For
+// the equivalence test only.
+ShapeFitResult FitShapeWithPivotedLdlt(std::span<const Eigen::Vector2d> points,
+                                       const Silhouette& silhouette, const ShapePrior& prior,
+                                       const ShapeFitOptions& options);
+}  // namespace internal
+
 // Support function of the shape (extent from the centre in direction n, unit vector).
 double ShapeSupport(ShapeModel model, const Eigen::Vector2d& size_m, double yaw_rad,
                     const Eigen::Vector2d& n, double exponent = 2.0);
