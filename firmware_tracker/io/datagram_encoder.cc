@@ -115,6 +115,73 @@ bool ToProto(const tracking::TrackReport& r, lrfnet_proto_Track* t) {
   return finite;
 }
 
+// One Track in the protobuf wire format, written directly: the bytes nanopb's pb_encode writes for
+// it (fields in number order; proto3 defaults left out: a zero number, a float whose bits are all
+// zero, an empty repeated field), without walking the field descriptors for every field of every
+// track (that walk was most of the encoder's time). At most kMaxTrackBytes.
+class TrackWriter {
+ public:
+  explicit TrackWriter(std::uint8_t* out) : out_(out) {}
+
+  std::size_t Write(const lrfnet_proto_Track& t) {
+    Varint(1, t.track_id);
+    Varint(2, static_cast<std::uint32_t>(t.state));
+    Varint(3, static_cast<std::uint32_t>(t.kind));
+    Fixed32(4, t.x_m);
+    Fixed32(5, t.y_m);
+    Fixed32(6, t.vx_mps);
+    Fixed32(7, t.vy_mps);
+    if (t.covariance_count > 0) {  // packed: tag, byte length, the values
+      Tag(8, PB_WT_STRING);
+      Raw(4u * t.covariance_count);
+      for (pb_size_t i = 0; i < t.covariance_count; ++i) Le32(Bits(t.covariance[i]));
+    }
+    Varint(9, t.age_scans);
+    Varint(10, t.points);
+    Fixed32(11, t.ellipse_yaw_rad);
+    Varint(12, static_cast<std::uint32_t>(t.shape));
+    Fixed32(13, t.size_major_m);
+    Fixed32(14, t.size_minor_m);
+    Fixed32(15, t.size_sigma_m);
+    return n_;
+  }
+
+ private:
+  static std::uint32_t Bits(float v) {
+    std::uint32_t bits = 0;
+    std::memcpy(&bits, &v, sizeof bits);
+    return bits;
+  }
+  void Tag(std::uint32_t field, pb_wire_type_t wire_type) {
+    Raw((field << 3) | static_cast<std::uint32_t>(wire_type));
+  }
+  void Raw(std::uint32_t v) {
+    while (v >= 0x80) {
+      out_[n_++] = static_cast<std::uint8_t>(v | 0x80);
+      v >>= 7;
+    }
+    out_[n_++] = static_cast<std::uint8_t>(v);
+  }
+  void Le32(std::uint32_t v) {
+    for (int i = 0; i < 4; ++i) out_[n_++] = static_cast<std::uint8_t>(v >> (8 * i));
+  }
+  // Enums are non-negative here, so their varint is the unsigned one.
+  void Varint(std::uint32_t field, std::uint32_t v) {
+    if (v == 0) return;
+    Tag(field, PB_WT_VARINT);
+    Raw(v);
+  }
+  void Fixed32(std::uint32_t field, float v) {
+    const std::uint32_t bits = Bits(v);
+    if (bits == 0) return;  // +0.0 only: nanopb writes -0.0
+    Tag(field, PB_WT_32BIT);
+    Le32(bits);
+  }
+
+  std::uint8_t* out_;
+  std::size_t n_ = 0;
+};
+
 std::size_t VarintBytes(std::size_t v) {
   std::size_t n = 1;
   while (v >= 0x80) {
@@ -194,19 +261,16 @@ void DatagramEncoder::CopyString(std::string_view text, char* out, std::size_t c
 std::size_t DatagramEncoder::EncodeTracks(const tracking::ScanTracks& scan, common::UtcNs sent_ns,
                                           DatagramSink& sink) {
   ++counters_.track_frames;
-  // Every track is converted and encoded once, into its slot. nanopb sizes a submessage before it
-  // writes it, so a Track inside a TrackFrame inside a Datagram would be encoded four times; the
-  // frame is assembled here from the encoded tracks instead, in field order (the same bytes).
+  // Every track is converted and encoded once, into its slot, by TrackWriter. nanopb sizes a
+  // submessage before it writes it, so a Track inside a TrackFrame inside a Datagram would be
+  // encoded four times; the frame is assembled here from the encoded tracks instead, in field
+  // order (the same bytes).
   std::size_t valid = 0;
   lrfnet_proto_Track track;
   for (std::size_t i = 0; i < scan.tracks.size(); ++i) {
     if (!ToProto(scan.tracks[i], &track)) continue;
-    pb_ostream_t stream = pb_ostream_from_buffer(track_bytes_[valid].data(), kMaxTrackBytes);
-    if (!pb_encode(&stream, lrfnet_proto_Track_fields, &track)) {
-      ++counters_.encode_errors;
-      continue;
-    }
-    track_sizes_[valid++] = stream.bytes_written;
+    track_sizes_[valid] = TrackWriter(track_bytes_[valid].data()).Write(track);
+    ++valid;
   }
   counters_.dropped_tracks += scan.tracks.size() - valid;
   const std::size_t parts = std::max<std::size_t>(1, (valid + kTracksPerPart - 1) / kTracksPerPart);
