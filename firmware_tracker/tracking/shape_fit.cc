@@ -175,6 +175,43 @@ struct Edge {
   double weight = 0.0;                          // 1 / sigma^2
 };
 
+// Sum of w g g^T, upper triangle row by row, written out: the loops over a 5 x 5 block (or Eigen's
+// rank update) cost several times the 15 products at this size.
+class UpperSum5 {
+ public:
+  void Add(const Vec5& gr, double w) {
+    const double g0 = gr(0), g1 = gr(1), g2 = gr(2), g3 = gr(3), g4 = gr(4);
+    const double w0 = w * g0, w1 = w * g1, w2 = w * g2, w3 = w * g3, w4 = w * g4;
+    v_[0] += w0 * g0;
+    v_[1] += w0 * g1;
+    v_[2] += w0 * g2;
+    v_[3] += w0 * g3;
+    v_[4] += w0 * g4;
+    v_[5] += w1 * g1;
+    v_[6] += w1 * g2;
+    v_[7] += w1 * g3;
+    v_[8] += w1 * g4;
+    v_[9] += w2 * g2;
+    v_[10] += w2 * g3;
+    v_[11] += w2 * g4;
+    v_[12] += w3 * g3;
+    v_[13] += w3 * g4;
+    v_[14] += w4 * g4;
+  }
+  // The sum in the upper triangle, zeros below.
+  Mat5 Upper() const {
+    Mat5 m = Mat5::Zero();
+    int k = 0;
+    for (int r = 0; r < 5; ++r) {
+      for (int col = r; col < 5; ++col) m(r, col) = v_[static_cast<std::size_t>(k++)];
+    }
+    return m;
+  }
+
+ private:
+  std::array<double, 15> v_{};
+};
+
 // The normal matrix is symmetric positive definite by construction (weighted outer products plus
 // the priors, each of which bounds a parameter). A 5 x 5 Cholesky by hand: Eigen's pivoted LDLT
 // and its general solve against the identity for the covariance cost more than a pass over the
@@ -417,16 +454,9 @@ ShapeFitResult Fit(std::span<const Eigen::Vector2d> points, const Silhouette& si
   // normalised distance), squares on edges and priors. Fills the Gauss-Newton normal matrix h and
   // gradient g (halves) with the IRLS weights min(1, k / |s|) of x; one pass over the points.
   const double k2 = o.robust_k * o.robust_k;
-  // h += w g g^T on the upper triangle (Eigen's rank update is slow at this size).
-  const auto add_outer = [](Mat5& hh, const Vec5& gr, double w) {
-    for (int r = 0; r < 5; ++r) {
-      const double wr = w * gr(r);
-      for (int col = r; col < 5; ++col) hh(r, col) += wr * gr(col);
-    }
-  };
   auto evaluate = [&](const Vec5& at, Mat5* h, Vec5* g, double* points_sq) {
     const double c = std::cos(at(kYaw)), s = std::sin(at(kYaw));
-    Mat5 hh = Mat5::Zero();
+    UpperSum5 outer;
     Vec5 gg = Vec5::Zero();
     double cost = 0.0, sq = 0.0;
     for (std::size_t i = 0; i < n; ++i) {
@@ -434,7 +464,7 @@ ShapeFitResult Fit(std::span<const Eigen::Vector2d> points, const Silhouette& si
       const double z2 = t.d * t.d * base_weight[i] * discount / k2;  // (s / k)^2
       const double z = z2 > 1.0 ? std::sqrt(z2) : 1.0;
       const double w = base_weight[i] / z;
-      add_outer(hh, t.grad, w);
+      outer.Add(t.grad, w);
       gg += (w * t.d) * t.grad;
       cost += k2 / discount * (z2 > 1.0 ? 2.0 * z - 1.0 : z2);
       sq += t.d * t.d;
@@ -445,10 +475,11 @@ ShapeFitResult Fit(std::span<const Eigen::Vector2d> points, const Silhouette& si
           edges[e].n.dot(at.head<2>()) + Support(model, at, c, s, edges[e].n, exponent, &grad);
       grad(kCx) = edges[e].n.x();
       grad(kCy) = edges[e].n.y();
-      add_outer(hh, grad, edges[e].weight);
+      outer.Add(grad, edges[e].weight);
       gg += (edges[e].weight * r) * grad;
       cost += edges[e].weight * r * r;
     }
+    Mat5 hh = outer.Upper();
     // Priors.
     const Eigen::Vector2d dc = at.head<2>() - centre_prior;
     hh(kCx, kCx) += centre_info;
