@@ -44,17 +44,21 @@ double CvEkf::MahalanobisSq(const Eigen::Vector2d& z_m, const Eigen::Matrix2d& r
 bool CvEkf::Update(const Eigen::Vector2d& z_m, const Eigen::Matrix2d& r_m2) {
   if (!z_m.allFinite() || !r_m2.allFinite()) return false;
   const Eigen::Matrix2d r = 0.5 * (r_m2 + r_m2.transpose());
-  Eigen::Matrix<double, 2, 4> h = Eigen::Matrix<double, 2, 4>::Zero();
-  h(0, 0) = 1.0;
-  h(1, 1) = 1.0;
-  const Eigen::Matrix2d s = h * p_ * h.transpose() + r;
-  const Eigen::LLT<Eigen::Matrix2d> llt(s);
-  if (llt.info() != Eigen::Success) return false;
-  // K = P H^T S^-1, via the Cholesky factor instead of an explicit inverse.
-  const Eigen::Matrix<double, 4, 2> k = llt.solve(h * p_).transpose();
-  x_ += k * (z_m - h * x_);
+  // H = [I 0] selects the position: S = H P H^T + R is P's top-left block plus R, and P H^T its
+  // left two columns. S^-1 in closed form (2 x 2, positive definite: the Cholesky condition below);
+  // the products are spelt with H's structure instead of multiplying by its zeros, and no general
+  // triangular solve runs per update.
+  const Eigen::Matrix2d s = p_.topLeftCorner<2, 2>() + r;
+  const double det = s(0, 0) * s(1, 1) - s(0, 1) * s(1, 0);
+  if (!(s(0, 0) > 0.0) || !(det > 0.0) || !std::isfinite(det)) return false;
+  Eigen::Matrix2d s_inv;
+  s_inv << s(1, 1), -s(0, 1), -s(1, 0), s(0, 0);
+  s_inv /= det;
+  const Eigen::Matrix<double, 4, 2> k = p_.topRows<2>().transpose() * s_inv;  // K = P H^T S^-1
+  x_ += k * (z_m - x_.head<2>());
   // Joseph form: stays positive semi-definite even with a slightly wrong gain from rounding.
-  const Eigen::Matrix4d i_kh = Eigen::Matrix4d::Identity() - k * h;
+  Eigen::Matrix4d i_kh = Eigen::Matrix4d::Identity();
+  i_kh.leftCols<2>() -= k;
   p_ = i_kh * p_ * i_kh.transpose() + k * r * k.transpose();
   p_ = 0.5 * (p_ + p_.transpose()).eval();
   return true;

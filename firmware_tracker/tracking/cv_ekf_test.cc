@@ -3,6 +3,7 @@
 #include <gtest/gtest.h>
 
 #include <Eigen/Cholesky>
+#include <Eigen/LU>
 #include <cmath>
 #include <random>
 
@@ -76,6 +77,38 @@ TEST(CvEkfTest, MahalanobisDistanceGatesFarMeasurements) {
   EXPECT_NEAR(ekf.MahalanobisSq({2.0 + std::sqrt(0.02), 1.0}, r), 1.0, 1e-9);
   EXPECT_GT(ekf.MahalanobisSq({4.0, 1.0}, r), 100.0);
   EXPECT_TRUE(std::isinf(ekf.MahalanobisSq({2.0, 1.0}, -Eigen::Matrix2d::Identity())));
+}
+
+// The update with H's structure spelt out against the textbook matrices (H = [I 0], the gain from
+// an explicit inverse, Joseph form), on random states and measurement covariances: equal up to
+// rounding.
+TEST(CvEkfTest, UpdateIsTheTextbookJosephFormUpdate) {
+  std::mt19937 rng(14);
+  std::uniform_real_distribution<double> u(-1.0, 1.0);
+  for (int k = 0; k < 200; ++k) {
+    CvEkf ekf{CvEkfOptions{}};
+    Eigen::Matrix2d a;
+    a << u(rng), u(rng), u(rng), u(rng);
+    const Eigen::Matrix2d r0 = 0.01 * (a * a.transpose() + 0.1 * Eigen::Matrix2d::Identity());
+    ekf.Init({5.0 * u(rng), 5.0 * u(rng)}, r0);
+    ekf.Predict(0.04 + 0.2 * (u(rng) + 1.0));
+    a << u(rng), u(rng), u(rng), u(rng);
+    const Eigen::Matrix2d r = 0.005 * (a * a.transpose() + 0.05 * Eigen::Matrix2d::Identity());
+    const Eigen::Vector2d z = ekf.state().head<2>() + Eigen::Vector2d(0.3 * u(rng), 0.3 * u(rng));
+    const CvEkf::State x = ekf.state();
+    const CvEkf::Covariance p = ekf.covariance();
+    Eigen::Matrix<double, 2, 4> h = Eigen::Matrix<double, 2, 4>::Zero();
+    h(0, 0) = h(1, 1) = 1.0;
+    const Eigen::Matrix<double, 4, 2> gain =
+        p * h.transpose() * (h * p * h.transpose() + r).inverse();
+    const CvEkf::State x_expected = x + gain * (z - h * x);
+    const Eigen::Matrix4d i_kh = Eigen::Matrix4d::Identity() - gain * h;
+    const Eigen::Matrix4d p_expected = i_kh * p * i_kh.transpose() + gain * r * gain.transpose();
+    ASSERT_TRUE(ekf.Update(z, r));
+    EXPECT_LT((ekf.state() - x_expected).norm(), 1e-12 * (1.0 + x_expected.norm())) << k;
+    EXPECT_LT((ekf.covariance() - p_expected).norm(), 1e-12 * p_expected.norm()) << k;
+    EXPECT_TRUE(SymmetricPositiveDefinite(ekf.covariance())) << k;
+  }
 }
 
 TEST(CvEkfTest, BadMeasurementsLeaveTheFilterUnchanged) {
