@@ -62,8 +62,10 @@ inline void PowerTerm(double x, double p, double* value, double* derivative) {
   *derivative = ax > 0.0 ? p * v / x : 0.0;
 }
 
+// (cos_yaw, sin_yaw) of x(kYaw) and (inv_a, inv_b) = (1 / x(kA), 1 / x(kB)): the caller's, once
+// per evaluation rather than per point.
 PointTerm PointResidual(ShapeModel model, const Vec5& x, double cos_yaw, double sin_yaw,
-                        double exponent, const Eigen::Vector2d& p) {
+                        double inv_a, double inv_b, double exponent, const Eigen::Vector2d& p) {
   PointTerm t;
   const double dx = p.x() - x(kCx), dy = p.y() - x(kCy);
   if (model == ShapeModel::kCircle) {
@@ -82,7 +84,6 @@ PointTerm PointResidual(ShapeModel model, const Vec5& x, double cos_yaw, double 
   // d/dq of d as (gu, gv) in the body frame; q = R^T (p - c): dq/dc = -R^T, dq/dyaw = (v, -u).
   double gu = 0.0, gv = 0.0;
   if (model == ShapeModel::kSuperellipse) {
-    const double inv_a = 1.0 / a, inv_b = 1.0 / b;
     double s1 = 0.0, d1 = 0.0, s2 = 0.0, d2 = 0.0;
     PowerTerm(u * inv_a, exponent, &s1, &d1);
     PowerTerm(v * inv_b, exponent, &s2, &d2);
@@ -456,11 +457,12 @@ ShapeFitResult Fit(std::span<const Eigen::Vector2d> points, const Silhouette& si
   const double k2 = o.robust_k * o.robust_k;
   auto evaluate = [&](const Vec5& at, Mat5* h, Vec5* g, double* points_sq) {
     const double c = std::cos(at(kYaw)), s = std::sin(at(kYaw));
+    const double inv_a = 1.0 / at(kA), inv_b = 1.0 / at(kB);
     UpperSum5 outer;
     Vec5 gg = Vec5::Zero();
     double cost = 0.0, sq = 0.0;
     for (std::size_t i = 0; i < n; ++i) {
-      const PointTerm t = PointResidual(model, at, c, s, exponent, used[i]);
+      const PointTerm t = PointResidual(model, at, c, s, inv_a, inv_b, exponent, used[i]);
       const double z2 = t.d * t.d * base_weight[i] * discount / k2;  // (s / k)^2
       const double z = z2 > 1.0 ? std::sqrt(z2) : 1.0;
       const double w = base_weight[i] / z;
