@@ -155,15 +155,25 @@ class TrackWriter {
   void Tag(std::uint32_t field, pb_wire_type_t wire_type) {
     Raw((field << 3) | static_cast<std::uint32_t>(wire_type));
   }
+  // The bytes go through a local array and memcpy: a store through a byte pointer may alias n_,
+  // which would be reloaded after every byte.
   void Raw(std::uint32_t v) {
+    std::uint8_t bytes[5];
+    std::size_t k = 0;
     while (v >= 0x80) {
-      out_[n_++] = static_cast<std::uint8_t>(v | 0x80);
+      bytes[k++] = static_cast<std::uint8_t>(v | 0x80);
       v >>= 7;
     }
-    out_[n_++] = static_cast<std::uint8_t>(v);
+    bytes[k++] = static_cast<std::uint8_t>(v);
+    std::memcpy(out_ + n_, bytes, k);
+    n_ += k;
   }
   void Le32(std::uint32_t v) {
-    for (int i = 0; i < 4; ++i) out_[n_++] = static_cast<std::uint8_t>(v >> (8 * i));
+    const std::uint8_t bytes[4] = {static_cast<std::uint8_t>(v), static_cast<std::uint8_t>(v >> 8),
+                                   static_cast<std::uint8_t>(v >> 16),
+                                   static_cast<std::uint8_t>(v >> 24)};
+    std::memcpy(out_ + n_, bytes, 4);
+    n_ += 4;
   }
   // Enums are non-negative here, so their varint is the unsigned one.
   void Varint(std::uint32_t field, std::uint32_t v) {
