@@ -115,50 +115,24 @@ bool ToProto(const tracking::TrackReport& r, lrfnet_proto_Track* t) {
   return finite;
 }
 
-// One Track in the protobuf wire format, written directly: the bytes nanopb's pb_encode writes for
-// it (fields in number order; proto3 defaults left out: a zero number, a float whose bits are all
-// zero, an empty repeated field), without walking the field descriptors for every field of every
-// track (that walk was most of the encoder's time). At most kMaxTrackBytes.
-class TrackWriter {
+// Protobuf wire format written directly, with nanopb's rules for proto3 fields: in field-number
+// order, defaults left out (a zero number, a float or double whose bits are all zero (nanopb writes
+// -0.0), an empty string or repeated field). For the track frames, which are most of the traffic:
+// pb_encode walks the field descriptors for every field of every message. The caller sizes the
+// output (the bounds are static).
+class WireWriter {
  public:
-  explicit TrackWriter(std::uint8_t* out) : out_(out) {}
+  explicit WireWriter(std::uint8_t* out) : out_(out) {}
 
-  std::size_t Write(const lrfnet_proto_Track& t) {
-    Varint(1, t.track_id);
-    Varint(2, static_cast<std::uint32_t>(t.state));
-    Varint(3, static_cast<std::uint32_t>(t.kind));
-    Fixed32(4, t.x_m);
-    Fixed32(5, t.y_m);
-    Fixed32(6, t.vx_mps);
-    Fixed32(7, t.vy_mps);
-    if (t.covariance_count > 0) {  // packed: tag, byte length, the values
-      Tag(8, PB_WT_STRING);
-      Raw(4u * t.covariance_count);
-      for (pb_size_t i = 0; i < t.covariance_count; ++i) Le32(Bits(t.covariance[i]));
-    }
-    Varint(9, t.age_scans);
-    Varint(10, t.points);
-    Fixed32(11, t.ellipse_yaw_rad);
-    Varint(12, static_cast<std::uint32_t>(t.shape));
-    Fixed32(13, t.size_major_m);
-    Fixed32(14, t.size_minor_m);
-    Fixed32(15, t.size_sigma_m);
-    return n_;
-  }
+  std::size_t size() const { return n_; }
 
- private:
-  static std::uint32_t Bits(float v) {
-    std::uint32_t bits = 0;
-    std::memcpy(&bits, &v, sizeof bits);
-    return bits;
-  }
   void Tag(std::uint32_t field, pb_wire_type_t wire_type) {
-    Raw((field << 3) | static_cast<std::uint32_t>(wire_type));
+    Raw((std::uint64_t{field} << 3) | static_cast<std::uint64_t>(wire_type));
   }
   // The bytes go through a local array and memcpy: a store through a byte pointer may alias n_,
   // which would be reloaded after every byte.
-  void Raw(std::uint32_t v) {
-    std::uint8_t bytes[5];
+  void Raw(std::uint64_t v) {
+    std::uint8_t bytes[10];
     std::size_t k = 0;
     while (v >= 0x80) {
       bytes[k++] = static_cast<std::uint8_t>(v | 0x80);
@@ -168,29 +142,87 @@ class TrackWriter {
     std::memcpy(out_ + n_, bytes, k);
     n_ += k;
   }
+  void Bytes(const std::uint8_t* data, std::size_t size) {
+    std::memcpy(out_ + n_, data, size);
+    n_ += size;
+  }
   void Le32(std::uint32_t v) {
     const std::uint8_t bytes[4] = {static_cast<std::uint8_t>(v), static_cast<std::uint8_t>(v >> 8),
                                    static_cast<std::uint8_t>(v >> 16),
                                    static_cast<std::uint8_t>(v >> 24)};
-    std::memcpy(out_ + n_, bytes, 4);
-    n_ += 4;
+    Bytes(bytes, 4);
   }
-  // Enums are non-negative here, so their varint is the unsigned one.
-  void Varint(std::uint32_t field, std::uint32_t v) {
+  // uint32, uint64 and non-negative enums; int64 as its two's complement (10 bytes when negative).
+  void Varint(std::uint32_t field, std::uint64_t v) {
     if (v == 0) return;
     Tag(field, PB_WT_VARINT);
     Raw(v);
   }
+  void Int64(std::uint32_t field, std::int64_t v) { Varint(field, static_cast<std::uint64_t>(v)); }
   void Fixed32(std::uint32_t field, float v) {
-    const std::uint32_t bits = Bits(v);
-    if (bits == 0) return;  // +0.0 only: nanopb writes -0.0
+    const std::uint32_t bits = FloatBits(v);
+    if (bits == 0) return;
     Tag(field, PB_WT_32BIT);
     Le32(bits);
   }
+  void Fixed64(std::uint32_t field, double v) {
+    std::uint64_t bits = 0;
+    std::memcpy(&bits, &v, sizeof bits);
+    if (bits == 0) return;
+    Tag(field, PB_WT_64BIT);
+    Le32(static_cast<std::uint32_t>(bits));
+    Le32(static_cast<std::uint32_t>(bits >> 32));
+  }
+  void String(std::uint32_t field, const char* text, std::size_t size) {
+    if (size == 0) return;
+    Tag(field, PB_WT_STRING);
+    Raw(size);
+    Bytes(reinterpret_cast<const std::uint8_t*>(text), size);
+  }
+  // A nested message already written: tag, length, bytes.
+  void Message(std::uint32_t field, const std::uint8_t* data, std::size_t size) {
+    Tag(field, PB_WT_STRING);
+    Raw(size);
+    Bytes(data, size);
+  }
 
+  static std::uint32_t FloatBits(float v) {
+    std::uint32_t bits = 0;
+    std::memcpy(&bits, &v, sizeof bits);
+    return bits;
+  }
+
+ private:
   std::uint8_t* out_;
   std::size_t n_ = 0;
 };
+
+// One Track; at most kMaxTrackBytes.
+std::size_t WriteTrack(const lrfnet_proto_Track& t, std::uint8_t* out) {
+  WireWriter w(out);
+  w.Varint(1, t.track_id);
+  w.Varint(2, static_cast<std::uint32_t>(t.state));
+  w.Varint(3, static_cast<std::uint32_t>(t.kind));
+  w.Fixed32(4, t.x_m);
+  w.Fixed32(5, t.y_m);
+  w.Fixed32(6, t.vx_mps);
+  w.Fixed32(7, t.vy_mps);
+  if (t.covariance_count > 0) {  // packed: tag, byte length, the values
+    w.Tag(8, PB_WT_STRING);
+    w.Raw(4u * t.covariance_count);
+    for (pb_size_t i = 0; i < t.covariance_count; ++i) {
+      w.Le32(WireWriter::FloatBits(t.covariance[i]));
+    }
+  }
+  w.Varint(9, t.age_scans);
+  w.Varint(10, t.points);
+  w.Fixed32(11, t.ellipse_yaw_rad);
+  w.Varint(12, static_cast<std::uint32_t>(t.shape));
+  w.Fixed32(13, t.size_major_m);
+  w.Fixed32(14, t.size_minor_m);
+  w.Fixed32(15, t.size_sigma_m);
+  return w.size();
+}
 
 std::size_t VarintBytes(std::size_t v) {
   std::size_t n = 1;
@@ -271,7 +303,7 @@ void DatagramEncoder::CopyString(std::string_view text, char* out, std::size_t c
 std::size_t DatagramEncoder::EncodeTracks(const tracking::ScanTracks& scan, common::UtcNs sent_ns,
                                           DatagramSink& sink) {
   ++counters_.track_frames;
-  // Every track is converted and encoded once, into its slot, by TrackWriter. nanopb sizes a
+  // Every track is converted and encoded once, into its slot, by WriteTrack. nanopb sizes a
   // submessage before it writes it, so a Track inside a TrackFrame inside a Datagram would be
   // encoded four times; the frame is assembled here from the encoded tracks instead, in field
   // order (the same bytes).
@@ -279,7 +311,7 @@ std::size_t DatagramEncoder::EncodeTracks(const tracking::ScanTracks& scan, comm
   lrfnet_proto_Track track;
   for (std::size_t i = 0; i < scan.tracks.size(); ++i) {
     if (!ToProto(scan.tracks[i], &track)) continue;
-    track_sizes_[valid] = TrackWriter(track_bytes_[valid].data()).Write(track);
+    track_sizes_[valid] = WriteTrack(track, track_bytes_[valid].data());
     ++valid;
   }
   counters_.dropped_tracks += scan.tracks.size() - valid;
@@ -308,36 +340,44 @@ std::size_t DatagramEncoder::EncodeTracks(const tracking::ScanTracks& scan, comm
 
 bool DatagramEncoder::EmitTrackFrame(std::size_t first, std::size_t count, common::UtcNs sent_ns,
                                      DatagramSink& sink) {
-  // The frame's own fields (1-5; tracks_count is 0) into the tail of the buffer, then the
-  // datagram's fields (1-5; no payload) at its start, the frame's tag and length, the frame's
-  // fields and its tracks (field 6), each with its tag and length.
+  // The frame's own fields (1-5) first, to know its length; then the datagram's fields (1-5), the
+  // frame's tag and length, the frame's fields and its tracks (field 6), each with its tag and
+  // length: the order and bytes of nanopb's pb_encode of message_ with those tracks.
+  const lrfnet_proto_TrackFrame& frame = message_.payload.track_frame;
   std::array<std::uint8_t, 64> head{};
-  pb_ostream_t head_stream = pb_ostream_from_buffer(head.data(), head.size());
-  bool ok = pb_encode(&head_stream, lrfnet_proto_TrackFrame_fields, &message_.payload.track_frame);
-  std::size_t frame_bytes = head_stream.bytes_written;
+  WireWriter h(head.data());
+  h.Int64(1, frame.scan_start_ns);
+  h.Fixed64(2, frame.scan_period_s);
+  h.Varint(3, frame.scan_counter);
+  h.Varint(4, frame.part);
+  h.Varint(5, frame.part_count);
+  std::size_t frame_bytes = h.size();
   for (std::size_t i = first; i < first + count; ++i) {
     frame_bytes += 1 + VarintBytes(track_sizes_[i]) + track_sizes_[i];
   }
-  message_.which_payload = 0;
-  pb_ostream_t stream = pb_ostream_from_buffer(buffer_.data(), buffer_.size());
-  ok = ok && pb_encode(&stream, lrfnet_proto_Datagram_fields, &message_) &&
-       pb_encode_tag(&stream, PB_WT_STRING, lrfnet_proto_Datagram_track_frame_tag) &&
-       pb_encode_varint(&stream, frame_bytes) &&
-       pb_write(&stream, head.data(), head_stream.bytes_written);
-  for (std::size_t i = first; ok && i < first + count; ++i) {
-    ok = pb_encode_tag(&stream, PB_WT_STRING, lrfnet_proto_TrackFrame_tracks_tag) &&
-         pb_encode_varint(&stream, track_sizes_[i]) &&
-         pb_write(&stream, track_bytes_[i].data(), track_sizes_[i]);
-  }
-  message_.which_payload = lrfnet_proto_Datagram_track_frame_tag;
-  if (!ok) {
+  const std::size_t id_length = std::strlen(message_.sensor_id);
+  // Widest header: version, sensor id, three 10-byte varints, the frame's tag and length.
+  const std::size_t widest_header = 2 + 2 + id_length + 3 * 11 + 1 + VarintBytes(frame_bytes);
+  if (widest_header + frame_bytes > buffer_.size()) {
     ++counters_.encode_errors;
     return false;
   }
-  sink.Send(std::span<const std::uint8_t>(buffer_.data(), stream.bytes_written), sent_ns);
+  WireWriter w(buffer_.data());
+  w.Varint(1, static_cast<std::uint32_t>(message_.version));
+  w.String(2, message_.sensor_id, id_length);
+  w.Varint(3, message_.sequence);
+  w.Int64(4, message_.sent_ns);
+  w.Varint(5, message_.session_id);
+  w.Tag(lrfnet_proto_Datagram_track_frame_tag, PB_WT_STRING);
+  w.Raw(frame_bytes);
+  w.Bytes(head.data(), h.size());
+  for (std::size_t i = first; i < first + count; ++i) {
+    w.Message(lrfnet_proto_TrackFrame_tracks_tag, track_bytes_[i].data(), track_sizes_[i]);
+  }
+  sink.Send(std::span<const std::uint8_t>(buffer_.data(), w.size()), sent_ns);
   ++sequence_;
   ++counters_.datagrams;
-  counters_.bytes += stream.bytes_written;
+  counters_.bytes += w.size();
   return true;
 }
 

@@ -259,9 +259,10 @@ TEST(DatagramEncoderTest, AssembledTrackFramesAreNanopbsOwnBytes) {
   }
 }
 
-// The tracks are written without nanopb's encoder: on random tracks (every state, kind and shape,
-// zeros that proto3 leaves out, -0.0 that it keeps, widest and one-byte varints) the datagrams
-// decode to exactly the values sent and are byte for byte what nanopb writes for them.
+// Track frames are written without nanopb's encoder: on random headers and tracks (every state,
+// kind and shape, zeros that proto3 leaves out, -0.0 that it keeps, negative int64, widest and
+// one-byte varints) the datagrams decode to exactly the values sent and are byte for byte what
+// nanopb writes for them.
 TEST(DatagramEncoderTest, RandomTracksAreNanopbsOwnBytesAndValues) {
   std::mt19937 rng(14);
   std::uniform_int_distribution<int> pick(0, 5);
@@ -291,12 +292,30 @@ TEST(DatagramEncoderTest, RandomTracksAreNanopbsOwnBytesAndValues) {
         return static_cast<std::uint32_t>(rng());
     }
   };
+  const auto stamp = [&]() -> common::UtcNs {
+    switch (pick(rng)) {
+      case 0:
+        return 0;
+      case 1:
+        return -1;
+      case 2:
+        return std::numeric_limits<common::UtcNs>::max();
+      default:
+        return kSentNs + static_cast<common::UtcNs>(rng());
+    }
+  };
   for (int round = 0; round < 40; ++round) {
-    DatagramEncoder encoder(Options());
+    DatagramEncoderOptions options = Options(round % 2 == 0 ? "s1" : std::string(32, 'w'));
+    options.session_id = round % 3 == 0 ? 0u : (round % 3 == 1 ? ~0ull : rng());
+    DatagramEncoder encoder(options);
     CollectSink sink;
     tracking::ScanTracks scan;
-    scan.scan_start_ns = kSentNs;
-    scan.scan_period_s = 0.04;
+    scan.scan_start_ns = stamp();
+    scan.scan_period_s = value(0.1);
+    scan.scan_counter = count();
+    const common::UtcNs sent_ns = stamp();
+    // A first frame without tracks: sequence 0 (left out), then 1.
+    if (round % 4 == 0) encoder.EncodeTracks(tracking::ScanTracks{}, sent_ns, sink);
     const std::uint32_t n = static_cast<std::uint32_t>(round) % 24;
     for (std::uint32_t i = 0; i < n; ++i) {
       tracking::TrackReport t;
@@ -319,11 +338,22 @@ TEST(DatagramEncoderTest, RandomTracksAreNanopbsOwnBytesAndValues) {
       t.size_sigma_m = value(0.05);
       ASSERT_TRUE(scan.tracks.push_back(t));
     }
-    encoder.EncodeTracks(scan, kSentNs, sink);
+    encoder.EncodeTracks(scan, sent_ns, sink);
     ASSERT_EQ(encoder.counters().tracks, n);
+    ASSERT_EQ(encoder.counters().encode_errors, 0u);
     std::uint32_t next = 0;
-    for (const auto& bytes : sink.datagrams) {
+    for (std::size_t k = 0; k < sink.datagrams.size(); ++k) {
+      const auto& bytes = sink.datagrams[k];
       const lrfnet_proto_Datagram d = Decode(bytes);
+      EXPECT_EQ(d.sequence, k);
+      EXPECT_EQ(d.sent_ns, sent_ns);
+      EXPECT_EQ(d.session_id, options.session_id);
+      EXPECT_STREQ(d.sensor_id, options.sensor_id.c_str());
+      if (round % 4 == 0 && k == 0) continue;  // the empty frame
+      const lrfnet_proto_TrackFrame& f = d.payload.track_frame;
+      EXPECT_EQ(f.scan_start_ns, scan.scan_start_ns);
+      EXPECT_EQ(std::memcmp(&f.scan_period_s, &scan.scan_period_s, sizeof(double)), 0);
+      EXPECT_EQ(f.scan_counter, scan.scan_counter);
       std::array<std::uint8_t, kMaxDatagramBytes> again{};
       pb_ostream_t stream = pb_ostream_from_buffer(again.data(), again.size());
       ASSERT_TRUE(pb_encode(&stream, lrfnet_proto_Datagram_fields, &d));
@@ -331,11 +361,11 @@ TEST(DatagramEncoderTest, RandomTracksAreNanopbsOwnBytesAndValues) {
                 bytes)
           << "round " << round;
       const auto same_bits = [](float got, double sent) {
-        const auto f = static_cast<float>(sent);
-        return std::memcmp(&got, &f, sizeof f) == 0;
+        const auto as_float = static_cast<float>(sent);
+        return std::memcmp(&got, &as_float, sizeof as_float) == 0;
       };
-      for (pb_size_t k = 0; k < d.payload.track_frame.tracks_count; ++k) {
-        const lrfnet_proto_Track& got = d.payload.track_frame.tracks[k];
+      for (pb_size_t t = 0; t < d.payload.track_frame.tracks_count; ++t) {
+        const lrfnet_proto_Track& got = d.payload.track_frame.tracks[t];
         const tracking::TrackReport& sent = scan.tracks[next++];
         SCOPED_TRACE("round " + std::to_string(round) + " track " + std::to_string(next - 1));
         EXPECT_EQ(got.track_id, sent.track_id);
