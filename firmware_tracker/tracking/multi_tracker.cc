@@ -275,6 +275,15 @@ void MultiTracker::Gate(common::UtcNs scan_start_ns) {
       // offset_s, in closed form (exact for the constant-velocity model).
       const double d = c.offset_s;
       const Eigen::Vector2d at = x.head<2>() + d * x.tail<2>();
+      const double distance_m = (c.z_m - at).norm();
+      distance_[i][j] = distance_m;
+      // Beyond max_gate_distance_m the pair is out whatever the covariance (InsideGate's first
+      // test, the same distance): most pairs of a crowded scene end here.
+      if (!(distance_m <= options_.max_gate_distance_m)) {
+        gated_[i][j] = false;
+        cost_[i][j] = kUnassignableCost;
+        continue;
+      }
       const Eigen::Matrix2d cov =
           p.topLeftCorner<2, 2>() + d * (p.topRightCorner<2, 2>() + p.bottomLeftCorner<2, 2>()) +
           d * d * p.bottomRightCorner<2, 2>() + (q * d * d * d / 3.0) * Eigen::Matrix2d::Identity();
@@ -282,7 +291,6 @@ void MultiTracker::Gate(common::UtcNs scan_start_ns) {
       const bool inside = InsideGate(at, cov, c, &d2, &log_det);
       gated_[i][j] = inside;
       cost_[i][j] = inside ? d2 + log_det : kUnassignableCost;
-      distance_[i][j] = (c.z_m - at).norm();
     }
   }
   for (std::size_t j = 0; j < candidates_.size(); ++j) candidate_to_track_[j] = -1;
