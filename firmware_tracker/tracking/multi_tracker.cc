@@ -6,67 +6,12 @@
 #include <cstdlib>
 #include <limits>
 
+#include "firmware_tracker/tracking/assignment.h"
+
 namespace lrfnet::tracking {
 namespace {
 
 bool Positive(double v) { return std::isfinite(v) && v > 0.0; }
-
-// Exact min-cost assignment of an n x m matrix, n <= m (every row gets a column): the Hungarian
-// method as shortest augmenting paths with potentials (Kuhn-Munkres / Jonker-Volgenant family),
-// O(n^2 m). cost(i, j) for 0-based i, j; row_to_col receives the column of every row.
-template <typename CostFn>
-void SolveAssignment(std::size_t n, std::size_t m, const CostFn& cost, int* row_to_col) {
-  constexpr std::size_t kDim = std::max(kMaxTracks, kMaxSegments) + 1;
-  constexpr double kInf = std::numeric_limits<double>::infinity();
-  // 1-based as in the textbook formulation; index 0 is the virtual start column.
-  std::array<double, kDim> u{};
-  std::array<double, kDim> v{};
-  std::array<std::size_t, kDim> row_of_col{};  // 0 = column free
-  std::array<std::size_t, kDim> way{};
-  std::array<double, kDim> min_slack{};
-  std::array<bool, kDim> used{};
-  for (std::size_t i = 1; i <= n; ++i) {
-    row_of_col[0] = i;
-    std::size_t j0 = 0;
-    std::fill_n(min_slack.begin(), m + 1, kInf);
-    std::fill_n(used.begin(), m + 1, false);
-    do {
-      used[j0] = true;
-      const std::size_t i0 = row_of_col[j0];
-      double delta = kInf;
-      std::size_t j1 = 0;
-      for (std::size_t j = 1; j <= m; ++j) {
-        if (used[j]) continue;
-        const double slack = cost(i0 - 1, j - 1) - u[i0] - v[j];
-        if (slack < min_slack[j]) {
-          min_slack[j] = slack;
-          way[j] = j0;
-        }
-        if (min_slack[j] < delta) {
-          delta = min_slack[j];
-          j1 = j;
-        }
-      }
-      for (std::size_t j = 0; j <= m; ++j) {
-        if (used[j]) {
-          u[row_of_col[j]] += delta;
-          v[j] -= delta;
-        } else {
-          min_slack[j] -= delta;
-        }
-      }
-      j0 = j1;
-    } while (row_of_col[j0] != 0);
-    do {
-      const std::size_t j1 = way[j0];
-      row_of_col[j0] = row_of_col[j1];
-      j0 = j1;
-    } while (j0 != 0);
-  }
-  for (std::size_t j = 1; j <= m; ++j) {
-    if (row_of_col[j] != 0) row_to_col[row_of_col[j] - 1] = static_cast<int>(j - 1);
-  }
-}
 
 // State and covariance of a constant-velocity filter moved by dt_s without process noise: used to
 // move a just-updated track from its measurement time back to the scan start (a few ms).
@@ -336,19 +281,17 @@ void MultiTracker::Associate(bool confirmed) {
     }
   }
 
-  std::array<int, std::max(kMaxTracks, kMaxSegments)> assignment{};
-  if (n <= m) {
-    SolveAssignment(
-        n, m, [&](std::size_t a, std::size_t b) { return cost_[rows[a]][cols[b]]; },
-        assignment.data());
-    for (std::size_t a = 0; a < n; ++a)
-      assign(rows[a], cols[static_cast<std::size_t>(assignment[a])]);
-  } else {
-    SolveAssignment(
-        m, n, [&](std::size_t b, std::size_t a) { return cost_[rows[a]][cols[b]]; },
-        assignment.data());
-    for (std::size_t b = 0; b < m; ++b)
-      assign(rows[static_cast<std::size_t>(assignment[b])], cols[b]);
+  static_assert(kMaxTracks == kMaxAssignmentDim && kMaxSegments == kMaxAssignmentDim,
+                "cost_ and gated_ are the assignment's matrices");
+  // The Hungarian method per group of tracks and measurements linked by gated pairs (a crowd splits
+  // into small groups); the same optimum as on the whole matrix (assignment.h).
+  std::array<int, kMaxTracks> row_to_col{};
+  std::array<int, kMaxSegments> col_to_row{};
+  SolveGatedAssignment(cost_, gated_, std::span<const std::size_t>(rows.data(), n),
+                       std::span<const std::size_t>(cols.data(), m), row_to_col.data(),
+                       col_to_row.data());
+  for (std::size_t a = 0; a < n; ++a) {
+    if (row_to_col[a] >= 0) assign(rows[a], cols[static_cast<std::size_t>(row_to_col[a])]);
   }
 }
 
