@@ -13,7 +13,7 @@ void SolveGatedAssignment(const AssignmentCosts& cost, const AssignmentAllowed& 
   // Groups by breadth-first search over the allowed pairs; group number + 1, 0 = not yet reached.
   std::array<std::size_t, kDim> row_group{};
   std::array<std::size_t, kDim> col_group{};
-  std::array<std::size_t, 2 * kDim> queue{};  // row a as a, column b as kDim + b
+  std::array<std::size_t, 2 * kDim> queue{};   // row a as a, column b as kDim + b
   std::array<std::size_t, kDim> group_rows{};  // positions in rows / cols
   std::array<std::size_t, kDim> group_cols{};
   std::array<int, kDim> group_assignment{};
@@ -67,7 +67,9 @@ void SolveGatedAssignment(const AssignmentCosts& cost, const AssignmentAllowed& 
     } else if (gn <= gm) {
       SolveAssignment(
           gn, gm,
-          [&](std::size_t r, std::size_t c) { return cost[rows[group_rows[r]]][cols[group_cols[c]]]; },
+          [&](std::size_t r, std::size_t c) {
+            return cost[rows[group_rows[r]]][cols[group_cols[c]]];
+          },
           group_assignment.data());
       for (std::size_t r = 0; r < gn; ++r) {
         pair(group_rows[r], group_cols[static_cast<std::size_t>(group_assignment[r])]);
@@ -75,7 +77,9 @@ void SolveGatedAssignment(const AssignmentCosts& cost, const AssignmentAllowed& 
     } else {
       SolveAssignment(
           gm, gn,
-          [&](std::size_t c, std::size_t r) { return cost[rows[group_rows[r]]][cols[group_cols[c]]]; },
+          [&](std::size_t c, std::size_t r) {
+            return cost[rows[group_rows[r]]][cols[group_cols[c]]];
+          },
           group_assignment.data());
       for (std::size_t c = 0; c < gm; ++c) {
         pair(group_rows[static_cast<std::size_t>(group_assignment[c])], group_cols[c]);

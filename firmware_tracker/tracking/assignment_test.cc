@@ -42,8 +42,8 @@ Problem RandomProblem(std::mt19937_64& rng, std::size_t n, std::size_t m, bool s
       bool ok = false;
       double c = 0.0;
       if (spatial) {
-        const double d2 = std::pow(tracks[i][0] - meas[j][0], 2) +
-                          std::pow(tracks[i][1] - meas[j][1], 2);
+        const double d2 =
+            std::pow(tracks[i][0] - meas[j][0], 2) + std::pow(tracks[i][1] - meas[j][1], 2);
         ok = d2 <= 1.0;
         c = 9.0 * d2 + 0.5 * unit(rng) - 3.0;  // d2 + ln det S may be negative
       } else {
@@ -104,8 +104,10 @@ Score Grouped(const Problem& p) {
   }
   std::size_t cols_used = 0;
   for (std::size_t j = 0; j < p.m; ++j) {
-    if (col_to_row[j] >= 0) ++cols_used;
-    else EXPECT_EQ(col_to_row[j], -1);
+    if (col_to_row[j] >= 0)
+      ++cols_used;
+    else
+      EXPECT_EQ(col_to_row[j], -1);
   }
   EXPECT_EQ(cols_used, s.pairs);
   return s;

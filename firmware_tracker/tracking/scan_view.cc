@@ -17,6 +17,22 @@ ScanError CheckScan(const ScanView& scan) {
   return ScanError::kNone;
 }
 
+void BeamDirections::Fit(const ScanView& scan) {
+  const std::size_t beams = scan.range_m.size();
+  if (beams == beams_ && scan.first_angle_rad == first_angle_rad_ &&
+      scan.angle_step_rad == angle_step_rad_) {
+    return;
+  }
+  first_angle_rad_ = scan.first_angle_rad;
+  angle_step_rad_ = scan.angle_step_rad;
+  beams_ = beams;
+  for (std::size_t i = 0; i < beams; ++i) {
+    const double angle_rad = scan.BeamAngleRad(i);
+    cos_[i] = std::cos(angle_rad);
+    sin_[i] = std::sin(angle_rad);
+  }
+}
+
 const char* ToString(ScanError error) {
   switch (error) {
     case ScanError::kNone:

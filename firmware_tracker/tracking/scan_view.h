@@ -5,6 +5,7 @@
 // metres). Beam i points at first_angle_rad + i * angle_step_rad. A range of 0 means "no echo";
 // ranges are not owned (the span must outlive the call that receives the view).
 
+#include <array>
 #include <cstddef>
 #include <span>
 
@@ -40,5 +41,23 @@ enum class ScanError {
 
 ScanError CheckScan(const ScanView& scan);
 const char* ToString(ScanError error);
+
+// cos and sin of every beam's angle (BeamAngleRad, the same values) for one scan geometry, kept
+// between scans: Fit recomputes them only when the first angle, the step or the beam count change.
+// Fixed storage for kMaxBeams beams, no allocation.
+class BeamDirections {
+ public:
+  // `scan` must pass CheckScan.
+  void Fit(const ScanView& scan);
+  double cos(std::size_t beam) const { return cos_[beam]; }
+  double sin(std::size_t beam) const { return sin_[beam]; }
+
+ private:
+  double first_angle_rad_ = 0.0;
+  double angle_step_rad_ = 0.0;
+  std::size_t beams_ = 0;  // 0: nothing computed yet
+  std::array<double, kMaxBeams> cos_{};
+  std::array<double, kMaxBeams> sin_{};
+};
 
 }  // namespace lrfnet::tracking

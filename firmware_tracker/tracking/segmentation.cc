@@ -91,14 +91,14 @@ void SegmentScan(const ScanView& scan, std::span<const std::uint8_t> foreground,
   out.points_m.clear();
   out.dropped_segments = 0;
   if (CheckScan(scan) != ScanError::kNone) return;
+  out.directions.Fit(scan);
 
   Builder builder(options, out);
   const std::size_t n = std::min(scan.range_m.size(), foreground.size());
   for (std::size_t i = 0; i < n; ++i) {
     const double r = scan.range_m[i];
     if (foreground[i] == 0 || !(std::isfinite(r) && r > 0.0)) continue;
-    const double angle_rad = scan.BeamAngleRad(i);
-    const Eigen::Vector2d p(r * std::cos(angle_rad), r * std::sin(angle_rad));
+    const Eigen::Vector2d p(r * out.directions.cos(i), r * out.directions.sin(i));
     if (builder.open()) {
       const bool beam_gap_ok = i - builder.last_beam() - 1 <= options.max_missing_beams;
       const bool jump_ok =

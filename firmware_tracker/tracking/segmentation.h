@@ -53,6 +53,7 @@ struct SegmentList {
   common::FixedVector<Segment, kMaxSegments> segments;
   common::FixedVector<Eigen::Vector2d, kMaxBeams> points_m;  // sensor frame
   std::uint64_t dropped_segments = 0;  // did not fit into kMaxSegments (this scan)
+  BeamDirections directions;           // of the last scan's beams, reused while they stay the same
 
   std::span<const Eigen::Vector2d> Points(const Segment& s) const {
     return points_m.span().subspan(s.first_point, s.point_count);

@@ -55,6 +55,32 @@ TEST(SegmentationTest, TwoSeparatedGroupsGiveTwoSegmentsWithSensorFramePoints) {
   EXPECT_NEAR(pts[0].y(), 5.0 * std::sin(common::DegToRad(10.0)), 1e-5);
 }
 
+TEST(SegmentationTest, OneListFollowsChangingBeamGeometries) {
+  // The list keeps its beams' directions between scans: a scan with another first angle, step or
+  // beam count must not reuse them. Points are r * (cos, sin) of the beam's angle, bit for bit.
+  SegmentList out;
+  const std::vector<std::pair<double, double>> geometries = {
+      {-90.0, 0.5}, {-90.0, 0.5}, {-45.0, 0.5}, {-45.0, 0.25}, {-45.0, 0.25}, {-90.0, 0.5}};
+  for (std::size_t k = 0; k < geometries.size(); ++k) {
+    MaskScan s(k == 4 ? 541 : 361, 3.0f + static_cast<float>(k));
+    s.Mark(0, s.mask.size());  // every beam: the first segment starts at beam 0
+    ScanView view = s.view();
+    view.first_angle_rad = common::DegToRad(geometries[k].first);
+    view.angle_step_rad = common::DegToRad(geometries[k].second);
+    SegmentScan(view, s.mask, SegmentationOptions{}, out);
+    ASSERT_FALSE(out.segments.empty()) << k;
+    for (const Segment& seg : out.segments) {
+      const auto pts = out.Points(seg);
+      for (std::size_t b = 0; b < pts.size(); ++b) {
+        const double angle_rad = view.BeamAngleRad(seg.begin_beam + b);
+        const double r = s.ranges[seg.begin_beam + b];
+        ASSERT_EQ(pts[b].x(), r * std::cos(angle_rad)) << "scan " << k << " beam " << b;
+        ASSERT_EQ(pts[b].y(), r * std::sin(angle_rad)) << "scan " << k << " beam " << b;
+      }
+    }
+  }
+}
+
 TEST(SegmentationTest, SingleBeamNoiseIsDropped) {
   MaskScan s(361);
   s.Mark(50, 51);
