@@ -264,6 +264,14 @@ void VisitTracking(tracking::TrackerOptions& p, ConfigVisitor& v) {
   v.Field("gate_mahalanobis_sq", o.gate_mahalanobis_sq,
           "Gate, squared Mahalanobis distance (9.21: chi-square, 2 dof, 99 %).");
   v.Field("max_gate_distance_m", o.max_gate_distance_m, "Euclidean bound on top of the gate.");
+  v.Field("recover_gate_mahalanobis_sq", o.recover_gate_mahalanobis_sq,
+          "A confirmed track left without a measurement takes the nearest one nobody took within "
+          "this wider gate (18.42: 2 dof, 99.99 %) before it can start a second track on the same "
+          "person; 0: off.");
+  v.Field("inflate_nis_above", o.inflate_nis_above,
+          "A measurement whose squared Mahalanobis distance exceeds this scales the track's "
+          "covariance by d2 / 2 before the update, so a track follows a start, stop or turn "
+          "instead of lagging behind; 0: off, else >= 2.");
   v.Field("extra_measurement_sigma_m", o.extra_measurement_sigma_m,
           "Added in quadrature to every centre_of_mass / ellipse measurement's sigma and to the "
           "rough position of shape_fit's association (sway, viewpoint changes).");

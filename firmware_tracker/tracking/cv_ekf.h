@@ -11,6 +11,7 @@
 // symmetric positive definite in floating point. Pure, fixed-size, never allocates.
 
 #include <Eigen/Core>
+#include <cmath>
 #include <optional>
 #include <string>
 
@@ -45,6 +46,12 @@ class CvEkf {
   // Position update. Returns false (filter unchanged) when the innovation covariance is not
   // positive definite or the input is not finite.
   bool Update(const Eigen::Vector2d& z_m, const Eigen::Matrix2d& r_m2);
+
+  // Multiplies the covariance by factor (> 0 and finite, else nothing): a state that proved less
+  // certain than it claimed (a manoeuvre the constant-velocity model did not predict).
+  void InflateCovariance(double factor) {
+    if (std::isfinite(factor) && factor > 0.0) p_ *= factor;
+  }
 
   // Replaces the state (e.g. a velocity limited to the possible), keeping the covariance.
   void SetState(const State& x) { x_ = x; }

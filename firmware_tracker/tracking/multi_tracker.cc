@@ -49,6 +49,13 @@ std::optional<std::string> Validate(const MultiTrackerOptions& o) {
   }
   if (!Positive(o.gate_mahalanobis_sq)) return "gate_mahalanobis_sq must be > 0";
   if (!Positive(o.max_gate_distance_m)) return "max_gate_distance_m must be > 0";
+  if (!(std::isfinite(o.recover_gate_mahalanobis_sq) && o.recover_gate_mahalanobis_sq >= 0.0)) {
+    return "recover_gate_mahalanobis_sq must be >= 0";
+  }
+  if (!(std::isfinite(o.inflate_nis_above) &&
+        (o.inflate_nis_above == 0.0 || o.inflate_nis_above >= 2.0))) {
+    return "inflate_nis_above must be 0 (off) or >= 2";
+  }
   if (!(std::isfinite(o.extra_measurement_sigma_m) && o.extra_measurement_sigma_m >= 0.0)) {
     return "extra_measurement_sigma_m must be >= 0";
   }
@@ -136,6 +143,7 @@ void MultiTracker::Step(common::UtcNs scan_start_ns, std::span<const Measurement
   // one for the same person.
   Associate(/*confirmed=*/true);
   Associate(/*confirmed=*/false);
+  Recover();
   UpdateAssigned(scan_start_ns, measurements, refiner);
   ManageLifecycle(scan_start_ns);
   StartTracks(scan_start_ns, measurements, refiner);
@@ -187,21 +195,31 @@ void MultiTracker::AcceptMeasurements(std::span<const Measurement> measurements,
   counters_.measurements += candidates_.size();
 }
 
-bool MultiTracker::InsideGate(const Eigen::Vector2d& predicted_m,
-                              const Eigen::Matrix2d& predicted_cov_m2, const Candidate& c,
-                              double* d2, double* log_det) const {
+double MultiTracker::MahalanobisSq(const Eigen::Vector2d& predicted_m,
+                                   const Eigen::Matrix2d& predicted_cov_m2, const Candidate& c,
+                                   double* log_det) const {
+  constexpr double kInf = std::numeric_limits<double>::infinity();
   const Eigen::Vector2d y = c.z_m - predicted_m;
-  if (!(y.norm() <= options_.max_gate_distance_m)) return false;
+  if (!(y.norm() <= options_.max_gate_distance_m)) return kInf;
   const Eigen::Matrix2d s = predicted_cov_m2 + c.r_m2;
   const double det = s(0, 0) * s(1, 1) - s(0, 1) * s(1, 0);
-  if (!(det > 0.0 && s(0, 0) > 0.0) || !std::isfinite(det)) return false;
+  if (!(det > 0.0 && s(0, 0) > 0.0) || !std::isfinite(det)) return kInf;
   // 2x2 inverse in closed form: y^T S^-1 y.
   const double m2 =
       (s(1, 1) * y.x() * y.x() - (s(0, 1) + s(1, 0)) * y.x() * y.y() + s(0, 0) * y.y() * y.y()) /
       det;
+  if (log_det != nullptr) *log_det = std::log(det);
+  return std::isfinite(m2) ? m2 : kInf;
+}
+
+bool MultiTracker::InsideGate(const Eigen::Vector2d& predicted_m,
+                              const Eigen::Matrix2d& predicted_cov_m2, const Candidate& c,
+                              double* d2, double* log_det) const {
+  double ld = 0.0;
+  const double m2 = MahalanobisSq(predicted_m, predicted_cov_m2, c, &ld);
   if (!(m2 <= options_.gate_mahalanobis_sq)) return false;
   if (d2 != nullptr) *d2 = m2;
-  if (log_det != nullptr) *log_det = std::log(det);
+  if (log_det != nullptr) *log_det = ld;
   return true;
 }
 
@@ -227,13 +245,16 @@ void MultiTracker::Gate(common::UtcNs scan_start_ns) {
       if (!(distance_m <= options_.max_gate_distance_m)) {
         gated_[i][j] = false;
         cost_[i][j] = kUnassignableCost;
+        d2_[i][j] = std::numeric_limits<double>::infinity();
         continue;
       }
       const Eigen::Matrix2d cov =
           p.topLeftCorner<2, 2>() + d * (p.topRightCorner<2, 2>() + p.bottomLeftCorner<2, 2>()) +
           d * d * p.bottomRightCorner<2, 2>() + (q * d * d * d / 3.0) * Eigen::Matrix2d::Identity();
-      double d2 = 0.0, log_det = 0.0;
-      const bool inside = InsideGate(at, cov, c, &d2, &log_det);
+      double log_det = 0.0;
+      const double d2 = MahalanobisSq(at, cov, c, &log_det);
+      const bool inside = d2 <= options_.gate_mahalanobis_sq;
+      d2_[i][j] = d2;
       gated_[i][j] = inside;
       cost_[i][j] = inside ? d2 + log_det : kUnassignableCost;
     }
@@ -295,6 +316,29 @@ void MultiTracker::Associate(bool confirmed) {
   }
 }
 
+void MultiTracker::Recover() {
+  if (!(options_.recover_gate_mahalanobis_sq > options_.gate_mahalanobis_sq)) return;
+  for (;;) {
+    double best = options_.recover_gate_mahalanobis_sq;
+    std::size_t best_i = 0, best_j = 0;
+    bool found = false;
+    for (std::size_t i = 0; i < tracks_.size(); ++i) {
+      if (!tracks_[i].confirmed || track_to_candidate_[i] >= 0) continue;
+      for (std::size_t j = 0; j < candidates_.size(); ++j) {
+        if (candidate_to_track_[j] >= 0 || !(d2_[i][j] <= best)) continue;
+        best = d2_[i][j];
+        best_i = i;
+        best_j = j;
+        found = true;
+      }
+    }
+    if (!found) return;
+    track_to_candidate_[best_i] = static_cast<int>(best_j);
+    candidate_to_track_[best_j] = static_cast<int>(best_i);
+    ++counters_.recovered;
+  }
+}
+
 void MultiTracker::LimitSpeed(Track& t) {
   const Eigen::Vector2d v = t.filter.velocity_mps();
   const double speed = v.norm();
@@ -323,6 +367,13 @@ void MultiTracker::UpdateAssigned(common::UtcNs scan_start_ns,
     const common::UtcNs at_ns = AtOffset(scan_start_ns, c.offset_s);
     t.filter.Predict(common::NsToSeconds(at_ns - t.filter_ns));
     t.filter_ns = std::max(t.filter_ns, at_ns);
+    const double pair_d2 = d2_[i][static_cast<std::size_t>(j)];
+    if (options_.inflate_nis_above > 0.0 && pair_d2 > options_.inflate_nis_above) {
+      // The track ran off its object by more than its covariance allows (a start, stop or turn
+      // the constant-velocity model did not predict): scale P so this innovation becomes as likely
+      // as an average one (d2 -> ~2, its expectation for 2 dof), and let the measurement pull.
+      t.filter.InflateCovariance(pair_d2 / 2.0);
+    }
     Measurement m = measurements[c.source];
     Eigen::Vector2d z = c.z_m;
     Eigen::Matrix2d r = c.r_m2;

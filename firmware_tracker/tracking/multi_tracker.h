@@ -25,13 +25,17 @@
 //       kUnassignableCost.
 //     - kClosest: the paper's rule; greedily pairs the geometrically closest remaining candidate
 //       pair (Euclidean distance of predicted position and measurement).
-//  4. Update of assigned tracks; the kind, orientation and point count of the measurement are kept.
-//     With a MeasurementRefiner (the pipeline's shape fit), the associated measurement is first
-//     replaced by the refiner's, made with what the track knows (its shape state, its predicted
-//     position and velocity), with the refiner's covariance as it is (no extra sigma); a refined
-//     measurement farther than 4x the gate from the prediction is not used (counted). The speed of
-//     the filter's velocity is then limited to max_speed_mps (counted): the limits of the objects a
-//     site has.
+//  3b. Recovery: confirmed tracks still without a measurement, and measurements nobody took, are
+//     paired greedily by d2_ij within recover_gate_mahalanobis_sq (and max_gate_distance_m),
+//     smallest first (counted).
+//  4. Update of assigned tracks (a track whose measurement lies beyond inflate_nis_above first has
+//     its covariance scaled, see there); the kind, orientation and point count of the measurement
+//     are kept. With a MeasurementRefiner (the pipeline's shape fit), the associated measurement is
+//     first replaced by the refiner's, made with what the track knows (its shape state, its
+//     predicted position and velocity), with the refiner's covariance as it is (no extra sigma); a
+//     refined measurement farther than 4x the gate from the prediction is not used (counted). The
+//     speed of the filter's velocity is then limited to max_speed_mps (counted): the limits of the
+//     objects a site has.
 //  5. Lifecycle. A new track is tentative; it is confirmed when it was updated in confirm_hits of
 //     its first confirm_window scans (M of N) and deleted as soon as that became impossible. A
 //     confirmed track without a measurement coasts (predicted only) and is deleted when its last
@@ -94,6 +98,18 @@ struct MultiTrackerOptions {
   Association association = Association::kGlobalNearestNeighbour;
   // Squared Mahalanobis distance; 9.21 = chi-square quantile for 2 degrees of freedom at 99 %.
   double gate_mahalanobis_sq = 9.21;
+  // Recovery (step 3b): a confirmed track left without a measurement takes the nearest one nobody
+  // took within this wider gate (and max_gate_distance_m) before it may start a second track.
+  // 18.42 = chi-square 2 dof at 99.99 %. A person who starts, stops or turns runs ahead of the
+  // constant-velocity prediction by 0.3 m within a few scans; with the 99 % gate that measurement
+  // started a new track beside the old one (an id switch and a ghost). 0 turns it off.
+  double recover_gate_mahalanobis_sq = 18.42;
+  // Manoeuvres (step 4): an associated measurement whose d2 (normalised innovation squared)
+  // exceeds this scales the track's covariance by d2 / 2 before the update (a one-step fading
+  // memory; 2 is d2's expectation for 2 dof). The filter then follows a start, stop or turn within
+  // a scan or two instead of lagging behind it by 0.2-0.4 m (results/tracking_benchmark.md).
+  // 0 turns it off; otherwise >= 2.
+  double inflate_nis_above = 2.0;
   // Euclidean bound on top of the statistical gate: a coasting track's covariance grows quickly and
   // would otherwise swallow measurements of other people. 1 m is ~0.7 s of walking.
   double max_gate_distance_m = 1.0;
@@ -159,6 +175,7 @@ struct MultiTrackerCounters {
   std::uint64_t refine_failures = 0;  // the refiner had no measurement, or it was far off
   std::uint64_t speed_clamps = 0;     // updates whose speed exceeded max_speed_mps
   std::uint64_t deleted_static = 0;   // handed to the background (step 5)
+  std::uint64_t recovered = 0;        // associations made in the wider gate (step 3b)
 
   std::uint64_t deleted() const {
     return deleted_tentative + deleted_coast_timeout + deleted_covariance + deleted_time_reset +
@@ -287,6 +304,7 @@ class MultiTracker {
                           std::span<const double> time_offsets_s);
   void Gate(common::UtcNs scan_start_ns);
   void Associate(bool confirmed);
+  void Recover();
   void UpdateAssigned(common::UtcNs scan_start_ns, std::span<const Measurement> measurements,
                       MeasurementRefiner* refiner);
   void ManageLifecycle(common::UtcNs scan_start_ns);
@@ -296,6 +314,9 @@ class MultiTracker {
   void Report(common::UtcNs scan_start_ns, ScanTracks& out) const;
   bool InsideGate(const Eigen::Vector2d& predicted_m, const Eigen::Matrix2d& predicted_cov_m2,
                   const Candidate& c, double* d2, double* log_det) const;
+  // y^T S^-1 y of the pair (infinity beyond max_gate_distance_m or for a degenerate S).
+  double MahalanobisSq(const Eigen::Vector2d& predicted_m, const Eigen::Matrix2d& predicted_cov_m2,
+                       const Candidate& c, double* log_det) const;
   std::uint32_t NewId();
 
   MultiTrackerOptions options_;
@@ -310,9 +331,10 @@ class MultiTracker {
   std::array<std::array<double, kMaxSegments>, kMaxTracks> cost_{};      // gated or unassignable
   std::array<std::array<double, kMaxSegments>, kMaxTracks> distance_{};  // Euclidean, metres
   std::array<std::array<bool, kMaxSegments>, kMaxTracks> gated_{};
-  std::size_t gated_rows_ = 0;                          // tracks when gated_ was filled
-  std::array<int, kMaxTracks> track_to_candidate_{};    // -1: none
-  std::array<int, kMaxSegments> candidate_to_track_{};  // -1: none
+  std::array<std::array<double, kMaxSegments>, kMaxTracks> d2_{};  // Mahalanobis^2, inf: none
+  std::size_t gated_rows_ = 0;                                     // tracks when gated_ was filled
+  std::array<int, kMaxTracks> track_to_candidate_{};               // -1: none
+  std::array<int, kMaxSegments> candidate_to_track_{};             // -1: none
   common::FixedVector<std::size_t, kMaxTracks> absorbed_;
 };
 

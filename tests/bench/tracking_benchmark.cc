@@ -32,7 +32,10 @@
 // tracker beyond its defaults and the device's range.
 //
 //   tracking_benchmark --scenarios DIR [--extra DIR] [--only NAME] [--out FILE] [--jobs N]
-//   (--extra: more scenario folders, e.g. held-out scenes, reported in their own section)
+//                      [--explain]
+//   (--extra: more scenario folders, e.g. held-out scenes, reported in their own section;
+//   --explain: per run on stderr, what became of an object's previous track at every id switch
+//   and missed scan, and the tracker's counters)
 
 #include <Eigen/Cholesky>
 #include <Eigen/Core>
@@ -134,11 +137,32 @@ struct Mot {
   }
 };
 
+// Why ids switched and tracks broke (--explain): for every id switch, what became of the
+// object's previous track in that scan, and whether the object was hidden since its last match;
+// for every missed scan of an object that had been matched, where its previous track was.
+struct Causes {
+  std::map<std::string, double> switches, misses;
+  void Add(const Causes& o) {
+    for (const auto& [k, v] : o.switches) switches[k] += v;
+    for (const auto& [k, v] : o.misses) misses[k] += v;
+  }
+};
+
 // One stream of frames (a sensor, or the fused world) scored frame by frame.
 class MotSequence {
  public:
+  // alive: ids the tracker still holds (reported or not), nullptr when unknown.
   void Frame(double dt_s, const std::vector<Truth>& truths, const std::vector<Hypothesis>& hyps,
-             const std::vector<Vector2d>& dont_care) {
+             const std::vector<Vector2d>& dont_care,
+             const std::set<std::uint64_t>* alive = nullptr) {
+    std::set<std::size_t> present;
+    for (const Truth& t : truths) present.insert(t.id);
+    for (auto& [id, st] : state_) {
+      if (!present.count(id) && st.ever_matched) {
+        st.hidden_since_match = true;
+        st.hidden_s += dt_s;
+      }
+    }
     mot_.objects += static_cast<double>(truths.size());
     mot_.target_seconds += dt_s * static_cast<double>(truths.size());
     std::vector<int> truth_to_hyp(truths.size(), -1);
@@ -186,6 +210,20 @@ class MotSequence {
       s.visible_s += dt_s;
       if (truth_to_hyp[t] < 0) {
         ++mot_.misses;
+        if (s.ever_matched) {
+          std::string why = "previous track gone";
+          for (std::size_t h = 0; h < hyps.size(); ++h) {
+            if (hyps[h].id != s.last_hyp) continue;
+            const double d = (hyps[h].p - truths[t].p).norm();
+            why = hyp_taken[h] ? "previous track on another object"
+                  : d <= 1.0   ? "previous track 0.5-1 m off"
+                               : "previous track > 1 m off";
+          }
+          if (why == "previous track gone" && alive != nullptr && alive->count(s.last_hyp)) {
+            why = "previous track alive, not reported";
+          }
+          causes_.misses[why] += 1;
+        }
         if (s.matched_last) s.interrupted = true;
         s.matched_last = false;
         continue;
@@ -205,7 +243,25 @@ class MotSequence {
           }
         }
       }
-      if (s.ever_matched && s.last_hyp != h.id) ++mot_.id_switches;
+      if (s.ever_matched && s.last_hyp != h.id) {
+        ++mot_.id_switches;
+        std::string why = "previous track gone";
+        for (std::size_t k = 0; k < hyps.size(); ++k) {
+          if (hyps[k].id != s.last_hyp) continue;
+          why = hyp_taken[k] ? "previous track on another object" : "previous track off the object";
+        }
+        if (why == "previous track gone" && alive != nullptr && alive->count(s.last_hyp)) {
+          why = "previous track alive, not reported";
+        }
+        why += !s.hidden_since_match ? ""
+               : s.hidden_s < 1.0    ? ", hidden < 1 s"
+               : s.hidden_s < 3.0    ? ", hidden 1-3 s"
+                                     : ", hidden > 3 s";
+        why += hyp_age_[h.id] < 0.5 ? ", new track" : ", old track";
+        causes_.switches[why] += 1;
+      }
+      s.hidden_since_match = false;
+      s.hidden_s = 0;
       if (s.interrupted) ++mot_.fragments;
       s.interrupted = false;
       s.ever_matched = true;
@@ -213,6 +269,7 @@ class MotSequence {
       s.last_hyp = h.id;
       hyps_[h.id].frames += 1;
     }
+    for (const Hypothesis& h : hyps) hyp_age_[h.id] += dt_s;
     for (std::size_t h = 0; h < hyps.size(); ++h) {
       if (hyp_taken[h]) continue;
       bool ignored = false;
@@ -237,9 +294,12 @@ class MotSequence {
     }
     return m;
   }
+  const Causes& causes() const { return causes_; }
 
  private:
   struct TruthState {
+    bool hidden_since_match = false;
+    double hidden_s = 0;  // since the last match
     bool matched_last = false;
     bool ever_matched = false;
     bool interrupted = false;
@@ -253,6 +313,8 @@ class MotSequence {
   Mot mot_;
   std::map<std::size_t, TruthState> state_;
   std::map<std::uint64_t, HypState> hyps_;
+  std::map<std::uint64_t, double> hyp_age_;  // seconds reported
+  Causes causes_;
 };
 
 // ---- the runs
@@ -276,6 +338,8 @@ std::vector<Variant> Variants(sim::Mount mount, double range_m) {
   old.tracking.static_objects = false;
   old.tracking.max_speed_mps = 1000.0;
   old.tracking.report_coasting_s = old.tracking.coast_timeout_s;
+  old.tracking.recover_gate_mahalanobis_sq = 0.0;
+  old.tracking.inflate_nis_above = 0.0;
   return {{"old", old}, {"new", fresh}};
 }
 
@@ -313,8 +377,10 @@ struct SensorFrames {
 };
 
 struct RunResult {
-  std::vector<Mot> per_sensor;  // per variant, summed over sensors
-  std::vector<Mot> fused;       // per variant
+  std::vector<Mot> per_sensor;                           // per variant, summed over sensors
+  std::vector<Causes> causes;                            // per variant, summed over sensors
+  std::vector<tracking::MultiTrackerCounters> counters;  // per variant, summed over sensors
+  std::vector<Mot> fused;                                // per variant
   double scans = 0;
   double track_seconds = 0;
   double cpu_s = 0;
@@ -323,7 +389,8 @@ struct RunResult {
 // The tracker over every scan of one sensor, for every variant.
 void RunSensor(const sim::Simulator& simulator, std::size_t sensor,
                const std::vector<Variant>& variants, std::vector<Mot>* mots,
-               std::vector<SensorFrames>* frames) {
+               std::vector<SensorFrames>* frames, std::vector<Causes>* causes,
+               std::vector<tracking::MultiTrackerCounters>* counters) {
   const sim::SensorSetup& setup = simulator.sensor(sensor);
   const common::Pose2 world_from_sensor{setup.x_m, setup.y_m, common::DegToRad(setup.yaw_deg)};
   const common::Pose2 sensor_from_world = world_from_sensor.inverse();
@@ -380,12 +447,20 @@ void RunSensor(const sim::Simulator& simulator, std::size_t sensor,
                         r.state == tracking::TrackState::kConfirmed});
         frame.tracks.push_back(ToObservation(r));
       }
-      sequences[v].Frame(period_s, truths, hyps, dont_care);
+      std::array<tracking::TrackPrediction, tracking::kMaxTracks> predictions;
+      const std::size_t n_alive = pipelines[v]->tracker().Predict(out.scan_start_ns, predictions);
+      std::set<std::uint64_t> alive;
+      for (std::size_t a = 0; a < n_alive; ++a) alive.insert(predictions[a].id);
+      sequences[v].Frame(period_s, truths, hyps, dont_care, &alive);
       (*frames)[v].frames.push_back(std::move(frame));
       (*frames)[v].seen.push_back(seen);
     }
   }
-  for (std::size_t v = 0; v < variants.size(); ++v) (*mots)[v].Add(sequences[v].Finish());
+  for (std::size_t v = 0; v < variants.size(); ++v) {
+    (*mots)[v].Add(sequences[v].Finish());
+    (*causes)[v] = sequences[v].causes();
+    (*counters)[v] = pipelines[v]->tracker().counters();
+  }
 }
 
 Mot RunFusion(const sim::Simulator& simulator, const std::vector<SensorFrames>& sensors) {
@@ -455,6 +530,47 @@ Mot RunFusion(const sim::Simulator& simulator, const std::vector<SensorFrames>& 
   return sequence.Finish();
 }
 
+void AddCounters(const tracking::MultiTrackerCounters& c, tracking::MultiTrackerCounters* sum) {
+  sum->created += c.created;
+  sum->confirmed += c.confirmed;
+  sum->deleted_tentative += c.deleted_tentative;
+  sum->deleted_coast_timeout += c.deleted_coast_timeout;
+  sum->deleted_covariance += c.deleted_covariance;
+  sum->deleted_static += c.deleted_static;
+  sum->births_suppressed += c.births_suppressed;
+  sum->refine_failures += c.refine_failures;
+  sum->speed_clamps += c.speed_clamps;
+  sum->associations += c.associations;
+  sum->recovered += c.recovered;
+}
+
+// --explain: the causes and the tracker's counters of one run, per variant, on stderr.
+void Explain(const std::string& scenario, const std::string& mount, const RunResult& r) {
+  const char* names[] = {"old", "new"};
+  for (std::size_t v = 0; v < r.causes.size(); ++v) {
+    const tracking::MultiTrackerCounters& c = r.counters[v];
+    std::fprintf(stderr,
+                 "%s %s %s: created %llu confirmed %llu deleted: tentative %llu coast %llu "
+                 "covariance %llu static %llu; births suppressed %llu refine failures %llu speed "
+                 "clamps %llu recovered %llu\n",
+                 scenario.c_str(), mount.c_str(), names[v],
+                 static_cast<unsigned long long>(c.created),
+                 static_cast<unsigned long long>(c.confirmed),
+                 static_cast<unsigned long long>(c.deleted_tentative),
+                 static_cast<unsigned long long>(c.deleted_coast_timeout),
+                 static_cast<unsigned long long>(c.deleted_covariance),
+                 static_cast<unsigned long long>(c.deleted_static),
+                 static_cast<unsigned long long>(c.births_suppressed),
+                 static_cast<unsigned long long>(c.refine_failures),
+                 static_cast<unsigned long long>(c.speed_clamps),
+                 static_cast<unsigned long long>(c.recovered));
+    for (const auto& [why, count] : r.causes[v].switches)
+      std::fprintf(stderr, "  switch: %-60s %5.0f\n", why.c_str(), count);
+    for (const auto& [why, count] : r.causes[v].misses)
+      std::fprintf(stderr, "  missed scan: %-55s %5.0f\n", why.c_str(), count);
+  }
+}
+
 bool HasPeople(const sim::Scenario& s) {
   return std::any_of(s.targets.begin(), s.targets.end(), [](const sim::TargetSpec& t) {
     return t.shape == sim::TargetShape::kPerson || t.shape == sim::TargetShape::kTrolley;
@@ -479,6 +595,9 @@ RunResult RunScenario(sim::Scenario scenario, bool all_legs, int jobs) {
   const std::size_t nv = variants[0].size();
   std::vector<std::vector<Mot>> mots(n, std::vector<Mot>(nv));
   std::vector<std::vector<SensorFrames>> frames(n, std::vector<SensorFrames>(nv));
+  std::vector<std::vector<Causes>> causes(n, std::vector<Causes>(nv));
+  std::vector<std::vector<tracking::MultiTrackerCounters>> counters(
+      n, std::vector<tracking::MultiTrackerCounters>(nv));
   const auto started = std::chrono::steady_clock::now();
   std::mutex mutex;
   std::size_t next = 0;
@@ -490,7 +609,7 @@ RunResult RunScenario(sim::Scenario scenario, bool all_legs, int jobs) {
         if (next >= n) return;
         i = next++;
       }
-      RunSensor(*simulator, i, variants[i], &mots[i], &frames[i]);
+      RunSensor(*simulator, i, variants[i], &mots[i], &frames[i], &causes[i], &counters[i]);
     }
   };
   std::vector<std::thread> threads;
@@ -500,10 +619,14 @@ RunResult RunScenario(sim::Scenario scenario, bool all_legs, int jobs) {
   RunResult result;
   result.cpu_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - started).count();
   result.per_sensor.assign(nv, Mot{});
+  result.causes.assign(nv, Causes{});
+  result.counters.assign(nv, tracking::MultiTrackerCounters{});
   for (std::size_t v = 0; v < nv; ++v) {
     std::vector<SensorFrames> by_sensor;
     for (std::size_t i = 0; i < n; ++i) {
       result.per_sensor[v].Add(mots[i][v]);
+      result.causes[v].Add(causes[i][v]);
+      AddCounters(counters[i][v], &result.counters[v]);
       by_sensor.push_back(std::move(frames[i][v]));
     }
     result.fused.push_back(RunFusion(*simulator, by_sensor));
@@ -538,7 +661,7 @@ struct Section {
 };
 
 Section RunFolder(const std::string& title, const std::string& dir, const std::string& only,
-                  int jobs) {
+                  int jobs, bool explain) {
   Section section;
   section.title = title;
   section.table = kHeader;
@@ -562,6 +685,7 @@ Section RunFolder(const std::string& title, const std::string& dir, const std::s
       for (const auto& s : scenario.sensors) mixed = mixed || s.mount == sim::Mount::kLegs;
       const std::string mount = legs ? "legs" : (mixed ? "as given" : "torso");
       const RunResult r = RunScenario(scenario, legs, jobs);
+      if (explain) Explain(scenario.name, mount, r);
       const char* names[] = {"old", "new"};
       for (std::size_t v = 0; v < r.per_sensor.size(); ++v) {
         section.table +=
@@ -632,6 +756,7 @@ int main(int argc, char** argv) {
   std::string scenarios_dir, out_path, only;
   std::vector<std::string> extra;
   int jobs = 1;
+  bool explain = false;
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
     auto value = [&]() -> std::string {
@@ -649,12 +774,14 @@ int main(int argc, char** argv) {
       out_path = value();
     } else if (a == "--only") {
       only = value();
+    } else if (a == "--explain") {
+      explain = true;
     } else if (a == "--jobs") {
       jobs = std::max(1, std::atoi(value().c_str()));
     } else {
       std::fprintf(stderr,
                    "usage: tracking_benchmark --scenarios DIR [--extra DIR] [--only NAME] "
-                   "[--out FILE] [--jobs N]\n");
+                   "[--out FILE] [--jobs N] [--explain]\n");
       return 2;
     }
   }
@@ -663,10 +790,10 @@ int main(int argc, char** argv) {
     return 2;
   }
   std::vector<Section> sections;
-  sections.push_back(RunFolder("Shipped scenarios", scenarios_dir, only, jobs));
+  sections.push_back(RunFolder("Shipped scenarios", scenarios_dir, only, jobs, explain));
   for (const std::string& dir : extra) {
-    sections.push_back(
-        RunFolder("More scenarios (" + fs::path(dir).filename().string() + ")", dir, only, jobs));
+    sections.push_back(RunFolder("More scenarios (" + fs::path(dir).filename().string() + ")", dir,
+                                 only, jobs, explain));
   }
   std::string text;
   for (const Section& s : sections) {
