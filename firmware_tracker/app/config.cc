@@ -234,6 +234,10 @@ void VisitShape(tracking::ShapeOptions& o, ConfigVisitor& v) {
           "Only outlines longer than this count as evidence of flatness.");
   v.Field("association_sigma_m", o.association_sigma_m,
           "1-sigma per axis of the rough position used to associate before the fit.");
+  v.Field("seen_through_margin_m", o.seen_through_margin_m,
+          "A coasting track is not reported where the scan sees through it (every beam with an "
+          "echo across the middle of its body returned from more than this beyond it); a person "
+          "hidden behind something stays reported. 0: off.");
   v.Field("point_sigma_m", o.fit.point_sigma_m, "Range noise of a point at 0 m (1 sigma).");
   v.Field("point_sigma_per_m", o.fit.point_sigma_per_m, "Growth of the range noise per metre.");
   v.Field("model_sigma_m", o.fit.model_sigma_m,

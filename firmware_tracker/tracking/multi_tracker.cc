@@ -323,7 +323,11 @@ void MultiTracker::Recover() {
     std::size_t best_i = 0, best_j = 0;
     bool found = false;
     for (std::size_t i = 0; i < tracks_.size(); ++i) {
-      if (!tracks_[i].confirmed || track_to_candidate_[i] >= 0) continue;
+      // Only a track measured in the previous scan: it lags behind its object. A coasting one
+      // would take whatever came near its growing covariance.
+      if (!tracks_[i].confirmed || track_to_candidate_[i] >= 0 || (tracks_[i].hits & 2u) == 0) {
+        continue;
+      }
       for (std::size_t j = 0; j < candidates_.size(); ++j) {
         if (candidate_to_track_[j] >= 0 || !(d2_[i][j] <= best)) continue;
         best = d2_[i][j];

@@ -25,9 +25,10 @@
 //       kUnassignableCost.
 //     - kClosest: the paper's rule; greedily pairs the geometrically closest remaining candidate
 //       pair (Euclidean distance of predicted position and measurement).
-//  3b. Recovery: confirmed tracks still without a measurement, and measurements nobody took, are
-//     paired greedily by d2_ij within recover_gate_mahalanobis_sq (and max_gate_distance_m),
-//     smallest first (counted).
+//  3b. Recovery: confirmed tracks still without a measurement that were measured in the previous
+//     scan (a coasting track would take whatever comes near its growing covariance), and
+//     measurements nobody took, are paired greedily by d2_ij within recover_gate_mahalanobis_sq
+//     (and max_gate_distance_m), smallest first (counted).
 //  4. Update of assigned tracks (a track whose measurement lies beyond inflate_nis_above first has
 //     its covariance scaled, see there); the kind, orientation and point count of the measurement
 //     are kept. With a MeasurementRefiner (the pipeline's shape fit), the associated measurement is
@@ -98,11 +99,12 @@ struct MultiTrackerOptions {
   Association association = Association::kGlobalNearestNeighbour;
   // Squared Mahalanobis distance; 9.21 = chi-square quantile for 2 degrees of freedom at 99 %.
   double gate_mahalanobis_sq = 9.21;
-  // Recovery (step 3b): a confirmed track left without a measurement takes the nearest one nobody
-  // took within this wider gate (and max_gate_distance_m) before it may start a second track.
-  // 18.42 = chi-square 2 dof at 99.99 %. A person who starts, stops or turns runs ahead of the
-  // constant-velocity prediction by 0.3 m within a few scans; with the 99 % gate that measurement
-  // started a new track beside the old one (an id switch and a ghost). 0 turns it off.
+  // Recovery (step 3b): a confirmed track measured in the previous scan and left without a
+  // measurement in this one takes the nearest one nobody took within this wider gate (and
+  // max_gate_distance_m) before it may start a second track. 18.42 = chi-square 2 dof at 99.99 %. A
+  // person who starts, stops or turns runs ahead of the constant-velocity prediction by 0.3 m
+  // within a few scans; with the 99 % gate that measurement started a new track beside the old one
+  // (an id switch and a ghost). 0 turns it off.
   double recover_gate_mahalanobis_sq = 18.42;
   // Manoeuvres (step 4): an associated measurement whose d2 (normalised innovation squared)
   // exceeds this scales the track's covariance by d2 / 2 before the update (a one-step fading

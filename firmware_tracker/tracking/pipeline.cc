@@ -107,6 +107,9 @@ std::optional<std::string> Validate(const ShapeOptions& o) {
     return "flat_min_extent_m must be >= 0";
   }
   if (!Positive(o.association_sigma_m)) return "association_sigma_m must be > 0";
+  if (!(std::isfinite(o.seen_through_margin_m) && o.seen_through_margin_m >= 0.0)) {
+    return "seen_through_margin_m must be >= 0";
+  }
   return std::nullopt;
 }
 
@@ -635,6 +638,49 @@ void TrackingPipeline::AbsorbStatic(const ScanView& scan) {
   }
 }
 
+bool TrackingPipeline::SeenThrough(const ScanView& scan, const Eigen::Vector2d& position_m,
+                                   double sigma_m) const {
+  const ShapeOptions& o = options_.shape;
+  const double range = position_m.norm();
+  // The body's half-width and two sigma of where the track may be.
+  const double half_width_m = o.person_major_m + 2.0 * sigma_m;
+  if (!(range > half_width_m)) return false;
+  const double bearing = std::atan2(position_m.y(), position_m.x());
+  const double half_angle = std::atan(half_width_m / range);
+  const double step = scan.angle_step_rad;
+  // Beam indices across [bearing - half_angle, bearing + half_angle] (either sign of step).
+  const double a = (bearing - half_angle - scan.first_angle_rad) / step;
+  const double b = (bearing + half_angle - scan.first_angle_rad) / step;
+  const double lo = std::ceil(std::min(a, b)), hi = std::floor(std::max(a, b));
+  const auto n = static_cast<double>(scan.range_m.size());
+  if (!(lo >= 0.0 && hi < n && lo <= hi)) return false;  // outside the field of view: unknown
+  std::size_t beyond = 0;
+  for (auto i = static_cast<std::size_t>(lo); i <= static_cast<std::size_t>(hi); ++i) {
+    const double r = scan.range_m[i];
+    if (!(r > 0.0)) continue;                                             // no echo: unknown
+    if (r <= range + options_.shape.seen_through_margin_m) return false;  // could be the person
+    ++beyond;
+  }
+  return beyond >= 2;
+}
+
+void TrackingPipeline::DropSeenThrough(const ScanView& scan) {
+  std::size_t kept = 0;
+  for (std::size_t i = 0; i < tracks_.tracks.size(); ++i) {
+    const TrackReport& r = tracks_.tracks[i];
+    const Eigen::Matrix2d p = r.covariance.topLeftCorner<2, 2>();
+    const double sigma_m = std::sqrt(std::max(0.0, 0.5 * p.trace()));
+    if (r.state == TrackState::kCoasting &&
+        SeenThrough(scan, Eigen::Vector2d(r.x_m, r.y_m), sigma_m)) {
+      ++counters_.seen_through;
+      continue;
+    }
+    if (kept != i) tracks_.tracks[kept] = r;
+    ++kept;
+  }
+  while (tracks_.tracks.size() > kept) tracks_.tracks.pop_back();
+}
+
 const ScanTracks& TrackingPipeline::Process(const ScanView& scan, std::uint32_t scan_counter) {
   ++counters_.scans;
   segments_.segments.clear();
@@ -667,7 +713,14 @@ const ScanTracks& TrackingPipeline::Process(const ScanView& scan, std::uint32_t 
                 shape_fit ? refiner_.get() : nullptr, tracks_);
   counters_.shape_fits += refiner_->fits - fits_before;
   counters_.failed_shape_fits += refiner_->failed - failed_before;
-  if (bg.scan_error == ScanError::kNone && bg.learned) AbsorbStatic(scan);
+  if (bg.scan_error == ScanError::kNone && bg.learned) {
+    AbsorbStatic(scan);
+    // At knee height the beams pass between a person's legs: no such check.
+    if (shape_fit && options_.shape.mount == Mount::kTorso &&
+        options_.shape.seen_through_margin_m > 0.0) {
+      DropSeenThrough(scan);
+    }
+  }
   tracks_.scan_counter = scan_counter;
   tracks_.scan_period_s = bg.scan_error == ScanError::kNone ? scan.scan_period_s : 0.0;
   return tracks_;

@@ -39,6 +39,9 @@
 // measurement counts as taken at scan start. Either way all reported tracks are valid at the scan
 // start.
 //
+// Coasting tracks (kShapeFit, torso mount): a coasting track's report is dropped where the scan
+// sees through its predicted position (ShapeOptions::seen_through_margin_m).
+//
 // Rejected scans (CheckScan) and scans while the background is being learned produce no
 // measurements; existing tracks coast through them. Static objects the tracker recognises are
 // handed to the background model (BackgroundModel::Absorb).
@@ -117,6 +120,13 @@ struct ShapeOptions {
   double beam_divergence_rad = 0.015;
   // Sigma of the first position used for association (per axis).
   double association_sigma_m = 0.08;
+  // Torso mount: a coasting track is not reported where the scan sees through it: every beam with
+  // an echo across its body (person_major_m to either side of its predicted position, widened by
+  // two sigma of the position; at least 2 beams) returned from more than this beyond it, none
+  // nearer. The person is not there (they turned, stopped or left while unseen); a person hidden
+  // behind something or merely not detected stays reported for tracking.report_coasting_s. Not
+  // at knee height (the beams pass between the legs). 0: off.
+  double seen_through_margin_m = 0.5;
 };
 
 std::optional<std::string> Validate(const ShapeOptions& options);
@@ -152,6 +162,7 @@ struct PipelineCounters {
   std::uint64_t leg_pairs = 0;          // observations of two legs (kLegs)
   std::uint64_t single_legs = 0;        // observations of one leg
   std::uint64_t absorbed_objects = 0;   // static objects handed to the background
+  std::uint64_t seen_through = 0;       // coasting track reports dropped (seen through)
 };
 
 // One piece of an observation: consecutive points of one segment and where its silhouette ends.
@@ -206,6 +217,8 @@ class TrackingPipeline {
   ObservationPart MakePart(const ScanView& scan, const Segment& segment, std::size_t first,
                            std::size_t count) const;
   void AbsorbStatic(const ScanView& scan);
+  void DropSeenThrough(const ScanView& scan);
+  bool SeenThrough(const ScanView& scan, const Eigen::Vector2d& position_m, double sigma_m) const;
 
   TrackerOptions options_;
   PipelineCounters counters_;

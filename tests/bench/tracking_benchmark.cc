@@ -139,10 +139,12 @@ struct Mot {
 
 // Why ids switched and tracks broke (--explain): for every id switch, what became of the
 // object's previous track in that scan, and whether the object was hidden since its last match;
-// for every missed scan of an object that had been matched, where its previous track was.
+// for every missed scan of an object that had been matched, where its previous track was; for
+// every false positive, where it was.
 struct Causes {
-  std::map<std::string, double> switches, misses;
+  std::map<std::string, double> switches, misses, false_positives;
   void Add(const Causes& o) {
+    for (const auto& [k, v] : o.false_positives) false_positives[k] += v;
     for (const auto& [k, v] : o.switches) switches[k] += v;
     for (const auto& [k, v] : o.misses) misses[k] += v;
   }
@@ -280,6 +282,23 @@ class MotSequence {
         continue;
       }
       ++mot_.false_positives;
+      {
+        double nearest = std::numeric_limits<double>::infinity();
+        bool taken = false;
+        for (std::size_t t = 0; t < truths.size(); ++t) {
+          const double d = (hyps[h].p - truths[t].p).norm();
+          if (d < nearest) {
+            nearest = d;
+            taken = truth_to_hyp[t] >= 0;
+          }
+        }
+        const std::string why = nearest > 1.5 ? "far from every object"
+                                : taken       ? "beside an object another track holds"
+                                              : "0.5-1.5 m off an untracked object";
+        causes_
+            .false_positives[std::string(hyps[h].measured ? "measured, " : "coasting, ") + why] +=
+            1;
+      }
       HypState& hs = hyps_[hyps[h].id];
       hs.frames += 1;
       hs.unmatched += 1;
@@ -566,6 +585,8 @@ void Explain(const std::string& scenario, const std::string& mount, const RunRes
                  static_cast<unsigned long long>(c.recovered));
     for (const auto& [why, count] : r.causes[v].switches)
       std::fprintf(stderr, "  switch: %-60s %5.0f\n", why.c_str(), count);
+    for (const auto& [why, count] : r.causes[v].false_positives)
+      std::fprintf(stderr, "  false positive: %-52s %5.0f\n", why.c_str(), count);
     for (const auto& [why, count] : r.causes[v].misses)
       std::fprintf(stderr, "  missed scan: %-55s %5.0f\n", why.c_str(), count);
   }
