@@ -390,13 +390,12 @@ void MultiTracker::UpdateAssigned(common::UtcNs scan_start_ns,
         // The refiner's covariance is its own, model errors included: no extra sigma.
         z = m.position_m;
         r = 0.5 * (m.covariance_m2 + m.covariance_m2.transpose());
-        double d2 = 0.0;
         Candidate refined = c;
         refined.z_m = z;
         refined.r_m2 = r;
         usable = z.allFinite() && r.allFinite() &&
-                 InsideGate(x.head<2>(), p.topLeftCorner<2, 2>(), refined, &d2, nullptr);
-        usable = usable || (std::isfinite(d2) && d2 <= 4.0 * options_.gate_mahalanobis_sq);
+                 MahalanobisSq(x.head<2>(), p.topLeftCorner<2, 2>(), refined, nullptr) <=
+                     4.0 * options_.gate_mahalanobis_sq;
       }
       if (!usable) {
         ++counters_.refine_failures;

@@ -6,6 +6,7 @@
 #include <cmath>
 #include <limits>
 #include <set>
+#include <utility>
 #include <vector>
 
 namespace lrfnet::tracking {
@@ -506,6 +507,44 @@ TEST(MultiTrackerTest, PersonWhoStartsWalkingOrTurnsKeepsOneTrack) {
   const StartResult lost = StandThenWalk(off);
   EXPECT_GT(lost.ids.size(), 1u) << "the scene no longer tests the start";
   EXPECT_EQ(lost.recovered, 0u);
+}
+
+// A refiner that moves every measurement of an existing track by a fixed offset.
+class OffsetRefiner final : public MeasurementRefiner {
+ public:
+  explicit OffsetRefiner(Eigen::Vector2d offset_m) : offset_m_(std::move(offset_m)) {}
+  bool Refine(std::size_t, common::UtcNs, const Eigen::Vector4d* predicted, const Eigen::Matrix4d*,
+              TrackShape& shape, Measurement& m) override {
+    shape.shape = ObjectShape::kTorso;
+    if (predicted != nullptr) m.position_m += offset_m_;
+    m.covariance_m2 = 0.02 * 0.02 * Eigen::Matrix2d::Identity();
+    return true;
+  }
+
+ private:
+  Eigen::Vector2d offset_m_;
+};
+
+TEST(MultiTrackerTest, RefinedMeasurementFarBeyondTheGateIsNotUsed) {
+  const std::vector<Measurement> ms = {Meas(3.0, 0.0, 0.02)};
+  for (const double offset_m : {0.05, 0.6}) {
+    MultiTracker tracker(Opts());
+    OffsetRefiner refiner({0.0, offset_m});
+    ScanTracks out;
+    tracker.Step(ScanNs(0), ms, {}, &refiner, out);  // born without an offset
+    for (std::int64_t k = 1; k < 10; ++k) tracker.Step(ScanNs(k), ms, {}, &refiner, out);
+    SCOPED_TRACE(offset_m);
+    if (offset_m < 0.1) {
+      // Near: used.
+      EXPECT_EQ(tracker.counters().refine_failures, 0u);
+      EXPECT_EQ(tracker.confirmed_count(), 1u);
+    } else {
+      // 0.6 m off a track that knows its position to 2 cm: beyond 4x the gate, never used; the
+      // track is never confirmed.
+      EXPECT_GE(tracker.counters().refine_failures, 3u);
+      EXPECT_EQ(tracker.confirmed_count(), 0u);
+    }
+  }
 }
 
 TEST(MultiTrackerTest, CoastingTracksAreReportedOnlyBrieflyButKeptUntilTheTimeout) {
