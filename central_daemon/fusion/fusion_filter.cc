@@ -103,13 +103,15 @@ BiasRows BiasJacobian(const common::Pose2& world_from_sensor, const Eigen::Vecto
   return j;
 }
 
-// The Bayesian linear regression of a sensor's samples y = J theta + e (e ~ N(0, noise I)) with
-// the prior theta ~ N(0, prior): normal equations with exponential forgetting (memory samples),
-// the noise variance from the residuals of the samples against the estimate before them.
+// The Bayesian linear regression of a sensor's samples y = J theta + e with the prior
+// theta ~ N(0, prior), each sample split along its line of sight n and across it l (a track's
+// own offset and the turning are larger along it): e.n ~ N(0, noise_n), e.l ~ N(0, noise_l).
+// Normal equations per direction with exponential forgetting (memory samples), the noise
+// variances from the residuals of the samples against the estimate before them.
 struct BiasModel {
-  BiasMat a = BiasMat::Zero();  // sum J^T J (forgetting)
-  BiasVec c = BiasVec::Zero();  // sum J^T y
-  double noise_m2 = 0.0;        // per axis; 0: not yet set
+  std::array<BiasMat, 2> a = {BiasMat::Zero(), BiasMat::Zero()};  // sum J^T J (n, l)
+  std::array<BiasVec, 2> c = {BiasVec::Zero(), BiasVec::Zero()};  // sum J^T y
+  std::array<double, 2> noise_m2 = {0.0, 0.0};                    // 0: not yet set
   double noise_count = 0.0;
   std::uint64_t samples = 0;
   BiasVec estimate = BiasVec::Zero();
@@ -401,17 +403,18 @@ class FusedFilterEngine final : public Engine {
       if (!b.solved) continue;
       for (std::size_t k = 0; k < kKinds; ++k) {
         const auto i = 3 + static_cast<Eigen::Index>(k);
-        if (b.a(i, i) <= 0.0) continue;  // no sample of this kind
+        if (b.a[0](i, i) <= 0.0) continue;  // no sample of this kind
         SensorBias sb;
         sb.sensor_id = id;
         sb.kind = static_cast<daemon::MeasurementKind>(k);
         const BiasVec theta = Applicable(b);
         sb.radial_m = theta(i);
-        sb.sigma_m = std::sqrt(b.covariance(i, i));
+        const BiasMat covariance = Covariance(b);
+        sb.sigma_m = std::sqrt(std::max(covariance(i, i), 0.0));
         sb.dx_m = theta(0);
         sb.dy_m = theta(1);
         sb.dyaw_rad = theta(2);
-        sb.pose_covariance = b.covariance.topLeftCorner<3, 3>();
+        sb.pose_covariance = covariance.topLeftCorner<3, 3>();
         sb.samples = b.samples;
         sb.applied = Learnt(b);
         out.push_back(std::move(sb));
@@ -432,6 +435,11 @@ class FusedFilterEngine final : public Engine {
     }
     return theta;
   }
+  // The covariance of the estimate, widened by sensor_bias_covariance_scale (successive samples
+  // of one local track share its own offset; the regression takes them as independent).
+  BiasMat Covariance(const BiasModel& b) const {
+    return options_.sensor_bias_covariance_scale * b.covariance;
+  }
   // The placement corrected by the sensor's learnt error, with the estimate's covariance (in
   // place of the calibration's) once it is learnt; else `placement`.
   SensorPlacement CorrectedPlacement(const SensorPlacement& placement, const BiasModel& b) const {
@@ -441,7 +449,7 @@ class FusedFilterEngine final : public Engine {
     out.world_from_sensor.x_m -= theta(0);
     out.world_from_sensor.y_m -= theta(1);
     out.world_from_sensor.yaw_rad -= theta(2);
-    out.covariance = b.covariance.topLeftCorner<3, 3>();
+    out.covariance = Covariance(b).topLeftCorner<3, 3>();
     return out;
   }
   double AppliedBias(const SensorState& ss, daemon::MeasurementKind kind) const {
@@ -451,7 +459,7 @@ class FusedFilterEngine final : public Engine {
   double AppliedBiasSigma(const SensorState& ss, daemon::MeasurementKind kind) const {
     if (!Learnt(ss.bias)) return 0.0;
     const auto i = 3 + static_cast<Eigen::Index>(KindIndex(kind));
-    return std::sqrt(std::max(ss.bias.covariance(i, i), 0.0));
+    return std::sqrt(std::max(Covariance(ss.bias)(i, i), 0.0));
   }
   // The prior of a sensor's bias model: its placement's covariance (pose_scale_ and
   // sensor_bias_pose_prior_scale included) and the centre sigma of each kind.
@@ -482,37 +490,69 @@ class FusedFilterEngine final : public Engine {
                      const BiasMat& prior) {
     if (!AllFinite(j) || !AllFinite(y)) return;
     const double memory = options_.sensor_bias_memory;
-    // The noise: residuals against the estimate so far (the first samples: the kind's sigma).
+    // The line of sight: the offset's column of J is -n.
+    Eigen::Vector2d n = -j.rightCols<kKinds>().rowwise().sum();
+    if (!(n.norm() > 0.5)) return;
+    n.normalize();
+    const Eigen::Vector2d l(-n.y(), n.x());
+    // The noise: residuals against the estimate so far (the first samples: the largest centre
+    // sigma).
     const double first = prior.diagonal().tail<kKinds>().maxCoeff();
-    if (b.noise_m2 <= 0.0) b.noise_m2 = first;
     const Eigen::Vector2d r = y - j * b.estimate;
     b.noise_count = std::min(b.noise_count + 1.0, memory);
-    b.noise_m2 += (0.5 * r.squaredNorm() - b.noise_m2) / (b.noise_count + 1.0);
     const double forget = 1.0 - 1.0 / memory;
-    b.a = forget * b.a + j.transpose() * j;
-    b.c = forget * b.c + j.transpose() * y;
+    for (int k = 0; k < 2; ++k) {
+      const Eigen::Vector2d& dir = k == 0 ? n : l;
+      if (b.noise_m2[k] <= 0.0) b.noise_m2[k] = first;
+      const double rk = dir.dot(r);
+      b.noise_m2[k] += (rk * rk - b.noise_m2[k]) / (b.noise_count + 1.0);
+      const BiasVec jk = (dir.transpose() * j).transpose();
+      b.a[k] = forget * b.a[k] + jk * jk.transpose();
+      b.c[k] = forget * b.c[k] + jk * dir.dot(y);
+    }
     ++b.samples;
-    // Information form: (A / noise + prior^-1) theta = c / noise. A prior variance of zero (the
-    // calibration's reference sensor) fixes that parameter at zero.
-    BiasMat info = b.a / b.noise_m2;
-    BiasVec rhs = b.c / b.noise_m2;
+    // Information form: (sum_k A_k / noise_k + prior^-1) theta = sum_k c_k / noise_k. A prior
+    // variance of zero (the calibration's reference sensor) fixes that parameter at zero.
+    const BiasMat data_info = b.a[0] / b.noise_m2[0] + b.a[1] / b.noise_m2[1];
+    const BiasVec rhs = b.c[0] / b.noise_m2[0] + b.c[1] / b.noise_m2[1];
     const Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> pose_eig(prior.topLeftCorner<3, 3>());
     if (pose_eig.info() != Eigen::Success) return;
     constexpr double kFixed = 1e-12;  // variance below which a direction is fixed
     Eigen::Matrix3d pose_info = Eigen::Matrix3d::Zero();
     for (int i = 0; i < 3; ++i) {
-      const double l = pose_eig.eigenvalues()(i);
+      const double lambda = pose_eig.eigenvalues()(i);
       const Eigen::Vector3d v = pose_eig.eigenvectors().col(i);
-      pose_info += (l > kFixed ? 1.0 / l : 1.0 / kFixed) * v * v.transpose();
+      pose_info += (lambda > kFixed ? 1.0 / lambda : 1.0 / kFixed) * v * v.transpose();
     }
-    info.topLeftCorner<3, 3>() += pose_info;
-    for (Eigen::Index i = 3; i < kBiasParams; ++i) info(i, i) += 1.0 / prior(i, i);
-    const Eigen::LDLT<BiasMat> ldlt(info);
-    if (ldlt.info() != Eigen::Success) return;
-    const BiasVec estimate = ldlt.solve(rhs);
-    BiasMat covariance = ldlt.solve(BiasMat::Identity());
-    covariance = (0.5 * (covariance + covariance.transpose())).eval();
-    if (!AllFinite(estimate) || !AllFinite(covariance)) return;
+    // Solved with the pose prior's information scaled by 1 / widen.
+    const auto solve = [&](double widen, BiasVec& estimate, BiasMat& covariance) {
+      BiasMat info = data_info;
+      info.topLeftCorner<3, 3>() += pose_info / widen;
+      for (Eigen::Index i = 3; i < kBiasParams; ++i) info(i, i) += 1.0 / prior(i, i);
+      const Eigen::LDLT<BiasMat> ldlt(info);
+      if (ldlt.info() != Eigen::Success) return false;
+      estimate = ldlt.solve(rhs);
+      covariance = ldlt.solve(BiasMat::Identity());
+      covariance = (0.5 * (covariance + covariance.transpose())).eval();
+      return AllFinite(estimate) && AllFinite(covariance);
+    };
+    BiasVec estimate;
+    BiasMat covariance;
+    if (!solve(1.0, estimate, covariance)) return;
+    // A placement error the prior finds unlikely (squared Mahalanobis distance above its 3
+    // degrees of freedom): the calibration claims too much; its prior is widened by that ratio
+    // and the regression solved again (an empirical Bayes step), so that the estimate is not
+    // held back, nor its covariance too small.
+    const Eigen::Vector3d pose = estimate.head<3>();
+    const double d2 = pose.dot(pose_info * pose);
+    if (std::isfinite(d2) && d2 > 3.0) {
+      BiasVec wider_estimate;
+      BiasMat wider_covariance;
+      if (solve(d2 / 3.0, wider_estimate, wider_covariance)) {
+        estimate = wider_estimate;
+        covariance = wider_covariance;
+      }
+    }
     b.estimate = estimate;
     b.covariance = covariance;
     b.solved = true;
