@@ -98,8 +98,25 @@ bool PlausibleObservation(const FusionOptions& o, const daemon::TrackObservation
          c(2, 2) <= o.max_velocity_variance_m2ps2 && c(3, 3) <= o.max_velocity_variance_m2ps2;
 }
 
-daemon::TrackObservation CentreCorrected(const daemon::TrackObservation& observation) {
-  return observation;
+daemon::TrackObservation CentreCorrected(const daemon::TrackObservation& observation,
+                                         double radial_offset_m) {
+  if (radial_offset_m == 0.0) return observation;
+  // The centre moved away from the sensor by the offset: p' = p + b p / |p|; its velocity by the
+  // derivative, v' = v + b (v - (v.n) n) / |p| (n = p / |p|). The covariance is kept (the
+  // Jacobian differs from I by b / |p|).
+  const Eigen::Vector2d p(observation.x_m, observation.y_m);
+  const Eigen::Vector2d v(observation.vx_mps, observation.vy_mps);
+  const double range = p.norm();
+  if (!std::isfinite(range) || range < 0.1 || !std::isfinite(radial_offset_m)) return observation;
+  const Eigen::Vector2d n = p / range;
+  const Eigen::Vector2d p2 = p + radial_offset_m * n;
+  const Eigen::Vector2d v2 = v + radial_offset_m / range * (v - v.dot(n) * n);
+  daemon::TrackObservation out = observation;
+  out.x_m = static_cast<float>(p2.x());
+  out.y_m = static_cast<float>(p2.y());
+  out.vx_mps = static_cast<float>(v2.x());
+  out.vy_mps = static_cast<float>(v2.y());
+  return out;
 }
 
 bool SamePlacement(const SensorPlacement& a, const SensorPlacement& b) {
@@ -242,6 +259,22 @@ std::optional<std::string> Validate(const FusionOptions& o) {
   if (o.max_offset_sensors < 1 || o.max_offset_sensors > 64) {
     return "max_offset_sensors must be 1..64";
   }
+  if (!positive(o.sensor_bias_sample_s)) return "sensor_bias_sample_s must be > 0";
+  if (o.sensor_bias_min_samples < 2) return "sensor_bias_min_samples must be >= 2";
+  if (o.sensor_bias_memory < o.sensor_bias_min_samples) {
+    return "sensor_bias_memory must be >= sensor_bias_min_samples";
+  }
+  if (!positive(o.sensor_bias_pose_prior_scale) || o.sensor_bias_pose_prior_scale > 1e4) {
+    return "sensor_bias_pose_prior_scale must be in (0, 1e4]";
+  }
+  if (!std::isfinite(o.sensor_bias_covariance_scale) || o.sensor_bias_covariance_scale < 1.0 ||
+      o.sensor_bias_covariance_scale > 1e4) {
+    return "sensor_bias_covariance_scale must be in [1, 1e4]";
+  }
+  if (!std::isfinite(o.max_sensor_bias_m) || o.max_sensor_bias_m < 0.0 ||
+      o.max_sensor_bias_m > 10.0) {
+    return "max_sensor_bias_m must be in [0, 10]";
+  }
   if (!positive(o.position_noise_floor_m2)) return "position_noise_floor_m2 must be > 0";
   if (!positive(o.velocity_noise_floor_m2ps2)) return "velocity_noise_floor_m2ps2 must be > 0";
   if (!positive(o.max_coast_s)) return "max_coast_s must be > 0";
@@ -362,5 +395,7 @@ std::vector<WorldTrack> Fuser::WorldTracks(common::UtcNs now_ns) const {
 const FusionCounters& Fuser::counters() const { return engine_->counters(); }
 
 CovarianceScales Fuser::covariance_scales() const { return engine_->covariance_scales(); }
+
+std::vector<SensorBias> Fuser::sensor_biases() const { return engine_->sensor_biases(); }
 
 }  // namespace lrfnet::fusion

@@ -4,6 +4,7 @@
 #include <Eigen/Cholesky>
 #include <Eigen/Eigenvalues>
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <limits>
 #include <optional>
@@ -78,6 +79,47 @@ struct Measurement {
   Eigen::Matrix2d offset_prior = Eigen::Matrix2d::Zero();
 };
 
+constexpr std::size_t kKinds = 4;  // daemon::MeasurementKind
+std::size_t KindIndex(daemon::MeasurementKind kind) {
+  return std::min(static_cast<std::size_t>(kind), kKinds - 1);
+}
+// A sensor's bias model ("Sensor bias" in fusion.h): theta = (dx, dy, dyaw) of its placement's
+// error and its centre offset towards itself per measurement kind; at a place p_s (sensor frame)
+// its frames are off by J(p_s) theta, J = [I, R' p_s, -n e_kind] (n = R p_s / |p_s|).
+constexpr int kBiasParams = 3 + static_cast<int>(kKinds);
+using BiasVec = Eigen::Matrix<double, kBiasParams, 1>;
+using BiasMat = Eigen::Matrix<double, kBiasParams, kBiasParams>;
+using BiasRows = Eigen::Matrix<double, 2, kBiasParams>;
+
+BiasRows BiasJacobian(const common::Pose2& world_from_sensor, const Eigen::Vector2d& p_s,
+                      daemon::MeasurementKind kind) {
+  BiasRows j = BiasRows::Zero();
+  j.leftCols<3>() = PoseJacobian(world_from_sensor, p_s, Eigen::Vector2d::Zero()).topRows<2>();
+  const double range = p_s.norm();
+  if (range > 1e-6) {
+    j.col(3 + static_cast<Eigen::Index>(KindIndex(kind))) =
+        -(world_from_sensor.rotation() * p_s) / range;
+  }
+  return j;
+}
+
+// The Bayesian linear regression of a sensor's samples y = J theta + e with the prior
+// theta ~ N(0, prior), each sample split along its line of sight n and across it l (a track's
+// own offset and the turning are larger along it): e.n ~ N(0, noise_n), e.l ~ N(0, noise_l).
+// Normal equations per direction with exponential forgetting (memory samples), the noise
+// variances from the residuals of the samples against the estimate before them.
+struct BiasModel {
+  std::array<BiasMat, 2> a = {BiasMat::Zero(), BiasMat::Zero()};  // sum J^T J (n, l)
+  std::array<BiasVec, 2> c = {BiasVec::Zero(), BiasVec::Zero()};  // sum J^T y
+  std::array<double, 2> noise_m2 = {0.0, 0.0};                    // 0: not yet set
+  double noise_count = 0.0;
+  std::uint64_t samples = 0;
+  BiasVec estimate = BiasVec::Zero();
+  BiasMat covariance = BiasMat::Zero();
+  bool solved = false;
+};
+constexpr std::uint32_t kMinBiasUpdates = 5;
+
 struct SourceKey {
   std::string sensor_id;
   std::uint32_t track_id = 0;
@@ -91,12 +133,17 @@ struct SourceKey {
 
 struct LocalTrack {
   daemon::TrackObservation observation;  // as received (centre corrected), sensor frame
+  daemon::TrackObservation received;     // as received
+  double applied_bias_m = 0.0;           // the centre correction of `observation`
+  // The correction of this frame's world position by the sensor's bias model (J theta).
+  Eigen::Vector2d applied_world = Eigen::Vector2d::Zero();
+  BiasRows jacobian = BiasRows::Zero();  // J at this frame's place
   WorldTrack world;
   bool usable = false;  // not tentative, or tentative sources allowed
   // The latest state its tracker measured (sensor frame) and its time: the next frame's
   // measurement is recovered against it.
   bool has_reference = false;
-  CvState reference_x = CvState::Zero();
+  daemon::TrackObservation reference;  // as received (corrected with the current offset when used)
   CvCovariance reference_p = CvCovariance::Identity();
   UtcNs reference_ns = 0;
   // Its information entered a fused track: from now on only each frame's new information counts.
@@ -108,6 +155,12 @@ struct LocalTrack {
   double ratio_sum = 0.0;
   bool unfiltered = false;
   Measurement measurement;  // of the latest frame
+  // Its sensor's bias: the sums of J and of (applied correction + de-shrunk offset) over its
+  // updates shared with other sensors since bias_first_ns ("Sensor bias" in fusion.h).
+  BiasRows bias_j_sum = BiasRows::Zero();
+  Eigen::Vector2d bias_y_sum = Eigen::Vector2d::Zero();
+  std::uint32_t bias_updates = 0;
+  UtcNs bias_first_ns = 0;
   std::optional<std::uint64_t> fused_id;
   std::uint32_t misses = 0;       // consecutive measured frames not assigned to its fused track
   std::uint32_t hold_frames = 0;  // after unbinding: frames before it may start a fused track
@@ -118,6 +171,8 @@ struct SensorState {
   FrameClock clock;
   // Scale of its tracker's covariances, learnt from its frames' fit (adapt_covariances).
   CovarianceScale noise_scale;
+  // Its placement's error and centre offsets (learn_sensor_bias).
+  BiasModel bias;
   std::map<std::uint32_t, LocalTrack> tracks;
 };
 
@@ -298,12 +353,21 @@ class FusedFilterEngine final : public Engine {
       }
       const auto old = previous.find(it->first);
       if (old == previous.end() || !SamePlacement(old->second, placement->second)) {
+        // A new calibration: what was learnt of the old placement's error does not hold.
+        it->second.bias = BiasModel{};
         for (auto& [tid, lt] : it->second.tracks) {
+          lt.observation = lt.received;
+          lt.applied_bias_m = 0.0;
+          lt.applied_world.setZero();
+          lt.bias_j_sum.setZero();
+          lt.bias_y_sum.setZero();
+          lt.bias_updates = 0;
           lt.world = ToWorld(placement->second, it->first, lt.world.stamp_ns, lt.observation);
         }
       }
       ++it;
     }
+    placements_ = next;
     // Estimates made with the old poses do not fit the new ones: every fused track starts again
     // from its sources' latest states, combined as independent estimates (their sensors differ).
     for (auto& [id, f] : tracks_) {
@@ -332,8 +396,168 @@ class FusedFilterEngine final : public Engine {
     for (const auto& [id, ss] : sensors_) out.trackers[id] = ss.noise_scale.scale;
     return out;
   }
+  std::vector<SensorBias> sensor_biases() const override {
+    std::vector<SensorBias> out;
+    for (const auto& [id, ss] : sensors_) {
+      const BiasModel& b = ss.bias;
+      if (!b.solved) continue;
+      for (std::size_t k = 0; k < kKinds; ++k) {
+        const auto i = 3 + static_cast<Eigen::Index>(k);
+        if (b.a[0](i, i) <= 0.0) continue;  // no sample of this kind
+        SensorBias sb;
+        sb.sensor_id = id;
+        sb.kind = static_cast<daemon::MeasurementKind>(k);
+        const BiasVec theta = Applicable(b);
+        sb.radial_m = theta(i);
+        const BiasMat covariance = Covariance(b);
+        sb.sigma_m = std::sqrt(std::max(covariance(i, i), 0.0));
+        sb.dx_m = theta(0);
+        sb.dy_m = theta(1);
+        sb.dyaw_rad = theta(2);
+        sb.pose_covariance = covariance.topLeftCorner<3, 3>();
+        sb.samples = b.samples;
+        sb.applied = Learnt(b);
+        out.push_back(std::move(sb));
+      }
+    }
+    return out;
+  }
 
  private:
+  bool Learnt(const BiasModel& b) const {
+    return options_.learn_sensor_bias && b.solved && b.samples >= options_.sensor_bias_min_samples;
+  }
+  // The estimate with its offsets clamped to max_sensor_bias_m.
+  BiasVec Applicable(const BiasModel& b) const {
+    BiasVec theta = b.estimate;
+    for (Eigen::Index i = 3; i < kBiasParams; ++i) {
+      theta(i) = std::clamp(theta(i), -options_.max_sensor_bias_m, options_.max_sensor_bias_m);
+    }
+    return theta;
+  }
+  // The covariance of the estimate, widened by sensor_bias_covariance_scale (successive samples
+  // of one local track share its own offset; the regression takes them as independent).
+  BiasMat Covariance(const BiasModel& b) const {
+    return options_.sensor_bias_covariance_scale * b.covariance;
+  }
+  // The placement corrected by the sensor's learnt error, with the estimate's covariance (in
+  // place of the calibration's) once it is learnt; else `placement`.
+  SensorPlacement CorrectedPlacement(const SensorPlacement& placement, const BiasModel& b) const {
+    if (!Learnt(b)) return placement;
+    const BiasVec theta = Applicable(b);
+    SensorPlacement out = placement;
+    out.world_from_sensor.x_m -= theta(0);
+    out.world_from_sensor.y_m -= theta(1);
+    out.world_from_sensor.yaw_rad -= theta(2);
+    out.covariance = Covariance(b).topLeftCorner<3, 3>();
+    return out;
+  }
+  double AppliedBias(const SensorState& ss, daemon::MeasurementKind kind) const {
+    if (!Learnt(ss.bias)) return 0.0;
+    return Applicable(ss.bias)(3 + static_cast<Eigen::Index>(KindIndex(kind)));
+  }
+  double AppliedBiasSigma(const SensorState& ss, daemon::MeasurementKind kind) const {
+    if (!Learnt(ss.bias)) return 0.0;
+    const auto i = 3 + static_cast<Eigen::Index>(KindIndex(kind));
+    return std::sqrt(std::max(Covariance(ss.bias)(i, i), 0.0));
+  }
+  // The prior of a sensor's bias model: its placement's covariance (pose_scale_ and
+  // sensor_bias_pose_prior_scale included) and the centre sigma of each kind.
+  BiasMat BiasPrior(const SensorPlacement& placement) const {
+    BiasMat prior = BiasMat::Zero();
+    prior.topLeftCorner<3, 3>() =
+        options_.sensor_bias_pose_prior_scale * pose_scale_.scale * placement.covariance;
+    for (std::size_t k = 0; k < kKinds; ++k) {
+      const double sigma = CentreSigma(static_cast<daemon::MeasurementKind>(k));
+      prior(3 + static_cast<Eigen::Index>(k), 3 + static_cast<Eigen::Index>(k)) = sigma * sigma;
+    }
+    return prior;
+  }
+  // The local track's sample of its sensor's bias, when it has enough updates; the model solved
+  // again.
+  void SubmitBiasSample(SensorState& ss, LocalTrack& lt, const SensorPlacement* placement) {
+    if (lt.bias_updates >= kMinBiasUpdates && placement != nullptr) {
+      const double n = lt.bias_updates;
+      const BiasRows j = lt.bias_j_sum / n;
+      const Eigen::Vector2d y = lt.bias_y_sum / n;
+      AddBiasSample(ss.bias, j, y, BiasPrior(*placement));
+    }
+    lt.bias_j_sum.setZero();
+    lt.bias_y_sum.setZero();
+    lt.bias_updates = 0;
+  }
+  void AddBiasSample(BiasModel& b, const BiasRows& j, const Eigen::Vector2d& y,
+                     const BiasMat& prior) {
+    if (!AllFinite(j) || !AllFinite(y)) return;
+    const double memory = options_.sensor_bias_memory;
+    // The line of sight: the offset's column of J is -n.
+    Eigen::Vector2d n = -j.rightCols<kKinds>().rowwise().sum();
+    if (!(n.norm() > 0.5)) return;
+    n.normalize();
+    const Eigen::Vector2d l(-n.y(), n.x());
+    // The noise: residuals against the estimate so far (the first samples: the largest centre
+    // sigma).
+    const double first = prior.diagonal().tail<kKinds>().maxCoeff();
+    const Eigen::Vector2d r = y - j * b.estimate;
+    b.noise_count = std::min(b.noise_count + 1.0, memory);
+    const double forget = 1.0 - 1.0 / memory;
+    for (int k = 0; k < 2; ++k) {
+      const Eigen::Vector2d& dir = k == 0 ? n : l;
+      if (b.noise_m2[k] <= 0.0) b.noise_m2[k] = first;
+      const double rk = dir.dot(r);
+      b.noise_m2[k] += (rk * rk - b.noise_m2[k]) / (b.noise_count + 1.0);
+      const BiasVec jk = (dir.transpose() * j).transpose();
+      b.a[k] = forget * b.a[k] + jk * jk.transpose();
+      b.c[k] = forget * b.c[k] + jk * dir.dot(y);
+    }
+    ++b.samples;
+    // Information form: (sum_k A_k / noise_k + prior^-1) theta = sum_k c_k / noise_k. A prior
+    // variance of zero (the calibration's reference sensor) fixes that parameter at zero.
+    const BiasMat data_info = b.a[0] / b.noise_m2[0] + b.a[1] / b.noise_m2[1];
+    const BiasVec rhs = b.c[0] / b.noise_m2[0] + b.c[1] / b.noise_m2[1];
+    const Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> pose_eig(prior.topLeftCorner<3, 3>());
+    if (pose_eig.info() != Eigen::Success) return;
+    constexpr double kFixed = 1e-12;  // variance below which a direction is fixed
+    Eigen::Matrix3d pose_info = Eigen::Matrix3d::Zero();
+    for (int i = 0; i < 3; ++i) {
+      const double lambda = pose_eig.eigenvalues()(i);
+      const Eigen::Vector3d v = pose_eig.eigenvectors().col(i);
+      pose_info += (lambda > kFixed ? 1.0 / lambda : 1.0 / kFixed) * v * v.transpose();
+    }
+    // Solved with the pose prior's information scaled by 1 / widen.
+    const auto solve = [&](double widen, BiasVec& estimate, BiasMat& covariance) {
+      BiasMat info = data_info;
+      info.topLeftCorner<3, 3>() += pose_info / widen;
+      for (Eigen::Index i = 3; i < kBiasParams; ++i) info(i, i) += 1.0 / prior(i, i);
+      const Eigen::LDLT<BiasMat> ldlt(info);
+      if (ldlt.info() != Eigen::Success) return false;
+      estimate = ldlt.solve(rhs);
+      covariance = ldlt.solve(BiasMat::Identity());
+      covariance = (0.5 * (covariance + covariance.transpose())).eval();
+      return AllFinite(estimate) && AllFinite(covariance);
+    };
+    BiasVec estimate;
+    BiasMat covariance;
+    if (!solve(1.0, estimate, covariance)) return;
+    // A placement error the prior finds unlikely (squared Mahalanobis distance above its 3
+    // degrees of freedom): the calibration claims too much; its prior is widened by that ratio
+    // and the regression solved again (an empirical Bayes step), so that the estimate is not
+    // held back, nor its covariance too small.
+    const Eigen::Vector3d pose = estimate.head<3>();
+    const double d2 = pose.dot(pose_info * pose);
+    if (std::isfinite(d2) && d2 > 3.0) {
+      BiasVec wider_estimate;
+      BiasMat wider_covariance;
+      if (solve(d2 / 3.0, wider_estimate, wider_covariance)) {
+        estimate = wider_estimate;
+        covariance = wider_covariance;
+      }
+    }
+    b.estimate = estimate;
+    b.covariance = covariance;
+    b.solved = true;
+  }
+
   LocalTrack* Find(const SourceKey& key) {
     const auto s = sensors_.find(key.sensor_id);
     if (s == sensors_.end()) return nullptr;
@@ -401,8 +625,14 @@ class FusedFilterEngine final : public Engine {
     tracks_.erase(it);
   }
 
+  const SensorPlacement* PlacementOf(const std::string& sensor_id) const {
+    const auto it = placements_.find(sensor_id);
+    return it == placements_.end() ? nullptr : &it->second;
+  }
+
   void DropSensorTracks(const std::string& sensor_id, SensorState& ss) {
     for (auto& [tid, lt] : ss.tracks) {
+      SubmitBiasSample(ss, lt, PlacementOf(sensor_id));
       if (!lt.fused_id) continue;
       auto f = tracks_.find(*lt.fused_id);
       if (f != tracks_.end()) Unbind(f->second, SourceKey{sensor_id, tid});
@@ -417,6 +647,7 @@ class FusedFilterEngine final : public Engine {
         ++it;
         continue;
       }
+      SubmitBiasSample(ss, lt, PlacementOf(sensor_id));
       if (lt.fused_id) {
         auto f = tracks_.find(*lt.fused_id);
         if (f != tracks_.end()) {
@@ -487,8 +718,10 @@ class FusedFilterEngine final : public Engine {
   // failure.
   // widen > 1 scales the covariance of (x, y, vx, vy) (and its correlation with the offsets by
   // the square root) before the update: a manoeuvre the motion model did not expect.
+  // bias_sample (optional): set to the sensor's offset there with the prior's shrinkage undone,
+  // when the update tells something about it ("Sensor bias" in fusion.h).
   bool Update(Track& f, const Measurement& m, const std::string& sensor_id, UtcNs t,
-              double widen = 1.0);
+              double widen = 1.0, std::optional<Eigen::Vector2d>* bias_sample = nullptr);
 
   Track& NewTrack(const Measurement& m, const std::string& sensor_id, UtcNs t);
 
@@ -556,6 +789,7 @@ class FusedFilterEngine final : public Engine {
 
   std::map<std::string, SensorState, std::less<>> sensors_;
   std::map<std::string, double, std::less<>> tracker_psd_;
+  PlacementMap placements_;  // as the Fuser was given them
   std::map<std::uint64_t, Track> tracks_;
   // Scale of the calibration's pose covariances, learnt from how well sensors' tracks fit the
   // fused tracks of other sensors when they join them (adapt_covariances).
@@ -593,7 +827,10 @@ Measurement FusedFilterEngine::Measure(const SensorPlacement& placement,
     if (!lt.has_reference || !(dt > 0.0) || !std::isfinite(dt)) {
       usable_measurement = false;
     } else {
-      CvState xb = lt.reference_x;
+      // The previous state corrected with the same offset as this one (a change of the learnt
+      // offset is no motion).
+      const daemon::TrackObservation ref = CentreCorrected(lt.reference, lt.applied_bias_m);
+      CvState xb(ref.x_m, ref.y_m, ref.vx_mps, ref.vy_mps);
       CvCovariance pb = lt.reference_p;
       common::CvPredict(dt, TrackerPsd(sensor_id), xb, pb);
       const Eigen::Matrix2d pp = p.topLeftCorner<2, 2>(), pbp = pb.topLeftCorner<2, 2>();
@@ -640,7 +877,7 @@ Measurement FusedFilterEngine::Measure(const SensorPlacement& placement,
   }
   // The next frame's reference.
   lt.has_reference = true;
-  lt.reference_x = x;
+  lt.reference = lt.received;
   lt.reference_p = p;
   lt.reference_ns = t;
   if (!usable_measurement || !AllFinite(z_s) || !AllFinite(r_s)) return m;
@@ -675,7 +912,11 @@ Measurement FusedFilterEngine::Measure(const SensorPlacement& placement,
   Eigen::Vector2d u = rot * x.head<2>();
   const double range = u.norm();
   u = range > 1e-6 ? Eigen::Vector2d(u / range) : Eigen::Vector2d(1.0, 0.0);
-  m.offset_prior += sigma * sigma * u * u.transpose() +
+  // The learnt offset's own error is common to the sensor's frames, as the pose's.
+  const auto ss_it = sensors_.find(sensor_id);
+  const double bias_sigma =
+      ss_it == sensors_.end() ? 0.0 : AppliedBiasSigma(ss_it->second, obs.kind);
+  m.offset_prior += (sigma * sigma + bias_sigma * bias_sigma) * u * u.transpose() +
                     lateral * lateral * (Eigen::Matrix2d::Identity() - u * u.transpose());
   m.offset_prior = (0.5 * (m.offset_prior + m.offset_prior.transpose())).eval();
   if (!AllFinite(m.z) || !AllFinite(m.r) || !AllFinite(m.offset_prior)) m.valid = false;
@@ -705,7 +946,7 @@ std::optional<double> FusedFilterEngine::Cost(const Track& f, const Vec& x, cons
 }
 
 bool FusedFilterEngine::Update(Track& f, const Measurement& m0, const std::string& sensor_id,
-                               UtcNs t, double widen) {
+                               UtcNs t, double widen, std::optional<Eigen::Vector2d>* bias_sample) {
   const UtcNs t_est = std::max(t, f.stamp_ns);
   Vec x;
   Mat p;
@@ -755,6 +996,26 @@ bool FusedFilterEngine::Update(Track& f, const Measurement& m0, const std::strin
   if (!AllFinite(candidate.x) || !AllFinite(candidate.p)) {
     ++counters_.numerical_failures;
     return false;
+  }
+  if (bias_sample != nullptr && !m.full_state && OthersMeasured(candidate, sensor_id, t_est)) {
+    // The offset's posterior N(mean, V) with its prior N(0, B)'s shrinkage undone: the
+    // likelihood's mean B (B - V)^-1 mean (fusion.h, "Sensor bias"), where the data says at least
+    // as much as the prior in every direction (V <= B / 2).
+    const auto i = 4 + 2 * static_cast<Eigen::Index>(k);
+    const Eigen::Vector2d mean = candidate.x.segment<2>(i);
+    const Eigen::Matrix2d v = candidate.p.block<2, 2>(i, i);
+    const Eigen::Matrix2d& b = m.offset_prior;
+    const Eigen::LLT<Eigen::Matrix2d> llt_b(b);
+    if (llt_b.info() == Eigen::Success) {
+      const Eigen::Matrix2d l_inv = llt_b.matrixL().solve(Eigen::Matrix2d::Identity());
+      const Eigen::Matrix2d w = l_inv * v * l_inv.transpose();
+      const Eigen::SelfAdjointEigenSolver<Eigen::Matrix2d> eig(0.5 * (w + w.transpose()),
+                                                               Eigen::EigenvaluesOnly);
+      if (eig.info() == Eigen::Success && eig.eigenvalues().maxCoeff() <= 0.5) {
+        const Eigen::Vector2d y = b * (b - v).ldlt().solve(mean);
+        if (AllFinite(y)) *bias_sample = y;
+      }
+    }
   }
   Offset& offset = candidate.offsets[static_cast<std::size_t>(k)];
   offset.last_ns = t_est;
@@ -815,6 +1076,8 @@ void FusedFilterEngine::AddFrame(const SensorPlacement& placement, const std::st
       AdmitFrame(frame, o.max_out_of_order_s, ss.clock, have_newest_, newest_ns_);
   if (admission == FrameAdmission::kNewSession) DropSensorTracks(sensor_id, ss);
   if (!CountAdmission(admission, counters_)) return;
+  // The placement with the error learnt of it taken off ("Sensor bias" in fusion.h).
+  const SensorPlacement corrected = CorrectedPlacement(placement, ss.bias);
 
   // 1. The frame's tracks: world frame, and the new information of each.
   std::vector<std::uint32_t> rows;  // local tracks with a measurement to associate
@@ -824,7 +1087,8 @@ void FusedFilterEngine::AddFrame(const SensorPlacement& placement, const std::st
       ++counters_.observations_over_capacity;
       continue;
     }
-    const daemon::TrackObservation obs = CentreCorrected(received);
+    const double bias_m = AppliedBias(ss, received.kind);
+    const daemon::TrackObservation obs = CentreCorrected(received, bias_m);
     if (!PlausibleObservation(o, obs)) {
       ++counters_.observations_invalid;
       continue;
@@ -835,7 +1099,7 @@ void FusedFilterEngine::AddFrame(const SensorPlacement& placement, const std::st
       ++counters_.observations_invalid;  // the same id twice in one frame
       continue;
     }
-    WorldTrack world = ToWorld(placement, sensor_id, t, obs);
+    WorldTrack world = ToWorld(corrected, sensor_id, t, obs);
     if (!AllFinite(world.covariance) || !std::isfinite(world.x_m) || !std::isfinite(world.y_m) ||
         !std::isfinite(world.vx_mps) || !std::isfinite(world.vy_mps)) {
       ++counters_.observations_invalid;
@@ -843,10 +1107,17 @@ void FusedFilterEngine::AddFrame(const SensorPlacement& placement, const std::st
       continue;
     }
     ++accepted;
+    if (!inserted && lt.observation.kind != obs.kind) SubmitBiasSample(ss, lt, &placement);
     lt.observation = obs;
+    lt.received = received;
+    lt.applied_bias_m = bias_m;
+    const Eigen::Vector2d p_raw(received.x_m, received.y_m);
+    lt.jacobian = BiasJacobian(placement.world_from_sensor, p_raw, received.kind);
+    lt.applied_world = placement.world_from_sensor * p_raw -
+                       corrected.world_from_sensor * Eigen::Vector2d(obs.x_m, obs.y_m);
     lt.world = std::move(world);
     lt.usable = obs.state != daemon::TrackState::kTentative || o.use_tentative_sources;
-    lt.measurement = Measure(placement, sensor_id, lt, t);
+    lt.measurement = Measure(corrected, sensor_id, lt, t);
     if (lt.usable) {
       ++counters_.observations;
       if (lt.measurement.valid) rows.push_back(obs.track_id);
@@ -925,9 +1196,20 @@ void FusedFilterEngine::AddFrame(const SensorPlacement& placement, const std::st
         Bind(f, key, lt);
       }
       lt.misses = 0;
-      if (Update(f, lt.measurement, sensor_id, t)) {
+      std::optional<Eigen::Vector2d> bias_sample;
+      if (Update(f, lt.measurement, sensor_id, t, 1.0,
+                 o.learn_sensor_bias ? &bias_sample : nullptr)) {
         lt.contributed = true;
         updated.push_back(f.id);
+        if (bias_sample) {
+          if (lt.bias_updates == 0) lt.bias_first_ns = t;
+          lt.bias_j_sum += lt.jacobian;
+          lt.bias_y_sum += lt.applied_world + *bias_sample;
+          ++lt.bias_updates;
+          if (Seconds(t, lt.bias_first_ns) >= o.sensor_bias_sample_s) {
+            SubmitBiasSample(ss, lt, &placement);
+          }
+        }
       }
       continue;
     }
@@ -1129,8 +1411,9 @@ std::vector<FusedTrack> FusedFilterEngine::Snapshot(UtcNs now_ns, bool include_t
   std::vector<FusedTrack> out;
   for (const auto& [id, f] : tracks_) {
     if (f.updates == 0 || (!f.confirmed && !include_tentative)) continue;
-    std::optional<FusedTrack> t = PredictedFusedTrack(
-        id, f.confirmed, f.first_ns, f.stamp_ns, f.updates, f.x.head<4>(), f.p.topLeftCorner<4, 4>(), options_, now_ns);
+    std::optional<FusedTrack> t =
+        PredictedFusedTrack(id, f.confirmed, f.first_ns, f.stamp_ns, f.updates, f.x.head<4>(),
+                            f.p.topLeftCorner<4, 4>(), options_, now_ns);
     if (!t) continue;
     for (const SourceKey& k : f.sources) {
       const LocalTrack* lt = Find(k);

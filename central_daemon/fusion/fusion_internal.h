@@ -42,6 +42,7 @@ class Engine {
   virtual std::vector<FusedTrack> Snapshot(common::UtcNs now_ns, bool include_tentative) const = 0;
   virtual std::vector<WorldTrack> WorldTracks(common::UtcNs now_ns) const = 0;
   virtual CovarianceScales covariance_scales() const { return {}; }
+  virtual std::vector<SensorBias> sensor_biases() const { return {}; }
 
   FusionCounters& counters() { return counters_; }
   const FusionCounters& counters() const { return counters_; }
@@ -116,10 +117,11 @@ void Predict(double dt_s, double accel_psd, common::CvState& x, common::CvCovari
 // What a snapshot reports of a fused track whose estimate (x, p) is from stamp_ns: predicted to
 // now_ns, its state by its age (coasting after coast_after_s), without sources (the caller's);
 // nothing once it is older or newer than max_coast_s.
-std::optional<FusedTrack> PredictedFusedTrack(std::uint64_t id, bool confirmed, common::UtcNs first_ns,
-                                              common::UtcNs stamp_ns, std::uint64_t updates,
-                                              common::CvState x, common::CvCovariance p,
-                                              const FusionOptions& options, common::UtcNs now_ns);
+std::optional<FusedTrack> PredictedFusedTrack(std::uint64_t id, bool confirmed,
+                                              common::UtcNs first_ns, common::UtcNs stamp_ns,
+                                              std::uint64_t updates, common::CvState x,
+                                              common::CvCovariance p, const FusionOptions& options,
+                                              common::UtcNs now_ns);
 
 // Every sensor's local tracks heard within source_timeout_s of now_ns, in the world frame with
 // the fused track they are bound to. Sensors: a map of sensor id to a state with `tracks`, a map
@@ -153,9 +155,12 @@ Eigen::Matrix<double, 4, 3> PoseJacobian(const common::Pose2& world_from_sensor,
 
 // The per-sample correction of a local track's centre (DESIGN.md, "Measurement model"): where the
 // shared model of what bias is left in a tracker's object centre is applied, for both methods and
-// for what the live view draws. Today the identity: the trackers report the body's centre, and
-// what is left is modelled as noise (FusionOptions::centre_sigma_*).
-daemon::TrackObservation CentreCorrected(const daemon::TrackObservation& observation);
+// for what the live view draws. The trackers report the body's centre; what is left is the
+// sensor's constant offset towards itself (radial_offset_m, learnt by the fused filter, see
+// "Sensor bias" in fusion.h; 0: the identity) and noise (FusionOptions::centre_sigma_*). The
+// centre is moved away from the sensor by radial_offset_m.
+daemon::TrackObservation CentreCorrected(const daemon::TrackObservation& observation,
+                                         double radial_offset_m = 0.0);
 
 // A local track that is finite, within the plausibility bounds of the options, and has a valid
 // covariance.

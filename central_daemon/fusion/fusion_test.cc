@@ -5,6 +5,7 @@
 #include <Eigen/Cholesky>
 #include <Eigen/Eigenvalues>
 #include <cmath>
+#include <functional>
 #include <limits>
 #include <optional>
 #include <random>
@@ -192,6 +193,15 @@ TEST(FusionOptionsTest, DefaultsAreValidAndBadValuesNamed) {
   o = {};
   o.max_tracks_per_frame = 0;
   EXPECT_TRUE(Validate(o));
+  o = {};
+  o.sensor_bias_memory = 3;  // below sensor_bias_min_samples
+  EXPECT_NE(Validate(o).value_or("").find("sensor_bias_memory"), std::string::npos);
+  o = {};
+  o.max_sensor_bias_m = std::numeric_limits<double>::infinity();
+  EXPECT_NE(Validate(o).value_or("").find("max_sensor_bias_m"), std::string::npos);
+  o = {};
+  o.sensor_bias_pose_prior_scale = 0.0;
+  EXPECT_NE(Validate(o).value_or("").find("sensor_bias_pose_prior_scale"), std::string::npos);
 }
 
 TEST_P(FuserTest, InvalidPlacementsAreIgnoredAndCounted) {
@@ -991,6 +1001,139 @@ TEST(FusedFilterTest, APersonWhoStopsAtOnceKeepsTheId) {
   EXPECT_GT(fuser.counters().manoeuvres, 0u);
   EXPECT_EQ(fuser.counters().sources_drifted, 0u);
   EXPECT_LT(max_error_m, 0.25);
+}
+
+// ---------------------------------------------------------------------------------------------
+// Sensor bias (fusion.h, "Sensor bias")
+
+// Four people walking circles of 2 m at 1 m/s in front of three sensors (a, the calibration's
+// reference, exact; b and c with the default pose covariance) for duration_s; each sensor's
+// centres offset towards it by its bias_m. Returns the fused error (mean vector and RMS) over
+// the last 20 s and the learnt biases.
+struct BiasRun {
+  Eigen::Vector2d mean_error = Eigen::Vector2d::Zero();
+  double rms_m = 0.0;
+  std::vector<SensorBias> biases;
+  const SensorBias* Of(const std::string& id) const {
+    for (const SensorBias& b : biases) {
+      if (b.sensor_id == id && b.kind == daemon::MeasurementKind::kCenterOfMass) return &b;
+    }
+    return nullptr;
+  }
+};
+
+BiasRun RunBiasScene(bool learn, const std::vector<double>& bias_m,
+                     const std::function<void(Scene&)>& adjust = nullptr,
+                     double duration_s = 60.0) {
+  Scene scene;
+  scene.sensors = {Sensor("a", 0, 0, 0), Sensor("b", 10, 0, 180, 0.013),
+                   Sensor("c", 5, 9, -90, 0.027)};
+  scene.sensors[0].pose_covariance.setZero();
+  for (std::size_t s = 0; s < scene.sensors.size(); ++s) {
+    scene.sensors[s].bias_m = bias_m[s];
+    scene.sensors[s].noise_m = scene.sensors[s].reported_sigma_m = 0.03;
+  }
+  for (int k = 0; k < 4; ++k) {
+    const Eigen::Vector2d centre(3.0 + 4.0 * (k % 2), 2.0 + 4.0 * (k / 2));
+    const double phase = 1.3 * k, direction = k % 2 == 0 ? 1.0 : -1.0;
+    SimPerson person;
+    person.position = [=](double t) {
+      const double a = phase + direction * t / 2.0;  // 1 m/s on a 2 m radius
+      return Eigen::Vector2d(centre + 2.0 * Eigen::Vector2d(std::cos(a), std::sin(a)));
+    };
+    scene.people.push_back(person);
+  }
+  if (adjust) adjust(scene);
+  FusionOptions o;
+  o.learn_sensor_bias = learn;
+  Fuser fuser(o);
+  fuser.SetPlacements(scene.Placements());
+  BiasRun out;
+  std::size_t n = 0;
+  double sum2 = 0.0;
+  scene.Run(fuser, duration_s, 0.1, [&](double t, UtcNs now) {
+    if (t < duration_s - 20.0) return;
+    const auto fused = fuser.Snapshot(now);
+    for (const SimPerson& person : scene.people) {
+      const Eigen::Vector2d truth = person.position(t);
+      const FusedTrack* f = testing::Nearest(fused, truth, 0.5);
+      if (f == nullptr) continue;
+      const Eigen::Vector2d e = Eigen::Vector2d(f->x_m, f->y_m) - truth;
+      out.mean_error += e;
+      sum2 += e.squaredNorm();
+      ++n;
+    }
+  });
+  EXPECT_GT(n, 700u);
+  out.mean_error /= static_cast<double>(std::max<std::size_t>(n, 1));
+  out.rms_m = std::sqrt(sum2 / static_cast<double>(std::max<std::size_t>(n, 1)));
+  out.biases = fuser.sensor_biases();
+  return out;
+}
+
+TEST(SensorBiasTest, ARadialOffsetIsLearntWithinItsSigmaAndTakenOut) {
+  // b's centres sit 0.06 m towards it, a's and c's are unbiased.
+  const BiasRun learnt = RunBiasScene(true, {0.0, 0.06, 0.0});
+  const BiasRun old = RunBiasScene(false, {0.0, 0.06, 0.0});
+  const SensorBias* b = learnt.Of("b");
+  ASSERT_NE(b, nullptr);
+  EXPECT_TRUE(b->applied);
+  EXPECT_GE(b->samples, 10u);
+  EXPECT_LT(b->sigma_m, 0.03);
+  EXPECT_GT(b->radial_m, 2.0 * b->sigma_m);  // told from no offset
+  EXPECT_NEAR(b->radial_m, 0.06, 2.0 * b->sigma_m) << "sigma " << b->sigma_m;
+  for (const std::string id : {"a", "c"}) {
+    const SensorBias* other = learnt.Of(id);
+    ASSERT_NE(other, nullptr) << id;
+    EXPECT_NEAR(other->radial_m, 0.0, 2.0 * other->sigma_m) << id << " sigma " << other->sigma_m;
+  }
+  // The reference's placement is not moved (its covariance is zero).
+  const SensorBias* a = learnt.Of("a");
+  EXPECT_LT(std::abs(a->dx_m) + std::abs(a->dy_m), 1e-6);
+  EXPECT_LT(std::abs(a->dyaw_rad), 1e-7);
+  // The fused positions: b's pull taken out.
+  EXPECT_LT(learnt.mean_error.norm(), 0.01) << learnt.mean_error.transpose();
+  EXPECT_GT(old.mean_error.norm(), learnt.mean_error.norm()) << old.mean_error.transpose();
+  EXPECT_LT(learnt.rms_m, old.rms_m);
+  // Off: nothing is learnt (the earlier release).
+  EXPECT_TRUE(old.biases.empty());
+}
+
+TEST(SensorBiasTest, APlacementErrorIsLearntWithinItsSigma) {
+  // c is placed 0.06 m east and 0.4 deg off of where it is, with a covariance that says 0.05 m
+  // and 0.5 deg; b has a radial offset of 0.04 m besides.
+  const double dyaw = DegToRad(0.4);
+  const auto adjust = [&](Scene& scene) {
+    SimSensor& c = scene.sensors[2];
+    c.placed = Pose2{c.truth.x_m + 0.06, c.truth.y_m, c.truth.yaw_rad + dyaw};
+    c.pose_covariance =
+        Eigen::Vector3d(0.05 * 0.05, 0.05 * 0.05, std::pow(DegToRad(0.5), 2)).asDiagonal();
+  };
+  const BiasRun learnt = RunBiasScene(true, {0.0, 0.04, 0.0}, adjust);
+  const BiasRun old = RunBiasScene(false, {0.0, 0.04, 0.0}, adjust);
+  const SensorBias* c = learnt.Of("c");
+  ASSERT_NE(c, nullptr);
+  EXPECT_TRUE(c->applied);
+  EXPECT_NEAR(c->dx_m, 0.06, 2.0 * std::sqrt(c->pose_covariance(0, 0)));
+  EXPECT_NEAR(c->dy_m, 0.0, 2.0 * std::sqrt(c->pose_covariance(1, 1)));
+  EXPECT_NEAR(c->dyaw_rad, dyaw, 2.0 * std::sqrt(c->pose_covariance(2, 2)));
+  EXPECT_LT(std::sqrt(c->pose_covariance(0, 0)), 0.02);
+  const SensorBias* b = learnt.Of("b");
+  ASSERT_NE(b, nullptr);
+  EXPECT_NEAR(b->radial_m, 0.04, 2.0 * b->sigma_m) << "sigma " << b->sigma_m;
+  EXPECT_LT(learnt.rms_m, 0.8 * old.rms_m) << learnt.rms_m << " vs " << old.rms_m;
+}
+
+TEST(SensorBiasTest, ASensorAloneLearnsNothingAndIsNotMoved) {
+  // Only a sees the people: its offset cannot be told from where they are.
+  const auto only_a = [](Scene& scene) {
+    scene.sensors.resize(1);
+    scene.sensors[0].pose_covariance = Eigen::Vector3d(1e-4, 1e-4, 1e-6).asDiagonal();
+  };
+  const BiasRun learnt = RunBiasScene(true, {0.06, 0.0, 0.0}, only_a, 30.0);
+  const BiasRun old = RunBiasScene(false, {0.06, 0.0, 0.0}, only_a, 30.0);
+  EXPECT_TRUE(learnt.biases.empty());
+  EXPECT_DOUBLE_EQ(learnt.rms_m, old.rms_m);
 }
 
 // ---------------------------------------------------------------------------------------------

@@ -90,6 +90,7 @@ struct Config {
   TrackerErrors errors;
   double pose_error_scale = 1.0;  // pose errors drawn from scale^2 * reported covariance
   fusion::FusionMethod method = fusion::FusionMethod::kFusedFilter;
+  bool learn_sensor_bias = true;  // fused filter: FusionOptions::learn_sensor_bias
 };
 
 struct Trajectories {
@@ -318,6 +319,7 @@ class LocalTracker {
     bool swapped;
   };
   const std::vector<Encounter>& encounters() const { return encounters_; }
+  double sensor_offset_m() const { return sensor_offset_m_; }
 
  private:
   struct Person {
@@ -467,6 +469,12 @@ struct Totals {
   std::size_t swap_events = 0;              // encounters in which some sensor swapped
   std::size_t correctable_swap_events = 0;  // ... and another sensor saw both and did not
   fusion::FusionCounters counters;
+  // Learnt sensor offsets (fused filter, learn_sensor_bias) against the true o_sensor, at the end
+  // of each run: errors, and how many of them are within 2 sigma.
+  std::vector<double> bias_errors;
+  std::size_t bias_inside_2sigma = 0;
+  // Their placements' errors before and after the learnt correction (sums of squares).
+  double pose_before_m2 = 0.0, pose_after_m2 = 0.0, yaw_before_rad2 = 0.0, yaw_after_rad2 = 0.0;
 
   void Add(const fusion::FusionCounters& c) {
     counters.sources_drifted += c.sources_drifted;
@@ -487,6 +495,7 @@ void Run(const Config& config, double seconds, std::uint32_t seed, Totals& total
   }
   fusion::FusionOptions options;
   options.method = config.method;
+  options.learn_sensor_bias = config.learn_sensor_bias;
   // The earlier releases' defaults with their method.
   if (config.method == fusion::FusionMethod::kLatestStates) {
     options.max_coast_s = 1.0;
@@ -509,6 +518,7 @@ void Run(const Config& config, double seconds, std::uint32_t seed, Totals& total
   for (std::size_t s = 0; s < sensors.size(); ++s) sensor_index[sensors[s].id] = s;
   // Whether a person was visible to some sensor in the last frames (= a track should exist).
   std::vector<double> last_visible(config.people, -1e9);
+  std::vector<std::map<std::uint32_t, fusion::WorldTrack>> latest_tracks(sensors.size());
   auto evaluate = [&](double t) {
     const UtcNs now = At(t);
     fuser.Tick(now);
@@ -589,8 +599,20 @@ void Run(const Config& config, double seconds, std::uint32_t seed, Totals& total
       }
       totals.exactly_one += mine == 1 ? 1 : 0;
     }
-    // Single sensors: their confirmed raw tracks in the world frame, at their own scan times.
-    const auto world_tracks = fuser.WorldTracks(now);
+    // Single sensors: their confirmed raw tracks in the world frame (as the trackers report them,
+    // without the fuser's correction of their biases), at their own scan times; those heard
+    // within the fuser's source_timeout_s, as Fuser::WorldTracks lists them.
+    std::vector<fusion::WorldTrack> world_tracks;
+    for (std::size_t s = 0; s < sensors.size(); ++s) {
+      for (auto it = latest_tracks[s].begin(); it != latest_tracks[s].end();) {
+        if (common::NsToSeconds(now - it->second.stamp_ns) > options.source_timeout_s) {
+          it = latest_tracks[s].erase(it);
+          continue;
+        }
+        world_tracks.push_back(it->second);
+        ++it;
+      }
+    }
     std::vector<std::size_t> views(config.people, 0);
     for (std::size_t s = 0; s < sensors.size(); ++s) {
       std::vector<Vector2d> raw;
@@ -635,6 +657,10 @@ void Run(const Config& config, double seconds, std::uint32_t seed, Totals& total
       next_sample += kSample;
     }
     const auto frame = trackers[s].Frame(sensors[s], traj, t);
+    for (const auto& o : frame.tracks) {
+      latest_tracks[s][o.track_id] =
+          fusion::ToWorld(sensors[s].placement, sensors[s].id, frame.scan_start_ns, o);
+    }
     const auto t0 = Clock::now();
     fuser.AddFrame(sensors[s].id, frame);
     totals.update_us.push_back(
@@ -651,6 +677,22 @@ void Run(const Config& config, double seconds, std::uint32_t seed, Totals& total
     }
   }
   totals.Add(fuser.counters());
+  for (const fusion::SensorBias& b : fuser.sensor_biases()) {
+    if (!b.applied) continue;
+    const std::size_t k = sensor_index[b.sensor_id];
+    const double error = b.radial_m - trackers[k].sensor_offset_m();
+    totals.bias_errors.push_back(error);
+    totals.bias_inside_2sigma += std::abs(error) <= 2.0 * b.sigma_m ? 1 : 0;
+    const common::Pose2& given = sensors[k].placement.world_from_sensor;
+    const common::Pose2& truth = sensors[k].truth;
+    const Vector2d before(given.x_m - truth.x_m, given.y_m - truth.y_m);
+    const Vector2d after = before - Vector2d(b.dx_m, b.dy_m);
+    const double yaw_before = common::AngleDiff(given.yaw_rad, truth.yaw_rad);
+    totals.pose_before_m2 += before.squaredNorm();
+    totals.pose_after_m2 += after.squaredNorm();
+    totals.yaw_before_rad2 += yaw_before * yaw_before;
+    totals.yaw_after_rad2 += (yaw_before - b.dyaw_rad) * (yaw_before - b.dyaw_rad);
+  }
   // Group the sensors' encounters of the same two people (within 0.5 s): a swap is correctable
   // when another sensor measured both and did not swap them.
   struct Group {
@@ -763,8 +805,15 @@ int main(int argc, char** argv) {
       "evaluated every 0.1 s after 2 s. Rows of a scene share their seeds (the same walks, "
       "poses and tracker errors).\n\n"
       "Fusion: *fused filter* (the default; one Kalman filter per fused track on every sensor's "
-      "new information, with each sensor's centre offset as a state) or *latest states* (the "
-      "information-weighted combination of the sources' latest states, earlier releases). "
+      "new information, with each sensor's centre offset as a state, and each sensor's constant "
+      "centre offset and placement error learnt across its tracks and taken out of its frames), "
+      "*fused filter, no sensor bias* (the same without that learning, learn_sensor_bias off: "
+      "the earlier release) or *latest states* (the information-weighted combination of the "
+      "sources' latest states, earlier releases). Fused ÷ best single: fused RMS divided by "
+      "the best single sensor's. Learnt: at the end of each run, for the sensors whose bias "
+      "is applied, the RMS of learnt minus true o_sensor (and the share within 2 of its "
+      "reported sigma), and the RMS of the placements' translation and yaw errors before and "
+      "after the learnt correction (s1, the exact reference, included when its bias applies). "
       "Tracker swaps: swaps summed over the sensors / encounters with a swap / of those, the "
       "ones in which another sensor measured both people and did not swap them. Fused RMS and "
       "p95: position error of confirmed and coasting fused tracks matched to people (CLEAR MOT "
@@ -788,11 +837,13 @@ int main(int argc, char** argv) {
       "counters source_rebinds, sources_drifted, fused_merged, handovers.\n\n"
       "| scene | fusion | people | tracker swaps | fused RMS m | fused p95 m "
       "| fused RMS m by views 0 / 1 / 2 / 3+ (share of samples) "
-      "| best / mean single-sensor RMS m | fused ÷ sensor RMS, same samples, worst sensor "
+      "| best / mean single-sensor RMS m | fused ÷ best single | fused ÷ sensor RMS, same samples, "
+      "worst sensor "
       "| fused NEES / inside 95 %% | single NEES "
       "| id switches / person-min | exactly one | false tracks / sample | update µs mean / p99 "
-      "| rebinds / drifted / merged / hand-overs |\n"
-      "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n",
+      "| rebinds / drifted / merged / hand-overs "
+      "| learnt offset error RMS m (inside 2σ) / placement error before → after |\n"
+      "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n",
       e.accel_psd, e.sensor_offset_min_m, e.sensor_offset_max_m, e.track_offset_sigma_m,
       e.turn_sigma_m, e.turn_tau_s, e.lateral_sigma_m, e.lateral_tau_s, e.noise_m, e.noise_per_m,
       e.coast_s, e.tentative_frames, e.loss_rate_hz, e.loss_gap_s, e.swap_probability,
@@ -802,10 +853,14 @@ int main(int argc, char** argv) {
   std::fflush(stdout);
   for (const Config& scene : scenes) {
     if (!only.empty() && only != scene.name + "/" + std::to_string(scene.people)) continue;
-    for (const fusion::FusionMethod method :
-         {fusion::FusionMethod::kFusedFilter, fusion::FusionMethod::kLatestStates}) {
+    // The fused filter with the sensors' biases learnt (default) and without (the earlier
+    // release), and the latest states.
+    for (const int variant : {0, 1, 2}) {
+      const fusion::FusionMethod method =
+          variant < 2 ? fusion::FusionMethod::kFusedFilter : fusion::FusionMethod::kLatestStates;
       Config config = scene;
       config.method = method;
+      config.learn_sensor_bias = variant == 0;
       Totals totals;
       for (int k = 0; k < seeds; ++k)
         Run(config, seconds, 1000u + static_cast<std::uint32_t>(k), totals);
@@ -838,17 +893,33 @@ int main(int argc, char** argv) {
                 static_cast<double>(std::max<std::size_t>(totals.fused_errors.size(), 1)));
         by_views += cell;
       }
-      char row[1024];
+      std::string learnt = "-";
+      if (!totals.bias_errors.empty()) {
+        const double n_bias = static_cast<double>(totals.bias_errors.size());
+        char cell[160];
+        std::snprintf(cell, sizeof(cell), "%.3f (%.0f %%) / %.3f → %.3f m, %.2f → %.2f°",
+                      Rms(totals.bias_errors),
+                      100.0 * static_cast<double>(totals.bias_inside_2sigma) / n_bias,
+                      std::sqrt(totals.pose_before_m2 / n_bias),
+                      std::sqrt(totals.pose_after_m2 / n_bias),
+                      common::RadToDeg(std::sqrt(totals.yaw_before_rad2 / n_bias)),
+                      common::RadToDeg(std::sqrt(totals.yaw_after_rad2 / n_bias)));
+        learnt = cell;
+      }
+      char row[1280];
       std::snprintf(
           row, sizeof(row),
-          "| %s | %s | %zu | %zu / %zu / %zu | %.3f | %.3f | %s | %.3f / %.3f | %.2f "
+          "| %s | %s | %zu | %zu / %zu / %zu | %.3f | %.3f | %s | %.3f / %.3f | %.2f | %.2f "
           "| %.2f / %.1f %% | %.1f | %.2f | %.1f %% | %.2f | %.1f / %.1f | %llu / %llu / %llu / "
-          "%llu |\n",
+          "%llu | %s |\n",
           config.name.c_str(),
-          method == fusion::FusionMethod::kFusedFilter ? "fused filter" : "latest states",
+          variant == 0   ? "fused filter"
+          : variant == 1 ? "fused filter, no sensor bias"
+                         : "latest states",
           config.people, totals.tracker_swaps, totals.swap_events, totals.correctable_swap_events,
           Rms(totals.fused_errors), Percentile(totals.fused_errors, 0.95), by_views.c_str(), best,
-          mean, worst_paired, ratio(totals.fused_nees_sum, totals.fused_nees_n),
+          mean, Rms(totals.fused_errors) / best, worst_paired,
+          ratio(totals.fused_nees_sum, totals.fused_nees_n),
           100.0 * ratio(static_cast<double>(totals.fused_nees_inside), totals.fused_nees_n),
           ratio(totals.sensor_nees_sum, totals.sensor_nees_n),
           static_cast<double>(totals.switches) / std::max(totals.person_seconds / 60.0, 1e-9),
@@ -858,7 +929,7 @@ int main(int argc, char** argv) {
           static_cast<unsigned long long>(totals.counters.source_rebinds),
           static_cast<unsigned long long>(totals.counters.sources_drifted),
           static_cast<unsigned long long>(totals.counters.fused_merged),
-          static_cast<unsigned long long>(totals.counters.handovers));
+          static_cast<unsigned long long>(totals.counters.handovers), learnt.c_str());
       std::printf("%s", row);
       std::fflush(stdout);
       table += row;
