@@ -6,6 +6,7 @@
 
 #include <chrono>
 #include <cmath>
+#include <cstdint>
 #include <filesystem>
 #include <fstream>
 #include <nlohmann/json.hpp>
@@ -292,6 +293,23 @@ TEST(MonitoringChain, TheDaemonFlagsAMovedSensorFusesWithoutItAndCorrectsItsPose
   EXPECT_EQ(m["sensors"]["s1"]["moves"], 0) << m.dump(2);
   EXPECT_EQ(m["sensors"]["s3"]["moves"], 0) << m.dump(2);
   EXPECT_EQ(m["sensors"]["s2"]["state"], "ok") << m.dump(2);
+  // What fusion learnt of each sensor is in the stats, with its sigma, inside the clamp; the
+  // reference sensor's placement is never moved.
+  const nlohmann::json& fusion_stats = stats["fusion"];
+  EXPECT_EQ(fusion_stats["calibrated"], true) << fusion_stats.dump(2);
+  EXPECT_GT(fusion_stats["frames"].get<std::uint64_t>(), 1000u) << fusion_stats.dump(2);
+  ASSERT_TRUE(fusion_stats["sensor_biases"].is_array()) << fusion_stats.dump(2);
+  std::uint64_t bias_samples = 0;
+  for (const auto& b : fusion_stats["sensor_biases"]) {
+    EXPECT_LE(std::abs(b["radial_m"].get<double>()), 0.3) << b.dump();
+    EXPECT_GT(b["sigma_m"].get<double>(), 0.0) << b.dump();
+    if (b["sensor_id"] == "s1") {
+      EXPECT_EQ(b["dx_m"].get<double>(), 0.0) << b.dump();
+      EXPECT_EQ(b["dyaw_deg"].get<double>(), 0.0) << b.dump();
+    }
+    bias_samples += b["samples"].get<std::uint64_t>();
+  }
+  EXPECT_GT(bias_samples, 0u) << fusion_stats.dump(2);
   std::int64_t moved_ns = 0, corrected_ns = 0;
   for (const auto& e : m["history"]) {
     if (e["event"] == "moved") moved_ns = e["stamp_ns"].get<std::int64_t>();

@@ -204,6 +204,19 @@ void VisitFusion(DaemonConfig& c, ConfigVisitor& v) {
   v.Field("adapt_covariances", o.adapt_covariances,
           "fused_filter: scale the calibration's pose covariances and a tracker's covariances up "
           "when the data show them too small (never below what was reported).");
+  v.Field("learn_sensor_bias", o.learn_sensor_bias,
+          "fused_filter: learn each sensor's constant centre offset (per measurement kind) and "
+          "the error of its placement from where other sensors see the same people, and take "
+          "them out of its frames (--stats-out: fusion.sensor_biases). Off: each fused track's "
+          "offset state alone (earlier releases).");
+  VisitInteger(v, "sensor_bias_min_samples", o.sensor_bias_min_samples,
+               "fused_filter: samples (one per local track and sensor_bias_sample_s of views "
+               "shared with other sensors) before a learnt bias is applied.");
+  v.Field("sensor_bias_sample_s", o.sensor_bias_sample_s,
+          "fused_filter: seconds of a local track's shared views per sample of its sensor's "
+          "bias.");
+  v.Field("max_sensor_bias_m", o.max_sensor_bias_m,
+          "fused_filter: learnt centre offsets are clamped to +-this, metres.");
   v.Field("manoeuvre_max_distance_m", o.manoeuvre_max_distance_m,
           "fused_filter: a bound track's frame within this distance of its fused track that the "
           "gate refused is a stop or sharp turn: the fused track widens to take it.");

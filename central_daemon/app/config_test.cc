@@ -52,6 +52,10 @@ TEST(DaemonConfigTest, FusionOptionsRoundTripThroughPrint) {
   c.fusion.binding_bonus = 0.0;
   c.fusion.adapt_covariances = false;
   c.fusion.confirm_updates = 5;
+  c.fusion.learn_sensor_bias = false;
+  c.fusion.sensor_bias_min_samples = 20;
+  c.fusion.sensor_bias_sample_s = 3.0;
+  c.fusion.max_sensor_bias_m = 0.1;
   ASSERT_EQ(Validate(c), std::nullopt);
   DaemonConfig back;
   ASSERT_EQ(LoadDaemonConfig(PrintDaemonConfig(c), back), std::nullopt);
@@ -60,6 +64,12 @@ TEST(DaemonConfigTest, FusionOptionsRoundTripThroughPrint) {
   ASSERT_EQ(LoadDaemonConfig("fusion: {method: latest_states}", partial), std::nullopt);
   EXPECT_EQ(partial.fusion.method, fusion::FusionMethod::kLatestStates);
   EXPECT_EQ(partial.fusion.max_coast_s, fusion::FusionOptions{}.max_coast_s);
+  EXPECT_TRUE(partial.fusion.learn_sensor_bias);
+  DaemonConfig no_bias;
+  ASSERT_EQ(LoadDaemonConfig("fusion: {learn_sensor_bias: false}", no_bias), std::nullopt);
+  EXPECT_FALSE(no_bias.fusion.learn_sensor_bias);
+  DaemonConfig bad;
+  EXPECT_NE(LoadDaemonConfig("fusion: {max_sensor_bias_m: -1}", bad), std::nullopt);
 }
 
 TEST(DaemonConfigTest, LiveViewBeyondLoopbackNeedsAToken) {

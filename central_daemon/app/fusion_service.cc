@@ -2,10 +2,14 @@
 
 #include <spdlog/spdlog.h>
 
+#include <algorithm>
 #include <boost/asio/ip/address.hpp>
 #include <cerrno>
+#include <cmath>
 #include <cstring>
 
+#include "central_daemon/ingest/sensor_data.h"
+#include "common/geometry.h"
 #include "common/host_port.h"
 
 namespace lrfnet::daemon {
@@ -143,6 +147,48 @@ void FusionService::Close() {
     socket_->close(ec);
     socket_.reset();
   }
+}
+
+nlohmann::json FusionService::StatsJson() const {
+  nlohmann::json j;
+  j["enabled"] = config_.fusion_enabled;
+  j["calibrated"] = calibrated_;
+  j["excluded"] = excluded_;
+  j["publishes"] = counters_.publishes;
+  j["datagrams_sent"] = counters_.datagrams_sent;
+  j["send_errors"] = counters_.send_errors;
+  j["lines_recorded"] = counters_.lines_recorded;
+  j["record_errors"] = counters_.record_errors;
+  j["calibrations"] = counters_.calibrations;
+  const fusion::FusionCounters& f = fuser_.counters();
+  j["frames"] = f.frames;
+  j["frames_unplaced"] = f.frames_unplaced;
+  j["frames_out_of_order"] = f.frames_out_of_order;
+  j["observations"] = f.observations;
+  j["observations_invalid"] = f.observations_invalid;
+  j["fused_created"] = f.fused_created;
+  j["fused_merged"] = f.fused_merged;
+  j["handovers"] = f.handovers;
+  j["numerical_failures"] = f.numerical_failures;
+  nlohmann::json biases = nlohmann::json::array();
+  for (const fusion::SensorBias& b : fuser_.sensor_biases()) {
+    nlohmann::json x;
+    x["sensor_id"] = b.sensor_id;
+    x["kind"] = ToString(b.kind);
+    x["radial_m"] = b.radial_m;
+    x["sigma_m"] = b.sigma_m;
+    x["dx_m"] = b.dx_m;
+    x["dy_m"] = b.dy_m;
+    x["dyaw_deg"] = common::RadToDeg(b.dyaw_rad);
+    x["sigma_x_m"] = std::sqrt(std::max(0.0, b.pose_covariance(0, 0)));
+    x["sigma_y_m"] = std::sqrt(std::max(0.0, b.pose_covariance(1, 1)));
+    x["sigma_yaw_deg"] = common::RadToDeg(std::sqrt(std::max(0.0, b.pose_covariance(2, 2))));
+    x["samples"] = b.samples;
+    x["applied"] = b.applied;
+    biases.push_back(std::move(x));
+  }
+  j["sensor_biases"] = std::move(biases);
+  return j;
 }
 
 }  // namespace lrfnet::daemon

@@ -18,6 +18,8 @@
 #include <string>
 #include <vector>
 
+#include <nlohmann/json.hpp>
+
 #include "central_daemon/app/config.h"
 #include "central_daemon/app/daemon.h"
 #include "central_daemon/calibration/types.h"
@@ -69,6 +71,10 @@ class FusionService final : public FrameListener {
   common::UtcNs now_ns() const { return now_ns_; }
   const fusion::Fuser& fuser() const { return fuser_; }
   const FusionServiceCounters& counters() const { return counters_; }
+  // The service's and the fuser's counters and what the fuser has learnt of each sensor (the
+  // centre offset per measurement kind and the placement error, with their sigmas): the
+  // "fusion" object of --stats-out.
+  nlohmann::json StatsJson() const;
 
  private:
   void Publish();

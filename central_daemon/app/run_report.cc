@@ -7,6 +7,7 @@
 #include <nlohmann/json.hpp>
 #include <vector>
 
+#include "central_daemon/app/fusion_service.h"
 #include "central_daemon/app/monitoring_service.h"
 #include "central_daemon/app/mqtt_output.h"
 #include "central_daemon/app/recorder.h"
@@ -40,11 +41,12 @@ void LogEvents(Daemon& daemon, double silent_after_s) {
 
 bool WriteStats(const std::string& path, const Daemon& daemon, const UdpReceiver* receiver,
                 const Recorder* recorder, const MonitoringService& monitoring,
-                const MqttOutput* mqtt) {
+                const MqttOutput* mqtt, const FusionService* fusion) {
   if (path.empty()) return true;
   nlohmann::json j = StatsJson(daemon.ingest(), daemon.store());
   if (mqtt != nullptr && mqtt->publisher) j["mqtt"] = MqttJson(*mqtt);
   j["monitoring"] = monitoring.StatsJson();
+  if (fusion != nullptr) j["fusion"] = fusion->StatsJson();
   j["requests_sent"] = daemon.requests_sent();
   j["requests_dropped"] = daemon.requests_dropped();
   if (receiver != nullptr) j["receiver"] = ReceiverJson(receiver->counters());

@@ -10,6 +10,7 @@
 
 namespace lrfnet::daemon {
 
+class FusionService;
 class MonitoringService;
 class Recorder;
 struct MqttOutput;
@@ -17,11 +18,11 @@ struct MqttOutput;
 // Logs the events the core has collected since the last call (new, restarted, silent, back).
 void LogEvents(Daemon& daemon, double silent_after_s);
 
-// Writes every counter as JSON to `path` (nothing when empty); receiver, recorder and mqtt are
-// left out when null (or not started). False (logged) when the file cannot be written.
+// Writes every counter as JSON to `path` (nothing when empty); receiver, recorder, mqtt and
+// fusion are left out when null (or not started). False (logged) when the file cannot be written.
 bool WriteStats(const std::string& path, const Daemon& daemon, const UdpReceiver* receiver,
                 const Recorder* recorder, const MonitoringService& monitoring,
-                const MqttOutput* mqtt = nullptr);
+                const MqttOutput* mqtt = nullptr, const FusionService* fusion = nullptr);
 
 // "summary: sensors=N datagrams=N accepted=N rejected=N lost=N frames=N".
 std::string Summary(const Daemon& daemon);
