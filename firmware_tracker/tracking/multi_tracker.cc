@@ -416,6 +416,8 @@ void MultiTracker::UpdateAssigned(common::UtcNs scan_start_ns,
     t.ellipse_yaw_rad = m.kind == MeasurementKind::kCenterOfMass ? 0.0 : m.orientation_rad;
     t.points = static_cast<std::uint32_t>(std::min<std::size_t>(m.point_count, UINT32_MAX));
     t.source = c.source;
+    t.z_m = z;
+    t.z_offset_s = common::NsToSeconds(at_ns - scan_start_ns);
   }
 }
 
@@ -535,6 +537,8 @@ void MultiTracker::StartTracks(common::UtcNs scan_start_ns,
     t->anchor_ns = scan_start_ns;
     t->moved = false;
     t->source = c.source;
+    t->z_m = z;
+    t->z_offset_s = common::NsToSeconds(at_ns - scan_start_ns);
     t->confirmed = options_.confirm_hits <= 1;
     ++counters_.created;
     if (t->confirmed) ++counters_.confirmed;
@@ -571,6 +575,11 @@ void MultiTracker::Report(common::UtcNs scan_start_ns, ScanTracks& out) const {
     r->covariance = p;
     r->age_scans = t.age_scans;
     r->points = t.points;
+    if (t.updated) {
+      r->measured_x_m = t.z_m.x();
+      r->measured_y_m = t.z_m.y();
+      r->measured_offset_s = t.z_offset_s;
+    }
     r->ellipse_yaw_rad = t.ellipse_yaw_rad;
     r->shape = t.shape.shape;
     if (t.shape.shape != ObjectShape::kUnspecified) {

@@ -250,7 +250,9 @@ struct Track {
   Eigen::Vector2d anchor_m = Eigen::Vector2d::Zero();
   common::UtcNs anchor_ns = 0;
   bool moved = false;
-  std::size_t source = 0;  // measurement of the current scan (when updated)
+  std::size_t source = 0;                         // measurement of the current scan (when updated)
+  Eigen::Vector2d z_m = Eigen::Vector2d::Zero();  // its position as used (refined), sensor frame
+  double z_offset_s = 0.0;                        // its time after the scan start
 };
 // An accepted measurement of the current scan.
 struct Candidate {

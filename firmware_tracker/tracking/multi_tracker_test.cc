@@ -385,9 +385,17 @@ TEST(MultiTrackerTest, ReportCarriesKindOrientationAndPointsOfTheLastMeasurement
   tracker.Step(ScanNs(3), std::vector<Measurement>{Meas(3.0, 1.0, 0.1)}, out);
   EXPECT_EQ(out.tracks[0].kind, MeasurementKind::kCenterOfMass);
   EXPECT_EQ(out.tracks[0].points, 12u);
-  tracker.Step(ScanNs(4), std::vector<Measurement>{}, out);
+  // The measurement itself and its time after the scan start (for evaluating the filter's lag).
+  const std::vector<double> offsets = {0.02};
+  tracker.Step(ScanNs(4), std::vector<Measurement>{Meas(3.05, 0.95, 0.1)}, offsets, out);
+  EXPECT_DOUBLE_EQ(out.tracks[0].measured_x_m, 3.05);
+  EXPECT_DOUBLE_EQ(out.tracks[0].measured_y_m, 0.95);
+  EXPECT_NEAR(out.tracks[0].measured_offset_s, 0.02, 1e-9);
+  tracker.Step(ScanNs(5), std::vector<Measurement>{}, out);
   EXPECT_EQ(out.tracks[0].kind, MeasurementKind::kCenterOfMass);
   EXPECT_EQ(out.tracks[0].points, 0u);
+  EXPECT_EQ(out.tracks[0].measured_x_m, 0.0);
+  EXPECT_EQ(out.tracks[0].measured_offset_s, 0.0);
 }
 
 TEST(MultiTrackerTest, MeasurementTimeOffsetsGiveUnbiasedPositionsAtScanStart) {

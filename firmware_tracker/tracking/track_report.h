@@ -36,6 +36,11 @@ struct TrackReport {
   Eigen::Matrix4d covariance = Eigen::Matrix4d::Identity();  // of (x, y, vx, vy)
   std::uint32_t age_scans = 0;                               // scans since the track was created
   std::uint32_t points = 0;  // points of the associated segment(s) (0 when coasting)
+  // The scan's measurement the track was updated with (sensor frame, as refined), and its time
+  // after the scan start; 0 when coasting. Not on the wire: for evaluating the filter's lag.
+  double measured_x_m = 0.0;
+  double measured_y_m = 0.0;
+  double measured_offset_s = 0.0;
   // kEllipse: major axis of the fitted ellipse; kShapeFit: direction of the shape's axis a.
   double ellipse_yaw_rad = 0.0;
   // The track's shape state (kShapeFit): semi-axes a (along ellipse_yaw_rad) and b of the torso

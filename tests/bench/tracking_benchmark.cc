@@ -32,14 +32,18 @@
 // tracker beyond its defaults and the device's range.
 //
 //   tracking_benchmark --scenarios DIR [--extra DIR] [--only NAME] [--out FILE] [--jobs N]
-//                      [--explain]
+//                      [--explain] [--breakdown]
 //   (--extra: more scenario folders, e.g. held-out scenes, reported in their own section;
 //   --explain: per run on stderr, what became of an object's previous track at every id switch
-//   and missed scan, and the tracker's counters)
+//   and missed scan, and the tracker's counters; --breakdown: a table more per section, the
+//   per-sensor matched error along and across the line of sight by range and point count, and
+//   the filtered track's error beside that of the scan's measurement it was updated with, see
+//   Breakdown)
 
 #include <Eigen/Cholesky>
 #include <Eigen/Core>
 #include <algorithm>
+#include <array>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -81,12 +85,116 @@ constexpr double kNees99 = 9.21;
 struct Truth {
   std::size_t id = 0;
   Vector2d p = Vector2d::Zero();
+  Vector2d v = Vector2d::Zero();  // velocity of its path (--breakdown), same frame
 };
 struct Hypothesis {
   std::uint64_t id = 0;
   Vector2d p = Vector2d::Zero();
   Matrix2d cov = Matrix2d::Identity();
   bool measured = false;
+  // --breakdown, per sensor: the scan's points of the track, and the measurement it was updated
+  // with and that measurement's time after the scan start (when measured).
+  std::uint32_t points = 0;
+  Vector2d z = Vector2d::Zero();
+  double z_offset_s = 0.0;
+};
+
+// --breakdown: where the matched error of the per-sensor tracks comes from. Every match's error
+// e = track - truth (the sensor at the origin of the frame) is split along the line of sight
+// (radial, signed: + away from the sensor, - towards it) and across it, binned by the truth's range
+// and by the scan's point count of the track (0: coasting). Where the track was measured in the
+// scan, the same is done for that measurement (the refined body centre the filter was updated
+// with) against the truth at the measurement's time: the filter's error beside its input's shows
+// what the filtering adds or removes (lag behind a start or turn, noise averaged away). "along
+// motion": the error's component along the truth's direction of travel (signed: - behind), over
+// matches of objects moving faster than kMovingMps.
+constexpr double kMovingMps = 0.3;
+struct ErrorStats {
+  double n = 0, sum = 0, radial = 0, radial2 = 0, across2 = 0;
+  double moving = 0, along = 0;
+  std::vector<double> norms;
+  void Add(const Vector2d& e, const Vector2d& los, const Vector2d& v) {
+    const Vector2d across(-los.y(), los.x());
+    const double r = e.dot(los), c = e.dot(across);
+    n += 1;
+    sum += e.norm();
+    radial += r;
+    radial2 += r * r;
+    across2 += c * c;
+    norms.push_back(e.norm());
+    if (v.norm() > kMovingMps) {
+      moving += 1;
+      along += e.dot(v.normalized());
+    }
+  }
+  void Merge(const ErrorStats& o) {
+    n += o.n;
+    sum += o.sum;
+    radial += o.radial;
+    radial2 += o.radial2;
+    across2 += o.across2;
+    moving += o.moving;
+    along += o.along;
+    norms.insert(norms.end(), o.norms.begin(), o.norms.end());
+  }
+  double Mean() const { return n > 0 ? sum / n : 0.0; }
+  double Rms() const { return n > 0 ? std::sqrt((radial2 + across2) / n) : 0.0; }
+  double RadialMean() const { return n > 0 ? radial / n : 0.0; }
+  double RadialRms() const { return n > 0 ? std::sqrt(radial2 / n) : 0.0; }
+  double AcrossRms() const { return n > 0 ? std::sqrt(across2 / n) : 0.0; }
+  double AlongMean() const { return moving > 0 ? along / moving : 0.0; }
+  double P95() const {
+    if (norms.empty()) return 0.0;
+    std::vector<double> e = norms;
+    const auto k = static_cast<std::size_t>(0.95 * static_cast<double>(e.size() - 1));
+    std::nth_element(e.begin(), e.begin() + static_cast<std::ptrdiff_t>(k), e.end());
+    return e[k];
+  }
+};
+struct BreakdownCell {
+  ErrorStats all;       // every match
+  ErrorStats filtered;  // measured matches: the track
+  ErrorStats raw;       // the same matches: the scan's measurement
+  void Merge(const BreakdownCell& o) {
+    all.Merge(o.all);
+    filtered.Merge(o.filtered);
+    raw.Merge(o.raw);
+  }
+};
+constexpr const char* kRangeBins[] = {"range 0-5 m", "range 5-10 m", "range 10-20 m",
+                                      "range 20+ m"};
+constexpr const char* kPointBins[] = {"points 0 (coasting)", "points 1",     "points 2-4",
+                                      "points 5-9",          "points 10-19", "points 20+"};
+struct Breakdown {
+  std::array<BreakdownCell, 4> by_range;
+  std::array<BreakdownCell, 6> by_points;
+  BreakdownCell total;
+  static std::size_t RangeBin(double r_m) {
+    return r_m < 5.0 ? 0 : r_m < 10.0 ? 1 : r_m < 20.0 ? 2 : 3;
+  }
+  static std::size_t PointBin(std::uint32_t n) {
+    return n == 0 ? 0 : n == 1 ? 1 : n <= 4 ? 2 : n <= 9 ? 3 : n <= 19 ? 4 : 5;
+  }
+  void Add(const Truth& t, const Hypothesis& h) {
+    const double range_m = t.p.norm();
+    if (!(range_m > 1e-6)) return;
+    const Vector2d los = t.p / range_m;
+    BreakdownCell* cells[] = {&by_range[RangeBin(range_m)], &by_points[PointBin(h.points)], &total};
+    const Vector2d e = h.p - t.p;
+    for (BreakdownCell* c : cells) c->all.Add(e, los, t.v);
+    if (!h.measured) return;
+    // The truth at the measurement's time (its path's velocity over a fraction of a scan).
+    const Vector2d ez = h.z - (t.p + h.z_offset_s * t.v);
+    for (BreakdownCell* c : cells) {
+      c->filtered.Add(e, los, t.v);
+      c->raw.Add(ez, los, t.v);
+    }
+  }
+  void Merge(const Breakdown& o) {
+    for (std::size_t i = 0; i < by_range.size(); ++i) by_range[i].Merge(o.by_range[i]);
+    for (std::size_t i = 0; i < by_points.size(); ++i) by_points[i].Merge(o.by_points[i]);
+    total.Merge(o.total);
+  }
 };
 
 struct Mot {
@@ -231,6 +339,7 @@ class MotSequence {
         continue;
       }
       const Hypothesis& h = hyps[static_cast<std::size_t>(truth_to_hyp[t])];
+      if (breakdown_ != nullptr) breakdown_->Add(truths[t], h);
       ++mot_.matches;
       const Vector2d e = h.p - truths[t].p;
       mot_.errors.push_back(e.norm());
@@ -314,8 +423,10 @@ class MotSequence {
     return m;
   }
   const Causes& causes() const { return causes_; }
+  void set_breakdown(Breakdown* b) { breakdown_ = b; }
 
  private:
+  Breakdown* breakdown_ = nullptr;
   struct TruthState {
     bool hidden_since_match = false;
     double hidden_s = 0;  // since the last match
@@ -400,6 +511,7 @@ struct RunResult {
   std::vector<Causes> causes;                            // per variant, summed over sensors
   std::vector<tracking::MultiTrackerCounters> counters;  // per variant, summed over sensors
   std::vector<Mot> fused;                                // per variant
+  std::vector<Breakdown> breakdown;                      // per variant, per sensor summed
   double scans = 0;
   double track_seconds = 0;
   double cpu_s = 0;
@@ -409,12 +521,14 @@ struct RunResult {
 void RunSensor(const sim::Simulator& simulator, std::size_t sensor,
                const std::vector<Variant>& variants, std::vector<Mot>* mots,
                std::vector<SensorFrames>* frames, std::vector<Causes>* causes,
-               std::vector<tracking::MultiTrackerCounters>* counters) {
+               std::vector<tracking::MultiTrackerCounters>* counters,
+               std::vector<Breakdown>* breakdowns) {
   const sim::SensorSetup& setup = simulator.sensor(sensor);
   const common::Pose2 world_from_sensor{setup.x_m, setup.y_m, common::DegToRad(setup.yaw_deg)};
   const common::Pose2 sensor_from_world = world_from_sensor.inverse();
   std::vector<std::unique_ptr<tracking::TrackingPipeline>> pipelines;
   std::vector<MotSequence> sequences(variants.size());
+  for (std::size_t v = 0; v < variants.size(); ++v) sequences[v].set_breakdown(&(*breakdowns)[v]);
   for (std::size_t v = 0; v < variants.size(); ++v) {
     pipelines.push_back(std::make_unique<tracking::TrackingPipeline>(variants[v].options));
   }
@@ -441,13 +555,15 @@ void RunSensor(const sim::Simulator& simulator, std::size_t sensor,
     for (const sim::TruthSample& ts : simulator.TruthAt(timing.start_s)) {
       const sim::Target& target = simulator.targets()[ts.target];
       const Vector2d p = sensor_from_world * Vector2d(ts.state.center.x, ts.state.center.y);
+      const Vector2d vel =
+          sensor_from_world.rotation() * Vector2d(ts.state.velocity_mps.x, ts.state.velocity_mps.y);
       // Doors and chairs, and people hidden in this scan (a track may coast on them), are neither
       // to be tracked nor false.
       if (!Scored(target.shape()) || hits[ts.target] < kMinHits) {
         dont_care.push_back(p);
         continue;
       }
-      truths.push_back({ts.target, p});
+      truths.push_back({ts.target, p, vel});
       seen.push_back(ts.target);
     }
     for (std::size_t v = 0; v < variants.size(); ++v) {
@@ -463,7 +579,10 @@ void RunSensor(const sim::Simulator& simulator, std::size_t sensor,
         hyps.push_back({r.track_id,
                         {r.x_m, r.y_m},
                         r.covariance.topLeftCorner<2, 2>(),
-                        r.state == tracking::TrackState::kConfirmed});
+                        r.state == tracking::TrackState::kConfirmed,
+                        r.points,
+                        {r.measured_x_m, r.measured_y_m},
+                        r.measured_offset_s});
         frame.tracks.push_back(ToObservation(r));
       }
       std::array<tracking::TrackPrediction, tracking::kMaxTracks> predictions;
@@ -619,6 +738,7 @@ RunResult RunScenario(sim::Scenario scenario, bool all_legs, int jobs) {
   std::vector<std::vector<Causes>> causes(n, std::vector<Causes>(nv));
   std::vector<std::vector<tracking::MultiTrackerCounters>> counters(
       n, std::vector<tracking::MultiTrackerCounters>(nv));
+  std::vector<std::vector<Breakdown>> breakdowns(n, std::vector<Breakdown>(nv));
   const auto started = std::chrono::steady_clock::now();
   std::mutex mutex;
   std::size_t next = 0;
@@ -630,7 +750,8 @@ RunResult RunScenario(sim::Scenario scenario, bool all_legs, int jobs) {
         if (next >= n) return;
         i = next++;
       }
-      RunSensor(*simulator, i, variants[i], &mots[i], &frames[i], &causes[i], &counters[i]);
+      RunSensor(*simulator, i, variants[i], &mots[i], &frames[i], &causes[i], &counters[i],
+                &breakdowns[i]);
     }
   };
   std::vector<std::thread> threads;
@@ -642,12 +763,14 @@ RunResult RunScenario(sim::Scenario scenario, bool all_legs, int jobs) {
   result.per_sensor.assign(nv, Mot{});
   result.causes.assign(nv, Causes{});
   result.counters.assign(nv, tracking::MultiTrackerCounters{});
+  result.breakdown.assign(nv, Breakdown{});
   for (std::size_t v = 0; v < nv; ++v) {
     std::vector<SensorFrames> by_sensor;
     for (std::size_t i = 0; i < n; ++i) {
       result.per_sensor[v].Add(mots[i][v]);
       result.causes[v].Add(causes[i][v]);
       AddCounters(counters[i][v], &result.counters[v]);
+      result.breakdown[v].Merge(breakdowns[i][v]);
       by_sensor.push_back(std::move(frames[i][v]));
     }
     result.fused.push_back(RunFusion(*simulator, by_sensor));
@@ -675,10 +798,30 @@ const char* kHeader =
     "<= 9.21 | door/chair/hidden track-s |\n"
     "|---|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n";
 
+const char* kBreakdownHeader =
+    "| scenario | mount | tracker | bin | matches | MOTP m | p95 m | radial mean m | radial RMS m "
+    "| across RMS m | measured | filtered RMS m | raw RMS m | filtered radial mean m | raw radial "
+    "mean m | filtered along-motion mean m | raw along-motion mean m |\n"
+    "|---|---|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n";
+
+std::string BreakdownRow(const std::string& lead, const std::string& bin, const BreakdownCell& c) {
+  char line[512];
+  std::snprintf(line, sizeof line,
+                "| %s | %s | %.0f | %.3f | %.3f | %+.3f | %.3f | %.3f | %.0f | %.3f | %.3f | "
+                "%+.3f | %+.3f | %+.3f | %+.3f |\n",
+                lead.c_str(), bin.c_str(), c.all.n, c.all.Mean(), c.all.P95(), c.all.RadialMean(),
+                c.all.RadialRms(), c.all.AcrossRms(), c.filtered.n, c.filtered.Rms(), c.raw.Rms(),
+                c.filtered.RadialMean(), c.raw.RadialMean(), c.filtered.AlongMean(),
+                c.raw.AlongMean());
+  return line;
+}
+
 struct Section {
   std::string title;
   std::string table;
-  std::map<std::string, Mot> totals;  // "<mount> <tracker>"
+  std::map<std::string, Mot> totals;            // "<mount> <tracker>"
+  std::map<std::string, Breakdown> breakdowns;  // "<mount> <tracker>" (per sensor)
+  std::string breakdown_rows;                   // per scenario, every match
 };
 
 Section RunFolder(const std::string& title, const std::string& dir, const std::string& only,
@@ -708,6 +851,12 @@ Section RunFolder(const std::string& title, const std::string& dir, const std::s
       const RunResult r = RunScenario(scenario, legs, jobs);
       if (explain) Explain(scenario.name, mount, r);
       const char* names[] = {"old", "new"};
+      for (std::size_t v = 0; v < r.breakdown.size(); ++v) {
+        const std::string key = std::string(legs ? "legs" : "torso") + " " + names[v];
+        section.breakdowns[key].Merge(r.breakdown[v]);
+        section.breakdown_rows += BreakdownRow(scenario.name + " | " + mount + " | " + names[v],
+                                               "all", r.breakdown[v].total);
+      }
       for (std::size_t v = 0; v < r.per_sensor.size(); ++v) {
         section.table +=
             Row(scenario.name, mount, std::string(names[v]) + " per sensor", r.per_sensor[v]);
@@ -727,6 +876,20 @@ Section RunFolder(const std::string& title, const std::string& dir, const std::s
     }
   }
   return section;
+}
+
+std::string BreakdownTable(const Section& s) {
+  std::string t = kBreakdownHeader;
+  for (const auto& [key, b] : s.breakdowns) {
+    const std::size_t space = key.find(' ');
+    const std::string lead = "all | " + key.substr(0, space) + " | " + key.substr(space + 1);
+    t += BreakdownRow(lead, "all", b.total);
+    for (std::size_t i = 0; i < b.by_range.size(); ++i)
+      t += BreakdownRow(lead, kRangeBins[i], b.by_range[i]);
+    for (std::size_t i = 0; i < b.by_points.size(); ++i)
+      t += BreakdownRow(lead, kPointBins[i], b.by_points[i]);
+  }
+  return t + s.breakdown_rows;
 }
 
 std::string Totals(const Section& s) {
@@ -777,7 +940,7 @@ int main(int argc, char** argv) {
   std::string scenarios_dir, out_path, only;
   std::vector<std::string> extra;
   int jobs = 1;
-  bool explain = false;
+  bool explain = false, breakdown = false;
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
     auto value = [&]() -> std::string {
@@ -797,12 +960,14 @@ int main(int argc, char** argv) {
       only = value();
     } else if (a == "--explain") {
       explain = true;
+    } else if (a == "--breakdown") {
+      breakdown = true;
     } else if (a == "--jobs") {
       jobs = std::max(1, std::atoi(value().c_str()));
     } else {
       std::fprintf(stderr,
                    "usage: tracking_benchmark --scenarios DIR [--extra DIR] [--only NAME] "
-                   "[--out FILE] [--jobs N] [--explain]\n");
+                   "[--out FILE] [--jobs N] [--explain] [--breakdown]\n");
       return 2;
     }
   }
@@ -820,6 +985,10 @@ int main(int argc, char** argv) {
   for (const Section& s : sections) {
     text += "## " + s.title + "\n\n" + s.table + "\n### " + s.title + ": all together\n\n" +
             Totals(s) + "\n### " + s.title + ": targets (per sensor)\n\n" + Targets(s) + "\n";
+    if (breakdown) {
+      text += "### " + s.title + ": where the per-sensor error comes from\n\n" + BreakdownTable(s) +
+              "\n";
+    }
   }
   std::printf("%s", text.c_str());
   if (!out_path.empty()) {
