@@ -222,8 +222,8 @@ void VisitShape(tracking::ShapeOptions& o, ConfigVisitor& v) {
   v.Field("size_floor_sigma_m", o.size_floor_sigma_m,
           "The size state counts as no more certain than this in that shared error.");
   v.Field("beam_divergence_rad", o.beam_divergence_rad,
-          "Full beam divergence of the scanner (LMS1xx, TiM: 0.015; LMS5xx: 0.011): where the "
-          "silhouette of an object ends.");
+          "Full beam divergence of the scanner (LMS1xx, TiM: 0.015; LMS5xx: 0.011). Not used: "
+          "a silhouette ends half a beam step beyond its last beam whatever the divergence.");
   v.Field("centre_model_sigma_m", o.centre_model_sigma_m,
           "Added in quadrature to every centre measurement's sigma: what the fit cannot know "
           "(sway, an outline that is not the model's).");

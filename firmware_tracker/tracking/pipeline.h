@@ -107,7 +107,7 @@ struct ShapeOptions {
   // track's covariance on top of the filter's (which averages its measurements as if they were
   // independent): centre_bias_sigma_m (the outline not being the model's, the beam width at the
   // silhouette) in quadrature with the size state's sigma, taken as at least size_floor_sigma_m.
-  double centre_bias_sigma_m = 0.035;
+  double centre_bias_sigma_m = 0.02;
   double size_floor_sigma_m = 0.02;
   // Added in quadrature to every body-centre measurement (sigma per axis): what the fit cannot know
   // (sway, the torso's turn, an outline that is not the model's).
@@ -115,8 +115,9 @@ struct ShapeOptions {
   // Flat objects (not person-like).
   double flat_rms_m = 0.015;
   double flat_min_extent_m = 0.25;
-  // Full beam divergence of the scanner (LMS1xx and TiM: 15 mrad, LMS5xx: 11 mrad): where a
-  // silhouette ends (see MakePart).
+  // Full beam divergence of the scanner (LMS1xx and TiM: 15 mrad, LMS5xx: 11 mrad). Not used: a
+  // silhouette ends half a beam step beyond its last beam whatever the divergence (see MakePart);
+  // kept so that configurations that set it still load.
   double beam_divergence_rad = 0.015;
   // Sigma of the first position used for association (per axis).
   double association_sigma_m = 0.08;
