@@ -12,8 +12,8 @@ mkdir -p results
 "$build_dir/tests/bench/decode_benchmark" --out results/decode_benchmark.md
 "$build_dir/tests/bench/tracker_benchmark" --out results/tracker_benchmark.md
 # Tracking accuracy (CLEAR-MOT, NEES) over every shipped scenario, old and new tracker, per sensor
-# and fused, at upper-body and knee height (a few minutes).
-"$build_dir/tests/bench/tracking_benchmark" --scenarios tools/scenarios --jobs 2 \
+# and fused, at upper-body and knee height, and where the per-sensor error comes from (a few minutes).
+"$build_dir/tests/bench/tracking_benchmark" --scenarios tools/scenarios --jobs 2 --breakdown \
   --out results/tracking_benchmark.md
 "$build_dir/tests/bench/store_benchmark" results/store_benchmark.md
 "$build_dir/tests/bench/daemon_benchmark" --out results/daemon_benchmark.md
