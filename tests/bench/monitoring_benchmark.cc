@@ -338,6 +338,7 @@ int main(int argc, char** argv) {
       }
 
       // The pose the daemon ends with against the new truth.
+      double run_motion_err_deg = std::nan(""), run_motion_err_m = std::nan("");
       calib::PoseFile final_file;
       if (!c.furniture &&
           calib::ReadPoseFile((dir / "calibration.yaml").string(), &final_file, &error) &&
@@ -346,9 +347,10 @@ int main(int argc, char** argv) {
         const common::Pose2 motion = s2_calibrated.inverse() * s2_final;
         const common::Pose2 true_motion = s2_before.inverse() * s2_after;
         // A move that was not flagged leaves the pose as calibrated: its error is the move.
-        tally.motion_err_deg.push_back(
-            common::RadToDeg(common::RotationDistanceRad(motion, true_motion)));
-        tally.motion_err_m.push_back(common::TranslationDistanceM(motion, true_motion));
+        run_motion_err_deg = common::RadToDeg(common::RotationDistanceRad(motion, true_motion));
+        run_motion_err_m = common::TranslationDistanceM(motion, true_motion);
+        tally.motion_err_deg.push_back(run_motion_err_deg);
+        tally.motion_err_m.push_back(run_motion_err_m);
         // Against the truth at the end, in s1's frame (the calibration's world is its reference
         // sensor's frame), as `lrfnet eval`.
         calib::PoseFile truth_end;
@@ -362,11 +364,12 @@ int main(int argc, char** argv) {
         }
       }
       std::fprintf(
-          stderr, "%s seed %d: move at %.1f s, flagged %s, corrected %s\n", c.name.c_str(), seed,
-          at_s,
+          stderr, "%s seed %d: move at %.1f s, flagged %s, corrected %s, motion error %s / %s\n",
+          c.name.c_str(), seed, at_s,
           flagged_ns ? Num(static_cast<double>(flagged_ns - move_ns) * 1e-9, "%.1f s after").c_str()
                      : "no",
-          corrected_ns ? "yes" : "no");
+          corrected_ns ? "yes" : "no", Num(run_motion_err_deg, "%.3f°").c_str(),
+          Num(run_motion_err_m, "%.3f m").c_str());
     }
   }
 
