@@ -271,6 +271,10 @@ std::optional<std::string> Validate(const FusionOptions& o) {
       o.sensor_bias_covariance_scale > 1e4) {
     return "sensor_bias_covariance_scale must be in [1, 1e4]";
   }
+  if (!std::isfinite(o.sensor_bias_offset_sigma_fraction) ||
+      o.sensor_bias_offset_sigma_fraction < 0.0 || o.sensor_bias_offset_sigma_fraction > 10.0) {
+    return "sensor_bias_offset_sigma_fraction must be in [0, 10]";
+  }
   if (!std::isfinite(o.max_sensor_bias_m) || o.max_sensor_bias_m < 0.0 ||
       o.max_sensor_bias_m > 10.0) {
     return "max_sensor_bias_m must be in [0, 10]";

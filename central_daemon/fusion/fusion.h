@@ -96,7 +96,9 @@
 // where views differ in direction: two sensors' offsets u1 b1 - u2 b2 separate unless u1 = +-u2,
 // and the calibration's reference sensor (zero covariance) is never moved. Once
 // sensor_bias_min_samples are in, frames are corrected by it (the placement by the error,
-// CentreCorrected by the offset), its covariance (times sensor_bias_covariance_scale) replaces
+// CentreCorrected by the offset where its sigma is at most sensor_bias_offset_sigma_fraction of
+// its kind's centre sigma: an offset known less well is left to the fused tracks' offset
+// states), its covariance (times sensor_bias_covariance_scale) replaces
 // the calibration's and its offset's variance is added to the offset prior along the line of
 // sight. A sensor that sees people only alone learns nothing and is not corrected. A new
 // placement of a sensor starts its model again. Fuser::sensor_biases() reports them.
@@ -212,6 +214,13 @@ struct FusionOptions {
   // fusion_benchmark with poses 3 sigma off, 1 left 6 % of the fused errors outside their 95 %
   // ellipse, 2 5.2 %, 3 4.5 %; on the 25-people row the fused RMS is 0.054 m with each.)
   double sensor_bias_covariance_scale = 3.0;
+  // A learnt offset is taken out of the frames only when its sigma (as used, see above) is at
+  // most this fraction of its kind's centre sigma; the placement's error is corrected
+  // regardless. (On fusion_benchmark's rows the learnt offsets' sigmas are 0.4-1.3 of the
+  // kind's: taking them out made every row but the ideal trackers' as bad or worse, the legacy
+  // trackers' id switches 0.19 -> 0.34 per person-minute and their 2-view RMS 0.065 -> 0.085 m;
+  // 0 never takes one out.)
+  double sensor_bias_offset_sigma_fraction = 0.33;
   // Learnt offsets are clamped to +-this [m] (a shape fit's is a few cm, a centre of mass's of a
   // person ~0.2 m).
   double max_sensor_bias_m = 0.3;
@@ -378,7 +387,11 @@ struct SensorBias {
   double dx_m = 0.0, dy_m = 0.0, dyaw_rad = 0.0;
   Eigen::Matrix3d pose_covariance = Eigen::Matrix3d::Zero();
   std::uint64_t samples = 0;  // of the sensor (all kinds)
-  bool applied = false;
+  // The scatter of its samples about the estimate (standard deviations along the line of sight
+  // and across it), as estimated from the residuals.
+  double residual_radial_m = 0.0, residual_lateral_m = 0.0;
+  bool applied = false;         // the placement corrected by it
+  bool offset_applied = false;  // radial_m taken out of the frames of this kind
 };
 
 class Fuser {

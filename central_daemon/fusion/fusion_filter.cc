@@ -416,7 +416,10 @@ class FusedFilterEngine final : public Engine {
         sb.dyaw_rad = theta(2);
         sb.pose_covariance = covariance.topLeftCorner<3, 3>();
         sb.samples = b.samples;
+        sb.residual_radial_m = std::sqrt(std::max(b.noise_m2[0], 0.0));
+        sb.residual_lateral_m = std::sqrt(std::max(b.noise_m2[1], 0.0));
         sb.applied = Learnt(b);
+        sb.offset_applied = OffsetApplied(b, sb.kind);
         out.push_back(std::move(sb));
       }
     }
@@ -452,12 +455,22 @@ class FusedFilterEngine final : public Engine {
     out.covariance = Covariance(b).topLeftCorner<3, 3>();
     return out;
   }
+  // Whether the learnt offset of a kind is taken out of the frames: only where it is known to
+  // within sensor_bias_offset_sigma_fraction of the kind's centre sigma (a less precise one
+  // would add an error common to all the sensor's frames for minutes, which the fused tracks'
+  // offset states, relaxing within centre_correlation_s, do better without).
+  bool OffsetApplied(const BiasModel& b, daemon::MeasurementKind kind) const {
+    if (!Learnt(b)) return false;
+    const auto i = 3 + static_cast<Eigen::Index>(KindIndex(kind));
+    const double limit = options_.sensor_bias_offset_sigma_fraction * CentreSigma(kind);
+    return Covariance(b)(i, i) <= limit * limit;
+  }
   double AppliedBias(const SensorState& ss, daemon::MeasurementKind kind) const {
-    if (!Learnt(ss.bias)) return 0.0;
+    if (!OffsetApplied(ss.bias, kind)) return 0.0;
     return Applicable(ss.bias)(3 + static_cast<Eigen::Index>(KindIndex(kind)));
   }
   double AppliedBiasSigma(const SensorState& ss, daemon::MeasurementKind kind) const {
-    if (!Learnt(ss.bias)) return 0.0;
+    if (!OffsetApplied(ss.bias, kind)) return 0.0;
     const auto i = 3 + static_cast<Eigen::Index>(KindIndex(kind));
     return std::sqrt(std::max(Covariance(ss.bias)(i, i), 0.0));
   }

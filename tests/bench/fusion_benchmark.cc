@@ -91,6 +91,8 @@ struct Config {
   double pose_error_scale = 1.0;  // pose errors drawn from scale^2 * reported covariance
   fusion::FusionMethod method = fusion::FusionMethod::kFusedFilter;
   bool learn_sensor_bias = true;  // fused filter: FusionOptions::learn_sensor_bias
+  // fused filter: FusionOptions::sensor_bias_offset_sigma_fraction (< 0: the default)
+  double offset_sigma_fraction = -1.0;
 };
 
 struct Trajectories {
@@ -496,6 +498,9 @@ void Run(const Config& config, double seconds, std::uint32_t seed, Totals& total
   fusion::FusionOptions options;
   options.method = config.method;
   options.learn_sensor_bias = config.learn_sensor_bias;
+  if (config.offset_sigma_fraction >= 0.0) {
+    options.sensor_bias_offset_sigma_fraction = config.offset_sigma_fraction;
+  }
   // The earlier releases' defaults with their method.
   if (config.method == fusion::FusionMethod::kLatestStates) {
     options.max_coast_s = 1.0;
@@ -806,7 +811,10 @@ int main(int argc, char** argv) {
       "poses and tracker errors).\n\n"
       "Fusion: *fused filter* (the default; one Kalman filter per fused track on every sensor's "
       "new information, with each sensor's centre offset as a state, and each sensor's constant "
-      "centre offset and placement error learnt across its tracks and taken out of its frames), "
+      "centre offset and placement error learnt across its tracks, the placement error taken out "
+      "of its frames and the offset where its sigma is at most a third of its kind's), *fused "
+      "filter, every learnt offset taken out* (the same taking out every learnt offset, "
+      "sensor_bias_offset_sigma_fraction 10: the earlier release), "
       "*fused filter, no sensor bias* (the same without that learning, learn_sensor_bias off: "
       "the earlier release) or *latest states* (the information-weighted combination of the "
       "sources' latest states, earlier releases). Fused ÷ best single: fused RMS divided by "
@@ -853,14 +861,15 @@ int main(int argc, char** argv) {
   std::fflush(stdout);
   for (const Config& scene : scenes) {
     if (!only.empty() && only != scene.name + "/" + std::to_string(scene.people)) continue;
-    // The fused filter with the sensors' biases learnt (default) and without (the earlier
-    // release), and the latest states.
-    for (const int variant : {0, 1, 2}) {
+    // The fused filter with the sensors' biases learnt (default), with every learnt offset taken
+    // out (3), without learning (the earlier releases), and the latest states.
+    for (const int variant : {0, 3, 1, 2}) {
       const fusion::FusionMethod method =
-          variant < 2 ? fusion::FusionMethod::kFusedFilter : fusion::FusionMethod::kLatestStates;
+          variant != 2 ? fusion::FusionMethod::kFusedFilter : fusion::FusionMethod::kLatestStates;
       Config config = scene;
       config.method = method;
-      config.learn_sensor_bias = variant == 0;
+      config.learn_sensor_bias = variant == 0 || variant == 3;
+      if (variant == 3) config.offset_sigma_fraction = 10.0;
       Totals totals;
       for (int k = 0; k < seeds; ++k)
         Run(config, seconds, 1000u + static_cast<std::uint32_t>(k), totals);
@@ -914,6 +923,7 @@ int main(int argc, char** argv) {
           "%llu | %s |\n",
           config.name.c_str(),
           variant == 0   ? "fused filter"
+          : variant == 3 ? "fused filter, every learnt offset taken out"
           : variant == 1 ? "fused filter, no sensor bias"
                          : "latest states",
           config.people, totals.tracker_swaps, totals.swap_events, totals.correctable_swap_events,
