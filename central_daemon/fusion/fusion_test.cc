@@ -1026,8 +1026,7 @@ struct BiasRun {
 };
 
 BiasRun RunBiasScene(bool learn, const std::vector<double>& bias_m,
-                     const std::function<void(Scene&)>& adjust = nullptr,
-                     double duration_s = 60.0,
+                     const std::function<void(Scene&)>& adjust = nullptr, double duration_s = 60.0,
                      const std::function<void(FusionOptions&)>& configure = nullptr) {
   Scene scene;
   scene.sensors = {Sensor("a", 0, 0, 0), Sensor("b", 10, 0, 180, 0.013),
