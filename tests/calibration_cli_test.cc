@@ -303,6 +303,7 @@ TEST(MonitoringChain, TheDaemonFlagsAMovedSensorFusesWithoutItAndCorrectsItsPose
   for (const auto& b : fusion_stats["sensor_biases"]) {
     EXPECT_LE(std::abs(b["radial_m"].get<double>()), 0.3) << b.dump();
     EXPECT_GT(b["sigma_m"].get<double>(), 0.0) << b.dump();
+    EXPECT_TRUE(b["offset_applied"].is_boolean()) << b.dump();
     if (b["sensor_id"] == "s1") {
       EXPECT_EQ(b["dx_m"].get<double>(), 0.0) << b.dump();
       EXPECT_EQ(b["dyaw_deg"].get<double>(), 0.0) << b.dump();

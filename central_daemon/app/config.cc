@@ -217,6 +217,10 @@ void VisitFusion(DaemonConfig& c, ConfigVisitor& v) {
           "bias.");
   v.Field("max_sensor_bias_m", o.max_sensor_bias_m,
           "fused_filter: learnt centre offsets are clamped to +-this, metres.");
+  v.Field("sensor_bias_offset_sigma_fraction", o.sensor_bias_offset_sigma_fraction,
+          "fused_filter: a learnt centre offset is taken out of the frames only when its sigma "
+          "is at most this fraction of its kind's centre_sigma (the placement's error is "
+          "corrected regardless).");
   v.Field("manoeuvre_max_distance_m", o.manoeuvre_max_distance_m,
           "fused_filter: a bound track's frame within this distance of its fused track that the "
           "gate refused is a stop or sharp turn: the fused track widens to take it.");

@@ -56,6 +56,7 @@ TEST(DaemonConfigTest, FusionOptionsRoundTripThroughPrint) {
   c.fusion.sensor_bias_min_samples = 20;
   c.fusion.sensor_bias_sample_s = 3.0;
   c.fusion.max_sensor_bias_m = 0.1;
+  c.fusion.sensor_bias_offset_sigma_fraction = 0.5;
   ASSERT_EQ(Validate(c), std::nullopt);
   DaemonConfig back;
   ASSERT_EQ(LoadDaemonConfig(PrintDaemonConfig(c), back), std::nullopt);

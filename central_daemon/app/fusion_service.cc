@@ -185,6 +185,7 @@ nlohmann::json FusionService::StatsJson() const {
     x["sigma_yaw_deg"] = common::RadToDeg(std::sqrt(std::max(0.0, b.pose_covariance(2, 2))));
     x["samples"] = b.samples;
     x["applied"] = b.applied;
+    x["offset_applied"] = b.offset_applied;
     biases.push_back(std::move(x));
   }
   j["sensor_biases"] = std::move(biases);
