@@ -4,7 +4,9 @@
 #include <Eigen/LU>
 #include <algorithm>
 #include <array>
+#include <bit>
 #include <cmath>
+#include <cstdint>
 
 #include "common/geometry.h"
 
@@ -43,15 +45,19 @@ struct PointTerm {
   Vec5 grad = Vec5::Zero();
 };
 
+// The superellipse exponents with a path of their own (kAnyExponent: pow).
+enum ExponentKind : int { kAnyExponent = 0, kExponent2 = 1, kExponent2_5 = 2 };
+
 // |x|^p and d|x|^p / dx, the common exponents without pow or a division.
+template <int kKind = kAnyExponent>
 inline void PowerTerm(double x, double p, double* value, double* derivative) {
-  if (p == 2.0) {
+  if (kKind == kExponent2 || (kKind == kAnyExponent && p == 2.0)) {
     *value = x * x;
     *derivative = 2.0 * x;
     return;
   }
   const double ax = std::abs(x);
-  if (p == 2.5) {
+  if (kKind == kExponent2_5 || (kKind == kAnyExponent && p == 2.5)) {
     const double root = std::sqrt(ax);
     *value = x * x * root;
     *derivative = 2.5 * x * root;
@@ -62,13 +68,37 @@ inline void PowerTerm(double x, double p, double* value, double* derivative) {
   *derivative = ax > 0.0 ? p * v / x : 0.0;
 }
 
+// x^(1/n) for the support function's powers, by Halley's iteration for r^n = x from a first guess
+// built from the exponent bits (relative error below 0.1 after the guess, cubic convergence: three
+// steps reach the last bits). libm's cbrt and pow cost several times as much and were a tenth of
+// the fit. Outside the normal range (0, subnormal, infinite, NaN) libm answers.
+template <int kN>
+double RootN(double x) {
+  if (!(x >= 1e-290 && x <= 1e290)) return kN == 3 ? std::cbrt(x) : std::pow(x, 1.0 / kN);
+  // A linear approximation of log2(x) / n in the exponent bits.
+  constexpr std::uint64_t kOne = 0x3FF0000000000000ull;
+  const auto bits = std::bit_cast<std::int64_t>(x);
+  constexpr auto kOneBits = static_cast<std::int64_t>(kOne);
+  double r = std::bit_cast<double>(kOneBits + (bits - kOneBits) / kN);
+  for (int i = 0; i < 3; ++i) {
+    double rn = r * r;  // r^n
+    for (int k = 2; k < kN; ++k) rn *= r;
+    r *= ((kN - 1) * rn + (kN + 1) * x) / ((kN + 1) * rn + (kN - 1) * x);
+  }
+  return r;
+}
+
 // (cos_yaw, sin_yaw) of x(kYaw) and (inv_a, inv_b) = (1 / x(kA), 1 / x(kB)): the caller's, once
-// per evaluation rather than per point.
-PointTerm PointResidual(ShapeModel model, const Vec5& x, double cos_yaw, double sin_yaw,
-                        double inv_a, double inv_b, double exponent, const Eigen::Vector2d& p) {
+// per evaluation rather than per point. Instantiated per model and exponent kind for the fit's
+// loop over the points (no branch on either per point; the same arithmetic).
+template <ShapeModel kModel, int kKind>
+[[gnu::always_inline]] inline PointTerm PointResidual(const Vec5& x, double cos_yaw, double sin_yaw,
+                                                      double inv_a, double inv_b, double exponent,
+                                                      const Eigen::Vector2d& p) {
+  constexpr ShapeModel model = kModel;
   PointTerm t;
   const double dx = p.x() - x(kCx), dy = p.y() - x(kCy);
-  if (model == ShapeModel::kCircle) {
+  if constexpr (model == ShapeModel::kCircle) {
     const double r = std::sqrt(dx * dx + dy * dy);
     t.d = r - x(kA);
     if (r > 1e-12) {
@@ -83,10 +113,10 @@ PointTerm PointResidual(ShapeModel model, const Vec5& x, double cos_yaw, double 
   const double v = -sin_yaw * dx + cos_yaw * dy;
   // d/dq of d as (gu, gv) in the body frame; q = R^T (p - c): dq/dc = -R^T, dq/dyaw = (v, -u).
   double gu = 0.0, gv = 0.0;
-  if (model == ShapeModel::kSuperellipse) {
+  if constexpr (model == ShapeModel::kSuperellipse) {
     double s1 = 0.0, d1 = 0.0, s2 = 0.0, d2 = 0.0;
-    PowerTerm(u * inv_a, exponent, &s1, &d1);
-    PowerTerm(v * inv_b, exponent, &s2, &d2);
+    PowerTerm<kKind>(u * inv_a, exponent, &s1, &d1);
+    PowerTerm<kKind>(v * inv_b, exponent, &s2, &d2);
     const double su = d1 * inv_a, sv = d2 * inv_b;  // dS/du, dS/dv
     const double g2 = su * su + sv * sv;
     if (!(g2 > 1e-24)) {
@@ -127,7 +157,9 @@ PointTerm PointResidual(ShapeModel model, const Vec5& x, double cos_yaw, double 
 }
 
 // Support function h(n; x) and its gradient with respect to (yaw, a, b).
-// (cos_yaw, sin_yaw) of x(kYaw): the caller's, computed once per evaluation.
+// (cos_yaw, sin_yaw) of x(kYaw): the caller's, computed once per evaluation. kLibmRoots: the
+// exponent 2.5's powers by libm's cbrt and pow (as before RootN; the equivalence test's reference).
+template <bool kLibmRoots = false>
 double Support(ShapeModel model, const Vec5& x, double c, double s, const Eigen::Vector2d& n,
                double exponent, Vec5* grad) {
   if (model == ShapeModel::kCircle) {
@@ -142,16 +174,26 @@ double Support(ShapeModel model, const Vec5& x, double c, double s, const Eigen:
     const double k = exponent / (exponent - 1.0);
     const double ap = std::abs(a * p), bq = std::abs(b * q);
     // |x|^k: exponent 2.5 (the person model) has k = 5/3, x^(5/3) = x cbrt(x^2).
-    const auto power = [k](double v) {
+    // and h = t^(3/5) = (t^(1/5))^3.
+    const bool five_thirds = std::abs(k - 5.0 / 3.0) < 1e-12;
+    const auto power = [k, five_thirds](double v) {
       if (k == 2.0) return v * v;
-      if (std::abs(k - 5.0 / 3.0) < 1e-12) return v * std::cbrt(v * v);
+      if (five_thirds) return v * (kLibmRoots ? std::cbrt(v * v) : RootN<3>(v * v));
       return std::pow(v, k);
     };
     const double tp = power(ap);
     const double tq = power(bq);
     const double t = tp + tq;
     if (!(t > 0.0)) return 0.0;
-    const double h = k == 2.0 ? std::sqrt(t) : std::pow(t, 1.0 / k);
+    double h = 0.0;
+    if (k == 2.0) {
+      h = std::sqrt(t);
+    } else if (five_thirds && !kLibmRoots) {
+      const double root = RootN<5>(t);
+      h = root * root * root;
+    } else {
+      h = std::pow(t, 1.0 / k);
+    }
     if (grad != nullptr) {
       const double scale = h / t;  // h^(1 - k)
       (*grad)(kA) = scale * tp / a;
@@ -203,7 +245,9 @@ class UpperSum5 {
   Mat5 Upper() const {
     Mat5 m = Mat5::Zero();
     int k = 0;
+#pragma GCC unroll 5
     for (int r = 0; r < 5; ++r) {
+#pragma GCC unroll 5
       for (int col = r; col < 5; ++col) m(r, col) = v_[static_cast<std::size_t>(k++)];
     }
     return m;
@@ -213,23 +257,72 @@ class UpperSum5 {
   std::array<double, 15> v_{};
 };
 
+// The points' part of the fit's objective at x (Huber, see Fit's evaluate): the normal matrix's
+// sum, gradient, cost and sum of squared distances, for one model and exponent kind.
+struct PointSums {
+  UpperSum5 outer;
+  Vec5 g = Vec5::Zero();
+  double cost = 0.0;
+  double sq = 0.0;
+};
+
+template <ShapeModel kModel, int kKind>
+void SumPoints(const Vec5& at, double c, double s, double inv_a, double inv_b, double exponent,
+               std::span<const Eigen::Vector2d> points, const double* base_weight, double discount,
+               double k2, PointSums& sums) {
+  for (std::size_t i = 0; i < points.size(); ++i) {
+    const PointTerm t = PointResidual<kModel, kKind>(at, c, s, inv_a, inv_b, exponent, points[i]);
+    const double z2 = t.d * t.d * base_weight[i] * discount / k2;  // (s / k)^2
+    const double z = z2 > 1.0 ? std::sqrt(z2) : 1.0;
+    const double w = base_weight[i] / z;
+    sums.outer.Add(t.grad, w);
+    sums.g += (w * t.d) * t.grad;
+    sums.cost += k2 / discount * (z2 > 1.0 ? 2.0 * z - 1.0 : z2);
+    sums.sq += t.d * t.d;
+  }
+}
+
+using SumPointsFn = void (*)(const Vec5&, double, double, double, double, double,
+                             std::span<const Eigen::Vector2d>, const double*, double, double,
+                             PointSums&);
+
+SumPointsFn SumPointsFor(ShapeModel model, double exponent) {
+  switch (model) {
+    case ShapeModel::kCircle:
+      return &SumPoints<ShapeModel::kCircle, kAnyExponent>;
+    case ShapeModel::kBox:
+      return &SumPoints<ShapeModel::kBox, kAnyExponent>;
+    case ShapeModel::kSuperellipse:
+      break;
+  }
+  if (exponent == 2.0) return &SumPoints<ShapeModel::kSuperellipse, kExponent2>;
+  if (exponent == 2.5) return &SumPoints<ShapeModel::kSuperellipse, kExponent2_5>;
+  return &SumPoints<ShapeModel::kSuperellipse, kAnyExponent>;
+}
+
 // The normal matrix is symmetric positive definite by construction (weighted outer products plus
 // the priors, each of which bounds a parameter). A 5 x 5 Cholesky by hand: Eigen's pivoted LDLT
 // and its general solve against the identity for the covariance cost more than a pass over the
 // points at this size. A pivot that is not positive (rounding on a nearly singular matrix) falls
-// back to the pivoted LDLT.
+// back to the pivoted LDLT. The loops are unrolled completely (the pragmas): with constant bounds
+// the triangular loops become straight code, a twentieth of the tracker's instructions per
+// crowded scan fewer (the same arithmetic in the same order).
 class NormalSolver {
  public:
   bool Factor(const Mat5& h) {
     use_ldlt_ = false;
+#pragma GCC unroll 5
     for (int j = 0; j < 5; ++j) {
       double d = h(j, j);
+#pragma GCC unroll 5
       for (int k = 0; k < j; ++k) d -= l_[j][k] * l_[j][k];
       if (!(d > 0.0) || !std::isfinite(d)) return FactorLdlt(h);
       l_[j][j] = std::sqrt(d);
       inv_diag_[j] = 1.0 / l_[j][j];
+#pragma GCC unroll 5
       for (int i = j + 1; i < 5; ++i) {
         double v = h(i, j);
+#pragma GCC unroll 5
         for (int k = 0; k < j; ++k) v -= l_[i][k] * l_[j][k];
         l_[i][j] = v * inv_diag_[j];
       }
@@ -240,14 +333,18 @@ class NormalSolver {
   Vec5 Solve(const Vec5& b) const {
     if (use_ldlt_) return ldlt_.solve(b);
     std::array<double, 5> y{};
+#pragma GCC unroll 5
     for (int i = 0; i < 5; ++i) {
       double v = b(i);
+#pragma GCC unroll 5
       for (int k = 0; k < i; ++k) v -= l_[i][k] * y[k];
       y[i] = v * inv_diag_[i];
     }
     Vec5 x;
+#pragma GCC unroll 5
     for (int i = 4; i >= 0; --i) {
       double v = y[i];
+#pragma GCC unroll 5
       for (int k = i + 1; k < 5; ++k) v -= l_[k][i] * x(k);
       x(i) = v * inv_diag_[i];
     }
@@ -257,18 +354,24 @@ class NormalSolver {
   Mat5 Inverse() const {
     if (use_ldlt_) return ldlt_.solve(Mat5::Identity());
     double m[5][5] = {};  // L^-1, lower triangular
+#pragma GCC unroll 5
     for (int j = 0; j < 5; ++j) {
       m[j][j] = inv_diag_[j];
+#pragma GCC unroll 5
       for (int i = j + 1; i < 5; ++i) {
         double v = 0.0;
+#pragma GCC unroll 5
         for (int k = j; k < i; ++k) v -= l_[i][k] * m[k][j];
         m[i][j] = v * inv_diag_[i];
       }
     }
     Mat5 inv;
+#pragma GCC unroll 5
     for (int i = 0; i < 5; ++i) {
+#pragma GCC unroll 5
       for (int j = i; j < 5; ++j) {
         double v = 0.0;
+#pragma GCC unroll 5
         for (int k = j; k < 5; ++k) v += m[k][i] * m[k][j];
         inv(i, j) = v;
         inv(j, i) = v;
@@ -339,7 +442,9 @@ double ShapeSupport(ShapeModel model, const Eigen::Vector2d& size_m, double yaw_
 
 namespace {
 
-template <class Solver>
+// kReference: the fit's numerics before RootN and the ray by the bisector (libm's roots, the ray's
+// angle by atan2), for the equivalence test.
+template <class Solver, bool kReference = false>
 ShapeFitResult Fit(std::span<const Eigen::Vector2d> points, const Silhouette& silhouette,
                    const ShapePrior& prior, const ShapeFitOptions& o) {
   ShapeFitResult result;
@@ -357,10 +462,8 @@ ShapeFitResult Fit(std::span<const Eigen::Vector2d> points, const Silhouette& si
       if (!p.allFinite()) continue;
       if (seen == next_pick && n < want) {
         pts[n++] = p;
-        next_pick = want <= 1 ? finite
-                              : static_cast<std::size_t>(std::llround(
-                                    static_cast<double>(n) * static_cast<double>(finite - 1) /
-                                    static_cast<double>(want - 1)));
+        // round(n (finite - 1) / (want - 1)), halves up, in integers.
+        next_pick = want <= 1 ? finite : (2 * n * (finite - 1) + (want - 1)) / (2 * (want - 1));
       }
       ++seen;
     }
@@ -396,15 +499,31 @@ ShapeFitResult Fit(std::span<const Eigen::Vector2d> points, const Silhouette& si
   x(kA) = std::clamp(prior.size_m.x(), o.min_size_m, o.max_size_m);
   x(kB) = circle ? x(kA) : std::clamp(prior.size_m.y(), o.min_size_m, o.max_size_m);
 
-  // Start: on the ray through the middle of the silhouette, the body's extent behind the points.
-  const double mid_angle = 0.5 * (std::atan2(used.front().y(), used.front().x()) +
-                                  std::atan2(used.back().y(), used.back().x()));
-  const Eigen::Vector2d ray(std::cos(mid_angle), std::sin(mid_angle));
+  // Start: on the ray through the middle of the silhouette, the body's extent behind the points
+  // (the bisector of the first and last point's directions: their mean angle without atan2).
+  Eigen::Vector2d ray;
+  if constexpr (kReference) {
+    const double mid_angle = 0.5 * (std::atan2(used.front().y(), used.front().x()) +
+                                    std::atan2(used.back().y(), used.back().x()));
+    ray = Eigen::Vector2d(std::cos(mid_angle), std::sin(mid_angle));
+  } else {
+    const double front = used.front().norm(), back = used.back().norm();
+    ray = used.front() / front + used.back() / back;
+    const double length = ray.norm();
+    // Points on opposite sides of the sensor or at it: the angles' mean as before.
+    if (!(front > 0.0 && back > 0.0 && length > 1e-6)) {
+      const double mid_angle = 0.5 * (std::atan2(used.front().y(), used.front().x()) +
+                                      std::atan2(used.back().y(), used.back().x()));
+      ray = Eigen::Vector2d(std::cos(mid_angle), std::sin(mid_angle));
+    } else {
+      ray /= length;
+    }
+  }
   double nearest_along = mean_range;
   for (const auto& p : used) nearest_along = std::min(nearest_along, p.dot(ray));
   const double exponent = std::max(2.0, prior.exponent);
   const double depth =
-      Support(model, x, std::cos(x(kYaw)), std::sin(x(kYaw)), ray, exponent, nullptr);
+      Support<kReference>(model, x, std::cos(x(kYaw)), std::sin(x(kYaw)), ray, exponent, nullptr);
   Eigen::Vector2d start = (nearest_along + depth) * ray;
   if (prior.centre_guess_m && prior.centre_guess_m->allFinite()) {
     const Eigen::Vector2d& g = *prior.centre_guess_m;
@@ -455,26 +574,21 @@ ShapeFitResult Fit(std::span<const Eigen::Vector2d> points, const Silhouette& si
   // normalised distance), squares on edges and priors. Fills the Gauss-Newton normal matrix h and
   // gradient g (halves) with the IRLS weights min(1, k / |s|) of x; one pass over the points.
   const double k2 = o.robust_k * o.robust_k;
+  const SumPointsFn sum_points = SumPointsFor(model, exponent);
   auto evaluate = [&](const Vec5& at, Mat5* h, Vec5* g, double* points_sq) {
-    const double c = std::cos(at(kYaw)), s = std::sin(at(kYaw));
+    // A circle has no orientation (its yaw stays 0).
+    const double c = circle ? 1.0 : std::cos(at(kYaw)), s = circle ? 0.0 : std::sin(at(kYaw));
     const double inv_a = 1.0 / at(kA), inv_b = 1.0 / at(kB);
-    UpperSum5 outer;
-    Vec5 gg = Vec5::Zero();
-    double cost = 0.0, sq = 0.0;
-    for (std::size_t i = 0; i < n; ++i) {
-      const PointTerm t = PointResidual(model, at, c, s, inv_a, inv_b, exponent, used[i]);
-      const double z2 = t.d * t.d * base_weight[i] * discount / k2;  // (s / k)^2
-      const double z = z2 > 1.0 ? std::sqrt(z2) : 1.0;
-      const double w = base_weight[i] / z;
-      outer.Add(t.grad, w);
-      gg += (w * t.d) * t.grad;
-      cost += k2 / discount * (z2 > 1.0 ? 2.0 * z - 1.0 : z2);
-      sq += t.d * t.d;
-    }
+    PointSums sums;
+    sum_points(at, c, s, inv_a, inv_b, exponent, used, base_weight.data(), discount, k2, sums);
+    UpperSum5& outer = sums.outer;
+    Vec5& gg = sums.g;
+    double cost = sums.cost;
+    const double sq = sums.sq;
     for (std::size_t e = 0; e < n_edges; ++e) {
       Vec5 grad = Vec5::Zero();
-      const double r =
-          edges[e].n.dot(at.head<2>()) + Support(model, at, c, s, edges[e].n, exponent, &grad);
+      const double r = edges[e].n.dot(at.head<2>()) +
+                       Support<kReference>(model, at, c, s, edges[e].n, exponent, &grad);
       grad(kCx) = edges[e].n.x();
       grad(kCy) = edges[e].n.y();
       outer.Add(grad, edges[e].weight);
@@ -598,7 +712,7 @@ namespace internal {
 ShapeFitResult FitShapeWithPivotedLdlt(std::span<const Eigen::Vector2d> points,
                                        const Silhouette& silhouette, const ShapePrior& prior,
                                        const ShapeFitOptions& options) {
-  return Fit<PivotedLdltSolver>(points, silhouette, prior, options);
+  return Fit<PivotedLdltSolver, true>(points, silhouette, prior, options);
 }
 
 }  // namespace internal

@@ -79,6 +79,33 @@ TEST(ShapeFitTest, SupportFunctionsOfTheShapes) {
   EXPECT_NEAR(ShapeSupport(ShapeModel::kCircle, size, 1.0, diagonal), 0.3, 1e-12);
 }
 
+// The person model's support function (exponent 2.5: the dual norm with k = 5/3) by the fit's own
+// roots against the libm powers it used before (|x|^k = x cbrt(x^2), h = pow(t, 1 / k)), over sizes
+// from a micrometre to a kilometre and far beyond (1e-100..1e100 m) and every direction.
+TEST(ShapeFitTest, PersonSupportFunctionMatchesLibmPowers) {
+  std::mt19937 rng(5);
+  std::uniform_real_distribution<double> uniform(0.0, 1.0);
+  const double k = 2.5 / 1.5;
+  const auto power = [](double v) { return v * std::cbrt(v * v); };
+  double worst = 0.0;
+  for (int i = 0; i < 20000; ++i) {
+    const double decades = i < 10000 ? 9.0 : 200.0;
+    const double a = std::pow(10.0, (i < 10000 ? -6.0 : -100.0) + decades * uniform(rng));
+    const double b = a * std::pow(10.0, -2.0 + 4.0 * uniform(rng));
+    const double yaw = 2.0 * common::kPi * uniform(rng);
+    const double angle = 2.0 * common::kPi * uniform(rng);
+    const Eigen::Vector2d n(std::cos(angle), std::sin(angle));
+    const double p = n.x() * std::cos(yaw) + n.y() * std::sin(yaw);
+    const double q = -n.x() * std::sin(yaw) + n.y() * std::cos(yaw);
+    const double expected = std::pow(power(std::abs(a * p)) + power(std::abs(b * q)), 1.0 / k);
+    const double h = ShapeSupport(ShapeModel::kSuperellipse, {a, b}, yaw, n, 2.5);
+    ASSERT_TRUE(std::isfinite(h)) << a << " " << b;
+    worst = std::max(worst, std::abs(h - expected) / expected);
+  }
+  EXPECT_LT(worst, 1e-14);
+  EXPECT_EQ(ShapeSupport(ShapeModel::kSuperellipse, {0.3, 0.1}, 0.0, {0, 0}, 2.5), 0.0);
+}
+
 // A cylinder of known radius at 5, 10 and 20 m, seen with 2 to 40 points (the beam step sets how
 // many): the centre, not the visible arc's middle, within what the fit says of itself.
 TEST(ShapeFitTest, CylinderOfKnownRadiusAtEveryRangeAndPointCount) {
@@ -279,9 +306,10 @@ TEST(ShapeFitTest, DegenerateInputsAreRefusedOrHonest) {
   EXPECT_TRUE(FitShape(same, none, ShapePrior{}, ShapeFitOptions{}).ok);
 }
 
-// The fit with its own 5 x 5 Cholesky against the same fit solved with Eigen's pivoted LDLT (what
-// it used before): the same iterations and results up to rounding, over random people, cylinders
-// and boxes at 2-25 m, with and without a track's yaw, centre guess and silhouette edges.
+// The fit with its own 5 x 5 Cholesky, roots (RootN) and start ray (the bisector) against the
+// same fit with Eigen's pivoted LDLT, libm's cbrt and pow and the ray's angle by atan2 (what it
+// used before): the same iterations and results up to rounding, over random people, cylinders and
+// boxes at 2-25 m, with and without a track's yaw, centre guess and silhouette edges.
 TEST(ShapeFitTest, CholeskySolverGivesThePivotedLdltResults) {
   std::mt19937 rng(14);
   std::uniform_real_distribution<double> uniform(0.0, 1.0);
