@@ -2,19 +2,21 @@
 // decoder -> clock mapping -> background model, segmentation, measurements, multi-target tracker ->
 // datagram encoding -> UDP send to a receiver on loopback. One benchmark iteration = one scan.
 //
-// Inputs: the shared LMS511 capture (1141 beams, 25 Hz; its scans looped with rewritten counters and
-// ticks so time runs on) when present, and synthetic LMS5xx scans (1141 beams over 190 deg, 25 Hz)
-// of a 30 x 20 m hall with 0, 10 and 50 people walking. The background is learned before timing.
-// Reported per case: median and p99 microseconds per scan, heap allocations in the timed loop, peak
-// RSS of the process after the case, uplink bytes per second against raw CoLa-B bytes per second.
-// Every input runs twice: with the previous measurement (fixed-axes ellipse, no static-object
-// handling or limits: "old") and with the body-centre shape fit (the default: "new"), so the cost
-// of each shows side by side in the same run. A markdown table goes to stdout and to --out FILE.
+// Inputs: the shared LMS511 capture (1141 beams, 25 Hz; its scans looped with rewritten counters
+// and ticks so time runs on) when present, and synthetic LMS5xx scans (1141 beams over 190 deg, 25
+// Hz) of a 30 x 20 m hall with 0, 10 and 50 people walking. The background is learned before
+// timing. Reported per case: median and p99 microseconds per scan, heap allocations in the timed
+// loop, peak RSS of the process after the case, uplink bytes per second against raw CoLa-B bytes
+// per second. Every input runs twice: with the previous measurement (fixed-axes ellipse, no
+// static-object handling or limits: "old") and with the body-centre shape fit (the default: "new"),
+// so the cost of each shows side by side in the same run. A markdown table goes to stdout and to
+// --out FILE.
 //
-//   tracker_benchmark [--out FILE] [--scans N] [--people LIST] [google benchmark flags]
+//   tracker_benchmark [--out FILE] [--scans N] [--people LIST] [--no-send] [google benchmark flags]
 //
 // --people 0,50 renders only those synthetic scenes and skips the capture (for profiling one case
-// under callgrind, where rendering every scene costs more than the timed loop).
+// under callgrind, where rendering every scene costs more than the timed loop). --no-send drops the
+// encoded datagrams instead of sending them (the path without the kernel's UDP send).
 
 #include <benchmark/benchmark.h>
 #include <sys/resource.h>
@@ -201,7 +203,17 @@ double Quantile(std::vector<double> values, double q) {
 struct Case {
   const Input* input = nullptr;
   bool old_measurement = false;
+  bool send = true;  // false: datagrams are encoded and dropped (no system call)
   std::string name;
+};
+
+// Takes the encoder's datagrams and drops them: the path without the kernel's UDP send.
+class DroppingSink final : public io::DatagramSink {
+ public:
+  void Send(std::span<const std::uint8_t> datagram, common::UtcNs) override {
+    bytes += datagram.size();
+  }
+  std::size_t bytes = 0;
 };
 
 void RunCase(benchmark::State& state, const Case* c) {
@@ -225,7 +237,9 @@ void RunCase(benchmark::State& state, const Case* c) {
     config.tracking.tracking.report_coasting_s = config.tracking.tracking.coast_timeout_s;
     config.tracking.tracking.max_speed_mps = 1000.0;
   }
-  auto node = std::make_unique<tracker::TrackerNode>(config, 1, udp);
+  DroppingSink dropping;
+  auto node = c->send ? std::make_unique<tracker::TrackerNode>(config, 1, udp)
+                      : std::make_unique<tracker::TrackerNode>(config, 1, dropping);
   cola::StreamDecoder decoder;
   Listener listener;
   listener.node = node.get();
@@ -250,7 +264,8 @@ void RunCase(benchmark::State& state, const Case* c) {
     const double cpu_started = ThreadCpuUs();
     const auto started = Clock::now();
     decoder.Feed(f.bytes, f.receive_ns, listener);
-    durations_us.push_back(std::chrono::duration<double, std::micro>(Clock::now() - started).count());
+    durations_us.push_back(
+        std::chrono::duration<double, std::micro>(Clock::now() - started).count());
     cpu_us.push_back(ThreadCpuUs() - cpu_started);
     raw_bytes += f.bytes.size();
     if ((i & 255) == 0) receiver.Drain();
@@ -280,7 +295,8 @@ void RunCase(benchmark::State& state, const Case* c) {
   state.counters["allocs"] = static_cast<double>(row.allocations);
   // The framework calls a case several times while it sizes the run; the last run is reported.
   auto& rows = Rows();
-  auto it = std::find_if(rows.begin(), rows.end(), [&](const Row& r) { return r.name == row.name; });
+  auto it =
+      std::find_if(rows.begin(), rows.end(), [&](const Row& r) { return r.name == row.name; });
   if (it != rows.end()) {
     *it = row;
   } else {
@@ -308,14 +324,15 @@ std::string Table() {
   };
   for (const Row& r : Rows()) {
     const double empty = empty_cpu(r);
-    std::snprintf(line, sizeof line,
-                  "| %s | %zu | %.1f | %.1f | %.1f | %.1f | %.2f | %zu | %.1f | %.0f | %.0f | %.3f | "
-                  "%llu |\n",
-                  r.name.c_str(), r.scans, r.median_us, r.p99_us, r.cpu_median_us, r.cpu_p99_us,
-                  empty > 0 ? r.cpu_median_us / empty : 0.0, r.allocations,
-                  static_cast<double>(r.peak_rss_kib) / 1024.0, r.uplink_bytes_per_s,
-                  r.raw_bytes_per_s, r.uplink_bytes_per_s / r.raw_bytes_per_s,
-                  static_cast<unsigned long long>(r.confirmed_tracks));
+    std::snprintf(
+        line, sizeof line,
+        "| %s | %zu | %.1f | %.1f | %.1f | %.1f | %.2f | %zu | %.1f | %.0f | %.0f | %.3f | "
+        "%llu |\n",
+        r.name.c_str(), r.scans, r.median_us, r.p99_us, r.cpu_median_us, r.cpu_p99_us,
+        empty > 0 ? r.cpu_median_us / empty : 0.0, r.allocations,
+        static_cast<double>(r.peak_rss_kib) / 1024.0, r.uplink_bytes_per_s, r.raw_bytes_per_s,
+        r.uplink_bytes_per_s / r.raw_bytes_per_s,
+        static_cast<unsigned long long>(r.confirmed_tracks));
     out += line;
   }
   return out;
@@ -330,12 +347,15 @@ int main(int argc, char** argv) {
   std::size_t scans = 3000;
   std::vector<int> people_counts = {0, 10, 50};
   bool capture_input = true;
+  bool send = true;
   std::vector<char*> args;
   for (int i = 0; i < argc; ++i) {
     if (std::strcmp(argv[i], "--out") == 0 && i + 1 < argc) {
       out_path = argv[++i];
     } else if (std::strcmp(argv[i], "--scans") == 0 && i + 1 < argc) {
       scans = static_cast<std::size_t>(std::stoul(argv[++i]));
+    } else if (std::strcmp(argv[i], "--no-send") == 0) {
+      send = false;
     } else if (std::strcmp(argv[i], "--people") == 0 && i + 1 < argc) {
       people_counts.clear();
       const std::string list = argv[++i];
@@ -367,7 +387,9 @@ int main(int argc, char** argv) {
       auto c = std::make_unique<Case>();
       c->input = input.get();
       c->old_measurement = old;
-      c->name = input->name + (old ? ", old (ellipse)" : ", new (shape fit)");
+      c->send = send;
+      c->name = input->name + (old ? ", old (ellipse" : ", new (shape fit") +
+                (send ? ")" : "; not sent)");
       // Exactly `scans` iterations: every timed scan once, in order.
       benchmark::RegisterBenchmark(c->name.c_str(), RunCase, c.get())
           ->Iterations(static_cast<benchmark::IterationCount>(input->timed.size()))
