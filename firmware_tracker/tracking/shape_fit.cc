@@ -69,9 +69,10 @@ inline void PowerTerm(double x, double p, double* value, double* derivative) {
 }
 
 // x^(1/n) for the support function's powers, by Halley's iteration for r^n = x from a first guess
-// built from the exponent bits (relative error below 0.1 after the guess, cubic convergence: three
-// steps reach the last bits). libm's cbrt and pow cost several times as much and were a tenth of
-// the fit. Outside the normal range (0, subnormal, infinite, NaN) libm answers.
+// built from the exponent bits (relative error at most 0.06 after the guess; cubic convergence:
+// after three steps the cube root is within 7e-16 of libm's, the fifth root within 8e-15, over
+// 1e-280..1e280). libm's cbrt and pow took several times as long, an eighth of the fit. Outside
+// the normal range (0, subnormal, infinite, NaN) libm answers.
 template <int kN>
 double RootN(double x) {
   if (!(x >= 1e-290 && x <= 1e290)) return kN == 3 ? std::cbrt(x) : std::pow(x, 1.0 / kN);
