@@ -238,6 +238,11 @@ void VisitShape(tracking::ShapeOptions& o, ConfigVisitor& v) {
           "A coasting track is not reported where the scan sees through it (every beam with an "
           "echo across the middle of its body returned from more than this beyond it); a person "
           "hidden behind something stays reported. 0: off.");
+  v.Field("unseen_coasting_m", o.unseen_coasting_m,
+          "A coasting track that has coasted farther than this (speed times time since its "
+          "last measurement) is reported only where the scan shows something of it (a "
+          "foreground return within its body's reach): someone who turned out of view is off "
+          "the straight prediction. Torso mount. 0: off.");
   v.Field("point_sigma_m", o.fit.point_sigma_m, "Range noise of a point at 0 m (1 sigma).");
   v.Field("point_sigma_per_m", o.fit.point_sigma_per_m, "Growth of the range noise per metre.");
   v.Field("model_sigma_m", o.fit.model_sigma_m,

@@ -579,6 +579,8 @@ void MultiTracker::Report(common::UtcNs scan_start_ns, ScanTracks& out) const {
       r->measured_x_m = t.z_m.x();
       r->measured_y_m = t.z_m.y();
       r->measured_offset_s = t.z_offset_s;
+    } else {
+      r->coasted_s = common::NsToSeconds(scan_start_ns - t.last_update_ns);
     }
     r->ellipse_yaw_rad = t.ellipse_yaw_rad;
     r->shape = t.shape.shape;
