@@ -312,6 +312,9 @@ void VisitTracking(tracking::TrackerOptions& p, ConfigVisitor& v) {
           "absorbs it (background.absorb_after_s).");
   v.Field("still_radius_m", o.still_radius_m,
           "A track moves when it leaves a circle of this radius around where it last stood.");
+  v.Field("moving_speed_mps", o.moving_speed_mps,
+          "A confirmed track also counts as moved when its speed exceeds this and three sigma "
+          "of it: someone walking in is reported from their confirmation. 0: off.");
   v.Field("never_moved_to_background_s", o.never_moved_to_background_s,
           "A track that never moved becomes background after this.");
   v.Field("static_object_to_background_s", o.static_object_to_background_s,

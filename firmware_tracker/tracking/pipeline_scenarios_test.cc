@@ -334,6 +334,9 @@ TEST(TrackerOptionsTest, DefaultsValidAndErrorsNameTheSectionAndField) {
   o.shape.seen_through_margin_m = -0.1;
   EXPECT_EQ(Validate(o)->rfind("shape.seen_through_margin_m", 0), 0u) << *Validate(o);
   o = {};
+  o.tracking.moving_speed_mps = -1.0;
+  EXPECT_EQ(Validate(o)->rfind("tracking.moving_speed_mps", 0), 0u) << *Validate(o);
+  o = {};
   o.shape.unseen_coasting_m = -0.1;
   EXPECT_EQ(Validate(o)->rfind("shape.unseen_coasting_m", 0), 0u) << *Validate(o);
 }
@@ -739,6 +742,31 @@ TEST(PipelineScenarioTest, AnObjectThatNeverMovesBecomesBackgroundWithoutBeingRe
   EXPECT_TRUE(AllReportedIds(run).empty());
   EXPECT_EQ(run.pipeline->counters().absorbed_objects, 1u);
   EXPECT_EQ(run.frames.back().segments, 0u);
+}
+
+// A person who appears walking (1 m/s, across the line of sight at 4 m) is reported from the scan
+// their track is confirmed in (3 of 4 scans), its speed being clear; with
+// tracking.moving_speed_mps off only once they left still_radius_m (0.25 m, 0.25 s) around where
+// the track started. (A box that appears and never moves is never reported: the test below.)
+TEST(PipelineScenarioTest, APersonWalkingInIsReportedFromTheirConfirmation) {
+  Scene scene;
+  scene.walkers = {Walker::Path(kLearnedS, {{4.0, -2.0}, {4.0, 2.0}}, 1.0)};
+  const Walker& walker = scene.walkers[0];
+  auto first_report_s = [&](const TrackerOptions& options) {
+    const SceneRun run = Simulate(scene, walker.end_s() + 0.5, options);
+    EXPECT_EQ(AllReportedIds(run).size(), 1u);
+    for (const Frame& f : run.frames) {
+      if (!f.tracks.empty()) return f.t_s - walker.start_s();
+    }
+    return 1e9;
+  };
+  TrackerOptions off = Synthetic();
+  off.tracking.moving_speed_mps = 0.0;
+  const double without = first_report_s(off);
+  const double with = first_report_s(Synthetic());
+  EXPECT_LE(with, 4.5 / kRateHz);  // the 3rd or 4th scan with the person
+  EXPECT_GE(without, 0.2);
+  EXPECT_GE(without - with, 2.0 / kRateHz);
 }
 
 TEST(PipelineScenarioTest, NoiseOnlyNeverConfirmsATrack) {

@@ -32,7 +32,7 @@
 // tracker beyond its defaults and the device's range.
 //
 //   tracking_benchmark --scenarios DIR [--extra DIR] [--only NAME] [--out FILE] [--jobs N]
-//                      [--explain] [--breakdown] [--before-unseen-coasting]
+//                      [--explain] [--breakdown] [--before-report-rules]
 //   (--extra: more scenario folders, e.g. held-out scenes, reported in their own section;
 //   --explain: per run on stderr, what became of an object's previous track at every id switch
 //   and missed scan, what the false positives are (by scan and by false track: a track left
@@ -40,8 +40,9 @@
 //   MotSequence::FalseClass) and the tracker's counters; --breakdown: a table more per section, the
 //   per-sensor matched error along and across the line of sight by range and point count, and
 //   the filtered track's error beside that of the scan's measurement it was updated with, see
-//   Breakdown; --before-unseen-coasting: a third tracker, "before", the new one without
-//   ShapeOptions::unseen_coasting_m, the tree before it)
+//   Breakdown; --before-report-rules: a third tracker, "before", the new one without
+//   ShapeOptions::unseen_coasting_m and MultiTrackerOptions::moving_speed_mps, the tree before
+//   them)
 
 #include <Eigen/Cholesky>
 #include <Eigen/Core>
@@ -536,9 +537,10 @@ struct Variant {
   tracking::TrackerOptions options;
 };
 
-// --before-unseen-coasting: a third tracker, "before", the new one as it was before coasting
-// tracks were dropped where the scan shows nothing of them (shape.unseen_coasting_m = 0).
-bool g_before_unseen_coasting = false;
+// --before-report-rules: a third tracker, "before", the new one as it was before coasting
+// tracks were dropped where the scan shows nothing of them (shape.unseen_coasting_m = 0) and
+// before a track was reported once its speed is clear (tracking.moving_speed_mps = 0).
+bool g_before_report_rules = false;
 const char* const kVariantNames[] = {"old", "new", "before"};
 
 std::vector<Variant> Variants(sim::Mount mount, double range_m) {
@@ -553,9 +555,10 @@ std::vector<Variant> Variants(sim::Mount mount, double range_m) {
   old.tracking.recover_gate_mahalanobis_sq = 0.0;
   old.tracking.inflate_nis_above = 0.0;
   std::vector<Variant> variants = {{"old", old}, {"new", fresh}};
-  if (g_before_unseen_coasting) {
+  if (g_before_report_rules) {
     tracking::TrackerOptions before = fresh;
     before.shape.unseen_coasting_m = 0.0;
+    before.tracking.moving_speed_mps = 0.0;
     variants.push_back({"before", before});
   }
   return variants;
@@ -1022,7 +1025,7 @@ std::string Targets(const Section& s) {
       const bool motp = m.Motp() <= motp_max, p95 = m.P95() <= p95_max,
                  precision = m.Precision() >= precision_min, honest = nees >= 1.5 && nees <= 3.0;
       std::snprintf(line, sizeof line,
-                    "| %s | %s | %.3f (<= %.3f) %s | %.3f (<= %.3f) %s | %.4f (>= %.3f) %s | %.2f "
+                    "| %s | %s | %.4f (<= %.3f) %s | %.4f (<= %.3f) %s | %.4f (>= %.3f) %s | %.2f "
                     "([1.5, 3]) %s | %s |\n",
                     mount, tracker, m.Motp(), motp_max, motp ? "met" : "missed", m.P95(), p95_max,
                     p95 ? "met" : "missed", m.Precision(), precision_min,
@@ -1062,15 +1065,15 @@ int main(int argc, char** argv) {
       explain = true;
     } else if (a == "--breakdown") {
       breakdown = true;
-    } else if (a == "--before-unseen-coasting") {
-      g_before_unseen_coasting = true;
+    } else if (a == "--before-report-rules") {
+      g_before_report_rules = true;
     } else if (a == "--jobs") {
       jobs = std::max(1, std::atoi(value().c_str()));
     } else {
       std::fprintf(stderr,
                    "usage: tracking_benchmark --scenarios DIR [--extra DIR] [--only NAME] "
                    "[--out FILE] [--jobs N] [--explain] [--breakdown] "
-                   "[--before-unseen-coasting]\n");
+                   "[--before-report-rules]\n");
       return 2;
     }
   }
