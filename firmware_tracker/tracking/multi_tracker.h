@@ -43,7 +43,8 @@
 //     measurement is older than coast_timeout_s or its position sigma (square root of the largest
 //     eigenvalue of the position covariance at scan time) exceeds max_position_sigma_m.
 //     Static objects: a track remembers where it was when it last moved (an anchor; it moved when
-//     its position leaves still_radius_m around the anchor). A track that never moved for
+//     its position leaves still_radius_m around the anchor, or, confirmed and not yet moved, when
+//     its speed exceeds moving_speed_mps and three sigma of it). A track that never moved for
 //     never_moved_to_background_s (clutter, an object put down while the sensor was not looking),
 //     and one that moved but is not person-like (the refiner says: flat like a door leaf or a
 //     chair's backrest, legs thinner than a person's) and has stood still for

@@ -40,7 +40,8 @@
 // start.
 //
 // Coasting tracks (kShapeFit, torso mount): a coasting track's report is dropped where the scan
-// sees through its predicted position (ShapeOptions::seen_through_margin_m).
+// sees through its predicted position (ShapeOptions::seen_through_margin_m), and, once it has
+// coasted more than ShapeOptions::unseen_coasting_m, where the scan shows nothing of it.
 //
 // Rejected scans (CheckScan) and scans while the background is being learned produce no
 // measurements; existing tracks coast through them. Static objects the tracker recognises are
