@@ -238,6 +238,11 @@ void VisitShape(tracking::ShapeOptions& o, ConfigVisitor& v) {
           "A coasting track is not reported where the scan sees through it (every beam with an "
           "echo across the middle of its body returned from more than this beyond it); a person "
           "hidden behind something stays reported. 0: off.");
+  v.Field("unseen_coasting_m", o.unseen_coasting_m,
+          "A coasting track that has coasted farther than this (speed times time since its "
+          "last measurement) is reported only where the scan shows something of it (a "
+          "foreground return within its body's reach): someone who turned out of view is off "
+          "the straight prediction. Torso mount. 0: off.");
   v.Field("point_sigma_m", o.fit.point_sigma_m, "Range noise of a point at 0 m (1 sigma).");
   v.Field("point_sigma_per_m", o.fit.point_sigma_per_m, "Growth of the range noise per metre.");
   v.Field("model_sigma_m", o.fit.model_sigma_m,
@@ -307,6 +312,9 @@ void VisitTracking(tracking::TrackerOptions& p, ConfigVisitor& v) {
           "absorbs it (background.absorb_after_s).");
   v.Field("still_radius_m", o.still_radius_m,
           "A track moves when it leaves a circle of this radius around where it last stood.");
+  v.Field("moving_speed_mps", o.moving_speed_mps,
+          "A confirmed track also counts as moved when its speed exceeds this and three sigma "
+          "of it: someone walking in is reported from their confirmation. 0: off.");
   v.Field("never_moved_to_background_s", o.never_moved_to_background_s,
           "A track that never moved becomes background after this.");
   v.Field("static_object_to_background_s", o.static_object_to_background_s,

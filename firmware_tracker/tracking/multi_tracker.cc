@@ -74,6 +74,9 @@ std::optional<std::string> Validate(const MultiTrackerOptions& o) {
   }
   if (!Positive(o.max_speed_mps)) return "max_speed_mps must be > 0";
   if (!Positive(o.still_radius_m)) return "still_radius_m must be > 0";
+  if (!(std::isfinite(o.moving_speed_mps) && o.moving_speed_mps >= 0.0)) {
+    return "moving_speed_mps must be >= 0";
+  }
   if (!Positive(o.never_moved_to_background_s)) return "never_moved_to_background_s must be > 0";
   if (!Positive(o.static_object_to_background_s)) {
     return "static_object_to_background_s must be > 0";
@@ -459,7 +462,17 @@ void MultiTracker::ManageLifecycle(common::UtcNs scan_start_ns) {
     if (!remove && t.updated && options_.static_objects) {
       // Static objects: measured positions only (a coasting track says nothing about motion).
       const Eigen::Vector2d position = t.filter.position_m();
-      if ((position - t.anchor_m).norm() > options_.still_radius_m) {
+      bool moving = false;
+      if (!t.moved && t.confirmed && options_.moving_speed_mps > 0.0) {
+        const Eigen::Vector2d v = t.filter.velocity_mps();
+        const double speed = v.norm();
+        if (speed > options_.moving_speed_mps) {
+          const Eigen::Vector2d u = v / speed;
+          const double var = u.dot(t.filter.covariance().bottomRightCorner<2, 2>() * u);
+          moving = speed * speed > 9.0 * var;
+        }
+      }
+      if (moving || (position - t.anchor_m).norm() > options_.still_radius_m) {
         t.anchor_m = position;
         t.anchor_ns = scan_start_ns;
         t.moved = true;
@@ -579,6 +592,8 @@ void MultiTracker::Report(common::UtcNs scan_start_ns, ScanTracks& out) const {
       r->measured_x_m = t.z_m.x();
       r->measured_y_m = t.z_m.y();
       r->measured_offset_s = t.z_offset_s;
+    } else {
+      r->coasted_s = common::NsToSeconds(scan_start_ns - t.last_update_ns);
     }
     r->ellipse_yaw_rad = t.ellipse_yaw_rad;
     r->shape = t.shape.shape;

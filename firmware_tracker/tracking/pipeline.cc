@@ -110,6 +110,9 @@ std::optional<std::string> Validate(const ShapeOptions& o) {
   if (!(std::isfinite(o.seen_through_margin_m) && o.seen_through_margin_m >= 0.0)) {
     return "seen_through_margin_m must be >= 0";
   }
+  if (!(std::isfinite(o.unseen_coasting_m) && o.unseen_coasting_m >= 0.0)) {
+    return "unseen_coasting_m must be >= 0";
+  }
   return std::nullopt;
 }
 
@@ -667,16 +670,51 @@ bool TrackingPipeline::SeenThrough(const ScanView& scan, const Eigen::Vector2d& 
   return beyond >= 2;
 }
 
-void TrackingPipeline::DropSeenThrough(const ScanView& scan) {
+bool TrackingPipeline::ForegroundNear(const ScanView& scan, const Eigen::Vector2d& position_m,
+                                      double sigma_m) const {
+  const double reach_m = options_.shape.person_major_m + 2.0 * sigma_m;
+  const double range = position_m.norm();
+  if (!(range > reach_m)) return true;  // at the sensor: unknown
+  const std::span<const std::uint8_t> foreground = background_.foreground();
+  const double bearing = std::atan2(position_m.y(), position_m.x());
+  const double half_angle = std::asin(reach_m / range);
+  const double step = scan.angle_step_rad;
+  const double a = (bearing - half_angle - scan.first_angle_rad) / step;
+  const double b = (bearing + half_angle - scan.first_angle_rad) / step;
+  const double lo = std::ceil(std::min(a, b)), hi = std::floor(std::max(a, b));
+  const auto n = static_cast<double>(std::min(scan.range_m.size(), foreground.size()));
+  if (!(lo >= 0.0 && hi < n && lo <= hi)) return true;  // outside the field of view: unknown
+  for (auto i = static_cast<std::size_t>(lo); i <= static_cast<std::size_t>(hi); ++i) {
+    const double r = scan.range_m[i];
+    if (foreground[i] == 0 || !(r > 0.0)) continue;
+    const double angle = scan.first_angle_rad + step * static_cast<double>(i);
+    if ((r * Eigen::Vector2d(std::cos(angle), std::sin(angle)) - position_m).norm() <= reach_m)
+      return true;
+  }
+  return false;
+}
+
+void TrackingPipeline::DropCoasting(const ScanView& scan) {
+  const ShapeOptions& o = options_.shape;
+  const bool torso = o.mount == Mount::kTorso;
   std::size_t kept = 0;
   for (std::size_t i = 0; i < tracks_.tracks.size(); ++i) {
     const TrackReport& r = tracks_.tracks[i];
-    const Eigen::Matrix2d p = r.covariance.topLeftCorner<2, 2>();
-    const double sigma_m = std::sqrt(std::max(0.0, 0.5 * p.trace()));
-    if (r.state == TrackState::kCoasting &&
-        SeenThrough(scan, Eigen::Vector2d(r.x_m, r.y_m), sigma_m)) {
-      ++counters_.seen_through;
-      continue;
+    if (r.state == TrackState::kCoasting) {
+      const Eigen::Matrix2d p = r.covariance.topLeftCorner<2, 2>();
+      const double sigma_m = std::sqrt(std::max(0.0, 0.5 * p.trace()));
+      const Eigen::Vector2d position(r.x_m, r.y_m);
+      // At knee height the beams pass between a person's legs: neither check.
+      if (torso && o.seen_through_margin_m > 0.0 && SeenThrough(scan, position, sigma_m)) {
+        ++counters_.seen_through;
+        continue;
+      }
+      const double coasted_m = std::hypot(r.vx_mps, r.vy_mps) * r.coasted_s;
+      if (torso && o.unseen_coasting_m > 0.0 && coasted_m > o.unseen_coasting_m &&
+          !ForegroundNear(scan, position, sigma_m)) {
+        ++counters_.unseen_coasting;
+        continue;
+      }
     }
     if (kept != i) tracks_.tracks[kept] = r;
     ++kept;
@@ -718,11 +756,7 @@ const ScanTracks& TrackingPipeline::Process(const ScanView& scan, std::uint32_t 
   counters_.failed_shape_fits += refiner_->failed - failed_before;
   if (bg.scan_error == ScanError::kNone && bg.learned) {
     AbsorbStatic(scan);
-    // At knee height the beams pass between a person's legs: no such check.
-    if (shape_fit && options_.shape.mount == Mount::kTorso &&
-        options_.shape.seen_through_margin_m > 0.0) {
-      DropSeenThrough(scan);
-    }
+    if (shape_fit) DropCoasting(scan);
   }
   tracks_.scan_counter = scan_counter;
   tracks_.scan_period_s = bg.scan_error == ScanError::kNone ? scan.scan_period_s : 0.0;

@@ -41,6 +41,8 @@ struct TrackReport {
   double measured_x_m = 0.0;
   double measured_y_m = 0.0;
   double measured_offset_s = 0.0;
+  // Time since the last measurement (0 when measured in this scan). Not on the wire.
+  double coasted_s = 0.0;
   // kEllipse: major axis of the fitted ellipse; kShapeFit: direction of the shape's axis a.
   double ellipse_yaw_rad = 0.0;
   // The track's shape state (kShapeFit): semi-axes a (along ellipse_yaw_rad) and b of the torso

@@ -32,13 +32,17 @@
 // tracker beyond its defaults and the device's range.
 //
 //   tracking_benchmark --scenarios DIR [--extra DIR] [--only NAME] [--out FILE] [--jobs N]
-//                      [--explain] [--breakdown]
+//                      [--explain] [--breakdown] [--before-report-rules]
 //   (--extra: more scenario folders, e.g. held-out scenes, reported in their own section;
 //   --explain: per run on stderr, what became of an object's previous track at every id switch
-//   and missed scan, and the tracker's counters; --breakdown: a table more per section, the
+//   and missed scan, what the false positives are (by scan and by false track: a track left
+//   behind by its object, a second track beside a tracked one, clutter, furniture; see
+//   MotSequence::FalseClass) and the tracker's counters; --breakdown: a table more per section, the
 //   per-sensor matched error along and across the line of sight by range and point count, and
 //   the filtered track's error beside that of the scan's measurement it was updated with, see
-//   Breakdown)
+//   Breakdown; --before-report-rules: a third tracker, "before", the new one without
+//   ShapeOptions::unseen_coasting_m and MultiTrackerOptions::moving_speed_mps, the tree before
+//   them)
 
 #include <Eigen/Cholesky>
 #include <Eigen/Core>
@@ -249,9 +253,14 @@ struct Mot {
 // object's previous track in that scan, and whether the object was hidden since its last match;
 // for every missed scan of an object that had been matched, where its previous track was; for
 // every false positive, where it was.
+// What the false positives are (--explain, by scan and by false track, see FalseClass): the class
+// of every unmatched reported scan of a track, and of every false track its most frequent class.
 struct Causes {
   std::map<std::string, double> switches, misses, false_positives;
+  std::map<std::string, double> false_classes, false_track_classes;
   void Add(const Causes& o) {
+    for (const auto& [k, v] : o.false_classes) false_classes[k] += v;
+    for (const auto& [k, v] : o.false_track_classes) false_track_classes[k] += v;
     for (const auto& [k, v] : o.false_positives) false_positives[k] += v;
     for (const auto& [k, v] : o.switches) switches[k] += v;
     for (const auto& [k, v] : o.misses) misses[k] += v;
@@ -261,10 +270,11 @@ struct Causes {
 // One stream of frames (a sensor, or the fused world) scored frame by frame.
 class MotSequence {
  public:
-  // alive: ids the tracker still holds (reported or not), nullptr when unknown.
+  // alive: ids the tracker still holds (reported or not), nullptr when unknown. furniture: the
+  // doors and chairs among dont_care (--explain's classes).
   void Frame(double dt_s, const std::vector<Truth>& truths, const std::vector<Hypothesis>& hyps,
-             const std::vector<Vector2d>& dont_care,
-             const std::set<std::uint64_t>* alive = nullptr) {
+             const std::vector<Vector2d>& dont_care, const std::set<std::uint64_t>* alive = nullptr,
+             const std::vector<Vector2d>* furniture = nullptr) {
     std::set<std::size_t> present;
     for (const Truth& t : truths) present.insert(t.id);
     for (auto& [id, st] : state_) {
@@ -378,9 +388,16 @@ class MotSequence {
       s.ever_matched = true;
       s.matched_last = true;
       s.last_hyp = h.id;
-      hyps_[h.id].frames += 1;
+      HypState& hs = hyps_[h.id];
+      hs.frames += 1;
+      hs.ever_matched = true;
+      hs.last_truth = truths[t].id;
     }
-    for (const Hypothesis& h : hyps) hyp_age_[h.id] += dt_s;
+    now_s_ += dt_s;
+    for (const Hypothesis& h : hyps) {
+      hyp_age_[h.id] += dt_s;
+      if (h.measured) hyps_[h.id].last_measured_s = now_s_;
+    }
     for (std::size_t h = 0; h < hyps.size(); ++h) {
       if (hyp_taken[h]) continue;
       bool ignored = false;
@@ -411,12 +428,68 @@ class MotSequence {
       HypState& hs = hyps_[hyps[h].id];
       hs.frames += 1;
       hs.unmatched += 1;
+      std::string cls =
+          FalseClass(hyps[h], hs.ever_matched, hs.last_truth, truths, truth_to_hyp, furniture);
+      if (!hyps[h].measured) {
+        const double coast_s = now_s_ - hs.last_measured_s;
+        cls += coast_s < 0.15 ? " < 0.15 s" : coast_s < 0.3 ? " 0.15-0.3 s" : " >= 0.3 s";
+      }
+      causes_.false_classes[cls] += 1;
+      hs.classes[cls] += 1;
     }
   }
 
-  Mot Finish() const {
+  // The class of a false positive: a track that held an object before ("left behind": its object
+  // out of view now, held by another track, or visible and untracked but > kMatchRadiusM away), or
+  // one that never held any: a second track within 1.5 m of an object another track holds (a
+  // split), within 1.5 m of an untracked object (offset from it), of a door or chair (furniture
+  // taken for a person), or of nothing (clutter: a background edge, noise, a shadow's border).
+  static std::string FalseClass(const Hypothesis& hyp, bool ever_matched, std::size_t last_truth,
+                                const std::vector<Truth>& truths,
+                                const std::vector<int>& truth_to_hyp,
+                                const std::vector<Vector2d>* furniture) {
+    const std::string state = hyp.measured ? " (measured)" : " (coasting)";
+    if (ever_matched) {
+      for (std::size_t t = 0; t < truths.size(); ++t) {
+        if (truths[t].id != last_truth) continue;
+        return (truth_to_hyp[t] >= 0 ? "left behind: its object on another track"
+                                     : "left behind: its object visible, untracked") +
+               state;
+      }
+      return "left behind: its object out of view" + state;
+    }
+    double nearest = std::numeric_limits<double>::infinity();
+    bool taken = false;
+    for (std::size_t t = 0; t < truths.size(); ++t) {
+      const double d = (hyp.p - truths[t].p).norm();
+      if (d < nearest) {
+        nearest = d;
+        taken = truth_to_hyp[t] >= 0;
+      }
+    }
+    if (nearest <= 1.5) {
+      return (taken ? "never matched: beside an object another track holds (split)"
+                    : "never matched: 0.5-1.5 m off an untracked object") +
+             state;
+    }
+    if (furniture != nullptr) {
+      for (const Vector2d& f : *furniture) {
+        if ((hyp.p - f).norm() <= 1.5) return "never matched: door or chair" + state;
+      }
+    }
+    return "never matched: far from every object (clutter)" + state;
+  }
+
+  Mot Finish() {
     Mot m = mot_;
-    for (const auto& [id, h] : hyps_) m.false_tracks += h.unmatched > 0.5 * h.frames ? 1 : 0;
+    for (const auto& [id, h] : hyps_) {
+      if (h.unmatched <= 0.5 * h.frames) continue;
+      m.false_tracks += 1;
+      const auto top =
+          std::max_element(h.classes.begin(), h.classes.end(),
+                           [](const auto& a, const auto& b) { return a.second < b.second; });
+      if (top != h.classes.end()) causes_.false_track_classes[top->first] += 1;
+    }
     for (const auto& [id, s] : state_) {
       m.missed_targets += (s.visible_s >= kMissedAfterS && !s.ever_matched) ? 1 : 0;
     }
@@ -439,8 +512,13 @@ class MotSequence {
   struct HypState {
     double frames = 0;
     double unmatched = 0;
+    bool ever_matched = false;
+    std::size_t last_truth = 0;
+    double last_measured_s = 0;  // time of its last measured report (MotSequence's clock)
+    std::map<std::string, double> classes;  // its false positives by FalseClass
   };
   Mot mot_;
+  double now_s_ = 0;  // sum of the frames' dt_s
   std::map<std::size_t, TruthState> state_;
   std::map<std::uint64_t, HypState> hyps_;
   std::map<std::uint64_t, double> hyp_age_;  // seconds reported
@@ -459,6 +537,12 @@ struct Variant {
   tracking::TrackerOptions options;
 };
 
+// --before-report-rules: a third tracker, "before", the new one as it was before coasting
+// tracks were dropped where the scan shows nothing of them (shape.unseen_coasting_m = 0) and
+// before a track was reported once its speed is clear (tracking.moving_speed_mps = 0).
+bool g_before_report_rules = false;
+const char* const kVariantNames[] = {"old", "new", "before"};
+
 std::vector<Variant> Variants(sim::Mount mount, double range_m) {
   tracking::TrackerOptions fresh;
   fresh.background.max_range_m = std::max(fresh.background.max_range_m, range_m + 1.0);
@@ -470,7 +554,14 @@ std::vector<Variant> Variants(sim::Mount mount, double range_m) {
   old.tracking.report_coasting_s = old.tracking.coast_timeout_s;
   old.tracking.recover_gate_mahalanobis_sq = 0.0;
   old.tracking.inflate_nis_above = 0.0;
-  return {{"old", old}, {"new", fresh}};
+  std::vector<Variant> variants = {{"old", old}, {"new", fresh}};
+  if (g_before_report_rules) {
+    tracking::TrackerOptions before = fresh;
+    before.shape.unseen_coasting_m = 0.0;
+    before.tracking.moving_speed_mps = 0.0;
+    variants.push_back({"before", before});
+  }
+  return variants;
 }
 
 daemon::TrackObservation ToObservation(const tracking::TrackReport& r) {
@@ -507,7 +598,10 @@ struct SensorFrames {
 };
 
 struct RunResult {
-  std::vector<Mot> per_sensor;                           // per variant, summed over sensors
+  std::vector<Mot> per_sensor;  // per variant, summed over sensors
+  // The same summed over the sensors of each mount ("torso", "legs"), per variant: the totals
+  // count a sensor by its own mount (a scenario "as given" mixes them).
+  std::map<std::string, std::vector<Mot>> per_sensor_by_mount;
   std::vector<Causes> causes;                            // per variant, summed over sensors
   std::vector<tracking::MultiTrackerCounters> counters;  // per variant, summed over sensors
   std::vector<Mot> fused;                                // per variant
@@ -550,7 +644,7 @@ void RunSensor(const sim::Simulator& simulator, std::size_t sensor,
     view.stamp_ns = start_ns + static_cast<std::int64_t>(std::llround(timing.start_s * 1e9));
     // The truth at the scan start, in this sensor's frame.
     std::vector<Truth> truths;
-    std::vector<Vector2d> dont_care;
+    std::vector<Vector2d> dont_care, furniture;
     std::vector<std::size_t> seen;
     for (const sim::TruthSample& ts : simulator.TruthAt(timing.start_s)) {
       const sim::Target& target = simulator.targets()[ts.target];
@@ -561,6 +655,7 @@ void RunSensor(const sim::Simulator& simulator, std::size_t sensor,
       // to be tracked nor false.
       if (!Scored(target.shape()) || hits[ts.target] < kMinHits) {
         dont_care.push_back(p);
+        if (!Scored(target.shape())) furniture.push_back(p);
         continue;
       }
       truths.push_back({ts.target, p, vel});
@@ -589,7 +684,7 @@ void RunSensor(const sim::Simulator& simulator, std::size_t sensor,
       const std::size_t n_alive = pipelines[v]->tracker().Predict(out.scan_start_ns, predictions);
       std::set<std::uint64_t> alive;
       for (std::size_t a = 0; a < n_alive; ++a) alive.insert(predictions[a].id);
-      sequences[v].Frame(period_s, truths, hyps, dont_care, &alive);
+      sequences[v].Frame(period_s, truths, hyps, dont_care, &alive, &furniture);
       (*frames)[v].frames.push_back(std::move(frame));
       (*frames)[v].seen.push_back(seen);
     }
@@ -684,7 +779,7 @@ void AddCounters(const tracking::MultiTrackerCounters& c, tracking::MultiTracker
 
 // --explain: the causes and the tracker's counters of one run, per variant, on stderr.
 void Explain(const std::string& scenario, const std::string& mount, const RunResult& r) {
-  const char* names[] = {"old", "new"};
+  const char* const* names = kVariantNames;
   for (std::size_t v = 0; v < r.causes.size(); ++v) {
     const tracking::MultiTrackerCounters& c = r.counters[v];
     std::fprintf(stderr,
@@ -708,6 +803,10 @@ void Explain(const std::string& scenario, const std::string& mount, const RunRes
       std::fprintf(stderr, "  false positive: %-52s %5.0f\n", why.c_str(), count);
     for (const auto& [why, count] : r.causes[v].misses)
       std::fprintf(stderr, "  missed scan: %-55s %5.0f\n", why.c_str(), count);
+    for (const auto& [cls, count] : r.causes[v].false_classes)
+      std::fprintf(stderr, "  false scans: %-72s %6.0f\n", cls.c_str(), count);
+    for (const auto& [cls, count] : r.causes[v].false_track_classes)
+      std::fprintf(stderr, "  false tracks: %-71s %6.0f\n", cls.c_str(), count);
   }
 }
 
@@ -768,6 +867,10 @@ RunResult RunScenario(sim::Scenario scenario, bool all_legs, int jobs) {
     std::vector<SensorFrames> by_sensor;
     for (std::size_t i = 0; i < n; ++i) {
       result.per_sensor[v].Add(mots[i][v]);
+      const std::string mount = simulator->sensor(i).mount == sim::Mount::kLegs ? "legs" : "torso";
+      auto& by_mount = result.per_sensor_by_mount[mount];
+      by_mount.resize(nv);
+      by_mount[v].Add(mots[i][v]);
       result.causes[v].Add(causes[i][v]);
       AddCounters(counters[i][v], &result.counters[v]);
       result.breakdown[v].Merge(breakdowns[i][v]);
@@ -850,7 +953,7 @@ Section RunFolder(const std::string& title, const std::string& dir, const std::s
       const std::string mount = legs ? "legs" : (mixed ? "as given" : "torso");
       const RunResult r = RunScenario(scenario, legs, jobs);
       if (explain) Explain(scenario.name, mount, r);
-      const char* names[] = {"old", "new"};
+      const char* const* names = kVariantNames;
       for (std::size_t v = 0; v < r.breakdown.size(); ++v) {
         const std::string key = std::string(legs ? "legs" : "torso") + " " + names[v];
         section.breakdowns[key].Merge(r.breakdown[v]);
@@ -860,10 +963,10 @@ Section RunFolder(const std::string& title, const std::string& dir, const std::s
       for (std::size_t v = 0; v < r.per_sensor.size(); ++v) {
         section.table +=
             Row(scenario.name, mount, std::string(names[v]) + " per sensor", r.per_sensor[v]);
-        section
-            .totals[(legs ? std::string("legs") : std::string("torso")) + " " + names[v] +
-                    " per sensor"]
-            .Add(r.per_sensor[v]);
+      }
+      for (const auto& [sensor_mount, mots] : r.per_sensor_by_mount) {
+        for (std::size_t v = 0; v < mots.size(); ++v)
+          section.totals[sensor_mount + " " + names[v] + " per sensor"].Add(mots[v]);
       }
       for (std::size_t v = 0; v < r.fused.size(); ++v) {
         section.table += Row(scenario.name, mount, std::string(names[v]) + " fused", r.fused[v]);
@@ -914,7 +1017,7 @@ std::string Targets(const Section& s) {
     const double scale = legs ? 1.5 : 1.0;
     const double motp_max = 0.03 * scale, p95_max = 0.10 * scale;
     const double precision_min = 1.0 - 0.01 * scale;
-    for (const char* tracker : {"new per sensor", "old per sensor"}) {
+    for (const char* tracker : {"new per sensor", "before per sensor", "old per sensor"}) {
       const auto it = s.totals.find(std::string(mount) + " " + tracker);
       if (it == s.totals.end()) continue;
       const Mot& m = it->second;
@@ -922,7 +1025,7 @@ std::string Targets(const Section& s) {
       const bool motp = m.Motp() <= motp_max, p95 = m.P95() <= p95_max,
                  precision = m.Precision() >= precision_min, honest = nees >= 1.5 && nees <= 3.0;
       std::snprintf(line, sizeof line,
-                    "| %s | %s | %.3f (<= %.3f) %s | %.3f (<= %.3f) %s | %.4f (>= %.3f) %s | %.2f "
+                    "| %s | %s | %.4f (<= %.3f) %s | %.4f (<= %.3f) %s | %.4f (>= %.3f) %s | %.2f "
                     "([1.5, 3]) %s | %s |\n",
                     mount, tracker, m.Motp(), motp_max, motp ? "met" : "missed", m.P95(), p95_max,
                     p95 ? "met" : "missed", m.Precision(), precision_min,
@@ -962,12 +1065,15 @@ int main(int argc, char** argv) {
       explain = true;
     } else if (a == "--breakdown") {
       breakdown = true;
+    } else if (a == "--before-report-rules") {
+      g_before_report_rules = true;
     } else if (a == "--jobs") {
       jobs = std::max(1, std::atoi(value().c_str()));
     } else {
       std::fprintf(stderr,
                    "usage: tracking_benchmark --scenarios DIR [--extra DIR] [--only NAME] "
-                   "[--out FILE] [--jobs N] [--explain] [--breakdown]\n");
+                   "[--out FILE] [--jobs N] [--explain] [--breakdown] "
+                   "[--before-report-rules]\n");
       return 2;
     }
   }
@@ -1001,7 +1107,9 @@ int main(int argc, char** argv) {
            "handling or motion limits); \"new\": the shape fit with the size learned per track, "
            "the static-object rules and the motion limits, on the same scans. Per sensor: summed "
            "over the scenario's sensors, in each sensor's frame; fused: the daemon's fusion of all "
-           "sensors' tracks in the world frame with the true poses, every 0.1 s. Match radius "
+           "sensors' tracks in the world frame with the true poses, every 0.1 s. In the totals a "
+           "sensor counts under its own mount (shop_floor as given: two at upper-body height, "
+           "two at knee height); fused totals by the scenario's run. Match radius "
            "0.5 m; an object counts in a scan when at least 2 of its beams returned. NEES: "
            "position, 2 dof, mean over measured matches (2 is honest) and the share within the "
            "99 % bound. \"legs\": every sensor at knee height. How the numbers are made: the "
