@@ -13,7 +13,7 @@ mkdir -p results
 "$build_dir/tests/bench/tracker_benchmark" --out results/tracker_benchmark.md
 # Tracking accuracy (CLEAR-MOT, NEES) over every shipped scenario, old and new tracker, per sensor
 # and fused, at upper-body and knee height, and where the per-sensor error comes from (a few minutes).
-"$build_dir/tests/bench/tracking_benchmark" --scenarios tools/scenarios --jobs 2 --breakdown \
+"$build_dir/tests/bench/tracking_benchmark" --scenarios tools/scenarios --jobs 2 --breakdown --before-report-rules \
   --out results/tracking_benchmark.md
 "$build_dir/tests/bench/store_benchmark" results/store_benchmark.md
 "$build_dir/tests/bench/daemon_benchmark" --out results/daemon_benchmark.md
