@@ -337,9 +337,15 @@ CoreSolution SolveCore(std::size_t n, std::size_t reference,
 // they agree with the poses (kConsistentSigma); a pair with one placed end places the other
 // (flagged when the pair is weak or the placed end is flagged). Candidates in order of their
 // translation uncertainty.
-void Extend(const std::vector<RelativeMeasurement>& all,
-            const std::vector<bool>& weak, const std::vector<std::string>& id,
-            CoreSolution* core, std::vector<std::string>* flag) {
+// A sensor placed through a weak pair (or through a sensor so placed): the sensor it hangs on and
+// the pair (measurement index).
+struct WeakLeaf {
+  std::size_t sensor = 0, anchor = 0, edge = 0;
+};
+
+void Extend(const std::vector<RelativeMeasurement>& all, const std::vector<bool>& weak,
+            const std::vector<std::string>& id, CoreSolution* core, std::vector<std::string>* flag,
+            std::vector<WeakLeaf>* leaves) {
   std::vector<std::size_t> order;
   for (std::size_t e = 0; e < all.size(); ++e) {
     if (!core->used[e] && !core->outlier[e]) order.push_back(e);
@@ -388,6 +394,7 @@ void Extend(const std::vector<RelativeMeasurement>& all,
           (*flag)[to] = (*flag)[from].empty()
                             ? "placed through the weak pair " + id[m.r] + "-" + id[m.s] + " only"
                             : (*flag)[from];
+          leaves->push_back({to, from, e});
         }
         changed = true;
       }
@@ -535,6 +542,7 @@ Eigen::Matrix3d AtLeast(const Eigen::Matrix3d& a, const Eigen::Matrix3d& b) {
 struct Refined {
   bool refined = false;
   std::string rejected;  // why a refinement that lowered its cost was not kept ("" otherwise)
+  std::vector<std::string> kept_pairs;  // weak leaves that kept the pairs' placement (why)
   JointRefineResult joint;
   std::vector<Pose2> poses;
   std::vector<Eigen::Matrix3d> covariance;
@@ -545,7 +553,8 @@ Refined Refine(const AlignedTracks& tracks, std::size_t reference,
                const std::vector<const PairEstimate*>& pair_of, const std::vector<Pose2>& poses,
                const std::vector<Eigen::Matrix3d>& covariance, const std::vector<bool>& placed,
                const JointRefineOptions& options, double max_disagreement_sigma,
-               bool keep_pairs_uncertainty) {
+               bool keep_pairs_uncertainty, const std::vector<WeakLeaf>& leaves,
+               double weak_min_move_sigma, const std::vector<std::string>& id) {
   // Pairs aligned on their backgrounds are constraints: without them the tracks' systematic
   // errors would pull wall-accurate poses apart.
   std::vector<RelativePoseConstraint> constraints;
@@ -596,6 +605,48 @@ Refined Refine(const AlignedTracks& tracks, std::size_t reference,
       out.covariance[i] = keep_pairs_uncertainty
                               ? AtLeast(out.joint.covariance[i], covariance[i])
                               : out.joint.covariance[i];
+    }
+  }
+  // A sensor hanging on one weak pair: the refinement's pose for it rests on the few observations
+  // the pair had plus associations with sensors whose pairs were rejected, which nothing has
+  // verified (far-range views, whose systematic errors the model does not carry, pull it while
+  // the refinement's covariance claims a precision it does not have). It keeps the pairs'
+  // placement, carried along with the sensor it hangs on, unless the refinement moves it relative
+  // to that sensor farther than the weak pair's own covariance allows (pipeline.h). In placement
+  // order, so that a leaf hanging on a leaf follows its anchor's decision.
+  if (weak_min_move_sigma > 0.0) {
+    std::vector<std::size_t> used_pairs(poses.size(), 0);
+    for (std::size_t e = 0; e < measurements.size(); ++e) {
+      if (!used[e]) continue;
+      ++used_pairs[measurements[e].r];
+      ++used_pairs[measurements[e].s];
+    }
+    for (const WeakLeaf& leaf : leaves) {
+      const std::size_t i = leaf.sensor, a = leaf.anchor;
+      // Only where the weak pair is the sensor's one used pair: other pairs that confirmed it
+      // put it in a cycle the refinement may resolve.
+      if (i == reference || !out.joint.refined[i] || leaf.edge >= measurements.size() ||
+          !used[leaf.edge] || used_pairs[i] != 1) {
+        continue;
+      }
+      const RelativeMeasurement& m = measurements[leaf.edge];
+      // s_from_r of the weak pair, from the pairs' placement and from the refined one.
+      const Pose2 before = poses[m.s].inverse() * poses[m.r];
+      const Pose2 after =
+          out.joint.world_from_sensor[m.s].inverse() * out.joint.world_from_sensor[m.r];
+      const Eigen::Vector3d delta(after.x_m - before.x_m, after.y_m - before.y_m,
+                                  common::AngleDiff(after.yaw_rad, before.yaw_rad));
+      const Eigen::LLT<Eigen::Matrix3d> llt(0.5 * (m.covariance + m.covariance.transpose()));
+      if (llt.info() != Eigen::Success) continue;
+      const double d = std::sqrt(std::max(0.0, delta.dot(llt.solve(delta))));
+      if (d > weak_min_move_sigma) continue;
+      out.poses[i] = out.poses[a] * (poses[a].inverse() * poses[i]);
+      out.covariance[i] = AtLeast(covariance[i], out.joint.covariance[a]);
+      out.kept_pairs.push_back(fmt::format(
+          "joint refinement would move {} {:.1f} sigma of its weak pair {}-{} ({:.2f} m, {:.2f} "
+          "deg; at least {:.1f} needed): kept the pairs' placement",
+          id[i], d, id[m.r], id[m.s], delta.head<2>().norm(), common::RadToDeg(std::abs(delta(2))),
+          weak_min_move_sigma));
     }
   }
   return out;
@@ -737,7 +788,8 @@ GlobalSolution SolveRobust(const AlignedTracks& tracks, std::size_t reference,
   for (std::size_t e = 0; e < measurements.size(); ++e) strong[e] = !weak[e];
   CoreSolution core = SolveCore(n, reference, measurements, strong, options);
   for (std::string& w : core.warnings) out.warnings.push_back(std::move(w));
-  Extend(measurements, weak, id, &core, &out.flag);
+  std::vector<WeakLeaf> leaves;
+  Extend(measurements, weak, id, &core, &out.flag, &leaves);
   out.edge_status = core.status;
 
   Placement best = SolvePlacement(n, reference, measurements, core.used, core.placed, core.poses);
@@ -817,10 +869,10 @@ GlobalSolution SolveRobust(const AlignedTracks& tracks, std::size_t reference,
       quick.association_rounds = std::min(quick.association_rounds, 3);
       const auto evaluate = [&](Placement& h) {
         if (options.refine) {
-          h.refined =
-              Refine(tracks, reference, measurements, h.used, pair_of, h.poses, h.covariance,
-                     core.placed, quick, options.refine_max_disagreement_sigma,
-                     options.conflicts_widen_covariance);
+          h.refined = Refine(
+              tracks, reference, measurements, h.used, pair_of, h.poses, h.covariance, core.placed,
+              quick, options.refine_max_disagreement_sigma, options.conflicts_widen_covariance,
+              leaves, options.weak_refine_min_move_sigma, id);
         } else {
           h.refined.poses = h.poses;
           h.refined.covariance = h.covariance;
@@ -928,7 +980,7 @@ GlobalSolution SolveRobust(const AlignedTracks& tracks, std::size_t reference,
     best.refined =
         Refine(tracks, reference, measurements, best.used, pair_of, best.poses, best.covariance,
                core.placed, options.joint, options.refine_max_disagreement_sigma,
-               options.conflicts_widen_covariance);
+               options.conflicts_widen_covariance, leaves, options.weak_refine_min_move_sigma, id);
   } else if (!options.refine) {
     best.refined.poses = best.poses;
     best.refined.covariance = best.covariance;
@@ -955,6 +1007,7 @@ GlobalSolution SolveRobust(const AlignedTracks& tracks, std::size_t reference,
       out.warnings.push_back("joint refinement did not lower the cost; not applied");
     } else {
       result->refined = true;
+      for (const std::string& note : best.refined.kept_pairs) out.warnings.push_back(note);
     }
   }
   for (std::size_t e = 0; e < measurements.size(); ++e) {
@@ -1007,6 +1060,10 @@ std::optional<std::string> Validate(const CalibrationOptions& options) {
   }
   if (!(options.refine_max_disagreement_sigma > 0.0)) {
     return "refine_max_disagreement_sigma must be > 0";
+  }
+  if (!(options.weak_refine_min_move_sigma >= 0.0) ||
+      !std::isfinite(options.weak_refine_min_move_sigma)) {
+    return "weak_refine_min_move_sigma must be a finite value >= 0";
   }
   if (!(options.max_translation_residual_m > 0.0) ||
       !std::isfinite(options.max_translation_residual_m)) {
@@ -1124,6 +1181,26 @@ void Finish(const GlobalSolution& global_in, std::size_t reference,
     result.sensors[i].covariance =
         global.calibrated[i] ? global.covariance[i] : Eigen::Matrix3d::Zero();
     if (i < global.flag.size()) result.sensors[i].flag = global.flag[i];
+  }
+  // What data would place a sensor hanging on weak pairs: its pairs that saw people together but
+  // were rejected, or more of the walks its weak pair rests on.
+  for (std::size_t i = 0; i < n; ++i) {
+    std::string& flag = result.sensors[i].flag;
+    if (!global.calibrated[i] || flag.rfind("placed through the weak pair", 0) != 0) continue;
+    std::string others;
+    for (const PairEstimate& p : out->pairs) {
+      if (p.accepted || (p.r != i && p.s != i) || p.matches == 0) continue;
+      const std::string why = p.reason.substr(0, p.reason.find(':'));
+      others += fmt::format("{}{} (pair {})", others.empty() ? "" : ", ",
+                            tracks.sensors[p.r == i ? p.s : p.r].id, why);
+    }
+    flag +=
+        others.empty()
+            ? "; more people walking where its weak pair's sensors both see them would place it"
+            : fmt::format(
+                  "; people walking, and turning, where {} and {} both see them would place it, or "
+                  "more walks where its weak pair's sensors both see them",
+                  tracks.sensors[i].id, others);
   }
   FillEdges(tracks, out->pairs, measurement_of_pair, global.edge_status, &result);
   timer->Total();

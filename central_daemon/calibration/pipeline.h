@@ -7,7 +7,8 @@
 //            pairwise MSAC + verification (eqs. 5-8) → point-to-line ICP on the backgrounds →
 //            L1 rotation averaging (Algorithm 1, node-angle form) → least-squares translations →
 //            joint refinement over all associated observations (Ceres; kept only if it lowers the
-//            cost and moves no sensor placed on walls beyond refine_max_disagreement_sigma).
+//            cost and moves no sensor placed on walls beyond refine_max_disagreement_sigma; a
+//            sensor hanging on a weak pair moves only beyond weak_refine_min_move_sigma).
 //   spectral the same pairwise estimates, then weighted spectral relaxation [21] and weighted
 //            least-squares translations (Quenzel et al.'s non-robust comparison).
 //   schenk   Schenk et al.: SVD track association, N/d weights, greedy placement, mass-spring
@@ -71,6 +72,15 @@ struct CalibrationOptions {
   // larger move means its model of the tracks is wrong (a bias it absorbs into the shared size
   // correction, a wall constraint its robust loss gave up).
   double refine_max_disagreement_sigma = 3.5;
+  // A sensor whose one used pair is weak (a flagged leaf) keeps the pairs' placement, carried along
+  // with the sensor it hangs on, unless the joint refinement moves it relative to that sensor
+  // farther than this from the weak pair's estimate (Mahalanobis, 3 dof, the pair's covariance;
+  // 2.8: chi-square 95 %). The refinement's pose for such a sensor rests on the pair's few
+  // observations and on associations with sensors whose pairs were rejected (nothing verified
+  // them; far-range views whose systematic error the model does not carry), while its covariance
+  // claims a precision those do not have; a move the pair's own uncertainty explains is no
+  // evidence against the pair. 0: the refinement's pose is always taken (the method before it).
+  double weak_refine_min_move_sigma = 2.8;
   // Tracks and walls that disagree beyond icp_max_disagreement_sigma leave their pair a
   // candidate with each component's variance widened by the square of its disagreement, and a
   // kept refinement reports no less uncertainty than the pairs' least squares (the refinement

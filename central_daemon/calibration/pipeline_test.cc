@@ -505,6 +505,106 @@ TEST(CalibratePipeline, ALeafOnAWeakPairIsPlacedWithALargeCovarianceAndAFlag) {
   }
 }
 
+TEST(CalibratePipeline, ALeafOnOneWeakPairKeepsThePairsPlacementUnlessTheRefinementContradictsIt) {
+  // The leaf e of the test above, its weak pair's estimate turned by one of its standard
+  // deviations: the joint refinement moves e by about that much, which the pair's own uncertainty
+  // explains, so e keeps the pairs' placement (relative to the sensor it hangs on: exactly the
+  // pair's estimate) and says so; the method before it took the refinement's pose. The same turn
+  // with a covariance that claims a tenth of it: the move contradicts the pair, the refinement's
+  // pose is taken.
+  std::mt19937 rng(14);
+  std::vector<SimSensor> sensors = Hall();
+  sensors.push_back({"e", {15.0, -3.0, DegToRad(135.0)}});
+  sensors.back().range_m = 6.0;
+  std::vector<Walker> walkers = {RandomWalker(rng, 1, 11, 1, 7, 0.0),
+                                 RandomWalker(rng, 1, 11, 1, 7, 5.0)};
+  walkers.push_back(Loop(11.0, 1.0, 10.0, 13.5));
+  const AlignedTracks tracks = Align(Simulate(sensors, walkers, 60.0, 15), {});
+  // e's pair with most matches is its only one (the others rejected): e hangs on it alone.
+  std::vector<PairEstimate> estimated = EstimateAllPairs(tracks, {});
+  const PairEstimate* leaf_pair = nullptr;
+  for (const PairEstimate& p : estimated) {
+    if (p.accepted && (p.r == 4 || p.s == 4) && (!leaf_pair || p.matches > leaf_pair->matches)) {
+      leaf_pair = &p;
+    }
+  }
+  ASSERT_NE(leaf_pair, nullptr);
+  for (PairEstimate& p : estimated) {
+    if ((p.r == 4 || p.s == 4) && &p != leaf_pair) {
+      p.accepted = false;
+      p.reason = "left out by the test";
+    }
+  }
+  ASSERT_TRUE(leaf_pair->weak);
+  const double yaw_sigma_rad = std::sqrt(leaf_pair->covariance(2, 2));
+  ASSERT_GT(RadToDeg(yaw_sigma_rad), 0.5);
+  const auto turned = [&](double covariance_scale) {
+    std::vector<PairEstimate> pairs = estimated;
+    for (PairEstimate& p : pairs) {
+      if (p.r != leaf_pair->r || p.s != leaf_pair->s) continue;
+      p.s_from_r.yaw_rad += yaw_sigma_rad;
+      p.covariance *= covariance_scale;
+    }
+    return pairs;
+  };
+  const auto leaf_relative = [&](const CalibrationOutcome& o) {  // s_from_r of the leaf's pair
+    return o.result.sensors[leaf_pair->s].world_from_sensor.inverse() *
+           o.result.sensors[leaf_pair->r].world_from_sensor;
+  };
+  const Pose2 truth = sensors[0].world_from_sensor.inverse() * sensors[4].world_from_sensor;
+  CalibrationOptions options;
+  options.reference = "a";
+  std::vector<PairEstimate> pairs = turned(1.0);
+  const CalibrationOutcome kept = CalibrateFromPairs(tracks, pairs, options);
+  ASSERT_TRUE(kept.ok) << kept.error;
+  ASSERT_TRUE(kept.result.refined);
+  Pose2 want;
+  for (const PairEstimate& p : pairs) {
+    if (p.r == leaf_pair->r && p.s == leaf_pair->s) want = p.s_from_r;
+  }
+  const Pose2 got = leaf_relative(kept);
+  EXPECT_NEAR(got.x_m, want.x_m, 1e-9);
+  EXPECT_NEAR(got.y_m, want.y_m, 1e-9);
+  EXPECT_NEAR(common::AngleDiff(got.yaw_rad, want.yaw_rad), 0.0, 1e-9);
+  bool said = false;
+  for (const std::string& w : kept.result.warnings) {
+    said |= w.find("would move e") != std::string::npos &&
+            w.find("kept the pairs' placement") != std::string::npos;
+  }
+  EXPECT_TRUE(said);
+  const SensorPose& e = kept.result.sensors[4];
+  EXPECT_NE(e.flag.find("weak pair"), std::string::npos) << e.flag;
+  // It names what data would place it: the sensors whose pairs with it saw people but were left
+  // out.
+  EXPECT_NE(e.flag.find("would place it"), std::string::npos) << e.flag;
+  EXPECT_LT(common::RotationDistanceRad(e.world_from_sensor, truth),
+            2.0 * std::sqrt(e.covariance(2, 2)));
+  EXPECT_LT(common::TranslationDistanceM(e.world_from_sensor, truth),
+            2.0 * std::sqrt(e.covariance(0, 0) + e.covariance(1, 1)));
+  // The hall's sensors are refined as before: the leaf's decision is its own.
+  options.weak_refine_min_move_sigma = 0.0;
+  const CalibrationOutcome before = CalibrateFromPairs(tracks, pairs, options);
+  ASSERT_TRUE(before.ok) << before.error;
+  const double moved_rad = std::abs(common::AngleDiff(leaf_relative(before).yaw_rad, want.yaw_rad));
+  EXPECT_GT(moved_rad, 0.3 * yaw_sigma_rad) << RadToDeg(moved_rad);
+  EXPECT_LT(moved_rad, 2.8 * yaw_sigma_rad) << RadToDeg(moved_rad);
+  for (std::size_t i = 1; i < 4; ++i) {
+    EXPECT_LT(common::TranslationDistanceM(kept.result.sensors[i].world_from_sensor,
+                                           before.result.sensors[i].world_from_sensor),
+              1e-9)
+        << i;
+  }
+  // A pair that claims a tenth of that uncertainty: the same move is ten of its sigmas.
+  options.weak_refine_min_move_sigma = CalibrationOptions{}.weak_refine_min_move_sigma;
+  const CalibrationOutcome moved = CalibrateFromPairs(tracks, turned(0.01), options);
+  ASSERT_TRUE(moved.ok) << moved.error;
+  EXPECT_GT(std::abs(common::AngleDiff(leaf_relative(moved).yaw_rad, want.yaw_rad)),
+            0.3 * yaw_sigma_rad);
+  for (const std::string& w : moved.result.warnings) {
+    EXPECT_EQ(w.find("kept the pairs' placement"), std::string::npos) << w;
+  }
+}
+
 // The hall with walls around it (notched so that no wall is seen alone); sensor c's tracks biased
 // by `bias_m` the model does not know, and recorded while c was turned by `tracks_turn_deg` from
 // where it learnt its background.
