@@ -405,15 +405,19 @@ int main(int argc, char** argv) {
                              100.0 * static_cast<double>(t.within_2sigma) / static_cast<double>(t.judged)))) +
                              " %"
                        : "-";
+      char unflagged[64] = "-";  // no sensor placed without a flag
+      if (!t.d_r_unflagged_deg.empty()) {
+        std::snprintf(unflagged, sizeof unflagged, "%.4f / %.4f", Mean(t.d_r_unflagged_deg),
+                      Mean(t.d_t_unflagged_m));
+      }
       char nees[32] = "-";
       if (!t.nees.empty()) std::snprintf(nees, sizeof nees, "%.2f", Mean(t.nees));
       std::snprintf(row, sizeof row,
-                    "| %s | %.4f | %.4f | %.4f | %.4f | %.4f / %.4f | %zu | %s | %s | %zu/%zu | "
+                    "| %s | %.4f | %.4f | %.4f | %.4f | %s | %zu | %s | %s | %zu/%zu | "
                     "%zu/%zu | %zu | %.3f |\n",
                     v.name.c_str(), Mean(t.d_r_deg), Median(t.d_r_deg), Mean(t.d_t_m),
-                    Median(t.d_t_m), Mean(t.d_r_unflagged_deg), Mean(t.d_t_unflagged_m), t.flagged,
-                    within.c_str(), nees, t.failed_runs, t.runs, t.beyond_3sigma_runs, t.runs,
-                    t.sensors_missing, total);
+                    Median(t.d_t_m), unflagged, t.flagged, within.c_str(), nees, t.failed_runs,
+                    t.runs, t.beyond_3sigma_runs, t.runs, t.sensors_missing, total);
       table << row;
       for (const auto& [stage, s] : t.stage_s) {
         stage_means[v.name][stage] += t.runs > 0 ? s / runs : 0.0;
