@@ -333,16 +333,29 @@ CoreSolution SolveCore(std::size_t n, std::size_t reference,
   return out;
 }
 
-// The sensors and pairs the strong core did not settle: pairs between placed sensors are used when
-// they agree with the poses (kConsistentSigma); a pair with one placed end places the other
-// (flagged when the pair is weak or the placed end is flagged). Candidates in order of their
-// translation uncertainty.
+// A flag "placed through the weak pair(s) P only" with the weak pair `pair` added ("... weak pairs
+// P, pair only"); any other flag unchanged.
+std::string WithWeakPair(const std::string& flag, const std::string& pair) {
+  const std::string single = "placed through the weak pair ",
+                    plural = "placed through the weak pairs ", only = " only";
+  const std::string& head = flag.starts_with(plural) ? plural : single;
+  if (!flag.starts_with(head) || !flag.ends_with(only) || flag.size() < head.size() + only.size()) {
+    return flag;
+  }
+  return plural + flag.substr(head.size(), flag.size() - head.size() - only.size()) + ", " + pair +
+         only;
+}
+
 // A sensor placed through a weak pair (or through a sensor so placed): the sensor it hangs on and
 // the pair (measurement index).
 struct WeakLeaf {
   std::size_t sensor = 0, anchor = 0, edge = 0;
 };
 
+// The sensors and pairs the strong core did not settle: pairs between placed sensors are used when
+// they agree with the poses (kConsistentSigma); a pair with one placed end places the other
+// (flagged when the pair is weak or the placed end is flagged). Candidates in order of their
+// translation uncertainty.
 void Extend(const std::vector<RelativeMeasurement>& all, const std::vector<bool>& weak,
             const std::vector<std::string>& id, CoreSolution* core, std::vector<std::string>* flag,
             std::vector<WeakLeaf>* leaves) {
@@ -374,6 +387,12 @@ void Extend(const std::vector<RelativeMeasurement>& all, const std::vector<bool>
           core->used[e] = true;
           core->status[e] = fmt::format("used ({}confirmed by the others, {:.1f} sigma)",
                                         weak[e] ? "weak, " : "", d);
+          // A flagged end now rests on this weak pair too: its flag names every weak pair.
+          if (weak[e]) {
+            for (std::size_t x : {m.r, m.s}) {
+              (*flag)[x] = WithWeakPair((*flag)[x], id[m.r] + "-" + id[m.s]);
+            }
+          }
         } else {
           core->outlier[e] = !weak[e];
           core->status[e] = fmt::format("{}inconsistent with the others ({:.1f} sigma)",
@@ -1196,10 +1215,11 @@ void Finish(const GlobalSolution& global_in, std::size_t reference,
     }
     flag +=
         others.empty()
-            ? "; more people walking where its weak pair's sensors both see them would place it"
+            ? "; more people walking where the two sensors of its weak pairs both see them would "
+              "place it"
             : fmt::format(
                   "; people walking, and turning, where {} and {} both see them would place it, or "
-                  "more walks where its weak pair's sensors both see them",
+                  "more walks where the two sensors of its weak pairs both see them",
                   tracks.sensors[i].id, others);
   }
   FillEdges(tracks, out->pairs, measurement_of_pair, global.edge_status, &result);
