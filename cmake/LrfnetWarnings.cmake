@@ -13,6 +13,8 @@ if(LRFNET_SANITIZE)
   add_link_options(-fsanitize=${LRFNET_SANITIZE})
 endif()
 
+option(LRFNET_UNITY_TESTS "Compile each test binary as one translation unit" ON)
+
 # A unit test beside the code: lrfnet_test(NAME SOURCES... LIBS ...)
 function(lrfnet_test name)
   if(LRFNET_FUZZ OR NOT BUILD_TESTING)
@@ -20,6 +22,12 @@ function(lrfnet_test name)
   endif()
   cmake_parse_arguments(T "" "" "SOURCES;LIBS" ${ARGN})
   add_executable(${name} ${T_SOURCES})
+  # One translation unit per test binary (LRFNET_UNITY_TESTS, see "Building by hand" in README.md):
+  # the test files of a binary share gtest, Eigen and the code under test; compiled together they are
+  # parsed and instantiated once.
+  if(LRFNET_UNITY_TESTS)
+    set_target_properties(${name} PROPERTIES UNITY_BUILD ON UNITY_BUILD_BATCH_SIZE 0)
+  endif()
   target_link_libraries(${name} PRIVATE ${T_LIBS} lrfnet_test_support GTest::gtest_main)
   lrfnet_warnings(${name})
   if(CMAKE_CROSSCOMPILING)

@@ -35,7 +35,7 @@ using std::chrono::seconds;
 using Bytes = std::vector<std::uint8_t>;
 
 // One scanner, one person walking: a few hundred datagrams.
-constexpr const char* kScenario = R"(name: auth_test
+constexpr const char* kAuthScenario = R"(name: auth_test
 seed: 3
 duration_s: 8
 world:
@@ -74,7 +74,7 @@ bool SendUdp(std::uint16_t port, const Bytes& bytes) {
   return n == static_cast<ssize_t>(bytes.size());
 }
 
-std::vector<Bytes> ReadDatagrams(const std::string& path) {
+std::vector<Bytes> ReadAuthDatagrams(const std::string& path) {
   std::string error;
   auto source = daemon::OpenDatagramFile(path, {}, &error);
   EXPECT_NE(source, nullptr) << error;
@@ -85,7 +85,7 @@ std::vector<Bytes> ReadDatagrams(const std::string& path) {
   return out;
 }
 
-nlohmann::json ReadJson(const std::string& path) {
+nlohmann::json ReadAuthJson(const std::string& path) {
   return nlohmann::json::parse(ReadText(path), nullptr, false);
 }
 
@@ -118,7 +118,7 @@ Bytes SealWith(const std::string& id, const auth::SensorKeys& keys, std::uint64_
 
 // A valid, unsigned health datagram of sensor `id` (what a tracker without --key sends).
 Bytes UnsignedHealth(const std::string& id) {
-  struct Collect final : io::DatagramSink {
+  struct CollectSealed final : io::DatagramSink {
     Bytes bytes;
     void Send(std::span<const std::uint8_t> d, common::UtcNs) override {
       bytes.assign(d.begin(), d.end());
@@ -198,7 +198,7 @@ TEST(AuthCliTest, OnlyTheTrackersSealedDatagramsAreAcceptedOverUdp) {
     Process p(LRFNET_TOOL_BINARY, args);
     ASSERT_EQ(p.Wait(), 0) << p.err();
   }
-  std::ofstream(dir / "scene.yaml") << kScenario;
+  std::ofstream(dir / "scene.yaml") << kAuthScenario;
   Process sim(LRFNET_TOOL_BINARY, {"sim", dir / "scene.yaml", "--out", dir / "sim"});
   ASSERT_EQ(sim.Wait(milliseconds(120'000)), 0) << sim.err();
 
@@ -223,7 +223,7 @@ TEST(AuthCliTest, OnlyTheTrackersSealedDatagramsAreAcceptedOverUdp) {
                    keys + "/sensor-s1-e1.key", "--encrypt", "--uplink", address, "--out",
                    dir / "tracker.rec", "--speed", "2", "--log-level", "warn"});
   ASSERT_EQ(tracker.Wait(milliseconds(60'000)), 0) << tracker.err();
-  const std::vector<Bytes> sent = ReadDatagrams(dir / "tracker.rec");
+  const std::vector<Bytes> sent = ReadAuthDatagrams(dir / "tracker.rec");
   ASSERT_GT(sent.size(), 100u);
   for (const Bytes& b : sent) ASSERT_TRUE(auth::LooksSealed(b));
   EXPECT_NE(tracker.out().find("requests_accepted="), std::string::npos);
@@ -272,7 +272,7 @@ TEST(AuthCliTest, OnlyTheTrackersSealedDatagramsAreAcceptedOverUdp) {
   std::this_thread::sleep_for(milliseconds(500));
   daemon->Signal(SIGINT);
   ASSERT_EQ(daemon->Wait(seconds(20)), 0) << daemon->err();
-  const nlohmann::json stats = ReadJson(dir / "stats1.json");
+  const nlohmann::json stats = ReadAuthJson(dir / "stats1.json");
   ASSERT_TRUE(stats.is_object());
   EXPECT_TRUE(stats["authenticated"].get<bool>());
   EXPECT_EQ(stats["accepted"].get<std::uint64_t>(), sent.size()) << "only the tracker's datagrams";
@@ -287,7 +287,7 @@ TEST(AuthCliTest, OnlyTheTrackersSealedDatagramsAreAcceptedOverUdp) {
   EXPECT_EQ(stats["sensors"][0]["sensor_id"], "s1");
   EXPECT_GE(stats["sensors"][0]["track_frames"].get<std::uint64_t>(), 100u);
   // The recording keeps everything received, refused or not.
-  const std::vector<Bytes> recorded = ReadDatagrams(dir / "rec1");
+  const std::vector<Bytes> recorded = ReadAuthDatagrams(dir / "rec1");
   EXPECT_EQ(recorded.size(), sent.size() + total_expected);
 
   // A restarted daemon (same state) refuses the earlier run's datagrams: yesterday's recording.
@@ -300,7 +300,7 @@ TEST(AuthCliTest, OnlyTheTrackersSealedDatagramsAreAcceptedOverUdp) {
   std::this_thread::sleep_for(milliseconds(500));
   daemon->Signal(SIGINT);
   ASSERT_EQ(daemon->Wait(seconds(20)), 0) << daemon->err();
-  const nlohmann::json stats2 = ReadJson(dir / "stats2.json");
+  const nlohmann::json stats2 = ReadAuthJson(dir / "stats2.json");
   EXPECT_EQ(stats2["accepted"].get<std::uint64_t>(), 0u) << stats2.dump(1);
   EXPECT_EQ(Refused(stats2, "stale"), sent.size()) << stats2.dump(1);
 
@@ -308,7 +308,7 @@ TEST(AuthCliTest, OnlyTheTrackersSealedDatagramsAreAcceptedOverUdp) {
   Process offline(LRFNET_DAEMON_BINARY, {"--input", dir / "rec1", "--keys", keys, "--stats-out",
                                          dir / "stats3.json", "--log-level", "warn"});
   EXPECT_EQ(offline.Wait(milliseconds(60'000)), 0) << offline.err();
-  const nlohmann::json stats3 = ReadJson(dir / "stats3.json");
+  const nlohmann::json stats3 = ReadAuthJson(dir / "stats3.json");
   EXPECT_EQ(stats3["accepted"].get<std::uint64_t>(), sent.size()) << stats3.dump(1);
   EXPECT_EQ(Refused(stats3, "replayed"), sent.size());
   // Without keys: the encrypted datagrams cannot be read (and the daemon says so).
@@ -318,7 +318,7 @@ TEST(AuthCliTest, OnlyTheTrackersSealedDatagramsAreAcceptedOverUdp) {
   EXPECT_NE(keyless.err().find(std::to_string(sent.size()) + " encrypted ones could not be read"),
             std::string::npos)
       << keyless.err();
-  const nlohmann::json stats4 = ReadJson(dir / "stats4.json");
+  const nlohmann::json stats4 = ReadAuthJson(dir / "stats4.json");
   EXPECT_EQ(stats4["accepted"].get<std::uint64_t>(), 0u);
   EXPECT_EQ(Refused(stats4, "encrypted"), sent.size());
   // lrfnet dump: verified with keys; header only without.
@@ -351,7 +351,7 @@ TEST(AuthCliTest, OnlyTheTrackersSealedDatagramsAreAcceptedOverUdp) {
   std::this_thread::sleep_for(milliseconds(500));
   sink_daemon.Signal(SIGINT);
   ASSERT_EQ(sink_daemon.Wait(seconds(20)), 0);
-  const nlohmann::json stats5 = ReadJson(dir / "stats5.json");
+  const nlohmann::json stats5 = ReadAuthJson(dir / "stats5.json");
   EXPECT_EQ(stats5["accepted"].get<std::uint64_t>(), sent.size()) << stats5.dump(1);
   EXPECT_EQ(stats5["rejected"].get<std::uint64_t>(), 0u) << stats5.dump(1);
 }

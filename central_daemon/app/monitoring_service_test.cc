@@ -18,12 +18,12 @@
 namespace lrfnet::daemon {
 namespace {
 
-constexpr common::UtcNs kT0 = 1'700'000'000'000'000'000;
-constexpr common::DurationNs kMs = 1'000'000;
+constexpr common::UtcNs kServiceT0 = 1'700'000'000'000'000'000;
+constexpr common::DurationNs kServiceMs = 1'000'000;
 const common::Pose2 kS1{0.3, 0.3, common::DegToRad(40.0)};
 const common::Pose2 kS2{11.7, 0.3, common::DegToRad(140.0)};
 
-struct Collect final : io::DatagramSink {
+struct CollectDatagrams final : io::DatagramSink {
   std::vector<std::vector<std::uint8_t>> out;
   void Send(std::span<const std::uint8_t> d, common::UtcNs) override {
     out.emplace_back(d.begin(), d.end());
@@ -40,7 +40,7 @@ struct Tracker {
   void Background(Daemon& d, const BackgroundScan& scan, common::UtcNs at_ns) {
     std::vector<float> ranges;
     for (const std::uint32_t mm : scan.ranges_mm) ranges.push_back(static_cast<float>(mm) * 1e-3f);
-    Collect c;
+    CollectDatagrams c;
     encoder.EncodeBackground({at_ns, scan.first_angle_rad, scan.angle_step_rad, ranges}, at_ns, c);
     for (const auto& bytes : c.out) d.OnDatagram(bytes, id + ":1", at_ns);
   }
@@ -49,7 +49,7 @@ struct Tracker {
     scan.scan_start_ns = at_ns;
     scan.scan_period_s = 1.0 / 15;
     scan.scan_counter = scans++;
-    Collect c;
+    CollectDatagrams c;
     encoder.EncodeTracks(scan, at_ns, c);
     for (const auto& bytes : c.out) d.OnDatagram(bytes, id + ":1", at_ns);
   }
@@ -89,10 +89,10 @@ TEST(MonitoringService, AMovedSensorIsExcludedFromTheFusionAndTheCalibrationKeep
   Daemon daemon(options, nullptr, nullptr, 1);
   Tracker s1("s1", 11), s2("s2", 12);
   const auto room = monitoring::testing::Room();
-  s1.Background(daemon, monitoring::testing::Snapshot(room, kS1, 0.005, 1), kT0);
-  s2.Background(daemon, monitoring::testing::Snapshot(room, kS2, 0.005, 2), kT0);
-  s1.Frame(daemon, kT0 + 100 * kMs);
-  s2.Frame(daemon, kT0 + 100 * kMs);
+  s1.Background(daemon, monitoring::testing::Snapshot(room, kS1, 0.005, 1), kServiceT0);
+  s2.Background(daemon, monitoring::testing::Snapshot(room, kS2, 0.005, 2), kServiceT0);
+  s1.Frame(daemon, kServiceT0 + 100 * kServiceMs);
+  s2.Frame(daemon, kServiceT0 + 100 * kServiceMs);
 
   MonitoringService monitoring(config);
   EXPECT_FALSE(monitoring.active());
@@ -119,8 +119,8 @@ TEST(MonitoringService, AMovedSensorIsExcludedFromTheFusionAndTheCalibrationKeep
       partial.ranges_mm[i] = after.ranges_mm[i];
     }
   }
-  s2.Background(daemon, partial, kT0 + 5000 * kMs);
-  s1.Frame(daemon, kT0 + 5100 * kMs);
+  s2.Background(daemon, partial, kServiceT0 + 5000 * kServiceMs);
+  s1.Frame(daemon, kServiceT0 + 5100 * kServiceMs);
   EXPECT_TRUE(monitoring.OnTick(daemon));
   EXPECT_EQ(monitoring.excluded(), std::set<std::string>{"s2"});
   EXPECT_NE(monitoring.StatusText().find("MOVED, not fused: s2"), std::string::npos)
@@ -133,7 +133,7 @@ TEST(MonitoringService, AMovedSensorIsExcludedFromTheFusionAndTheCalibrationKeep
   ASSERT_GE(history.size(), 2u);
   EXPECT_EQ(history[1].event, "moved");
   EXPECT_EQ(history[1].sensor, "s2");
-  EXPECT_EQ(history[1].stamp_ns, kT0 + 5100 * kMs);
+  EXPECT_EQ(history[1].stamp_ns, kServiceT0 + 5100 * kServiceMs);
   ASSERT_TRUE(history[1].after.has_value());
   EXPECT_NEAR(common::RadToDeg(history[1].after->yaw_rad), 143.0, 0.1);
   calib::PoseFile poses;
@@ -162,7 +162,7 @@ TEST(MonitoringService, AMovedSensorIsExcludedFromTheFusionAndTheCalibrationKeep
   fusion.SetExcluded(monitoring.excluded());
   TrackFrameData frame;
   frame.session_id = 1;
-  frame.scan_start_ns = kT0 + 6000 * kMs;
+  frame.scan_start_ns = kServiceT0 + 6000 * kServiceMs;
   TrackObservation track;
   track.track_id = 1;
   track.state = TrackState::kConfirmed;
@@ -189,7 +189,7 @@ TEST(MonitoringService, AMovedSensorIsExcludedFromTheFusionAndTheCalibrationKeep
     states[id] = monitoring::ToString(watch.state);
   }
   mqtt.SetMonitorStates(states);
-  mqtt.OnTick(kT0 + 6000 * kMs, daemon, fusion, zones);
+  mqtt.OnTick(kServiceT0 + 6000 * kServiceMs, daemon, fusion, zones);
   EXPECT_NE(sink.last[mqtt.Topic("sensors/s2/health")].find("\"state\":\"moved\""),
             std::string::npos)
       << sink.last[mqtt.Topic("sensors/s2/health")];
@@ -201,8 +201,8 @@ TEST(MonitoringService, AMovedSensorIsExcludedFromTheFusionAndTheCalibrationKeep
   EXPECT_TRUE(fusion.fuser().HasPlacement("s2"));
 
   // Its background once re-learned gives the pose: corrected, fused again, in the file.
-  s2.Background(daemon, after, kT0 + 35000 * kMs);
-  s1.Frame(daemon, kT0 + 35100 * kMs);
+  s2.Background(daemon, after, kServiceT0 + 35000 * kServiceMs);
+  s1.Frame(daemon, kServiceT0 + 35100 * kServiceMs);
   EXPECT_TRUE(monitoring.OnTick(daemon));
   EXPECT_TRUE(monitoring.excluded().empty());
   EXPECT_EQ(monitoring.StatusText(), "");

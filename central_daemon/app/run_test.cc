@@ -25,7 +25,7 @@ namespace {
 
 namespace fs = std::filesystem;
 
-constexpr common::UtcNs kT0 = 1'700'000'000'000'000'000;
+constexpr common::UtcNs kRunT0 = 1'700'000'000'000'000'000;
 
 class RunTest : public ::testing::Test {
  protected:
@@ -129,12 +129,12 @@ TEST_F(RunTest, RecorderWritesWhatTheCoreRecordsAndItReadsBack) {
   DaemonConfig config;
   config.record_path = (dir_ / "rec.lrfrec").string();
   Recorder recorder(RecordingOptions(config, Writer()));
-  ASSERT_EQ(recorder.Open(kT0), std::nullopt);
+  ASSERT_EQ(recorder.Open(kRunT0), std::nullopt);
   const std::vector<std::vector<std::uint8_t>> sent = {{1, 2, 3}, {}, {0xff, 0x00, 0x7f, 0x80}};
   for (std::size_t i = 0; i < sent.size(); ++i) {
-    recorder.Record(sent[i], "192.0.2.7:4000", kT0 + static_cast<common::UtcNs>(i) * 1'000'000);
+    recorder.Record(sent[i], "192.0.2.7:4000", kRunT0 + static_cast<common::UtcNs>(i) * 1'000'000);
   }
-  recorder.FlushIfDue(kT0 + 10'000'000'000);
+  recorder.FlushIfDue(kRunT0 + 10'000'000'000);
   ASSERT_EQ(recorder.Close(), std::nullopt);
   EXPECT_EQ(recorder.writer().counters().entries_written, sent.size());
   EXPECT_EQ(recorder.writer().counters().write_errors, 0u);
@@ -147,7 +147,7 @@ TEST_F(RunTest, RecorderWritesWhatTheCoreRecordsAndItReadsBack) {
     ASSERT_EQ(source->Next(&d), SourceStatus::kDatagram) << i;
     EXPECT_EQ(d.bytes, sent[i]);
     EXPECT_EQ(d.source, "192.0.2.7:4000");
-    EXPECT_EQ(d.receive_ns, kT0 + static_cast<common::UtcNs>(i) * 1'000'000);
+    EXPECT_EQ(d.receive_ns, kRunT0 + static_cast<common::UtcNs>(i) * 1'000'000);
   }
   EXPECT_EQ(source->Next(&d), SourceStatus::kEnd);
 }
@@ -158,8 +158,8 @@ TEST_F(RunTest, SummaryAndStatsCountWhatArrived) {
   EXPECT_EQ(Summary(daemon),
             "summary: sensors=0 datagrams=0 accepted=0 rejected=0 lost=0 frames=0");
   const std::vector<std::uint8_t> garbage = {0xde, 0xad, 0xbe, 0xef};
-  daemon.OnDatagram(garbage, "192.0.2.1:5000", kT0);
-  daemon.OnDatagram({}, "192.0.2.1:5000", kT0 + 1);
+  daemon.OnDatagram(garbage, "192.0.2.1:5000", kRunT0);
+  daemon.OnDatagram({}, "192.0.2.1:5000", kRunT0 + 1);
   EXPECT_EQ(Summary(daemon),
             "summary: sensors=0 datagrams=2 accepted=0 rejected=2 lost=0 frames=0");
 
@@ -178,8 +178,8 @@ TEST_F(RunTest, SummaryAndStatsCountWhatArrived) {
   // With the recording: its counters too.
   config.record_path = (dir_ / "rec.lrfrec").string();
   Recorder recorder(RecordingOptions(config, Writer()));
-  ASSERT_EQ(recorder.Open(kT0), std::nullopt);
-  recorder.Record(garbage, "192.0.2.1:5000", kT0);
+  ASSERT_EQ(recorder.Open(kRunT0), std::nullopt);
+  recorder.Record(garbage, "192.0.2.1:5000", kRunT0);
   ASSERT_TRUE(WriteStats(path, daemon, nullptr, &recorder, monitoring));
   EXPECT_TRUE(nlohmann::json::parse(Read(path)).contains("recording"));
 

@@ -8,7 +8,7 @@
 namespace lrfnet::calib {
 namespace {
 
-RelativeMeasurement Edge(std::size_t r, std::size_t s, double yaw_rad = 0.0) {
+RelativeMeasurement GraphEdge(std::size_t r, std::size_t s, double yaw_rad = 0.0) {
   RelativeMeasurement m;
   m.r = r;
   m.s = s;
@@ -18,20 +18,20 @@ RelativeMeasurement Edge(std::size_t r, std::size_t s, double yaw_rad = 0.0) {
 
 TEST(UnconnectedNodes, ListsTheNodesWithoutAPathToTheReferenceSorted) {
   // 0-1-2 connected, 3-4 an island, 5 alone.
-  const std::vector<RelativeMeasurement> m = {Edge(1, 0), Edge(2, 1), Edge(4, 3)};
+  const std::vector<RelativeMeasurement> m = {GraphEdge(1, 0), GraphEdge(2, 1), GraphEdge(4, 3)};
   EXPECT_EQ(UnconnectedNodes(6, 0, m), (std::vector<std::size_t>{3, 4, 5}));
   EXPECT_EQ(UnconnectedNodes(6, 3, m), (std::vector<std::size_t>{0, 1, 2, 5}));
   EXPECT_TRUE(UnconnectedNodes(3, 2, m).empty());
 }
 
 TEST(UnconnectedNodes, IgnoresBadIndicesAndAnOutOfRangeReference) {
-  const std::vector<RelativeMeasurement> m = {Edge(1, 0), Edge(7, 2), Edge(2, 2)};
+  const std::vector<RelativeMeasurement> m = {GraphEdge(1, 0), GraphEdge(7, 2), GraphEdge(2, 2)};
   EXPECT_EQ(UnconnectedNodes(3, 0, m), (std::vector<std::size_t>{2}));
   EXPECT_EQ(UnconnectedNodes(3, 3, m), (std::vector<std::size_t>{0, 1, 2}));
 }
 
 TEST(ConnectivityError, NamesTheNodesAndHonoursTheUseFlags) {
-  const std::vector<RelativeMeasurement> m = {Edge(1, 0), Edge(2, 1), Edge(3, 2)};
+  const std::vector<RelativeMeasurement> m = {GraphEdge(1, 0), GraphEdge(2, 1), GraphEdge(3, 2)};
   EXPECT_FALSE(ConnectivityError(4, 0, m).has_value());
   const auto error = ConnectivityError(4, 0, m, {true, false, true});
   ASSERT_TRUE(error.has_value());
@@ -47,15 +47,15 @@ TEST(FormatNodeList, ShortensLongLists) {
 }
 
 TEST(CheckGraphInput, RejectsWhatNoSolverCanUse) {
-  const std::vector<RelativeMeasurement> ok = {Edge(1, 0)};
+  const std::vector<RelativeMeasurement> ok = {GraphEdge(1, 0)};
   EXPECT_FALSE(CheckGraphInput(2, 0, ok).has_value());
   EXPECT_NE(CheckGraphInput(0, 0, {})->find("at least 2 nodes"), std::string::npos);
   EXPECT_NE(CheckGraphInput(1, 0, {})->find("at least 2 nodes"), std::string::npos);
   EXPECT_NE(CheckGraphInput(2, 2, ok)->find("reference node 2 out of range"), std::string::npos);
-  EXPECT_NE(CheckGraphInput(2, 0, {Edge(1, 5)})->find("out of range"), std::string::npos);
-  EXPECT_NE(CheckGraphInput(2, 0, {Edge(1, 1)})->find("itself"), std::string::npos);
+  EXPECT_NE(CheckGraphInput(2, 0, {GraphEdge(1, 5)})->find("out of range"), std::string::npos);
+  EXPECT_NE(CheckGraphInput(2, 0, {GraphEdge(1, 1)})->find("itself"), std::string::npos);
 
-  std::vector<RelativeMeasurement> nan = {Edge(1, 0), Edge(0, 1)};
+  std::vector<RelativeMeasurement> nan = {GraphEdge(1, 0), GraphEdge(0, 1)};
   nan[1].s_from_r.yaw_rad = std::numeric_limits<double>::quiet_NaN();
   const auto nan_error = CheckGraphInput(2, 0, nan);
   ASSERT_TRUE(nan_error.has_value());
@@ -64,7 +64,7 @@ TEST(CheckGraphInput, RejectsWhatNoSolverCanUse) {
   nan[1].s_from_r.x_m = std::numeric_limits<double>::infinity();
   EXPECT_TRUE(CheckGraphInput(2, 0, nan).has_value());
 
-  std::vector<RelativeMeasurement> weight = {Edge(1, 0)};
+  std::vector<RelativeMeasurement> weight = {GraphEdge(1, 0)};
   weight[0].weight = 0.0;
   EXPECT_NE(CheckGraphInput(2, 0, weight)->find("weight"), std::string::npos);
   weight[0].weight = std::numeric_limits<double>::quiet_NaN();
@@ -72,7 +72,7 @@ TEST(CheckGraphInput, RejectsWhatNoSolverCanUse) {
 }
 
 TEST(CheckGraphInput, ChecksTheTranslationCovarianceOnlyWhereAsked) {
-  std::vector<RelativeMeasurement> m = {Edge(1, 0), Edge(1, 0)};
+  std::vector<RelativeMeasurement> m = {GraphEdge(1, 0), GraphEdge(1, 0)};
   m[1].covariance(0, 0) = -1.0;
   EXPECT_FALSE(CheckGraphInput(2, 0, m).has_value());
   const auto error = CheckGraphInput(2, 0, m, true);
@@ -92,7 +92,7 @@ TEST(CheckGraphInput, ChecksTheTranslationCovarianceOnlyWhereAsked) {
 
 TEST(SpanningTreeYaws, ComposesTheMeasurementsFromTheReference) {
   // φ_r = φ_s + θ: node 1 = node 0 + 0.5, node 2 = node 1 - 0.25 (measured as 1 from 2: +0.25).
-  const std::vector<RelativeMeasurement> m = {Edge(1, 0, 0.5), Edge(1, 2, 0.25)};
+  const std::vector<RelativeMeasurement> m = {GraphEdge(1, 0, 0.5), GraphEdge(1, 2, 0.25)};
   const std::vector<double> yaw = SpanningTreeYaws(3, 0, m);
   EXPECT_NEAR(yaw[0], 0.0, 1e-15);
   EXPECT_NEAR(yaw[1], 0.5, 1e-15);

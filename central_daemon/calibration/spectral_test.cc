@@ -24,7 +24,7 @@ RelativeMeasurement Measure(const std::vector<double>& truth, std::size_t r, std
   return m;
 }
 
-std::vector<double> RandomYaws(std::size_t n, std::mt19937& rng) {
+std::vector<double> SpectralRandomYaws(std::size_t n, std::mt19937& rng) {
   std::uniform_real_distribution<double> u(-kPi, kPi);
   std::vector<double> yaw(n);
   for (double& y : yaw) y = u(rng);
@@ -44,7 +44,7 @@ TEST(AverageRotationsSpectral, RecoversNoiseFreeGraphsExactly) {
   // A plain cycle of 40 (the smallest spectral gap of these), a ring with chords, a complete graph.
   for (std::size_t k : {1u, 3u, 20u}) {
     const std::size_t n = 40;
-    const std::vector<double> truth = RandomYaws(n, rng);
+    const std::vector<double> truth = SpectralRandomYaws(n, rng);
     std::vector<RelativeMeasurement> m;
     for (std::size_t i = 0; i < n; ++i) {
       for (std::size_t d = 1; d <= k; ++d) {
@@ -66,7 +66,7 @@ TEST(AverageRotationsSpectral, MatchesADenseEigensolver) {
     std::mt19937 rng(seed);
     std::uniform_real_distribution<double> u(0.0, 1.0);
     const std::size_t n = 25;
-    const std::vector<double> truth = RandomYaws(n, rng);
+    const std::vector<double> truth = SpectralRandomYaws(n, rng);
     std::vector<RelativeMeasurement> m;
     for (std::size_t i = 0; i < n; ++i) {
       for (std::size_t j = i + 1; j < n; ++j) {
@@ -97,7 +97,7 @@ TEST(AverageRotationsSpectral, MatchesADenseEigensolver) {
 TEST(AverageRotationsSpectral, DegradesWithOutliersWhereL1IsExact) {
   std::mt19937 rng(4);
   const std::size_t n = 18;
-  const std::vector<double> truth = RandomYaws(n, rng);
+  const std::vector<double> truth = SpectralRandomYaws(n, rng);
   std::uniform_real_distribution<double> magnitude(DegToRad(20.0), kPi);
   std::vector<RelativeMeasurement> m;
   for (std::size_t i = 0; i < n; ++i) {

@@ -50,7 +50,7 @@ void ExpectCountersAddUp(const Ingest& ingest) {
   EXPECT_EQ(sensor_received, c.accepted);
 }
 
-proto::Datagram Parse(const Bytes& bytes) {
+proto::Datagram ParseDatagram(const Bytes& bytes) {
   proto::Datagram d;
   EXPECT_TRUE(d.ParseFromArray(bytes.data(), static_cast<int>(bytes.size())));
   return d;
@@ -260,7 +260,7 @@ TEST_F(IngestTest, EveryRejectReasonIsCountedWhereItBelongs) {
   };
   std::vector<Case> cases;
   const auto mutated = [&](const Bytes& base, auto change) {
-    proto::Datagram d = Parse(base);
+    proto::Datagram d = ParseDatagram(base);
     d.set_sequence(d.sequence() + 100);  // not a duplicate of the base
     change(d);
     return Serialize(d);
@@ -408,7 +408,7 @@ TEST_F(IngestTest, ASequenceJumpIsAReset) {
   FakeTracker tracker("gate-3", 1);
   const Bytes first = tracker.Health(kT0 - kMs);
   ASSERT_TRUE(Feed(first).accepted);
-  proto::Datagram d = Parse(tracker.Health(kT0 - kMs));
+  proto::Datagram d = ParseDatagram(tracker.Health(kT0 - kMs));
   d.set_sequence(2'000'000);
   ASSERT_TRUE(Feed(Serialize(d)).accepted);
   EXPECT_EQ(listener_.Count(SensorEventKind::kSequenceReset), 1u);
@@ -466,7 +466,7 @@ TEST_F(IngestTest, RequestsAreRateLimitedAndStopOnceInfoAndBackgroundArrived) {
 
 TEST_F(IngestTest, ASensorKnownOnlyFromRejectedDatagramsIsCountedButNotAsked) {
   FakeTracker tracker("gate-3", 1);
-  proto::Datagram d = Parse(tracker.Health(kT0 - kMs));
+  proto::Datagram d = ParseDatagram(tracker.Health(kT0 - kMs));
   d.set_version(static_cast<proto::ProtocolVersion>(2));
   const Disposition disposition = Feed(Serialize(d));
   EXPECT_FALSE(disposition.accepted);

@@ -24,8 +24,8 @@ using test_util::ReadToEnd;
 using test_util::TempPath;
 using test_util::WriteBytes;
 
-constexpr common::UtcNs kT0 = 1'700'000'000'000'000'000;
-constexpr common::DurationNs kMs = common::kNsPerMs;
+constexpr common::UtcNs kSourceT0 = 1'700'000'000'000'000'000;
+constexpr common::DurationNs kSourceMs = common::kNsPerMs;
 
 class DatagramSourceTest : public ::testing::Test {
  protected:
@@ -42,9 +42,9 @@ Bytes SmallRecording(const std::string& path, std::vector<std::size_t>* boundari
   RecordingWriterOptions options;
   options.path = path;
   RecordingWriter writer(options);
-  EXPECT_EQ(writer.Open(kT0), std::nullopt);
+  EXPECT_EQ(writer.Open(kSourceT0), std::nullopt);
   for (std::uint32_t i = 0; i < 4; ++i) {
-    writer.Append(MakeDatagram(i * i * 20, i), "10.0.0.1:5000", kT0 + i * kMs);
+    writer.Append(MakeDatagram(i * i * 20, i), "10.0.0.1:5000", kSourceT0 + i * kSourceMs);
   }
   EXPECT_EQ(writer.Close(), std::nullopt);
   Bytes bytes = ReadBytes(path);
@@ -165,9 +165,9 @@ TEST_F(DatagramSourceTest, DamagedRotationPartIsNamed) {
   options.path = path;
   options.max_file_bytes = 64 * 1024;
   RecordingWriter writer(options);
-  ASSERT_EQ(writer.Open(kT0), std::nullopt);
+  ASSERT_EQ(writer.Open(kSourceT0), std::nullopt);
   for (std::uint32_t i = 0; i < 200; ++i) {
-    writer.Append(MakeDatagram(1000, i), "10.0.0.1:5000", kT0 + i * kMs);
+    writer.Append(MakeDatagram(1000, i), "10.0.0.1:5000", kSourceT0 + i * kSourceMs);
   }
   ASSERT_EQ(writer.Close(), std::nullopt);
   ASSERT_EQ(RecordingFiles(path).size(), 4u);
@@ -215,10 +215,10 @@ TEST_F(DatagramSourceTest, ReadsTheTrackersOwnRecordings) {
   std::vector<Bytes> sent;
   {
     io::RecordingWriter writer(options);
-    ASSERT_EQ(writer.Open(kT0), std::nullopt);
+    ASSERT_EQ(writer.Open(kSourceT0), std::nullopt);
     for (std::uint32_t i = 0; i < 100; ++i) {
       sent.push_back(MakeDatagram(i * 13 % 1400, i));
-      writer.Append(sent.back(), kT0 + i * 40 * kMs);
+      writer.Append(sent.back(), kSourceT0 + i * 40 * kSourceMs);
     }
     ASSERT_EQ(writer.Close(), std::nullopt);
   }
@@ -227,14 +227,14 @@ TEST_F(DatagramSourceTest, ReadsTheTrackersOwnRecordings) {
   ASSERT_NE(source, nullptr) << error;
   EXPECT_EQ(source->kind(), DatagramFileKind::kRecording);
   EXPECT_EQ(source->writer(), "lrfnet-tracker 0.1.0");
-  EXPECT_EQ(source->created_ns(), kT0);
+  EXPECT_EQ(source->created_ns(), kSourceT0);
   const ReadResult r = ReadToEnd(*source);
   EXPECT_EQ(r.end, SourceStatus::kEnd) << r.error;
   ASSERT_EQ(r.datagrams.size(), sent.size());
   for (std::size_t i = 0; i < sent.size(); ++i) {
     EXPECT_EQ(r.datagrams[i].bytes, sent[i]);
     EXPECT_EQ(r.datagrams[i].source, "tracker:gate-3");
-    EXPECT_EQ(r.datagrams[i].receive_ns, kT0 + static_cast<common::UtcNs>(i) * 40 * kMs);
+    EXPECT_EQ(r.datagrams[i].receive_ns, kSourceT0 + static_cast<common::UtcNs>(i) * 40 * kSourceMs);
   }
 }
 
@@ -268,14 +268,14 @@ test_util::PcapFile EthernetCapture() {
   arp[13] = 0x06;
 
   test_util::PcapFile pcap(capture::kLinkTypeEthernet);
-  pcap.Add(kT0 + 1'000'000, Ethernet(Ipv4Udp(kSensorA, 40000, kDaemon4, 2222, Payload("A"))))
-      .Add(kT0 + 2'000'000, Ethernet(Ipv4Udp(kSensorB, 40001, kDaemon4, 3333, Payload("BB"))))
-      .Add(kT0 + 3'000'000, Ethernet(Ipv6Udp(kSensorC, 40002, kDaemon6, 2222, Payload("CCC"))))
-      .Add(kT0 + 4'000'000, Ethernet(bad_length))
-      .Add(kT0 + 5'000'000, Ethernet(fragment))
-      .Add(kT0 + 6'000'000, Ethernet(tcp))
-      .Add(kT0 + 7'000'000, arp)
-      .Add(kT0 + 8'000'000, Ethernet(Ipv4Udp(kSensorA, 40000, kDaemon4, 2222, {})));
+  pcap.Add(kSourceT0 + 1'000'000, Ethernet(Ipv4Udp(kSensorA, 40000, kDaemon4, 2222, Payload("A"))))
+      .Add(kSourceT0 + 2'000'000, Ethernet(Ipv4Udp(kSensorB, 40001, kDaemon4, 3333, Payload("BB"))))
+      .Add(kSourceT0 + 3'000'000, Ethernet(Ipv6Udp(kSensorC, 40002, kDaemon6, 2222, Payload("CCC"))))
+      .Add(kSourceT0 + 4'000'000, Ethernet(bad_length))
+      .Add(kSourceT0 + 5'000'000, Ethernet(fragment))
+      .Add(kSourceT0 + 6'000'000, Ethernet(tcp))
+      .Add(kSourceT0 + 7'000'000, arp)
+      .Add(kSourceT0 + 8'000'000, Ethernet(Ipv4Udp(kSensorA, 40000, kDaemon4, 2222, {})));
   return pcap;
 }
 
@@ -293,14 +293,14 @@ TEST_F(DatagramSourceTest, UdpCaptureGivesEveryDatagramWithSenderAndTime) {
   ASSERT_EQ(r.datagrams.size(), 4u);
   EXPECT_EQ(r.datagrams[0].source, "192.168.1.10:40000");
   EXPECT_EQ(r.datagrams[0].bytes, Payload("A"));
-  EXPECT_EQ(r.datagrams[0].receive_ns, kT0 + 1'000'000);
+  EXPECT_EQ(r.datagrams[0].receive_ns, kSourceT0 + 1'000'000);
   EXPECT_EQ(r.datagrams[1].source, "192.168.1.11:40001");
   EXPECT_EQ(r.datagrams[1].bytes, Payload("BB"));
   EXPECT_EQ(r.datagrams[2].source, "[fe80::1]:40002");
   EXPECT_EQ(r.datagrams[2].bytes, Payload("CCC"));
-  EXPECT_EQ(r.datagrams[2].receive_ns, kT0 + 3'000'000);
+  EXPECT_EQ(r.datagrams[2].receive_ns, kSourceT0 + 3'000'000);
   EXPECT_TRUE(r.datagrams[3].bytes.empty());
-  EXPECT_EQ(r.datagrams[3].receive_ns, kT0 + 8'000'000);
+  EXPECT_EQ(r.datagrams[3].receive_ns, kSourceT0 + 8'000'000);
   const DatagramSourceCounters& c = source->counters();
   EXPECT_EQ(c.packets, 8u);
   EXPECT_EQ(c.datagrams, 4u);
@@ -333,8 +333,8 @@ TEST_F(DatagramSourceTest, UdpCapturePortFilter) {
 TEST_F(DatagramSourceTest, RawIpNanosecondCaptureKeepsNanoseconds) {
   const std::string path = TempPath("raw_ns.pcap");
   test_util::PcapFile pcap(capture::kLinkTypeRaw, /*nanosecond=*/true);
-  pcap.Add(kT0 + 123'456'789, test_util::Ipv4Udp(kSensorA, 1, kDaemon4, 2222, Payload("v4")))
-      .Add(kT0 + 223'456'789, test_util::Ipv6Udp(kSensorC, 65535, kDaemon6, 2222, Payload("v6")));
+  pcap.Add(kSourceT0 + 123'456'789, test_util::Ipv4Udp(kSensorA, 1, kDaemon4, 2222, Payload("v4")))
+      .Add(kSourceT0 + 223'456'789, test_util::Ipv6Udp(kSensorC, 65535, kDaemon6, 2222, Payload("v6")));
   WriteBytes(path, pcap.bytes());
   std::string error;
   auto source = Open(path, &error);
@@ -342,16 +342,16 @@ TEST_F(DatagramSourceTest, RawIpNanosecondCaptureKeepsNanoseconds) {
   const ReadResult r = ReadToEnd(*source);
   EXPECT_EQ(r.end, SourceStatus::kEnd) << r.error;
   ASSERT_EQ(r.datagrams.size(), 2u);
-  EXPECT_EQ(r.datagrams[0].receive_ns, kT0 + 123'456'789);
+  EXPECT_EQ(r.datagrams[0].receive_ns, kSourceT0 + 123'456'789);
   EXPECT_EQ(r.datagrams[0].source, "192.168.1.10:1");
-  EXPECT_EQ(r.datagrams[1].receive_ns, kT0 + 223'456'789);
+  EXPECT_EQ(r.datagrams[1].receive_ns, kSourceT0 + 223'456'789);
   EXPECT_EQ(r.datagrams[1].source, "[fe80::1]:65535");
 }
 
 TEST_F(DatagramSourceTest, PcapngCaptureIsDetectedByContent) {
   const std::string path = TempPath("udp_capture.rec");  // the name does not matter
   test_util::PcapngFile pcapng(capture::kLinkTypeEthernet);
-  pcapng.Add(kT0 + 5,
+  pcapng.Add(kSourceT0 + 5,
              test_util::Ethernet(test_util::Ipv4Udp(kSensorB, 9, kDaemon4, 2222, Payload("ng"))));
   WriteBytes(path, pcapng.bytes());
   std::string error;
@@ -361,7 +361,7 @@ TEST_F(DatagramSourceTest, PcapngCaptureIsDetectedByContent) {
   const ReadResult r = ReadToEnd(*source);
   EXPECT_EQ(r.end, SourceStatus::kEnd) << r.error;
   ASSERT_EQ(r.datagrams.size(), 1u);
-  EXPECT_EQ(r.datagrams[0].receive_ns, kT0 + 5);
+  EXPECT_EQ(r.datagrams[0].receive_ns, kSourceT0 + 5);
   EXPECT_EQ(r.datagrams[0].source, "192.168.1.11:9");
   EXPECT_EQ(r.datagrams[0].bytes, Payload("ng"));
 }
@@ -383,7 +383,7 @@ TEST_F(DatagramSourceTest, TornCaptureEndsWithAnErrorAfterItsWholePackets) {
 TEST_F(DatagramSourceTest, CaptureOfAnUnknownLinkTypeIsRefused) {
   const std::string path = TempPath("user0.pcap");
   test_util::PcapFile pcap(147);  // LINKTYPE_USER0
-  pcap.Add(kT0, Payload("whatever"));
+  pcap.Add(kSourceT0, Payload("whatever"));
   WriteBytes(path, pcap.bytes());
   std::string error;
   EXPECT_EQ(Open(path, &error), nullptr);
@@ -391,15 +391,15 @@ TEST_F(DatagramSourceTest, CaptureOfAnUnknownLinkTypeIsRefused) {
   EXPECT_TRUE(Contains(error, path)) << error;
 }
 
-// A recording of datagrams received at kT0 + the given milliseconds from `sender`.
+// A recording of datagrams received at kSourceT0 + the given milliseconds from `sender`.
 void WriteRecording(const std::string& path, const std::vector<int>& ms,
                     const std::string& sender) {
   RecordingWriterOptions options;
   options.path = path;
   RecordingWriter writer(options);
-  ASSERT_EQ(writer.Open(kT0), std::nullopt);
+  ASSERT_EQ(writer.Open(kSourceT0), std::nullopt);
   for (const int t : ms) {
-    writer.Append(MakeDatagram(10, static_cast<std::uint32_t>(t)), sender, kT0 + t * kMs);
+    writer.Append(MakeDatagram(10, static_cast<std::uint32_t>(t)), sender, kSourceT0 + t * kSourceMs);
   }
   ASSERT_EQ(writer.Close(), std::nullopt);
 }
@@ -419,7 +419,7 @@ TEST_F(DatagramSourceTest, MergedFilesGiveEveryDatagramInReceiveOrder) {
   std::vector<std::pair<int, std::size_t>> got;
   SourceStatus status;
   while ((status = merged.Next(&d, &index)) == SourceStatus::kDatagram) {
-    got.emplace_back(static_cast<int>((d.receive_ns - kT0) / kMs), index);
+    got.emplace_back(static_cast<int>((d.receive_ns - kSourceT0) / kSourceMs), index);
     EXPECT_EQ(d.source, index == 0 ? "tracker:a" : "tracker:b");
     EXPECT_EQ(d.bytes, MakeDatagram(10, static_cast<std::uint32_t>(got.back().first)));
   }
@@ -455,7 +455,7 @@ TEST_F(DatagramSourceTest, MergedFilesReportATornOneOnceAndGoOnWithTheOthers) {
       EXPECT_TRUE(Contains(merged.source(1).error(), "merge_torn.rec")) << merged.source(1).error();
       continue;
     }
-    got.push_back(static_cast<int>((d.receive_ns - kT0) / kMs));
+    got.push_back(static_cast<int>((d.receive_ns - kSourceT0) / kSourceMs));
   }
   EXPECT_EQ(errors, 1);
   EXPECT_EQ(got, (std::vector<int>{0, 1, 3, 5, 9}));

@@ -13,7 +13,7 @@ namespace {
 
 using Bytes = std::vector<std::uint8_t>;
 
-constexpr common::UtcNs kT0 = 1'700'000'000'000'000'000;
+constexpr common::UtcNs kDecoderT0 = 1'700'000'000'000'000'000;
 
 void AppendVarint(std::uint64_t v, Bytes* out) {
   while (v >= 0x80) {
@@ -31,16 +31,16 @@ void AppendEntry(const proto::RecordEntry& e, Bytes* out) {
 
 proto::RecordEntry Header(std::uint32_t version = 1) {
   proto::RecordEntry e;
-  e.set_receive_ns(kT0);
+  e.set_receive_ns(kDecoderT0);
   e.mutable_header()->set_format_version(version);
-  e.mutable_header()->set_created_ns(kT0);
+  e.mutable_header()->set_created_ns(kDecoderT0);
   e.mutable_header()->set_writer("lrfnetd test");
   return e;
 }
 
 proto::RecordEntry Datagram(int i, std::size_t size) {
   proto::RecordEntry e;
-  e.set_receive_ns(kT0 + i * common::kNsPerMs);
+  e.set_receive_ns(kDecoderT0 + i * common::kNsPerMs);
   e.set_source("10.0.0." + std::to_string(i) + ":4000");
   std::string bytes(size, '\0');
   for (std::size_t k = 0; k < size; ++k) bytes[k] = static_cast<char>(i * 31 + k);
@@ -106,7 +106,7 @@ TEST(RecordingDecoderTest, DecodesHeaderAndDatagramsInOrder) {
   ASSERT_EQ(out.entries.size(), 5u);
   EXPECT_TRUE(out.entries[0].has_header);
   EXPECT_EQ(out.entries[0].header.format_version, 1u);
-  EXPECT_EQ(out.entries[0].header.created_ns, kT0);
+  EXPECT_EQ(out.entries[0].header.created_ns, kDecoderT0);
   EXPECT_EQ(out.entries[0].header.writer, "lrfnetd test");
   for (int i = 0; i < 4; ++i) {
     const RecordingEntry& e = out.entries[static_cast<std::size_t>(i) + 1];

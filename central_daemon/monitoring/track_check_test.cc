@@ -12,23 +12,23 @@ namespace {
 using testing::Frames;
 using testing::TwoPeople;
 
-constexpr common::UtcNs kStart = 1'700'000'000'000'000'000;
-const Pose2 kS1{0.3, 0.3, common::DegToRad(40.0)};
-const Pose2 kS2{11.7, 0.3, common::DegToRad(140.0)};
-const Pose2 kS3{11.7, 7.7, common::DegToRad(-140.0)};
+constexpr common::UtcNs kT0 = 1'700'000'000'000'000'000;
+const Pose2 kPoseA{0.3, 0.3, common::DegToRad(40.0)};
+const Pose2 kPoseB{11.7, 0.3, common::DegToRad(140.0)};
+const Pose2 kPoseC{11.7, 7.7, common::DegToRad(-140.0)};
 
 struct Scene {
   std::vector<daemon::TrackFrameData> s1, s2, s3;
-  std::vector<PlacedFrames> Others() const { return {{"s1", kS1, &s1}, {"s3", kS3, &s3}}; }
+  std::vector<PlacedFrames> Others() const { return {{"s1", kPoseA, &s1}, {"s3", kPoseC, &s3}}; }
 };
 
 // Ten seconds of `people` (two unless said) seen by three sensors; s2 stands at `s2_true`.
 Scene Walk(const Pose2& s2_true, double t0_s = 0.0, double t1_s = 10.0,
            const std::vector<testing::Walker>& people = TwoPeople()) {
   Scene s;
-  s.s1 = Frames(people, kS1, t0_s, t1_s, kStart, 11, 1);
-  s.s2 = Frames(people, s2_true, t0_s, t1_s, kStart, 12, 2);
-  s.s3 = Frames(people, kS3, t0_s, t1_s, kStart, 13, 3);
+  s.s1 = Frames(people, kPoseA, t0_s, t1_s, kT0, 11, 1);
+  s.s2 = Frames(people, s2_true, t0_s, t1_s, kT0, 12, 2);
+  s.s3 = Frames(people, kPoseC, t0_s, t1_s, kT0, 13, 3);
   return s;
 }
 
@@ -41,8 +41,8 @@ std::vector<testing::Walker> FourPeople() {
 }
 
 TEST(TrackCheck, TracksThatAgreeFindNoMove) {
-  const Scene scene = Walk(kS2);
-  const TrackFit fit = CheckTracks(scene.s2, kS2, scene.Others(), {});
+  const Scene scene = Walk(kPoseB);
+  const TrackFit fit = CheckTracks(scene.s2, kPoseB, scene.Others(), {});
   ASSERT_TRUE(fit.enough) << fit.reason;
   EXPECT_FALSE(fit.moved) << fit.reason;
   EXPECT_LT(fit.chi2, 25.0) << fit.reason;
@@ -58,9 +58,9 @@ TEST(TrackCheck, ATrackOffsetIsAMoveWithItsCorrection) {
   // chi2 ~7) are below min_chi2 in one window; their corrections are still estimated right.
   for (const Pose2& bump : {Pose2{0, 0, common::DegToRad(2.0)}, Pose2{0.2, 0.0, 0.0},
                             Pose2{0.0, 0.2, common::DegToRad(1.0)}}) {
-    const Pose2 moved = kS2 * bump;
+    const Pose2 moved = kPoseB * bump;
     const Scene scene = Walk(moved, 0.0, 10.0, FourPeople());
-    const TrackFit fit = CheckTracks(scene.s2, kS2, scene.Others(), {});
+    const TrackFit fit = CheckTracks(scene.s2, kPoseB, scene.Others(), {});
     ASSERT_TRUE(fit.enough) << fit.reason;
     EXPECT_TRUE(fit.moved) << fit.reason;
     EXPECT_NEAR(common::RadToDeg(common::AngleDiff(fit.correction.yaw_rad, bump.yaw_rad)), 0.0,
@@ -75,11 +75,11 @@ TEST(TrackCheck, ATrackOffsetIsAMoveWithItsCorrection) {
 
 TEST(TrackCheck, ALargeMoveIsFoundBySearchingFromScratch) {
   // 10 degrees: at 8 m the tracks land 1.4 m away, beyond the association gate.
-  const Pose2 moved = kS2 * Pose2{0.0, 0.0, common::DegToRad(10.0)};
+  const Pose2 moved = kPoseB * Pose2{0.0, 0.0, common::DegToRad(10.0)};
   const Scene scene = Walk(moved, 0.0, 20.0);
-  const TrackFit detect = CheckTracks(scene.s2, kS2, scene.Others(), {});
+  const TrackFit detect = CheckTracks(scene.s2, kPoseB, scene.Others(), {});
   EXPECT_TRUE(detect.moved) << detect.reason;
-  const TrackFit fit = EstimateFromTracks(scene.s2, kS2, scene.Others(), {});
+  const TrackFit fit = EstimateFromTracks(scene.s2, kPoseB, scene.Others(), {});
   ASSERT_TRUE(fit.enough) << fit.reason;
   EXPECT_NEAR(common::RadToDeg(common::AngleDiff(fit.world_from_sensor.yaw_rad, moved.yaw_rad)),
               0.0, 0.2)
@@ -88,25 +88,25 @@ TEST(TrackCheck, ALargeMoveIsFoundBySearchingFromScratch) {
 }
 
 TEST(TrackCheck, TooFewTracksAreNotEnoughNeverAMove) {
-  const Scene scene = Walk(kS2 * Pose2{0.0, 0.0, common::DegToRad(5.0)}, 0.0, 1.5);
-  const TrackFit fit = CheckTracks(scene.s2, kS2, scene.Others(), {});
+  const Scene scene = Walk(kPoseB * Pose2{0.0, 0.0, common::DegToRad(5.0)}, 0.0, 1.5);
+  const TrackFit fit = CheckTracks(scene.s2, kPoseB, scene.Others(), {});
   EXPECT_FALSE(fit.enough);
   EXPECT_FALSE(fit.moved);
   EXPECT_FALSE(fit.reason.empty());
   // Nobody else to compare with.
-  EXPECT_FALSE(CheckTracks(scene.s2, kS2, {}, {}).enough);
+  EXPECT_FALSE(CheckTracks(scene.s2, kPoseB, {}, {}).enough);
   // A person standing still fixes no rotation, and a box does not count at all.
   const std::vector<testing::Walker> standing = {{{{6, 4}, {6.001, 4}}, 0.0001, 0.0}};
-  const auto s1 = Frames(standing, kS1, 0, 10, kStart, 11, 1);
-  const auto s2 = Frames(standing, kS2 * Pose2{0.2, 0, 0}, 0, 10, kStart, 12, 2);
-  const std::vector<PlacedFrames> others = {{"s1", kS1, &s1}};
-  const TrackFit still = CheckTracks(s2, kS2, others, {});
+  const auto s1 = Frames(standing, kPoseA, 0, 10, kT0, 11, 1);
+  const auto s2 = Frames(standing, kPoseB * Pose2{0.2, 0, 0}, 0, 10, kT0, 12, 2);
+  const std::vector<PlacedFrames> others = {{"s1", kPoseA, &s1}};
+  const TrackFit still = CheckTracks(s2, kPoseB, others, {});
   EXPECT_FALSE(still.enough) << still.reason;
   EXPECT_FALSE(still.moved) << still.reason;
 }
 
 TEST(TrackCheck, HostileTracksAreIgnored) {
-  Scene scene = Walk(kS2);
+  Scene scene = Walk(kPoseB);
   for (auto& f : scene.s2) {
     daemon::TrackObservation bad = f.tracks.front();
     bad.track_id = 99;
@@ -117,7 +117,7 @@ TEST(TrackCheck, HostileTracksAreIgnored) {
     bad.covariance.fill(-1.0f);
     f.tracks.push_back(bad);
   }
-  const TrackFit fit = CheckTracks(scene.s2, kS2, scene.Others(), {});
+  const TrackFit fit = CheckTracks(scene.s2, kPoseB, scene.Others(), {});
   ASSERT_TRUE(fit.enough) << fit.reason;
   EXPECT_FALSE(fit.moved) << fit.reason;
   EXPECT_TRUE(std::isfinite(fit.world_from_sensor.x_m));
@@ -126,7 +126,7 @@ TEST(TrackCheck, HostileTracksAreIgnored) {
 TEST(TrackCheck, TheWorldRecordingRotatesPositionsVelocitiesAndCovariances) {
   daemon::TrackFrameData f;
   f.session_id = 5;
-  f.scan_start_ns = kStart;
+  f.scan_start_ns = kT0;
   daemon::TrackObservation o;
   o.track_id = 3;
   o.x_m = 1.0f;

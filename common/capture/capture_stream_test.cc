@@ -10,6 +10,7 @@
 #include <string>
 #include <vector>
 
+#include "common/capture/capture_test_util.h"
 #include "common/capture/packet_parser.h"
 #include "common/capture/pcap_reader.h"
 #include "tests/support/test_data.h"
@@ -22,22 +23,13 @@ using Bytes = std::vector<std::uint8_t>;
 // ------------------------------------------------------------------------------------------------
 // Writing small captures.
 
-void Put16(Bytes* b, std::size_t at, std::uint32_t v) {
-  (*b)[at] = static_cast<std::uint8_t>(v >> 8);
-  (*b)[at + 1] = static_cast<std::uint8_t>(v);
-}
-void Put32(Bytes* b, std::size_t at, std::uint32_t v) {
-  Put16(b, at, v >> 16);
-  Put16(b, at + 2, v & 0xFFFF);
-}
+using test::Put16;
+using test::Put32;
 void AppendLe32(Bytes* b, std::uint32_t v) {
   for (int i = 0; i < 4; ++i) b->push_back(static_cast<std::uint8_t>(v >> (8 * i)));
 }
-Bytes Cat(Bytes a, const Bytes& b) {
-  a.insert(a.end(), b.begin(), b.end());
-  return a;
-}
-Bytes Text(const std::string& s) { return Bytes(s.begin(), s.end()); }
+using test::Cat;
+using test::Text;
 
 Bytes TcpHeader(std::uint16_t src_port, std::uint16_t dst_port, std::uint32_t seq,
                 std::uint8_t flags, const Bytes& payload) {

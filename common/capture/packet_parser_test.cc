@@ -6,24 +6,17 @@
 #include <string>
 #include <vector>
 
+#include "common/capture/capture_test_util.h"
+
 namespace lrfnet::capture {
 namespace {
 
 using Bytes = std::vector<std::uint8_t>;
 
-void Put16(Bytes* b, std::size_t at, std::uint32_t v) {
-  (*b)[at] = static_cast<std::uint8_t>(v >> 8);
-  (*b)[at + 1] = static_cast<std::uint8_t>(v);
-}
-void Put32(Bytes* b, std::size_t at, std::uint32_t v) {
-  Put16(b, at, v >> 16);
-  Put16(b, at + 2, v & 0xFFFF);
-}
-Bytes Cat(Bytes a, const Bytes& b) {
-  a.insert(a.end(), b.begin(), b.end());
-  return a;
-}
-Bytes Text(const std::string& s) { return Bytes(s.begin(), s.end()); }
+using test::Put16;
+using test::Put32;
+using test::Cat;
+using test::Text;
 
 // TCP header with `option_words` 32-bit words of NOP options.
 Bytes Tcp(std::uint16_t src_port, std::uint16_t dst_port, std::uint32_t seq, std::uint32_t ack,

@@ -21,7 +21,7 @@ namespace fs = std::filesystem;
 using testing::SyntheticDevice;
 using testing::Wall;
 
-TrackerConfig Config() {
+TrackerConfig RunConfig() {
   TrackerConfig config;
   config.sensor_id = "run.s1";
   return config;
@@ -60,7 +60,7 @@ TEST(TrackerRun, DecoderSummaryNamesEveryCounter) {
 
 TEST(TrackerRun, ScanLogPrintsEveryNthScanAndStopsAtMaxScans) {
   testing::CollectingSink sink;
-  TrackerNode node(Config(), 1, sink);
+  TrackerNode node(RunConfig(), 1, sink);
   SyntheticDevice device;
   const std::vector<Wall> walls = testing::Room();
   ScanLog log(/*print_every=*/2, /*max_scans=*/3);
@@ -113,8 +113,8 @@ class TrackerOutputs : public ::testing::Test {
 TEST_F(TrackerOutputs, RecordingCountsEveryDatagramOfTheNode) {
   Outputs outputs;
   const std::string path = (dir_ / "s1.lrfrec").string();
-  ASSERT_EQ(outputs.Open(Config(), path, 1'700'000'000'000'000'000), std::nullopt);
-  TrackerNode node(Config(), 7, outputs.sink());
+  ASSERT_EQ(outputs.Open(RunConfig(), path, 1'700'000'000'000'000'000), std::nullopt);
+  TrackerNode node(RunConfig(), 7, outputs.sink());
   SyntheticDevice device;
   const std::vector<Wall> walls = testing::Room();
   for (std::int64_t k = 0; k < 30; ++k) {
@@ -136,7 +136,7 @@ TEST_F(TrackerOutputs, RecordingCountsEveryDatagramOfTheNode) {
 
 TEST_F(TrackerOutputs, NoOutputsCountOnly) {
   Outputs outputs;
-  ASSERT_EQ(outputs.Open(Config(), "", 0), std::nullopt);
+  ASSERT_EQ(outputs.Open(RunConfig(), "", 0), std::nullopt);
   EXPECT_EQ(outputs.Summary(), "");
   EXPECT_TRUE(outputs.Close());
 }
@@ -144,18 +144,18 @@ TEST_F(TrackerOutputs, NoOutputsCountOnly) {
 TEST_F(TrackerOutputs, ErrorsNameTheFlag) {
   const std::string missing_dir = (dir_ / "no_such_dir" / "s1.lrfrec").string();
   Outputs out;
-  const auto e = out.Open(Config(), missing_dir, 0);
+  const auto e = out.Open(RunConfig(), missing_dir, 0);
   ASSERT_TRUE(e.has_value());
   EXPECT_EQ(e->rfind("--out " + missing_dir + ": ", 0), 0u) << *e;
 
-  TrackerConfig config = Config();
+  TrackerConfig config = RunConfig();
   config.uplink_address = "127.0.0.1";  // no port
   Outputs uplink;
   const auto u = uplink.Open(config, "", 0);
   ASSERT_TRUE(u.has_value());
   EXPECT_NE(u->find("--uplink"), std::string::npos) << *u;
 
-  config = Config();
+  config = RunConfig();
   config.key_file = (dir_ / "no_such.key").string();
   Outputs keyed;
   const auto k = keyed.Open(config, "", 0);

@@ -259,4 +259,16 @@ std::vector<std::uint8_t> EncodeScanFrame(const ScanTelegram& scan) {
   return frame;
 }
 
+Bytes B(std::string_view s) { return Bytes(s.begin(), s.end()); }
+
+Bytes Frame(const Bytes& payload) {
+  Bytes out(payload.size() + kFrameHeaderBytes + kFrameTrailerBytes);
+  out.resize(EncodeFrame(payload, out));
+  return out;
+}
+
+Bytes Frame(std::string_view payload) { return Frame(B(payload)); }
+
+void Append(Bytes& a, const Bytes& b) { a.insert(a.end(), b.begin(), b.end()); }
+
 }  // namespace lrfnet::cola::test

@@ -13,6 +13,18 @@
 
 namespace lrfnet::cola::test {
 
+using Bytes = std::vector<std::uint8_t>;
+
+// The bytes of a text.
+Bytes B(std::string_view s);
+
+// A whole CoLa-B frame (header, length, payload, checksum) around `payload`.
+Bytes Frame(const Bytes& payload);
+Bytes Frame(std::string_view payload);
+
+// a += b.
+void Append(Bytes& a, const Bytes& b);
+
 // The sensor -> client TCP payload of a classic pcap or pcapng file (Ethernet, IPv4, TCP from
 // `sensor_port`), concatenated in capture order; a segment whose sequence number lies before the
 // next expected one (a retransmission) is dropped. Enough for the shared SICK captures, not a

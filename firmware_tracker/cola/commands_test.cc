@@ -7,12 +7,14 @@
 #include <string_view>
 #include <vector>
 
+#include "firmware_tracker/cola/cola_test_util.h"
+
 namespace lrfnet::cola {
 namespace {
 
 using Bytes = std::vector<std::uint8_t>;
 
-Bytes B(std::string_view s) { return Bytes(s.begin(), s.end()); }
+using test::B;
 
 template <typename Encode>
 Bytes Encoded(Encode encode) {

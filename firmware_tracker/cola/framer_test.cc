@@ -7,21 +7,16 @@
 #include <string_view>
 #include <vector>
 
+#include "firmware_tracker/cola/cola_test_util.h"
+
 namespace lrfnet::cola {
 namespace {
 
 using Bytes = std::vector<std::uint8_t>;
 
-Bytes ToBytes(std::string_view s) { return Bytes(s.begin(), s.end()); }
-
-Bytes Frame(const Bytes& payload) {
-  Bytes out(payload.size() + kFrameHeaderBytes + kFrameTrailerBytes);
-  out.resize(EncodeFrame(payload, out));
-  return out;
-}
-Bytes Frame(std::string_view payload) { return Frame(ToBytes(payload)); }
-
-void Append(Bytes& a, const Bytes& b) { a.insert(a.end(), b.begin(), b.end()); }
+using test::Append;
+using test::Frame;
+Bytes ToBytes(std::string_view s) { return test::B(s); }
 
 // What a user of the framer sees: the sequence of frames and rejections, and the counters.
 struct Trace {

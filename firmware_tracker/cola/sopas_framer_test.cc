@@ -7,12 +7,14 @@
 #include <utility>
 #include <vector>
 
+#include "firmware_tracker/cola/cola_test_util.h"
+
 namespace lrfnet::cola {
 namespace {
 
 using Bytes = std::vector<std::uint8_t>;
 
-Bytes B(std::string_view s) { return Bytes(s.begin(), s.end()); }
+using test::B;
 
 Bytes Cat(std::initializer_list<Bytes> parts) {
   Bytes out;

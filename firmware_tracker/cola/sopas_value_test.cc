@@ -16,7 +16,7 @@ namespace {
 using Bytes = std::vector<std::uint8_t>;
 using S = SopasScalar;
 
-Bytes B(std::string_view s) { return Bytes(s.begin(), s.end()); }
+using test::B;
 std::string Text(const Bytes& b) { return std::string(b.begin(), b.end()); }
 
 Bytes Encode(const SopasValues& v, Dialect d) {

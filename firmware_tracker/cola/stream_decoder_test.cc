@@ -17,16 +17,8 @@ namespace {
 
 using Bytes = std::vector<std::uint8_t>;
 
-Bytes Frame(std::string_view payload) {
-  Bytes out(payload.size() + kFrameHeaderBytes + kFrameTrailerBytes);
-  out.resize(EncodeFrame(
-      std::span(reinterpret_cast<const std::uint8_t*>(payload.data()), payload.size()), out));
-  return out;
-}
-Bytes Frame(const Bytes& payload) {
-  return Frame(std::string_view(reinterpret_cast<const char*>(payload.data()), payload.size()));
-}
-void Append(Bytes& a, const Bytes& b) { a.insert(a.end(), b.begin(), b.end()); }
+using test::Append;
+using test::Frame;
 
 struct Recorder : TelegramListener {
   std::vector<std::uint16_t> scan_counters;

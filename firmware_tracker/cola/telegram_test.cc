@@ -6,12 +6,14 @@
 #include <string_view>
 #include <vector>
 
+#include "firmware_tracker/cola/cola_test_util.h"
+
 namespace lrfnet::cola {
 namespace {
 
 using Bytes = std::vector<std::uint8_t>;
 
-Bytes B(std::string_view s) { return Bytes(s.begin(), s.end()); }
+using test::B;
 std::string Str(std::span<const std::uint8_t> s) { return std::string(s.begin(), s.end()); }
 
 // Payloads as the real devices sent them (shared captures).

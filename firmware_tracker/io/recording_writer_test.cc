@@ -75,7 +75,7 @@ class RecordingWriterTest : public ::testing::Test {
   static void TearDownTestSuite() { std::filesystem::remove_all(TempDir()); }
 };
 
-RecordingWriterOptions Options(const std::string& path) {
+RecordingWriterOptions WriterOptions(const std::string& path) {
   RecordingWriterOptions o;
   o.path = path;
   o.writer = "lrfnet-tracker 0.1.0";
@@ -84,16 +84,16 @@ RecordingWriterOptions Options(const std::string& path) {
 }
 
 TEST_F(RecordingWriterTest, OptionsAreValidated) {
-  EXPECT_EQ(Validate(Options("x.rec")), std::nullopt);
-  RecordingWriterOptions o = Options("");
+  EXPECT_EQ(Validate(WriterOptions("x.rec")), std::nullopt);
+  RecordingWriterOptions o = WriterOptions("");
   EXPECT_TRUE(Validate(o).has_value());
-  o = Options("x.rec");
+  o = WriterOptions("x.rec");
   o.source = std::string(65, 's');
   EXPECT_TRUE(Validate(o).has_value());
-  o = Options("x.rec");
+  o = WriterOptions("x.rec");
   o.buffer_bytes = 100;
   EXPECT_TRUE(Validate(o).has_value());
-  o = Options("x.rec");
+  o = WriterOptions("x.rec");
   o.flush_interval_s = 0.0;
   EXPECT_TRUE(Validate(o).has_value());
   EXPECT_EQ(TrackerRecordSource("gate-3"), "tracker:gate-3");
@@ -103,7 +103,7 @@ TEST_F(RecordingWriterTest, HeaderThenEveryDatagramAsSent) {
   const std::string path = TempPath("round_trip.rec");
   std::vector<std::vector<std::uint8_t>> sent;
   {
-    RecordingWriter writer(Options(path));
+    RecordingWriter writer(WriterOptions(path));
     ASSERT_EQ(writer.Open(kT0), std::nullopt);
     for (int i = 0; i < 200; ++i) {
       sent.push_back(
@@ -138,7 +138,7 @@ TEST_F(RecordingWriterTest, HeaderThenEveryDatagramAsSent) {
 
 TEST_F(RecordingWriterTest, DataReachesTheFileWithinTheFlushInterval) {
   const std::string path = TempPath("interval.rec");
-  RecordingWriter writer(Options(path));
+  RecordingWriter writer(WriterOptions(path));
   ASSERT_EQ(writer.Open(kT0), std::nullopt);
   const auto header_bytes = std::filesystem::file_size(path);
   EXPECT_GT(header_bytes, 0u);  // the header is written at once
@@ -158,7 +158,7 @@ TEST_F(RecordingWriterTest, DataReachesTheFileWithinTheFlushInterval) {
 
 TEST_F(RecordingWriterTest, FullBufferIsWrittenAndTheFileHoldsWholeEntries) {
   const std::string path = TempPath("small_buffer.rec");
-  RecordingWriterOptions o = Options(path);
+  RecordingWriterOptions o = WriterOptions(path);
   o.buffer_bytes = 4096;
   o.flush_interval_s = 3600.0;
   RecordingWriter writer(o);
@@ -176,7 +176,7 @@ TEST_F(RecordingWriterTest, FullBufferIsWrittenAndTheFileHoldsWholeEntries) {
 
 TEST_F(RecordingWriterTest, RefusesOversizeDatagramsAndWritesBeforeOpen) {
   const std::string path = TempPath("refuse.rec");
-  RecordingWriter writer(Options(path));
+  RecordingWriter writer(WriterOptions(path));
   EXPECT_FALSE(writer.Append(Datagram(10, 0), kT0));
   EXPECT_EQ(writer.counters().not_open, 1u);
   ASSERT_EQ(writer.Open(kT0), std::nullopt);
@@ -189,13 +189,13 @@ TEST_F(RecordingWriterTest, RefusesOversizeDatagramsAndWritesBeforeOpen) {
 }
 
 TEST_F(RecordingWriterTest, UnwritablePathsGiveAClearError) {
-  RecordingWriter missing_dir(Options(TempPath("no/such/dir/x.rec")));
+  RecordingWriter missing_dir(WriterOptions(TempPath("no/such/dir/x.rec")));
   const auto error = missing_dir.Open(kT0);
   ASSERT_TRUE(error.has_value());
   EXPECT_NE(error->find("no/such/dir/x.rec"), std::string::npos) << *error;
   EXPECT_FALSE(missing_dir.is_open());
   if (std::filesystem::exists("/dev/full")) {
-    RecordingWriter full(Options("/dev/full"));
+    RecordingWriter full(WriterOptions("/dev/full"));
     const auto full_error = full.Open(kT0);
     ASSERT_TRUE(full_error.has_value());
     EXPECT_NE(full_error->find("No space left"), std::string::npos) << *full_error;
@@ -212,7 +212,7 @@ TEST_F(RecordingWriterTest, WriteErrorsAreCountedAndNeverFatal) {
   ASSERT_GE(reader, 0);
   const auto old_handler = std::signal(SIGPIPE, SIG_IGN);
   {
-    RecordingWriter writer(Options(path));
+    RecordingWriter writer(WriterOptions(path));
     ASSERT_EQ(writer.Open(kT0), std::nullopt);
     ::close(reader);
     // The first entry is buffered; each later one is a second after it and triggers a write.

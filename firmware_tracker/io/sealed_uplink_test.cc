@@ -20,7 +20,7 @@
 namespace lrfnet::io {
 namespace {
 
-constexpr char kId[] = "gate-3";
+constexpr char kSealedId[] = "gate-3";
 
 auth::Key Site(std::uint8_t fill) {
   auth::Key k{};
@@ -125,33 +125,33 @@ TEST_F(SealedUplinkTest, SealedDatagramsOverUdpAndOnlySealedRequestsCount) {
   UdpUplinkOptions options;
   options.host = "127.0.0.1";
   options.port = daemon_socket.port();
-  options.sensor_id = kId;
-  options.keys = KeysOf(kId);
+  options.sensor_id = kSealedId;
+  options.keys = KeysOf(kSealedId);
   UdpUplink uplink(options);
   ASSERT_EQ(uplink.Open(), std::nullopt);
-  SealingSink sealing(Tracker(kId, true), uplink);
-  DatagramEncoder encoder(DatagramEncoderOptions{kId, 5});
+  SealingSink sealing(Tracker(kSealedId, true), uplink);
+  DatagramEncoder encoder(DatagramEncoderOptions{kSealedId, 5});
   ASSERT_TRUE(encoder.EncodeHealth({}, 1'700'000'000'000'000'000, sealing));
   const std::vector<std::uint8_t> got = daemon_socket.Receive();
   auth::Envelope e;
   ASSERT_EQ(auth::ParseEnvelope(got, &e), auth::HeaderError::kNone);
-  EXPECT_EQ(e.sensor_id, kId);
+  EXPECT_EQ(e.sensor_id, kSealedId);
   EXPECT_TRUE(e.encrypted);
 
-  auth::Sealer daemon(Daemon(kId));
+  auth::Sealer daemon(Daemon(kSealedId));
   const auto good = SealedRequest(daemon, true, false);
   // Every kind of bad Request, each followed by a check that it set nothing.
   RequestMessage m;
-  m.sensor_id = kId;
+  m.sensor_id = kSealedId;
   m.send_background = true;
   std::array<std::uint8_t, kMaxDatagramBytes> unsigned_request{};
   const std::size_t unsigned_size = EncodeRequest(m, unsigned_request);
   auto forged = good;
   forged[forged.size() - 20] ^= 0x01;  // a payload bit: the tag no longer matches
-  auth::Sealer other_epoch(Daemon(kId, 2));
-  auth::Sealer other_site(Daemon(kId, 1, 8));
+  auth::Sealer other_epoch(Daemon(kSealedId, 2));
+  auth::Sealer other_site(Daemon(kSealedId, 1, 8));
   auth::Sealer other_sensor(Daemon("gate-4"));
-  auth::SealerOptions wrong_direction = Daemon(kId);
+  auth::SealerOptions wrong_direction = Daemon(kSealedId);
   wrong_direction.direction = auth::Direction::kToDaemon;
   auth::Sealer reflected(wrong_direction);
   const std::vector<std::pair<std::vector<std::uint8_t>, RequestReject>> bad = {

@@ -19,7 +19,7 @@
 namespace lrfnet::io {
 namespace {
 
-constexpr char kId[] = "gate-3";
+constexpr char kUdpId[] = "gate-3";
 
 // The daemon's side of the loopback.
 using FakeDaemon = ::lrfnet::testing::LoopbackUdpPeer;
@@ -28,7 +28,7 @@ UdpUplinkOptions Options(const std::string& host, std::uint16_t port) {
   UdpUplinkOptions o;
   o.host = host;
   o.port = port;
-  o.sensor_id = kId;
+  o.sensor_id = kUdpId;
   return o;
 }
 
@@ -60,7 +60,7 @@ void FramesAndRequestsOverLoopback(int family, const std::string& host) {
   EXPECT_NE(uplink.local_port(), 0);
 
   DatagramEncoderOptions options;
-  options.sensor_id = kId;
+  options.sensor_id = kUdpId;
   DatagramEncoder encoder(options);
   tracking::ScanTracks scan;
   for (std::uint32_t i = 0; i < 20; ++i) {
@@ -80,7 +80,7 @@ void FramesAndRequestsOverLoopback(int family, const std::string& host) {
     pb_istream_t stream = pb_istream_from_buffer(bytes.data(), bytes.size());
     ASSERT_TRUE(pb_decode(&stream, lrfnet_proto_Datagram_fields, &d));
     EXPECT_EQ(d.sequence, k);
-    EXPECT_STREQ(d.sensor_id, kId);
+    EXPECT_STREQ(d.sensor_id, kUdpId);
     ASSERT_EQ(d.which_payload, lrfnet_proto_Datagram_track_frame_tag);
     EXPECT_EQ(d.payload.track_frame.scan_counter, k / 2);
     EXPECT_EQ(d.payload.track_frame.part, k % 2);
@@ -92,7 +92,7 @@ void FramesAndRequestsOverLoopback(int family, const std::string& host) {
   EXPECT_EQ(uplink.Poll(), 0u);
   EXPECT_FALSE(uplink.TakeRequests().any());
   // The daemon asks for a background snapshot, then sends garbage and a request for another sensor.
-  ASSERT_TRUE(daemon.Reply(RequestBytes(kId, false, true)));
+  ASSERT_TRUE(daemon.Reply(RequestBytes(kUdpId, false, true)));
   ASSERT_EQ(PollFor(uplink), 1u);
   PendingRequests pending = uplink.TakeRequests();
   EXPECT_TRUE(pending.send_background);

@@ -15,7 +15,7 @@ using testing::Room;
 using testing::SyntheticScanner;
 using testing::Wall;
 
-constexpr double kRateHz = 25.0;
+using testing::kRateHz;
 
 std::int64_t Scans(double seconds) {
   return static_cast<std::int64_t>(std::lround(seconds * kRateHz));

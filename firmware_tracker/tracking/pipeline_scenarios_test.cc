@@ -31,7 +31,7 @@ using testing::ScannerConfig;
 using testing::SyntheticScanner;
 using testing::Wall;
 
-constexpr double kRateHz = 25.0;
+using testing::kRateHz;
 constexpr double kLearnedS = 6.0;  // background learning (5 s) is over; people enter after this
 
 // A person moving through keyframes (time s, position m) with linear interpolation; absent before

@@ -19,6 +19,9 @@
 
 namespace lrfnet::tracking::testing {
 
+// The scan rate the tests' synthetic scanners run at.
+inline constexpr double kRateHz = 25.0;
+
 struct Wall {
   Eigen::Vector2d a_m;
   Eigen::Vector2d b_m;

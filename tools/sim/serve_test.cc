@@ -19,7 +19,7 @@ namespace {
 
 using std::chrono::seconds;
 
-const char* const kScenario = R"(name: serve_test
+const char* const kServeScenario = R"(name: serve_test
 seed: 23
 duration_s: 5
 world:
@@ -31,10 +31,10 @@ targets:
   - {id: walker, shape: person, path: [[2, 2], [18, 8], [2, 8]], speed_mps: 1.2, loop: true}
 )";
 
-std::shared_ptr<const Simulator> MakeSim() {
+std::shared_ptr<const Simulator> MakeServeSim() {
   Scenario s;
   std::string error;
-  EXPECT_TRUE(ParseScenario(kScenario, "serve_test.yaml", &s, &error)) << error;
+  EXPECT_TRUE(ParseScenario(kServeScenario, "serve_test.yaml", &s, &error)) << error;
   std::shared_ptr<const Simulator> sim = Simulator::Create(s, &error);
   EXPECT_NE(sim, nullptr) << error;
   return sim;
@@ -46,7 +46,7 @@ std::uint64_t IndexOf(const Simulator& sim, std::size_t sensor, const cola::Scan
 }
 
 TEST(SimScanSource, ScansLeaveAtTheirScenarioTimesOnTheSharedClock) {
-  auto sim = MakeSim();
+  auto sim = MakeServeSim();
   ASSERT_NE(sim, nullptr);
   double now = 0.5;
   auto source = MakeSimScanSource(sim, 0, [&now] { return now; });
@@ -98,7 +98,7 @@ TEST(SimScanSource, ScansLeaveAtTheirScenarioTimesOnTheSharedClock) {
 }
 
 TEST(SimServe, TheLiveClientReceivesTheSimulatedScansOverTcp) {
-  auto sim = MakeSim();
+  auto sim = MakeServeSim();
   ASSERT_NE(sim, nullptr);
   constexpr double kSpeed = 2.0;
   const auto start = std::chrono::steady_clock::now();
