@@ -2,6 +2,7 @@
 
 #include <fmt/format.h>
 
+#include <Eigen/Cholesky>
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
@@ -92,6 +93,19 @@ std::optional<std::string> Validate(const MonitorOptions& o) {
   }
   if (!(o.settled_min_inliers >= 0.0 && o.settled_min_inliers <= 1.0)) {
     return "settled_min_inliers must be in [0, 1]";
+  }
+  if (!positive(o.background_time_constant_s, 3600.0)) {
+    return "background_time_constant_s must be in (0, 3600]";
+  }
+  if (!(o.background_absorb_after_s >= 0.0 && o.background_absorb_after_s <= 3600.0)) {
+    return "background_absorb_after_s must be in [0, 3600]";
+  }
+  if (!positive(o.combine_max_chi2, 1e12)) return "combine_max_chi2 must be in (0, 1e12]";
+  if (!(o.tracks_bias_sigma_m >= 0.0 && o.tracks_bias_sigma_m <= 10.0)) {
+    return "tracks_bias_sigma_m must be in [0, 10]";
+  }
+  if (!(o.tracks_bias_sigma_deg >= 0.0 && o.tracks_bias_sigma_deg <= 180.0)) {
+    return "tracks_bias_sigma_deg must be in [0, 180]";
   }
   if (!(o.relearn_hold_s >= 0.0 && o.relearn_hold_s <= 86400.0)) {
     return "relearn_hold_s must be in [0, 86400]";
@@ -204,35 +218,41 @@ void Monitor::OnBackground(const std::string& sensor_id, const daemon::Backgroun
   const bool within_refinement =
       std::abs(common::RadToDeg(refinement.yaw_rad)) <= options_.refine_max_yaw_deg &&
       std::hypot(refinement.x_m, refinement.y_m) <= options_.refine_max_translation_m;
-  // Within relearn_hold_s of the move even a snapshot with settled_min_inliers may still hold a
-  // few of the old scene's nearer returns (the tracker absorbs them after absorb_after_s), enough
-  // to pull its motion by a few tenths of a degree: every settled snapshot until then refines the
-  // pose (a motion beyond the refinement bounds is a new move, judged below).
-  if (settling && settled && within_refinement && !watch.provisional) {
-    const bool agrees = std::abs(common::RadToDeg(refinement.yaw_rad)) <= kAgreeYawDeg &&
-                        std::hypot(refinement.x_m, refinement.y_m) <= kAgreeTranslationM;
-    if (!agrees) {
-      Correct(watch, now_ns, "background", watch.world_from_sensor * refinement,
-              MovedCovariance(watch, v.covariance), "refined by the background: " + v.reason, true);
-    } else if (watch.state == WatchState::kSettling) {
-      watch.state = WatchState::kWatched;
-    }
-    watch.background_refined = true;
-    return;
-  }
-  if (watch.provisional && settled) {
-    // Each settled snapshot refines a pose from tracks until one agrees with it: the tracker's
-    // background has then stopped changing. (A mixed one would pull it towards the old scene.)
-    const Pose2 motion = refinement;
-    const bool agrees = std::abs(common::RadToDeg(motion.yaw_rad)) <= kAgreeYawDeg &&
-                        std::hypot(motion.x_m, motion.y_m) <= kAgreeTranslationM;
-    if (!agrees) {
-      Correct(watch, now_ns, "background", watch.world_from_sensor * motion,
-              MovedCovariance(watch, v.covariance), "refined by the background: " + v.reason, true);
-      watch.provisional = true;
+  // After a move every snapshot that aligns with the reference scene as a whole refines the pose,
+  // whatever the verdict says of the motion's significance (the question here is where the sensor
+  // is, not whether it moved): within relearn_hold_s of the move (a settled snapshot may still
+  // hold a few old returns, or lag the move: see background_time_constant_s) and, for a pose from
+  // tracks, until one agrees with it. Each refinement takes the newest snapshot, combined with the
+  // tracks' estimate since the flag by covariance; a snapshot short of settled_min_inliers counts
+  // only that way (its unabsorbed old returns are in its covariance). A motion beyond the
+  // refinement bounds is a new move, judged below.
+  const bool aligned_whole = !v.partial && v.inliers_after >= v.inliers_before &&
+                             v.inliers_after >= options_.correct_min_inliers;
+  const bool whole_settled = aligned_whole && v.inliers_after >= options_.settled_min_inliers;
+  const bool usable = whole_settled || (aligned_whole && watch.tracks_estimate.has_value());
+  if ((settling || watch.provisional) && usable && (watch.provisional || within_refinement)) {
+    const bool was_provisional = watch.provisional;
+    const Refined refined = RefineAfterMove(watch, refinement, v, now_ns);
+    const Pose2 change = watch.world_from_sensor.inverse() * refined.world_from_sensor;
+    const bool agrees = std::abs(common::RadToDeg(change.yaw_rad)) <= kAgreeYawDeg &&
+                        std::hypot(change.x_m, change.y_m) <= kAgreeTranslationM;
+    // Agreement says the tracker's background stopped changing only once it can no longer lag
+    // the move by more than agreement (a lagging background changes by little per snapshot):
+    // until then each snapshot refines a pose from tracks.
+    const bool lag_small =
+        common::RadToDeg(refined.lag_rad) <= kAgreeYawDeg && refined.lag_m <= kAgreeTranslationM;
+    if (refined.tracks_left_out) watch.tracks_estimate.reset();
+    if (!agrees || (was_provisional && !lag_small)) {
+      Correct(watch, now_ns, "background", refined.world_from_sensor, refined.covariance,
+              "refined by the background: " + refined.detail, whole_settled);
+      // A pose from tracks is refined until a snapshot agrees with it: the tracker's background
+      // has then stopped changing.
+      watch.provisional = was_provisional;
     } else {
-      watch.provisional = false;
-      watch.state = WatchState::kWatched;
+      if (lag_small) watch.provisional = false;
+      if (watch.state == WatchState::kSettling && whole_settled) {
+        watch.state = WatchState::kWatched;
+      }
     }
     watch.background_refined = true;
     return;
@@ -502,6 +522,68 @@ void Monitor::Update(common::UtcNs now_ns, const FrameSource& source) {
   }
 }
 
+Monitor::Refined Monitor::RefineAfterMove(const SensorWatch& watch, const Pose2& refinement,
+                                          const BackgroundVerdict& v, common::UtcNs now_ns) const {
+  const Pose2 snapshot_pose = watch.world_from_sensor * refinement;
+  // The lag: beams whose range changed by less than the tracker's margin follow the change with
+  // its time constant (a share exp(-t / tau) of the move left after t seconds; the flag comes
+  // after the move, so t from the flag bounds it from below), and until the tracker absorbs
+  // nearer returns the points off the scene may be old ones, each pulling the motion towards the
+  // old pose (at most their share of it).
+  const double since_flag_s = std::max(0.0, static_cast<double>(now_ns - watch.flagged_ns) * 1e-9);
+  const double lag = std::exp(-since_flag_s / options_.background_time_constant_s) +
+                     (since_flag_s < options_.background_absorb_after_s
+                          ? std::clamp(1.0 - v.inliers_after, 0.0, 1.0)
+                          : 0.0);
+  const Pose2 move = watch.pose_before_move.inverse() * snapshot_pose;
+  const double lag_m = lag * std::hypot(move.x_m, move.y_m);
+  const double lag_rad = lag * std::abs(move.yaw_rad);
+  Eigen::Matrix3d motion_covariance = v.covariance;
+  motion_covariance(0, 0) += lag_m * lag_m;
+  motion_covariance(1, 1) += lag_m * lag_m;
+  motion_covariance(2, 2) += lag_rad * lag_rad;
+  Eigen::Matrix3d j = Eigen::Matrix3d::Identity();
+  j.topLeftCorner<2, 2>() = watch.world_from_sensor.rotation();
+  const Eigen::Matrix3d snapshot_covariance = Symmetric(j * motion_covariance * j.transpose());
+  Refined out{snapshot_pose, Symmetric(watch.covariance_before_move + snapshot_covariance),
+              fmt::format("{:.0f}% of {} points on the reference scene after a motion of {} "
+                          "({:.1f} s after the flag, lag up to {:.0f}% of the move)",
+                          100.0 * v.inliers_after, v.points, MotionText(refinement), since_flag_s,
+                          100.0 * lag)};
+  out.lag_m = lag_m;
+  out.lag_rad = lag_rad;
+  if (!watch.tracks_estimate) return out;
+  // The information-weighted mean of the snapshot's pose and the tracks' (independent errors).
+  const Pose2& tracks = *watch.tracks_estimate;
+  const Eigen::Matrix3d sum = snapshot_covariance + watch.tracks_estimate_covariance;
+  const Eigen::Vector3d difference(tracks.x_m - snapshot_pose.x_m, tracks.y_m - snapshot_pose.y_m,
+                                   common::AngleDiff(tracks.yaw_rad, snapshot_pose.yaw_rad));
+  const Eigen::LDLT<Eigen::Matrix3d> ldlt(sum);
+  if (ldlt.info() != Eigen::Success || !(ldlt.vectorD().minCoeff() > 0.0)) {
+    return out;
+  }
+  const double chi2 = difference.dot(ldlt.solve(difference));
+  if (!(chi2 <= options_.combine_max_chi2)) {
+    // They disagree beyond both covariances: the tracks are bent (a tracker re-learning its
+    // background merges wall pieces with people), the scene as a whole is not.
+    out.detail += fmt::format(
+        ", the tracks' estimate {:+.2f} deg, {:.3f} m from it left out (chi2 {:.0f})",
+        common::RadToDeg(difference.z()), std::hypot(difference.x(), difference.y()), chi2);
+    out.tracks_left_out = true;
+    return out;
+  }
+  const Eigen::Matrix3d gain = snapshot_covariance * ldlt.solve(Eigen::Matrix3d::Identity());
+  const Eigen::Vector3d step = gain * difference;
+  out.world_from_sensor = Pose2{snapshot_pose.x_m + step.x(), snapshot_pose.y_m + step.y(),
+                                common::NormalizeAngle(snapshot_pose.yaw_rad + step.z())};
+  out.covariance =
+      Symmetric(watch.covariance_before_move + snapshot_covariance - gain * snapshot_covariance);
+  out.detail +=
+      fmt::format(", combined with the tracks' estimate {:+.2f} deg, {:.3f} m from it",
+                  common::RadToDeg(difference.z()), std::hypot(difference.x(), difference.y()));
+  return out;
+}
+
 Eigen::Matrix3d Monitor::MovedCovariance(const SensorWatch& watch,
                                          const Eigen::Matrix3d& motion_covariance) {
   Eigen::Matrix3d j = Eigen::Matrix3d::Identity();
@@ -519,6 +601,9 @@ void Monitor::Flag(SensorWatch& watch, common::UtcNs now_ns, const std::string& 
   watch.pending_relearn.reset();
   watch.background_candidate.reset();
   watch.background_refined = false;
+  watch.pose_before_move = watch.world_from_sensor;
+  watch.covariance_before_move = watch.covariance;
+  watch.tracks_estimate.reset();
   watch.detail = detail;
   ++watch.moves;
   // The others' track checks compared them with this sensor's tracks too: count again without.
@@ -538,6 +623,18 @@ void Monitor::Correct(SensorWatch& watch, common::UtcNs now_ns, const std::strin
   if (watch.state == WatchState::kMoved) watch.tracks_valid_from_ns = watch.flagged_ns;
   watch.world_from_sensor = world_from_sensor;
   watch.covariance = covariance;
+  if (method == "tracks") {
+    // Tracks since a flag come from a tracker that re-learns its background: besides their
+    // noise they share a bend of unknown size (see tracks_bias_sigma_m).
+    watch.tracks_estimate = world_from_sensor;
+    watch.tracks_estimate_covariance = covariance;
+    const double bias_rad = common::DegToRad(options_.tracks_bias_sigma_deg);
+    watch.tracks_estimate_covariance(0, 0) +=
+        options_.tracks_bias_sigma_m * options_.tracks_bias_sigma_m;
+    watch.tracks_estimate_covariance(1, 1) +=
+        options_.tracks_bias_sigma_m * options_.tracks_bias_sigma_m;
+    watch.tracks_estimate_covariance(2, 2) += bias_rad * bias_rad;
+  }
   // Fused again once its tracker has re-learned its background (see kSettling).
   if (settled) {
     watch.state = WatchState::kWatched;

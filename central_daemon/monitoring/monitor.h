@@ -34,10 +34,17 @@
 //     - else the tracks since the flag (from correction_min_tracks_s of them on, every
 //       track_period_s): EstimateFromTracks started from the pose the detection suggested, with
 //       every other pose fixed (the calibration's pairwise association, refit and MSAC search).
-//   A pose corrected from tracks is refined by each settled snapshot after it until one agrees
-//   with it (event kCorrected again, method "background"); so is one corrected from the
-//   background, by every settled snapshot within relearn_hold_s of the move whose motion stays
-//   within the refinement bounds (a settled snapshot may still hold a few old returns).
+//   After a correction, every snapshot that aligns with the reference as a whole refines the
+//   pose (event kCorrected again, method "background"), whatever its verdict on the motion's
+//   significance: within relearn_hold_s of the move (within the refinement bounds) and, for a
+//   pose from tracks, until one agrees with it. The snapshot's pose carries the covariance of its
+//   lag (its tracker's background follows a small range change with a time constant and absorbs
+//   nearer returns only after a while: background_time_constant_s, background_absorb_after_s)
+//   and is combined with the tracks' estimate since the flag, if any, by covariance (their bend
+//   while the tracker re-learns: tracks_bias_sigma_*); when the two disagree beyond both
+//   covariances (combine_max_chi2) the snapshot alone counts. A snapshot with fewer than
+//   settled_min_inliers on the scene (a viewpoint moved by half a metre sees parts the reference
+//   does not) counts only against such a tracks' estimate.
 //   Only one sensor is flagged by tracks per check, and only against at least two other watched
 //   sensors: when one sensor moved, the others' tracks are compared with its tracks too and look a
 //   little off; once it is flagged and left out, they agree again (every sensor's strikes start
@@ -93,6 +100,24 @@ struct MonitorOptions {
   // move) when this share of its points lies on the reference scene under the ICP's motion; such
   // a snapshot refines a pose that came from tracks.
   double settled_min_inliers = 0.97;
+  // The tracker's background follows a range change within its margin with this time constant
+  // (the tracker's background.track_time_constant_s): a snapshot t seconds after a move still
+  // lags it by up to exp(-t / this) of the move ...
+  double background_time_constant_s = 10.0;
+  // ... and until the tracker absorbs nearer returns (its absorb_after_s) the snapshot's points
+  // off the scene may be old returns, each pulling its motion towards the old pose. Both are part
+  // of the covariance of the pose a snapshot gives after a move (t from the flag, which comes
+  // after the move).
+  double background_absorb_after_s = 30.0;
+  // The tracks since a flag come from a tracker that is re-learning its background (wall pieces
+  // merge with people near it): a bend they share, of up to correction_max_rms_m, is part of the
+  // covariance of a pose from them when it is combined with a snapshot's (the benchmark's track
+  // corrections were 0.2-0.7 degrees / up to 0.1 m off).
+  double tracks_bias_sigma_m = 0.05;
+  double tracks_bias_sigma_deg = 0.5;
+  // A snapshot's pose and the tracks' that disagree beyond both covariances (chi^2 of the
+  // difference against their sum above this): the tracks are bent, the snapshot alone counts.
+  double combine_max_chi2 = 16.0;
   // A track correction uses the tracks since the flag, once there are this many seconds of them.
   double correction_min_tracks_s = 8.0;
   // ... and at most this many (the newest).
@@ -189,6 +214,13 @@ struct SensorWatch {
   Eigen::Vector3d baseline_sum = Eigen::Vector3d::Zero();
   // A settled snapshot refined the pose since the last flag: the tracks no longer refine it.
   bool background_refined = false;
+  // Since the last flag: the pose and covariance in use when it was flagged, and the tracks'
+  // own estimate of the new pose (kept apart from the snapshots': their errors are independent,
+  // and each snapshot after a move is combined with it by covariance).
+  Pose2 pose_before_move;
+  Eigen::Matrix3d covariance_before_move = Eigen::Matrix3d::Zero();
+  std::optional<Pose2> tracks_estimate;
+  Eigen::Matrix3d tracks_estimate_covariance = Eigen::Matrix3d::Zero();
 };
 
 class Monitor {
@@ -227,6 +259,19 @@ class Monitor {
   // rotated into the world.
   static Eigen::Matrix3d MovedCovariance(const SensorWatch& watch,
                                          const Eigen::Matrix3d& motion_covariance);
+  // The pose a snapshot taken after the last move gives (`refinement` from the pose in use), with
+  // the covariance of its lag (see background_time_constant_s), combined with the tracks'
+  // estimate since the flag when there is one (an information-weighted mean).
+  struct Refined {
+    Pose2 world_from_sensor;
+    Eigen::Matrix3d covariance;
+    std::string detail;
+    bool tracks_left_out = false;  // they disagreed (combine_max_chi2)
+    double lag_m = 0.0;            // how far the snapshot may still lag the move
+    double lag_rad = 0.0;
+  };
+  Refined RefineAfterMove(const SensorWatch& watch, const Pose2& refinement,
+                          const BackgroundVerdict& verdict, common::UtcNs now_ns) const;
   std::vector<PlacedFrames> Others(
       const std::string& sensor_id,
       const std::map<std::string, std::vector<daemon::TrackFrameData>>& frames) const;

@@ -158,6 +158,61 @@ TEST(Monitor, SnapshotsThatMixTheOldSceneWithTheNewNeverSetAWrongPose) {
   EXPECT_FALSE(monitor.Excluded("s2"));
 }
 
+TEST(Monitor, APoseFromBentTracksIsRefinedBySnapshotsShortOfSettled) {
+  // Where the background cannot flag (no significant motion: background min_chi2 1e12), the
+  // tracks flag a 2 degree turn and correct it from the tracks since the flag, which the moved
+  // sensor's tracker bends while it re-learns its background: here they place it 0.6 degrees
+  // off. The snapshots that follow hold the new scene with a few old returns (short of
+  // settled_min_inliers), and their verdict is "scene changed" (the motion is never
+  // significant). They must still set the pose where the scene as a whole puts it.
+  MonitorOptions options;
+  options.background.min_chi2 = 1e12;
+  Monitor monitor(options);
+  monitor.SetPoses(Calibrated(), References());
+  const Pose2 bumped = kS2 * Pose2{0.0, 0.0, common::DegToRad(2.0)};
+  const Pose2 bent = bumped * Pose2{0.0, 0.0, common::DegToRad(0.6)};
+  const FakeFrames frames(100.0, {{0.0, kS2}, {20.0, bent}});
+  std::uint32_t id = 2;
+  common::UtcNs flagged = 0, corrected_by_tracks = 0;
+  double inliers = 0.0;
+  for (double t = 1.0; t <= 90.0; t += 1.0) {
+    if (t >= 50.0 && static_cast<int>(t) % 4 == 2) {
+      // Every 16th beam still holds a nearer return of the old scene, not yet absorbed.
+      daemon::BackgroundScan scene = Snapshot(Room(), bumped, 0.005, 30 + id, id);
+      for (std::size_t i = 0; i < scene.ranges_mm.size(); i += 16) {
+        scene.ranges_mm[i] = scene.ranges_mm[i] * 7 / 10;
+      }
+      monitor.OnBackground("s2", scene, At(t));
+      ++id;
+      // What the check makes of it at the expected pose (for the message below).
+      inliers =
+          CheckBackgrounds(References().at("s2"), scene, options.background, kS2.inverse() * bumped)
+              .inliers_after;
+    }
+    monitor.Update(At(t), frames);
+    for (const MonitorEvent& e : monitor.TakeEvents()) {
+      ASSERT_EQ(e.sensor_id, "s2") << e.detail;
+      if (e.kind == MonitorEventKind::kMoved) flagged = e.stamp_ns;
+      if (e.kind == MonitorEventKind::kCorrected && e.method == "tracks" && !corrected_by_tracks) {
+        corrected_by_tracks = e.stamp_ns;
+        ASSERT_TRUE(e.after.has_value());
+        // The failure mode: the tracks' pose is the bent one.
+        EXPECT_GT(common::RadToDeg(common::RotationDistanceRad(*e.after, bumped)), 0.4) << e.detail;
+      }
+    }
+  }
+  ASSERT_NE(flagged, 0);
+  ASSERT_NE(corrected_by_tracks, 0);
+  EXPECT_LT(corrected_by_tracks, At(50.0));
+  EXPECT_GT(inliers, options.correct_min_inliers);
+  EXPECT_LT(inliers, options.settled_min_inliers) << "the snapshots were meant to be unsettled";
+  const Pose2 final_pose = Watch(monitor, "s2").world_from_sensor;
+  EXPECT_LT(common::RadToDeg(common::RotationDistanceRad(final_pose, bumped)), 0.1)
+      << Watch(monitor, "s2").detail;
+  EXPECT_LT(common::TranslationDistanceM(final_pose, bumped), 0.02);
+  EXPECT_EQ(Watch(monitor, "s2").moves, 1u);
+}
+
 TEST(Monitor, WithoutBackgroundsTheTracksFlagAndCorrect) {
   MonitorOptions options;
   Monitor monitor(options);
@@ -298,6 +353,15 @@ TEST(Monitor, OptionsAreValidated) {
   o = {};
   o.background.min_yaw_deg = -1;
   EXPECT_NE(Validate(o).value_or("").find("background.min_yaw_deg"), std::string::npos);
+  o = {};
+  o.background_time_constant_s = 0.0;
+  EXPECT_NE(Validate(o).value_or("").find("background_time_constant_s"), std::string::npos);
+  o = {};
+  o.combine_max_chi2 = std::nan("");
+  EXPECT_NE(Validate(o).value_or("").find("combine_max_chi2"), std::string::npos);
+  o = {};
+  o.tracks_bias_sigma_deg = -1.0;
+  EXPECT_NE(Validate(o).value_or("").find("tracks_bias_sigma_deg"), std::string::npos);
 }
 
 }  // namespace
