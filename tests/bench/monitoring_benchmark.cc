@@ -10,6 +10,12 @@
 //
 //   monitoring_benchmark --tool LRFNET --tracker TRACKER --daemon LRFNETD [--seeds 5]
 //                        [--out results/monitoring_benchmark.md] [--only CASE] [--keep yes]
+//                        [--seed K] [--duration-s 100] [--tracker-config FILE]
+//
+// --seed runs only seed K (a row's worst run again); --duration-s replays longer runs (the move
+// still between 35 s and 65 s) to see what a correction becomes with more time;
+// --tracker-config runs the trackers with other options (e.g. the track covariances of an
+// earlier tracker, to see where an unmoved sensor's track chi^2 comes from).
 //
 // Per case: runs flagged, time from the move to the flag (gateway time), the method that flagged,
 // the error of the corrected pose against the new truth (the motion the daemon applied to the
@@ -57,7 +63,6 @@ std::string ReadText(const fs::path& path) {
   return text.str();
 }
 
-constexpr double kDurationS = 100.0;
 constexpr double kCalibrationS = 40.0;
 
 // The room; `s2_moves` and `changes` are YAML flow lists (possibly empty).
@@ -121,7 +126,8 @@ std::string Num(double v, const char* format) {
 
 // Simulates `scenario` into dir/sim and replays each capture through the tracker into dir/ID.rec.
 bool SimulateAndTrack(const fs::path& dir, const std::string& scenario, const std::string& tool,
-                      const std::string& tracker, const std::string& log) {
+                      const std::string& tracker, const std::string& log,
+                      const std::string& tracker_config = "") {
   fs::create_directories(dir);
   std::ofstream(dir / "scenario.yaml") << scenario;
   if (RunProcess({tool, "sim", (dir / "scenario.yaml").string(), "--out", (dir / "sim").string(),
@@ -130,10 +136,15 @@ bool SimulateAndTrack(const fs::path& dir, const std::string& scenario, const st
     return false;
   }
   for (const char* id : {"s1", "s2", "s3"}) {
-    if (RunProcess({tracker, "--replay", (dir / "sim" / (std::string(id) + ".pcap")).string(),
-                    "--sensor-id", id, "--out", (dir / (std::string(id) + ".rec")).string(),
-                    "--log-level", "warn"},
-                   log) != 0) {
+    std::vector<std::string> args = {
+        tracker, "--replay", (dir / "sim" / (std::string(id) + ".pcap")).string(), "--sensor-id",
+        id,      "--out",    (dir / (std::string(id) + ".rec")).string(),          "--log-level",
+        "warn"};
+    if (!tracker_config.empty()) {
+      args.push_back("--config");
+      args.push_back(tracker_config);
+    }
+    if (RunProcess(args, log) != 0) {
       return false;
     }
   }
@@ -147,6 +158,13 @@ int main(int argc, char** argv) {
   const std::string tracker = Arg(argc, argv, "--tracker", "");
   const std::string daemon = Arg(argc, argv, "--daemon", "");
   const int seeds = std::stoi(Arg(argc, argv, "--seeds", "5"));
+  const int only_seed = std::stoi(Arg(argc, argv, "--seed", "0"));
+  const std::string tracker_config = Arg(argc, argv, "--tracker-config", "");
+  const double duration_s = std::stod(Arg(argc, argv, "--duration-s", "100"));
+  if (!(duration_s >= 70.0 && duration_s <= 3600.0)) {
+    std::fprintf(stderr, "--duration-s must be in [70, 3600]\n");
+    return 2;
+  }
   const std::string out_path = Arg(argc, argv, "--out", "");
   if (tool.empty() || tracker.empty() || daemon.empty()) {
     std::fprintf(stderr,
@@ -180,10 +198,11 @@ int main(int argc, char** argv) {
   std::map<std::string, Tally> tallies;
 
   for (int seed = 1; seed <= seeds; ++seed) {
+    if (only_seed != 0 && seed != only_seed) continue;
     // The site's calibration, from 40 s before any move (same room and seed).
     const fs::path calib_dir = work / ("calibration_" + std::to_string(seed));
-    if (!SimulateAndTrack(calib_dir, Scenario(seed, kCalibrationS, "[]", "[]"), tool, tracker,
-                          log) ||
+    if (!SimulateAndTrack(calib_dir, Scenario(seed, kCalibrationS, "[]", "[]"), tool, tracker, log,
+                          tracker_config) ||
         RunProcess(
             {tool, "calibrate", (calib_dir / "s1.rec").string(), (calib_dir / "s2.rec").string(),
              (calib_dir / "s3.rec").string(), "--out", (calib_dir / "calibration.yaml").string()},
@@ -241,7 +260,8 @@ int main(int argc, char** argv) {
         daemon_args.push_back("--config");
         daemon_args.push_back(tracks_alone_config.string());
       }
-      if (!SimulateAndTrack(dir, Scenario(seed, kDurationS, moves, changes), tool, tracker, log) ||
+      if (!SimulateAndTrack(dir, Scenario(seed, duration_s, moves, changes), tool, tracker, log,
+                            tracker_config) ||
           RunProcess(daemon_args, log) != 0) {
         std::fprintf(stderr, "%s seed %d: the chain failed (see %s)\n", c.name.c_str(), seed,
                      log.c_str());
@@ -265,9 +285,12 @@ int main(int argc, char** argv) {
         ++tally.failed;
         continue;
       }
+      std::string run_chi2;
       for (const auto& [id, sensor] : stats["monitoring"]["sensors"].items()) {
         if (id == "s2" && !c.furniture) continue;
-        tally.max_track_chi2 = std::max(tally.max_track_chi2, sensor.value("max_track_chi2", 0.0));
+        const double chi2 = sensor.value("max_track_chi2", 0.0);
+        tally.max_track_chi2 = std::max(tally.max_track_chi2, chi2);
+        run_chi2 += " " + id + " " + Num(chi2, "%.1f");
       }
       std::int64_t flagged_ns = 0, corrected_ns = 0;
       for (const auto& e : stats["monitoring"]["history"]) {
@@ -297,7 +320,7 @@ int main(int argc, char** argv) {
         flagged_ns = stamp;
         ++tally.methods[e.value("method", "?")];
       }
-      tally.watched_sensor_s += c.furniture ? 3.0 * kDurationS : 2.0 * kDurationS + at_s;
+      tally.watched_sensor_s += c.furniture ? 3.0 * duration_s : 2.0 * duration_s + at_s;
       if (flagged_ns != 0) {
         ++tally.flagged;
         tally.flag_delay_s.push_back(static_cast<double>(flagged_ns - move_ns) * 1e-9);
@@ -354,7 +377,7 @@ int main(int argc, char** argv) {
         // Against the truth at the end, in s1's frame (the calibration's world is its reference
         // sensor's frame), as `lrfnet eval`.
         calib::PoseFile truth_end;
-        if (calib::TruthPosesAt(truth_text, kDurationS, &truth_end, &error)) {
+        if (calib::TruthPosesAt(truth_text, duration_s, &truth_end, &error)) {
           const calib::EvalResult eval = calib::Evaluate(final_file, truth_end, "s1");
           for (const calib::SensorError& se : eval.sensors) {
             if (se.id != "s2") continue;
@@ -364,12 +387,14 @@ int main(int argc, char** argv) {
         }
       }
       std::fprintf(
-          stderr, "%s seed %d: move at %.1f s, flagged %s, corrected %s, motion error %s / %s\n",
+          stderr,
+          "%s seed %d: move at %.1f s, flagged %s, corrected %s, motion error %s / %s, track "
+          "chi2 max of the unmoved:%s\n",
           c.name.c_str(), seed, at_s,
           flagged_ns ? Num(static_cast<double>(flagged_ns - move_ns) * 1e-9, "%.1f s after").c_str()
                      : "no",
           corrected_ns ? "yes" : "no", Num(run_motion_err_deg, "%.3f°").c_str(),
-          Num(run_motion_err_m, "%.3f m").c_str());
+          Num(run_motion_err_m, "%.3f m").c_str(), run_chi2.c_str());
     }
   }
 
@@ -379,7 +404,9 @@ int main(int argc, char** argv) {
         << " seeds per case. Per seed: a 12 x 8 m room with three TiM561, two people walking "
            "loops and two pieces of furniture; the site is calibrated (`lrfnet calibrate`) from "
            "40 s without a move, then `lrfnetd --input --calibration-in` (monitoring on, default "
-           "options) replays 100 s of the same room in which, at a random time between 35 and "
+           "options) replays "
+        << duration_s
+        << " s of the same room in which, at a random time between 35 and "
            "65 s, s2 is turned or pushed (into the room, random direction within 45° of its "
            "middle), or only the furniture moves (a "
            "cabinet taken away, a cart parked). Times are gateway time from the move to the "
