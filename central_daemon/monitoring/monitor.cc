@@ -545,7 +545,7 @@ Monitor::Refined Monitor::RefineAfterMove(const SensorWatch& watch, const Pose2&
   Eigen::Matrix3d j = Eigen::Matrix3d::Identity();
   j.topLeftCorner<2, 2>() = watch.world_from_sensor.rotation();
   const Eigen::Matrix3d snapshot_covariance = Symmetric(j * motion_covariance * j.transpose());
-  Refined out{snapshot_pose, Symmetric(watch.covariance_before_move + snapshot_covariance),
+  Refined out{snapshot_pose, MovedCovariance(watch, v.covariance),
               fmt::format("{:.0f}% of {} points on the reference scene after a motion of {} "
                           "({:.1f} s after the flag, lag up to {:.0f}% of the move)",
                           100.0 * v.inliers_after, v.points, MotionText(refinement), since_flag_s,
@@ -576,8 +576,9 @@ Monitor::Refined Monitor::RefineAfterMove(const SensorWatch& watch, const Pose2&
   const Eigen::Vector3d step = gain * difference;
   out.world_from_sensor = Pose2{snapshot_pose.x_m + step.x(), snapshot_pose.y_m + step.y(),
                                 common::NormalizeAngle(snapshot_pose.yaw_rad + step.z())};
-  out.covariance =
-      Symmetric(watch.covariance_before_move + snapshot_covariance - gain * snapshot_covariance);
+  // The combination's covariance only weighs and judges; the pose keeps the one any snapshot's
+  // correction gives (the fused filter takes it as the prior of what it learns of the sensor).
+  out.covariance = MovedCovariance(watch, v.covariance);
   out.detail +=
       fmt::format(", combined with the tracks' estimate {:+.2f} deg, {:.3f} m from it",
                   common::RadToDeg(difference.z()), std::hypot(difference.x(), difference.y()));
@@ -602,7 +603,6 @@ void Monitor::Flag(SensorWatch& watch, common::UtcNs now_ns, const std::string& 
   watch.background_candidate.reset();
   watch.background_refined = false;
   watch.pose_before_move = watch.world_from_sensor;
-  watch.covariance_before_move = watch.covariance;
   watch.tracks_estimate.reset();
   watch.detail = detail;
   ++watch.moves;

@@ -214,11 +214,10 @@ struct SensorWatch {
   Eigen::Vector3d baseline_sum = Eigen::Vector3d::Zero();
   // A settled snapshot refined the pose since the last flag: the tracks no longer refine it.
   bool background_refined = false;
-  // Since the last flag: the pose and covariance in use when it was flagged, and the tracks'
+  // Since the last flag: the pose in use when it was flagged, and the tracks'
   // own estimate of the new pose (kept apart from the snapshots': their errors are independent,
   // and each snapshot after a move is combined with it by covariance).
   Pose2 pose_before_move;
-  Eigen::Matrix3d covariance_before_move = Eigen::Matrix3d::Zero();
   std::optional<Pose2> tracks_estimate;
   Eigen::Matrix3d tracks_estimate_covariance = Eigen::Matrix3d::Zero();
 };
