@@ -1,7 +1,8 @@
 // Calibration accuracy and speed over the shipped scenarios, through the whole chain:
-// `lrfnet sim SCENARIO --seed N` → `lrfnet-tracker --replay` per capture (centre-of-mass and
-// ellipse measurements) → Calibrate (our method with and without ICP and joint refinement, with
-// uniform and N/d weights; both baselines) → errors against the truth (as `lrfnet eval`).
+// `lrfnet sim SCENARIO --seed N` → `lrfnet-tracker --replay` per capture (centre-of-mass,
+// ellipse and shape-fit measurements, the last the tracker's default) → Calibrate (our method
+// with and without ICP and joint refinement, with uniform and N/d weights; both baselines) →
+// errors against the truth (as `lrfnet eval`).
 //
 //   calibration_benchmark --tool LRFNET --tracker LRFNET_TRACKER --scenarios DIR
 //                         [--seeds 3] [--only NAME] [--out results/calibration_benchmark.md]
@@ -51,9 +52,23 @@ using namespace lrfnet;
 using bench::Arg;
 using bench::RunProcess;
 
+// The tracker runs per sensor: the benchmark's name of each (in file names and Variant) and its
+// measurement.kind in the tracker's configuration.
+constexpr const char* kMeasurements[] = {"ellipse", "com", "shape_fit"};
+
+std::string TrackerKind(const std::string& measurement) {
+  return measurement == "com" ? "center_of_mass" : measurement;
+}
+
+std::string MeasurementLabel(const std::string& measurement) {
+  if (measurement == "com") return "CoM";
+  if (measurement == "shape_fit") return "shape fit";
+  return measurement;
+}
+
 struct Variant {
   std::string name;
-  std::string measurement;  // "ellipse" or "com": which tracker run
+  std::string measurement;  // "ellipse", "com" or "shape_fit": which tracker run
   calib::CalibrationOptions options;
 };
 
@@ -79,8 +94,8 @@ std::vector<Variant> Variants(bool diagnostic) {
       true, true);
   // The same before walls won over biased tracks (no bias allowance in the ICP test, conflicts
   // not widened, the refinement kept whenever it lowers its own cost).
-  for (const char* measurement : {"ellipse", "com"}) {
-    add(std::string("ours, ") + (measurement == std::string("com") ? "CoM" : "ellipse") +
+  for (const char* measurement : kMeasurements) {
+    add(std::string("ours, ") + MeasurementLabel(measurement) +
             ", ICP + refinement, before (tracks over walls)",
         measurement, calib::Method::kQuenzel, true, true, false);
     out.back().options.icp_track_bias_sigma_m = 0.0;
@@ -89,14 +104,18 @@ std::vector<Variant> Variants(bool diagnostic) {
   }
   // The same with the joint refinement's pose taken for a sensor hanging on a weak pair whatever
   // the pair's own covariance says of the move.
-  for (const char* measurement : {"ellipse", "com"}) {
-    add(std::string("ours, ") + (measurement == std::string("com") ? "CoM" : "ellipse") +
+  for (const char* measurement : kMeasurements) {
+    add(std::string("ours, ") + MeasurementLabel(measurement) +
             ", ICP + refinement, before (refinement moves weak leaves)",
         measurement, calib::Method::kQuenzel, true, true, false);
     out.back().options.weak_refine_min_move_sigma = 0.0;
   }
   add("ours, CoM, ICP + refinement", "com", calib::Method::kQuenzel, true, true, false);
   add("ours, CoM, neither", "com", calib::Method::kQuenzel, false, false, false);
+  // The tracker's default measurement (measurement.kind shape_fit).
+  add("ours, shape fit, ICP + refinement", "shape_fit", calib::Method::kQuenzel, true, true, false);
+  add("ours, shape fit, ICP", "shape_fit", calib::Method::kQuenzel, true, false, false);
+  add("ours, shape fit, neither", "shape_fit", calib::Method::kQuenzel, false, false, false);
   add("spectral [21], ellipse, N/d weights", "ellipse", calib::Method::kSpectral, true, false,
       true);
   add("Schenk et al., ellipse", "ellipse", calib::Method::kSchenk, true, false, true);
@@ -199,7 +218,8 @@ int main(int argc, char** argv) {
   std::ostringstream table;
   table << "# Calibration benchmark\n\n"
         << "Whole chain per scenario and seed: `lrfnet sim` → `lrfnet-tracker --replay` per "
-           "sensor (centre-of-mass and ellipse measurements) → calibration → errors against "
+           "sensor (centre-of-mass, ellipse and shape-fit measurements; shape fit is the tracker's "
+           "default) → calibration → errors against "
            "the truth in the reference sensor's frame (d_R [deg], d_t [m], over all non-reference "
            "sensors of all seeds; Quenzel et al. Table III). Seeds per scenario: "
         << seeds
@@ -237,10 +257,9 @@ int main(int argc, char** argv) {
         continue;
       }
       std::map<std::string, calib::CalibrationInput> inputs;
-      for (const std::string measurement : {"ellipse", "com"}) {
+      for (const std::string measurement : kMeasurements) {
         const fs::path config = dir / (measurement + ".yaml");
-        std::ofstream(config) << "measurement:\n  kind: "
-                              << (measurement == "com" ? "center_of_mass" : "ellipse") << "\n";
+        std::ofstream(config) << "measurement:\n  kind: " << TrackerKind(measurement) << "\n";
         std::vector<std::string> recordings;
         for (const auto& [id, pose] : truth.sensors) {
           const std::string rec = (dir / (id + "." + measurement + ".rec")).string();
