@@ -572,7 +572,7 @@ Refined Refine(const AlignedTracks& tracks, std::size_t reference,
                const std::vector<const PairEstimate*>& pair_of, const std::vector<Pose2>& poses,
                const std::vector<Eigen::Matrix3d>& covariance, const std::vector<bool>& placed,
                const JointRefineOptions& options, double max_disagreement_sigma,
-               bool keep_pairs_uncertainty, const std::vector<WeakLeaf>& leaves,
+               double max_wall_residual_sigma, bool keep_pairs_uncertainty, const std::vector<WeakLeaf>& leaves,
                double weak_min_move_sigma, const std::vector<std::string>& id) {
   // Pairs aligned on their backgrounds are constraints: without them the tracks' systematic
   // errors would pull wall-accurate poses apart.
@@ -615,6 +615,34 @@ Refined Refine(const AlignedTracks& tracks, std::size_t reference,
         "joint refinement moved {} {:.1f} sigma away from the pairs' least squares (at most "
         "{:.1f}); not applied",
         tracks.sensors[worst].id, worst_sigma, max_disagreement_sigma);
+    return out;
+  }
+  // The same for each wall constraint itself, against the background alignment's own
+  // covariance: the refinement's covariance widens the test above exactly where its robust loss
+  // gave a constraint up (biased tracks of two sensors moving both of them and their walls'
+  // relative pose, each within the sum of the covariances).
+  double worst_wall_sigma = 0.0;
+  const RelativePoseConstraint* worst_wall = nullptr;
+  for (const RelativePoseConstraint& c : constraints) {
+    if (!placed[c.r] || !placed[c.s]) continue;
+    const Pose2 after =
+        out.joint.world_from_sensor[c.s].inverse() * out.joint.world_from_sensor[c.r];
+    const Eigen::Vector3d delta(after.x_m - c.s_from_r.x_m, after.y_m - c.s_from_r.y_m,
+                                common::AngleDiff(after.yaw_rad, c.s_from_r.yaw_rad));
+    const Eigen::LLT<Eigen::Matrix3d> llt(0.5 * (c.covariance + c.covariance.transpose()));
+    if (llt.info() != Eigen::Success) continue;
+    const double d = std::sqrt(std::max(0.0, delta.dot(llt.solve(delta))));
+    if (d > worst_wall_sigma) {
+      worst_wall_sigma = d;
+      worst_wall = &c;
+    }
+  }
+  if (worst_wall != nullptr && worst_wall_sigma > max_wall_residual_sigma) {
+    out.rejected = fmt::format(
+        "joint refinement moved the pair {}-{} {:.1f} sigma off its background alignment (at "
+        "most {:.1f}); not applied",
+        tracks.sensors[worst_wall->r].id, tracks.sensors[worst_wall->s].id, worst_wall_sigma,
+        max_wall_residual_sigma);
     return out;
   }
   out.refined = true;
@@ -890,7 +918,8 @@ GlobalSolution SolveRobust(const AlignedTracks& tracks, std::size_t reference,
         if (options.refine) {
           h.refined = Refine(
               tracks, reference, measurements, h.used, pair_of, h.poses, h.covariance, core.placed,
-              quick, options.refine_max_disagreement_sigma, options.conflicts_widen_covariance,
+              quick, options.refine_max_disagreement_sigma, options.refine_max_wall_residual_sigma,
+              options.conflicts_widen_covariance,
               leaves, options.weak_refine_min_move_sigma, id);
         } else {
           h.refined.poses = h.poses;
@@ -999,7 +1028,7 @@ GlobalSolution SolveRobust(const AlignedTracks& tracks, std::size_t reference,
     best.refined =
         Refine(tracks, reference, measurements, best.used, pair_of, best.poses, best.covariance,
                core.placed, options.joint, options.refine_max_disagreement_sigma,
-               options.conflicts_widen_covariance, leaves, options.weak_refine_min_move_sigma, id);
+               options.refine_max_wall_residual_sigma, options.conflicts_widen_covariance, leaves, options.weak_refine_min_move_sigma, id);
   } else if (!options.refine) {
     best.refined.poses = best.poses;
     best.refined.covariance = best.covariance;
@@ -1079,6 +1108,9 @@ std::optional<std::string> Validate(const CalibrationOptions& options) {
   }
   if (!(options.refine_max_disagreement_sigma > 0.0)) {
     return "refine_max_disagreement_sigma must be > 0";
+  }
+  if (!(options.refine_max_wall_residual_sigma > 0.0)) {
+    return "refine_max_wall_residual_sigma must be > 0";
   }
   if (!(options.weak_refine_min_move_sigma >= 0.0) ||
       !std::isfinite(options.weak_refine_min_move_sigma)) {

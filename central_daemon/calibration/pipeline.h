@@ -7,8 +7,10 @@
 //            pairwise MSAC + verification (eqs. 5-8) → point-to-line ICP on the backgrounds →
 //            L1 rotation averaging (Algorithm 1, node-angle form) → least-squares translations →
 //            joint refinement over all associated observations (Ceres; kept only if it lowers the
-//            cost and moves no sensor placed on walls beyond refine_max_disagreement_sigma; a
-//            sensor hanging on a weak pair moves only beyond weak_refine_min_move_sigma).
+//            cost and moves no sensor placed on walls beyond refine_max_disagreement_sigma, nor,
+//            if set, a pair aligned on walls beyond refine_max_wall_residual_sigma of that
+//            alignment; a sensor hanging on a weak pair moves only beyond
+//            weak_refine_min_move_sigma).
 //   spectral the same pairwise estimates, then weighted spectral relaxation [21] and weighted
 //            least-squares translations (Quenzel et al.'s non-robust comparison).
 //   schenk   Schenk et al.: SVD track association, N/d weights, greedy placement, mass-spring
@@ -25,6 +27,7 @@
 // sensors that are connected are still filled in (calibrated = true) so a caller may show them.
 
 #include <functional>
+#include <limits>
 #include <optional>
 #include <string>
 #include <vector>
@@ -72,6 +75,17 @@ struct CalibrationOptions {
   // larger move means its model of the tracks is wrong (a bias it absorbs into the shared size
   // correction, a wall constraint its robust loss gave up).
   double refine_max_disagreement_sigma = 3.5;
+  // And only if at the refined poses every used pair aligned on the backgrounds keeps its
+  // background alignment within this (Mahalanobis, 3 dof, the alignment's own covariance): the
+  // test above sums in the refinement's covariance, which is wide exactly where its robust loss
+  // gave a wall constraint up, so two sensors with biased tracks (knee-height scanners whose
+  // tracker fits a torso to legs) could both move within it while their walls' relative pose
+  // breaks. inf (the default): not tested. Off because where the tracks carry a bias shared by
+  // every pair between two rooms (office_distributed with shape-fit tracks), the pairs' least
+  // squares it falls back to claims too little uncertainty (errors beyond 3 sigma) where the
+  // refinement's covariance happened to cover them (results/calibration_benchmark.md,
+  // --diagnostic-variants).
+  double refine_max_wall_residual_sigma = std::numeric_limits<double>::infinity();
   // A sensor whose one used pair is weak (a flagged leaf) keeps the pairs' placement, carried along
   // with the sensor it hangs on, unless the joint refinement moves it relative to that sensor
   // farther than this from the weak pair's estimate (Mahalanobis, 3 dof, the pair's covariance;

@@ -4,6 +4,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <random>
 #include <tuple>
 
@@ -610,11 +611,14 @@ TEST(CalibratePipeline, ALeafOnOneWeakPairKeepsThePairsPlacementUnlessTheRefinem
 // where it learnt its background.
 CalibrationOutcome HallWithWallsAndABiasedSensor(double bias_m, double tracks_turn_deg,
                                                  std::vector<SimSensor>* sensors,
-                                                 double others_bias_m = 0.0) {
+                                                 double others_bias_m = 0.0,
+                                                 const CalibrationOptions& given = {},
+                                                 double b_bias_m = 0.0) {
   std::mt19937 rng(16);
   *sensors = Hall();
   for (SimSensor& s : *sensors) s.unknown_bias_m = others_bias_m;
   (*sensors)[2].unknown_bias_m = bias_m;
+  if (b_bias_m != 0.0) (*sensors)[1].unknown_bias_m = b_bias_m;
   std::vector<SimSensor> while_tracking = *sensors;
   while_tracking[2].world_from_sensor.yaw_rad += DegToRad(tracks_turn_deg);
   const std::vector<Walker> walkers = {RandomWalker(rng, 1, 11, 1, 7, 0.0),
@@ -626,7 +630,7 @@ CalibrationOutcome HallWithWallsAndABiasedSensor(double bias_m, double tracks_tu
   for (std::size_t i = 0; i < sensors->size(); ++i) {
     input.sensors[i].background = CastBackground(room, (*sensors)[i].world_from_sensor);
   }
-  CalibrationOptions options;
+  CalibrationOptions options = given;
   options.reference = "a";
   return Calibrate(input, options);
 }
@@ -668,6 +672,47 @@ TEST(CalibratePipeline, WallsPlaceASensorWhoseTracksCarryABiasTheModelDoesNotKno
     if ((e.r == "c" || e.s == "c") && e.used) icp += e.icp_applied ? 1 : 0;
   }
   EXPECT_GE(icp, 2u);
+}
+
+TEST(CalibratePipeline, TheRefinementIsNotKeptWhereItBreaksAPairsWalls) {
+  // b's and c's tracks both put everyone 0.12 m too far from them (two knee-height scanners whose
+  // tracker fits a torso to legs). The per-sensor test is off (it sums the refinement's own
+  // covariance, wide where its robust loss gave a wall constraint up): the wall test alone (off by
+  // default) keeps the walls' placement, and without it the refinement follows the tracks.
+  CalibrationOptions options;
+  options.refine_max_disagreement_sigma = std::numeric_limits<double>::infinity();
+  options.refine_max_wall_residual_sigma = 3.5;
+  std::vector<SimSensor> sensors;
+  const CalibrationOutcome walls = HallWithWallsAndABiasedSensor(0.12, 0.0, &sensors, 0.0, options,
+                                                                 0.12);
+  ASSERT_TRUE(walls.ok) << walls.error;
+  bool said = false;
+  for (const std::string& w : walls.result.warnings) {
+    said |= w.find("off its background alignment") != std::string::npos;
+  }
+  EXPECT_TRUE(said);
+  double worst_walls_m = 0.0;
+  for (std::size_t i = 1; i < sensors.size(); ++i) {
+    const Judged j = Judge(walls, sensors, i);
+    worst_walls_m = std::max(worst_walls_m, j.dt_m);
+    EXPECT_LT(j.dt_m, 0.03) << sensors[i].id;
+    EXPECT_LT(RadToDeg(j.dyaw_rad), 0.2) << sensors[i].id;
+    EXPECT_TRUE(j.covered) << sensors[i].id << " " << j.dt_m << " m " << RadToDeg(j.dyaw_rad)
+                           << " deg";
+  }
+  options.refine_max_wall_residual_sigma = std::numeric_limits<double>::infinity();
+  const CalibrationOutcome tracks = HallWithWallsAndABiasedSensor(0.12, 0.0, &sensors, 0.0,
+                                                                  options, 0.12);
+  ASSERT_TRUE(tracks.ok) << tracks.error;
+  EXPECT_TRUE(tracks.result.refined);
+  double worst_tracks_m = 0.0;
+  for (std::size_t i = 1; i < sensors.size(); ++i) {
+    worst_tracks_m = std::max(worst_tracks_m, Judge(tracks, sensors, i).dt_m);
+  }
+  EXPECT_GT(worst_tracks_m, 2.0 * worst_walls_m);
+  CalibrationOptions bad;
+  bad.refine_max_wall_residual_sigma = 0.0;
+  EXPECT_TRUE(Validate(bad).has_value());
 }
 
 TEST(CalibratePipeline, TracksThatContradictTheWallsLeaveTheirPairsUncertainNotWrong) {

@@ -12,7 +12,8 @@
 // and the accepted pairs against the truth; LRFNET_BENCH_VERBOSE=pairs adds the rejected pairs
 // (their best hypothesis and the clearly different runner-up against the truth, the evidence of
 // each and the negative-evidence counts per range band). --diagnostic-variants adds rows that
-// take the joint refinement apart (its annealed gate, its size correction).
+// take the joint refinement apart (its annealed gate, its size correction) and rows with the
+// refinement's walls test on (refine_max_wall_residual_sigma 3.5, per measurement).
 //
 // Writes one table per scenario like Table III of Quenzel et al. (mean and median d_R [deg] and
 // d_t [m] over all sensors of all seeds, sensors that could not be calibrated counted apart) and
@@ -100,6 +101,7 @@ std::vector<Variant> Variants(bool diagnostic) {
         measurement, calib::Method::kQuenzel, true, true, false);
     out.back().options.icp_track_bias_sigma_m = 0.0;
     out.back().options.refine_max_disagreement_sigma = std::numeric_limits<double>::infinity();
+    out.back().options.refine_max_wall_residual_sigma = std::numeric_limits<double>::infinity();
     out.back().options.conflicts_widen_covariance = false;
   }
   // The same with the joint refinement's pose taken for a sensor hanging on a weak pair whatever
@@ -128,6 +130,14 @@ std::vector<Variant> Variants(bool diagnostic) {
     add("ours, ellipse, ICP + refinement, no size correction", "ellipse", calib::Method::kQuenzel,
         true, true, false);
     out.back().options.joint.estimate_size_correction = false;
+    // The refinement not kept where it moves a pair aligned on walls beyond 3.5 sigma of that
+    // alignment (CalibrationOptions::refine_max_wall_residual_sigma, off by default).
+    for (const char* measurement : kMeasurements) {
+      add(std::string("ours, ") + MeasurementLabel(measurement) +
+              ", ICP + refinement, walls test on the refinement (3.5 sigma)",
+          measurement, calib::Method::kQuenzel, true, true, false);
+      out.back().options.refine_max_wall_residual_sigma = 3.5;
+    }
   }
   return out;
 }
