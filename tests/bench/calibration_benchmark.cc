@@ -1,8 +1,9 @@
 // Calibration accuracy and speed over the shipped scenarios, through the whole chain:
 // `lrfnet sim SCENARIO --seed N` → `lrfnet-tracker --replay` per capture (centre-of-mass,
-// ellipse and shape-fit measurements, the last the tracker's default) → Calibrate (our method
-// with and without ICP and joint refinement, with uniform and N/d weights; both baselines) →
-// errors against the truth (as `lrfnet eval`).
+// ellipse and shape-fit measurements, the last the tracker's default, also with each sensor's
+// mount from the simulator's truth) → Calibrate (our method with and without ICP and joint
+// refinement, with uniform and N/d weights; both baselines) → errors against the truth (as
+// `lrfnet eval`).
 //
 //   calibration_benchmark --tool LRFNET --tracker LRFNET_TRACKER --scenarios DIR
 //                         [--seeds 3] [--only NAME] [--out results/calibration_benchmark.md]
@@ -35,6 +36,7 @@
 #include <fstream>
 #include <limits>
 #include <map>
+#include <set>
 #include <sstream>
 #include <string>
 #include <vector>
@@ -45,6 +47,7 @@
 #include "central_daemon/calibration/pairwise.h"
 #include "central_daemon/calibration/pipeline.h"
 #include "tests/bench/bench_util.h"
+#include "yaml-cpp/yaml.h"
 
 namespace {
 
@@ -55,16 +58,38 @@ using bench::RunProcess;
 
 // The tracker runs per sensor: the benchmark's name of each (in file names and Variant) and its
 // measurement.kind in the tracker's configuration.
-constexpr const char* kMeasurements[] = {"ellipse", "com", "shape_fit"};
+// "shape_fit_mount" is shape fit with each sensor's shape.mount as the simulator's truth says (a
+// knee-height scanner configured for legs); the others run every sensor at the default mount
+// (upper body), as a site that set only measurement.kind would.
+constexpr const char* kMeasurements[] = {"ellipse", "com", "shape_fit", "shape_fit_mount"};
 
 std::string TrackerKind(const std::string& measurement) {
-  return measurement == "com" ? "center_of_mass" : measurement;
+  if (measurement == "com") return "center_of_mass";
+  if (measurement == "shape_fit_mount") return "shape_fit";
+  return measurement;
 }
 
 std::string MeasurementLabel(const std::string& measurement) {
   if (measurement == "com") return "CoM";
   if (measurement == "shape_fit") return "shape fit";
+  if (measurement == "shape_fit_mount") return "shape fit at each sensor's mount";
   return measurement;
+}
+
+// The sensors the simulator mounted at knee height (`devices[].mount: legs` in its truth.yaml).
+std::set<std::string> LegsMounted(const fs::path& truth_yaml) {
+  std::set<std::string> out;
+  try {
+    const YAML::Node root = YAML::LoadFile(truth_yaml.string());
+    for (const YAML::Node& d : root["devices"]) {
+      if (d["mount"] && d["mount"].as<std::string>() == "legs") {
+        out.insert(d["id"].as<std::string>());
+      }
+    }
+  } catch (const YAML::Exception& e) {
+    std::fprintf(stderr, "%s: %s\n", truth_yaml.string().c_str(), e.what());
+  }
+  return out;
 }
 
 struct Variant {
@@ -95,7 +120,7 @@ std::vector<Variant> Variants(bool diagnostic) {
       true, true);
   // The same before walls won over biased tracks (no bias allowance in the ICP test, conflicts
   // not widened, the refinement kept whenever it lowers its own cost).
-  for (const char* measurement : kMeasurements) {
+  for (const char* measurement : {"ellipse", "com", "shape_fit"}) {
     add(std::string("ours, ") + MeasurementLabel(measurement) +
             ", ICP + refinement, before (tracks over walls)",
         measurement, calib::Method::kQuenzel, true, true, false);
@@ -106,7 +131,7 @@ std::vector<Variant> Variants(bool diagnostic) {
   }
   // The same with the joint refinement's pose taken for a sensor hanging on a weak pair whatever
   // the pair's own covariance says of the move.
-  for (const char* measurement : kMeasurements) {
+  for (const char* measurement : {"ellipse", "com", "shape_fit"}) {
     add(std::string("ours, ") + MeasurementLabel(measurement) +
             ", ICP + refinement, before (refinement moves weak leaves)",
         measurement, calib::Method::kQuenzel, true, true, false);
@@ -118,6 +143,10 @@ std::vector<Variant> Variants(bool diagnostic) {
   add("ours, shape fit, ICP + refinement", "shape_fit", calib::Method::kQuenzel, true, true, false);
   add("ours, shape fit, ICP", "shape_fit", calib::Method::kQuenzel, true, false, false);
   add("ours, shape fit, neither", "shape_fit", calib::Method::kQuenzel, false, false, false);
+  add("ours, shape fit at each sensor's mount, ICP + refinement", "shape_fit_mount",
+      calib::Method::kQuenzel, true, true, false);
+  add("ours, shape fit at each sensor's mount, ICP", "shape_fit_mount", calib::Method::kQuenzel,
+      true, false, false);
   add("spectral [21], ellipse, N/d weights", "ellipse", calib::Method::kSpectral, true, false,
       true);
   add("Schenk et al., ellipse", "ellipse", calib::Method::kSchenk, true, false, true);
@@ -132,7 +161,7 @@ std::vector<Variant> Variants(bool diagnostic) {
     out.back().options.joint.estimate_size_correction = false;
     // The refinement not kept where it moves a pair aligned on walls beyond 3.5 sigma of that
     // alignment (CalibrationOptions::refine_max_wall_residual_sigma, off by default).
-    for (const char* measurement : kMeasurements) {
+    for (const char* measurement : {"ellipse", "com", "shape_fit"}) {
       add(std::string("ours, ") + MeasurementLabel(measurement) +
               ", ICP + refinement, walls test on the refinement (3.5 sigma)",
           measurement, calib::Method::kQuenzel, true, true, false);
@@ -229,7 +258,9 @@ int main(int argc, char** argv) {
   table << "# Calibration benchmark\n\n"
         << "Whole chain per scenario and seed: `lrfnet sim` → `lrfnet-tracker --replay` per "
            "sensor (centre-of-mass, ellipse and shape-fit measurements; shape fit is the tracker's "
-           "default) → calibration → errors against "
+           "default; every sensor at the default mount, upper-body height, but in the rows "
+           "`shape fit at each sensor's mount`, where a knee-height sensor runs with `shape.mount: "
+           "legs`) → calibration → errors against "
            "the truth in the reference sensor's frame (d_R [deg], d_t [m], over all non-reference "
            "sensors of all seeds; Quenzel et al. Table III). Seeds per scenario: "
         << seeds
@@ -267,14 +298,24 @@ int main(int argc, char** argv) {
         continue;
       }
       std::map<std::string, calib::CalibrationInput> inputs;
+      const std::set<std::string> legs = LegsMounted(dir / "sim/truth.yaml");
       for (const std::string measurement : kMeasurements) {
+        if (measurement == "shape_fit_mount" && legs.empty()) {
+          inputs[measurement] = inputs["shape_fit"];  // every sensor at the default mount
+          continue;
+        }
         const fs::path config = dir / (measurement + ".yaml");
         std::ofstream(config) << "measurement:\n  kind: " << TrackerKind(measurement) << "\n";
+        const fs::path legs_config = dir / (measurement + ".legs.yaml");
+        std::ofstream(legs_config) << "measurement:\n  kind: " << TrackerKind(measurement)
+                                   << "\nshape:\n  mount: legs\n";
         std::vector<std::string> recordings;
         for (const auto& [id, pose] : truth.sensors) {
+          const bool at_legs = measurement == "shape_fit_mount" && legs.count(id) != 0;
           const std::string rec = (dir / (id + "." + measurement + ".rec")).string();
           if (!(cached && fs::exists(rec)) && RunProcess({tracker, "--replay", (dir / ("sim/" + id + ".pcap")).string(),
-                          "--sensor-id", id, "--out", rec, "--config", config.string(),
+                          "--sensor-id", id, "--out", rec, "--config",
+                          (at_legs ? legs_config : config).string(),
                           "--log-level", "warn"},
                          log) != 0) {
             std::fprintf(stderr, "%s seed %d: tracker %s failed\n", scenario.c_str(), seed,
