@@ -572,8 +572,9 @@ Refined Refine(const AlignedTracks& tracks, std::size_t reference,
                const std::vector<const PairEstimate*>& pair_of, const std::vector<Pose2>& poses,
                const std::vector<Eigen::Matrix3d>& covariance, const std::vector<bool>& placed,
                const JointRefineOptions& options, double max_disagreement_sigma,
-               double max_wall_residual_sigma, bool keep_pairs_uncertainty, const std::vector<WeakLeaf>& leaves,
-               double weak_min_move_sigma, const std::vector<std::string>& id) {
+               double max_wall_residual_sigma, bool keep_pairs_uncertainty,
+               const std::vector<WeakLeaf>& leaves, double weak_min_move_sigma,
+               const std::vector<std::string>& id) {
   // Pairs aligned on their backgrounds are constraints: without them the tracks' systematic
   // errors would pull wall-accurate poses apart.
   std::vector<RelativePoseConstraint> constraints;
@@ -919,8 +920,7 @@ GlobalSolution SolveRobust(const AlignedTracks& tracks, std::size_t reference,
           h.refined = Refine(
               tracks, reference, measurements, h.used, pair_of, h.poses, h.covariance, core.placed,
               quick, options.refine_max_disagreement_sigma, options.refine_max_wall_residual_sigma,
-              options.conflicts_widen_covariance,
-              leaves, options.weak_refine_min_move_sigma, id);
+              options.conflicts_widen_covariance, leaves, options.weak_refine_min_move_sigma, id);
         } else {
           h.refined.poses = h.poses;
           h.refined.covariance = h.covariance;
@@ -1028,7 +1028,8 @@ GlobalSolution SolveRobust(const AlignedTracks& tracks, std::size_t reference,
     best.refined =
         Refine(tracks, reference, measurements, best.used, pair_of, best.poses, best.covariance,
                core.placed, options.joint, options.refine_max_disagreement_sigma,
-               options.refine_max_wall_residual_sigma, options.conflicts_widen_covariance, leaves, options.weak_refine_min_move_sigma, id);
+               options.refine_max_wall_residual_sigma, options.conflicts_widen_covariance, leaves,
+               options.weak_refine_min_move_sigma, id);
   } else if (!options.refine) {
     best.refined.poses = best.poses;
     best.refined.covariance = best.covariance;

@@ -683,8 +683,8 @@ TEST(CalibratePipeline, TheRefinementIsNotKeptWhereItBreaksAPairsWalls) {
   options.refine_max_disagreement_sigma = std::numeric_limits<double>::infinity();
   options.refine_max_wall_residual_sigma = 3.5;
   std::vector<SimSensor> sensors;
-  const CalibrationOutcome walls = HallWithWallsAndABiasedSensor(0.12, 0.0, &sensors, 0.0, options,
-                                                                 0.12);
+  const CalibrationOutcome walls =
+      HallWithWallsAndABiasedSensor(0.12, 0.0, &sensors, 0.0, options, 0.12);
   ASSERT_TRUE(walls.ok) << walls.error;
   bool said = false;
   for (const std::string& w : walls.result.warnings) {
@@ -701,8 +701,8 @@ TEST(CalibratePipeline, TheRefinementIsNotKeptWhereItBreaksAPairsWalls) {
                            << " deg";
   }
   options.refine_max_wall_residual_sigma = std::numeric_limits<double>::infinity();
-  const CalibrationOutcome tracks = HallWithWallsAndABiasedSensor(0.12, 0.0, &sensors, 0.0,
-                                                                  options, 0.12);
+  const CalibrationOutcome tracks =
+      HallWithWallsAndABiasedSensor(0.12, 0.0, &sensors, 0.0, options, 0.12);
   ASSERT_TRUE(tracks.ok) << tracks.error;
   EXPECT_TRUE(tracks.result.refined);
   double worst_tracks_m = 0.0;

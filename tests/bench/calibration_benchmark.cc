@@ -307,16 +307,16 @@ int main(int argc, char** argv) {
         const fs::path config = dir / (measurement + ".yaml");
         std::ofstream(config) << "measurement:\n  kind: " << TrackerKind(measurement) << "\n";
         const fs::path legs_config = dir / (measurement + ".legs.yaml");
-        std::ofstream(legs_config) << "measurement:\n  kind: " << TrackerKind(measurement)
-                                   << "\nshape:\n  mount: legs\n";
+        std::ofstream(legs_config)
+            << "measurement:\n  kind: " << TrackerKind(measurement) << "\nshape:\n  mount: legs\n";
         std::vector<std::string> recordings;
         for (const auto& [id, pose] : truth.sensors) {
           const bool at_legs = measurement == "shape_fit_mount" && legs.count(id) != 0;
           const std::string rec = (dir / (id + "." + measurement + ".rec")).string();
-          if (!(cached && fs::exists(rec)) && RunProcess({tracker, "--replay", (dir / ("sim/" + id + ".pcap")).string(),
+          if (!(cached && fs::exists(rec)) &&
+              RunProcess({tracker, "--replay", (dir / ("sim/" + id + ".pcap")).string(),
                           "--sensor-id", id, "--out", rec, "--config",
-                          (at_legs ? legs_config : config).string(),
-                          "--log-level", "warn"},
+                          (at_legs ? legs_config : config).string(), "--log-level", "warn"},
                          log) != 0) {
             std::fprintf(stderr, "%s seed %d: tracker %s failed\n", scenario.c_str(), seed,
                          id.c_str());
