@@ -7,6 +7,7 @@
 #include <limits>
 #include <random>
 #include <tuple>
+#include <utility>
 
 namespace lrfnet::calib {
 namespace {
@@ -475,9 +476,9 @@ TEST(CalibratePipeline, AChainOfBridgesWithShortOverlapsIsPlacedWithCovariancesT
   EXPECT_EQ(used, 4u);
 }
 
-TEST(CalibratePipeline, ALeafOnAWeakPairIsPlacedWithALargeCovarianceAndAFlag) {
-  // The hall's four sensors see two people everywhere; a fifth, e, looks into the hall's corner
-  // from outside and sees one of them for a few seconds only.
+// The hall's four sensors and a fifth, e, looking into the hall's corner from outside (range
+// 6 m); two people walk everywhere, a third loops through e's corner.
+std::pair<std::vector<SimSensor>, std::vector<Walker>> HallWithLeaf() {
   std::mt19937 rng(14);
   std::vector<SimSensor> sensors = Hall();
   sensors.push_back({"e", {15.0, -3.0, DegToRad(135.0)}});
@@ -485,6 +486,13 @@ TEST(CalibratePipeline, ALeafOnAWeakPairIsPlacedWithALargeCovarianceAndAFlag) {
   std::vector<Walker> walkers = {RandomWalker(rng, 1, 11, 1, 7, 0.0),
                                  RandomWalker(rng, 1, 11, 1, 7, 5.0)};
   walkers.push_back(Loop(11.0, 1.0, 10.0, 13.5));
+  return {sensors, walkers};
+}
+
+TEST(CalibratePipeline, ALeafOnAWeakPairIsPlacedWithALargeCovarianceAndAFlag) {
+  // The hall's four sensors see two people everywhere; a fifth, e, looks into the hall's corner
+  // from outside and sees one of them for a few seconds only.
+  const auto [sensors, walkers] = HallWithLeaf();
   const CalibrationInput input = Simulate(sensors, walkers, 60.0, 15);
   CalibrationOptions options;
   options.reference = "a";
@@ -513,13 +521,7 @@ TEST(CalibratePipeline, ALeafOnOneWeakPairKeepsThePairsPlacementUnlessTheRefinem
   // pair's estimate) and says so; the method before it took the refinement's pose. The same turn
   // with a covariance that claims a tenth of it: the move contradicts the pair, the refinement's
   // pose is taken.
-  std::mt19937 rng(14);
-  std::vector<SimSensor> sensors = Hall();
-  sensors.push_back({"e", {15.0, -3.0, DegToRad(135.0)}});
-  sensors.back().range_m = 6.0;
-  std::vector<Walker> walkers = {RandomWalker(rng, 1, 11, 1, 7, 0.0),
-                                 RandomWalker(rng, 1, 11, 1, 7, 5.0)};
-  walkers.push_back(Loop(11.0, 1.0, 10.0, 13.5));
+  const auto [sensors, walkers] = HallWithLeaf();
   const AlignedTracks tracks = Align(Simulate(sensors, walkers, 60.0, 15), {});
   // e's pair with most matches is its only one (the others rejected): e hangs on it alone.
   std::vector<PairEstimate> estimated = EstimateAllPairs(tracks, {});

@@ -57,6 +57,21 @@ TrackerOptions Resolved(TrackerOptions o) {
 
 double Range(const Eigen::Vector2d& p) { return p.norm(); }
 
+// The beams [lo, hi] whose directions lie within half_angle_rad of position_m's bearing (either
+// sign of the scan's angle step), among the first `beams`; false when none is in the field of view.
+bool BeamsAcross(const ScanView& scan, const Eigen::Vector2d& position_m, double half_angle_rad,
+                 std::size_t beams, std::size_t* lo, std::size_t* hi) {
+  const double bearing = std::atan2(position_m.y(), position_m.x());
+  const double step = scan.angle_step_rad;
+  const double a = (bearing - half_angle_rad - scan.first_angle_rad) / step;
+  const double b = (bearing + half_angle_rad - scan.first_angle_rad) / step;
+  const double first = std::ceil(std::min(a, b)), last = std::floor(std::max(a, b));
+  if (!(first >= 0.0 && last < static_cast<double>(beams) && first <= last)) return false;
+  *lo = static_cast<std::size_t>(first);
+  *hi = static_cast<std::size_t>(last);
+  return true;
+}
+
 }  // namespace
 
 std::optional<std::string> Validate(const ShapeOptions& o) {
@@ -651,17 +666,13 @@ bool TrackingPipeline::SeenThrough(const ScanView& scan, const Eigen::Vector2d& 
   // The body's half-width and two sigma of where the track may be.
   const double half_width_m = o.person_major_m + 2.0 * sigma_m;
   if (!(range > half_width_m)) return false;
-  const double bearing = std::atan2(position_m.y(), position_m.x());
-  const double half_angle = std::atan(half_width_m / range);
-  const double step = scan.angle_step_rad;
-  // Beam indices across [bearing - half_angle, bearing + half_angle] (either sign of step).
-  const double a = (bearing - half_angle - scan.first_angle_rad) / step;
-  const double b = (bearing + half_angle - scan.first_angle_rad) / step;
-  const double lo = std::ceil(std::min(a, b)), hi = std::floor(std::max(a, b));
-  const auto n = static_cast<double>(scan.range_m.size());
-  if (!(lo >= 0.0 && hi < n && lo <= hi)) return false;  // outside the field of view: unknown
+  std::size_t lo = 0, hi = 0;
+  if (!BeamsAcross(scan, position_m, std::atan(half_width_m / range), scan.range_m.size(), &lo,
+                   &hi)) {
+    return false;  // outside the field of view: unknown
+  }
   std::size_t beyond = 0;
-  for (auto i = static_cast<std::size_t>(lo); i <= static_cast<std::size_t>(hi); ++i) {
+  for (std::size_t i = lo; i <= hi; ++i) {
     const double r = scan.range_m[i];
     if (!(r > 0.0)) continue;                                             // no echo: unknown
     if (r <= range + options_.shape.seen_through_margin_m) return false;  // could be the person
@@ -676,18 +687,15 @@ bool TrackingPipeline::ForegroundNear(const ScanView& scan, const Eigen::Vector2
   const double range = position_m.norm();
   if (!(range > reach_m)) return true;  // at the sensor: unknown
   const std::span<const std::uint8_t> foreground = background_.foreground();
-  const double bearing = std::atan2(position_m.y(), position_m.x());
-  const double half_angle = std::asin(reach_m / range);
-  const double step = scan.angle_step_rad;
-  const double a = (bearing - half_angle - scan.first_angle_rad) / step;
-  const double b = (bearing + half_angle - scan.first_angle_rad) / step;
-  const double lo = std::ceil(std::min(a, b)), hi = std::floor(std::max(a, b));
-  const auto n = static_cast<double>(std::min(scan.range_m.size(), foreground.size()));
-  if (!(lo >= 0.0 && hi < n && lo <= hi)) return true;  // outside the field of view: unknown
-  for (auto i = static_cast<std::size_t>(lo); i <= static_cast<std::size_t>(hi); ++i) {
+  std::size_t lo = 0, hi = 0;
+  if (!BeamsAcross(scan, position_m, std::asin(reach_m / range),
+                   std::min(scan.range_m.size(), foreground.size()), &lo, &hi)) {
+    return true;  // outside the field of view: unknown
+  }
+  for (std::size_t i = lo; i <= hi; ++i) {
     const double r = scan.range_m[i];
     if (foreground[i] == 0 || !(r > 0.0)) continue;
-    const double angle = scan.first_angle_rad + step * static_cast<double>(i);
+    const double angle = scan.first_angle_rad + scan.angle_step_rad * static_cast<double>(i);
     if ((r * Eigen::Vector2d(std::cos(angle), std::sin(angle)) - position_m).norm() <= reach_m)
       return true;
   }
