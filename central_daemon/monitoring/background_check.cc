@@ -257,6 +257,12 @@ BackgroundVerdict CheckBackgrounds(const BackgroundScan& reference, const Backgr
                                      [&](const Pose2& m) { return share_within(points, m, tau); });
   // The expectation itself competes: a motion that puts fewer points on the scene is no motion.
   const bool better = whole.found && whole.share >= v.inliers_before;
+  if (whole.found) {
+    v.fit_found = true;
+    v.fit_reference_from_current = whole.icp.s_from_r;
+    v.fit_covariance = whole.icp.covariance * options.covariance_inflation;
+    v.fit_share = whole.share;
+  }
   v.inliers_after = better ? whole.share : v.inliers_before;
   if (better) {
     v.reference_from_current = whole.icp.s_from_r;

@@ -108,6 +108,16 @@ struct BackgroundVerdict {
   int degenerate_directions = 0;
   // kMoved from the changed points alone (stage 2): the tracker has not yet re-learned the rest.
   bool partial = false;
+  // The whole scene's ICP pose (stage 1) and its covariance (inflated), also where the expectation
+  // kept more points within inlier_distance_m and so is the verdict's pose; fit_share of the
+  // current snapshot's points on the reference scene under it. A count of points within
+  // inlier_distance_m decides whether there was a motion; it cannot place a sensor to a tenth of a
+  // degree (0.2 degrees move a point at 6 m by 2 cm, and a few stale or grazing points decide the
+  // count), the ICP's least-squares pose can: where the sensor is, ask the fit.
+  bool fit_found = false;
+  Pose2 fit_reference_from_current;
+  Eigen::Matrix3d fit_covariance = Eigen::Matrix3d::Zero();
+  double fit_share = 0.0;
 };
 
 // Compares `current` with `reference` (both of the same sensor). `expected` is where the sensor is

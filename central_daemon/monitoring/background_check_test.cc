@@ -110,6 +110,39 @@ TEST(BackgroundCheck, AnExpectedMotionIsNoNewMove) {
   EXPECT_NEAR(common::RadToDeg(w.motion.yaw_rad), -2.0, 0.05);
 }
 
+TEST(BackgroundCheck, TheFitPlacesTheSensorWhereTheExpectationKeepsMorePointsOnTheScene) {
+  // A sensor turned by 10 degrees, expected 0.3 degrees short of it (a pose from tracks). Some
+  // beams of its snapshot still hold what it saw from there (a tracker's background follows a
+  // move beam by beam): at the expected pose they lie on the scene, at the true one off it, while
+  // the rest lie within inlier_distance_m either way. The count of points on the scene then keeps
+  // the expectation; the ICP's fit is the true pose.
+  const auto reference = Snapshot(Room(), kSensor, 0.005, 1);
+  const Pose2 turned = kSensor * Pose2{0.0, 0.0, common::DegToRad(10.0)};
+  const Pose2 short_of_it = kSensor * Pose2{0.0, 0.0, common::DegToRad(9.7)};
+  daemon::BackgroundScan current = Snapshot(Room(), turned, 0.005, 2);
+  const daemon::BackgroundScan stale = Snapshot(Room(), short_of_it, 0.005, 3);
+  std::size_t replaced = 0;
+  for (std::size_t i = 0; i < current.ranges_mm.size(); ++i) {
+    const double d_mm = std::abs(static_cast<double>(current.ranges_mm[i]) -
+                                 static_cast<double>(stale.ranges_mm[i]));
+    if (d_mm > 60.0) {
+      current.ranges_mm[i] = stale.ranges_mm[i];
+      ++replaced;
+    }
+  }
+  ASSERT_GT(replaced, 20u);
+  const BackgroundVerdict v =
+      CheckBackgrounds(reference, current, {}, MotionOf(kSensor, short_of_it));
+  // The failure mode: the verdict's pose is the expectation.
+  EXPECT_GT(v.inliers_before, v.fit_share);
+  EXPECT_NEAR(common::RadToDeg(v.motion.yaw_rad), 0.0, 1e-9);
+  ASSERT_TRUE(v.fit_found);
+  EXPECT_NEAR(common::RadToDeg(common::AngleDiff(v.fit_reference_from_current.yaw_rad,
+                                                 MotionOf(kSensor, turned).yaw_rad)),
+              0.0, 0.05);
+  EXPECT_GT(v.fit_share, 0.9);
+}
+
 TEST(BackgroundCheck, ACorridorHidesAShiftAlongItsAxis) {
   // Two long parallel walls: a shift along them leaves the scene the same.
   const std::vector<testing::Wall> corridor = {{{-30, -1.5}, {30, -1.5}}, {{-30, 1.5}, {30, 1.5}}};

@@ -214,7 +214,12 @@ void Monitor::OnBackground(const std::string& sensor_id, const daemon::Backgroun
   const bool settled = !v.partial && v.kind != BackgroundVerdictKind::kSceneChanged &&
                        v.inliers_after >= options_.settled_min_inliers &&
                        v.inliers_after >= v.inliers_before;
-  const Pose2 refinement = watch.reference_from_sensor.inverse() * v.reference_from_current;
+  // Where the sensor is: the whole scene's ICP pose, also where the expectation kept a few more
+  // points within inlier_distance_m (see BackgroundVerdict::fit_share; the expectation is often
+  // the tracks' pose, and a count of points cannot tell it from one a few tenths of a degree off).
+  const bool use_fit = v.fit_found && !v.partial && v.fit_share >= options_.correct_min_inliers;
+  const Pose2 refinement = watch.reference_from_sensor.inverse() *
+                           (use_fit ? v.fit_reference_from_current : v.reference_from_current);
   const bool within_refinement =
       std::abs(common::RadToDeg(refinement.yaw_rad)) <= options_.refine_max_yaw_deg &&
       std::hypot(refinement.x_m, refinement.y_m) <= options_.refine_max_translation_m;
@@ -232,7 +237,14 @@ void Monitor::OnBackground(const std::string& sensor_id, const daemon::Backgroun
   const bool usable = whole_settled || (aligned_whole && watch.tracks_estimate.has_value());
   if ((settling || watch.provisional) && usable && (watch.provisional || within_refinement)) {
     const bool was_provisional = watch.provisional;
-    const Refined refined = RefineAfterMove(watch, refinement, v, now_ns);
+    Refined refined =
+        RefineAfterMove(watch, refinement, use_fit ? v.fit_covariance : v.covariance, v, now_ns);
+    if (use_fit && v.fit_share < v.inliers_after) {
+      refined.detail += fmt::format(
+          " (the ICP's pose, {:.1f}% of the points on the scene there; {:.1f}% at the expected "
+          "one)",
+          100.0 * v.fit_share, 100.0 * v.inliers_after);
+    }
     const Pose2 change = watch.world_from_sensor.inverse() * refined.world_from_sensor;
     const bool agrees = std::abs(common::RadToDeg(change.yaw_rad)) <= kAgreeYawDeg &&
                         std::hypot(change.x_m, change.y_m) <= kAgreeTranslationM;
@@ -523,6 +535,7 @@ void Monitor::Update(common::UtcNs now_ns, const FrameSource& source) {
 }
 
 Monitor::Refined Monitor::RefineAfterMove(const SensorWatch& watch, const Pose2& refinement,
+                                          const Eigen::Matrix3d& refinement_covariance,
                                           const BackgroundVerdict& v, common::UtcNs now_ns) const {
   const Pose2 snapshot_pose = watch.world_from_sensor * refinement;
   // The lag: beams whose range changed by less than the tracker's margin follow the change with
@@ -538,14 +551,14 @@ Monitor::Refined Monitor::RefineAfterMove(const SensorWatch& watch, const Pose2&
   const Pose2 move = watch.pose_before_move.inverse() * snapshot_pose;
   const double lag_m = lag * std::hypot(move.x_m, move.y_m);
   const double lag_rad = lag * std::abs(move.yaw_rad);
-  Eigen::Matrix3d motion_covariance = v.covariance;
+  Eigen::Matrix3d motion_covariance = refinement_covariance;
   motion_covariance(0, 0) += lag_m * lag_m;
   motion_covariance(1, 1) += lag_m * lag_m;
   motion_covariance(2, 2) += lag_rad * lag_rad;
   Eigen::Matrix3d j = Eigen::Matrix3d::Identity();
   j.topLeftCorner<2, 2>() = watch.world_from_sensor.rotation();
   const Eigen::Matrix3d snapshot_covariance = Symmetric(j * motion_covariance * j.transpose());
-  Refined out{snapshot_pose, MovedCovariance(watch, v.covariance),
+  Refined out{snapshot_pose, MovedCovariance(watch, refinement_covariance),
               fmt::format("{:.0f}% of {} points on the reference scene after a motion of {} "
                           "({:.1f} s after the flag, lag up to {:.0f}% of the move)",
                           100.0 * v.inliers_after, v.points, MotionText(refinement), since_flag_s,
@@ -578,7 +591,7 @@ Monitor::Refined Monitor::RefineAfterMove(const SensorWatch& watch, const Pose2&
                                 common::NormalizeAngle(snapshot_pose.yaw_rad + step.z())};
   // The combination's covariance only weighs and judges; the pose keeps the one any snapshot's
   // correction gives (the fused filter takes it as the prior of what it learns of the sensor).
-  out.covariance = MovedCovariance(watch, v.covariance);
+  out.covariance = MovedCovariance(watch, refinement_covariance);
   out.detail +=
       fmt::format(", combined with the tracks' estimate {:+.2f} deg, {:.3f} m from it",
                   common::RadToDeg(difference.z()), std::hypot(difference.x(), difference.y()));

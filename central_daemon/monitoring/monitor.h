@@ -44,7 +44,10 @@
 //   while the tracker re-learns: tracks_bias_sigma_*); when the two disagree beyond both
 //   covariances (combine_max_chi2) the snapshot alone counts. A snapshot with fewer than
 //   settled_min_inliers on the scene (a viewpoint moved by half a metre sees parts the reference
-//   does not) counts only against such a tracks' estimate.
+//   does not) counts only against such a tracks' estimate. The snapshot's pose is the ICP's fit
+//   of the whole scene, also where the pose in use keeps a few more points within
+//   inlier_distance_m (BackgroundVerdict::fit_share): that count cannot tell poses a few tenths
+//   of a degree apart, and the beams the tracker has not yet re-learned favour the pose in use.
 //   Only one sensor is flagged by tracks per check, and only against at least two other watched
 //   sensors: when one sensor moved, the others' tracks are compared with its tracks too and look a
 //   little off; once it is flagged and left out, they agree again (every sensor's strikes start
@@ -270,6 +273,7 @@ class Monitor {
     double lag_rad = 0.0;
   };
   Refined RefineAfterMove(const SensorWatch& watch, const Pose2& refinement,
+                          const Eigen::Matrix3d& refinement_covariance,
                           const BackgroundVerdict& verdict, common::UtcNs now_ns) const;
   std::vector<PlacedFrames> Others(
       const std::string& sensor_id,

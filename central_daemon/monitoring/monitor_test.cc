@@ -213,6 +213,60 @@ TEST(Monitor, APoseFromBentTracksIsRefinedBySnapshotsShortOfSettled) {
   EXPECT_EQ(Watch(monitor, "s2").moves, 1u);
 }
 
+TEST(Monitor, SnapshotsWhoseStaleBeamsFavourThePoseInUseStillCorrectIt) {
+  // The tracks flag a 2 degree turn and place it off (bent tracks, as in the test above). In the
+  // snapshots that follow, the beams on which a sensor at the pose in use would see more than 6 cm
+  // farther or nearer still hold what it saw from there: at that pose (the check's expectation)
+  // they lie on the scene and every other point within inlier_distance_m, so the expectation keeps
+  // more points on the scene than the ICP's pose does. The refinement must take the ICP's pose:
+  // the expectation would keep the pose in use as it is.
+  MonitorOptions options;
+  options.background.min_chi2 = 1e12;
+  Monitor monitor(options);
+  monitor.SetPoses(Calibrated(), References());
+  const Pose2 bumped = kS2 * Pose2{0.0, 0.0, common::DegToRad(2.0)};
+  const Pose2 bent = bumped * Pose2{0.0, 0.0, common::DegToRad(0.6)};
+  const FakeFrames frames(100.0, {{0.0, kS2}, {20.0, bent}});
+  std::uint32_t id = 2;
+  common::UtcNs corrected_by_tracks = 0;
+  int expectation_kept = 0;
+  for (double t = 1.0; t <= 90.0; t += 1.0) {
+    if (t >= 50.0 && static_cast<int>(t) % 4 == 2) {
+      const Pose2 in_use = Watch(monitor, "s2").world_from_sensor;
+      daemon::BackgroundScan scene = Snapshot(Room(), bumped, 0.005, 30 + id, id);
+      const daemon::BackgroundScan stale = Snapshot(Room(), in_use, 0.005, 60 + id, id);
+      for (std::size_t i = 0; i < scene.ranges_mm.size(); ++i) {
+        if (std::abs(static_cast<double>(scene.ranges_mm[i]) -
+                     static_cast<double>(stale.ranges_mm[i])) > 60.0) {
+          scene.ranges_mm[i] = stale.ranges_mm[i];
+        }
+      }
+      const BackgroundVerdict v = CheckBackgrounds(References().at("s2"), scene, options.background,
+                                                   kS2.inverse() * in_use);
+      if (v.fit_found && v.fit_share < v.inliers_before) ++expectation_kept;
+      monitor.OnBackground("s2", scene, At(t));
+      ++id;
+    }
+    monitor.Update(At(t), frames);
+    for (const MonitorEvent& e : monitor.TakeEvents()) {
+      ASSERT_EQ(e.sensor_id, "s2") << e.detail;
+      if (e.kind == MonitorEventKind::kCorrected && e.method == "tracks" && !corrected_by_tracks) {
+        corrected_by_tracks = e.stamp_ns;
+        ASSERT_TRUE(e.after.has_value());
+        EXPECT_GT(common::RadToDeg(common::RotationDistanceRad(*e.after, bumped)), 0.4) << e.detail;
+      }
+    }
+  }
+  ASSERT_NE(corrected_by_tracks, 0);
+  EXPECT_LT(corrected_by_tracks, At(50.0));
+  EXPECT_GE(expectation_kept, 1) << "the snapshots were meant to favour the pose in use";
+  const Pose2 final_pose = Watch(monitor, "s2").world_from_sensor;
+  EXPECT_LT(common::RadToDeg(common::RotationDistanceRad(final_pose, bumped)), 0.1)
+      << Watch(monitor, "s2").detail;
+  EXPECT_LT(common::TranslationDistanceM(final_pose, bumped), 0.02);
+  EXPECT_EQ(Watch(monitor, "s2").moves, 1u);
+}
+
 TEST(Monitor, WithoutBackgroundsTheTracksFlagAndCorrect) {
   MonitorOptions options;
   Monitor monitor(options);
