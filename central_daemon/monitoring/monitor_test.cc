@@ -158,6 +158,14 @@ TEST(Monitor, SnapshotsThatMixTheOldSceneWithTheNewNeverSetAWrongPose) {
   EXPECT_FALSE(monitor.Excluded("s2"));
 }
 
+// s2 turned 2 degrees; its frames from 20 s on as its tracker gives them while it re-learns the
+// background: bent 0.6 degrees further.
+const Pose2 kS2Turned2Deg = kS2 * Pose2{0.0, 0.0, common::DegToRad(2.0)};
+FakeFrames BentTracksOfTurnedS2() {
+  return FakeFrames(100.0,
+                    {{0.0, kS2}, {20.0, kS2Turned2Deg * Pose2{0.0, 0.0, common::DegToRad(0.6)}}});
+}
+
 TEST(Monitor, APoseFromBentTracksIsRefinedBySnapshotsShortOfSettled) {
   // Where the background cannot flag (no significant motion: background min_chi2 1e12), the
   // tracks flag a 2 degree turn and correct it from the tracks since the flag, which the moved
@@ -169,9 +177,8 @@ TEST(Monitor, APoseFromBentTracksIsRefinedBySnapshotsShortOfSettled) {
   options.background.min_chi2 = 1e12;
   Monitor monitor(options);
   monitor.SetPoses(Calibrated(), References());
-  const Pose2 bumped = kS2 * Pose2{0.0, 0.0, common::DegToRad(2.0)};
-  const Pose2 bent = bumped * Pose2{0.0, 0.0, common::DegToRad(0.6)};
-  const FakeFrames frames(100.0, {{0.0, kS2}, {20.0, bent}});
+  const Pose2 bumped = kS2Turned2Deg;
+  const FakeFrames frames = BentTracksOfTurnedS2();
   std::uint32_t id = 2;
   common::UtcNs flagged = 0, corrected_by_tracks = 0;
   double inliers = 0.0;
@@ -224,9 +231,8 @@ TEST(Monitor, SnapshotsWhoseStaleBeamsFavourThePoseInUseStillCorrectIt) {
   options.background.min_chi2 = 1e12;
   Monitor monitor(options);
   monitor.SetPoses(Calibrated(), References());
-  const Pose2 bumped = kS2 * Pose2{0.0, 0.0, common::DegToRad(2.0)};
-  const Pose2 bent = bumped * Pose2{0.0, 0.0, common::DegToRad(0.6)};
-  const FakeFrames frames(100.0, {{0.0, kS2}, {20.0, bent}});
+  const Pose2 bumped = kS2Turned2Deg;
+  const FakeFrames frames = BentTracksOfTurnedS2();
   std::uint32_t id = 2;
   common::UtcNs corrected_by_tracks = 0;
   int expectation_kept = 0;
