@@ -8,6 +8,7 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
+#include <map>
 #include <numeric>
 #include <utility>
 
@@ -1117,6 +1118,11 @@ std::optional<std::string> Validate(const CalibrationOptions& options) {
       !std::isfinite(options.weak_refine_min_move_sigma)) {
     return "weak_refine_min_move_sigma must be a finite value >= 0";
   }
+  if (!(options.mount_mismatch_bias_sigma_m >= 0.0) ||
+      !std::isfinite(options.mount_mismatch_bias_sigma_m)) {
+    return "mount_mismatch_bias_sigma_m must be a finite value >= 0";
+  }
+  if (auto e = common::Validate(options.mount_check)) return "mount_check: " + *e;
   if (!(options.max_translation_residual_m > 0.0) ||
       !std::isfinite(options.max_translation_residual_m)) {
     return "max_translation_residual_m must be a finite value > 0";
@@ -1284,6 +1290,27 @@ void Finish(const GlobalSolution& global_in, std::size_t reference,
     out->error = "sensors not connected to the reference " + result.reference + ": " +
                  JoinIds(tracks, unconnected) + " (no accepted pairwise estimate links them" +
                  detail + ")";
+    // What data would place each of them (as for a sensor hanging on weak pairs).
+    for (std::size_t i : unconnected) {
+      std::string others;
+      for (const PairEstimate& p : out->pairs) {
+        if (p.accepted || (p.r != i && p.s != i) || p.matches == 0) continue;
+        const std::string why = p.reason.substr(0, p.reason.find(':'));
+        others += fmt::format("{}{} (pair {})", others.empty() ? "" : ", ",
+                              tracks.sensors[p.r == i ? p.s : p.r].id, why);
+      }
+      std::string& flag = result.sensors[i].flag;
+      flag = others.empty()
+                 ? fmt::format(
+                       "not placed: people walking where {} and another sensor both see "
+                       "them would place it",
+                       tracks.sensors[i].id)
+                 : fmt::format(
+                       "not placed: people walking, and turning, where {} and {} both see "
+                       "them would place it",
+                       tracks.sensors[i].id, others);
+      out->error += "; " + tracks.sensors[i].id + " " + flag;
+    }
     return;
   }
   out->ok = true;
@@ -1340,7 +1367,80 @@ void StartResult(const AlignedTracks& tracks, CalibrationResult* result) {
   }
 }
 
+// The mount check of every sensor configured for upper-body height; a sensor whose tracks look
+// like legs gets the shared radial bias of mount_mismatch_bias_sigma_m on its samples: a
+// sensitivity to the size correction (types.h TrackSample), whose prior sigma is
+// size_prior_sigma_m, of mount_mismatch_bias_sigma_m / size_prior_sigma_m on top of its own.
+std::vector<common::MountCheck> CheckMounts(const CalibrationInput& input,
+                                            const CalibrationOptions& options,
+                                            AlignedTracks* tracks) {
+  std::vector<common::MountCheck> out(input.sensors.size());
+  if (!options.check_mount) return out;
+  const double prior = tracks->size_prior_sigma_m;
+  for (std::size_t i = 0; i < input.sensors.size() && i < tracks->sensors.size(); ++i) {
+    out[i] = CheckMount(input.sensors[i], options.mount_check);
+    if (!out[i].looks_like_legs || !(prior > 0.0) || !std::isfinite(prior)) continue;
+    const auto per_minor = static_cast<float>(options.mount_mismatch_bias_sigma_m / prior);
+    for (GridTrack& t : tracks->sensors[i].tracks) {
+      for (TrackSample& x : t.samples) x.bias_per_minor += per_minor;
+    }
+  }
+  return out;
+}
+
+// Every sensor the mount check found mis-mounted: flagged (after any other flag), a warning, and
+// named in a refusal.
+void AddMountFlags(CalibrationOutcome* out) {
+  for (std::size_t i = 0; i < out->mount_checks.size() && i < out->result.sensors.size(); ++i) {
+    SensorPose& sensor = out->result.sensors[i];
+    const std::string flag = MountFlag(sensor.id, out->mount_checks[i]);
+    if (flag.empty()) continue;
+    sensor.flag = sensor.flag.empty() ? flag : flag + "; " + sensor.flag;
+    out->result.warnings.push_back(flag);
+    if (!out->ok && !out->error.empty()) out->error += "; " + flag;
+  }
+}
+
 }  // namespace
+
+common::MountCheck CheckMount(const SensorRecording& sensor,
+                              const common::MountCheckOptions& options) {
+  if (sensor.description && sensor.description->mount == daemon::MountHeight::kLegs) return {};
+  struct Key {
+    std::uint64_t session;
+    std::uint32_t track;
+    bool operator<(const Key& o) const {
+      return session != o.session ? session < o.session : track < o.track;
+    }
+  };
+  std::map<Key, std::vector<double>> widths;
+  for (const TrackFrameData& frame : sensor.frames) {
+    for (const TrackObservation& t : frame.tracks) {
+      if (t.state != daemon::TrackState::kConfirmed || t.shape == daemon::ObjectShape::kBox ||
+          t.shape == daemon::ObjectShape::kLegs || !(t.size_minor_m > 0.0f) ||
+          !(t.size_major_m > 0.0f)) {
+        continue;
+      }
+      const double speed = std::hypot(static_cast<double>(t.vx_mps), static_cast<double>(t.vy_mps));
+      if (!(speed > options.min_speed_mps)) continue;
+      widths[{frame.session_id, t.track_id}].push_back(
+          static_cast<double>(std::min(t.size_major_m, t.size_minor_m)));
+    }
+  }
+  std::vector<double> medians;
+  for (auto& [key, w] : widths) {
+    if (w.size() >= options.min_states) medians.push_back(common::MedianInPlace(w));
+  }
+  return common::CheckUpperBodyMount(medians, options);
+}
+
+std::string MountFlag(const std::string& id, const common::MountCheck& check) {
+  if (!check.looks_like_legs) return "";
+  return fmt::format(
+      "{}: tracks look like legs ({} of {} people tracks leg-sized, median half-width {:.2f} m) "
+      "but shape.mount is torso; set shape.mount: legs on its tracker",
+      id, check.leg_sized, check.tracks, check.median_half_width_m);
+}
 
 CalibrationOutcome CalibrateFromPairs(AlignedTracks tracks, std::vector<PairEstimate> pairs,
                                       const CalibrationOptions& options,
@@ -1386,6 +1486,7 @@ CalibrationOutcome Calibrate(const CalibrationInput& input, const CalibrationOpt
   AlignOptions align = options.align;
   if (options.method == Method::kSchenk) align.smooth = false;  // Schenk et al. use filtered tracks
   out.tracks = Align(input, align);
+  out.mount_checks = CheckMounts(input, options, &out.tracks);
   const AlignedTracks& tracks = out.tracks;
   timer.Mark("align + smoothing");
   const std::size_t n = tracks.sensors.size();
@@ -1395,6 +1496,7 @@ CalibrationOutcome Calibrate(const CalibrationInput& input, const CalibrationOpt
   if (!out.assessment.sufficient) {
     out.error = "too little data: " + out.assessment.missing;
     timer.Total();
+    AddMountFlags(&out);
     return out;
   }
   if (!options.reference.empty() && !IndexOf(tracks, options.reference)) {
@@ -1409,7 +1511,26 @@ CalibrationOutcome Calibrate(const CalibrationInput& input, const CalibrationOpt
       ApplyIcp(tracks, options, &out.pairs);
       timer.Mark("icp");
     }
-    SolveFromPairs(options, &timer, &out);
+    // The joint refinement fits every associated observation with the measurement model, which
+    // does not know how a torso fit errs on legs: with thousands of them it pulls the poses of a
+    // mis-mounted sensor and its neighbours ~0.1 m off while claiming a few centimetres
+    // (shop_floor). Its pairs carry the bias prior; the poses are theirs.
+    std::string mismounted;
+    for (std::size_t i = 0; i < out.mount_checks.size(); ++i) {
+      if (out.mount_checks[i].looks_like_legs) {
+        mismounted += (mismounted.empty() ? "" : ", ") + tracks.sensors[i].id;
+      }
+    }
+    if (options.refine && !mismounted.empty()) {
+      CalibrationOptions pairs_only = options;
+      pairs_only.refine = false;
+      result.warnings.push_back("joint refinement not run: the tracks of " + mismounted +
+                                " carry a bias it does not model (shape.mount)");
+      SolveFromPairs(pairs_only, &timer, &out);
+    } else {
+      SolveFromPairs(options, &timer, &out);
+    }
+    AddMountFlags(&out);
     return out;
   }
 
@@ -1451,6 +1572,7 @@ CalibrationOutcome Calibrate(const CalibrationInput& input, const CalibrationOpt
   }
   if (!schenk.ok) global.warnings.push_back(schenk.message);
   Finish(global, reference, measurement_of_pair, &timer, &out);
+  AddMountFlags(&out);
   return out;
 }
 

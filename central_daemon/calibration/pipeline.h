@@ -41,6 +41,7 @@
 #include "central_daemon/calibration/schenk.h"
 #include "central_daemon/calibration/translations.h"
 #include "central_daemon/calibration/types.h"
+#include "common/mount_check.h"
 
 namespace lrfnet::calib {
 
@@ -102,6 +103,15 @@ struct CalibrationOptions {
   // icp_track_bias_sigma_m = 0 and refine_max_disagreement_sigma = inf it is the benchmark's
   // "before" row).
   bool conflicts_widen_covariance = true;
+  // A sensor configured for upper-body height (SensorInfo mount torso, or unspecified with sizes
+  // sent) whose tracks look like legs (common/mount_check.h: a knee-height scanner whose
+  // tracker fits a torso to two legs, its centres ~0.1 m off the body's): flagged with what to do
+  // (set shape.mount: legs on its tracker), and its samples carry a shared radial bias of this
+  // standard deviation (metres; through the size correction, types.h TrackSample), so that the
+  // pairs through it and its pose say how little its tracks are worth. check_mount false: no check.
+  bool check_mount = true;
+  common::MountCheckOptions mount_check;
+  double mount_mismatch_bias_sigma_m = 0.1;
   double max_translation_residual_m = 0.5;   // edges beyond it are dropped from the translations
   // Minimum data: seconds of simultaneous tracks a pair needs to count as linked (assessment).
   double min_pair_overlap_s = 3.0;
@@ -147,10 +157,24 @@ struct CalibrationOutcome {
   AlignedTracks tracks;             // the aligned tracks used (for the report and fusion)
   std::vector<PairEstimate> pairs;  // every pair considered
   DataAssessment assessment;
+  // Per sensor (input order): the mount check of a sensor configured for upper-body height
+  // (decided false for the others and with check_mount off).
+  std::vector<common::MountCheck> mount_checks;
 };
 
 // A monotonic clock in seconds for the stage times (may be empty: no timings).
 using StageClock = std::function<double()>;
+
+// The mount check of one sensor's recording (common/mount_check.h): every confirmed person track
+// (not a box) of each session, its median learned half-width (the smaller semi-axis of its size
+// state) over its states faster than options.min_speed_mps, if it has options.min_states of them.
+// Decided false for a sensor configured at knee height (SensorInfo mount legs) or whose tracker
+// sends no sizes.
+common::MountCheck CheckMount(const SensorRecording& sensor,
+                              const common::MountCheckOptions& options);
+
+// The flag of a sensor whose check says legs ("" otherwise): what was seen and what to do.
+std::string MountFlag(const std::string& id, const common::MountCheck& check);
 
 // Precondition: Validate(options) is nullopt (checked: a violation gives ok = false).
 CalibrationOutcome Calibrate(const CalibrationInput& input, const CalibrationOptions& options,

@@ -778,5 +778,77 @@ TEST(CalibrateScale, ALayoutWhoseScaleThePeoplesSizeExplainsSaysSoAndItsSigmaCov
   ExpectClose(observable, hall, 0.03, 0.2);
 }
 
+// The input as shape-fit trackers configured for upper-body height send it: each track's learned
+// size (semi-axes major x minor; `legs_sensor`'s tracks leg-sized, 0.2 x 0.066 m, the others a
+// torso's) and, so that each sensor has enough tracks to judge, a new track id every 10 s.
+void AsShapeFitTrackers(CalibrationInput* input, std::size_t legs_sensor) {
+  for (std::size_t i = 0; i < input->sensors.size(); ++i) {
+    SensorRecording& rec = input->sensors[i];
+    rec.description = daemon::SensorDescription{};
+    rec.description->kind = MeasurementKind::kShapeFit;
+    rec.description->mount = daemon::MountHeight::kTorso;
+    const common::UtcNs t0_ns = rec.frames.front().scan_start_ns;
+    for (TrackFrameData& f : rec.frames) {
+      const auto part = static_cast<std::uint32_t>((f.scan_start_ns - t0_ns) / 10'000'000'000);
+      for (TrackObservation& o : f.tracks) {
+        o.track_id += 100 * part;
+        o.kind = MeasurementKind::kShapeFit;
+        o.shape = daemon::ObjectShape::kTorso;
+        o.size_major_m = i == legs_sensor ? 0.2f : 0.23f;
+        o.size_minor_m = i == legs_sensor ? 0.066f : 0.14f;
+        o.size_sigma_m = 0.02f;
+      }
+    }
+  }
+}
+
+TEST(CalibratePipeline, ASensorWhoseTracksLookLikeLegsIsFlaggedAndItsSigmaCoversTheError) {
+  // The hall without walls in range; c is a knee-height scanner left at the default mount: its
+  // tracker fits a torso to two legs (leg-sized tracks) and puts everyone 0.12 m farther from it
+  // than the body centre. Nothing but the tracks places it.
+  std::mt19937 rng(16);
+  std::vector<SimSensor> sensors = Hall();
+  sensors[2].unknown_bias_m = 0.12;
+  const std::vector<Walker> walkers = {RandomWalker(rng, 1, 11, 1, 7, 0.0),
+                                       RandomWalker(rng, 1, 11, 1, 7, 5.0)};
+  CalibrationInput input = Simulate(sensors, walkers, 60.0, 17);
+  AsShapeFitTrackers(&input, 2);
+  CalibrationOptions options;
+  options.reference = "a";
+  const CalibrationOutcome outcome = Calibrate(input, options);
+  ASSERT_TRUE(outcome.ok) << outcome.error;
+  ASSERT_EQ(outcome.mount_checks.size(), 4u);
+  for (std::size_t i = 0; i < 4; ++i) {
+    EXPECT_TRUE(outcome.mount_checks[i].decided) << sensors[i].id;
+    EXPECT_EQ(outcome.mount_checks[i].looks_like_legs, i == 2) << sensors[i].id;
+  }
+  const std::string& flag = outcome.result.sensors[2].flag;
+  EXPECT_NE(flag.find("c: tracks look like legs"), std::string::npos) << flag;
+  EXPECT_NE(flag.find("median half-width 0.07 m"), std::string::npos) << flag;
+  EXPECT_NE(flag.find("set shape.mount: legs on its tracker"), std::string::npos) << flag;
+  for (std::size_t i : {1, 3}) EXPECT_TRUE(outcome.result.sensors[i].flag.empty()) << i;
+  for (std::size_t i = 1; i < sensors.size(); ++i) {
+    const Judged j = Judge(outcome, sensors, i);
+    EXPECT_TRUE(j.covered) << sensors[i].id << " " << j.dt_m << " m " << RadToDeg(j.dyaw_rad)
+                           << " deg";
+  }
+  // The bias prior lets the pairs through c estimate its offset: c is placed within 3 cm.
+  const auto sigma_t_m = [](const CalibrationOutcome& o) {
+    const Eigen::Matrix3d& c = o.result.sensors[2].covariance;
+    return std::sqrt(c(0, 0) + c(1, 1));
+  };
+  const Judged checked = Judge(outcome, sensors, 2);
+  EXPECT_LT(checked.dt_m, 0.03);
+  EXPECT_LT(checked.dt_m, 2.0 * sigma_t_m(outcome));
+  // Without the check the same data put c 0.1 m off, beyond 2 sigma, and say nothing.
+  options.check_mount = false;
+  const CalibrationOutcome unchecked = Calibrate(input, options);
+  ASSERT_TRUE(unchecked.ok) << unchecked.error;
+  EXPECT_TRUE(unchecked.result.sensors[2].flag.empty());
+  const Judged j = Judge(unchecked, sensors, 2);
+  EXPECT_GT(j.dt_m, 0.08);
+  EXPECT_GT(j.dt_m, 2.0 * sigma_t_m(unchecked)) << sigma_t_m(unchecked);
+}
+
 }  // namespace
 }  // namespace lrfnet::calib
