@@ -17,8 +17,10 @@
 // trolleys (box shapes) are not people and are left out by the caller.
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstddef>
+#include <cstdint>
 #include <optional>
 #include <span>
 #include <string>
@@ -88,5 +90,82 @@ inline MountCheck CheckUpperBodyMount(std::span<double> track_half_widths_m,
                                            options.min_leg_share * static_cast<double>(out.tracks);
   return out;
 }
+
+// A tracker's running check (fixed storage, no allocation after construction): fed every
+// confirmed person track of every scan, it keeps each track's mean half-width over its walking
+// states and, when the track ends (a scan without it) or has walked kLongTrackStates states, files
+// it among the last kHistory tracks and judges them again. Not thread-safe.
+template <std::size_t kTracks, std::size_t kHistory>
+class MountWatch {
+ public:
+  static constexpr std::size_t kLongTrackStates = 500;
+
+  explicit MountWatch(const MountCheckOptions& options = {}) : options_(options) {}
+
+  // One confirmed person track (not a box) in the current scan.
+  void Add(std::uint32_t track_id, double speed_mps, double half_width_m) {
+    Live* live = nullptr;
+    for (std::size_t i = 0; i < live_count_; ++i) {
+      if (live_[i].id == track_id) live = &live_[i];
+    }
+    if (live == nullptr) {
+      if (live_count_ == kTracks) return;
+      live = &live_[live_count_++];
+      *live = Live{track_id};
+    }
+    live->seen = true;
+    if (!(speed_mps > options_.min_speed_mps) || !std::isfinite(half_width_m) ||
+        !(half_width_m > 0.0) || live->filed) {
+      return;
+    }
+    live->sum_m += half_width_m;
+    if (++live->states == kLongTrackStates) File(*live);
+  }
+
+  // After every scan's Add calls: files the tracks that ended. True when the verdict turned to
+  // legs.
+  bool EndScan() {
+    const bool before = verdict_.looks_like_legs;
+    std::size_t kept = 0;
+    for (std::size_t i = 0; i < live_count_; ++i) {
+      if (!live_[i].seen) {
+        if (!live_[i].filed) File(live_[i]);
+        continue;
+      }
+      live_[i].seen = false;
+      live_[kept++] = live_[i];
+    }
+    live_count_ = kept;
+    return verdict_.looks_like_legs && !before;
+  }
+
+  const MountCheck& verdict() const { return verdict_; }
+
+ private:
+  struct Live {
+    std::uint32_t id = 0;
+    std::size_t states = 0;
+    double sum_m = 0.0;
+    bool seen = false;
+    bool filed = false;
+  };
+
+  void File(Live& live) {
+    live.filed = true;
+    if (live.states < options_.min_states) return;
+    history_[next_] = live.sum_m / static_cast<double>(live.states);
+    next_ = (next_ + 1) % kHistory;
+    filled_ = filled_ < kHistory ? filled_ + 1 : kHistory;
+    std::array<double, kHistory> copy = history_;
+    verdict_ = CheckUpperBodyMount(std::span<double>(copy.data(), filled_), options_);
+  }
+
+  MountCheckOptions options_;
+  std::array<Live, kTracks> live_{};
+  std::size_t live_count_ = 0;
+  std::array<double, kHistory> history_{};
+  std::size_t next_ = 0, filled_ = 0;
+  MountCheck verdict_;
+};
 
 }  // namespace lrfnet::common

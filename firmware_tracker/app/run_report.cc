@@ -1,6 +1,7 @@
 #include "firmware_tracker/app/run_report.h"
 
 #include <spdlog/fmt/fmt.h>
+#include <spdlog/spdlog.h>
 
 #include <cstdio>
 #include <ctime>
@@ -32,15 +33,24 @@ std::string NodeSummary(const TrackerNode& node) {
   const tracking::ClockMapperStatus clock = node.clock().status();
   return fmt::format(
       "tracks_created={} tracks_confirmed={} datagrams={} datagram_bytes={} frames={} "
-      "snapshots={} tick_offset_s={:.6f} drift_ppm={:.2f} device_restarts={}",
+      "snapshots={} tick_offset_s={:.6f} drift_ppm={:.2f} device_restarts={} "
+      "mount_looks_like_legs={}",
       t.created, t.confirmed, e.datagrams, e.bytes, node.counters().frames,
       node.counters().snapshots, clock.offset_s, clock.drift_ppm,
-      node.clock().counters().device_restarts);
+      node.clock().counters().device_restarts, node.counters().mount_looks_like_legs);
 }
 
 bool ScanLog::OnScan(const std::string& sensor_id, const cola::ScanTelegram& scan,
                      common::UtcNs receive_time_ns, const TrackerNode& node) {
   ++scans_;
+  if (node.counters().mount_looks_like_legs > mount_warnings_) {
+    mount_warnings_ = node.counters().mount_looks_like_legs;
+    const common::MountCheck& m = node.mount_check();
+    spdlog::warn(
+        "{}: tracks look like legs ({} of {} people tracks leg-sized, median half-width {:.2f} m) "
+        "but shape.mount is torso; a scanner at knee height needs shape.mount: legs",
+        sensor_id, m.leg_sized, m.tracks, m.median_half_width_m);
+  }
   if (print_every_ > 0 && (scans_ - 1) % print_every_ == 0) {
     const tracking::ScanTracks& tracks = node.pipeline().last_tracks();
     std::string list;

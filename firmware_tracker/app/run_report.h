@@ -28,7 +28,8 @@ class ScanLog {
   ScanLog(std::uint64_t print_every, std::uint64_t max_scans)
       : print_every_(print_every), max_scans_(max_scans) {}
 
-  // Prints every print_every-th scan (the first one included) with the node's last tracks.
+  // Prints every print_every-th scan (the first one included) with the node's last tracks, and
+  // logs one warning each time the node's mount check turns to legs.
   // Returns false once max_scans were seen (the caller stops).
   bool OnScan(const std::string& sensor_id, const cola::ScanTelegram& scan,
               common::UtcNs receive_time_ns, const TrackerNode& node);
@@ -38,6 +39,7 @@ class ScanLog {
   std::uint64_t print_every_;
   std::uint64_t max_scans_;
   std::uint64_t scans_ = 0;
+  std::uint64_t mount_warnings_ = 0;
 };
 
 }  // namespace lrfnet::tracker

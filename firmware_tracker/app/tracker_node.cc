@@ -69,6 +69,18 @@ void TrackerNode::OnScan(const cola::ScanTelegram& scan, common::UtcNs receive_n
   view.stamp_ns = mapped.scan_start_ns;
   view.scan_period_s = polar.scan_frequency_hz > 0.0 ? 1.0 / polar.scan_frequency_hz : 0.0;
   const tracking::ScanTracks& tracks = pipeline_->Process(view, polar.scan_counter);
+  if (config_.tracking.method == tracking::MeasurementMethod::kShapeFit &&
+      config_.tracking.shape.mount == tracking::Mount::kTorso) {
+    for (const tracking::TrackReport& t : tracks.tracks) {
+      if (t.state != tracking::TrackState::kConfirmed || t.shape == tracking::ObjectShape::kBox ||
+          t.shape == tracking::ObjectShape::kLegs) {
+        continue;
+      }
+      mount_watch_.Add(t.track_id, std::hypot(t.vx_mps, t.vy_mps),
+                       std::min(t.size_major_m, t.size_minor_m));
+    }
+    if (mount_watch_.EndScan()) ++counters_.mount_looks_like_legs;
+  }
 
   // Sensor info before the first frame of a new geometry, so a receiver can interpret it.
   if (polar.count != info_count_ || polar.first_angle_rad != info_first_angle_rad_ ||

@@ -23,6 +23,7 @@
 #include <string_view>
 
 #include "common/fixed_capacity.h"
+#include "common/mount_check.h"
 #include "common/time.h"
 #include "firmware_tracker/app/config.h"
 #include "firmware_tracker/cola/scan_telegram.h"
@@ -48,6 +49,9 @@ struct NodeCounters {
   std::uint64_t snapshots = 0;         // background snapshots published
   std::uint64_t sensor_infos = 0;
   std::uint64_t healths = 0;
+  // Times the mount check (common/mount_check.h; shape.mount torso, shape-fit measurement) found
+  // the tracks looking like legs: a knee-height scanner configured as upper body.
+  std::uint64_t mount_looks_like_legs = 0;
 };
 
 class TrackerNode {
@@ -81,6 +85,8 @@ class TrackerNode {
   const tracking::ClockMapper& clock() const { return clock_; }
   const io::DatagramEncoder& encoder() const { return encoder_; }
   const NodeCounters& counters() const { return counters_; }
+  // The mount check's latest verdict (undecided with shape.mount legs or another measurement).
+  const common::MountCheck& mount_check() const { return mount_watch_.verdict(); }
 
  private:
   bool BackgroundChanged() const;
@@ -94,6 +100,7 @@ class TrackerNode {
   std::unique_ptr<tracking::TrackingPipeline> pipeline_;
   std::unique_ptr<cola::PolarScan> polar_;
   NodeCounters counters_;
+  common::MountWatch<tracking::kMaxTracks, 32> mount_watch_;
 
   // Device identity and the geometry sensor info was last sent for.
   std::string model_;

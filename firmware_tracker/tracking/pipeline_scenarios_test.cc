@@ -19,6 +19,7 @@
 #include <utility>
 #include <vector>
 
+#include "common/mount_check.h"
 #include "firmware_tracker/tracking/pipeline.h"
 #include "firmware_tracker/tracking/tracking_test_util.h"
 
@@ -877,6 +878,64 @@ TEST(PipelineScenarioTest, TwoPeopleSideBySideAtKneeHeightKeepTheirLegsAndIds) {
   }
   EXPECT_EQ(ids.size(), 2u);
   EXPECT_EQ(AllReportedIds(run), ids);
+}
+
+// Six people crossing the room one after another (1.5 s apart, alternating directions), of the
+// sizes given (upper body) or as legs.
+Scene SixCrossing(std::vector<Eigen::Vector2d> sizes, bool legs) {
+  Scene scene;
+  scene.legs = legs;
+  scene.sizes = std::move(sizes);
+  for (int i = 0; i < 6; ++i) {
+    const double x = 2.0 + 0.9 * i, y = i % 2 == 0 ? -4.0 : 4.0;
+    scene.walkers.push_back(Walker::Path(kLearnedS + 1.5 * i, {{x, y}, {x + 0.5, -y}}, 1.2));
+  }
+  return scene;
+}
+
+// The mount check as the tracker's gateway runs it (common::MountWatch) over a run's reports.
+common::MountCheck MountCheckOf(const SceneRun& run) {
+  common::MountWatch<kMaxTracks, 32> watch;
+  for (const Frame& f : run.frames) {
+    for (const TrackReport& r : f.tracks) {
+      if (r.state != TrackState::kConfirmed || r.shape == ObjectShape::kBox ||
+          r.shape == ObjectShape::kLegs) {
+        continue;
+      }
+      watch.Add(r.track_id, std::hypot(r.vx_mps, r.vy_mps),
+                std::min(r.size_major_m, r.size_minor_m));
+    }
+    watch.EndScan();
+  }
+  watch.EndScan();  // every track ends with the run
+  return watch.verdict();
+}
+
+TEST(PipelineScenarioTest, MountCheckFindsLegsUnderAnUpperBodyMountAndNothingElse) {
+  const Scene legs = SixCrossing({}, true);
+  const double end_s = legs.walkers.back().end_s() + 1.0;
+  // Knee height, configured as upper body (the default): the torso fit settles on a leg's size.
+  const common::MountCheck wrong = MountCheckOf(Simulate(legs, end_s, Synthetic()));
+  EXPECT_TRUE(wrong.decided) << wrong.tracks;
+  EXPECT_TRUE(wrong.looks_like_legs)
+      << wrong.leg_sized << " of " << wrong.tracks << ", median " << wrong.median_half_width_m;
+  RecordProperty("legs_as_torso", std::to_string(wrong.leg_sized) + " of " +
+                                      std::to_string(wrong.tracks) + " leg-sized, median " +
+                                      std::to_string(wrong.median_half_width_m));
+  // Configured for legs: the reports are legs, which the check leaves alone.
+  const common::MountCheck right_legs = MountCheckOf(Simulate(legs, end_s, LegsOptions()));
+  EXPECT_FALSE(right_legs.decided);
+  EXPECT_FALSE(right_legs.looks_like_legs);
+  // Upper body at upper-body height: people of varying size and a child (0.15 x 0.09 m).
+  const Scene torso = SixCrossing(
+      {{0.25, 0.15}, {0.15, 0.09}, {0.22, 0.13}, {0.27, 0.16}, {0.2, 0.12}, {0.24, 0.14}}, false);
+  const common::MountCheck right = MountCheckOf(Simulate(torso, end_s, Synthetic()));
+  EXPECT_TRUE(right.decided) << right.tracks;
+  EXPECT_FALSE(right.looks_like_legs)
+      << right.leg_sized << " of " << right.tracks << ", median " << right.median_half_width_m;
+  EXPECT_GT(right.median_half_width_m, wrong.median_half_width_m + 0.03);
+  RecordProperty("torso", std::to_string(right.leg_sized) + " of " + std::to_string(right.tracks) +
+                              " leg-sized, median " + std::to_string(right.median_half_width_m));
 }
 
 TEST(PipelineScenarioTest, ForkliftAtFourMetresPerSecondNeedsTheLimitsRaised) {
