@@ -10,8 +10,8 @@
 // track, its median over the states in which the track is confirmed and walking (an object's size
 // is learnt while it moves past the sensor; a standing track keeps its prior); per sensor, the
 // share of its tracks whose median lies below leg_max_half_width_m (a leg's radius, 0.05-0.07 m,
-// and the fit's spread), measured in results/calibration_benchmark.md ("Mount check"): 52-100 %
-// of the tracks of a knee-height scanner run as torso, at most 8 % of an upper-body scanner's.
+// and the fit's spread), measured in results/calibration_benchmark.md ("Mount check"): 50-100 %
+// of the tracks of a knee-height scanner run as torso, at most 6 % of an upper-body scanner's.
 // A share, not the median, so that a few children (a child's torso half depth is near 0.09 m)
 // among adults do not flip the verdict, and a sensor needs min_tracks tracks for one. Carts and
 // trolleys (box shapes) are not people and are left out by the caller.

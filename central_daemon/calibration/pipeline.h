@@ -108,7 +108,8 @@ struct CalibrationOptions {
   // tracker fits a torso to two legs, its centres ~0.1 m off the body's): flagged with what to do
   // (set shape.mount: legs on its tracker), and its samples carry a shared radial bias of this
   // standard deviation (metres; through the size correction, types.h TrackSample), so that the
-  // pairs through it and its pose say how little its tracks are worth. check_mount false: no check.
+  // pairs through it and its pose say how little its tracks are worth; the joint refinement, whose
+  // model does not know that bias, is not run (a warning says so). check_mount false: no check.
   bool check_mount = true;
   common::MountCheckOptions mount_check;
   double mount_mismatch_bias_sigma_m = 0.1;
