@@ -32,12 +32,19 @@ constexpr std::size_t kMaxFitPoints = 64;
 
 bool Positive(double v) { return std::isfinite(v) && v > 0.0; }
 
-// Axis directions are defined modulo pi.
+// Axis directions are defined modulo pi. Within (-pi/2, pi/2) (a yaw's deviation from its prior,
+// nearly always) remainder(a, pi) is a itself: no libm call there.
 double WrapHalfTurn(double a) {
+  if (std::abs(a) < common::kPi / 2) return a;
   a = std::remainder(a, common::kPi);
   if (a <= -common::kPi / 2) a += common::kPi;
   return a;
 }
+
+// Two values side by side, one per SIMD lane (SSE2, NEON): the fit's independent chains of square
+// roots and divisions (two points, two silhouette edges) run together. The same IEEE operations in
+// the same order as the scalar code, so the same results.
+using Lanes = Eigen::Array2d;
 
 // Distance of a point from the outline and its gradient with respect to x.
 struct PointTerm {
@@ -74,17 +81,36 @@ inline void PowerTerm(double x, double p, double* value, double* derivative) {
 // 1e-280..1e280). libm's cbrt and pow took several times as long, an eighth of the fit. Outside
 // the normal range (0, subnormal, infinite, NaN) libm answers.
 template <int kN>
-double RootN(double x) {
-  if (!(x >= 1e-290 && x <= 1e290)) return kN == 3 ? std::cbrt(x) : std::pow(x, 1.0 / kN);
+double RootGuess(double x) {
   // A linear approximation of log2(x) / n in the exponent bits.
   constexpr std::uint64_t kOne = 0x3FF0000000000000ull;
   const auto bits = std::bit_cast<std::int64_t>(x);
   constexpr auto kOneBits = static_cast<std::int64_t>(kOne);
-  double r = std::bit_cast<double>(kOneBits + (bits - kOneBits) / kN);
+  return std::bit_cast<double>(kOneBits + (bits - kOneBits) / kN);
+}
+
+template <int kN>
+double RootN(double x) {
+  if (!(x >= 1e-290 && x <= 1e290)) return kN == 3 ? std::cbrt(x) : std::pow(x, 1.0 / kN);
+  double r = RootGuess<kN>(x);
   for (int i = 0; i < 3; ++i) {
     double rn = r * r;  // r^n
     for (int k = 2; k < kN; ++k) rn *= r;
     r *= ((kN - 1) * rn + (kN + 1) * x) / ((kN + 1) * rn + (kN - 1) * x);
+  }
+  return r;
+}
+
+// RootN of two values at once (the same steps per lane).
+template <int kN>
+Lanes RootN(const Lanes& x) {
+  if (!((x >= 1e-290).all() && (x <= 1e290).all())) return Lanes(RootN<kN>(x(0)), RootN<kN>(x(1)));
+  Lanes r(RootGuess<kN>(x(0)), RootGuess<kN>(x(1)));
+  constexpr double kLow = kN - 1, kHigh = kN + 1;
+  for (int i = 0; i < 3; ++i) {
+    Lanes rn = r * r;  // r^n
+    for (int k = 2; k < kN; ++k) rn *= r;
+    r *= (kLow * rn + kHigh * x) / (kHigh * rn + kLow * x);
   }
   return r;
 }
@@ -219,6 +245,57 @@ struct Edge {
   double weight = 0.0;                          // 1 / sigma^2
 };
 
+// Whether SupportPair serves the superellipse with this exponent (its dual exponent k = 2 or 5/3).
+bool PairedSupport(ShapeModel model, double exponent) {
+  if (model != ShapeModel::kSuperellipse) return false;
+  const double k = exponent / (exponent - 1.0);
+  return k == 2.0 || std::abs(k - 5.0 / 3.0) < 1e-12;
+}
+
+// Support<false> of a superellipse for the two silhouette edges at once (precondition:
+// PairedSupport), each edge's chain of roots in one lane: h(n_e; x) and the gradients' (yaw, a, b)
+// entries (left as they are where h is 0, as Support leaves them).
+Lanes SupportPair(const Vec5& x, double c, double s, const Edge& e0, const Edge& e1,
+                  double exponent, Vec5* grad0, Vec5* grad1) {
+  const Lanes nx(e0.n.x(), e1.n.x()), ny(e0.n.y(), e1.n.y());
+  const Lanes p = nx * c + ny * s;   // n . e1
+  const Lanes q = -nx * s + ny * c;  // n . e2
+  const double a = x(kA), b = x(kB);
+  const Lanes ap = (a * p).abs(), bq = (b * q).abs();
+  const bool square = exponent / (exponent - 1.0) == 2.0;
+  // |x|^k: k = 2, or 5/3 (x^(5/3) = x cbrt(x^2)).
+  const Lanes tp = square ? Lanes(ap * ap) : Lanes(ap * RootN<3>(Lanes(ap * ap)));
+  const Lanes tq = square ? Lanes(bq * bq) : Lanes(bq * RootN<3>(Lanes(bq * bq)));
+  const Lanes t = tp + tq;
+  Lanes h;
+  if (square) {
+    h = t.sqrt();
+  } else {
+    const Lanes root = RootN<5>(t);
+    h = root * root * root;
+  }
+  const Lanes scale = h / t;
+  const Lanes grad_a = scale * tp / a;
+  const Lanes grad_b = scale * tq / b;
+  Lanes dtp = tp / p, dtq = tq / q;  // 0 where the power is 0 (below)
+  for (int e = 0; e < 2; ++e) {
+    if (!(ap(e) > 0.0)) dtp(e) = 0.0;
+    if (!(bq(e) > 0.0)) dtq(e) = 0.0;
+  }
+  const Lanes grad_yaw = scale * (dtp * q - dtq * p);
+  Vec5* grads[2] = {grad0, grad1};
+  for (int e = 0; e < 2; ++e) {
+    if (!(t(e) > 0.0)) {
+      h(e) = 0.0;
+      continue;
+    }
+    (*grads[e])(kA) = grad_a(e);
+    (*grads[e])(kB) = grad_b(e);
+    (*grads[e])(kYaw) = grad_yaw(e);
+  }
+  return h;
+}
+
 // Sum of w g g^T, upper triangle row by row, written out: the loops over a 5 x 5 block (or Eigen's
 // rank update) cost several times the 15 products at this size.
 class UpperSum5 {
@@ -283,11 +360,82 @@ void SumPoints(const Vec5& at, double c, double s, double inv_a, double inv_b, d
   }
 }
 
+// |x|^p and its derivative of two values (PowerTerm's arithmetic; p = 2 or 2.5).
+template <int kKind>
+inline void PowerTerm(const Lanes& x, Lanes* value, Lanes* derivative) {
+  static_assert(kKind == kExponent2 || kKind == kExponent2_5);
+  if constexpr (kKind == kExponent2) {
+    *value = x * x;
+    *derivative = 2.0 * x;
+  } else {
+    const Lanes root = x.abs().sqrt();
+    *value = x * x * root;
+    *derivative = 2.5 * x * root;
+  }
+}
+
+// SumPoints of the superellipse with exponent 2 or 2.5, two points at a time: PointResidual's and
+// the Huber weight's arithmetic per lane (their square roots and divisions side by side), the sums
+// taken point by point in order as SumPoints does, so the same result.
+template <int kKind>
+void SumPointsPaired(const Vec5& at, double c, double s, double inv_a, double inv_b, double,
+                     std::span<const Eigen::Vector2d> points, const double* base_weight,
+                     double discount, double k2, PointSums& sums) {
+  const std::size_t n = points.size();
+  const double cx = at(kCx), cy = at(kCy);
+  const double centre_d = -std::min(at(kA), at(kB));  // a point at the centre
+  for (std::size_t i = 0; i < n; i += 2) {
+    const std::size_t j = i + 1 < n ? i + 1 : i;  // an odd count: the last point twice, summed once
+    const Lanes dx = Lanes(points[i].x(), points[j].x()) - cx;
+    const Lanes dy = Lanes(points[i].y(), points[j].y()) - cy;
+    const Lanes u = c * dx + s * dy;
+    const Lanes v = -s * dx + c * dy;
+    Lanes s1, d1, s2, d2;
+    PowerTerm<kKind>(u * inv_a, &s1, &d1);
+    PowerTerm<kKind>(v * inv_b, &s2, &d2);
+    const Lanes su = d1 * inv_a, sv = d2 * inv_b;
+    const Lanes g2 = su * su + sv * sv;
+    const Lanes inv_g = g2.sqrt().inverse();
+    // No per-lane selects in the lanes (Eigen evaluates them one value at a time, and a value
+    // stored alone then loaded as a pair stalls the store forwarding): the rare exceptions are
+    // mended in the lanes afterwards.
+    Lanes d = (s1 + s2 - 1.0) * inv_g;
+    const Lanes gu = su * inv_g, gv = sv * inv_g;
+    Lanes grad_cx = -(c * gu - s * gv);
+    Lanes grad_cy = -(s * gu + c * gv);
+    Lanes grad_yaw = gu * v - gv * u;
+    Lanes grad_a = -gu * u * inv_a;
+    Lanes grad_b = -gv * v * inv_b;
+    for (int l = 0; l < 2; ++l) {
+      if (!(g2(l) > 1e-24)) {  // at the centre
+        d(l) = centre_d;
+        grad_cx(l) = grad_cy(l) = grad_yaw(l) = grad_a(l) = grad_b(l) = 0.0;
+      }
+    }
+    // Huber weights (SumPoints): z = max(1, |s| / k) (the square root of 1 is 1 exactly).
+    const Lanes weight(base_weight[i], base_weight[j]);
+    const Lanes z2 = d * d * weight * discount / k2;
+    const Lanes z = z2.max(1.0).sqrt();
+    const Lanes w = weight / z;
+    const Lanes wd = w * d;
+    const int lanes = j == i ? 1 : 2;
+    for (int l = 0; l < lanes; ++l) {
+      Vec5 grad;
+      grad << grad_cx(l), grad_cy(l), grad_yaw(l), grad_a(l), grad_b(l);
+      sums.outer.Add(grad, w(l));
+      sums.g += wd(l) * grad;
+      sums.cost += k2 / discount * (z2(l) > 1.0 ? 2.0 * z(l) - 1.0 : z2(l));
+      sums.sq += d(l) * d(l);
+    }
+  }
+}
+
 using SumPointsFn = void (*)(const Vec5&, double, double, double, double, double,
                              std::span<const Eigen::Vector2d>, const double*, double, double,
                              PointSums&);
 
-SumPointsFn SumPointsFor(ShapeModel model, double exponent) {
+// paired: SumPointsPaired where it serves (the same results as SumPoints).
+SumPointsFn SumPointsFor(ShapeModel model, double exponent, bool paired) {
   switch (model) {
     case ShapeModel::kCircle:
       return &SumPoints<ShapeModel::kCircle, kAnyExponent>;
@@ -296,8 +444,13 @@ SumPointsFn SumPointsFor(ShapeModel model, double exponent) {
     case ShapeModel::kSuperellipse:
       break;
   }
-  if (exponent == 2.0) return &SumPoints<ShapeModel::kSuperellipse, kExponent2>;
-  if (exponent == 2.5) return &SumPoints<ShapeModel::kSuperellipse, kExponent2_5>;
+  if (exponent == 2.0) {
+    return paired ? &SumPointsPaired<kExponent2> : &SumPoints<ShapeModel::kSuperellipse, kExponent2>;
+  }
+  if (exponent == 2.5) {
+    return paired ? &SumPointsPaired<kExponent2_5>
+                  : &SumPoints<ShapeModel::kSuperellipse, kExponent2_5>;
+  }
   return &SumPoints<ShapeModel::kSuperellipse, kAnyExponent>;
 }
 
@@ -444,8 +597,9 @@ double ShapeSupport(ShapeModel model, const Eigen::Vector2d& size_m, double yaw_
 namespace {
 
 // kReference: the fit's numerics before RootN and the ray by the bisector (libm's roots, the ray's
-// angle by atan2), for the equivalence test.
-template <class Solver, bool kReference = false>
+// angle by atan2), for the equivalence test. kPaired: two points' and the two edges' arithmetic
+// side by side (SumPointsPaired, SupportPair; the same results).
+template <class Solver, bool kReference = false, bool kPaired = !kReference>
 ShapeFitResult Fit(std::span<const Eigen::Vector2d> points, const Silhouette& silhouette,
                    const ShapePrior& prior, const ShapeFitOptions& o) {
   ShapeFitResult result;
@@ -523,8 +677,9 @@ ShapeFitResult Fit(std::span<const Eigen::Vector2d> points, const Silhouette& si
   double nearest_along = mean_range;
   for (const auto& p : used) nearest_along = std::min(nearest_along, p.dot(ray));
   const double exponent = std::max(2.0, prior.exponent);
-  const double depth =
-      Support<kReference>(model, x, std::cos(x(kYaw)), std::sin(x(kYaw)), ray, exponent, nullptr);
+  // The sine and cosine of the last yaw evaluated (the start's is the first evaluation's too).
+  double cos_yaw = std::cos(x(kYaw)), sin_yaw = std::sin(x(kYaw)), trig_yaw = x(kYaw);
+  const double depth = Support<kReference>(model, x, cos_yaw, sin_yaw, ray, exponent, nullptr);
   Eigen::Vector2d start = (nearest_along + depth) * ray;
   if (prior.centre_guess_m && prior.centre_guess_m->allFinite()) {
     const Eigen::Vector2d& g = *prior.centre_guess_m;
@@ -575,10 +730,16 @@ ShapeFitResult Fit(std::span<const Eigen::Vector2d> points, const Silhouette& si
   // normalised distance), squares on edges and priors. Fills the Gauss-Newton normal matrix h and
   // gradient g (halves) with the IRLS weights min(1, k / |s|) of x; one pass over the points.
   const double k2 = o.robust_k * o.robust_k;
-  const SumPointsFn sum_points = SumPointsFor(model, exponent);
+  const SumPointsFn sum_points = SumPointsFor(model, exponent, kPaired);
+  const bool paired_edges = kPaired && n_edges == 2 && PairedSupport(model, exponent);
   auto evaluate = [&](const Vec5& at, Mat5* h, Vec5* g, double* points_sq) {
     // A circle has no orientation (its yaw stays 0).
-    const double c = circle ? 1.0 : std::cos(at(kYaw)), s = circle ? 0.0 : std::sin(at(kYaw));
+    if (!circle && !(at(kYaw) == trig_yaw)) {
+      trig_yaw = at(kYaw);
+      cos_yaw = std::cos(trig_yaw);
+      sin_yaw = std::sin(trig_yaw);
+    }
+    const double c = circle ? 1.0 : cos_yaw, s = circle ? 0.0 : sin_yaw;
     const double inv_a = 1.0 / at(kA), inv_b = 1.0 / at(kB);
     PointSums sums;
     sum_points(at, c, s, inv_a, inv_b, exponent, used, base_weight.data(), discount, k2, sums);
@@ -586,10 +747,20 @@ ShapeFitResult Fit(std::span<const Eigen::Vector2d> points, const Silhouette& si
     Vec5& gg = sums.g;
     double cost = sums.cost;
     const double sq = sums.sq;
+    std::array<Vec5, 2> edge_grad = {Vec5::Zero(), Vec5::Zero()};
+    std::array<double, 2> support{};
+    if (paired_edges) {
+      const Lanes h_pair =
+          SupportPair(at, c, s, edges[0], edges[1], exponent, &edge_grad[0], &edge_grad[1]);
+      support = {h_pair(0), h_pair(1)};
+    } else {
+      for (std::size_t e = 0; e < n_edges; ++e) {
+        support[e] = Support<kReference>(model, at, c, s, edges[e].n, exponent, &edge_grad[e]);
+      }
+    }
     for (std::size_t e = 0; e < n_edges; ++e) {
-      Vec5 grad = Vec5::Zero();
-      const double r = edges[e].n.dot(at.head<2>()) +
-                       Support<kReference>(model, at, c, s, edges[e].n, exponent, &grad);
+      Vec5& grad = edge_grad[e];
+      const double r = edges[e].n.dot(at.head<2>()) + support[e];
       grad(kCx) = edges[e].n.x();
       grad(kCy) = edges[e].n.y();
       outer.Add(grad, edges[e].weight);
@@ -714,6 +885,12 @@ ShapeFitResult FitShapeWithPivotedLdlt(std::span<const Eigen::Vector2d> points,
                                        const Silhouette& silhouette, const ShapePrior& prior,
                                        const ShapeFitOptions& options) {
   return Fit<PivotedLdltSolver, true>(points, silhouette, prior, options);
+}
+
+ShapeFitResult FitShapeUnpaired(std::span<const Eigen::Vector2d> points,
+                                const Silhouette& silhouette, const ShapePrior& prior,
+                                const ShapeFitOptions& options) {
+  return Fit<NormalSolver, false, false>(points, silhouette, prior, options);
 }
 
 }  // namespace internal

@@ -113,6 +113,11 @@ namespace internal {
 ShapeFitResult FitShapeWithPivotedLdlt(std::span<const Eigen::Vector2d> points,
                                        const Silhouette& silhouette, const ShapePrior& prior,
                                        const ShapeFitOptions& options);
+// FitShape with every point's and edge's arithmetic one at a time, as FitShape did before it
+// took two side by side: the same operations, so the same result. For the equivalence test only.
+ShapeFitResult FitShapeUnpaired(std::span<const Eigen::Vector2d> points,
+                                const Silhouette& silhouette, const ShapePrior& prior,
+                                const ShapeFitOptions& options);
 }  // namespace internal
 
 // Support function of the shape (extent from the centre in direction n, unit vector).

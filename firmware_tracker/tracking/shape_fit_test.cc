@@ -310,13 +310,16 @@ TEST(ShapeFitTest, DegenerateInputsAreRefusedOrHonest) {
 // The fit with its own 5 x 5 Cholesky, roots (RootN) and start ray (the bisector) against the
 // same fit with Eigen's pivoted LDLT, libm's cbrt and pow and the ray's angle by atan2 (what it
 // used before): the same iterations and results up to rounding, over random people, cylinders and
-// boxes at 2-25 m, with and without a track's yaw, centre guess and silhouette edges.
+// boxes at 2-25 m, with and without a track's yaw, centre guess and silhouette edges. And the fit
+// with two points' and both edges' arithmetic side by side against one at a time: the same
+// operations, so the same results (exactly where the compiler fuses no multiply-adds).
 TEST(ShapeFitTest, CholeskySolverGivesThePivotedLdltResults) {
   std::mt19937 rng(14);
   std::uniform_real_distribution<double> uniform(0.0, 1.0);
   const double steps_deg[] = {0.1667, 0.25, 0.5, 1.0};
   const ShapeModel models[] = {ShapeModel::kSuperellipse, ShapeModel::kCircle, ShapeModel::kBox};
   int fits = 0;
+  int identical = 0;  // fits whose side-by-side arithmetic gave the very same bits
   double worst_centre_m = 0.0;
   for (int k = 0; k < 600; ++k) {
     const double range = 2.0 + 23.0 * uniform(rng);
@@ -359,9 +362,24 @@ TEST(ShapeFitTest, CholeskySolverGivesThePivotedLdltResults) {
     EXPECT_NEAR(fit.yaw_sigma_rad, ref.yaw_sigma_rad, 1e-9 * ref.yaw_sigma_rad);
     EXPECT_NEAR(fit.rms_m, ref.rms_m, 1e-9);
     worst_centre_m = std::max(worst_centre_m, (fit.centre_m - ref.centre_m).norm());
+    const ShapeFitResult unpaired =
+        internal::FitShapeUnpaired(v.points, v.silhouette, prior, ShapeFitOptions{});
+    ASSERT_TRUE(unpaired.ok);
+    EXPECT_EQ(fit.iterations, unpaired.iterations);
+    EXPECT_LE((fit.centre_m - unpaired.centre_m).norm(), 1e-12);
+    EXPECT_LE((fit.centre_cov_m2 - unpaired.centre_cov_m2).norm(),
+              1e-12 * unpaired.centre_cov_m2.norm());
+    EXPECT_LE((fit.size_m - unpaired.size_m).norm(), 1e-12);
+    EXPECT_NEAR(fit.yaw_rad, unpaired.yaw_rad, 1e-12);
+    EXPECT_NEAR(fit.rms_m, unpaired.rms_m, 1e-12);
+    if (fit.centre_m == unpaired.centre_m && fit.centre_cov_m2 == unpaired.centre_cov_m2 &&
+        fit.size_m == unpaired.size_m && fit.yaw_rad == unpaired.yaw_rad) {
+      ++identical;
+    }
   }
   EXPECT_GT(fits, 500);
-  std::printf("%d fits, largest centre difference %.3g m\n", fits, worst_centre_m);
+  std::printf("%d fits, largest centre difference %.3g m; side by side: %d identical\n", fits,
+              worst_centre_m, identical);
 }
 
 }  // namespace
