@@ -384,7 +384,11 @@ void SumPointsPaired(const Vec5& at, double c, double s, double inv_a, double in
   const std::size_t n = points.size();
   const double cx = at(kCx), cy = at(kCy);
   const double centre_d = -std::min(at(kA), at(kB));  // a point at the centre
-  for (std::size_t i = 0; i < n; i += 2) {
+  // First every pair's distances, gradients and weights (independent chains of square roots and
+  // divisions that the processor overlaps), then the sums point by point.
+  constexpr std::size_t kPairs = kMaxFitPoints / 2;
+  std::array<Lanes, kPairs> dist, grad_cx, grad_cy, grad_yaw, grad_a, grad_b, w, z2, z;
+  for (std::size_t i = 0, k = 0; i < n; i += 2, ++k) {
     const std::size_t j = i + 1 < n ? i + 1 : i;  // an odd count: the last point twice, summed once
     const Lanes dx = Lanes(points[i].x(), points[j].x()) - cx;
     const Lanes dy = Lanes(points[i].y(), points[j].y()) - cy;
@@ -398,35 +402,38 @@ void SumPointsPaired(const Vec5& at, double c, double s, double inv_a, double in
     const Lanes inv_g = g2.sqrt().inverse();
     // No per-lane selects in the lanes (Eigen evaluates them one value at a time, and a value
     // stored alone then loaded as a pair stalls the store forwarding): the rare exceptions are
-    // mended in the lanes afterwards.
-    Lanes d = (s1 + s2 - 1.0) * inv_g;
+    // mended afterwards.
+    dist[k] = (s1 + s2 - 1.0) * inv_g;
     const Lanes gu = su * inv_g, gv = sv * inv_g;
-    Lanes grad_cx = -(c * gu - s * gv);
-    Lanes grad_cy = -(s * gu + c * gv);
-    Lanes grad_yaw = gu * v - gv * u;
-    Lanes grad_a = -gu * u * inv_a;
-    Lanes grad_b = -gv * v * inv_b;
-    for (int l = 0; l < 2; ++l) {
-      if (!(g2(l) > 1e-24)) {  // at the centre
-        d(l) = centre_d;
-        grad_cx(l) = grad_cy(l) = grad_yaw(l) = grad_a(l) = grad_b(l) = 0.0;
+    grad_cx[k] = -(c * gu - s * gv);
+    grad_cy[k] = -(s * gu + c * gv);
+    grad_yaw[k] = gu * v - gv * u;
+    grad_a[k] = -gu * u * inv_a;
+    grad_b[k] = -gv * v * inv_b;
+    if (!(g2(0) > 1e-24) || !(g2(1) > 1e-24)) {
+      for (int l = 0; l < 2; ++l) {
+        if (g2(l) > 1e-24) continue;
+        dist[k](l) = centre_d;
+        grad_cx[k](l) = grad_cy[k](l) = grad_yaw[k](l) = grad_a[k](l) = grad_b[k](l) = 0.0;
       }
     }
     // Huber weights (SumPoints): z = max(1, |s| / k) (the square root of 1 is 1 exactly).
     const Lanes weight(base_weight[i], base_weight[j]);
-    const Lanes z2 = d * d * weight * discount / k2;
-    const Lanes z = z2.max(1.0).sqrt();
-    const Lanes w = weight / z;
-    const Lanes wd = w * d;
-    const int lanes = j == i ? 1 : 2;
-    for (int l = 0; l < lanes; ++l) {
-      Vec5 grad;
-      grad << grad_cx(l), grad_cy(l), grad_yaw(l), grad_a(l), grad_b(l);
-      sums.outer.Add(grad, w(l));
-      sums.g += wd(l) * grad;
-      sums.cost += k2 / discount * (z2(l) > 1.0 ? 2.0 * z(l) - 1.0 : z2(l));
-      sums.sq += d(l) * d(l);
-    }
+    z2[k] = dist[k] * dist[k] * weight * discount / k2;
+    z[k] = z2[k].max(1.0).sqrt();
+    w[k] = weight / z[k];
+  }
+  for (std::size_t i = 0; i < n; ++i) {
+    const std::size_t k = i / 2;
+    const auto l = static_cast<Eigen::Index>(i % 2);
+    const double d = dist[k](l);
+    Vec5 grad;
+    grad << grad_cx[k](l), grad_cy[k](l), grad_yaw[k](l), grad_a[k](l), grad_b[k](l);
+    sums.outer.Add(grad, w[k](l));
+    sums.g += (w[k](l) * d) * grad;
+    const double zz = z2[k](l);
+    sums.cost += k2 / discount * (zz > 1.0 ? 2.0 * z[k](l) - 1.0 : zz);
+    sums.sq += d * d;
   }
 }
 
