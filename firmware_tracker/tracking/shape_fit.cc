@@ -636,9 +636,11 @@ ShapeFitResult Fit(std::span<const Eigen::Vector2d> points, const Silhouette& si
   // Shape of the point set: principal line and extent (flat objects: doors, boards).
   Eigen::Vector2d mean = Eigen::Vector2d::Zero();
   double range_sum = 0.0;
-  for (const auto& p : used) {
-    mean += p;
-    range_sum += p.norm();
+  std::array<double, kMaxFitPoints> range_m{};  // each point's range (its noise below)
+  for (std::size_t i = 0; i < n; ++i) {
+    mean += used[i];
+    range_m[i] = used[i].norm();
+    range_sum += range_m[i];
   }
   mean /= static_cast<double>(n);
   const double mean_range = range_sum / static_cast<double>(n);
@@ -716,7 +718,7 @@ ShapeFitResult Fit(std::span<const Eigen::Vector2d> points, const Silhouette& si
   const double discount = std::max(1.0, static_cast<double>(n) / o.effective_points);
   std::array<double, kMaxFitPoints> base_weight{};
   for (std::size_t i = 0; i < n; ++i) {
-    const double noise = o.point_sigma_m + o.point_sigma_per_m * used[i].norm();
+    const double noise = o.point_sigma_m + o.point_sigma_per_m * range_m[i];
     base_weight[i] = 1.0 / ((noise * noise + o.model_sigma_m * o.model_sigma_m) * discount);
   }
 
