@@ -452,7 +452,8 @@ SumPointsFn SumPointsFor(ShapeModel model, double exponent, bool paired) {
       break;
   }
   if (exponent == 2.0) {
-    return paired ? &SumPointsPaired<kExponent2> : &SumPoints<ShapeModel::kSuperellipse, kExponent2>;
+    return paired ? &SumPointsPaired<kExponent2>
+                  : &SumPoints<ShapeModel::kSuperellipse, kExponent2>;
   }
   if (exponent == 2.5) {
     return paired ? &SumPointsPaired<kExponent2_5>
