@@ -751,12 +751,8 @@ ShapeFitResult Fit(std::span<const Eigen::Vector2d> points, const Silhouette& si
     }
     const double c = circle ? 1.0 : cos_yaw, s = circle ? 0.0 : sin_yaw;
     const double inv_a = 1.0 / at(kA), inv_b = 1.0 / at(kB);
-    PointSums sums;
-    sum_points(at, c, s, inv_a, inv_b, exponent, used, base_weight.data(), discount, k2, sums);
-    UpperSum5& outer = sums.outer;
-    Vec5& gg = sums.g;
-    double cost = sums.cost;
-    const double sq = sums.sq;
+    // The edges' support functions first: their chain of roots does not depend on the points, so
+    // it runs while the points' pass does. Summed after the points, as before.
     std::array<Vec5, 2> edge_grad = {Vec5::Zero(), Vec5::Zero()};
     std::array<double, 2> support{};
     if (paired_edges) {
@@ -768,6 +764,12 @@ ShapeFitResult Fit(std::span<const Eigen::Vector2d> points, const Silhouette& si
         support[e] = Support<kReference>(model, at, c, s, edges[e].n, exponent, &edge_grad[e]);
       }
     }
+    PointSums sums;
+    sum_points(at, c, s, inv_a, inv_b, exponent, used, base_weight.data(), discount, k2, sums);
+    UpperSum5& outer = sums.outer;
+    Vec5& gg = sums.g;
+    double cost = sums.cost;
+    const double sq = sums.sq;
     for (std::size_t e = 0; e < n_edges; ++e) {
       Vec5& grad = edge_grad[e];
       const double r = edges[e].n.dot(at.head<2>()) + support[e];
