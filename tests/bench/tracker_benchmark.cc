@@ -10,7 +10,7 @@
 // per second. Every input runs twice: with the previous measurement (fixed-axes ellipse, no
 // static-object handling or limits: "old") and with the body-centre shape fit (the default: "new"),
 // so the cost of each shows side by side in the same run. A markdown table goes to stdout and to
-// --out FILE.
+// --out FILE (replacing its header and table; the file's "## " sections after them are kept).
 //
 //   tracker_benchmark [--out FILE] [--scans N] [--people LIST] [--no-send] [google benchmark flags]
 //
@@ -29,6 +29,7 @@
 #include <cstring>
 #include <ctime>
 #include <fstream>
+#include <iterator>
 #include <memory>
 #include <random>
 #include <string>
@@ -403,6 +404,15 @@ int main(int argc, char** argv) {
   const std::string table = Table();
   std::printf("\n%s", table.c_str());
   if (!out_path.empty()) {
+    // The file's sections after the generated table ("## ...": measurements side by side, analyses)
+    // are kept: only the header and the table are this run's.
+    std::string kept;
+    {
+      std::ifstream in(out_path);
+      const std::string old((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+      const std::size_t section = old.find("\n## ");
+      if (section != std::string::npos) kept = old.substr(section);
+    }
     std::ofstream out(out_path);
     out << "# lrfnet-tracker per-scan path\n\n"
         << "decode -> clock mapping -> tracking -> encode -> UDP send on loopback, one scan per "
@@ -410,7 +420,7 @@ int main(int argc, char** argv) {
            "the case (inputs for all cases are held in memory). old: the previous measurement "
            "(fixed-axes ellipse), new: the body-centre shape fit (the default); CPU median / empty "
            "scene: against the 0-people scene of the same measurement in this run.\n\n"
-        << table;
+        << table << kept;
   }
   return 0;
 }
