@@ -356,7 +356,7 @@ void ModelSamples(const Record* records, std::size_t n, UtcNs first_ns, UtcNs st
     double total = 0.0;
     for (double w : weight) total += w;
     double bias = 0.0, per_major = 0.0, per_minor = 0.0, size_var = 0.0, model_var = 0.0;
-    double bias2 = 0.0;
+    double bias2 = 0.0, shared_var = 0.0;
     std::size_t main_kind = 0;
     for (std::size_t kind = 0; kind < kKinds; ++kind) {
       if (weight[kind] == 0.0) continue;
@@ -374,6 +374,7 @@ void ModelSamples(const Record* records, std::size_t n, UtcNs first_ns, UtcNs st
       per_minor += f * b.per_minor_m_per_m;
       size_var += f * b.size_sigma_m * b.size_sigma_m;
       model_var += f * b.sigma_m * b.sigma_m;
+      shared_var += f * b.shared_sigma_m * b.shared_sigma_m;
     }
     // Which kinds the smoother mixed, and in which proportion, is known only roughly: the
     // spread of the kinds' biases is uncertainty of the mixture.
@@ -392,6 +393,7 @@ void ModelSamples(const Record* records, std::size_t n, UtcNs first_ns, UtcNs st
     x.bias_per_minor = static_cast<float>(per_minor);
     x.bias_sigma_m = static_cast<float>(std::sqrt(size_var));
     x.model_sigma_m = static_cast<float>(std::sqrt(model_var));
+    x.shared_bias_sigma_m = static_cast<float>(std::sqrt(shared_var));
   }
 }
 

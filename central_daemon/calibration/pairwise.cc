@@ -182,6 +182,9 @@ struct Obs {
   Eigen::Matrix2d vcov;  // cov plus the prior size correction's uncertainty (verification)
   Eigen::Matrix2d jd;    // d centre / d size correction (CentrePerSizeCorrection)
   Eigen::Vector2d raw;   // the tracker's position (coverage: where the sensor tracks people)
+  // The centre's shift for one standard deviation of its sensor's shared radial bias
+  // (TrackSample::shared_bias_sigma_m along the line of sight).
+  Eigen::Vector2d shared_bias;
   std::size_t track;
 };
 
@@ -192,6 +195,7 @@ Obs MakeObs(const TrackSample& x, std::size_t track, double prior_var) {
   o.jd = CentrePerSizeCorrection(x);
   o.vcov = o.cov + prior_var * (o.jd * o.jd.transpose());
   o.raw = x.position_m;
+  o.shared_bias = static_cast<double>(x.shared_bias_sigma_m) * LineOfSight(x.position_m);
   o.track = track;
   return o;
 }
@@ -488,6 +492,7 @@ std::vector<std::pair<std::size_t, std::size_t>> Associate(const PairData& d, co
 struct FitInput {
   std::vector<Eigen::Vector2d> p, q;
   std::vector<Eigen::Matrix2d> cp, cq, jp, jq;
+  std::vector<Eigen::Vector2d> bp, bq;  // Obs::shared_bias of both sides
   std::vector<std::size_t> segment;
   std::size_t segments = 0;
   // Per segment: summed ranges of both sides and the count (the systematic floor's sigma).
@@ -500,6 +505,8 @@ struct FitInput {
     cq.reserve(n);
     jp.reserve(n);
     jq.reserve(n);
+    bp.reserve(n);
+    bq.reserve(n);
     segment.reserve(n);
   }
 
@@ -510,6 +517,8 @@ struct FitInput {
     q.push_back(b.c);
     cq.push_back(b.cov);
     jq.push_back(b.jd);
+    bp.push_back(a.shared_bias);
+    bq.push_back(b.shared_bias);
     segment.push_back(seg);
     segments = std::max(segments, seg + 1);
     if (range_r.size() < segments) {
@@ -670,6 +679,20 @@ RigidFit Fit(const FitInput& in, const PairwiseOptions& o, double prior_var,
     const double side_s = o.segment_sigma_m + o.segment_sigma_per_m * in.range_s[k] / count;
     const Eigen::Matrix<double, 5, 2> a = hc_inv * response[k];
     systematic.noalias() += (side_r * side_r + side_s * side_s) * (a * a.transpose());
+  }
+  if (o.sensor_bias) {
+    // Each sensor's shared radial bias as a consider parameter (pairwise.h "Sensor bias";
+    // refine.h): x responds to one standard deviation of r's by -H^-1 sum_i rho_i J_i^T W_i R b_p,i
+    // (e = R p + t - q) and of s's by +H^-1 sum_i rho_i J_i^T W_i b_q,i.
+    const Eigen::Matrix2d R0 = fit.s_from_r.rotation();
+    Eigen::Matrix<double, 5, 1> g_r = Eigen::Matrix<double, 5, 1>::Zero();
+    Eigen::Matrix<double, 5, 1> g_s = Eigen::Matrix<double, 5, 1>::Zero();
+    for (std::size_t i = 0; i < n; ++i) {
+      g_r.noalias() += rho[i] * (J[i].transpose() * (W[i] * (R0 * in.bp[i])));
+      g_s.noalias() += rho[i] * (J[i].transpose() * (W[i] * in.bq[i]));
+    }
+    const Eigen::Matrix<double, 5, 1> a_r = hc_inv * g_r, a_s = hc_inv * g_s;
+    systematic.noalias() += a_r * a_r.transpose() + a_s * a_s.transpose();
   }
   fit.segments = in.segments;
   fit.covariance_systematic = systematic.topLeftCorner<3, 3>();

@@ -34,6 +34,14 @@
 // through the fit. One short straight walk therefore leaves the yaw uncertain however many
 // samples it has, and an L-shaped path or several people fix it.
 //
+// Sensor bias: what is left of each sensor's measurement bias after the model, shared by all its
+// samples (TrackSample::shared_bias_sigma_m, radial), is carried as a consider parameter at its
+// prior (refine.h "Sensor bias"; Bierman 1977 ch. VII): the fit's response to one standard
+// deviation of r's and of s's, S = -H^-1 H_x_b, adds S S^T to the covariance. It does not average
+// out over the pair's samples: two sensors facing each other across a small overlap (a doorway)
+// see one person's centre shifted in opposite directions, which is a translation along the line
+// between them.
+//
 // Frames: s_from_r maps r's coordinates into s's frame (eq. 5: R * t_p + t ≈ t_q). Metres and
 // radians. Track identities are never compared across sensors: one person may carry unrelated
 // ids in r and s, and a track may split or merge.
@@ -141,6 +149,8 @@ struct PairwiseOptions {
   // track's start and end there are often a person half hidden), both sides in quadrature.
   double segment_sigma_m = 0.015;
   double segment_sigma_per_m = 0.003;
+  // Carry both sensors' shared radial bias in the covariance (see "Sensor bias" above).
+  bool sensor_bias = true;
 
   // --- decision ---
   // Fewer associated observations than this: rejected (too little to judge).

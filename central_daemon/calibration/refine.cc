@@ -33,6 +33,9 @@ struct StepSample {
   Eigen::Vector2d z = Eigen::Vector2d::Zero();
   Eigen::Matrix2d jd = Eigen::Matrix2d::Zero();
   Eigen::Matrix2d sqrt_info = Eigen::Matrix2d::Identity();
+  // The sample's shift for one standard deviation of its sensor's shared radial bias:
+  // TrackSample::shared_bias_sigma_m along the line of sight (zero without sensor_bias).
+  Eigen::Vector2d shared_bias = Eigen::Vector2d::Zero();
 };
 
 struct Observation {
@@ -43,6 +46,7 @@ struct Observation {
   Eigen::Vector2d z = Eigen::Vector2d::Zero();
   Eigen::Matrix2d jd = Eigen::Matrix2d::Zero();
   Eigen::Matrix2d sqrt_info = Eigen::Matrix2d::Identity();
+  Eigen::Vector2d shared_bias = Eigen::Vector2d::Zero();
 };
 
 struct Association {
@@ -285,8 +289,8 @@ bool IsFinite(const Pose2& p) {
 }
 
 bool UsableModel(const TrackSample& x) {
-  for (const float v :
-       {x.bias_m, x.bias_per_major, x.bias_per_minor, x.bias_sigma_m, x.model_sigma_m}) {
+  for (const float v : {x.bias_m, x.bias_per_major, x.bias_per_minor, x.bias_sigma_m,
+                        x.model_sigma_m, x.shared_bias_sigma_m}) {
     if (!std::isfinite(v) || std::abs(v) > kMaxModelValue) return false;
   }
   return true;
@@ -334,6 +338,10 @@ std::vector<std::vector<StepSample>> CollectSamples(
           continue;
         }
         out.sqrt_info = llt.matrixL().solve(Eigen::Matrix2d::Identity());
+        if (options.sensor_bias) {
+          out.shared_bias =
+              static_cast<double>(sample.shared_bias_sigma_m) * LineOfSight(sample.position_m);
+        }
         if (!out.sqrt_info.allFinite()) {
           ++rejected;
           continue;
@@ -433,8 +441,8 @@ void AssociateStep(const std::vector<StepSample>& samples, std::size_t step_inde
     for (std::size_t i : members[c]) {
       mean += world[i];
       const StepSample& sample = samples[i];
-      out.observations.push_back(
-          {sample.sensor, sample.group, object, i, sample.z, sample.jd, sample.sqrt_info});
+      out.observations.push_back({sample.sensor, sample.group, object, i, sample.z, sample.jd,
+                                  sample.sqrt_info, sample.shared_bias});
     }
     out.objects.push_back(mean / static_cast<double>(members[c].size()));
     out.object_step.push_back(step_index);
@@ -769,6 +777,10 @@ struct ReducedSystem {
   Eigen::MatrixXd h;                    // without the size prior
   std::vector<Eigen::MatrixXd> groups;  // dim x 2 per track with observations (responses)
   std::vector<double> group_sigma;      // the systematic sigma of each of them
+  // dim x sensors: column s is the gradient's response to one standard deviation of sensor s's
+  // shared radial bias (every sample of s shifted by its Observation::shared_bias), i.e. H_theta_b
+  // of the consider parameter b_s (refine.h "Sensor bias").
+  Eigen::MatrixXd sensor_bias;
 };
 
 ReducedSystem BuildReducedSystem(const Association& a, const std::vector<Constraint>& constraints,
@@ -851,6 +863,17 @@ ReducedSystem BuildReducedSystem(const Association& a, const std::vector<Constra
   std::vector<Eigen::Matrix<double, 2, 5>> coupling;     // w J_o^T J_g per observation
   std::vector<Eigen::Matrix<double, 2, 2>> object_side;  // w J_o^T sqrt_info per observation
   std::vector<Columns> cols;
+  if (with_groups) {
+    out.sensor_bias = Eigen::MatrixXd::Zero(dim, static_cast<Eigen::Index>(poses.size()));
+  }
+  auto scatter_bias = [&](std::size_t sensor, const Columns& rows,
+                          const Eigen::Matrix<double, 5, 1>& block) {
+    for (std::size_t i = 0; i < 5; ++i) {
+      if (rows[i] == kNone) continue;
+      out.sensor_bias(static_cast<Eigen::Index>(rows[i]), static_cast<Eigen::Index>(sensor)) +=
+          block(static_cast<Eigen::Index>(i));
+    }
+  };
   for (std::size_t o = 0; o < objects.size(); ++o) {
     const std::vector<std::size_t>& members = by_object[o];
     Eigen::Matrix2d h_oo = Eigen::Matrix2d::Zero();
@@ -874,6 +897,7 @@ ReducedSystem BuildReducedSystem(const Association& a, const std::vector<Constra
       scatter(cols[k], cols[k], w * j_g.transpose() * j_g, 1.0);
       if (with_groups) {
         scatter_rows(group_matrix(ob.group), cols[k], w * j_g.transpose() * ob.sqrt_info);
+        scatter_bias(ob.sensor, cols[k], w * j_g.transpose() * (ob.sqrt_info * ob.shared_bias));
       }
     }
     const Eigen::LDLT<Eigen::Matrix2d> ldlt(h_oo);
@@ -886,9 +910,12 @@ ReducedSystem BuildReducedSystem(const Association& a, const std::vector<Constra
       if (with_groups) {
         // The object moves with the offset too: its share of the reduced response.
         const Eigen::Matrix<double, 2, 2> moved = h_oo_inv * object_side[k];
-        Eigen::MatrixXd& g = group_matrix(a.observations[members[k]].group);
+        const Observation& ob = a.observations[members[k]];
+        Eigen::MatrixXd& g = group_matrix(ob.group);
+        const Eigen::Vector2d moved_bias = moved * ob.shared_bias;
         for (std::size_t m = 0; m < members.size(); ++m) {
           scatter_rows(g, cols[m], -(coupling[m].transpose() * moved));
+          scatter_bias(ob.sensor, cols[m], -(coupling[m].transpose() * moved_bias));
         }
       }
     }
@@ -957,6 +984,12 @@ bool PoseCovariance(const ReducedSystem& system, double size_prior_sigma_m, doub
     const Eigen::MatrixXd response = *inverse * system.groups[k];
     const double sigma = system.group_sigma[k];
     total.noalias() += (sigma * sigma) * (response * response.transpose());
+  }
+  if (system.sensor_bias.size() > 0) {
+    // The consider parameters (refine.h "Sensor bias"): Sigma += S Sigma_b S^T, S = -H^-1
+    // H_theta_b, Sigma_b = I (the columns are per standard deviation).
+    const Eigen::MatrixXd response = *inverse * system.sensor_bias;
+    total.noalias() += response * response.transpose();
   }
   for (std::size_t s = 0; s < system.pose_offset.size(); ++s) {
     if (system.pose_offset[s] == kNone) continue;

@@ -51,6 +51,22 @@
 // view-dependent error) that does not average out over its samples, modelled as a constant 2D
 // offset per track (segment_sigma_*) and propagated through the estimator.
 //
+// Sensor bias: what is left of the measurement bias after the model (TrackSample::
+// shared_bias_sigma_m: a shape fit's centre settles a little off along the line of sight, the same
+// way for all of one sensor's tracks) is one unknown b_s per sensor, shared by every sample and
+// every pair of that sensor. Seen from opposite sides (two groups of sensors facing each other
+// across a room, each group tied by walls) it adds up along the line between the sensors, exactly
+// like a translation: the tracks cannot tell b_s from the poses, so it is not estimated but
+// carried as a "consider" parameter at its prior, b_s ~ N(0, shared_bias_sigma^2) (the consider
+// covariance of Schmidt's filter; Bierman, "Factorization Methods for Discrete Sequential
+// Estimation", 1977, ch. VII; Tapley, Schutz, Born, "Statistical Orbit Determination", 2004,
+// sec. 6.3): with H the reduced normal matrix of the poses and H_theta_b = J_theta^T W J_b,
+//
+//     Sigma_pose += S Sigma_b S^T,   S = -H^-1 H_theta_b,
+//
+// so the samples of one sensor, however many and in however many pairs, never shrink that part of
+// the uncertainty. sensor_bias = false leaves it out (the behaviour before).
+//
 // Thread-safety: pure function over value types; concurrent calls are safe.
 
 #include <Eigen/Core>
@@ -106,6 +122,9 @@ struct JointRefineOptions {
   // offset (metres, 2D), segment_sigma_m plus segment_sigma_per_m times the track's mean range.
   double segment_sigma_m = 0.015;
   double segment_sigma_per_m = 0.003;
+  // Carry each sensor's shared radial bias as a consider parameter in the covariance (see "Sensor
+  // bias" above).
+  bool sensor_bias = true;
   int max_iterations = 50;     // per solve
   int association_rounds = 5;  // solves, each after a (re-)association with the current poses
   // Too little data: fewer associated observations in total, or fewer for a sensor (that sensor

@@ -76,6 +76,10 @@ struct TrackSample {
   float bias_per_minor = 0.0f;  // d bias / d d_minor
   float bias_sigma_m = 0.0f;    // radial, 1 sigma, not shared with other samples
   float model_sigma_m = 0.0f;   // isotropic, 1 sigma, beyond position_cov_m2
+  // Radial, 1 sigma: the part of the bias shared by all samples of this sensor (CentreBias::
+  // shared_sigma_m), not in CentreCovariance: the joint refinement and the pairwise covariance
+  // carry it as one unknown per sensor (refine.h, pairwise.h "sensor bias").
+  float shared_bias_sigma_m = 0.0f;
 };
 
 // Unit vector from the sensor to p (zero at the sensor itself).

@@ -95,10 +95,11 @@ std::optional<std::string> Validate(const MeasurementModelOptions& o) {
       o.ellipse_minor_m > 5.0) {
     return "ellipse_major_m and ellipse_minor_m must be in (0, 5]";
   }
-  for (const double v : {o.shape_fit_size_sigma_m, o.com_sigma_m, o.ellipse_sigma_m,
-                         o.shape_fit_sigma_m, o.unspecified_sigma_m}) {
+  for (const double v : {o.shape_fit_size_sigma_m, o.shape_fit_shared_bias_sigma_m, o.com_sigma_m,
+                         o.ellipse_sigma_m, o.shape_fit_sigma_m, o.unspecified_sigma_m}) {
     if (!(std::isfinite(v) && v >= 0.0 && v <= 5.0)) {
-      return "shape_fit_size_sigma_m and *_sigma_m must be in [0, 5]";
+      return "shape_fit_size_sigma_m, shape_fit_shared_bias_sigma_m and *_sigma_m must be in "
+             "[0, 5]";
     }
   }
   if (!(std::isfinite(o.min_heading_speed_mps) && o.min_heading_speed_mps >= 0.0)) {
@@ -138,6 +139,7 @@ CentreBias CentreBiasOf(const MeasurementContext& c, const MeasurementModelOptio
     // The body centre with the track's own size: what is left is that size's error.
     out.size_sigma_m =
         Positive(c.size_sigma_m) ? std::min(c.size_sigma_m, 5.0) : o.shape_fit_size_sigma_m;
+    out.shared_sigma_m = o.shape_fit_shared_bias_sigma_m;
     return out;
   }
 

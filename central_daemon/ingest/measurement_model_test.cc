@@ -110,6 +110,7 @@ TEST(MeasurementModel, ShapeFitIsTheBodyCentreWithItsSizeUncertainty) {
   EXPECT_EQ(b.size_sigma_m, 0.04);
   c.size_sigma_m = 0.0;  // not sent: the default
   EXPECT_EQ(CentreBiasOf(c, o).size_sigma_m, o.shape_fit_size_sigma_m);
+  EXPECT_EQ(CentreBiasOf(c, o).shared_sigma_m, o.shape_fit_shared_bias_sigma_m);
 }
 
 TEST(MeasurementModel, SensitivitiesAreTheDerivativesOfThePriorSize) {
