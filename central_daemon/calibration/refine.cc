@@ -161,6 +161,67 @@ class ObservationCost final : public ceres::SizedCostFunction<2, 2, 3, 1, 1> {
   Eigen::Matrix2d sqrt_info_;
 };
 
+// The same for an observation of a sensor whose shared radial bias is estimated: a fifth block,
+// the bias' change beta (standard deviations of the prior) since it was last applied to z, moving
+// the centre by beta * shared_bias.
+class ObservationBiasCost final : public ceres::SizedCostFunction<2, 2, 3, 1, 1, 1> {
+ public:
+  ObservationBiasCost(const Eigen::Vector2d& z, const Eigen::Matrix2d& jd,
+                      const Eigen::Matrix2d& sqrt_info, const Eigen::Vector2d& shared_bias)
+      : z_(z), jd_(jd), sqrt_info_(sqrt_info), shared_bias_(shared_bias) {}
+
+  bool Evaluate(double const* const* parameters, double* residuals,
+                double** jacobians) const override {
+    const double size[2] = {parameters[2][0], parameters[3][0]};
+    const Linearization l =
+        Linearize(z_ + parameters[4][0] * shared_bias_, jd_, parameters[0], parameters[1], size);
+    Eigen::Map<Eigen::Vector2d> r(residuals);
+    r = sqrt_info_ * l.e;
+    if (jacobians != nullptr) {
+      if (jacobians[0] != nullptr) {
+        Eigen::Map<Eigen::Matrix<double, 2, 2, Eigen::RowMajor>> j_object(jacobians[0]);
+        j_object = sqrt_info_ * l.d_object;
+      }
+      if (jacobians[1] != nullptr) {
+        Eigen::Map<Eigen::Matrix<double, 2, 3, Eigen::RowMajor>> j_pose(jacobians[1]);
+        j_pose = sqrt_info_ * l.d_pose;
+      }
+      for (int k = 0; k < 2; ++k) {
+        if (jacobians[2 + k] != nullptr) {
+          Eigen::Map<Eigen::Vector2d> j_size(jacobians[2 + k]);
+          j_size = sqrt_info_ * l.d_size.col(k);
+        }
+      }
+      if (jacobians[4] != nullptr) {
+        Eigen::Map<Eigen::Vector2d> j_bias(jacobians[4]);
+        j_bias = -(sqrt_info_ * shared_bias_);
+      }
+    }
+    return true;
+  }
+
+ private:
+  Eigen::Vector2d z_;
+  Eigen::Matrix2d jd_;
+  Eigen::Matrix2d sqrt_info_;
+  Eigen::Vector2d shared_bias_;
+};
+
+// The prior of a sensor's shared bias, N(0, 1) in standard deviations: (applied + beta) / 1.
+class BiasPriorCost final : public ceres::SizedCostFunction<1, 1> {
+ public:
+  explicit BiasPriorCost(double applied) : applied_(applied) {}
+  bool Evaluate(double const* const* parameters, double* residuals,
+                double** jacobians) const override {
+    residuals[0] = applied_ + parameters[0][0];
+    if (jacobians != nullptr && jacobians[0] != nullptr) jacobians[0][0] = 1.0;
+    return true;
+  }
+
+ private:
+  double applied_;
+};
+
 // The prior of one size-correction component: d / sigma.
 class SizePriorCost final : public ceres::SizedCostFunction<1, 1> {
  public:
@@ -563,7 +624,9 @@ SolveOutcome Solve(const Association& a, const std::vector<Constraint>& constrai
                    const std::vector<bool>& free_sensor, const std::array<bool, 2>& free_size,
                    double size_prior_sigma_m, std::vector<PoseParams>& poses, SizeParams& size,
                    std::vector<Eigen::Vector2d>& objects, const ceres::LossFunction* loss,
-                   double observation_weight, const JointRefineOptions& options) {
+                   double observation_weight, const JointRefineOptions& options,
+                   const std::vector<bool>& free_bias, const std::vector<double>& applied_bias,
+                   std::vector<double>& bias_step) {
   // Declared before the problem, which refers to them until destroyed.
   ceres::ScaledLoss observation_loss(loss, observation_weight, ceres::DO_NOT_TAKE_OWNERSHIP);
   ceres::CauchyLoss constraint_loss(options.constraint_loss_scale);
@@ -601,11 +664,24 @@ SolveOutcome Solve(const Association& a, const std::vector<Constraint>& constrai
       problem.AddResidualBlock(new SizePriorCost(size_prior_sigma_m), nullptr, &size[k]);
     }
   }
+  bias_step.assign(poses.size(), 0.0);
+  for (std::size_t sensor = 0; sensor < poses.size(); ++sensor) {
+    if (sensor >= free_bias.size() || !free_bias[sensor]) continue;
+    problem.AddParameterBlock(&bias_step[sensor], 1);
+    ordering->AddElementToGroup(&bias_step[sensor], 1);
+    problem.AddResidualBlock(new BiasPriorCost(applied_bias[sensor]), nullptr, &bias_step[sensor]);
+  }
   for (Eigen::Vector2d& o : objects) {
     problem.AddParameterBlock(o.data(), 2);
     ordering->AddElementToGroup(o.data(), 0);
   }
   for (const Observation& ob : a.observations) {
+    if (ob.sensor < free_bias.size() && free_bias[ob.sensor]) {
+      problem.AddResidualBlock(new ObservationBiasCost(ob.z, ob.jd, ob.sqrt_info, ob.shared_bias),
+                               &observation_loss, objects[ob.object].data(),
+                               poses[ob.sensor].data(), &size[0], &size[1], &bias_step[ob.sensor]);
+      continue;
+    }
     problem.AddResidualBlock(new ObservationCost(ob.z, ob.jd, ob.sqrt_info), &observation_loss,
                              objects[ob.object].data(), poses[ob.sensor].data(), &size[0],
                              &size[1]);
@@ -781,6 +857,8 @@ struct ReducedSystem {
   // shared radial bias (every sample of s shifted by its Observation::shared_bias), i.e. H_theta_b
   // of the consider parameter b_s (refine.h "Sensor bias").
   Eigen::MatrixXd sensor_bias;
+  // sensors x sensors: H_bb of the same biases (objects eliminated), per standard deviation.
+  Eigen::MatrixXd bias_bias;
 };
 
 ReducedSystem BuildReducedSystem(const Association& a, const std::vector<Constraint>& constraints,
@@ -863,9 +941,9 @@ ReducedSystem BuildReducedSystem(const Association& a, const std::vector<Constra
   std::vector<Eigen::Matrix<double, 2, 5>> coupling;     // w J_o^T J_g per observation
   std::vector<Eigen::Matrix<double, 2, 2>> object_side;  // w J_o^T sqrt_info per observation
   std::vector<Columns> cols;
-  if (with_groups) {
-    out.sensor_bias = Eigen::MatrixXd::Zero(dim, static_cast<Eigen::Index>(poses.size()));
-  }
+  const auto sensors = static_cast<Eigen::Index>(poses.size());
+  out.sensor_bias = Eigen::MatrixXd::Zero(dim, sensors);
+  out.bias_bias = Eigen::MatrixXd::Zero(sensors, sensors);
   auto scatter_bias = [&](std::size_t sensor, const Columns& rows,
                           const Eigen::Matrix<double, 5, 1>& block) {
     for (std::size_t i = 0; i < 5; ++i) {
@@ -895,9 +973,12 @@ ReducedSystem BuildReducedSystem(const Association& a, const std::vector<Constra
       object_side[k] = w * j_o.transpose() * ob.sqrt_info;
       cols[k] = columns_of(ob);
       scatter(cols[k], cols[k], w * j_g.transpose() * j_g, 1.0);
+      const Eigen::Vector2d j_b = ob.sqrt_info * ob.shared_bias;
+      scatter_bias(ob.sensor, cols[k], w * j_g.transpose() * j_b);
+      const auto b = static_cast<Eigen::Index>(ob.sensor);
+      out.bias_bias(b, b) += w * j_b.squaredNorm();
       if (with_groups) {
         scatter_rows(group_matrix(ob.group), cols[k], w * j_g.transpose() * ob.sqrt_info);
-        scatter_bias(ob.sensor, cols[k], w * j_g.transpose() * (ob.sqrt_info * ob.shared_bias));
       }
     }
     const Eigen::LDLT<Eigen::Matrix2d> ldlt(h_oo);
@@ -907,15 +988,21 @@ ReducedSystem BuildReducedSystem(const Association& a, const std::vector<Constra
       for (std::size_t m = 0; m < members.size(); ++m) {
         scatter(cols[k], cols[m], coupling[k].transpose() * h_oo_inv * coupling[m], -1.0);
       }
+      // The object moves with an offset of observation k too: its share of the reduced response.
+      const Eigen::Matrix<double, 2, 2> moved = h_oo_inv * object_side[k];
+      const Observation& ob = a.observations[members[k]];
+      const Eigen::Vector2d moved_bias = moved * ob.shared_bias;
+      for (std::size_t m = 0; m < members.size(); ++m) {
+        scatter_bias(ob.sensor, cols[m], -(coupling[m].transpose() * moved_bias));
+        const Observation& other = a.observations[members[m]];
+        out.bias_bias(static_cast<Eigen::Index>(other.sensor),
+                      static_cast<Eigen::Index>(ob.sensor)) -=
+            (object_side[m] * other.shared_bias).dot(moved_bias);
+      }
       if (with_groups) {
-        // The object moves with the offset too: its share of the reduced response.
-        const Eigen::Matrix<double, 2, 2> moved = h_oo_inv * object_side[k];
-        const Observation& ob = a.observations[members[k]];
         Eigen::MatrixXd& g = group_matrix(ob.group);
-        const Eigen::Vector2d moved_bias = moved * ob.shared_bias;
         for (std::size_t m = 0; m < members.size(); ++m) {
           scatter_rows(g, cols[m], -(coupling[m].transpose() * moved));
-          scatter_bias(ob.sensor, cols[m], -(coupling[m].transpose() * moved_bias));
         }
       }
     }
@@ -963,6 +1050,43 @@ void SizeObservability(const ReducedSystem& system, const std::vector<PoseParams
     scale_correlation[k] =
         var > 0.0 && var_scale > 0.0 ? std::abs(cov) / std::sqrt(var * var_scale) : 1.0;
   }
+}
+
+// How well the data alone determine each sensor's shared radial bias, in standard deviations of
+// its prior (+inf: the sensor has none, or the data say nothing of it): the marginal of the
+// reduced system extended by the biases, every pose free, the size correction under its prior.
+std::vector<double> SensorBiasDataSigma(const ReducedSystem& system, double size_prior_sigma_m) {
+  const auto d = static_cast<Eigen::Index>(system.dim);
+  const Eigen::Index nb = system.bias_bias.rows();
+  std::vector<double> out(static_cast<std::size_t>(nb), std::numeric_limits<double>::infinity());
+  Eigen::MatrixXd m = Eigen::MatrixXd::Zero(d + nb, d + nb);
+  m.topLeftCorner(d, d) = system.h;
+  const double prior_info =
+      size_prior_sigma_m > 0.0 ? 1.0 / (size_prior_sigma_m * size_prior_sigma_m) : 1e12;
+  for (std::size_t k = 0; k < 2; ++k) {
+    const auto i = static_cast<Eigen::Index>(system.size_offset + k);
+    m(i, i) += prior_info;
+  }
+  m.topRightCorner(d, nb) = system.sensor_bias;  // the sign of H_theta_b does not matter here
+  m.bottomLeftCorner(nb, d) = system.sensor_bias.transpose();
+  m.bottomRightCorner(nb, nb) = 0.5 * (system.bias_bias + system.bias_bias.transpose());
+  std::vector<bool> present(static_cast<std::size_t>(nb), false);
+  for (Eigen::Index b = 0; b < nb; ++b) {
+    present[static_cast<std::size_t>(b)] = m(d + b, d + b) > 0.0;
+    if (!present[static_cast<std::size_t>(b)]) m(d + b, d + b) = 1.0;  // not in the problem
+  }
+  // A tiny regularisation keeps an unobservable direction finite (huge) instead of failing.
+  const double ridge = 1e-9 * std::max(1.0, m.diagonal().cwiseAbs().maxCoeff());
+  m.diagonal().array() += ridge;
+  const auto inverse = InverseSpd(m);
+  if (!inverse) return out;
+  for (Eigen::Index b = 0; b < nb; ++b) {
+    const double var = (*inverse)(d + b, d + b);
+    if (present[static_cast<std::size_t>(b)] && var > 0.0 && var < 1.0 / ridge) {
+      out[static_cast<std::size_t>(b)] = std::sqrt(var);
+    }
+  }
+  return out;
 }
 
 // Marginal covariance of the free poses (size correction marginalised under its prior) plus the
@@ -1019,6 +1143,9 @@ std::optional<std::string> Validate(const JointRefineOptions& o) {
   if (!non_negative(o.model_sigma_per_m)) return "model_sigma_per_m must be finite and >= 0";
   if (!(o.max_size_scale_correlation > 0.0 && o.max_size_scale_correlation <= 1.0)) {
     return "max_size_scale_correlation must be in (0, 1]";
+  }
+  if (!(o.sensor_bias_max_data_sigma >= 0.0) || !std::isfinite(o.sensor_bias_max_data_sigma)) {
+    return "sensor_bias_max_data_sigma must be a finite value >= 0";
   }
   if (o.loss != RobustLoss::kNone && o.loss != RobustLoss::kHuber &&
       o.loss != RobustLoss::kCauchy) {
@@ -1096,8 +1223,27 @@ JointRefineResult RefineJointly(const AlignedTracks& tracks,
   }
   result.stride = stride;
   std::vector<double> group_sigma;
-  const std::vector<std::vector<StepSample>> samples =
+  std::vector<std::vector<StepSample>> samples =
       CollectSamples(tracks, calibrated, stride, options, result.rejected_samples, group_sigma);
+  // Each sensor's shared radial bias (refine.h "Sensor bias"): its prior standard deviation (the
+  // mean over its samples), whether it is estimated, and what has been applied to the samples' z
+  // (prior standard deviations).
+  std::vector<double> bias_sigma_m(n, 0.0);
+  {
+    std::vector<double> count(n, 0.0);
+    for (const auto& step : samples) {
+      for (const StepSample& x : step) {
+        bias_sigma_m[x.sensor] += x.shared_bias.norm();
+        count[x.sensor] += 1.0;
+      }
+    }
+    for (std::size_t s = 0; s < n; ++s) {
+      if (count[s] > 0.0) bias_sigma_m[s] /= count[s];
+    }
+  }
+  std::vector<bool> free_bias(n, false);
+  std::vector<double> applied_bias(n, 0.0);
+  bool bias_checked = !options.estimate_sensor_bias || !options.sensor_bias;
   const std::unique_ptr<ceres::LossFunction> loss = MakeLoss(options);
   const ceres::CauchyLoss constraint_loss(options.constraint_loss_scale);
   // Smoothed tracks are correlated over observation_correlation_steps grid steps: the used
@@ -1119,7 +1265,7 @@ JointRefineResult RefineJointly(const AlignedTracks& tracks,
   bool size_checked = false;
   std::string last_note;
   double gate = options.initial_association_gate_m;
-  for (int round = 0; round < options.association_rounds + 2; ++round) {
+  for (int round = 0; round < options.association_rounds + 3; ++round) {
     Association a;
     for (std::size_t k = 0; k < samples.size(); ++k) {
       AssociateStep(samples[k], k, poses, size, gate, a);
@@ -1159,24 +1305,39 @@ JointRefineResult RefineJointly(const AlignedTracks& tracks,
     if (converged || round >= options.association_rounds) {
       // The association has settled (or the rounds are spent): decide once whether the size
       // correction is observable; a component that is not is held at 0 and the poses solved
-      // again.
-      if (size_checked || !(free_size[0] || free_size[1])) break;
-      size_checked = true;
-      const ReducedSystem system = BuildReducedSystem(
-          final_association, final_constraints, final_params, size, final_association.objects,
-          final_free, loss.get(), &constraint_loss, observation_weight, false);
-      SizeObservability(system, final_params, reference, result.size_data_sigma_m,
-                        result.size_scale_correlation);
+      // again. Then, once, which sensors' shared bias the data observe: those are estimated and
+      // the poses solved again.
       bool changed = false;
-      for (std::size_t k = 0; k < 2; ++k) {
-        const bool observable =
-            result.size_data_sigma_m[k] <= prior_sigma &&
-            result.size_scale_correlation[k] <= options.max_size_scale_correlation;
-        if (!observable && free_size[k]) {
-          free_size[k] = false;
-          size[k] = 0.0;
-          changed = true;
+      if (!size_checked && (free_size[0] || free_size[1])) {
+        size_checked = true;
+        const ReducedSystem system = BuildReducedSystem(
+            final_association, final_constraints, final_params, size, final_association.objects,
+            final_free, loss.get(), &constraint_loss, observation_weight, false);
+        SizeObservability(system, final_params, reference, result.size_data_sigma_m,
+                          result.size_scale_correlation);
+        for (std::size_t k = 0; k < 2; ++k) {
+          const bool observable =
+              result.size_data_sigma_m[k] <= prior_sigma &&
+              result.size_scale_correlation[k] <= options.max_size_scale_correlation;
+          if (!observable && free_size[k]) {
+            free_size[k] = false;
+            size[k] = 0.0;
+            changed = true;
+          }
         }
+      }
+      if (!changed && !bias_checked) {
+        bias_checked = true;
+        const ReducedSystem system = BuildReducedSystem(
+            final_association, final_constraints, final_params, size, final_association.objects,
+            final_free, loss.get(), &constraint_loss, observation_weight, false);
+        const std::vector<double> data_sigma = SensorBiasDataSigma(system, prior_sigma);
+        for (std::size_t s = 0; s < n; ++s) {
+          free_bias[s] =
+              bias_sigma_m[s] > 0.0 && data_sigma[s] <= options.sensor_bias_max_data_sigma;
+          changed = changed || free_bias[s];
+        }
+        result.sensor_bias_data_sigma = data_sigma;
       }
       if (!changed) break;
     }
@@ -1187,9 +1348,10 @@ JointRefineResult RefineJointly(const AlignedTracks& tracks,
     // Objects start at their optimum for the current poses, so that the solver's steps go to the
     // poses from the first iteration on.
     OptimizeObjects(a, params, size, loss.get(), a.objects);
-    const SolveOutcome outcome =
-        Solve(a, round_constraints, free_sensor, free_size, prior_sigma, params, next_size,
-              a.objects, loss.get(), observation_weight, options);
+    std::vector<double> bias_step;
+    const SolveOutcome outcome = Solve(a, round_constraints, free_sensor, free_size, prior_sigma,
+                                       params, next_size, a.objects, loss.get(), observation_weight,
+                                       options, free_bias, applied_bias, bias_step);
     result.iterations += outcome.iterations;
     result.solver_time_s += outcome.time_s;
     ++result.rounds;
@@ -1202,6 +1364,19 @@ JointRefineResult RefineJointly(const AlignedTracks& tracks,
       if (free_sensor[s]) poses[s] = ToPose(params[s]);
     }
     size = next_size;
+    // The estimated biases' change goes into the samples' centres (and this round's
+    // observations, whose objects the solver fitted with it).
+    bool bias_moved = false;
+    for (std::size_t s = 0; s < n; ++s) {
+      applied_bias[s] += bias_step[s];
+      bias_moved = bias_moved || bias_step[s] != 0.0;
+    }
+    if (bias_moved) {
+      for (auto& step : samples) {
+        for (StepSample& x : step) x.z += bias_step[x.sensor] * x.shared_bias;
+      }
+      for (Observation& ob : a.observations) ob.z += bias_step[ob.sensor] * ob.shared_bias;
+    }
     final_association = std::move(a);
     final_free = free_sensor;
     final_params = std::move(params);
@@ -1244,6 +1419,12 @@ JointRefineResult RefineJointly(const AlignedTracks& tracks,
   result.sensor_observations = CountPerSensor(a, n);
   result.size_correction_m = Eigen::Vector2d(size[0], size[1]);
   result.size_correction_estimated = free_size;
+  result.sensor_bias_estimated = free_bias;
+  result.sensor_bias_m.assign(n, 0.0);
+  for (std::size_t s = 0; s < n; ++s) result.sensor_bias_m[s] = applied_bias[s] * bias_sigma_m[s];
+  if (result.sensor_bias_data_sigma.size() != n) {
+    result.sensor_bias_data_sigma.assign(n, std::numeric_limits<double>::infinity());
+  }
   result.cost_before = before.cost;
   result.cost_after = after.cost;
   result.rms_before_m = before.rms_m;
@@ -1262,6 +1443,7 @@ JointRefineResult RefineJointly(const AlignedTracks& tracks,
   }
   unknowns += 3 * refined_count;
   for (bool b : free_size) unknowns += b ? 1 : 0;
+  for (std::size_t s = 0; s < n; ++s) unknowns += free_bias[s] ? 1 : 0;
   const std::size_t residuals = 2 * a.observations.size() + 3 * final_constraints.size();
   result.variance_factor =
       residuals > unknowns ? after.unweighted_sum / static_cast<double>(residuals - unknowns) : 0.0;
@@ -1281,6 +1463,13 @@ JointRefineResult RefineJointly(const AlignedTracks& tracks,
               << (free_size[k] ? "estimated" : "prior: not observable apart from the scale");
     }
     message << ")";
+  }
+  bool any_bias = false;
+  for (std::size_t s = 0; s < n; ++s) {
+    if (!free_bias[s]) continue;
+    message << (any_bias ? ", " : "; shared radial bias estimated: ") << tracks.sensors[s].id << ' '
+            << Fixed(result.sensor_bias_m[s], 3) << " m";
+    any_bias = true;
   }
   std::vector<std::string> held;
   for (std::size_t s = 0; s < n; ++s) {

@@ -66,6 +66,13 @@
 //
 // so the samples of one sensor, however many and in however many pairs, never shrink that part of
 // the uncertainty. sensor_bias = false leaves it out (the behaviour before).
+// Where the data do observe a sensor's bias (walls tie sensors that see one person from different
+// directions, so the same b_s must explain their disagreement in every direction), it is
+// estimated (estimate_sensor_bias): after the association has settled (and the size decision),
+// each b_s's standard deviation from the data alone (every pose free, the size under its prior)
+// is computed; those at most sensor_bias_max_data_sigma of the prior are solved for with their
+// prior, the others held at 0. The covariance keeps the consider term for all (an upper bound
+// where b_s was estimated).
 //
 // Thread-safety: pure function over value types; concurrent calls are safe.
 
@@ -125,6 +132,8 @@ struct JointRefineOptions {
   // Carry each sensor's shared radial bias as a consider parameter in the covariance (see "Sensor
   // bias" above).
   bool sensor_bias = true;
+  bool estimate_sensor_bias = true;
+  double sensor_bias_max_data_sigma = 0.5;
   int max_iterations = 50;     // per solve
   int association_rounds = 5;  // solves, each after a (re-)association with the current poses
   // Too little data: fewer associated observations in total, or fewer for a sensor (that sensor
@@ -170,7 +179,8 @@ struct JointRefineResult {
   std::vector<bool> refined;
   std::vector<std::size_t> sensor_observations;  // associated observations per sensor (last round)
   // Cost (see above) at the initial poses and size correction and at the final ones, both with the
-  // final association and the object positions optimal for those poses.
+  // final association, the estimated sensor biases and the object positions optimal for those
+  // poses.
   double cost_before = 0.0, cost_after = 0.0;
   // RMS over observations of |R_s^T (o - t_s) - z| (metres), before and after, like the costs.
   double rms_before_m = 0.0, rms_after_m = 0.0;
@@ -182,6 +192,12 @@ struct JointRefineResult {
   std::array<bool, 2> size_correction_estimated{};
   std::array<double, 2> size_scale_correlation{};
   std::array<double, 2> size_data_sigma_m{};
+  // Per sensor (refine.h "Sensor bias"): how far its reported points lie towards it from the body
+  // centres beyond the measurement model, as estimated (0 where not estimated); whether it was
+  // estimated; its standard deviation from the data alone in units of its prior (+inf: none).
+  std::vector<double> sensor_bias_m;
+  std::vector<bool> sensor_bias_estimated;
+  std::vector<double> sensor_bias_data_sigma;
   // (sum rho(|r|^2) + sum |r_c|^2) / (residuals - unknowns) at the solution, without w.
   double variance_factor = 0.0;
   std::size_t observations = 0;      // associated observations in the final problem

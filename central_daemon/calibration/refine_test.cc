@@ -156,6 +156,10 @@ TEST(JointRefineOptionsTest, DefaultsAreValidAndBadValuesAreNamed) {
   o.max_size_scale_correlation = 0.0;
   EXPECT_TRUE(Validate(o).has_value());
   o = {};
+  o.sensor_bias_max_data_sigma = -0.5;
+  ASSERT_TRUE(Validate(o).has_value());
+  EXPECT_NE(Validate(o)->find("sensor_bias_max_data_sigma"), std::string::npos);
+  o = {};
   o.loss_scale = std::nan("");
   EXPECT_TRUE(Validate(o).has_value());
   o = {};
@@ -635,20 +639,20 @@ TEST(RefineJointlyTest, CovarianceMatchesTheSpreadOverNoiseDraws) {
   EXPECT_LT(nees, 5.0);
 }
 
-TEST(RefineJointlyTest, SensorBiasAcrossADoorwayIsInTheCovariance) {
-  // Two rooms joined by a doorway at (10, 5): two sensors in each, tied to each other by walls
-  // (constraints of a few millimetres), and people seen by all four only in the doorway. Every
-  // shape-fit centre sits 0.02 m beyond the body centre along its line of sight (one standard
-  // deviation of the shared bias the model allows, the same for every sensor): seen from both
-  // sides, room B comes out ~0.04 m towards room A, which no number of samples averages out.
-  // With each sensor's bias as a consider parameter the covariance covers that; without it the
-  // covariance only knows the noise.
-  const std::vector<Pose2> truth = {{6.0, 5.0, 0.0},
-                                    {6.0, 7.0, DegToRad(-25.0)},
-                                    {14.0, 5.0, DegToRad(180.0)},
-                                    {14.0, 3.0, DegToRad(155.0)}};
-  // Six people walking back and forth between the rooms; each sensor sees them within 5 m, so the
-  // four views overlap only around the doorway and every pass is a new track.
+// Two rooms joined by a doorway at (10, 5): two sensors in each, tied to each other by walls
+// (constraints of a few millimetres), and six people walking back and forth between the rooms,
+// each sensor seeing them within 5 m (the views overlap only around the doorway; every pass is a
+// new track). Every shape-fit centre sits 0.02 m beyond the body centre along its line of sight
+// (one standard deviation of the shared bias the model allows, the same for every sensor): seen
+// from both sides, room B comes out ~0.04 m towards room A, which no number of samples averages.
+std::vector<Pose2> DoorwaySensors() {
+  return {{6.0, 5.0, 0.0},
+          {6.0, 7.0, DegToRad(-25.0)},
+          {14.0, 5.0, DegToRad(180.0)},
+          {14.0, 3.0, DegToRad(155.0)}};
+}
+
+AlignedTracks DoorwayTracks(const std::vector<Pose2>& sensors) {
   std::vector<Path> doorway;
   for (int i = 0; i < 6; ++i) {
     const double k = static_cast<double>(i);
@@ -664,12 +668,27 @@ TEST(RefineJointlyTest, SensorBiasAcrossADoorwayIsInTheCovariance) {
   synth.shared_bias_sigma_m = 0.02;
   synth.range_m = 5.0;
   synth.steps = 2400;
-  const AlignedTracks tracks = MakeTracks(truth, doorway, synth);
+  return MakeTracks(sensors, doorway, synth);
+}
+
+// The 2-dof NEES of a sensor's position error: within chi2(2) 95 % (5.99) for a covariance that
+// covers the error, beyond 3 sigma (9) for one that does not.
+double PositionNees(const JointRefineResult& r, const std::vector<Pose2>& truth, std::size_t s) {
+  const Eigen::Vector2d e = r.world_from_sensor[s].translation() - truth[s].translation();
+  return e.dot(r.covariance[s].topLeftCorner<2, 2>().ldlt().solve(e));
+}
+
+TEST(RefineJointlyTest, SensorBiasHeldAcrossADoorwayIsInTheCovariance) {
+  // The biases held at their prior (not estimated): as a consider parameter each sensor's bias
+  // puts the error into the covariance; without it the covariance only knows the noise.
+  const std::vector<Pose2> truth = DoorwaySensors();
+  const AlignedTracks tracks = DoorwayTracks(truth);
   const std::vector<RelativePoseConstraint> walls = {
       TrueConstraint(truth, 0, 1, 0.002, DegToRad(0.02)),
       TrueConstraint(truth, 2, 3, 0.002, DegToRad(0.02))};
   const std::vector<Pose2> initial = Perturb(truth, 0, 0.05, DegToRad(0.5));
   JointRefineOptions options;
+  options.estimate_sensor_bias = false;
   const JointRefineResult with =
       RefineJointly(tracks, initial, std::vector<bool>(4, true), 0, options, walls);
   options.sensor_bias = false;
@@ -677,14 +696,8 @@ TEST(RefineJointlyTest, SensorBiasAcrossADoorwayIsInTheCovariance) {
       RefineJointly(tracks, initial, std::vector<bool>(4, true), 0, options, walls);
   ASSERT_TRUE(with.ok) << with.message;
   ASSERT_TRUE(without.ok) << without.message;
-  // The 2-dof NEES of the position error: within chi2(2) 95 % (5.99) for a covariance that
-  // covers the error, beyond 3 sigma (9) for one that does not.
-  auto nees = [&truth](const JointRefineResult& r, std::size_t s) {
-    const Eigen::Vector2d e = r.world_from_sensor[s].translation() - truth[s].translation();
-    return e.dot(r.covariance[s].topLeftCorner<2, 2>().ldlt().solve(e));
-  };
   for (std::size_t s = 1; s < 4; ++s) {
-    EXPECT_LE(nees(with, s), 5.99) << s;
+    EXPECT_LE(PositionNees(with, truth, s), 5.99) << s;
     // Honest, not meaningless: of the order of the bias prior.
     EXPECT_LT(std::sqrt(with.covariance[s].topLeftCorner<2, 2>().trace()), 0.06) << s;
   }
@@ -694,8 +707,45 @@ TEST(RefineJointlyTest, SensorBiasAcrossADoorwayIsInTheCovariance) {
     EXPECT_GT(error_m, 0.025) << s;
     EXPECT_NEAR(common::TranslationDistanceM(without.world_from_sensor[s], truth[s]), error_m,
                 1e-9);
-    EXPECT_GT(nees(without, s), 9.0) << s;
+    EXPECT_GT(PositionNees(without, truth, s), 9.0) << s;
   }
+}
+
+TEST(RefineJointlyTest, SensorBiasIsEstimatedWhereWallsMakeItObservable) {
+  // The walls tie each room's two sensors, which see one person from different directions: only
+  // the right bias of each explains their disagreement in every direction. Estimated, room B is
+  // placed to millimetres; the reported biases are the true -0.02 m (beyond the centre).
+  const std::vector<Pose2> truth = DoorwaySensors();
+  const AlignedTracks tracks = DoorwayTracks(truth);
+  const std::vector<RelativePoseConstraint> walls = {
+      TrueConstraint(truth, 0, 1, 0.002, DegToRad(0.02)),
+      TrueConstraint(truth, 2, 3, 0.002, DegToRad(0.02))};
+  const JointRefineResult r = RefineJointly(tracks, Perturb(truth, 0, 0.05, DegToRad(0.5)),
+                                            std::vector<bool>(4, true), 0, {}, walls);
+  ASSERT_TRUE(r.ok) << r.message;
+  ASSERT_EQ(r.sensor_bias_estimated.size(), 4u);
+  for (std::size_t s = 0; s < 4; ++s) {
+    EXPECT_TRUE(r.sensor_bias_estimated[s]) << s << ": " << r.sensor_bias_data_sigma[s];
+    EXPECT_LT(r.sensor_bias_data_sigma[s], 0.5) << s;
+    EXPECT_NEAR(r.sensor_bias_m[s], -0.02, 0.01) << s;
+  }
+  for (std::size_t s = 1; s < 4; ++s) {
+    EXPECT_LT(common::TranslationDistanceM(r.world_from_sensor[s], truth[s]), 0.01) << s;
+    EXPECT_LE(PositionNees(r, truth, s), 5.99) << s;
+  }
+  EXPECT_NE(r.message.find("shared radial bias estimated"), std::string::npos) << r.message;
+
+  // Two facing sensors alone: a bias of either is a translation along the line between them, the
+  // data cannot tell them apart; held at the prior, which the covariance carries.
+  const std::vector<Pose2> facing = {truth[0], truth[2]};
+  const std::vector<Pose2> pair_initial = {truth[0], Perturb(facing, 0, 0.05, 0.0)[1]};
+  const JointRefineResult p =
+      RefineJointly(DoorwayTracks(facing), pair_initial, std::vector<bool>(2, true), 0, {});
+  ASSERT_TRUE(p.ok) << p.message;
+  EXPECT_FALSE(p.sensor_bias_estimated[0]) << p.sensor_bias_data_sigma[0];
+  EXPECT_FALSE(p.sensor_bias_estimated[1]) << p.sensor_bias_data_sigma[1];
+  EXPECT_GT(common::TranslationDistanceM(p.world_from_sensor[1], facing[1]), 0.025);
+  EXPECT_LE(PositionNees(p, facing, 1), 5.99);
 }
 
 }  // namespace

@@ -147,8 +147,8 @@ std::vector<Variant> Variants(bool diagnostic) {
   add("ours, shape fit, ICP + refinement, before (no mount check)", "shape_fit",
       calib::Method::kQuenzel, true, true, false);
   out.back().options.check_mount = false;
-  // The same without each sensor's shared radial bias in the covariances (refine.h, pairwise.h
-  // "Sensor bias"): the behaviour before it.
+  // The same without each sensor's shared radial bias (refine.h, pairwise.h "Sensor bias"):
+  // neither in the covariances nor estimated, the behaviour before it.
   for (const bool refine : {true, false}) {
     add(std::string("ours, shape fit, ICP") + (refine ? " + refinement" : "") +
             ", before (no sensor bias)",
@@ -156,6 +156,10 @@ std::vector<Variant> Variants(bool diagnostic) {
     out.back().options.joint.sensor_bias = false;
     out.back().options.pairwise.sensor_bias = false;
   }
+  // With the shared biases in the covariances but never estimated (held at their prior).
+  add("ours, shape fit, ICP + refinement, sensor bias held", "shape_fit", calib::Method::kQuenzel,
+      true, true, false);
+  out.back().options.joint.estimate_sensor_bias = false;
   add("ours, shape fit at each sensor's mount, ICP + refinement", "shape_fit_mount",
       calib::Method::kQuenzel, true, true, false);
   add("ours, shape fit at each sensor's mount, ICP", "shape_fit_mount", calib::Method::kQuenzel,
