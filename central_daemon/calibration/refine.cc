@@ -924,7 +924,8 @@ ReducedSystem BuildReducedSystem(const Association& a, const std::vector<Constra
   auto group_matrix = [&](std::size_t group) -> Eigen::MatrixXd& {
     if (group_index[group] == kNone) {
       group_index[group] = out.groups.size();
-      out.groups.push_back(Eigen::MatrixXd::Zero(dim, 2));
+      // Rows: the reduced system's, then one per sensor's shared bias.
+      out.groups.push_back(Eigen::MatrixXd::Zero(dim + static_cast<Eigen::Index>(poses.size()), 2));
       out.group_sigma.push_back(group < group_sigma.size() ? group_sigma[group] : 0.0);
     }
     return out.groups[group_index[group]];
@@ -978,7 +979,9 @@ ReducedSystem BuildReducedSystem(const Association& a, const std::vector<Constra
       const auto b = static_cast<Eigen::Index>(ob.sensor);
       out.bias_bias(b, b) += w * j_b.squaredNorm();
       if (with_groups) {
-        scatter_rows(group_matrix(ob.group), cols[k], w * j_g.transpose() * ob.sqrt_info);
+        Eigen::MatrixXd& g = group_matrix(ob.group);
+        scatter_rows(g, cols[k], w * j_g.transpose() * ob.sqrt_info);
+        g.row(dim + b) += w * j_b.transpose() * ob.sqrt_info;
       }
     }
     const Eigen::LDLT<Eigen::Matrix2d> ldlt(h_oo);
@@ -1003,6 +1006,9 @@ ReducedSystem BuildReducedSystem(const Association& a, const std::vector<Constra
         Eigen::MatrixXd& g = group_matrix(ob.group);
         for (std::size_t m = 0; m < members.size(); ++m) {
           scatter_rows(g, cols[m], -(coupling[m].transpose() * moved));
+          const Observation& other = a.observations[members[m]];
+          g.row(dim + static_cast<Eigen::Index>(other.sensor)) -=
+              (object_side[m] * other.shared_bias).transpose() * moved;
         }
       }
     }
@@ -1089,30 +1095,70 @@ std::vector<double> SensorBiasDataSigma(const ReducedSystem& system, double size
   return out;
 }
 
-// Marginal covariance of the free poses (size correction marginalised under its prior) plus the
-// systematic floor. Returns false when the system is not positive definite.
+// Marginal covariance of the free poses (size correction marginalised under its prior, the
+// estimated sensor biases under theirs) plus the systematic floor and the consider term of the
+// biases held at their prior (refine.h "Sensor bias"). Returns false when the system is not
+// positive definite.
 bool PoseCovariance(const ReducedSystem& system, double size_prior_sigma_m, double scale,
+                    const std::vector<bool>& estimated_bias,
                     std::vector<Eigen::Matrix3d>& covariance) {
   if (system.dim == 2) return true;  // no free pose
-  Eigen::MatrixXd h = system.h;
+  const auto d = static_cast<Eigen::Index>(system.dim);
+  // The system extended by the estimated biases (per standard deviation, prior N(0, 1)).
+  std::vector<Eigen::Index> estimated, held;
+  for (Eigen::Index b = 0; b < system.bias_bias.rows(); ++b) {
+    if (static_cast<std::size_t>(b) < estimated_bias.size() &&
+        estimated_bias[static_cast<std::size_t>(b)]) {
+      estimated.push_back(b);
+    } else if (system.sensor_bias.col(b).squaredNorm() > 0.0) {
+      held.push_back(b);
+    }
+  }
+  const auto ne = static_cast<Eigen::Index>(estimated.size());
+  Eigen::MatrixXd h = Eigen::MatrixXd::Zero(d + ne, d + ne);
+  h.topLeftCorner(d, d) = system.h;
   const double prior_info =
       size_prior_sigma_m > 0.0 ? 1.0 / (size_prior_sigma_m * size_prior_sigma_m) : 1e12;
   for (std::size_t k = 0; k < 2; ++k) {
     const auto i = static_cast<Eigen::Index>(system.size_offset + k);
     h(i, i) += prior_info;
   }
+  for (Eigen::Index i = 0; i < ne; ++i) {
+    h.block(0, d + i, d, 1) = system.sensor_bias.col(estimated[static_cast<std::size_t>(i)]);
+    h.block(d + i, 0, 1, d) =
+        system.sensor_bias.col(estimated[static_cast<std::size_t>(i)]).transpose();
+    for (Eigen::Index j = 0; j < ne; ++j) {
+      h(d + i, d + j) = 0.5 * (system.bias_bias(estimated[static_cast<std::size_t>(i)],
+                                                estimated[static_cast<std::size_t>(j)]) +
+                               system.bias_bias(estimated[static_cast<std::size_t>(j)],
+                                                estimated[static_cast<std::size_t>(i)]));
+    }
+    h(d + i, d + i) += 1.0;
+  }
   const auto inverse = InverseSpd(h);
   if (!inverse) return false;
   Eigen::MatrixXd total = scale * *inverse;
+  // Rows of an extended column: the reduced system's, then the estimated biases'.
+  auto extend = [&](const Eigen::MatrixXd& column, Eigen::Index bias_rows_at) {
+    Eigen::MatrixXd out(d + ne, column.cols());
+    out.topRows(d) = column.topRows(d);
+    for (Eigen::Index i = 0; i < ne; ++i) {
+      out.row(d + i) = column.row(bias_rows_at + estimated[static_cast<std::size_t>(i)]);
+    }
+    return out;
+  };
   for (std::size_t k = 0; k < system.groups.size(); ++k) {
-    const Eigen::MatrixXd response = *inverse * system.groups[k];
+    const Eigen::MatrixXd response = *inverse * extend(system.groups[k], d);
     const double sigma = system.group_sigma[k];
     total.noalias() += (sigma * sigma) * (response * response.transpose());
   }
-  if (system.sensor_bias.size() > 0) {
-    // The consider parameters (refine.h "Sensor bias"): Sigma += S Sigma_b S^T, S = -H^-1
-    // H_theta_b, Sigma_b = I (the columns are per standard deviation).
-    const Eigen::MatrixXd response = *inverse * system.sensor_bias;
+  // The consider parameters: Sigma += S Sigma_b S^T, S = -H^-1 H_x_b, Sigma_b = I (the columns
+  // are per standard deviation), H_x_b of the poses and of the estimated biases.
+  for (const Eigen::Index b : held) {
+    Eigen::MatrixXd column(d + static_cast<Eigen::Index>(system.bias_bias.rows()), 1);
+    column.topRows(d) = system.sensor_bias.col(b);
+    column.bottomRows(system.bias_bias.rows()) = system.bias_bias.col(b);
+    const Eigen::MatrixXd response = *inverse * extend(column, d);
     total.noalias() += response * response.transpose();
   }
   for (std::size_t s = 0; s < system.pose_offset.size(); ++s) {
@@ -1486,7 +1532,7 @@ JointRefineResult RefineJointly(const AlignedTracks& tracks,
   const ReducedSystem system =
       BuildReducedSystem(a, final_constraints, final_params, size, a.objects, final_free,
                          loss.get(), &constraint_loss, observation_weight, true, group_sigma);
-  if (!PoseCovariance(system, prior_sigma, scale, result.covariance)) {
+  if (!PoseCovariance(system, prior_sigma, scale, free_bias, result.covariance)) {
     result.covariance.assign(n, Eigen::Matrix3d::Zero());
     message << "; covariance unavailable (reduced system not positive definite)";
   }

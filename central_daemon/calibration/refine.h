@@ -71,8 +71,9 @@
 // estimated (estimate_sensor_bias): after the association has settled (and the size decision),
 // each b_s's standard deviation from the data alone (every pose free, the size under its prior)
 // is computed; those at most sensor_bias_max_data_sigma of the prior are solved for with their
-// prior, the others held at 0. The covariance keeps the consider term for all (an upper bound
-// where b_s was estimated).
+// prior, the others held at 0. In the covariance the estimated ones are marginalised under their
+// prior (with the systematic floor's response through them) and the held ones enter as consider
+// terms (S from the system extended by the estimated ones).
 //
 // Thread-safety: pure function over value types; concurrent calls are safe.
 
