@@ -101,50 +101,53 @@ void BackgroundModel::FinishLearning() {
   learned_ = true;
 }
 
-void BackgroundModel::UpdateBeam(std::size_t i, float r, double dt_s) {
-  Beam& b = beams_[i];
+bool BackgroundModel::UpdateBeam(std::size_t i, float r, float dt, double alpha) {
   float& bg = background_m_[i];
-  const auto dt = static_cast<float>(dt_s);
-
-  const bool at_background =
-      (r == 0.0f && bg == 0.0f) || (r != 0.0f && bg != 0.0f && std::abs(r - bg) <= Margin(bg));
+  const double margin = Margin(bg);
+  const bool echo = r != 0.0f;
+  // Classified against the model as it was before this scan.
+  const bool fg = echo && (bg == 0.0f || r < bg - margin);
+  const bool at_background = echo ? bg != 0.0f && std::abs(r - bg) <= margin : bg == 0.0f;
+  Beam& b = beams_[i];
   if (at_background) {
-    if (r != 0.0f) {
-      const double alpha = dt_s / (options_.track_time_constant_s + dt_s);
-      bg += static_cast<float>(alpha * (r - bg));
-    }
+    if (echo) bg += static_cast<float>(alpha * (r - bg));
     b.candidate = Candidate::kNone;
     b.candidate_age_s = 0.0f;
-    return;
+    return fg;
   }
 
-  const bool nearer = r != 0.0f && (bg == 0.0f || r < bg);
+  // A change candidate (a person's beams, mostly): its next state is selected from the outcomes
+  // (follow, hold behind an occluder, restart; absorb or recede when old enough).
+  const bool nearer = echo && (bg == 0.0f || r < bg);
   const Candidate kind = nearer ? Candidate::kNearer : Candidate::kFarther;
+  const float candidate_m = b.candidate_m;
   const bool same_as_candidate =
-      b.candidate == kind && ((r == 0.0f && b.candidate_m == 0.0f) ||
-                              (r != 0.0f && b.candidate_m != 0.0f &&
-                               std::abs(r - b.candidate_m) <= Margin(b.candidate_m)));
-  if (same_as_candidate) {
-    b.candidate_age_s += dt;
-    if (r != 0.0f) b.candidate_m += 0.5f * (r - b.candidate_m);
-  } else if (kind == Candidate::kNearer && b.candidate == Candidate::kNearer && r < b.candidate_m) {
-    // Something passes in front of a candidate static object: its clock holds, it does not restart.
-    return;
-  } else {
-    b.candidate = kind;
-    b.candidate_m = r;
-    b.candidate_age_s = 0.0f;
-    return;
-  }
-
-  const double limit_s =
-      kind == Candidate::kNearer ? options_.absorb_after_s : options_.recede_after_s;
-  if (b.candidate_age_s >= limit_s) {
-    bg = b.candidate_m;
+      b.candidate == kind &&
+      (echo ? candidate_m != 0.0f && std::abs(r - candidate_m) <= Margin(candidate_m)
+            : candidate_m == 0.0f);
+  // Something passes in front of a candidate static object: its clock holds, it does not restart.
+  const bool holds =
+      !same_as_candidate && nearer && b.candidate == Candidate::kNearer && r < candidate_m;
+  const bool restarts = !same_as_candidate && !holds;
+  const float followed_m = echo ? candidate_m + 0.5f * (r - candidate_m) : candidate_m;
+  const float age_s = same_as_candidate ? b.candidate_age_s + dt
+                      : restarts        ? 0.0f
+                                        : b.candidate_age_s;
+  const float new_m = same_as_candidate ? followed_m : restarts ? r : candidate_m;
+  const Candidate new_candidate = restarts ? kind : b.candidate;
+  const double limit_s = nearer ? options_.absorb_after_s : options_.recede_after_s;
+  if (same_as_candidate && age_s >= limit_s) [[unlikely]] {
+    bg = new_m;
     b.candidate = Candidate::kNone;
+    b.candidate_m = new_m;
     b.candidate_age_s = 0.0f;
-    ++(kind == Candidate::kNearer ? counters_.absorbed_beams : counters_.receded_beams);
+    ++(nearer ? counters_.absorbed_beams : counters_.receded_beams);
+    return fg;
   }
+  b.candidate = new_candidate;
+  b.candidate_m = new_m;
+  b.candidate_age_s = age_s;
+  return fg;
 }
 
 void BackgroundModel::Absorb(const ScanView& scan, std::size_t begin_beam, std::size_t end_beam) {
@@ -210,14 +213,16 @@ BackgroundResult BackgroundModel::Update(const ScanView& scan) {
   }
 
   result.learned = true;
+  // The background's tracking gain (track_time_constant_s) is the same for every beam of a scan.
+  const double alpha = dt_s / (options_.track_time_constant_s + dt_s);
+  const auto dt = static_cast<float>(dt_s);
+  std::size_t foreground_beams = 0;
   for (std::size_t i = 0; i < n; ++i) {
-    const float r = Sanitize(scan.range_m[i]);
-    const float bg = background_m_[i];
-    const bool fg = r != 0.0f && (bg == 0.0f || r < bg - Margin(bg));
+    const bool fg = UpdateBeam(i, Sanitize(scan.range_m[i]), dt, alpha);
     foreground_[i] = fg ? 1 : 0;
-    result.foreground_beams += fg ? 1 : 0;
-    UpdateBeam(i, r, dt_s);
+    foreground_beams += fg ? 1 : 0;
   }
+  result.foreground_beams = foreground_beams;
   return result;
 }
 

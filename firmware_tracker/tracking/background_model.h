@@ -127,7 +127,9 @@ class BackgroundModel {
   void StartLearning(const ScanView& scan);
   void Learn(std::size_t i, float r);
   void FinishLearning();
-  void UpdateBeam(std::size_t i, float r, double dt_s);
+  // Classifies beam i's sanitised return r (true: foreground) and updates the beam; dt is the time
+  // since the last scan, alpha the background's tracking gain for that time.
+  bool UpdateBeam(std::size_t i, float r, float dt, double alpha);
 
   BackgroundOptions options_;
   bool learned_ = false;

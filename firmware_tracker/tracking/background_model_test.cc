@@ -186,6 +186,32 @@ TEST(BackgroundModelTest, ParkedCartIsAbsorbedAfterTimeConstant) {
   }
 }
 
+TEST(BackgroundModelTest, CartsClockHoldsWhileSomeonePassesInFront) {
+  SyntheticScanner scanner;
+  BackgroundOptions options;
+  BackgroundModel model(options);
+  const auto room = Room();
+  RunScans(model, scanner, 0, Scans(6.0), room, {});
+  // A cart parked at (4, 2); for 2 s of its absorb_after_s a person stands on the same rays at
+  // (2, 1), across them. The cart's clock holds meanwhile (it neither runs nor restarts).
+  const std::vector<Body> cart = {{{4.0, 2.0}, 0.4, 0.3, 0.5}};
+  std::vector<Body> both = cart;
+  both.push_back({{2.0, 1.0}, 0.25, 0.15, 0.46 + 1.57});
+  std::int64_t k = Scans(6.0);
+  const auto run = [&](double seconds, const std::vector<Body>& bodies) {
+    RunScans(model, scanner, k, k + Scans(seconds), room, bodies);
+    k += Scans(seconds);
+  };
+  run(options.absorb_after_s - 3.0, cart);
+  run(2.0, both);
+  // Had the clock run on, the cart would be background here; had it restarted, 27 s from now.
+  run(2.0, cart);
+  EXPECT_GT(model.Update(scanner.Render(k++, room, cart)).foreground_beams, 5u);
+  run(1.5, cart);
+  EXPECT_EQ(model.Update(scanner.Render(k++, room, cart)).foreground_beams, 0u);
+  EXPECT_GT(model.counters().absorbed_beams, 5u);
+}
+
 TEST(BackgroundModelTest, PersonStandingStillForSecondsIsNotAbsorbed) {
   SyntheticScanner scanner;
   BackgroundModel model(BackgroundOptions{});
