@@ -12,8 +12,9 @@ mkdir -p results
 "$build_dir/tests/bench/decode_benchmark" --out results/decode_benchmark.md
 "$build_dir/tests/bench/tracker_benchmark" --out results/tracker_benchmark.md
 # Tracking accuracy (CLEAR-MOT, NEES) over every shipped scenario, old and new tracker, per sensor
-# and fused, at upper-body and knee height, and where the per-sensor error comes from (a few minutes).
-"$build_dir/tests/bench/tracking_benchmark" --scenarios tools/scenarios --jobs 2 --breakdown --before-report-rules \
+# and fused, at upper-body and knee height, where the per-sensor error comes from and what the false
+# positives are (under a minute).
+"$build_dir/tests/bench/tracking_benchmark" --scenarios tools/scenarios --jobs 2 --breakdown --explain --before-report-rules \
   --out results/tracking_benchmark.md
 "$build_dir/tests/bench/store_benchmark" results/store_benchmark.md
 "$build_dir/tests/bench/daemon_benchmark" --out results/daemon_benchmark.md

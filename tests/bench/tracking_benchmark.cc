@@ -255,11 +255,14 @@ struct Mot {
 // every false positive, where it was.
 // What the false positives are (--explain, by scan and by false track, see FalseClass): the class
 // of every unmatched reported scan of a track, and of every false track its most frequent class.
+// false_classes: by class and, when coasting, the time since the track's last measurement;
+// false_scan_classes: by class alone (the results file's table).
 struct Causes {
   std::map<std::string, double> switches, misses, false_positives;
-  std::map<std::string, double> false_classes, false_track_classes;
+  std::map<std::string, double> false_classes, false_scan_classes, false_track_classes;
   void Add(const Causes& o) {
     for (const auto& [k, v] : o.false_classes) false_classes[k] += v;
+    for (const auto& [k, v] : o.false_scan_classes) false_scan_classes[k] += v;
     for (const auto& [k, v] : o.false_track_classes) false_track_classes[k] += v;
     for (const auto& [k, v] : o.false_positives) false_positives[k] += v;
     for (const auto& [k, v] : o.switches) switches[k] += v;
@@ -428,14 +431,16 @@ class MotSequence {
       HypState& hs = hyps_[hyps[h].id];
       hs.frames += 1;
       hs.unmatched += 1;
-      std::string cls =
+      const std::string cls =
           FalseClass(hyps[h], hs.ever_matched, hs.last_truth, truths, truth_to_hyp, furniture);
+      causes_.false_scan_classes[cls] += 1;
+      hs.classes[cls] += 1;
+      std::string timed = cls;
       if (!hyps[h].measured) {
         const double coast_s = now_s_ - hs.last_measured_s;
-        cls += coast_s < 0.15 ? " < 0.15 s" : coast_s < 0.3 ? " 0.15-0.3 s" : " >= 0.3 s";
+        timed += coast_s < 0.15 ? " < 0.15 s" : coast_s < 0.3 ? " 0.15-0.3 s" : " >= 0.3 s";
       }
-      causes_.false_classes[cls] += 1;
-      hs.classes[cls] += 1;
+      causes_.false_classes[timed] += 1;
     }
   }
 
@@ -602,10 +607,12 @@ struct RunResult {
   // The same summed over the sensors of each mount ("torso", "legs"), per variant: the totals
   // count a sensor by its own mount (a scenario "as given" mixes them).
   std::map<std::string, std::vector<Mot>> per_sensor_by_mount;
-  std::vector<Causes> causes;                            // per variant, summed over sensors
-  std::vector<tracking::MultiTrackerCounters> counters;  // per variant, summed over sensors
-  std::vector<Mot> fused;                                // per variant
-  std::vector<Breakdown> breakdown;                      // per variant, per sensor summed
+  std::vector<Causes> causes;                                  // per variant, summed over sensors
+  std::map<std::string, std::vector<Causes>> causes_by_mount;  // as per_sensor_by_mount
+  std::vector<Causes> fused_causes;                            // per variant
+  std::vector<tracking::MultiTrackerCounters> counters;        // per variant, summed over sensors
+  std::vector<Mot> fused;                                      // per variant
+  std::vector<Breakdown> breakdown;                            // per variant, per sensor summed
   double scans = 0;
   double track_seconds = 0;
   double cpu_s = 0;
@@ -696,7 +703,8 @@ void RunSensor(const sim::Simulator& simulator, std::size_t sensor,
   }
 }
 
-Mot RunFusion(const sim::Simulator& simulator, const std::vector<SensorFrames>& sensors) {
+Mot RunFusion(const sim::Simulator& simulator, const std::vector<SensorFrames>& sensors,
+              Causes* causes) {
   fusion::Fuser fuser;
   std::vector<fusion::SensorPlacement> placements;
   for (std::size_t i = 0; i < simulator.sensor_count(); ++i) {
@@ -760,7 +768,9 @@ Mot RunFusion(const sim::Simulator& simulator, const std::vector<SensorFrames>& 
     fuser.AddFrame(sensors[item.sensor].id, sensors[item.sensor].frames[item.frame]);
     latest[item.sensor] = item.frame;
   }
-  return sequence.Finish();
+  Mot m = sequence.Finish();
+  *causes = sequence.causes();
+  return m;
 }
 
 void AddCounters(const tracking::MultiTrackerCounters& c, tracking::MultiTrackerCounters* sum) {
@@ -807,6 +817,12 @@ void Explain(const std::string& scenario, const std::string& mount, const RunRes
       std::fprintf(stderr, "  false scans: %-72s %6.0f\n", cls.c_str(), count);
     for (const auto& [cls, count] : r.causes[v].false_track_classes)
       std::fprintf(stderr, "  false tracks: %-71s %6.0f\n", cls.c_str(), count);
+    for (const auto& [cls, count] : r.fused_causes[v].false_scan_classes)
+      std::fprintf(stderr, "  fused false scans: %-66s %6.0f\n", cls.c_str(), count);
+    for (const auto& [cls, count] : r.fused_causes[v].false_track_classes)
+      std::fprintf(stderr, "  fused false tracks: %-65s %6.0f\n", cls.c_str(), count);
+    for (const auto& [why, count] : r.fused_causes[v].switches)
+      std::fprintf(stderr, "  fused switch: %-60s %5.0f\n", why.c_str(), count);
   }
 }
 
@@ -871,12 +887,16 @@ RunResult RunScenario(sim::Scenario scenario, bool all_legs, int jobs) {
       auto& by_mount = result.per_sensor_by_mount[mount];
       by_mount.resize(nv);
       by_mount[v].Add(mots[i][v]);
+      auto& causes_by_mount = result.causes_by_mount[mount];
+      causes_by_mount.resize(nv);
+      causes_by_mount[v].Add(causes[i][v]);
       result.causes[v].Add(causes[i][v]);
       AddCounters(counters[i][v], &result.counters[v]);
       result.breakdown[v].Merge(breakdowns[i][v]);
       by_sensor.push_back(std::move(frames[i][v]));
     }
-    result.fused.push_back(RunFusion(*simulator, by_sensor));
+    result.fused_causes.emplace_back();
+    result.fused.push_back(RunFusion(*simulator, by_sensor, &result.fused_causes.back()));
   }
   return result;
 }
@@ -925,7 +945,124 @@ struct Section {
   std::map<std::string, Mot> totals;            // "<mount> <tracker>"
   std::map<std::string, Breakdown> breakdowns;  // "<mount> <tracker>" (per sensor)
   std::string breakdown_rows;                   // per scenario, every match
+  // --explain, per variant: the false positives' causes per "<scenario> | <mount> | <counted>"
+  // (counted: per sensor, by the sensors' own mount where a run mixes them, or fused), and summed
+  // per "<mount> | <counted>" over the scenarios.
+  std::map<std::string, std::vector<Causes>> explain_rows, explain_totals;
 };
+
+// The totals' group of an --explain row "<scenario> | <run mount> | <counted>": per sensor by the
+// sensor's mount ("per sensor at torso"), fused by the run's mount ("as given" counts as torso, as
+// in the totals above).
+std::string ExplainGroup(const std::string& row_key) {
+  const std::size_t a = row_key.find(" | ");
+  const std::size_t b = row_key.find(" | ", a + 3);
+  const std::string run_mount = row_key.substr(a + 3, b - a - 3);
+  const std::string counted = row_key.substr(b + 3);
+  const std::string prefix = "per sensor at ";
+  if (counted.rfind(prefix, 0) == 0) return counted.substr(prefix.size()) + " | per sensor";
+  return (run_mount == "legs" ? "legs" : "torso") + std::string(" | ") + counted;
+}
+
+void AddCauses(const std::vector<Causes>& causes, std::vector<Causes>* sum) {
+  sum->resize(std::max(sum->size(), causes.size()));
+  for (std::size_t v = 0; v < causes.size(); ++v) (*sum)[v].Add(causes[v]);
+}
+
+// --explain's table: every false-positive class with its scans and false tracks per variant, the
+// rows ordered by the new tracker's scans; `where` adds the scenarios' share of each class (the
+// new tracker's scans, from `rows`) for the totals.
+std::string ExplainTable(const std::map<std::string, std::vector<Causes>>& groups, bool where,
+                         const std::map<std::string, std::vector<Causes>>* rows) {
+  std::size_t nv = 0;
+  for (const auto& [key, causes] : groups) nv = std::max(nv, causes.size());
+  if (nv == 0) return "";
+  const std::size_t v_new = 1;  // kVariantNames: old, new, before
+  std::string t = where ? "| mount | counted | class |" : "| scenario | mount | counted | class |";
+  std::string rule = where ? "|---|---|---|" : "|---|---|---|---|";
+  for (std::size_t v = 0; v < nv; ++v) {
+    t += std::string(" FP scans ") + kVariantNames[v] + " |";
+    rule += "---:|";
+  }
+  for (std::size_t v = 0; v < nv; ++v) {
+    t += std::string(" false tracks ") + kVariantNames[v] + " |";
+    rule += "---:|";
+  }
+  if (where) {
+    t += " where (FP scans new: scenario count) |";
+    rule += "---|";
+  }
+  t += "\n" + rule + "\n";
+  char cell[64];
+  // Upper-body height first.
+  std::vector<std::pair<std::string, const std::vector<Causes>*>> ordered_groups;
+  for (const bool legs : {false, true}) {
+    for (const auto& [key, causes] : groups) {
+      const std::string group = where ? key : ExplainGroup(key);
+      if ((group.rfind("legs", 0) == 0) == legs) ordered_groups.emplace_back(key, &causes);
+    }
+  }
+  for (const auto& [key, causes_ptr] : ordered_groups) {
+    const std::vector<Causes>& causes = *causes_ptr;
+    std::set<std::string> classes;
+    for (const Causes& c : causes) {
+      for (const auto& [cls, n] : c.false_scan_classes) classes.insert(cls);
+      for (const auto& [cls, n] : c.false_track_classes) classes.insert(cls);
+    }
+    auto count = [&](const std::map<std::string, double>& m, const std::string& cls) {
+      const auto it = m.find(cls);
+      return it == m.end() ? 0.0 : it->second;
+    };
+    std::vector<std::string> ordered(classes.begin(), classes.end());
+    std::stable_sort(ordered.begin(), ordered.end(), [&](const auto& a, const auto& b) {
+      return count(causes[v_new].false_scan_classes, a) >
+             count(causes[v_new].false_scan_classes, b);
+    });
+    std::vector<double> all_scans(nv, 0.0), all_tracks(nv, 0.0);
+    auto line = [&](const std::string& cls, const std::vector<double>& scans,
+                    const std::vector<double>& tracks, const std::string& places) {
+      std::string l = "| " + key + " | " + cls + " |";
+      for (std::size_t v = 0; v < nv; ++v) {
+        std::snprintf(cell, sizeof cell, " %.0f |", scans[v]);
+        l += cell;
+      }
+      for (std::size_t v = 0; v < nv; ++v) {
+        std::snprintf(cell, sizeof cell, " %.0f |", tracks[v]);
+        l += cell;
+      }
+      if (where) l += " " + places + " |";
+      return l + "\n";
+    };
+    for (const std::string& cls : ordered) {
+      std::vector<double> scans(nv, 0.0), tracks(nv, 0.0);
+      for (std::size_t v = 0; v < causes.size(); ++v) {
+        scans[v] = count(causes[v].false_scan_classes, cls);
+        tracks[v] = count(causes[v].false_track_classes, cls);
+        all_scans[v] += scans[v];
+        all_tracks[v] += tracks[v];
+      }
+      std::string places;
+      if (where && rows != nullptr) {
+        // The rows of this group: "<scenario> | <mount> | <counted>" whose counted and sensor
+        // mount match the key "<mount> | <counted>".
+        std::vector<std::pair<double, std::string>> share;
+        for (const auto& [row_key, row_causes] : *rows) {
+          if (row_causes.size() <= v_new || ExplainGroup(row_key) != key) continue;
+          const double n = count(row_causes[v_new].false_scan_classes, cls);
+          if (n > 0) share.emplace_back(n, row_key.substr(0, row_key.find(" | ")));
+        }
+        std::sort(share.begin(), share.end(), std::greater<>());
+        for (const auto& [n, scenario] : share) {
+          std::snprintf(cell, sizeof cell, "%.0f", n);
+          places += (places.empty() ? "" : ", ") + scenario + " " + cell;
+        }
+      }
+      t += line(cls, scans, tracks, places);
+    }
+    t += line("all", all_scans, all_tracks, "");
+  }
+  return t;
+}
 
 Section RunFolder(const std::string& title, const std::string& dir, const std::string& only,
                   int jobs, bool explain) {
@@ -952,7 +1089,18 @@ Section RunFolder(const std::string& title, const std::string& dir, const std::s
       for (const auto& s : scenario.sensors) mixed = mixed || s.mount == sim::Mount::kLegs;
       const std::string mount = legs ? "legs" : (mixed ? "as given" : "torso");
       const RunResult r = RunScenario(scenario, legs, jobs);
-      if (explain) Explain(scenario.name, mount, r);
+      if (explain) {
+        Explain(scenario.name, mount, r);
+        for (const auto& [sensor_mount, causes] : r.causes_by_mount) {
+          const std::string key =
+              scenario.name + " | " + mount + " | per sensor at " + sensor_mount;
+          AddCauses(causes, &section.explain_rows[key]);
+          AddCauses(causes, &section.explain_totals[ExplainGroup(key)]);
+        }
+        const std::string key = scenario.name + " | " + mount + " | fused";
+        AddCauses(r.fused_causes, &section.explain_rows[key]);
+        AddCauses(r.fused_causes, &section.explain_totals[ExplainGroup(key)]);
+      }
       const char* const* names = kVariantNames;
       for (std::size_t v = 0; v < r.breakdown.size(); ++v) {
         const std::string key = std::string(legs ? "legs" : "torso") + " " + names[v];
@@ -994,6 +1142,20 @@ std::string BreakdownTable(const Section& s) {
   }
   return t + s.breakdown_rows;
 }
+
+const char* const kExplainText =
+    "Every reported track's scan that matched no object (a false positive: what lowers "
+    "precision) in one class; a false track (unmatched in more than half of its scans) in the "
+    "class of most of its false scans. \"Left behind\": the track had held an object before, and "
+    "that object is now out of view (hidden or gone: the track goes on where it is not), visible "
+    "but held by no track (the track ran off it), or held by another track. \"Never matched\": a "
+    "track that never held an object, within 1.5 m of an object another track holds (a second "
+    "track of it, a split), within 1.5 m of an untracked object (offset from it), within 1.5 m of "
+    "a door or chair, or far from every object (clutter: a background edge, a shadow's border). "
+    "Coasting: reported without a measurement in that scan. Tracks on doors and chairs and on "
+    "hidden people within the match radius count neither way (the door/chair/hidden column). Per "
+    "sensor under the sensor's own mount (shop_floor as given: two sensors at upper-body height, "
+    "two at knee height), fused by the run (as given counts as upper-body height).\n\n";
 
 std::string Totals(const Section& s) {
   std::string t = kHeader;
@@ -1094,6 +1256,11 @@ int main(int argc, char** argv) {
     if (breakdown) {
       text += "### " + s.title + ": where the per-sensor error comes from\n\n" + BreakdownTable(s) +
               "\n";
+    }
+    if (explain) {
+      text += "### " + s.title + ": what the false positives are\n\n" + kExplainText +
+              ExplainTable(s.explain_totals, true, &s.explain_rows) + "\nPer scenario:\n\n" +
+              ExplainTable(s.explain_rows, false, nullptr) + "\n";
     }
   }
   std::printf("%s", text.c_str());
