@@ -292,6 +292,10 @@ void VisitTracking(tracking::TrackerOptions& p, ConfigVisitor& v) {
   v.Field("max_position_sigma_m", o.max_position_sigma_m,
           "A track whose position sigma grows beyond this is deleted.");
   VisitInteger(v, "max_tracks", o.max_tracks, "Simultaneous tracks (at most 64).");
+  v.Field("resume_window_s", o.resume_window_s,
+          "A track deleted after coast_timeout_s is kept this much longer, unreported, and "
+          "resumed with its id by a measurement within its gate: someone hidden for a moment "
+          "comes back as themselves (confirmed again as a new track is). 0: off.");
   v.Field("max_time_gap_s", o.max_time_gap_s,
           "A jump between consecutive scans beyond this (either way) deletes all tracks.");
   v.Field("report_tentative", o.report_tentative, "Also send tentative (unconfirmed) tracks.");

@@ -64,6 +64,9 @@ std::optional<std::string> Validate(const MultiTrackerOptions& o) {
     return "confirm_hits must be in [1, confirm_window]";
   }
   if (!Positive(o.coast_timeout_s)) return "coast_timeout_s must be > 0";
+  if (!(std::isfinite(o.resume_window_s) && o.resume_window_s >= 0.0)) {
+    return "resume_window_s must be >= 0";
+  }
   if (!Positive(o.max_position_sigma_m)) return "max_position_sigma_m must be > 0";
   if (o.max_tracks < 1 || o.max_tracks > kMaxTracks) {
     return "max_tracks must be in [1, " + std::to_string(kMaxTracks) + "]";
@@ -88,7 +91,10 @@ MultiTracker::MultiTracker(const MultiTrackerOptions& options) : options_(option
   if (Validate(options_)) std::abort();
 }
 
-void MultiTracker::Clear() { tracks_.clear(); }
+void MultiTracker::Clear() {
+  tracks_.clear();
+  lost_.clear();
+}
 
 std::size_t MultiTracker::confirmed_count() const {
   return static_cast<std::size_t>(
@@ -163,6 +169,7 @@ void MultiTracker::HandleTime(common::UtcNs scan_start_ns) {
       ++counters_.time_resets;
       counters_.deleted_time_reset += tracks_.size();
       tracks_.clear();
+      lost_.clear();
     }
   }
   has_time_ = true;
@@ -450,6 +457,7 @@ void MultiTracker::ManageLifecycle(common::UtcNs scan_start_ns) {
                common::NsToSeconds(scan_start_ns - t.last_update_ns) > options_.coast_timeout_s) {
       remove = true;
       ++counters_.deleted_coast_timeout;
+      Lose(t, scan_start_ns);
     }
     if (!remove) {
       const Eigen::Matrix2d p = t.filter.covariance().topLeftCorner<2, 2>();
@@ -457,6 +465,7 @@ void MultiTracker::ManageLifecycle(common::UtcNs scan_start_ns) {
             options_.max_position_sigma_m * options_.max_position_sigma_m)) {
         remove = true;
         ++counters_.deleted_covariance;
+        if (t.confirmed && !t.updated) Lose(t, scan_start_ns);
       }
     }
     if (!remove && t.updated && options_.static_objects) {
@@ -494,6 +503,102 @@ void MultiTracker::ManageLifecycle(common::UtcNs scan_start_ns) {
   while (tracks_.size() > kept) tracks_.pop_back();
 }
 
+void MultiTracker::Lose(const Track& t, common::UtcNs scan_start_ns) {
+  if (!(options_.resume_window_s > 0.0)) return;
+  // Forget those past the window first; when full, the one lost longest ago.
+  std::size_t kept = 0;
+  for (std::size_t i = 0; i < lost_.size(); ++i) {
+    if (common::NsToSeconds(scan_start_ns - lost_[i].last_update_ns) >
+        options_.coast_timeout_s + options_.resume_window_s) {
+      continue;
+    }
+    if (kept != i) lost_[kept] = lost_[i];
+    ++kept;
+  }
+  while (lost_.size() > kept) lost_.pop_back();
+  if (lost_.full()) {
+    std::size_t oldest = 0;
+    for (std::size_t i = 1; i < lost_.size(); ++i) {
+      if (lost_[i].last_update_ns < lost_[oldest].last_update_ns) oldest = i;
+    }
+    lost_[oldest] = t;
+    return;
+  }
+  (void)lost_.push_back(t);
+}
+
+bool MultiTracker::Resume(common::UtcNs scan_start_ns, const Candidate& c,
+                          std::span<const Measurement> measurements, MeasurementRefiner* refiner) {
+  const common::UtcNs at_ns = AtOffset(scan_start_ns, c.offset_s);
+  double best_d2 = std::numeric_limits<double>::infinity();
+  std::size_t best = lost_.size();
+  for (std::size_t i = 0; i < lost_.size(); ++i) {
+    const Track& t = lost_[i];
+    if (common::NsToSeconds(at_ns - t.last_update_ns) >
+            options_.coast_timeout_s + options_.resume_window_s ||
+        at_ns < t.filter_ns) {
+      continue;
+    }
+    CvEkf predicted = t.filter;
+    predicted.Predict(common::NsToSeconds(at_ns - t.filter_ns));
+    double d2 = 0.0;
+    if (InsideGate(predicted.position_m(), predicted.covariance().topLeftCorner<2, 2>(), c, &d2,
+                   nullptr) &&
+        d2 < best_d2) {
+      best_d2 = d2;
+      best = i;
+    }
+  }
+  if (best == lost_.size()) return false;
+  Track t = lost_[best];
+  // The walk before the gap says little of the one after it (a person who waited behind a pillar,
+  // turned or slowed): the filter starts again from the last measurement with the velocity prior
+  // of a new track, so this measurement's displacement over the gap gives the velocity.
+  t.filter = CvEkf(options_.ekf);
+  t.filter.Init(t.z_m, c.r_m2);
+  t.filter.Predict(common::NsToSeconds(at_ns - t.last_update_ns));
+  t.filter_ns = at_ns;
+  Measurement m = measurements[c.source];
+  Eigen::Vector2d z = c.z_m;
+  Eigen::Matrix2d r = c.r_m2;
+  if (refiner != nullptr) {
+    const Eigen::Vector4d x = t.filter.state();
+    const Eigen::Matrix4d p = t.filter.covariance();
+    TrackShape shape = t.shape;
+    if (!refiner->Refine(c.source, at_ns, &x, &p, shape, m) || !m.position_m.allFinite() ||
+        !m.covariance_m2.allFinite()) {
+      return false;  // not this track's: a new one may start from it
+    }
+    z = m.position_m;
+    r = 0.5 * (m.covariance_m2 + m.covariance_m2.transpose());
+    t.shape = shape;
+  }
+  if (!t.filter.Update(z, r)) return false;
+  LimitSpeed(t);
+  t.updated = true;
+  // Confirmed again as a new track is (M of N from here), so that clutter near the prediction
+  // does not bring a lost track back; then reported at once (it has moved).
+  t.hits = 1u;
+  t.age_scans = 0;
+  t.confirmed = options_.confirm_hits <= 1;
+  t.last_update_ns = at_ns;
+  t.kind = m.kind;
+  t.ellipse_yaw_rad = m.kind == MeasurementKind::kCenterOfMass ? 0.0 : m.orientation_rad;
+  t.points = static_cast<std::uint32_t>(std::min<std::size_t>(m.point_count, UINT32_MAX));
+  t.source = c.source;
+  t.z_m = z;
+  t.z_offset_s = common::NsToSeconds(at_ns - scan_start_ns);
+  // Still for as long as it was lost: the static-object clocks restart here.
+  t.anchor_m = t.filter.position_m();
+  t.anchor_ns = scan_start_ns;
+  lost_[best] = lost_[lost_.size() - 1];
+  lost_.pop_back();
+  (void)tracks_.push_back(t);
+  ++counters_.resumed;
+  ++counters_.associations;
+  return true;
+}
+
 void MultiTracker::StartTracks(common::UtcNs scan_start_ns,
                                std::span<const Measurement> measurements,
                                MeasurementRefiner* refiner) {
@@ -519,6 +624,7 @@ void MultiTracker::StartTracks(common::UtcNs scan_start_ns,
       ++counters_.dropped_capacity;
       continue;
     }
+    if (!lost_.empty() && Resume(scan_start_ns, c, measurements, refiner)) continue;
     const common::UtcNs at_ns = AtOffset(scan_start_ns, c.offset_s);
     Measurement m = measurements[c.source];
     Eigen::Vector2d z = c.z_m;

@@ -55,7 +55,9 @@
 //  6. Births. A measurement that was not assigned starts a tentative track unless it lies within
 //     the gate of an existing track or of a track born earlier in the same scan (a person split
 //     into two segments must not become two tracks). Births beyond max_tracks are dropped and
-//     counted.
+//     counted. Before that, a measurement within the gate of a track deleted by the coast timeout
+//     less than resume_window_s ago (predicted to its time) resumes that track (nearest in d2
+//     first; counted as resumed, not as created).
 //  7. Reports: one TrackReport per confirmed track that has moved (and per tentative track if
 //     report_tentative; confirmed tracks that never moved count as tentative there), ordered by id,
 //     state and covariance at scan_start_ns.
@@ -132,6 +134,14 @@ struct MultiTrackerOptions {
   // the person: ~0.5 s hidden, ~1 s partly hidden) and two people passing each other; longer
   // timeouts keep ghosts of people who left the field of view.
   double coast_timeout_s = 1.0;
+  // A confirmed track deleted after coast_timeout_s (or for its covariance) is kept this much
+  // longer, unreported and not associated, and resumed (same id, confirmed, its state and shape)
+  // by a measurement no track took that lies within its gate (gate_mahalanobis_sq with its
+  // coasted covariance, and max_gate_distance_m) instead of a new tentative track: a person hidden
+  // behind a pillar or another person for 1-3 s comes back as themselves, reported at once
+  // (a new track waits for confirm_hits and still_radius_m or moving_speed_mps: missed scans and,
+  // for the evaluation, a fragment and an id switch). 0: off.
+  double resume_window_s = 1.0;
   // Safety net for covariance growth (large coast_timeout_s, fresh tracks with the 1.5 m/s velocity
   // prior): a track whose position sigma exceeds this can no longer be associated sensibly.
   double max_position_sigma_m = 1.0;
@@ -184,6 +194,7 @@ struct MultiTrackerCounters {
   std::uint64_t speed_clamps = 0;     // updates whose speed exceeded max_speed_mps
   std::uint64_t deleted_static = 0;   // handed to the background (step 5)
   std::uint64_t recovered = 0;        // associations made in the wider gate (step 3b)
+  std::uint64_t resumed = 0;          // deleted tracks found again (resume_window_s)
 
   std::uint64_t deleted() const {
     return deleted_tentative + deleted_coast_timeout + deleted_covariance + deleted_time_reset +
@@ -320,6 +331,10 @@ class MultiTracker {
   void ManageLifecycle(common::UtcNs scan_start_ns);
   void StartTracks(common::UtcNs scan_start_ns, std::span<const Measurement> measurements,
                    MeasurementRefiner* refiner);
+  // Step 6's resumption: true when candidate c resumed a lost track (moved back into tracks_).
+  bool Resume(common::UtcNs scan_start_ns, const Candidate& c,
+              std::span<const Measurement> measurements, MeasurementRefiner* refiner);
+  void Lose(const Track& t, common::UtcNs scan_start_ns);
   void LimitSpeed(Track& t);
   void Report(common::UtcNs scan_start_ns, ScanTracks& out) const;
   bool InsideGate(const Eigen::Vector2d& predicted_m, const Eigen::Matrix2d& predicted_cov_m2,
@@ -335,6 +350,8 @@ class MultiTracker {
   common::UtcNs last_scan_ns_ = 0;
   std::uint32_t next_id_ = 1;
   common::FixedVector<Track, kMaxTracks> tracks_;
+  // Confirmed tracks deleted by the coast timeout within resume_window_s (step 6).
+  common::FixedVector<Track, kMaxTracks> lost_;
 
   // Per-scan scratch, sized at compile time.
   common::FixedVector<Candidate, kMaxSegments> candidates_;

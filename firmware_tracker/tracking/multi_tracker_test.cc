@@ -75,6 +75,8 @@ TEST(MultiTrackerOptionsTest, DefaultsValidAndEachBadValueNamesItsField) {
       {with([](auto& o) { o.inflate_nis_above = 1.0; }), "inflate_nis_above"},
       {with([](auto& o) { o.inflate_nis_above = -1.0; }), "inflate_nis_above"},
       {with([](auto& o) { o.coast_timeout_s = 0.0; }), "coast_timeout_s"},
+      {with([](auto& o) { o.resume_window_s = -1.0; }), "resume_window_s"},
+      {with([nan](auto& o) { o.resume_window_s = nan; }), "resume_window_s"},
       {with([](auto& o) { o.max_position_sigma_m = 0.0; }), "max_position_sigma_m"},
       {with([](auto& o) { o.max_tracks = 0; }), "max_tracks"},
       {with([](auto& o) { o.max_tracks = kMaxTracks + 1; }), "max_tracks"},
@@ -282,8 +284,75 @@ TEST(MultiTrackerTest, CoastingTrackIsDeletedWhenItsPositionSigmaGrowsTooLarge) 
   EXPECT_EQ(tracker.counters().deleted_coast_timeout, 0u);
 }
 
+// A person walking at 1 m/s along x, measured for 2 s, then hidden for gap_scans scans (the
+// track times out after 1 s), then measured again at `offset_m` across the walking line from
+// where they walk on. Returns the reports of the scans after the gap, one per scan.
+std::vector<ScanTracks> WalkHideAndReappear(const MultiTrackerOptions& options,
+                                            std::int64_t gap_scans, double offset_m,
+                                            MultiTrackerCounters* counters) {
+  MultiTracker tracker(options);
+  ScanTracks out;
+  auto at = [](std::int64_t k) { return 1.0 + 0.04 * static_cast<double>(k); };
+  std::int64_t k = 0;
+  for (; k < 50; ++k)
+    tracker.Step(ScanNs(k), std::vector<Measurement>{Meas(at(k), 2.0, 0.02)}, out);
+  for (const std::int64_t end = k + gap_scans; k < end; ++k) tracker.Step(ScanNs(k), {}, out);
+  std::vector<ScanTracks> after;
+  for (const std::int64_t end = k + 10; k < end; ++k) {
+    tracker.Step(ScanNs(k), std::vector<Measurement>{Meas(at(k), 2.0 + offset_m, 0.02)}, out);
+    after.push_back(out);
+  }
+  *counters = tracker.counters();
+  return after;
+}
+
+TEST(MultiTrackerTest, PersonFoundAgainAfterAGapWhereTheTrackExpectsThemKeepsTheirId) {
+  // Hidden 1.6 s (40 scans): deleted 1 s after the last measurement, found again 0.6 s later on
+  // the walking line.
+  MultiTrackerCounters counters;
+  const std::vector<ScanTracks> after = WalkHideAndReappear(Opts(), 40, 0.0, &counters);
+  EXPECT_EQ(counters.deleted_coast_timeout, 1u);
+  EXPECT_EQ(counters.resumed, 1u);
+  EXPECT_EQ(counters.created, 1u);
+  // Confirmed again as a new track would be (3 of 4 scans), with the id it had.
+  EXPECT_TRUE(after[0].tracks.empty());
+  EXPECT_TRUE(after[1].tracks.empty());
+  for (std::size_t i = 2; i < after.size(); ++i) {
+    ASSERT_EQ(after[i].tracks.size(), 1u) << "scan " << i;
+    EXPECT_EQ(after[i].tracks[0].track_id, 1u);
+    EXPECT_EQ(after[i].tracks[0].state, TrackState::kConfirmed);
+  }
+  // Its velocity is the walk's (from the last measurement before the gap and the new ones).
+  EXPECT_NEAR(after.back().tracks[0].vx_mps, 1.0, 0.15);
+  EXPECT_NEAR(after.back().tracks[0].vy_mps, 0.0, 0.15);
+
+  // Off: the same person is a new track.
+  MultiTrackerOptions off = Opts();
+  off.resume_window_s = 0.0;
+  const std::vector<ScanTracks> new_id = WalkHideAndReappear(off, 40, 0.0, &counters);
+  ASSERT_EQ(new_id.back().tracks.size(), 1u);
+  EXPECT_EQ(new_id.back().tracks[0].track_id, 2u);
+  EXPECT_EQ(counters.resumed, 0u);
+}
+
+TEST(MultiTrackerTest, LostTrackIsNotResumedFarFromItsPredictionOrAfterItsWindow) {
+  MultiTrackerCounters counters;
+  // 1.5 m across the walking line: outside max_gate_distance_m of the prediction.
+  std::vector<ScanTracks> after = WalkHideAndReappear(Opts(), 40, 1.5, &counters);
+  ASSERT_EQ(after.back().tracks.size(), 1u);
+  EXPECT_EQ(after.back().tracks[0].track_id, 2u);
+  EXPECT_EQ(counters.resumed, 0u);
+  // On the line but hidden longer than coast_timeout_s + resume_window_s (2 s).
+  after = WalkHideAndReappear(Opts(), 60, 0.0, &counters);
+  ASSERT_EQ(after.back().tracks.size(), 1u);
+  EXPECT_EQ(after.back().tracks[0].track_id, 2u);
+  EXPECT_EQ(counters.resumed, 0u);
+}
+
 TEST(MultiTrackerTest, IdsStartAtOneAndAreNeverReused) {
-  MultiTracker tracker{Opts()};
+  MultiTrackerOptions options = Opts();
+  options.resume_window_s = 0.0;  // a track found again where it was lost keeps its id
+  MultiTracker tracker{options};
   ScanTracks out;
   std::set<std::uint32_t> seen;
   std::uint32_t previous = 0;
