@@ -32,7 +32,7 @@
 // tracker beyond its defaults and the device's range.
 //
 //   tracking_benchmark --scenarios DIR [--extra DIR] [--only NAME] [--out FILE] [--jobs N]
-//                      [--explain] [--breakdown] [--before-report-rules]
+//                      [--explain] [--breakdown] [--before-report-rules | --before-resume]
 //   (--extra: more scenario folders, e.g. held-out scenes, reported in their own section;
 //   --explain: per run on stderr, what became of an object's previous track at every id switch
 //   and missed scan, what the false positives are (by scan and by false track: a track left
@@ -42,7 +42,9 @@
 //   the filtered track's error beside that of the scan's measurement it was updated with, see
 //   Breakdown; --before-report-rules: a third tracker, "before", the new one without
 //   ShapeOptions::unseen_coasting_m and MultiTrackerOptions::moving_speed_mps, the tree before
-//   them)
+//   them; --before-resume: "before" is the new one without resuming lost tracks,
+//   MultiTrackerOptions::resume_window_s = 0). --explain also writes the false positives' classes
+//   to the results (ExplainTable).
 
 #include <Eigen/Cholesky>
 #include <Eigen/Core>
@@ -546,6 +548,9 @@ struct Variant {
 // tracks were dropped where the scan shows nothing of them (shape.unseen_coasting_m = 0) and
 // before a track was reported once its speed is clear (tracking.moving_speed_mps = 0).
 bool g_before_report_rules = false;
+// --before-resume: "before" is the new tracker without resuming lost tracks
+// (MultiTrackerOptions::resume_window_s = 0).
+bool g_before_resume = false;
 const char* const kVariantNames[] = {"old", "new", "before"};
 
 std::vector<Variant> Variants(sim::Mount mount, double range_m) {
@@ -559,11 +564,16 @@ std::vector<Variant> Variants(sim::Mount mount, double range_m) {
   old.tracking.report_coasting_s = old.tracking.coast_timeout_s;
   old.tracking.recover_gate_mahalanobis_sq = 0.0;
   old.tracking.inflate_nis_above = 0.0;
+  old.tracking.resume_window_s = 0.0;
   std::vector<Variant> variants = {{"old", old}, {"new", fresh}};
   if (g_before_report_rules) {
     tracking::TrackerOptions before = fresh;
     before.shape.unseen_coasting_m = 0.0;
     before.tracking.moving_speed_mps = 0.0;
+    variants.push_back({"before", before});
+  } else if (g_before_resume) {
+    tracking::TrackerOptions before = fresh;
+    before.tracking.resume_window_s = 0.0;
     variants.push_back({"before", before});
   }
   return variants;
@@ -785,6 +795,7 @@ void AddCounters(const tracking::MultiTrackerCounters& c, tracking::MultiTracker
   sum->speed_clamps += c.speed_clamps;
   sum->associations += c.associations;
   sum->recovered += c.recovered;
+  sum->resumed += c.resumed;
 }
 
 // --explain: the causes and the tracker's counters of one run, per variant, on stderr.
@@ -792,21 +803,21 @@ void Explain(const std::string& scenario, const std::string& mount, const RunRes
   const char* const* names = kVariantNames;
   for (std::size_t v = 0; v < r.causes.size(); ++v) {
     const tracking::MultiTrackerCounters& c = r.counters[v];
-    std::fprintf(stderr,
-                 "%s %s %s: created %llu confirmed %llu deleted: tentative %llu coast %llu "
-                 "covariance %llu static %llu; births suppressed %llu refine failures %llu speed "
-                 "clamps %llu recovered %llu\n",
-                 scenario.c_str(), mount.c_str(), names[v],
-                 static_cast<unsigned long long>(c.created),
-                 static_cast<unsigned long long>(c.confirmed),
-                 static_cast<unsigned long long>(c.deleted_tentative),
-                 static_cast<unsigned long long>(c.deleted_coast_timeout),
-                 static_cast<unsigned long long>(c.deleted_covariance),
-                 static_cast<unsigned long long>(c.deleted_static),
-                 static_cast<unsigned long long>(c.births_suppressed),
-                 static_cast<unsigned long long>(c.refine_failures),
-                 static_cast<unsigned long long>(c.speed_clamps),
-                 static_cast<unsigned long long>(c.recovered));
+    std::fprintf(
+        stderr,
+        "%s %s %s: created %llu confirmed %llu deleted: tentative %llu coast %llu "
+        "covariance %llu static %llu; births suppressed %llu refine failures %llu speed "
+        "clamps %llu recovered %llu resumed %llu\n",
+        scenario.c_str(), mount.c_str(), names[v], static_cast<unsigned long long>(c.created),
+        static_cast<unsigned long long>(c.confirmed),
+        static_cast<unsigned long long>(c.deleted_tentative),
+        static_cast<unsigned long long>(c.deleted_coast_timeout),
+        static_cast<unsigned long long>(c.deleted_covariance),
+        static_cast<unsigned long long>(c.deleted_static),
+        static_cast<unsigned long long>(c.births_suppressed),
+        static_cast<unsigned long long>(c.refine_failures),
+        static_cast<unsigned long long>(c.speed_clamps),
+        static_cast<unsigned long long>(c.recovered), static_cast<unsigned long long>(c.resumed));
     for (const auto& [why, count] : r.causes[v].switches)
       std::fprintf(stderr, "  switch: %-60s %5.0f\n", why.c_str(), count);
     for (const auto& [why, count] : r.causes[v].false_positives)
@@ -1229,13 +1240,15 @@ int main(int argc, char** argv) {
       breakdown = true;
     } else if (a == "--before-report-rules") {
       g_before_report_rules = true;
+    } else if (a == "--before-resume") {
+      g_before_resume = true;
     } else if (a == "--jobs") {
       jobs = std::max(1, std::atoi(value().c_str()));
     } else {
       std::fprintf(stderr,
                    "usage: tracking_benchmark --scenarios DIR [--extra DIR] [--only NAME] "
                    "[--out FILE] [--jobs N] [--explain] [--breakdown] "
-                   "[--before-report-rules]\n");
+                   "[--before-report-rules | --before-resume]\n");
       return 2;
     }
   }
@@ -1281,6 +1294,14 @@ int main(int argc, char** argv) {
            "position, 2 dof, mean over measured matches (2 is honest) and the share within the "
            "99 % bound. \"legs\": every sensor at knee height. How the numbers are made: the "
            "header of tests/bench/tracking_benchmark.cc.\n\n"
+        << (g_before_resume ? "\"before\": the new tracker without resuming lost tracks "
+                              "(`tracking.resume_window_s` 0), on the same scans in the same "
+                              "run.\n\n"
+            : g_before_report_rules
+                ? "\"before\": the new tracker without the coasting and moving report rules "
+                  "(`shape.unseen_coasting_m` 0, `tracking.moving_speed_mps` 0), on the same "
+                  "scans in the same run.\n\n"
+                : "")
         << text;
   }
   return 0;
