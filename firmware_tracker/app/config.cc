@@ -295,7 +295,8 @@ void VisitTracking(tracking::TrackerOptions& p, ConfigVisitor& v) {
   v.Field("resume_window_s", o.resume_window_s,
           "A track deleted after coast_timeout_s is kept this much longer, unreported, and "
           "resumed with its id by a measurement within its gate: someone hidden for a moment "
-          "comes back as themselves (confirmed again as a new track is). 0: off.");
+          "comes back as themselves (confirmed again as a new track is). 0: off. Not at knee "
+          "height (shape.mount: legs).");
   v.Field("max_time_gap_s", o.max_time_gap_s,
           "A jump between consecutive scans beyond this (either way) deletes all tracks.");
   v.Field("report_tentative", o.report_tentative, "Also send tentative (unconfirmed) tracks.");

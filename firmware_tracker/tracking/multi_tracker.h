@@ -140,7 +140,8 @@ struct MultiTrackerOptions {
   // coasted covariance, and max_gate_distance_m) instead of a new tentative track: a person hidden
   // behind a pillar or another person for 1-3 s comes back as themselves, reported at once
   // (a new track waits for confirm_hits and still_radius_m or moving_speed_mps: missed scans and,
-  // for the evaluation, a fragment and an id switch). 0: off.
+  // for the evaluation, a fragment and an id switch). 0: off. The pipeline turns it off at knee
+  // height (ShapeOptions::mount kLegs).
   double resume_window_s = 1.0;
   // Safety net for covariance growth (large coast_timeout_s, fresh tracks with the 1.5 m/s velocity
   // prior): a track whose position sigma exceeds this can no longer be associated sensibly.

@@ -1070,5 +1070,14 @@ TEST(PipelineScenarioTest, AWideBeamDoesNotPullTheCentreTowardsTheSensor) {
   RecordProperty("mean_size_m", std::to_string(size_sum / n));
 }
 
+TEST(TrackerOptionsTest, LostTracksAreResumedAtUpperBodyHeightOnly) {
+  TrackerOptions options;
+  ASSERT_GT(options.tracking.resume_window_s, 0.0);
+  EXPECT_EQ(TrackingPipeline(options).tracker().options().resume_window_s,
+            options.tracking.resume_window_s);
+  options.shape.mount = Mount::kLegs;
+  EXPECT_EQ(TrackingPipeline(options).tracker().options().resume_window_s, 0.0);
+}
+
 }  // namespace
 }  // namespace lrfnet::tracking
