@@ -56,8 +56,9 @@
 //     the gate of an existing track or of a track born earlier in the same scan (a person split
 //     into two segments must not become two tracks). Births beyond max_tracks are dropped and
 //     counted. Before that, a measurement within the gate of a track deleted by the coast timeout
-//     less than resume_window_s ago (predicted to its time) resumes that track (nearest in d2
-//     first; counted as resumed, not as created).
+//     less than resume_window_s ago (predicted to its time) resumes that track (of several, the
+//     one with the smallest d2; counted as resumed, not as created): same id, its shape, its filter
+//     restarted from its last measurement, confirmed again by M of N.
 //  7. Reports: one TrackReport per confirmed track that has moved (and per tentative track if
 //     report_tentative; confirmed tracks that never moved count as tentative there), ordered by id,
 //     state and covariance at scan_start_ns.
