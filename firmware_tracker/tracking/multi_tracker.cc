@@ -388,30 +388,13 @@ void MultiTracker::UpdateAssigned(common::UtcNs scan_start_ns,
       // as an average one (d2 -> ~2, its expectation for 2 dof), and let the measurement pull.
       t.filter.InflateCovariance(pair_d2 / 2.0);
     }
-    Measurement m = measurements[c.source];
-    Eigen::Vector2d z = c.z_m;
-    Eigen::Matrix2d r = c.r_m2;
-    if (refiner != nullptr) {
-      const Eigen::Vector4d x = t.filter.state();
-      const Eigen::Matrix4d p = t.filter.covariance();
-      TrackShape shape = t.shape;
-      bool usable = refiner->Refine(c.source, at_ns, &x, &p, shape, m);
-      if (usable) {
-        // The refiner's covariance is its own, model errors included: no extra sigma.
-        z = m.position_m;
-        r = 0.5 * (m.covariance_m2 + m.covariance_m2.transpose());
-        Candidate refined = c;
-        refined.z_m = z;
-        refined.r_m2 = r;
-        usable = z.allFinite() && r.allFinite() &&
-                 MahalanobisSq(x.head<2>(), p.topLeftCorner<2, 2>(), refined, nullptr) <=
-                     4.0 * options_.gate_mahalanobis_sq;
-      }
-      if (!usable) {
-        ++counters_.refine_failures;
-        continue;
-      }
-      t.shape = shape;
+    Measurement m;
+    Eigen::Vector2d z;
+    Eigen::Matrix2d r;
+    if (!MeasureForTrack(t, c, at_ns, measurements, refiner, 4.0 * options_.gate_mahalanobis_sq, &m,
+                         &z, &r)) {
+      ++counters_.refine_failures;
+      continue;
     }
     if (!t.filter.Update(z, r)) {
       ++counters_.failed_updates;
@@ -419,16 +402,50 @@ void MultiTracker::UpdateAssigned(common::UtcNs scan_start_ns,
     }
     LimitSpeed(t);
     ++counters_.associations;
-    t.updated = true;
     t.hits |= 1u;
-    t.last_update_ns = at_ns;
-    t.kind = m.kind;
-    t.ellipse_yaw_rad = m.kind == MeasurementKind::kCenterOfMass ? 0.0 : m.orientation_rad;
-    t.points = static_cast<std::uint32_t>(std::min<std::size_t>(m.point_count, UINT32_MAX));
-    t.source = c.source;
-    t.z_m = z;
-    t.z_offset_s = common::NsToSeconds(at_ns - scan_start_ns);
+    NoteUpdate(t, m, c, z, at_ns, scan_start_ns);
   }
+}
+
+bool MultiTracker::MeasureForTrack(Track& t, const Candidate& c, common::UtcNs at_ns,
+                                   std::span<const Measurement> measurements,
+                                   MeasurementRefiner* refiner, double max_d2, Measurement* m,
+                                   Eigen::Vector2d* z, Eigen::Matrix2d* r) const {
+  *m = measurements[c.source];
+  *z = c.z_m;
+  *r = c.r_m2;
+  if (refiner == nullptr) return true;
+  const Eigen::Vector4d x = t.filter.state();
+  const Eigen::Matrix4d p = t.filter.covariance();
+  TrackShape shape = t.shape;
+  if (!refiner->Refine(c.source, at_ns, &x, &p, shape, *m)) return false;
+  // The refiner's covariance is its own, model errors included: no extra sigma.
+  *z = m->position_m;
+  *r = 0.5 * (m->covariance_m2 + m->covariance_m2.transpose());
+  if (!z->allFinite() || !r->allFinite()) return false;
+  if (std::isfinite(max_d2)) {
+    Candidate refined = c;
+    refined.z_m = *z;
+    refined.r_m2 = *r;
+    if (!(MahalanobisSq(x.head<2>(), p.topLeftCorner<2, 2>(), refined, nullptr) <= max_d2)) {
+      return false;
+    }
+  }
+  t.shape = shape;
+  return true;
+}
+
+void MultiTracker::NoteUpdate(Track& t, const Measurement& m, const Candidate& c,
+                              const Eigen::Vector2d& z, common::UtcNs at_ns,
+                              common::UtcNs scan_start_ns) {
+  t.updated = true;
+  t.last_update_ns = at_ns;
+  t.kind = m.kind;
+  t.ellipse_yaw_rad = m.kind == MeasurementKind::kCenterOfMass ? 0.0 : m.orientation_rad;
+  t.points = static_cast<std::uint32_t>(std::min<std::size_t>(m.point_count, UINT32_MAX));
+  t.source = c.source;
+  t.z_m = z;
+  t.z_offset_s = common::NsToSeconds(at_ns - scan_start_ns);
 }
 
 void MultiTracker::ManageLifecycle(common::UtcNs scan_start_ns) {
@@ -558,36 +575,22 @@ bool MultiTracker::Resume(common::UtcNs scan_start_ns, const Candidate& c,
   t.filter.Init(t.z_m, c.r_m2);
   t.filter.Predict(common::NsToSeconds(at_ns - t.last_update_ns));
   t.filter_ns = at_ns;
-  Measurement m = measurements[c.source];
-  Eigen::Vector2d z = c.z_m;
-  Eigen::Matrix2d r = c.r_m2;
-  if (refiner != nullptr) {
-    const Eigen::Vector4d x = t.filter.state();
-    const Eigen::Matrix4d p = t.filter.covariance();
-    TrackShape shape = t.shape;
-    if (!refiner->Refine(c.source, at_ns, &x, &p, shape, m) || !m.position_m.allFinite() ||
-        !m.covariance_m2.allFinite()) {
-      return false;  // not this track's: a new one may start from it
-    }
-    z = m.position_m;
-    r = 0.5 * (m.covariance_m2 + m.covariance_m2.transpose());
-    t.shape = shape;
+  Measurement m;
+  Eigen::Vector2d z;
+  Eigen::Matrix2d r;
+  // Not this track's when the refiner has no answer: a new one may start from it.
+  if (!MeasureForTrack(t, c, at_ns, measurements, refiner, std::numeric_limits<double>::infinity(),
+                       &m, &z, &r)) {
+    return false;
   }
   if (!t.filter.Update(z, r)) return false;
   LimitSpeed(t);
-  t.updated = true;
   // Confirmed again as a new track is (M of N from here), so that clutter near the prediction
   // does not bring a lost track back; then reported at once (it has moved).
   t.hits = 1u;
   t.age_scans = 0;
   t.confirmed = options_.confirm_hits <= 1;
-  t.last_update_ns = at_ns;
-  t.kind = m.kind;
-  t.ellipse_yaw_rad = m.kind == MeasurementKind::kCenterOfMass ? 0.0 : m.orientation_rad;
-  t.points = static_cast<std::uint32_t>(std::min<std::size_t>(m.point_count, UINT32_MAX));
-  t.source = c.source;
-  t.z_m = z;
-  t.z_offset_s = common::NsToSeconds(at_ns - scan_start_ns);
+  NoteUpdate(t, m, c, z, at_ns, scan_start_ns);
   // Still for as long as it was lost: the static-object clocks restart here.
   t.anchor_m = t.filter.position_m();
   t.anchor_ns = scan_start_ns;

@@ -336,6 +336,16 @@ class MultiTracker {
   // Step 6's resumption: true when candidate c resumed a lost track (moved back into tracks_).
   bool Resume(common::UtcNs scan_start_ns, const Candidate& c,
               std::span<const Measurement> measurements, MeasurementRefiner* refiner);
+  // Candidate c's measurement for track t at at_ns, in *m, *z, *r: with a refiner, its fit made
+  // from what t knows (t's shape updated), which must be finite and, for a finite max_d2, within
+  // max_d2 of t's prediction (false otherwise, t unchanged); without one, c's own.
+  bool MeasureForTrack(Track& t, const Candidate& c, common::UtcNs at_ns,
+                       std::span<const Measurement> measurements, MeasurementRefiner* refiner,
+                       double max_d2, Measurement* m, Eigen::Vector2d* z, Eigen::Matrix2d* r) const;
+  // What a track keeps of the measurement its filter just took.
+  static void NoteUpdate(Track& t, const Measurement& m, const Candidate& c,
+                         const Eigen::Vector2d& z, common::UtcNs at_ns,
+                         common::UtcNs scan_start_ns);
   void Lose(const Track& t, common::UtcNs scan_start_ns);
   void LimitSpeed(Track& t);
   void Report(common::UtcNs scan_start_ns, ScanTracks& out) const;
