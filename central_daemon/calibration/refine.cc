@@ -119,6 +119,26 @@ std::vector<std::pair<double, double>> CosSin(const std::vector<PoseParams>& par
   return out;
 }
 
+// The whitened Jacobians of an observation's residual into Ceres' blocks (those requested): object
+// (2), pose (3), the two components of the size correction (1 each).
+void WhitenedJacobians(const Linearization& l, const Eigen::Matrix2d& sqrt_info,
+                       double** jacobians) {
+  if (jacobians[0] != nullptr) {
+    Eigen::Map<Eigen::Matrix<double, 2, 2, Eigen::RowMajor>> j_object(jacobians[0]);
+    j_object = sqrt_info * l.d_object;
+  }
+  if (jacobians[1] != nullptr) {
+    Eigen::Map<Eigen::Matrix<double, 2, 3, Eigen::RowMajor>> j_pose(jacobians[1]);
+    j_pose = sqrt_info * l.d_pose;
+  }
+  for (int k = 0; k < 2; ++k) {
+    if (jacobians[2 + k] != nullptr) {
+      Eigen::Map<Eigen::Vector2d> j_size(jacobians[2 + k]);
+      j_size = sqrt_info * l.d_size.col(k);
+    }
+  }
+}
+
 // Whitened residual of one observation; parameter blocks: object (2), sensor pose (3), the two
 // components of the size correction (1 each, so that either can be held). Where Quenzel et al.
 // compare two sensors' observations by their Mahalanobis distance under the summed covariances
@@ -137,20 +157,7 @@ class ObservationCost final : public ceres::SizedCostFunction<2, 2, 3, 1, 1> {
     Eigen::Map<Eigen::Vector2d> r(residuals);
     r = sqrt_info_ * l.e;
     if (jacobians != nullptr) {
-      if (jacobians[0] != nullptr) {
-        Eigen::Map<Eigen::Matrix<double, 2, 2, Eigen::RowMajor>> j_object(jacobians[0]);
-        j_object = sqrt_info_ * l.d_object;
-      }
-      if (jacobians[1] != nullptr) {
-        Eigen::Map<Eigen::Matrix<double, 2, 3, Eigen::RowMajor>> j_pose(jacobians[1]);
-        j_pose = sqrt_info_ * l.d_pose;
-      }
-      for (int k = 0; k < 2; ++k) {
-        if (jacobians[2 + k] != nullptr) {
-          Eigen::Map<Eigen::Vector2d> j_size(jacobians[2 + k]);
-          j_size = sqrt_info_ * l.d_size.col(k);
-        }
-      }
+      WhitenedJacobians(l, sqrt_info_, jacobians);
     }
     return true;
   }
@@ -178,20 +185,7 @@ class ObservationBiasCost final : public ceres::SizedCostFunction<2, 2, 3, 1, 1,
     Eigen::Map<Eigen::Vector2d> r(residuals);
     r = sqrt_info_ * l.e;
     if (jacobians != nullptr) {
-      if (jacobians[0] != nullptr) {
-        Eigen::Map<Eigen::Matrix<double, 2, 2, Eigen::RowMajor>> j_object(jacobians[0]);
-        j_object = sqrt_info_ * l.d_object;
-      }
-      if (jacobians[1] != nullptr) {
-        Eigen::Map<Eigen::Matrix<double, 2, 3, Eigen::RowMajor>> j_pose(jacobians[1]);
-        j_pose = sqrt_info_ * l.d_pose;
-      }
-      for (int k = 0; k < 2; ++k) {
-        if (jacobians[2 + k] != nullptr) {
-          Eigen::Map<Eigen::Vector2d> j_size(jacobians[2 + k]);
-          j_size = sqrt_info_ * l.d_size.col(k);
-        }
-      }
+      WhitenedJacobians(l, sqrt_info_, jacobians);
       if (jacobians[4] != nullptr) {
         Eigen::Map<Eigen::Vector2d> j_bias(jacobians[4]);
         j_bias = -(sqrt_info_ * shared_bias_);
