@@ -42,6 +42,9 @@
 // sharp turn): its track's kinematic covariance is widened until it fits (manoeuvres). Otherwise
 // it is struck, and unbound after drift_updates consecutive strikes. An unbound measurement that
 // nothing took starts a fused track (after 2 x drift_updates frames when it was just unbound).
+// A local track forgotten after source_timeout_s that its tracker sends again with the same id
+// within max_coast_s is bound again to the fused track it fed (sources_returned), rather than
+// starting a second one that would coast on without sources once it is bound back.
 //   Covariances that claim too much are scaled (adapt_covariances, covariance matching): the
 // placements' covariances by how well sensors' tracks fit the others' fused tracks when they join
 // them, each sensor's track covariances by how well its frames fit. Never below what was reported.
@@ -346,6 +349,9 @@ struct FusionCounters {
   std::uint64_t source_strikes = 0;     // a frame in which a source disagreed with its track
   std::uint64_t sources_drifted = 0;    // sources unbound for drifting away
   std::uint64_t sources_timed_out = 0;  // sources unbound after source_timeout_s
+  // kFusedFilter: a timed-out local track sent again with its id (its tracker resumed it),
+  // bound again to the fused track it fed.
+  std::uint64_t sources_returned = 0;
   std::uint64_t fused_created = 0;
   std::uint64_t fused_deleted = 0;        // timed out (merged ones are not counted here)
   std::uint64_t fused_merged = 0;         // merged into an older fused track

@@ -174,6 +174,13 @@ struct SensorState {
   // Its placement's error and centre offsets (learn_sensor_bias).
   BiasModel bias;
   std::map<std::uint32_t, LocalTrack> tracks;
+  // Local tracks forgotten after source_timeout_s while bound: the fused track each fed and the
+  // time of its last frame, kept for max_coast_s (see ReturningSource).
+  struct Forgotten {
+    std::uint64_t fused_id = 0;
+    UtcNs last_ns = 0;
+  };
+  std::map<std::uint32_t, Forgotten> forgotten;
 };
 
 // A sensor's centre offset kept as a state of a fused track.
@@ -651,9 +658,39 @@ class FusedFilterEngine final : public Engine {
       if (f != tracks_.end()) Unbind(f->second, SourceKey{sensor_id, tid});
     }
     ss.tracks.clear();
+    ss.forgotten.clear();  // a new session's ids are other tracks
+  }
+
+  // A local track that returns after it was forgotten. A tracker may hold a coasting track
+  // unsent for longer than source_timeout_s and send it again with the same id (it resumed the
+  // track: the same person, as far as it knows). Started as a new source, it would start a
+  // second fused track beside the one it fed, be bound back to that one a frame later, and leave
+  // the new one without sources to coast on as a false track. So it is bound again to the fused
+  // track it fed, if that still lives and holds no other track of the sensor; the association
+  // then treats it as any bound source (binding_bonus; unbound after drift_updates strikes if
+  // it no longer fits). Kept for max_coast_s after the last frame: the fused track it fed
+  // coasts no longer than that without other sources.
+  void ReturningSource(const std::string& sensor_id, SensorState& ss, std::uint32_t track_id,
+                       LocalTrack& lt, UtcNs t) {
+    const auto it = ss.forgotten.find(track_id);
+    if (it == ss.forgotten.end()) return;
+    const SensorState::Forgotten forgotten = it->second;
+    ss.forgotten.erase(it);
+    if (Seconds(t, forgotten.last_ns) > options_.max_coast_s) return;
+    const auto f = tracks_.find(forgotten.fused_id);
+    if (f == tracks_.end()) return;
+    for (const SourceKey& k : f->second.sources) {
+      if (k.sensor_id == sensor_id) return;
+    }
+    Bind(f->second, SourceKey{sensor_id, track_id}, lt);
+    ++counters_.sources_returned;
   }
 
   void ExpireSources(const std::string& sensor_id, SensorState& ss, UtcNs now) {
+    for (auto it = ss.forgotten.begin(); it != ss.forgotten.end();) {
+      it = Seconds(now, it->second.last_ns) > options_.max_coast_s ? ss.forgotten.erase(it)
+                                                                   : std::next(it);
+    }
     for (auto it = ss.tracks.begin(); it != ss.tracks.end();) {
       LocalTrack& lt = it->second;
       if (Seconds(now, lt.stamp()) <= options_.source_timeout_s) {
@@ -670,6 +707,7 @@ class FusedFilterEngine final : public Engine {
           } else {
             f->second.last_sensor = sensor_id;
           }
+          ss.forgotten[it->first] = SensorState::Forgotten{f->first, lt.stamp()};
         }
         ++counters_.sources_timed_out;
       }
@@ -1131,6 +1169,9 @@ void FusedFilterEngine::AddFrame(const SensorPlacement& placement, const std::st
     lt.world = std::move(world);
     lt.usable = obs.state != daemon::TrackState::kTentative || o.use_tentative_sources;
     lt.measurement = Measure(corrected, sensor_id, lt, t);
+    if (inserted && lt.usable && lt.measurement.valid) {
+      ReturningSource(sensor_id, ss, obs.track_id, lt, t);
+    }
     if (lt.usable) {
       ++counters_.observations;
       if (lt.measurement.valid) rows.push_back(obs.track_id);

@@ -1006,6 +1006,49 @@ TEST(FusedFilterTest, APersonWhoStopsAtOnceKeepsTheId) {
   EXPECT_LT(max_error_m, 0.25);
 }
 
+TEST(FusedFilterTest, ALocalTrackSentAgainAfterTheSourceTimeoutFeedsItsFusedTrackAgain) {
+  // One sensor: its tracker holds a walker's coasting track unsent for 0.7 s (longer than
+  // source_timeout_s) and sends it again with its id, 0.35 m behind where the fused track
+  // coasted to (the walker slowed). In the same frame it starts a track on someone standing
+  // 0.1 m from there. The returning track feeds the fused track it fed before (the standing
+  // person does not take it over), the standing person gets a fused track of its own, and no
+  // fused track is left without a source.
+  const FusionOptions o;
+  ASSERT_LT(o.source_timeout_s, 0.7);
+  ASSERT_GT(o.max_coast_s, 0.7);
+  Fuser fuser(o);
+  fuser.SetPlacements({Placed("a", 0, 0, 0)});
+  const auto walker_x = [](double t) { return 2.0 + 1.5 * (t - 1.0) - (t > 3.5 ? 0.35 : 0.0); };
+  const double standing_x = 2.0 + 1.5 * 2.76;
+  std::set<std::uint64_t> walker_ids;
+  for (int k = 0; k <= 100; ++k) {
+    const double t = 1.0 + 0.04 * k;
+    std::vector<TrackObservation> tracks;
+    if (t < 3.02 || t > 3.74) tracks.push_back(Obs(1, walker_x(t), 1.0, 1.5, 0.0));
+    if (t > 3.74) tracks.push_back(Obs(2, standing_x, 1.1));
+    fuser.AddFrame("a", FrameAt(t, std::move(tracks)));
+    const UtcNs now = AtSeconds(t);
+    fuser.Tick(now);
+    const auto fused = fuser.Snapshot(now, true);
+    if (const auto* f = testing::Nearest(fused, Eigen::Vector2d(walker_x(t), 1.0), 0.3)) {
+      walker_ids.insert(f->id);
+    }
+  }
+  EXPECT_EQ(walker_ids.size(), 1u);
+  EXPECT_EQ(fuser.counters().sources_timed_out, 1u);
+  EXPECT_EQ(fuser.counters().sources_returned, 1u);
+  EXPECT_EQ(fuser.counters().fused_created, 2u);  // the walker's and the standing person's
+  const auto fused = fuser.Snapshot(AtSeconds(5.0));
+  ASSERT_EQ(fused.size(), 2u);
+  const auto* walker = testing::Nearest(fused, Eigen::Vector2d(walker_x(5.0), 1.0), 0.3);
+  const auto* standing = testing::Nearest(fused, Eigen::Vector2d(standing_x, 1.1), 0.3);
+  ASSERT_NE(walker, nullptr);
+  ASSERT_NE(standing, nullptr);
+  EXPECT_EQ(walker_ids.count(walker->id), 1u);
+  EXPECT_NE(standing->id, walker->id);
+  for (const FusedTrack& f : fused) EXPECT_EQ(f.sources.size(), 1u) << f.id;
+}
+
 // ---------------------------------------------------------------------------------------------
 // Sensor bias (fusion.h, "Sensor bias")
 
