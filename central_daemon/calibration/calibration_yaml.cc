@@ -332,7 +332,7 @@ std::string CalibrationYaml(const CalibrationResult& result, const YamlContext& 
     std::string bias;
     if (s.radial_bias && ReadableBias(*s.radial_bias)) {
       bias = fmt::format(", radial_bias_m: {}, sigma_radial_bias_m: {}, radial_bias_estimated: {}",
-                         Exact(s.radial_bias->bias_m), Exact(s.radial_bias->sigma_m),
+                         Exact(s.radial_bias->bias_m), Short(s.radial_bias->sigma_m),
                          Bool(s.radial_bias->estimated));
     }
     y += fmt::format(
