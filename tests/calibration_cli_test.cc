@@ -104,6 +104,15 @@ TEST_F(CalibrationChain, CalibratesTheSimulatedSetupWithinTheBoundsAndWritesTheR
     }
   }
   EXPECT_EQ(judged, 5u);  // every sensor but the reference
+  // Refined: each sensor's shared radial bias in the file and in the printed summary.
+  if (written["quality"]["joint_refinement"]["applied"].as<bool>()) {
+    EXPECT_NE(calibrate.out().find("radial_bias_m"), std::string::npos) << calibrate.out();
+    for (const YAML::Node& s : written["sensors"]) {
+      ASSERT_TRUE(s["radial_bias_m"].IsDefined()) << s["id"].as<std::string>();
+      EXPECT_GT(s["sigma_radial_bias_m"].as<double>(), 0.0) << s["id"].as<std::string>();
+      EXPECT_NO_THROW(s["radial_bias_estimated"].as<bool>()) << s["id"].as<std::string>();
+    }
+  }
   std::size_t used = 0;
   for (const auto& e : stats["edges"]) used += e["used"].get<bool>() ? 1 : 0;
   EXPECT_GE(used, 5u) << stats["edges"].dump(2);  // a ring of six needs at least five

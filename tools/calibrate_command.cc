@@ -29,8 +29,12 @@ namespace {
 void PrintSummary(const calib::CalibrationOutcome& outcome) {
   const calib::CalibrationResult& r = outcome.result;
   std::printf("method %s, reference %s\n", r.method.c_str(), r.reference.c_str());
-  std::printf("%-12s %10s %10s %9s %9s %9s\n", "sensor", "x_m", "y_m", "yaw_deg", "sigma_m",
-              "sigma_deg");
+  // The joint refinement's shared radial bias per sensor, where it ran: estimated from the data
+  // ("est") or held at its prior ("prior"), +- one standard deviation.
+  bool any_bias = false;
+  for (const calib::SensorPose& s : r.sensors) any_bias = any_bias || s.radial_bias.has_value();
+  std::printf("%-12s %10s %10s %9s %9s %9s%s\n", "sensor", "x_m", "y_m", "yaw_deg", "sigma_m",
+              "sigma_deg", any_bias ? "  radial_bias_m" : "");
   for (const calib::SensorPose& s : r.sensors) {
     if (!s.calibrated) {
       std::printf("%-12s %10s%s%s\n", s.id.c_str(), "not calibrated", s.flag.empty() ? "" : ": ",
@@ -39,10 +43,17 @@ void PrintSummary(const calib::CalibrationOutcome& outcome) {
     }
     const double sigma_m = std::sqrt(std::max(0.0, s.covariance(0, 0) + s.covariance(1, 1)));
     const double sigma_deg = common::RadToDeg(std::sqrt(std::max(0.0, s.covariance(2, 2))));
+    char bias[64] = "";
+    if (s.radial_bias) {
+      std::snprintf(bias, sizeof bias, "  %+.4f+-%.4f %s", s.radial_bias->bias_m,
+                    s.radial_bias->sigma_m, s.radial_bias->estimated ? "est" : "prior");
+    } else if (any_bias) {
+      std::snprintf(bias, sizeof bias, "  %-20s", "-");
+    }
     // A flagged pose is printed with what is wrong with it (e.g. placed by a weak pair only).
-    std::printf("%-12s %10.4f %10.4f %9.3f %9.4f %9.4f%s%s\n", s.id.c_str(),
+    std::printf("%-12s %10.4f %10.4f %9.3f %9.4f %9.4f%s%s%s\n", s.id.c_str(),
                 s.world_from_sensor.x_m, s.world_from_sensor.y_m,
-                common::RadToDeg(s.world_from_sensor.yaw_rad), sigma_m, sigma_deg,
+                common::RadToDeg(s.world_from_sensor.yaw_rad), sigma_m, sigma_deg, bias,
                 s.flag.empty() ? "" : "  ! ", s.flag.c_str());
   }
   if (!r.ambiguity.empty()) std::printf("not decided by the data: %s\n", r.ambiguity.c_str());

@@ -26,6 +26,12 @@ constexpr const char* kHeader =
     "#               together: p_reference = R(yaw) * p_sensor + (x_m, y_m)\n"
     "#   sigma_*     one standard deviation of x_m, y_m [m] and yaw_deg [deg]\n"
     "#   calibrated: false   the data did not connect this sensor to the reference: no pose\n"
+    "#   radial_bias_m   (only where the joint refinement ran) how far this sensor's people's\n"
+    "#               centres lie towards it along its line of sight beyond the measurement model\n"
+    "#               [m; negative: beyond it]; sigma_radial_bias_m its standard deviation\n"
+    "#               after the refinement;\n"
+    "#               radial_bias_estimated: false = the data do not observe it, held at its prior\n"
+    "#               (0 +- sigma), which the pose sigmas include\n"
     "# quality     how well the data supports the poses:\n"
     "#   edges       one per sensor pair with a pairwise estimate: `used` by the global solution "
     "or\n"
@@ -86,6 +92,12 @@ bool Readable(const SensorPose& s) {
   const Pose2& p = s.world_from_sensor;
   return std::isfinite(p.x_m) && std::isfinite(p.y_m) && std::isfinite(p.yaw_rad) &&
          std::abs(p.x_m) <= kMaxPoseCoordinateM && std::abs(p.y_m) <= kMaxPoseCoordinateM;
+}
+
+// A radial bias the reader accepts back.
+bool ReadableBias(const RadialBiasEstimate& b) {
+  return std::isfinite(b.bias_m) && std::isfinite(b.sigma_m) &&
+         std::abs(b.bias_m) <= kMaxRadialBiasM && b.sigma_m >= 0.0 && b.sigma_m <= kMaxRadialBiasM;
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -216,8 +228,35 @@ class Reader {
         }
         pose.yaw_rad = common::NormalizeAngle(common::DegToRad(yaw_deg));
       }
+      // The refinement's radial bias: all three keys or none.
+      std::optional<RadialBiasEstimate> bias;
+      if (Has(entry, "radial_bias_m") || Has(entry, "sigma_radial_bias_m") ||
+          Has(entry, "radial_bias_estimated")) {
+        RadialBiasEstimate b;
+        if (!Number(entry, path + ".radial_bias_m", note, "radial_bias_m", kMaxRadialBiasM,
+                    &b.bias_m) ||
+            !Number(entry, path + ".sigma_radial_bias_m", note, "sigma_radial_bias_m",
+                    kMaxRadialBiasM, &b.sigma_m)) {
+          return false;
+        }
+        if (b.sigma_m < 0.0) {
+          return Fail(entry["sigma_radial_bias_m"], path + ".sigma_radial_bias_m",
+                      "expected a number >= 0" + note);
+        }
+        if (!Has(entry, "radial_bias_estimated")) {
+          return Fail(entry, path + ".radial_bias_estimated", "missing key" + note);
+        }
+        const YAML::Node node = entry["radial_bias_estimated"];
+        const std::string text = node.IsScalar() ? node.Scalar() : "";
+        if (text != "true" && text != "false") {
+          return Fail(node, path + ".radial_bias_estimated", "expected true or false" + note);
+        }
+        b.estimated = text == "true";
+        bias = b;
+      }
       file.sensors.emplace_back(id, pose);
       file.calibrated.push_back(calibrated);
+      file.radial_bias.push_back(bias);
     }
 
     if (Has(root, "reference")) {
@@ -250,6 +289,9 @@ PoseFile PoseFileOf(const CalibrationResult& result) {
   for (const SensorPose& s : result.sensors) {
     file.sensors.emplace_back(s.id, s.world_from_sensor);
     file.calibrated.push_back(s.calibrated);
+    file.radial_bias.push_back(s.calibrated && s.radial_bias && ReadableBias(*s.radial_bias)
+                                   ? s.radial_bias
+                                   : std::nullopt);
     if (s.calibrated && s.id == result.reference) file.reference = s.id;
   }
   return file;
@@ -288,12 +330,18 @@ std::string CalibrationYaml(const CalibrationResult& result, const YamlContext& 
     }
     ++calibrated;
     const Pose2& p = s.world_from_sensor;
+    std::string bias;
+    if (s.radial_bias && ReadableBias(*s.radial_bias)) {
+      bias = fmt::format(", radial_bias_m: {}, sigma_radial_bias_m: {}, radial_bias_estimated: {}",
+                         Exact(s.radial_bias->bias_m), Short(s.radial_bias->sigma_m),
+                         Bool(s.radial_bias->estimated));
+    }
     y += fmt::format(
         "  - {{id: {}, x_m: {}, y_m: {}, yaw_deg: {}, sigma_x_m: {}, sigma_y_m: {}, "
-        "sigma_yaw_deg: {}, cov_xy_m2: {}{}}}\n",
+        "sigma_yaw_deg: {}, cov_xy_m2: {}{}{}}}\n",
         Quoted(s.id), Exact(p.x_m), Exact(p.y_m), Exact(common::RadToDeg(p.yaw_rad)),
         Short(SigmaOf(s.covariance, 0)), Short(SigmaOf(s.covariance, 1)),
-        Short(common::RadToDeg(SigmaOf(s.covariance, 2))), Short(s.covariance(0, 1)), flag);
+        Short(common::RadToDeg(SigmaOf(s.covariance, 2))), Short(s.covariance(0, 1)), bias, flag);
   }
 
   std::size_t used = 0;

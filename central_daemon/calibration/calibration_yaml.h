@@ -6,9 +6,13 @@
 //   sensors:
 //     - {id: "s1", x_m: 0, y_m: 0, yaw_deg: 0, sigma_x_m: 0, sigma_y_m: 0, sigma_yaw_deg: 0}
 //     - {id: "s7", calibrated: false}    # calibration only: not connected, no pose
+//     - {id: "s2", x_m: 4, ..., radial_bias_m: -0.02, sigma_radial_bias_m: 0.004,
+//        radial_bias_estimated: true}    # calibration only, where the joint refinement ran
 //
 // x_m, y_m [m] and yaw_deg [deg, counter-clockwise] are world_from_sensor (common/geometry.h);
-// a calibration's world is the reference sensor's frame. Other keys (method, quality, devices,
+// a calibration's world is the reference sensor's frame. radial_bias_m, sigma_radial_bias_m [m]
+// and radial_bias_estimated (all three or none) are the joint refinement's shared radial bias of
+// that sensor (types.h RadialBiasEstimate). Other keys (method, quality, devices,
 // targets, ...) are informative and ignored by the reader.
 
 #include <optional>
@@ -39,6 +43,8 @@ struct PoseFile {
   std::optional<std::string> reference;                // `reference`, when the file has one
   std::vector<std::pair<std::string, Pose2>> sensors;  // in file order; yaw in (-pi, pi]
   std::vector<bool> calibrated;                        // parallel to sensors (absent: true)
+  // Parallel to sensors as read (absent: nullopt); may be shorter in a PoseFile built by hand.
+  std::vector<std::optional<RadialBiasEstimate>> radial_bias;
 
   // Index of `id` in sensors, or nullopt.
   std::optional<std::size_t> Find(const std::string& id) const;
@@ -52,11 +58,13 @@ PoseFile PoseFileOf(const CalibrationResult& result);
 inline constexpr std::size_t kMaxPoseFileBytes = 16u << 20;
 inline constexpr double kMaxPoseCoordinateM = 1e7;
 inline constexpr double kMaxPoseYawDeg = 1e6;
+inline constexpr double kMaxRadialBiasM = 100.0;
 
 // Parses the `sensors` list (and `reference`). False with a one-line *error naming the file (if
 // any), the line and the key for anything malformed: not YAML, no `sensors` list or an empty one,
 // an entry without id, a duplicate id, a missing or non-numeric or non-finite or out-of-range
-// x_m / y_m / yaw_deg of a calibrated sensor, a `calibrated` that is not true/false, a
+// x_m / y_m / yaw_deg of a calibrated sensor, a radial bias with one of its three keys missing or
+// malformed (or a negative sigma_radial_bias_m), a `calibrated` that is not true/false, a
 // `reference` that is not one of the calibrated sensors. *out is only written on success.
 bool ParsePoseYaml(const std::string& text, PoseFile* out, std::string* error);
 bool ReadPoseFile(const std::string& path, PoseFile* out, std::string* error);

@@ -79,6 +79,51 @@ TEST(CalibrationYaml, RoundTripGivesTheSamePoses) {
   }
 }
 
+TEST(CalibrationYaml, RadialBiasRoundTripsAndFilesWithoutItStillRead) {
+  CalibrationResult result = MakeResult();
+  result.sensors[0].radial_bias = RadialBiasEstimate{-0.019873456789012345, 0.0041234567891, true};
+  result.sensors[1].radial_bias = RadialBiasEstimate{0.0, 0.02, false};
+  // Not written for a sensor without a pose, nor when not finite.
+  result.sensors[3].radial_bias = RadialBiasEstimate{std::nan(""), 0.02, true};
+  result.sensors[4].radial_bias = RadialBiasEstimate{0.01, 0.02, true};
+  const std::string yaml = CalibrationYaml(result, {});
+  PoseFile file;
+  std::string error;
+  ASSERT_TRUE(ParsePoseYaml(yaml, &file, &error)) << error << "\n" << yaml;
+  ASSERT_EQ(file.radial_bias.size(), result.sensors.size());
+  for (std::size_t i : {0u, 1u}) {
+    const RadialBiasEstimate& want = *result.sensors[i].radial_bias;
+    ASSERT_TRUE(file.radial_bias[i].has_value()) << i;
+    EXPECT_EQ(file.radial_bias[i]->bias_m, want.bias_m) << i;  // every digit
+    EXPECT_NEAR(file.radial_bias[i]->sigma_m, want.sigma_m, 1e-6 * want.sigma_m) << i;  // 6 digits
+    EXPECT_EQ(file.radial_bias[i]->estimated, want.estimated) << i;
+  }
+  for (std::size_t i : {2u, 3u, 4u}) EXPECT_FALSE(file.radial_bias[i].has_value()) << i;
+  const YAML::Node root = YAML::Load(yaml);
+  EXPECT_TRUE(root["sensors"][0]["radial_bias_estimated"].as<bool>());
+  EXPECT_FALSE(root["sensors"][1]["radial_bias_estimated"].as<bool>());
+  EXPECT_FALSE(root["sensors"][4]["radial_bias_m"].IsDefined());
+  // Documented in the file's header.
+  EXPECT_NE(yaml.find("#   radial_bias_m"), std::string::npos);
+  EXPECT_NE(yaml.find("sigma_radial_bias_m"), std::string::npos);
+  // What the file reads back is what PoseFileOf gives.
+  const PoseFile direct = PoseFileOf(result);
+  ASSERT_EQ(direct.radial_bias.size(), file.radial_bias.size());
+  for (std::size_t i = 0; i < direct.radial_bias.size(); ++i) {
+    EXPECT_EQ(direct.radial_bias[i].has_value(), file.radial_bias[i].has_value()) << i;
+  }
+
+  // A file without the keys (written before, or a truth.yaml): no bias, the poses as before.
+  const std::string old =
+      "reference: a\nsensors:\n  - {id: a, x_m: 0, y_m: 0, yaw_deg: 0}\n"
+      "  - {id: b, x_m: 1, y_m: 2, yaw_deg: 3, sigma_x_m: 0.01}\n";
+  ASSERT_TRUE(ParsePoseYaml(old, &file, &error)) << error;
+  ASSERT_EQ(file.radial_bias.size(), 2u);
+  EXPECT_FALSE(file.radial_bias[0].has_value());
+  EXPECT_FALSE(file.radial_bias[1].has_value());
+  EXPECT_NEAR(file.sensors[1].second.y_m, 2.0, 1e-12);
+}
+
 TEST(CalibrationYaml, FlagsAndTheAmbiguityAreWrittenAndThePosesStillRead) {
   CalibrationResult result = MakeResult();
   result.sensors[1].flag = "placed by a weak pair only: \"few\" matches";
@@ -254,6 +299,33 @@ TEST(PoseYaml, HostileInputGivesOneClearLine) {
       {"reference uncalibrated",
        "reference: b\nsensors: [" + ok_entry + ", {id: b, calibrated: false}]\n",
        "reference: 'b' is not calibrated"},
+      {"bias without its sigma",
+       "sensors: [{id: a, x_m: 1, y_m: 2, yaw_deg: 3, radial_bias_m: 0.01, "
+       "radial_bias_estimated: true}]\n",
+       "sensors[0].sigma_radial_bias_m: missing key (sensor 'a')"},
+      {"bias flag alone",
+       "sensors: [{id: a, x_m: 1, y_m: 2, yaw_deg: 3, radial_bias_estimated: false}]\n",
+       "sensors[0].radial_bias_m: missing key"},
+      {"bias without its flag",
+       "sensors: [{id: a, x_m: 1, y_m: 2, yaw_deg: 3, radial_bias_m: 0.01, "
+       "sigma_radial_bias_m: 0.02}]\n",
+       "sensors[0].radial_bias_estimated: missing key"},
+      {"bias flag not a bool",
+       "sensors: [{id: a, x_m: 1, y_m: 2, yaw_deg: 3, radial_bias_m: 0.01, "
+       "sigma_radial_bias_m: 0.02, radial_bias_estimated: yes}]\n",
+       "sensors[0].radial_bias_estimated: expected true or false"},
+      {"bias not finite",
+       "sensors: [{id: a, x_m: 1, y_m: 2, yaw_deg: 3, radial_bias_m: inf, "
+       "sigma_radial_bias_m: 0.02, radial_bias_estimated: true}]\n",
+       "sensors[0].radial_bias_m: expected a finite number"},
+      {"bias out of range",
+       "sensors: [{id: a, x_m: 1, y_m: 2, yaw_deg: 3, radial_bias_m: 1e3, "
+       "sigma_radial_bias_m: 0.02, radial_bias_estimated: true}]\n",
+       "sensors[0].radial_bias_m: 1e3 is out of range"},
+      {"negative bias sigma",
+       "sensors: [{id: a, x_m: 1, y_m: 2, yaw_deg: 3, radial_bias_m: 0.01, "
+       "sigma_radial_bias_m: -0.02, radial_bias_estimated: true}]\n",
+       "sensors[0].sigma_radial_bias_m: expected a number >= 0"},
       {"not yaml", "sensors: [{id: a, x_m: 1\n", "not valid YAML"},
       {"tab indentation", "sensors:\n\t- {id: a}\n", "not valid YAML"},
       {"bad escape", "sensors: [{id: \"a\\\x01\"}]\n",

@@ -110,6 +110,8 @@ struct GlobalSolution {
   std::vector<std::string> edge_status;  // per measurement
   std::vector<bool> edge_used;           // per measurement
   std::vector<std::string> flag;         // per sensor
+  // Per sensor where the joint refinement was applied, else empty.
+  std::vector<std::optional<RadialBiasEstimate>> radial_bias;
   std::vector<std::string> warnings;
 };
 
@@ -563,6 +565,7 @@ struct Refined {
   bool refined = false;
   std::string rejected;  // why a refinement that lowered its cost was not kept ("" otherwise)
   std::vector<std::string> kept_pairs;  // weak leaves that kept the pairs' placement (why)
+  std::vector<std::size_t> kept_sensors;  // those leaves (full indices)
   JointRefineResult joint;
   std::vector<Pose2> poses;
   std::vector<Eigen::Matrix3d> covariance;
@@ -691,6 +694,7 @@ Refined Refine(const AlignedTracks& tracks, std::size_t reference,
       if (d > weak_min_move_sigma) continue;
       out.poses[i] = out.poses[a] * (poses[a].inverse() * poses[i]);
       out.covariance[i] = AtLeast(covariance[i], out.joint.covariance[a]);
+      out.kept_sensors.push_back(i);
       out.kept_pairs.push_back(fmt::format(
           "joint refinement would move {} {:.1f} sigma of its weak pair {}-{} ({:.2f} m, {:.2f} "
           "deg; at least {:.1f} needed): kept the pairs' placement",
@@ -1058,6 +1062,19 @@ GlobalSolution SolveRobust(const AlignedTracks& tracks, std::size_t reference,
     } else {
       result->refined = true;
       for (const std::string& note : best.refined.kept_pairs) out.warnings.push_back(note);
+      // Each sensor the refinement placed (a weak leaf that kept the pairs' placement has the
+      // bias at its prior in its pairs' covariance).
+      out.radial_bias.assign(n, std::nullopt);
+      const auto& kept = best.refined.kept_sensors;
+      for (std::size_t i = 0; i < n; ++i) {
+        if (std::find(kept.begin(), kept.end(), i) != kept.end()) continue;
+        if (i < joint.refined.size() && joint.refined[i] && i < joint.sensor_bias_m.size() &&
+            i < joint.sensor_bias_sigma_m.size() && i < joint.sensor_bias_estimated.size() &&
+            joint.sensor_bias_sigma_m[i] > 0.0) {
+          out.radial_bias[i] = RadialBiasEstimate{
+              joint.sensor_bias_m[i], joint.sensor_bias_sigma_m[i], joint.sensor_bias_estimated[i]};
+        }
+      }
     }
   }
   for (std::size_t e = 0; e < measurements.size(); ++e) {
@@ -1239,6 +1256,10 @@ void Finish(const GlobalSolution& global_in, std::size_t reference,
     result.sensors[i].covariance =
         global.calibrated[i] ? global.covariance[i] : Eigen::Matrix3d::Zero();
     if (i < global.flag.size()) result.sensors[i].flag = global.flag[i];
+    result.sensors[i].radial_bias.reset();
+    if (global.calibrated[i] && i < global.radial_bias.size()) {
+      result.sensors[i].radial_bias = global.radial_bias[i];
+    }
   }
   // What data would place a sensor hanging on weak pairs: its pairs that saw people together but
   // were rejected, or more of the walks its weak pair rests on.

@@ -561,6 +561,8 @@ TEST(CalibratePipeline, ALeafOnOneWeakPairKeepsThePairsPlacementUnlessTheRefinem
   const CalibrationOutcome kept = CalibrateFromPairs(tracks, pairs, options);
   ASSERT_TRUE(kept.ok) << kept.error;
   ASSERT_TRUE(kept.result.refined);
+  // Ellipse trackers: no shared radial bias in the model, none reported.
+  for (const SensorPose& s : kept.result.sensors) EXPECT_FALSE(s.radial_bias.has_value()) << s.id;
   Pose2 want;
   for (const PairEstimate& p : pairs) {
     if (p.r == leaf_pair->r && p.s == leaf_pair->s) want = p.s_from_r;
@@ -845,6 +847,16 @@ TEST(CalibratePipeline, ASensorWhoseTracksLookLikeLegsIsFlaggedAndItsSigmaCovers
   const CalibrationOutcome unchecked = Calibrate(input, options);
   ASSERT_TRUE(unchecked.ok) << unchecked.error;
   EXPECT_TRUE(unchecked.result.sensors[2].flag.empty());
+  // Refined, every sensor carries its shared radial bias; without walls nothing ties sensors that
+  // see one person from different directions, so none is observed: each held at 0 with its
+  // 0.02 m prior (c's 0.12 m is what the mount check is for).
+  ASSERT_TRUE(unchecked.result.refined);
+  for (const SensorPose& s : unchecked.result.sensors) {
+    ASSERT_TRUE(s.radial_bias.has_value()) << s.id;
+    EXPECT_FALSE(s.radial_bias->estimated) << s.id;
+    EXPECT_EQ(s.radial_bias->bias_m, 0.0) << s.id;
+    EXPECT_NEAR(s.radial_bias->sigma_m, 0.02, 1e-6) << s.id;
+  }
   const Judged j = Judge(unchecked, sensors, 2);
   EXPECT_GT(j.dt_m, 0.08);
   EXPECT_GT(j.dt_m, 2.0 * sigma_t_m(unchecked)) << sigma_t_m(unchecked);

@@ -1091,11 +1091,12 @@ std::vector<double> SensorBiasDataSigma(const ReducedSystem& system, double size
 
 // Marginal covariance of the free poses (size correction marginalised under its prior, the
 // estimated sensor biases under theirs) plus the systematic floor and the consider term of the
-// biases held at their prior (refine.h "Sensor bias"). Returns false when the system is not
+// biases held at their prior (refine.h "Sensor bias"); the estimated biases' standard deviations
+// (in units of their prior, per sensor) go to bias_sigma. Returns false when the system is not
 // positive definite.
 bool PoseCovariance(const ReducedSystem& system, double size_prior_sigma_m, double scale,
                     const std::vector<bool>& estimated_bias,
-                    std::vector<Eigen::Matrix3d>& covariance) {
+                    std::vector<Eigen::Matrix3d>& covariance, std::vector<double>& bias_sigma) {
   if (system.dim == 2) return true;  // no free pose
   const auto d = static_cast<Eigen::Index>(system.dim);
   // The system extended by the estimated biases (per standard deviation, prior N(0, 1)).
@@ -1160,6 +1161,10 @@ bool PoseCovariance(const ReducedSystem& system, double size_prior_sigma_m, doub
     const auto p = static_cast<Eigen::Index>(system.pose_offset[s]);
     const Eigen::Matrix3d c = total.block<3, 3>(p, p);
     covariance[s] = 0.5 * (c + c.transpose());
+  }
+  for (Eigen::Index i = 0; i < ne; ++i) {
+    const auto b = static_cast<std::size_t>(estimated[static_cast<std::size_t>(i)]);
+    if (b < bias_sigma.size()) bias_sigma[b] = std::sqrt(std::max(0.0, total(d + i, d + i)));
   }
   return true;
 }
@@ -1526,9 +1531,15 @@ JointRefineResult RefineJointly(const AlignedTracks& tracks,
   const ReducedSystem system =
       BuildReducedSystem(a, final_constraints, final_params, size, a.objects, final_free,
                          loss.get(), &constraint_loss, observation_weight, true, group_sigma);
-  if (!PoseCovariance(system, prior_sigma, scale, free_bias, result.covariance)) {
+  // Held (and, should the covariance fail, estimated) biases: their prior.
+  std::vector<double> bias_sigma(n, 1.0);
+  if (!PoseCovariance(system, prior_sigma, scale, free_bias, result.covariance, bias_sigma)) {
     result.covariance.assign(n, Eigen::Matrix3d::Zero());
     message << "; covariance unavailable (reduced system not positive definite)";
+  }
+  result.sensor_bias_sigma_m.assign(n, 0.0);
+  for (std::size_t s = 0; s < n; ++s) {
+    result.sensor_bias_sigma_m[s] = bias_sigma[s] * bias_sigma_m[s];
   }
   if (!last_note.empty()) message << "; " << last_note;
   result.message = message.str();

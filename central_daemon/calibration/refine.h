@@ -199,6 +199,10 @@ struct JointRefineResult {
   std::vector<double> sensor_bias_m;
   std::vector<bool> sensor_bias_estimated;
   std::vector<double> sensor_bias_data_sigma;
+  // Per sensor: the standard deviation of sensor_bias_m after the refinement (metres): an
+  // estimated one's marginal under its prior (the variance factor, the systematic floor and the
+  // held ones' consider terms included), a held one's prior; 0 without a bias model.
+  std::vector<double> sensor_bias_sigma_m;
   // (sum rho(|r|^2) + sum |r_c|^2) / (residuals - unknowns) at the solution, without w.
   double variance_factor = 0.0;
   std::size_t observations = 0;      // associated observations in the final problem

@@ -728,6 +728,11 @@ TEST(RefineJointlyTest, SensorBiasIsEstimatedWhereWallsMakeItObservable) {
     EXPECT_TRUE(r.sensor_bias_estimated[s]) << s << ": " << r.sensor_bias_data_sigma[s];
     EXPECT_LT(r.sensor_bias_data_sigma[s], 0.5) << s;
     EXPECT_NEAR(r.sensor_bias_m[s], -0.02, 0.01) << s;
+    // Its uncertainty after the refinement: well below the 0.02 m prior, and covering the error.
+    ASSERT_EQ(r.sensor_bias_sigma_m.size(), 4u);
+    EXPECT_GT(r.sensor_bias_sigma_m[s], 0.0) << s;
+    EXPECT_LT(r.sensor_bias_sigma_m[s], 0.01) << s;
+    EXPECT_LE(std::abs(r.sensor_bias_m[s] + 0.02), 3.0 * r.sensor_bias_sigma_m[s]) << s;
   }
   for (std::size_t s = 1; s < 4; ++s) {
     EXPECT_LT(common::TranslationDistanceM(r.world_from_sensor[s], truth[s]), 0.01) << s;
@@ -744,6 +749,10 @@ TEST(RefineJointlyTest, SensorBiasIsEstimatedWhereWallsMakeItObservable) {
   ASSERT_TRUE(p.ok) << p.message;
   EXPECT_FALSE(p.sensor_bias_estimated[0]) << p.sensor_bias_data_sigma[0];
   EXPECT_FALSE(p.sensor_bias_estimated[1]) << p.sensor_bias_data_sigma[1];
+  for (std::size_t s = 0; s < 2; ++s) {
+    EXPECT_EQ(p.sensor_bias_m[s], 0.0) << s;
+    EXPECT_NEAR(p.sensor_bias_sigma_m[s], 0.02, 1e-6) << s;  // its prior
+  }
   EXPECT_GT(common::TranslationDistanceM(p.world_from_sensor[1], facing[1]), 0.025);
   EXPECT_LE(PositionNees(p, facing, 1), 5.99);
 }

@@ -1003,14 +1003,28 @@ std::string SummaryMd(const ReportInput& in, const std::vector<EdgeRow>& edges) 
 
   md +=
       "## Poses\n\nIn the frame of the reference sensor; sigma = one standard deviation (the "
-      "picture draws 2 sigma).\n\n";
+      "picture draws 2 sigma).";
+  // The joint refinement's shared radial bias per sensor, where it ran.
+  bool any_bias = false;
+  for (const SensorPose& s : r.sensors) any_bias = any_bias || (s.calibrated && s.radial_bias);
+  if (any_bias) {
+    md +=
+        " Radial bias: how far the sensor's people's centres lie towards it along its line of "
+        "sight beyond the measurement model, +- one standard deviation after the joint "
+        "refinement; \"estimated\" from the data, or \"prior\": the data do not observe it, "
+        "held at 0 and its prior carried in the pose sigmas.";
+  }
+  md += "\n\n";
   md += "| sensor | x [m] | y [m] | yaw [deg] | sigma x [m] | sigma y [m] | sigma yaw [deg] |";
+  if (any_bias) md += " radial bias [m] |";
   md += eval ? " d_R [deg] | d_t [m] |\n" : "\n";
-  md += eval ? "|---|--:|--:|--:|--:|--:|--:|--:|--:|\n" : "|---|--:|--:|--:|--:|--:|--:|\n";
+  md += "|---|--:|--:|--:|--:|--:|--:|";
+  if (any_bias) md += "--:|";
+  md += eval ? "--:|--:|\n" : "\n";
   for (const SensorPose& s : r.sensors) {
     if (!s.calibrated) {
       md += "| " + Md(s.id) + (s.flag.empty() ? "" : " (!)") + " | not calibrated | | | | | |" +
-            (eval ? " | |\n" : "\n");
+            (any_bias ? " |" : "") + (eval ? " | |\n" : "\n");
       continue;
     }
     const Pose2& p = s.world_from_sensor;
@@ -1019,6 +1033,12 @@ std::string SummaryMd(const ReportInput& in, const std::vector<EdgeRow>& edges) 
                       s.flag.empty() ? "" : " (!)", Num(p.x_m, 4), Num(p.y_m, 4),
                       Num(common::RadToDeg(p.yaw_rad), 3), Num(sigma(0), 4), Num(sigma(1), 4),
                       Num(common::RadToDeg(sigma(2)), 3));
+    if (any_bias) {
+      md += s.radial_bias ? fmt::format(" {} +- {} ({}) |", Num(s.radial_bias->bias_m, 4),
+                                        Num(s.radial_bias->sigma_m, 4),
+                                        s.radial_bias->estimated ? "estimated" : "prior")
+                          : std::string(" |");
+    }
     if (eval) {
       const SensorError* e = error_of(s.id);
       md += e != nullptr ? fmt::format(" {:.4f} | {:.4f} |", e->d_r_deg, e->d_t_m)

@@ -359,6 +359,33 @@ TEST_F(ReportTest, SummaryHasPosesTruthErrorsEdgesAndTimings) {
   EXPECT_NE(md.find("Residuals over the 1 used edges"), std::string::npos) << md;
 }
 
+TEST_F(ReportTest, SummaryShowsEachSensorsRadialBiasWhereTheRefinementRan) {
+  MakeScene();
+  std::string error;
+  ASSERT_TRUE(WriteReport(dir_.string(), input_, &error)) << error;
+  EXPECT_EQ(ReadText(dir_ / "summary.md").find("radial bias"), std::string::npos);  // not run
+
+  result_.sensors[0].radial_bias = RadialBiasEstimate{-0.0213, 0.0042, true};
+  result_.sensors[1].radial_bias = RadialBiasEstimate{0.0, 0.02, false};
+  ASSERT_TRUE(WriteReport(dir_.string(), input_, &error)) << error;
+  const std::string md = ReadText(dir_ / "summary.md");
+  EXPECT_NE(md.find("| sigma yaw [deg] | radial bias [m] | d_R [deg] |"), std::string::npos) << md;
+  EXPECT_NE(md.find("| -0.0213 +- 0.0042 (estimated) | (reference) | |"), std::string::npos) << md;
+  EXPECT_NE(md.find("| 0.0000 +- 0.0200 (prior) | 0.0000 | 0.2000 |"), std::string::npos) << md;
+  EXPECT_NE(md.find("| s4 | not calibrated | | | | | | | | |"), std::string::npos) << md;
+  // Every row of the table has as many cells as its header.
+  const std::size_t header = md.find("| sensor | x [m]");
+  ASSERT_NE(header, std::string::npos);
+  const std::size_t table_end = md.find("\n\n", header);
+  std::istringstream rows(md.substr(header, table_end - header));
+  std::size_t cells = 0;
+  for (std::string row; std::getline(rows, row);) {
+    const std::size_t bars = Count(row, "|") - Count(row, "\\|");
+    if (cells == 0) cells = bars;
+    EXPECT_EQ(bars, cells) << row;
+  }
+}
+
 TEST_F(ReportTest, RejectedPairsAreCountedAsRejectedWithTheirReasonOnce) {
   // The global step reports every pair, the rejected ones as "rejected: <reason>", not used.
   MakeScene();

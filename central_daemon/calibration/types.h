@@ -191,6 +191,14 @@ struct PairEstimate {
 // ---------------------------------------------------------------------------------------------
 // Global result.
 
+// A sensor's shared radial bias from the joint refinement (refine.h "Sensor bias"): how far its
+// people's centres lie towards it, along its line of sight, beyond the measurement model.
+struct RadialBiasEstimate {
+  double bias_m = 0.0;     // 0 where held at its prior
+  double sigma_m = 0.0;    // after the refinement; a held one's prior
+  bool estimated = false;  // false: the data do not observe it, held at its prior N(0, sigma^2)
+};
+
 struct SensorPose {
   std::string id;
   bool calibrated = false;       // false: not placed (not connected to the reference, or refused)
@@ -200,6 +208,8 @@ struct SensorPose {
   std::string flag;
   Pose2 world_from_sensor;       // the reference sensor is the identity
   Eigen::Matrix3d covariance = Eigen::Matrix3d::Zero();  // (x, y, yaw), metres and radians
+  // Only where the joint refinement was applied and placed this sensor.
+  std::optional<RadialBiasEstimate> radial_bias;
 };
 
 struct EdgeReport {
