@@ -51,6 +51,20 @@ std::string JoinIds(const AlignedTracks& tracks, const std::vector<std::size_t>&
   return out;
 }
 
+// The sensors that saw people together with sensor i in a pair that was rejected, each with the
+// reason's first words ("k1 (pair residual too large), t1 (pair inconsistent)"); empty when none.
+std::string RejectedPartners(const AlignedTracks& tracks, const std::vector<PairEstimate>& pairs,
+                             std::size_t i) {
+  std::string out;
+  for (const PairEstimate& p : pairs) {
+    if (p.accepted || (p.r != i && p.s != i) || p.matches == 0) continue;
+    const std::string why = p.reason.substr(0, p.reason.find(':'));
+    out += fmt::format("{}{} (pair {})", out.empty() ? "" : ", ",
+                       tracks.sensors[p.r == i ? p.s : p.r].id, why);
+  }
+  return out;
+}
+
 double WeightOf(const PairEstimate& pair) {
   // Schenk et al.: N / d, the number of associated observations over their mean distance.
   const double d = std::max(pair.mean_residual_m, 1e-3);
@@ -125,10 +139,10 @@ constexpr double kSeparation = 9.0;
 
 // The connected part of `use` around the reference as a sub-problem with its own indices.
 struct SubProblem {
-  std::vector<std::size_t> to_full;           // sub index -> full index
-  std::vector<std::size_t> to_sub;            // full index -> sub index (kNoIndex: not in it)
+  std::vector<std::size_t> to_full;  // sub index -> full index
+  std::vector<std::size_t> to_sub;   // full index -> sub index (kNoIndex: not in it)
   std::vector<RelativeMeasurement> measurements;
-  std::vector<std::size_t> to_all;            // sub measurement -> measurement index
+  std::vector<std::size_t> to_all;  // sub measurement -> measurement index
 };
 constexpr std::size_t kNoIndex = std::numeric_limits<std::size_t>::max();
 
@@ -219,11 +233,11 @@ GlobalSolution SolveSpectral(std::size_t n, std::size_t reference,
 // the joint weighted least squares of rotations and translations on the inliers.
 struct CoreSolution {
   bool ok = false;
-  std::vector<bool> placed;      // full index
-  std::vector<Pose2> poses;      // full index
+  std::vector<bool> placed;                 // full index
+  std::vector<Pose2> poses;                 // full index
   std::vector<Eigen::Matrix3d> covariance;  // full index (of the least squares)
-  std::vector<bool> used;        // per measurement: an inlier of the solution
-  std::vector<bool> outlier;     // per measurement: considered and dropped
+  std::vector<bool> used;                   // per measurement: an inlier of the solution
+  std::vector<bool> outlier;                // per measurement: considered and dropped
   std::vector<std::string> status;
   std::vector<std::string> warnings;
 };
@@ -405,8 +419,8 @@ void Extend(const std::vector<RelativeMeasurement>& all, const std::vector<bool>
       } else if (pr != ps) {
         const std::size_t from = pr ? m.r : m.s, to = pr ? m.s : m.r;
         // world_from_r = world_from_s * s_from_r.
-        core->poses[to] = pr ? core->poses[from] * m.s_from_r.inverse()
-                             : core->poses[from] * m.s_from_r;
+        core->poses[to] =
+            pr ? core->poses[from] * m.s_from_r.inverse() : core->poses[from] * m.s_from_r;
         cov[to] = cov[from] + m.covariance;  // rough; the least squares below replaces it
         core->placed[to] = true;
         core->used[e] = true;
@@ -451,8 +465,8 @@ void FillEdges(const AlignedTracks& tracks, const std::vector<PairEstimate>& pai
     if (sr.calibrated && ss.calibrated) {
       const Pose2 final_s_from_r = ss.world_from_sensor.inverse() * sr.world_from_sensor;
       if (p.accepted) {
-        e.rotation_residual_deg =
-            common::RadToDeg(std::abs(common::AngleDiff(p.s_from_r.yaw_rad, final_s_from_r.yaw_rad)));
+        e.rotation_residual_deg = common::RadToDeg(
+            std::abs(common::AngleDiff(p.s_from_r.yaw_rad, final_s_from_r.yaw_rad)));
         e.translation_residual_m = common::TranslationDistanceM(p.s_from_r, final_s_from_r);
       }
       const TrackResidual residual = ResidualOf(tracks, p.r, p.s, final_s_from_r);
@@ -476,14 +490,16 @@ void ApplyIcp(const AlignedTracks& tracks, const CalibrationOptions& options,
     const SensorTracks& r = tracks.sensors[p.r];
     const SensorTracks& s = tracks.sensors[p.s];
     if (!r.background || !s.background) continue;
-    const IcpResult icp = RefineWithBackgrounds(*r.background, *s.background, p.s_from_r, options.icp);
+    const IcpResult icp =
+        RefineWithBackgrounds(*r.background, *s.background, p.s_from_r, options.icp);
     p.icp_score_before = icp.score_before;
     p.icp_score_after = icp.score_after;
     if (!icp.applied) continue;
     // The backgrounds agree better; the tracks must still agree with them.
     const Eigen::Matrix3d pair_info_cov = 0.5 * (p.covariance + p.covariance.transpose());
     const Eigen::Matrix3d icp_cov = 0.5 * (icp.covariance + icp.covariance.transpose());
-    const Eigen::Vector3d delta(icp.s_from_r.x_m - p.s_from_r.x_m, icp.s_from_r.y_m - p.s_from_r.y_m,
+    const Eigen::Vector3d delta(icp.s_from_r.x_m - p.s_from_r.x_m,
+                                icp.s_from_r.y_m - p.s_from_r.y_m,
                                 common::AngleDiff(icp.s_from_r.yaw_rad, p.s_from_r.yaw_rad));
     // The tracks may carry a bias the model does not know (pipeline.h icp_track_bias_sigma_m).
     Eigen::Matrix3d test_cov = pair_info_cov + icp_cov;
@@ -564,7 +580,7 @@ Eigen::Matrix3d AtLeast(const Eigen::Matrix3d& a, const Eigen::Matrix3d& b) {
 struct Refined {
   bool refined = false;
   std::string rejected;  // why a refinement that lowered its cost was not kept ("" otherwise)
-  std::vector<std::string> kept_pairs;  // weak leaves that kept the pairs' placement (why)
+  std::vector<std::string> kept_pairs;    // weak leaves that kept the pairs' placement (why)
   std::vector<std::size_t> kept_sensors;  // those leaves (full indices)
   JointRefineResult joint;
   std::vector<Pose2> poses;
@@ -654,9 +670,8 @@ Refined Refine(const AlignedTracks& tracks, std::size_t reference,
   out.poses = out.joint.world_from_sensor;
   for (std::size_t i = 0; i < poses.size(); ++i) {
     if (out.joint.refined[i] && i != reference) {
-      out.covariance[i] = keep_pairs_uncertainty
-                              ? AtLeast(out.joint.covariance[i], covariance[i])
-                              : out.joint.covariance[i];
+      out.covariance[i] = keep_pairs_uncertainty ? AtLeast(out.joint.covariance[i], covariance[i])
+                                                 : out.joint.covariance[i];
     }
   }
   // A sensor hanging on one weak pair: the refinement's pose for it rests on the few observations
@@ -938,13 +953,14 @@ GlobalSolution SolveRobust(const AlignedTracks& tracks, std::size_t reference,
       for (std::size_t e : candidates) {
         std::vector<bool> use(measurements.size(), false);
         for (std::size_t k = 0; k < measurements.size(); ++k) use[k] = considered[k] && k != e;
-        if (!UnconnectedNodes(n, reference, [&] {
-               std::vector<RelativeMeasurement> kept;
-               for (std::size_t k = 0; k < measurements.size(); ++k) {
-                 if (use[k]) kept.push_back(measurements[k]);
-               }
-               return kept;
-             }())
+        if (!UnconnectedNodes(n, reference,
+                              [&] {
+                                std::vector<RelativeMeasurement> kept;
+                                for (std::size_t k = 0; k < measurements.size(); ++k) {
+                                  if (use[k]) kept.push_back(measurements[k]);
+                                }
+                                return kept;
+                              }())
                  .empty()) {
           continue;
         }
@@ -1006,8 +1022,8 @@ GlobalSolution SolveRobust(const AlignedTracks& tracks, std::size_t reference,
         std::string names, walks;
         for (std::size_t i : apart) names += (names.empty() ? "" : ", ") + id[i];
         for (std::size_t e : candidates) {
-          walks += (walks.empty() ? "" : ", ") + id[measurements[e].r] + " and " +
-                   id[measurements[e].s];
+          walks +=
+              (walks.empty() ? "" : ", ") + id[measurements[e].r] + " and " + id[measurements[e].s];
         }
         const Placement& other = tried[*rival];
         double dt = 0.0, dyaw = 0.0;
@@ -1103,9 +1119,12 @@ GlobalSolution SolveRobust(const AlignedTracks& tracks, std::size_t reference,
 
 const char* ToString(Method method) {
   switch (method) {
-    case Method::kQuenzel: return "quenzel";
-    case Method::kSpectral: return "spectral";
-    case Method::kSchenk: return "schenk";
+    case Method::kQuenzel:
+      return "quenzel";
+    case Method::kSpectral:
+      return "spectral";
+    case Method::kSchenk:
+      return "schenk";
   }
   return "?";
 }
@@ -1174,8 +1193,8 @@ DataAssessment Assess(const AlignedTracks& tracks, double min_pair_overlap_s) {
         seen[i][k] = true;
       }
     }
-    d.tracked_s = static_cast<double>(std::count(seen[i].begin(), seen[i].end(), true)) *
-                  tracks.step_s;
+    d.tracked_s =
+        static_cast<double>(std::count(seen[i].begin(), seen[i].end(), true)) * tracks.step_s;
     out.sensors.push_back(std::move(d));
   }
   // Union-find over the pairs with enough simultaneous tracks.
@@ -1206,8 +1225,9 @@ DataAssessment Assess(const AlignedTracks& tracks, double min_pair_overlap_s) {
   } else if (n == 1) {
     out.missing = "only one sensor (" + out.sensors[0].id + "): calibration needs at least two";
   } else if (out.sensors[main].tracks == 0) {
-    out.missing = "no sensor has any track: nobody walked through the scene (or every track was "
-                  "shorter than align.min_track_duration_s)";
+    out.missing =
+        "no sensor has any track: nobody walked through the scene (or every track was "
+        "shorter than align.min_track_duration_s)";
   } else if (!out.unlinked.empty()) {
     std::string text;
     if (!no_tracks.empty()) {
@@ -1216,11 +1236,13 @@ DataAssessment Assess(const AlignedTracks& tracks, double min_pair_overlap_s) {
       text += "; ";
     }
     std::string linked;
-    for (std::size_t k = 0; k < out.unlinked.size(); ++k) linked += (k ? ", " : "") + out.unlinked[k];
+    for (std::size_t k = 0; k < out.unlinked.size(); ++k)
+      linked += (k ? ", " : "") + out.unlinked[k];
     // The best link of each unlinked sensor tells the user how far it is from enough.
     double best_s = 0.0;
     for (const PairData& p : out.pairs) {
-      if ((find(p.r) == find(main)) != (find(p.s) == find(main))) best_s = std::max(best_s, p.overlap_s);
+      if ((find(p.r) == find(main)) != (find(p.s) == find(main)))
+        best_s = std::max(best_s, p.overlap_s);
     }
     char buffer[160];
     std::snprintf(buffer, sizeof buffer,
@@ -1236,8 +1258,7 @@ DataAssessment Assess(const AlignedTracks& tracks, double min_pair_overlap_s) {
 namespace {
 
 // Steps 7-8 of the quenzel and spectral methods from out->pairs (pipeline.h), then the result.
-void SolveFromPairs(const CalibrationOptions& options, StageTimer* timer,
-                    CalibrationOutcome* out);
+void SolveFromPairs(const CalibrationOptions& options, StageTimer* timer, CalibrationOutcome* out);
 
 // The result's sensors, edges and the outcome's error from a global solution.
 void Finish(const GlobalSolution& global_in, std::size_t reference,
@@ -1266,13 +1287,7 @@ void Finish(const GlobalSolution& global_in, std::size_t reference,
   for (std::size_t i = 0; i < n; ++i) {
     std::string& flag = result.sensors[i].flag;
     if (!global.calibrated[i] || flag.rfind("placed through the weak pair", 0) != 0) continue;
-    std::string others;
-    for (const PairEstimate& p : out->pairs) {
-      if (p.accepted || (p.r != i && p.s != i) || p.matches == 0) continue;
-      const std::string why = p.reason.substr(0, p.reason.find(':'));
-      others += fmt::format("{}{} (pair {})", others.empty() ? "" : ", ",
-                            tracks.sensors[p.r == i ? p.s : p.r].id, why);
-    }
+    const std::string others = RejectedPartners(tracks, out->pairs, i);
     flag +=
         others.empty()
             ? "; more people walking where the two sensors of its weak pairs both see them would "
@@ -1300,10 +1315,9 @@ void Finish(const GlobalSolution& global_in, std::size_t reference,
   if (!unconnected.empty()) {
     std::string detail;
     for (const PairEstimate& p : out->pairs) {
-      const bool involves = std::find(unconnected.begin(), unconnected.end(), p.r) !=
-                                unconnected.end() ||
-                            std::find(unconnected.begin(), unconnected.end(), p.s) !=
-                                unconnected.end();
+      const bool involves =
+          std::find(unconnected.begin(), unconnected.end(), p.r) != unconnected.end() ||
+          std::find(unconnected.begin(), unconnected.end(), p.s) != unconnected.end();
       if (involves && !p.accepted && detail.size() < 400) {
         detail += "; " + tracks.sensors[p.r].id + "-" + tracks.sensors[p.s].id + ": " + p.reason;
       }
@@ -1313,13 +1327,7 @@ void Finish(const GlobalSolution& global_in, std::size_t reference,
                  detail + ")";
     // What data would place each of them (as for a sensor hanging on weak pairs).
     for (std::size_t i : unconnected) {
-      std::string others;
-      for (const PairEstimate& p : out->pairs) {
-        if (p.accepted || (p.r != i && p.s != i) || p.matches == 0) continue;
-        const std::string why = p.reason.substr(0, p.reason.find(':'));
-        others += fmt::format("{}{} (pair {})", others.empty() ? "" : ", ",
-                              tracks.sensors[p.r == i ? p.s : p.r].id, why);
-      }
+      const std::string others = RejectedPartners(tracks, out->pairs, i);
       std::string& flag = result.sensors[i].flag;
       flag = others.empty()
                  ? fmt::format(
@@ -1337,8 +1345,7 @@ void Finish(const GlobalSolution& global_in, std::size_t reference,
   out->ok = true;
 }
 
-void SolveFromPairs(const CalibrationOptions& options, StageTimer* timer,
-                    CalibrationOutcome* out) {
+void SolveFromPairs(const CalibrationOptions& options, StageTimer* timer, CalibrationOutcome* out) {
   const AlignedTracks& tracks = out->tracks;
   const std::size_t n = tracks.sensors.size();
   std::size_t reference = BestConnected(out->pairs, n);
@@ -1370,8 +1377,8 @@ void SolveFromPairs(const CalibrationOptions& options, StageTimer* timer,
       weak[measurement_of_pair[k]] = p.weak;
       pair_of[measurement_of_pair[k]] = &p;
     }
-    global = SolveRobust(tracks, reference, measurements, weak, pair_of, options, timer,
-                         &out->result);
+    global =
+        SolveRobust(tracks, reference, measurements, weak, pair_of, options, timer, &out->result);
   }
   Finish(global, reference, measurement_of_pair, timer, out);
 }
@@ -1464,8 +1471,7 @@ std::string MountFlag(const std::string& id, const common::MountCheck& check) {
 }
 
 CalibrationOutcome CalibrateFromPairs(AlignedTracks tracks, std::vector<PairEstimate> pairs,
-                                      const CalibrationOptions& options,
-                                      const StageClock& clock) {
+                                      const CalibrationOptions& options, const StageClock& clock) {
   CalibrationOutcome out;
   out.result.method = ToString(options.method);
   if (auto e = Validate(options)) {
@@ -1565,8 +1571,8 @@ CalibrationOutcome Calibrate(const CalibrationInput& input, const CalibrationOpt
       overlap[p.r] += p.overlap_s;
       overlap[p.s] += p.overlap_s;
     }
-    reference = static_cast<std::size_t>(
-        std::max_element(overlap.begin(), overlap.end()) - overlap.begin());
+    reference = static_cast<std::size_t>(std::max_element(overlap.begin(), overlap.end()) -
+                                         overlap.begin());
   }
   GlobalSolution global;
   std::vector<std::size_t> measurement_of_pair;
