@@ -463,35 +463,37 @@ SumPointsFn SumPointsFor(ShapeModel model, double exponent, bool paired) {
 }
 
 // The normal matrix is symmetric positive definite by construction (weighted outer products plus
-// the priors, each of which bounds a parameter). A 5 x 5 Cholesky by hand: Eigen's pivoted LDLT
-// and its general solve against the identity for the covariance cost more than a pass over the
-// points at this size. A pivot that is not positive (rounding on a nearly singular matrix) falls
-// back to the pivoted LDLT. The loops are unrolled completely (the pragmas): with constant bounds
-// the triangular loops become straight code, a twentieth of the tracker's instructions per
-// crowded scan fewer (the same arithmetic in the same order).
+// the priors, each of which bounds a parameter). A 5 x 5 root-free Cholesky (h = L D L^T, L unit
+// lower triangular) by hand: Eigen's pivoted LDLT and its general solve against the identity for
+// the covariance cost more than a pass over the points at this size. A pivot that is not positive
+// (rounding on a nearly singular matrix) falls back to the pivoted LDLT. Without square roots the
+// factorisation's dependent chain is one division per column (L L^T had a square root and a
+// division). The loops are unrolled completely (the pragmas): with constant bounds the triangular
+// loops become straight code.
 class NormalSolver {
  public:
   bool Factor(const Mat5& h) {
     use_ldlt_ = false;
 #pragma GCC unroll 5
     for (int j = 0; j < 5; ++j) {
+      // u_[i][k] = l_[i][k] d_k (i > k): the products before the division.
       double d = h(j, j);
 #pragma GCC unroll 5
-      for (int k = 0; k < j; ++k) d -= l_[j][k] * l_[j][k];
+      for (int k = 0; k < j; ++k) d -= u_[j][k] * l_[j][k];
       if (!(d > 0.0) || !std::isfinite(d)) return FactorLdlt(h);
-      l_[j][j] = std::sqrt(d);
-      inv_diag_[j] = 1.0 / l_[j][j];
+      inv_diag_[j] = 1.0 / d;
 #pragma GCC unroll 5
       for (int i = j + 1; i < 5; ++i) {
         double v = h(i, j);
 #pragma GCC unroll 5
-        for (int k = 0; k < j; ++k) v -= l_[i][k] * l_[j][k];
+        for (int k = 0; k < j; ++k) v -= u_[i][k] * l_[j][k];
+        u_[i][j] = v;
         l_[i][j] = v * inv_diag_[j];
       }
     }
     return true;
   }
-  // h^-1 b.
+  // h^-1 b: L y = b, then L^T x = D^-1 y.
   Vec5 Solve(const Vec5& b) const {
     if (use_ldlt_) return ldlt_.solve(b);
     std::array<double, 5> y{};
@@ -500,31 +502,31 @@ class NormalSolver {
       double v = b(i);
 #pragma GCC unroll 5
       for (int k = 0; k < i; ++k) v -= l_[i][k] * y[k];
-      y[i] = v * inv_diag_[i];
+      y[i] = v;
     }
     Vec5 x;
 #pragma GCC unroll 5
     for (int i = 4; i >= 0; --i) {
-      double v = y[i];
+      double v = y[i] * inv_diag_[i];
 #pragma GCC unroll 5
       for (int k = i + 1; k < 5; ++k) v -= l_[k][i] * x(k);
-      x(i) = v * inv_diag_[i];
+      x(i) = v;
     }
     return x;
   }
-  // h^-1 = L^-T L^-1.
+  // h^-1 = L^-T D^-1 L^-1.
   Mat5 Inverse() const {
     if (use_ldlt_) return ldlt_.solve(Mat5::Identity());
-    double m[5][5] = {};  // L^-1, lower triangular
+    double m[5][5] = {};  // L^-1, unit lower triangular
 #pragma GCC unroll 5
     for (int j = 0; j < 5; ++j) {
-      m[j][j] = inv_diag_[j];
+      m[j][j] = 1.0;
 #pragma GCC unroll 5
       for (int i = j + 1; i < 5; ++i) {
         double v = 0.0;
 #pragma GCC unroll 5
         for (int k = j; k < i; ++k) v -= l_[i][k] * m[k][j];
-        m[i][j] = v * inv_diag_[i];
+        m[i][j] = v;
       }
     }
     Mat5 inv;
@@ -534,7 +536,7 @@ class NormalSolver {
       for (int j = i; j < 5; ++j) {
         double v = 0.0;
 #pragma GCC unroll 5
-        for (int k = j; k < 5; ++k) v += m[k][i] * m[k][j];
+        for (int k = j; k < 5; ++k) v += m[k][i] * inv_diag_[k] * m[k][j];
         inv(i, j) = v;
         inv(j, i) = v;
       }
@@ -549,8 +551,9 @@ class NormalSolver {
     return ldlt_.info() == Eigen::Success;
   }
 
-  double l_[5][5] = {};
-  std::array<double, 5> inv_diag_{};
+  double l_[5][5] = {};  // L below the diagonal
+  double u_[5][5] = {};  // L D below the diagonal
+  std::array<double, 5> inv_diag_{};  // D^-1
   bool use_ldlt_ = false;
   Eigen::LDLT<Mat5> ldlt_;
 };
