@@ -102,8 +102,10 @@ TEST(ShapeFitTest, PersonSupportFunctionMatchesLibmPowers) {
     ASSERT_TRUE(std::isfinite(h)) << a << " " << b;
     worst = std::max(worst, std::abs(h - expected) / expected);
   }
-  // The fifth root within 8e-15, cubed.
-  EXPECT_LT(worst, 3e-14);
+  // Two Halley steps: the fifth root within 1.4e-10, cubed (a 0.3 m body: 1.3e-10 m, far below
+  // any point's noise; the fits' centres move by at most 1e-10 m, CholeskySolverGivesThePivoted-
+  // LdltResults).
+  EXPECT_LT(worst, 1e-9);
   EXPECT_EQ(ShapeSupport(ShapeModel::kSuperellipse, {0.3, 0.1}, 0.0, {0, 0}, 2.5), 0.0);
 }
 
