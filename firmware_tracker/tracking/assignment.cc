@@ -1,5 +1,8 @@
 #include "firmware_tracker/tracking/assignment.h"
 
+#include <bit>
+#include <cstdint>
+
 namespace lrfnet::tracking {
 
 void SolveGatedAssignment(const AssignmentCosts& cost, const AssignmentAllowed& allowed,
@@ -10,52 +13,61 @@ void SolveGatedAssignment(const AssignmentCosts& cost, const AssignmentAllowed& 
   const std::size_t m = std::min(cols.size(), kDim);
   std::fill_n(row_to_col, n, -1);
   std::fill_n(col_to_row, m, -1);
-  // Groups by breadth-first search over the allowed pairs; group number + 1, 0 = not yet reached.
-  std::array<std::size_t, kDim> row_group{};
-  std::array<std::size_t, kDim> col_group{};
-  std::array<std::size_t, 2 * kDim> queue{};   // row a as a, column b as kDim + b
+  // Groups by breadth-first search over the allowed pairs, in bit masks (kDim = 64: one word per
+  // row's columns and per column's rows): each row's allowed columns gathered once without a
+  // branch, then whole fronts of the search at a time. A crowd's matrix is mostly not allowed: the
+  // branch per pair of the search cost more than the pairs that are.
+  static_assert(kDim == 64, "one 64-bit mask per row and column");
+  using Mask = std::uint64_t;
+  const auto all = [](std::size_t count) {
+    return count >= 64 ? ~Mask{0} : (Mask{1} << count) - 1;
+  };
+  std::array<Mask, kDim> row_cols;  // bit b: allowed[rows[a]][cols[b]]; the first n set below
+  std::array<Mask, kDim> col_rows;  // bit a: the same pair; the first m set below
+  std::fill_n(col_rows.begin(), m, Mask{0});
+  for (std::size_t a = 0; a < n; ++a) {
+    const auto& allowed_row = allowed[rows[a]];
+    Mask mask = 0;
+    for (std::size_t b = 0; b < m; ++b) mask |= Mask{allowed_row[cols[b]]} << b;
+    row_cols[a] = mask;
+    for (Mask bits = mask; bits != 0; bits &= bits - 1) {
+      col_rows[static_cast<std::size_t>(std::countr_zero(bits))] |= Mask{1} << a;
+    }
+  }
   std::array<std::size_t, kDim> group_rows{};  // positions in rows / cols
   std::array<std::size_t, kDim> group_cols{};
   std::array<int, kDim> group_assignment{};
-  std::size_t groups = 0;
-  for (std::size_t start = 0; start < n; ++start) {
-    if (row_group[start] != 0) continue;
-    const std::size_t g = ++groups;
-    std::size_t head = 0, tail = 0;
-    queue[tail++] = start;
-    row_group[start] = g;
-    std::size_t gn = 0, gm = 0;
-    while (head < tail) {
-      const std::size_t node = queue[head++];
-      if (node < kDim) {
-        ++gn;
-        const auto& allowed_row = allowed[rows[node]];
-        for (std::size_t b = 0; b < m; ++b) {
-          if (col_group[b] == 0 && allowed_row[cols[b]]) {
-            col_group[b] = g;
-            queue[tail++] = kDim + b;
-          }
-        }
-      } else {
-        ++gm;
-        const std::size_t col = cols[node - kDim];
-        for (std::size_t a = start + 1; a < n; ++a) {
-          if (row_group[a] == 0 && allowed[rows[a]][col]) {
-            row_group[a] = g;
-            queue[tail++] = a;
-          }
-        }
+  Mask rows_left = all(n), cols_left = all(m);
+  while (rows_left != 0) {
+    // The group of the first row not yet reached, front by front.
+    Mask group_row_mask = rows_left & (~rows_left + 1);
+    Mask group_col_mask = 0;
+    rows_left &= ~group_row_mask;
+    for (Mask front = group_row_mask; front != 0;) {
+      Mask new_cols = 0;
+      for (Mask bits = front; bits != 0; bits &= bits - 1) {
+        new_cols |= row_cols[static_cast<std::size_t>(std::countr_zero(bits))];
       }
+      new_cols &= cols_left;
+      cols_left &= ~new_cols;
+      group_col_mask |= new_cols;
+      Mask new_rows = 0;
+      for (Mask bits = new_cols; bits != 0; bits &= bits - 1) {
+        new_rows |= col_rows[static_cast<std::size_t>(std::countr_zero(bits))];
+      }
+      new_rows &= rows_left;
+      rows_left &= ~new_rows;
+      group_row_mask |= new_rows;
+      front = new_rows;
     }
-    if (gm == 0) continue;  // a row without allowed pairs
+    if (group_col_mask == 0) continue;  // a row without allowed pairs
     // The group's rows and columns in their given order.
-    std::size_t k = 0;
-    for (std::size_t a = start; a < n && k < gn; ++a) {
-      if (row_group[a] == g) group_rows[k++] = a;
+    std::size_t gn = 0, gm = 0;
+    for (Mask bits = group_row_mask; bits != 0; bits &= bits - 1) {
+      group_rows[gn++] = static_cast<std::size_t>(std::countr_zero(bits));
     }
-    k = 0;
-    for (std::size_t b = 0; b < m && k < gm; ++b) {
-      if (col_group[b] == g) group_cols[k++] = b;
+    for (Mask bits = group_col_mask; bits != 0; bits &= bits - 1) {
+      group_cols[gm++] = static_cast<std::size_t>(std::countr_zero(bits));
     }
     auto pair = [&](std::size_t a, std::size_t b) {
       if (!allowed[rows[a]][cols[b]]) return;  // the group could not pair every row

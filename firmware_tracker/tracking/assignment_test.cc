@@ -153,7 +153,11 @@ TEST(GatedAssignment, PerGroupEqualsWholeMatrixTotalCost) {
   std::uniform_int_distribution<std::size_t> size(1, kMaxAssignmentDim);
   std::size_t multi_row_groups = 0;
   for (int trial = 0; trial < 400; ++trial) {
-    const Problem p = RandomProblem(rng, size(rng), size(rng), trial % 4 != 0);
+    // The first ones at the full width (every bit of the solver's 64-bit masks).
+    const std::size_t n = trial < 4 ? kMaxAssignmentDim : size(rng);
+    const std::size_t m =
+        trial < 4 ? kMaxAssignmentDim - static_cast<std::size_t>(trial % 2) : size(rng);
+    const Problem p = RandomProblem(rng, n, m, trial % 4 != 0);
     const Score whole = WholeMatrix(p);
     const Score grouped = Grouped(p);
     ASSERT_EQ(grouped.pairs, whole.pairs) << "trial " << trial << " " << p.n << "x" << p.m;

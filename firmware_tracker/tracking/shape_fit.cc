@@ -555,8 +555,8 @@ class NormalSolver {
     return ldlt_.info() == Eigen::Success;
   }
 
-  double l_[5][5] = {};  // L below the diagonal
-  double u_[5][5] = {};  // L D below the diagonal
+  double l_[5][5] = {};               // L below the diagonal
+  double u_[5][5] = {};               // L D below the diagonal
   std::array<double, 5> inv_diag_{};  // D^-1
   bool use_ldlt_ = false;
   Eigen::LDLT<Mat5> ldlt_;
