@@ -235,6 +235,7 @@ bool MultiTracker::InsideGate(const Eigen::Vector2d& predicted_m,
 
 void MultiTracker::Gate(common::UtcNs scan_start_ns) {
   const double q = options_.ekf.accel_psd_m2ps3;
+  const double max_gate_sq_m2 = options_.max_gate_distance_m * options_.max_gate_distance_m;
   gated_rows_ = tracks_.size();
   for (std::size_t i = 0; i < tracks_.size(); ++i) {
     CvEkf predicted = tracks_[i].filter;
@@ -248,16 +249,18 @@ void MultiTracker::Gate(common::UtcNs scan_start_ns) {
       // offset_s, in closed form (exact for the constant-velocity model).
       const double d = c.offset_s;
       const Eigen::Vector2d at = x.head<2>() + d * x.tail<2>();
-      const double distance_m = (c.z_m - at).norm();
-      distance_[i][j] = distance_m;
       // Beyond max_gate_distance_m the pair is out whatever the covariance (InsideGate's first
-      // test, the same distance): most pairs of a crowded scene end here.
-      if (!(distance_m <= options_.max_gate_distance_m)) {
+      // test): most pairs of a crowded scene end here, on the squared distance (the root only for
+      // the pairs within; distance_ is read only where gated_).
+      const double distance_sq_m2 = (c.z_m - at).squaredNorm();
+      if (!(distance_sq_m2 <= max_gate_sq_m2)) {
+        distance_[i][j] = std::numeric_limits<double>::infinity();
         gated_[i][j] = false;
         cost_[i][j] = kUnassignableCost;
         d2_[i][j] = std::numeric_limits<double>::infinity();
         continue;
       }
+      distance_[i][j] = std::sqrt(distance_sq_m2);
       const Eigen::Matrix2d cov =
           p.topLeftCorner<2, 2>() + d * (p.topRightCorner<2, 2>() + p.bottomLeftCorner<2, 2>()) +
           d * d * p.bottomRightCorner<2, 2>() + (q * d * d * d / 3.0) * Eigen::Matrix2d::Identity();
