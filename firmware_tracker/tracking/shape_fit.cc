@@ -421,11 +421,17 @@ void SumPointsPaired(const Vec5& at, double c, double s, double inv_a, double in
         grad_cx[k](l) = grad_cy[k](l) = grad_yaw[k](l) = grad_a[k](l) = grad_b[k](l) = 0.0;
       }
     }
-    // Huber weights (SumPoints): z = max(1, |s| / k) (the square root of 1 is 1 exactly).
+    // Huber weights (SumPoints): z = max(1, |s| / k) (the square root of 1 is 1 exactly). Most
+    // pairs have both points within k sigma: their weights need no root and no division.
     const Lanes weight(base_weight[i], base_weight[j]);
     z2[k] = dist[k] * dist[k] * weight * discount / k2;
-    z[k] = z2[k].max(1.0).sqrt();
-    w[k] = weight / z[k];
+    if (z2[k](0) > 1.0 || z2[k](1) > 1.0) {
+      z[k] = z2[k].max(1.0).sqrt();
+      w[k] = weight / z[k];
+    } else {
+      z[k] = Lanes::Ones();
+      w[k] = weight;
+    }
   }
   for (std::size_t i = 0; i < n; ++i) {
     const std::size_t k = i / 2;
