@@ -57,10 +57,26 @@ bool CvEkf::Update(const Eigen::Vector2d& z_m, const Eigen::Matrix2d& r_m2) {
   const Eigen::Matrix<double, 4, 2> k = p_.topRows<2>().transpose() * s_inv;  // K = P H^T S^-1
   x_ += k * (z_m - x_.head<2>());
   // Joseph form: stays positive semi-definite even with a slightly wrong gain from rounding.
-  Eigen::Matrix4d i_kh = Eigen::Matrix4d::Identity();
-  i_kh.leftCols<2>() -= k;
-  p_ = i_kh * p_ * i_kh.transpose() + k * r * k.transpose();
-  p_ = 0.5 * (p_ + p_.transpose()).eval();
+  // I - K H = [[I - K1, 0], [-K2, I]] (K1, K2: K's position and velocity rows), so
+  // (I - K H) P (I - K H)^T in 2 x 2 blocks, without the 4 x 4 products' multiplications by zero:
+  //   M = (I - K1) [P11 P12],  N = [P21 P22] - K2 [P11 P12],
+  //   P' = [[M1 (I - K1)^T, M2 - M1 K2^T], [., N2 - N1 K2^T]] + K R K^T (upper blocks; symmetric).
+  const Eigen::Matrix2d k1 = k.topRows<2>(), k2 = k.bottomRows<2>();
+  const Eigen::Matrix2d a = Eigen::Matrix2d::Identity() - k1;
+  const Eigen::Matrix2d p11 = p_.topLeftCorner<2, 2>(), p12 = p_.topRightCorner<2, 2>();
+  const Eigen::Matrix2d p21 = p_.bottomLeftCorner<2, 2>(), p22 = p_.bottomRightCorner<2, 2>();
+  const Eigen::Matrix2d m1 = a * p11, m2 = a * p12;
+  const Eigen::Matrix2d n1 = p21 - k2 * p11, n2 = p22 - k2 * p12;
+  const Eigen::Matrix2d rk1 = r * k1.transpose(), rk2 = r * k2.transpose();
+  const Eigen::Matrix2d top_left = m1 * a.transpose() + k1 * rk1;
+  const Eigen::Matrix2d top_right = m2 - m1 * k2.transpose() + k1 * rk2;
+  const Eigen::Matrix2d bottom_left = n1 * a.transpose() + k2 * rk1;
+  const Eigen::Matrix2d bottom_right = n2 - n1 * k2.transpose() + k2 * rk2;
+  p_.topLeftCorner<2, 2>() = 0.5 * (top_left + top_left.transpose());
+  p_.bottomRightCorner<2, 2>() = 0.5 * (bottom_right + bottom_right.transpose());
+  const Eigen::Matrix2d off = 0.5 * (top_right + bottom_left.transpose());
+  p_.topRightCorner<2, 2>() = off;
+  p_.bottomLeftCorner<2, 2>() = off.transpose();
   return true;
 }
 
