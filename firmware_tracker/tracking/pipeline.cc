@@ -515,6 +515,10 @@ void TrackingPipeline::BuildObservations(const ScanView& scan) {
   leg_parts_.clear();
   for (const Segment& s : segments_.segments) {
     const auto pts = segments_.Points(s);
+    if (o.drop_mixed_pixel_legs && s.width_m <= pair_width && Veiled(scan, s)) {
+      ++counters_.veiled_segments;
+      continue;
+    }
     if (s.width_m > pair_width) {
       Observation ob;
       ob.parts[0] = MakePart(scan, s, 0, s.point_count);
@@ -542,6 +546,38 @@ void TrackingPipeline::BuildObservations(const ScanView& scan) {
     }
   }
   PairLegs(scan);
+}
+
+// Mixed pixels of a nearer leg's edge (ShapeOptions::drop_mixed_pixel_legs): a segment beside a
+// return nearer by more than the segmentation's jump and the legs' pairing distance, where a leg
+// no longer fills a beam's footprint, that spans no more beams than a footprint reaches beyond
+// the edge or lies between two such returns.
+bool TrackingPipeline::Veiled(const ScanView& scan, const Segment& segment) const {
+  const SegmentationOptions& g = options_.segmentation;
+  const ShapeOptions& o = options_.shape;
+  const auto pts = segments_.Points(segment);
+  const double step = std::abs(scan.angle_step_rad);
+  const auto footprint_beams =
+      static_cast<std::size_t>(std::ceil(0.5 * o.beam_divergence_rad / step)) + 1;
+  const std::size_t reach = g.max_missing_beams + 1;
+  const auto nearer = [&](std::size_t beam, const Eigen::Vector2d& p) {
+    const float r = scan.range_m[beam];
+    if (!(std::isfinite(r) && r > 0.0f)) return false;
+    // Nearer than a leg fills a beam's footprint, a leg's beams return the leg: a mixed pixel
+    // is a single beam at its edge, which segmentation drops (min_points).
+    if (static_cast<double>(r) * o.beam_divergence_rad < 2.0 * o.leg_radius_m) return false;
+    const double range = Range(p);
+    return static_cast<double>(r) <
+           range - std::max(g.jump_base_m + g.jump_per_m * range, o.leg_pairing_distance_m);
+  };
+  const std::size_t n = scan.range_m.size();
+  bool before = false, after = false;
+  for (std::size_t k = 1; k <= reach; ++k) {
+    before = before || (segment.begin_beam >= k && nearer(segment.begin_beam - k, pts.front()));
+    after = after || (segment.end_beam + k - 1 < n && nearer(segment.end_beam + k - 1, pts.back()));
+  }
+  return (before && after) ||
+         ((before || after) && segment.end_beam - segment.begin_beam <= footprint_beams);
 }
 
 void TrackingPipeline::PairLegs(const ScanView& scan) {
@@ -581,6 +617,28 @@ void TrackingPipeline::PairLegs(const ScanView& scan) {
   // Around the live tracks, confirmed first: the pair (or single leg) nearest to the prediction.
   const double reach = o.leg_pairing_distance_m;
   const std::size_t tracks = tracker_.Predict(scan.stamp_ns, predictions_);
+  // Legs straight behind a confirmed track, farther than its own legs reach, are mixed
+  // pixels of its legs (at knee height a beam's footprint is as wide as a leg from a few metres
+  // on, and its echo lies between the leg and what is behind): nothing behind a person's legs can
+  // be seen through them.
+  for (std::size_t t = 0; o.drop_mixed_pixel_legs && t < tracks; ++t) {
+    if (!predictions_[t].confirmed) continue;
+    const Eigen::Vector2d& c = predictions_[t].position_m;
+    const double range = c.norm();
+    if (!(range > reach)) continue;
+    const Eigen::Vector2d ray = c / range;
+    const double half_width = o.hip_half_width_m + o.leg_radius_m +
+                              0.5 * (o.beam_divergence_rad + std::abs(scan.angle_step_rad)) * range;
+    for (std::size_t a = 0; a < n; ++a) {
+      if (leg_used_[a]) continue;
+      const Eigen::Vector2d d = leg_centres_m_[a] - c;
+      const double behind = d.dot(ray);
+      if (behind > reach && std::abs(d.x() * ray.y() - d.y() * ray.x()) < half_width) {
+        leg_used_[a] = true;
+        ++counters_.shadowed_legs;
+      }
+    }
+  }
   for (std::size_t t = 0; t < tracks; ++t) {
     const Eigen::Vector2d& c = predictions_[t].position_m;
     double best = 0.6 * reach;

@@ -11,7 +11,8 @@
 //   around every live track's predicted position (the pair whose midpoint is nearest, within
 //   leg_pairing_distance_m of each other, or a single leg when the other is hidden), confirmed
 //   tracks first; the legs left over pair with their nearest neighbour within
-//   leg_pairing_distance_m, the rest stay single (one track per person, not per leg).
+//   leg_pairing_distance_m, the rest stay single (one track per person, not per leg). Mixed
+//   pixels at a leg's edge are not legs (ShapeOptions::drop_mixed_pixel_legs).
 // Each observation gets a cheap first position for association (the middle of its silhouette,
 // behind the nearest point by the prior's extent, sigma association_sigma_m). The tracker then
 // asks for the real measurement of every observation it associated or starts a track with
@@ -96,6 +97,21 @@ struct ShapeOptions {
   double leg_pairing_distance_m = 0.7;
   double person_min_leg_radius_m = 0.035;
   double hip_half_width_m = 0.1;  // a leg's lateral offset from the body centre
+  // Legs mount: mixed pixels are not legs. A beam that grazes a leg reports a range between the
+  // leg and what lies behind it; where the beam's footprint (beam_divergence_rad times the range)
+  // is as wide as a leg (an LMS1xx from 8 m on) no beam is filled by the leg, and its echoes form
+  // leg-sized segments up to metres behind the person that walk with them (tracking_benchmark
+  // --explain: 95 % of schenk_A's knee-height clutter scans lay straight behind the person, 2-4 m
+  // back). Dropped: a leg-sized segment beside a return there (within
+  // segmentation.max_missing_beams + 1 beams) that is nearer by more than the segmentation's jump
+  // and leg_pairing_distance_m (not the same person's other leg), when the segment spans no more
+  // beams than a footprint reaches beyond an edge (ceil(beam_divergence_rad / 2 / step) + 1) or
+  // lies between two such returns (seen through the gap between two legs); and a leg no track
+  // took that lies straight behind a confirmed track (across the ray within its legs' reach,
+  // hip_half_width_m + leg_radius_m, plus half a footprint and a step; along it farther than
+  // leg_pairing_distance_m). Someone behind a person at knee height is hidden anyway; they are
+  // found once they step out of the shadow. false: the tree before this rule.
+  bool drop_mixed_pixel_legs = true;
   double gait_sigma_m = 0.05;
   // Yaw prior: faster than walking_speed_mps a person faces where they walk (sigma
   // walking_yaw_sigma_rad: the torso turns with the gait, people step sideways); standing, the last
@@ -116,9 +132,9 @@ struct ShapeOptions {
   // Flat objects (not person-like).
   double flat_rms_m = 0.015;
   double flat_min_extent_m = 0.25;
-  // Full beam divergence of the scanner (LMS1xx and TiM: 15 mrad, LMS5xx: 11 mrad). Not used: a
-  // silhouette ends half a beam step beyond its last beam whatever the divergence (see MakePart);
-  // kept so that configurations that set it still load.
+  // Full beam divergence of the scanner (LMS1xx and TiM: 15 mrad, LMS5xx: 11 mrad). Used only for
+  // the legs' mixed pixels (drop_mixed_pixel_legs): a silhouette ends half a beam step beyond its
+  // last beam whatever the divergence (see MakePart).
   double beam_divergence_rad = 0.015;
   // Sigma of the first position used for association (per axis).
   double association_sigma_m = 0.08;
@@ -176,6 +192,8 @@ struct PipelineCounters {
   std::uint64_t failed_shape_fits = 0;  // degenerate input
   std::uint64_t leg_pairs = 0;          // observations of two legs (kLegs)
   std::uint64_t single_legs = 0;        // observations of one leg
+  std::uint64_t veiled_segments = 0;    // legs: mixed pixels beside a nearer edge, dropped
+  std::uint64_t shadowed_legs = 0;      // legs: straight behind a confirmed track, dropped
   std::uint64_t absorbed_objects = 0;   // static objects handed to the background
   std::uint64_t seen_through = 0;       // coasting track reports dropped (seen through)
   std::uint64_t unseen_coasting = 0;    // coasting track reports dropped (nothing seen near)
@@ -235,6 +253,7 @@ class TrackingPipeline {
   void AbsorbStatic(const ScanView& scan);
   void DropCoasting(const ScanView& scan);
   bool SeenThrough(const ScanView& scan, const Eigen::Vector2d& position_m, double sigma_m) const;
+  bool Veiled(const ScanView& scan, const Segment& segment) const;
   bool ForegroundNear(const ScanView& scan, const Eigen::Vector2d& position_m,
                       double sigma_m) const;
 

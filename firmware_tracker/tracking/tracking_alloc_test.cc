@@ -137,5 +137,47 @@ TEST(TrackingAllocTest, WholePipelineOnACrowdAllocatesNothingAfterTheFirstScan) 
   EXPECT_GT(pipeline->counters().shape_fits, 10u * 2000u);
 }
 
+TEST(TrackingAllocTest, KneeHeightPipelineAllocatesNothingAfterTheFirstScan) {
+  testing::ScannerConfig config;
+  config.max_range_m = 30.0;
+  testing::SyntheticScanner scanner(config);
+  // A hall 14 m deep: people at 8-12 m, where the legs' mixed-pixel rules apply.
+  const std::vector<testing::Wall> hall = {{{14.0, -8.0}, {14.0, 8.0}},
+                                           {{14.0, 8.0}, {-1.0, 8.0}},
+                                           {{-1.0, 8.0}, {-1.0, -8.0}},
+                                           {{-1.0, -8.0}, {14.0, -8.0}}};
+  TrackerOptions options;
+  options.shape.mount = Mount::kLegs;
+  auto pipeline = std::make_unique<TrackingPipeline>(options);
+  constexpr int kPeople = 10;
+  constexpr int kScans = 1000;
+  std::vector<testing::Body> bodies(2 * kPeople);
+  std::size_t allocations = 0;
+  for (int k = 0; k < kScans; ++k) {
+    const double t = k / 25.0;
+    for (int i = 0; i < kPeople; ++i) {
+      const double phase = 0.7 * i;
+      const Eigen::Vector2d c(4.0 + 6.0 * std::abs(std::sin((0.1 + 0.01 * i) * t + phase)),
+                              -6.0 + 1.2 * i + std::sin(0.2 * t + phase));
+      const Eigen::Vector2d off(0.1 * std::cos(2.0 * t + i), 0.1);
+      bodies[2 * i] = testing::Cylinder(t < 6.0 ? Eigen::Vector2d(40.0, 0.0) : c + off, 0.06);
+      bodies[2 * i + 1] = testing::Cylinder(t < 6.0 ? Eigen::Vector2d(40.0, 0.0) : c - off, 0.06);
+    }
+    // A mixed pixel behind every other leg's edge beam.
+    const ScanView scan = scanner.Render(k, hall, bodies);  // outside the counted region
+    std::vector<float>& r = scanner.ranges();
+    for (std::size_t b = 1; b + 1 < r.size(); b += 2) {
+      if (r[b - 1] > 0.0f && r[b] > r[b - 1] + 1.0f) r[b] = 0.5f * (r[b - 1] + r[b]);
+    }
+    if (k >= 1) ::lrfnet::testing::StartCountingAllocations();
+    (void)pipeline->Process(scan, static_cast<std::uint32_t>(k));
+    if (k >= 1) allocations += ::lrfnet::testing::StopCountingAllocations();
+  }
+  EXPECT_EQ(allocations, 0u);
+  EXPECT_GT(pipeline->counters().leg_pairs, 1000u);
+  EXPECT_GT(pipeline->counters().veiled_segments + pipeline->counters().shadowed_legs, 0u);
+  EXPECT_GT(pipeline->tracker().counters().confirmed, 5u);
+}
+
 }  // namespace
 }  // namespace lrfnet::tracking

@@ -32,7 +32,8 @@
 // tracker beyond its defaults and the device's range.
 //
 //   tracking_benchmark --scenarios DIR [--extra DIR] [--only NAME] [--out FILE] [--jobs N]
-//                      [--explain] [--breakdown] [--before-report-rules | --before-resume]
+//                      [--explain] [--breakdown]
+//                      [--before-report-rules | --before-resume | --before-mixed-pixels]
 //   (--extra: more scenario folders, e.g. held-out scenes, reported in their own section;
 //   --explain: per run on stderr, what became of an object's previous track at every id switch
 //   and missed scan, what the false positives are (by scan and by false track: a track left
@@ -43,8 +44,9 @@
 //   Breakdown; --before-report-rules: a third tracker, "before", the new one without
 //   ShapeOptions::unseen_coasting_m and MultiTrackerOptions::moving_speed_mps, the tree before
 //   them; --before-resume: "before" is the new one without resuming lost tracks,
-//   MultiTrackerOptions::resume_window_s = 0). --explain also writes the false positives' classes
-//   to the results (ExplainTable).
+//   MultiTrackerOptions::resume_window_s = 0; --before-mixed-pixels: "before" is the new one
+//   taking knee-height mixed pixels for legs, ShapeOptions::drop_mixed_pixel_legs = false).
+//   --explain also writes the false positives' classes to the results (ExplainTable).
 
 #include <Eigen/Cholesky>
 #include <Eigen/Core>
@@ -551,6 +553,9 @@ bool g_before_report_rules = false;
 // --before-resume: "before" is the new tracker without resuming lost tracks
 // (MultiTrackerOptions::resume_window_s = 0).
 bool g_before_resume = false;
+// --before-mixed-pixels: "before" is the new tracker that takes knee-height mixed pixels for legs
+// (ShapeOptions::drop_mixed_pixel_legs = false).
+bool g_before_mixed_pixels = false;
 const char* const kVariantNames[] = {"old", "new", "before"};
 
 std::vector<Variant> Variants(sim::Mount mount, double range_m) {
@@ -574,6 +579,10 @@ std::vector<Variant> Variants(sim::Mount mount, double range_m) {
   } else if (g_before_resume) {
     tracking::TrackerOptions before = fresh;
     before.tracking.resume_window_s = 0.0;
+    variants.push_back({"before", before});
+  } else if (g_before_mixed_pixels) {
+    tracking::TrackerOptions before = fresh;
+    before.shape.drop_mixed_pixel_legs = false;
     variants.push_back({"before", before});
   }
   return variants;
@@ -1242,13 +1251,15 @@ int main(int argc, char** argv) {
       g_before_report_rules = true;
     } else if (a == "--before-resume") {
       g_before_resume = true;
+    } else if (a == "--before-mixed-pixels") {
+      g_before_mixed_pixels = true;
     } else if (a == "--jobs") {
       jobs = std::max(1, std::atoi(value().c_str()));
     } else {
       std::fprintf(stderr,
                    "usage: tracking_benchmark --scenarios DIR [--extra DIR] [--only NAME] "
                    "[--out FILE] [--jobs N] [--explain] [--breakdown] "
-                   "[--before-report-rules | --before-resume]\n");
+                   "[--before-report-rules | --before-resume | --before-mixed-pixels]\n");
       return 2;
     }
   }
@@ -1294,9 +1305,13 @@ int main(int argc, char** argv) {
            "position, 2 dof, mean over measured matches (2 is honest) and the share within the "
            "99 % bound. \"legs\": every sensor at knee height. How the numbers are made: the "
            "header of tests/bench/tracking_benchmark.cc.\n\n"
-        << (g_before_resume ? "\"before\": the new tracker without resuming lost tracks "
-                              "(`tracking.resume_window_s` 0), on the same scans in the same "
-                              "run.\n\n"
+        << (g_before_mixed_pixels
+                ? "\"before\": the new tracker taking knee-height mixed pixels for legs "
+                  "(`shape.drop_mixed_pixel_legs` false), on the same scans in the same run; "
+                  "upper-body rows are the same by construction.\n\n"
+            : g_before_resume ? "\"before\": the new tracker without resuming lost tracks "
+                                "(`tracking.resume_window_s` 0), on the same scans in the same "
+                                "run.\n\n"
             : g_before_report_rules
                 ? "\"before\": the new tracker without the coasting and moving report rules "
                   "(`shape.unseen_coasting_m` 0, `tracking.moving_speed_mps` 0), on the same "
