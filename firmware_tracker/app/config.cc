@@ -204,6 +204,11 @@ void VisitShape(tracking::ShapeOptions& o, ConfigVisitor& v) {
           "mount legs: thinner legs are not a person's (a chair's) for the static-object rules.");
   v.Field("hip_half_width_m", o.hip_half_width_m,
           "mount legs: a leg's lateral offset from the body centre (a single leg's uncertainty).");
+  v.Field("drop_mixed_pixel_legs", o.drop_mixed_pixel_legs,
+          "mount legs: mixed pixels are not legs. Where a leg fills no beam footprint (divergence "
+          "times range above a leg's width) a beam that grazes it reports a range between the leg "
+          "and what is behind: leg-sized pieces beside a much nearer return, and legs straight "
+          "behind a confirmed track, are dropped.");
   v.Field("gait_sigma_m", o.gait_sigma_m,
           "mount legs: how far the midpoint of the legs strays from the body centre while "
           "walking (1 sigma).");
@@ -222,8 +227,9 @@ void VisitShape(tracking::ShapeOptions& o, ConfigVisitor& v) {
   v.Field("size_floor_sigma_m", o.size_floor_sigma_m,
           "The size state counts as no more certain than this in that shared error.");
   v.Field("beam_divergence_rad", o.beam_divergence_rad,
-          "Full beam divergence of the scanner (LMS1xx, TiM: 0.015; LMS5xx: 0.011). Not used: "
-          "a silhouette ends half a beam step beyond its last beam whatever the divergence.");
+          "Full beam divergence of the scanner (LMS1xx, TiM: 0.015; LMS5xx: 0.011). Used for "
+          "the legs' mixed pixels only: a silhouette ends half a beam step beyond its last beam "
+          "whatever the divergence.");
   v.Field("centre_model_sigma_m", o.centre_model_sigma_m,
           "Added in quadrature to every centre measurement's sigma: what the fit cannot know "
           "(sway, an outline that is not the model's).");
