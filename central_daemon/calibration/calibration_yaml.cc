@@ -3,6 +3,9 @@
 #include <spdlog/fmt/fmt.h>
 #include <yaml-cpp/yaml.h>
 
+#include <Eigen/Eigenvalues>
+#include <algorithm>
+#include <array>
 #include <cerrno>
 #include <cmath>
 #include <cstdlib>
@@ -24,7 +27,8 @@ constexpr const char* kHeader =
     "#   x_m, y_m    position of the sensor in the reference frame [m]\n"
     "#   yaw_deg     heading of the sensor's x axis (its forward beam), counter-clockwise [deg];\n"
     "#               together: p_reference = R(yaw) * p_sensor + (x_m, y_m)\n"
-    "#   sigma_*     one standard deviation of x_m, y_m [m] and yaw_deg [deg]\n"
+    "#   sigma_*     one standard deviation of x_m, y_m [m] and yaw_deg [deg]; cov_xy_m2,\n"
+    "#               cov_xyaw_m_deg, cov_yyaw_m_deg the covariances between them [m^2, m deg]\n"
     "#   calibrated: false   the data did not connect this sensor to the reference: no pose\n"
     "#   radial_bias_m   (only where the joint refinement ran) how far this sensor's people's\n"
     "#               centres lie towards it along its line of sight beyond the measurement model\n"
@@ -32,6 +36,9 @@ constexpr const char* kHeader =
     "#               after the refinement;\n"
     "#               radial_bias_estimated: false = the data do not observe it, held at its prior\n"
     "#               (0 +- sigma), which the pose sigmas include\n"
+    "#   flag        what a person should know about this sensor's pose\n"
+    "#   mount_looks_like_legs: true   its tracks are leg-sized although its tracker is set up\n"
+    "#               for upper-body height: set shape.mount: legs on that tracker\n"
     "# quality     how well the data supports the poses:\n"
     "#   edges       one per sensor pair with a pairwise estimate: `used` by the global solution "
     "or\n"
@@ -84,7 +91,15 @@ std::string Bool(bool b) { return b ? "true" : "false"; }
 
 double SigmaOf(const Eigen::Matrix3d& cov, int i) {
   const double v = cov(i, i);
-  return v > 0.0 && std::isfinite(v) ? std::sqrt(v) : 0.0;
+  // Beyond the reader's bounds a pose is as good as unknown: written at the bound.
+  const double limit = i < 2 ? kMaxPoseCoordinateM : common::DegToRad(kMaxPoseYawDeg);
+  return v > 0.0 && std::isfinite(v) ? std::min(std::sqrt(v), limit) : 0.0;
+}
+
+// cov(i, j) as the reader accepts it back: finite, within the product of the two sigmas.
+double CrossOf(const Eigen::Matrix3d& cov, int i, int j) {
+  const double bound = SigmaOf(cov, i) * SigmaOf(cov, j);
+  return std::isfinite(cov(i, j)) ? std::clamp(cov(i, j), -bound, bound) : 0.0;
 }
 
 // A pose the reader accepts back (finite, within its bounds).
@@ -171,6 +186,80 @@ class Reader {
     return true;
   }
 
+  // entry[key], when present, as true or false (absent: *out unchanged).
+  bool Boolean(const YAML::Node& entry, const std::string& key_path, const std::string& note,
+               const char* key, bool* out) {
+    if (!Has(entry, key)) return true;
+    const YAML::Node node = entry[key];
+    const std::string text = node.IsScalar() ? node.Scalar() : "";
+    if (text != "true" && text != "false")
+      return Fail(node, key_path, "expected true or false" + note);
+    *out = text == "true";
+    return true;
+  }
+
+  // The pose's covariance (x, y, yaw; metres and radians) from sigma_x_m, sigma_y_m,
+  // sigma_yaw_deg (none of them: nullopt; one absent: 0) and the optional cov_xy_m2,
+  // cov_xyaw_m_deg, cov_yyaw_m_deg (absent: 0). A covariance beyond the product of its two sigmas
+  // (a correlation above 1, more than the sigmas' six digits explain) is an error; what rounding
+  // leaves of a matrix that is not positive semi-definite is taken off its eigenvalues.
+  bool Covariance(const YAML::Node& entry, const std::string& path, const std::string& note,
+                  std::optional<Eigen::Matrix3d>* out) {
+    static constexpr std::array<const char*, 3> kSigma = {"sigma_x_m", "sigma_y_m",
+                                                          "sigma_yaw_deg"};
+    static constexpr std::array<const char*, 3> kCross = {"cov_xy_m2", "cov_xyaw_m_deg",
+                                                          "cov_yyaw_m_deg"};
+    bool any = false;
+    for (const char* key : kSigma) any = any || Has(entry, key);
+    if (!any) {
+      for (const char* key : kCross) {
+        if (Has(entry, key))
+          return Fail(entry[key], path + "." + key,
+                      "without sigma_x_m, sigma_y_m, sigma_yaw_deg" + note);
+      }
+      return true;
+    }
+    std::array<double, 3> sigma{};
+    for (std::size_t i = 0; i < 3; ++i) {
+      if (!Has(entry, kSigma[i])) continue;
+      const double limit = i < 2 ? kMaxPoseCoordinateM : kMaxPoseYawDeg;
+      if (!Number(entry, path + "." + kSigma[i], note, kSigma[i], limit, &sigma[i])) return false;
+      if (sigma[i] < 0.0)
+        return Fail(entry[kSigma[i]], path + "." + kSigma[i], "expected a number >= 0" + note);
+    }
+    // The file's units (m, m, deg) to the covariance's (m, m, rad).
+    const std::array<double, 3> to_si = {1.0, 1.0, common::DegToRad(1.0)};
+    Eigen::Matrix3d c = Eigen::Matrix3d::Zero();
+    for (int i = 0; i < 3; ++i) c(i, i) = sigma[i] * sigma[i] * to_si[i] * to_si[i];
+    static constexpr std::array<std::array<int, 2>, 3> kPair = {{{0, 1}, {0, 2}, {1, 2}}};
+    for (std::size_t k = 0; k < 3; ++k) {
+      if (!Has(entry, kCross[k])) continue;
+      const auto [i, j] = kPair[k];
+      const double bound = sigma[static_cast<std::size_t>(i)] * sigma[static_cast<std::size_t>(j)];
+      double v = 0.0;
+      if (!Number(entry, path + "." + kCross[k], note, kCross[k],
+                  kMaxPoseCoordinateM * kMaxPoseYawDeg, &v)) {
+        return false;
+      }
+      if (std::abs(v) > bound * (1.0 + 1e-4) + 1e-12) {
+        return Fail(entry[kCross[k]], path + "." + kCross[k],
+                    fmt::format("|{}| is beyond {} * {} (a correlation above 1){}", Short(v),
+                                kSigma[i], kSigma[j], note));
+      }
+      v = std::clamp(v, -bound, bound);
+      c(i, j) = c(j, i) =
+          v * to_si[static_cast<std::size_t>(i)] * to_si[static_cast<std::size_t>(j)];
+    }
+    const Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> eig(c);
+    if (eig.info() == Eigen::Success && eig.eigenvalues().minCoeff() < 0.0) {
+      c = eig.eigenvectors() * eig.eigenvalues().cwiseMax(0.0).asDiagonal() *
+          eig.eigenvectors().transpose();
+      c = (0.5 * (c + c.transpose())).eval();
+    }
+    *out = c;
+    return true;
+  }
+
   // Error messages quote at most this much of a hostile value.
   // Control characters (a hostile file's bytes) are shown as '?', so the error stays one line.
   static std::string Clip(const std::string& s, std::size_t max_chars = 40) {
@@ -254,9 +343,23 @@ class Reader {
         b.estimated = text == "true";
         bias = b;
       }
+      std::optional<Eigen::Matrix3d> covariance;
+      if (!Covariance(entry, path, note, &covariance)) return false;
+      std::string flag;
+      if (Has(entry, "flag")) {
+        if (!entry["flag"].IsScalar())
+          return Fail(entry["flag"], path + ".flag", "expected a string" + note);
+        flag = entry["flag"].Scalar();
+      }
+      bool legs = false;
+      if (!Boolean(entry, path + ".mount_looks_like_legs", note, "mount_looks_like_legs", &legs))
+        return false;
       file.sensors.emplace_back(id, pose);
       file.calibrated.push_back(calibrated);
       file.radial_bias.push_back(bias);
+      file.covariance.push_back(covariance);
+      file.flag.push_back(std::move(flag));
+      file.mount_looks_like_legs.push_back(legs);
     }
 
     if (Has(root, "reference")) {
@@ -292,6 +395,10 @@ PoseFile PoseFileOf(const CalibrationResult& result) {
     file.radial_bias.push_back(s.calibrated && s.radial_bias && ReadableBias(*s.radial_bias)
                                    ? s.radial_bias
                                    : std::nullopt);
+    file.covariance.push_back(s.calibrated ? std::optional<Eigen::Matrix3d>(s.covariance)
+                                           : std::nullopt);
+    file.flag.push_back(s.flag);
+    file.mount_looks_like_legs.push_back(s.mount_looks_like_legs);
     if (s.calibrated && s.id == result.reference) file.reference = s.id;
   }
   return file;
@@ -323,7 +430,8 @@ std::string CalibrationYaml(const CalibrationResult& result, const YamlContext& 
       y += "  # the estimate of this sensor's pose is not finite or absurdly far away\n";
     }
     // What a person should know about the pose (types.h SensorPose::flag).
-    const std::string flag = s.flag.empty() ? "" : ", flag: " + Quoted(s.flag);
+    std::string flag = s.flag.empty() ? "" : ", flag: " + Quoted(s.flag);
+    if (s.mount_looks_like_legs) flag += ", mount_looks_like_legs: true";
     if (!s.calibrated || !Readable(s)) {
       y += "  - {id: " + Quoted(s.id) + ", calibrated: false" + flag + "}\n";
       continue;
@@ -338,10 +446,12 @@ std::string CalibrationYaml(const CalibrationResult& result, const YamlContext& 
     }
     y += fmt::format(
         "  - {{id: {}, x_m: {}, y_m: {}, yaw_deg: {}, sigma_x_m: {}, sigma_y_m: {}, "
-        "sigma_yaw_deg: {}, cov_xy_m2: {}{}{}}}\n",
+        "sigma_yaw_deg: {}, cov_xy_m2: {}, cov_xyaw_m_deg: {}, cov_yyaw_m_deg: {}{}{}}}\n",
         Quoted(s.id), Exact(p.x_m), Exact(p.y_m), Exact(common::RadToDeg(p.yaw_rad)),
         Short(SigmaOf(s.covariance, 0)), Short(SigmaOf(s.covariance, 1)),
-        Short(common::RadToDeg(SigmaOf(s.covariance, 2))), Short(s.covariance(0, 1)), bias, flag);
+        Short(common::RadToDeg(SigmaOf(s.covariance, 2))), Short(CrossOf(s.covariance, 0, 1)),
+        Short(common::RadToDeg(CrossOf(s.covariance, 0, 2))),
+        Short(common::RadToDeg(CrossOf(s.covariance, 1, 2))), bias, flag);
   }
 
   std::size_t used = 0;

@@ -8,8 +8,13 @@
 //     - {id: "s7", calibrated: false}    # calibration only: not connected, no pose
 //     - {id: "s2", x_m: 4, ..., radial_bias_m: -0.02, sigma_radial_bias_m: 0.004,
 //        radial_bias_estimated: true}    # calibration only, where the joint refinement ran
+//     - {id: "s3", ..., cov_xy_m2: 1e-5, cov_xyaw_m_deg: 2e-4, cov_yyaw_m_deg: -1e-4,
+//        flag: "...", mount_looks_like_legs: true}   # calibration only
 //
 // x_m, y_m [m] and yaw_deg [deg, counter-clockwise] are world_from_sensor (common/geometry.h);
+// sigma_x_m, sigma_y_m, sigma_yaw_deg and the cross terms cov_* (any absent: 0) its covariance
+// (SensorPose::covariance; none of them: not given); flag and mount_looks_like_legs as
+// SensorPose's;
 // a calibration's world is the reference sensor's frame. radial_bias_m, sigma_radial_bias_m [m]
 // and radial_bias_estimated (all three or none) are the joint refinement's shared radial bias of
 // that sensor (types.h RadialBiasEstimate). Other keys (method, quality, devices,
@@ -45,6 +50,12 @@ struct PoseFile {
   std::vector<bool> calibrated;                        // parallel to sensors (absent: true)
   // Parallel to sensors as read (absent: nullopt); may be shorter in a PoseFile built by hand.
   std::vector<std::optional<RadialBiasEstimate>> radial_bias;
+  // Parallel to sensors, like radial_bias: the pose's covariance (x, y, yaw; metres and radians)
+  // where the file gives its sigmas (nullopt: it does not), the `flag` text ("" absent), and
+  // mount_looks_like_legs (absent: false).
+  std::vector<std::optional<Eigen::Matrix3d>> covariance;
+  std::vector<std::string> flag;
+  std::vector<bool> mount_looks_like_legs;
 
   // Index of `id` in sensors, or nullopt.
   std::optional<std::size_t> Find(const std::string& id) const;
@@ -64,7 +75,9 @@ inline constexpr double kMaxRadialBiasM = 100.0;
 // any), the line and the key for anything malformed: not YAML, no `sensors` list or an empty one,
 // an entry without id, a duplicate id, a missing or non-numeric or non-finite or out-of-range
 // x_m / y_m / yaw_deg of a calibrated sensor, a radial bias with one of its three keys missing or
-// malformed (or a negative sigma_radial_bias_m), a `calibrated` that is not true/false, a
+// malformed (or a negative sigma_radial_bias_m), a negative sigma, a cross term beyond the
+// product of its sigmas (a correlation above 1), a `calibrated` or mount_looks_like_legs that is
+// not true/false, a `flag` that is not a string, a
 // `reference` that is not one of the calibrated sensors. *out is only written on success.
 bool ParsePoseYaml(const std::string& text, PoseFile* out, std::string* error);
 bool ReadPoseFile(const std::string& path, PoseFile* out, std::string* error);

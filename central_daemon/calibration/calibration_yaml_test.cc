@@ -4,6 +4,7 @@
 #include <unistd.h>
 #include <yaml-cpp/yaml.h>
 
+#include <Eigen/Eigenvalues>
 #include <cmath>
 #include <filesystem>
 #include <fstream>
@@ -148,6 +149,85 @@ TEST(CalibrationYaml, FlagsAndTheAmbiguityAreWrittenAndThePosesStillRead) {
   ASSERT_TRUE(ParsePoseYaml(yaml, &file, &error)) << error;
   EXPECT_TRUE(file.calibrated[1]);
   EXPECT_FALSE(file.calibrated[4]);
+}
+
+// A covariance with every cross term (x, y, yaw): what a joint refinement gives a sensor far from
+// the reference (yaw and position correlated through the lever arm).
+Eigen::Matrix3d CorrelatedCovariance(double sigma_m, double sigma_yaw_rad, double lever_m) {
+  Eigen::Matrix3d j = Eigen::Matrix3d::Identity();
+  j(0, 2) = -0.6 * lever_m;
+  j(1, 2) = 0.8 * lever_m;
+  const Eigen::Vector3d d(sigma_m * sigma_m, 0.5 * sigma_m * sigma_m,
+                          sigma_yaw_rad * sigma_yaw_rad);
+  return j * d.asDiagonal() * j.transpose();
+}
+
+TEST(CalibrationYaml, CovarianceFlagsAndMountRoundTrip) {
+  CalibrationResult result = MakeResult();
+  result.sensors[1].covariance = CorrelatedCovariance(0.004, common::DegToRad(0.05), 12.0);
+  result.sensors[2].covariance = CorrelatedCovariance(0.0123456789, common::DegToRad(1.7), 30.0);
+  // Yaw and position perfectly correlated: rounding to six digits must not make it indefinite.
+  result.sensors[3].covariance = CorrelatedCovariance(0.0, common::DegToRad(0.3), 7.0);
+  result.sensors[2].mount_looks_like_legs = true;
+  result.sensors[2].flag = "q: tracks look like legs; set shape.mount: legs on its tracker";
+  result.sensors[4].mount_looks_like_legs = true;
+  result.sensors[4].flag = "s5: tracks look like legs";
+  const std::string yaml = CalibrationYaml(result, {});
+  PoseFile file;
+  std::string error;
+  ASSERT_TRUE(ParsePoseYaml(yaml, &file, &error)) << error << "\n" << yaml;
+  ASSERT_EQ(file.covariance.size(), result.sensors.size());
+  ASSERT_EQ(file.flag.size(), result.sensors.size());
+  ASSERT_EQ(file.mount_looks_like_legs.size(), result.sensors.size());
+  for (std::size_t i = 0; i < 4; ++i) {
+    const Eigen::Matrix3d& want = result.sensors[i].covariance;
+    ASSERT_TRUE(file.covariance[i].has_value()) << i;
+    const Eigen::Matrix3d& got = *file.covariance[i];
+    for (int r = 0; r < 3; ++r) {
+      for (int c = 0; c < 3; ++c) {
+        // Six digits of each sigma and cross term.
+        const double scale = std::sqrt(want(r, r) * want(c, c));
+        EXPECT_NEAR(got(r, c), want(r, c), 2e-5 * scale + 1e-300) << i << " " << r << c;
+      }
+    }
+    const Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> eig(got);
+    EXPECT_GE(eig.eigenvalues().minCoeff(), -1e-15 * std::max(1e-300, got.maxCoeff())) << i << "\n"
+                                                                                       << got;
+    EXPECT_EQ(got, got.transpose()) << i;
+  }
+  EXPECT_FALSE(file.covariance[4].has_value());  // not calibrated: no pose, no sigmas
+  EXPECT_EQ(file.mount_looks_like_legs, (std::vector<bool>{false, false, true, false, true}));
+  for (std::size_t i = 0; i < result.sensors.size(); ++i)
+    EXPECT_EQ(file.flag[i], result.sensors[i].flag) << i;
+  EXPECT_NE(yaml.find("#   mount_looks_like_legs"), std::string::npos);
+  EXPECT_NE(yaml.find("cov_xyaw_m_deg"), std::string::npos);
+  // PoseFileOf gives the same without the text.
+  const PoseFile direct = PoseFileOf(result);
+  EXPECT_EQ(direct.mount_looks_like_legs, file.mount_looks_like_legs);
+  EXPECT_EQ(direct.flag, file.flag);
+  ASSERT_EQ(direct.covariance.size(), file.covariance.size());
+  for (std::size_t i = 0; i < direct.covariance.size(); ++i)
+    EXPECT_EQ(direct.covariance[i].has_value(), file.covariance[i].has_value()) << i;
+
+  // A covariance that is not finite is written as zeros and still reads.
+  result.sensors[1].covariance(0, 1) = result.sensors[1].covariance(1, 0) = std::nan("");
+  result.sensors[1].covariance(2, 2) = std::numeric_limits<double>::infinity();
+  ASSERT_TRUE(ParsePoseYaml(CalibrationYaml(result, {}), &file, &error)) << error;
+  EXPECT_EQ((*file.covariance[1])(0, 1), 0.0);
+  EXPECT_EQ((*file.covariance[1])(2, 2), 0.0);
+  // A file from before (sigmas and cov_xy_m2 only): that covariance, no flags.
+  ASSERT_TRUE(
+      ParsePoseYaml("sensors:\n  - {id: a, x_m: 1, y_m: 2, yaw_deg: 3, sigma_x_m: 0.02, "
+                    "sigma_y_m: 0.01, sigma_yaw_deg: 0.5, cov_xy_m2: -0.0001}\n",
+                    &file, &error))
+      << error;
+  ASSERT_TRUE(file.covariance[0].has_value());
+  EXPECT_NEAR((*file.covariance[0])(0, 0), 4e-4, 1e-15);
+  EXPECT_NEAR((*file.covariance[0])(0, 1), -1e-4, 1e-15);
+  EXPECT_NEAR((*file.covariance[0])(2, 2), std::pow(common::DegToRad(0.5), 2), 1e-15);
+  EXPECT_EQ((*file.covariance[0])(0, 2), 0.0);
+  EXPECT_FALSE(file.mount_looks_like_legs[0]);
+  EXPECT_EQ(file.flag[0], "");
 }
 
 TEST(CalibrationYaml, PoseFileOfMatchesWhatTheFileReadsBack) {
@@ -326,6 +406,25 @@ TEST(PoseYaml, HostileInputGivesOneClearLine) {
        "sensors: [{id: a, x_m: 1, y_m: 2, yaw_deg: 3, radial_bias_m: 0.01, "
        "sigma_radial_bias_m: -0.02, radial_bias_estimated: true}]\n",
        "sensors[0].sigma_radial_bias_m: expected a number >= 0"},
+      {"negative sigma", "sensors: [{id: a, x_m: 1, y_m: 2, yaw_deg: 3, sigma_y_m: -0.1}]\n",
+       "sensors[0].sigma_y_m: expected a number >= 0 (sensor 'a')"},
+      {"sigma not finite", "sensors: [{id: a, x_m: 1, y_m: 2, yaw_deg: 3, sigma_yaw_deg: inf}]\n",
+       "sensors[0].sigma_yaw_deg: expected a finite number"},
+      {"correlation above 1",
+       "sensors: [{id: a, x_m: 1, y_m: 2, yaw_deg: 3, sigma_x_m: 0.1, sigma_y_m: 0.1, "
+       "sigma_yaw_deg: 1, cov_xy_m2: 0.02}]\n",
+       "sensors[0].cov_xy_m2: |0.02| is beyond sigma_x_m * sigma_y_m"},
+      {"cross term without sigmas",
+       "sensors: [{id: a, x_m: 1, y_m: 2, yaw_deg: 3, cov_yyaw_m_deg: 1}]\n",
+       "sensors[0].cov_yyaw_m_deg: without sigma_x_m, sigma_y_m, sigma_yaw_deg"},
+      {"cross term not a number",
+       "sensors: [{id: a, x_m: 1, y_m: 2, yaw_deg: 3, sigma_x_m: 1, cov_xyaw_m_deg: [1]}]\n",
+       "sensors[0].cov_xyaw_m_deg: expected a number"},
+      {"mount flag not a bool",
+       "sensors: [{id: a, x_m: 1, y_m: 2, yaw_deg: 3, mount_looks_like_legs: 1}]\n",
+       "sensors[0].mount_looks_like_legs: expected true or false"},
+      {"flag a list", "sensors: [{id: a, calibrated: false, flag: [x]}]\n",
+       "sensors[0].flag: expected a string"},
       {"not yaml", "sensors: [{id: a, x_m: 1\n", "not valid YAML"},
       {"tab indentation", "sensors:\n\t- {id: a}\n", "not valid YAML"},
       {"bad escape", "sensors: [{id: \"a\\\x01\"}]\n",

@@ -1423,6 +1423,7 @@ void AddMountFlags(CalibrationOutcome* out) {
     SensorPose& sensor = out->result.sensors[i];
     const std::string flag = MountFlag(sensor.id, out->mount_checks[i]);
     if (flag.empty()) continue;
+    sensor.mount_looks_like_legs = true;
     sensor.flag = sensor.flag.empty() ? flag : flag + "; " + sensor.flag;
     out->result.warnings.push_back(flag);
     if (!out->ok && !out->error.empty()) out->error += "; " + flag;

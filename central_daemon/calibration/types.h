@@ -210,6 +210,9 @@ struct SensorPose {
   Eigen::Matrix3d covariance = Eigen::Matrix3d::Zero();  // (x, y, yaw), metres and radians
   // Only where the joint refinement was applied and placed this sensor.
   std::optional<RadialBiasEstimate> radial_bias;
+  // The mount check (common/mount_check.h) found this sensor's tracks leg-sized while its tracker
+  // is configured for upper-body height (shape.mount: torso); `flag` says what to do.
+  bool mount_looks_like_legs = false;
 };
 
 struct EdgeReport {
