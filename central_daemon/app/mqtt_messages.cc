@@ -117,6 +117,18 @@ std::string CalibrationJson(const std::string& site, common::UtcNs stamp_ns,
     e["sigma_x_m"] = Rounded(sigma(0), 1e5);
     e["sigma_y_m"] = Rounded(sigma(1), 1e5);
     e["sigma_yaw_deg"] = Rounded(RadToDeg(sigma(2)), 1e5);
+    // The joint refinement's shared radial bias of the sensor (null where it did not place it).
+    if (s.radial_bias) {
+      e["radial_bias_m"] = Rounded(s.radial_bias->bias_m, 1e5);
+      e["sigma_radial_bias_m"] = Rounded(s.radial_bias->sigma_m, 1e5);
+      e["radial_bias_estimated"] = s.radial_bias->estimated;
+    } else {
+      e["radial_bias_m"] = nullptr;
+      e["sigma_radial_bias_m"] = nullptr;
+      e["radial_bias_estimated"] = nullptr;
+    }
+    e["mount_looks_like_legs"] = s.mount_looks_like_legs;
+    e["flag"] = s.flag;
     sensors.push_back(std::move(e));
   }
   j["sensors"] = std::move(sensors);

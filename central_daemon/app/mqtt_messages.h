@@ -45,7 +45,9 @@ std::string ObjectsJson(const std::string& site, std::uint64_t seq, common::UtcN
 std::string ZoneJson(const std::string& site, std::uint64_t seq, common::UtcNs stamp_ns,
                      const zones::ZoneState& zone);
 
-// lrfnet/<site>/calibration (retained): the poses with their standard deviations.
+// lrfnet/<site>/calibration (retained): the poses with their standard deviations, each sensor's
+// radial bias (radial_bias_m, sigma_radial_bias_m, radial_bias_estimated; null where the joint
+// refinement did not place it), mount_looks_like_legs and flag.
 std::string CalibrationJson(const std::string& site, common::UtcNs stamp_ns,
                             const calib::CalibrationResult& result);
 

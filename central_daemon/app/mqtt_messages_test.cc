@@ -83,9 +83,26 @@ TEST(MqttMessagesTest, ZoneStatusHealthAndCalibration) {
   p.world_from_sensor = {1.0, 2.0, std::acos(-1.0) / 2};
   p.covariance(2, 2) = std::pow(std::acos(-1.0) / 180.0, 2);  // 1 degree
   r.sensors = {p};
+  calib::SensorPose legs = p;
+  legs.id = "s3";
+  legs.radial_bias = calib::RadialBiasEstimate{-0.0183, 0.0061, true};
+  legs.mount_looks_like_legs = true;
+  legs.flag = "s3: tracks look like legs; set shape.mount: legs on its tracker";
+  r.sensors = {p, legs};
   const json c = json::parse(CalibrationJson("lab", 9, r));
   EXPECT_EQ(c["sensors"][0]["yaw_deg"], 90.0);
   EXPECT_DOUBLE_EQ(c["sensors"][0]["sigma_yaw_deg"].get<double>(), 1.0);
+  // Without a refinement's bias: the three keys null; no mount verdict, no flag.
+  EXPECT_TRUE(c["sensors"][0]["radial_bias_m"].is_null());
+  EXPECT_TRUE(c["sensors"][0]["sigma_radial_bias_m"].is_null());
+  EXPECT_TRUE(c["sensors"][0]["radial_bias_estimated"].is_null());
+  EXPECT_EQ(c["sensors"][0]["mount_looks_like_legs"], false);
+  EXPECT_EQ(c["sensors"][0]["flag"], "");
+  EXPECT_DOUBLE_EQ(c["sensors"][1]["radial_bias_m"].get<double>(), -0.0183);
+  EXPECT_DOUBLE_EQ(c["sensors"][1]["sigma_radial_bias_m"].get<double>(), 0.0061);
+  EXPECT_EQ(c["sensors"][1]["radial_bias_estimated"], true);
+  EXPECT_EQ(c["sensors"][1]["mount_looks_like_legs"], true);
+  EXPECT_EQ(c["sensors"][1]["flag"], legs.flag);
 }
 
 }  // namespace

@@ -74,8 +74,8 @@ std::optional<std::string> LoadConfig(const RunOptions& run, DaemonConfig* confi
   return std::nullopt;
 }
 
-// calibration.initial: the poses of a calibration.yaml as a calibration outcome, and the file's
-// text (its history).
+// calibration.initial: the sensors of a calibration.yaml (poses, covariances, radial biases,
+// flags) as a calibration outcome, and the file's text (its history).
 std::optional<std::string> LoadInitialCalibration(const std::string& path,
                                                   calib::CalibrationOutcome* outcome,
                                                   std::string* text) {
@@ -97,6 +97,14 @@ std::optional<std::string> LoadInitialCalibration(const std::string& path,
     pose.id = file.sensors[i].first;
     pose.world_from_sensor = file.sensors[i].second;
     pose.calibrated = i < file.calibrated.size() ? file.calibrated[i] : true;
+    // What the calibration that wrote the file knew of the pose, as its result carries it: the
+    // covariance (fusion and monitoring weigh the pose by it), the radial bias, the flags.
+    if (i < file.covariance.size() && file.covariance[i]) pose.covariance = *file.covariance[i];
+    if (pose.calibrated && i < file.radial_bias.size()) pose.radial_bias = file.radial_bias[i];
+    if (i < file.flag.size()) pose.flag = file.flag[i];
+    if (i < file.mount_looks_like_legs.size())
+      pose.mount_looks_like_legs = file.mount_looks_like_legs[i];
+    if (!pose.flag.empty()) spdlog::warn("calibration.initial ({}): {}", pose.id, pose.flag);
     outcome->result.sensors.push_back(std::move(pose));
   }
   return std::nullopt;

@@ -59,8 +59,8 @@ struct RunOptions {
 // file or the flag.
 std::optional<std::string> LoadConfig(const RunOptions& run, DaemonConfig* config);
 
-// calibration.initial: the poses of a calibration.yaml as a calibration outcome, and the file's
-// text (its history) when `text` is given.
+// calibration.initial: the sensors of a calibration.yaml (poses, covariances, radial biases,
+// flags) as a calibration outcome, and the file's text (its history) when `text` is given.
 std::optional<std::string> LoadInitialCalibration(const std::string& path,
                                                   calib::CalibrationOutcome* outcome,
                                                   std::string* text = nullptr);

@@ -13,7 +13,9 @@
 #include <string>
 #include <vector>
 
+#include "central_daemon/app/fusion_service.h"
 #include "central_daemon/app/monitoring_service.h"
+#include "central_daemon/app/mqtt_messages.h"
 #include "central_daemon/app/recorder.h"
 #include "central_daemon/app/run_report.h"
 #include "central_daemon/app/run_setup.h"
@@ -123,6 +125,95 @@ TEST_F(RunTest, InitialCalibrationIsTheFilesPosesAndText) {
   EXPECT_EQ(e->rfind("calibration.initial: ", 0), 0u) << *e;
   EXPECT_FALSE(untouched.ok);
   EXPECT_TRUE(untouched.result.sensors.empty());
+}
+
+// A calibration as the pipeline leaves it: correlated covariances, radial biases estimated and
+// held, a sensor whose tracks look like legs, one not placed.
+calib::CalibrationResult ComputedCalibration() {
+  calib::CalibrationResult r;
+  r.method = "quenzel";
+  r.reference = "s1";
+  const auto pose = [](const char* id, double x, double y, double yaw_deg, double sigma_m,
+                       double sigma_yaw_deg) {
+    calib::SensorPose p;
+    p.id = id;
+    p.calibrated = true;
+    p.world_from_sensor = {x, y, common::DegToRad(yaw_deg)};
+    // Yaw correlated with the position through the lever arm to the reference.
+    Eigen::Matrix3d j = Eigen::Matrix3d::Identity();
+    j(0, 2) = -y;
+    j(1, 2) = x;
+    const double s_yaw = common::DegToRad(sigma_yaw_deg);
+    p.covariance =
+        j *
+        Eigen::Vector3d(sigma_m * sigma_m, 0.7 * sigma_m * sigma_m, s_yaw * s_yaw).asDiagonal() *
+        j.transpose();
+    return p;
+  };
+  r.sensors.push_back(pose("s1", 0, 0, 0, 0, 0));
+  r.sensors.back().radial_bias = calib::RadialBiasEstimate{-0.0183456, 0.0061234, true};
+  r.sensors.push_back(pose("s2", 11.3124, 7.4031, 179.9812, 0.0114, 0.0512));
+  r.sensors.back().radial_bias = calib::RadialBiasEstimate{0.0, 0.02, false};
+  r.sensors.push_back(pose("s3", -4.25, 9.5, -91.5, 0.0231, 0.1234));
+  r.sensors.back().radial_bias = calib::RadialBiasEstimate{0.0, 0.1, false};
+  r.sensors.back().mount_looks_like_legs = true;
+  r.sensors.back().flag =
+      "s3: tracks look like legs (6 of 7 people tracks leg-sized, median half-width 0.07 m) but "
+      "shape.mount is torso; set shape.mount: legs on its tracker";
+  calib::SensorPose lost;
+  lost.id = "s4";
+  lost.flag = "ambiguous: two placements explain the data equally";
+  r.sensors.push_back(lost);
+  return r;
+}
+
+TEST_F(RunTest, ACalibrationReadAtStartUpCarriesWhatItsCalibrationComputed) {
+  const calib::CalibrationResult computed = ComputedCalibration();
+  calib::CalibrationOutcome loaded;
+  ASSERT_EQ(LoadInitialCalibration(Write("calibration.yaml", calib::CalibrationYaml(computed, {})),
+                                   &loaded),
+            std::nullopt);
+  ASSERT_EQ(loaded.result.sensors.size(), computed.sensors.size());
+  for (std::size_t i = 0; i < computed.sensors.size(); ++i) {
+    const calib::SensorPose& want = computed.sensors[i];
+    const calib::SensorPose& got = loaded.result.sensors[i];
+    EXPECT_EQ(got.calibrated, want.calibrated) << want.id;
+    EXPECT_EQ(got.flag, want.flag) << want.id;
+    EXPECT_EQ(got.mount_looks_like_legs, want.mount_looks_like_legs) << want.id;
+    ASSERT_EQ(got.radial_bias.has_value(), want.radial_bias.has_value()) << want.id;
+    if (want.radial_bias) {
+      EXPECT_EQ(got.radial_bias->bias_m, want.radial_bias->bias_m) << want.id;
+      EXPECT_NEAR(got.radial_bias->sigma_m, want.radial_bias->sigma_m,
+                  1e-6 * want.radial_bias->sigma_m);
+      EXPECT_EQ(got.radial_bias->estimated, want.radial_bias->estimated) << want.id;
+    }
+    for (int r = 0; r < 3; ++r) {
+      for (int c = 0; c < 3; ++c) {
+        const double scale = std::sqrt(want.covariance(r, r) * want.covariance(c, c));
+        EXPECT_NEAR(got.covariance(r, c), want.covariance(r, c), 2e-5 * scale)
+            << want.id << " (" << r << ", " << c << ")";
+      }
+    }
+  }
+  // The fusion weighs each placement by that covariance, as it would the computed one's.
+  const auto placed_computed = PlacementsOf(computed);
+  const auto placed_loaded = PlacementsOf(loaded.result);
+  ASSERT_EQ(placed_loaded.size(), 3u);
+  ASSERT_EQ(placed_loaded.size(), placed_computed.size());
+  for (std::size_t i = 0; i < placed_loaded.size(); ++i) {
+    EXPECT_TRUE(placed_loaded[i].covariance.isApprox(placed_computed[i].covariance, 1e-4) ||
+                placed_computed[i].covariance.isZero())
+        << placed_loaded[i].id << "\n"
+        << placed_loaded[i].covariance;
+    EXPECT_GT(placed_loaded[i].covariance(2, 2), i == 0 ? -1.0 : 0.0) << placed_loaded[i].id;
+  }
+  // What is published of each sensor is the same (MQTT rounds sigmas to 1e-5).
+  const nlohmann::json from_computed = nlohmann::json::parse(CalibrationJson("lab", 1, computed));
+  const nlohmann::json from_loaded =
+      nlohmann::json::parse(CalibrationJson("lab", 1, loaded.result));
+  EXPECT_EQ(from_loaded["sensors"], from_computed["sensors"]) << from_loaded["sensors"].dump(1);
+  EXPECT_EQ(from_loaded["sensors"][2]["mount_looks_like_legs"], true);
+  EXPECT_EQ(from_loaded["sensors"][1]["sigma_yaw_deg"], 0.0512);
 }
 
 TEST_F(RunTest, RecorderWritesWhatTheCoreRecordsAndItReadsBack) {

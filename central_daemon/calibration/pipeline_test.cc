@@ -823,6 +823,7 @@ TEST(CalibratePipeline, ASensorWhoseTracksLookLikeLegsIsFlaggedAndItsSigmaCovers
   for (std::size_t i = 0; i < 4; ++i) {
     EXPECT_TRUE(outcome.mount_checks[i].decided) << sensors[i].id;
     EXPECT_EQ(outcome.mount_checks[i].looks_like_legs, i == 2) << sensors[i].id;
+    EXPECT_EQ(outcome.result.sensors[i].mount_looks_like_legs, i == 2) << sensors[i].id;
   }
   const std::string& flag = outcome.result.sensors[2].flag;
   EXPECT_NE(flag.find("c: tracks look like legs"), std::string::npos) << flag;
@@ -847,6 +848,7 @@ TEST(CalibratePipeline, ASensorWhoseTracksLookLikeLegsIsFlaggedAndItsSigmaCovers
   const CalibrationOutcome unchecked = Calibrate(input, options);
   ASSERT_TRUE(unchecked.ok) << unchecked.error;
   EXPECT_TRUE(unchecked.result.sensors[2].flag.empty());
+  EXPECT_FALSE(unchecked.result.sensors[2].mount_looks_like_legs);
   // Refined, every sensor carries its shared radial bias; without walls nothing ties sensors that
   // see one person from different directions, so none is observed: each held at 0 with its
   // 0.02 m prior (c's 0.12 m is what the mount check is for).
