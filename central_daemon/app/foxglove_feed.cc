@@ -143,7 +143,10 @@ constexpr const char* kCalibrationSchema =
     R"("properties":{"state":{"enum":["collecting","calibrating","calibrated","failed"]},"progress":{"type":"number"},)"
     R"("message":{"type":"string"},"reference":{"type":"string"},"track_residual_rms_m":{"type":"number"},)"
     R"("sensors":{"type":"array","items":{"type":"object","required":["id","placed"],"properties":{"id":{"type":"string"},)"
-    R"("placed":{"type":"boolean"},"status":{"type":"string"},"x_m":{"type":"number"},"y_m":{"type":"number"},"yaw_rad":{"type":"number"}}}}}})";
+    R"("placed":{"type":"boolean"},"status":{"type":"string"},"x_m":{"type":"number"},"y_m":{"type":"number"},"yaw_rad":{"type":"number"},)"
+    R"("sigma_x_m":{"type":"number"},"sigma_y_m":{"type":"number"},"sigma_yaw_rad":{"type":"number"},)"
+    R"("radial_bias_m":{"type":"number"},"sigma_radial_bias_m":{"type":"number"},"radial_bias_estimated":{"type":"boolean"},)"
+    R"("mount_looks_like_legs":{"type":"boolean"},"flag":{"type":"string"}}}}}})";
 
 FoxgloveChannelMessage Message(std::string topic, const std::string& schema_name,
                                const std::string& schema, const Json& payload,
@@ -270,6 +273,22 @@ std::vector<FoxgloveChannelMessage> FoxgloveMessagesOf(const LiveState& state) {
       e["x_m"] = F(s.world_from_sensor.x_m);
       e["y_m"] = F(s.world_from_sensor.y_m);
       e["yaw_rad"] = F(s.world_from_sensor.yaw_rad);
+    }
+    // What the calibration says of the sensor (LiveSensor::Calibration).
+    const LiveSensor::Calibration& c = s.calibration;
+    if (c.calibrated) {
+      if (s.placed) {
+        e["sigma_x_m"] = F(c.sigma_x_m);
+        e["sigma_y_m"] = F(c.sigma_y_m);
+        e["sigma_yaw_rad"] = F(c.sigma_yaw_rad);
+      }
+      if (c.has_radial_bias) {
+        e["radial_bias_m"] = F(c.radial_bias_m);
+        e["sigma_radial_bias_m"] = F(c.sigma_radial_bias_m);
+        e["radial_bias_estimated"] = c.radial_bias_estimated;
+      }
+      e["mount_looks_like_legs"] = c.mount_looks_like_legs;
+      e["flag"] = c.flag;
     }
     sensors.push_back(std::move(e));
   }

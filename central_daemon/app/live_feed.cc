@@ -1,5 +1,6 @@
 #include "central_daemon/app/live_feed.h"
 
+#include <algorithm>
 #include <cmath>
 
 namespace lrfnet::daemon {
@@ -20,7 +21,8 @@ std::vector<std::array<float, 2>> BackgroundPoints(const BackgroundScan& scan,
     if (k++ % stride != 0) continue;
     const double angle = scan.first_angle_rad + static_cast<double>(i) * scan.angle_step_rad;
     const double range_m = scan.ranges_mm[i] * 1e-3;
-    const Eigen::Vector2d p = pose * Eigen::Vector2d(range_m * std::cos(angle), range_m * std::sin(angle));
+    const Eigen::Vector2d p =
+        pose * Eigen::Vector2d(range_m * std::cos(angle), range_m * std::sin(angle));
     out.push_back({static_cast<float>(p.x()), static_cast<float>(p.y())});
   }
   return out;
@@ -43,6 +45,27 @@ void BackgroundScanOf(const BackgroundScan& scan, std::size_t max_points, LiveSe
   }
 }
 
+// What the calibration says of one sensor, for the live view.
+LiveSensor::Calibration CalibrationOf(const calib::SensorPose& pose) {
+  LiveSensor::Calibration c;
+  c.calibrated = true;
+  if (pose.calibrated) {
+    const auto sigma = [&](int i) { return std::sqrt(std::max(0.0, pose.covariance(i, i))); };
+    c.sigma_x_m = sigma(0);
+    c.sigma_y_m = sigma(1);
+    c.sigma_yaw_rad = sigma(2);
+  }
+  if (pose.radial_bias) {
+    c.has_radial_bias = true;
+    c.radial_bias_m = pose.radial_bias->bias_m;
+    c.sigma_radial_bias_m = pose.radial_bias->sigma_m;
+    c.radial_bias_estimated = pose.radial_bias->estimated;
+  }
+  c.mount_looks_like_legs = pose.mount_looks_like_legs;
+  c.flag = pose.flag;
+  return c;
+}
+
 }  // namespace
 
 LiveState LiveFeed::Build(const Daemon& daemon, const CalibrationService& calibration,
@@ -56,9 +79,11 @@ LiveState LiveFeed::Build(const Daemon& daemon, const CalibrationService& calibr
   // Calibration.
   const auto& latest = calibration.latest();
   std::map<std::string, common::Pose2, std::less<>> poses;
+  std::map<std::string, const calib::SensorPose*, std::less<>> calibrated;
   if (latest) {
     for (const calib::SensorPose& s : latest->result.sensors) {
       if (s.calibrated) poses[s.id] = s.world_from_sensor;
+      calibrated[s.id] = &s;
     }
     state.calibration.state = "calibrated";
     state.calibration.progress = 1.0;
@@ -87,6 +112,9 @@ LiveState LiveFeed::Build(const Daemon& daemon, const CalibrationService& calibr
     const auto pose = poses.find(s.sensor_id);
     sensor.placed = pose != poses.end();
     if (sensor.placed) sensor.world_from_sensor = pose->second;
+    if (const auto c = calibrated.find(s.sensor_id); c != calibrated.end()) {
+      sensor.calibration = CalibrationOf(*c->second);
+    }
     if (s.info) {
       sensor.model = s.info->model;
       sensor.first_angle_rad = s.info->first_angle_rad;

@@ -210,6 +210,41 @@ void WriteMonitor(Writer& w, const LiveSensor& s) {
   w.EndObject();
 }
 
+// What the calibration says of a sensor, or null when there is none that names it.
+void WriteSensorCalibration(Writer& w, const LiveSensor& s) {
+  const LiveSensor::Calibration& c = s.calibration;
+  w.Key("calibration");
+  if (!c.calibrated) {
+    w.Null();
+    return;
+  }
+  w.BeginObject();
+  w.Key("sigma_x_m");
+  w.Real(c.sigma_x_m);
+  w.Key("sigma_y_m");
+  w.Real(c.sigma_y_m);
+  w.Key("sigma_yaw_deg");
+  w.Real(common::RadToDeg(c.sigma_yaw_rad));
+  w.Key("radial_bias");
+  if (c.has_radial_bias) {
+    w.BeginObject();
+    w.Key("m");
+    w.Real(c.radial_bias_m);
+    w.Key("sigma_m");
+    w.Real(c.sigma_radial_bias_m);
+    w.Key("estimated");
+    w.Bool(c.radial_bias_estimated);
+    w.EndObject();
+  } else {
+    w.Null();
+  }
+  w.Key("mount_looks_like_legs");
+  w.Bool(c.mount_looks_like_legs);
+  w.Key("flag");
+  w.String(c.flag);
+  w.EndObject();
+}
+
 void WriteSensor(Writer& w, const LiveSensor& s) {
   w.BeginObject();
   w.Key("id");
@@ -250,6 +285,7 @@ void WriteSensor(Writer& w, const LiveSensor& s) {
   }
   w.EndArray();
   WriteMonitor(w, s);
+  WriteSensorCalibration(w, s);
   w.EndObject();
 }
 

@@ -42,6 +42,20 @@ struct LiveSensor {
   // empty when not watched. `monitor_detail`: what was last found, one line.
   std::string monitor_state;
   std::string monitor_detail;
+  // What the calibration in use says of this sensor (`calibrated` false: the daemon has none that
+  // names it): the pose's standard deviations (placed only), its shared radial bias (the joint
+  // refinement's, where it placed the sensor: metres towards the sensor along its line of sight,
+  // its sigma, estimated or held at its prior), the mount check's verdict and the flag text.
+  struct Calibration {
+    bool calibrated = false;
+    double sigma_x_m = 0.0, sigma_y_m = 0.0, sigma_yaw_rad = 0.0;
+    bool has_radial_bias = false;
+    double radial_bias_m = 0.0, sigma_radial_bias_m = 0.0;
+    bool radial_bias_estimated = false;
+    bool mount_looks_like_legs = false;
+    std::string flag;
+  };
+  Calibration calibration;
 };
 
 struct LiveTrack {
@@ -95,7 +109,10 @@ struct LiveState {
 // {"type":"state","stamp_ns":..,"version":"..","authenticated":true,"calibration":{"state":"calibrated",...},
 //  "sensors":[{"id":"s1","placed":true,"x_m":..,"y_m":..,"yaw_rad":..,"first_angle_rad":..,
 //   "fov_rad":..,"max_range_m":..,"status":"active",...,"background":[[x,y],...],
-//   "monitor":{"state":"moved","detail":".."} or null}],
+//   "monitor":{"state":"moved","detail":".."} or null,
+//   "calibration":{"sigma_x_m":..,"sigma_y_m":..,"sigma_yaw_deg":..,
+//    "radial_bias":{"m":..,"sigma_m":..,"estimated":true} or null,"mount_looks_like_legs":false,
+//    "flag":".."} or null}],
 //  "tracks":[{"sensor":"s1","id":3,"state":"confirmed","x_m":..,...,"fused":7}],
 //  "fused":[{"id":7,"state":"confirmed","x_m":..,...,"sensors":["s1","s2"]}],
 //  "zones":[{"name":"door","kind":"line","points":[[x,y],...],"occupancy":0,"inbound":3,

@@ -31,6 +31,16 @@ LiveState TwoSensors() {
   a.clock_sync = "synchronized";
   a.track_frames = 12345;
   a.background_xy = {{1.0f, 2.0f}, {3.25f, -4.5f}};
+  a.calibration.calibrated = true;
+  a.calibration.sigma_x_m = 0.0114;
+  a.calibration.sigma_y_m = 0.0098;
+  a.calibration.sigma_yaw_rad = 0.001;
+  a.calibration.has_radial_bias = true;
+  a.calibration.radial_bias_m = -0.0183;
+  a.calibration.sigma_radial_bias_m = 0.0061;
+  a.calibration.radial_bias_estimated = true;
+  a.calibration.mount_looks_like_legs = true;
+  a.calibration.flag = "s1: tracks look like legs";
   LiveSensor b;
   b.id = "s2";
   b.model = "tim561";
@@ -102,6 +112,17 @@ TEST(LiveStateJson, ParsesBackWithTheValues) {
   EXPECT_EQ(j["sensors"][1]["placed"], false);
   EXPECT_EQ(j["sensors"][1]["status"], "waiting");
   EXPECT_TRUE(j["sensors"][1]["background"].empty());
+  // What the calibration says of each sensor (null: none names it).
+  const json& c = a["calibration"];
+  EXPECT_DOUBLE_EQ(c["sigma_x_m"].get<double>(), 0.0114);
+  EXPECT_DOUBLE_EQ(c["sigma_y_m"].get<double>(), 0.0098);
+  EXPECT_NEAR(c["sigma_yaw_deg"].get<double>(), 0.0572958, 1e-7);
+  EXPECT_DOUBLE_EQ(c["radial_bias"]["m"].get<double>(), -0.0183);
+  EXPECT_DOUBLE_EQ(c["radial_bias"]["sigma_m"].get<double>(), 0.0061);
+  EXPECT_EQ(c["radial_bias"]["estimated"], true);
+  EXPECT_EQ(c["mount_looks_like_legs"], true);
+  EXPECT_EQ(c["flag"], "s1: tracks look like legs");
+  EXPECT_TRUE(j["sensors"][1]["calibration"].is_null());
 
   ASSERT_EQ(j["tracks"].size(), 2u);
   EXPECT_EQ(j["tracks"][0]["sensor"], "s1");

@@ -117,7 +117,22 @@ LiveState RoomState(double t_s, bool placed) {
     s.model = r.model;
     s.placed = placed;
     const common::Pose2 world_from_sensor{r.x_m, r.y_m, common::DegToRad(r.yaw_deg)};
-    if (placed) s.world_from_sensor = world_from_sensor;
+    if (placed) {
+      s.world_from_sensor = world_from_sensor;
+      // The calibration's word on each sensor: s1 the reference; s2's radial bias estimated, the
+      // others' held at their prior; s3's tracks leg-sized under shape.mount: torso.
+      LiveSensor::Calibration& c = s.calibration;
+      c.calibrated = true;
+      c.sigma_x_m = i == 0 ? 0.0 : 0.011;
+      c.sigma_y_m = i == 0 ? 0.0 : 0.0098;
+      c.sigma_yaw_rad = i == 0 ? 0.0 : common::DegToRad(0.051);
+      c.has_radial_bias = true;
+      c.radial_bias_m = i == 1 ? -0.0183 : 0.0;
+      c.sigma_radial_bias_m = i == 1 ? 0.0061 : 0.02;
+      c.radial_bias_estimated = i == 1;
+      c.mount_looks_like_legs = i == 2;
+      if (i == 2) c.flag = "s3: tracks look like legs; set shape.mount: legs on its tracker";
+    }
     s.fov_rad = common::DegToRad(r.fov_deg);
     s.first_angle_rad = -s.fov_rad / 2;
     s.max_range_m = r.max_range_m;
@@ -638,12 +653,27 @@ TEST_F(LiveViewBrowserTest, ShowsPlacedSensorsAndMovingTracksAndReconnects) {
   EXPECT_GE(moved, 0.8) << "the tracks did not move on the page";
   EXPECT_LT(moved, 30.0);
   // The health table has a row per sensor and the fused table one per person.
-  EXPECT_EQ(browser.Evaluate("document.querySelectorAll('#sensor-rows tr').length"), 6);
+  EXPECT_EQ(browser.Evaluate("document.querySelectorAll('#sensor-rows tr.sensor').length"), 6);
   EXPECT_EQ(browser.Evaluate("document.querySelectorAll('#fused-rows tr').length"), 2);
   EXPECT_EQ(browser.Evaluate("document.getElementById('calib-state').textContent"), "calibrated");
   for (const RoomSensor& r : kRoom) {
     EXPECT_NE(html.find(std::string("</span>") + r.id + "</td>"), std::string::npos) << r.id;
   }
+  // Under each sensor its pose's sigmas and radial bias; the knee-height mount where it is seen.
+  const auto calibration_row = [&](const std::string& id) {
+    const json text = browser.Evaluate(
+        "document.querySelector('#sensor-rows tr.calib[data-sensor=\"" + id + "\"]').textContent");
+    return text.is_string() ? text.get<std::string>() : std::string();
+  };
+  EXPECT_EQ(
+      calibration_row("s2"),
+      "pose 8.00, 0.30 m, 90.0° ± 1.1, 1.0 cm, 0.05° · radial bias -1.8 ± 0.6 cm (estimated)");
+  EXPECT_EQ(calibration_row("s1"),
+            "pose 0.30, 0.30 m, 45.0° ± 0.0, 0.0 cm, 0.00° · radial bias 0.0 ± 2.0 cm (prior)");
+  EXPECT_EQ(calibration_row("s3"),
+            "pose 15.70, 0.30 m, 135.0° ± 1.1, 1.0 cm, 0.05° · radial bias 0.0 ± 2.0 cm (prior)"
+            "scan plane looks like knee height: set shape.mount: legs");
+  EXPECT_EQ(browser.Evaluate("document.getElementById('summary').dataset.legSensors"), "s3");
 
   // The daemon goes away: the page says so, and comes back by itself when it is back.
   OnIo([this] { server_->Stop(); });
@@ -773,6 +803,12 @@ TEST_F(LiveViewFoxgloveTest, AFoxgloveClientSeesSensorsTracksTransformsAndZones)
   EXPECT_EQ(last["/lrfnet/zones"]["entities"][1]["lines"][0]["type"], 1);  // closed polygon
   EXPECT_EQ(last["/lrfnet/calibration"]["state"], "calibrated");
   EXPECT_EQ(last["/lrfnet/calibration"]["sensors"].size(), kRoom.size());
+  const json& s2 = last["/lrfnet/calibration"]["sensors"][1];
+  EXPECT_DOUBLE_EQ(s2["radial_bias_m"].get<double>(), -0.0183) << s2.dump();
+  EXPECT_DOUBLE_EQ(s2["sigma_radial_bias_m"].get<double>(), 0.0061) << s2.dump();
+  EXPECT_EQ(s2["radial_bias_estimated"], true) << s2.dump();
+  EXPECT_DOUBLE_EQ(s2["sigma_x_m"].get<double>(), 0.011) << s2.dump();
+  EXPECT_EQ(last["/lrfnet/calibration"]["sensors"][2]["mount_looks_like_legs"], true);
   // Everything subscribed arrived more than once (moving people), and the counters say so.
   EXPECT_GE(summary["counts"]["/lrfnet/fused"].get<int>(), 3);
   const LiveViewCounters c = OnIo([this] { return server_->counters(); });
