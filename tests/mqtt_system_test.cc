@@ -356,6 +356,67 @@ TEST_F(MqttSystem, OfflineObjectsAndZoneCountsMatchTheTruthAndEveryMessageItsSch
   EXPECT_TRUE(ok) << report;
 }
 
+// A daemon that computed a calibration and one started later from the calibration.yaml it wrote
+// publish the same calibration: poses, sigmas, each sensor's radial bias, the mount verdict.
+TEST_F(MqttSystem, ACalibrationReadFromItsFileIsPublishedAsTheDaemonThatComputedIt) {
+  MosquittoBroker broker;
+  ASSERT_TRUE(broker.Start());
+  MqttSubscriber subscriber(broker.port(), "lrfnet/+/calibration");
+  ASSERT_TRUE(subscriber.WaitSubscribed());
+  ScratchDir out;
+  Process computing(LRFNET_DAEMON_BINARY,
+                    {"--input", *dir_ / "s1.rec", *dir_ / "s2.rec", "--config",
+                     *dir_ / "lrfnetd.yaml", "--calibration-out", out / "calibration.yaml",
+                     "--mqtt", broker.address(), "--mqtt-site", "computed"});
+  ASSERT_EQ(computing.Wait(milliseconds(120'000)), 0) << computing.err();
+  Process loading(LRFNET_DAEMON_BINARY,
+                  {"--input", *dir_ / "s1.rec", *dir_ / "s2.rec", "--config",
+                   *dir_ / "lrfnetd.yaml", "--calibration-in", out / "calibration.yaml", "--mqtt",
+                   broker.address(), "--mqtt-site", "loaded"});
+  ASSERT_EQ(loading.Wait(milliseconds(120'000)), 0) << loading.err();
+  ASSERT_TRUE(subscriber.WaitFor([](const std::vector<ReceivedMessage>& got) {
+    return std::count_if(got.begin(), got.end(),
+                         [](const ReceivedMessage& r) {
+                           return r.topic.find("/loaded/") != std::string::npos;
+                         }) > 0 &&
+           std::count_if(got.begin(), got.end(), [](const ReceivedMessage& r) {
+             return r.topic.find("/computed/") != std::string::npos;
+           }) > 0;
+  }));
+  const json computed = Parse(subscriber.On("lrfnet/computed/calibration").back().payload);
+  const json loaded = Parse(subscriber.On("lrfnet/loaded/calibration").back().payload);
+  ASSERT_EQ(computed["sensors"].size(), 2u) << computed.dump(1);
+  ASSERT_EQ(loaded["sensors"].size(), 2u) << loaded.dump(1);
+  EXPECT_EQ(loaded["reference"], computed["reference"]);
+  std::printf("computed: %s\nloaded:   %s\n", computed["sensors"].dump().c_str(),
+              loaded["sensors"].dump().c_str());
+  for (std::size_t i = 0; i < 2; ++i) {
+    const json& c = computed["sensors"][i];
+    const json& l = loaded["sensors"][i];
+    const std::string id = c["id"].get<std::string>();
+    EXPECT_EQ(l["id"], c["id"]);
+    ASSERT_EQ(c["calibrated"], true) << c.dump();
+    EXPECT_EQ(l["calibrated"], true) << id;
+    for (const char* key : {"x_m", "y_m", "yaw_deg"}) EXPECT_EQ(l[key], c[key]) << id << " " << key;
+    // The file keeps six digits of the sigmas; the message rounds to 1e-5.
+    for (const char* key : {"sigma_x_m", "sigma_y_m", "sigma_yaw_deg", "sigma_radial_bias_m"}) {
+      ASSERT_TRUE(c[key].is_number()) << id << " " << key << ": " << c.dump();
+      ASSERT_TRUE(l[key].is_number()) << id << " " << key << ": " << l.dump();
+      EXPECT_NEAR(l[key].get<double>(), c[key].get<double>(), 1.1e-5) << id << " " << key;
+    }
+    EXPECT_EQ(l["radial_bias_m"], c["radial_bias_m"]) << id;
+    EXPECT_EQ(l["radial_bias_estimated"], c["radial_bias_estimated"]) << id;
+    EXPECT_EQ(l["mount_looks_like_legs"], c["mount_looks_like_legs"]) << id;
+    EXPECT_EQ(l["flag"], c["flag"]) << id;
+    // The sensor that is not the reference has an uncertainty to carry.
+    if (id != computed["reference"]) {
+      EXPECT_GT(l["sigma_x_m"].get<double>() + l["sigma_y_m"].get<double>(), 0.0) << l.dump();
+      EXPECT_GT(l["sigma_yaw_deg"].get<double>(), 0.0) << l.dump();
+    }
+    EXPECT_GT(l["sigma_radial_bias_m"].get<double>(), 0.0) << l.dump();
+  }
+}
+
 TEST_F(MqttSystem, LiveBrokerRestartPublishingResumesAndTheLossIsCounted) {
   MosquittoBroker broker;
   ASSERT_TRUE(broker.Start());
