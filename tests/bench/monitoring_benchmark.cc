@@ -178,6 +178,10 @@ int main(int argc, char** argv) {
   const std::string log = (work / "log.txt").string();
   const std::string only = Arg(argc, argv, "--only", "");     // one case by name
   bool keep_work = Arg(argc, argv, "--keep", "no") == "yes";  // or for a look at what failed
+  // Diagnostic: lrfnetd is given the site calibration's poses alone (no sigmas, no radial
+  // biases), as it read a calibration.yaml before it kept them: the monitoring and the fusion
+  // then take every placement as exact.
+  const bool poses_only = Arg(argc, argv, "--poses-only", "no") == "yes";
 
   // The daemon's options for the tracks-alone cases: a background motion is never significant
   // (the snapshots still correct a pose once the tracks flagged it).
@@ -219,6 +223,24 @@ int main(int argc, char** argv) {
       continue;
     }
     const common::Pose2 s2_calibrated = initial.sensors[*initial.Find("s2")].second;
+    fs::path site_calibration = calib_dir / "calibration.yaml";
+    if (poses_only) {
+      site_calibration = calib_dir / "poses_only.yaml";
+      std::ofstream poses(site_calibration);
+      if (initial.reference) poses << "reference: \"" << *initial.reference << "\"\n";
+      poses << "sensors:\n";
+      for (std::size_t i = 0; i < initial.sensors.size(); ++i) {
+        const auto& [id, pose] = initial.sensors[i];
+        if (!initial.calibrated[i]) {
+          poses << "  - {id: \"" << id << "\", calibrated: false}\n";
+          continue;
+        }
+        char line[160];
+        std::snprintf(line, sizeof line, "\", x_m: %.17g, y_m: %.17g, yaw_deg: %.17g}\n", pose.x_m,
+                      pose.y_m, common::RadToDeg(pose.yaw_rad));
+        poses << "  - {id: \"" << id << line;
+      }
+    }
 
     for (std::size_t ci = 0; ci < cases.size(); ++ci) {
       const Case& c = cases[ci];
@@ -252,7 +274,7 @@ int main(int argc, char** argv) {
       ++tally.runs;
       std::vector<std::string> daemon_args = {
           daemon, "--input", (dir / "s1.rec").string(), (dir / "s2.rec").string(),
-          (dir / "s3.rec").string(), "--calibration-in", (calib_dir / "calibration.yaml").string(),
+          (dir / "s3.rec").string(), "--calibration-in", site_calibration.string(),
           "--calibration-out", (dir / "calibration.yaml").string(), "--fused-out",
           (dir / "fused.jsonl").string(), "--stats-out", (dir / "stats.json").string(),
           "--log-level", "warn"};
@@ -426,7 +448,12 @@ int main(int argc, char** argv) {
            "moved (it flags at tracks_min_chi2 = 25, on two consecutive checks). *Tracks alone*: "
            "the background's motions are never significant (background_min_chi2 1e12, as in a "
            "scene without structure in range), so only the track check can flag; snapshots still "
-           "correct the pose after the flag.\n\n"
+           "correct the pose after the flag."
+        << (poses_only ? " **--poses-only**: lrfnetd is given the site calibration's poses "
+                         "alone (no sigmas, no radial biases), as it read a calibration.yaml "
+                         "before it kept them."
+                       : "")
+        << "\n\n"
         << "| case | runs | flagged | move → flag mean / max [s] | flagged by | corrected | "
            "motion error mean / max [°] | [m] | pose error mean / max [°] | [m] | fused before "
            "flag | while flagged | coasting after flag | flagged again | false flags | per "
