@@ -669,7 +669,7 @@ TEST_F(LiveViewBrowserTest, ShowsPlacedSensorsAndMovingTracksAndReconnects) {
       calibration_row("s2"),
       "pose 8.00, 0.30 m, 90.0° ± 1.1, 1.0 cm, 0.05° · radial bias -1.8 ± 0.6 cm (estimated)");
   EXPECT_EQ(calibration_row("s1"),
-            "pose 0.30, 0.30 m, 45.0° ± 0.0, 0.0 cm, 0.00° · radial bias 0.0 ± 2.0 cm (prior)");
+            "pose 0.30, 0.30 m, 45.0° (reference) · radial bias 0.0 ± 2.0 cm (prior)");
   EXPECT_EQ(calibration_row("s3"),
             "pose 15.70, 0.30 m, 135.0° ± 1.1, 1.0 cm, 0.05° · radial bias 0.0 ± 2.0 cm (prior)"
             "scan plane looks like knee height: set shape.mount: legs");
