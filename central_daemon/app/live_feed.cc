@@ -45,8 +45,9 @@ void BackgroundScanOf(const BackgroundScan& scan, std::size_t max_points, LiveSe
   }
 }
 
-// What the calibration says of one sensor, for the live view.
-LiveSensor::Calibration CalibrationOf(const calib::SensorPose& pose) {
+}  // namespace
+
+LiveSensor::Calibration LiveCalibrationOf(const calib::SensorPose& pose) {
   LiveSensor::Calibration c;
   c.calibrated = true;
   if (pose.calibrated) {
@@ -65,8 +66,6 @@ LiveSensor::Calibration CalibrationOf(const calib::SensorPose& pose) {
   c.flag = pose.flag;
   return c;
 }
-
-}  // namespace
 
 LiveState LiveFeed::Build(const Daemon& daemon, const CalibrationService& calibration,
                           const FusionService& fusion, common::UtcNs now_ns,
@@ -113,7 +112,7 @@ LiveState LiveFeed::Build(const Daemon& daemon, const CalibrationService& calibr
     sensor.placed = pose != poses.end();
     if (sensor.placed) sensor.world_from_sensor = pose->second;
     if (const auto c = calibrated.find(s.sensor_id); c != calibrated.end()) {
-      sensor.calibration = CalibrationOf(*c->second);
+      sensor.calibration = LiveCalibrationOf(*c->second);
     }
     if (s.info) {
       sensor.model = s.info->model;

@@ -14,6 +14,10 @@
 
 namespace lrfnet::daemon {
 
+// What the live view shows of one sensor's calibration (pose sigmas where placed, radial bias,
+// mount verdict, flag).
+LiveSensor::Calibration LiveCalibrationOf(const calib::SensorPose& pose);
+
 class LiveFeed {
  public:
   explicit LiveFeed(std::size_t background_points) : background_points_(background_points) {}

@@ -14,6 +14,7 @@
 #include <vector>
 
 #include "central_daemon/app/fusion_service.h"
+#include "central_daemon/app/live_feed.h"
 #include "central_daemon/app/monitoring_service.h"
 #include "central_daemon/app/mqtt_messages.h"
 #include "central_daemon/app/recorder.h"
@@ -214,6 +215,26 @@ TEST_F(RunTest, ACalibrationReadAtStartUpCarriesWhatItsCalibrationComputed) {
   EXPECT_EQ(from_loaded["sensors"], from_computed["sensors"]) << from_loaded["sensors"].dump(1);
   EXPECT_EQ(from_loaded["sensors"][2]["mount_looks_like_legs"], true);
   EXPECT_EQ(from_loaded["sensors"][1]["sigma_yaw_deg"], 0.0512);
+  // And the live view shows each sensor's calibration as the computed one's.
+  for (std::size_t i = 0; i < computed.sensors.size(); ++i) {
+    const LiveSensor::Calibration want = LiveCalibrationOf(computed.sensors[i]);
+    const LiveSensor::Calibration got = LiveCalibrationOf(loaded.result.sensors[i]);
+    const std::string& id = computed.sensors[i].id;
+    EXPECT_TRUE(got.calibrated) << id;
+    EXPECT_NEAR(got.sigma_x_m, want.sigma_x_m, 1e-5 * want.sigma_x_m) << id;
+    EXPECT_NEAR(got.sigma_y_m, want.sigma_y_m, 1e-5 * want.sigma_y_m) << id;
+    EXPECT_NEAR(got.sigma_yaw_rad, want.sigma_yaw_rad, 1e-5 * want.sigma_yaw_rad) << id;
+    EXPECT_EQ(got.has_radial_bias, want.has_radial_bias) << id;
+    EXPECT_EQ(got.radial_bias_m, want.radial_bias_m) << id;
+    EXPECT_NEAR(got.sigma_radial_bias_m, want.sigma_radial_bias_m, 1e-6 * want.sigma_radial_bias_m)
+        << id;
+    EXPECT_EQ(got.radial_bias_estimated, want.radial_bias_estimated) << id;
+    EXPECT_EQ(got.mount_looks_like_legs, want.mount_looks_like_legs) << id;
+    EXPECT_EQ(got.flag, want.flag) << id;
+  }
+  EXPECT_TRUE(LiveCalibrationOf(loaded.result.sensors[2]).mount_looks_like_legs);
+  EXPECT_GT(LiveCalibrationOf(loaded.result.sensors[1]).sigma_x_m, 0.01);
+  EXPECT_FALSE(LiveCalibrationOf(loaded.result.sensors[3]).has_radial_bias);
 }
 
 TEST_F(RunTest, RecorderWritesWhatTheCoreRecordsAndItReadsBack) {
