@@ -715,6 +715,9 @@ TEST_F(LiveViewBrowserTest, BeforeCalibrationShowsEachSensorInItsOwnFrame) {
   EXPECT_EQ(browser.Evaluate("document.getElementById('calib-state').textContent"), "collecting");
   EXPECT_EQ(browser.Evaluate("document.getElementById('calib-percent').textContent"), "45 %");
   EXPECT_EQ(browser.Evaluate("document.getElementById('progress-fill').style.width"), "45%");
+  // No calibration yet: no calibration line under the sensors.
+  EXPECT_EQ(browser.Evaluate("document.querySelectorAll('#sensor-rows tr.calib').length"), 0);
+  EXPECT_EQ(browser.Evaluate("document.querySelectorAll('#sensor-rows tr.sensor').length"), 6);
 }
 
 // ---- Foxglove -------------------------------------------------------------------------------
