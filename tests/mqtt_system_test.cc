@@ -388,6 +388,9 @@ TEST_F(MqttSystem, ACalibrationReadFromItsFileIsPublishedAsTheDaemonThatComputed
   ASSERT_EQ(computed["sensors"].size(), 2u) << computed.dump(1);
   ASSERT_EQ(loaded["sensors"].size(), 2u) << loaded.dump(1);
   EXPECT_EQ(loaded["reference"], computed["reference"]);
+  EXPECT_GT(computed["track_residual_rms_m"].get<double>(), 0.0) << computed.dump();
+  EXPECT_NEAR(loaded["track_residual_rms_m"].get<double>(),
+              computed["track_residual_rms_m"].get<double>(), 1.1e-4);
   std::printf("computed: %s\nloaded:   %s\n", computed["sensors"].dump().c_str(),
               loaded["sensors"].dump().c_str());
   for (std::size_t i = 0; i < 2; ++i) {

@@ -92,6 +92,7 @@ std::optional<std::string> LoadInitialCalibration(const std::string& path,
   outcome->ok = true;
   outcome->result.method = "file";
   outcome->result.reference = file.reference.value_or("");
+  outcome->result.track_residual_rms_m = file.track_residual_rms_m.value_or(0.0);
   for (std::size_t i = 0; i < file.sensors.size(); ++i) {
     calib::SensorPose pose;
     pose.id = file.sensors[i].first;

@@ -134,6 +134,7 @@ calib::CalibrationResult ComputedCalibration() {
   calib::CalibrationResult r;
   r.method = "quenzel";
   r.reference = "s1";
+  r.track_residual_rms_m = 0.0283;
   const auto pose = [](const char* id, double x, double y, double yaw_deg, double sigma_m,
                        double sigma_yaw_deg) {
     calib::SensorPose p;
@@ -208,6 +209,7 @@ TEST_F(RunTest, ACalibrationReadAtStartUpCarriesWhatItsCalibrationComputed) {
         << placed_loaded[i].covariance;
     EXPECT_GT(placed_loaded[i].covariance(2, 2), i == 0 ? -1.0 : 0.0) << placed_loaded[i].id;
   }
+  EXPECT_EQ(loaded.result.track_residual_rms_m, computed.track_residual_rms_m);
   // What is published of each sensor is the same (MQTT rounds sigmas to 1e-5).
   const nlohmann::json from_computed = nlohmann::json::parse(CalibrationJson("lab", 1, computed));
   const nlohmann::json from_loaded =

@@ -362,6 +362,21 @@ class Reader {
       file.mount_looks_like_legs.push_back(legs);
     }
 
+    // The one quality figure a daemon started from the file reports again.
+    const YAML::Node quality = root["quality"];
+    if (quality.IsDefined() && quality.IsMap() && Has(quality, "track_residual_rms_m")) {
+      double rms = 0.0;
+      if (!Number(quality, "quality.track_residual_rms_m", "", "track_residual_rms_m",
+                  kMaxPoseCoordinateM, &rms)) {
+        return false;
+      }
+      if (rms < 0.0) {
+        return Fail(quality["track_residual_rms_m"], "quality.track_residual_rms_m",
+                    "expected a number >= 0");
+      }
+      file.track_residual_rms_m = rms;
+    }
+
     if (Has(root, "reference")) {
       const YAML::Node node = root["reference"];
       if (!node.IsScalar()) return Fail(node, "reference", "expected a sensor id");
@@ -479,7 +494,9 @@ std::string CalibrationYaml(const CalibrationResult& result, const YamlContext& 
       "  joint_refinement: {{applied: {}, cost_before: {}, cost_after: {}, observations: {}}}\n",
       Bool(result.refined), Short(result.refine_cost_before), Short(result.refine_cost_after),
       result.refine_observations);
-  y += "  track_residual_rms_m: " + Short(result.track_residual_rms_m) + "\n";
+  // Read back by lrfnetd (calibration.initial): written only when it is a number.
+  if (std::isfinite(result.track_residual_rms_m) && result.track_residual_rms_m >= 0.0)
+    y += "  track_residual_rms_m: " + Short(result.track_residual_rms_m) + "\n";
   y += "  warnings:";
   y += result.warnings.empty() ? " []\n" : "\n";
   for (const std::string& w : result.warnings) y += "    - " + Quoted(w) + "\n";

@@ -17,8 +17,8 @@
 // SensorPose's;
 // a calibration's world is the reference sensor's frame. radial_bias_m, sigma_radial_bias_m [m]
 // and radial_bias_estimated (all three or none) are the joint refinement's shared radial bias of
-// that sensor (types.h RadialBiasEstimate). Other keys (method, quality, devices,
-// targets, ...) are informative and ignored by the reader.
+// that sensor (types.h RadialBiasEstimate). quality.track_residual_rms_m is read too; other keys
+// (method, the rest of quality, devices, targets, ...) are informative and ignored by the reader.
 
 #include <optional>
 #include <string>
@@ -56,6 +56,8 @@ struct PoseFile {
   std::vector<std::optional<Eigen::Matrix3d>> covariance;
   std::vector<std::string> flag;
   std::vector<bool> mount_looks_like_legs;
+  // quality.track_residual_rms_m [m], when the file has it.
+  std::optional<double> track_residual_rms_m;
 
   // Index of `id` in sensors, or nullopt.
   std::optional<std::size_t> Find(const std::string& id) const;
@@ -71,13 +73,14 @@ inline constexpr double kMaxPoseCoordinateM = 1e7;
 inline constexpr double kMaxPoseYawDeg = 1e6;
 inline constexpr double kMaxRadialBiasM = 100.0;
 
-// Parses the `sensors` list (and `reference`). False with a one-line *error naming the file (if
+// Parses the `sensors` list (and `reference`, quality.track_residual_rms_m). False with a one-line *error naming the file (if
 // any), the line and the key for anything malformed: not YAML, no `sensors` list or an empty one,
 // an entry without id, a duplicate id, a missing or non-numeric or non-finite or out-of-range
 // x_m / y_m / yaw_deg of a calibrated sensor, a radial bias with one of its three keys missing or
 // malformed (or a negative sigma_radial_bias_m), a negative sigma, a cross term beyond the
 // product of its sigmas (a correlation above 1), a `calibrated` or mount_looks_like_legs that is
-// not true/false, a `flag` that is not a string, a
+// not true/false, a `flag` that is not a string, a quality.track_residual_rms_m that is not a
+// number >= 0, a
 // `reference` that is not one of the calibrated sensors. *out is only written on success.
 bool ParsePoseYaml(const std::string& text, PoseFile* out, std::string* error);
 bool ReadPoseFile(const std::string& path, PoseFile* out, std::string* error);

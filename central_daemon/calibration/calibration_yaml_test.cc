@@ -200,6 +200,8 @@ TEST(CalibrationYaml, CovarianceFlagsAndMountRoundTrip) {
   for (std::size_t i = 0; i < result.sensors.size(); ++i)
     EXPECT_EQ(file.flag[i], result.sensors[i].flag) << i;
   EXPECT_NE(yaml.find("#   mount_looks_like_legs"), std::string::npos);
+  ASSERT_TRUE(file.track_residual_rms_m.has_value());
+  EXPECT_NEAR(*file.track_residual_rms_m, result.track_residual_rms_m, 1e-9);
   EXPECT_NE(yaml.find("cov_xyaw_m_deg"), std::string::npos);
   // PoseFileOf gives the same without the text.
   const PoseFile direct = PoseFileOf(result);
@@ -228,6 +230,11 @@ TEST(CalibrationYaml, CovarianceFlagsAndMountRoundTrip) {
   EXPECT_EQ((*file.covariance[0])(0, 2), 0.0);
   EXPECT_FALSE(file.mount_looks_like_legs[0]);
   EXPECT_EQ(file.flag[0], "");
+  EXPECT_FALSE(file.track_residual_rms_m.has_value());
+  // A residual that is not a number is not written (the file still reads).
+  result.track_residual_rms_m = std::nan("");
+  ASSERT_TRUE(ParsePoseYaml(CalibrationYaml(result, {}), &file, &error)) << error;
+  EXPECT_FALSE(file.track_residual_rms_m.has_value());
 }
 
 TEST(CalibrationYaml, PoseFileOfMatchesWhatTheFileReadsBack) {
@@ -425,6 +432,10 @@ TEST(PoseYaml, HostileInputGivesOneClearLine) {
        "sensors[0].mount_looks_like_legs: expected true or false"},
       {"flag a list", "sensors: [{id: a, calibrated: false, flag: [x]}]\n",
        "sensors[0].flag: expected a string"},
+      {"residual negative", "sensors: [" + ok_entry + "]\nquality: {track_residual_rms_m: -1}\n",
+       "quality.track_residual_rms_m: expected a number >= 0"},
+      {"residual not a number", "sensors: [" + ok_entry + "]\nquality: {track_residual_rms_m: x}\n",
+       "quality.track_residual_rms_m: expected a number, got 'x'"},
       {"not yaml", "sensors: [{id: a, x_m: 1\n", "not valid YAML"},
       {"tab indentation", "sensors:\n\t- {id: a}\n", "not valid YAML"},
       {"bad escape", "sensors: [{id: \"a\\\x01\"}]\n",
