@@ -227,9 +227,19 @@ void VisitShape(tracking::ShapeOptions& o, ConfigVisitor& v) {
   v.Field("size_floor_sigma_m", o.size_floor_sigma_m,
           "The size state counts as no more certain than this in that shared error.");
   v.Field("beam_divergence_rad", o.beam_divergence_rad,
-          "Full beam divergence of the scanner (LMS1xx, TiM: 0.015; LMS5xx: 0.011). Used for "
-          "the legs' mixed pixels only: a silhouette ends half a beam step beyond its last beam "
-          "whatever the divergence.");
+          "Full beam divergence of the scanner (LMS1xx, TiM: 0.015; LMS5xx: 0.011); the beam's "
+          "footprint at range R is R times this plus beam_exit_diameter_m (mixed pixels of legs "
+          "and of a far body's edges).");
+  v.Field("beam_exit_diameter_m", o.beam_exit_diameter_m,
+          "The beam's diameter at the scanner (LMS1xx: 0.008; LMS5xx: 0.013).");
+  v.Field("mixed_pixel_min_footprint_m", o.mixed_pixel_min_footprint_m,
+          "Mount torso: where the beam's footprint is at least this wide, a segment's edge point "
+          "whose neighbour beam beyond returned from more than mixed_pixel_min_gap_m behind it "
+          "is a mixed pixel (a range between the body and what is behind): the fit leaves it "
+          "out. 0: off.");
+  v.Field("mixed_pixel_min_gap_m", o.mixed_pixel_min_gap_m,
+          "How far behind an edge point the neighbour beam must have returned for the edge point "
+          "to be a mixed pixel.");
   v.Field("centre_model_sigma_m", o.centre_model_sigma_m,
           "Added in quadrature to every centre measurement's sigma: what the fit cannot know "
           "(sway, an outline that is not the model's).");

@@ -132,6 +132,18 @@ std::optional<std::string> Validate(const ShapeOptions& o) {
   if (!(std::isfinite(o.unseen_coasting_m) && o.unseen_coasting_m >= 0.0)) {
     return "unseen_coasting_m must be >= 0";
   }
+  if (!(std::isfinite(o.beam_divergence_rad) && o.beam_divergence_rad >= 0.0)) {
+    return "beam_divergence_rad must be >= 0";
+  }
+  if (!(std::isfinite(o.beam_exit_diameter_m) && o.beam_exit_diameter_m >= 0.0)) {
+    return "beam_exit_diameter_m must be >= 0";
+  }
+  if (!(std::isfinite(o.mixed_pixel_min_footprint_m) && o.mixed_pixel_min_footprint_m >= 0.0)) {
+    return "mixed_pixel_min_footprint_m must be >= 0 (0: off)";
+  }
+  if (!(std::isfinite(o.mixed_pixel_min_gap_m) && o.mixed_pixel_min_gap_m >= 0.0)) {
+    return "mixed_pixel_min_gap_m must be >= 0";
+  }
   return std::nullopt;
 }
 
@@ -230,6 +242,21 @@ class TrackingPipeline::Refiner final : public MeasurementRefiner {
     return p_.segments_.points_m.span().subspan(part.first_point, part.point_count);
   }
 
+  // The part's points whose range the fit can use: without its mixed edge points
+  // (ShapeOptions::mixed_pixel_min_footprint_m); where those are all there is, the nearest of them
+  // (a mixed pixel lies behind the body, the nearest the least).
+  std::span<const Eigen::Vector2d> ReliablePoints(const ObservationPart& part) const {
+    const std::span<const Eigen::Vector2d> all = Points(part);
+    const std::size_t drop_first = part.first_mixed ? 1 : 0;
+    const std::size_t drop_last = part.last_mixed && all.size() > drop_first ? 1 : 0;
+    if (all.size() > drop_first + drop_last) {
+      return all.subspan(drop_first, all.size() - drop_first - drop_last);
+    }
+    if (all.empty() || drop_first + drop_last == 0) return all;
+    const std::size_t nearest = all.size() > 1 && all[1].norm() < all[0].norm() ? 1 : 0;
+    return all.subspan(nearest, 1);
+  }
+
   bool RefineBody(const Observation& ob, const Eigen::Vector4d* predicted,
                   const Eigen::Matrix4d* predicted_cov, TrackShape& shape, Measurement& m) {
     const ShapeOptions& o = p_.options_.shape;
@@ -267,7 +294,8 @@ class TrackingPipeline::Refiner final : public MeasurementRefiner {
       }
     }
     const ObservationPart& part = ob.parts[0];
-    const ShapeFitResult fit = FitShape(Points(part), part.silhouette, prior, o.fit);
+    const std::span<const Eigen::Vector2d> points = ReliablePoints(part);
+    const ShapeFitResult fit = FitShape(points, part.silhouette, prior, o.fit);
     if (!fit.ok) {
       ++failed;
       return false;
@@ -442,7 +470,27 @@ ObservationPart TrackingPipeline::MakePart(const ScanView& scan, const Segment& 
   };
   s.first_valid = part.begin_beam > 0 && clear(part.begin_beam - 1, points.front());
   s.last_valid = part.end_beam < scan.range_m.size() && clear(part.end_beam, points.back());
+  MarkMixedPixels(scan, points, part);
   return part;
+}
+
+void TrackingPipeline::MarkMixedPixels(const ScanView& scan,
+                                       std::span<const Eigen::Vector2d> points,
+                                       ObservationPart& part) const {
+  const ShapeOptions& o = options_.shape;
+  if (o.mount != Mount::kTorso || !(o.mixed_pixel_min_footprint_m > 0.0) || points.empty()) return;
+  // An edge point is mixed where the footprint at it is wide enough and the neighbour beam beyond
+  // it returned from more than mixed_pixel_min_gap_m behind it (no echo: nothing to mix with).
+  const auto mixed = [&](std::size_t beam, const Eigen::Vector2d& edge_point) {
+    const double range = Range(edge_point);
+    if (range * o.beam_divergence_rad + o.beam_exit_diameter_m < o.mixed_pixel_min_footprint_m) {
+      return false;
+    }
+    const float r = scan.range_m[beam];
+    return std::isfinite(r) && r > 0.0f && static_cast<double>(r) - range > o.mixed_pixel_min_gap_m;
+  };
+  part.first_mixed = part.begin_beam > 0 && mixed(part.begin_beam - 1, points.front());
+  part.last_mixed = part.end_beam < scan.range_m.size() && mixed(part.end_beam, points.back());
 }
 
 void TrackingPipeline::AddObservation(const ScanView& scan, const Observation& observation) {

@@ -33,7 +33,8 @@
 //
 //   tracking_benchmark --scenarios DIR [--extra DIR] [--only NAME] [--out FILE] [--jobs N]
 //                      [--explain] [--breakdown]
-//                      [--before-report-rules | --before-resume | --before-mixed-pixels]
+//                      [--before-report-rules | --before-resume |
+//                       [--before-mixed-pixels] [--before-far]]
 //   (--extra: more scenario folders, e.g. held-out scenes, reported in their own section;
 //   --explain: per run on stderr, what became of an object's previous track at every id switch
 //   and missed scan, what the false positives are (by scan and by false track: a track left
@@ -45,8 +46,11 @@
 //   ShapeOptions::unseen_coasting_m and MultiTrackerOptions::moving_speed_mps, the tree before
 //   them; --before-resume: "before" is the new one without resuming lost tracks,
 //   MultiTrackerOptions::resume_window_s = 0; --before-mixed-pixels: "before" is the new one
-//   taking knee-height mixed pixels for legs, ShapeOptions::drop_mixed_pixel_legs = false).
-//   --explain also writes the false positives' classes to the results (ExplainTable).
+//   taking knee-height mixed pixels for legs, ShapeOptions::drop_mixed_pixel_legs = false;
+//   --before-far: "before" is the new one without the mixed-pixel model of far edges at upper-body
+//   height, ShapeOptions::mixed_pixel_min_footprint_m = 0; both: without either). --explain also
+//   writes the false positives' classes to the results (ExplainTable) and, on stderr, what the
+//   tracks measured again after more than 1 s (a lost track resumed) came back on.
 
 #include <Eigen/Cholesky>
 #include <Eigen/Core>
@@ -264,7 +268,11 @@ struct Mot {
 struct Causes {
   std::map<std::string, double> switches, misses, false_positives;
   std::map<std::string, double> false_classes, false_scan_classes, false_track_classes;
+  // Tracks measured again more than kResumedAfterS after their previous measurement (a lost
+  // track resumed): what they came back on, and their false scans within 1 s after.
+  std::map<std::string, double> resumes;
   void Add(const Causes& o) {
+    for (const auto& [k, v] : o.resumes) resumes[k] += v;
     for (const auto& [k, v] : o.false_classes) false_classes[k] += v;
     for (const auto& [k, v] : o.false_scan_classes) false_scan_classes[k] += v;
     for (const auto& [k, v] : o.false_track_classes) false_track_classes[k] += v;
@@ -396,14 +404,38 @@ class MotSequence {
       s.matched_last = true;
       s.last_hyp = h.id;
       HypState& hs = hyps_[h.id];
+      NoteResume(h, hs, dt_s,
+                 truths[t].id == hs.last_truth ? "on its own object" : "on another object");
       hs.frames += 1;
       hs.ever_matched = true;
       hs.last_truth = truths[t].id;
     }
+    for (std::size_t h = 0; h < hyps.size(); ++h) {
+      if (hyp_taken[h]) continue;
+      HypState& hs = hyps_[hyps[h].id];
+      if (!hs.ever_matched) continue;
+      std::string cls = "unmatched, its object out of view";
+      for (std::size_t t = 0; t < truths.size(); ++t) {
+        if (truths[t].id != hs.last_truth) continue;
+        const double d = (hyps[h].p - truths[t].p).norm();
+        cls = std::string(truth_to_hyp[t] >= 0 ? "unmatched, its object on another track"
+                                               : "unmatched, its object untracked") +
+              (d < 1.0   ? " < 1 m"
+               : d < 2.0 ? " 1-2 m"
+                         : " >= 2 m");
+      }
+      NoteResume(hyps[h], hs, dt_s, cls);
+      if (!hs.resumed_cls.empty() && now_s_ + dt_s - hs.resumed_at_s < 1.0) {
+        causes_.resumes["false scans within 1 s after: " + hs.resumed_cls] += 1;
+      }
+    }
     now_s_ += dt_s;
     for (const Hypothesis& h : hyps) {
       hyp_age_[h.id] += dt_s;
-      if (h.measured) hyps_[h.id].last_measured_s = now_s_;
+      if (h.measured) {
+        hyps_[h.id].last_measured_s = now_s_;
+        hyps_[h.id].last_measured_p = h.p;
+      }
     }
     for (std::size_t h = 0; h < hyps.size(); ++h) {
       if (hyp_taken[h]) continue;
@@ -524,8 +556,28 @@ class MotSequence {
     bool ever_matched = false;
     std::size_t last_truth = 0;
     double last_measured_s = 0;  // time of its last measured report (MotSequence's clock)
+    Vector2d last_measured_p = Vector2d::Zero();
+    std::string resumed_cls;  // what it came back on when last resumed
+    double resumed_at_s = 0;
     std::map<std::string, double> classes;  // its false positives by FalseClass
   };
+  static constexpr double kResumedAfterS = 1.0;
+  void NoteResume(const Hypothesis& h, HypState& hs, double dt_s, const std::string& cls) {
+    if (!h.measured || hs.frames == 0 || now_s_ + dt_s - hs.last_measured_s <= kResumedAfterS) {
+      return;
+    }
+    const double jump = (h.p - hs.last_measured_p).norm();
+    const double gap = now_s_ + dt_s - hs.last_measured_s;
+    hs.resumed_cls = cls;
+    hs.resumed_at_s = now_s_ + dt_s;
+    causes_.resumes[cls] += 1;
+    causes_.resumes[cls + (jump < 0.5   ? ", jump < 0.5 m"
+                           : jump < 1.0 ? ", jump 0.5-1 m"
+                           : jump < 2.0 ? ", jump 1-2 m"
+                                        : ", jump >= 2 m")] += 1;
+    causes_.resumes[cls + (gap < 1.5 ? ", gap < 1.5 s" : ", gap >= 1.5 s")] += 1;
+  }
+
   Mot mot_;
   double now_s_ = 0;  // sum of the frames' dt_s
   std::map<std::size_t, TruthState> state_;
@@ -556,6 +608,10 @@ bool g_before_resume = false;
 // --before-mixed-pixels: "before" is the new tracker that takes knee-height mixed pixels for legs
 // (ShapeOptions::drop_mixed_pixel_legs = false).
 bool g_before_mixed_pixels = false;
+// --before-far: "before" is the new tracker without the mixed-pixel model of far edges at
+// upper-body height (ShapeOptions::mixed_pixel_min_footprint_m = 0). With --before-mixed-pixels:
+// "before" has neither.
+bool g_before_far = false;
 const char* const kVariantNames[] = {"old", "new", "before"};
 
 std::vector<Variant> Variants(sim::Mount mount, double range_m) {
@@ -580,9 +636,10 @@ std::vector<Variant> Variants(sim::Mount mount, double range_m) {
     tracking::TrackerOptions before = fresh;
     before.tracking.resume_window_s = 0.0;
     variants.push_back({"before", before});
-  } else if (g_before_mixed_pixels) {
+  } else if (g_before_mixed_pixels || g_before_far) {
     tracking::TrackerOptions before = fresh;
-    before.shape.drop_mixed_pixel_legs = false;
+    if (g_before_mixed_pixels) before.shape.drop_mixed_pixel_legs = false;
+    if (g_before_far) before.shape.mixed_pixel_min_footprint_m = 0.0;
     variants.push_back({"before", before});
   }
   return variants;
@@ -843,6 +900,8 @@ void Explain(const std::string& scenario, const std::string& mount, const RunRes
       std::fprintf(stderr, "  fused false tracks: %-65s %6.0f\n", cls.c_str(), count);
     for (const auto& [why, count] : r.fused_causes[v].switches)
       std::fprintf(stderr, "  fused switch: %-60s %5.0f\n", why.c_str(), count);
+    for (const auto& [why, count] : r.causes[v].resumes)
+      std::fprintf(stderr, "  resumed: %-90s %5.0f\n", why.c_str(), count);
   }
 }
 
@@ -1253,13 +1312,16 @@ int main(int argc, char** argv) {
       g_before_resume = true;
     } else if (a == "--before-mixed-pixels") {
       g_before_mixed_pixels = true;
+    } else if (a == "--before-far") {
+      g_before_far = true;
     } else if (a == "--jobs") {
       jobs = std::max(1, std::atoi(value().c_str()));
     } else {
       std::fprintf(stderr,
                    "usage: tracking_benchmark --scenarios DIR [--extra DIR] [--only NAME] "
                    "[--out FILE] [--jobs N] [--explain] [--breakdown] "
-                   "[--before-report-rules | --before-resume | --before-mixed-pixels]\n");
+                   "[--before-report-rules | --before-resume | [--before-mixed-pixels] "
+                   "[--before-far]]\n");
       return 2;
     }
   }
@@ -1305,10 +1367,21 @@ int main(int argc, char** argv) {
            "position, 2 dof, mean over measured matches (2 is honest) and the share within the "
            "99 % bound. \"legs\": every sensor at knee height. How the numbers are made: the "
            "header of tests/bench/tracking_benchmark.cc.\n\n"
-        << (g_before_mixed_pixels
+        << (g_before_mixed_pixels && g_before_far
+                ? "\"before\": the new tracker without its handling of mixed pixels: at knee "
+                  "height taking them for legs (`shape.drop_mixed_pixel_legs` false), at "
+                  "upper-body "
+                  "height fitting a far body's mixed edge points "
+                  "(`shape.mixed_pixel_min_footprint_m` "
+                  "0), on the same scans in the same run.\n\n"
+            : g_before_mixed_pixels
                 ? "\"before\": the new tracker taking knee-height mixed pixels for legs "
                   "(`shape.drop_mixed_pixel_legs` false), on the same scans in the same run; "
                   "upper-body rows are the same by construction.\n\n"
+            : g_before_far
+                ? "\"before\": the new tracker without the mixed-pixel model of far edges "
+                  "(`shape.mixed_pixel_min_footprint_m` 0), on the same scans in the same "
+                  "run.\n\n"
             : g_before_resume ? "\"before\": the new tracker without resuming lost tracks "
                                 "(`tracking.resume_window_s` 0), on the same scans in the same "
                                 "run.\n\n"
