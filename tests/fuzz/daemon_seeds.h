@@ -12,5 +12,7 @@ void WriteDatagramSeeds(const std::string& dir);
 void WriteRecordingSeeds(const std::string& dir);
 // auth_fuzz: datagrams sealed with its keys, damaged copies, unsigned datagrams.
 void WriteAuthSeeds(const std::string& dir);
+// calibration_yaml_fuzz: calibration.yaml files the writer made, older formats, damaged copies.
+void WriteCalibrationYamlSeeds(const std::string& dir);
 
 }  // namespace lrfnet::fuzz
