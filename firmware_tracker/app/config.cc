@@ -320,6 +320,14 @@ void VisitTracking(tracking::TrackerOptions& p, ConfigVisitor& v) {
           "A coasting track is sent for this long after its last measurement (and kept until "
           "coast_timeout_s, to be found again): someone hidden longer may have stopped or "
           "turned.");
+  v.Field("report_coasting_per_measured_s", o.report_coasting_per_measured_s,
+          "... and for no longer than this times how long the track was seen (measured in "
+          "consecutive scans): a track with little evidence (sporadic clutter confirmed within "
+          "a few scans) is sent coasting only briefly. 0: off.");
+  v.Field("seen_gap_s", o.seen_gap_s,
+          "Seen, for report_coasting_per_measured_s: the time between two of a track's "
+          "measurements at most this far apart (someone far away is measured in some scans "
+          "only; clutter comes in bursts).");
   v.Field("max_speed_mps", o.max_speed_mps,
           "Motion limit: a track's speed is clamped to this. 2.5 covers walking people; a site "
           "with forklifts raises it (to ~6), with accel_psd_m2ps3 (~2), "

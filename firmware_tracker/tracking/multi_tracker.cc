@@ -3,7 +3,6 @@
 #include <algorithm>
 #include <bit>
 #include <cmath>
-#include <cstdlib>
 #include <limits>
 
 #include "firmware_tracker/tracking/assignment.h"
@@ -75,6 +74,11 @@ std::optional<std::string> Validate(const MultiTrackerOptions& o) {
   if (!(std::isfinite(o.report_coasting_s) && o.report_coasting_s >= 0.0)) {
     return "report_coasting_s must be >= 0";
   }
+  if (!(std::isfinite(o.report_coasting_per_measured_s) &&
+        o.report_coasting_per_measured_s >= 0.0)) {
+    return "report_coasting_per_measured_s must be >= 0";
+  }
+  if (!(std::isfinite(o.seen_gap_s) && o.seen_gap_s >= 0.0)) return "seen_gap_s must be >= 0";
   if (!Positive(o.max_speed_mps)) return "max_speed_mps must be > 0";
   if (!Positive(o.still_radius_m)) return "still_radius_m must be > 0";
   if (!(std::isfinite(o.moving_speed_mps) && o.moving_speed_mps >= 0.0)) {
@@ -442,6 +446,8 @@ void MultiTracker::NoteUpdate(Track& t, const Measurement& m, const Candidate& c
                               const Eigen::Vector2d& z, common::UtcNs at_ns,
                               common::UtcNs scan_start_ns) {
   t.updated = true;
+  const double gap_s = common::NsToSeconds(at_ns - t.last_update_ns);
+  if (gap_s > 0.0 && gap_s <= options_.seen_gap_s) t.measured_s += gap_s;
   t.last_update_ns = at_ns;
   t.kind = m.kind;
   t.ellipse_yaw_rad = m.kind == MeasurementKind::kCenterOfMass ? 0.0 : m.orientation_rad;
@@ -650,6 +656,7 @@ void MultiTracker::StartTracks(common::UtcNs scan_start_ns,
     t->filter.Init(z, r);
     t->filter_ns = at_ns;
     t->last_update_ns = at_ns;
+    t->measured_s = 0.0;
     t->id = NewId();
     t->updated = true;
     t->hits = 1u;
@@ -676,9 +683,13 @@ void MultiTracker::Report(common::UtcNs scan_start_ns, ScanTracks& out) const {
   for (const Track& t : tracks_) {
     // A confirmed track that never moved is not reported as one (step 5).
     const bool reportable = t.confirmed && (t.moved || !options_.static_objects);
-    if (reportable && !t.updated &&
-        common::NsToSeconds(scan_start_ns - t.last_update_ns) > options_.report_coasting_s) {
-      continue;
+    if (reportable && !t.updated) {
+      const double coasting_s = common::NsToSeconds(scan_start_ns - t.last_update_ns);
+      double limit_s = options_.report_coasting_s;
+      if (options_.report_coasting_per_measured_s > 0.0) {
+        limit_s = std::min(limit_s, options_.report_coasting_per_measured_s * t.measured_s);
+      }
+      if (coasting_s > limit_s) continue;
     }
     if (!reportable && !options_.report_tentative) continue;
     Eigen::Vector4d x = t.filter.state();

@@ -155,6 +155,17 @@ struct MultiTrackerOptions {
   // again) until coast_timeout_s: a person hidden for longer may have stopped or turned, and a
   // track reported where they are not is a false one.
   double report_coasting_s = 0.5;
+  // ... and for no longer than this times how long it was seen (the time between its
+  // measurements in consecutive scans, summed): a track with little evidence of an object is
+  // reported coasting only briefly. Sporadic clutter at knee height (a leg-sized echo in 3-4
+  // consecutive scans now and then: confirmed after 60 ms at 50 Hz, seen for 60 ms) was reported
+  // for 0.5 s after each hit, 2.5-4 coasting reports per measured one; a person seen for
+  // report_coasting_s / this or longer is not affected. A time, not a scan count: the same at every
+  // scan rate. 0: off.
+  double report_coasting_per_measured_s = 1.0;
+  // Seen, for the above: the time between two of the track's measurements at most this far apart
+  // (a person at the edge of the range is measured in some scans only; clutter comes in bursts).
+  double seen_gap_s = 0.2;
   // Motion limit: the filter's speed is clamped to this. 2.5 m/s covers people walking fast; a site
   // with forklifts or running people raises it (with accel_psd_m2ps3, initial_velocity_sigma_mps
   // and max_gate_distance_m).
@@ -256,6 +267,9 @@ struct Track {
   CvEkf filter;
   common::UtcNs filter_ns = 0;       // time the filter state refers to
   common::UtcNs last_update_ns = 0;  // time of the last measurement
+  // Time between its measurements in consecutive scans, summed (kept when resumed): how long it
+  // was seen, for report_coasting_per_measured_s.
+  double measured_s = 0.0;
   std::uint32_t id = 0;
   bool confirmed = false;
   bool updated = false;         // in the current scan
@@ -343,9 +357,8 @@ class MultiTracker {
                        std::span<const Measurement> measurements, MeasurementRefiner* refiner,
                        double max_d2, Measurement* m, Eigen::Vector2d* z, Eigen::Matrix2d* r) const;
   // What a track keeps of the measurement its filter just took.
-  static void NoteUpdate(Track& t, const Measurement& m, const Candidate& c,
-                         const Eigen::Vector2d& z, common::UtcNs at_ns,
-                         common::UtcNs scan_start_ns);
+  void NoteUpdate(Track& t, const Measurement& m, const Candidate& c, const Eigen::Vector2d& z,
+                  common::UtcNs at_ns, common::UtcNs scan_start_ns);
   void Lose(const Track& t, common::UtcNs scan_start_ns);
   void LimitSpeed(Track& t);
   void Report(common::UtcNs scan_start_ns, ScanTracks& out) const;

@@ -22,6 +22,7 @@ MultiTrackerOptions Opts() {
   MultiTrackerOptions o;
   o.static_objects = false;
   o.report_coasting_s = o.coast_timeout_s;  // every coasting scan reported
+  o.report_coasting_per_measured_s = 0.0;
   return o;
 }
 
@@ -66,6 +67,11 @@ TEST(MultiTrackerOptionsTest, DefaultsValidAndEachBadValueNamesItsField) {
       {with([](auto& o) { o.confirm_hits = 0; }), "confirm_hits"},
       {with([](auto& o) { o.confirm_hits = 5; }), "confirm_hits"},  // > confirm_window (4)
       {with([](auto& o) { o.confirm_window = 33; }), "confirm_window"},
+      {with([](auto& o) { o.report_coasting_per_measured_s = -1.0; }),
+       "report_coasting_per_measured_s"},
+      {with([nan](auto& o) { o.report_coasting_per_measured_s = nan; }),
+       "report_coasting_per_measured_s"},
+      {with([](auto& o) { o.seen_gap_s = -0.1; }), "seen_gap_s"},
       {with([](auto& o) { o.gate_mahalanobis_sq = 0.0; }), "gate_mahalanobis_sq"},
       {with([nan](auto& o) { o.gate_mahalanobis_sq = nan; }), "gate_mahalanobis_sq"},
       {with([](auto& o) { o.max_gate_distance_m = -1.0; }), "max_gate_distance_m"},
@@ -647,6 +653,43 @@ TEST(MultiTrackerTest, CoastingTracksAreReportedOnlyBrieflyButKeptUntilTheTimeou
   tracker.Step(ScanNs(30), at(30), out);
   ASSERT_EQ(out.tracks.size(), 1u);
   EXPECT_EQ(out.tracks[0].track_id, id);
+}
+
+// Seen for `seen_scans` consecutive scans `period_ns` apart, then nothing: how long (s) the track
+// is reported coasting afterwards.
+double ReportedCoastingS(const MultiTrackerOptions& options, common::DurationNs period_ns,
+                         std::int64_t seen_scans) {
+  MultiTracker tracker(options);
+  ScanTracks out;
+  const std::vector<Measurement> echo = {Meas(3.0, 1.0)};
+  for (std::int64_t k = 0; k < seen_scans; ++k) tracker.Step(kT0 + k * period_ns, echo, out);
+  EXPECT_EQ(out.tracks.size(), 1u);
+  double last_reported_s = 0.0;
+  for (std::int64_t k = seen_scans; k < seen_scans + 200; ++k) {
+    tracker.Step(kT0 + k * period_ns, std::vector<Measurement>{}, out);
+    if (!out.tracks.empty()) {
+      last_reported_s = common::NsToSeconds((k - seen_scans + 1) * period_ns);
+    }
+  }
+  return last_reported_s;
+}
+
+TEST(MultiTrackerTest, TrackSeenBrieflyIsReportedCoastingForAsLongAsItWasSeenAtEveryScanRate) {
+  MultiTrackerOptions options;  // report_coasting_s 0.5, report_coasting_per_measured_s 1
+  options.static_objects = false;
+  MultiTrackerOptions before = options;
+  before.report_coasting_per_measured_s = 0.0;
+  constexpr common::DurationNs k50Hz = 20 * common::kNsPerMs;
+  constexpr common::DurationNs k15Hz = 200 * common::kNsPerMs / 3;
+  // An echo in 4 consecutive scans (confirmed by 3 of 4): seen for 3 periods (60 ms at 50 Hz,
+  // 200 ms at 15 Hz); reported coasting for that long (to within a scan), not for 0.5 s.
+  EXPECT_NEAR(ReportedCoastingS(options, k50Hz, 4), 0.06, 0.021);
+  EXPECT_NEAR(ReportedCoastingS(options, k15Hz, 4), 0.2, 0.067);
+  EXPECT_NEAR(ReportedCoastingS(before, k50Hz, 4), 0.5, 0.021);
+  EXPECT_NEAR(ReportedCoastingS(before, k15Hz, 4), 0.5, 0.067);
+  // Someone seen for 1 s: reported coasting for report_coasting_s at both rates.
+  EXPECT_NEAR(ReportedCoastingS(options, k50Hz, 51), 0.5, 0.021);
+  EXPECT_NEAR(ReportedCoastingS(options, k15Hz, 16), 0.5, 0.067);
 }
 
 }  // namespace

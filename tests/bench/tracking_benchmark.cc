@@ -33,8 +33,8 @@
 //
 //   tracking_benchmark --scenarios DIR [--extra DIR] [--only NAME] [--out FILE] [--jobs N]
 //                      [--explain] [--breakdown]
-//                      [--before-report-rules | --before-resume |
-//                       [--before-mixed-pixels] [--before-far]]
+//                      [--before-report-rules |
+//                       [--before-mixed-pixels] [--before-far] [--before-evidence-coasting]]
 //   (--extra: more scenario folders, e.g. held-out scenes, reported in their own section;
 //   --explain: per run on stderr, what became of an object's previous track at every id switch
 //   and missed scan, what the false positives are (by scan and by false track: a track left
@@ -44,11 +44,12 @@
 //   the filtered track's error beside that of the scan's measurement it was updated with, see
 //   Breakdown; --before-report-rules: a third tracker, "before", the new one without
 //   ShapeOptions::unseen_coasting_m and MultiTrackerOptions::moving_speed_mps, the tree before
-//   them; --before-resume: "before" is the new one without resuming lost tracks,
-//   MultiTrackerOptions::resume_window_s = 0; --before-mixed-pixels: "before" is the new one
-//   taking knee-height mixed pixels for legs, ShapeOptions::drop_mixed_pixel_legs = false;
-//   --before-far: "before" is the new one without the mixed-pixel model of far edges at upper-body
-//   height, ShapeOptions::mixed_pixel_min_footprint_m = 0; both: without either). --explain also
+//   them; --before-mixed-pixels: "before" is the new one taking knee-height mixed pixels for legs,
+//   ShapeOptions::drop_mixed_pixel_legs = false; --before-far: "before" is the new one without the
+//   mixed-pixel model of far edges at upper-body height, ShapeOptions::mixed_pixel_min_footprint_m
+//   = 0; --before-evidence-coasting: "before" is the new one reporting every coasting track for
+//   report_coasting_s whatever its evidence, MultiTrackerOptions::report_coasting_per_measured_s =
+//   0; several: without any of them). --explain also
 //   writes the false positives' classes to the results (ExplainTable) and, on stderr, what the
 //   tracks measured again after more than 1 s (a lost track resumed) came back on.
 
@@ -602,9 +603,6 @@ struct Variant {
 // tracks were dropped where the scan shows nothing of them (shape.unseen_coasting_m = 0) and
 // before a track was reported once its speed is clear (tracking.moving_speed_mps = 0).
 bool g_before_report_rules = false;
-// --before-resume: "before" is the new tracker without resuming lost tracks
-// (MultiTrackerOptions::resume_window_s = 0).
-bool g_before_resume = false;
 // --before-mixed-pixels: "before" is the new tracker that takes knee-height mixed pixels for legs
 // (ShapeOptions::drop_mixed_pixel_legs = false).
 bool g_before_mixed_pixels = false;
@@ -612,6 +610,10 @@ bool g_before_mixed_pixels = false;
 // upper-body height (ShapeOptions::mixed_pixel_min_footprint_m = 0). With --before-mixed-pixels:
 // "before" has neither.
 bool g_before_far = false;
+// --before-evidence-coasting: "before" is the new tracker reporting every coasting track for
+// report_coasting_s whatever its evidence (MultiTrackerOptions::report_coasting_per_measured_s =
+// 0).
+bool g_before_evidence_coasting = false;
 const char* const kVariantNames[] = {"old", "new", "before"};
 
 std::vector<Variant> Variants(sim::Mount mount, double range_m) {
@@ -623,6 +625,7 @@ std::vector<Variant> Variants(sim::Mount mount, double range_m) {
   old.tracking.static_objects = false;
   old.tracking.max_speed_mps = 1000.0;
   old.tracking.report_coasting_s = old.tracking.coast_timeout_s;
+  old.tracking.report_coasting_per_measured_s = 0.0;
   old.tracking.recover_gate_mahalanobis_sq = 0.0;
   old.tracking.inflate_nis_above = 0.0;
   old.tracking.resume_window_s = 0.0;
@@ -632,14 +635,11 @@ std::vector<Variant> Variants(sim::Mount mount, double range_m) {
     before.shape.unseen_coasting_m = 0.0;
     before.tracking.moving_speed_mps = 0.0;
     variants.push_back({"before", before});
-  } else if (g_before_resume) {
-    tracking::TrackerOptions before = fresh;
-    before.tracking.resume_window_s = 0.0;
-    variants.push_back({"before", before});
-  } else if (g_before_mixed_pixels || g_before_far) {
+  } else if (g_before_mixed_pixels || g_before_far || g_before_evidence_coasting) {
     tracking::TrackerOptions before = fresh;
     if (g_before_mixed_pixels) before.shape.drop_mixed_pixel_legs = false;
     if (g_before_far) before.shape.mixed_pixel_min_footprint_m = 0.0;
+    if (g_before_evidence_coasting) before.tracking.report_coasting_per_measured_s = 0.0;
     variants.push_back({"before", before});
   }
   return variants;
@@ -1308,8 +1308,8 @@ int main(int argc, char** argv) {
       breakdown = true;
     } else if (a == "--before-report-rules") {
       g_before_report_rules = true;
-    } else if (a == "--before-resume") {
-      g_before_resume = true;
+    } else if (a == "--before-evidence-coasting") {
+      g_before_evidence_coasting = true;
     } else if (a == "--before-mixed-pixels") {
       g_before_mixed_pixels = true;
     } else if (a == "--before-far") {
@@ -1320,8 +1320,8 @@ int main(int argc, char** argv) {
       std::fprintf(stderr,
                    "usage: tracking_benchmark --scenarios DIR [--extra DIR] [--only NAME] "
                    "[--out FILE] [--jobs N] [--explain] [--breakdown] "
-                   "[--before-report-rules | --before-resume | [--before-mixed-pixels] "
-                   "[--before-far]]\n");
+                   "[--before-report-rules | [--before-mixed-pixels] [--before-far] "
+                   "[--before-evidence-coasting]]\n");
       return 2;
     }
   }
@@ -1382,9 +1382,11 @@ int main(int argc, char** argv) {
                 ? "\"before\": the new tracker without the mixed-pixel model of far edges "
                   "(`shape.mixed_pixel_min_footprint_m` 0), on the same scans in the same "
                   "run.\n\n"
-            : g_before_resume ? "\"before\": the new tracker without resuming lost tracks "
-                                "(`tracking.resume_window_s` 0), on the same scans in the same "
-                                "run.\n\n"
+            : g_before_evidence_coasting
+                ? "\"before\": the new tracker reporting every coasting track for "
+                  "`tracking.report_coasting_s` whatever its evidence "
+                  "(`tracking.report_coasting_per_measured_s` 0), on the same scans in the same "
+                  "run.\n\n"
             : g_before_report_rules
                 ? "\"before\": the new tracker without the coasting and moving report rules "
                   "(`shape.unseen_coasting_m` 0, `tracking.moving_speed_mps` 0), on the same "
