@@ -98,7 +98,6 @@ void TrackerNode::OnScan(const cola::ScanTelegram& scan, common::UtcNs receive_n
     ++counters_.frames;
   }
 
-
   const tracking::BackgroundModel& background = pipeline_->background();
   if (background.learned()) {
     const double since_s = common::NsToSeconds(sent_ns - last_snapshot_ns_);
@@ -111,22 +110,12 @@ void TrackerNode::OnScan(const cola::ScanTelegram& scan, common::UtcNs receive_n
 }
 
 bool TrackerNode::BackgroundChanged() const {
-  const std::span<const float> now_m = pipeline_->background().background_range_m();
-  if (now_m.size() != sent_background_m_.size()) return true;
-  if (now_m.empty()) return false;
-  std::size_t changed = 0;
-  for (std::size_t i = 0; i < now_m.size(); ++i) {
-    const float a = now_m[i];
-    const float b = sent_background_m_[i];
-    if ((a == 0.0f) != (b == 0.0f)) {
-      ++changed;
-    } else if (a != 0.0f) {
-      const double margin = pipeline_->background().Margin(std::min(a, b));
-      if (std::abs(static_cast<double>(a) - static_cast<double>(b)) > margin) ++changed;
-    }
-  }
-  return static_cast<double>(changed) >=
-         config_.publish.snapshot_change_fraction * static_cast<double>(now_m.size());
+  const tracking::BackgroundModel& background = pipeline_->background();
+  const std::size_t beams = background.background_range_m().size();
+  if (beams != sent_background_m_.size()) return true;
+  if (beams == 0) return false;
+  return static_cast<double>(background.CountMovedBeams(sent_background_m_.span())) >=
+         config_.publish.snapshot_change_fraction * static_cast<double>(beams);
 }
 
 void TrackerNode::PublishBackground(common::UtcNs sent_ns) {

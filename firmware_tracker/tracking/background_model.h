@@ -110,6 +110,10 @@ class BackgroundModel {
   // Per beam, metres, 0 = free. Meaningful once learned(); same beam geometry as the last scan.
   std::span<const float> background_range_m() const { return background_m_.span(); }
   double Margin(double range_m) const;
+  // Beams of `reference_m` (a background published earlier, same geometry) that the present
+  // background no longer matches: free in one and not the other, or apart by more than
+  // Margin(nearer of the two). reference_m.size() must equal background_range_m().size().
+  std::size_t CountMovedBeams(std::span<const float> reference_m) const;
   const BackgroundCounters& counters() const { return counters_; }
   // Forgets the model and starts learning again with the next scan; counters are kept.
   void Reset();

@@ -158,6 +158,64 @@ TEST(BackgroundModelTest, DoorOpeningRecedesBackgroundThenReveals) {
   for (std::size_t i : BeamsTowards(scanner, at, 0.1)) EXPECT_EQ(model.foreground()[i], 1);
 }
 
+TEST(BackgroundModelTest, CountMovedBeamsAgainstAnEarlierBackground) {
+  SyntheticScanner scanner;
+  BackgroundModel model(BackgroundOptions{});
+  RunScans(model, scanner, 0, Scans(6.0), Room(), {});
+  const std::span<const float> now = model.background_range_m();
+  ASSERT_GT(now.size(), 100u);
+  std::vector<float> ref(now.begin(), now.end());
+  EXPECT_EQ(model.CountMovedBeams(ref), 0u);
+  // Moves just within and just beyond each beam's margin, beams becoming free and taken, both
+  // free: the count is the beams beyond the margin of the nearer range or of another freeness.
+  std::size_t expected = 0;
+  std::size_t free_both = 0;
+  for (std::size_t i = 0; i < ref.size(); ++i) {
+    const float a = now[i];
+    switch (i % 6) {
+      case 0:  // nearer by half the margin: within it
+        if (a != 0.0f) ref[i] = a - static_cast<float>(0.5 * model.Margin(a));
+        break;
+      case 1:  // farther by more than the margin
+        if (a != 0.0f) {
+          ref[i] = a + static_cast<float>(1.1 * model.Margin(a));
+          ++expected;
+        }
+        break;
+      case 2:  // free in the reference only
+        if (a != 0.0f) {
+          ref[i] = 0.0f;
+          ++expected;
+        }
+        break;
+      case 3:  // taken in the reference only
+        if (a == 0.0f) {
+          ref[i] = 5.0f;
+          ++expected;
+        }
+        break;
+      default:
+        free_both += a == 0.0f ? 1 : 0;
+        break;
+    }
+  }
+  ASSERT_GT(expected, 50u);
+  ASSERT_GT(free_both, 0u);  // the room's open side: free in both, not moved
+  // The count agrees with the rule written beam by beam.
+  std::size_t by_rule = 0;
+  for (std::size_t i = 0; i < ref.size(); ++i) {
+    const float a = now[i], b = ref[i];
+    if ((a == 0.0f) != (b == 0.0f)) {
+      ++by_rule;
+    } else if (a != 0.0f && std::abs(static_cast<double>(a) - static_cast<double>(b)) >
+                                model.Margin(std::min(a, b))) {
+      ++by_rule;
+    }
+  }
+  EXPECT_EQ(by_rule, expected);
+  EXPECT_EQ(model.CountMovedBeams(ref), expected);
+}
+
 TEST(BackgroundModelTest, ParkedCartIsAbsorbedAfterTimeConstant) {
   SyntheticScanner scanner;
   BackgroundOptions options;
