@@ -650,7 +650,7 @@ ShapeFitResult Fit(std::span<const Eigen::Vector2d> points, const Silhouette& si
   // Shape of the point set: principal line and extent (flat objects: doors, boards).
   Eigen::Vector2d mean = Eigen::Vector2d::Zero();
   double range_sum = 0.0;
-  std::array<double, kMaxFitPoints> range_m{};  // each point's range (its noise below)
+  std::array<double, kMaxFitPoints> range_m;  // each point's range (its noise below); [0, n)
   for (std::size_t i = 0; i < n; ++i) {
     mean += used[i];
     range_m[i] = used[i].norm();
@@ -730,7 +730,7 @@ ShapeFitResult Fit(std::span<const Eigen::Vector2d> points, const Silhouette& si
 
   // Per-point weights: noise and model error, discounted for correlation.
   const double discount = std::max(1.0, static_cast<double>(n) / o.effective_points);
-  std::array<double, kMaxFitPoints> base_weight{};
+  std::array<double, kMaxFitPoints> base_weight;  // [0, n) set below
   for (std::size_t i = 0; i < n; ++i) {
     const double noise = o.point_sigma_m + o.point_sigma_per_m * range_m[i];
     base_weight[i] = 1.0 / ((noise * noise + o.model_sigma_m * o.model_sigma_m) * discount);
@@ -758,9 +758,12 @@ ShapeFitResult Fit(std::span<const Eigen::Vector2d> points, const Silhouette& si
   auto evaluate = [&](const Vec5& at, Mat5* h, Vec5* g, double* points_sq) {
     // A circle has no orientation (its yaw stays 0).
     if (!circle && !(at(kYaw) == trig_yaw)) {
-      trig_yaw = at(kYaw);
-      cos_yaw = std::cos(trig_yaw);
-      sin_yaw = std::sin(trig_yaw);
+      // Both from one local value, so that the compiler makes them one sincos call (the captured
+      // trig_yaw would be read again after the store to cos_yaw).
+      const double yaw = at(kYaw);
+      trig_yaw = yaw;
+      cos_yaw = std::cos(yaw);
+      sin_yaw = std::sin(yaw);
     }
     const double c = circle ? 1.0 : cos_yaw, s = circle ? 0.0 : sin_yaw;
     const double inv_a = 1.0 / at(kA), inv_b = 1.0 / at(kB);
