@@ -110,6 +110,7 @@ struct Hypothesis {
   std::uint32_t points = 0;
   Vector2d z = Vector2d::Zero();
   double z_offset_s = 0.0;
+  std::size_t parts = 0;  // --breakdown: the measurement's observation, a Breakdown::PartsBin
 };
 
 // --breakdown: where the matched error of the per-sensor tracks comes from. Every match's error
@@ -124,7 +125,8 @@ struct Hypothesis {
 constexpr double kMovingMps = 0.3;
 struct ErrorStats {
   double n = 0, sum = 0, radial = 0, radial2 = 0, across2 = 0;
-  double moving = 0, along = 0;
+  double moving = 0, along = 0, along2 = 0, beside2 = 0;  // beside: across the motion
+  double nees = 0;  // sum of the position's NEES (AddNees)
   std::vector<double> norms;
   void Add(const Vector2d& e, const Vector2d& los, const Vector2d& v) {
     const Vector2d across(-los.y(), los.x());
@@ -136,9 +138,16 @@ struct ErrorStats {
     across2 += c * c;
     norms.push_back(e.norm());
     if (v.norm() > kMovingMps) {
+      const Vector2d u = v.normalized();
       moving += 1;
-      along += e.dot(v.normalized());
+      along += e.dot(u);
+      along2 += e.dot(u) * e.dot(u);
+      beside2 += (u.x() * e.y() - u.y() * e.x()) * (u.x() * e.y() - u.y() * e.x());
     }
+  }
+  void AddNees(const Vector2d& e, const Matrix2d& cov) {
+    const Eigen::LDLT<Matrix2d> ldlt(cov);
+    if (ldlt.info() == Eigen::Success) nees += e.dot(ldlt.solve(e));
   }
   void Merge(const ErrorStats& o) {
     n += o.n;
@@ -148,6 +157,9 @@ struct ErrorStats {
     across2 += o.across2;
     moving += o.moving;
     along += o.along;
+    along2 += o.along2;
+    beside2 += o.beside2;
+    nees += o.nees;
     norms.insert(norms.end(), o.norms.begin(), o.norms.end());
   }
   double Mean() const { return n > 0 ? sum / n : 0.0; }
@@ -156,6 +168,9 @@ struct ErrorStats {
   double RadialRms() const { return n > 0 ? std::sqrt(radial2 / n) : 0.0; }
   double AcrossRms() const { return n > 0 ? std::sqrt(across2 / n) : 0.0; }
   double AlongMean() const { return moving > 0 ? along / moving : 0.0; }
+  double AlongRms() const { return moving > 0 ? std::sqrt(along2 / moving) : 0.0; }
+  double BesideRms() const { return moving > 0 ? std::sqrt(beside2 / moving) : 0.0; }
+  double Nees() const { return n > 0 ? nees / n : 0.0; }
   double P95() const {
     if (norms.empty()) return 0.0;
     std::vector<double> e = norms;
@@ -178,9 +193,18 @@ constexpr const char* kRangeBins[] = {"range 0-5 m", "range 5-10 m", "range 10-2
                                       "range 20+ m"};
 constexpr const char* kPointBins[] = {"points 0 (coasting)", "points 1",     "points 2-4",
                                       "points 5-9",          "points 10-19", "points 20+"};
+// What the scan's measurement of a track was made of (the pipeline's observation): knee height
+// one leg (its partner hidden, or both legs in one segment too few points to split), one part
+// wider than a leg (two legs that touch), two legs, or a segment wider than a pair of legs.
+constexpr const char* kPartsBins[] = {"parts: coasting", "parts: one segment (torso)",
+                                      "parts: one leg", "parts: one leg-sized part wider than a leg",
+                                      "parts: two legs", "parts: wider than two legs"};
 struct Breakdown {
   std::array<BreakdownCell, 4> by_range;
   std::array<BreakdownCell, 6> by_points;
+  std::array<BreakdownCell, 6> by_parts;
+  // Knee height, by the number of legs measured and the range.
+  std::array<BreakdownCell, 4> one_leg_by_range, two_legs_by_range;
   BreakdownCell total;
   static std::size_t RangeBin(double r_m) {
     return r_m < 5.0 ? 0 : r_m < 10.0 ? 1 : r_m < 20.0 ? 2 : 3;
@@ -192,20 +216,34 @@ struct Breakdown {
     const double range_m = t.p.norm();
     if (!(range_m > 1e-6)) return;
     const Vector2d los = t.p / range_m;
-    BreakdownCell* cells[] = {&by_range[RangeBin(range_m)], &by_points[PointBin(h.points)], &total};
+    const std::size_t parts = h.measured ? h.parts : 0;
+    BreakdownCell* legs = parts == 2 || parts == 3   ? &one_leg_by_range[RangeBin(range_m)]
+                          : parts == 4 ? &two_legs_by_range[RangeBin(range_m)]
+                                                     : nullptr;
+    BreakdownCell* cells[] = {&by_range[RangeBin(range_m)], &by_points[PointBin(h.points)],
+                              &by_parts[parts], &total, legs};
     const Vector2d e = h.p - t.p;
-    for (BreakdownCell* c : cells) c->all.Add(e, los, t.v);
+    for (BreakdownCell* c : cells) {
+      if (c != nullptr) c->all.Add(e, los, t.v);
+    }
     if (!h.measured) return;
     // The truth at the measurement's time (its path's velocity over a fraction of a scan).
     const Vector2d ez = h.z - (t.p + h.z_offset_s * t.v);
     for (BreakdownCell* c : cells) {
+      if (c == nullptr) continue;
       c->filtered.Add(e, los, t.v);
+      c->filtered.AddNees(e, h.cov);
       c->raw.Add(ez, los, t.v);
     }
   }
   void Merge(const Breakdown& o) {
     for (std::size_t i = 0; i < by_range.size(); ++i) by_range[i].Merge(o.by_range[i]);
     for (std::size_t i = 0; i < by_points.size(); ++i) by_points[i].Merge(o.by_points[i]);
+    for (std::size_t i = 0; i < by_parts.size(); ++i) by_parts[i].Merge(o.by_parts[i]);
+    for (std::size_t i = 0; i < by_range.size(); ++i) {
+      one_leg_by_range[i].Merge(o.one_leg_by_range[i]);
+      two_legs_by_range[i].Merge(o.two_legs_by_range[i]);
+    }
     total.Merge(o.total);
   }
 };
@@ -672,6 +710,35 @@ daemon::TrackObservation ToObservation(const tracking::TrackReport& r) {
   return o;
 }
 
+// --breakdown: what the measurement of a track measured in this scan was made of (a kPartsBins
+// index): the pipeline's observation with the track's point count whose first position lies
+// nearest to the refined measurement.
+std::size_t PartsOf(const tracking::TrackingPipeline& pipeline, const tracking::TrackReport& r) {
+  const auto obs = pipeline.observations();
+  const auto ms = pipeline.measurements();
+  const Vector2d z(r.measured_x_m, r.measured_y_m);
+  double best = std::numeric_limits<double>::infinity();
+  std::size_t found = obs.size();
+  for (std::size_t i = 0; i < obs.size() && i < ms.size(); ++i) {
+    std::size_t points = 0;
+    for (std::size_t k = 0; k < obs[i].part_count; ++k) points += obs[i].parts[k].point_count;
+    const double d = (ms[i].position_m - z).norm();
+    if (points == r.points && d < best) {
+      best = d;
+      found = i;
+    }
+  }
+  if (found == obs.size()) return 0;
+  const tracking::Observation& ob = obs[found];
+  if (pipeline.options().shape.mount == tracking::Mount::kTorso) return 1;
+  if (!ob.legs) return 5;
+  if (ob.part_count == 2) return 4;
+  const auto pts = pipeline.segments().points_m.span().subspan(ob.parts[0].first_point,
+                                                               ob.parts[0].point_count);
+  const tracking::ShapeOptions& o = pipeline.options().shape;
+  return (pts.back() - pts.front()).norm() > 2.0 * o.leg_radius_m + 0.08 ? 3 : 2;
+}
+
 struct SensorFrames {
   std::string id;
   std::vector<daemon::TrackFrameData> frames;  // per scan
@@ -760,7 +827,10 @@ void RunSensor(const sim::Simulator& simulator, std::size_t sensor,
                         r.state == tracking::TrackState::kConfirmed,
                         r.points,
                         {r.measured_x_m, r.measured_y_m},
-                        r.measured_offset_s});
+                        r.measured_offset_s,
+                        r.state == tracking::TrackState::kConfirmed
+                            ? PartsOf(*pipelines[v], r)
+                            : 0});
         frame.tracks.push_back(ToObservation(r));
       }
       std::array<tracking::TrackPrediction, tracking::kMaxTracks> predictions;
@@ -1003,18 +1073,20 @@ const char* kHeader =
 const char* kBreakdownHeader =
     "| scenario | mount | tracker | bin | matches | MOTP m | p95 m | radial mean m | radial RMS m "
     "| across RMS m | measured | filtered RMS m | raw RMS m | filtered radial mean m | raw radial "
-    "mean m | filtered along-motion mean m | raw along-motion mean m |\n"
-    "|---|---|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n";
+    "mean m | filtered along-motion mean m | raw along-motion mean m | raw along-motion RMS m | "
+    "raw across-motion RMS m | filtered NEES |\n"
+    "|---|---|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:"
+    "|\n";
 
 std::string BreakdownRow(const std::string& lead, const std::string& bin, const BreakdownCell& c) {
   char line[512];
   std::snprintf(line, sizeof line,
                 "| %s | %s | %.0f | %.3f | %.3f | %+.3f | %.3f | %.3f | %.0f | %.3f | %.3f | "
-                "%+.3f | %+.3f | %+.3f | %+.3f |\n",
+                "%+.3f | %+.3f | %+.3f | %+.3f | %.3f | %.3f | %.2f |\n",
                 lead.c_str(), bin.c_str(), c.all.n, c.all.Mean(), c.all.P95(), c.all.RadialMean(),
                 c.all.RadialRms(), c.all.AcrossRms(), c.filtered.n, c.filtered.Rms(), c.raw.Rms(),
                 c.filtered.RadialMean(), c.raw.RadialMean(), c.filtered.AlongMean(),
-                c.raw.AlongMean());
+                c.raw.AlongMean(), c.raw.AlongRms(), c.raw.BesideRms(), c.filtered.Nees());
   return line;
 }
 
@@ -1218,6 +1290,15 @@ std::string BreakdownTable(const Section& s) {
       t += BreakdownRow(lead, kRangeBins[i], b.by_range[i]);
     for (std::size_t i = 0; i < b.by_points.size(); ++i)
       t += BreakdownRow(lead, kPointBins[i], b.by_points[i]);
+    for (std::size_t i = 0; i < b.by_parts.size(); ++i) {
+      if (b.by_parts[i].all.n > 0) t += BreakdownRow(lead, kPartsBins[i], b.by_parts[i]);
+    }
+    for (std::size_t i = 0; i < b.by_range.size(); ++i) {
+      if (b.one_leg_by_range[i].all.n > 0)
+        t += BreakdownRow(lead, std::string("one leg, ") + kRangeBins[i], b.one_leg_by_range[i]);
+      if (b.two_legs_by_range[i].all.n > 0)
+        t += BreakdownRow(lead, std::string("two legs, ") + kRangeBins[i], b.two_legs_by_range[i]);
+    }
   }
   return t + s.breakdown_rows;
 }
