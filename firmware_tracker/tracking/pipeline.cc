@@ -379,11 +379,25 @@ class TrackingPipeline::Refiner final : public MeasurementRefiner {
       shape.size_m = Eigen::Vector2d::Constant(std::isfinite(radius) ? radius : shape.size_m.x());
       shape.size_cov_m2 = Eigen::Matrix2d::Constant(1.0 / info);
     } else {
-      // One leg: the body centre lies beside it (the hip) and ahead or behind (the stride).
       m.position_m = legs[0].centre_m;
-      const double extent2 =
-          o.hip_half_width_m * o.hip_half_width_m + 4.0 * o.gait_sigma_m * o.gait_sigma_m;
-      m.covariance_m2 = legs[0].centre_cov_m2 + extent2 * Eigen::Matrix2d::Identity();
+      const double range = legs[0].centre_m.norm();
+      if (ob.partner_behind && range > 0.0) {
+        // The other leg hidden behind it (ShapeOptions::hidden_leg_behind): the centre, the legs'
+        // midpoint, at least hip_half_width_m farther along the line of sight; the hidden leg
+        // within the shadow, +-leg_radius_m across it (the midpoint +-leg_radius_m / 2: variance
+        // leg_radius_m^2 / 12 for a uniform place), and the midpoint's swing as for two legs.
+        const Eigen::Vector2d ray = legs[0].centre_m / range;
+        const Eigen::Vector2d across(-ray.y(), ray.x());
+        m.position_m += o.hip_half_width_m * ray;
+        m.covariance_m2 = legs[0].centre_cov_m2 +
+                          o.gait_sigma_m * o.gait_sigma_m * Eigen::Matrix2d::Identity() +
+                          (o.leg_radius_m * o.leg_radius_m / 12.0) * across * across.transpose();
+      } else {
+        // One leg: the body centre lies beside it (the hip) and ahead or behind (the stride).
+        const double extent2 =
+            o.hip_half_width_m * o.hip_half_width_m + 4.0 * o.gait_sigma_m * o.gait_sigma_m;
+        m.covariance_m2 = legs[0].centre_cov_m2 + extent2 * Eigen::Matrix2d::Identity();
+      }
       m.rms_residual_m = legs[0].rms_m;
       shape.size_m = legs[0].size_m;
       shape.size_cov_m2 = legs[0].size_cov_m2;
@@ -628,6 +642,45 @@ bool TrackingPipeline::Veiled(const ScanView& scan, const Segment& segment) cons
          ((before || after) && segment.end_beam - segment.begin_beam <= footprint_beams);
 }
 
+// One leg whose partner is hidden behind it (ShapeOptions::hidden_leg_behind): no foreground
+// return within the pairing distance of the leg, outside its own beams, lies in front of where the
+// hidden leg's edge would be or beside the leg's shadow, and a leg beside it would have returned a
+// beam (the beams' spacing there is narrower than a leg).
+bool TrackingPipeline::PartnerBehind(const ScanView& scan, const ObservationPart& part,
+                                     const Eigen::Vector2d& centre_m) const {
+  const ShapeOptions& o = options_.shape;
+  const double range = centre_m.norm();
+  const double step = std::abs(scan.angle_step_rad);
+  const double reach = o.leg_pairing_distance_m;
+  if (!(range > reach) || !(step > 0.0)) return false;
+  // A leg beside it returns at least one beam, and a whole one (no mixed pixel alone), only where
+  // the beams' spacing and footprint are narrower than a leg.
+  if ((range + reach) * std::max(step, o.beam_divergence_rad) >= 2.0 * o.leg_radius_m) {
+    return false;
+  }
+  const auto foreground = background_.foreground();
+  const std::size_t n = std::min(scan.range_m.size(), foreground.size());
+  const Eigen::Vector2d ray = centre_m / range;
+  const double behind_min = 2.0 * o.hip_half_width_m - o.leg_radius_m;
+  const double shadow = 2.0 * o.leg_radius_m + step * range;
+  const auto beams = static_cast<std::size_t>(std::ceil(reach / ((range - reach) * step))) + 1;
+  const std::size_t first = part.begin_beam > beams ? part.begin_beam - beams : 0;
+  const std::size_t last = std::min(n, part.end_beam + beams);
+  for (std::size_t b = first; b < last; ++b) {
+    if (b >= part.begin_beam && b < part.end_beam) continue;
+    const float r = scan.range_m[b];
+    if (foreground[b] == 0 || !(std::isfinite(r) && r > 0.0f)) continue;
+    const double angle = scan.first_angle_rad + static_cast<double>(b) * scan.angle_step_rad;
+    const Eigen::Vector2d d =
+        static_cast<double>(r) * Eigen::Vector2d(std::cos(angle), std::sin(angle)) - centre_m;
+    if (d.norm() > reach) continue;
+    const double along = d.dot(ray);
+    const double across = std::abs(d.x() * ray.y() - d.y() * ray.x());
+    if (along < behind_min || across > shadow) return false;
+  }
+  return true;
+}
+
 void TrackingPipeline::PairLegs(const ScanView& scan) {
   const ShapeOptions& o = options_.shape;
   const std::size_t n = leg_parts_.size();
@@ -659,6 +712,9 @@ void TrackingPipeline::PairLegs(const ScanView& scan) {
       ++counters_.leg_pairs;
     } else {
       ++counters_.single_legs;
+      ob.partner_behind =
+          o.hidden_leg_behind && PartnerBehind(scan, leg_parts_[a], leg_centres_m_[a]);
+      if (ob.partner_behind) ++counters_.legs_behind;
     }
     AddObservation(scan, ob);
   };

@@ -34,7 +34,8 @@
 //   tracking_benchmark --scenarios DIR [--extra DIR] [--only NAME] [--out FILE] [--jobs N]
 //                      [--explain] [--breakdown]
 //                      [--before-report-rules |
-//                       [--before-mixed-pixels] [--before-far] [--before-evidence-coasting]]
+//                       [--before-mixed-pixels] [--before-far] [--before-evidence-coasting]
+//                        [--before-one-leg]]
 //   (--extra: more scenario folders, e.g. held-out scenes, reported in their own section;
 //   --explain: per run on stderr, what became of an object's previous track at every id switch
 //   and missed scan, what the false positives are (by scan and by false track: a track left
@@ -49,7 +50,9 @@
 //   mixed-pixel model of far edges at upper-body height, ShapeOptions::mixed_pixel_min_footprint_m
 //   = 0; --before-evidence-coasting: "before" is the new one reporting every coasting track for
 //   report_coasting_s whatever its evidence, MultiTrackerOptions::report_coasting_per_measured_s =
-//   0; several: without any of them). --explain also
+//   0; --before-one-leg: "before" measures every single knee-height leg as the leg itself, also
+//   where its partner is hidden behind it, ShapeOptions::hidden_leg_behind = false; several:
+//   without any of them). --explain also
 //   writes the false positives' classes to the results (ExplainTable) and, on stderr, what the
 //   tracks measured again after more than 1 s (a lost track resumed) came back on.
 
@@ -126,7 +129,7 @@ constexpr double kMovingMps = 0.3;
 struct ErrorStats {
   double n = 0, sum = 0, radial = 0, radial2 = 0, across2 = 0;
   double moving = 0, along = 0, along2 = 0, beside2 = 0;  // beside: across the motion
-  double nees = 0;  // sum of the position's NEES (AddNees)
+  double nees = 0;                                        // sum of the position's NEES (AddNees)
   std::vector<double> norms;
   void Add(const Vector2d& e, const Vector2d& los, const Vector2d& v) {
     const Vector2d across(-los.y(), los.x());
@@ -196,9 +199,10 @@ constexpr const char* kPointBins[] = {"points 0 (coasting)", "points 1",     "po
 // What the scan's measurement of a track was made of (the pipeline's observation): knee height
 // one leg (its partner hidden, or both legs in one segment too few points to split), one part
 // wider than a leg (two legs that touch), two legs, or a segment wider than a pair of legs.
-constexpr const char* kPartsBins[] = {"parts: coasting", "parts: one segment (torso)",
-                                      "parts: one leg", "parts: one leg-sized part wider than a leg",
-                                      "parts: two legs", "parts: wider than two legs"};
+constexpr const char* kPartsBins[] = {
+    "parts: coasting", "parts: one segment (torso)",
+    "parts: one leg",  "parts: one leg-sized part wider than a leg",
+    "parts: two legs", "parts: wider than two legs"};
 struct Breakdown {
   std::array<BreakdownCell, 4> by_range;
   std::array<BreakdownCell, 6> by_points;
@@ -217,9 +221,9 @@ struct Breakdown {
     if (!(range_m > 1e-6)) return;
     const Vector2d los = t.p / range_m;
     const std::size_t parts = h.measured ? h.parts : 0;
-    BreakdownCell* legs = parts == 2 || parts == 3   ? &one_leg_by_range[RangeBin(range_m)]
-                          : parts == 4 ? &two_legs_by_range[RangeBin(range_m)]
-                                                     : nullptr;
+    BreakdownCell* legs = parts == 2 || parts == 3 ? &one_leg_by_range[RangeBin(range_m)]
+                          : parts == 4             ? &two_legs_by_range[RangeBin(range_m)]
+                                                   : nullptr;
     BreakdownCell* cells[] = {&by_range[RangeBin(range_m)], &by_points[PointBin(h.points)],
                               &by_parts[parts], &total, legs};
     const Vector2d e = h.p - t.p;
@@ -652,6 +656,10 @@ bool g_before_far = false;
 // report_coasting_s whatever its evidence (MultiTrackerOptions::report_coasting_per_measured_s =
 // 0).
 bool g_before_evidence_coasting = false;
+// --before-one-leg: "before" is the new tracker measuring every single leg as the leg itself with
+// the hip and stride extent (ShapeOptions::hidden_leg_behind = false). With the other --before-*
+// options: without any of them.
+bool g_before_one_leg = false;
 const char* const kVariantNames[] = {"old", "new", "before"};
 
 std::vector<Variant> Variants(sim::Mount mount, double range_m) {
@@ -673,8 +681,10 @@ std::vector<Variant> Variants(sim::Mount mount, double range_m) {
     before.shape.unseen_coasting_m = 0.0;
     before.tracking.moving_speed_mps = 0.0;
     variants.push_back({"before", before});
-  } else if (g_before_mixed_pixels || g_before_far || g_before_evidence_coasting) {
+  } else if (g_before_mixed_pixels || g_before_far || g_before_evidence_coasting ||
+             g_before_one_leg) {
     tracking::TrackerOptions before = fresh;
+    if (g_before_one_leg) before.shape.hidden_leg_behind = false;
     if (g_before_mixed_pixels) before.shape.drop_mixed_pixel_legs = false;
     if (g_before_far) before.shape.mixed_pixel_min_footprint_m = 0.0;
     if (g_before_evidence_coasting) before.tracking.report_coasting_per_measured_s = 0.0;
@@ -733,8 +743,8 @@ std::size_t PartsOf(const tracking::TrackingPipeline& pipeline, const tracking::
   if (pipeline.options().shape.mount == tracking::Mount::kTorso) return 1;
   if (!ob.legs) return 5;
   if (ob.part_count == 2) return 4;
-  const auto pts = pipeline.segments().points_m.span().subspan(ob.parts[0].first_point,
-                                                               ob.parts[0].point_count);
+  const auto pts =
+      pipeline.segments().points_m.span().subspan(ob.parts[0].first_point, ob.parts[0].point_count);
   const tracking::ShapeOptions& o = pipeline.options().shape;
   return (pts.back() - pts.front()).norm() > 2.0 * o.leg_radius_m + 0.08 ? 3 : 2;
 }
@@ -821,16 +831,15 @@ void RunSensor(const sim::Simulator& simulator, std::size_t sensor,
       frame.scan_counter = static_cast<std::uint32_t>(k);
       for (const tracking::TrackReport& r : out.tracks) {
         if (r.state == tracking::TrackState::kTentative) continue;
-        hyps.push_back({r.track_id,
-                        {r.x_m, r.y_m},
-                        r.covariance.topLeftCorner<2, 2>(),
-                        r.state == tracking::TrackState::kConfirmed,
-                        r.points,
-                        {r.measured_x_m, r.measured_y_m},
-                        r.measured_offset_s,
-                        r.state == tracking::TrackState::kConfirmed
-                            ? PartsOf(*pipelines[v], r)
-                            : 0});
+        hyps.push_back(
+            {r.track_id,
+             {r.x_m, r.y_m},
+             r.covariance.topLeftCorner<2, 2>(),
+             r.state == tracking::TrackState::kConfirmed,
+             r.points,
+             {r.measured_x_m, r.measured_y_m},
+             r.measured_offset_s,
+             r.state == tracking::TrackState::kConfirmed ? PartsOf(*pipelines[v], r) : 0});
         frame.tracks.push_back(ToObservation(r));
       }
       std::array<tracking::TrackPrediction, tracking::kMaxTracks> predictions;
@@ -1075,7 +1084,8 @@ const char* kBreakdownHeader =
     "| across RMS m | measured | filtered RMS m | raw RMS m | filtered radial mean m | raw radial "
     "mean m | filtered along-motion mean m | raw along-motion mean m | raw along-motion RMS m | "
     "raw across-motion RMS m | filtered NEES |\n"
-    "|---|---|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:"
+    "|---|---|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|--"
+    "-:"
     "|\n";
 
 std::string BreakdownRow(const std::string& lead, const std::string& bin, const BreakdownCell& c) {
@@ -1395,6 +1405,8 @@ int main(int argc, char** argv) {
       g_before_mixed_pixels = true;
     } else if (a == "--before-far") {
       g_before_far = true;
+    } else if (a == "--before-one-leg") {
+      g_before_one_leg = true;
     } else if (a == "--jobs") {
       jobs = std::max(1, std::atoi(value().c_str()));
     } else {
@@ -1402,7 +1414,7 @@ int main(int argc, char** argv) {
                    "usage: tracking_benchmark --scenarios DIR [--extra DIR] [--only NAME] "
                    "[--out FILE] [--jobs N] [--explain] [--breakdown] "
                    "[--before-report-rules | [--before-mixed-pixels] [--before-far] "
-                   "[--before-evidence-coasting]]\n");
+                   "[--before-evidence-coasting] [--before-one-leg]]\n");
       return 2;
     }
   }
@@ -1448,7 +1460,13 @@ int main(int argc, char** argv) {
            "position, 2 dof, mean over measured matches (2 is honest) and the share within the "
            "99 % bound. \"legs\": every sensor at knee height. How the numbers are made: the "
            "header of tests/bench/tracking_benchmark.cc.\n\n"
-        << (g_before_mixed_pixels && g_before_far
+        << (g_before_one_leg && !g_before_mixed_pixels && !g_before_far &&
+                    !g_before_evidence_coasting
+                ? "\"before\": the new tracker measuring a single leg at knee height as the leg "
+                  "itself even where its partner is hidden behind it (`shape.hidden_leg_behind` "
+                  "false), on the same scans in the same run; upper-body rows are the same by "
+                  "construction.\n\n"
+            : g_before_mixed_pixels && g_before_far
                 ? "\"before\": the new tracker without its handling of mixed pixels: at knee "
                   "height taking them for legs (`shape.drop_mixed_pixel_legs` false), at "
                   "upper-body "
