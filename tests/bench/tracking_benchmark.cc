@@ -197,16 +197,22 @@ constexpr const char* kRangeBins[] = {"range 0-5 m", "range 5-10 m", "range 10-2
 constexpr const char* kPointBins[] = {"points 0 (coasting)", "points 1",     "points 2-4",
                                       "points 5-9",          "points 10-19", "points 20+"};
 // What the scan's measurement of a track was made of (the pipeline's observation): knee height
-// one leg (its partner hidden, or both legs in one segment too few points to split), one part
-// wider than a leg (two legs that touch), two legs, or a segment wider than a pair of legs.
-constexpr const char* kPartsBins[] = {
-    "parts: coasting", "parts: one segment (torso)",
-    "parts: one leg",  "parts: one leg-sized part wider than a leg",
-    "parts: two legs", "parts: wider than two legs"};
+// one leg (its partner not seen, or both legs in one segment of too few points to split), one
+// part wider than a leg (two legs that touch), two legs, a segment wider than a pair of legs, one
+// leg taken as hiding the other (ShapeOptions::hidden_leg_behind); coasting, with or without an
+// observation within 0.5 m of the track (one it could have taken).
+constexpr const char* kPartsBins[] = {"parts: coasting",
+                                      "parts: one segment (torso)",
+                                      "parts: one leg",
+                                      "parts: one leg-sized part wider than a leg",
+                                      "parts: two legs",
+                                      "parts: wider than two legs",
+                                      "parts: coasting beside an observation (0.5 m)",
+                                      "parts: one leg hiding the other"};
 struct Breakdown {
   std::array<BreakdownCell, 4> by_range;
   std::array<BreakdownCell, 6> by_points;
-  std::array<BreakdownCell, 6> by_parts;
+  std::array<BreakdownCell, 8> by_parts;
   // Knee height, by the number of legs measured and the range.
   std::array<BreakdownCell, 4> one_leg_by_range, two_legs_by_range;
   BreakdownCell total;
@@ -220,10 +226,11 @@ struct Breakdown {
     const double range_m = t.p.norm();
     if (!(range_m > 1e-6)) return;
     const Vector2d los = t.p / range_m;
-    const std::size_t parts = h.measured ? h.parts : 0;
-    BreakdownCell* legs = parts == 2 || parts == 3 ? &one_leg_by_range[RangeBin(range_m)]
-                          : parts == 4             ? &two_legs_by_range[RangeBin(range_m)]
-                                                   : nullptr;
+    const std::size_t parts = h.measured || h.parts == 6 ? h.parts : 0;
+    BreakdownCell* legs = parts == 2 || parts == 3 || parts == 7
+                              ? &one_leg_by_range[RangeBin(range_m)]
+                          : parts == 4 ? &two_legs_by_range[RangeBin(range_m)]
+                                       : nullptr;
     BreakdownCell* cells[] = {&by_range[RangeBin(range_m)], &by_points[PointBin(h.points)],
                               &by_parts[parts], &total, legs};
     const Vector2d e = h.p - t.p;
@@ -727,6 +734,13 @@ std::size_t PartsOf(const tracking::TrackingPipeline& pipeline, const tracking::
   const auto obs = pipeline.observations();
   const auto ms = pipeline.measurements();
   const Vector2d z(r.measured_x_m, r.measured_y_m);
+  if (r.state != tracking::TrackState::kConfirmed) {
+    // Coasting: an observation it could have taken?
+    for (const tracking::Measurement& m : ms) {
+      if ((m.position_m - Vector2d(r.x_m, r.y_m)).norm() < 0.5) return 6;
+    }
+    return 0;
+  }
   double best = std::numeric_limits<double>::infinity();
   std::size_t found = obs.size();
   for (std::size_t i = 0; i < obs.size() && i < ms.size(); ++i) {
@@ -743,6 +757,7 @@ std::size_t PartsOf(const tracking::TrackingPipeline& pipeline, const tracking::
   if (pipeline.options().shape.mount == tracking::Mount::kTorso) return 1;
   if (!ob.legs) return 5;
   if (ob.part_count == 2) return 4;
+  if (ob.partner_behind) return 7;
   const auto pts =
       pipeline.segments().points_m.span().subspan(ob.parts[0].first_point, ob.parts[0].point_count);
   const tracking::ShapeOptions& o = pipeline.options().shape;
@@ -831,15 +846,14 @@ void RunSensor(const sim::Simulator& simulator, std::size_t sensor,
       frame.scan_counter = static_cast<std::uint32_t>(k);
       for (const tracking::TrackReport& r : out.tracks) {
         if (r.state == tracking::TrackState::kTentative) continue;
-        hyps.push_back(
-            {r.track_id,
-             {r.x_m, r.y_m},
-             r.covariance.topLeftCorner<2, 2>(),
-             r.state == tracking::TrackState::kConfirmed,
-             r.points,
-             {r.measured_x_m, r.measured_y_m},
-             r.measured_offset_s,
-             r.state == tracking::TrackState::kConfirmed ? PartsOf(*pipelines[v], r) : 0});
+        hyps.push_back({r.track_id,
+                        {r.x_m, r.y_m},
+                        r.covariance.topLeftCorner<2, 2>(),
+                        r.state == tracking::TrackState::kConfirmed,
+                        r.points,
+                        {r.measured_x_m, r.measured_y_m},
+                        r.measured_offset_s,
+                        PartsOf(*pipelines[v], r)});
         frame.tracks.push_back(ToObservation(r));
       }
       std::array<tracking::TrackPrediction, tracking::kMaxTracks> predictions;
