@@ -970,6 +970,12 @@ TEST(PipelineScenarioTest, OneLegHidingTheOtherIsMeasuredAsTheCentreBehindIt) {
     EXPECT_GT(after.walking_nees, 0.2);
     EXPECT_LT(after.walking_nees, 3.0);
   }
+  // At 14 m and 0.5 deg (12 cm between beams) a leg beside could fall between two beams: nothing
+  // there is no sign of a hidden leg, and a single leg stays a single leg.
+  const CrossingError far = CrossAtKneeHeight(14.0, 0.5, true);
+  SCOPED_TRACE("14 m: " + Describe(far));
+  EXPECT_GT(far.single_legs, 20u);
+  EXPECT_EQ(far.legs_behind, 0u);
 }
 
 // Six people crossing the room one after another (1.5 s apart, alternating directions), of the
