@@ -663,7 +663,8 @@ bool TrackingPipeline::PartnerBehind(const ScanView& scan, const ObservationPart
   const Eigen::Vector2d ray = centre_m / range;
   const double behind_min = 2.0 * o.hip_half_width_m - o.leg_radius_m;
   const double shadow = 2.0 * o.leg_radius_m + step * range;
-  const auto beams = static_cast<std::size_t>(std::ceil(reach / ((range - reach) * step))) + 1;
+  // The beams that can reach within `reach` of the leg: asin(reach / range) either side.
+  const auto beams = static_cast<std::size_t>(std::ceil(std::asin(reach / range) / step)) + 1;
   const std::size_t first = part.begin_beam > beams ? part.begin_beam - beams : 0;
   const std::size_t last = std::min(n, part.end_beam + beams);
   for (std::size_t b = first; b < last; ++b) {
