@@ -642,10 +642,12 @@ bool TrackingPipeline::Veiled(const ScanView& scan, const Segment& segment) cons
          ((before || after) && segment.end_beam - segment.begin_beam <= footprint_beams);
 }
 
-// One leg whose partner is hidden behind it (ShapeOptions::hidden_leg_behind): no foreground
-// return within the pairing distance of the leg, outside its own beams, lies in front of where the
-// hidden leg's edge would be or beside the leg's shadow, and a leg beside it would have returned a
-// beam (the beams' spacing there is narrower than a leg).
+// One leg whose partner is hidden behind it (ShapeOptions::hidden_leg_behind): every other beam
+// that passes within the pairing distance of the leg passes through that disc (no echo, or a
+// return beyond it), or returns from straight behind the leg (the hidden leg's edge, a mixed
+// pixel); a return inside the disc or in front of it could be the other leg or hide it. And a leg
+// beside it would have returned a whole beam (the beams' spacing and footprint are narrower than
+// a leg).
 bool TrackingPipeline::PartnerBehind(const ScanView& scan, const ObservationPart& part,
                                      const Eigen::Vector2d& centre_m) const {
   const ShapeOptions& o = options_.shape;
@@ -653,28 +655,28 @@ bool TrackingPipeline::PartnerBehind(const ScanView& scan, const ObservationPart
   const double step = std::abs(scan.angle_step_rad);
   const double reach = o.leg_pairing_distance_m;
   if (!(range > reach) || !(step > 0.0)) return false;
-  // A leg beside it returns at least one beam, and a whole one (no mixed pixel alone), only where
-  // the beams' spacing and footprint are narrower than a leg.
   if ((range + reach) * std::max(step, o.beam_divergence_rad) >= 2.0 * o.leg_radius_m) {
     return false;
   }
-  const auto foreground = background_.foreground();
-  const std::size_t n = std::min(scan.range_m.size(), foreground.size());
+  const std::size_t n = scan.range_m.size();
   const Eigen::Vector2d ray = centre_m / range;
   const double behind_min = 2.0 * o.hip_half_width_m - o.leg_radius_m;
   const double shadow = 2.0 * o.leg_radius_m + step * range;
-  // The beams that can reach within `reach` of the leg: asin(reach / range) either side.
+  // The beams that pass within `reach` of the leg: asin(reach / range) either side.
   const auto beams = static_cast<std::size_t>(std::ceil(std::asin(reach / range) / step)) + 1;
   const std::size_t first = part.begin_beam > beams ? part.begin_beam - beams : 0;
   const std::size_t last = std::min(n, part.end_beam + beams);
   for (std::size_t b = first; b < last; ++b) {
     if (b >= part.begin_beam && b < part.end_beam) continue;
     const float r = scan.range_m[b];
-    if (foreground[b] == 0 || !(std::isfinite(r) && r > 0.0f)) continue;
+    if (!(std::isfinite(r) && r > 0.0f)) continue;  // no echo: the beam passed
     const double angle = scan.first_angle_rad + static_cast<double>(b) * scan.angle_step_rad;
-    const Eigen::Vector2d d =
-        static_cast<double>(r) * Eigen::Vector2d(std::cos(angle), std::sin(angle)) - centre_m;
-    if (d.norm() > reach) continue;
+    const Eigen::Vector2d u(std::cos(angle), std::sin(angle));
+    const double past = std::abs(u.x() * centre_m.y() - u.y() * centre_m.x());
+    if (past >= reach) continue;
+    const double leaves = u.dot(centre_m) + std::sqrt(reach * reach - past * past);
+    if (static_cast<double>(r) >= leaves) continue;
+    const Eigen::Vector2d d = static_cast<double>(r) * u - centre_m;
     const double along = d.dot(ray);
     const double across = std::abs(d.x() * ray.y() - d.y() * ray.x());
     if (along < behind_min || across > shadow) return false;

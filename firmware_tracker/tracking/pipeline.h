@@ -120,11 +120,13 @@ struct ShapeOptions {
   // straight behind it along the line of sight, at least that far: the body centre, their
   // midpoint, lies hip_half_width_m or more behind the seen leg (tracking_benchmark --breakdown
   // before this: one-leg measurements 0.09 m towards the sensor at 0-5 m). Taken as hidden where
-  // nothing else of the scan's foreground lies within leg_pairing_distance_m of the leg in front
-  // of where a hidden leg's edge can be (2 hip_half_width_m - leg_radius_m behind its centre) or
-  // beside its shadow (more than 2 leg_radius_m and a beam's spacing and footprint across the
-  // line of sight), and where a leg beside it would have returned a beam (the beams' spacing
-  // there below 2 leg_radius_m). Then the centre is measured hip_half_width_m behind the leg,
+  // every other beam passing within leg_pairing_distance_m of the leg passes through that disc
+  // (no echo or a return beyond it) or returns from straight behind the leg (at least
+  // 2 hip_half_width_m - leg_radius_m behind its centre, within 2 leg_radius_m and a beam's
+  // spacing across the line of sight: the hidden leg's edge, a mixed pixel); a return in the
+  // disc or in front of it, background or not, could be the other leg or hide it. And only where
+  // a leg beside it would have returned a whole beam (the beams' spacing and footprint there
+  // below 2 leg_radius_m). Then the centre is measured hip_half_width_m behind the leg,
   // with the legs' midpoint swing (gait_sigma_m) and the hidden leg's place across the shadow
   // (leg_radius_m / 2 either side) as its covariance; otherwise the leg itself, with the hip and
   // stride extent. false: every single leg as the latter (the tree before this rule).

@@ -890,10 +890,11 @@ struct CrossingError {
   int walking = 0, standing = 0;
   std::uint64_t single_legs = 0, legs_behind = 0;
 };
-CrossingError CrossAtKneeHeight(double range_m, double step_deg, bool hidden_leg_behind) {
+CrossingError CrossAtKneeHeight(double range_m, double step_deg, bool hidden_leg_behind,
+                                double wall_x_m = 15.0) {
   Scene scene;
   scene.legs = true;
-  scene.walls = {{{15.0, -7.0}, {15.0, 7.0}},
+  scene.walls = {{{wall_x_m, -7.0}, {wall_x_m, 7.0}},
                  {{-2.0, 7.0}, {15.0, 7.0}},
                  {{-2.0, -7.0}, {15.0, -7.0}},
                  {{-2.0, 7.0}, {-2.0, -7.0}}};
@@ -976,6 +977,12 @@ TEST(PipelineScenarioTest, OneLegHidingTheOtherIsMeasuredAsTheCentreBehindIt) {
   SCOPED_TRACE("14 m: " + Describe(far));
   EXPECT_GT(far.single_legs, 20u);
   EXPECT_EQ(far.legs_behind, 0u);
+  // In front of a wall 0.35 m behind the body, the beams beside the leg return from within the
+  // legs' reach: the other leg could stand there, so a single leg stays a single leg.
+  const CrossingError wall = CrossAtKneeHeight(5.0, 0.5, true, 5.35);
+  SCOPED_TRACE("5 m before a wall: " + Describe(wall));
+  EXPECT_GT(wall.single_legs, 20u);
+  EXPECT_EQ(wall.legs_behind, 0u);
 }
 
 // Six people crossing the room one after another (1.5 s apart, alternating directions), of the
