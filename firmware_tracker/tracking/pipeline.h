@@ -24,11 +24,11 @@
 // (ShapeOptions::hidden_leg_behind), else its centre (plus the hip and stride extent). The fit's
 // size posterior becomes the track's size state (drifting by size_drift_m_per_sqrt_s between
 // scans), and a track whose learned semi-axis a exceeds box_min_half_length_m is fitted as a box
-// from then on. Whether an object is
-// person-like (static objects, multi_tracker.h): torso: not flat (the points' distance to their
-// principal line, range noise removed, averaged over the track's life, stays above flat_rms_m on
-// outlines longer than flat_min_extent_m, of at least 4 points, over which a person's back would
-// stand out of the range noise); legs: leg radius at least person_min_leg_radius_m.
+// from then on. Whether an object is person-like (static objects, multi_tracker.h): torso: not flat
+// (the points' distance to their principal line, range noise removed, averaged over the track's
+// life, stays above flat_rms_m on outlines longer than flat_min_extent_m, of at least 4 points,
+// over which a person's back would stand out of the range noise); legs: leg radius at least
+// person_min_leg_radius_m.
 //
 // Methods kCenterOfMass / kEllipse: the previous tracker (measurement.h), one measurement per
 // segment, no shape state (kept to compare against).
