@@ -212,6 +212,11 @@ void VisitShape(tracking::ShapeOptions& o, ConfigVisitor& v) {
   v.Field("gait_sigma_m", o.gait_sigma_m,
           "mount legs: how far the midpoint of the legs strays from the body centre while "
           "walking (1 sigma).");
+  v.Field("hidden_leg_behind", o.hidden_leg_behind,
+          "mount legs: a single leg whose neighbouring beams all pass leg_pairing_distance_m "
+          "around it (or return from straight behind it), where a leg beside would have returned "
+          "a beam, hides the other leg behind it: the body centre is measured hip_half_width_m "
+          "farther along the line of sight (false: at the leg, with the hip and stride extent).");
   v.Field("walking_speed_mps", o.walking_speed_mps,
           "Faster than this a person faces where they walk (the yaw prior of the fit).");
   v.Field("walking_yaw_sigma_rad", o.walking_yaw_sigma_rad,

@@ -379,11 +379,25 @@ class TrackingPipeline::Refiner final : public MeasurementRefiner {
       shape.size_m = Eigen::Vector2d::Constant(std::isfinite(radius) ? radius : shape.size_m.x());
       shape.size_cov_m2 = Eigen::Matrix2d::Constant(1.0 / info);
     } else {
-      // One leg: the body centre lies beside it (the hip) and ahead or behind (the stride).
       m.position_m = legs[0].centre_m;
-      const double extent2 =
-          o.hip_half_width_m * o.hip_half_width_m + 4.0 * o.gait_sigma_m * o.gait_sigma_m;
-      m.covariance_m2 = legs[0].centre_cov_m2 + extent2 * Eigen::Matrix2d::Identity();
+      const double range = legs[0].centre_m.norm();
+      if (ob.partner_behind && range > 0.0) {
+        // The other leg hidden behind it (ShapeOptions::hidden_leg_behind): the centre, the legs'
+        // midpoint, at least hip_half_width_m farther along the line of sight; the hidden leg
+        // within the shadow, +-leg_radius_m across it (the midpoint +-leg_radius_m / 2: variance
+        // leg_radius_m^2 / 12 for a uniform place), and the midpoint's swing as for two legs.
+        const Eigen::Vector2d ray = legs[0].centre_m / range;
+        const Eigen::Vector2d across(-ray.y(), ray.x());
+        m.position_m += o.hip_half_width_m * ray;
+        m.covariance_m2 = legs[0].centre_cov_m2 +
+                          o.gait_sigma_m * o.gait_sigma_m * Eigen::Matrix2d::Identity() +
+                          (o.leg_radius_m * o.leg_radius_m / 12.0) * across * across.transpose();
+      } else {
+        // One leg: the body centre lies beside it (the hip) and ahead or behind (the stride).
+        const double extent2 =
+            o.hip_half_width_m * o.hip_half_width_m + 4.0 * o.gait_sigma_m * o.gait_sigma_m;
+        m.covariance_m2 = legs[0].centre_cov_m2 + extent2 * Eigen::Matrix2d::Identity();
+      }
       m.rms_residual_m = legs[0].rms_m;
       shape.size_m = legs[0].size_m;
       shape.size_cov_m2 = legs[0].size_cov_m2;
@@ -628,6 +642,48 @@ bool TrackingPipeline::Veiled(const ScanView& scan, const Segment& segment) cons
          ((before || after) && segment.end_beam - segment.begin_beam <= footprint_beams);
 }
 
+// One leg whose partner is hidden behind it (ShapeOptions::hidden_leg_behind): every other beam
+// that passes within the pairing distance of the leg passes through that disc (no echo, or a
+// return beyond it), or returns from straight behind the leg (the hidden leg's edge, a mixed
+// pixel); a return inside the disc or in front of it could be the other leg or hide it. And a leg
+// beside it would have returned a whole beam (the beams' spacing and footprint are narrower than
+// a leg).
+bool TrackingPipeline::PartnerBehind(const ScanView& scan, const ObservationPart& part,
+                                     const Eigen::Vector2d& centre_m) const {
+  const ShapeOptions& o = options_.shape;
+  const double range = centre_m.norm();
+  const double step = std::abs(scan.angle_step_rad);
+  const double reach = o.leg_pairing_distance_m;
+  if (!(range > reach) || !(step > 0.0)) return false;
+  if ((range + reach) * std::max(step, o.beam_divergence_rad) >= 2.0 * o.leg_radius_m) {
+    return false;
+  }
+  const std::size_t n = scan.range_m.size();
+  const Eigen::Vector2d ray = centre_m / range;
+  const double behind_min = 2.0 * o.hip_half_width_m - o.leg_radius_m;
+  const double shadow = 2.0 * o.leg_radius_m + step * range;
+  // The beams that pass within `reach` of the leg: asin(reach / range) either side.
+  const auto beams = static_cast<std::size_t>(std::ceil(std::asin(reach / range) / step)) + 1;
+  const std::size_t first = part.begin_beam > beams ? part.begin_beam - beams : 0;
+  const std::size_t last = std::min(n, part.end_beam + beams);
+  for (std::size_t b = first; b < last; ++b) {
+    if (b >= part.begin_beam && b < part.end_beam) continue;
+    const float r = scan.range_m[b];
+    if (!(std::isfinite(r) && r > 0.0f)) continue;  // no echo: the beam passed
+    const double angle = scan.first_angle_rad + static_cast<double>(b) * scan.angle_step_rad;
+    const Eigen::Vector2d u(std::cos(angle), std::sin(angle));
+    const double past = std::abs(u.x() * centre_m.y() - u.y() * centre_m.x());
+    if (past >= reach) continue;
+    const double leaves = u.dot(centre_m) + std::sqrt(reach * reach - past * past);
+    if (static_cast<double>(r) >= leaves) continue;
+    const Eigen::Vector2d d = static_cast<double>(r) * u - centre_m;
+    const double along = d.dot(ray);
+    const double across = std::abs(d.x() * ray.y() - d.y() * ray.x());
+    if (along < behind_min || across > shadow) return false;
+  }
+  return true;
+}
+
 void TrackingPipeline::PairLegs(const ScanView& scan) {
   const ShapeOptions& o = options_.shape;
   const std::size_t n = leg_parts_.size();
@@ -659,6 +715,9 @@ void TrackingPipeline::PairLegs(const ScanView& scan) {
       ++counters_.leg_pairs;
     } else {
       ++counters_.single_legs;
+      ob.partner_behind =
+          o.hidden_leg_behind && PartnerBehind(scan, leg_parts_[a], leg_centres_m_[a]);
+      if (ob.partner_behind) ++counters_.legs_behind;
     }
     AddObservation(scan, ob);
   };

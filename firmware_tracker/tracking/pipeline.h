@@ -20,13 +20,15 @@
 // direction as the yaw prior (the shoulders across it; a box's length along it) and its predicted
 // position as the start; legs: a circle per leg with the track's leg radius, the body centre their
 // midpoint (plus gait_sigma_m: the legs' midpoint swings about the body's centre as they step), or
-// the one leg's centre (plus the hip and stride extent). The fit's size posterior becomes the
-// track's size state (drifting by size_drift_m_per_sqrt_s between scans), and a track whose learned
-// semi-axis a exceeds box_min_half_length_m is fitted as a box from then on. Whether an object is
-// person-like (static objects, multi_tracker.h): torso: not flat (the points' distance to their
-// principal line, range noise removed, averaged over the track's life, stays above flat_rms_m on
-// outlines longer than flat_min_extent_m, of at least 4 points, over which a person's back would
-// stand out of the range noise); legs: leg radius at least person_min_leg_radius_m.
+// one leg: hip_half_width_m behind it along the line of sight where it hides the other
+// (ShapeOptions::hidden_leg_behind), else its centre (plus the hip and stride extent). The fit's
+// size posterior becomes the track's size state (drifting by size_drift_m_per_sqrt_s between
+// scans), and a track whose learned semi-axis a exceeds box_min_half_length_m is fitted as a box
+// from then on. Whether an object is person-like (static objects, multi_tracker.h): torso: not flat
+// (the points' distance to their principal line, range noise removed, averaged over the track's
+// life, stays above flat_rms_m on outlines longer than flat_min_extent_m, of at least 4 points,
+// over which a person's back would stand out of the range noise); legs: leg radius at least
+// person_min_leg_radius_m.
 //
 // Methods kCenterOfMass / kEllipse: the previous tracker (measurement.h), one measurement per
 // segment, no shape state (kept to compare against).
@@ -113,6 +115,22 @@ struct ShapeOptions {
   // found once they step out of the shadow. false: the tree before this rule.
   bool drop_mixed_pixel_legs = true;
   double gait_sigma_m = 0.05;
+  // Legs mount: one leg whose partner is hidden behind it. Walking legs are always
+  // 2 hip_half_width_m apart across the walk, so where one leg hides the other, the other stands
+  // straight behind it along the line of sight, at least that far: the body centre, their
+  // midpoint, lies hip_half_width_m or more behind the seen leg (tracking_benchmark --breakdown
+  // before this: one-leg measurements 0.09 m towards the sensor at 0-5 m). Taken as hidden where
+  // every other beam passing within leg_pairing_distance_m of the leg passes through that disc
+  // (no echo or a return beyond it) or returns from straight behind the leg (at least
+  // 2 hip_half_width_m - leg_radius_m behind its centre, within 2 leg_radius_m and a beam's
+  // spacing across the line of sight: the hidden leg's edge, a mixed pixel); a return in the
+  // disc or in front of it, background or not, could be the other leg or hide it. And only where
+  // a leg beside it would have returned a whole beam (the beams' spacing and footprint there
+  // below 2 leg_radius_m). Then the centre is measured hip_half_width_m behind the leg,
+  // with the legs' midpoint swing (gait_sigma_m) and the hidden leg's place across the shadow
+  // (leg_radius_m / 2 either side) as its covariance; otherwise the leg itself, with the hip and
+  // stride extent. false: every single leg as the latter (the tree before this rule).
+  bool hidden_leg_behind = true;
   // Yaw prior: faster than walking_speed_mps a person faces where they walk (sigma
   // walking_yaw_sigma_rad: the torso turns with the gait, people step sideways); standing, the last
   // orientation, less certain by yaw_drift_rad_per_s.
@@ -209,6 +227,7 @@ struct PipelineCounters {
   std::uint64_t failed_shape_fits = 0;  // degenerate input
   std::uint64_t leg_pairs = 0;          // observations of two legs (kLegs)
   std::uint64_t single_legs = 0;        // observations of one leg
+  std::uint64_t legs_behind = 0;        // of them: the other hidden behind (hidden_leg_behind)
   std::uint64_t veiled_segments = 0;    // legs: mixed pixels beside a nearer edge, dropped
   std::uint64_t shadowed_legs = 0;      // legs: straight behind a confirmed track, dropped
   std::uint64_t absorbed_objects = 0;   // static objects handed to the background
@@ -233,6 +252,8 @@ struct Observation {
   std::array<ObservationPart, 2> parts{};
   std::size_t part_count = 0;
   bool legs = false;  // parts are legs (kLegs mount)
+  // One leg whose partner stands hidden behind it (ShapeOptions::hidden_leg_behind).
+  bool partner_behind = false;
 };
 
 class TrackingPipeline {
@@ -276,6 +297,8 @@ class TrackingPipeline {
   void DropCoasting(const ScanView& scan);
   bool SeenThrough(const ScanView& scan, const Eigen::Vector2d& position_m, double sigma_m) const;
   bool Veiled(const ScanView& scan, const Segment& segment) const;
+  bool PartnerBehind(const ScanView& scan, const ObservationPart& part,
+                     const Eigen::Vector2d& centre_m) const;
   bool ForegroundNear(const ScanView& scan, const Eigen::Vector2d& position_m,
                       double sigma_m) const;
 

@@ -34,7 +34,8 @@
 //   tracking_benchmark --scenarios DIR [--extra DIR] [--only NAME] [--out FILE] [--jobs N]
 //                      [--explain] [--breakdown]
 //                      [--before-report-rules |
-//                       [--before-mixed-pixels] [--before-far] [--before-evidence-coasting]]
+//                       [--before-mixed-pixels] [--before-far] [--before-evidence-coasting]
+//                        [--before-one-leg]]
 //   (--extra: more scenario folders, e.g. held-out scenes, reported in their own section;
 //   --explain: per run on stderr, what became of an object's previous track at every id switch
 //   and missed scan, what the false positives are (by scan and by false track: a track left
@@ -49,7 +50,9 @@
 //   mixed-pixel model of far edges at upper-body height, ShapeOptions::mixed_pixel_min_footprint_m
 //   = 0; --before-evidence-coasting: "before" is the new one reporting every coasting track for
 //   report_coasting_s whatever its evidence, MultiTrackerOptions::report_coasting_per_measured_s =
-//   0; several: without any of them). --explain also
+//   0; --before-one-leg: "before" measures every single knee-height leg as the leg itself, also
+//   where its partner is hidden behind it, ShapeOptions::hidden_leg_behind = false; several:
+//   without any of them). --explain also
 //   writes the false positives' classes to the results (ExplainTable) and, on stderr, what the
 //   tracks measured again after more than 1 s (a lost track resumed) came back on.
 
@@ -110,6 +113,7 @@ struct Hypothesis {
   std::uint32_t points = 0;
   Vector2d z = Vector2d::Zero();
   double z_offset_s = 0.0;
+  std::size_t parts = 0;  // --breakdown: the measurement's observation, a Breakdown::PartsBin
 };
 
 // --breakdown: where the matched error of the per-sensor tracks comes from. Every match's error
@@ -124,7 +128,8 @@ struct Hypothesis {
 constexpr double kMovingMps = 0.3;
 struct ErrorStats {
   double n = 0, sum = 0, radial = 0, radial2 = 0, across2 = 0;
-  double moving = 0, along = 0;
+  double moving = 0, along = 0, along2 = 0, beside2 = 0;  // beside: across the motion
+  double nees = 0;                                        // sum of the position's NEES (AddNees)
   std::vector<double> norms;
   void Add(const Vector2d& e, const Vector2d& los, const Vector2d& v) {
     const Vector2d across(-los.y(), los.x());
@@ -136,9 +141,16 @@ struct ErrorStats {
     across2 += c * c;
     norms.push_back(e.norm());
     if (v.norm() > kMovingMps) {
+      const Vector2d u = v.normalized();
       moving += 1;
-      along += e.dot(v.normalized());
+      along += e.dot(u);
+      along2 += e.dot(u) * e.dot(u);
+      beside2 += (u.x() * e.y() - u.y() * e.x()) * (u.x() * e.y() - u.y() * e.x());
     }
+  }
+  void AddNees(const Vector2d& e, const Matrix2d& cov) {
+    const Eigen::LDLT<Matrix2d> ldlt(cov);
+    if (ldlt.info() == Eigen::Success) nees += e.dot(ldlt.solve(e));
   }
   void Merge(const ErrorStats& o) {
     n += o.n;
@@ -148,6 +160,9 @@ struct ErrorStats {
     across2 += o.across2;
     moving += o.moving;
     along += o.along;
+    along2 += o.along2;
+    beside2 += o.beside2;
+    nees += o.nees;
     norms.insert(norms.end(), o.norms.begin(), o.norms.end());
   }
   double Mean() const { return n > 0 ? sum / n : 0.0; }
@@ -156,6 +171,9 @@ struct ErrorStats {
   double RadialRms() const { return n > 0 ? std::sqrt(radial2 / n) : 0.0; }
   double AcrossRms() const { return n > 0 ? std::sqrt(across2 / n) : 0.0; }
   double AlongMean() const { return moving > 0 ? along / moving : 0.0; }
+  double AlongRms() const { return moving > 0 ? std::sqrt(along2 / moving) : 0.0; }
+  double BesideRms() const { return moving > 0 ? std::sqrt(beside2 / moving) : 0.0; }
+  double Nees() const { return n > 0 ? nees / n : 0.0; }
   double P95() const {
     if (norms.empty()) return 0.0;
     std::vector<double> e = norms;
@@ -178,9 +196,25 @@ constexpr const char* kRangeBins[] = {"range 0-5 m", "range 5-10 m", "range 10-2
                                       "range 20+ m"};
 constexpr const char* kPointBins[] = {"points 0 (coasting)", "points 1",     "points 2-4",
                                       "points 5-9",          "points 10-19", "points 20+"};
+// What the scan's measurement of a track was made of (the pipeline's observation): knee height
+// one leg (its partner not seen, or both legs in one segment of too few points to split), one
+// part wider than a leg (two legs that touch), two legs, a segment wider than a pair of legs, one
+// leg taken as hiding the other (ShapeOptions::hidden_leg_behind); coasting, with or without an
+// observation within 0.5 m of the track (one it could have taken).
+constexpr const char* kPartsBins[] = {"parts: coasting",
+                                      "parts: one segment (torso)",
+                                      "parts: one leg",
+                                      "parts: one leg-sized part wider than a leg",
+                                      "parts: two legs",
+                                      "parts: wider than two legs",
+                                      "parts: coasting beside an observation (0.5 m)",
+                                      "parts: one leg hiding the other"};
 struct Breakdown {
   std::array<BreakdownCell, 4> by_range;
   std::array<BreakdownCell, 6> by_points;
+  std::array<BreakdownCell, 8> by_parts;
+  // Knee height, by the number of legs measured and the range.
+  std::array<BreakdownCell, 4> one_leg_by_range, two_legs_by_range;
   BreakdownCell total;
   static std::size_t RangeBin(double r_m) {
     return r_m < 5.0 ? 0 : r_m < 10.0 ? 1 : r_m < 20.0 ? 2 : 3;
@@ -192,20 +226,35 @@ struct Breakdown {
     const double range_m = t.p.norm();
     if (!(range_m > 1e-6)) return;
     const Vector2d los = t.p / range_m;
-    BreakdownCell* cells[] = {&by_range[RangeBin(range_m)], &by_points[PointBin(h.points)], &total};
+    const std::size_t parts = h.measured || h.parts == 6 ? h.parts : 0;
+    BreakdownCell* legs = parts == 2 || parts == 3 || parts == 7
+                              ? &one_leg_by_range[RangeBin(range_m)]
+                          : parts == 4 ? &two_legs_by_range[RangeBin(range_m)]
+                                       : nullptr;
+    BreakdownCell* cells[] = {&by_range[RangeBin(range_m)], &by_points[PointBin(h.points)],
+                              &by_parts[parts], &total, legs};
     const Vector2d e = h.p - t.p;
-    for (BreakdownCell* c : cells) c->all.Add(e, los, t.v);
+    for (BreakdownCell* c : cells) {
+      if (c != nullptr) c->all.Add(e, los, t.v);
+    }
     if (!h.measured) return;
     // The truth at the measurement's time (its path's velocity over a fraction of a scan).
     const Vector2d ez = h.z - (t.p + h.z_offset_s * t.v);
     for (BreakdownCell* c : cells) {
+      if (c == nullptr) continue;
       c->filtered.Add(e, los, t.v);
+      c->filtered.AddNees(e, h.cov);
       c->raw.Add(ez, los, t.v);
     }
   }
   void Merge(const Breakdown& o) {
     for (std::size_t i = 0; i < by_range.size(); ++i) by_range[i].Merge(o.by_range[i]);
     for (std::size_t i = 0; i < by_points.size(); ++i) by_points[i].Merge(o.by_points[i]);
+    for (std::size_t i = 0; i < by_parts.size(); ++i) by_parts[i].Merge(o.by_parts[i]);
+    for (std::size_t i = 0; i < by_range.size(); ++i) {
+      one_leg_by_range[i].Merge(o.one_leg_by_range[i]);
+      two_legs_by_range[i].Merge(o.two_legs_by_range[i]);
+    }
     total.Merge(o.total);
   }
 };
@@ -614,6 +663,10 @@ bool g_before_far = false;
 // report_coasting_s whatever its evidence (MultiTrackerOptions::report_coasting_per_measured_s =
 // 0).
 bool g_before_evidence_coasting = false;
+// --before-one-leg: "before" is the new tracker measuring every single leg as the leg itself with
+// the hip and stride extent (ShapeOptions::hidden_leg_behind = false). With the other --before-*
+// options: without any of them.
+bool g_before_one_leg = false;
 const char* const kVariantNames[] = {"old", "new", "before"};
 
 std::vector<Variant> Variants(sim::Mount mount, double range_m) {
@@ -635,8 +688,10 @@ std::vector<Variant> Variants(sim::Mount mount, double range_m) {
     before.shape.unseen_coasting_m = 0.0;
     before.tracking.moving_speed_mps = 0.0;
     variants.push_back({"before", before});
-  } else if (g_before_mixed_pixels || g_before_far || g_before_evidence_coasting) {
+  } else if (g_before_mixed_pixels || g_before_far || g_before_evidence_coasting ||
+             g_before_one_leg) {
     tracking::TrackerOptions before = fresh;
+    if (g_before_one_leg) before.shape.hidden_leg_behind = false;
     if (g_before_mixed_pixels) before.shape.drop_mixed_pixel_legs = false;
     if (g_before_far) before.shape.mixed_pixel_min_footprint_m = 0.0;
     if (g_before_evidence_coasting) before.tracking.report_coasting_per_measured_s = 0.0;
@@ -670,6 +725,43 @@ daemon::TrackObservation ToObservation(const tracking::TrackReport& r) {
   o.size_minor_m = static_cast<float>(r.size_minor_m);
   o.size_sigma_m = static_cast<float>(r.size_sigma_m);
   return o;
+}
+
+// --breakdown: what the measurement of a track measured in this scan was made of (a kPartsBins
+// index): the pipeline's observation with the track's point count whose first position lies
+// nearest to the refined measurement.
+std::size_t PartsOf(const tracking::TrackingPipeline& pipeline, const tracking::TrackReport& r) {
+  const auto obs = pipeline.observations();
+  const auto ms = pipeline.measurements();
+  const Vector2d z(r.measured_x_m, r.measured_y_m);
+  if (r.state != tracking::TrackState::kConfirmed) {
+    // Coasting: an observation it could have taken?
+    for (const tracking::Measurement& m : ms) {
+      if ((m.position_m - Vector2d(r.x_m, r.y_m)).norm() < 0.5) return 6;
+    }
+    return 0;
+  }
+  double best = std::numeric_limits<double>::infinity();
+  std::size_t found = obs.size();
+  for (std::size_t i = 0; i < obs.size() && i < ms.size(); ++i) {
+    std::size_t points = 0;
+    for (std::size_t k = 0; k < obs[i].part_count; ++k) points += obs[i].parts[k].point_count;
+    const double d = (ms[i].position_m - z).norm();
+    if (points == r.points && d < best) {
+      best = d;
+      found = i;
+    }
+  }
+  if (found == obs.size()) return 0;
+  const tracking::Observation& ob = obs[found];
+  if (pipeline.options().shape.mount == tracking::Mount::kTorso) return 1;
+  if (!ob.legs) return 5;
+  if (ob.part_count == 2) return 4;
+  if (ob.partner_behind) return 7;
+  const auto pts =
+      pipeline.segments().points_m.span().subspan(ob.parts[0].first_point, ob.parts[0].point_count);
+  const tracking::ShapeOptions& o = pipeline.options().shape;
+  return (pts.back() - pts.front()).norm() > 2.0 * o.leg_radius_m + 0.08 ? 3 : 2;
 }
 
 struct SensorFrames {
@@ -760,7 +852,8 @@ void RunSensor(const sim::Simulator& simulator, std::size_t sensor,
                         r.state == tracking::TrackState::kConfirmed,
                         r.points,
                         {r.measured_x_m, r.measured_y_m},
-                        r.measured_offset_s});
+                        r.measured_offset_s,
+                        PartsOf(*pipelines[v], r)});
         frame.tracks.push_back(ToObservation(r));
       }
       std::array<tracking::TrackPrediction, tracking::kMaxTracks> predictions;
@@ -1003,18 +1096,21 @@ const char* kHeader =
 const char* kBreakdownHeader =
     "| scenario | mount | tracker | bin | matches | MOTP m | p95 m | radial mean m | radial RMS m "
     "| across RMS m | measured | filtered RMS m | raw RMS m | filtered radial mean m | raw radial "
-    "mean m | filtered along-motion mean m | raw along-motion mean m |\n"
-    "|---|---|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n";
+    "mean m | filtered along-motion mean m | raw along-motion mean m | raw along-motion RMS m | "
+    "raw across-motion RMS m | filtered NEES |\n"
+    "|---|---|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|--"
+    "-:"
+    "|\n";
 
 std::string BreakdownRow(const std::string& lead, const std::string& bin, const BreakdownCell& c) {
   char line[512];
   std::snprintf(line, sizeof line,
                 "| %s | %s | %.0f | %.3f | %.3f | %+.3f | %.3f | %.3f | %.0f | %.3f | %.3f | "
-                "%+.3f | %+.3f | %+.3f | %+.3f |\n",
+                "%+.3f | %+.3f | %+.3f | %+.3f | %.3f | %.3f | %.2f |\n",
                 lead.c_str(), bin.c_str(), c.all.n, c.all.Mean(), c.all.P95(), c.all.RadialMean(),
                 c.all.RadialRms(), c.all.AcrossRms(), c.filtered.n, c.filtered.Rms(), c.raw.Rms(),
                 c.filtered.RadialMean(), c.raw.RadialMean(), c.filtered.AlongMean(),
-                c.raw.AlongMean());
+                c.raw.AlongMean(), c.raw.AlongRms(), c.raw.BesideRms(), c.filtered.Nees());
   return line;
 }
 
@@ -1218,6 +1314,15 @@ std::string BreakdownTable(const Section& s) {
       t += BreakdownRow(lead, kRangeBins[i], b.by_range[i]);
     for (std::size_t i = 0; i < b.by_points.size(); ++i)
       t += BreakdownRow(lead, kPointBins[i], b.by_points[i]);
+    for (std::size_t i = 0; i < b.by_parts.size(); ++i) {
+      if (b.by_parts[i].all.n > 0) t += BreakdownRow(lead, kPartsBins[i], b.by_parts[i]);
+    }
+    for (std::size_t i = 0; i < b.by_range.size(); ++i) {
+      if (b.one_leg_by_range[i].all.n > 0)
+        t += BreakdownRow(lead, std::string("one leg, ") + kRangeBins[i], b.one_leg_by_range[i]);
+      if (b.two_legs_by_range[i].all.n > 0)
+        t += BreakdownRow(lead, std::string("two legs, ") + kRangeBins[i], b.two_legs_by_range[i]);
+    }
   }
   return t + s.breakdown_rows;
 }
@@ -1314,6 +1419,8 @@ int main(int argc, char** argv) {
       g_before_mixed_pixels = true;
     } else if (a == "--before-far") {
       g_before_far = true;
+    } else if (a == "--before-one-leg") {
+      g_before_one_leg = true;
     } else if (a == "--jobs") {
       jobs = std::max(1, std::atoi(value().c_str()));
     } else {
@@ -1321,7 +1428,7 @@ int main(int argc, char** argv) {
                    "usage: tracking_benchmark --scenarios DIR [--extra DIR] [--only NAME] "
                    "[--out FILE] [--jobs N] [--explain] [--breakdown] "
                    "[--before-report-rules | [--before-mixed-pixels] [--before-far] "
-                   "[--before-evidence-coasting]]\n");
+                   "[--before-evidence-coasting] [--before-one-leg]]\n");
       return 2;
     }
   }
@@ -1367,7 +1474,13 @@ int main(int argc, char** argv) {
            "position, 2 dof, mean over measured matches (2 is honest) and the share within the "
            "99 % bound. \"legs\": every sensor at knee height. How the numbers are made: the "
            "header of tests/bench/tracking_benchmark.cc.\n\n"
-        << (g_before_mixed_pixels && g_before_far
+        << (g_before_one_leg && !g_before_mixed_pixels && !g_before_far &&
+                    !g_before_evidence_coasting
+                ? "\"before\": the new tracker measuring a single leg at knee height as the leg "
+                  "itself even where its partner is hidden behind it (`shape.hidden_leg_behind` "
+                  "false), on the same scans in the same run; upper-body rows are the same by "
+                  "construction.\n\n"
+            : g_before_mixed_pixels && g_before_far
                 ? "\"before\": the new tracker without its handling of mixed pixels: at knee "
                   "height taking them for legs (`shape.drop_mixed_pixel_legs` false), at "
                   "upper-body "
