@@ -307,6 +307,11 @@ void VisitTracking(tracking::TrackerOptions& p, ConfigVisitor& v) {
           "rough position of shape_fit's association (sway, viewpoint changes).");
   VisitInteger(v, "confirm_hits", o.confirm_hits, "M of the M-of-N confirmation.");
   VisitInteger(v, "confirm_window", o.confirm_window, "N of the M-of-N confirmation (<= 32).");
+  v.Field("confirm_min_s", o.confirm_min_s,
+          "... and a track is confirmed only once its first and latest measurements lie this far "
+          "apart, M of N holding meanwhile: bursts of leg-sized clutter (mixed pixels behind a "
+          "person) reach M of N within a few scans at 50 Hz, walking legs stay in view. A time, "
+          "the same at every scan rate. 0: M of N alone. Knee height only (shape.mount: legs).");
   v.Field("coast_timeout_s", o.coast_timeout_s,
           "A confirmed track without measurements is deleted after this (occlusions shorter "
           "than this keep their id).");

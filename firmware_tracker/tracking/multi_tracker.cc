@@ -62,6 +62,9 @@ std::optional<std::string> Validate(const MultiTrackerOptions& o) {
   if (o.confirm_hits < 1 || o.confirm_hits > o.confirm_window) {
     return "confirm_hits must be in [1, confirm_window]";
   }
+  if (!(std::isfinite(o.confirm_min_s) && o.confirm_min_s >= 0.0 && o.confirm_min_s <= 10.0)) {
+    return "confirm_min_s must be in [0, 10]";
+  }
   if (!Positive(o.coast_timeout_s)) return "coast_timeout_s must be > 0";
   if (!(std::isfinite(o.resume_window_s) && o.resume_window_s >= 0.0)) {
     return "resume_window_s must be >= 0";
@@ -465,9 +468,13 @@ void MultiTracker::ManageLifecycle(common::UtcNs scan_start_ns) {
     Track& t = tracks_[i];
     bool remove = false;
     if (!t.confirmed) {
-      // All scans of a young track lie in its first window: bits 0..age_scans.
+      // All scans of a young track lie in its first window: bits 0..age_scans; later, the latest
+      // confirm_window scans (confirm_min_s).
       const auto hits = static_cast<std::uint32_t>(std::popcount(t.hits & window_mask));
-      if (hits >= options_.confirm_hits) {
+      const bool long_enough =
+          options_.confirm_min_s <= 0.0 ||
+          common::NsToSeconds(t.last_update_ns - t.first_update_ns) >= options_.confirm_min_s;
+      if (hits >= options_.confirm_hits && long_enough) {
         t.confirmed = true;
         ++counters_.confirmed;
       } else {
@@ -598,8 +605,9 @@ bool MultiTracker::Resume(common::UtcNs scan_start_ns, const Candidate& c,
   // does not bring a lost track back; then reported at once (it has moved).
   t.hits = 1u;
   t.age_scans = 0;
-  t.confirmed = options_.confirm_hits <= 1;
+  t.confirmed = options_.confirm_hits <= 1 && options_.confirm_min_s <= 0.0;
   NoteUpdate(t, m, c, z, at_ns, scan_start_ns);
+  t.first_update_ns = at_ns;
   // Still for as long as it was lost: the static-object clocks restart here.
   t.anchor_m = t.filter.position_m();
   t.anchor_ns = scan_start_ns;
@@ -656,6 +664,7 @@ void MultiTracker::StartTracks(common::UtcNs scan_start_ns,
     t->filter.Init(z, r);
     t->filter_ns = at_ns;
     t->last_update_ns = at_ns;
+    t->first_update_ns = at_ns;
     t->measured_s = 0.0;
     t->id = NewId();
     t->updated = true;
@@ -671,7 +680,7 @@ void MultiTracker::StartTracks(common::UtcNs scan_start_ns,
     t->source = c.source;
     t->z_m = z;
     t->z_offset_s = common::NsToSeconds(at_ns - scan_start_ns);
-    t->confirmed = options_.confirm_hits <= 1;
+    t->confirmed = options_.confirm_hits <= 1 && options_.confirm_min_s <= 0.0;
     ++counters_.created;
     if (t->confirmed) ++counters_.confirmed;
   }

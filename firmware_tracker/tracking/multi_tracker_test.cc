@@ -23,6 +23,7 @@ MultiTrackerOptions Opts() {
   o.static_objects = false;
   o.report_coasting_s = o.coast_timeout_s;  // every coasting scan reported
   o.report_coasting_per_measured_s = 0.0;
+  o.confirm_min_s = 0.0;  // M of N alone
   return o;
 }
 
@@ -67,6 +68,9 @@ TEST(MultiTrackerOptionsTest, DefaultsValidAndEachBadValueNamesItsField) {
       {with([](auto& o) { o.confirm_hits = 0; }), "confirm_hits"},
       {with([](auto& o) { o.confirm_hits = 5; }), "confirm_hits"},  // > confirm_window (4)
       {with([](auto& o) { o.confirm_window = 33; }), "confirm_window"},
+      {with([](auto& o) { o.confirm_min_s = -0.1; }), "confirm_min_s"},
+      {with([](auto& o) { o.confirm_min_s = 11.0; }), "confirm_min_s"},
+      {with([nan](auto& o) { o.confirm_min_s = nan; }), "confirm_min_s"},
       {with([](auto& o) { o.report_coasting_per_measured_s = -1.0; }),
        "report_coasting_per_measured_s"},
       {with([nan](auto& o) { o.report_coasting_per_measured_s = nan; }),
@@ -677,6 +681,7 @@ double ReportedCoastingS(const MultiTrackerOptions& options, common::DurationNs 
 TEST(MultiTrackerTest, TrackSeenBrieflyIsReportedCoastingForAsLongAsItWasSeenAtEveryScanRate) {
   MultiTrackerOptions options;  // report_coasting_s 0.5, report_coasting_per_measured_s 1
   options.static_objects = false;
+  options.confirm_min_s = 0.0;  // confirmed by 3 of 4 as the pipeline does at upper-body height
   MultiTrackerOptions before = options;
   before.report_coasting_per_measured_s = 0.0;
   constexpr common::DurationNs k50Hz = 20 * common::kNsPerMs;
@@ -690,6 +695,57 @@ TEST(MultiTrackerTest, TrackSeenBrieflyIsReportedCoastingForAsLongAsItWasSeenAtE
   // Someone seen for 1 s: reported coasting for report_coasting_s at both rates.
   EXPECT_NEAR(ReportedCoastingS(options, k50Hz, 51), 0.5, 0.021);
   EXPECT_NEAR(ReportedCoastingS(options, k15Hz, 16), 0.5, 0.067);
+}
+
+// An object at (3, 1) m walking along x at 1.2 m/s, measured in the scans k (0, 1, ...,
+// `scans` - 1, `period_ns` apart) where seen(k), then gone for 1 s: when (s after its first
+// measurement) it was first reported, -1 for never.
+template <typename Seen>
+double FirstReportedS(const MultiTrackerOptions& options, common::DurationNs period_ns,
+                      std::int64_t scans, Seen seen) {
+  MultiTracker tracker(options);
+  ScanTracks out;
+  double first_s = -1.0;
+  const auto end = scans + 1 * common::kNsPerS / period_ns;
+  for (std::int64_t k = 0; k < end; ++k) {
+    const double t_s = common::NsToSeconds(k * period_ns);
+    std::vector<Measurement> ms;
+    if (k < scans && seen(k)) ms.push_back(Meas(3.0 + 1.2 * t_s, 1.0));
+    tracker.Step(kT0 + k * period_ns, ms, out);
+    if (!out.tracks.empty() && first_s < 0.0) first_s = t_s;
+  }
+  return first_s;
+}
+
+TEST(MultiTrackerTest, ConfirmationTakesAMinimumTimeAtEveryScanRateSoClutterBurstsAreNotTracks) {
+  MultiTrackerOptions options = Opts();
+  options.confirm_min_s = 0.2;
+  MultiTrackerOptions before = Opts();  // M of N (3 of 4) alone
+  constexpr common::DurationNs k50Hz = 20 * common::kNsPerMs;
+  constexpr common::DurationNs k15Hz = 200 * common::kNsPerMs / 3;
+  const auto always = [](std::int64_t) { return true; };
+  // Leg-sized clutter in 5 consecutive scans at 50 Hz (80 ms) or 3 at 15 Hz (133 ms): M of N
+  // confirms both (after 40 ms and 133 ms); with 0.2 s, neither is ever reported.
+  EXPECT_NEAR(FirstReportedS(before, k50Hz, 5, always), 0.04, 1e-9);
+  EXPECT_NEAR(FirstReportedS(before, k15Hz, 3, always), 0.1333, 1e-3);
+  EXPECT_EQ(FirstReportedS(options, k50Hz, 5, always), -1.0);
+  EXPECT_EQ(FirstReportedS(options, k15Hz, 3, always), -1.0);
+  // A burst at 50 Hz that lasts 0.3 s but is seen in every other scan only (2 of 4): M of N
+  // fails in its windows after the first; deleted, never reported.
+  EXPECT_EQ(FirstReportedS(options, k50Hz, 15, [](std::int64_t k) { return k < 4 || k % 2 == 0; }),
+            -1.0);
+  // A person walking in: reported 0.2 s after the first measurement, within one scan, at both
+  // rates, also when every 4th scan misses them (3 of 4 in every window).
+  const double latency_50_s = FirstReportedS(options, k50Hz, 100, always);
+  EXPECT_GE(latency_50_s, 0.2 - 1e-9);
+  EXPECT_LE(latency_50_s, 0.22 + 1e-9);
+  const double latency_15_s = FirstReportedS(options, k15Hz, 30, always);
+  EXPECT_GE(latency_15_s, 0.2 - 1e-6);
+  EXPECT_LE(latency_15_s, 0.2667 + 1e-3);
+  const double latency_gaps_s =
+      FirstReportedS(options, k50Hz, 100, [](std::int64_t k) { return k % 4 != 3; });
+  EXPECT_GE(latency_gaps_s, 0.2 - 1e-9);
+  EXPECT_LE(latency_gaps_s, 0.24 + 1e-9);
 }
 
 }  // namespace
