@@ -209,6 +209,10 @@ void VisitShape(tracking::ShapeOptions& o, ConfigVisitor& v) {
           "times range above a leg's width) a beam that grazes it reports a range between the leg "
           "and what is behind: leg-sized pieces beside a much nearer return, and legs straight "
           "behind a confirmed track, are dropped.");
+  v.Field("drop_mixed_pixel_legs_whole_person", o.drop_mixed_pixel_legs_whole_person,
+          "mount legs: ... also leg-sized pieces within leg_pairing_distance_m (across the ray) "
+          "of a much nearer return: the other leg of a person one beam returns may fill no beam, "
+          "its mixed pixels lie behind it.");
   v.Field("gait_sigma_m", o.gait_sigma_m,
           "mount legs: how far the midpoint of the legs strays from the body centre while "
           "walking (1 sigma).");

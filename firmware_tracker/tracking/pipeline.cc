@@ -4,7 +4,6 @@
 #include <Eigen/LU>
 #include <algorithm>
 #include <cmath>
-#include <cstdlib>
 #include <utility>
 
 #include "common/geometry.h"
@@ -642,8 +641,29 @@ bool TrackingPipeline::Veiled(const ScanView& scan, const Segment& segment) cons
     before = before || (segment.begin_beam >= k && nearer(segment.begin_beam - k, pts.front()));
     after = after || (segment.end_beam + k - 1 < n && nearer(segment.end_beam + k - 1, pts.back()));
   }
-  return (before && after) ||
-         ((before || after) && segment.end_beam - segment.begin_beam <= footprint_beams);
+  if ((before && after) ||
+      ((before || after) && segment.end_beam - segment.begin_beam <= footprint_beams)) {
+    return true;
+  }
+  if (!o.drop_mixed_pixel_legs_whole_person) return false;
+  // The other leg of a person a nearer beam returns lies within leg_pairing_distance_m of it:
+  // a beam k steps away is in that leg's shadow when k steps span at most that much at its range.
+  // nearer() needs a range of at least 2 leg_radius_m / beam_divergence_rad, which bounds k.
+  const double min_near_m = 2.0 * o.leg_radius_m / std::max(o.beam_divergence_rad, 1e-6);
+  const auto widest = static_cast<std::size_t>(
+      std::ceil(std::atan(o.leg_pairing_distance_m / min_near_m) / std::max(step, 1e-6)));
+  const auto within = [&](std::size_t beam, std::size_t k, const Eigen::Vector2d& p) {
+    return static_cast<double>(scan.range_m[beam]) * std::tan(static_cast<double>(k) * step) <=
+               o.leg_pairing_distance_m &&
+           nearer(beam, p);
+  };
+  for (std::size_t k = reach + 1; k <= std::min(widest, n); ++k) {
+    if ((segment.begin_beam >= k && within(segment.begin_beam - k, k, pts.front())) ||
+        (segment.end_beam + k - 1 < n && within(segment.end_beam + k - 1, k, pts.back()))) {
+      return true;
+    }
+  }
+  return false;
 }
 
 // One leg whose partner is hidden behind it (ShapeOptions::hidden_leg_behind): every other beam

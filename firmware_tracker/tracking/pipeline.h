@@ -114,6 +114,12 @@ struct ShapeOptions {
   // leg_pairing_distance_m). Someone behind a person at knee height is hidden anyway; they are
   // found once they step out of the shadow. false: the tree before this rule.
   bool drop_mixed_pixel_legs = true;
+  // ... and a leg-sized segment whose bearing lies within leg_pairing_distance_m (across the ray,
+  // at that return's range) of such a much nearer return: where one beam returns a person's leg,
+  // their other leg, which may fill no beam, can be that far from it, and its mixed pixels lie
+  // behind it (schenk_C / schenk_D: clutter 2-6 m behind people at 15-30 m who are returned by a
+  // beam or two). false: beside the return only (max_missing_beams + 1 beams).
+  bool drop_mixed_pixel_legs_whole_person = true;
   double gait_sigma_m = 0.05;
   // Legs mount: one leg whose partner is hidden behind it. Walking legs are always
   // 2 hip_half_width_m apart across the walk, so where one leg hides the other, the other stands

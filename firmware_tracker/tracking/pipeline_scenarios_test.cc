@@ -1409,6 +1409,63 @@ TEST(PipelineScenarioTest, MixedPixelsBehindLegsAtKneeHeightGiveNoFalseTracks) {
   EXPECT_GE(now.matched, before.matched - now.person_frames / 100);
 }
 
+// Knee height, 50 Hz, 0.25 deg: a person at 15 m returned by a single beam (their legs fill no
+// beam's 0.22 m footprint) walks across the view; 3 m behind them, 5 beams (0.33 m across) to the
+// side, their other leg's mixed pixels form a 3-beam leg-sized segment that walks with them. Beside
+// the return (within max_missing_beams + 1 = 3 beams) the old rule sees nothing nearer; within
+// leg_pairing_distance_m of it, the segment is the person's shadow. A real pair of legs 1.2 m
+// beside the return is kept.
+TEST(PipelineScenarioTest, MixedPixelsWithinAPersonsReachOfANearerReturnAreNotLegs) {
+  constexpr std::size_t kBeams = 541;
+  constexpr double kStepRad = 0.25 * common::kPi / 180.0;
+  const auto run = [&](bool whole_person, bool real_legs) {
+    TrackerOptions options;
+    options.shape.mount = Mount::kLegs;
+    options.shape.drop_mixed_pixel_legs_whole_person = whole_person;
+    TrackingPipeline pipeline(options);
+    std::vector<float> ranges(kBeams);
+    std::set<std::uint32_t> ids;
+    std::uint64_t veiled_before = 0;
+    for (std::int64_t k = 0; k < static_cast<std::int64_t>((kLearnedS + 3.0) * 50.0); ++k) {
+      const double t_s = static_cast<double>(k) / 50.0;
+      std::fill(ranges.begin(), ranges.end(), 30.0f);
+      if (t_s >= kLearnedS) {
+        // One beam every 8 scans: 0.49 m/s across at 18 m.
+        const auto near = static_cast<std::size_t>(200 + (k - 300) / 8);
+        ranges[near] = 15.0f;
+        for (std::size_t b = near + 5; b < near + 8; ++b) ranges[b] = 18.0f;
+        if (real_legs) {
+          // Two legs 1.2 m (+ 0.3 m) across at 15 m: 4 beams each, 0.15 m apart.
+          for (std::size_t b = near + 18; b < near + 22; ++b) ranges[b] = 15.0f;
+          for (std::size_t b = near + 24; b < near + 28; ++b) ranges[b] = 15.0f;
+        }
+      } else if (k == 299) {
+        veiled_before = pipeline.counters().veiled_segments;
+      }
+      ScanView scan;
+      scan.first_angle_rad = -0.5 * static_cast<double>(kBeams - 1) * kStepRad;
+      scan.angle_step_rad = kStepRad;
+      scan.range_m = ranges;
+      scan.stamp_ns = 1'600'000'000 * common::kNsPerS + k * 20 * common::kNsPerMs;
+      scan.scan_period_s = 0.02;
+      for (const TrackReport& r : pipeline.Process(scan, static_cast<std::uint32_t>(k)).tracks) {
+        ids.insert(r.track_id);
+      }
+    }
+    return std::make_pair(ids.size(), pipeline.counters().veiled_segments - veiled_before);
+  };
+  const auto [tracks_now, veiled_now] = run(true, false);
+  const auto [tracks_before, veiled_before] = run(false, false);
+  EXPECT_EQ(tracks_now, 0u);
+  EXPECT_GE(veiled_now, 140u);  // every scan of the 3 s
+  EXPECT_EQ(tracks_before, 1u);
+  EXPECT_EQ(veiled_before, 0u);
+  // A person walking beside the single return, beyond the pairing distance: tracked.
+  const auto [tracks_beside, veiled_beside] = run(true, true);
+  EXPECT_EQ(tracks_beside, 1u);
+  EXPECT_GE(veiled_beside, 140u);
+}
+
 TEST(TrackerOptionsTest, ConfirmationInTimeAppliesAtKneeHeightOnly) {
   TrackerOptions options;
   ASSERT_GT(options.tracking.confirm_min_s, 0.0);

@@ -35,7 +35,7 @@
 //                      [--explain] [--breakdown]
 //                      [--before-report-rules |
 //                       [--before-mixed-pixels] [--before-far] [--before-evidence-coasting]
-//                       [--before-one-leg] [--before-confirm-time]]
+//                       [--before-one-leg] [--before-confirm-time] [--before-whole-person]]
 //   (--extra: more scenario folders, e.g. held-out scenes, reported in their own section;
 //   --explain: per run on stderr, what became of an object's previous track at every id switch
 //   and missed scan, what the false positives are (by scan and by false track: a track left
@@ -53,7 +53,9 @@
 //   0; --before-one-leg: "before" measures every single knee-height leg as the leg itself, also
 //   where its partner is hidden behind it, ShapeOptions::hidden_leg_behind = false;
 //   --before-confirm-time: "before" is the new one confirming by M of N alone,
-//   MultiTrackerOptions::confirm_min_s = 0; several: without any of them). --explain also
+//   MultiTrackerOptions::confirm_min_s = 0; --before-whole-person: "before" drops knee-height
+//   mixed pixels beside a nearer return only, ShapeOptions::drop_mixed_pixel_legs_whole_person =
+//   false; several: without any of them). --explain also
 //   writes the false positives' classes to the results (ExplainTable) and, on stderr, what the
 //   tracks measured again after more than 1 s (a lost track resumed) came back on.
 
@@ -671,6 +673,9 @@ bool g_before_one_leg = false;
 // --before-confirm-time: "before" is the new tracker confirming by M of N alone, at every mount
 // (MultiTrackerOptions::confirm_min_s = 0).
 bool g_before_confirm_time = false;
+// --before-whole-person: "before" drops knee-height mixed pixels beside a much nearer return only,
+// not within the pairing distance of it (ShapeOptions::drop_mixed_pixel_legs_whole_person = false).
+bool g_before_whole_person = false;
 const char* const kVariantNames[] = {"old", "new", "before"};
 
 std::vector<Variant> Variants(sim::Mount mount, double range_m) {
@@ -693,13 +698,14 @@ std::vector<Variant> Variants(sim::Mount mount, double range_m) {
     before.tracking.moving_speed_mps = 0.0;
     variants.push_back({"before", before});
   } else if (g_before_mixed_pixels || g_before_far || g_before_evidence_coasting ||
-             g_before_one_leg || g_before_confirm_time) {
+             g_before_one_leg || g_before_confirm_time || g_before_whole_person) {
     tracking::TrackerOptions before = fresh;
     if (g_before_one_leg) before.shape.hidden_leg_behind = false;
     if (g_before_mixed_pixels) before.shape.drop_mixed_pixel_legs = false;
     if (g_before_far) before.shape.mixed_pixel_min_footprint_m = 0.0;
     if (g_before_evidence_coasting) before.tracking.report_coasting_per_measured_s = 0.0;
     if (g_before_confirm_time) before.tracking.confirm_min_s = 0.0;
+    if (g_before_whole_person) before.shape.drop_mixed_pixel_legs_whole_person = false;
     variants.push_back({"before", before});
   }
   return variants;
@@ -1390,6 +1396,36 @@ std::string Targets(const Section& s) {
 
 }  // namespace
 
+// The "before" line for the knee-height rules alone (--before-one-leg, --before-confirm-time,
+// --before-whole-person, any of them), empty otherwise.
+std::string KneeHeightBefore() {
+  if (!(g_before_one_leg || g_before_confirm_time || g_before_whole_person) ||
+      g_before_mixed_pixels || g_before_far || g_before_evidence_coasting ||
+      g_before_report_rules) {
+    return "";
+  }
+  std::vector<std::string> without;
+  if (g_before_one_leg) {
+    without.push_back(
+        "measuring a single leg at knee height as the leg itself even where its partner is "
+        "hidden behind it (`shape.hidden_leg_behind` false)");
+  }
+  if (g_before_confirm_time) {
+    without.push_back("confirming a track by M of N alone (`tracking.confirm_min_s` 0)");
+  }
+  if (g_before_whole_person) {
+    without.push_back(
+        "dropping knee-height mixed pixels beside a nearer return only "
+        "(`shape.drop_mixed_pixel_legs_whole_person` false)");
+  }
+  std::string text = "\"before\": the new tracker ";
+  for (std::size_t i = 0; i < without.size(); ++i) {
+    text += (i == 0 ? "" : i + 1 == without.size() ? " and " : ", ") + without[i];
+  }
+  return text +
+         ", on the same scans in the same run; upper-body rows are the same by construction.\n\n";
+}
+
 int main(int argc, char** argv) {
   std::string scenarios_dir, out_path, only;
   std::vector<std::string> extra;
@@ -1422,6 +1458,8 @@ int main(int argc, char** argv) {
       g_before_evidence_coasting = true;
     } else if (a == "--before-confirm-time") {
       g_before_confirm_time = true;
+    } else if (a == "--before-whole-person") {
+      g_before_whole_person = true;
     } else if (a == "--before-mixed-pixels") {
       g_before_mixed_pixels = true;
     } else if (a == "--before-far") {
@@ -1435,7 +1473,8 @@ int main(int argc, char** argv) {
                    "usage: tracking_benchmark --scenarios DIR [--extra DIR] [--only NAME] "
                    "[--out FILE] [--jobs N] [--explain] [--breakdown] "
                    "[--before-report-rules | [--before-mixed-pixels] [--before-far] "
-                   "[--before-evidence-coasting] [--before-one-leg] [--before-confirm-time]]\n");
+                   "[--before-evidence-coasting] [--before-one-leg] [--before-confirm-time] "
+                   "[--before-whole-person]]\n");
       return 2;
     }
   }
@@ -1481,19 +1520,7 @@ int main(int argc, char** argv) {
            "position, 2 dof, mean over measured matches (2 is honest) and the share within the "
            "99 % bound. \"legs\": every sensor at knee height. How the numbers are made: the "
            "header of tests/bench/tracking_benchmark.cc.\n\n"
-        << (g_before_one_leg && g_before_confirm_time && !g_before_mixed_pixels && !g_before_far &&
-                    !g_before_evidence_coasting
-                ? "\"before\": the new tracker measuring a single leg at knee height as the leg "
-                  "itself even where its partner is hidden behind it (`shape.hidden_leg_behind` "
-                  "false) and confirming a track by M of N alone (`tracking.confirm_min_s` 0), on "
-                  "the same scans in the same run; upper-body rows are the same by "
-                  "construction.\n\n"
-            : g_before_one_leg && !g_before_mixed_pixels && !g_before_far &&
-                    !g_before_evidence_coasting && !g_before_confirm_time
-                ? "\"before\": the new tracker measuring a single leg at knee height as the leg "
-                  "itself even where its partner is hidden behind it (`shape.hidden_leg_behind` "
-                  "false), on the same scans in the same run; upper-body rows are the same by "
-                  "construction.\n\n"
+        << (!KneeHeightBefore().empty() ? KneeHeightBefore()
             : g_before_mixed_pixels && g_before_far
                 ? "\"before\": the new tracker without its handling of mixed pixels: at knee "
                   "height taking them for legs (`shape.drop_mixed_pixel_legs` false), at "
@@ -1509,10 +1536,6 @@ int main(int argc, char** argv) {
                 ? "\"before\": the new tracker without the mixed-pixel model of far edges "
                   "(`shape.mixed_pixel_min_footprint_m` 0), on the same scans in the same "
                   "run.\n\n"
-            : g_before_confirm_time && !g_before_evidence_coasting && !g_before_mixed_pixels &&
-                    !g_before_far
-                ? "\"before\": the new tracker confirming a track by M of N alone "
-                  "(`tracking.confirm_min_s` 0), on the same scans in the same run.\n\n"
             : g_before_evidence_coasting
                 ? "\"before\": the new tracker reporting every coasting track for "
                   "`tracking.report_coasting_s` whatever its evidence "
