@@ -691,6 +691,11 @@ std::vector<Variant> Variants(sim::Mount mount, double range_m) {
   old.tracking.recover_gate_mahalanobis_sq = 0.0;
   old.tracking.inflate_nis_above = 0.0;
   old.tracking.resume_window_s = 0.0;
+  old.tracking.confirm_min_s = 0.0;
+  old.shape.mixed_pixel_min_footprint_m = 0.0;
+  old.shape.drop_mixed_pixel_legs = false;
+  old.shape.drop_mixed_pixel_legs_whole_person = false;
+  old.shape.hidden_leg_behind = false;
   std::vector<Variant> variants = {{"old", old}, {"new", fresh}};
   if (g_before_report_rules) {
     tracking::TrackerOptions before = fresh;
