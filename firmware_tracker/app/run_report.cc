@@ -27,6 +27,17 @@ std::string DecoderSummary(const cola::StreamCounters& c) {
       c.other_telegrams, c.bad_headers, c.scan_decode_errors);
 }
 
+std::string PipelineSummary(const tracking::PipelineCounters& c) {
+  return fmt::format(
+      "rejected_scans={} learning_scans={} segments={} dropped_segments={} "
+      "ellipse_measurements={} com_measurements={} shape_fits={} failed_shape_fits={} "
+      "leg_pairs={} single_legs={} veiled_segments={} shadowed_legs={} absorbed_objects={} "
+      "seen_through={} unseen_coasting={}",
+      c.rejected_scans, c.learning_scans, c.segments, c.dropped_segments, c.ellipse_measurements,
+      c.com_measurements, c.shape_fits, c.failed_shape_fits, c.leg_pairs, c.single_legs,
+      c.veiled_segments, c.shadowed_legs, c.absorbed_objects, c.seen_through, c.unseen_coasting);
+}
+
 std::string NodeSummary(const TrackerNode& node) {
   const tracking::MultiTrackerCounters& t = node.pipeline().tracker().counters();
   const io::DatagramEncoderCounters& e = node.encoder().counters();
@@ -34,10 +45,11 @@ std::string NodeSummary(const TrackerNode& node) {
   return fmt::format(
       "tracks_created={} tracks_confirmed={} datagrams={} datagram_bytes={} frames={} "
       "snapshots={} tick_offset_s={:.6f} drift_ppm={:.2f} device_restarts={} "
-      "mount_looks_like_legs={}",
+      "mount_looks_like_legs={} {}",
       t.created, t.confirmed, e.datagrams, e.bytes, node.counters().frames,
       node.counters().snapshots, clock.offset_s, clock.drift_ppm,
-      node.clock().counters().device_restarts, node.counters().mount_looks_like_legs);
+      node.clock().counters().device_restarts, node.counters().mount_looks_like_legs,
+      PipelineSummary(node.pipeline().counters()));
 }
 
 bool ScanLog::OnScan(const std::string& sensor_id, const cola::ScanTelegram& scan,

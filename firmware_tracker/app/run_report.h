@@ -10,6 +10,7 @@
 #include "firmware_tracker/app/tracker_node.h"
 #include "firmware_tracker/cola/scan_telegram.h"
 #include "firmware_tracker/cola/stream_decoder.h"
+#include "firmware_tracker/tracking/pipeline.h"
 
 namespace lrfnet::tracker {
 
@@ -19,7 +20,11 @@ std::string FormatUtc(common::UtcNs t_ns);
 // The decoder's counters as "frames=N bad_checksums=N ... scan_decode_errors=N".
 std::string DecoderSummary(const cola::StreamCounters& c);
 
-// The node's counters as "tracks_created=N ... device_restarts=N".
+// The tracking pipeline's counters as "rejected_scans=N ... unseen_coasting=N" (its scans are the
+// summary's scans).
+std::string PipelineSummary(const tracking::PipelineCounters& c);
+
+// The node's counters as "tracks_created=N ... mount_looks_like_legs=N", then the pipeline's.
 std::string NodeSummary(const TrackerNode& node);
 
 // Scan printing and the stop rule, shared by both modes. Prints on stdout.

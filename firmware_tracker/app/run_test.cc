@@ -58,6 +58,54 @@ TEST(TrackerRun, DecoderSummaryNamesEveryCounter) {
             "bad_headers=5 scan_decode_errors=6");
 }
 
+TEST(TrackerRun, PipelineSummaryNamesEveryCounter) {
+  tracking::PipelineCounters c;
+  c.scans = 99;  // the summary's own scans= says it
+  c.rejected_scans = 1;
+  c.learning_scans = 2;
+  c.segments = 3;
+  c.dropped_segments = 4;
+  c.ellipse_measurements = 5;
+  c.com_measurements = 6;
+  c.shape_fits = 7;
+  c.failed_shape_fits = 8;
+  c.leg_pairs = 9;
+  c.single_legs = 10;
+  c.veiled_segments = 11;
+  c.shadowed_legs = 12;
+  c.absorbed_objects = 13;
+  c.seen_through = 14;
+  c.unseen_coasting = 15;
+  EXPECT_EQ(PipelineSummary(c),
+            "rejected_scans=1 learning_scans=2 segments=3 dropped_segments=4 "
+            "ellipse_measurements=5 com_measurements=6 shape_fits=7 failed_shape_fits=8 "
+            "leg_pairs=9 single_legs=10 veiled_segments=11 shadowed_legs=12 absorbed_objects=13 "
+            "seen_through=14 unseen_coasting=15");
+}
+
+TEST(TrackerRun, NodeSummaryEndsWithThePipelinesCounters) {
+  // Two seconds of a room: the node's summary carries the pipeline's counters as they are.
+  testing::CollectingSink sink;
+  TrackerNode node(RunConfig(), 1, sink);
+  SyntheticDevice device;
+  const std::vector<Wall> walls = testing::Room();
+  for (std::int64_t k = 0; k < 60; ++k) {
+    common::UtcNs rx = 0;
+    const cola::ScanTelegram& scan = device.Scan(k, walls, {}, &rx);
+    node.OnScan(scan, rx, rx);
+  }
+  const tracking::PipelineCounters& c = node.pipeline().counters();
+  EXPECT_GT(c.learning_scans, 0u);
+  const std::string summary = NodeSummary(node);
+  const std::string pipeline = PipelineSummary(c);
+  ASSERT_GE(summary.size(), pipeline.size());
+  EXPECT_EQ(summary.substr(summary.size() - pipeline.size()), pipeline) << summary;
+  EXPECT_NE(summary.find(" veiled_segments=0 shadowed_legs=0 "), std::string::npos) << summary;
+  EXPECT_NE(summary.find(" learning_scans=" + std::to_string(c.learning_scans) + " "),
+            std::string::npos)
+      << summary;
+}
+
 TEST(TrackerRun, ScanLogPrintsEveryNthScanAndStopsAtMaxScans) {
   testing::CollectingSink sink;
   TrackerNode node(RunConfig(), 1, sink);
