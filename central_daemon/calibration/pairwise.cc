@@ -692,7 +692,9 @@ RigidFit Fit(const FitInput& in, const PairwiseOptions& o, double prior_var,
       g_s.noalias() += rho[i] * (J[i].transpose() * (W[i] * in.bq[i]));
     }
     const Eigen::Matrix<double, 5, 1> a_r = hc_inv * g_r, a_s = hc_inv * g_s;
-    systematic.noalias() += a_r * a_r.transpose() + a_s * a_s.transpose();
+    const Matrix5d bias = a_r * a_r.transpose() + a_s * a_s.transpose();
+    systematic.noalias() += bias;
+    fit.covariance_sensor_bias = bias.topLeftCorner<3, 3>();
   }
   fit.segments = in.segments;
   fit.covariance_systematic = systematic.topLeftCorner<3, 3>();

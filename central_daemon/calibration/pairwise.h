@@ -259,6 +259,10 @@ struct RigidFit {
   Pose2 s_from_r;
   Eigen::Matrix3d covariance = Eigen::Matrix3d::Identity();  // (x, y, yaw); honest (see above)
   Eigen::Matrix3d covariance_systematic = Eigen::Matrix3d::Zero();  // its per-track-pair part
+  // The part of covariance_systematic from the sensors' shared radial biases (options.sensor_bias;
+  // zero without): a constant of the sensors, which a comparison with an earlier fit of the same
+  // sensors cancels (monitoring/track_check.h).
+  Eigen::Matrix3d covariance_sensor_bias = Eigen::Matrix3d::Zero();
   double rms_m = 0.0;            // Euclidean residual RMS over the matches
   double mean_residual_m = 0.0;  // mean Euclidean residual
   double variance_factor = 0.0;  // residual variance of unit weight (before the floor at 1)

@@ -151,6 +151,7 @@ TrackFit FitFrom(const calib::AlignedTracks& aligned, const Pose2& start,
   out.enough = true;
   out.world_from_sensor = fit.s_from_r;
   out.covariance = fit.covariance;
+  out.covariance_sensor_bias = fit.covariance_sensor_bias;
   out.rms_m = fit.rms_m;
   return out;
 }
@@ -165,7 +166,8 @@ void Judge(const Pose2& current, const Pose2& baseline, const TrackCheckOptions&
   const Eigen::Vector3d delta(fit->world_from_sensor.x_m - expected.x_m,
                               fit->world_from_sensor.y_m - expected.y_m,
                               common::AngleDiff(fit->world_from_sensor.yaw_rad, expected.yaw_rad));
-  fit->chi2 = Chi2(delta, fit->covariance);
+  // The sensor's shared bias is in the baseline too (track_check.h): not a source of motion.
+  fit->chi2 = Chi2(delta, fit->covariance - fit->covariance_sensor_bias);
   const double yaw_deg = common::RadToDeg(motion.yaw_rad);
   const double shift_m = std::hypot(motion.x_m, motion.y_m);
   const bool large =

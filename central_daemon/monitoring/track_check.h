@@ -22,12 +22,15 @@
 // one). A calibration leaves each sensor with a small correction of its own (its models of the
 // object centres are not these; its poses carry their errors): `baseline`, the correction measured
 // right after the pose was set, is what "nothing moved" looks like. The motion
-// baseline^-1 * correction is tested against the fit's covariance (chi^2 of the fitted pose minus
-// current * baseline, (x_m, y_m, yaw_rad), 3 dof): moved when chi^2 >= min_chi2, the motion is at
-// least min_yaw_deg or min_translation_m and the fit's residual is at most max_fit_rms_m. Too few
-// associated observations (min_matches) or too little spread of the sensor's matched positions
-// (min_match_spread_m: one standing person fixes no rotation) is "not enough data", never
-// "moved".
+// baseline^-1 * correction is tested against the fit's covariance without its sensor-bias part
+// (chi^2 of the fitted pose minus current * baseline, (x_m, y_m, yaw_rad), 3 dof; the sensor's
+// shared radial bias (calib::PairwiseOptions::sensor_bias) is a constant of its tracker, which
+// the baseline, measured with the same bias, already holds; counted in the test, it would make
+// a push along the lines of sight look smaller than it is): moved when chi^2 >= min_chi2, the
+// motion is at least min_yaw_deg or min_translation_m and the fit's residual is at most
+// max_fit_rms_m. Too few associated observations (min_matches) or too little spread of the
+// sensor's matched positions (min_match_spread_m: one standing person fixes no rotation) is "not
+// enough data", never "moved".
 //
 // EstimateFromTracks (correction): the same fit started from `initial` (e.g. the pose the
 // background or the detection suggests); when that associates too little, the pairwise MSAC of
@@ -89,7 +92,9 @@ struct TrackFit {
   Pose2 world_from_sensor;  // fitted (current when !enough)
   Pose2 correction;         // current^-1 * fitted, sensor frame (the baseline included)
   Eigen::Matrix3d covariance = Eigen::Matrix3d::Zero();  // of the fitted (x_m, y_m, yaw_rad)
-  double chi2 = 0.0;
+  // Its part from the sensor's shared radial bias (left out of chi2, see above).
+  Eigen::Matrix3d covariance_sensor_bias = Eigen::Matrix3d::Zero();
+  double chi2 = 0.0;  // of the motion (covariance - covariance_sensor_bias)
   std::size_t matches = 0;
   double rms_m = 0.0;        // of the fit's residuals
   double spread_m = 0.0;     // of the sensor's matched positions

@@ -2,6 +2,7 @@
 
 #include <gtest/gtest.h>
 
+#include <Eigen/Cholesky>
 #include <cmath>
 
 #include "central_daemon/monitoring/monitoring_test_util.h"
@@ -71,6 +72,56 @@ TEST(TrackCheck, ATrackOffsetIsAMoveWithItsCorrection) {
     // The fitted pose is the new truth.
     EXPECT_LT(common::TranslationDistanceM(fit.world_from_sensor, moved), 0.03) << fit.reason;
   }
+}
+
+// The sensor's reports moved out along its lines of sight by bias_m (a shape fit's shared bias).
+std::vector<daemon::TrackFrameData> RadiallyBiased(std::vector<daemon::TrackFrameData> frames,
+                                                   double bias_m) {
+  for (daemon::TrackFrameData& f : frames) {
+    for (daemon::TrackObservation& o : f.tracks) {
+      const double range_m = std::hypot(o.x_m, o.y_m);
+      const double scale = (range_m + bias_m) / range_m;
+      o.x_m = static_cast<float>(o.x_m * scale);
+      o.y_m = static_cast<float>(o.y_m * scale);
+    }
+  }
+  return frames;
+}
+
+TEST(TrackCheck, TheSensorsSharedBiasIsInTheBaselineNotInTheTestOfAMove) {
+  // s2's tracker puts every centre 3 cm beyond the body (1.5 times the shared bias's prior). The
+  // baseline, measured right after the pose was set, holds what that does to the fit; a later
+  // window that did not move stays below min_chi2, and a 0.2 m push of two people's 10 s is
+  // tested against the fit's covariance without the bias's consider term (which the baseline
+  // cancels): chi2 ~48 here, ~32 against the whole covariance.
+  constexpr double kBiasM = 0.03;
+  const Scene before = Walk(kPoseB, 0.0, 10.0);
+  const TrackFit learn =
+      CheckTracks(RadiallyBiased(before.s2, kBiasM), kPoseB, before.Others(), {});
+  ASSERT_TRUE(learn.enough) << learn.reason;
+  const Pose2 baseline = learn.correction;
+
+  const Scene still = Walk(kPoseB, 10.0, 20.0);
+  const TrackFit unmoved =
+      CheckTracks(RadiallyBiased(still.s2, kBiasM), kPoseB, still.Others(), {}, baseline);
+  ASSERT_TRUE(unmoved.enough) << unmoved.reason;
+  EXPECT_FALSE(unmoved.moved) << unmoved.reason;
+  EXPECT_LT(unmoved.chi2, 25.0) << unmoved.reason;
+
+  const Pose2 pushed = kPoseB * Pose2{0.2, 0.0, 0.0};
+  const Scene after = Walk(pushed, 20.0, 30.0);
+  const TrackFit fit =
+      CheckTracks(RadiallyBiased(after.s2, kBiasM), kPoseB, after.Others(), {}, baseline);
+  ASSERT_TRUE(fit.enough) << fit.reason;
+  EXPECT_GT(fit.covariance_sensor_bias.trace(), 0.0);
+  const Pose2 expected = kPoseB * baseline;
+  const Eigen::Vector3d delta(fit.world_from_sensor.x_m - expected.x_m,
+                              fit.world_from_sensor.y_m - expected.y_m,
+                              common::AngleDiff(fit.world_from_sensor.yaw_rad, expected.yaw_rad));
+  const double chi2_whole = delta.dot(fit.covariance.ldlt().solve(delta));
+  EXPECT_GT(fit.chi2, chi2_whole);
+  EXPECT_TRUE(fit.moved) << fit.reason;
+  EXPECT_NEAR(fit.correction.x_m - baseline.x_m, 0.2, 0.04) << fit.reason;
 }
 
 TEST(TrackCheck, ALargeMoveIsFoundBySearchingFromScratch) {
