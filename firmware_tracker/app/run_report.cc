@@ -31,11 +31,12 @@ std::string PipelineSummary(const tracking::PipelineCounters& c) {
   return fmt::format(
       "rejected_scans={} learning_scans={} segments={} dropped_segments={} "
       "ellipse_measurements={} com_measurements={} shape_fits={} failed_shape_fits={} "
-      "leg_pairs={} single_legs={} veiled_segments={} shadowed_legs={} absorbed_objects={} "
-      "seen_through={} unseen_coasting={}",
+      "leg_pairs={} single_legs={} legs_behind={} veiled_segments={} shadowed_legs={} "
+      "absorbed_objects={} seen_through={} unseen_coasting={}",
       c.rejected_scans, c.learning_scans, c.segments, c.dropped_segments, c.ellipse_measurements,
       c.com_measurements, c.shape_fits, c.failed_shape_fits, c.leg_pairs, c.single_legs,
-      c.veiled_segments, c.shadowed_legs, c.absorbed_objects, c.seen_through, c.unseen_coasting);
+      c.legs_behind, c.veiled_segments, c.shadowed_legs, c.absorbed_objects, c.seen_through,
+      c.unseen_coasting);
 }
 
 std::string NodeSummary(const TrackerNode& node) {

@@ -71,16 +71,17 @@ TEST(TrackerRun, PipelineSummaryNamesEveryCounter) {
   c.failed_shape_fits = 8;
   c.leg_pairs = 9;
   c.single_legs = 10;
-  c.veiled_segments = 11;
-  c.shadowed_legs = 12;
-  c.absorbed_objects = 13;
-  c.seen_through = 14;
-  c.unseen_coasting = 15;
+  c.legs_behind = 11;
+  c.veiled_segments = 12;
+  c.shadowed_legs = 13;
+  c.absorbed_objects = 14;
+  c.seen_through = 15;
+  c.unseen_coasting = 16;
   EXPECT_EQ(PipelineSummary(c),
             "rejected_scans=1 learning_scans=2 segments=3 dropped_segments=4 "
             "ellipse_measurements=5 com_measurements=6 shape_fits=7 failed_shape_fits=8 "
-            "leg_pairs=9 single_legs=10 veiled_segments=11 shadowed_legs=12 absorbed_objects=13 "
-            "seen_through=14 unseen_coasting=15");
+            "leg_pairs=9 single_legs=10 legs_behind=11 veiled_segments=12 shadowed_legs=13 "
+            "absorbed_objects=14 seen_through=15 unseen_coasting=16");
 }
 
 TEST(TrackerRun, NodeSummaryEndsWithThePipelinesCounters) {
