@@ -39,6 +39,20 @@ std::string PipelineSummary(const tracking::PipelineCounters& c) {
       c.unseen_coasting);
 }
 
+std::string MultiTrackerSummary(const tracking::MultiTrackerCounters& c) {
+  return fmt::format(
+      "measurements={} associations={} deleted_tentative={} deleted_coast_timeout={} "
+      "deleted_covariance={} deleted_time_reset={} deleted_static={} dropped_capacity={} "
+      "births_suppressed={} rejected_measurements={} measurements_over_capacity={} "
+      "failed_updates={} time_steps_backwards={} time_resets={} refine_failures={} "
+      "speed_clamps={} recovered={} resumed={}",
+      c.measurements, c.associations, c.deleted_tentative, c.deleted_coast_timeout,
+      c.deleted_covariance, c.deleted_time_reset, c.deleted_static, c.dropped_capacity,
+      c.births_suppressed, c.rejected_measurements, c.measurements_over_capacity, c.failed_updates,
+      c.time_steps_backwards, c.time_resets, c.refine_failures, c.speed_clamps, c.recovered,
+      c.resumed);
+}
+
 std::string NodeSummary(const TrackerNode& node) {
   const tracking::MultiTrackerCounters& t = node.pipeline().tracker().counters();
   const io::DatagramEncoderCounters& e = node.encoder().counters();
@@ -46,11 +60,11 @@ std::string NodeSummary(const TrackerNode& node) {
   return fmt::format(
       "tracks_created={} tracks_confirmed={} datagrams={} datagram_bytes={} frames={} "
       "snapshots={} tick_offset_s={:.6f} drift_ppm={:.2f} device_restarts={} "
-      "mount_looks_like_legs={} {}",
+      "mount_looks_like_legs={} {} {}",
       t.created, t.confirmed, e.datagrams, e.bytes, node.counters().frames,
       node.counters().snapshots, clock.offset_s, clock.drift_ppm,
       node.clock().counters().device_restarts, node.counters().mount_looks_like_legs,
-      PipelineSummary(node.pipeline().counters()));
+      PipelineSummary(node.pipeline().counters()), MultiTrackerSummary(t));
 }
 
 bool ScanLog::OnScan(const std::string& sensor_id, const cola::ScanTelegram& scan,

@@ -24,7 +24,12 @@ std::string DecoderSummary(const cola::StreamCounters& c);
 // summary's scans).
 std::string PipelineSummary(const tracking::PipelineCounters& c);
 
-// The node's counters as "tracks_created=N ... mount_looks_like_legs=N", then the pipeline's.
+// The multi-tracker's counters beyond tracks_created / tracks_confirmed as "measurements=N ...
+// resumed=N".
+std::string MultiTrackerSummary(const tracking::MultiTrackerCounters& c);
+
+// The node's counters as "tracks_created=N ... mount_looks_like_legs=N", then the pipeline's and
+// the multi-tracker's.
 std::string NodeSummary(const TrackerNode& node);
 
 // Scan printing and the stop rule, shared by both modes. Prints on stdout.

@@ -84,6 +84,37 @@ TEST(TrackerRun, PipelineSummaryNamesEveryCounter) {
             "absorbed_objects=14 seen_through=15 unseen_coasting=16");
 }
 
+TEST(TrackerRun, MultiTrackerSummaryNamesEveryCounterButTheTwoBeforeIt) {
+  tracking::MultiTrackerCounters c;
+  c.scans = 99;      // the summary's scans=
+  c.created = 98;    // tracks_created=
+  c.confirmed = 97;  // tracks_confirmed=
+  c.measurements = 1;
+  c.associations = 2;
+  c.deleted_tentative = 3;
+  c.deleted_coast_timeout = 4;
+  c.deleted_covariance = 5;
+  c.deleted_time_reset = 6;
+  c.deleted_static = 7;
+  c.dropped_capacity = 8;
+  c.births_suppressed = 9;
+  c.rejected_measurements = 10;
+  c.measurements_over_capacity = 11;
+  c.failed_updates = 12;
+  c.time_steps_backwards = 13;
+  c.time_resets = 14;
+  c.refine_failures = 15;
+  c.speed_clamps = 16;
+  c.recovered = 17;
+  c.resumed = 18;
+  EXPECT_EQ(MultiTrackerSummary(c),
+            "measurements=1 associations=2 deleted_tentative=3 deleted_coast_timeout=4 "
+            "deleted_covariance=5 deleted_time_reset=6 deleted_static=7 dropped_capacity=8 "
+            "births_suppressed=9 rejected_measurements=10 measurements_over_capacity=11 "
+            "failed_updates=12 time_steps_backwards=13 time_resets=14 refine_failures=15 "
+            "speed_clamps=16 recovered=17 resumed=18");
+}
+
 TEST(TrackerRun, NodeSummaryEndsWithThePipelinesCounters) {
   // Two seconds of a room: the node's summary carries the pipeline's counters as they are.
   testing::CollectingSink sink;
@@ -98,7 +129,8 @@ TEST(TrackerRun, NodeSummaryEndsWithThePipelinesCounters) {
   const tracking::PipelineCounters& c = node.pipeline().counters();
   EXPECT_GT(c.learning_scans, 0u);
   const std::string summary = NodeSummary(node);
-  const std::string pipeline = PipelineSummary(c);
+  const std::string pipeline =
+      PipelineSummary(c) + " " + MultiTrackerSummary(node.pipeline().tracker().counters());
   ASSERT_GE(summary.size(), pipeline.size());
   EXPECT_EQ(summary.substr(summary.size() - pipeline.size()), pipeline) << summary;
   EXPECT_NE(summary.find(" veiled_segments=0 shadowed_legs=0 "), std::string::npos) << summary;
