@@ -652,10 +652,29 @@ bool TrackingPipeline::Veiled(const ScanView& scan, const Segment& segment) cons
   const double min_near_m = 2.0 * o.leg_radius_m / std::max(o.beam_divergence_rad, 1e-6);
   const auto widest = static_cast<std::size_t>(
       std::ceil(std::atan(o.leg_pairing_distance_m / min_near_m) / std::max(step, 1e-6)));
+  // ... and only where that nearer return can be a person: the run of beams around it at its range
+  // (within the segmentation's jump) spans no more than a person's legs (leg_pairing_distance_m)
+  // plus a footprint. The edge of a wall, a machine or a shelf has mixed pixels at its edge beam
+  // only (the rule above); people walking behind it within the pairing distance are real legs.
+  const auto narrow = [&](std::size_t beam) {
+    const auto r = static_cast<double>(scan.range_m[beam]);
+    const double tolerance = g.jump_base_m + g.jump_per_m * r;
+    const auto most = static_cast<std::size_t>(std::ceil(
+                          (o.leg_pairing_distance_m + r * o.beam_divergence_rad) / (r * step))) +
+                      1;
+    const auto same = [&](std::size_t j) {
+      const float rj = scan.range_m[j];
+      return std::isfinite(rj) && rj > 0.0f && std::abs(static_cast<double>(rj) - r) <= tolerance;
+    };
+    std::size_t count = 1;
+    for (std::size_t j = beam; j > 0 && count <= most && same(j - 1); --j) ++count;
+    for (std::size_t j = beam + 1; j < n && count <= most && same(j); ++j) ++count;
+    return count <= most;
+  };
   const auto within = [&](std::size_t beam, std::size_t k, const Eigen::Vector2d& p) {
     return static_cast<double>(scan.range_m[beam]) * std::tan(static_cast<double>(k) * step) <=
                o.leg_pairing_distance_m &&
-           nearer(beam, p);
+           nearer(beam, p) && narrow(beam);
   };
   for (std::size_t k = reach + 1; k <= std::min(widest, n); ++k) {
     if ((segment.begin_beam >= k && within(segment.begin_beam - k, k, pts.front())) ||

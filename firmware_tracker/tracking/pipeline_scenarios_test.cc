@@ -1418,7 +1418,7 @@ TEST(PipelineScenarioTest, MixedPixelsBehindLegsAtKneeHeightGiveNoFalseTracks) {
 TEST(PipelineScenarioTest, MixedPixelsWithinAPersonsReachOfANearerReturnAreNotLegs) {
   constexpr std::size_t kBeams = 541;
   constexpr double kStepRad = 0.25 * common::kPi / 180.0;
-  const auto run = [&](bool whole_person, bool real_legs) {
+  const auto run = [&](bool whole_person, bool real_legs, bool wall = false) {
     TrackerOptions options;
     options.shape.mount = Mount::kLegs;
     options.shape.drop_mixed_pixel_legs_whole_person = whole_person;
@@ -1433,6 +1433,10 @@ TEST(PipelineScenarioTest, MixedPixelsWithinAPersonsReachOfANearerReturnAreNotLe
         // One beam every 8 scans: 0.49 m/s across at 18 m.
         const auto near = static_cast<std::size_t>(200 + (k - 300) / 8);
         ranges[near] = 15.0f;
+        // A wall's end instead of a person: 2 m of beams at 15 m ending at the same beam.
+        if (wall)
+          std::fill(ranges.begin() + 100, ranges.begin() + static_cast<std::ptrdiff_t>(near) + 1,
+                    15.0f);
         for (std::size_t b = near + 5; b < near + 8; ++b) ranges[b] = 18.0f;
         if (real_legs) {
           // Two legs 1.2 m (+ 0.3 m) across at 15 m: 4 beams each, 0.15 m apart.
@@ -1464,6 +1468,11 @@ TEST(PipelineScenarioTest, MixedPixelsWithinAPersonsReachOfANearerReturnAreNotLe
   const auto [tracks_beside, veiled_beside] = run(true, true);
   EXPECT_EQ(tracks_beside, 1u);
   EXPECT_GE(veiled_beside, 140u);
+  // The same segment 5 beams beside a wall's end is not a person's shadow (a wall's mixed pixels
+  // lie at its edge beam only): kept, as without the rule.
+  const auto [tracks_wall, veiled_wall] = run(true, false, true);
+  EXPECT_EQ(tracks_wall, 1u);
+  EXPECT_EQ(veiled_wall, 0u);
 }
 
 TEST(TrackerOptionsTest, ConfirmationInTimeAppliesAtKneeHeightOnly) {
