@@ -646,6 +646,11 @@ bool TrackingPipeline::Veiled(const ScanView& scan, const Segment& segment) cons
     return true;
   }
   if (!o.drop_mixed_pixel_legs_whole_person) return false;
+  // The piece must be no wider than a hidden leg's mixed pixels: a footprint beyond the leg's
+  // own beams (a wider piece is not one leg's shadow).
+  const auto leg_beams = static_cast<std::size_t>(
+      std::ceil(2.0 * o.leg_radius_m / std::max(Range(pts.front()) * step, 1e-6)));
+  if (segment.end_beam - segment.begin_beam > footprint_beams + leg_beams) return false;
   // The other leg of a person a nearer beam returns lies within leg_pairing_distance_m of it:
   // a beam k steps away is in that leg's shadow when k steps span at most that much at its range.
   // nearer() needs a range of at least 2 leg_radius_m / beam_divergence_rad, which bounds k.
@@ -707,8 +712,10 @@ bool TrackingPipeline::PartnerBehind(const ScanView& scan, const ObservationPart
   const double shadow = 2.0 * o.leg_radius_m + step * range;
   // The beams that pass within `reach` of the leg: asin(reach / range) either side.
   const auto beams = static_cast<std::size_t>(std::ceil(std::asin(reach / range) / step)) + 1;
-  const std::size_t first = part.begin_beam > beams ? part.begin_beam - beams : 0;
-  const std::size_t last = std::min(n, part.end_beam + beams);
+  // At the edge of the field of view the other leg may stand beyond it: not known to be hidden.
+  if (part.begin_beam < beams || part.end_beam + beams > n) return false;
+  const std::size_t first = part.begin_beam - beams;
+  const std::size_t last = part.end_beam + beams;
   for (std::size_t b = first; b < last; ++b) {
     if (b >= part.begin_beam && b < part.end_beam) continue;
     const float r = scan.range_m[b];
