@@ -243,40 +243,76 @@ bool MultiTracker::InsideGate(const Eigen::Vector2d& predicted_m,
 void MultiTracker::Gate(common::UtcNs scan_start_ns) {
   const double q = options_.ekf.accel_psd_m2ps3;
   const double max_gate_sq_m2 = options_.max_gate_distance_m * options_.max_gate_distance_m;
+  constexpr double kInf = std::numeric_limits<double>::infinity();
   gated_rows_ = tracks_.size();
+  // Most pairs of a crowded scene lie beyond max_gate_distance_m (InsideGate's first test: out
+  // whatever the covariance). That test runs on blocks of 8 measurements at once (Eigen's packets,
+  // on contiguous copies of their positions and beam times), the rows are filled as "out" in bulk,
+  // and only a block with a pair within is looked at pair by pair. The padding lies at infinity.
+  constexpr std::size_t kBlock = 8;
+  static_assert(kMaxSegments % kBlock == 0, "whole blocks");
+  using Block = Eigen::Array<double, kBlock, 1>;
+  const std::size_t n = candidates_.size();
+  const std::size_t padded = (n + kBlock - 1) / kBlock * kBlock;
+  alignas(16) std::array<double, kMaxSegments> z_x_m;
+  alignas(16) std::array<double, kMaxSegments> z_y_m;
+  alignas(16) std::array<double, kMaxSegments> offset_s;
+  for (std::size_t j = 0; j < n; ++j) {
+    z_x_m[j] = candidates_[j].z_m.x();
+    z_y_m[j] = candidates_[j].z_m.y();
+    offset_s[j] = candidates_[j].offset_s;
+  }
+  for (std::size_t j = n; j < padded; ++j) {
+    z_x_m[j] = kInf;
+    z_y_m[j] = kInf;
+    offset_s[j] = 0.0;
+  }
   for (std::size_t i = 0; i < tracks_.size(); ++i) {
     CvEkf predicted = tracks_[i].filter;
     predicted.Predict(common::NsToSeconds(scan_start_ns - tracks_[i].filter_ns));
     track_to_candidate_[i] = -1;
     const Eigen::Vector4d& x = predicted.state();
     const Eigen::Matrix4d& p = predicted.covariance();
-    for (std::size_t j = 0; j < candidates_.size(); ++j) {
-      const Candidate& c = candidates_[j];
-      // The track moved on to the measurement's beam time: position block of F P F^T + Q over
-      // offset_s, in closed form (exact for the constant-velocity model).
-      const double d = c.offset_s;
-      const Eigen::Vector2d at = x.head<2>() + d * x.tail<2>();
-      // Beyond max_gate_distance_m the pair is out whatever the covariance (InsideGate's first
-      // test): most pairs of a crowded scene end here, on the squared distance (the root only for
-      // the pairs within; distance_ is read only where gated_).
-      const double distance_sq_m2 = (c.z_m - at).squaredNorm();
-      if (!(distance_sq_m2 <= max_gate_sq_m2)) {
-        distance_[i][j] = std::numeric_limits<double>::infinity();
-        gated_[i][j] = false;
-        cost_[i][j] = kUnassignableCost;
-        d2_[i][j] = std::numeric_limits<double>::infinity();
-        continue;
+    std::array<double, kMaxSegments>& distance_row = distance_[i];
+    std::array<bool, kMaxSegments>& gated_row = gated_[i];
+    std::array<double, kMaxSegments>& cost_row = cost_[i];
+    std::array<double, kMaxSegments>& d2_row = d2_[i];
+    alignas(16) std::array<double, kBlock> distance_sq_m2;
+    for (std::size_t b = 0; b < padded; b += kBlock) {
+      Eigen::Map<Block>(distance_row.data() + b).setConstant(kInf);
+      Eigen::Map<Block>(cost_row.data() + b).setConstant(kUnassignableCost);
+      Eigen::Map<Block>(d2_row.data() + b).setConstant(kInf);
+      std::fill_n(gated_row.begin() + static_cast<std::ptrdiff_t>(b), kBlock, false);
+      // The same arithmetic as below: (z - (x + d v)).squaredNorm(), 8 pairs at once.
+      const Block off = Eigen::Map<const Block, Eigen::Aligned16>(offset_s.data() + b);
+      const Block dx_m =
+          Eigen::Map<const Block, Eigen::Aligned16>(z_x_m.data() + b) - (x(0) + off * x(2));
+      const Block dy_m =
+          Eigen::Map<const Block, Eigen::Aligned16>(z_y_m.data() + b) - (x(1) + off * x(3));
+      Eigen::Map<Block, Eigen::Aligned16> dsq(distance_sq_m2.data());
+      dsq = dx_m * dx_m + dy_m * dy_m;
+      // A NaN comes only from a state gone bad and is then in every pair of the row, all out (as
+      // pair by pair); the minimum of the others is exact.
+      if (!(dsq.minCoeff() <= max_gate_sq_m2)) continue;
+      for (std::size_t j = b; j < b + kBlock; ++j) {
+        if (!(distance_sq_m2[j - b] <= max_gate_sq_m2)) continue;
+        const Candidate& c = candidates_[j];
+        // The track moved on to the measurement's beam time: position block of F P F^T + Q over
+        // offset_s, in closed form (exact for the constant-velocity model).
+        const double d = c.offset_s;
+        const Eigen::Vector2d at = x.head<2>() + d * x.tail<2>();
+        distance_row[j] = std::sqrt(distance_sq_m2[j - b]);
+        const Eigen::Matrix2d cov = p.topLeftCorner<2, 2>() +
+                                    d * (p.topRightCorner<2, 2>() + p.bottomLeftCorner<2, 2>()) +
+                                    d * d * p.bottomRightCorner<2, 2>() +
+                                    (q * d * d * d / 3.0) * Eigen::Matrix2d::Identity();
+        double log_det = 0.0;
+        const double d2 = MahalanobisSq(at, cov, c, &log_det);
+        const bool inside = d2 <= options_.gate_mahalanobis_sq;
+        d2_row[j] = d2;
+        gated_row[j] = inside;
+        cost_row[j] = inside ? d2 + log_det : kUnassignableCost;
       }
-      distance_[i][j] = std::sqrt(distance_sq_m2);
-      const Eigen::Matrix2d cov =
-          p.topLeftCorner<2, 2>() + d * (p.topRightCorner<2, 2>() + p.bottomLeftCorner<2, 2>()) +
-          d * d * p.bottomRightCorner<2, 2>() + (q * d * d * d / 3.0) * Eigen::Matrix2d::Identity();
-      double log_det = 0.0;
-      const double d2 = MahalanobisSq(at, cov, c, &log_det);
-      const bool inside = d2 <= options_.gate_mahalanobis_sq;
-      d2_[i][j] = d2;
-      gated_[i][j] = inside;
-      cost_[i][j] = inside ? d2 + log_det : kUnassignableCost;
     }
   }
   for (std::size_t j = 0; j < candidates_.size(); ++j) candidate_to_track_[j] = -1;

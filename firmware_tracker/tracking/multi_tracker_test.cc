@@ -477,6 +477,43 @@ TEST(MultiTrackerTest, ReportCarriesKindOrientationAndPointsOfTheLastMeasurement
   EXPECT_EQ(out.tracks[0].measured_offset_s, 0.0);
 }
 
+TEST(MultiTrackerTest, EveryMeasurementOfACrowdIsGatedWhateverItsPlaceInTheList) {
+  // 21 people 1.5 m apart (the gate runs on blocks of 8 measurements; 21 leaves a partial block),
+  // listed in one order while the tracks are born, then reversed and without person 9: each
+  // track keeps its person, the missing one coasts, and each follows its person's 5 cm step.
+  MultiTracker tracker{Opts()};
+  ScanTracks out;
+  constexpr int kPeople = 21;
+  const auto at = [](int person) {
+    return Eigen::Vector2d(-6.0 + 1.5 * (person % 7), 2.0 + 1.5 * (person / 7));
+  };
+  std::vector<Measurement> crowd;
+  for (int p = 0; p < kPeople; ++p) crowd.push_back(Meas(at(p).x(), at(p).y()));
+  Feed(tracker, 0, 5, crowd, out);
+  ASSERT_EQ(out.tracks.size(), static_cast<std::size_t>(kPeople));
+  std::vector<std::uint32_t> id_of(kPeople, 0);
+  for (const TrackReport& r : out.tracks) {
+    for (int p = 0; p < kPeople; ++p) {
+      if ((Eigen::Vector2d(r.x_m, r.y_m) - at(p)).norm() < 0.05) id_of[p] = r.track_id;
+    }
+  }
+  std::vector<Measurement> reversed;
+  for (int p = kPeople - 1; p >= 0; --p) {
+    if (p != 9) reversed.push_back(Meas(at(p).x() + 0.05, at(p).y()));
+  }
+  tracker.Step(ScanNs(5), reversed, out);
+  ASSERT_EQ(out.tracks.size(), static_cast<std::size_t>(kPeople));
+  EXPECT_EQ(tracker.track_count(), static_cast<std::size_t>(kPeople));
+  for (int p = 0; p < kPeople; ++p) {
+    ASSERT_NE(id_of[p], 0u) << "person " << p;
+    const TrackReport* r = FindId(out, id_of[p]);
+    ASSERT_NE(r, nullptr) << "person " << p;
+    EXPECT_EQ(r->state, p == 9 ? TrackState::kCoasting : TrackState::kConfirmed) << "person " << p;
+    EXPECT_NEAR(r->x_m, at(p).x() + (p == 9 ? 0.0 : 0.05), 0.03) << "person " << p;
+    EXPECT_GT(r->x_m, at(p).x() + (p == 9 ? -0.01 : 0.01)) << "person " << p;
+  }
+}
+
 TEST(MultiTrackerTest, MeasurementTimeOffsetsGiveUnbiasedPositionsAtScanStart) {
   // A person at 1.5 m/s seen 30 ms into every scan (e.g. at the end of a 270 deg field of view).
   const double offset_s = 0.03, speed = 1.5;

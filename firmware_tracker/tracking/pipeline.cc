@@ -525,10 +525,20 @@ void TrackingPipeline::AddObservation(const ScanView& scan, const Observation& o
   for (std::size_t k = 0; k < observation.part_count; ++k) {
     const ObservationPart& part = observation.parts[k];
     const auto pts = segments_.points_m.span().subspan(part.first_point, part.point_count);
-    const double mid = 0.5 * (std::atan2(pts.front().y(), pts.front().x()) +
-                              std::atan2(pts.back().y(), pts.back().x()));
-    const Eigen::Vector2d ray(std::cos(mid), std::sin(mid));
-    double nearest = Range(pts.front());
+    // The ray half way between the first and the last point's: the sum of their unit vectors
+    // (the direction at the mean of their bearings, without atan2, cos and sin; a part spans far
+    // less than half a turn, so the sum is never near zero).
+    const double front_range = Range(pts.front());
+    const double back_range = Range(pts.back());
+    const Eigen::Vector2d bisector = pts.front() / front_range + pts.back() / back_range;
+    const double bisector_norm = bisector.norm();
+    Eigen::Vector2d ray = bisector / bisector_norm;
+    if (!(bisector_norm > 1e-9) || !ray.allFinite()) {
+      const double mid = 0.5 * (std::atan2(pts.front().y(), pts.front().x()) +
+                                std::atan2(pts.back().y(), pts.back().x()));
+      ray = Eigen::Vector2d(std::cos(mid), std::sin(mid));
+    }
+    double nearest = front_range;
     for (const auto& p : pts) nearest = std::min(nearest, p.dot(ray));
     const double width = (pts.back() - pts.front()).norm();
     extent = std::max(extent, width);
