@@ -235,6 +235,9 @@ void VisitShape(tracking::ShapeOptions& o, ConfigVisitor& v) {
           "covariance, which the filter alone would make too small.");
   v.Field("size_floor_sigma_m", o.size_floor_sigma_m,
           "The size state counts as no more certain than this in that shared error.");
+  v.Field("box_size_floor_sigma_m", o.box_size_floor_sigma_m,
+          "A box's (cart's) size state counts as no more certain than this in that shared error: "
+          "learned from the few faces a passing cart shows, each scan sharing that view's error.");
   v.Field("beam_divergence_rad", o.beam_divergence_rad,
           "Full beam divergence of the scanner (LMS1xx, TiM: 0.015; LMS5xx: 0.011); the beam's "
           "footprint at range R is R times this plus beam_exit_diameter_m (mixed pixels of legs "

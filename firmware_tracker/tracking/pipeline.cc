@@ -121,6 +121,9 @@ std::optional<std::string> Validate(const ShapeOptions& o) {
   if (!(std::isfinite(o.size_floor_sigma_m) && o.size_floor_sigma_m >= 0.0)) {
     return "size_floor_sigma_m must be >= 0";
   }
+  if (!(std::isfinite(o.box_size_floor_sigma_m) && o.box_size_floor_sigma_m >= 0.0)) {
+    return "box_size_floor_sigma_m must be >= 0";
+  }
   if (!(std::isfinite(o.centre_bias_sigma_m) && o.centre_bias_sigma_m >= 0.0)) {
     return "centre_bias_sigma_m must be >= 0";
   }
@@ -209,8 +212,11 @@ class TrackingPipeline::Refiner final : public MeasurementRefiner {
     measurement.kind = MeasurementKind::kShapeFit;
     // What successive measurements share goes into the report: the size state's error (never
     // taken as smaller than the floor) and the outline's departure from the model.
-    const double size_var = std::max({shape.size_cov_m2(0, 0), shape.size_cov_m2(1, 1),
-                                      o.size_floor_sigma_m * o.size_floor_sigma_m});
+    const double floor_m = shape.model == ShapeModel::kBox
+                               ? std::max(o.size_floor_sigma_m, o.box_size_floor_sigma_m)
+                               : o.size_floor_sigma_m;
+    const double size_var =
+        std::max({shape.size_cov_m2(0, 0), shape.size_cov_m2(1, 1), floor_m * floor_m});
     shape.centre_bias_cov_m2 =
         (o.centre_bias_sigma_m * o.centre_bias_sigma_m + size_var) * Eigen::Matrix2d::Identity();
     shape.stamp_ns = at_ns;

@@ -148,8 +148,14 @@ struct ShapeOptions {
   // track's covariance on top of the filter's (which averages its measurements as if they were
   // independent): centre_bias_sigma_m (the outline not being the model's, the beam width at the
   // silhouette) in quadrature with the size state's sigma, taken as at least size_floor_sigma_m.
+  // A box's (a cart's) size state counts as no more certain than box_size_floor_sigma_m: its
+  // size is learned from the few faces a sensor sees as it passes, each scan's fit of them
+  // sharing that view's error (the unseen side's extent taken from the prior, the corners between
+  // beams), so its learned variance, built from hundreds of such scans, would claim millimetres
+  // while it is centimetres off; 0: size_floor_sigma_m alone, as before.
   double centre_bias_sigma_m = 0.02;
   double size_floor_sigma_m = 0.02;
+  double box_size_floor_sigma_m = 0.06;
   // Added in quadrature to every body-centre measurement (sigma per axis): what the fit cannot know
   // (sway, the torso's turn, an outline that is not the model's).
   double centre_model_sigma_m = 0.015;

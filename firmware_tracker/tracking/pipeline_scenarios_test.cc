@@ -340,6 +340,9 @@ TEST(TrackerOptionsTest, DefaultsValidAndErrorsNameTheSectionAndField) {
   o = {};
   o.shape.unseen_coasting_m = -0.1;
   EXPECT_EQ(Validate(o)->rfind("shape.unseen_coasting_m", 0), 0u) << *Validate(o);
+  o = {};
+  o.shape.box_size_floor_sigma_m = -0.01;
+  EXPECT_EQ(Validate(o)->rfind("shape.box_size_floor_sigma_m", 0), 0u) << *Validate(o);
 }
 
 class CrossingTest : public ::testing::TestWithParam<MeasurementKind> {};

@@ -35,7 +35,8 @@
 //                      [--explain] [--breakdown]
 //                      [--before-report-rules |
 //                       [--before-mixed-pixels] [--before-far] [--before-evidence-coasting]
-//                       [--before-one-leg] [--before-confirm-time] [--before-whole-person]]
+//                       [--before-one-leg] [--before-confirm-time] [--before-whole-person]
+//                       [--before-box-size]]
 //   (--extra: more scenario folders, e.g. held-out scenes, reported in their own section;
 //   --explain: per run on stderr, what became of an object's previous track at every id switch
 //   and missed scan, what the false positives are (by scan and by false track: a track left
@@ -55,7 +56,9 @@
 //   --before-confirm-time: "before" is the new one confirming by M of N alone,
 //   MultiTrackerOptions::confirm_min_s = 0; --before-whole-person: "before" drops knee-height
 //   mixed pixels beside a nearer return only, ShapeOptions::drop_mixed_pixel_legs_whole_person =
-//   false; several: without any of them). --explain also
+//   false; --before-box-size: "before" reports a box's (cart's) centre with its learned size's
+//   sigma as it is, ShapeOptions::box_size_floor_sigma_m = 0; several: without any of them).
+//   --explain also
 //   writes the false positives' classes to the results (ExplainTable) and, on stderr, what the
 //   tracks measured again after more than 1 s (a lost track resumed) came back on.
 
@@ -676,6 +679,9 @@ bool g_before_confirm_time = false;
 // --before-whole-person: "before" drops knee-height mixed pixels beside a much nearer return only,
 // not within the pairing distance of it (ShapeOptions::drop_mixed_pixel_legs_whole_person = false).
 bool g_before_whole_person = false;
+// --before-box-size: "before" reports a box's centre with its learned size's sigma however small
+// (ShapeOptions::box_size_floor_sigma_m = 0).
+bool g_before_box_size = false;
 const char* const kVariantNames[] = {"old", "new", "before"};
 
 std::vector<Variant> Variants(sim::Mount mount, double range_m) {
@@ -703,7 +709,8 @@ std::vector<Variant> Variants(sim::Mount mount, double range_m) {
     before.tracking.moving_speed_mps = 0.0;
     variants.push_back({"before", before});
   } else if (g_before_mixed_pixels || g_before_far || g_before_evidence_coasting ||
-             g_before_one_leg || g_before_confirm_time || g_before_whole_person) {
+             g_before_one_leg || g_before_confirm_time || g_before_whole_person ||
+             g_before_box_size) {
     tracking::TrackerOptions before = fresh;
     if (g_before_one_leg) before.shape.hidden_leg_behind = false;
     if (g_before_mixed_pixels) before.shape.drop_mixed_pixel_legs = false;
@@ -711,6 +718,7 @@ std::vector<Variant> Variants(sim::Mount mount, double range_m) {
     if (g_before_evidence_coasting) before.tracking.report_coasting_per_measured_s = 0.0;
     if (g_before_confirm_time) before.tracking.confirm_min_s = 0.0;
     if (g_before_whole_person) before.shape.drop_mixed_pixel_legs_whole_person = false;
+    if (g_before_box_size) before.shape.box_size_floor_sigma_m = 0.0;
     variants.push_back({"before", before});
   }
   return variants;
@@ -1402,9 +1410,9 @@ std::string Targets(const Section& s) {
 }  // namespace
 
 // The "before" line for the knee-height rules alone (--before-one-leg, --before-confirm-time,
-// --before-whole-person, any of them), empty otherwise.
+// --before-whole-person, --before-box-size, any of them), empty otherwise.
 std::string KneeHeightBefore() {
-  if (!(g_before_one_leg || g_before_confirm_time || g_before_whole_person) ||
+  if (!(g_before_one_leg || g_before_confirm_time || g_before_whole_person || g_before_box_size) ||
       g_before_mixed_pixels || g_before_far || g_before_evidence_coasting ||
       g_before_report_rules) {
     return "";
@@ -1423,12 +1431,18 @@ std::string KneeHeightBefore() {
         "dropping knee-height mixed pixels beside a nearer return only "
         "(`shape.drop_mixed_pixel_legs_whole_person` false)");
   }
+  if (g_before_box_size) {
+    without.push_back(
+        "reporting a box's centre with its learned size's sigma however small "
+        "(`shape.box_size_floor_sigma_m` 0)");
+  }
   std::string text = "\"before\": the new tracker ";
   for (std::size_t i = 0; i < without.size(); ++i) {
     text += (i == 0 ? "" : i + 1 == without.size() ? " and " : ", ") + without[i];
   }
   return text +
-         ", on the same scans in the same run; upper-body rows are the same by construction.\n\n";
+         ", on the same scans in the same run; upper-body rows are the same by construction" +
+         (g_before_box_size ? " except for the boxes' (carts') covariance" : "") + ".\n\n";
 }
 
 int main(int argc, char** argv) {
@@ -1471,6 +1485,8 @@ int main(int argc, char** argv) {
       g_before_far = true;
     } else if (a == "--before-one-leg") {
       g_before_one_leg = true;
+    } else if (a == "--before-box-size") {
+      g_before_box_size = true;
     } else if (a == "--jobs") {
       jobs = std::max(1, std::atoi(value().c_str()));
     } else {
@@ -1479,7 +1495,7 @@ int main(int argc, char** argv) {
                    "[--out FILE] [--jobs N] [--explain] [--breakdown] "
                    "[--before-report-rules | [--before-mixed-pixels] [--before-far] "
                    "[--before-evidence-coasting] [--before-one-leg] [--before-confirm-time] "
-                   "[--before-whole-person]]\n");
+                   "[--before-whole-person] [--before-box-size]]\n");
       return 2;
     }
   }
