@@ -313,7 +313,7 @@ struct Candidate {
   Eigen::Vector2d z_m = Eigen::Vector2d::Zero();
   Eigen::Matrix2d r_m2 = Eigen::Matrix2d::Identity();
   double offset_s = 0.0;
-  std::size_t source = 0;  // index into the caller's measurements
+  std::size_t source = 0;      // index into the caller's measurements
   bool evidence_only = false;  // Measurement::evidence_only
 };
 }  // namespace internal

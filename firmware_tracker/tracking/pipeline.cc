@@ -622,7 +622,8 @@ void TrackingPipeline::AddSingleBeamLegs(const ScanView& scan) {
   const ShapeOptions& o = options_.shape;
   const std::size_t tracks = tracker_.Predict(scan.stamp_ns, predictions_);
   bool any_confirmed = false;
-  for (std::size_t t = 0; t < tracks; ++t) any_confirmed = any_confirmed || predictions_[t].confirmed;
+  for (std::size_t t = 0; t < tracks; ++t)
+    any_confirmed = any_confirmed || predictions_[t].confirmed;
   if (!any_confirmed) return;
   const auto foreground = background_.foreground();
   const auto& segs = segments_.segments;
@@ -633,7 +634,8 @@ void TrackingPipeline::AddSingleBeamLegs(const ScanView& scan) {
     const float r = scan.range_m[b];
     if (foreground[b] == 0 || !(std::isfinite(r) && r > 0.0f)) continue;
     const double angle = scan.BeamAngleRad(b);
-    const Eigen::Vector2d p = static_cast<double>(r) * Eigen::Vector2d(std::cos(angle), std::sin(angle));
+    const Eigen::Vector2d p =
+        static_cast<double>(r) * Eigen::Vector2d(std::cos(angle), std::sin(angle));
     // Only where a leg may return one beam (narrower than two beams' spacing): nearer, a lone
     // beam is clutter or a mixed pixel.
     if (2.0 * o.leg_radius_m >= 2.0 * static_cast<double>(r) * std::abs(scan.angle_step_rad)) {

@@ -822,8 +822,9 @@ struct RunResult {
 // and association (an observation near the person that the track did not take: how far its first
 // position lay from the track, whether it was one leg or two).
 constexpr double kCoastingNearM = 0.4;
-std::string CoastingCause(const tracking::TrackingPipeline& pipeline, const tracking::ScanView& scan,
-                          const Vector2d& truth_m, const Vector2d& track_m) {
+std::string CoastingCause(const tracking::TrackingPipeline& pipeline,
+                          const tracking::ScanView& scan, const Vector2d& truth_m,
+                          const Vector2d& track_m) {
   const auto near = [&](const Vector2d& p) { return (p - truth_m).norm() <= kCoastingNearM; };
   std::size_t raw = 0, foreground = 0;
   const auto fg = pipeline.background().foreground();
@@ -855,8 +856,8 @@ std::string CoastingCause(const tracking::TrackingPipeline& pipeline, const trac
   for (std::size_t i = 0; i < obs.size(); ++i) {
     bool hit = false;
     for (std::size_t k = 0; k < obs[i].part_count && !hit; ++k) {
-      const auto pts = segs.points_m.span().subspan(obs[i].parts[k].first_point,
-                                                    obs[i].parts[k].point_count);
+      const auto pts =
+          segs.points_m.span().subspan(obs[i].parts[k].first_point, obs[i].parts[k].point_count);
       for (const Vector2d& p : pts) hit = hit || near(p);
     }
     if (!hit || i >= ms.size()) continue;
@@ -874,8 +875,10 @@ std::string CoastingCause(const tracking::TrackingPipeline& pipeline, const trac
   std::size_t points = 0;
   for (std::size_t k = 0; k < ob.part_count; ++k) points += ob.parts[k].point_count;
   const char* what = !ob.legs ? "wide" : ob.part_count == 2 ? "two legs" : "one leg";
-  const char* dist = best < 0.2 ? "< 0.2 m" : best < 0.4 ? "0.2-0.4 m" : best < 0.7 ? "0.4-0.7 m"
-                                                                                  : ">= 0.7 m";
+  const char* dist = best < 0.2   ? "< 0.2 m"
+                     : best < 0.4 ? "0.2-0.4 m"
+                     : best < 0.7 ? "0.4-0.7 m"
+                                  : ">= 0.7 m";
   return std::string("e: observation not taken, ") + what + (points <= 2 ? " (<= 2 points)" : "") +
          ", first position " + dist + " from the track";
 }
