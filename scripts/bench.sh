@@ -15,7 +15,7 @@ mkdir -p results
 # and fused, at upper-body and knee height, where the per-sensor error comes from and what the false
 # positives are (under a minute).
 "$build_dir/tests/bench/tracking_benchmark" --scenarios tools/scenarios --jobs 2 --breakdown --explain \
-  --before-one-leg --before-confirm-time --before-whole-person --before-box-size \
+  --before-one-leg --before-confirm-time --before-whole-person --before-box-size --before-single-beam \
   --out results/tracking_benchmark.md
 "$build_dir/tests/bench/store_benchmark" results/store_benchmark.md
 "$build_dir/tests/bench/daemon_benchmark" --out results/daemon_benchmark.md

@@ -221,6 +221,11 @@ void VisitShape(tracking::ShapeOptions& o, ConfigVisitor& v) {
           "around it (or return from straight behind it), where a leg beside would have returned "
           "a beam, hides the other leg behind it: the body centre is measured hip_half_width_m "
           "farther along the line of sight (false: at the leg, with the hip and stride extent).");
+  v.Field("single_beam_legs", o.single_beam_legs,
+          "mount legs: a leg returned by a single beam (below segmentation.min_points), where "
+          "a leg is narrower than two beams' spacing, within leg_pairing_distance_m of one "
+          "confirmed track that still knows where it is, updates that track where it found no "
+          "other leg; it never starts a track (false: such beams are dropped).");
   v.Field("walking_speed_mps", o.walking_speed_mps,
           "Faster than this a person faces where they walk (the yaw prior of the fit).");
   v.Field("walking_yaw_sigma_rad", o.walking_yaw_sigma_rad,

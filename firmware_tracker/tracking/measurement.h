@@ -67,6 +67,9 @@ struct Measurement {
   double orientation_rad = 0.0;  // ellipse major axis direction in (-pi/2, pi/2]; 0 for CoM
   double rms_residual_m = 0.0;   // ellipse fit; 0 for CoM
   std::size_t point_count = 0;
+  // Evidence for a confirmed track only (MultiTracker): it may update a confirmed track whose gate
+  // it falls within, never a tentative one, and never starts or resumes a track.
+  bool evidence_only = false;
 };
 
 // Precondition: points is not empty.

@@ -205,6 +205,7 @@ void MultiTracker::AcceptMeasurements(std::span<const Measurement> measurements,
     c->z_m = m.position_m;
     c->r_m2 = r;
     c->source = j;
+    c->evidence_only = m.evidence_only;
     double offset_s = j < time_offsets_s.size() ? time_offsets_s[j] : 0.0;
     if (!(std::isfinite(offset_s) && offset_s >= 0.0)) offset_s = 0.0;
     c->offset_s = std::min(offset_s, options_.max_time_gap_s);
@@ -327,7 +328,8 @@ void MultiTracker::Associate(bool confirmed) {
     if (tracks_[i].confirmed == confirmed) rows[n++] = i;
   }
   for (std::size_t j = 0; j < candidates_.size(); ++j) {
-    if (candidate_to_track_[j] < 0) cols[m++] = j;
+    // Evidence-only measurements are for confirmed tracks (step 3c).
+    if (candidate_to_track_[j] < 0 && (confirmed || !candidates_[j].evidence_only)) cols[m++] = j;
   }
   if (n == 0 || m == 0) return;
   auto assign = [this](std::size_t i, std::size_t j) {
@@ -665,6 +667,7 @@ void MultiTracker::StartTracks(common::UtcNs scan_start_ns,
   for (std::size_t j = 0; j < candidates_.size(); ++j) {
     if (candidate_to_track_[j] >= 0) continue;
     const Candidate& c = candidates_[j];
+    if (c.evidence_only) continue;  // step 3c: never a new or resumed track
     bool suppressed = false;
     for (std::size_t i = 0; i < gated_rows && !suppressed; ++i) suppressed = gated_[i][j];
     for (std::size_t b = first_born; b < tracks_.size() && !suppressed; ++b) {

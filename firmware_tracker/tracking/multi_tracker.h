@@ -55,6 +55,9 @@
 //     measurement of this scan is handed back (absorbed_sources()) so the background takes it over.
 //     A person who stops stays a track (until the background absorbs them after its
 //     absorb_after_s).
+//  3c. A measurement marked evidence_only (Measurement::evidence_only, e.g. a knee-height leg
+//     returned by a single beam) is a candidate for confirmed tracks only (steps 3 and 3b) and
+//     starts or resumes no track (step 6).
 //  6. Births. A measurement that was not assigned starts a tentative track unless it lies within
 //     the gate of an existing track or of a track born earlier in the same scan (a person split
 //     into two segments must not become two tracks). Births beyond max_tracks are dropped and
@@ -310,7 +313,8 @@ struct Candidate {
   Eigen::Vector2d z_m = Eigen::Vector2d::Zero();
   Eigen::Matrix2d r_m2 = Eigen::Matrix2d::Identity();
   double offset_s = 0.0;
-  std::size_t source = 0;  // index into the caller's measurements
+  std::size_t source = 0;      // index into the caller's measurements
+  bool evidence_only = false;  // Measurement::evidence_only
 };
 }  // namespace internal
 

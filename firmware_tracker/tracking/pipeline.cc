@@ -626,7 +626,64 @@ void TrackingPipeline::BuildObservations(const ScanView& scan) {
       (void)leg_parts_.push_back(MakePart(scan, s, split, s.point_count - split));
     }
   }
+  single_beam_first_ = leg_parts_.size();
+  if (o.single_beam_legs) AddSingleBeamLegs(scan);
   PairLegs(scan);
+}
+
+// Single-beam legs (ShapeOptions::single_beam_legs): foreground beams in no segment, within the
+// pairing distance of a confirmed track's prediction and not veiled, as one-point leg parts after
+// the segments' (from single_beam_first_ on).
+void TrackingPipeline::AddSingleBeamLegs(const ScanView& scan) {
+  const ShapeOptions& o = options_.shape;
+  const std::size_t tracks = tracker_.Predict(scan.stamp_ns, predictions_);
+  bool any_confirmed = false;
+  for (std::size_t t = 0; t < tracks; ++t)
+    any_confirmed = any_confirmed || predictions_[t].confirmed;
+  if (!any_confirmed) return;
+  const auto foreground = background_.foreground();
+  const auto& segs = segments_.segments;
+  std::size_t next = 0;  // segments are in beam order
+  for (std::size_t b = 0; b < foreground.size() && b < scan.range_m.size(); ++b) {
+    while (next < segs.size() && segs[next].end_beam <= b) ++next;
+    if (next < segs.size() && segs[next].begin_beam <= b) continue;  // in a segment
+    const float r = scan.range_m[b];
+    if (foreground[b] == 0 || !(std::isfinite(r) && r > 0.0f)) continue;
+    const double angle = scan.BeamAngleRad(b);
+    const Eigen::Vector2d p =
+        static_cast<double>(r) * Eigen::Vector2d(std::cos(angle), std::sin(angle));
+    // Only where a leg may return one beam (narrower than two beams' spacing): nearer, a lone
+    // beam is clutter or a mixed pixel.
+    if (2.0 * o.leg_radius_m >= 2.0 * static_cast<double>(r) * std::abs(scan.angle_step_rad)) {
+      continue;
+    }
+    // Near exactly one confirmed track: between two, whose it is is unknown.
+    // And only one that still knows where the legs are (its position sigma within their reach):
+    // a track coasting for long would follow whatever beam flickers near it.
+    std::size_t near_tracks = 0, known = 0;
+    for (std::size_t t = 0; t < tracks; ++t) {
+      if (!predictions_[t].confirmed ||
+          (predictions_[t].position_m - p).norm() > o.leg_pairing_distance_m) {
+        continue;
+      }
+      ++near_tracks;
+      const double reach = o.hip_half_width_m + o.leg_radius_m;
+      if (0.5 * predictions_[t].covariance_m2.trace() <= reach * reach) ++known;
+    }
+    if (near_tracks != 1 || known != 1 || leg_parts_.full() || !segments_.points_m.push_back(p)) {
+      continue;
+    }
+    Segment single;
+    single.begin_beam = b;
+    single.end_beam = b + 1;
+    single.first_point = segments_.points_m.size() - 1;
+    single.point_count = 1;
+    if (o.drop_mixed_pixel_legs && Veiled(scan, single)) {
+      segments_.points_m.pop_back();
+      continue;
+    }
+    (void)leg_parts_.push_back(MakePart(scan, single, 0, 1));
+  }
 }
 
 // Mixed pixels of a nearer leg's edge (ShapeOptions::drop_mixed_pixel_legs): a segment beside a
@@ -785,7 +842,12 @@ void TrackingPipeline::PairLegs(const ScanView& scan) {
           o.hidden_leg_behind && PartnerBehind(scan, leg_parts_[a], leg_centres_m_[a]);
       if (ob.partner_behind) ++counters_.legs_behind;
     }
+    const std::size_t before = measurements_.size();
     AddObservation(scan, ob);
+    if (a >= single_beam_first_ || b >= single_beam_first_) {
+      ++counters_.single_beam_legs;
+      if (measurements_.size() > before) measurements_[before].evidence_only = true;
+    }
   };
   // Around the live tracks, confirmed first: the pair (or single leg) nearest to the prediction.
   const double reach = o.leg_pairing_distance_m;
@@ -812,11 +874,12 @@ void TrackingPipeline::PairLegs(const ScanView& scan) {
       }
     }
   }
-  for (std::size_t t = 0; t < tracks; ++t) {
-    const Eigen::Vector2d& c = predictions_[t].position_m;
+  // The segments' legs [first, last) nearest to prediction c: a pair or a single leg.
+  const auto nearest = [&](const Eigen::Vector2d& c, std::size_t first, std::size_t last,
+                           std::size_t& best_a, std::size_t& best_b) {
     double best = 0.6 * reach;
-    std::size_t best_a = n, best_b = n;
-    for (std::size_t a = 0; a < n; ++a) {
+    best_a = best_b = n;
+    for (std::size_t a = first; a < last; ++a) {
       if (leg_used_[a] || (leg_centres_m_[a] - c).norm() > reach) continue;
       // A single leg counts as lying its hip offset from the centre, and as worse than a pair that
       // fits: the other leg is usually there.
@@ -826,7 +889,7 @@ void TrackingPipeline::PairLegs(const ScanView& scan) {
         best = single;
         best_a = best_b = a;
       }
-      for (std::size_t b = a + 1; b < n; ++b) {
+      for (std::size_t b = a + 1; b < last; ++b) {
         if (leg_used_[b] || (leg_centres_m_[a] - leg_centres_m_[b]).norm() > reach) continue;
         const double d = (0.5 * (leg_centres_m_[a] + leg_centres_m_[b]) - c).norm();
         if (d < best) {
@@ -836,9 +899,19 @@ void TrackingPipeline::PairLegs(const ScanView& scan) {
         }
       }
     }
+  };
+  for (std::size_t t = 0; t < tracks; ++t) {
+    std::size_t best_a = n, best_b = n;
+    nearest(predictions_[t].position_m, 0, single_beam_first_, best_a, best_b);
+    // A confirmed track that found no leg of a segment: its single-beam legs (evidence only).
+    if (best_a == n && predictions_[t].confirmed) {
+      nearest(predictions_[t].position_m, single_beam_first_, n, best_a, best_b);
+    }
     if (best_a < n) emit(best_a, best_b);
   }
-  // The rest: nearest neighbours within the pairing distance, then single legs.
+  // The rest (single-beam legs never): nearest neighbours within the pairing distance, then
+  // single legs.
+  for (std::size_t a = single_beam_first_; a < n; ++a) leg_used_[a] = true;
   for (;;) {
     double best = reach;
     std::size_t best_a = n, best_b = n;

@@ -137,6 +137,20 @@ struct ShapeOptions {
   // (leg_radius_m / 2 either side) as its covariance; otherwise the leg itself, with the hip and
   // stride extent. false: every single leg as the latter (the tree before this rule).
   bool hidden_leg_behind = true;
+  // Legs mount: a leg returned by a single beam (segmentation drops it: min_points) is evidence
+  // for a confirmed track (Measurement::evidence_only): a foreground beam in no segment, at a
+  // range where a leg is narrower than two beams' spacing (nearer, a lone beam is clutter or a
+  // mixed pixel), within leg_pairing_distance_m of exactly one confirmed track's prediction whose
+  // position sigma (root of half the trace) is within the legs' reach (hip_half_width_m +
+  // leg_radius_m: a track coasting for long would follow any beam that flickers near it), not
+  // veiled (drop_mixed_pixel_legs), is paired into that track's observation (two such legs, or
+  // one) where the track found no leg of a segment; it never starts or resumes a track, nor feeds
+  // a tentative one. Its covariance is the one- or two-leg measurement's (a circle fitted to one
+  // point: the silhouette across the ray, the track's leg radius along it; one leg adds the hip
+  // and stride extent). tracking_benchmark --explain before this: of the knee-height scans with a
+  // track coasting beside a person the scan returned, 82 % had only single-beam returns near the
+  // person. false: such beams are dropped.
+  bool single_beam_legs = true;
   // Yaw prior: faster than walking_speed_mps a person faces where they walk (sigma
   // walking_yaw_sigma_rad: the torso turns with the gait, people step sideways); standing, the last
   // orientation, less certain by yaw_drift_rad_per_s.
@@ -240,6 +254,7 @@ struct PipelineCounters {
   std::uint64_t leg_pairs = 0;          // observations of two legs (kLegs)
   std::uint64_t single_legs = 0;        // observations of one leg
   std::uint64_t legs_behind = 0;        // of them: the other hidden behind (hidden_leg_behind)
+  std::uint64_t single_beam_legs = 0;   // observations of single-beam legs (single_beam_legs)
   std::uint64_t veiled_segments = 0;    // legs: mixed pixels beside a nearer edge, dropped
   std::uint64_t shadowed_legs = 0;      // legs: straight behind a confirmed track, dropped
   std::uint64_t absorbed_objects = 0;   // static objects handed to the background
@@ -300,6 +315,7 @@ class TrackingPipeline {
   void MeasureLegacy(const ScanView& scan);
   void BuildObservations(const ScanView& scan);
   void PairLegs(const ScanView& scan);
+  void AddSingleBeamLegs(const ScanView& scan);
   void AddObservation(const ScanView& scan, const Observation& observation);
   ObservationPart MakePart(const ScanView& scan, const Segment& segment, std::size_t first,
                            std::size_t count) const;
@@ -326,6 +342,8 @@ class TrackingPipeline {
   common::FixedVector<ObservationPart, 2 * kMaxSegments> leg_parts_;
   std::array<Eigen::Vector2d, 2 * kMaxSegments> leg_centres_m_{};
   std::array<bool, 2 * kMaxSegments> leg_used_{};
+  // leg_parts_ from this index on are single-beam legs (ShapeOptions::single_beam_legs).
+  std::size_t single_beam_first_ = 0;
   std::array<TrackPrediction, kMaxTracks> predictions_{};
   MultiTracker tracker_;
   std::unique_ptr<Refiner> refiner_;

@@ -1478,6 +1478,82 @@ TEST(PipelineScenarioTest, MixedPixelsWithinAPersonsReachOfANearerReturnAreNotLe
   EXPECT_EQ(veiled_wall, 0u);
 }
 
+// Knee height, 25 Hz, 0.5 deg: a person walks across the view at 10 m (0.44 m/s), each leg
+// returned by 2 beams (one segment split into two legs), then for 1 s by a single beam each, 3
+// beams apart (two one-point segments, below min_points), then by 2 beams again. With
+// shape.single_beam_legs the confirmed track is measured from the single beams (one id, within a
+// few centimetres of the body centre); without, it coasts through that second. Single beams
+// alone never start a track.
+TEST(PipelineScenarioTest, SingleBeamLegsUpdateAConfirmedTrackButStartNone) {
+  constexpr std::size_t kBeams = 361;
+  constexpr double kStepRad = 0.5 * common::kPi / 180.0;
+  constexpr double kFirstRad = -0.5 * common::kPi;
+  struct Run {
+    std::set<std::uint32_t> ids;
+    int single_scans = 0, measured = 0;
+    double error_sum_m = 0.0, error_max_m = 0.0;
+    std::uint64_t created = 0, single_beam_legs = 0;
+  };
+  const auto run = [&](bool single_beam_legs, bool single_from_start) {
+    TrackerOptions options;
+    options.shape.mount = Mount::kLegs;
+    options.shape.single_beam_legs = single_beam_legs;
+    TrackingPipeline pipeline(options);
+    std::vector<float> ranges(kBeams);
+    Run out;
+    const auto k0 = static_cast<std::int64_t>(kLearnedS * 25.0);
+    for (std::int64_t k = 0; k < k0 + 100; ++k) {
+      std::fill(ranges.begin(), ranges.end(), 30.0f);
+      const bool walking = k >= k0;
+      const std::int64_t i = k - k0;
+      const bool single = walking && (single_from_start || (i >= 50 && i < 75));
+      const auto c = static_cast<std::size_t>(120 + std::max<std::int64_t>(i, 0) / 5);
+      if (walking) {
+        ranges[c - 2] = 10.0f;
+        ranges[c + 2] = 10.0f;
+        if (!single) ranges[c - 1] = ranges[c + 1] = 10.0f;
+      }
+      ScanView scan;
+      scan.first_angle_rad = kFirstRad;
+      scan.angle_step_rad = kStepRad;
+      scan.range_m = ranges;
+      scan.stamp_ns = 1'600'000'000 * common::kNsPerS + k * 40 * common::kNsPerMs;
+      scan.scan_period_s = 0.04;
+      const ScanTracks& tracks = pipeline.Process(scan, static_cast<std::uint32_t>(k));
+      for (const TrackReport& r : tracks.tracks) out.ids.insert(r.track_id);
+      if (!single || single_from_start) continue;
+      ++out.single_scans;
+      // Truth at the scan start: the legs' midpoint, a leg radius behind their front.
+      const double bearing = kFirstRad + static_cast<double>(c) * kStepRad;
+      const Eigen::Vector2d truth = 10.06 * Eigen::Vector2d(std::cos(bearing), std::sin(bearing));
+      for (const TrackReport& r : tracks.tracks) {
+        if (r.state != TrackState::kConfirmed) continue;
+        ++out.measured;
+        const double e = (Eigen::Vector2d(r.x_m, r.y_m) - truth).norm();
+        out.error_sum_m += e;
+        out.error_max_m = std::max(out.error_max_m, e);
+      }
+    }
+    out.created = pipeline.tracker().counters().created;
+    out.single_beam_legs = pipeline.counters().single_beam_legs;
+    return out;
+  };
+  const Run now = run(true, false);
+  const Run before = run(false, false);
+  ASSERT_EQ(now.single_scans, 25);
+  EXPECT_EQ(now.ids.size(), 1u);
+  EXPECT_GE(now.measured, 24);  // every single-beam scan
+  EXPECT_GE(now.single_beam_legs, 24u);
+  EXPECT_LT(now.error_sum_m / std::max(now.measured, 1), 0.05);
+  EXPECT_LT(now.error_max_m, 0.12);
+  EXPECT_EQ(before.measured, 0);  // coasting through the single-beam second
+  EXPECT_EQ(before.single_beam_legs, 0u);
+  // Single beams only: evidence for no track, the start of none.
+  const Run alone = run(true, true);
+  EXPECT_EQ(alone.created, 0u);
+  EXPECT_TRUE(alone.ids.empty());
+}
+
 TEST(TrackerOptionsTest, ConfirmationInTimeAppliesAtKneeHeightOnly) {
   TrackerOptions options;
   ASSERT_GT(options.tracking.confirm_min_s, 0.0);

@@ -36,7 +36,7 @@
 //                      [--before-report-rules |
 //                       [--before-mixed-pixels] [--before-far] [--before-evidence-coasting]
 //                       [--before-one-leg] [--before-confirm-time] [--before-whole-person]
-//                       [--before-box-size]]
+//                       [--before-box-size] [--before-single-beam]]
 //   (--extra: more scenario folders, e.g. held-out scenes, reported in their own section;
 //   --explain: per run on stderr, what became of an object's previous track at every id switch
 //   and missed scan, what the false positives are (by scan and by false track: a track left
@@ -57,8 +57,9 @@
 //   MultiTrackerOptions::confirm_min_s = 0; --before-whole-person: "before" drops knee-height
 //   mixed pixels beside a nearer return only, ShapeOptions::drop_mixed_pixel_legs_whole_person =
 //   false; --before-box-size: "before" reports a box's (cart's) centre with its learned size's
-//   sigma as it is, ShapeOptions::box_size_floor_sigma_m = 0; several: without any of them).
-//   --explain also
+//   sigma as it is, ShapeOptions::box_size_floor_sigma_m = 0; --before-single-beam: "before" drops
+//   knee-height legs returned by a single beam, ShapeOptions::single_beam_legs = false; several:
+//   without any of them). --explain also
 //   writes the false positives' classes to the results (ExplainTable) and, on stderr, what the
 //   tracks measured again after more than 1 s (a lost track resumed) came back on.
 
@@ -327,7 +328,11 @@ struct Causes {
   // Tracks measured again more than kResumedAfterS after their previous measurement (a lost
   // track resumed): what they came back on, and their false scans within 1 s after.
   std::map<std::string, double> resumes;
+  // A reported track coasting beside a person the scan returned (the nearest track within
+  // kMatchRadiusM of them, not measured): what became of the person's returns (CoastingCause).
+  std::map<std::string, double> coasting;
   void Add(const Causes& o) {
+    for (const auto& [k, v] : o.coasting) coasting[k] += v;
     for (const auto& [k, v] : o.resumes) resumes[k] += v;
     for (const auto& [k, v] : o.false_classes) false_classes[k] += v;
     for (const auto& [k, v] : o.false_scan_classes) false_scan_classes[k] += v;
@@ -682,7 +687,12 @@ bool g_before_whole_person = false;
 // --before-box-size: "before" reports a box's centre with its learned size's sigma however small
 // (ShapeOptions::box_size_floor_sigma_m = 0).
 bool g_before_box_size = false;
+// --before-single-beam: "before" drops knee-height legs returned by a single beam, also beside a
+// confirmed track (ShapeOptions::single_beam_legs = false).
+bool g_before_single_beam = false;
 const char* const kVariantNames[] = {"old", "new", "before"};
+// --explain: why tracks coast beside a person the scan returned (CoastingCause).
+bool g_explain_coasting = false;
 
 std::vector<Variant> Variants(sim::Mount mount, double range_m) {
   tracking::TrackerOptions fresh;
@@ -702,6 +712,7 @@ std::vector<Variant> Variants(sim::Mount mount, double range_m) {
   old.shape.drop_mixed_pixel_legs = false;
   old.shape.drop_mixed_pixel_legs_whole_person = false;
   old.shape.hidden_leg_behind = false;
+  old.shape.single_beam_legs = false;
   std::vector<Variant> variants = {{"old", old}, {"new", fresh}};
   if (g_before_report_rules) {
     tracking::TrackerOptions before = fresh;
@@ -710,7 +721,7 @@ std::vector<Variant> Variants(sim::Mount mount, double range_m) {
     variants.push_back({"before", before});
   } else if (g_before_mixed_pixels || g_before_far || g_before_evidence_coasting ||
              g_before_one_leg || g_before_confirm_time || g_before_whole_person ||
-             g_before_box_size) {
+             g_before_box_size || g_before_single_beam) {
     tracking::TrackerOptions before = fresh;
     if (g_before_one_leg) before.shape.hidden_leg_behind = false;
     if (g_before_mixed_pixels) before.shape.drop_mixed_pixel_legs = false;
@@ -719,6 +730,7 @@ std::vector<Variant> Variants(sim::Mount mount, double range_m) {
     if (g_before_confirm_time) before.tracking.confirm_min_s = 0.0;
     if (g_before_whole_person) before.shape.drop_mixed_pixel_legs_whole_person = false;
     if (g_before_box_size) before.shape.box_size_floor_sigma_m = 0.0;
+    if (g_before_single_beam) before.shape.single_beam_legs = false;
     variants.push_back({"before", before});
   }
   return variants;
@@ -810,6 +822,73 @@ struct RunResult {
   double cpu_s = 0;
 };
 
+// --explain: why a track coasts beside a person the scan returned, from the pipeline's stages
+// around the person's true centre (returns within kCoastingNearM of it): the returns' fate in
+// background model, segmentation (min_points), the legs' observations (Veiled, the shadow rule)
+// and association (an observation near the person that the track did not take: how far its first
+// position lay from the track, whether it was one leg or two).
+constexpr double kCoastingNearM = 0.4;
+std::string CoastingCause(const tracking::TrackingPipeline& pipeline,
+                          const tracking::ScanView& scan, const Vector2d& truth_m,
+                          const Vector2d& track_m) {
+  const auto near = [&](const Vector2d& p) { return (p - truth_m).norm() <= kCoastingNearM; };
+  std::size_t raw = 0, foreground = 0;
+  const auto fg = pipeline.background().foreground();
+  for (std::size_t b = 0; b < scan.range_m.size(); ++b) {
+    const float r = scan.range_m[b];
+    if (!(std::isfinite(r) && r > 0.0f)) continue;
+    const double a = scan.first_angle_rad + static_cast<double>(b) * scan.angle_step_rad;
+    if (!near(static_cast<double>(r) * Vector2d(std::cos(a), std::sin(a)))) continue;
+    ++raw;
+    if (b < fg.size() && fg[b] != 0) ++foreground;
+  }
+  if (raw == 0) return "a: no return near the person (drop-outs, far returns)";
+  if (raw == 1) {
+    return foreground == 1 ? "a: one return near the person, foreground"
+                           : "a: one return near the person, background";
+  }
+  if (foreground == 0) return "b: no return near the person foreground";
+  const tracking::SegmentList& segs = pipeline.segments();
+  std::size_t seg_points = 0;
+  for (const Vector2d& p : segs.points_m.span()) seg_points += near(p) ? 1 : 0;
+  if (seg_points == 0) {
+    return foreground == 1 ? "c: one foreground return (below segmentation.min_points)"
+                           : "c: foreground returns in no segment (min_points)";
+  }
+  const auto obs = pipeline.observations();
+  const auto ms = pipeline.measurements();
+  double best = std::numeric_limits<double>::infinity();
+  std::size_t best_i = obs.size();
+  for (std::size_t i = 0; i < obs.size(); ++i) {
+    bool hit = false;
+    for (std::size_t k = 0; k < obs[i].part_count && !hit; ++k) {
+      const auto pts =
+          segs.points_m.span().subspan(obs[i].parts[k].first_point, obs[i].parts[k].point_count);
+      for (const Vector2d& p : pts) hit = hit || near(p);
+    }
+    if (!hit || i >= ms.size()) continue;
+    const double d = (ms[i].position_m - track_m).norm();
+    if (d < best) {
+      best = d;
+      best_i = i;
+    }
+  }
+  if (best_i == obs.size()) {
+    return seg_points == 1 ? "d: segment point near, no observation (veiled, shadowed), 1 point"
+                           : "d: segment points near, no observation (veiled, shadowed)";
+  }
+  const tracking::Observation& ob = obs[best_i];
+  std::size_t points = 0;
+  for (std::size_t k = 0; k < ob.part_count; ++k) points += ob.parts[k].point_count;
+  const char* what = !ob.legs ? "wide" : ob.part_count == 2 ? "two legs" : "one leg";
+  const char* dist = best < 0.2   ? "< 0.2 m"
+                     : best < 0.4 ? "0.2-0.4 m"
+                     : best < 0.7 ? "0.4-0.7 m"
+                                  : ">= 0.7 m";
+  return std::string("e: observation not taken, ") + what + (points <= 2 ? " (<= 2 points)" : "") +
+         ", first position " + dist + " from the track";
+}
+
 // The tracker over every scan of one sensor, for every variant.
 void RunSensor(const sim::Simulator& simulator, std::size_t sensor,
                const std::vector<Variant>& variants, std::vector<Mot>* mots,
@@ -885,13 +964,31 @@ void RunSensor(const sim::Simulator& simulator, std::size_t sensor,
       std::set<std::uint64_t> alive;
       for (std::size_t a = 0; a < n_alive; ++a) alive.insert(predictions[a].id);
       sequences[v].Frame(period_s, truths, hyps, dont_care, &alive, &furniture);
+      if (g_explain_coasting) {
+        for (const Truth& t : truths) {
+          const Hypothesis* nearest = nullptr;
+          double best = kMatchRadiusM;
+          for (const Hypothesis& h : hyps) {
+            const double d = (h.p - t.p).norm();
+            if (d < best) {
+              best = d;
+              nearest = &h;
+            }
+          }
+          if (nearest != nullptr && !nearest->measured) {
+            (*causes)[v].coasting[CoastingCause(*pipelines[v], view, t.p, nearest->p)] += 1.0;
+          }
+        }
+      }
       (*frames)[v].frames.push_back(std::move(frame));
       (*frames)[v].seen.push_back(seen);
     }
   }
   for (std::size_t v = 0; v < variants.size(); ++v) {
     (*mots)[v].Add(sequences[v].Finish());
+    const auto coasting = std::move((*causes)[v].coasting);
     (*causes)[v] = sequences[v].causes();
+    (*causes)[v].coasting = coasting;
     (*counters)[v] = pipelines[v]->tracker().counters();
   }
 }
@@ -1019,6 +1116,8 @@ void Explain(const std::string& scenario, const std::string& mount, const RunRes
       std::fprintf(stderr, "  fused switch: %-60s %5.0f\n", why.c_str(), count);
     for (const auto& [why, count] : r.causes[v].resumes)
       std::fprintf(stderr, "  resumed: %-90s %5.0f\n", why.c_str(), count);
+    for (const auto& [why, count] : r.causes[v].coasting)
+      std::fprintf(stderr, "  coasting beside the person: %-80s %6.0f\n", why.c_str(), count);
   }
 }
 
@@ -1412,7 +1511,8 @@ std::string Targets(const Section& s) {
 // The "before" line for the knee-height rules alone (--before-one-leg, --before-confirm-time,
 // --before-whole-person, --before-box-size, any of them), empty otherwise.
 std::string KneeHeightBefore() {
-  if (!(g_before_one_leg || g_before_confirm_time || g_before_whole_person || g_before_box_size) ||
+  if (!(g_before_one_leg || g_before_confirm_time || g_before_whole_person || g_before_box_size ||
+        g_before_single_beam) ||
       g_before_mixed_pixels || g_before_far || g_before_evidence_coasting ||
       g_before_report_rules) {
     return "";
@@ -1435,6 +1535,11 @@ std::string KneeHeightBefore() {
     without.push_back(
         "reporting a box's centre with its learned size's sigma however small "
         "(`shape.box_size_floor_sigma_m` 0)");
+  }
+  if (g_before_single_beam) {
+    without.push_back(
+        "dropping knee-height legs returned by a single beam, also beside a confirmed track "
+        "(`shape.single_beam_legs` false)");
   }
   std::string text = "\"before\": the new tracker ";
   for (std::size_t i = 0; i < without.size(); ++i) {
@@ -1469,6 +1574,7 @@ int main(int argc, char** argv) {
       only = value();
     } else if (a == "--explain") {
       explain = true;
+      g_explain_coasting = true;
     } else if (a == "--breakdown") {
       breakdown = true;
     } else if (a == "--before-report-rules") {
@@ -1487,6 +1593,8 @@ int main(int argc, char** argv) {
       g_before_one_leg = true;
     } else if (a == "--before-box-size") {
       g_before_box_size = true;
+    } else if (a == "--before-single-beam") {
+      g_before_single_beam = true;
     } else if (a == "--jobs") {
       jobs = std::max(1, std::atoi(value().c_str()));
     } else {
@@ -1495,7 +1603,7 @@ int main(int argc, char** argv) {
                    "[--out FILE] [--jobs N] [--explain] [--breakdown] "
                    "[--before-report-rules | [--before-mixed-pixels] [--before-far] "
                    "[--before-evidence-coasting] [--before-one-leg] [--before-confirm-time] "
-                   "[--before-whole-person] [--before-box-size]]\n");
+                   "[--before-whole-person] [--before-box-size] [--before-single-beam]]\n");
       return 2;
     }
   }
