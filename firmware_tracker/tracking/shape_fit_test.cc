@@ -219,36 +219,45 @@ TEST(ShapeFitTest, FewPointsStillGiveTheBodyCentreWithAnHonestCovariance) {
   }
 }
 
+// The points and silhouette a 361-beam scanner (0.5 deg from -90 deg) sees of a box with
+// half-lengths a along u and b along w around centre, range noise noise_sigma_m.
+View RenderBox(const Eigen::Vector2d& centre, double yaw, double a, double b, double noise_sigma_m,
+               std::uint32_t seed) {
+  const Eigen::Vector2d u(std::cos(yaw), std::sin(yaw)), w(-std::sin(yaw), std::cos(yaw));
+  const std::vector<testing::Wall> box = {{centre + a * u + b * w, centre - a * u + b * w},
+                                          {centre - a * u + b * w, centre - a * u - b * w},
+                                          {centre - a * u - b * w, centre + a * u - b * w},
+                                          {centre + a * u - b * w, centre + a * u + b * w}};
+  testing::ScannerConfig config;
+  config.first_angle_rad = common::DegToRad(-90.0);
+  config.beams = 361;
+  config.noise_sigma_m = noise_sigma_m;
+  if (seed != 0) config.seed = seed;
+  testing::SyntheticScanner scanner(config);
+  const ScanView scan = scanner.Render(0, box, {});
+  View v;
+  std::size_t first = scan.range_m.size(), last = 0;
+  for (std::size_t i = 0; i < scan.range_m.size(); ++i) {
+    if (scan.range_m[i] <= 0.0f) continue;
+    const double angle = scan.BeamAngleRad(i);
+    v.points.emplace_back(scan.range_m[i] * std::cos(angle), scan.range_m[i] * std::sin(angle));
+    first = std::min(first, i);
+    last = i;
+  }
+  if (!v.points.empty()) {
+    v.silhouette = {scan.BeamAngleRad(first) - 0.5 * scan.angle_step_rad,
+                    scan.BeamAngleRad(last) + 0.5 * scan.angle_step_rad,
+                    std::abs(scan.angle_step_rad), true, true};
+  }
+  return v;
+}
+
 TEST(ShapeFitTest, BoxOfACartAtItsCornerAndSide) {
   // A 1.0 x 0.6 m cart (half-lengths 0.5, 0.3), its length along its heading.
   for (const double yaw_deg : {0.0, 30.0, 60.0, 90.0}) {
     const double yaw = common::DegToRad(yaw_deg);
     const Eigen::Vector2d centre(4.0, 1.0);
-    // Render the rectangle as four walls.
-    const Eigen::Vector2d u(std::cos(yaw), std::sin(yaw)), w(-std::sin(yaw), std::cos(yaw));
-    const std::vector<testing::Wall> box = {
-        {centre + 0.5 * u + 0.3 * w, centre - 0.5 * u + 0.3 * w},
-        {centre - 0.5 * u + 0.3 * w, centre - 0.5 * u - 0.3 * w},
-        {centre - 0.5 * u - 0.3 * w, centre + 0.5 * u - 0.3 * w},
-        {centre + 0.5 * u - 0.3 * w, centre + 0.5 * u + 0.3 * w}};
-    testing::ScannerConfig config;
-    config.first_angle_rad = common::DegToRad(-90.0);
-    config.beams = 361;
-    config.noise_sigma_m = 0.01;
-    testing::SyntheticScanner scanner(config);
-    const ScanView scan = scanner.Render(0, box, {});
-    View v;
-    std::size_t first = scan.range_m.size(), last = 0;
-    for (std::size_t i = 0; i < scan.range_m.size(); ++i) {
-      if (scan.range_m[i] <= 0.0f) continue;
-      const double a = scan.BeamAngleRad(i);
-      v.points.emplace_back(scan.range_m[i] * std::cos(a), scan.range_m[i] * std::sin(a));
-      first = std::min(first, i);
-      last = i;
-    }
-    v.silhouette = {scan.BeamAngleRad(first) - 0.5 * scan.angle_step_rad,
-                    scan.BeamAngleRad(last) + 0.5 * scan.angle_step_rad,
-                    std::abs(scan.angle_step_rad), true, true};
+    const View v = RenderBox(centre, yaw, 0.5, 0.3, 0.01, 0);
     ShapePrior prior;
     prior.model = ShapeModel::kBox;  // a track that learned its size, give or take 5 cm
     prior.size_m = {0.52, 0.28};
@@ -475,32 +484,9 @@ TEST(ShapeFitTest, BoxSeenFromOneCornerHasAnHonestCovariance) {
     const double range = 4.0 + 4.0 * (draw % 5) / 4.0;
     const double yaw = common::DegToRad(20.0 + 50.0 * (draw % 7) / 6.0);  // a corner faces us
     const Eigen::Vector2d centre = range * Eigen::Vector2d(std::cos(0.2), std::sin(0.2));
-    const Eigen::Vector2d u(std::cos(yaw), std::sin(yaw)), w(-std::sin(yaw), std::cos(yaw));
     const double a = 0.45, b = 0.3;
-    const std::vector<testing::Wall> box = {{centre + a * u + b * w, centre - a * u + b * w},
-                                            {centre - a * u + b * w, centre - a * u - b * w},
-                                            {centre - a * u - b * w, centre + a * u - b * w},
-                                            {centre + a * u - b * w, centre + a * u + b * w}};
-    testing::ScannerConfig config;
-    config.first_angle_rad = common::DegToRad(-90.0);
-    config.beams = 361;
-    config.noise_sigma_m = 0.012;
-    config.seed = draw + 1;
-    testing::SyntheticScanner scanner(config);
-    const ScanView scan = scanner.Render(0, box, {});
-    View v;
-    std::size_t first = scan.range_m.size(), last = 0;
-    for (std::size_t i = 0; i < scan.range_m.size(); ++i) {
-      if (scan.range_m[i] <= 0.0f) continue;
-      const double angle = scan.BeamAngleRad(i);
-      v.points.emplace_back(scan.range_m[i] * std::cos(angle), scan.range_m[i] * std::sin(angle));
-      first = std::min(first, i);
-      last = i;
-    }
+    const View v = RenderBox(centre, yaw, a, b, 0.012, draw + 1);
     ASSERT_GE(v.points.size(), 4u);
-    v.silhouette = {scan.BeamAngleRad(first) - 0.5 * scan.angle_step_rad,
-                    scan.BeamAngleRad(last) + 0.5 * scan.angle_step_rad,
-                    std::abs(scan.angle_step_rad), true, true};
     ShapePrior prior;
     prior.model = ShapeModel::kBox;
     prior.size_m = {a + size_sigma * gauss(rng), b + size_sigma * gauss(rng)};
