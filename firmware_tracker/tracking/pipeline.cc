@@ -627,16 +627,17 @@ void TrackingPipeline::BuildObservations(const ScanView& scan) {
     }
   }
   single_beam_first_ = leg_parts_.size();
-  if (o.single_beam_legs) AddSingleBeamLegs(scan);
-  PairLegs(scan);
+  const std::size_t tracks = tracker_.Predict(scan.stamp_ns, predictions_);
+  if (o.single_beam_legs) AddSingleBeamLegs(scan, tracks);
+  PairLegs(scan, tracks);
 }
 
 // Single-beam legs (ShapeOptions::single_beam_legs): foreground beams in no segment, within the
 // pairing distance of a confirmed track's prediction and not veiled, as one-point leg parts after
 // the segments' (from single_beam_first_ on).
-void TrackingPipeline::AddSingleBeamLegs(const ScanView& scan) {
+void TrackingPipeline::AddSingleBeamLegs(const ScanView& scan, std::size_t tracks) {
   const ShapeOptions& o = options_.shape;
-  const std::size_t tracks = tracker_.Predict(scan.stamp_ns, predictions_);
+  const double reach = o.hip_half_width_m + o.leg_radius_m;
   bool any_confirmed = false;
   for (std::size_t t = 0; t < tracks; ++t)
     any_confirmed = any_confirmed || predictions_[t].confirmed;
@@ -654,9 +655,7 @@ void TrackingPipeline::AddSingleBeamLegs(const ScanView& scan) {
         static_cast<double>(r) * Eigen::Vector2d(std::cos(angle), std::sin(angle));
     // Only where a leg may return one beam (narrower than two beams' spacing): nearer, a lone
     // beam is clutter or a mixed pixel.
-    if (2.0 * o.leg_radius_m >= 2.0 * static_cast<double>(r) * std::abs(scan.angle_step_rad)) {
-      continue;
-    }
+    if (o.leg_radius_m >= static_cast<double>(r) * std::abs(scan.angle_step_rad)) continue;
     // Near exactly one confirmed track: between two, whose it is is unknown.
     // And only one that still knows where the legs are (its position sigma within their reach):
     // a track coasting for long would follow whatever beam flickers near it.
@@ -667,7 +666,6 @@ void TrackingPipeline::AddSingleBeamLegs(const ScanView& scan) {
         continue;
       }
       ++near_tracks;
-      const double reach = o.hip_half_width_m + o.leg_radius_m;
       if (0.5 * predictions_[t].covariance_m2.trace() <= reach * reach) ++known;
     }
     if (near_tracks != 1 || known != 1 || leg_parts_.full() || !segments_.points_m.push_back(p)) {
@@ -793,7 +791,7 @@ bool TrackingPipeline::PartnerBehind(const ScanView& scan, const ObservationPart
     if (b >= part.begin_beam && b < part.end_beam) continue;
     const float r = scan.range_m[b];
     if (!(std::isfinite(r) && r > 0.0f)) continue;  // no echo: the beam passed
-    const double angle = scan.first_angle_rad + static_cast<double>(b) * scan.angle_step_rad;
+    const double angle = scan.BeamAngleRad(b);
     const Eigen::Vector2d u(std::cos(angle), std::sin(angle));
     const double past = std::abs(u.x() * centre_m.y() - u.y() * centre_m.x());
     if (past >= reach) continue;
@@ -807,7 +805,7 @@ bool TrackingPipeline::PartnerBehind(const ScanView& scan, const ObservationPart
   return true;
 }
 
-void TrackingPipeline::PairLegs(const ScanView& scan) {
+void TrackingPipeline::PairLegs(const ScanView& scan, std::size_t tracks) {
   const ShapeOptions& o = options_.shape;
   const std::size_t n = leg_parts_.size();
   for (std::size_t i = 0; i < n; ++i) {
@@ -851,7 +849,6 @@ void TrackingPipeline::PairLegs(const ScanView& scan) {
   };
   // Around the live tracks, confirmed first: the pair (or single leg) nearest to the prediction.
   const double reach = o.leg_pairing_distance_m;
-  const std::size_t tracks = tracker_.Predict(scan.stamp_ns, predictions_);
   // Legs straight behind a confirmed track, farther than its own legs reach, are mixed
   // pixels of its legs (at knee height a beam's footprint is as wide as a leg from a few metres
   // on, and its echo lies between the leg and what is behind): nothing behind a person's legs can

@@ -314,8 +314,9 @@ class TrackingPipeline {
 
   void MeasureLegacy(const ScanView& scan);
   void BuildObservations(const ScanView& scan);
-  void PairLegs(const ScanView& scan);
-  void AddSingleBeamLegs(const ScanView& scan);
+  // tracks: the live tracks' predictions at the scan's time, in predictions_ (predicted once).
+  void PairLegs(const ScanView& scan, std::size_t tracks);
+  void AddSingleBeamLegs(const ScanView& scan, std::size_t tracks);
   void AddObservation(const ScanView& scan, const Observation& observation);
   ObservationPart MakePart(const ScanView& scan, const Segment& segment, std::size_t first,
                            std::size_t count) const;
