@@ -319,6 +319,52 @@ TEST(ShapeFitTest, DegenerateInputsAreRefusedOrHonest) {
   EXPECT_TRUE(FitShape(same, none, ShapePrior{}, ShapeFitOptions{}).ok);
 }
 
+// Beyond max_points the fit takes evenly spaced points, counted among the finite ones: a segment
+// whose points are all finite (picked by index) and the same segment with non-finite points
+// between them (picked on a pass over all of them) give the same fit, bit for bit, at every count.
+TEST(ShapeFitTest, EvenlySubsampledPointsWithAndWithoutNonFiniteOnes) {
+  const double nan = std::nan("");
+  for (const std::size_t max_points : {std::size_t{2}, std::size_t{5}, std::size_t{8}}) {
+    ShapeFitOptions options;
+    options.max_points = max_points;
+    for (std::size_t count = 1; count <= 64; ++count) {
+      // An arc of a 0.2 m cylinder at 4 m, its near half, with a little unevenness.
+      std::vector<Eigen::Vector2d> arc;
+      for (std::size_t i = 0; i < count; ++i) {
+        const double t = count == 1 ? 0.5 : static_cast<double>(i) / static_cast<double>(count - 1);
+        const double angle = common::kPi * (0.5 + t) + 0.002 * std::sin(7.0 * t);
+        arc.emplace_back(4.0 + 0.2 * std::cos(angle), 0.2 * std::sin(angle));
+      }
+      std::vector<Eigen::Vector2d> holed;
+      for (std::size_t i = 0; i < count; ++i) {
+        if (i % 3 == 0) holed.emplace_back(nan, 1.0);
+        holed.push_back(arc[i]);
+      }
+      holed.emplace_back(1.0, nan);
+      Silhouette edges;
+      edges.first_valid = edges.last_valid = true;
+      edges.step_rad = common::DegToRad(0.25);
+      edges.first_edge_rad = std::atan2(arc.front().y(), arc.front().x()) - 0.5 * edges.step_rad;
+      edges.last_edge_rad = std::atan2(arc.back().y(), arc.back().x()) + 0.5 * edges.step_rad;
+      ShapePrior prior;
+      prior.exponent = 2.0;
+      prior.size_m = Eigen::Vector2d(0.2, 0.2);
+      const ShapeFitResult all = FitShape(arc, edges, prior, options);
+      const ShapeFitResult with_holes = FitShape(holed, edges, prior, options);
+      ASSERT_TRUE(all.ok) << count;
+      EXPECT_EQ(all.points_used, std::min(count, max_points)) << count;
+      EXPECT_EQ(with_holes.points_used, all.points_used) << count;
+      EXPECT_EQ(with_holes.iterations, all.iterations) << count;
+      EXPECT_EQ(with_holes.centre_m, all.centre_m) << count << " points, max " << max_points;
+      EXPECT_EQ(with_holes.centre_cov_m2, all.centre_cov_m2) << count;
+      EXPECT_EQ(with_holes.extent_m, all.extent_m) << count;
+      // The first and last points are always taken.
+      EXPECT_DOUBLE_EQ(all.extent_m, (arc.front() - arc.back()).norm()) << count;
+      EXPECT_NEAR(all.centre_m.x(), 4.0, 0.05) << count;
+    }
+  }
+}
+
 // The fit with its own 5 x 5 Cholesky, roots (RootN) and start ray (the bisector) against the
 // same fit with Eigen's pivoted LDLT, libm's cbrt and pow and the ray's angle by atan2 (what it
 // used before): the same iterations and results up to rounding, over random people, cylinders and
