@@ -652,14 +652,17 @@ void TrackingPipeline::BuildObservations(const ScanView& scan) {
   PairLegs(scan, tracks);
 }
 
-// A piece wider than a pair of legs only along the line of sight (across it no wider than a pair),
-// all of it where a leg fills no beam's footprint (ShapeOptions::drop_deep_mixed_pixel_pieces).
+// A piece (wider than a pair of legs) no wider across the line of sight than a pair of legs or than
+// one leg's beams (its diameter and a beam's footprint), all of it where a leg fills no beam's
+// footprint (ShapeOptions::drop_deep_mixed_pixel_pieces).
 bool TrackingPipeline::DeepMixedPixels(std::span<const Eigen::Vector2d> pts) const {
   const ShapeOptions& o = options_.shape;
   const double pair_width = 2.0 * (o.hip_half_width_m + o.leg_radius_m) + 0.1;
-  if (pts.empty() || AcrossWidth(pts) > pair_width) return false;
+  if (pts.empty()) return false;
   double nearest_m = std::numeric_limits<double>::infinity();
   for (const Eigen::Vector2d& p : pts) nearest_m = std::min(nearest_m, p.norm());
+  const double footprint_m = nearest_m * o.beam_divergence_rad + o.beam_exit_diameter_m;
+  if (AcrossWidth(pts) > std::max(pair_width, 2.0 * o.leg_radius_m + footprint_m)) return false;
   return nearest_m * o.beam_divergence_rad >= 2.0 * o.leg_radius_m;
 }
 

@@ -1481,7 +1481,8 @@ TEST(PipelineScenarioTest, MixedPixelsWithinAPersonsReachOfANearerReturnAreNotLe
 // Knee height, 25 Hz, 0.5 deg, a wall at 30 m: a far leg (27 m, where the beam's footprint,
 // 0.41 m, is three times a leg) grazed by two adjacent beams whose echoes, part leg and part wall,
 // lie 0.7 m apart in range: a piece 0.74 m long, all of it along the line of sight (one beam's
-// spacing, 0.24 m, across). It moves across the view at 0.74 m/s for 3 s. With
+// spacing, 0.24 m, across); or by three (0.47 m across: within the leg's diameter and a
+// footprint). It moves across the view at 0.74 m/s for 3 s. With
 // shape.drop_deep_mixed_pixel_pieces it is no object (dropped every scan, no track); without, it
 // was measured as a wide object and reported as a track. The same piece seen by a scanner whose
 // beam diverges 4 mrad (a leg fills its footprint out to 30 m: the echoes are the leg's), and an
@@ -1489,7 +1490,7 @@ TEST(PipelineScenarioTest, MixedPixelsWithinAPersonsReachOfANearerReturnAreNotLe
 TEST(PipelineScenarioTest, FarPiecesDeepAlongTheRayAreMixedPixelsNotObjects) {
   constexpr std::size_t kBeams = 361;
   constexpr double kStepRad = 0.5 * common::kPi / 180.0;
-  enum class Piece { kDeepFar, kDeepFarNarrowBeam, kWideFar };
+  enum class Piece { kDeepFar, kDeepFarThreeBeams, kDeepFarNarrowBeam, kWideFar };
   const auto run = [&](bool rule, Piece piece) {
     TrackerOptions options;
     options.shape.mount = Mount::kLegs;
@@ -1509,6 +1510,11 @@ TEST(PipelineScenarioTest, FarPiecesDeepAlongTheRayAreMixedPixelsNotObjects) {
           case Piece::kDeepFarNarrowBeam:
             ranges[b] = 26.9f;
             ranges[b + 1] = 27.6f;
+            break;
+          case Piece::kDeepFarThreeBeams:
+            ranges[b] = 26.9f;
+            ranges[b + 1] = 27.6f;
+            ranges[b + 2] = 27.2f;
             break;
           case Piece::kWideFar:
             std::fill(ranges.begin() + static_cast<std::ptrdiff_t>(b),
@@ -1530,12 +1536,14 @@ TEST(PipelineScenarioTest, FarPiecesDeepAlongTheRayAreMixedPixelsNotObjects) {
     }
     return std::make_pair(ids.size(), pipeline.counters().veiled_segments - dropped_before);
   };
-  const auto [deep_now, dropped_now] = run(true, Piece::kDeepFar);
-  EXPECT_EQ(deep_now, 0u);
-  EXPECT_EQ(dropped_now, 75u);  // every scan
-  const auto [deep_before, dropped_without] = run(false, Piece::kDeepFar);
-  EXPECT_EQ(deep_before, 1u);
-  EXPECT_EQ(dropped_without, 0u);
+  for (const Piece piece : {Piece::kDeepFar, Piece::kDeepFarThreeBeams}) {
+    const auto [deep_now, dropped_now] = run(true, piece);
+    EXPECT_EQ(deep_now, 0u) << static_cast<int>(piece);
+    EXPECT_EQ(dropped_now, 75u) << static_cast<int>(piece);  // every scan
+    const auto [deep_before, dropped_without] = run(false, piece);
+    EXPECT_EQ(deep_before, 1u) << static_cast<int>(piece);
+    EXPECT_EQ(dropped_without, 0u) << static_cast<int>(piece);
+  }
   for (const bool rule : {true, false}) {
     for (const Piece piece : {Piece::kDeepFarNarrowBeam, Piece::kWideFar}) {
       const auto [tracks, dropped] = run(rule, piece);
