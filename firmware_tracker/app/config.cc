@@ -213,6 +213,11 @@ void VisitShape(tracking::ShapeOptions& o, ConfigVisitor& v) {
           "mount legs: ... also leg-sized pieces within leg_pairing_distance_m (across the ray) "
           "of a much nearer return: the other leg of a person one beam returns may fill no beam, "
           "its mixed pixels lie behind it.");
+  v.Field("drop_deep_mixed_pixel_pieces", o.drop_deep_mixed_pixel_pieces,
+          "mount legs: ... also pieces wider than a pair of legs only along the line of sight "
+          "(across it no wider than a pair, or than a leg and a beam footprint) where a leg fills "
+          "no beam footprint: a far leg's mixed pixels at ranges between the leg and what is "
+          "behind, no body's outline.");
   v.Field("gait_sigma_m", o.gait_sigma_m,
           "mount legs: how far the midpoint of the legs strays from the body centre while "
           "walking (1 sigma).");

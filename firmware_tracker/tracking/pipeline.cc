@@ -79,6 +79,22 @@ bool BeamsAcross(const ScanView& scan, const Eigen::Vector2d& position_m, double
   return true;
 }
 
+// How far a piece's points spread across the line of sight through their middle.
+double AcrossWidth(std::span<const Eigen::Vector2d> pts) {
+  if (pts.empty()) return 0.0;
+  const Eigen::Vector2d mid = 0.5 * (pts.front() + pts.back());
+  const double range = mid.norm();
+  if (!(range > 0.0)) return 0.0;
+  const Eigen::Vector2d across(-mid.y() / range, mid.x() / range);
+  double lo = std::numeric_limits<double>::infinity(), hi = -lo;
+  for (const Eigen::Vector2d& p : pts) {
+    const double a = p.dot(across);
+    lo = std::min(lo, a);
+    hi = std::max(hi, a);
+  }
+  return hi - lo;
+}
+
 }  // namespace
 
 std::optional<std::string> Validate(const ShapeOptions& o) {
@@ -596,6 +612,10 @@ void TrackingPipeline::BuildObservations(const ScanView& scan) {
   leg_parts_.clear();
   for (const Segment& s : segments_.segments) {
     const auto pts = segments_.Points(s);
+    if (o.drop_deep_mixed_pixel_pieces && s.width_m > pair_width && DeepMixedPixels(pts)) {
+      ++counters_.veiled_segments;
+      continue;
+    }
     if (o.drop_mixed_pixel_legs && s.width_m <= pair_width && Veiled(scan, s)) {
       ++counters_.veiled_segments;
       continue;
@@ -630,6 +650,20 @@ void TrackingPipeline::BuildObservations(const ScanView& scan) {
   const std::size_t tracks = tracker_.Predict(scan.stamp_ns, predictions_);
   if (o.single_beam_legs) AddSingleBeamLegs(scan, tracks);
   PairLegs(scan, tracks);
+}
+
+// A piece (wider than a pair of legs) no wider across the line of sight than a pair of legs or than
+// one leg's beams (its diameter and a beam's footprint), all of it where a leg fills no beam's
+// footprint (ShapeOptions::drop_deep_mixed_pixel_pieces).
+bool TrackingPipeline::DeepMixedPixels(std::span<const Eigen::Vector2d> pts) const {
+  const ShapeOptions& o = options_.shape;
+  const double pair_width = 2.0 * (o.hip_half_width_m + o.leg_radius_m) + 0.1;
+  if (pts.empty()) return false;
+  double nearest_m = std::numeric_limits<double>::infinity();
+  for (const Eigen::Vector2d& p : pts) nearest_m = std::min(nearest_m, p.norm());
+  const double footprint_m = nearest_m * o.beam_divergence_rad + o.beam_exit_diameter_m;
+  if (AcrossWidth(pts) > std::max(pair_width, 2.0 * o.leg_radius_m + footprint_m)) return false;
+  return nearest_m * o.beam_divergence_rad >= 2.0 * o.leg_radius_m;
 }
 
 // Single-beam legs (ShapeOptions::single_beam_legs): foreground beams in no segment, within the

@@ -36,7 +36,7 @@
 //                      [--before-report-rules |
 //                       [--before-mixed-pixels] [--before-far] [--before-evidence-coasting]
 //                       [--before-one-leg] [--before-confirm-time] [--before-whole-person]
-//                       [--before-box-size] [--before-single-beam]]
+//                       [--before-box-size] [--before-single-beam] [--before-deep-pieces]]
 //   (--extra: more scenario folders, e.g. held-out scenes, reported in their own section;
 //   --explain: per run on stderr, what became of an object's previous track at every id switch
 //   and missed scan, what the false positives are (by scan and by false track: a track left
@@ -58,7 +58,10 @@
 //   mixed pixels beside a nearer return only, ShapeOptions::drop_mixed_pixel_legs_whole_person =
 //   false; --before-box-size: "before" reports a box's (cart's) centre with its learned size's
 //   sigma as it is, ShapeOptions::box_size_floor_sigma_m = 0; --before-single-beam: "before" drops
-//   knee-height legs returned by a single beam, ShapeOptions::single_beam_legs = false; several:
+//   knee-height legs returned by a single beam, ShapeOptions::single_beam_legs = false;
+//   --before-deep-pieces: "before" measures knee-height pieces deep along the line of sight but
+//   no wider across it than a pair of legs as wide objects, also where a leg fills no beam,
+//   ShapeOptions::drop_deep_mixed_pixel_pieces = false; several:
 //   without any of them). --explain also
 //   writes the false positives' classes to the results (ExplainTable) and, on stderr, what the
 //   tracks measured again after more than 1 s (a lost track resumed) came back on.
@@ -121,6 +124,8 @@ struct Hypothesis {
   Vector2d z = Vector2d::Zero();
   double z_offset_s = 0.0;
   std::size_t parts = 0;  // --breakdown: the measurement's observation, a Breakdown::PartsBin
+  // --explain, per sensor, coasting: what the scan shows across its body (CoastingView).
+  std::string view;
 };
 
 // --breakdown: where the matched error of the per-sensor tracks comes from. Every match's error
@@ -325,6 +330,8 @@ struct Mot {
 struct Causes {
   std::map<std::string, double> switches, misses, false_positives;
   std::map<std::string, double> false_classes, false_scan_classes, false_track_classes;
+  // False scans per sensor by class and what was there (CoastingView).
+  std::map<std::string, double> false_views;
   // Tracks measured again more than kResumedAfterS after their previous measurement (a lost
   // track resumed): what they came back on, and their false scans within 1 s after.
   std::map<std::string, double> resumes;
@@ -335,6 +342,7 @@ struct Causes {
     for (const auto& [k, v] : o.coasting) coasting[k] += v;
     for (const auto& [k, v] : o.resumes) resumes[k] += v;
     for (const auto& [k, v] : o.false_classes) false_classes[k] += v;
+    for (const auto& [k, v] : o.false_views) false_views[k] += v;
     for (const auto& [k, v] : o.false_scan_classes) false_scan_classes[k] += v;
     for (const auto& [k, v] : o.false_track_classes) false_track_classes[k] += v;
     for (const auto& [k, v] : o.false_positives) false_positives[k] += v;
@@ -538,6 +546,7 @@ class MotSequence {
         timed += coast_s < 0.15 ? " < 0.15 s" : coast_s < 0.3 ? " 0.15-0.3 s" : " >= 0.3 s";
       }
       causes_.false_classes[timed] += 1;
+      if (!hyps[h].view.empty()) causes_.false_views[cls + " | " + hyps[h].view] += 1;
     }
   }
 
@@ -690,6 +699,10 @@ bool g_before_box_size = false;
 // --before-single-beam: "before" drops knee-height legs returned by a single beam, also beside a
 // confirmed track (ShapeOptions::single_beam_legs = false).
 bool g_before_single_beam = false;
+// --before-deep-pieces: "before" measures knee-height pieces deep along the line of sight but no
+// wider across it than a pair of legs as wide objects, also where a leg fills no beam
+// (ShapeOptions::drop_deep_mixed_pixel_pieces = false).
+bool g_before_deep_pieces = false;
 const char* const kVariantNames[] = {"old", "new", "before"};
 // --explain: why tracks coast beside a person the scan returned (CoastingCause).
 bool g_explain_coasting = false;
@@ -713,6 +726,7 @@ std::vector<Variant> Variants(sim::Mount mount, double range_m) {
   old.shape.drop_mixed_pixel_legs_whole_person = false;
   old.shape.hidden_leg_behind = false;
   old.shape.single_beam_legs = false;
+  old.shape.drop_deep_mixed_pixel_pieces = false;
   std::vector<Variant> variants = {{"old", old}, {"new", fresh}};
   if (g_before_report_rules) {
     tracking::TrackerOptions before = fresh;
@@ -721,7 +735,7 @@ std::vector<Variant> Variants(sim::Mount mount, double range_m) {
     variants.push_back({"before", before});
   } else if (g_before_mixed_pixels || g_before_far || g_before_evidence_coasting ||
              g_before_one_leg || g_before_confirm_time || g_before_whole_person ||
-             g_before_box_size || g_before_single_beam) {
+             g_before_box_size || g_before_single_beam || g_before_deep_pieces) {
     tracking::TrackerOptions before = fresh;
     if (g_before_one_leg) before.shape.hidden_leg_behind = false;
     if (g_before_mixed_pixels) before.shape.drop_mixed_pixel_legs = false;
@@ -731,6 +745,7 @@ std::vector<Variant> Variants(sim::Mount mount, double range_m) {
     if (g_before_whole_person) before.shape.drop_mixed_pixel_legs_whole_person = false;
     if (g_before_box_size) before.shape.box_size_floor_sigma_m = 0.0;
     if (g_before_single_beam) before.shape.single_beam_legs = false;
+    if (g_before_deep_pieces) before.shape.drop_deep_mixed_pixel_pieces = false;
     variants.push_back({"before", before});
   }
   return variants;
@@ -821,6 +836,54 @@ struct RunResult {
   double track_seconds = 0;
   double cpu_s = 0;
 };
+
+// --explain, per sensor: what the scan shows across a coasting track's body (the beams within
+// shape.person_major_m + 2 sigma of its reported position to either side, as the see-through rule
+// takes them): "at it" (an echo within that reach of its range; foreground, or background only),
+// "behind a nearer return" (an echo nearer, none at it), "seen through" (every echo more than
+// shape.seen_through_margin_m beyond it, at least 2), else "no echo"; with the track's range and
+// whether the beams lie closer than a leg's width (shape.leg_radius_m) there (a leg cannot fall
+// between two beams). Measured false scans are tagged with what the measurement was made of
+// (kPartsBins), the range and the point count instead. On stderr as "false scans, what was
+// there", per class (Causes::false_views).
+std::string CoastingView(const tracking::TrackingPipeline& pipeline, const tracking::ScanView& scan,
+                         const Vector2d& p, const Matrix2d& cov) {
+  const tracking::ShapeOptions& o = pipeline.options().shape;
+  const double range = p.norm();
+  const double sigma = std::sqrt(std::max(0.0, 0.5 * cov.trace()));
+  const double reach = o.person_major_m + 2.0 * sigma;
+  const std::string bin = range < 5.0    ? "< 5 m"
+                          : range < 10.0 ? "5-10 m"
+                          : range < 15.0 ? "10-15 m"
+                                         : ">= 15 m";
+  const bool dense = range * scan.angle_step_rad <= 2.0 * o.leg_radius_m;
+  const std::string where = bin + (dense ? ", beams < a leg apart" : ", beams >= a leg apart");
+  if (!(range > reach)) return "at the sensor, " + where;
+  const double bearing = std::atan2(p.y(), p.x());
+  const double half = std::atan(reach / range);
+  std::size_t at = 0, at_foreground = 0, nearer = 0, beyond = 0;
+  const auto fg = pipeline.background().foreground();
+  for (std::size_t b = 0; b < scan.range_m.size(); ++b) {
+    const double a = scan.first_angle_rad + static_cast<double>(b) * scan.angle_step_rad;
+    if (std::abs(std::remainder(a - bearing, 2.0 * M_PI)) > half) continue;
+    const double r = static_cast<double>(scan.range_m[b]);
+    if (!(r > 0.0)) continue;
+    if (r < range - reach) {
+      ++nearer;
+    } else if (r <= range + o.seen_through_margin_m) {
+      ++at;
+      if (b < fg.size() && fg[b] != 0) ++at_foreground;
+    } else {
+      ++beyond;
+    }
+  }
+  const std::string what = at_foreground > 0 ? "at it, foreground"
+                           : at > 0          ? "at it, background only"
+                           : nearer > 0      ? "behind a nearer return"
+                           : beyond >= 2     ? "seen through"
+                                             : "no echo";
+  return what + ", " + where;
+}
 
 // --explain: why a track coasts beside a person the scan returned, from the pipeline's stages
 // around the person's true centre (returns within kCoastingNearM of it): the returns' fate in
@@ -949,6 +1012,18 @@ void RunSensor(const sim::Simulator& simulator, std::size_t sensor,
       frame.scan_counter = static_cast<std::uint32_t>(k);
       for (const tracking::TrackReport& r : out.tracks) {
         if (r.state == tracking::TrackState::kTentative) continue;
+        std::string coasting_view;
+        if (g_explain_coasting && r.state == tracking::TrackState::kCoasting) {
+          coasting_view =
+              CoastingView(*pipelines[v], view, {r.x_m, r.y_m}, r.covariance.topLeftCorner<2, 2>());
+        } else if (g_explain_coasting) {
+          const double range = std::hypot(r.x_m, r.y_m);
+          coasting_view = std::string("measured: ") + kPartsBins[PartsOf(*pipelines[v], r)] +
+                          (range < 10.0   ? ", < 10 m"
+                           : range < 15.0 ? ", 10-15 m"
+                                          : ", >= 15 m") +
+                          ", " + std::to_string(r.points) + " points";
+        }
         hyps.push_back({r.track_id,
                         {r.x_m, r.y_m},
                         r.covariance.topLeftCorner<2, 2>(),
@@ -956,7 +1031,8 @@ void RunSensor(const sim::Simulator& simulator, std::size_t sensor,
                         r.points,
                         {r.measured_x_m, r.measured_y_m},
                         r.measured_offset_s,
-                        PartsOf(*pipelines[v], r)});
+                        PartsOf(*pipelines[v], r),
+                        std::move(coasting_view)});
         frame.tracks.push_back(ToObservation(r));
       }
       std::array<tracking::TrackPrediction, tracking::kMaxTracks> predictions;
@@ -1043,10 +1119,12 @@ Mot RunFusion(const sim::Simulator& simulator, const std::vector<SensorFrames>& 
     }
     std::vector<Hypothesis> hyps;
     for (const fusion::FusedTrack& f : fuser.Snapshot(now_ns)) {
-      hyps.push_back({f.id,
-                      {f.x_m, f.y_m},
-                      f.covariance.topLeftCorner<2, 2>(),
-                      f.state == fusion::FusedState::kConfirmed});
+      Hypothesis h;
+      h.id = f.id;
+      h.p = {f.x_m, f.y_m};
+      h.cov = f.covariance.topLeftCorner<2, 2>();
+      h.measured = f.state == fusion::FusedState::kConfirmed;
+      hyps.push_back(std::move(h));
     }
     sequence.Frame(kFusionStepS, truths, hyps, dont_care);
   };
@@ -1108,6 +1186,8 @@ void Explain(const std::string& scenario, const std::string& mount, const RunRes
       std::fprintf(stderr, "  false scans: %-72s %6.0f\n", cls.c_str(), count);
     for (const auto& [cls, count] : r.causes[v].false_track_classes)
       std::fprintf(stderr, "  false tracks: %-71s %6.0f\n", cls.c_str(), count);
+    for (const auto& [cls, count] : r.causes[v].false_views)
+      std::fprintf(stderr, "  false scans, what was there: %-100s %6.0f\n", cls.c_str(), count);
     for (const auto& [cls, count] : r.fused_causes[v].false_scan_classes)
       std::fprintf(stderr, "  fused false scans: %-66s %6.0f\n", cls.c_str(), count);
     for (const auto& [cls, count] : r.fused_causes[v].false_track_classes)
@@ -1512,7 +1592,7 @@ std::string Targets(const Section& s) {
 // --before-whole-person, --before-box-size, any of them), empty otherwise.
 std::string KneeHeightBefore() {
   if (!(g_before_one_leg || g_before_confirm_time || g_before_whole_person || g_before_box_size ||
-        g_before_single_beam) ||
+        g_before_single_beam || g_before_deep_pieces) ||
       g_before_mixed_pixels || g_before_far || g_before_evidence_coasting ||
       g_before_report_rules) {
     return "";
@@ -1540,6 +1620,12 @@ std::string KneeHeightBefore() {
     without.push_back(
         "dropping knee-height legs returned by a single beam, also beside a confirmed track "
         "(`shape.single_beam_legs` false)");
+  }
+  if (g_before_deep_pieces) {
+    without.push_back(
+        "measuring knee-height pieces deep along the line of sight but no wider across it than a "
+        "pair of legs as wide objects, also where a leg fills no beam "
+        "(`shape.drop_deep_mixed_pixel_pieces` false)");
   }
   std::string text = "\"before\": the new tracker ";
   for (std::size_t i = 0; i < without.size(); ++i) {
@@ -1595,6 +1681,8 @@ int main(int argc, char** argv) {
       g_before_box_size = true;
     } else if (a == "--before-single-beam") {
       g_before_single_beam = true;
+    } else if (a == "--before-deep-pieces") {
+      g_before_deep_pieces = true;
     } else if (a == "--jobs") {
       jobs = std::max(1, std::atoi(value().c_str()));
     } else {
@@ -1603,7 +1691,8 @@ int main(int argc, char** argv) {
                    "[--out FILE] [--jobs N] [--explain] [--breakdown] "
                    "[--before-report-rules | [--before-mixed-pixels] [--before-far] "
                    "[--before-evidence-coasting] [--before-one-leg] [--before-confirm-time] "
-                   "[--before-whole-person] [--before-box-size] [--before-single-beam]]\n");
+                   "[--before-whole-person] [--before-box-size] [--before-single-beam] "
+                   "[--before-deep-pieces]]\n");
       return 2;
     }
   }
