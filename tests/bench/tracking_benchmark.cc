@@ -36,7 +36,7 @@
 //                      [--before-report-rules |
 //                       [--before-mixed-pixels] [--before-far] [--before-evidence-coasting]
 //                       [--before-one-leg] [--before-confirm-time] [--before-whole-person]
-//                       [--before-box-size] [--before-single-beam]]
+//                       [--before-box-size] [--before-single-beam] [--before-isotropic-bias]]
 //   (--extra: more scenario folders, e.g. held-out scenes, reported in their own section;
 //   --explain: per run on stderr, what became of an object's previous track at every id switch
 //   and missed scan, what the false positives are (by scan and by false track: a track left
@@ -58,7 +58,9 @@
 //   mixed pixels beside a nearer return only, ShapeOptions::drop_mixed_pixel_legs_whole_person =
 //   false; --before-box-size: "before" reports a box's (cart's) centre with its learned size's
 //   sigma as it is, ShapeOptions::box_size_floor_sigma_m = 0; --before-single-beam: "before" drops
-//   knee-height legs returned by a single beam, ShapeOptions::single_beam_legs = false; several:
+//   knee-height legs returned by a single beam, ShapeOptions::single_beam_legs = false;
+//   --before-isotropic-bias: "before" reports the centre's shared error as the same sigma in every
+//   direction, ShapeOptions::centre_bias_along_ray = false; several:
 //   without any of them). --explain also
 //   writes the false positives' classes to the results (ExplainTable) and, on stderr, what the
 //   tracks measured again after more than 1 s (a lost track resumed) came back on.
@@ -690,6 +692,9 @@ bool g_before_box_size = false;
 // --before-single-beam: "before" drops knee-height legs returned by a single beam, also beside a
 // confirmed track (ShapeOptions::single_beam_legs = false).
 bool g_before_single_beam = false;
+// --before-isotropic-bias: "before" reports the centre's shared error in every direction alike
+// (ShapeOptions::centre_bias_along_ray = false).
+bool g_before_isotropic_bias = false;
 const char* const kVariantNames[] = {"old", "new", "before"};
 // --explain: why tracks coast beside a person the scan returned (CoastingCause).
 bool g_explain_coasting = false;
@@ -721,7 +726,7 @@ std::vector<Variant> Variants(sim::Mount mount, double range_m) {
     variants.push_back({"before", before});
   } else if (g_before_mixed_pixels || g_before_far || g_before_evidence_coasting ||
              g_before_one_leg || g_before_confirm_time || g_before_whole_person ||
-             g_before_box_size || g_before_single_beam) {
+             g_before_box_size || g_before_single_beam || g_before_isotropic_bias) {
     tracking::TrackerOptions before = fresh;
     if (g_before_one_leg) before.shape.hidden_leg_behind = false;
     if (g_before_mixed_pixels) before.shape.drop_mixed_pixel_legs = false;
@@ -731,6 +736,7 @@ std::vector<Variant> Variants(sim::Mount mount, double range_m) {
     if (g_before_whole_person) before.shape.drop_mixed_pixel_legs_whole_person = false;
     if (g_before_box_size) before.shape.box_size_floor_sigma_m = 0.0;
     if (g_before_single_beam) before.shape.single_beam_legs = false;
+    if (g_before_isotropic_bias) before.shape.centre_bias_along_ray = false;
     variants.push_back({"before", before});
   }
   return variants;
@@ -1512,7 +1518,7 @@ std::string Targets(const Section& s) {
 // --before-whole-person, --before-box-size, any of them), empty otherwise.
 std::string KneeHeightBefore() {
   if (!(g_before_one_leg || g_before_confirm_time || g_before_whole_person || g_before_box_size ||
-        g_before_single_beam) ||
+        g_before_single_beam || g_before_isotropic_bias) ||
       g_before_mixed_pixels || g_before_far || g_before_evidence_coasting ||
       g_before_report_rules) {
     return "";
@@ -1541,13 +1547,25 @@ std::string KneeHeightBefore() {
         "dropping knee-height legs returned by a single beam, also beside a confirmed track "
         "(`shape.single_beam_legs` false)");
   }
+  if (g_before_isotropic_bias) {
+    without.push_back(
+        "reporting the centre's shared error with the same sigma in every direction "
+        "(`shape.centre_bias_along_ray` false)");
+  }
   std::string text = "\"before\": the new tracker ";
   for (std::size_t i = 0; i < without.size(); ++i) {
     text += (i == 0 ? "" : i + 1 == without.size() ? " and " : ", ") + without[i];
   }
-  return text +
-         ", on the same scans in the same run; upper-body rows are the same by construction" +
-         (g_before_box_size ? " except for the boxes' (carts') covariance" : "") + ".\n\n";
+  const char* const same =
+      g_before_isotropic_bias
+          ? ", on the same scans in the same run; upper-body tracks are the same by construction, "
+            "their reported covariance (so NEES and what fusion makes of them) is not"
+          : ", on the same scans in the same run; upper-body rows are the same by construction";
+  return text + same +
+         (g_before_box_size && !g_before_isotropic_bias
+              ? " except for the boxes' (carts') covariance"
+              : "") +
+         ".\n\n";
 }
 
 int main(int argc, char** argv) {
@@ -1595,6 +1613,8 @@ int main(int argc, char** argv) {
       g_before_box_size = true;
     } else if (a == "--before-single-beam") {
       g_before_single_beam = true;
+    } else if (a == "--before-isotropic-bias") {
+      g_before_isotropic_bias = true;
     } else if (a == "--jobs") {
       jobs = std::max(1, std::atoi(value().c_str()));
     } else {
@@ -1603,7 +1623,8 @@ int main(int argc, char** argv) {
                    "[--out FILE] [--jobs N] [--explain] [--breakdown] "
                    "[--before-report-rules | [--before-mixed-pixels] [--before-far] "
                    "[--before-evidence-coasting] [--before-one-leg] [--before-confirm-time] "
-                   "[--before-whole-person] [--before-box-size] [--before-single-beam]]\n");
+                   "[--before-whole-person] [--before-box-size] [--before-single-beam] "
+                   "[--before-isotropic-bias]]\n");
       return 2;
     }
   }
