@@ -243,6 +243,15 @@ void VisitShape(tracking::ShapeOptions& o, ConfigVisitor& v) {
           "The centre's error successive measurements share (the outline is not the model's, the "
           "beam width at the silhouette): added, with the size state's sigma, to the reported "
           "covariance, which the filter alone would make too small.");
+  v.Field("centre_bias_along_ray", o.centre_bias_along_ray,
+          "true: that shared error is built along the ray from the sensor and across it: along it "
+          "centre_bias_sigma_m and the size's error through the body's extent towards the "
+          "sensor, across it centre_bias_across_sigma_m, the silhouette's beam step (range x "
+          "step / sqrt(12), halved in variance with both ends a silhouette) and, with an end "
+          "occluded, the size's error through the extent across. false: centre_bias_sigma_m and "
+          "the size's sigma in every direction.");
+  v.Field("centre_bias_across_sigma_m", o.centre_bias_across_sigma_m,
+          "With centre_bias_along_ray: a shared error across the ray added to the silhouette's.");
   v.Field("size_floor_sigma_m", o.size_floor_sigma_m,
           "The size state counts as no more certain than this in that shared error.");
   v.Field("box_size_floor_sigma_m", o.box_size_floor_sigma_m,

@@ -143,6 +143,9 @@ std::optional<std::string> Validate(const ShapeOptions& o) {
   if (!(std::isfinite(o.centre_bias_sigma_m) && o.centre_bias_sigma_m >= 0.0)) {
     return "centre_bias_sigma_m must be >= 0";
   }
+  if (!(std::isfinite(o.centre_bias_across_sigma_m) && o.centre_bias_across_sigma_m >= 0.0)) {
+    return "centre_bias_across_sigma_m must be >= 0";
+  }
   if (!(std::isfinite(o.flat_rms_m) && o.flat_rms_m >= 0.0)) return "flat_rms_m must be >= 0";
   if (!(std::isfinite(o.flat_min_extent_m) && o.flat_min_extent_m >= 0.0)) {
     return "flat_min_extent_m must be >= 0";
@@ -231,10 +234,18 @@ class TrackingPipeline::Refiner final : public MeasurementRefiner {
     const double floor_m = shape.model == ShapeModel::kBox
                                ? std::max(o.size_floor_sigma_m, o.box_size_floor_sigma_m)
                                : o.size_floor_sigma_m;
-    const double size_var =
-        std::max({shape.size_cov_m2(0, 0), shape.size_cov_m2(1, 1), floor_m * floor_m});
-    shape.centre_bias_cov_m2 =
-        (o.centre_bias_sigma_m * o.centre_bias_sigma_m + size_var) * Eigen::Matrix2d::Identity();
+    const double range_m = measurement.position_m.norm();
+    if (o.centre_bias_along_ray && range_m > 0.0) {
+      const double step_rad = ob.part_count > 0 ? ob.parts[0].silhouette.step_rad : 0.0;
+      shape.centre_bias_cov_m2 =
+          CentreBiasAlongRay(shape, measurement.position_m / range_m, range_m, step_rad,
+                             SilhouetteEdges(ob), floor_m, o);
+    } else {
+      const double size_var =
+          std::max({shape.size_cov_m2(0, 0), shape.size_cov_m2(1, 1), floor_m * floor_m});
+      shape.centre_bias_cov_m2 =
+          (o.centre_bias_sigma_m * o.centre_bias_sigma_m + size_var) * Eigen::Matrix2d::Identity();
+    }
     shape.stamp_ns = at_ns;
     ++shape.updates;
     return true;
@@ -242,6 +253,63 @@ class TrackingPipeline::Refiner final : public MeasurementRefiner {
 
   std::uint64_t fits = 0;
   std::uint64_t failed = 0;
+
+  // How many of the observation's two outline ends are silhouettes (MakePart: not an occluder's
+  // edge, not the field of view's end).
+  static int SilhouetteEdges(const Observation& ob) {
+    if (ob.part_count == 0) return 0;
+    return (ob.parts[0].silhouette.first_valid ? 1 : 0) +
+           (ob.parts[ob.part_count - 1].silhouette.last_valid ? 1 : 0);
+  }
+
+  // dh/d(a, b) of the body's extent h(n; a, b) in direction n (the support function), by central
+  // differences (h is homogeneous of degree 1 in (a, b); a circle's is its radius a).
+  static Eigen::Vector2d ExtentJacobian(const TrackShape& shape, const Eigen::Vector2d& n) {
+    if (shape.model == ShapeModel::kCircle) return Eigen::Vector2d(1.0, 0.0);
+    const double step_m = 1e-4;
+    Eigen::Vector2d jacobian;
+    for (int i = 0; i < 2; ++i) {
+      Eigen::Vector2d up = shape.size_m;
+      Eigen::Vector2d down = shape.size_m;
+      up(i) += step_m;
+      down(i) = std::max(0.5 * down(i), down(i) - step_m);
+      jacobian(i) = (ShapeSupport(shape.model, up, shape.yaw_rad, n, shape.exponent) -
+                     ShapeSupport(shape.model, down, shape.yaw_rad, n, shape.exponent)) /
+                    (up(i) - down(i));
+    }
+    return jacobian;
+  }
+
+  // ShapeOptions::centre_bias_along_ray: u the unit ray from the sensor through the centre at
+  // range_m, step_rad the scan's beam step, edges the silhouette ends (SilhouetteEdges).
+  static Eigen::Matrix2d CentreBiasAlongRay(const TrackShape& shape, const Eigen::Vector2d& u,
+                                            double range_m, double step_rad, int edges,
+                                            double floor_m, const ShapeOptions& o) {
+    // The size's covariance, each semi-axis no more certain than the floor (a PSD diagonal added).
+    Eigen::Matrix2d size_cov = shape.size_cov_m2;
+    size_cov(0, 0) += std::max(0.0, floor_m * floor_m - size_cov(0, 0));
+    size_cov(1, 1) += std::max(0.0, floor_m * floor_m - size_cov(1, 1));
+    // Along the ray: the centre lies h(-u) behind the visible side, a size error dsize moves it
+    // by J dsize.
+    const Eigen::Vector2d j_radial = ExtentJacobian(shape, -u);
+    const double radial_var =
+        j_radial.dot(size_cov * j_radial) + o.centre_bias_sigma_m * o.centre_bias_sigma_m;
+    // Across: each silhouette end lies uniformly within one beam step of its last returning beam,
+    // variance (R step)^2 / 12, shared by the scans of a track while it moves less than a beam
+    // spacing across the ray; the centre is the mean of the two ends (half that variance). With
+    // one end or none a silhouette, the centre lies the body's extent across from what is seen:
+    // the size's error moves it across too.
+    const double width_m = range_m * step_rad;
+    double across_var = o.centre_bias_across_sigma_m * o.centre_bias_across_sigma_m +
+                        width_m * width_m / (12.0 * std::max(1, edges));
+    if (edges < 2) {
+      const Eigen::Vector2d w(-u.y(), u.x());
+      const Eigen::Vector2d j_across = ExtentJacobian(shape, w);
+      across_var += j_across.dot(size_cov * j_across);
+    }
+    const Eigen::Matrix2d along = u * u.transpose();
+    return radial_var * along + across_var * (Eigen::Matrix2d::Identity() - along);
+  }
 
  private:
   void Init(const Observation& ob, common::UtcNs at_ns, TrackShape& shape) const {

@@ -343,6 +343,9 @@ TEST(TrackerOptionsTest, DefaultsValidAndErrorsNameTheSectionAndField) {
   o = {};
   o.shape.box_size_floor_sigma_m = -0.01;
   EXPECT_EQ(Validate(o)->rfind("shape.box_size_floor_sigma_m", 0), 0u) << *Validate(o);
+  o = {};
+  o.shape.centre_bias_across_sigma_m = std::nan("");
+  EXPECT_EQ(Validate(o)->rfind("shape.centre_bias_across_sigma_m", 0), 0u) << *Validate(o);
 }
 
 class CrossingTest : public ::testing::TestWithParam<MeasurementKind> {};
@@ -1136,6 +1139,83 @@ TEST(PipelineScenarioTest, CovarianceOfPeopleOfDifferentSizesMatchesTheirError) 
   EXPECT_GT(nees / n, 1.0);
   EXPECT_LT(nees / n, 3.5);
   RecordProperty("mean_nees", std::to_string(nees / n));
+}
+
+// The reported covariance against the error of a person whose build is unlike the prior (0.29 x
+// 0.18 m against 0.23 x 0.14 m), walking across the line of sight at 3, 8 and 15 m (seen from one
+// side), over three noise draws each. Per range, RMS over the measured confirmed tracks: the
+// reported radial and across sigmas contain the error in that direction; the shared error is
+// reported along the ray (across: the silhouette's beam step, growing with range), so the across
+// sigma is below the radial one and below what the same error reported in every direction gave
+// (centre_bias_along_ray false); the NEES mean stays below 3 at every range and above the
+// isotropic one. On these clean ellipses (the model's own outline, no clutter) the error is 3-18
+// mm and the NEES mean is far below 2 (a run: 0.09 / 0.32 / 0.23 at 3 / 8 / 15 m, isotropic 0.05
+// / 0.28 / 0.20): the filter's own covariance already gives 0.16 / 0.48 / 0.27 without any shared
+// term (centre_model_sigma_m per measurement), so this scene cannot show the band of 1.5-3;
+// tracking_benchmark's scenes (superelliptic people, clutter) are where it is checked.
+struct RayErrors {
+  double radial_sq = 0.0, across_sq = 0.0, sigma_radial_sq = 0.0, sigma_across_sq = 0.0;
+  double nees = 0.0;
+  int n = 0;
+  double Rms(double sum) const { return std::sqrt(sum / n); }
+};
+
+RayErrors WalkAcrossTheRay(const TrackerOptions& options, double range_m) {
+  RayErrors out;
+  for (std::uint32_t seed = 1; seed <= 3; ++seed) {
+    ScannerConfig config;
+    config.seed = seed;
+    Scene scene;
+    scene.walls = {};
+    scene.walkers = {Walker::Path(kLearnedS, {{range_m, -2.5}, {range_m, 2.5}}, 1.0)};
+    scene.sizes = {{0.29, 0.18}};
+    const Walker& walker = scene.walkers[0];
+    const SceneRun run = Simulate(scene, walker.end_s(), options, config);
+    for (const Frame& f : run.frames) {
+      if (!f.truth[0] || f.t_s < walker.start_s() + 1.0) continue;
+      const Eigen::Vector2d u = f.truth[0]->normalized();
+      const Eigen::Vector2d w(-u.y(), u.x());
+      for (const TrackReport& r : f.tracks) {
+        const Eigen::Vector2d e = Position(r) - *f.truth[0];
+        if (r.state != TrackState::kConfirmed || e.norm() > 0.4) continue;
+        const Eigen::Matrix2d p = r.covariance.topLeftCorner<2, 2>();
+        out.radial_sq += e.dot(u) * e.dot(u);
+        out.across_sq += e.dot(w) * e.dot(w);
+        out.sigma_radial_sq += u.dot(p * u);
+        out.sigma_across_sq += w.dot(p * w);
+        out.nees += e.dot(p.ldlt().solve(e));
+        ++out.n;
+      }
+    }
+  }
+  return out;
+}
+
+TEST(PipelineScenarioTest, CovarianceAlongAndAcrossTheRayContainsTheErrorAtEveryRange) {
+  const TrackerOptions options = Synthetic();
+  ASSERT_TRUE(options.shape.centre_bias_along_ray);
+  TrackerOptions isotropic = options;
+  isotropic.shape.centre_bias_along_ray = false;
+  double previous_sigma_across = 0.0;
+  for (const double range_m : {3.0, 8.0, 15.0}) {
+    SCOPED_TRACE(range_m);
+    const RayErrors e = WalkAcrossTheRay(options, range_m);
+    const RayErrors before = WalkAcrossTheRay(isotropic, range_m);
+    ASSERT_GT(e.n, 150);
+    ASSERT_GT(before.n, 150);
+    const double sigma_radial = e.Rms(e.sigma_radial_sq);
+    const double sigma_across = e.Rms(e.sigma_across_sq);
+    EXPECT_LE(e.Rms(e.radial_sq), sigma_radial);
+    EXPECT_LE(e.Rms(e.across_sq), sigma_across);
+    EXPECT_LT(sigma_across, 0.8 * sigma_radial);
+    EXPECT_LT(sigma_across, before.Rms(before.sigma_across_sq));
+    EXPECT_GT(sigma_across, previous_sigma_across);
+    previous_sigma_across = sigma_across;
+    EXPECT_LT(e.nees / e.n, 3.0);
+    EXPECT_GT(e.nees / e.n, before.nees / before.n);
+    RecordProperty("nees_at_" + std::to_string(static_cast<int>(range_m)) + "_m",
+                   std::to_string(e.nees / e.n));
+  }
 }
 
 TEST(PipelineScenarioTest, AWideBeamDoesNotPullTheCentreTowardsTheSensor) {

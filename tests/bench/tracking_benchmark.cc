@@ -36,7 +36,8 @@
 //                      [--before-report-rules |
 //                       [--before-mixed-pixels] [--before-far] [--before-evidence-coasting]
 //                       [--before-one-leg] [--before-confirm-time] [--before-whole-person]
-//                       [--before-box-size] [--before-single-beam] [--before-deep-pieces]]
+//                       [--before-box-size] [--before-single-beam] [--before-deep-pieces]
+//                       [--before-isotropic-bias]]
 //   (--extra: more scenario folders, e.g. held-out scenes, reported in their own section;
 //   --explain: per run on stderr, what became of an object's previous track at every id switch
 //   and missed scan, what the false positives are (by scan and by false track: a track left
@@ -61,7 +62,9 @@
 //   knee-height legs returned by a single beam, ShapeOptions::single_beam_legs = false;
 //   --before-deep-pieces: "before" measures knee-height pieces deep along the line of sight but
 //   no wider across it than a pair of legs as wide objects, also where a leg fills no beam,
-//   ShapeOptions::drop_deep_mixed_pixel_pieces = false; several:
+//   ShapeOptions::drop_deep_mixed_pixel_pieces = false;
+//   --before-isotropic-bias: "before" reports the centre's shared error as the same sigma in every
+//   direction, ShapeOptions::centre_bias_along_ray = false; several:
 //   without any of them). --explain also
 //   writes the false positives' classes to the results (ExplainTable) and, on stderr, what the
 //   tracks measured again after more than 1 s (a lost track resumed) came back on.
@@ -703,6 +706,9 @@ bool g_before_single_beam = false;
 // wider across it than a pair of legs as wide objects, also where a leg fills no beam
 // (ShapeOptions::drop_deep_mixed_pixel_pieces = false).
 bool g_before_deep_pieces = false;
+// --before-isotropic-bias: "before" reports the centre's shared error in every direction alike
+// (ShapeOptions::centre_bias_along_ray = false).
+bool g_before_isotropic_bias = false;
 const char* const kVariantNames[] = {"old", "new", "before"};
 // --explain: why tracks coast beside a person the scan returned (CoastingCause).
 bool g_explain_coasting = false;
@@ -735,7 +741,8 @@ std::vector<Variant> Variants(sim::Mount mount, double range_m) {
     variants.push_back({"before", before});
   } else if (g_before_mixed_pixels || g_before_far || g_before_evidence_coasting ||
              g_before_one_leg || g_before_confirm_time || g_before_whole_person ||
-             g_before_box_size || g_before_single_beam || g_before_deep_pieces) {
+             g_before_box_size || g_before_single_beam || g_before_deep_pieces ||
+             g_before_isotropic_bias) {
     tracking::TrackerOptions before = fresh;
     if (g_before_one_leg) before.shape.hidden_leg_behind = false;
     if (g_before_mixed_pixels) before.shape.drop_mixed_pixel_legs = false;
@@ -745,6 +752,7 @@ std::vector<Variant> Variants(sim::Mount mount, double range_m) {
     if (g_before_whole_person) before.shape.drop_mixed_pixel_legs_whole_person = false;
     if (g_before_box_size) before.shape.box_size_floor_sigma_m = 0.0;
     if (g_before_single_beam) before.shape.single_beam_legs = false;
+    if (g_before_isotropic_bias) before.shape.centre_bias_along_ray = false;
     if (g_before_deep_pieces) before.shape.drop_deep_mixed_pixel_pieces = false;
     variants.push_back({"before", before});
   }
@@ -1592,7 +1600,7 @@ std::string Targets(const Section& s) {
 // --before-whole-person, --before-box-size, any of them), empty otherwise.
 std::string KneeHeightBefore() {
   if (!(g_before_one_leg || g_before_confirm_time || g_before_whole_person || g_before_box_size ||
-        g_before_single_beam || g_before_deep_pieces) ||
+        g_before_single_beam || g_before_deep_pieces || g_before_isotropic_bias) ||
       g_before_mixed_pixels || g_before_far || g_before_evidence_coasting ||
       g_before_report_rules) {
     return "";
@@ -1627,13 +1635,25 @@ std::string KneeHeightBefore() {
         "pair of legs as wide objects, also where a leg fills no beam "
         "(`shape.drop_deep_mixed_pixel_pieces` false)");
   }
+  if (g_before_isotropic_bias) {
+    without.push_back(
+        "reporting the centre's shared error with the same sigma in every direction "
+        "(`shape.centre_bias_along_ray` false)");
+  }
   std::string text = "\"before\": the new tracker ";
   for (std::size_t i = 0; i < without.size(); ++i) {
     text += (i == 0 ? "" : i + 1 == without.size() ? " and " : ", ") + without[i];
   }
-  return text +
-         ", on the same scans in the same run; upper-body rows are the same by construction" +
-         (g_before_box_size ? " except for the boxes' (carts') covariance" : "") + ".\n\n";
+  const char* const same =
+      g_before_isotropic_bias
+          ? ", on the same scans in the same run; upper-body tracks are the same by construction, "
+            "their reported covariance (so NEES and what fusion makes of them) is not"
+          : ", on the same scans in the same run; upper-body rows are the same by construction";
+  return text + same +
+         (g_before_box_size && !g_before_isotropic_bias
+              ? " except for the boxes' (carts') covariance"
+              : "") +
+         ".\n\n";
 }
 
 int main(int argc, char** argv) {
@@ -1683,6 +1703,8 @@ int main(int argc, char** argv) {
       g_before_single_beam = true;
     } else if (a == "--before-deep-pieces") {
       g_before_deep_pieces = true;
+    } else if (a == "--before-isotropic-bias") {
+      g_before_isotropic_bias = true;
     } else if (a == "--jobs") {
       jobs = std::max(1, std::atoi(value().c_str()));
     } else {
@@ -1692,7 +1714,7 @@ int main(int argc, char** argv) {
                    "[--before-report-rules | [--before-mixed-pixels] [--before-far] "
                    "[--before-evidence-coasting] [--before-one-leg] [--before-confirm-time] "
                    "[--before-whole-person] [--before-box-size] [--before-single-beam] "
-                   "[--before-deep-pieces]]\n");
+                   "[--before-deep-pieces] [--before-isotropic-bias]]\n");
       return 2;
     }
   }
