@@ -251,7 +251,8 @@ void VisitShape(tracking::ShapeOptions& o, ConfigVisitor& v) {
           "occluded, the size's error through the extent across. false: centre_bias_sigma_m and "
           "the size's sigma in every direction.");
   v.Field("centre_bias_across_sigma_m", o.centre_bias_across_sigma_m,
-          "With centre_bias_along_ray: a shared error across the ray added to the silhouette's.");
+          "With centre_bias_along_ray: a shared error across the ray added to the silhouette's (a "
+          "walking person's sideways sway, which the constant-velocity filter smooths away).");
   v.Field("size_floor_sigma_m", o.size_floor_sigma_m,
           "The size state counts as no more certain than this in that shared error.");
   v.Field("box_size_floor_sigma_m", o.box_size_floor_sigma_m,

@@ -262,21 +262,12 @@ class TrackingPipeline::Refiner final : public MeasurementRefiner {
            (ob.parts[ob.part_count - 1].silhouette.last_valid ? 1 : 0);
   }
 
-  // dh/d(a, b) of the body's extent h(n; a, b) in direction n (the support function), by central
-  // differences (h is homogeneous of degree 1 in (a, b); a circle's is its radius a).
+  // dh/d(a, b) of the body's extent h(n; a, b) in direction n (the support function's analytic
+  // derivative; a circle's extent is its radius a).
   static Eigen::Vector2d ExtentJacobian(const TrackShape& shape, const Eigen::Vector2d& n) {
     if (shape.model == ShapeModel::kCircle) return Eigen::Vector2d(1.0, 0.0);
-    const double step_m = 1e-4;
-    Eigen::Vector2d jacobian;
-    for (int i = 0; i < 2; ++i) {
-      Eigen::Vector2d up = shape.size_m;
-      Eigen::Vector2d down = shape.size_m;
-      up(i) += step_m;
-      down(i) = std::max(0.5 * down(i), down(i) - step_m);
-      jacobian(i) = (ShapeSupport(shape.model, up, shape.yaw_rad, n, shape.exponent) -
-                     ShapeSupport(shape.model, down, shape.yaw_rad, n, shape.exponent)) /
-                    (up(i) - down(i));
-    }
+    Eigen::Vector2d jacobian = Eigen::Vector2d::Zero();
+    ShapeSupport(shape.model, shape.size_m, shape.yaw_rad, n, shape.exponent, &jacobian);
     return jacobian;
   }
 

@@ -129,7 +129,7 @@ struct ShapeOptions {
   // between the two (or a surface seen edge-on). Taken whole it was measured as a wide object (a
   // cart) up to metres behind the leg; it confirmed clutter tracks at 15-30 m (schenk_C: 553 of
   // 850 measured clutter scans were such 2-3 point pieces). Counted in
-  // TrackingCounters::veiled_segments. false: measured as a wide object.
+  // PipelineCounters::veiled_segments. false: measured as a wide object.
   bool drop_deep_mixed_pixel_pieces = true;
   double gait_sigma_m = 0.05;
   // Legs mount: one leg whose partner is hidden behind it. Walking legs are always
@@ -193,7 +193,10 @@ struct ShapeOptions {
   // the larger size variance in every direction, as before.
   double centre_bias_sigma_m = 0.02;
   bool centre_bias_along_ray = true;
-  double centre_bias_across_sigma_m = 0.0;
+  // Across the ray, also a walking person's sideways sway (the trunk swings about 2 cm either way
+  // once per stride, RMS ~0.015 m), which a constant-velocity filter smooths away instead of
+  // following: shared by every scan of a stride. 0: the silhouette's ends alone.
+  double centre_bias_across_sigma_m = 0.015;
   double size_floor_sigma_m = 0.02;
   double box_size_floor_sigma_m = 0.06;
   // Added in quadrature to every body-centre measurement (sigma per axis): what the fit cannot know

@@ -1207,7 +1207,7 @@ TEST(PipelineScenarioTest, CovarianceAlongAndAcrossTheRayContainsTheErrorAtEvery
     const double sigma_across = e.Rms(e.sigma_across_sq);
     EXPECT_LE(e.Rms(e.radial_sq), sigma_radial);
     EXPECT_LE(e.Rms(e.across_sq), sigma_across);
-    EXPECT_LT(sigma_across, 0.8 * sigma_radial);
+    EXPECT_LT(sigma_across, sigma_radial);
     EXPECT_LT(sigma_across, before.Rms(before.sigma_across_sq));
     EXPECT_GT(sigma_across, previous_sigma_across);
     previous_sigma_across = sigma_across;

@@ -637,12 +637,16 @@ std::optional<std::string> Validate(const ShapeFitOptions& o) {
 }
 
 double ShapeSupport(ShapeModel model, const Eigen::Vector2d& size_m, double yaw_rad,
-                    const Eigen::Vector2d& n, double exponent) {
+                    const Eigen::Vector2d& n, double exponent, Eigen::Vector2d* d_size) {
   Vec5 x = Vec5::Zero();
   x(kYaw) = yaw_rad;
   x(kA) = size_m.x();
   x(kB) = size_m.y();
-  return Support(model, x, std::cos(yaw_rad), std::sin(yaw_rad), n, exponent, nullptr);
+  Vec5 grad = Vec5::Zero();
+  const double h = Support(model, x, std::cos(yaw_rad), std::sin(yaw_rad), n, exponent,
+                           d_size != nullptr ? &grad : nullptr);
+  if (d_size != nullptr) *d_size = Eigen::Vector2d(grad(kA), grad(kB));
+  return h;
 }
 
 namespace {

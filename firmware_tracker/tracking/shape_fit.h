@@ -120,8 +120,10 @@ ShapeFitResult FitShapeUnpaired(std::span<const Eigen::Vector2d> points,
                                 const ShapeFitOptions& options);
 }  // namespace internal
 
-// Support function of the shape (extent from the centre in direction n, unit vector).
+// Support function of the shape (extent from the centre in direction n, unit vector); d_size, if
+// given, receives its derivative with respect to the size (a, b).
 double ShapeSupport(ShapeModel model, const Eigen::Vector2d& size_m, double yaw_rad,
-                    const Eigen::Vector2d& n, double exponent = 2.0);
+                    const Eigen::Vector2d& n, double exponent = 2.0,
+                    Eigen::Vector2d* d_size = nullptr);
 
 }  // namespace lrfnet::tracking

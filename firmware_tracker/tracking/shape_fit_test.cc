@@ -80,6 +80,33 @@ TEST(ShapeFitTest, SupportFunctionsOfTheShapes) {
   EXPECT_NEAR(ShapeSupport(ShapeModel::kCircle, size, 1.0, diagonal), 0.3, 1e-12);
 }
 
+// The support function's derivative by the size (the centre-bias covariance's Jacobian) against
+// central differences, for every model, exponents 2 and 2.5, in every direction.
+TEST(ShapeFitTest, SupportFunctionSizeDerivativeMatchesDifferences) {
+  const Eigen::Vector2d size(0.26, 0.15);
+  const double step_m = 1e-6;
+  for (const auto& [model, exponent] :
+       {std::pair{ShapeModel::kSuperellipse, 2.0}, std::pair{ShapeModel::kSuperellipse, 2.5},
+        std::pair{ShapeModel::kBox, 2.0}, std::pair{ShapeModel::kCircle, 2.0}}) {
+    for (int k = 0; k < 24; ++k) {
+      const double angle = 0.1 + 2.0 * common::kPi * k / 24.0;
+      const Eigen::Vector2d n(std::cos(angle), std::sin(angle));
+      Eigen::Vector2d d_size(-1.0, -1.0);
+      const double h = ShapeSupport(model, size, 0.4, n, exponent, &d_size);
+      EXPECT_DOUBLE_EQ(h, ShapeSupport(model, size, 0.4, n, exponent));
+      for (int i = 0; i < 2; ++i) {
+        Eigen::Vector2d up = size, down = size;
+        up(i) += step_m;
+        down(i) -= step_m;
+        const double expected = (ShapeSupport(model, up, 0.4, n, exponent) -
+                                 ShapeSupport(model, down, 0.4, n, exponent)) /
+                                (2.0 * step_m);
+        EXPECT_NEAR(d_size(i), expected, 1e-6) << static_cast<int>(model) << " " << k << " " << i;
+      }
+    }
+  }
+}
+
 // The person model's support function (exponent 2.5: the dual norm with k = 5/3) by the fit's own
 // roots against the libm powers it used before (|x|^k = x cbrt(x^2), h = pow(t, 1 / k)), over sizes
 // from a micrometre to a kilometre and far beyond (1e-100..1e100 m) and every direction.
