@@ -226,6 +226,13 @@ void VisitShape(tracking::ShapeOptions& o, ConfigVisitor& v) {
           "around it (or return from straight behind it), where a leg beside would have returned "
           "a beam, hides the other leg behind it: the body centre is measured hip_half_width_m "
           "farther along the line of sight (false: at the leg, with the hip and stride extent).");
+  v.Field("single_leg_across_walk", o.single_leg_across_walk,
+          "mount legs: one leg (its partner not hidden behind it) of a track walking faster than "
+          "walking_speed_mps, clearly to one side of the predicted centre across the walk: the "
+          "body centre is measured hip_half_width_m across the walk from it on that side, "
+          "anywhere within the legs' reach along the walk (sigma leg_pairing_distance_m / 2: "
+          "successive scans share the stride's phase) (false: at the leg, with the hip and stride "
+          "extent).");
   v.Field("single_beam_legs", o.single_beam_legs,
           "mount legs: a leg returned by a single beam (below segmentation.min_points), where "
           "a leg is narrower than two beams' spacing, within leg_pairing_distance_m of one "

@@ -223,7 +223,7 @@ class TrackingPipeline::Refiner final : public MeasurementRefiner {
     // An observation of the other kind than the track's (legs of a cart's track, a cart's outline
     // for a person's legs): not this track's measurement.
     if (ob.legs != (shape.model == ShapeModel::kCircle)) return false;
-    const bool ok = ob.legs ? RefineLegs(ob, predicted, shape, measurement)
+    const bool ok = ob.legs ? RefineLegs(ob, predicted, predicted_cov, shape, measurement)
                             : RefineBody(ob, predicted, predicted_cov, shape, measurement);
     if (!ok) return false;
     measurement.covariance_m2 +=
@@ -253,6 +253,7 @@ class TrackingPipeline::Refiner final : public MeasurementRefiner {
 
   std::uint64_t fits = 0;
   std::uint64_t failed = 0;
+  std::uint64_t across_walk = 0;
 
   // How many of the observation's two outline ends are silhouettes (MakePart: not an occluder's
   // edge, not the field of view's end).
@@ -426,8 +427,8 @@ class TrackingPipeline::Refiner final : public MeasurementRefiner {
     return true;
   }
 
-  bool RefineLegs(const Observation& ob, const Eigen::Vector4d* predicted, TrackShape& shape,
-                  Measurement& m) {
+  bool RefineLegs(const Observation& ob, const Eigen::Vector4d* predicted,
+                  const Eigen::Matrix4d* predicted_cov, TrackShape& shape, Measurement& m) {
     const ShapeOptions& o = p_.options_.shape;
     std::array<ShapeFitResult, 2> legs;
     std::size_t points = 0;
@@ -435,7 +436,6 @@ class TrackingPipeline::Refiner final : public MeasurementRefiner {
     prior.model = ShapeModel::kCircle;
     prior.size_m = shape.size_m;
     prior.size_cov_m2 = shape.size_cov_m2;
-    (void)predicted;
     for (std::size_t k = 0; k < ob.part_count; ++k) {
       legs[k] = FitShape(Points(ob.parts[k]), ob.parts[k].silhouette, prior, o.fit);
       points += ob.parts[k].point_count;
@@ -476,6 +476,19 @@ class TrackingPipeline::Refiner final : public MeasurementRefiner {
         m.covariance_m2 = legs[0].centre_cov_m2 +
                           o.gait_sigma_m * o.gait_sigma_m * Eigen::Matrix2d::Identity() +
                           (o.leg_radius_m * o.leg_radius_m / 12.0) * across * across.transpose();
+      } else if (Eigen::Vector2d left;
+                 WalkingSide(predicted, predicted_cov, legs[0].centre_m, left)) {
+        // One leg of a walking track (ShapeOptions::single_leg_across_walk): the centre
+        // hip_half_width_m across the walk from it, on the side the prediction lies (sway and hip
+        // width: gait_sigma_m); ahead or behind it by a stride phase that successive scans share:
+        // within the legs' reach along the walk.
+        const Eigen::Vector2d forward(left.y(), -left.x());
+        m.position_m += o.hip_half_width_m * left;
+        const double gait2 = o.gait_sigma_m * o.gait_sigma_m;
+        const double reach = 0.5 * o.leg_pairing_distance_m;
+        m.covariance_m2 = legs[0].centre_cov_m2 + reach * reach * forward * forward.transpose() +
+                          gait2 * left * left.transpose();
+        ++across_walk;
       } else {
         // One leg: the body centre lies beside it (the hip) and ahead or behind (the stride).
         const double extent2 =
@@ -490,6 +503,25 @@ class TrackingPipeline::Refiner final : public MeasurementRefiner {
     ++flat_count(shape);
     shape.person_like =
         flat_count(shape) < kMinFlatnessUpdates || shape.size_m.x() >= o.person_min_leg_radius_m;
+    return true;
+  }
+
+  // ShapeOptions::single_leg_across_walk: whether a track predicted at `predicted` walks (speed at
+  // least walking_speed_mps and twice its sigma) with the leg at `leg_m` clearly on one side of
+  // its centre across the walk (more than hip_half_width_m / 2); then `towards_centre` is the unit
+  // vector across the walk from the leg towards the predicted centre.
+  bool WalkingSide(const Eigen::Vector4d* predicted, const Eigen::Matrix4d* predicted_cov,
+                   const Eigen::Vector2d& leg_m, Eigen::Vector2d& towards_centre) const {
+    const ShapeOptions& o = p_.options_.shape;
+    if (!o.single_leg_across_walk || predicted == nullptr || predicted_cov == nullptr) return false;
+    const Eigen::Vector2d v = predicted->tail<2>();
+    const double speed = v.norm();
+    const double speed_sigma = std::sqrt(0.5 * predicted_cov->bottomRightCorner<2, 2>().trace());
+    if (!(speed >= o.walking_speed_mps && speed >= 2.0 * speed_sigma)) return false;
+    const Eigen::Vector2d left(-v.y() / speed, v.x() / speed);
+    const double offset = (predicted->head<2>() - leg_m).dot(left);
+    if (!(std::abs(offset) > 0.5 * o.hip_half_width_m)) return false;
+    towards_centre = offset > 0.0 ? left : Eigen::Vector2d(-left);
     return true;
   }
 
@@ -1156,10 +1188,12 @@ const ScanTracks& TrackingPipeline::Process(const ScanView& scan, std::uint32_t 
   }
 
   const std::uint64_t fits_before = refiner_->fits, failed_before = refiner_->failed;
+  const std::uint64_t across_walk_before = refiner_->across_walk;
   tracker_.Step(scan.stamp_ns, measurements_.span(), offsets_s_.span(),
                 shape_fit ? refiner_.get() : nullptr, tracks_);
   counters_.shape_fits += refiner_->fits - fits_before;
   counters_.failed_shape_fits += refiner_->failed - failed_before;
+  counters_.legs_across_walk += refiner_->across_walk - across_walk_before;
   if (bg.scan_error == ScanError::kNone && bg.learned) {
     AbsorbStatic(scan);
     if (shape_fit) DropCoasting(scan);

@@ -991,6 +991,89 @@ TEST(PipelineScenarioTest, OneLegHidingTheOtherIsMeasuredAsTheCentreBehindIt) {
   EXPECT_EQ(wall.legs_behind, 0u);
 }
 
+// A walker going straight away from the sensor along the x axis (legs side by side across the
+// line of sight, both seen), until at 1.5 s a screen appears close to the sensor that hides
+// everything right of the walk (y < 0): from then on only the left leg is seen, in every phase
+// of the stride, and nothing hides the right leg behind it. The tracked centre's error along and
+// across the walk (measured confirmed tracks) while one leg is seen, with or without
+// ShapeOptions::single_leg_across_walk.
+struct OneLegWalk {
+  double along_mean_m = 0.0, along_abs_m = 0.0, across_mean_m = 0.0, across_abs_m = 0.0;
+  double error_m = 0.0, nees = 0.0;
+  int n = 0;
+  std::uint64_t across_walk = 0;
+};
+OneLegWalk WalkWithOneLegSeen(bool across_walk) {
+  Scene scene;
+  scene.legs = true;
+  scene.walls = {{{15.0, -7.0}, {15.0, 7.0}},
+                 {{-2.0, 7.0}, {15.0, 7.0}},
+                 {{-2.0, -7.0}, {15.0, -7.0}},
+                 {{-2.0, 7.0}, {-2.0, -7.0}}};
+  const double speed = 1.3;
+  const double start_s = kLearnedS, screen_s = start_s + 1.5;
+  scene.walkers = {Walker::Path(start_s, {{2.0, 0.0}, {9.0, 0.0}}, speed)};
+  scene.moving_walls = [screen_s](double t_s) {
+    return t_s < screen_s ? std::vector<Wall>{} : std::vector<Wall>{{{0.6, -1.5}, {0.6, -0.002}}};
+  };
+  TrackerOptions options = LegsOptions();
+  options.shape.single_leg_across_walk = across_walk;
+  const SceneRun run = Simulate(scene, scene.walkers[0].end_s() + 0.2, options);
+  OneLegWalk out;
+  for (const Frame& f : run.frames) {
+    // From half a second after the screen appears (the two-leg past forgotten) to the end.
+    if (!f.truth[0] || f.t_s < screen_s + 0.5) continue;
+    for (const TrackReport& r : f.tracks) {
+      const Eigen::Vector2d e = Position(r) - *f.truth[0];
+      if (r.state != TrackState::kConfirmed || e.norm() > 0.4) continue;
+      out.along_mean_m += e.x();
+      out.along_abs_m += std::abs(e.x());
+      out.across_mean_m += e.y();
+      out.across_abs_m += std::abs(e.y());
+      out.error_m += e.norm();
+      out.nees += e.dot(r.covariance.topLeftCorner<2, 2>().ldlt().solve(e));
+      ++out.n;
+    }
+  }
+  if (out.n > 0) {
+    for (double* v : {&out.along_mean_m, &out.along_abs_m, &out.across_mean_m, &out.across_abs_m,
+                      &out.error_m, &out.nees}) {
+      *v /= out.n;
+    }
+  }
+  out.across_walk = run.pipeline->counters().legs_across_walk;
+  return out;
+}
+
+std::string Describe(const OneLegWalk& w) {
+  return "along mean " + std::to_string(w.along_mean_m) + " m (|.| " +
+         std::to_string(w.along_abs_m) + "), across mean " + std::to_string(w.across_mean_m) +
+         " m (|.| " + std::to_string(w.across_abs_m) + "), error " + std::to_string(w.error_m) +
+         " m, NEES " + std::to_string(w.nees) + " (" + std::to_string(w.n) + "), across the walk " +
+         std::to_string(w.across_walk);
+}
+
+TEST(PipelineScenarioTest, OneLegOfAWalkerIsMeasuredAsTheCentreAcrossTheWalk) {
+  const OneLegWalk before = WalkWithOneLegSeen(false);
+  const OneLegWalk after = WalkWithOneLegSeen(true);
+  SCOPED_TRACE("before: " + Describe(before) + "; after: " + Describe(after));
+  RecordProperty("before", Describe(before));
+  RecordProperty("after", Describe(after));
+  ASSERT_GT(before.n, 60);
+  ASSERT_GT(after.n, 60);
+  EXPECT_EQ(before.across_walk, 0u);
+  EXPECT_GT(after.across_walk, 60u);
+  // Before: the track follows the left leg, the hip (0.09 m) left of the centre.
+  EXPECT_GT(before.across_mean_m, 0.05);
+  // After: the centre, across the walk and along it over every phase of the stride.
+  EXPECT_LT(std::abs(after.across_mean_m), 0.03);
+  EXPECT_LT(after.across_abs_m, 0.035);
+  EXPECT_LT(std::abs(after.along_mean_m), 0.05);
+  EXPECT_LT(after.error_m, before.error_m - 0.03);
+  EXPECT_GT(after.nees, 0.2);
+  EXPECT_LT(after.nees, 3.0);
+}
+
 // Six people crossing the room one after another (1.5 s apart, alternating directions), of the
 // sizes given (upper body) or as legs.
 Scene SixCrossing(std::vector<Eigen::Vector2d> sizes, bool legs) {

@@ -37,7 +37,7 @@
 //                       [--before-mixed-pixels] [--before-far] [--before-evidence-coasting]
 //                       [--before-one-leg] [--before-confirm-time] [--before-whole-person]
 //                       [--before-box-size] [--before-single-beam] [--before-deep-pieces]
-//                       [--before-isotropic-bias]]
+//                       [--before-isotropic-bias] [--before-across-walk]]
 //   (--extra: more scenario folders, e.g. held-out scenes, reported in their own section;
 //   --explain: per run on stderr, what became of an object's previous track at every id switch
 //   and missed scan, what the false positives are (by scan and by false track: a track left
@@ -64,7 +64,9 @@
 //   no wider across it than a pair of legs as wide objects, also where a leg fills no beam,
 //   ShapeOptions::drop_deep_mixed_pixel_pieces = false;
 //   --before-isotropic-bias: "before" reports the centre's shared error as the same sigma in every
-//   direction, ShapeOptions::centre_bias_along_ray = false; several:
+//   direction, ShapeOptions::centre_bias_along_ray = false;
+//   --before-across-walk: "before" measures a walking track's single leg as the leg itself,
+//   ShapeOptions::single_leg_across_walk = false; several:
 //   without any of them). --explain also
 //   writes the false positives' classes to the results (ExplainTable) and, on stderr, what the
 //   tracks measured again after more than 1 s (a lost track resumed) came back on.
@@ -709,6 +711,10 @@ bool g_before_deep_pieces = false;
 // --before-isotropic-bias: "before" reports the centre's shared error in every direction alike
 // (ShapeOptions::centre_bias_along_ray = false).
 bool g_before_isotropic_bias = false;
+// --before-across-walk: "before" measures a walking track's single leg (partner not hidden behind
+// it) as the leg itself with the hip and stride extent, not hip_half_width_m across the walk from
+// it (ShapeOptions::single_leg_across_walk = false).
+bool g_before_across_walk = false;
 const char* const kVariantNames[] = {"old", "new", "before"};
 // --explain: why tracks coast beside a person the scan returned (CoastingCause).
 bool g_explain_coasting = false;
@@ -733,6 +739,7 @@ std::vector<Variant> Variants(sim::Mount mount, double range_m) {
   old.shape.hidden_leg_behind = false;
   old.shape.single_beam_legs = false;
   old.shape.drop_deep_mixed_pixel_pieces = false;
+  old.shape.single_leg_across_walk = false;
   std::vector<Variant> variants = {{"old", old}, {"new", fresh}};
   if (g_before_report_rules) {
     tracking::TrackerOptions before = fresh;
@@ -742,7 +749,7 @@ std::vector<Variant> Variants(sim::Mount mount, double range_m) {
   } else if (g_before_mixed_pixels || g_before_far || g_before_evidence_coasting ||
              g_before_one_leg || g_before_confirm_time || g_before_whole_person ||
              g_before_box_size || g_before_single_beam || g_before_deep_pieces ||
-             g_before_isotropic_bias) {
+             g_before_isotropic_bias || g_before_across_walk) {
     tracking::TrackerOptions before = fresh;
     if (g_before_one_leg) before.shape.hidden_leg_behind = false;
     if (g_before_mixed_pixels) before.shape.drop_mixed_pixel_legs = false;
@@ -754,6 +761,7 @@ std::vector<Variant> Variants(sim::Mount mount, double range_m) {
     if (g_before_single_beam) before.shape.single_beam_legs = false;
     if (g_before_isotropic_bias) before.shape.centre_bias_along_ray = false;
     if (g_before_deep_pieces) before.shape.drop_deep_mixed_pixel_pieces = false;
+    if (g_before_across_walk) before.shape.single_leg_across_walk = false;
     variants.push_back({"before", before});
   }
   return variants;
@@ -1600,7 +1608,8 @@ std::string Targets(const Section& s) {
 // --before-whole-person, --before-box-size, any of them), empty otherwise.
 std::string KneeHeightBefore() {
   if (!(g_before_one_leg || g_before_confirm_time || g_before_whole_person || g_before_box_size ||
-        g_before_single_beam || g_before_deep_pieces || g_before_isotropic_bias) ||
+        g_before_single_beam || g_before_deep_pieces || g_before_isotropic_bias ||
+        g_before_across_walk) ||
       g_before_mixed_pixels || g_before_far || g_before_evidence_coasting ||
       g_before_report_rules) {
     return "";
@@ -1639,6 +1648,11 @@ std::string KneeHeightBefore() {
     without.push_back(
         "reporting the centre's shared error with the same sigma in every direction "
         "(`shape.centre_bias_along_ray` false)");
+  }
+  if (g_before_across_walk) {
+    without.push_back(
+        "measuring a walking track's single leg as the leg itself rather than hip_half_width_m "
+        "across the walk from it (`shape.single_leg_across_walk` false)");
   }
   std::string text = "\"before\": the new tracker ";
   for (std::size_t i = 0; i < without.size(); ++i) {
@@ -1705,6 +1719,8 @@ int main(int argc, char** argv) {
       g_before_deep_pieces = true;
     } else if (a == "--before-isotropic-bias") {
       g_before_isotropic_bias = true;
+    } else if (a == "--before-across-walk") {
+      g_before_across_walk = true;
     } else if (a == "--jobs") {
       jobs = std::max(1, std::atoi(value().c_str()));
     } else {
@@ -1714,7 +1730,7 @@ int main(int argc, char** argv) {
                    "[--before-report-rules | [--before-mixed-pixels] [--before-far] "
                    "[--before-evidence-coasting] [--before-one-leg] [--before-confirm-time] "
                    "[--before-whole-person] [--before-box-size] [--before-single-beam] "
-                   "[--before-deep-pieces] [--before-isotropic-bias]]\n");
+                   "[--before-deep-pieces] [--before-isotropic-bias] [--before-across-walk]]\n");
       return 2;
     }
   }
