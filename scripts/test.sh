@@ -46,7 +46,7 @@ fi
 if [ "${LRFNET_SKIP_FUZZ:-0}" != 1 ]; then
   stage "fuzz build (clang, libFuzzer + ASan/UBSan)"
   if CC=clang CXX=clang++ cmake -S . -B build-fuzz -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo \
-       -DLRFNET_FUZZ=ON >/dev/null && cmake --build build-fuzz -j"$jobs"; then
+       -DLRFNET_FUZZ=ON >/dev/null && cmake --build build-fuzz -j"$jobs" --target lrfnet_fuzz_targets; then
     # Every *_fuzz executable the build made, $jobs at a time (each libFuzzer process uses one core).
     mapfile -t targets < <(find build-fuzz/tests/fuzz -maxdepth 1 -type f -name '*_fuzz' -perm -u+x \
                              -printf '%f\n' | sort)
