@@ -255,8 +255,8 @@ void VisitShape(tracking::ShapeOptions& o, ConfigVisitor& v) {
           "centre_bias_sigma_m and the size's error through the body's extent towards the "
           "sensor, across it centre_bias_across_sigma_m, the silhouette's beam step (range x "
           "step / sqrt(12), halved in variance with both ends a silhouette) and, with an end "
-          "occluded, the size's error through the extent across. false: centre_bias_sigma_m and "
-          "the size's sigma in every direction.");
+          "occluded, the size's error through the extent across; a box (cart) keeps the form of "
+          "false. false: centre_bias_sigma_m and the size's sigma in every direction.");
   v.Field("centre_bias_across_sigma_m", o.centre_bias_across_sigma_m,
           "With centre_bias_along_ray: a shared error across the ray added to the silhouette's (a "
           "walking person's sideways sway, which the constant-velocity filter smooths away).");

@@ -235,7 +235,7 @@ class TrackingPipeline::Refiner final : public MeasurementRefiner {
                                ? std::max(o.size_floor_sigma_m, o.box_size_floor_sigma_m)
                                : o.size_floor_sigma_m;
     const double range_m = measurement.position_m.norm();
-    if (o.centre_bias_along_ray && range_m > 0.0) {
+    if (o.centre_bias_along_ray && range_m > 0.0 && shape.model != ShapeModel::kBox) {
       const double step_rad = ob.part_count > 0 ? ob.parts[0].silhouette.step_rad : 0.0;
       shape.centre_bias_cov_m2 =
           CentreBiasAlongRay(shape, measurement.position_m / range_m, range_m, step_rad,

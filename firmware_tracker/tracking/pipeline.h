@@ -202,11 +202,13 @@ struct ShapeOptions {
   // visible arc keeps its centre whatever the size: what is shared there is where the silhouette
   // ends between two beams (uniform over R x step: (R step)^2 / 12 per end, the centre the mean of
   // two ends), plus, where an end is an occluder's or the field of view's, the size's error
-  // through the extent across the ray, plus centre_bias_across_sigma_m^2. tracking_benchmark
-  // --before-isotropic-bias: upper body per sensor NEES 1.31 -> 1.97, knee height 1.91 -> 2.33
-  // (99 % containment 0.98 -> 0.97, 0.97 -> 0.97); clean scenes stay far below 2 (quenzel 0.24 ->
-  // 0.28), cluttered ones above 3 (computer_lab 2.54 -> 5.20). false: centre_bias_sigma_m^2 plus
-  // the larger size variance in every direction, as before.
+  // through the extent across the ray, plus centre_bias_across_sigma_m^2. A box (a cart) keeps
+  // the form below: its learned size is the least certain part of it (box_size_floor_sigma_m).
+  // tracking_benchmark --before-isotropic-bias: upper body per sensor NEES 1.31 -> 1.51, knee
+  // height 1.88 -> 2.03 (99 % containment 0.98 -> 0.98, 0.97 -> 0.97); clean scenes stay far below
+  // 2 (quenzel 0.24 -> 0.25), cluttered ones above 3 (computer_lab 2.54 -> 3.52; 5.20 without the
+  // sway term). false: centre_bias_sigma_m^2 plus the larger size variance in every direction, as
+  // before.
   double centre_bias_sigma_m = 0.02;
   bool centre_bias_along_ray = true;
   // Across the ray, also a walking person's sideways sway (the trunk swings about 2 cm either way
