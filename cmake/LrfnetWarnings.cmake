@@ -15,7 +15,7 @@ endif()
 
 option(LRFNET_UNITY_TESTS "Compile each test binary as one translation unit" ON)
 option(LRFNET_PCH "Precompiled headers for the libraries whose many files share heavy headers" ON)
-# The test binaries' own code (test cases, fixtures, helpers) at -O1 in optimized builds; the code
+# The test binaries' own code (test cases, fixtures, support code) at -O1 in optimized builds; the code
 # under test keeps the build type's level (its libraries are compiled as usual). Half the test
 # binaries' compile time is optimization, mostly of gtest's assertion templates; -O1 takes a fifth
 # to two fifths less CPU (daemon_io_test 14.9 -> 10.7 s, calib_align_test 50.5 -> 42.2 s) and the

@@ -204,7 +204,7 @@ struct ShapeOptions {
   // two ends), plus, where an end is an occluder's or the field of view's, the size's error
   // through the extent across the ray, plus centre_bias_across_sigma_m^2. A box (a cart) keeps
   // the form below: its learned size is the least certain part of it (box_size_floor_sigma_m).
-  // tracking_benchmark --before-isotropic-bias: upper body per sensor NEES 1.31 -> 1.51, knee
+  // tracking_benchmark --before-isotropic-bias alone: upper body per sensor NEES 1.31 -> 1.51, knee
   // height 1.88 -> 2.03 (99 % containment 0.98 -> 0.98, 0.97 -> 0.97); clean scenes stay far below
   // 2 (quenzel 0.24 -> 0.25), cluttered ones above 3 (computer_lab 2.54 -> 3.52; 5.20 without the
   // sway term). false: centre_bias_sigma_m^2 plus the larger size variance in every direction, as
