@@ -1003,7 +1003,8 @@ struct OneLegWalk {
   int n = 0;
   std::uint64_t across_walk = 0;
 };
-OneLegWalk WalkWithOneLegSeen(bool across_walk) {
+// mirrored: the screen hides the left leg instead of the right.
+OneLegWalk WalkWithOneLegSeen(bool across_walk, bool mirrored) {
   Scene scene;
   scene.legs = true;
   scene.walls = {{{15.0, -7.0}, {15.0, 7.0}},
@@ -1013,8 +1014,10 @@ OneLegWalk WalkWithOneLegSeen(bool across_walk) {
   const double speed = 1.3;
   const double start_s = kLearnedS, screen_s = start_s + 1.5;
   scene.walkers = {Walker::Path(start_s, {{2.0, 0.0}, {9.0, 0.0}}, speed)};
-  scene.moving_walls = [screen_s](double t_s) {
-    return t_s < screen_s ? std::vector<Wall>{} : std::vector<Wall>{{{0.6, -1.5}, {0.6, -0.002}}};
+  const double side = mirrored ? -1.0 : 1.0;
+  scene.moving_walls = [screen_s, side](double t_s) {
+    return t_s < screen_s ? std::vector<Wall>{}
+                          : std::vector<Wall>{{{0.6, -1.5 * side}, {0.6, -0.002 * side}}};
   };
   TrackerOptions options = LegsOptions();
   options.shape.single_leg_across_walk = across_walk;
@@ -1054,24 +1057,28 @@ std::string Describe(const OneLegWalk& w) {
 }
 
 TEST(PipelineScenarioTest, OneLegOfAWalkerIsMeasuredAsTheCentreAcrossTheWalk) {
-  const OneLegWalk before = WalkWithOneLegSeen(false);
-  const OneLegWalk after = WalkWithOneLegSeen(true);
-  SCOPED_TRACE("before: " + Describe(before) + "; after: " + Describe(after));
-  RecordProperty("before", Describe(before));
-  RecordProperty("after", Describe(after));
-  ASSERT_GT(before.n, 60);
-  ASSERT_GT(after.n, 60);
-  EXPECT_EQ(before.across_walk, 0u);
-  EXPECT_GT(after.across_walk, 60u);
-  // Before: the track follows the left leg, the hip (0.09 m) left of the centre.
-  EXPECT_GT(before.across_mean_m, 0.05);
-  // After: the centre, across the walk and along it over every phase of the stride.
-  EXPECT_LT(std::abs(after.across_mean_m), 0.03);
-  EXPECT_LT(after.across_abs_m, 0.035);
-  EXPECT_LT(std::abs(after.along_mean_m), 0.05);
-  EXPECT_LT(after.error_m, before.error_m - 0.03);
-  EXPECT_GT(after.nees, 0.2);
-  EXPECT_LT(after.nees, 3.0);
+  for (const bool mirrored : {false, true}) {
+    const OneLegWalk before = WalkWithOneLegSeen(false, mirrored);
+    const OneLegWalk after = WalkWithOneLegSeen(true, mirrored);
+    const double side = mirrored ? -1.0 : 1.0;
+    SCOPED_TRACE(std::string(mirrored ? "right leg seen" : "left leg seen") +
+                 "; before: " + Describe(before) + "; after: " + Describe(after));
+    RecordProperty("before", Describe(before));
+    RecordProperty("after", Describe(after));
+    ASSERT_GT(before.n, 60);
+    ASSERT_GT(after.n, 60);
+    EXPECT_EQ(before.across_walk, 0u);
+    EXPECT_GT(after.across_walk, 60u);
+    // Before: the track follows the leg it sees, the hip (0.09 m) to that side of the centre.
+    EXPECT_GT(side * before.across_mean_m, 0.05);
+    // After: the centre, across the walk and along it over every phase of the stride.
+    EXPECT_LT(std::abs(after.across_mean_m), 0.03);
+    EXPECT_LT(after.across_abs_m, 0.035);
+    EXPECT_LT(std::abs(after.along_mean_m), 0.05);
+    EXPECT_LT(after.error_m, before.error_m - 0.03);
+    EXPECT_GT(after.nees, 0.2);
+    EXPECT_LT(after.nees, 3.0);
+  }
 }
 
 // Six people crossing the room one after another (1.5 s apart, alternating directions), of the
