@@ -703,7 +703,8 @@ void TrackingPipeline::BuildObservations(const ScanView& scan) {
   leg_parts_.clear();
   for (const Segment& s : segments_.segments) {
     const auto pts = segments_.Points(s);
-    if (o.drop_deep_mixed_pixel_pieces && s.width_m > pair_width && DeepMixedPixels(pts)) {
+    if (o.drop_deep_mixed_pixel_pieces && s.width_m > pair_width &&
+        DeepMixedPixels(pts, pair_width)) {
       ++counters_.veiled_segments;
       continue;
     }
@@ -743,17 +744,17 @@ void TrackingPipeline::BuildObservations(const ScanView& scan) {
   PairLegs(scan, tracks);
 }
 
-// A piece (wider than a pair of legs) no wider across the line of sight than a pair of legs or than
-// one leg's beams (its diameter and a beam's footprint), all of it where a leg fills no beam's
-// footprint (ShapeOptions::drop_deep_mixed_pixel_pieces).
-bool TrackingPipeline::DeepMixedPixels(std::span<const Eigen::Vector2d> pts) const {
+// A piece (wider than a pair of legs, pair_width_m: BuildObservations') no wider across the line of
+// sight than a pair of legs or than one leg's beams (its diameter and a beam's footprint), all of
+// it where a leg fills no beam's footprint (ShapeOptions::drop_deep_mixed_pixel_pieces).
+bool TrackingPipeline::DeepMixedPixels(std::span<const Eigen::Vector2d> pts,
+                                       double pair_width_m) const {
   const ShapeOptions& o = options_.shape;
-  const double pair_width = 2.0 * (o.hip_half_width_m + o.leg_radius_m) + 0.1;
   if (pts.empty()) return false;
   double nearest_m = std::numeric_limits<double>::infinity();
   for (const Eigen::Vector2d& p : pts) nearest_m = std::min(nearest_m, p.norm());
   const double footprint_m = nearest_m * o.beam_divergence_rad + o.beam_exit_diameter_m;
-  if (AcrossWidth(pts) > std::max(pair_width, 2.0 * o.leg_radius_m + footprint_m)) return false;
+  if (AcrossWidth(pts) > std::max(pair_width_m, 2.0 * o.leg_radius_m + footprint_m)) return false;
   return nearest_m * o.beam_divergence_rad >= 2.0 * o.leg_radius_m;
 }
 

@@ -373,7 +373,7 @@ class TrackingPipeline {
   void AbsorbStatic(const ScanView& scan);
   void DropCoasting(const ScanView& scan);
   bool SeenThrough(const ScanView& scan, const Eigen::Vector2d& position_m, double sigma_m) const;
-  bool DeepMixedPixels(std::span<const Eigen::Vector2d> pts) const;
+  bool DeepMixedPixels(std::span<const Eigen::Vector2d> pts, double pair_width_m) const;
   bool Veiled(const ScanView& scan, const Segment& segment) const;
   bool PartnerBehind(const ScanView& scan, const ObservationPart& part,
                      const Eigen::Vector2d& centre_m) const;
