@@ -233,6 +233,11 @@ void VisitShape(tracking::ShapeOptions& o, ConfigVisitor& v) {
           "anywhere within the legs' reach along the walk (sigma leg_pairing_distance_m / 2: "
           "successive scans share the stride's phase) (false: at the leg, with the hip and stride "
           "extent).");
+  v.Field("split_few_point_legs", o.split_few_point_legs,
+          "mount legs: a leg-sized segment of two or three points spread across the line of "
+          "sight wider than one leg can be (2 (leg_radius_m + 2 leg_radius_sigma_m)) is two legs "
+          "side by side: split at its widest gap into two legs measured as a pair (false: one "
+          "leg; four points or more are split by their width either way).");
   v.Field("single_beam_legs", o.single_beam_legs,
           "mount legs: a leg returned by a single beam (below segmentation.min_points), where "
           "a leg is narrower than two beams' spacing, within leg_pairing_distance_m of one "

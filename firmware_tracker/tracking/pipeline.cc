@@ -699,7 +699,6 @@ void TrackingPipeline::BuildObservations(const ScanView& scan) {
   // Legs: every segment narrow enough for a pair of legs holds one or two legs.
   const ShapeOptions& o = options_.shape;
   const double pair_width = 2.0 * (o.hip_half_width_m + o.leg_radius_m) + 0.1;
-  const double leg_width = 2.0 * o.leg_radius_m + 0.08;
   leg_parts_.clear();
   for (const Segment& s : segments_.segments) {
     const auto pts = segments_.Points(s);
@@ -719,18 +718,7 @@ void TrackingPipeline::BuildObservations(const ScanView& scan) {
       AddObservation(scan, ob);
       continue;
     }
-    std::size_t split = 0;
-    if (s.width_m > leg_width && s.point_count >= 4) {
-      // Two legs that touch: split at the widest gap between consecutive points.
-      double widest = 0.0;
-      for (std::size_t i = 1; i < pts.size(); ++i) {
-        const double gap = (pts[i] - pts[i - 1]).norm();
-        if (i >= 2 && i + 2 <= pts.size() && gap > widest) {
-          widest = gap;
-          split = i;
-        }
-      }
-    }
+    const std::size_t split = LegSplit(s, pts);
     if (split == 0) {
       (void)leg_parts_.push_back(MakePart(scan, s, 0, s.point_count));
     } else {
@@ -742,6 +730,36 @@ void TrackingPipeline::BuildObservations(const ScanView& scan) {
   const std::size_t tracks = tracker_.Predict(scan.stamp_ns, predictions_);
   if (o.single_beam_legs) AddSingleBeamLegs(scan, tracks);
   PairLegs(scan, tracks);
+}
+
+std::size_t TrackingPipeline::LegSplit(const Segment& segment,
+                                       std::span<const Eigen::Vector2d> pts) {
+  const ShapeOptions& o = options_.shape;
+  if (pts.size() < 2) return 0;
+  // Two legs that touch: split at the widest gap between consecutive points, each leg at least
+  // two points where there are four or more and the segment is wider than a leg with margin.
+  // ShapeOptions::split_few_point_legs: with fewer points, one point each where the beams' centres
+  // spread across the line of sight wider than a leg two sigmas above the prior radius can (a
+  // beam returns a leg only where its centre ray falls on it).
+  const bool few = pts.size() < 4;
+  if (few) {
+    const double widest_leg = 2.0 * (o.leg_radius_m + 2.0 * o.leg_radius_sigma_m);
+    if (!(o.split_few_point_legs && AcrossWidth(pts) > widest_leg)) return 0;
+  } else if (!(segment.width_m > 2.0 * o.leg_radius_m + 0.08)) {
+    return 0;
+  }
+  const std::size_t min_part = few ? 1 : 2;
+  std::size_t split = 0;
+  double widest = 0.0;
+  for (std::size_t i = min_part; i + min_part <= pts.size(); ++i) {
+    const double gap = (pts[i] - pts[i - 1]).norm();
+    if (gap > widest) {
+      widest = gap;
+      split = i;
+    }
+  }
+  if (few && split > 0) ++counters_.split_few_point_legs;
+  return split;
 }
 
 // A piece (wider than a pair of legs, pair_width_m: BuildObservations') no wider across the line of

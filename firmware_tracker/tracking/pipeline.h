@@ -164,6 +164,16 @@ struct ShapeOptions {
   // / 2) and the filter's prediction carries the position there. false: such a leg is measured as
   // the leg itself with the hip and stride extent in every direction (the tree before this rule).
   bool single_leg_across_walk = true;
+  // Legs mount: a leg-sized segment (no wider than a pair of legs) of two or three points whose
+  // beams' centres spread across the line of sight wider than a leg two sigmas above the prior
+  // (2 (leg_radius_m + 2 leg_radius_sigma_m)) holds two legs side by side: a beam returns a leg
+  // only where its centre ray falls on it, so one leg's points span no more than its diameter
+  // across the ray, and a mixed pixel beside a leg lies behind it, not beside it. It is split at
+  // the widest gap between consecutive points into two legs (a part may be a single point),
+  // measured as a pair; as one leg, it was a circle through both legs' beams, or a leg with its
+  // partner taken as hidden behind it. Segments of four points or more are split where wider
+  // than 2 leg_radius_m + 0.08 m whatever this says. false: two or three points are one leg.
+  bool split_few_point_legs = true;
   // Legs mount: a leg returned by a single beam (segmentation drops it: min_points) is evidence
   // for a confirmed track (Measurement::evidence_only): a foreground beam in no segment, at a
   // range where a leg is narrower than two beams' spacing (nearer, a lone beam is clutter or a
@@ -303,6 +313,7 @@ struct PipelineCounters {
   std::uint64_t legs_behind = 0;        // of them: the other hidden behind (hidden_leg_behind)
   std::uint64_t single_beam_legs = 0;   // observations of single-beam legs (single_beam_legs)
   std::uint64_t legs_across_walk = 0;   // one leg measured across the walk (single_leg_across_walk)
+  std::uint64_t split_few_point_legs = 0;  // 2-3 point segments split into two legs
   std::uint64_t veiled_segments = 0;    // legs: mixed pixels (beside a nearer edge, deep), dropped
   std::uint64_t shadowed_legs = 0;      // legs: straight behind a confirmed track, dropped
   std::uint64_t absorbed_objects = 0;   // static objects handed to the background
@@ -364,6 +375,9 @@ class TrackingPipeline {
   void BuildObservations(const ScanView& scan);
   // tracks: the live tracks' predictions at the scan's time, in predictions_ (predicted once).
   void PairLegs(const ScanView& scan, std::size_t tracks);
+  // Where a leg-sized segment splits into two legs: the index of the second
+  // leg's first point, 0 for one leg (ShapeOptions::split_few_point_legs for 2-3 points).
+  std::size_t LegSplit(const Segment& segment, std::span<const Eigen::Vector2d> pts);
   void AddSingleBeamLegs(const ScanView& scan, std::size_t tracks);
   void AddObservation(const ScanView& scan, const Observation& observation);
   ObservationPart MakePart(const ScanView& scan, const Segment& segment, std::size_t first,

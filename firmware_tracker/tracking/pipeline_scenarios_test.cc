@@ -1081,6 +1081,73 @@ TEST(PipelineScenarioTest, OneLegOfAWalkerIsMeasuredAsTheCentreAcrossTheWalk) {
   }
 }
 
+// A person walking away from the sensor along the x axis to 11 m, where they stand (legs side by
+// side across the line of sight, 0.06 m apart): at 0.5 deg (0.096 m between beams) each leg
+// returns one or two beams, and where no beam falls between them both legs make one segment of
+// two or three points, wider across the ray than a leg. The standing person's error (confirmed
+// tracks from 0.5 s after the stop), with or without ShapeOptions::split_few_point_legs, over
+// lateral offsets that move the beams across the legs.
+struct StandingFar {
+  double error_m = 0.0, nees = 0.0;
+  int n = 0;
+  std::uint64_t splits = 0;
+};
+StandingFar StandFarAtKneeHeight(bool split) {
+  StandingFar out;
+  for (const double y : {0.0, 0.02, 0.04, 0.06, 0.08}) {
+    Scene scene;
+    scene.legs = true;
+    scene.walls = {{{15.0, -7.0}, {15.0, 7.0}},
+                   {{-2.0, 7.0}, {15.0, 7.0}},
+                   {{-2.0, -7.0}, {15.0, -7.0}},
+                   {{-2.0, 7.0}, {-2.0, -7.0}}};
+    const double stop_s = kLearnedS + 2.0;
+    scene.walkers = {Walker({{kLearnedS, {9.0, y}}, {stop_s, {11.0, y}}, {stop_s + 3.0, {11.0, y}}})};
+    TrackerOptions options = LegsOptions();
+    options.shape.split_few_point_legs = split;
+    const SceneRun run = Simulate(scene, stop_s + 3.0, options);
+    for (const Frame& f : run.frames) {
+      if (!f.truth[0] || f.t_s < stop_s + 0.5) continue;
+      for (const TrackReport& r : f.tracks) {
+        const Eigen::Vector2d e = Position(r) - *f.truth[0];
+        if (r.state != TrackState::kConfirmed || e.norm() > 0.4) continue;
+        out.error_m += e.norm();
+        out.nees += e.dot(r.covariance.topLeftCorner<2, 2>().ldlt().solve(e));
+        ++out.n;
+      }
+    }
+    out.splits += run.pipeline->counters().split_few_point_legs;
+  }
+  if (out.n > 0) {
+    out.error_m /= out.n;
+    out.nees /= out.n;
+  }
+  return out;
+}
+
+std::string Describe(const StandingFar& s) {
+  return "error " + std::to_string(s.error_m) + " m, NEES " + std::to_string(s.nees) + " (" +
+         std::to_string(s.n) + "), split " + std::to_string(s.splits);
+}
+
+TEST(PipelineScenarioTest, TwoLegsSideBySideInOneFewPointSegmentAreMeasuredAsAPair) {
+  const StandingFar before = StandFarAtKneeHeight(false);
+  const StandingFar after = StandFarAtKneeHeight(true);
+  SCOPED_TRACE("before: " + Describe(before) + "; after: " + Describe(after));
+  RecordProperty("before", Describe(before));
+  RecordProperty("after", Describe(after));
+  ASSERT_GT(before.n, 200);
+  ASSERT_GT(after.n, 200);
+  EXPECT_EQ(before.splits, 0u);
+  EXPECT_GT(after.splits, 50u);
+  // Before: one circle through both legs' beams; now the legs' midpoint, within what the
+  // covariance says.
+  EXPECT_LT(after.error_m, before.error_m - 0.01);
+  EXPECT_LT(after.error_m, 0.04);
+  EXPECT_GT(after.nees, 0.2);
+  EXPECT_LT(after.nees, 3.0);
+}
+
 // Six people crossing the room one after another (1.5 s apart, alternating directions), of the
 // sizes given (upper body) or as legs.
 Scene SixCrossing(std::vector<Eigen::Vector2d> sizes, bool legs) {
