@@ -1091,12 +1091,17 @@ void TrackingPipeline::AbsorbStatic(const ScanView& scan) {
 }
 
 bool TrackingPipeline::SeenThrough(const ScanView& scan, const Eigen::Vector2d& position_m,
-                                   double sigma_m) const {
-  const ShapeOptions& o = options_.shape;
+                                   double half_width_m, double max_beam_gap_m) const {
   const double range = position_m.norm();
-  // The body's half-width and two sigma of where the track may be.
-  const double half_width_m = o.person_major_m + 2.0 * sigma_m;
   if (!(range > half_width_m)) return false;
+  // A leg at the region's far side falls between two beams farther apart than its width there,
+  // and a beam wider than it returns a mixed pixel between it and what lies behind.
+  if (max_beam_gap_m > 0.0 &&
+      !((range + half_width_m) * std::max(std::abs(scan.angle_step_rad),
+                                          options_.shape.beam_divergence_rad) <
+        max_beam_gap_m)) {
+    return false;
+  }
   std::size_t lo = 0, hi = 0;
   if (!BeamsAcross(scan, position_m, std::atan(half_width_m / range), scan.range_m.size(), &lo,
                    &hi)) {
@@ -1143,9 +1148,19 @@ void TrackingPipeline::DropCoasting(const ScanView& scan) {
       const Eigen::Matrix2d p = r.covariance.topLeftCorner<2, 2>();
       const double sigma_m = std::sqrt(std::max(0.0, 0.5 * p.trace()));
       const Eigen::Vector2d position(r.x_m, r.y_m);
-      // At knee height the beams pass between a person's legs: neither check.
-      if (torso && o.seen_through_margin_m > 0.0 && SeenThrough(scan, position, sigma_m)) {
+      // At knee height the beams pass between a person's legs: neither upper-body check.
+      // The body's half-width and two sigma of where the track may be.
+      if (torso && o.seen_through_margin_m > 0.0 &&
+          SeenThrough(scan, position, o.person_major_m + 2.0 * sigma_m, 0.0)) {
         ++counters_.seen_through;
+        continue;
+      }
+      // Knee height: where its legs may stand, with beams no leg can fall between.
+      if (!torso && o.legs_seen_through && o.seen_through_margin_m > 0.0 &&
+          SeenThrough(scan, position,
+                      0.5 * o.leg_pairing_distance_m + o.leg_radius_m + 2.0 * sigma_m,
+                      2.0 * o.leg_radius_m)) {
+        ++counters_.legs_seen_through;
         continue;
       }
       const double coasted_m = std::hypot(r.vx_mps, r.vy_mps) * r.coasted_s;

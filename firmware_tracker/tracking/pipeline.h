@@ -266,6 +266,17 @@ struct ShapeOptions {
   // measured for a scan or two there is mostly a leg pairing that failed: dropping the report
   // cost more fragments than it saved false tracks). 0: off.
   double unseen_coasting_m = 0.3;
+  // Knee-height mount: a coasting track is not reported where the scan sees through every place
+  // its legs may stand: the beams across leg_pairing_distance_m / 2 + leg_radius_m (a leg's
+  // farthest reach from the body centre in a stride) widened by two sigma of the position, to
+  // either side, all returned from more than seen_through_margin_m beyond it (at least 2, none
+  // nearer, beams without an echo unknown), and the beams lie closer together there than a leg's
+  // width (2 leg_radius_m at the far side of that region), so a leg standing there would have
+  // returned at least one of them. The person is not there (they turned, stopped or left while
+  // unmeasured). Where beams are farther apart than a leg's width (a far person's legs fall
+  // between them) or something nearer hides the place, the track is reported as before. false:
+  // off (the upper-body rule alone, which never applies at knee height).
+  bool legs_seen_through = true;
 };
 
 std::optional<std::string> Validate(const ShapeOptions& options);
@@ -308,6 +319,7 @@ struct PipelineCounters {
   std::uint64_t absorbed_objects = 0;   // static objects handed to the background
   std::uint64_t seen_through = 0;       // coasting track reports dropped (seen through)
   std::uint64_t unseen_coasting = 0;    // coasting track reports dropped (nothing seen near)
+  std::uint64_t legs_seen_through = 0;  // knee height: coasting reports dropped (legs seen through)
 };
 
 // One piece of an observation: consecutive points of one segment and where its silhouette ends.
@@ -372,7 +384,11 @@ class TrackingPipeline {
                        ObservationPart& part) const;
   void AbsorbStatic(const ScanView& scan);
   void DropCoasting(const ScanView& scan);
-  bool SeenThrough(const ScanView& scan, const Eigen::Vector2d& position_m, double sigma_m) const;
+  // Every beam with an echo within half_width_m of position_m (either side, at least 2) returned
+  // from more than shape.seen_through_margin_m beyond it; with max_beam_gap_m > 0, also the beams
+  // lie at most that far apart at range + half_width_m (else false: unknown).
+  bool SeenThrough(const ScanView& scan, const Eigen::Vector2d& position_m, double half_width_m,
+                   double max_beam_gap_m) const;
   bool DeepMixedPixels(std::span<const Eigen::Vector2d> pts, double pair_width_m) const;
   bool Veiled(const ScanView& scan, const Segment& segment) const;
   bool PartnerBehind(const ScanView& scan, const ObservationPart& part,

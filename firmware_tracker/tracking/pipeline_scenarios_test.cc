@@ -866,6 +866,43 @@ TEST(PipelineScenarioTest, LegsAtKneeHeightAreOnePersonInEveryGaitPhase) {
   }
 }
 
+// At knee height a person walking across the room vanishes at x = 4.5 m (as through a door): the
+// beams across every place their legs could stand return from the wall behind, and at 4.5 m they
+// lie closer together than a leg is wide, so the coasting track is no longer reported; with
+// shape.legs_seen_through off it is reported at its prediction (for report_coasting_s).
+TEST(PipelineScenarioTest, AKneeHeightCoastingTrackIsNotReportedWhereTheScanSeesThroughItsLegs) {
+  Scene scene;
+  scene.legs = true;
+  scene.walkers = {Walker::Path(kLearnedS, {{4.5, -3.0}, {4.5, 0.5}}, 1.2)};
+  const Walker& walker = scene.walkers[0];
+  struct Result {
+    int coasting = 0;
+    std::uint64_t dropped = 0;
+  };
+  auto run_with = [&](const TrackerOptions& options) {
+    const SceneRun run = Simulate(scene, walker.end_s() + 1.5, options);
+    Result result;
+    int before = 0;
+    for (const Frame& f : run.frames) {
+      for (const TrackReport& r : f.tracks) {
+        if (f.t_s > walker.end_s() && r.state == TrackState::kCoasting) ++result.coasting;
+        if (f.t_s > walker.start_s() + 0.5 && f.t_s < walker.end_s()) ++before;
+      }
+    }
+    EXPECT_GT(before, 50);  // tracked while walking
+    result.dropped = run.pipeline->counters().legs_seen_through;
+    return result;
+  };
+  TrackerOptions off = LegsOptions();
+  off.shape.legs_seen_through = false;
+  const Result without = run_with(off);
+  EXPECT_GE(without.coasting, 5);
+  EXPECT_EQ(without.dropped, 0u);
+  const Result with = run_with(LegsOptions());
+  EXPECT_LE(with.coasting, 1);
+  EXPECT_GE(with.dropped, 4u);
+}
+
 TEST(PipelineScenarioTest, TwoPeopleSideBySideAtKneeHeightKeepTheirLegsAndIds) {
   Scene scene;
   scene.legs = true;

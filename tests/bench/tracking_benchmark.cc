@@ -37,7 +37,8 @@
 //                       [--before-mixed-pixels] [--before-far] [--before-evidence-coasting]
 //                       [--before-one-leg] [--before-confirm-time] [--before-whole-person]
 //                       [--before-box-size] [--before-single-beam] [--before-deep-pieces]
-//                       [--before-isotropic-bias] [--before-across-walk]]
+//                       [--before-isotropic-bias] [--before-across-walk]
+//                       [--before-legs-seen-through]]
 //   (--extra: more scenario folders, e.g. held-out scenes, reported in their own section;
 //   --explain: per run on stderr, what became of an object's previous track at every id switch
 //   and missed scan, what the false positives are (by scan and by false track: a track left
@@ -66,7 +67,9 @@
 //   --before-isotropic-bias: "before" reports the centre's shared error as the same sigma in every
 //   direction, ShapeOptions::centre_bias_along_ray = false;
 //   --before-across-walk: "before" measures a walking track's single leg as the leg itself,
-//   ShapeOptions::single_leg_across_walk = false; several:
+//   ShapeOptions::single_leg_across_walk = false;
+//   --before-legs-seen-through: "before" reports a knee-height coasting track also where the scan
+//   sees through every place its legs may stand, ShapeOptions::legs_seen_through = false; several:
 //   without any of them). --explain also
 //   writes the false positives' classes to the results (ExplainTable) and, on stderr, what the
 //   tracks measured again after more than 1 s (a lost track resumed) came back on.
@@ -715,6 +718,9 @@ bool g_before_isotropic_bias = false;
 // it) as the leg itself with the hip and stride extent, not hip_half_width_m across the walk from
 // it (ShapeOptions::single_leg_across_walk = false).
 bool g_before_across_walk = false;
+// --before-legs-seen-through: "before" reports a knee-height coasting track also where the scan
+// sees through every place its legs may stand (ShapeOptions::legs_seen_through = false).
+bool g_before_legs_seen_through = false;
 const char* const kVariantNames[] = {"old", "new", "before"};
 // --explain: why tracks coast beside a person the scan returned (CoastingCause).
 bool g_explain_coasting = false;
@@ -749,7 +755,7 @@ std::vector<Variant> Variants(sim::Mount mount, double range_m) {
   } else if (g_before_mixed_pixels || g_before_far || g_before_evidence_coasting ||
              g_before_one_leg || g_before_confirm_time || g_before_whole_person ||
              g_before_box_size || g_before_single_beam || g_before_deep_pieces ||
-             g_before_isotropic_bias || g_before_across_walk) {
+             g_before_isotropic_bias || g_before_across_walk || g_before_legs_seen_through) {
     tracking::TrackerOptions before = fresh;
     if (g_before_one_leg) before.shape.hidden_leg_behind = false;
     if (g_before_mixed_pixels) before.shape.drop_mixed_pixel_legs = false;
@@ -762,6 +768,7 @@ std::vector<Variant> Variants(sim::Mount mount, double range_m) {
     if (g_before_isotropic_bias) before.shape.centre_bias_along_ray = false;
     if (g_before_deep_pieces) before.shape.drop_deep_mixed_pixel_pieces = false;
     if (g_before_across_walk) before.shape.single_leg_across_walk = false;
+    if (g_before_legs_seen_through) before.shape.legs_seen_through = false;
     variants.push_back({"before", before});
   }
   return variants;
@@ -1609,7 +1616,7 @@ std::string Targets(const Section& s) {
 std::string KneeHeightBefore() {
   if (!(g_before_one_leg || g_before_confirm_time || g_before_whole_person || g_before_box_size ||
         g_before_single_beam || g_before_deep_pieces || g_before_isotropic_bias ||
-        g_before_across_walk) ||
+        g_before_across_walk || g_before_legs_seen_through) ||
       g_before_mixed_pixels || g_before_far || g_before_evidence_coasting ||
       g_before_report_rules) {
     return "";
@@ -1653,6 +1660,11 @@ std::string KneeHeightBefore() {
     without.push_back(
         "measuring a walking track's single leg as the leg itself rather than hip_half_width_m "
         "across the walk from it (`shape.single_leg_across_walk` false)");
+  }
+  if (g_before_legs_seen_through) {
+    without.push_back(
+        "reporting a knee-height coasting track also where the scan sees through every place its "
+        "legs may stand (`shape.legs_seen_through` false)");
   }
   std::string text = "\"before\": the new tracker ";
   for (std::size_t i = 0; i < without.size(); ++i) {
@@ -1721,6 +1733,8 @@ int main(int argc, char** argv) {
       g_before_isotropic_bias = true;
     } else if (a == "--before-across-walk") {
       g_before_across_walk = true;
+    } else if (a == "--before-legs-seen-through") {
+      g_before_legs_seen_through = true;
     } else if (a == "--jobs") {
       jobs = std::max(1, std::atoi(value().c_str()));
     } else {
@@ -1730,7 +1744,8 @@ int main(int argc, char** argv) {
                    "[--before-report-rules | [--before-mixed-pixels] [--before-far] "
                    "[--before-evidence-coasting] [--before-one-leg] [--before-confirm-time] "
                    "[--before-whole-person] [--before-box-size] [--before-single-beam] "
-                   "[--before-deep-pieces] [--before-isotropic-bias] [--before-across-walk]]\n");
+                   "[--before-deep-pieces] [--before-isotropic-bias] [--before-across-walk] "
+                   "[--before-legs-seen-through]]\n");
       return 2;
     }
   }
