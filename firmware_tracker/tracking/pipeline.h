@@ -250,8 +250,8 @@ struct ShapeOptions {
   // an echo across its body (person_major_m to either side of its predicted position, widened by
   // two sigma of the position; at least 2 beams) returned from more than this beyond it, none
   // nearer. The person is not there (they turned, stopped or left while unseen); a person hidden
-  // behind something or merely not detected stays reported for tracking.report_coasting_s. Not
-  // at knee height (the beams pass between the legs). 0: off.
+  // behind something or merely not detected stays reported for tracking.report_coasting_s. At
+  // knee height the beams pass between the legs: there legs_seen_through instead. 0: off.
   double seen_through_margin_m = 0.5;
   // Torso mount: a coasting track that has coasted farther than this (its speed times the time
   // since its last measurement) is reported only where the scan shows something of it: a
@@ -277,6 +277,15 @@ struct ShapeOptions {
   // between them) or something nearer hides the place, the track is reported as before. false:
   // off (the upper-body rule alone, which never applies at knee height).
   bool legs_seen_through = true;
+  // Knee-height mount: a coasting track is reported for at most this long after its last
+  // measurement (tracking.report_coasting_s where that is shorter; the track is kept to be found
+  // again until tracking.coast_timeout_s as at every mount). A knee-height track's velocity is
+  // made from legs that stand still in turn, so its straight prediction leaves someone who turns,
+  // stops or is hidden sooner than an upper-body track's does, while a person in view is measured
+  // again within a few scans (their legs return in most of them): beyond this the report is
+  // mostly where the person is not (tracking_benchmark, knee height, "left behind" false
+  // positives). 0: off (tracking.report_coasting_s at every mount).
+  double legs_report_coasting_s = 0.3;
 };
 
 std::optional<std::string> Validate(const ShapeOptions& options);

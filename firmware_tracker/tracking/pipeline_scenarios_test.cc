@@ -341,6 +341,9 @@ TEST(TrackerOptionsTest, DefaultsValidAndErrorsNameTheSectionAndField) {
   o.shape.unseen_coasting_m = -0.1;
   EXPECT_EQ(Validate(o)->rfind("shape.unseen_coasting_m", 0), 0u) << *Validate(o);
   o = {};
+  o.shape.legs_report_coasting_s = -0.1;
+  EXPECT_EQ(Validate(o)->rfind("shape.legs_report_coasting_s", 0), 0u) << *Validate(o);
+  o = {};
   o.shape.box_size_floor_sigma_m = -0.01;
   EXPECT_EQ(Validate(o)->rfind("shape.box_size_floor_sigma_m", 0), 0u) << *Validate(o);
   o = {};
@@ -1852,6 +1855,23 @@ TEST(TrackerOptionsTest, LostTracksAreResumedAtUpperBodyHeightOnly) {
             options.tracking.resume_window_s);
   options.shape.mount = Mount::kLegs;
   EXPECT_EQ(TrackingPipeline(options).tracker().options().resume_window_s, 0.0);
+}
+
+// Coasting tracks are reported for tracking.report_coasting_s (0.5 s) at upper-body height and for
+// shape.legs_report_coasting_s (0.3 s) at knee height; 0 there, or a shorter
+// tracking.report_coasting_s, leaves tracking.report_coasting_s.
+TEST(TrackerOptionsTest, CoastingTracksAreReportedForLessTimeAtKneeHeight) {
+  TrackerOptions options;
+  ASSERT_EQ(options.tracking.report_coasting_s, 0.5);
+  ASSERT_EQ(options.shape.legs_report_coasting_s, 0.3);
+  EXPECT_EQ(TrackingPipeline(options).tracker().options().report_coasting_s, 0.5);
+  options.shape.mount = Mount::kLegs;
+  EXPECT_EQ(TrackingPipeline(options).tracker().options().report_coasting_s, 0.3);
+  options.tracking.report_coasting_s = 0.2;
+  EXPECT_EQ(TrackingPipeline(options).tracker().options().report_coasting_s, 0.2);
+  options.tracking.report_coasting_s = 0.5;
+  options.shape.legs_report_coasting_s = 0.0;
+  EXPECT_EQ(TrackingPipeline(options).tracker().options().report_coasting_s, 0.5);
 }
 
 }  // namespace
