@@ -751,6 +751,8 @@ std::vector<Variant> Variants(sim::Mount mount, double range_m) {
   old.shape.single_beam_legs = false;
   old.shape.drop_deep_mixed_pixel_pieces = false;
   old.shape.single_leg_across_walk = false;
+  old.shape.legs_report_coasting_s = 0.0;
+  old.shape.legs_seen_through = false;
   std::vector<Variant> variants = {{"old", old}, {"new", fresh}};
   if (g_before_report_rules) {
     tracking::TrackerOptions before = fresh;
