@@ -303,6 +303,16 @@ void VisitShape(tracking::ShapeOptions& o, ConfigVisitor& v) {
           "last measurement) is reported only where the scan shows something of it (a "
           "foreground return within its body's reach): someone who turned out of view is off "
           "the straight prediction. Torso mount. 0: off.");
+  v.Field("legs_seen_through", o.legs_seen_through,
+          "Knee-height mount: a coasting track is not reported where the scan sees through "
+          "every place its legs may stand (every beam with an echo within half "
+          "leg_pairing_distance_m plus leg_radius_m of it returned from more than "
+          "seen_through_margin_m beyond it), where the beams and their footprint are narrower "
+          "than a leg; a person hidden behind something stays reported.");
+  v.Field("legs_report_coasting_s", o.legs_report_coasting_s,
+          "Knee-height mount: a coasting track is sent for at most this long after its last "
+          "measurement (tracking.report_coasting_s where that is shorter): a track predicted "
+          "from legs leaves someone who turns or stops unseen sooner. 0: off.");
   v.Field("point_sigma_m", o.fit.point_sigma_m, "Range noise of a point at 0 m (1 sigma).");
   v.Field("point_sigma_per_m", o.fit.point_sigma_per_m, "Growth of the range noise per metre.");
   v.Field("model_sigma_m", o.fit.model_sigma_m,

@@ -33,12 +33,12 @@ std::string PipelineSummary(const tracking::PipelineCounters& c) {
       "ellipse_measurements={} com_measurements={} shape_fits={} failed_shape_fits={} "
       "leg_pairs={} single_legs={} legs_behind={} veiled_segments={} shadowed_legs={} "
       "absorbed_objects={} seen_through={} unseen_coasting={} single_beam_legs={} "
-      "legs_across_walk={} split_few_point_legs={}",
+      "legs_across_walk={} split_few_point_legs={} legs_seen_through={}",
       c.rejected_scans, c.learning_scans, c.segments, c.dropped_segments, c.ellipse_measurements,
       c.com_measurements, c.shape_fits, c.failed_shape_fits, c.leg_pairs, c.single_legs,
       c.legs_behind, c.veiled_segments, c.shadowed_legs, c.absorbed_objects, c.seen_through,
       c.unseen_coasting, c.single_beam_legs, c.legs_across_walk,
-      c.split_few_point_legs);
+      c.split_few_point_legs, c.legs_seen_through);
 }
 
 std::string MultiTrackerSummary(const tracking::MultiTrackerCounters& c) {
@@ -47,12 +47,12 @@ std::string MultiTrackerSummary(const tracking::MultiTrackerCounters& c) {
       "deleted_covariance={} deleted_time_reset={} deleted_static={} dropped_capacity={} "
       "births_suppressed={} rejected_measurements={} measurements_over_capacity={} "
       "failed_updates={} time_steps_backwards={} time_resets={} refine_failures={} "
-      "speed_clamps={} recovered={} resumed={}",
+      "speed_clamps={} recovered={} resumed={} coasting_unreported={}",
       c.measurements, c.associations, c.deleted_tentative, c.deleted_coast_timeout,
       c.deleted_covariance, c.deleted_time_reset, c.deleted_static, c.dropped_capacity,
       c.births_suppressed, c.rejected_measurements, c.measurements_over_capacity, c.failed_updates,
       c.time_steps_backwards, c.time_resets, c.refine_failures, c.speed_clamps, c.recovered,
-      c.resumed);
+      c.resumed, c.coasting_unreported);
 }
 
 std::string NodeSummary(const TrackerNode& node) {

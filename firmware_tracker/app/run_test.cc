@@ -80,12 +80,13 @@ TEST(TrackerRun, PipelineSummaryNamesEveryCounter) {
   c.single_beam_legs = 17;
   c.legs_across_walk = 18;
   c.split_few_point_legs = 19;
+  c.legs_seen_through = 20;
   EXPECT_EQ(PipelineSummary(c),
             "rejected_scans=1 learning_scans=2 segments=3 dropped_segments=4 "
             "ellipse_measurements=5 com_measurements=6 shape_fits=7 failed_shape_fits=8 "
             "leg_pairs=9 single_legs=10 legs_behind=11 veiled_segments=12 shadowed_legs=13 "
             "absorbed_objects=14 seen_through=15 unseen_coasting=16 single_beam_legs=17 "
-            "legs_across_walk=18 split_few_point_legs=19");
+            "legs_across_walk=18 split_few_point_legs=19 legs_seen_through=20");
 }
 
 TEST(TrackerRun, MultiTrackerSummaryNamesEveryCounterButTheTwoBeforeIt) {
@@ -111,12 +112,13 @@ TEST(TrackerRun, MultiTrackerSummaryNamesEveryCounterButTheTwoBeforeIt) {
   c.speed_clamps = 16;
   c.recovered = 17;
   c.resumed = 18;
+  c.coasting_unreported = 19;
   EXPECT_EQ(MultiTrackerSummary(c),
             "measurements=1 associations=2 deleted_tentative=3 deleted_coast_timeout=4 "
             "deleted_covariance=5 deleted_time_reset=6 deleted_static=7 dropped_capacity=8 "
             "births_suppressed=9 rejected_measurements=10 measurements_over_capacity=11 "
             "failed_updates=12 time_steps_backwards=13 time_resets=14 refine_failures=15 "
-            "speed_clamps=16 recovered=17 resumed=18");
+            "speed_clamps=16 recovered=17 resumed=18 coasting_unreported=19");
 }
 
 TEST(TrackerRun, NodeSummaryEndsWithThePipelinesCounters) {

@@ -725,7 +725,7 @@ void MultiTracker::StartTracks(common::UtcNs scan_start_ns,
   }
 }
 
-void MultiTracker::Report(common::UtcNs scan_start_ns, ScanTracks& out) const {
+void MultiTracker::Report(common::UtcNs scan_start_ns, ScanTracks& out) {
   out.scan_start_ns = scan_start_ns;
   out.tracks.clear();
   for (const Track& t : tracks_) {
@@ -737,7 +737,10 @@ void MultiTracker::Report(common::UtcNs scan_start_ns, ScanTracks& out) const {
       if (options_.report_coasting_per_measured_s > 0.0) {
         limit_s = std::min(limit_s, options_.report_coasting_per_measured_s * t.measured_s);
       }
-      if (coasting_s > limit_s) continue;
+      if (coasting_s > limit_s) {
+        ++counters_.coasting_unreported;
+        continue;
+      }
     }
     if (!reportable && !options_.report_tentative) continue;
     Eigen::Vector4d x = t.filter.state();

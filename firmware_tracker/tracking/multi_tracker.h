@@ -228,6 +228,9 @@ struct MultiTrackerCounters {
   std::uint64_t deleted_static = 0;   // handed to the background (step 5)
   std::uint64_t recovered = 0;        // associations made in the wider gate (step 3b)
   std::uint64_t resumed = 0;          // deleted tracks found again (resume_window_s)
+  // Confirmed coasting tracks' reports withheld: coasting for longer than report_coasting_s (or
+  // report_coasting_per_measured_s times how long they were seen), per scan.
+  std::uint64_t coasting_unreported = 0;
 
   std::uint64_t deleted() const {
     return deleted_tentative + deleted_coast_timeout + deleted_covariance + deleted_time_reset +
@@ -383,7 +386,7 @@ class MultiTracker {
                   common::UtcNs at_ns, common::UtcNs scan_start_ns);
   void Lose(const Track& t, common::UtcNs scan_start_ns);
   void LimitSpeed(Track& t);
-  void Report(common::UtcNs scan_start_ns, ScanTracks& out) const;
+  void Report(common::UtcNs scan_start_ns, ScanTracks& out);
   bool InsideGate(const Eigen::Vector2d& predicted_m, const Eigen::Matrix2d& predicted_cov_m2,
                   const Candidate& c, double* d2, double* log_det) const;
   // y^T S^-1 y of the pair (infinity beyond max_gate_distance_m or for a degenerate S).

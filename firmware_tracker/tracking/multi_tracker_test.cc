@@ -689,6 +689,7 @@ TEST(MultiTrackerTest, CoastingTracksAreReportedOnlyBrieflyButKeptUntilTheTimeou
     reported += out.tracks.empty() ? 0 : 1;
   }
   EXPECT_EQ(reported, 7);
+  EXPECT_EQ(tracker.counters().coasting_unreported, 13u);  // the other 13 coasting scans
   EXPECT_EQ(tracker.track_count(), 1u);
   // Found again within the coast timeout: the same id.
   tracker.Step(ScanNs(30), at(30), out);

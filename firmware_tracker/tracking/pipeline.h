@@ -260,8 +260,8 @@ struct ShapeOptions {
   // an echo across its body (person_major_m to either side of its predicted position, widened by
   // two sigma of the position; at least 2 beams) returned from more than this beyond it, none
   // nearer. The person is not there (they turned, stopped or left while unseen); a person hidden
-  // behind something or merely not detected stays reported for tracking.report_coasting_s. Not
-  // at knee height (the beams pass between the legs). 0: off.
+  // behind something or merely not detected stays reported for tracking.report_coasting_s. At
+  // knee height the beams pass between the legs: there legs_seen_through instead. 0: off.
   double seen_through_margin_m = 0.5;
   // Torso mount: a coasting track that has coasted farther than this (its speed times the time
   // since its last measurement) is reported only where the scan shows something of it: a
@@ -276,6 +276,26 @@ struct ShapeOptions {
   // measured for a scan or two there is mostly a leg pairing that failed: dropping the report
   // cost more fragments than it saved false tracks). 0: off.
   double unseen_coasting_m = 0.3;
+  // Knee-height mount: a coasting track is not reported where the scan sees through every place
+  // its legs may stand: the beams across leg_pairing_distance_m / 2 + leg_radius_m (a leg's
+  // farthest reach from the body centre in a stride) widened by two sigma of the position, to
+  // either side, all returned from more than seen_through_margin_m beyond it (at least 2, none
+  // nearer, beams without an echo unknown), and the beams lie closer together there than a leg's
+  // width (2 leg_radius_m at the far side of that region), so a leg standing there would have
+  // returned at least one of them. The person is not there (they turned, stopped or left while
+  // unmeasured). Where beams are farther apart than a leg's width (a far person's legs fall
+  // between them) or something nearer hides the place, the track is reported as before. false:
+  // off (the upper-body rule alone, which never applies at knee height).
+  bool legs_seen_through = true;
+  // Knee-height mount: a coasting track is reported for at most this long after its last
+  // measurement (tracking.report_coasting_s where that is shorter; the track is kept to be found
+  // again until tracking.coast_timeout_s as at every mount). A knee-height track's velocity is
+  // made from legs that stand still in turn, so its straight prediction leaves someone who turns,
+  // stops or is hidden sooner than an upper-body track's does, while a person in view is measured
+  // again within a few scans (their legs return in most of them): beyond this the report is
+  // mostly where the person is not (tracking_benchmark, knee height, "left behind" false
+  // positives). 0: off (tracking.report_coasting_s at every mount).
+  double legs_report_coasting_s = 0.3;
 };
 
 std::optional<std::string> Validate(const ShapeOptions& options);
@@ -319,6 +339,7 @@ struct PipelineCounters {
   std::uint64_t absorbed_objects = 0;   // static objects handed to the background
   std::uint64_t seen_through = 0;       // coasting track reports dropped (seen through)
   std::uint64_t unseen_coasting = 0;    // coasting track reports dropped (nothing seen near)
+  std::uint64_t legs_seen_through = 0;  // knee height: coasting reports dropped (legs seen through)
 };
 
 // One piece of an observation: consecutive points of one segment and where its silhouette ends.
@@ -386,7 +407,11 @@ class TrackingPipeline {
                        ObservationPart& part) const;
   void AbsorbStatic(const ScanView& scan);
   void DropCoasting(const ScanView& scan);
-  bool SeenThrough(const ScanView& scan, const Eigen::Vector2d& position_m, double sigma_m) const;
+  // Every beam with an echo within half_width_m of position_m (either side, at least 2) returned
+  // from more than shape.seen_through_margin_m beyond it; with max_beam_gap_m > 0, also the beams
+  // lie at most that far apart at range + half_width_m (else false: unknown).
+  bool SeenThrough(const ScanView& scan, const Eigen::Vector2d& position_m, double half_width_m,
+                   double max_beam_gap_m) const;
   bool DeepMixedPixels(std::span<const Eigen::Vector2d> pts, double pair_width_m) const;
   bool Veiled(const ScanView& scan, const Segment& segment) const;
   bool PartnerBehind(const ScanView& scan, const ObservationPart& part,

@@ -341,6 +341,9 @@ TEST(TrackerOptionsTest, DefaultsValidAndErrorsNameTheSectionAndField) {
   o.shape.unseen_coasting_m = -0.1;
   EXPECT_EQ(Validate(o)->rfind("shape.unseen_coasting_m", 0), 0u) << *Validate(o);
   o = {};
+  o.shape.legs_report_coasting_s = -0.1;
+  EXPECT_EQ(Validate(o)->rfind("shape.legs_report_coasting_s", 0), 0u) << *Validate(o);
+  o = {};
   o.shape.box_size_floor_sigma_m = -0.01;
   EXPECT_EQ(Validate(o)->rfind("shape.box_size_floor_sigma_m", 0), 0u) << *Validate(o);
   o = {};
@@ -864,6 +867,43 @@ TEST(PipelineScenarioTest, LegsAtKneeHeightAreOnePersonInEveryGaitPhase) {
       EXPECT_NEAR(r.size_major_m, Legs::kRadiusM, 0.02);
     }
   }
+}
+
+// At knee height a person walking across the room vanishes at x = 4.5 m (as through a door): the
+// beams across every place their legs could stand return from the wall behind, and at 4.5 m they
+// lie closer together than a leg is wide, so the coasting track is no longer reported; with
+// shape.legs_seen_through off it is reported at its prediction (for report_coasting_s).
+TEST(PipelineScenarioTest, AKneeHeightCoastingTrackIsNotReportedWhereTheScanSeesThroughItsLegs) {
+  Scene scene;
+  scene.legs = true;
+  scene.walkers = {Walker::Path(kLearnedS, {{4.5, -3.0}, {4.5, 0.5}}, 1.2)};
+  const Walker& walker = scene.walkers[0];
+  struct Result {
+    int coasting = 0;
+    std::uint64_t dropped = 0;
+  };
+  auto run_with = [&](const TrackerOptions& options) {
+    const SceneRun run = Simulate(scene, walker.end_s() + 1.5, options);
+    Result result;
+    int before = 0;
+    for (const Frame& f : run.frames) {
+      for (const TrackReport& r : f.tracks) {
+        if (f.t_s > walker.end_s() && r.state == TrackState::kCoasting) ++result.coasting;
+        if (f.t_s > walker.start_s() + 0.5 && f.t_s < walker.end_s()) ++before;
+      }
+    }
+    EXPECT_GT(before, 50);  // tracked while walking
+    result.dropped = run.pipeline->counters().legs_seen_through;
+    return result;
+  };
+  TrackerOptions off = LegsOptions();
+  off.shape.legs_seen_through = false;
+  const Result without = run_with(off);
+  EXPECT_GE(without.coasting, 5);
+  EXPECT_EQ(without.dropped, 0u);
+  const Result with = run_with(LegsOptions());
+  EXPECT_LE(with.coasting, 1);
+  EXPECT_GE(with.dropped, 4u);
 }
 
 TEST(PipelineScenarioTest, TwoPeopleSideBySideAtKneeHeightKeepTheirLegsAndIds) {
@@ -1882,6 +1922,23 @@ TEST(TrackerOptionsTest, LostTracksAreResumedAtUpperBodyHeightOnly) {
             options.tracking.resume_window_s);
   options.shape.mount = Mount::kLegs;
   EXPECT_EQ(TrackingPipeline(options).tracker().options().resume_window_s, 0.0);
+}
+
+// Coasting tracks are reported for tracking.report_coasting_s (0.5 s) at upper-body height and for
+// shape.legs_report_coasting_s (0.3 s) at knee height; 0 there, or a shorter
+// tracking.report_coasting_s, leaves tracking.report_coasting_s.
+TEST(TrackerOptionsTest, CoastingTracksAreReportedForLessTimeAtKneeHeight) {
+  TrackerOptions options;
+  ASSERT_EQ(options.tracking.report_coasting_s, 0.5);
+  ASSERT_EQ(options.shape.legs_report_coasting_s, 0.3);
+  EXPECT_EQ(TrackingPipeline(options).tracker().options().report_coasting_s, 0.5);
+  options.shape.mount = Mount::kLegs;
+  EXPECT_EQ(TrackingPipeline(options).tracker().options().report_coasting_s, 0.3);
+  options.tracking.report_coasting_s = 0.2;
+  EXPECT_EQ(TrackingPipeline(options).tracker().options().report_coasting_s, 0.2);
+  options.tracking.report_coasting_s = 0.5;
+  options.shape.legs_report_coasting_s = 0.0;
+  EXPECT_EQ(TrackingPipeline(options).tracker().options().report_coasting_s, 0.5);
 }
 
 }  // namespace

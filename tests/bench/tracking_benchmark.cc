@@ -37,7 +37,8 @@
 //                       [--before-mixed-pixels] [--before-far] [--before-evidence-coasting]
 //                       [--before-one-leg] [--before-confirm-time] [--before-whole-person]
 //                       [--before-box-size] [--before-single-beam] [--before-deep-pieces]
-//                       [--before-isotropic-bias] [--before-across-walk] [--before-few-point-legs]]
+//                       [--before-isotropic-bias] [--before-across-walk] [--before-few-point-legs]
+//                       [--before-legs-seen-through] [--before-legs-report-coasting]]
 //   (--extra: more scenario folders, e.g. held-out scenes, reported in their own section;
 //   --explain: per run on stderr, what became of an object's previous track at every id switch
 //   and missed scan, what the false positives are (by scan and by false track: a track left
@@ -68,7 +69,11 @@
 //   --before-across-walk: "before" measures a walking track's single leg as the leg itself,
 //   ShapeOptions::single_leg_across_walk = false;
 //   --before-few-point-legs: "before" measures a knee-height segment of two or three points wider
-//   than a leg as one leg, ShapeOptions::split_few_point_legs = false; several:
+//   than a leg as one leg, ShapeOptions::split_few_point_legs = false;
+//   --before-legs-seen-through: "before" reports a knee-height coasting track also where the scan
+//   sees through every place its legs may stand, ShapeOptions::legs_seen_through = false;
+//   --before-legs-report-coasting: "before" reports a knee-height coasting track for all of
+//   MultiTrackerOptions::report_coasting_s, ShapeOptions::legs_report_coasting_s = 0; several:
 //   without any of them). --explain also
 //   writes the false positives' classes to the results (ExplainTable) and, on stderr, what the
 //   tracks measured again after more than 1 s (a lost track resumed) came back on.
@@ -720,6 +725,12 @@ bool g_before_across_walk = false;
 // --before-few-point-legs: "before" fits a leg-sized segment of two or three points wider than a
 // leg as one leg (ShapeOptions::split_few_point_legs = false).
 bool g_before_few_point_legs = false;
+// --before-legs-seen-through: "before" reports a knee-height coasting track also where the scan
+// sees through every place its legs may stand (ShapeOptions::legs_seen_through = false).
+bool g_before_legs_seen_through = false;
+// --before-legs-report-coasting: "before" reports a knee-height coasting track for all of
+// report_coasting_s (ShapeOptions::legs_report_coasting_s = 0).
+bool g_before_legs_report_coasting = false;
 const char* const kVariantNames[] = {"old", "new", "before"};
 // --explain: why tracks coast beside a person the scan returned (CoastingCause).
 bool g_explain_coasting = false;
@@ -746,6 +757,8 @@ std::vector<Variant> Variants(sim::Mount mount, double range_m) {
   old.shape.drop_deep_mixed_pixel_pieces = false;
   old.shape.single_leg_across_walk = false;
   old.shape.split_few_point_legs = false;
+  old.shape.legs_report_coasting_s = 0.0;
+  old.shape.legs_seen_through = false;
   std::vector<Variant> variants = {{"old", old}, {"new", fresh}};
   if (g_before_report_rules) {
     tracking::TrackerOptions before = fresh;
@@ -755,7 +768,8 @@ std::vector<Variant> Variants(sim::Mount mount, double range_m) {
   } else if (g_before_mixed_pixels || g_before_far || g_before_evidence_coasting ||
              g_before_one_leg || g_before_confirm_time || g_before_whole_person ||
              g_before_box_size || g_before_single_beam || g_before_deep_pieces ||
-             g_before_isotropic_bias || g_before_across_walk || g_before_few_point_legs) {
+             g_before_isotropic_bias || g_before_across_walk || g_before_few_point_legs ||
+             g_before_legs_seen_through || g_before_legs_report_coasting) {
     tracking::TrackerOptions before = fresh;
     if (g_before_one_leg) before.shape.hidden_leg_behind = false;
     if (g_before_mixed_pixels) before.shape.drop_mixed_pixel_legs = false;
@@ -769,6 +783,8 @@ std::vector<Variant> Variants(sim::Mount mount, double range_m) {
     if (g_before_deep_pieces) before.shape.drop_deep_mixed_pixel_pieces = false;
     if (g_before_across_walk) before.shape.single_leg_across_walk = false;
     if (g_before_few_point_legs) before.shape.split_few_point_legs = false;
+    if (g_before_legs_seen_through) before.shape.legs_seen_through = false;
+    if (g_before_legs_report_coasting) before.shape.legs_report_coasting_s = 0.0;
     variants.push_back({"before", before});
   }
   return variants;
@@ -1616,7 +1632,8 @@ std::string Targets(const Section& s) {
 std::string KneeHeightBefore() {
   if (!(g_before_one_leg || g_before_confirm_time || g_before_whole_person || g_before_box_size ||
         g_before_single_beam || g_before_deep_pieces || g_before_isotropic_bias ||
-        g_before_across_walk || g_before_few_point_legs) ||
+        g_before_across_walk || g_before_few_point_legs ||
+        g_before_legs_seen_through || g_before_legs_report_coasting) ||
       g_before_mixed_pixels || g_before_far || g_before_evidence_coasting ||
       g_before_report_rules) {
     return "";
@@ -1665,6 +1682,16 @@ std::string KneeHeightBefore() {
     without.push_back(
         "measuring a knee-height segment of two or three points wider than a leg as one leg "
         "rather than two legs side by side (`shape.split_few_point_legs` false)");
+  }
+  if (g_before_legs_seen_through) {
+    without.push_back(
+        "reporting a knee-height coasting track also where the scan sees through every place its "
+        "legs may stand (`shape.legs_seen_through` false)");
+  }
+  if (g_before_legs_report_coasting) {
+    without.push_back(
+        "reporting a knee-height coasting track for all of `tracking.report_coasting_s` "
+        "(`shape.legs_report_coasting_s` 0)");
   }
   std::string text = "\"before\": the new tracker ";
   for (std::size_t i = 0; i < without.size(); ++i) {
@@ -1735,6 +1762,10 @@ int main(int argc, char** argv) {
       g_before_across_walk = true;
     } else if (a == "--before-few-point-legs") {
       g_before_few_point_legs = true;
+    } else if (a == "--before-legs-seen-through") {
+      g_before_legs_seen_through = true;
+    } else if (a == "--before-legs-report-coasting") {
+      g_before_legs_report_coasting = true;
     } else if (a == "--jobs") {
       jobs = std::max(1, std::atoi(value().c_str()));
     } else {
@@ -1745,7 +1776,8 @@ int main(int argc, char** argv) {
                    "[--before-evidence-coasting] [--before-one-leg] [--before-confirm-time] "
                    "[--before-whole-person] [--before-box-size] [--before-single-beam] "
                    "[--before-deep-pieces] [--before-isotropic-bias] [--before-across-walk] "
-                   "[--before-few-point-legs]]\n");
+                   "[--before-few-point-legs] "
+                   "[--before-legs-seen-through] [--before-legs-report-coasting]]\n");
       return 2;
     }
   }
