@@ -13,7 +13,7 @@
 // --out FILE (replacing its header and table; the file's "## " sections after them are kept).
 //
 //   tracker_benchmark [--out FILE] [--scans N] [--people LIST] [--no-send] [--rounds R]
-//                     [google benchmark flags]
+//                     [--no-turns] [google benchmark flags]
 //
 // --people 0,50 renders only those synthetic scenes and skips the capture (for profiling one case
 // under callgrind, where rendering every scene costs more than the timed loop). --no-send drops the
@@ -25,7 +25,9 @@
 // load changes within seconds; run one after the other, one scene may be measured in a quiet
 // moment and the next in a busy one, and their ratio moves by more than most changes to the
 // tracker. In turns, every round's ratio to the empty scene compares times taken within the same
-// few hundred milliseconds; the table gives the median over the rounds and its spread.
+// few hundred milliseconds; the table gives the median over the rounds and its spread. Without
+// --rounds the cases run one after the other as before and then once more in 10 rounds, whose
+// ratios the table's last column gives (--no-turns leaves that run out).
 
 #include <benchmark/benchmark.h>
 #include <sys/resource.h>
@@ -86,6 +88,16 @@ struct Row {
   double raw_bytes_per_s = 0.0;
   std::uint64_t confirmed_tracks = 0;
 };
+
+// Per case, from the run in turns (Interleaved): the CPU / empty-scene ratio's median over the
+// rounds and its lowest and highest.
+struct TurnStats {
+  double ratio_median = 0.0, ratio_low = 0.0, ratio_high = 0.0;
+};
+std::vector<std::pair<std::string, TurnStats>>& Turns() {
+  static std::vector<std::pair<std::string, TurnStats>> turns;
+  return turns;
+}
 
 std::vector<Row>& Rows() {
   static std::vector<Row> rows;
@@ -419,6 +431,12 @@ std::string Interleaved(const std::vector<const Case*>& cases, std::size_t round
       }
     }
     const auto [lo, hi] = std::minmax_element(m.begin(), m.end());
+    if (!ratio.empty()) {
+      Turns().emplace_back(cases[c]->name,
+                           TurnStats{Quantile(ratio, 0.5),
+                                     *std::min_element(ratio.begin(), ratio.end()),
+                                     *std::max_element(ratio.begin(), ratio.end())});
+    }
     const double seconds = static_cast<double>(runners[c]->fed()) / cases[c]->input->rate_hz;
     std::snprintf(line, sizeof line,
                   "| %s | %zu | %zu | %.1f | %.1f | %.1f | %.2f | %.2f | %.2f | %zu | %.0f | %llu "
@@ -434,12 +452,23 @@ std::string Interleaved(const std::vector<const Case*>& cases, std::size_t round
   return out;
 }
 
+std::string TurnsCell(const std::string& name) {
+  for (const auto& [n, t] : Turns()) {
+    if (n != name) continue;
+    char cell[64];
+    std::snprintf(cell, sizeof cell, "%.2f [%.2f - %.2f]", t.ratio_median, t.ratio_low,
+                  t.ratio_high);
+    return cell;
+  }
+  return "-";
+}
+
 std::string Table() {
   std::string out =
       "| input | scans | median µs/scan | p99 µs/scan | CPU median µs | CPU p99 µs | CPU median / "
       "empty scene | allocations | peak RSS MiB | uplink B/s | raw CoLa-B B/s | uplink/raw | "
-      "confirmed tracks |\n"
-      "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n";
+      "confirmed tracks | CPU / empty scene, in turns: median [lowest - highest round] |\n"
+      "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n";
   char line[512];
   // The empty scene of the same measurement in this run.
   auto empty_cpu = [](const Row& r) {
@@ -457,12 +486,12 @@ std::string Table() {
     std::snprintf(
         line, sizeof line,
         "| %s | %zu | %.1f | %.1f | %.1f | %.1f | %.2f | %zu | %.1f | %.0f | %.0f | %.3f | "
-        "%llu |\n",
+        "%llu | %s |\n",
         r.name.c_str(), r.scans, r.median_us, r.p99_us, r.cpu_median_us, r.cpu_p99_us,
         empty > 0 ? r.cpu_median_us / empty : 0.0, r.allocations,
         static_cast<double>(r.peak_rss_kib) / 1024.0, r.uplink_bytes_per_s, r.raw_bytes_per_s,
         r.uplink_bytes_per_s / r.raw_bytes_per_s,
-        static_cast<unsigned long long>(r.confirmed_tracks));
+        static_cast<unsigned long long>(r.confirmed_tracks), TurnsCell(r.name).c_str());
     out += line;
   }
   return out;
@@ -479,6 +508,7 @@ int main(int argc, char** argv) {
   bool capture_input = true;
   bool send = true;
   std::size_t rounds = 0;
+  bool turns = true;
   std::string filter;
   std::vector<char*> args;
   for (int i = 0; i < argc; ++i) {
@@ -488,6 +518,8 @@ int main(int argc, char** argv) {
       scans = static_cast<std::size_t>(std::stoul(argv[++i]));
     } else if (std::strcmp(argv[i], "--rounds") == 0 && i + 1 < argc) {
       rounds = static_cast<std::size_t>(std::stoul(argv[++i]));
+    } else if (std::strcmp(argv[i], "--no-turns") == 0) {
+      turns = false;
     } else if (std::strcmp(argv[i], "--no-send") == 0) {
       send = false;
     } else if (std::strcmp(argv[i], "--people") == 0 && i + 1 < argc) {
@@ -532,21 +564,24 @@ int main(int argc, char** argv) {
       cases.push_back(std::move(c));
     }
   }
+  // The cases whose name --benchmark_filter's pattern finds (for the runs in turns).
+  std::vector<const Case*> selected;
+  const std::regex pattern(filter.empty() ? std::string(".") : filter);
+  for (const auto& c : cases) {
+    if (std::regex_search(c->name, pattern)) selected.push_back(c.get());
+  }
+  if (selected.empty()) {
+    std::fprintf(stderr, "tracker_benchmark: no case matches --benchmark_filter\n");
+    return 1;
+  }
   std::string table;
   if (rounds > 0) {
-    // The cases in turns (see Interleaved), those whose name --benchmark_filter's pattern finds.
-    std::vector<const Case*> selected;
-    const std::regex pattern(filter.empty() ? std::string(".") : filter);
-    for (const auto& c : cases) {
-      if (std::regex_search(c->name, pattern)) selected.push_back(c.get());
-    }
-    if (selected.empty()) {
-      std::fprintf(stderr, "tracker_benchmark: no case matches --benchmark_filter\n");
-      return 1;
-    }
     table = Interleaved(selected, rounds);
   } else {
     benchmark::RunSpecifiedBenchmarks();
+    // The ratios once more with the cases in turns (10 rounds), beside the table's ratios of cases
+    // measured one after the other (--no-turns: without).
+    if (turns) Interleaved(selected, 10);
     table = Table();
   }
   benchmark::Shutdown();
@@ -569,6 +604,12 @@ int main(int argc, char** argv) {
            "the case (inputs for all cases are held in memory). old: the previous measurement "
            "(fixed-axes ellipse), new: the body-centre shape fit (the default); CPU median / empty "
            "scene: against the 0-people scene of the same measurement in this run.";
+    if (rounds == 0 && turns) {
+      out << " Last column: the cases run once more in turns, 10 rounds of consecutive scans each "
+             "(the order rotated from round to round), each round's median against the empty "
+             "scene's in the same round; the median over the rounds with the lowest and highest "
+             "(a change of the machine's load during the run falls on every scene alike).";
+    }
     if (rounds > 0) {
       out << " The cases ran in turns, " << rounds
           << " rounds of consecutive scans each (the order rotated from round to round): CPU "
