@@ -23,14 +23,41 @@ constexpr std::size_t kMinFlatnessPoints = 4;
 // parabola v = k u^2 on [-h, h] less its mean, sqrt(1/5 - 1/9) k h^2 = 0.298 s.
 constexpr double kArcLineRmsShare = 0.298;
 
+// x^p for x >= 0: the common exponents by algebra (2: x x; 2.5: x x sqrt(x)), others by pow.
+double PowerOf(double x, double p) {
+  if (p == 2.0) return x * x;
+  if (p == 2.5) return x * x * std::sqrt(x);
+  return std::pow(x, p);
+}
+
+}  // namespace
+
+namespace internal {
+
 // What the points of a person's back (the prior's upper body seen from behind, its flattest view)
-// spread over extent_m show of their principal line: kArcLineRmsShare times the sagitta of the
-// superellipse |u/a|^p + |v/b|^p = 1 over |u| <= extent_m / 2.
+// spread over extent_m show of their principal line: kArcLineRmsShare times the sagitta b (1 - v)
+// of the superellipse |u/a|^p + |v/b|^p = 1 over |u| <= extent_m / 2.
 double PersonBackLineRms(const ShapeOptions& o, double extent_m) {
   const double u = std::min(1.0, 0.5 * extent_m / o.person_major_m);
   const double v = std::pow(1.0 - std::pow(u, o.person_exponent), 1.0 / o.person_exponent);
   return kArcLineRmsShare * o.person_minor_m * (1.0 - v);
 }
+
+// PersonBackLineRms(o, extent_m) > threshold_m without the p-th root: with s = kArcLineRmsShare b,
+// s (1 - v) > t <=> v < w = 1 - t / s, and for v, w >= 0 (both sides to the power p, monotonic)
+// <=> 1 - u^p < w^p; never where w <= 0 (v >= 0). With p = 2.5 two square roots instead of two
+// pow calls.
+bool PersonBackLineRmsAbove(const ShapeOptions& o, double extent_m, double threshold_m) {
+  const double u = std::min(1.0, 0.5 * extent_m / o.person_major_m);
+  const double w = 1.0 - threshold_m / (kArcLineRmsShare * o.person_minor_m);
+  if (!(w > 0.0)) return false;
+  return 1.0 - PowerOf(u, o.person_exponent) < PowerOf(w, o.person_exponent);
+}
+
+}  // namespace internal
+
+namespace {
+
 // Sizes are learned only from fits whose yaw prior is at least this certain (a walking person).
 constexpr double kMaxLearningYawSigmaRad = 0.6;
 // A track is a cylinder when its learned semi-axes differ by less than this share of a, after this
@@ -425,7 +452,7 @@ class TrackingPipeline::Refiner final : public MeasurementRefiner {
     const double range = fit.centre_m.norm();
     const double noise = o.fit.point_sigma_m + o.fit.point_sigma_per_m * range;
     if (fit.extent_m >= o.flat_min_extent_m && fit.points_used >= kMinFlatnessPoints &&
-        PersonBackLineRms(o, fit.extent_m) > noise) {
+        internal::PersonBackLineRmsAbove(o, fit.extent_m, noise)) {
       const double v = fit.line_rms_m * fit.line_rms_m - noise * noise;
       shape.flatness_m2 += (v - shape.flatness_m2) /
                            std::min(kFlatnessMemory, static_cast<double>(++flat_count(shape)));

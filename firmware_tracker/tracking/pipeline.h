@@ -439,4 +439,13 @@ class TrackingPipeline {
   ScanTracks tracks_;
 };
 
+namespace internal {
+
+// What the points of a person's back spread over extent_m show of their principal line (RMS
+// distance, m), and whether it exceeds threshold_m (the same test without the root).
+double PersonBackLineRms(const ShapeOptions& o, double extent_m);
+bool PersonBackLineRmsAbove(const ShapeOptions& o, double extent_m, double threshold_m);
+
+}  // namespace internal
+
 }  // namespace lrfnet::tracking

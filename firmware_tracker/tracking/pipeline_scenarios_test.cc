@@ -1941,5 +1941,36 @@ TEST(TrackerOptionsTest, CoastingTracksAreReportedForLessTimeAtKneeHeight) {
   EXPECT_EQ(TrackingPipeline(options).tracker().options().report_coasting_s, 0.5);
 }
 
+// The flatness rule's test "would a person's back over this extent stand out of the noise" without
+// the p-th root: known answers (the whole back, u = 1: 0.298 b; an ellipse's back over half its
+// width: 0.298 b (1 - sqrt(3) / 2)) and the same answer as the RMS itself on either side of it.
+TEST(PersonBackLineRms, RootFreeTestAgreesWithTheRms) {
+  ShapeOptions o;
+  o.person_major_m = 0.23;
+  o.person_minor_m = 0.14;
+  o.person_exponent = 2.5;
+  EXPECT_NEAR(internal::PersonBackLineRms(o, 0.46), 0.298 * 0.14, 1e-15);
+  EXPECT_TRUE(internal::PersonBackLineRmsAbove(o, 0.46, 0.298 * 0.14 * (1.0 - 1e-9)));
+  EXPECT_FALSE(internal::PersonBackLineRmsAbove(o, 0.46, 0.298 * 0.14 * (1.0 + 1e-9)));
+  EXPECT_FALSE(internal::PersonBackLineRmsAbove(o, 0.46, 0.5));
+  o.person_exponent = 2.0;
+  const double half_width = 0.298 * 0.14 * (1.0 - std::sqrt(3.0) / 2.0);
+  EXPECT_NEAR(internal::PersonBackLineRms(o, 0.23), half_width, 1e-15);
+  EXPECT_TRUE(internal::PersonBackLineRmsAbove(o, 0.23, half_width * (1.0 - 1e-9)));
+  EXPECT_FALSE(internal::PersonBackLineRmsAbove(o, 0.23, half_width * (1.0 + 1e-9)));
+  for (const double p : {2.0, 2.5, 3.0}) {
+    o.person_exponent = p;
+    for (int e = 1; e <= 60; ++e) {
+      const double extent = 0.01 * e;
+      const double rms = internal::PersonBackLineRms(o, extent);
+      for (const double t : {0.0, 0.5 * rms, rms * (1.0 - 1e-9), rms * (1.0 + 1e-9), 2.0 * rms}) {
+        EXPECT_EQ(internal::PersonBackLineRmsAbove(o, extent, t), rms > t)
+            << "p " << p << " extent " << extent << " threshold " << t;
+      }
+    }
+  }
+  EXPECT_FALSE(internal::PersonBackLineRmsAbove(o, 0.3, std::nan("")));
+}
+
 }  // namespace
 }  // namespace lrfnet::tracking

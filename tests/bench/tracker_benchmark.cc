@@ -12,11 +12,22 @@
 // so the cost of each shows side by side in the same run. A markdown table goes to stdout and to
 // --out FILE (replacing its header and table; the file's "## " sections after them are kept).
 //
-//   tracker_benchmark [--out FILE] [--scans N] [--people LIST] [--no-send] [google benchmark flags]
+//   tracker_benchmark [--out FILE] [--scans N] [--people LIST] [--no-send] [--rounds R]
+//                     [--no-turns] [google benchmark flags]
 //
 // --people 0,50 renders only those synthetic scenes and skips the capture (for profiling one case
 // under callgrind, where rendering every scene costs more than the timed loop). --no-send drops the
 // encoded datagrams instead of sending them (the path without the kernel's UDP send).
+//
+// --rounds R runs the cases in turns instead of one after the other (Google Benchmark's runner is
+// then not used; --benchmark_filter=PATTERN still selects the cases): each case's scans are cut
+// into R blocks and block r of every case runs before block r + 1 of any. On a shared machine the
+// load changes within seconds; run one after the other, one scene may be measured in a quiet
+// moment and the next in a busy one, and their ratio moves by more than most changes to the
+// tracker. In turns, every round's ratio to the empty scene compares times taken within the same
+// few hundred milliseconds; the table gives the median over the rounds and its spread. Without
+// --rounds the cases run one after the other as before and then once more in 10 rounds, whose
+// ratios the table's last column gives (--no-turns leaves that run out).
 
 #include <benchmark/benchmark.h>
 #include <sys/resource.h>
@@ -31,7 +42,9 @@
 #include <fstream>
 #include <iterator>
 #include <memory>
+#include <optional>
 #include <random>
+#include <regex>
 #include <string>
 #include <vector>
 
@@ -75,6 +88,16 @@ struct Row {
   double raw_bytes_per_s = 0.0;
   std::uint64_t confirmed_tracks = 0;
 };
+
+// Per case, from the run in turns (Interleaved): the CPU / empty-scene ratio's median over the
+// rounds and its lowest and highest.
+struct TurnStats {
+  double ratio_median = 0.0, ratio_low = 0.0, ratio_high = 0.0;
+};
+std::vector<std::pair<std::string, TurnStats>>& Turns() {
+  static std::vector<std::pair<std::string, TurnStats>> turns;
+  return turns;
+}
 
 std::vector<Row>& Rows() {
   static std::vector<Row> rows;
@@ -217,59 +240,95 @@ class DroppingSink final : public io::DatagramSink {
   std::size_t bytes = 0;
 };
 
+// One case's tracker with its learned background, fed the case's timed scans one at a time.
+class CaseRunner {
+ public:
+  explicit CaseRunner(const Case* c) : case_(c) {}
+
+  // Opens the uplink and learns the background; an error message when the uplink cannot open.
+  std::optional<std::string> SetUp() {
+    io::UdpUplinkOptions udp_options;
+    udp_options.host = "127.0.0.1";
+    udp_options.port = receiver_.port();
+    udp_options.sensor_id = "bench";
+    udp_ = std::make_unique<io::UdpUplink>(udp_options);
+    if (auto e = udp_->Open()) return e;
+    tracker::TrackerConfig config;
+    config.sensor_id = "bench";
+    config.tracking.background.max_range_m = 40.0;
+    if (case_->old_measurement) {
+      config.tracking.method = tracking::MeasurementMethod::kEllipse;
+      config.tracking.tracking.static_objects = false;
+      config.tracking.tracking.report_coasting_s = config.tracking.tracking.coast_timeout_s;
+      config.tracking.tracking.max_speed_mps = 1000.0;
+    }
+    node_ = case_->send ? std::make_unique<tracker::TrackerNode>(config, 1, *udp_)
+                        : std::make_unique<tracker::TrackerNode>(config, 1, dropping_);
+    listener_.node = node_.get();
+    for (const Frame& f : case_->input->learn) decoder_.Feed(f.bytes, f.receive_ns, listener_);
+    receiver_.Drain();
+    bytes_before_ = node_->encoder().counters().bytes;
+    return std::nullopt;
+  }
+
+  bool Exhausted() const { return next_ == case_->input->timed.size(); }
+
+  // Feeds the next timed scan; its wall and thread CPU time in µs.
+  void Feed(double* wall_us, double* cpu_us) {
+    const Frame& f = case_->input->timed[next_++];
+    const double cpu_started = ThreadCpuUs();
+    const auto started = Clock::now();
+    decoder_.Feed(f.bytes, f.receive_ns, listener_);
+    *wall_us = std::chrono::duration<double, std::micro>(Clock::now() - started).count();
+    *cpu_us = ThreadCpuUs() - cpu_started;
+    raw_bytes_ += f.bytes.size();
+    if ((next_ & 255) == 0) receiver_.Drain();
+  }
+
+  std::size_t fed() const { return next_; }
+  double uplink_bytes() const {
+    return static_cast<double>(node_->encoder().counters().bytes - bytes_before_);
+  }
+  double raw_bytes() const { return static_cast<double>(raw_bytes_); }
+  std::uint64_t confirmed_tracks() const {
+    return node_->pipeline().tracker().counters().confirmed;
+  }
+
+ private:
+  const Case* case_;
+  lrfnet::testing::LoopbackUdpPeer receiver_;
+  std::unique_ptr<io::UdpUplink> udp_;
+  DroppingSink dropping_;
+  std::unique_ptr<tracker::TrackerNode> node_;
+  cola::StreamDecoder decoder_;
+  Listener listener_;
+  std::uint64_t bytes_before_ = 0;
+  std::uint64_t raw_bytes_ = 0;
+  std::size_t next_ = 0;
+};
+
 void RunCase(benchmark::State& state, const Case* c) {
   const Input* input = c->input;
-  lrfnet::testing::LoopbackUdpPeer receiver;
-  io::UdpUplinkOptions udp_options;
-  udp_options.host = "127.0.0.1";
-  udp_options.port = receiver.port();
-  udp_options.sensor_id = "bench";
-  io::UdpUplink udp(udp_options);
-  if (auto e = udp.Open()) {
+  CaseRunner runner(c);
+  if (auto e = runner.SetUp()) {
     state.SkipWithError(e->c_str());
     return;
   }
-  tracker::TrackerConfig config;
-  config.sensor_id = "bench";
-  config.tracking.background.max_range_m = 40.0;
-  if (c->old_measurement) {
-    config.tracking.method = tracking::MeasurementMethod::kEllipse;
-    config.tracking.tracking.static_objects = false;
-    config.tracking.tracking.report_coasting_s = config.tracking.tracking.coast_timeout_s;
-    config.tracking.tracking.max_speed_mps = 1000.0;
-  }
-  DroppingSink dropping;
-  auto node = c->send ? std::make_unique<tracker::TrackerNode>(config, 1, udp)
-                      : std::make_unique<tracker::TrackerNode>(config, 1, dropping);
-  cola::StreamDecoder decoder;
-  Listener listener;
-  listener.node = node.get();
-  for (const Frame& f : input->learn) decoder.Feed(f.bytes, f.receive_ns, listener);
-  receiver.Drain();
-
   std::vector<double> durations_us;
   std::vector<double> cpu_us;
   durations_us.reserve(input->timed.size());
   cpu_us.reserve(input->timed.size());
-  const std::uint64_t bytes_before = node->encoder().counters().bytes;
-  std::uint64_t raw_bytes = 0;
-  std::size_t i = 0;
   lrfnet::testing::StartCountingAllocations();
   for (auto _ : state) {
-    if (i == input->timed.size()) {
+    if (runner.Exhausted()) {
       // Out of pre-rendered scans: stop (the learning above must not be repeated in the loop).
       state.SkipWithError("input exhausted; pass a smaller --benchmark_min_time or more --scans");
       break;
     }
-    const Frame& f = input->timed[i++];
-    const double cpu_started = ThreadCpuUs();
-    const auto started = Clock::now();
-    decoder.Feed(f.bytes, f.receive_ns, listener);
-    durations_us.push_back(
-        std::chrono::duration<double, std::micro>(Clock::now() - started).count());
-    cpu_us.push_back(ThreadCpuUs() - cpu_started);
-    raw_bytes += f.bytes.size();
-    if ((i & 255) == 0) receiver.Drain();
+    double wall = 0.0, cpu = 0.0;
+    runner.Feed(&wall, &cpu);
+    durations_us.push_back(wall);
+    cpu_us.push_back(cpu);
   }
   const std::size_t allocations = lrfnet::testing::StopCountingAllocations();
   if (durations_us.empty()) return;
@@ -287,10 +346,9 @@ void RunCase(benchmark::State& state, const Case* c) {
   getrusage(RUSAGE_SELF, &usage);
   row.peak_rss_kib = usage.ru_maxrss;
   const double seconds = static_cast<double>(row.scans) / input->rate_hz;
-  row.uplink_bytes_per_s =
-      static_cast<double>(node->encoder().counters().bytes - bytes_before) / seconds;
-  row.raw_bytes_per_s = static_cast<double>(raw_bytes) / seconds;
-  row.confirmed_tracks = node->pipeline().tracker().counters().confirmed;
+  row.uplink_bytes_per_s = runner.uplink_bytes() / seconds;
+  row.raw_bytes_per_s = runner.raw_bytes() / seconds;
+  row.confirmed_tracks = runner.confirmed_tracks();
   state.counters["median_us"] = row.median_us;
   state.counters["p99_us"] = row.p99_us;
   state.counters["allocs"] = static_cast<double>(row.allocations);
@@ -305,12 +363,112 @@ void RunCase(benchmark::State& state, const Case* c) {
   }
 }
 
+// The empty scene's case of the same measurement as `c` (the same name after the last comma).
+std::size_t EmptySceneOf(const std::vector<const Case*>& cases, std::size_t c) {
+  const std::string& name = cases[c]->name;
+  const std::string suffix = name.substr(name.rfind(','));
+  for (std::size_t e = 0; e < cases.size(); ++e) {
+    const std::string& n = cases[e]->name;
+    if (n.find(" 0 people") != std::string::npos && n.substr(n.rfind(',')) == suffix) return e;
+  }
+  return cases.size();
+}
+
+// The cases run in turns: every case's timed scans are cut into `rounds` consecutive blocks, and
+// block r of every case runs before block r + 1 of any (the order of the cases rotated from round
+// to round), so that a change in the machine's load during the run falls on every scene alike. Per
+// case: the median over the rounds of each round's median CPU time per scan, with the fastest and
+// slowest round's, and the ratio to the empty scene of the same measurement taken round by round
+// (each round's median against the empty scene's in the same round), its median over the rounds
+// with the smallest and largest.
+std::string Interleaved(const std::vector<const Case*>& cases, std::size_t rounds) {
+  std::vector<std::unique_ptr<CaseRunner>> runners;
+  for (const Case* c : cases) {
+    runners.push_back(std::make_unique<CaseRunner>(c));
+    if (auto e = runners.back()->SetUp()) {
+      std::fprintf(stderr, "tracker_benchmark: %s: %s\n", c->name.c_str(), e->c_str());
+      std::exit(1);
+    }
+  }
+  const std::size_t n = cases.size();
+  // round_median[c][r]
+  std::vector<std::vector<double>> round_median(n, std::vector<double>(rounds, 0.0));
+  std::vector<std::size_t> allocations(n, 0);
+  std::vector<double> cpu_us, wall_us;
+  for (std::size_t r = 0; r < rounds; ++r) {
+    for (std::size_t k = 0; k < n; ++k) {
+      const std::size_t c = (k + r) % n;
+      const std::size_t total = cases[c]->input->timed.size();
+      const std::size_t end = total * (r + 1) / rounds;
+      cpu_us.clear();
+      wall_us.clear();
+      cpu_us.reserve(total);
+      wall_us.reserve(total);
+      lrfnet::testing::StartCountingAllocations();
+      while (runners[c]->fed() < end) {
+        double wall = 0.0, cpu = 0.0;
+        runners[c]->Feed(&wall, &cpu);
+        wall_us.push_back(wall);
+        cpu_us.push_back(cpu);
+      }
+      allocations[c] += lrfnet::testing::StopCountingAllocations();
+      round_median[c][r] = cpu_us.empty() ? 0.0 : Quantile(cpu_us, 0.5);
+    }
+  }
+  std::string out =
+      "| input | scans | rounds | CPU median µs (median of the rounds) | fastest round | slowest "
+      "round | CPU / empty scene (median of the rounds) | lowest | highest | allocations | "
+      "uplink B/s | confirmed tracks |\n"
+      "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n";
+  char line[512];
+  for (std::size_t c = 0; c < n; ++c) {
+    const std::vector<double>& m = round_median[c];
+    const std::size_t e = EmptySceneOf(cases, c);
+    std::vector<double> ratio;
+    if (e < n) {
+      for (std::size_t r = 0; r < rounds; ++r) {
+        if (round_median[e][r] > 0.0) ratio.push_back(m[r] / round_median[e][r]);
+      }
+    }
+    const auto [lo, hi] = std::minmax_element(m.begin(), m.end());
+    if (!ratio.empty()) {
+      Turns().emplace_back(cases[c]->name,
+                           TurnStats{Quantile(ratio, 0.5),
+                                     *std::min_element(ratio.begin(), ratio.end()),
+                                     *std::max_element(ratio.begin(), ratio.end())});
+    }
+    const double seconds = static_cast<double>(runners[c]->fed()) / cases[c]->input->rate_hz;
+    std::snprintf(line, sizeof line,
+                  "| %s | %zu | %zu | %.1f | %.1f | %.1f | %.2f | %.2f | %.2f | %zu | %.0f | %llu "
+                  "|\n",
+                  cases[c]->name.c_str(), runners[c]->fed(), rounds, Quantile(m, 0.5), *lo, *hi,
+                  ratio.empty() ? 0.0 : Quantile(ratio, 0.5),
+                  ratio.empty() ? 0.0 : *std::min_element(ratio.begin(), ratio.end()),
+                  ratio.empty() ? 0.0 : *std::max_element(ratio.begin(), ratio.end()),
+                  allocations[c], runners[c]->uplink_bytes() / seconds,
+                  static_cast<unsigned long long>(runners[c]->confirmed_tracks()));
+    out += line;
+  }
+  return out;
+}
+
+std::string TurnsCell(const std::string& name) {
+  for (const auto& [n, t] : Turns()) {
+    if (n != name) continue;
+    char cell[64];
+    std::snprintf(cell, sizeof cell, "%.2f [%.2f - %.2f]", t.ratio_median, t.ratio_low,
+                  t.ratio_high);
+    return cell;
+  }
+  return "-";
+}
+
 std::string Table() {
   std::string out =
       "| input | scans | median µs/scan | p99 µs/scan | CPU median µs | CPU p99 µs | CPU median / "
       "empty scene | allocations | peak RSS MiB | uplink B/s | raw CoLa-B B/s | uplink/raw | "
-      "confirmed tracks |\n"
-      "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n";
+      "confirmed tracks | CPU / empty scene, in turns: median [lowest - highest round] |\n"
+      "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n";
   char line[512];
   // The empty scene of the same measurement in this run.
   auto empty_cpu = [](const Row& r) {
@@ -328,12 +486,12 @@ std::string Table() {
     std::snprintf(
         line, sizeof line,
         "| %s | %zu | %.1f | %.1f | %.1f | %.1f | %.2f | %zu | %.1f | %.0f | %.0f | %.3f | "
-        "%llu |\n",
+        "%llu | %s |\n",
         r.name.c_str(), r.scans, r.median_us, r.p99_us, r.cpu_median_us, r.cpu_p99_us,
         empty > 0 ? r.cpu_median_us / empty : 0.0, r.allocations,
         static_cast<double>(r.peak_rss_kib) / 1024.0, r.uplink_bytes_per_s, r.raw_bytes_per_s,
         r.uplink_bytes_per_s / r.raw_bytes_per_s,
-        static_cast<unsigned long long>(r.confirmed_tracks));
+        static_cast<unsigned long long>(r.confirmed_tracks), TurnsCell(r.name).c_str());
     out += line;
   }
   return out;
@@ -349,12 +507,19 @@ int main(int argc, char** argv) {
   std::vector<int> people_counts = {0, 10, 50};
   bool capture_input = true;
   bool send = true;
+  std::size_t rounds = 0;
+  bool turns = true;
+  std::string filter;
   std::vector<char*> args;
   for (int i = 0; i < argc; ++i) {
     if (std::strcmp(argv[i], "--out") == 0 && i + 1 < argc) {
       out_path = argv[++i];
     } else if (std::strcmp(argv[i], "--scans") == 0 && i + 1 < argc) {
       scans = static_cast<std::size_t>(std::stoul(argv[++i]));
+    } else if (std::strcmp(argv[i], "--rounds") == 0 && i + 1 < argc) {
+      rounds = static_cast<std::size_t>(std::stoul(argv[++i]));
+    } else if (std::strcmp(argv[i], "--no-turns") == 0) {
+      turns = false;
     } else if (std::strcmp(argv[i], "--no-send") == 0) {
       send = false;
     } else if (std::strcmp(argv[i], "--people") == 0 && i + 1 < argc) {
@@ -367,6 +532,7 @@ int main(int argc, char** argv) {
       }
       capture_input = false;
     } else {
+      if (std::strncmp(argv[i], "--benchmark_filter=", 19) == 0) filter = argv[i] + 19;
       args.push_back(argv[i]);
     }
   }
@@ -398,10 +564,28 @@ int main(int argc, char** argv) {
       cases.push_back(std::move(c));
     }
   }
-  benchmark::RunSpecifiedBenchmarks();
+  // The cases whose name --benchmark_filter's pattern finds (for the runs in turns).
+  std::vector<const Case*> selected;
+  const std::regex pattern(filter.empty() ? std::string(".") : filter);
+  for (const auto& c : cases) {
+    if (std::regex_search(c->name, pattern)) selected.push_back(c.get());
+  }
+  if (selected.empty()) {
+    std::fprintf(stderr, "tracker_benchmark: no case matches --benchmark_filter\n");
+    return 1;
+  }
+  std::string table;
+  if (rounds > 0) {
+    table = Interleaved(selected, rounds);
+  } else {
+    benchmark::RunSpecifiedBenchmarks();
+    // The ratios once more with the cases in turns (10 rounds), beside the table's ratios of cases
+    // measured one after the other (--no-turns: without).
+    if (turns) Interleaved(selected, 10);
+    table = Table();
+  }
   benchmark::Shutdown();
 
-  const std::string table = Table();
   std::printf("\n%s", table.c_str());
   if (!out_path.empty()) {
     // The file's sections after the generated table ("## ...": measurements side by side, analyses)
@@ -419,8 +603,21 @@ int main(int argc, char** argv) {
            "iteration; allocations counted in the timed loop; peak RSS is the process's after "
            "the case (inputs for all cases are held in memory). old: the previous measurement "
            "(fixed-axes ellipse), new: the body-centre shape fit (the default); CPU median / empty "
-           "scene: against the 0-people scene of the same measurement in this run.\n\n"
-        << table << kept;
+           "scene: against the 0-people scene of the same measurement in this run.";
+    if (rounds == 0 && turns) {
+      out << " Last column: the cases run once more in turns, 10 rounds of consecutive scans each "
+             "(the order rotated from round to round), each round's median against the empty "
+             "scene's in the same round; the median over the rounds with the lowest and highest "
+             "(a change of the machine's load during the run falls on every scene alike).";
+    }
+    if (rounds > 0) {
+      out << " The cases ran in turns, " << rounds
+          << " rounds of consecutive scans each (the order rotated from round to round): CPU "
+             "times are the median over the rounds of each round's median, the ratios to the "
+             "empty scene are taken round by round and their median given with the lowest and "
+             "highest.";
+    }
+    out << "\n\n" << table << kept;
   }
   return 0;
 }
