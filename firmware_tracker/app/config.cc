@@ -218,6 +218,12 @@ void VisitShape(tracking::ShapeOptions& o, ConfigVisitor& v) {
           "(across it no wider than a pair, or than a leg and a beam footprint) where a leg fills "
           "no beam footprint: a far leg's mixed pixels at ranges between the leg and what is "
           "behind, no body's outline.");
+  v.Field("deep_mixed_pixel_behind_ratio", o.deep_mixed_pixel_behind_ratio,
+          "mount legs: ... only where the learned background of the piece's beams lies behind it "
+          "within this many times the piece's depth (a mixed pixel's echoes each carry at least "
+          "a fifth of the energy: 4); elsewhere nothing stands behind to mix with and the piece "
+          "is kept (two legs in radial stride, an object end-on). 0: no surface behind "
+          "required.");
   v.Field("gait_sigma_m", o.gait_sigma_m,
           "mount legs: how far the midpoint of the legs strays from the body centre while "
           "walking (1 sigma).");

@@ -201,6 +201,9 @@ std::optional<std::string> Validate(const ShapeOptions& o) {
   if (!(std::isfinite(o.mixed_pixel_min_footprint_m) && o.mixed_pixel_min_footprint_m >= 0.0)) {
     return "mixed_pixel_min_footprint_m must be >= 0 (0: off)";
   }
+  if (!(std::isfinite(o.deep_mixed_pixel_behind_ratio) && o.deep_mixed_pixel_behind_ratio >= 0.0)) {
+    return "deep_mixed_pixel_behind_ratio must be >= 0";
+  }
   if (!(std::isfinite(o.mixed_pixel_min_gap_m) && o.mixed_pixel_min_gap_m >= 0.0)) {
     return "mixed_pixel_min_gap_m must be >= 0";
   }
@@ -739,8 +742,11 @@ void TrackingPipeline::BuildObservations(const ScanView& scan) {
     const auto pts = segments_.Points(s);
     if (o.drop_deep_mixed_pixel_pieces && s.width_m > pair_width &&
         DeepMixedPixels(pts, pair_width)) {
-      ++counters_.veiled_segments;
-      continue;
+      if (SurfaceBehind(s)) {
+        ++counters_.veiled_segments;
+        continue;
+      }
+      ++counters_.deep_pieces_kept;
     }
     if (o.drop_mixed_pixel_legs && s.width_m <= pair_width && Veiled(scan, s)) {
       ++counters_.veiled_segments;
@@ -809,6 +815,31 @@ bool TrackingPipeline::DeepMixedPixels(std::span<const Eigen::Vector2d> pts,
   const double footprint_m = nearest_m * o.beam_divergence_rad + o.beam_exit_diameter_m;
   if (AcrossWidth(pts) > std::max(pair_width_m, 2.0 * o.leg_radius_m + footprint_m)) return false;
   return nearest_m * o.beam_divergence_rad >= 2.0 * o.leg_radius_m;
+}
+
+// The evidence a deep piece's points are mixed pixels (ShapeOptions::deep_mixed_pixel_behind_ratio):
+// a mixed range m = w n + (1 - w) f of a near echo n and a far one f, each weight at least s,
+// puts f no more than (1 - s) / s (m - n) behind m. The piece's nearest point stands for n, its
+// farthest for m; a beam of the piece whose learned background lies behind the nearest point and
+// no more than ratio times the depth behind the farthest is that surface f.
+bool TrackingPipeline::SurfaceBehind(const Segment& segment) const {
+  const double ratio = options_.shape.deep_mixed_pixel_behind_ratio;
+  if (!(ratio > 0.0)) return true;
+  const auto pts = segments_.Points(segment);
+  double nearest_m = std::numeric_limits<double>::infinity();
+  double farthest_m = 0.0;
+  for (const Eigen::Vector2d& p : pts) {
+    const double r = p.norm();
+    nearest_m = std::min(nearest_m, r);
+    farthest_m = std::max(farthest_m, r);
+  }
+  const double limit_m = farthest_m + ratio * (farthest_m - nearest_m);
+  const auto background = background_.background_range_m();
+  for (std::size_t b = segment.begin_beam; b < segment.end_beam && b < background.size(); ++b) {
+    const double f = static_cast<double>(background[b]);
+    if (f > nearest_m && f <= limit_m) return true;  // 0 = free: no surface
+  }
+  return false;
 }
 
 // Single-beam legs (ShapeOptions::single_beam_legs): foreground beams in no segment, within the

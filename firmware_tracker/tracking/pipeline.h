@@ -131,6 +131,15 @@ struct ShapeOptions {
   // 850 measured clutter scans were such 2-3 point pieces). Counted in
   // PipelineCounters::veiled_segments. false: measured as a wide object.
   bool drop_deep_mixed_pixel_pieces = true;
+  // ... but only where a surface stands behind the piece to mix with: a mixed pixel's range is
+  // its echoes' energy-weighted mean, each carrying at least a minor share s of the energy (else
+  // the receiver reports the other one alone), so the surface behind lies at most (1 - s) / s times
+  // the piece's depth (farthest minus nearest point) behind its farthest point. Taken as the
+  // learned background of the piece's beams; this is that ratio (4: echoes under 20 % of the
+  // energy are not merged). A piece with no background there (legs in radial stride at 12 m before
+  // a wall at 30 m, an open hall, a bicycle end-on) is kept and counted in
+  // PipelineCounters::deep_pieces_kept. 0: no surface behind required (the piece's shape alone).
+  double deep_mixed_pixel_behind_ratio = 4.0;
   double gait_sigma_m = 0.05;
   // Legs mount: one leg whose partner is hidden behind it. Walking legs are always
   // 2 hip_half_width_m apart across the walk, so where one leg hides the other, the other stands
@@ -335,6 +344,7 @@ struct PipelineCounters {
   std::uint64_t legs_across_walk = 0;   // one leg measured across the walk (single_leg_across_walk)
   std::uint64_t split_few_point_legs = 0;  // 2-3 point segments split into two legs
   std::uint64_t veiled_segments = 0;    // legs: mixed pixels (beside a nearer edge, deep), dropped
+  std::uint64_t deep_pieces_kept = 0;    // legs: deep pieces with no surface behind, kept
   std::uint64_t shadowed_legs = 0;      // legs: straight behind a confirmed track, dropped
   std::uint64_t absorbed_objects = 0;   // static objects handed to the background
   std::uint64_t seen_through = 0;       // coasting track reports dropped (seen through)
@@ -413,6 +423,7 @@ class TrackingPipeline {
   bool SeenThrough(const ScanView& scan, const Eigen::Vector2d& position_m, double half_width_m,
                    double max_beam_gap_m) const;
   bool DeepMixedPixels(std::span<const Eigen::Vector2d> pts, double pair_width_m) const;
+  bool SurfaceBehind(const Segment& segment) const;
   bool Veiled(const ScanView& scan, const Segment& segment) const;
   bool PartnerBehind(const ScanView& scan, const ObservationPart& part,
                      const Eigen::Vector2d& centre_m) const;

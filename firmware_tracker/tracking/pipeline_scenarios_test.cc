@@ -16,6 +16,7 @@
 #include <optional>
 #include <set>
 #include <string>
+#include <tuple>
 #include <utility>
 #include <vector>
 
@@ -1827,6 +1828,68 @@ TEST(PipelineScenarioTest, FarPiecesDeepAlongTheRayAreMixedPixelsNotObjects) {
       EXPECT_EQ(tracks, 1u) << rule << " " << static_cast<int>(piece);
       EXPECT_EQ(dropped, 0u) << rule << " " << static_cast<int>(piece);
     }
+  }
+}
+
+// Knee height, 25 Hz, 0.5 deg (0.105 m between beams at 12 m, where a leg fills no beam's
+// footprint): a person walks straight away from the sensor from 12 m at 0.75 m/s for 3 s, legs in
+// radial stride, the near one returned by two beams, the far one 0.45 m behind it and 0.2 m to
+// the side by two more: one segment 0.56 m long, 0.31 m across the ray, a deep piece by its shape.
+// The wall behind stands 18 m farther (30 m): nothing for those echoes to mix with, so with
+// shape.deep_mixed_pixel_behind_ratio the piece is kept (one track, counted as kept every scan);
+// with the ratio 0 it is dropped by its shape (no track). The same shape 12 m away with a wall
+// 1.2 m behind the piece's far end (within 4 times its 0.47 m depth: mixed pixels between the near
+// leg and the wall) is dropped either way.
+TEST(PipelineScenarioTest, DeepPieceIsDroppedOnlyWithASurfaceBehindToMixWith) {
+  constexpr std::size_t kBeams = 361;
+  constexpr double kStepRad = 0.5 * common::kPi / 180.0;
+  const auto run = [&](double ratio, float wall_m) {
+    TrackerOptions options;
+    options.shape.mount = Mount::kLegs;
+    options.shape.deep_mixed_pixel_behind_ratio = ratio;
+    TrackingPipeline pipeline(options);
+    std::vector<float> ranges(kBeams);
+    std::set<std::uint32_t> ids;
+    std::uint64_t dropped_before = 0, kept_before = 0;
+    const auto k0 = static_cast<std::int64_t>(kLearnedS * 25.0);
+    for (std::int64_t k = 0; k < k0 + 75; ++k) {
+      std::fill(ranges.begin(), ranges.end(), wall_m);
+      if (k >= k0) {
+        // Walking away keeps the gap to a near wall: the wall is the piece's surface behind.
+        const float walked =
+            wall_m < 20.0f ? 0.0f : 0.03f * static_cast<float>(k - k0);  // 0.75 m/s
+        const float near_leg[] = {12.0f, 12.02f, 12.45f, 12.47f};
+        for (std::size_t i = 0; i < 4; ++i) ranges[180 + i] = near_leg[i] + walked;
+      } else if (k == k0 - 1) {
+        dropped_before = pipeline.counters().veiled_segments;
+        kept_before = pipeline.counters().deep_pieces_kept;
+      }
+      ScanView scan;
+      scan.first_angle_rad = -0.5 * common::kPi;
+      scan.angle_step_rad = kStepRad;
+      scan.range_m = ranges;
+      scan.stamp_ns = 1'600'000'000 * common::kNsPerS + k * 40 * common::kNsPerMs;
+      scan.scan_period_s = 0.04;
+      for (const TrackReport& r : pipeline.Process(scan, static_cast<std::uint32_t>(k)).tracks) {
+        ids.insert(r.track_id);
+      }
+    }
+    return std::make_tuple(ids.size(), pipeline.counters().veiled_segments - dropped_before,
+                           pipeline.counters().deep_pieces_kept - kept_before);
+  };
+  const auto [stride_tracks, stride_dropped, stride_kept] = run(4.0, 30.0f);
+  EXPECT_EQ(stride_tracks, 1u);
+  EXPECT_EQ(stride_dropped, 0u);
+  EXPECT_EQ(stride_kept, 75u);
+  const auto [shape_tracks, shape_dropped, shape_kept] = run(0.0, 30.0f);
+  EXPECT_EQ(shape_tracks, 0u);
+  EXPECT_EQ(shape_dropped, 75u);
+  EXPECT_EQ(shape_kept, 0u);
+  for (const double ratio : {4.0, 0.0}) {
+    const auto [mixed_tracks, mixed_dropped, mixed_kept] = run(ratio, 13.67f);
+    EXPECT_EQ(mixed_tracks, 0u) << ratio;
+    EXPECT_EQ(mixed_dropped, 75u) << ratio;
+    EXPECT_EQ(mixed_kept, 0u) << ratio;
   }
 }
 

@@ -37,8 +37,9 @@
 //                       [--before-mixed-pixels] [--before-far] [--before-evidence-coasting]
 //                       [--before-one-leg] [--before-confirm-time] [--before-whole-person]
 //                       [--before-box-size] [--before-single-beam] [--before-deep-pieces]
-//                       [--before-isotropic-bias] [--before-across-walk] [--before-few-point-legs]
-//                       [--before-legs-seen-through] [--before-legs-report-coasting]]
+//                       [--before-deep-evidence] [--before-isotropic-bias] [--before-across-walk]
+//                       [--before-few-point-legs] [--before-legs-seen-through]
+//                       [--before-legs-report-coasting]]
 //   (--extra: more scenario folders, e.g. held-out scenes, reported in their own section;
 //   --explain: per run on stderr, what became of an object's previous track at every id switch
 //   and missed scan, what the false positives are (by scan and by false track: a track left
@@ -63,7 +64,9 @@
 //   knee-height legs returned by a single beam, ShapeOptions::single_beam_legs = false;
 //   --before-deep-pieces: "before" measures knee-height pieces deep along the line of sight but
 //   no wider across it than a pair of legs as wide objects, also where a leg fills no beam,
-//   ShapeOptions::drop_deep_mixed_pixel_pieces = false;
+//   ShapeOptions::drop_deep_mixed_pixel_pieces = false; --before-deep-evidence: "before" drops
+//   those pieces by their shape alone, also with no surface behind them to mix with,
+//   ShapeOptions::deep_mixed_pixel_behind_ratio = 0;
 //   --before-isotropic-bias: "before" reports the centre's shared error as the same sigma in every
 //   direction, ShapeOptions::centre_bias_along_ray = false;
 //   --before-across-walk: "before" measures a walking track's single leg as the leg itself,
@@ -715,6 +718,9 @@ bool g_before_single_beam = false;
 // wider across it than a pair of legs as wide objects, also where a leg fills no beam
 // (ShapeOptions::drop_deep_mixed_pixel_pieces = false).
 bool g_before_deep_pieces = false;
+// --before-deep-evidence: "before" drops such deep pieces by their shape alone, also where no surface
+// stands behind them to mix with (ShapeOptions::deep_mixed_pixel_behind_ratio = 0).
+bool g_before_deep_evidence = false;
 // --before-isotropic-bias: "before" reports the centre's shared error in every direction alike
 // (ShapeOptions::centre_bias_along_ray = false).
 bool g_before_isotropic_bias = false;
@@ -768,8 +774,9 @@ std::vector<Variant> Variants(sim::Mount mount, double range_m) {
   } else if (g_before_mixed_pixels || g_before_far || g_before_evidence_coasting ||
              g_before_one_leg || g_before_confirm_time || g_before_whole_person ||
              g_before_box_size || g_before_single_beam || g_before_deep_pieces ||
-             g_before_isotropic_bias || g_before_across_walk || g_before_few_point_legs ||
-             g_before_legs_seen_through || g_before_legs_report_coasting) {
+             g_before_deep_evidence || g_before_isotropic_bias || g_before_across_walk ||
+             g_before_few_point_legs || g_before_legs_seen_through ||
+             g_before_legs_report_coasting) {
     tracking::TrackerOptions before = fresh;
     if (g_before_one_leg) before.shape.hidden_leg_behind = false;
     if (g_before_mixed_pixels) before.shape.drop_mixed_pixel_legs = false;
@@ -781,6 +788,7 @@ std::vector<Variant> Variants(sim::Mount mount, double range_m) {
     if (g_before_single_beam) before.shape.single_beam_legs = false;
     if (g_before_isotropic_bias) before.shape.centre_bias_along_ray = false;
     if (g_before_deep_pieces) before.shape.drop_deep_mixed_pixel_pieces = false;
+    if (g_before_deep_evidence) before.shape.deep_mixed_pixel_behind_ratio = 0.0;
     if (g_before_across_walk) before.shape.single_leg_across_walk = false;
     if (g_before_few_point_legs) before.shape.split_few_point_legs = false;
     if (g_before_legs_seen_through) before.shape.legs_seen_through = false;
@@ -1631,8 +1639,8 @@ std::string Targets(const Section& s) {
 // --before-whole-person, --before-box-size, any of them), empty otherwise.
 std::string KneeHeightBefore() {
   if (!(g_before_one_leg || g_before_confirm_time || g_before_whole_person || g_before_box_size ||
-        g_before_single_beam || g_before_deep_pieces || g_before_isotropic_bias ||
-        g_before_across_walk || g_before_few_point_legs ||
+        g_before_single_beam || g_before_deep_pieces || g_before_deep_evidence ||
+        g_before_isotropic_bias || g_before_across_walk || g_before_few_point_legs ||
         g_before_legs_seen_through || g_before_legs_report_coasting) ||
       g_before_mixed_pixels || g_before_far || g_before_evidence_coasting ||
       g_before_report_rules) {
@@ -1667,6 +1675,11 @@ std::string KneeHeightBefore() {
         "measuring knee-height pieces deep along the line of sight but no wider across it than a "
         "pair of legs as wide objects, also where a leg fills no beam "
         "(`shape.drop_deep_mixed_pixel_pieces` false)");
+  }
+  if (g_before_deep_evidence) {
+    without.push_back(
+        "dropping those deep knee-height pieces by their shape alone, also where no surface stands "
+        "behind them to mix with (`shape.deep_mixed_pixel_behind_ratio` 0)");
   }
   if (g_before_isotropic_bias) {
     without.push_back(
@@ -1756,6 +1769,8 @@ int main(int argc, char** argv) {
       g_before_single_beam = true;
     } else if (a == "--before-deep-pieces") {
       g_before_deep_pieces = true;
+    } else if (a == "--before-deep-evidence") {
+      g_before_deep_evidence = true;
     } else if (a == "--before-isotropic-bias") {
       g_before_isotropic_bias = true;
     } else if (a == "--before-across-walk") {
@@ -1775,8 +1790,8 @@ int main(int argc, char** argv) {
                    "[--before-report-rules | [--before-mixed-pixels] [--before-far] "
                    "[--before-evidence-coasting] [--before-one-leg] [--before-confirm-time] "
                    "[--before-whole-person] [--before-box-size] [--before-single-beam] "
-                   "[--before-deep-pieces] [--before-isotropic-bias] [--before-across-walk] "
-                   "[--before-few-point-legs] "
+                   "[--before-deep-pieces] [--before-deep-evidence] [--before-isotropic-bias] "
+                   "[--before-across-walk] [--before-few-point-legs] "
                    "[--before-legs-seen-through] [--before-legs-report-coasting]]\n");
       return 2;
     }
