@@ -742,7 +742,7 @@ void TrackingPipeline::BuildObservations(const ScanView& scan) {
     const auto pts = segments_.Points(s);
     if (o.drop_deep_mixed_pixel_pieces && s.width_m > pair_width &&
         DeepMixedPixels(pts, pair_width)) {
-      if (SurfaceBehind(s)) {
+      if (SurfaceBehind(scan, s)) {
         ++counters_.veiled_segments;
         continue;
       }
@@ -821,9 +821,13 @@ bool TrackingPipeline::DeepMixedPixels(std::span<const Eigen::Vector2d> pts,
 // a mixed range m = w n + (1 - w) f of a near echo n and a far one f, each weight at least s,
 // puts f no more than (1 - s) / s (m - n) behind m. The piece's nearest point stands for n, its
 // farthest for m; a beam of the piece whose learned background lies behind the nearest point and
-// no more than ratio times the depth behind the farthest is that surface f.
-bool TrackingPipeline::SurfaceBehind(const Segment& segment) const {
-  const double ratio = options_.shape.deep_mixed_pixel_behind_ratio;
+// no more than ratio times the depth behind the farthest is that surface f. Where every point may
+// be mixed (the nearest one too, so the depth understates how far f lies), the piece spans no
+// more beams than one leg touches: those whose footprint reaches it, (2 leg_radius_m + footprint)
+// / (range x step) + 1 (as Veiled bounds its pieces by the footprint's beams).
+bool TrackingPipeline::SurfaceBehind(const ScanView& scan, const Segment& segment) const {
+  const ShapeOptions& o = options_.shape;
+  const double ratio = o.deep_mixed_pixel_behind_ratio;
   if (!(ratio > 0.0)) return true;
   const auto pts = segments_.Points(segment);
   double nearest_m = std::numeric_limits<double>::infinity();
@@ -832,6 +836,12 @@ bool TrackingPipeline::SurfaceBehind(const Segment& segment) const {
     const double r = p.norm();
     nearest_m = std::min(nearest_m, r);
     farthest_m = std::max(farthest_m, r);
+  }
+  const double spacing_m = nearest_m * std::abs(scan.angle_step_rad);
+  const double footprint_m = nearest_m * o.beam_divergence_rad + o.beam_exit_diameter_m;
+  if (spacing_m > 0.0 && static_cast<double>(segment.end_beam - segment.begin_beam) <=
+                             std::floor((2.0 * o.leg_radius_m + footprint_m) / spacing_m) + 1.0) {
+    return true;  // within one leg's beams
   }
   const double limit_m = farthest_m + ratio * (farthest_m - nearest_m);
   const auto background = background_.background_range_m();

@@ -136,7 +136,8 @@ struct ShapeOptions {
   // the receiver reports the other one alone), so the surface behind lies at most (1 - s) / s times
   // the piece's depth (farthest minus nearest point) behind its farthest point. Taken as the
   // learned background of the piece's beams; this is that ratio (4: echoes under 20 % of the
-  // energy are not merged). A piece with no background there (legs in radial stride at 12 m before
+  // energy are not merged). A piece within the beams one leg touches ((2 leg_radius_m +
+  // footprint) / beam spacing + 1) needs no such evidence: all of it may be mixed. A piece with no background there (legs in radial stride at 12 m before
   // a wall at 30 m, an open hall, a bicycle end-on) is kept and counted in
   // PipelineCounters::deep_pieces_kept. 0: no surface behind required (the piece's shape alone).
   double deep_mixed_pixel_behind_ratio = 4.0;
@@ -423,7 +424,7 @@ class TrackingPipeline {
   bool SeenThrough(const ScanView& scan, const Eigen::Vector2d& position_m, double half_width_m,
                    double max_beam_gap_m) const;
   bool DeepMixedPixels(std::span<const Eigen::Vector2d> pts, double pair_width_m) const;
-  bool SurfaceBehind(const Segment& segment) const;
+  bool SurfaceBehind(const ScanView& scan, const Segment& segment) const;
   bool Veiled(const ScanView& scan, const Segment& segment) const;
   bool PartnerBehind(const ScanView& scan, const ObservationPart& part,
                      const Eigen::Vector2d& centre_m) const;

@@ -1834,7 +1834,8 @@ TEST(PipelineScenarioTest, FarPiecesDeepAlongTheRayAreMixedPixelsNotObjects) {
 // Knee height, 25 Hz, 0.5 deg (0.105 m between beams at 12 m, where a leg fills no beam's
 // footprint): a person walks straight away from the sensor from 12 m at 0.75 m/s for 3 s, legs in
 // radial stride, the near one returned by two beams, the far one 0.45 m behind it and 0.2 m to
-// the side by two more: one segment 0.56 m long, 0.31 m across the ray, a deep piece by its shape.
+// the side by two more: one segment 0.56 m long, 0.31 m across the ray, a deep piece by its shape,
+// over more beams (4) than one leg's footprint touches there (3).
 // The wall behind stands 18 m farther (30 m): nothing for those echoes to mix with, so with
 // shape.deep_mixed_pixel_behind_ratio the piece is kept (one track, counted as kept every scan);
 // with the ratio 0 it is dropped by its shape (no track). The same shape 12 m away with a wall
