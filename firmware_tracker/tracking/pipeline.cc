@@ -817,14 +817,15 @@ bool TrackingPipeline::DeepMixedPixels(std::span<const Eigen::Vector2d> pts,
   return nearest_m * o.beam_divergence_rad >= 2.0 * o.leg_radius_m;
 }
 
-// The evidence a deep piece's points are mixed pixels (ShapeOptions::deep_mixed_pixel_behind_ratio):
-// a mixed range m = w n + (1 - w) f of a near echo n and a far one f, each weight at least s,
-// puts f no more than (1 - s) / s (m - n) behind m. The piece's nearest point stands for n, its
-// farthest for m; a beam of the piece whose learned background lies behind the nearest point and
-// no more than ratio times the depth behind the farthest is that surface f. Where every point may
-// be mixed (the nearest one too, so the depth understates how far f lies), the piece spans no
-// more beams than one leg touches: those whose footprint reaches it, (2 leg_radius_m + footprint)
-// / (range x step) + 1 (as Veiled bounds its pieces by the footprint's beams).
+// The evidence a deep piece's points are mixed pixels
+// (ShapeOptions::deep_mixed_pixel_behind_ratio): a mixed range m = w n + (1 - w) f of a near echo n
+// and a far one f, each weight at least s, puts f no more than (1 - s) / s (m - n) behind m. The
+// piece's nearest point stands for n, its farthest for m; a beam of the piece whose learned
+// background lies behind the nearest point and no more than ratio times the depth behind the
+// farthest is that surface f. Where every point may be mixed (the nearest one too, so the depth
+// understates how far f lies), the piece spans no more beams than one leg touches: those whose
+// footprint reaches it, (2 leg_radius_m + footprint) / (range x step) + 1 (as Veiled bounds its
+// pieces by the footprint's beams).
 bool TrackingPipeline::SurfaceBehind(const ScanView& scan, const Segment& segment) const {
   const ShapeOptions& o = options_.shape;
   const double ratio = o.deep_mixed_pixel_behind_ratio;

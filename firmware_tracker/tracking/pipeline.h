@@ -137,9 +137,10 @@ struct ShapeOptions {
   // the piece's depth (farthest minus nearest point) behind its farthest point. Taken as the
   // learned background of the piece's beams; this is that ratio (4: echoes under 20 % of the
   // energy are not merged). A piece within the beams one leg touches ((2 leg_radius_m +
-  // footprint) / beam spacing + 1) needs no such evidence: all of it may be mixed. A piece with no background there (legs in radial stride at 12 m before
-  // a wall at 30 m, an open hall, a bicycle end-on) is kept and counted in
-  // PipelineCounters::deep_pieces_kept. 0: no surface behind required (the piece's shape alone).
+  // footprint) / beam spacing + 1) needs no such evidence: all of it may be mixed. A piece with no
+  // background there (legs in radial stride at 12 m before a wall at 30 m, an open hall, a bicycle
+  // end-on) is kept and counted in PipelineCounters::deep_pieces_kept. 0: no surface behind
+  // required (the piece's shape alone).
   double deep_mixed_pixel_behind_ratio = 4.0;
   double gait_sigma_m = 0.05;
   // Legs mount: one leg whose partner is hidden behind it. Walking legs are always
@@ -345,7 +346,7 @@ struct PipelineCounters {
   std::uint64_t legs_across_walk = 0;   // one leg measured across the walk (single_leg_across_walk)
   std::uint64_t split_few_point_legs = 0;  // 2-3 point segments split into two legs
   std::uint64_t veiled_segments = 0;    // legs: mixed pixels (beside a nearer edge, deep), dropped
-  std::uint64_t deep_pieces_kept = 0;    // legs: deep pieces with no surface behind, kept
+  std::uint64_t deep_pieces_kept = 0;   // legs: deep pieces with no surface behind, kept
   std::uint64_t shadowed_legs = 0;      // legs: straight behind a confirmed track, dropped
   std::uint64_t absorbed_objects = 0;   // static objects handed to the background
   std::uint64_t seen_through = 0;       // coasting track reports dropped (seen through)

@@ -718,8 +718,8 @@ bool g_before_single_beam = false;
 // wider across it than a pair of legs as wide objects, also where a leg fills no beam
 // (ShapeOptions::drop_deep_mixed_pixel_pieces = false).
 bool g_before_deep_pieces = false;
-// --before-deep-evidence: "before" drops such deep pieces by their shape alone, also where no surface
-// stands behind them to mix with (ShapeOptions::deep_mixed_pixel_behind_ratio = 0).
+// --before-deep-evidence: "before" drops such deep pieces by their shape alone, also where no
+// surface stands behind them to mix with (ShapeOptions::deep_mixed_pixel_behind_ratio = 0).
 bool g_before_deep_evidence = false;
 // --before-isotropic-bias: "before" reports the centre's shared error in every direction alike
 // (ShapeOptions::centre_bias_along_ray = false).
