@@ -16,7 +16,7 @@ mkdir -p results
 # positives are (under a minute).
 "$build_dir/tests/bench/tracking_benchmark" --scenarios tools/scenarios --jobs 2 --breakdown --explain \
   --before-one-leg --before-confirm-time --before-whole-person --before-box-size --before-single-beam \
-  --before-deep-pieces --before-isotropic-bias --before-across-walk \
+  --before-deep-pieces --before-isotropic-bias --before-across-walk --before-fusion-merge \
   --out results/tracking_benchmark.md
 "$build_dir/tests/bench/store_benchmark" results/store_benchmark.md
 "$build_dir/tests/bench/daemon_benchmark" --out results/daemon_benchmark.md

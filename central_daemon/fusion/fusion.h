@@ -72,6 +72,9 @@
 // Merge: two fused tracks with disjoint sensors that stay within the gate of each other (position,
 // also under merge_max_distance_m, and velocity under merge_max_speed_difference_mps) for
 // merge_updates consecutive checks are one object: the younger is merged into the older id.
+// kFusedFilter: the position gate adds merge_centre_spread_m to both covariances (two sensors see
+// different sides of one body), and a fused track left without sources that coasts within the
+// gates of a measured one is merged into it too (merge_sourceless).
 // A tracker restart (TrackFrameData.session_id changes) unbinds every local track of the old
 // session; the new session's tracks (whose ids restart) are associated afresh.
 //
@@ -264,6 +267,19 @@ struct FusionOptions {
   std::uint32_t merge_updates = 5;
   double merge_max_distance_m = 0.6;
   double merge_max_speed_difference_mps = 0.5;
+  // kFusedFilter: the merge test's spread [m, per axis] of two sensors' centres of one body that
+  // their tracks' covariances leave out: each sensor sees another side of the body (its size,
+  // up to a torso's half depth), and the placements and the sensors' clocks are off a little.
+  // Added to both tracks' position covariances in the merge test only (s^2 I each), so narrow
+  // covariances across the line of sight do not keep one person's two fused tracks apart.
+  // 0: the tracks' covariances alone (earlier releases).
+  double merge_centre_spread_m = 0.1;
+  // kFusedFilter: a fused track that no local track feeds any more (its sources timed out or
+  // moved to another fused track), coasting within the merge gates of a measured fused track of
+  // other or the same sensors, is that track's object left behind: it is merged into it after
+  // merge_updates checks (the older id kept, the measured track's estimate). Off: it coasts on
+  // beside it until max_coast_s (earlier releases).
+  bool merge_sourceless = true;
 
   // Plausibility of a local track (sensor frame); anything outside is skipped and counted.
   double max_local_range_m = 500.0;
@@ -355,6 +371,11 @@ struct FusionCounters {
   std::uint64_t fused_created = 0;
   std::uint64_t fused_deleted = 0;        // timed out (merged ones are not counted here)
   std::uint64_t fused_merged = 0;         // merged into an older fused track
+  // kFusedFilter: of fused_merged, a track without sources merged with the measured track it
+  // coasted on (merge_sourceless).
+  std::uint64_t fused_merged_sourceless = 0;
+  // kFusedFilter: merge checks passed only with merge_centre_spread_m.
+  std::uint64_t merge_checks_spread = 0;
   std::uint64_t fused_over_capacity = 0;  // not created: max_fused_tracks reached
   std::uint64_t numerical_failures = 0;   // a covariance that could not be factorised (skipped)
   // kFusedFilter: a source's frame went to another fused track than the one it was bound to (its

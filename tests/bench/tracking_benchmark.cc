@@ -37,7 +37,8 @@
 //                       [--before-mixed-pixels] [--before-far] [--before-evidence-coasting]
 //                       [--before-one-leg] [--before-confirm-time] [--before-whole-person]
 //                       [--before-box-size] [--before-single-beam] [--before-deep-pieces]
-//                       [--before-isotropic-bias] [--before-across-walk]]
+//                       [--before-isotropic-bias] [--before-across-walk]
+//                       [--before-fusion-merge]]
 //   (--extra: more scenario folders, e.g. held-out scenes, reported in their own section;
 //   --explain: per run on stderr, what became of an object's previous track at every id switch
 //   and missed scan, what the false positives are (by scan and by false track: a track left
@@ -66,7 +67,11 @@
 //   --before-isotropic-bias: "before" reports the centre's shared error as the same sigma in every
 //   direction, ShapeOptions::centre_bias_along_ray = false;
 //   --before-across-walk: "before" measures a walking track's single leg as the leg itself,
-//   ShapeOptions::single_leg_across_walk = false; several:
+//   ShapeOptions::single_leg_across_walk = false;
+//   --before-fusion-merge: "before"'s fusion tests merges with the tracks' covariances alone and
+//   leaves a fused track without sources to coast beside the track that took its object,
+//   FusionOptions::merge_centre_spread_m = 0 and merge_sourceless = false (its tracker is the new
+//   one unless other --before-* flags are given); several:
 //   without any of them). --explain also
 //   writes the false positives' classes to the results (ExplainTable) and, on stderr, what the
 //   tracks measured again after more than 1 s (a lost track resumed) came back on.
@@ -715,6 +720,10 @@ bool g_before_isotropic_bias = false;
 // it) as the leg itself with the hip and stride extent, not hip_half_width_m across the walk from
 // it (ShapeOptions::single_leg_across_walk = false).
 bool g_before_across_walk = false;
+// --before-fusion-merge: "before"'s fusion without the merge test's centre spread and without
+// merging fused tracks left without sources (FusionOptions::merge_centre_spread_m = 0,
+// merge_sourceless = false).
+bool g_before_fusion_merge = false;
 const char* const kVariantNames[] = {"old", "new", "before"};
 // --explain: why tracks coast beside a person the scan returned (CoastingCause).
 bool g_explain_coasting = false;
@@ -749,7 +758,7 @@ std::vector<Variant> Variants(sim::Mount mount, double range_m) {
   } else if (g_before_mixed_pixels || g_before_far || g_before_evidence_coasting ||
              g_before_one_leg || g_before_confirm_time || g_before_whole_person ||
              g_before_box_size || g_before_single_beam || g_before_deep_pieces ||
-             g_before_isotropic_bias || g_before_across_walk) {
+             g_before_isotropic_bias || g_before_across_walk || g_before_fusion_merge) {
     tracking::TrackerOptions before = fresh;
     if (g_before_one_leg) before.shape.hidden_leg_behind = false;
     if (g_before_mixed_pixels) before.shape.drop_mixed_pixel_legs = false;
@@ -1086,8 +1095,8 @@ void RunSensor(const sim::Simulator& simulator, std::size_t sensor,
 }
 
 Mot RunFusion(const sim::Simulator& simulator, const std::vector<SensorFrames>& sensors,
-              Causes* causes) {
-  fusion::Fuser fuser;
+              const fusion::FusionOptions& options, Causes* causes) {
+  fusion::Fuser fuser(options);
   std::vector<fusion::SensorPlacement> placements;
   for (std::size_t i = 0; i < simulator.sensor_count(); ++i) {
     const sim::SensorSetup& s = simulator.sensor(i);
@@ -1287,7 +1296,13 @@ RunResult RunScenario(sim::Scenario scenario, bool all_legs, int jobs) {
       by_sensor.push_back(std::move(frames[i][v]));
     }
     result.fused_causes.emplace_back();
-    result.fused.push_back(RunFusion(*simulator, by_sensor, &result.fused_causes.back()));
+    fusion::FusionOptions fusion_options;
+    if (g_before_fusion_merge && std::string(kVariantNames[v]) == "before") {
+      fusion_options.merge_centre_spread_m = 0.0;
+      fusion_options.merge_sourceless = false;
+    }
+    result.fused.push_back(
+        RunFusion(*simulator, by_sensor, fusion_options, &result.fused_causes.back()));
   }
   return result;
 }
@@ -1609,7 +1624,7 @@ std::string Targets(const Section& s) {
 std::string KneeHeightBefore() {
   if (!(g_before_one_leg || g_before_confirm_time || g_before_whole_person || g_before_box_size ||
         g_before_single_beam || g_before_deep_pieces || g_before_isotropic_bias ||
-        g_before_across_walk) ||
+        g_before_across_walk || g_before_fusion_merge) ||
       g_before_mixed_pixels || g_before_far || g_before_evidence_coasting ||
       g_before_report_rules) {
     return "";
@@ -1654,9 +1669,16 @@ std::string KneeHeightBefore() {
         "measuring a walking track's single leg as the leg itself rather than hip_half_width_m "
         "across the walk from it (`shape.single_leg_across_walk` false)");
   }
-  std::string text = "\"before\": the new tracker ";
+  std::string text = "\"before\": the new tracker" + std::string(without.empty() ? "" : " ");
   for (std::size_t i = 0; i < without.size(); ++i) {
     text += (i == 0 ? "" : i + 1 == without.size() ? " and " : ", ") + without[i];
+  }
+  if (g_before_fusion_merge) {
+    text +=
+        std::string(without.empty() ? "" : ",") +
+        " fused by a fusion that tests merges with the tracks' covariances alone and leaves a "
+        "fused track without sources to coast beside the track that took its object "
+        "(`fusion.merge_centre_spread_m` 0, `fusion.merge_sourceless` false)";
   }
   const char* const same =
       g_before_isotropic_bias
@@ -1721,6 +1743,8 @@ int main(int argc, char** argv) {
       g_before_isotropic_bias = true;
     } else if (a == "--before-across-walk") {
       g_before_across_walk = true;
+    } else if (a == "--before-fusion-merge") {
+      g_before_fusion_merge = true;
     } else if (a == "--jobs") {
       jobs = std::max(1, std::atoi(value().c_str()));
     } else {
@@ -1730,7 +1754,8 @@ int main(int argc, char** argv) {
                    "[--before-report-rules | [--before-mixed-pixels] [--before-far] "
                    "[--before-evidence-coasting] [--before-one-leg] [--before-confirm-time] "
                    "[--before-whole-person] [--before-box-size] [--before-single-beam] "
-                   "[--before-deep-pieces] [--before-isotropic-bias] [--before-across-walk]]\n");
+                   "[--before-deep-pieces] [--before-isotropic-bias] [--before-across-walk] "
+                   "[--before-fusion-merge]]\n");
       return 2;
     }
   }
