@@ -251,6 +251,9 @@ void VisitFusion(DaemonConfig& c, ConfigVisitor& v) {
           "fused_filter: spread (m, per axis) of two sensors' centres of one body added to both "
           "tracks' covariances in the merge test (each sensor sees another side); 0: the "
           "covariances alone.");
+  v.Field("report_sourceless", o.report_sourceless,
+          "fused_filter: also publish a fused track no sensor's track is bound to any more "
+          "(coasting until max_coast_s); off: kept for its id, not published.");
   v.Field("merge_sourceless", o.merge_sourceless,
           "fused_filter: a fused track without sources coasting on a measured one is merged "
           "into it rather than left beside it as a second track.");

@@ -280,6 +280,12 @@ struct FusionOptions {
   // merge_updates checks (the older id kept, the measured track's estimate). Off: it coasts on
   // beside it until max_coast_s (earlier releases).
   bool merge_sourceless = true;
+  // kFusedFilter: a confirmed fused track that no sensor's local track is bound to any more (its
+  // last source timed out: every tracker that followed it dropped it, after coasting through
+  // what hid it) is kept for max_coast_s to be picked up with its id, but not reported by
+  // Snapshot: no sensor claims the object is there. On: reported as coasting until deleted
+  // (earlier releases).
+  bool report_sourceless = false;
 
   // Plausibility of a local track (sensor frame); anything outside is skipped and counted.
   double max_local_range_m = 500.0;
@@ -376,6 +382,9 @@ struct FusionCounters {
   std::uint64_t fused_merged_sourceless = 0;
   // kFusedFilter: merge checks passed only with merge_centre_spread_m.
   std::uint64_t merge_checks_spread = 0;
+  // kFusedFilter: confirmed fused tracks whose last source timed out, no longer reported from
+  // then on unless a source binds again (report_sourceless off).
+  std::uint64_t fused_unreported_sourceless = 0;
   std::uint64_t fused_over_capacity = 0;  // not created: max_fused_tracks reached
   std::uint64_t numerical_failures = 0;   // a covariance that could not be factorised (skipped)
   // kFusedFilter: a source's frame went to another fused track than the one it was bound to (its

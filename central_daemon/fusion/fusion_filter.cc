@@ -706,6 +706,9 @@ class FusedFilterEngine final : public Engine {
             ++counters_.handovers;  // other sensors continue the track
           } else {
             f->second.last_sensor = sensor_id;
+            if (!options_.report_sourceless && f->second.confirmed) {
+              ++counters_.fused_unreported_sourceless;
+            }
           }
           ss.forgotten[it->first] = SensorState::Forgotten{f->first, lt.stamp()};
         }
@@ -1497,6 +1500,7 @@ std::vector<FusedTrack> FusedFilterEngine::Snapshot(UtcNs now_ns, bool include_t
   std::vector<FusedTrack> out;
   for (const auto& [id, f] : tracks_) {
     if (f.updates == 0 || (!f.confirmed && !include_tentative)) continue;
+    if (!options_.report_sourceless && f.sources.empty()) continue;  // no tracker claims it
     std::optional<FusedTrack> t =
         PredictedFusedTrack(id, f.confirmed, f.first_ns, f.stamp_ns, f.updates, f.x.head<4>(),
                             f.p.topLeftCorner<4, 4>(), options_, now_ns);

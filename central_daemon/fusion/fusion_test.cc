@@ -252,7 +252,9 @@ TEST_P(FuserTest, UnplacedSensorIsCountedAndIgnored) {
 // Lifecycle
 
 TEST_P(FuserTest, TentativeConfirmedCoastingDeleted) {
-  Fuser fuser(Options());
+  FusionOptions o = Options();
+  o.report_sourceless = true;  // the coasting track is reported until deleted
+  Fuser fuser(o);
   fuser.SetPlacements({Placed("a", 0, 0, 0)});
   fuser.AddFrame("a", FrameAt(1.00, {Obs(1, 3, 0, 1, 0)}));
   EXPECT_TRUE(fuser.Snapshot(AtSeconds(1.0)).empty());
@@ -1063,6 +1065,7 @@ TEST(FusedFilterTest, ALocalTrackSentAgainAfterTheSourceTimeoutFeedsItsFusedTrac
 std::pair<std::vector<FusedTrack>, FusionCounters> RunLeftBehind(bool merge_sourceless) {
   FusionOptions o;
   o.merge_sourceless = merge_sourceless;
+  o.report_sourceless = !merge_sourceless;  // earlier releases: both off / on
   Fuser fuser(o);
   fuser.SetPlacements({Placed("a", 0, 0, 0)});
   const auto x = [](double t) { return 3.0 + 1.0 * (t - 1.0); };
@@ -1092,6 +1095,41 @@ TEST(FusedFilterTest, AFusedTrackLeftBehindByItsSourcesMergesIntoTheTrackThatToo
   ASSERT_EQ(after[0].sources.size(), 1u);
   EXPECT_EQ(after[0].sources[0].track_id, 2u);
   EXPECT_NEAR(after[0].y_m, 1.1, 0.03);  // the measured track's estimate, not a blend
+}
+
+TEST(FusedFilterTest, AFusedTrackNoTrackerHoldsIsKeptForItsIdButNotReported) {
+  // A walker leaves the only sensor's view at t = 2 s (its tracker drops the track) and its
+  // tracker starts a new track where the fused track coasted to at t = 2.7 s.
+  const auto run = [](bool report_sourceless, std::size_t* reported_at_2_6,
+                      std::set<std::uint64_t>* ids) {
+    FusionOptions o;
+    o.report_sourceless = report_sourceless;
+    Fuser fuser(o);
+    fuser.SetPlacements({Placed("a", 0, 0, 0)});
+    for (int k = 0; k <= 50; ++k) {
+      const double t = 1.0 + 0.04 * k;
+      const double x = 3.0 + 1.0 * (t - 1.0);
+      std::vector<TrackObservation> tracks;
+      if (t < 2.0) tracks.push_back(Obs(1, x, 1.0, 1.0, 0.0));
+      if (t > 2.7) tracks.push_back(Obs(2, x, 1.0, 1.0, 0.0));
+      fuser.AddFrame("a", FrameAt(t, std::move(tracks)));
+      fuser.Tick(AtSeconds(t));
+      const auto fused = fuser.Snapshot(AtSeconds(t));
+      if (std::abs(t - 2.6) < 0.02) *reported_at_2_6 = fused.size();
+      for (const FusedTrack& f : fused) ids->insert(f.id);
+    }
+    return fuser.counters();
+  };
+  std::size_t before = 0, after = 0;
+  std::set<std::uint64_t> before_ids, after_ids;
+  const FusionCounters before_counters = run(true, &before, &before_ids);
+  const FusionCounters counters = run(false, &after, &after_ids);
+  EXPECT_EQ(before, 1u);  // coasting with no tracker holding it
+  EXPECT_EQ(before_counters.fused_unreported_sourceless, 0u);
+  EXPECT_EQ(after, 0u);
+  EXPECT_EQ(counters.fused_unreported_sourceless, 1u);
+  EXPECT_EQ(after_ids, before_ids);  // the new track picks up the kept id
+  EXPECT_EQ(after_ids.size(), 1u);
 }
 
 // Two sensors face each other across a walker; their trackers report covariances narrow across

@@ -1300,6 +1300,7 @@ RunResult RunScenario(sim::Scenario scenario, bool all_legs, int jobs) {
     if (g_before_fusion_merge && std::string(kVariantNames[v]) == "before") {
       fusion_options.merge_centre_spread_m = 0.0;
       fusion_options.merge_sourceless = false;
+      fusion_options.report_sourceless = true;
     }
     result.fused.push_back(
         RunFusion(*simulator, by_sensor, fusion_options, &result.fused_causes.back()));
