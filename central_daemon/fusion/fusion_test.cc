@@ -1168,7 +1168,7 @@ TEST(FusedFilterTest, NarrowCovariancesOfTwoSensorsOnOneBodyAreMergedWithTheCent
   ASSERT_EQ(before_counters.fused_created, 2u);  // b's track did not fit a's fused track
   EXPECT_EQ(before, 2u);
   EXPECT_EQ(before_counters.fused_merged, 0u);
-  const auto [after, counters] = RunNarrowCovariances(FusionOptions().merge_centre_spread_m);
+  const auto [after, counters] = RunNarrowCovariances(0.1);
   ASSERT_EQ(counters.fused_created, 2u);
   EXPECT_EQ(counters.fused_merged, 1u);
   EXPECT_GT(counters.merge_checks_spread, 0u);

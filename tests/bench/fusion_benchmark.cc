@@ -93,8 +93,8 @@ struct Config {
   bool learn_sensor_bias = true;  // fused filter: FusionOptions::learn_sensor_bias
   // fused filter: FusionOptions::sensor_bias_offset_sigma_fraction (< 0: the default)
   double offset_sigma_fraction = -1.0;
-  // fused filter: the earlier release's merge test and reporting (merge_centre_spread_m 0,
-  // merge_sourceless off, report_sourceless on).
+  // fused filter: the earlier release's merging and reporting (merge_sourceless off,
+  // report_sourceless on).
   bool earlier_merge = false;
 };
 
@@ -502,7 +502,6 @@ void Run(const Config& config, double seconds, std::uint32_t seed, Totals& total
   options.method = config.method;
   options.learn_sensor_bias = config.learn_sensor_bias;
   if (config.earlier_merge) {
-    options.merge_centre_spread_m = 0.0;
     options.merge_sourceless = false;
     options.report_sourceless = true;
   }
@@ -821,10 +820,9 @@ int main(int argc, char** argv) {
       "new information, with each sensor's centre offset as a state, and each sensor's constant "
       "centre offset and placement error learnt across its tracks, the placement error taken out "
       "of its frames and the offset where its sigma is at most a third of its kind's), *fused "
-      "filter, earlier merge and reporting* (the same testing merges with the tracks' "
-      "covariances alone, merge_centre_spread_m 0, leaving fused tracks without sources beside "
-      "the track that took their object, merge_sourceless off, and reporting them as coasting, "
-      "report_sourceless on: the earlier release), *fused "
+      "filter, earlier merge and reporting* (the same leaving fused tracks without sources "
+      "beside the track that took their object, merge_sourceless off, and reporting them as "
+      "coasting, report_sourceless on: the earlier release), *fused "
       "filter, every learnt offset taken out* (the same taking out every learnt offset, "
       "sensor_bias_offset_sigma_fraction 10: the earlier release), "
       "*fused filter, no sensor bias* (the same without that learning, learn_sensor_bias off: "

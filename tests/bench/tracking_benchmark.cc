@@ -68,9 +68,9 @@
 //   direction, ShapeOptions::centre_bias_along_ray = false;
 //   --before-across-walk: "before" measures a walking track's single leg as the leg itself,
 //   ShapeOptions::single_leg_across_walk = false;
-//   --before-fusion-merge: "before"'s fusion tests merges with the tracks' covariances alone and
-//   leaves a fused track without sources to coast beside the track that took its object,
-//   FusionOptions::merge_centre_spread_m = 0 and merge_sourceless = false (its tracker is the new
+//   --before-fusion-merge: "before"'s fusion leaves a fused track without sources to coast beside
+//   the track that took its object and reports fused tracks no tracker holds any more,
+//   FusionOptions::merge_sourceless = false and report_sourceless = true (its tracker is the new
 //   one unless other --before-* flags are given); several:
 //   without any of them). --explain also
 //   writes the false positives' classes to the results (ExplainTable) and, on stderr, what the
@@ -720,9 +720,9 @@ bool g_before_isotropic_bias = false;
 // it) as the leg itself with the hip and stride extent, not hip_half_width_m across the walk from
 // it (ShapeOptions::single_leg_across_walk = false).
 bool g_before_across_walk = false;
-// --before-fusion-merge: "before"'s fusion without the merge test's centre spread and without
-// merging fused tracks left without sources (FusionOptions::merge_centre_spread_m = 0,
-// merge_sourceless = false).
+// --before-fusion-merge: "before"'s fusion without merging fused tracks left without sources and
+// reporting fused tracks no tracker holds any more (FusionOptions::merge_sourceless = false,
+// report_sourceless = true).
 bool g_before_fusion_merge = false;
 const char* const kVariantNames[] = {"old", "new", "before"};
 // --explain: why tracks coast beside a person the scan returned (CoastingCause).
@@ -1298,7 +1298,6 @@ RunResult RunScenario(sim::Scenario scenario, bool all_legs, int jobs) {
     result.fused_causes.emplace_back();
     fusion::FusionOptions fusion_options;
     if (g_before_fusion_merge && std::string(kVariantNames[v]) == "before") {
-      fusion_options.merge_centre_spread_m = 0.0;
       fusion_options.merge_sourceless = false;
       fusion_options.report_sourceless = true;
     }
@@ -1677,9 +1676,9 @@ std::string KneeHeightBefore() {
   if (g_before_fusion_merge) {
     text +=
         std::string(without.empty() ? "" : ",") +
-        " fused by a fusion that tests merges with the tracks' covariances alone and leaves a "
-        "fused track without sources to coast beside the track that took its object "
-        "(`fusion.merge_centre_spread_m` 0, `fusion.merge_sourceless` false)";
+        " fused by a fusion that leaves a fused track without sources to coast beside the track "
+        "that took its object and reports fused tracks no tracker holds any more "
+        "(`fusion.merge_sourceless` false, `fusion.report_sourceless` true)";
   }
   const char* const same =
       g_before_isotropic_bias
