@@ -247,6 +247,16 @@ void VisitFusion(DaemonConfig& c, ConfigVisitor& v) {
           "Two fused tracks further apart are never merged.");
   v.Field("merge_max_speed_difference_mps", o.merge_max_speed_difference_mps,
           "Two fused tracks whose velocities differ more are never merged.");
+  v.Field("merge_centre_spread_m", o.merge_centre_spread_m,
+          "fused_filter: spread (m, per axis) of two sensors' centres of one body added to both "
+          "tracks' covariances in the merge test (each sensor sees another side); 0: the "
+          "covariances alone.");
+  v.Field("report_sourceless", o.report_sourceless,
+          "fused_filter: also publish a fused track no sensor's track is bound to any more "
+          "(coasting until max_coast_s); off: kept for its id, not published.");
+  v.Field("merge_sourceless", o.merge_sourceless,
+          "fused_filter: a fused track without sources coasting on a measured one is merged "
+          "into it rather than left beside it as a second track.");
   v.Field("position_noise_floor_m2", o.position_noise_floor_m2,
           "latest_states: added to every source's position variance (calibration and centre "
           "errors).");

@@ -168,6 +168,9 @@ nlohmann::json FusionService::StatsJson() const {
   j["observations_invalid"] = f.observations_invalid;
   j["fused_created"] = f.fused_created;
   j["fused_merged"] = f.fused_merged;
+  j["fused_merged_sourceless"] = f.fused_merged_sourceless;
+  j["merge_checks_spread"] = f.merge_checks_spread;
+  j["fused_unreported_sourceless"] = f.fused_unreported_sourceless;
   j["handovers"] = f.handovers;
   j["numerical_failures"] = f.numerical_failures;
   nlohmann::json biases = nlohmann::json::array();

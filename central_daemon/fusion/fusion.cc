@@ -299,6 +299,10 @@ std::optional<std::string> Validate(const FusionOptions& o) {
   if (!positive(o.merge_max_speed_difference_mps)) {
     return "merge_max_speed_difference_mps must be > 0";
   }
+  if (!std::isfinite(o.merge_centre_spread_m) || o.merge_centre_spread_m < 0.0 ||
+      o.merge_centre_spread_m > o.merge_max_distance_m) {
+    return "merge_centre_spread_m must be in [0, merge_max_distance_m]";
+  }
   if (!positive(o.max_local_range_m)) return "max_local_range_m must be > 0";
   if (!positive(o.max_speed_mps)) return "max_speed_mps must be > 0";
   if (!positive(o.max_position_variance_m2)) return "max_position_variance_m2 must be > 0";

@@ -72,6 +72,11 @@
 // Merge: two fused tracks with disjoint sensors that stay within the gate of each other (position,
 // also under merge_max_distance_m, and velocity under merge_max_speed_difference_mps) for
 // merge_updates consecutive checks are one object: the younger is merged into the older id.
+// kFusedFilter: a fused track left without sources that coasts within the gates of a measured
+// one is merged into it too (merge_sourceless); the position gate may add
+// merge_centre_spread_m to both covariances (two sensors see different sides of one body; off by
+// default). A fused track no sensor's track is bound to any more is kept for its id but not
+// reported (report_sourceless).
 // A tracker restart (TrackFrameData.session_id changes) unbinds every local track of the old
 // session; the new session's tracks (whose ids restart) are associated afresh.
 //
@@ -264,6 +269,28 @@ struct FusionOptions {
   std::uint32_t merge_updates = 5;
   double merge_max_distance_m = 0.6;
   double merge_max_speed_difference_mps = 0.5;
+  // kFusedFilter: the merge test's spread [m, per axis] of two sensors' centres of one body that
+  // their tracks' covariances leave out: each sensor sees another side of the body (its size,
+  // up to a torso's half depth), and the placements and the sensors' clocks are off a little.
+  // Added to both tracks' position covariances in the merge test only (s^2 I each), so narrow
+  // covariances across the line of sight do not keep one person's two fused tracks apart.
+  // 0 (default): the tracks' covariances alone. (On fusion_benchmark's 25-people row with
+  // tracker errors, 0.1 merged people walking close together: fused RMS 0.052 -> 0.058 m, id
+  // switches 0.14 -> 0.23 per person-minute; 0.05: 0.054 m, 0.19. The fused tracks' covariances
+  // already hold each sensor's centre offset and pose error.)
+  double merge_centre_spread_m = 0.0;
+  // kFusedFilter: a fused track that no local track feeds any more (its sources timed out or
+  // moved to another fused track), coasting within the merge gates of a measured fused track of
+  // other or the same sensors, is that track's object left behind: it is merged into it after
+  // merge_updates checks (the older id kept, the measured track's estimate). Off: it coasts on
+  // beside it until max_coast_s (earlier releases).
+  bool merge_sourceless = true;
+  // kFusedFilter: a confirmed fused track that no sensor's local track is bound to any more (its
+  // last source timed out: every tracker that followed it dropped it, after coasting through
+  // what hid it) is kept for max_coast_s to be picked up with its id, but not reported by
+  // Snapshot: no sensor claims the object is there. On: reported as coasting until deleted
+  // (earlier releases).
+  bool report_sourceless = false;
 
   // Plausibility of a local track (sensor frame); anything outside is skipped and counted.
   double max_local_range_m = 500.0;
@@ -355,6 +382,14 @@ struct FusionCounters {
   std::uint64_t fused_created = 0;
   std::uint64_t fused_deleted = 0;        // timed out (merged ones are not counted here)
   std::uint64_t fused_merged = 0;         // merged into an older fused track
+  // kFusedFilter: of fused_merged, a track without sources merged with the measured track it
+  // coasted on (merge_sourceless).
+  std::uint64_t fused_merged_sourceless = 0;
+  // kFusedFilter: merge checks passed only with merge_centre_spread_m.
+  std::uint64_t merge_checks_spread = 0;
+  // kFusedFilter: confirmed fused tracks whose last source timed out, no longer reported from
+  // then on unless a source binds again (report_sourceless off).
+  std::uint64_t fused_unreported_sourceless = 0;
   std::uint64_t fused_over_capacity = 0;  // not created: max_fused_tracks reached
   std::uint64_t numerical_failures = 0;   // a covariance that could not be factorised (skipped)
   // kFusedFilter: a source's frame went to another fused track than the one it was bound to (its

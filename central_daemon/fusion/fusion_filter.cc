@@ -706,6 +706,9 @@ class FusedFilterEngine final : public Engine {
             ++counters_.handovers;  // other sensors continue the track
           } else {
             f->second.last_sensor = sensor_id;
+            if (!options_.report_sourceless && f->second.confirmed) {
+              ++counters_.fused_unreported_sourceless;
+            }
           }
           ss.forgotten[it->first] = SensorState::Forgotten{f->first, lt.stamp()};
         }
@@ -836,7 +839,9 @@ class FusedFilterEngine final : public Engine {
   }
 
   std::uint64_t MergeCheck(std::uint64_t f_id);
-  void Merge(std::uint64_t older_id, std::uint64_t younger_id);
+  // estimate_of: 0, or the one of the two whose estimate alone is kept (the other is a track
+  // without sources whose information is older and shares its sensors).
+  void Merge(std::uint64_t older_id, std::uint64_t younger_id, std::uint64_t estimate_of = 0);
 
   std::map<std::string, SensorState, std::less<>> sensors_;
   std::map<std::string, double, std::less<>> tracker_psd_;
@@ -1336,7 +1341,12 @@ std::uint64_t FusedFilterEngine::MergeCheck(std::uint64_t f_id) {
       }
     };
     const double dt = Seconds(t, g.stamp_ns);
-    if (std::abs(dt) > o.coast_after_s) {
+    // A track no local track feeds any more (none of its sources was in its sensor's latest
+    // frame), coasting while f is measured: its object's sources may have moved on to f
+    // (merge_sourceless).
+    const bool g_sourceless = o.merge_sourceless && g.updates > 0 && dt > o.coast_after_s &&
+                              dt <= o.max_coast_s && ActiveSensors(g).empty();
+    if (std::abs(dt) > o.coast_after_s && !g_sourceless) {
       reset();
       continue;
     }
@@ -1347,17 +1357,26 @@ std::uint64_t FusedFilterEngine::MergeCheck(std::uint64_t f_id) {
       continue;
     }
     const std::vector<std::string> g_sensors = ActiveSensors(g);
-    bool disjoint = !g_sensors.empty();
+    bool disjoint = !g_sensors.empty() || g_sourceless;
     for (const std::string& s : f_sensors) {
       if (std::find(g_sensors.begin(), g_sensors.end(), s) != g_sensors.end()) disjoint = false;
     }
     CvState gx = g.x.head<4>();
     CvCovariance gp = g.p.topLeftCorner<4, 4>();
     internal::Predict(dt, o.accel_psd, gx, gp);
-    if (!disjoint || !(Mahalanobis2(f_pos, f.p.topLeftCorner<2, 2>(), gx.head<2>(),
-                                    gp.topLeftCorner<2, 2>()) <= o.gate_mahalanobis2)) {
+    // Two sensors' centres of one body differ by what each sees of it: s^2 I on both sides
+    // (not for a coasting track, whose covariance grew with its coasting).
+    const double spread_m = g_sourceless ? 0.0 : o.merge_centre_spread_m;
+    const Eigen::Matrix2d spread = spread_m * spread_m * Eigen::Matrix2d::Identity();
+    const Eigen::Matrix2d fp = f.p.topLeftCorner<2, 2>(), gpp = gp.topLeftCorner<2, 2>();
+    if (!disjoint ||
+        !(Mahalanobis2(f_pos, fp + spread, gx.head<2>(), gpp + spread) <= o.gate_mahalanobis2)) {
       reset();
       continue;
+    }
+    if (spread_m > 0.0 &&
+        !(Mahalanobis2(f_pos, fp, gx.head<2>(), gpp) <= o.gate_mahalanobis2)) {
+      ++counters_.merge_checks_spread;
     }
     if (younger.merge_into == older_id) {
       ++younger.merge_count;
@@ -1366,7 +1385,8 @@ std::uint64_t FusedFilterEngine::MergeCheck(std::uint64_t f_id) {
       younger.merge_count = 1;
     }
     if (younger.merge_count >= o.merge_updates) {
-      Merge(older_id, std::max(g_id, f_id));
+      if (g_sourceless) ++counters_.fused_merged_sourceless;
+      Merge(older_id, std::max(g_id, f_id), g_sourceless ? f_id : 0);
       return older_id;
     }
   }
@@ -1377,7 +1397,8 @@ std::uint64_t FusedFilterEngine::MergeCheck(std::uint64_t f_id) {
 // so their estimates are independent: information-weighted sum of the two (x, y, vx, vy); the
 // older track's offsets are kept with their covariance, the younger's others start from their
 // priors.
-void FusedFilterEngine::Merge(std::uint64_t older_id, std::uint64_t younger_id) {
+void FusedFilterEngine::Merge(std::uint64_t older_id, std::uint64_t younger_id,
+                              std::uint64_t estimate_of) {
   Track& older = tracks_.at(older_id);
   auto yit = tracks_.find(younger_id);
   Track& younger = yit->second;
@@ -1386,9 +1407,22 @@ void FusedFilterEngine::Merge(std::uint64_t older_id, std::uint64_t younger_id) 
   Mat po, py;
   Predicted(older, t, xo, po);
   Predicted(younger, t, xy, py);
+  if (estimate_of != 0) {
+    // The track without sources keeps none: its local tracks were not in their sensors' latest
+    // frames (the trackers dropped them or moved them on).
+    Track& stale = estimate_of == younger_id ? older : younger;
+    const std::vector<SourceKey> keys = stale.sources;
+    for (const SourceKey& k : keys) Unbind(stale, k);
+  }
+  if (estimate_of == younger_id) {
+    // The younger (measured) track's estimate and offsets replace the older's.
+    xo = xy;
+    po = py;
+    older.offsets = younger.offsets;
+  }
   const Eigen::Matrix4d a = po.topLeftCorner<4, 4>(), b = py.topLeftCorner<4, 4>();
   const Eigen::LLT<Eigen::Matrix4d> lla(a), llb(b);
-  if (lla.info() == Eigen::Success && llb.info() == Eigen::Success) {
+  if (estimate_of == 0 && lla.info() == Eigen::Success && llb.info() == Eigen::Success) {
     const Eigen::Matrix4d ia = lla.solve(Eigen::Matrix4d::Identity());
     const Eigen::Matrix4d ib = llb.solve(Eigen::Matrix4d::Identity());
     const Eigen::LLT<Eigen::Matrix4d> llm(ia + ib);
@@ -1408,6 +1442,7 @@ void FusedFilterEngine::Merge(std::uint64_t older_id, std::uint64_t younger_id) 
   older.p = std::move(po);
   older.stamp_ns = t;
   for (const Offset& off : younger.offsets) {
+    if (estimate_of != 0) break;  // the measured track's offsets only
     if (older.OffsetIndex(off.sensor_id) < 0) {
       const int k = AddOffset(options_, older, off.sensor_id, off.prior, off.last_ns);
       (void)k;
@@ -1465,6 +1500,7 @@ std::vector<FusedTrack> FusedFilterEngine::Snapshot(UtcNs now_ns, bool include_t
   std::vector<FusedTrack> out;
   for (const auto& [id, f] : tracks_) {
     if (f.updates == 0 || (!f.confirmed && !include_tentative)) continue;
+    if (!options_.report_sourceless && f.sources.empty()) continue;  // no tracker claims it
     std::optional<FusedTrack> t =
         PredictedFusedTrack(id, f.confirmed, f.first_ns, f.stamp_ns, f.updates, f.x.head<4>(),
                             f.p.topLeftCorner<4, 4>(), options_, now_ns);

@@ -205,6 +205,12 @@ TEST(FusionOptionsTest, DefaultsAreValidAndBadValuesNamed) {
   o = {};
   o.sensor_bias_pose_prior_scale = 0.0;
   EXPECT_NE(Validate(o).value_or("").find("sensor_bias_pose_prior_scale"), std::string::npos);
+  o = {};
+  o.merge_centre_spread_m = -0.01;
+  EXPECT_NE(Validate(o).value_or("").find("merge_centre_spread_m"), std::string::npos);
+  o = {};
+  o.merge_centre_spread_m = o.merge_max_distance_m + 0.1;
+  EXPECT_NE(Validate(o).value_or("").find("merge_centre_spread_m"), std::string::npos);
 }
 
 TEST_P(FuserTest, InvalidPlacementsAreIgnoredAndCounted) {
@@ -246,7 +252,9 @@ TEST_P(FuserTest, UnplacedSensorIsCountedAndIgnored) {
 // Lifecycle
 
 TEST_P(FuserTest, TentativeConfirmedCoastingDeleted) {
-  Fuser fuser(Options());
+  FusionOptions o = Options();
+  o.report_sourceless = true;  // the coasting track is reported until deleted
+  Fuser fuser(o);
   fuser.SetPlacements({Placed("a", 0, 0, 0)});
   fuser.AddFrame("a", FrameAt(1.00, {Obs(1, 3, 0, 1, 0)}));
   EXPECT_TRUE(fuser.Snapshot(AtSeconds(1.0)).empty());
@@ -1047,6 +1055,124 @@ TEST(FusedFilterTest, ALocalTrackSentAgainAfterTheSourceTimeoutFeedsItsFusedTrac
   EXPECT_EQ(walker_ids.count(walker->id), 1u);
   EXPECT_NE(standing->id, walker->id);
   for (const FusedTrack& f : fused) EXPECT_EQ(f.sources.size(), 1u) << f.id;
+}
+
+// One sensor's tracker follows a walker with track 1, starts a second track (2) on the same
+// walker 0.1 m beside it at t = 2 s and drops track 1 at t = 2.3 s. Track 2 starts a fused track
+// of its own (the walker's fused track took track 1 in that frame); once track 1 is gone its fused
+// track coasts beside the one track 2 feeds. Returns the fused tracks seen at t = 3 s and the
+// counters.
+std::pair<std::vector<FusedTrack>, FusionCounters> RunLeftBehind(bool merge_sourceless) {
+  FusionOptions o;
+  o.merge_sourceless = merge_sourceless;
+  o.report_sourceless = !merge_sourceless;  // earlier releases: both off / on
+  Fuser fuser(o);
+  fuser.SetPlacements({Placed("a", 0, 0, 0)});
+  const auto x = [](double t) { return 3.0 + 1.0 * (t - 1.0); };
+  std::vector<FusedTrack> at_3s;
+  for (int k = 0; k <= 50; ++k) {
+    const double t = 1.0 + 0.04 * k;
+    std::vector<TrackObservation> tracks;
+    if (t < 2.3) tracks.push_back(Obs(1, x(t), 1.0, 1.0, 0.0));
+    if (t >= 2.0) tracks.push_back(Obs(2, x(t), 1.1, 1.0, 0.0));
+    fuser.AddFrame("a", FrameAt(t, std::move(tracks)));
+    fuser.Tick(AtSeconds(t));
+    if (k == 50) at_3s = fuser.Snapshot(AtSeconds(t));
+  }
+  return {at_3s, fuser.counters()};
+}
+
+TEST(FusedFilterTest, AFusedTrackLeftBehindByItsSourcesMergesIntoTheTrackThatTookItsObject) {
+  const auto [before, before_counters] = RunLeftBehind(false);
+  ASSERT_EQ(before_counters.fused_created, 2u);
+  EXPECT_EQ(before.size(), 2u);  // the left-behind track coasts beside the walker's
+  EXPECT_EQ(before_counters.fused_merged_sourceless, 0u);
+  const auto [after, counters] = RunLeftBehind(true);
+  ASSERT_EQ(counters.fused_created, 2u);
+  EXPECT_EQ(counters.fused_merged_sourceless, 1u);
+  ASSERT_EQ(after.size(), 1u);
+  EXPECT_EQ(after[0].id, 1u);  // the older id kept
+  ASSERT_EQ(after[0].sources.size(), 1u);
+  EXPECT_EQ(after[0].sources[0].track_id, 2u);
+  EXPECT_NEAR(after[0].y_m, 1.1, 0.03);  // the measured track's estimate, not a blend
+}
+
+TEST(FusedFilterTest, AFusedTrackNoTrackerHoldsIsKeptForItsIdButNotReported) {
+  // A walker leaves the only sensor's view at t = 2 s (its tracker drops the track) and its
+  // tracker starts a new track where the fused track coasted to at t = 2.7 s.
+  const auto run = [](bool report_sourceless, std::size_t* reported_at_2_6,
+                      std::set<std::uint64_t>* ids) {
+    FusionOptions o;
+    o.report_sourceless = report_sourceless;
+    Fuser fuser(o);
+    fuser.SetPlacements({Placed("a", 0, 0, 0)});
+    for (int k = 0; k <= 50; ++k) {
+      const double t = 1.0 + 0.04 * k;
+      const double x = 3.0 + 1.0 * (t - 1.0);
+      std::vector<TrackObservation> tracks;
+      if (t < 2.0) tracks.push_back(Obs(1, x, 1.0, 1.0, 0.0));
+      if (t > 2.7) tracks.push_back(Obs(2, x, 1.0, 1.0, 0.0));
+      fuser.AddFrame("a", FrameAt(t, std::move(tracks)));
+      fuser.Tick(AtSeconds(t));
+      const auto fused = fuser.Snapshot(AtSeconds(t));
+      if (std::abs(t - 2.6) < 0.02) *reported_at_2_6 = fused.size();
+      for (const FusedTrack& f : fused) ids->insert(f.id);
+    }
+    return fuser.counters();
+  };
+  std::size_t before = 0, after = 0;
+  std::set<std::uint64_t> before_ids, after_ids;
+  const FusionCounters before_counters = run(true, &before, &before_ids);
+  const FusionCounters counters = run(false, &after, &after_ids);
+  EXPECT_EQ(before, 1u);  // coasting with no tracker holding it
+  EXPECT_EQ(before_counters.fused_unreported_sourceless, 0u);
+  EXPECT_EQ(after, 0u);
+  EXPECT_EQ(counters.fused_unreported_sourceless, 1u);
+  EXPECT_EQ(after_ids, before_ids);  // the new track picks up the kept id
+  EXPECT_EQ(after_ids.size(), 1u);
+}
+
+// Two sensors face each other across a walker; their trackers report covariances narrow across
+// the line of sight (1 cm) and their centres 0.4 m apart across it (what each sees of the body,
+// and the sensors' clocks). The second sensor's track does not fit the first's fused track and
+// starts its own; the merge test with the centres' spread joins them, the covariances alone do
+// not.
+constexpr double kApart = 0.4;
+std::pair<std::size_t, FusionCounters> RunNarrowCovariances(double spread_m) {
+  FusionOptions o;
+  o.merge_centre_spread_m = spread_m;
+  o.learn_sensor_bias = false;
+  Fuser fuser(o);
+  fuser.SetPlacements({Placed("a", 0, 0, 0), Placed("b", 10, 0, 180)});
+  auto narrow = [](std::uint32_t id, double x, double y, double vy) {
+    TrackObservation obs = Obs(id, x, y, 0.0, vy);
+    obs.covariance[0] = 0.05f * 0.05f;  // along the line of sight (sensor x)
+    obs.covariance[4] = 0.01f * 0.01f;  // across it
+    return obs;
+  };
+  std::size_t tracks_at_end = 0;
+  for (int k = 0; k <= 100; ++k) {
+    const double t = 1.0 + 0.04 * k;
+    const double y = 0.5 * (t - 1.0);  // walking across both lines of sight at 0.5 m/s
+    fuser.AddFrame("a", FrameAt(t, {narrow(1, 5.0, y, 0.5)}));
+    // b sees the walker at world (5, y + kApart): in its frame (5, -(y + kApart)).
+    fuser.AddFrame("b", FrameAt(t + 0.01, {narrow(4, 5.0, -(y + kApart), -0.5)}));
+    fuser.Tick(AtSeconds(t + 0.01));
+    if (k == 100) tracks_at_end = fuser.Snapshot(AtSeconds(t + 0.01)).size();
+  }
+  return {tracks_at_end, fuser.counters()};
+}
+
+TEST(FusedFilterTest, NarrowCovariancesOfTwoSensorsOnOneBodyAreMergedWithTheCentreSpread) {
+  const auto [before, before_counters] = RunNarrowCovariances(0.0);
+  ASSERT_EQ(before_counters.fused_created, 2u);  // b's track did not fit a's fused track
+  EXPECT_EQ(before, 2u);
+  EXPECT_EQ(before_counters.fused_merged, 0u);
+  const auto [after, counters] = RunNarrowCovariances(0.1);
+  ASSERT_EQ(counters.fused_created, 2u);
+  EXPECT_EQ(counters.fused_merged, 1u);
+  EXPECT_GT(counters.merge_checks_spread, 0u);
+  EXPECT_EQ(after, 1u);
 }
 
 // ---------------------------------------------------------------------------------------------

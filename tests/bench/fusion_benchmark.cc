@@ -93,6 +93,9 @@ struct Config {
   bool learn_sensor_bias = true;  // fused filter: FusionOptions::learn_sensor_bias
   // fused filter: FusionOptions::sensor_bias_offset_sigma_fraction (< 0: the default)
   double offset_sigma_fraction = -1.0;
+  // fused filter: the earlier release's merging and reporting (merge_sourceless off,
+  // report_sourceless on).
+  bool earlier_merge = false;
 };
 
 struct Trajectories {
@@ -498,6 +501,10 @@ void Run(const Config& config, double seconds, std::uint32_t seed, Totals& total
   fusion::FusionOptions options;
   options.method = config.method;
   options.learn_sensor_bias = config.learn_sensor_bias;
+  if (config.earlier_merge) {
+    options.merge_sourceless = false;
+    options.report_sourceless = true;
+  }
   if (config.offset_sigma_fraction >= 0.0) {
     options.sensor_bias_offset_sigma_fraction = config.offset_sigma_fraction;
   }
@@ -813,6 +820,9 @@ int main(int argc, char** argv) {
       "new information, with each sensor's centre offset as a state, and each sensor's constant "
       "centre offset and placement error learnt across its tracks, the placement error taken out "
       "of its frames and the offset where its sigma is at most a third of its kind's), *fused "
+      "filter, earlier merge and reporting* (the same leaving fused tracks without sources "
+      "beside the track that took their object, merge_sourceless off, and reporting them as "
+      "coasting, report_sourceless on: the earlier release), *fused "
       "filter, every learnt offset taken out* (the same taking out every learnt offset, "
       "sensor_bias_offset_sigma_fraction 10: the earlier release), "
       "*fused filter, no sensor bias* (the same without that learning, learn_sensor_bias off: "
@@ -863,12 +873,13 @@ int main(int argc, char** argv) {
     if (!only.empty() && only != scene.name + "/" + std::to_string(scene.people)) continue;
     // The fused filter with the sensors' biases learnt (default), with every learnt offset taken
     // out (3), without learning (the earlier releases), and the latest states.
-    for (const int variant : {0, 3, 1, 2}) {
+    for (const int variant : {0, 4, 3, 1, 2}) {
       const fusion::FusionMethod method =
           variant != 2 ? fusion::FusionMethod::kFusedFilter : fusion::FusionMethod::kLatestStates;
       Config config = scene;
       config.method = method;
-      config.learn_sensor_bias = variant == 0 || variant == 3;
+      config.learn_sensor_bias = variant == 0 || variant == 3 || variant == 4;
+      config.earlier_merge = variant == 4;
       if (variant == 3) config.offset_sigma_fraction = 10.0;
       Totals totals;
       for (int k = 0; k < seeds; ++k)
@@ -923,6 +934,7 @@ int main(int argc, char** argv) {
           "%llu | %s |\n",
           config.name.c_str(),
           variant == 0   ? "fused filter"
+          : variant == 4 ? "fused filter, earlier merge and reporting"
           : variant == 3 ? "fused filter, every learnt offset taken out"
           : variant == 1 ? "fused filter, no sensor bias"
                          : "latest states",

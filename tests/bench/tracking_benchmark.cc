@@ -39,7 +39,8 @@
 //                       [--before-box-size] [--before-single-beam] [--before-deep-pieces]
 //                       [--before-deep-evidence] [--before-isotropic-bias] [--before-across-walk]
 //                       [--before-few-point-legs] [--before-legs-seen-through]
-//                       [--before-legs-report-coasting]]
+//                       [--before-legs-report-coasting]
+//                       [--before-fusion-merge]]
 //   (--extra: more scenario folders, e.g. held-out scenes, reported in their own section;
 //   --explain: per run on stderr, what became of an object's previous track at every id switch
 //   and missed scan, what the false positives are (by scan and by false track: a track left
@@ -76,7 +77,11 @@
 //   --before-legs-seen-through: "before" reports a knee-height coasting track also where the scan
 //   sees through every place its legs may stand, ShapeOptions::legs_seen_through = false;
 //   --before-legs-report-coasting: "before" reports a knee-height coasting track for all of
-//   MultiTrackerOptions::report_coasting_s, ShapeOptions::legs_report_coasting_s = 0; several:
+//   MultiTrackerOptions::report_coasting_s, ShapeOptions::legs_report_coasting_s = 0;
+//   --before-fusion-merge: "before"'s fusion leaves a fused track without sources to coast beside
+//   the track that took its object and reports fused tracks no tracker holds any more,
+//   FusionOptions::merge_sourceless = false and report_sourceless = true (its tracker is the new
+//   one unless other --before-* flags are given); several:
 //   without any of them). --explain also
 //   writes the false positives' classes to the results (ExplainTable) and, on stderr, what the
 //   tracks measured again after more than 1 s (a lost track resumed) came back on.
@@ -737,6 +742,10 @@ bool g_before_legs_seen_through = false;
 // --before-legs-report-coasting: "before" reports a knee-height coasting track for all of
 // report_coasting_s (ShapeOptions::legs_report_coasting_s = 0).
 bool g_before_legs_report_coasting = false;
+// --before-fusion-merge: "before"'s fusion without merging fused tracks left without sources and
+// reporting fused tracks no tracker holds any more (FusionOptions::merge_sourceless = false,
+// report_sourceless = true).
+bool g_before_fusion_merge = false;
 const char* const kVariantNames[] = {"old", "new", "before"};
 // --explain: why tracks coast beside a person the scan returned (CoastingCause).
 bool g_explain_coasting = false;
@@ -776,7 +785,7 @@ std::vector<Variant> Variants(sim::Mount mount, double range_m) {
              g_before_box_size || g_before_single_beam || g_before_deep_pieces ||
              g_before_deep_evidence || g_before_isotropic_bias || g_before_across_walk ||
              g_before_few_point_legs || g_before_legs_seen_through ||
-             g_before_legs_report_coasting) {
+             g_before_legs_report_coasting || g_before_fusion_merge) {
     tracking::TrackerOptions before = fresh;
     if (g_before_one_leg) before.shape.hidden_leg_behind = false;
     if (g_before_mixed_pixels) before.shape.drop_mixed_pixel_legs = false;
@@ -1117,8 +1126,8 @@ void RunSensor(const sim::Simulator& simulator, std::size_t sensor,
 }
 
 Mot RunFusion(const sim::Simulator& simulator, const std::vector<SensorFrames>& sensors,
-              Causes* causes) {
-  fusion::Fuser fuser;
+              const fusion::FusionOptions& options, Causes* causes) {
+  fusion::Fuser fuser(options);
   std::vector<fusion::SensorPlacement> placements;
   for (std::size_t i = 0; i < simulator.sensor_count(); ++i) {
     const sim::SensorSetup& s = simulator.sensor(i);
@@ -1318,7 +1327,13 @@ RunResult RunScenario(sim::Scenario scenario, bool all_legs, int jobs) {
       by_sensor.push_back(std::move(frames[i][v]));
     }
     result.fused_causes.emplace_back();
-    result.fused.push_back(RunFusion(*simulator, by_sensor, &result.fused_causes.back()));
+    fusion::FusionOptions fusion_options;
+    if (g_before_fusion_merge && std::string(kVariantNames[v]) == "before") {
+      fusion_options.merge_sourceless = false;
+      fusion_options.report_sourceless = true;
+    }
+    result.fused.push_back(
+        RunFusion(*simulator, by_sensor, fusion_options, &result.fused_causes.back()));
   }
   return result;
 }
@@ -1641,7 +1656,7 @@ std::string KneeHeightBefore() {
   if (!(g_before_one_leg || g_before_confirm_time || g_before_whole_person || g_before_box_size ||
         g_before_single_beam || g_before_deep_pieces || g_before_deep_evidence ||
         g_before_isotropic_bias || g_before_across_walk || g_before_few_point_legs ||
-        g_before_legs_seen_through || g_before_legs_report_coasting) ||
+        g_before_legs_seen_through || g_before_legs_report_coasting || g_before_fusion_merge) ||
       g_before_mixed_pixels || g_before_far || g_before_evidence_coasting ||
       g_before_report_rules) {
     return "";
@@ -1706,9 +1721,16 @@ std::string KneeHeightBefore() {
         "reporting a knee-height coasting track for all of `tracking.report_coasting_s` "
         "(`shape.legs_report_coasting_s` 0)");
   }
-  std::string text = "\"before\": the new tracker ";
+  std::string text = "\"before\": the new tracker" + std::string(without.empty() ? "" : " ");
   for (std::size_t i = 0; i < without.size(); ++i) {
     text += (i == 0 ? "" : i + 1 == without.size() ? " and " : ", ") + without[i];
+  }
+  if (g_before_fusion_merge) {
+    text +=
+        std::string(without.empty() ? "" : ",") +
+        " fused by a fusion that leaves a fused track without sources to coast beside the track "
+        "that took its object and reports fused tracks no tracker holds any more "
+        "(`fusion.merge_sourceless` false, `fusion.report_sourceless` true)";
   }
   const char* const same =
       g_before_isotropic_bias
@@ -1781,6 +1803,8 @@ int main(int argc, char** argv) {
       g_before_legs_seen_through = true;
     } else if (a == "--before-legs-report-coasting") {
       g_before_legs_report_coasting = true;
+    } else if (a == "--before-fusion-merge") {
+      g_before_fusion_merge = true;
     } else if (a == "--jobs") {
       jobs = std::max(1, std::atoi(value().c_str()));
     } else {
@@ -1792,7 +1816,8 @@ int main(int argc, char** argv) {
                    "[--before-whole-person] [--before-box-size] [--before-single-beam] "
                    "[--before-deep-pieces] [--before-deep-evidence] [--before-isotropic-bias] "
                    "[--before-across-walk] [--before-few-point-legs] "
-                   "[--before-legs-seen-through] [--before-legs-report-coasting]]\n");
+                   "[--before-legs-seen-through] [--before-legs-report-coasting] "
+                   "[--before-fusion-merge]]\n");
       return 2;
     }
   }
