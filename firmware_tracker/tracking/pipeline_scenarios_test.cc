@@ -10,11 +10,13 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <cstdint>
 #include <functional>
 #include <map>
 #include <memory>
 #include <optional>
 #include <set>
+#include <span>
 #include <string>
 #include <tuple>
 #include <utility>
@@ -35,6 +37,18 @@ using testing::Wall;
 
 using testing::kRateHz;
 constexpr double kLearnedS = 6.0;  // background learning (5 s) is over; people enter after this
+
+// Scan k of a sensor that turns once per period_ms, the given ranges from first_angle_rad on.
+ScanView RangesScan(std::span<const float> ranges, double first_angle_rad, double step_rad,
+                    std::int64_t k, std::int64_t period_ms) {
+  ScanView scan;
+  scan.first_angle_rad = first_angle_rad;
+  scan.angle_step_rad = step_rad;
+  scan.range_m = ranges;
+  scan.stamp_ns = 1'600'000'000 * common::kNsPerS + k * period_ms * common::kNsPerMs;
+  scan.scan_period_s = 1e-3 * static_cast<double>(period_ms);
+  return scan;
+}
 
 // A person moving through keyframes (time s, position m) with linear interpolation; absent before
 // the first and after the last keyframe. Shoulders (major axis) across the walking direction.
@@ -1143,7 +1157,8 @@ StandingFar StandFarAtKneeHeight(bool split) {
                    {{-2.0, -7.0}, {15.0, -7.0}},
                    {{-2.0, 7.0}, {-2.0, -7.0}}};
     const double stop_s = kLearnedS + 2.0;
-    scene.walkers = {Walker({{kLearnedS, {9.0, y}}, {stop_s, {11.0, y}}, {stop_s + 3.0, {11.0, y}}})};
+    scene.walkers = {
+        Walker({{kLearnedS, {9.0, y}}, {stop_s, {11.0, y}}, {stop_s + 3.0, {11.0, y}}})};
     TrackerOptions options = LegsOptions();
     options.shape.split_few_point_legs = split;
     const SceneRun run = Simulate(scene, stop_s + 3.0, options);
@@ -1727,12 +1742,8 @@ TEST(PipelineScenarioTest, MixedPixelsWithinAPersonsReachOfANearerReturnAreNotLe
       } else if (k == 299) {
         veiled_before = pipeline.counters().veiled_segments;
       }
-      ScanView scan;
-      scan.first_angle_rad = -0.5 * static_cast<double>(kBeams - 1) * kStepRad;
-      scan.angle_step_rad = kStepRad;
-      scan.range_m = ranges;
-      scan.stamp_ns = 1'600'000'000 * common::kNsPerS + k * 20 * common::kNsPerMs;
-      scan.scan_period_s = 0.02;
+      const ScanView scan =
+          RangesScan(ranges, -0.5 * static_cast<double>(kBeams - 1) * kStepRad, kStepRad, k, 20);
       for (const TrackReport& r : pipeline.Process(scan, static_cast<std::uint32_t>(k)).tracks) {
         ids.insert(r.track_id);
       }
@@ -1802,12 +1813,7 @@ TEST(PipelineScenarioTest, FarPiecesDeepAlongTheRayAreMixedPixelsNotObjects) {
       } else if (k == k0 - 1) {
         dropped_before = pipeline.counters().veiled_segments;
       }
-      ScanView scan;
-      scan.first_angle_rad = -0.5 * common::kPi;
-      scan.angle_step_rad = kStepRad;
-      scan.range_m = ranges;
-      scan.stamp_ns = 1'600'000'000 * common::kNsPerS + k * 40 * common::kNsPerMs;
-      scan.scan_period_s = 0.04;
+      const ScanView scan = RangesScan(ranges, -0.5 * common::kPi, kStepRad, k, 40);
       for (const TrackReport& r : pipeline.Process(scan, static_cast<std::uint32_t>(k)).tracks) {
         ids.insert(r.track_id);
       }
@@ -1865,12 +1871,7 @@ TEST(PipelineScenarioTest, DeepPieceIsDroppedOnlyWithASurfaceBehindToMixWith) {
         dropped_before = pipeline.counters().veiled_segments;
         kept_before = pipeline.counters().deep_pieces_kept;
       }
-      ScanView scan;
-      scan.first_angle_rad = -0.5 * common::kPi;
-      scan.angle_step_rad = kStepRad;
-      scan.range_m = ranges;
-      scan.stamp_ns = 1'600'000'000 * common::kNsPerS + k * 40 * common::kNsPerMs;
-      scan.scan_period_s = 0.04;
+      const ScanView scan = RangesScan(ranges, -0.5 * common::kPi, kStepRad, k, 40);
       for (const TrackReport& r : pipeline.Process(scan, static_cast<std::uint32_t>(k)).tracks) {
         ids.insert(r.track_id);
       }
@@ -1929,12 +1930,7 @@ TEST(PipelineScenarioTest, SingleBeamLegsUpdateAConfirmedTrackButStartNone) {
         ranges[c + 2] = 10.0f;
         if (!single) ranges[c - 1] = ranges[c + 1] = 10.0f;
       }
-      ScanView scan;
-      scan.first_angle_rad = kFirstRad;
-      scan.angle_step_rad = kStepRad;
-      scan.range_m = ranges;
-      scan.stamp_ns = 1'600'000'000 * common::kNsPerS + k * 40 * common::kNsPerMs;
-      scan.scan_period_s = 0.04;
+      const ScanView scan = RangesScan(ranges, kFirstRad, kStepRad, k, 40);
       const ScanTracks& tracks = pipeline.Process(scan, static_cast<std::uint32_t>(k));
       for (const TrackReport& r : tracks.tracks) out.ids.insert(r.track_id);
       if (!single || single_from_start) continue;
