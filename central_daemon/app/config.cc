@@ -253,7 +253,8 @@ void VisitFusion(DaemonConfig& c, ConfigVisitor& v) {
           "covariances alone.");
   v.Field("report_sourceless", o.report_sourceless,
           "fused_filter: also publish a fused track no sensor's track is bound to any more "
-          "(coasting until max_coast_s); off: kept for its id, not published.");
+          "(coasting until max_coast_s); off: kept for its id, not published (an id may then "
+          "leave the published objects and come back: zones count it as gone and new).");
   v.Field("merge_sourceless", o.merge_sourceless,
           "fused_filter: a fused track without sources coasting on a measured one is merged "
           "into it rather than left beside it as a second track.");

@@ -287,10 +287,12 @@ struct FusionOptions {
   bool merge_sourceless = true;
   // kFusedFilter: a confirmed fused track that no sensor's local track is bound to any more (its
   // last source timed out: every tracker that followed it dropped it, after coasting through
-  // what hid it) is kept for max_coast_s to be picked up with its id, but not reported by
-  // Snapshot: no sensor claims the object is there. On: reported as coasting until deleted
-  // (earlier releases).
-  bool report_sourceless = false;
+  // what hid it) is reported by Snapshot as coasting until max_coast_s deletes it (on, the
+  // default), or kept for max_coast_s to be picked up with its id but not reported (off: no
+  // sensor claims the object is there). Off, an id can leave Snapshot and come back: consumers
+  // that take an absent id as gone for good (zones' counts and dwell times, MQTT's paths) then
+  // count a hidden person who reappears as one who left and another who entered.
+  bool report_sourceless = true;
 
   // Plausibility of a local track (sensor frame); anything outside is skipped and counted.
   double max_local_range_m = 500.0;
@@ -380,15 +382,17 @@ struct FusionCounters {
   // bound again to the fused track it fed.
   std::uint64_t sources_returned = 0;
   std::uint64_t fused_created = 0;
-  std::uint64_t fused_deleted = 0;        // timed out (merged ones are not counted here)
-  std::uint64_t fused_merged = 0;         // merged into an older fused track
+  std::uint64_t fused_deleted = 0;  // timed out (merged ones are not counted here)
+  std::uint64_t fused_merged = 0;   // merged into an older fused track
   // kFusedFilter: of fused_merged, a track without sources merged with the measured track it
   // coasted on (merge_sourceless).
   std::uint64_t fused_merged_sourceless = 0;
   // kFusedFilter: merge checks passed only with merge_centre_spread_m.
   std::uint64_t merge_checks_spread = 0;
   // kFusedFilter: confirmed fused tracks whose last source timed out, no longer reported from
-  // then on unless a source binds again (report_sourceless off).
+  // then on unless a source binds again (report_sourceless off). Counted at the timeout only: a
+  // track whose last source moved to another fused track, drifted off or whose tracker restarted
+  // is hidden too but not counted here.
   std::uint64_t fused_unreported_sourceless = 0;
   std::uint64_t fused_over_capacity = 0;  // not created: max_fused_tracks reached
   std::uint64_t numerical_failures = 0;   // a covariance that could not be factorised (skipped)

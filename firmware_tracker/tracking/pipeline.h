@@ -181,9 +181,9 @@ struct ShapeOptions {
   // only where its centre ray falls on it, so one leg's points span no more than its diameter
   // across the ray, and a mixed pixel beside a leg lies behind it, not beside it. It is split at
   // the widest gap between consecutive points into two legs (a part may be a single point),
-  // measured as a pair; as one leg, it was a circle through both legs' beams, or a leg with its
-  // partner taken as hidden behind it. Segments of four points or more are split where wider
-  // than 2 leg_radius_m + 0.08 m whatever this says. false: two or three points are one leg.
+  // measured as a pair. Segments of four points or more are split where wider than
+  // 2 leg_radius_m + 0.08 m whatever this says. false: two or three points are one leg (fitted
+  // as one circle through both legs' beams, or as a leg hiding its partner behind it).
   bool split_few_point_legs = true;
   // Legs mount: a leg returned by a single beam (segmentation drops it: min_points) is evidence
   // for a confirmed track (Measurement::evidence_only): a foreground beam in no segment, at a
@@ -295,8 +295,9 @@ struct ShapeOptions {
   // width (2 leg_radius_m at the far side of that region), so a leg standing there would have
   // returned at least one of them. The person is not there (they turned, stopped or left while
   // unmeasured). Where beams are farther apart than a leg's width (a far person's legs fall
-  // between them) or something nearer hides the place, the track is reported as before. false:
-  // off (the upper-body rule alone, which never applies at knee height).
+  // between them) or something nearer hides the place, the track is reported for as long as
+  // legs_report_coasting_s allows. false: off (the upper-body rule alone, which never applies
+  // at knee height).
   bool legs_seen_through = true;
   // Knee-height mount: a coasting track is reported for at most this long after its last
   // measurement (tracking.report_coasting_s where that is shorter; the track is kept to be found

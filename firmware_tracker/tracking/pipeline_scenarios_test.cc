@@ -359,6 +359,11 @@ TEST(TrackerOptionsTest, DefaultsValidAndErrorsNameTheSectionAndField) {
   o.shape.legs_report_coasting_s = -0.1;
   EXPECT_EQ(Validate(o)->rfind("shape.legs_report_coasting_s", 0), 0u) << *Validate(o);
   o = {};
+  o.shape.deep_mixed_pixel_behind_ratio = -1.0;
+  EXPECT_EQ(Validate(o)->rfind("shape.deep_mixed_pixel_behind_ratio", 0), 0u) << *Validate(o);
+  o.shape.deep_mixed_pixel_behind_ratio = std::nan("");
+  EXPECT_EQ(Validate(o)->rfind("shape.deep_mixed_pixel_behind_ratio", 0), 0u) << *Validate(o);
+  o = {};
   o.shape.box_size_floor_sigma_m = -0.01;
   EXPECT_EQ(Validate(o)->rfind("shape.box_size_floor_sigma_m", 0), 0u) << *Validate(o);
   o = {};

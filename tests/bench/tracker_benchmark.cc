@@ -366,10 +366,16 @@ void RunCase(benchmark::State& state, const Case* c) {
 // The empty scene's case of the same measurement as `c` (the same name after the last comma).
 std::size_t EmptySceneOf(const std::vector<const Case*>& cases, std::size_t c) {
   const std::string& name = cases[c]->name;
-  const std::string suffix = name.substr(name.rfind(','));
+  const std::size_t comma = name.rfind(',');
+  if (comma == std::string::npos) return cases.size();
+  const std::string suffix = name.substr(comma);
   for (std::size_t e = 0; e < cases.size(); ++e) {
     const std::string& n = cases[e]->name;
-    if (n.find(" 0 people") != std::string::npos && n.substr(n.rfind(',')) == suffix) return e;
+    const std::size_t n_comma = n.rfind(',');
+    if (n.find(" 0 people") != std::string::npos && n_comma != std::string::npos &&
+        n.substr(n_comma) == suffix) {
+      return e;
+    }
   }
   return cases.size();
 }
@@ -432,10 +438,10 @@ std::string Interleaved(const std::vector<const Case*>& cases, std::size_t round
     }
     const auto [lo, hi] = std::minmax_element(m.begin(), m.end());
     if (!ratio.empty()) {
-      Turns().emplace_back(cases[c]->name,
-                           TurnStats{Quantile(ratio, 0.5),
-                                     *std::min_element(ratio.begin(), ratio.end()),
-                                     *std::max_element(ratio.begin(), ratio.end())});
+      Turns().emplace_back(
+          cases[c]->name,
+          TurnStats{Quantile(ratio, 0.5), *std::min_element(ratio.begin(), ratio.end()),
+                    *std::max_element(ratio.begin(), ratio.end())});
     }
     const double seconds = static_cast<double>(runners[c]->fed()) / cases[c]->input->rate_hz;
     std::snprintf(line, sizeof line,
@@ -573,6 +579,11 @@ int main(int argc, char** argv) {
   if (selected.empty()) {
     std::fprintf(stderr, "tracker_benchmark: no case matches --benchmark_filter\n");
     return 1;
+  }
+  if (rounds > scans) {
+    std::fprintf(stderr, "tracker_benchmark: --rounds %zu is more than --scans %zu\n", rounds,
+                 scans);
+    return 2;
   }
   std::string table;
   if (rounds > 0) {

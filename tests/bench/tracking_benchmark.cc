@@ -1328,7 +1328,9 @@ RunResult RunScenario(sim::Scenario scenario, bool all_legs, int jobs) {
     }
     result.fused_causes.emplace_back();
     fusion::FusionOptions fusion_options;
-    if (g_before_fusion_merge && std::string(kVariantNames[v]) == "before") {
+    // "old" is the previous system: its fusion too.
+    if (std::string(kVariantNames[v]) == "old" ||
+        (g_before_fusion_merge && std::string(kVariantNames[v]) == "before")) {
       fusion_options.merge_sourceless = false;
       fusion_options.report_sourceless = true;
     }
@@ -1741,6 +1743,8 @@ std::string KneeHeightBefore() {
          (g_before_box_size && !g_before_isotropic_bias
               ? " except for the boxes' (carts') covariance"
               : "") +
+         (g_before_fusion_merge ? " (per sensor; the fused rows differ by the fusion's options too)"
+                                : "") +
          ".\n\n";
 }
 
