@@ -280,7 +280,8 @@ void MultiTracker::Gate(common::UtcNs scan_start_ns) {
     std::array<double, kMaxSegments>& d2_row = d2_[i];
     alignas(16) std::array<double, kBlock> distance_sq_m2;
     for (std::size_t b = 0; b < padded; b += kBlock) {
-      Eigen::Map<Block>(distance_row.data() + b).setConstant(kInf);
+      // distance_ is read only where gated_ is set (kClosest): its pairs out are not written (at 50
+      // people the three rows filled per track are more than the data cache holds).
       Eigen::Map<Block>(cost_row.data() + b).setConstant(kUnassignableCost);
       Eigen::Map<Block>(d2_row.data() + b).setConstant(kInf);
       std::fill_n(gated_row.begin() + static_cast<std::ptrdiff_t>(b), kBlock, false);

@@ -406,7 +406,7 @@ class MultiTracker {
   // Per-scan scratch, sized at compile time.
   common::FixedVector<Candidate, kMaxSegments> candidates_;
   std::array<std::array<double, kMaxSegments>, kMaxTracks> cost_{};      // gated or unassignable
-  std::array<std::array<double, kMaxSegments>, kMaxTracks> distance_{};  // Euclidean, metres
+  std::array<std::array<double, kMaxSegments>, kMaxTracks> distance_{};  // metres; where gated_
   std::array<std::array<bool, kMaxSegments>, kMaxTracks> gated_{};
   std::array<std::array<double, kMaxSegments>, kMaxTracks> d2_{};  // Mahalanobis^2, inf: none
   std::size_t gated_rows_ = 0;                                     // tracks when gated_ was filled

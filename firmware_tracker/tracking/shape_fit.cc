@@ -32,6 +32,14 @@ constexpr std::size_t kMaxFitPoints = 64;
 
 bool Positive(double v) { return std::isfinite(v) && v > 0.0; }
 
+// Eigen's allFinite without a branch per entry: x - x is 0 for a finite entry and NaN otherwise,
+// and a NaN stays NaN through the sum.
+template <class Derived>
+bool AllFinite(const Eigen::MatrixBase<Derived>& m) {
+  const double t = (m - m).sum();
+  return t == t;
+}
+
 // Axis directions are defined modulo pi. Within (-pi/2, pi/2) (a yaw's deviation from its prior,
 // nearly always) remainder(a, pi) is a itself: no libm call there.
 double WrapHalfTurn(double a) {
@@ -520,7 +528,7 @@ class NormalSolver {
       double d = h(j, j);
 #pragma GCC unroll 5
       for (int k = 0; k < j; ++k) d -= u_[j][k] * l_[j][k];
-      if (!(d > 0.0) || !std::isfinite(d)) return FactorLdlt(h);
+      if (!(d > 0.0) || !std::isfinite(d)) [[unlikely]] return FactorLdlt(h);
       inv_diag_[j] = 1.0 / d;
 #pragma GCC unroll 5
       for (int i = j + 1; i < 5; ++i) {
@@ -535,7 +543,7 @@ class NormalSolver {
   }
   // h^-1 b: L y = b, then L^T x = D^-1 y.
   Vec5 Solve(const Vec5& b) const {
-    if (use_ldlt_) return ldlt_.solve(b);
+    if (use_ldlt_) [[unlikely]] return SolveLdlt(b);
     std::array<double, 5> y{};
 #pragma GCC unroll 5
     for (int i = 0; i < 5; ++i) {
@@ -556,7 +564,7 @@ class NormalSolver {
   }
   // h^-1 = L^-T D^-1 L^-1.
   Mat5 Inverse() const {
-    if (use_ldlt_) return ldlt_.solve(Mat5::Identity());
+    if (use_ldlt_) [[unlikely]] return InverseLdlt();
     double m[5][5] = {};  // L^-1, unit lower triangular
 #pragma GCC unroll 5
     for (int j = 0; j < 5; ++j) {
@@ -585,11 +593,15 @@ class NormalSolver {
   }
 
  private:
-  bool FactorLdlt(const Mat5& h) {
+  // The pivoted LDLT (rare: a pivot that is not positive) out of line and in the cold section, so
+  // that its code does not share the instruction cache with the fit's hot path.
+  [[gnu::cold, gnu::noinline]] bool FactorLdlt(const Mat5& h) {
     use_ldlt_ = true;
     ldlt_.compute(h);
     return ldlt_.info() == Eigen::Success;
   }
+  [[gnu::cold, gnu::noinline]] Vec5 SolveLdlt(const Vec5& b) const { return ldlt_.solve(b); }
+  [[gnu::cold, gnu::noinline]] Mat5 InverseLdlt() const { return ldlt_.solve(Mat5::Identity()); }
 
   double l_[5][5] = {};               // L below the diagonal
   double u_[5][5] = {};               // L D below the diagonal
@@ -651,6 +663,37 @@ double ShapeSupport(ShapeModel model, const Eigen::Vector2d& size_m, double yaw_
 
 namespace {
 
+// The rare paths of Fit out of line and in the cold section (their code then does not share the
+// instruction cache with the fit's hot path, which a crowd's many fits per scan run through).
+
+// The fit's points where some are not finite: the finite ones, evenly subsampled to want (of
+// finite), into pts; returns their count.
+[[gnu::cold, gnu::noinline]] std::size_t PickFinitePoints(
+    std::span<const Eigen::Vector2d> points, std::size_t finite, std::size_t want,
+    std::array<Eigen::Vector2d, kMaxFitPoints>& pts) {
+  std::size_t n = 0;
+  std::size_t seen = 0;
+  std::size_t next_pick = 0;  // index among finite points of the next one to take
+  for (const auto& p : points) {
+    if (!p.allFinite()) continue;
+    if (seen == next_pick && n < want) {
+      pts[n++] = p;
+      // round(n (finite - 1) / (want - 1)), halves up, in integers.
+      next_pick = want <= 1 ? finite : (2 * n * (finite - 1) + (want - 1)) / (2 * (want - 1));
+    }
+    ++seen;
+  }
+  return n;
+}
+
+// The unit vector at the mean of two points' bearings.
+[[gnu::cold, gnu::noinline]] Eigen::Vector2d RayByMeanAngle(const Eigen::Vector2d& first,
+                                                            const Eigen::Vector2d& last) {
+  const double mid_angle =
+      0.5 * (std::atan2(first.y(), first.x()) + std::atan2(last.y(), last.x()));
+  return {std::cos(mid_angle), std::sin(mid_angle)};
+}
+
 // kReference: the fit's numerics before RootN and the ray by the bisector (libm's roots, the ray's
 // angle by atan2), for the equivalence test. kPaired: two points' and the two edges' arithmetic
 // side by side (SumPointsPaired, SupportPair; the same results).
@@ -661,7 +704,12 @@ ShapeFitResult Fit(std::span<const Eigen::Vector2d> points, const Silhouette& si
   // The points used: finite ones, evenly subsampled to max_points.
   std::array<Eigen::Vector2d, kMaxFitPoints> pts;
   std::size_t finite = 0;
-  for (const auto& p : points) finite += p.allFinite() ? 1 : 0;
+  // x - x + y - y is 0 for a finite point and NaN otherwise (allFinite's test without a branch
+  // per coordinate).
+  for (const auto& p : points) {
+    const double t = (p.x() - p.x()) + (p.y() - p.y());
+    finite += t == t ? 1 : 0;
+  }
   if (finite == 0) return result;
   const std::size_t want = std::min(finite, o.max_points);
   std::size_t n = 0;
@@ -685,18 +733,8 @@ ShapeFitResult Fit(std::span<const Eigen::Vector2d> points, const Silhouette& si
         }
       }
     }
-  } else {
-    std::size_t seen = 0;
-    std::size_t next_pick = 0;  // index among finite points of the next one to take
-    for (const auto& p : points) {
-      if (!p.allFinite()) continue;
-      if (seen == next_pick && n < want) {
-        pts[n++] = p;
-        // round(n (finite - 1) / (want - 1)), halves up, in integers.
-        next_pick = want <= 1 ? finite : (2 * n * (finite - 1) + (want - 1)) / (2 * (want - 1));
-      }
-      ++seen;
-    }
+  } else [[unlikely]] {
+    n = PickFinitePoints(points, finite, want, pts);
   }
   const std::span<const Eigen::Vector2d> used(pts.data(), n);
   result.points_used = n;
@@ -735,18 +773,14 @@ ShapeFitResult Fit(std::span<const Eigen::Vector2d> points, const Silhouette& si
   // (the bisector of the first and last point's directions: their mean angle without atan2).
   Eigen::Vector2d ray;
   if constexpr (kReference) {
-    const double mid_angle = 0.5 * (std::atan2(used.front().y(), used.front().x()) +
-                                    std::atan2(used.back().y(), used.back().x()));
-    ray = Eigen::Vector2d(std::cos(mid_angle), std::sin(mid_angle));
+    ray = RayByMeanAngle(used.front(), used.back());
   } else {
     const double front = used.front().norm(), back = used.back().norm();
     ray = used.front() / front + used.back() / back;
     const double length = ray.norm();
     // Points on opposite sides of the sensor or at it: the angles' mean as before.
-    if (!(front > 0.0 && back > 0.0 && length > 1e-6)) {
-      const double mid_angle = 0.5 * (std::atan2(used.front().y(), used.front().x()) +
-                                      std::atan2(used.back().y(), used.back().x()));
-      ray = Eigen::Vector2d(std::cos(mid_angle), std::sin(mid_angle));
+    if (!(front > 0.0 && back > 0.0 && length > 1e-6)) [[unlikely]] {
+      ray = RayByMeanAngle(used.front(), used.back());
     } else {
       ray /= length;
     }
@@ -894,11 +928,14 @@ ShapeFitResult Fit(std::span<const Eigen::Vector2d> points, const Silhouette& si
     factored = solver.Factor(h);
     if (!factored) break;
     Vec5 step = -solver.Solve(g);
-    if (!step.allFinite()) break;
+    if (!AllFinite(step)) break;
     // Trust region in parameter units.
+    // The largest of the five (std::max over an initializer list walks them with a branch each;
+    // the chain of maxima gives the same value for finite ones without a branch).
     const double scale = std::max(
-        {1.0, step.head<2>().norm() / kMaxCentreStepM, std::abs(step(kYaw)) / kMaxYawStepRad,
-         std::abs(step(kA)) / kMaxSizeStepM, std::abs(step(kB)) / kMaxSizeStepM});
+        std::max(std::max(1.0, step.head<2>().norm() / kMaxCentreStepM),
+                 std::abs(step(kYaw)) / kMaxYawStepRad),
+        std::max(std::abs(step(kA)) / kMaxSizeStepM, std::abs(step(kB)) / kMaxSizeStepM));
     step /= scale;
     // Converged: a step this small changes nothing that matters, and evaluating it would cost a
     // pass over the points (the normal matrix at x serves for the covariance).
@@ -935,7 +972,7 @@ ShapeFitResult Fit(std::span<const Eigen::Vector2d> points, const Silhouette& si
 
   if (!factored && !solver.Factor(h)) return result;
   const Mat5 cov = solver.Inverse();
-  if (!cov.allFinite()) return result;
+  if (!AllFinite(cov)) return result;
   result.centre_m = x.head<2>();
   result.centre_cov_m2 = 0.5 * (cov.block<2, 2>(0, 0) + cov.block<2, 2>(0, 0).transpose());
   if (circle) {
@@ -950,7 +987,7 @@ ShapeFitResult Fit(std::span<const Eigen::Vector2d> points, const Silhouette& si
   }
   result.rms_m = std::sqrt(points_cost / static_cast<double>(n));
   result.iterations = iterations;
-  result.ok = result.centre_m.allFinite() && result.centre_cov_m2.allFinite();
+  result.ok = AllFinite(result.centre_m) && AllFinite(result.centre_cov_m2);
   return result;
 }
 
