@@ -7,6 +7,7 @@
 #include <bit>
 #include <cmath>
 #include <cstdint>
+#include <limits>
 
 #include "common/geometry.h"
 
@@ -563,7 +564,21 @@ class NormalSolver {
     return x;
   }
   // h^-1 = L^-T D^-1 L^-1.
-  Mat5 Inverse() const {
+  Mat5 Inverse() const { return InverseEntries<false>(); }
+  // The entries of h^-1 a fit reports (InverseEntries<true>), the same values as Inverse's; the
+  // others 0.
+  Mat5 ResultInverse() const { return InverseEntries<true>(); }
+
+ private:
+  // The entries a fit's result takes from the covariance: the centre's block, the yaw's variance,
+  // the size's block (a circle: (kA, kA) alone), each diagonal entry among them.
+  static constexpr bool ResultEntry(int i, int j) {
+    return (i < 2 && j < 2) || (i == kYaw && j == kYaw) || (i >= kA && j >= kA);
+  }
+  // kResultOnly: only the ResultEntry entries (the others 0), each with the same arithmetic as in
+  // the full inverse: 20 of the 35 products' terms.
+  template <bool kResultOnly>
+  Mat5 InverseEntries() const {
     if (use_ldlt_) [[unlikely]] return InverseLdlt();
     double m[5][5] = {};  // L^-1, unit lower triangular
 #pragma GCC unroll 5
@@ -583,6 +598,11 @@ class NormalSolver {
 #pragma GCC unroll 5
       for (int j = i; j < 5; ++j) {
         double v = 0.0;
+        if (kResultOnly && !ResultEntry(i, j)) {
+          inv(i, j) = 0.0;
+          inv(j, i) = 0.0;
+          continue;
+        }
 #pragma GCC unroll 5
         for (int k = j; k < 5; ++k) v += m[k][i] * inv_diag_[k] * m[k][j];
         inv(i, j) = v;
@@ -592,7 +612,6 @@ class NormalSolver {
     return inv;
   }
 
- private:
   // The pivoted LDLT (rare: a pivot that is not positive) out of line and in the cold section, so
   // that its code does not share the instruction cache with the fit's hot path.
   [[gnu::cold, gnu::noinline]] bool FactorLdlt(const Mat5& h) {
@@ -620,6 +639,7 @@ class PivotedLdltSolver {
   }
   Vec5 Solve(const Vec5& b) const { return ldlt_.solve(b); }
   Mat5 Inverse() const { return ldlt_.solve(Mat5::Identity()); }
+  Mat5 ResultInverse() const { return Inverse(); }
 
  private:
   Eigen::LDLT<Mat5> ldlt_;
@@ -971,7 +991,10 @@ ShapeFitResult Fit(std::span<const Eigen::Vector2d> points, const Silhouette& si
   }
 
   if (!factored && !solver.Factor(h)) return result;
-  const Mat5 cov = solver.Inverse();
+  // Only the entries the result takes; the others were tested for finiteness before and are not
+  // formed now (with every diagonal entry finite, they could overflow only at covariances near
+  // 1e308, far beyond anything the priors leave).
+  const Mat5 cov = solver.ResultInverse();
   if (!AllFinite(cov)) return result;
   result.centre_m = x.head<2>();
   result.centre_cov_m2 = 0.5 * (cov.block<2, 2>(0, 0) + cov.block<2, 2>(0, 0).transpose());
@@ -1010,6 +1033,12 @@ ShapeFitResult FitShapeUnpaired(std::span<const Eigen::Vector2d> points,
                                 const Silhouette& silhouette, const ShapePrior& prior,
                                 const ShapeFitOptions& options) {
   return Fit<NormalSolver, false, false>(points, silhouette, prior, options);
+}
+
+Mat5 NormalSolverInverse(const Mat5& h, bool result_entries_only) {
+  NormalSolver solver;
+  if (!solver.Factor(h)) return Mat5::Constant(std::numeric_limits<double>::quiet_NaN());
+  return result_entries_only ? solver.ResultInverse() : solver.Inverse();
 }
 
 }  // namespace internal

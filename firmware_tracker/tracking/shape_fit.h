@@ -118,6 +118,11 @@ ShapeFitResult FitShapeWithPivotedLdlt(std::span<const Eigen::Vector2d> points,
 ShapeFitResult FitShapeUnpaired(std::span<const Eigen::Vector2d> points,
                                 const Silhouette& silhouette, const ShapePrior& prior,
                                 const ShapeFitOptions& options);
+// The fit's own 5 x 5 solver on a symmetric positive definite h: its inverse, all of it or only
+// the entries a fit reports (the centre's and the size's blocks, the yaw's variance; the others
+// 0). For the test that both give those entries with the same bits.
+Eigen::Matrix<double, 5, 5> NormalSolverInverse(const Eigen::Matrix<double, 5, 5>& h,
+                                                bool result_entries_only);
 }  // namespace internal
 
 // Support function of the shape (extent from the centre in direction n, unit vector); d_size, if

@@ -398,6 +398,36 @@ TEST(ShapeFitTest, EvenlySubsampledPointsWithAndWithoutNonFiniteOnes) {
 // boxes at 2-25 m, with and without a track's yaw, centre guess and silhouette edges. And the fit
 // with two points' and both edges' arithmetic side by side against one at a time: the same
 // operations, so the same results (exactly where the compiler fuses no multiply-adds).
+TEST(ShapeFitTest, CovarianceOfTheReportedEntriesOnlyHasTheFullInversesBits) {
+  // Random symmetric positive definite normal matrices over many orders of magnitude: the entries
+  // a fit reports are the full inverse's, bit for bit; the others are not formed (0).
+  std::mt19937 rng(5);
+  std::uniform_real_distribution<double> uniform(-1.0, 1.0);
+  const auto reported = [](int i, int j) {
+    return (i < 2 && j < 2) || (i == 2 && j == 2) || (i >= 3 && j >= 3);
+  };
+  for (int k = 0; k < 2000; ++k) {
+    Eigen::Matrix<double, 5, 5> a;
+    for (int i = 0; i < 5; ++i) {
+      for (int j = 0; j < 5; ++j) a(i, j) = uniform(rng) * std::pow(10.0, 3.0 * uniform(rng));
+    }
+    const Eigen::Matrix<double, 5, 5> h =
+        a * a.transpose() + 1e-3 * Eigen::Matrix<double, 5, 5>::Identity();
+    const Eigen::Matrix<double, 5, 5> full = internal::NormalSolverInverse(h, false);
+    const Eigen::Matrix<double, 5, 5> part = internal::NormalSolverInverse(h, true);
+    ASSERT_TRUE(full.allFinite());
+    for (int i = 0; i < 5; ++i) {
+      for (int j = 0; j < 5; ++j) {
+        if (reported(i, j)) {
+          EXPECT_EQ(part(i, j), full(i, j)) << k << " " << i << " " << j;
+        } else {
+          EXPECT_EQ(part(i, j), 0.0) << k << " " << i << " " << j;
+        }
+      }
+    }
+  }
+}
+
 TEST(ShapeFitTest, CholeskySolverGivesThePivotedLdltResults) {
   std::mt19937 rng(14);
   std::uniform_real_distribution<double> uniform(0.0, 1.0);
