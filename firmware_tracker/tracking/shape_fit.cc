@@ -529,7 +529,9 @@ class NormalSolver {
       double d = h(j, j);
 #pragma GCC unroll 5
       for (int k = 0; k < j; ++k) d -= u_[j][k] * l_[j][k];
-      if (!(d > 0.0) || !std::isfinite(d)) [[unlikely]] return FactorLdlt(h);
+      if (!(d > 0.0) || !std::isfinite(d)) [[unlikely]] {
+        return FactorLdlt(h);
+      }
       inv_diag_[j] = 1.0 / d;
 #pragma GCC unroll 5
       for (int i = j + 1; i < 5; ++i) {
@@ -544,7 +546,9 @@ class NormalSolver {
   }
   // h^-1 b: L y = b, then L^T x = D^-1 y.
   Vec5 Solve(const Vec5& b) const {
-    if (use_ldlt_) [[unlikely]] return SolveLdlt(b);
+    if (use_ldlt_) [[unlikely]] {
+      return SolveLdlt(b);
+    }
     std::array<double, 5> y{};
 #pragma GCC unroll 5
     for (int i = 0; i < 5; ++i) {
@@ -579,7 +583,9 @@ class NormalSolver {
   // the full inverse: 20 of the 35 products' terms.
   template <bool kResultOnly>
   Mat5 InverseEntries() const {
-    if (use_ldlt_) [[unlikely]] return InverseLdlt();
+    if (use_ldlt_) [[unlikely]] {
+      return InverseLdlt();
+    }
     double m[5][5] = {};  // L^-1, unit lower triangular
 #pragma GCC unroll 5
     for (int j = 0; j < 5; ++j) {
@@ -952,10 +958,10 @@ ShapeFitResult Fit(std::span<const Eigen::Vector2d> points, const Silhouette& si
     // Trust region in parameter units.
     // The largest of the five (std::max over an initializer list walks them with a branch each;
     // the chain of maxima gives the same value for finite ones without a branch).
-    const double scale = std::max(
-        std::max(std::max(1.0, step.head<2>().norm() / kMaxCentreStepM),
-                 std::abs(step(kYaw)) / kMaxYawStepRad),
-        std::max(std::abs(step(kA)) / kMaxSizeStepM, std::abs(step(kB)) / kMaxSizeStepM));
+    const double scale =
+        std::max(std::max(std::max(1.0, step.head<2>().norm() / kMaxCentreStepM),
+                          std::abs(step(kYaw)) / kMaxYawStepRad),
+                 std::max(std::abs(step(kA)) / kMaxSizeStepM, std::abs(step(kB)) / kMaxSizeStepM));
     step /= scale;
     // Converged: a step this small changes nothing that matters, and evaluating it would cost a
     // pass over the points (the normal matrix at x serves for the covariance).
