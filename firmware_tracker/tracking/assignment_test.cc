@@ -202,5 +202,35 @@ TEST(GatedAssignment, SubsetsOfRowsAndColumns) {
   }
 }
 
+TEST(GatedAssignment, AllColumnsTakesNoFlagBeyondTheLastColumn) {
+  // Every column in order (the tracker's first stage: the masks 8 flags at a time): flags set
+  // beyond the m columns change nothing, at every m (every remainder of 8).
+  std::mt19937_64 rng(8);
+  for (std::size_t m = 1; m <= kMaxAssignmentDim; ++m) {
+    for (int trial = 0; trial < 4; ++trial) {
+      const std::size_t n = 1 + m % 17;
+      Problem p = RandomProblem(rng, n, m, trial % 2 == 0);
+      std::vector<int> rows_clean(n), cols_clean(m);
+      SolveGatedAssignment(*p.cost, *p.allowed, Iota(n), Iota(m), rows_clean.data(),
+                           cols_clean.data());
+      for (std::size_t i = 0; i < n; ++i) {
+        for (std::size_t j = m; j < kMaxAssignmentDim; ++j) {
+          (*p.allowed)[i][j] = true;
+          (*p.cost)[i][j] = 0.0;
+        }
+      }
+      std::vector<int> rows_set(n), cols_set(m);
+      SolveGatedAssignment(*p.cost, *p.allowed, Iota(n), Iota(m), rows_set.data(), cols_set.data());
+      EXPECT_EQ(rows_set, rows_clean) << m;
+      EXPECT_EQ(cols_set, cols_clean) << m;
+      for (std::size_t i = 0; i < n; ++i) {
+        if (rows_set[i] >= 0) {
+          EXPECT_TRUE((*p.allowed)[i][static_cast<std::size_t>(rows_set[i])]);
+        }
+      }
+    }
+  }
+}
+
 }  // namespace
 }  // namespace lrfnet::tracking
