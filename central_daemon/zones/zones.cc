@@ -64,6 +64,9 @@ std::optional<std::string> Validate(const ZoneOptions& options) {
   if (!(options.hysteresis_m >= 0.0 && options.hysteresis_m <= 10.0)) {
     return "hysteresis_m: must be in [0, 10]";
   }
+  if (!(options.absent_hold_s >= 0.0 && options.absent_hold_s <= 3600.0)) {
+    return "absent_hold_s: must be in [0, 3600]";
+  }
   return std::nullopt;
 }
 
@@ -221,17 +224,32 @@ bool ZoneCounter::Update(std::span<const ZoneTrack> tracks, common::UtcNs now_ns
   for (const ZoneTrack& track : tracks) {
     if (!std::isfinite(track.x_m) || !std::isfinite(track.y_m)) continue;
     if (!seen.insert(track.id).second) continue;  // a duplicate id: the first one counts
+    if (absent_since_ns_.erase(track.id) != 0) ++counters_.absent_returned;
     for (std::size_t i = 0; i < zones_.size(); ++i) UpdateTrack(zones_[i], data_[i], track, now_ns);
   }
-  for (ZoneData& data : data_) {
-    for (auto it = data.tracks.begin(); it != data.tracks.end();) {
-      if (seen.count(it->first) != 0) {
-        ++it;
-        continue;
-      }
+  // Ids known to some zone but absent now: held until absent_hold_s, then gone as of the first
+  // update they were absent from.
+  const auto hold_ns = static_cast<common::DurationNs>(options_.absent_hold_s * 1e9);
+  std::set<std::uint64_t> gone;
+  for (const ZoneData& data : data_) {
+    for (const auto& entry : data.tracks) {
+      const std::uint64_t id = entry.first;
+      if (seen.count(id) != 0 || gone.count(id) != 0) continue;
+      const auto [it, first] = absent_since_ns_.try_emplace(id, now_ns);
+      if (first) ++counters_.absent_held;
+      if (now_ns - it->second >= hold_ns) gone.insert(id);
+    }
+  }
+  for (const std::uint64_t id : gone) {
+    const common::UtcNs since_ns = absent_since_ns_.at(id);
+    absent_since_ns_.erase(id);
+    ++counters_.absent_gone;
+    for (ZoneData& data : data_) {
+      const auto it = data.tracks.find(id);
+      if (it == data.tracks.end()) continue;
       if (it->second.in_region) ++data.state.lost_inside;
-      EndDwell(data, it->second, now_ns);
-      it = data.tracks.erase(it);
+      EndDwell(data, it->second, since_ns);
+      data.tracks.erase(it);
     }
   }
   return true;

@@ -22,9 +22,17 @@
 // keep their state and are not used to change it.
 //
 // Dwell: a track's dwell in a region starts when it is first seen in it and ends when it leaves it
-// or disappears (a track absent from an update is gone: the fused ids are never reused). Ended
-// dwells are summed (count, total, longest); a track that disappears in a polygon is also counted
-// as lost_inside (it left the sensors' view there, or its fused track was merged).
+// or is gone. Ended dwells are summed (count, total, longest); a track that is gone in a polygon
+// is also counted as lost_inside (it left the sensors' view there, or its fused track was merged).
+//
+// Absent tracks: the fusion may leave a hidden person's id out of its published tracks for a while
+// and publish it again when a sensor sees the person again (fusion.report_sourceless off). An id
+// absent from an update is therefore *held* for absent_hold_s: it keeps its side, its region and
+// its dwell (a hidden person is still where it was last seen), and if it comes back within that
+// time it simply continues from its new position (a line crossed while hidden counts once, as one
+// straight step). Only an id absent for absent_hold_s is gone, as of the first update it was absent
+// from (the same instant as with absent_hold_s = 0, where an absent id is gone at once). Fused ids
+// are never reused.
 //
 // Time is passed in (gateway UTC ns, the fused tracks' time base). Not thread-safe.
 
@@ -58,6 +66,10 @@ struct ZoneOptions {
   // a person's radius plus the fused position's noise; a polygon narrower than twice this never
   // holds a track.
   double hysteresis_m = 0.3;
+  // How long [s] an id absent from the updates is held before it is gone (see the header): the
+  // longest a fused id can be left out and come back, the fusion's max_coast_s (lrfnetd sets it
+  // from there unless configured). 0: an absent id is gone at once (earlier releases).
+  double absent_hold_s = 1.5;
 };
 std::optional<std::string> Validate(const ZoneOptions& options);
 
@@ -71,6 +83,13 @@ inline constexpr std::size_t kMaxZonePoints = 1024;
 
 // Signed distance [m] of p to the polygon's boundary, > 0 inside (even-odd rule).
 double SignedDistanceToPolygon(std::span<const Point> polygon, Point p);
+
+// What the hold of absent ids did (see the header), since start.
+struct ZoneCounters {
+  std::uint64_t absent_held = 0;      // ids absent from an update while in some zone's state
+  std::uint64_t absent_returned = 0;  // of these, came back within absent_hold_s
+  std::uint64_t absent_gone = 0;      // of these, gone after absent_hold_s
+};
 
 // A fused track as the zones see it.
 struct ZoneTrack {
@@ -98,14 +117,15 @@ class ZoneCounter {
   // Preconditions: Validate(zones), Validate(options) (checked; aborts otherwise).
   ZoneCounter(std::vector<Zone> zones, const ZoneOptions& options);
 
-  // All current tracks at now_ns (ids absent since the last update are gone). Updates with a
-  // time before the previous one are ignored (returns false).
+  // All current tracks at now_ns (ids absent are held, then gone: see the header). Updates with
+  // a time before the previous one are ignored (returns false).
   bool Update(std::span<const ZoneTrack> tracks, common::UtcNs now_ns);
 
   // Every zone's state as of the last update, in the order of the zones.
   std::vector<ZoneState> States() const;
   const std::vector<Zone>& zones() const { return zones_; }
   const ZoneOptions& options() const { return options_; }
+  const ZoneCounters& counters() const { return counters_; }
 
  private:
   enum class Side : std::uint8_t { kUnknown, kA, kB };  // polygon: A outside, B inside
@@ -128,6 +148,9 @@ class ZoneCounter {
   std::vector<Zone> zones_;
   ZoneOptions options_;
   std::vector<ZoneData> data_;
+  // Ids absent from the latest update and since when (the first update they were absent from).
+  std::map<std::uint64_t, common::UtcNs> absent_since_ns_;
+  ZoneCounters counters_;
   common::UtcNs now_ns_ = 0;
   bool started_ = false;
 };

@@ -21,8 +21,9 @@ Zone Square(const char* name, double x0, double y0, double side) {
 // Feeds one track along a list of positions, one update each, and returns the counter.
 class Walk {
  public:
-  Walk(std::vector<Zone> zones, double hysteresis_m = 0.3)
-      : counter_(std::move(zones), ZoneOptions{hysteresis_m}) {}
+  // absent_hold_s 0: an absent id is gone at once (the tests of crossings and dwell).
+  Walk(std::vector<Zone> zones, double hysteresis_m = 0.3, double absent_hold_s = 0.0)
+      : counter_(std::move(zones), ZoneOptions{hysteresis_m, absent_hold_s}) {}
   void To(std::uint64_t id, Point p, bool measured = true) {
     const ZoneTrack t{id, p.x_m, p.y_m, measured};
     counter_.Update(std::span<const ZoneTrack>(&t, 1), Now());
@@ -156,6 +157,64 @@ TEST(ZonesTest, CoastingTracksKeepTheirState) {
   w.To(1, {0, 1.5});
   EXPECT_EQ(w.State(0).inbound, 1u);
   EXPECT_EQ(w.State(1).inbound, 1u);
+}
+
+// A person hidden from every sensor for 1 s (the fusion leaves the id out) while crossing the
+// door line into the room, then seen again inside: held, nothing ends or restarts.
+TEST(ZonesTest, AnIdThatComesBackWithinTheHoldIsNeitherGoneNorNew) {
+  for (const double hold_s : {0.0, 1.5}) {
+    SCOPED_TRACE(hold_s);
+    Walk w({Line("door", {-1, 0}, {1, 0}), Square("room", -1, 0, 2)}, 0.3, hold_s);
+    w.Straight(1, {0, -2}, {0, -0.2});
+    for (int i = 0; i < 10; ++i) w.Nothing();  // 1 s hidden
+    w.Straight(1, {0, 1.0}, {0, 1.2});
+    const ZoneState door = w.State(0), room = w.State(1);
+    if (hold_s == 0.0) {
+      // Earlier releases: gone, then a new track inside: no crossing, a dwell ended.
+      EXPECT_EQ(door.inbound, 0u);
+      EXPECT_EQ(room.inbound, 0u);
+      EXPECT_EQ(door.dwells_completed, 1u);
+      EXPECT_EQ(w.counter().counters().absent_gone, 1u);
+      EXPECT_EQ(w.counter().counters().absent_returned, 0u);
+    } else {
+      EXPECT_EQ(door.inbound, 1u);  // the crossing while hidden, once
+      EXPECT_EQ(door.outbound, 0u);
+      EXPECT_EQ(room.inbound, 1u);
+      EXPECT_EQ(room.outbound, 0u);
+      EXPECT_EQ(room.lost_inside, 0u);
+      EXPECT_EQ(door.dwells_completed, 1u);  // it left the door's band, once
+      EXPECT_EQ(room.dwells_completed, 0u);
+      EXPECT_EQ(room.present_ids, std::vector<std::uint64_t>{1});
+      EXPECT_EQ(w.counter().counters().absent_held, 1u);
+      EXPECT_EQ(w.counter().counters().absent_returned, 1u);
+      EXPECT_EQ(w.counter().counters().absent_gone, 0u);
+    }
+  }
+}
+
+// Held while absent: still present (occupancy unchanged); absent for the hold: gone exactly once,
+// its dwell ended at the first update it was absent from.
+TEST(ZonesTest, AnIdAbsentForTheHoldIsGoneOnceAsOfItsDisappearance) {
+  Walk w({Square("room", 0, 0, 4)}, 0.3, 1.0);
+  for (int i = 0; i < 20; ++i) w.To(7, {2, 2});  // 2 s inside (seen first inside)
+  w.Nothing();
+  EXPECT_EQ(w.State().present_ids, std::vector<std::uint64_t>{7});
+  EXPECT_EQ(w.State().lost_inside, 0u);
+  for (int i = 0; i < 9; ++i) w.Nothing();  // 0.9 s after the first update without it
+  EXPECT_EQ(w.State().present_ids, std::vector<std::uint64_t>{7});
+  EXPECT_EQ(w.State().dwells_completed, 0u);
+  w.Nothing();  // 1.0 s: gone
+  EXPECT_TRUE(w.State().present_ids.empty());
+  EXPECT_EQ(w.State().lost_inside, 1u);
+  EXPECT_EQ(w.State().dwells_completed, 1u);
+  EXPECT_EQ(w.State().outbound, 0u);
+  // In it from the first update (0.1 s) to the first one it was absent from (2.1 s).
+  EXPECT_NEAR(w.State().dwell_max_s, 2.0, 1e-6);
+  for (int i = 0; i < 30; ++i) w.Nothing();
+  EXPECT_EQ(w.State().lost_inside, 1u);
+  EXPECT_EQ(w.State().dwells_completed, 1u);
+  EXPECT_EQ(w.counter().counters().absent_gone, 1u);
+  EXPECT_EQ(w.counter().counters().absent_returned, 0u);
 }
 
 TEST(ZonesTest, ManyPeopleBothWaysAtOnce) {
