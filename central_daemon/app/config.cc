@@ -254,7 +254,8 @@ void VisitFusion(DaemonConfig& c, ConfigVisitor& v) {
   v.Field("report_sourceless", o.report_sourceless,
           "fused_filter: also publish a fused track no sensor's track is bound to any more "
           "(coasting until max_coast_s); off: kept for its id, not published (an id may then "
-          "leave the published objects and come back: zones count it as gone and new).");
+          "leave the published objects and come back: zones and MQTT hold an absent id for "
+          "zones.absent_hold_s).");
   v.Field("merge_sourceless", o.merge_sourceless,
           "fused_filter: a fused track without sources coasting on a measured one is merged "
           "into it rather than left beside it as a second track.");
@@ -305,6 +306,13 @@ void VisitZones(DaemonConfig& c, ConfigVisitor& v) {
           "A track must be this far past a polygon's edge or a line to change sides, so a person "
           "standing on it is counted once. Zones should be wider than twice this.");
   v.Field("update_hz", c.zones_update_hz, "The zones are evaluated this often (fused-track time).");
+  v.Field("absent_hold_s", c.absent_hold_s,
+          "An id absent from the fused tracks (the fusion may leave a hidden person out and "
+          "publish the id again when a sensor sees them) is held this long before it is gone: "
+          "the zones keep its side, region and dwell, MQTT its path, and nothing is published "
+          "for it until it comes back (then its new position) or the time is up (then its exit, "
+          "as of when it disappeared). Negative: fusion.max_coast_s, the longest a fused id can "
+          "be left out and come back. 0: an absent id is gone at once.");
 }
 
 void VisitMqtt(DaemonConfig& c, ConfigVisitor& v) {
@@ -411,6 +419,8 @@ bool TopicLevelOk(const std::string& s) {
 
 std::optional<std::string> ValidateZonesAndMqtt(DaemonConfig& c) {
   if (auto e = ParseZones(c.zones_list, &c.zones)) return e;
+  if (!(c.absent_hold_s <= 3600.0)) return "zones.absent_hold_s: must be at most 3600";
+  c.zone_options.absent_hold_s = c.absent_hold_s < 0.0 ? c.fusion.max_coast_s : c.absent_hold_s;
   if (auto e = Prefixed("zones", zones::Validate(c.zone_options))) return e;
   if (!(c.zones_update_hz >= 0.1 && c.zones_update_hz <= 100.0))
     return "zones.update_hz: must be in [0.1, 100]";

@@ -86,8 +86,11 @@ struct DaemonConfig {
   // Zones (section `zones`).
   std::string zones_list = "[]";   // the zones as YAML text (flow style), parsed by Validate
   std::vector<zones::Zone> zones;  // from zones_list
-  zones::ZoneOptions zone_options;
+  zones::ZoneOptions zone_options;  // absent_hold_s: set by Validate from absent_hold_s below
   double zones_update_hz = 10.0;
+  // How long an id absent from the fused tracks is held before zones and MQTT take it as gone
+  // [s]; negative: fusion.max_coast_s (the longest a fused id can be left out and come back).
+  double absent_hold_s = -1.0;
   // MQTT (section `mqtt`).
   MqttConfig mqtt;
   // Authenticated datagrams (section `auth`); changes need a restart.

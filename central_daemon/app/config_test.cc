@@ -126,6 +126,8 @@ TEST(DaemonConfigTest, ErrorsNameTheKey) {
       {"zones: {list: [{name: a, line: [[0, 0], [1, 0]]}, {name: a, line: [[0, 0], [1, 0]]}]}",
        "twice"},
       {"zones: {hysteresis_m: -1}", "zones.hysteresis_m"},
+      {"zones: {absent_hold_s: 4000}", "zones.absent_hold_s"},
+      {"zones: {absent_hold_s: .nan}", "zones.absent_hold_s"},
       {"mqtt: {broker: 'nope'}", "mqtt.broker"},
       {"mqtt: {site: 'a/b'}", "mqtt.site"},
       {"mqtt: {topic_prefix: 'a/#'}", "mqtt.topic_prefix"},
@@ -188,6 +190,21 @@ mqtt:
   EXPECT_EQ(back.zones[1].points[2].x_m, 5.0);
   EXPECT_EQ(back.mqtt.broker, "127.0.0.1:1883");
   EXPECT_EQ(back.mqtt.password, "p: w");
+}
+
+TEST(DaemonConfigTest, AbsentIdsAreHeldForTheFusionsMaxCoastUnlessConfigured) {
+  DaemonConfig c;
+  ASSERT_EQ(LoadDaemonConfig("fusion: {max_coast_s: 2.5}", c), std::nullopt);
+  EXPECT_LT(c.absent_hold_s, 0.0);
+  EXPECT_EQ(c.zone_options.absent_hold_s, 2.5);
+  EXPECT_FALSE(c.fusion.report_sourceless);  // ids may leave the fused tracks and come back
+  DaemonConfig set;
+  ASSERT_EQ(LoadDaemonConfig("fusion: {max_coast_s: 2.5}\nzones: {absent_hold_s: 0.7}", set),
+            std::nullopt);
+  EXPECT_EQ(set.zone_options.absent_hold_s, 0.7);
+  DaemonConfig off;
+  ASSERT_EQ(LoadDaemonConfig("zones: {absent_hold_s: 0}", off), std::nullopt);
+  EXPECT_EQ(off.zone_options.absent_hold_s, 0.0);
 }
 
 }  // namespace

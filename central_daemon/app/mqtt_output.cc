@@ -72,7 +72,9 @@ nlohmann::json MqttJson(const MqttOutput& mqtt) {
           {"objects", s.objects},
           {"zones", s.zones},
           {"calibrations", s.calibrations},
-          {"health", s.health}};
+          {"health", s.health},
+          {"objects_returned", s.objects_returned},
+          {"objects_gone", s.objects_gone}};
 }
 
 }  // namespace lrfnet::daemon

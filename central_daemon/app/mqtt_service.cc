@@ -29,7 +29,8 @@ MqttService::MqttService(const DaemonConfig& config, MqttSink* sink, std::string
       objects_period_ns_(PeriodNs(1.0 / config.mqtt.objects_hz)),
       path_interval_ns_(PeriodNs(config.mqtt.path_interval_s)),
       zones_interval_ns_(PeriodNs(config.mqtt.zones_interval_s)),
-      health_interval_ns_(PeriodNs(config.mqtt.health_interval_s)) {}
+      health_interval_ns_(PeriodNs(config.mqtt.health_interval_s)),
+      absent_hold_ns_(PeriodNs(config.zone_options.absent_hold_s)) {}
 
 std::string MqttService::Topic(std::string_view suffix) const {
   return config_.topic_prefix + "/" + config_.site + "/" + std::string(suffix);
@@ -107,7 +108,12 @@ void MqttService::PublishObjects(const Daemon& daemon, const FusionService& fusi
       }
     }
     // The path: samples every path_interval_s, the newest last, then the current position.
-    std::deque<PathSample>& path = paths_[t.id];
+    ObjectMark& mark = objects_[t.id];
+    if (mark.absent_since_ns != 0) {
+      mark.absent_since_ns = 0;
+      ++counters_.objects_returned;
+    }
+    std::deque<PathSample>& path = mark.path;
     if (config_.path_points > 0) {
       if (path.empty() || stamp_ns - path.back().t_ns >= path_interval_ns_ ||
           stamp_ns < path.back().t_ns) {
@@ -120,11 +126,23 @@ void MqttService::PublishObjects(const Daemon& daemon, const FusionService& fusi
     }
     objects.push_back(std::move(o));
   }
-  // Paths of objects that are gone.
-  for (auto it = paths_.begin(); it != paths_.end();) {
+  // Objects absent from the list: held for absent_hold_s (the fusion may publish the id again),
+  // then gone with their paths.
+  for (auto it = objects_.begin(); it != objects_.end();) {
     const bool alive = std::any_of(tracks.begin(), tracks.end(),
                                    [&](const fusion::FusedTrack& t) { return t.id == it->first; });
-    it = alive ? std::next(it) : paths_.erase(it);
+    if (alive) {
+      ++it;
+      continue;
+    }
+    ObjectMark& mark = it->second;
+    if (mark.absent_since_ns == 0) mark.absent_since_ns = stamp_ns;
+    if (stamp_ns - mark.absent_since_ns >= absent_hold_ns_ || stamp_ns < mark.absent_since_ns) {
+      ++counters_.objects_gone;
+      it = objects_.erase(it);
+    } else {
+      ++it;
+    }
   }
   sink_->Publish(Topic("objects"), ObjectsJson(config_.site, ++objects_seq_, stamp_ns, objects),
                  objects_qos_, false);

@@ -10,6 +10,10 @@
 //   <prefix>/<site>/status               retained; "online" / "offline" (also the last will)
 // Objects and zones run on the fused tracks' time (gateway UTC), health on the daemon's clock (the
 // receive times offline), so a silent site still reports its sensors silent.
+// An object absent from the fused tracks is left out of the object list but held for
+// zones.absent_hold_s (see config.h) with its path: one that comes back within it continues its
+// path; the zones hold it likewise (zones.h), so its zone messages do not change while it is
+// hidden.
 // Thread-safety: called on the io thread.
 
 #include <cstdint>
@@ -47,6 +51,10 @@ struct MqttServiceCounters {
   std::uint64_t calibrations = 0;
   std::uint64_t health = 0;
   std::uint64_t status = 0;
+  // Objects absent from the fused tracks that came back within absent_hold_s (path kept).
+  std::uint64_t objects_returned = 0;
+  // Objects absent for absent_hold_s (path dropped).
+  std::uint64_t objects_gone = 0;
 };
 
 class MqttService {
@@ -90,6 +98,7 @@ class MqttService {
   common::DurationNs path_interval_ns_;
   common::DurationNs zones_interval_ns_;
   common::DurationNs health_interval_ns_;
+  common::DurationNs absent_hold_ns_;
 
   std::uint64_t objects_seq_ = 0;
   common::UtcNs last_objects_ns_ = 0;
@@ -97,7 +106,11 @@ class MqttService {
     common::UtcNs t_ns = 0;
     double x_m = 0.0, y_m = 0.0;
   };
-  std::map<std::uint64_t, std::deque<PathSample>> paths_;
+  struct ObjectMark {
+    std::deque<PathSample> path;
+    common::UtcNs absent_since_ns = 0;  // 0: in the latest object list
+  };
+  std::map<std::uint64_t, ObjectMark> objects_;
 
   struct ZoneMark {
     std::uint64_t seq = 0;

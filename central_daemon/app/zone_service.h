@@ -2,7 +2,8 @@
 // lrfnetd's zones (an adapter around zones::ZoneCounter): the fused tracks are run through the
 // zones of the config at zones.update_hz of fused-track time (gateway UTC scan times, so a
 // recording replayed offline counts exactly like the live stream). Confirmed and coasting fused
-// tracks count; coasting ones keep their state (see zones.h).
+// tracks count; coasting ones keep their state, and an id absent from the fused tracks is held
+// for zones.absent_hold_s before it is gone (see zones.h).
 // Thread-safety: called on the io thread.
 
 #include <optional>
@@ -27,6 +28,10 @@ class ZoneService {
   const std::vector<zones::Zone>& zones() const { return zones_; }
   common::UtcNs stamp_ns() const { return stamp_ns_; }
   std::uint64_t updates() const { return updates_; }
+  // Absent ids held, come back, gone (zeros when disabled).
+  zones::ZoneCounters counters() const {
+    return counter_ ? counter_->counters() : zones::ZoneCounters{};
+  }
 
  private:
   std::vector<zones::Zone> zones_;

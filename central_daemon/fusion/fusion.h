@@ -287,12 +287,13 @@ struct FusionOptions {
   bool merge_sourceless = true;
   // kFusedFilter: a confirmed fused track that no sensor's local track is bound to any more (its
   // last source timed out: every tracker that followed it dropped it, after coasting through
-  // what hid it) is reported by Snapshot as coasting until max_coast_s deletes it (on, the
-  // default), or kept for max_coast_s to be picked up with its id but not reported (off: no
-  // sensor claims the object is there). Off, an id can leave Snapshot and come back: consumers
-  // that take an absent id as gone for good (zones' counts and dwell times, MQTT's paths) then
-  // count a hidden person who reappears as one who left and another who entered.
-  bool report_sourceless = true;
+  // what hid it) is kept for max_coast_s to be picked up with its id but not reported (off, the
+  // default: no sensor claims the object is there), or reported by Snapshot as coasting until
+  // max_coast_s deletes it (on, earlier releases). Off, an id can leave Snapshot and come back
+  // within max_coast_s: lrfnetd's zones and MQTT output hold an absent id for
+  // zones.absent_hold_s (by default max_coast_s) before they take it as gone, so a hidden person
+  // who reappears is neither an exit nor a new entry there.
+  bool report_sourceless = false;
 
   // Plausibility of a local track (sensor frame); anything outside is skipped and counted.
   double max_local_range_m = 500.0;

@@ -40,7 +40,7 @@
 //                       [--before-deep-evidence] [--before-isotropic-bias] [--before-across-walk]
 //                       [--before-few-point-legs] [--before-legs-seen-through]
 //                       [--before-legs-report-coasting]
-//                       [--before-fusion-merge]]
+//                       [--before-fusion-merge] [--before-report-sourceless]]
 //   (--extra: more scenario folders, e.g. held-out scenes, reported in their own section;
 //   --explain: per run on stderr, what became of an object's previous track at every id switch
 //   and missed scan, what the false positives are (by scan and by false track: a track left
@@ -81,7 +81,10 @@
 //   --before-fusion-merge: "before"'s fusion leaves a fused track without sources to coast beside
 //   the track that took its object and reports fused tracks no tracker holds any more,
 //   FusionOptions::merge_sourceless = false and report_sourceless = true (its tracker is the new
-//   one unless other --before-* flags are given); several:
+//   one unless other --before-* flags are given);
+//   --before-report-sourceless: "before"'s fusion reports fused tracks no tracker holds any more
+//   as coasting, FusionOptions::report_sourceless = true (merging as the new one unless
+//   --before-fusion-merge is given too); several:
 //   without any of them). --explain also
 //   writes the false positives' classes to the results (ExplainTable) and, on stderr, what the
 //   tracks measured again after more than 1 s (a lost track resumed) came back on.
@@ -746,6 +749,9 @@ bool g_before_legs_report_coasting = false;
 // reporting fused tracks no tracker holds any more (FusionOptions::merge_sourceless = false,
 // report_sourceless = true).
 bool g_before_fusion_merge = false;
+// --before-report-sourceless: "before"'s fusion reports fused tracks no tracker holds any more as
+// coasting (FusionOptions::report_sourceless = true).
+bool g_before_report_sourceless = false;
 const char* const kVariantNames[] = {"old", "new", "before"};
 // --explain: why tracks coast beside a person the scan returned (CoastingCause).
 bool g_explain_coasting = false;
@@ -785,7 +791,8 @@ std::vector<Variant> Variants(sim::Mount mount, double range_m) {
              g_before_box_size || g_before_single_beam || g_before_deep_pieces ||
              g_before_deep_evidence || g_before_isotropic_bias || g_before_across_walk ||
              g_before_few_point_legs || g_before_legs_seen_through ||
-             g_before_legs_report_coasting || g_before_fusion_merge) {
+             g_before_legs_report_coasting || g_before_fusion_merge ||
+             g_before_report_sourceless) {
     tracking::TrackerOptions before = fresh;
     if (g_before_one_leg) before.shape.hidden_leg_behind = false;
     if (g_before_mixed_pixels) before.shape.drop_mixed_pixel_legs = false;
@@ -1334,6 +1341,9 @@ RunResult RunScenario(sim::Scenario scenario, bool all_legs, int jobs) {
       fusion_options.merge_sourceless = false;
       fusion_options.report_sourceless = true;
     }
+    if (g_before_report_sourceless && std::string(kVariantNames[v]) == "before") {
+      fusion_options.report_sourceless = true;
+    }
     result.fused.push_back(
         RunFusion(*simulator, by_sensor, fusion_options, &result.fused_causes.back()));
   }
@@ -1658,7 +1668,8 @@ std::string KneeHeightBefore() {
   if (!(g_before_one_leg || g_before_confirm_time || g_before_whole_person || g_before_box_size ||
         g_before_single_beam || g_before_deep_pieces || g_before_deep_evidence ||
         g_before_isotropic_bias || g_before_across_walk || g_before_few_point_legs ||
-        g_before_legs_seen_through || g_before_legs_report_coasting || g_before_fusion_merge) ||
+        g_before_legs_seen_through || g_before_legs_report_coasting || g_before_fusion_merge ||
+        g_before_report_sourceless) ||
       g_before_mixed_pixels || g_before_far || g_before_evidence_coasting ||
       g_before_report_rules) {
     return "";
@@ -1733,6 +1744,10 @@ std::string KneeHeightBefore() {
         " fused by a fusion that leaves a fused track without sources to coast beside the track "
         "that took its object and reports fused tracks no tracker holds any more "
         "(`fusion.merge_sourceless` false, `fusion.report_sourceless` true)";
+  } else if (g_before_report_sourceless) {
+    text += std::string(without.empty() ? "" : ",") +
+            " fused by a fusion that reports fused tracks no tracker holds any more as coasting "
+            "(`fusion.report_sourceless` true)";
   }
   const char* const same =
       g_before_isotropic_bias
@@ -1743,8 +1758,9 @@ std::string KneeHeightBefore() {
          (g_before_box_size && !g_before_isotropic_bias
               ? " except for the boxes' (carts') covariance"
               : "") +
-         (g_before_fusion_merge ? " (per sensor; the fused rows differ by the fusion's options too)"
-                                : "") +
+         (g_before_fusion_merge || g_before_report_sourceless
+              ? " (per sensor; the fused rows differ by the fusion's options too)"
+              : "") +
          ".\n\n";
 }
 
@@ -1809,6 +1825,8 @@ int main(int argc, char** argv) {
       g_before_legs_report_coasting = true;
     } else if (a == "--before-fusion-merge") {
       g_before_fusion_merge = true;
+    } else if (a == "--before-report-sourceless") {
+      g_before_report_sourceless = true;
     } else if (a == "--jobs") {
       jobs = std::max(1, std::atoi(value().c_str()));
     } else {
@@ -1821,7 +1839,7 @@ int main(int argc, char** argv) {
                    "[--before-deep-pieces] [--before-deep-evidence] [--before-isotropic-bias] "
                    "[--before-across-walk] [--before-few-point-legs] "
                    "[--before-legs-seen-through] [--before-legs-report-coasting] "
-                   "[--before-fusion-merge]]\n");
+                   "[--before-fusion-merge] [--before-report-sourceless]]\n");
       return 2;
     }
   }

@@ -1,0 +1,234 @@
+// lrfnetd's zones and MQTT output with a fused id that leaves the fused tracks and comes back
+// (fusion.report_sourceless off: a person no tracker holds is not published until a sensor sees
+// them again), through a real mosquitto broker (skipped when it is not installed).
+
+#include "central_daemon/app/mqtt_service.h"
+
+#include <gtest/gtest.h>
+#include <unistd.h>
+
+#include <boost/asio/io_context.hpp>
+#include <chrono>
+#include <nlohmann/json.hpp>
+#include <set>
+#include <string>
+#include <vector>
+
+#include "central_daemon/app/config.h"
+#include "central_daemon/app/daemon.h"
+#include "central_daemon/app/fusion_service.h"
+#include "central_daemon/app/zone_service.h"
+#include "central_daemon/io/mqtt_publisher.h"
+#include "tests/mosquitto_broker.h"
+#include "tests/mqtt_subscriber.h"
+
+namespace lrfnet::daemon {
+namespace {
+
+using lrfnet::testing::MosquittoBroker;
+using lrfnet::testing::MqttSubscriber;
+using lrfnet::testing::ReceivedMessage;
+
+constexpr common::UtcNs kT0 = 1'700'000'000'000'000'000;
+
+common::UtcNs At(double t_s) { return kT0 + static_cast<common::DurationNs>(t_s * 1e9); }
+
+calib::CalibrationResult OneSensorAtTheOrigin() {
+  calib::CalibrationResult r;
+  r.method = "quenzel";
+  r.reference = "s1";
+  calib::SensorPose p;
+  p.id = "s1";
+  p.calibrated = true;
+  p.covariance = Eigen::Matrix3d::Identity() * 1e-6;
+  r.sensors.push_back(p);
+  return r;
+}
+
+TrackFrameData FrameWith(double t_s, std::uint32_t scan, std::optional<std::uint32_t> track_id) {
+  TrackFrameData frame;
+  frame.session_id = 1;
+  frame.scan_start_ns = At(t_s);
+  frame.scan_period_s = 0.04;
+  frame.scan_counter = scan;
+  if (track_id) {
+    TrackObservation track;
+    track.track_id = *track_id;
+    track.state = TrackState::kConfirmed;
+    track.x_m = 3.0f;
+    track.y_m = 1.0f;
+    track.covariance = {0.0025f, 0, 0, 0, 0.0025f, 0, 0, 0.01f, 0, 0.01f};
+    frame.tracks.push_back(track);
+  }
+  return frame;
+}
+
+struct HideRun {
+  std::vector<nlohmann::json> zone;     // the zone's messages, in order
+  std::vector<nlohmann::json> objects;  // the object lists, in order
+  MqttServiceCounters counters;
+};
+
+// One sensor at the origin sees a person standing at (3, 1), inside the zone "room". Its tracker
+// drops the person at 2 s and starts a new track on them hidden_s later (the fused id is left out
+// of the fused tracks once the old track timed out, and taken up again by the new track when it
+// comes within fusion.max_coast_s). Everything runs through lrfnetd's fusion, zones and MQTT
+// services, published to a real broker; returns what a subscriber received.
+HideRun RunHide(std::uint16_t port, double hidden_s, double absent_hold_s) {
+  DaemonConfig config;
+  config.zones_list = "[{name: room, polygon: [[2, 0], [4, 0], [4, 2], [2, 2]]}]";
+  config.absent_hold_s = absent_hold_s;
+  config.fusion.report_sourceless = false;
+  config.mqtt.broker = "127.0.0.1:" + std::to_string(port);
+  static int runs = 0;  // a site of its own per run: the zone messages are retained
+  config.mqtt.site = "lab" + std::to_string(++runs);
+  config.mqtt.client_id = "lrfnet-service-test-" + std::to_string(::getpid());
+  config.mqtt.objects_hz = 10.0;
+  config.mqtt.path_points = 40;  // 20 s of path
+  EXPECT_EQ(Validate(config), std::nullopt);
+
+  const std::string topics = "lrfnet/" + config.mqtt.site + "/";
+  MqttSubscriber subscriber(port, topics + "#");
+  EXPECT_TRUE(subscriber.WaitSubscribed());
+  DaemonOptions options;
+  options.send_requests = false;
+  Daemon daemon(options, nullptr, nullptr, 1);
+  boost::asio::io_context io;
+  FusionService fusion(io, config);
+  fusion.SetCalibration(OneSensorAtTheOrigin());
+  ZoneService zones(config);
+  MqttPublisherSink sink(nullptr);
+  MqttService mqtt(config, &sink, "test");
+  MqttPublisher real(PublisherOptions(config, mqtt));
+  sink.set_publisher(&real);
+  std::string error;
+  EXPECT_TRUE(real.Start(&error)) << error;
+  EXPECT_TRUE(real.WaitConnected(20.0)) << real.last_error();
+
+  std::uint32_t scan = 0;
+  for (double t = 0.0; t < 8.0 - 1e-9; t += 0.04) {
+    std::optional<std::uint32_t> track;
+    if (t < 2.0) track = 1;
+    if (t >= 2.0 + hidden_s) track = 2;
+    fusion.OnFrame("s1", FrameWith(t, scan++, track));
+    if (scan % 5 == 0) {  // every 0.2 s
+      fusion.OnTick(t);
+      zones.OnTick(fusion);
+      mqtt.OnTick(At(t), daemon, fusion, zones);
+    }
+  }
+  EXPECT_TRUE(real.Flush(20.0));
+  const std::size_t sent = mqtt.counters().objects + mqtt.counters().zones;
+  EXPECT_TRUE(subscriber.WaitFor([&](const std::vector<ReceivedMessage>& m) {
+    std::size_t n = 0;
+    for (const ReceivedMessage& r : m) n += r.topic.ends_with("/health") ? 0 : 1;
+    return n >= sent;
+  }));
+  real.Stop();
+  HideRun run;
+  for (const ReceivedMessage& m : subscriber.messages()) {
+    if (m.topic == topics + "zones/room") run.zone.push_back(nlohmann::json::parse(m.payload));
+    if (m.topic == topics + "objects") run.objects.push_back(nlohmann::json::parse(m.payload));
+  }
+  run.counters = mqtt.counters();
+  return run;
+}
+
+// The ids present in each zone message, and the exits it reports (lost inside, dwells ended).
+std::vector<std::set<std::uint64_t>> PresentIds(const HideRun& run) {
+  std::vector<std::set<std::uint64_t>> out;
+  for (const nlohmann::json& z : run.zone) {
+    std::set<std::uint64_t> ids;
+    for (const auto& p : z["present"]) ids.insert(p["id"].get<std::uint64_t>());
+    out.push_back(ids);
+  }
+  return out;
+}
+
+// The number of times an id leaves the zone's present list and later comes back to it.
+int ExitEnterPairs(const std::vector<std::set<std::uint64_t>>& present) {
+  int pairs = 0;
+  std::set<std::uint64_t> seen, left;
+  for (const auto& ids : present) {
+    for (const std::uint64_t id : seen) {
+      if (ids.count(id) == 0) left.insert(id);
+    }
+    for (const std::uint64_t id : ids) {
+      if (left.erase(id) != 0) ++pairs;
+      seen.insert(id);
+    }
+  }
+  return pairs;
+}
+
+class MqttServiceHide : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    if (!lrfnet::testing::HaveBinary(lrfnet::testing::kMosquitto))
+      GTEST_SKIP() << "mosquitto is not installed (scripts/install_deps.sh adds it)";
+    ASSERT_TRUE(broker_.Start());
+  }
+  MosquittoBroker broker_;
+};
+
+TEST_F(MqttServiceHide, AnIdHiddenAndBackWithinTheHoldGivesNoExitAndNoEntry) {
+  // 1 s hidden: the fused id is absent from the fused tracks from about 2.5 s to 3 s.
+  const HideRun held = RunHide(broker_.port(), 1.0, -1.0);  // hold: fusion.max_coast_s
+  ASSERT_FALSE(held.zone.empty());
+  ASSERT_FALSE(held.objects.empty());
+  // The id did leave the object list for a while and came back (what the zones are held over).
+  std::vector<std::uint64_t> object_ids;
+  int lists_without = 0;
+  for (const nlohmann::json& o : held.objects) {
+    if (o["objects"].empty()) {
+      if (!object_ids.empty()) ++lists_without;
+      continue;
+    }
+    ASSERT_EQ(o["objects"].size(), 1u);
+    const auto id = o["objects"][0]["id"].get<std::uint64_t>();
+    if (object_ids.empty() || object_ids.back() != id) object_ids.push_back(id);
+  }
+  EXPECT_GT(lists_without, 0);
+  ASSERT_EQ(object_ids.size(), 1u);
+  EXPECT_EQ(held.counters.objects_returned, 1u);
+  // The object's path goes on from before the hiding (its oldest point is from about 0.2 s).
+  EXPECT_LT(held.objects.back()["objects"][0]["path"][0][2].get<double>(), -6.0);
+  // The zone: the id present in every message from its entry on, nothing lost, no dwell ended.
+  const auto present = PresentIds(held);
+  EXPECT_EQ(ExitEnterPairs(present), 0);
+  for (const nlohmann::json& z : held.zone) {
+    EXPECT_EQ(z["lost_inside"], 0) << z.dump();
+    EXPECT_EQ(z["dwell"]["completed"], 0) << z.dump();
+  }
+  EXPECT_EQ(present.back(), std::set<std::uint64_t>{object_ids[0]});
+
+  // Without the hold (earlier releases): an exit and an entry of the same id.
+  const HideRun at_once = RunHide(broker_.port(), 1.0, 0.0);
+  EXPECT_EQ(ExitEnterPairs(PresentIds(at_once)), 1);
+  EXPECT_EQ(at_once.zone.back()["lost_inside"], 1);
+}
+
+TEST_F(MqttServiceHide, AnIdHiddenForLongerThanTheHoldExitsExactlyOnce) {
+  // 3 s hidden: the fused track is deleted max_coast_s after its last update; the new track
+  // starts a new id.
+  const HideRun run = RunHide(broker_.port(), 3.0, -1.0);
+  ASSERT_FALSE(run.zone.empty());
+  const auto present = PresentIds(run);
+  EXPECT_EQ(ExitEnterPairs(present), 0);
+  std::set<std::uint64_t> ids;
+  for (const auto& p : present) ids.insert(p.begin(), p.end());
+  EXPECT_EQ(ids.size(), 2u);  // the first id and the new one
+  // lost_inside goes 0 -> 1 once and stays.
+  int changes = 0;
+  for (std::size_t i = 1; i < run.zone.size(); ++i) {
+    if (run.zone[i]["lost_inside"] != run.zone[i - 1]["lost_inside"]) ++changes;
+  }
+  EXPECT_EQ(changes, 1);
+  EXPECT_EQ(run.zone.back()["lost_inside"], 1);
+  EXPECT_EQ(run.zone.back()["dwell"]["completed"], 1);
+  EXPECT_EQ(run.counters.objects_returned, 0u);
+  EXPECT_EQ(run.counters.objects_gone, 1u);
+}
+
+}  // namespace
+}  // namespace lrfnet::daemon
