@@ -259,6 +259,11 @@ void VisitFusion(DaemonConfig& c, ConfigVisitor& v) {
   v.Field("merge_sourceless", o.merge_sourceless,
           "fused_filter: a fused track without sources coasting on a measured one is merged "
           "into it rather than left beside it as a second track.");
+  v.Field("merge_sourceless_shadow_m", o.merge_sourceless_shadow_m,
+          "fused_filter: a person's radius (m) for merge_sourceless: a fused track without sources "
+          "standing in the shadow of a measured one (behind it along the line of sight of every "
+          "sensor that saw it last by more than this) was hidden by it and is not merged into it; "
+          "0: no shadow test.");
   v.Field("position_noise_floor_m2", o.position_noise_floor_m2,
           "latest_states: added to every source's position variance (calibration and centre "
           "errors).");

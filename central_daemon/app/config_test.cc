@@ -140,6 +140,7 @@ TEST(DaemonConfigTest, ErrorsNameTheKey) {
       {"fusion: {centre_sigma_shape_fit_m: 0}", "fusion.centre_sigma_shape_fit_m"},
       {"fusion: {centre_lateral_fraction: 2}", "fusion.centre_lateral_fraction"},
       {"fusion: {max_coast_s: -1}", "fusion.max_coast_s"},
+      {"fusion: {merge_sourceless_shadow_m: -0.1}", "fusion.merge_sourceless_shadow_m"},
       {"fusion: {binding_bonus: .nan}", "fusion.binding_bonus"},
       {"monitoring: {track_window_s: 0}", "monitoring.track_window_s"},
       {"monitoring: {background_min_yaw_deg: -1}", "monitoring.background_min_yaw_deg"},

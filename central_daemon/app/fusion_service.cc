@@ -170,6 +170,7 @@ nlohmann::json FusionService::StatsJson() const {
   j["fused_merged"] = f.fused_merged;
   j["fused_merged_sourceless"] = f.fused_merged_sourceless;
   j["merge_checks_spread"] = f.merge_checks_spread;
+  j["merge_sourceless_shadowed"] = f.merge_sourceless_shadowed;
   j["fused_unreported_sourceless"] = f.fused_unreported_sourceless;
   j["handovers"] = f.handovers;
   j["numerical_failures"] = f.numerical_failures;

@@ -299,6 +299,9 @@ std::optional<std::string> Validate(const FusionOptions& o) {
   if (!positive(o.merge_max_speed_difference_mps)) {
     return "merge_max_speed_difference_mps must be > 0";
   }
+  if (!(o.merge_sourceless_shadow_m >= 0.0 && o.merge_sourceless_shadow_m <= 2.0)) {
+    return "merge_sourceless_shadow_m must be in [0, 2]";
+  }
   if (!std::isfinite(o.merge_centre_spread_m) || o.merge_centre_spread_m < 0.0 ||
       o.merge_centre_spread_m > o.merge_max_distance_m) {
     return "merge_centre_spread_m must be in [0, merge_max_distance_m]";

@@ -285,6 +285,16 @@ struct FusionOptions {
   // merge_updates checks (the older id kept, the measured track's estimate). Off: it coasts on
   // beside it until max_coast_s (earlier releases).
   bool merge_sourceless = true;
+  // kFusedFilter: a person's radius [m] for the shadow test of merge_sourceless. A fused track
+  // without sources that stands in the shadow of the measured track from every sensor that saw it
+  // last (farther along that sensor's line of sight through the measured track by more than this,
+  // and across it by less than the shadow's half-width at its range plus this, the shadow being a
+  // body of this radius seen from the sensor) was hidden by that track's object, not left behind
+  // by its own sources: it is not merged into it and keeps its id for when it is seen again. Two
+  // bodies cannot overlap, so a person hidden behind another stands at least about a body's depth
+  // behind them, while a track left behind by its own object coasts where that object is.
+  // 0: no shadow test (earlier releases).
+  double merge_sourceless_shadow_m = 0.25;
   // kFusedFilter: a confirmed fused track that no sensor's local track is bound to any more (its
   // last source timed out: every tracker that followed it dropped it, after coasting through
   // what hid it) is kept for max_coast_s to be picked up with its id but not reported (off, the
@@ -388,6 +398,9 @@ struct FusionCounters {
   // kFusedFilter: of fused_merged, a track without sources merged with the measured track it
   // coasted on (merge_sourceless).
   std::uint64_t fused_merged_sourceless = 0;
+  // kFusedFilter: merge checks of a track without sources refused because it stands in the
+  // measured track's shadow (merge_sourceless_shadow_m).
+  std::uint64_t merge_sourceless_shadowed = 0;
   // kFusedFilter: merge checks passed only with merge_centre_spread_m.
   std::uint64_t merge_checks_spread = 0;
   // kFusedFilter: confirmed fused tracks whose last source timed out, no longer reported from

@@ -789,6 +789,35 @@ class FusedFilterEngine final : public Engine {
     return false;
   }
 
+  // Whether g (at g_pos) stands in the shadow of a body of radius merge_sourceless_shadow_m at
+  // f_pos from every sensor that measured g within source_timeout_s of its last measurement:
+  // along each sensor's line of sight u through f_pos, at least that radius behind f
+  // (d.u - |f_pos - s| >= r) and across it within the shadow's half-width at that range plus a
+  // body's radius (|d x u| <= r (d.u) / |f_pos - s| + r), d = g_pos - s.
+  bool InShadowOf(const Track& g, const Eigen::Vector2d& g_pos,
+                  const Eigen::Vector2d& f_pos) const {
+    const double r = options_.merge_sourceless_shadow_m;
+    if (!(r > 0.0)) return false;
+    UtcNs last_ns = 0;
+    for (const Offset& off : g.offsets) last_ns = std::max(last_ns, off.last_ns);
+    bool any = false;
+    for (const Offset& off : g.offsets) {
+      if (off.last_ns == 0 || Seconds(last_ns, off.last_ns) > options_.source_timeout_s) continue;
+      const SensorPlacement* placement = PlacementOf(off.sensor_id);
+      if (placement == nullptr) continue;
+      const Eigen::Vector2d s = placement->world_from_sensor.translation();
+      const Eigen::Vector2d to_f = f_pos - s, to_g = g_pos - s;
+      const double range_f = to_f.norm();
+      if (!(range_f > r)) return false;
+      const Eigen::Vector2d u = to_f / range_f;
+      const double range_g = to_g.dot(u);
+      const double across = std::abs(u.x() * to_g.y() - u.y() * to_g.x());
+      if (!(range_g - range_f >= r) || !(across <= r * range_g / range_f + r)) return false;
+      any = true;
+    }
+    return any;
+  }
+
   std::vector<std::string> ActiveSensors(const Track& f) const {
     std::vector<std::string> out;
     for (const SourceKey& k : f.sources) {
@@ -1353,6 +1382,12 @@ std::uint64_t FusedFilterEngine::MergeCheck(std::uint64_t f_id) {
     const Eigen::Vector2d g_pos = g.x.head<2>() + dt * g.x.segment<2>(2);
     if ((g_pos - f_pos).norm() > o.merge_max_distance_m ||
         (g.x.segment<2>(2) - f_vel).norm() > o.merge_max_speed_difference_mps) {
+      reset();
+      continue;
+    }
+    // Without sources in f's shadow: hidden by f's object, not left behind by its own.
+    if (g_sourceless && InShadowOf(g, g_pos, f_pos)) {
+      ++counters_.merge_sourceless_shadowed;
       reset();
       continue;
     }

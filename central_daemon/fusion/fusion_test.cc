@@ -1097,6 +1097,70 @@ TEST(FusedFilterTest, AFusedTrackLeftBehindByItsSourcesMergesIntoTheTrackThatToo
   EXPECT_NEAR(after[0].y_m, 1.1, 0.03);  // the measured track's estimate, not a blend
 }
 
+// Two sensors 1 m apart, (1.5, 0) and (2.5, 0), look at person A standing at (2, 4). Person B walks
+// slowly across in front of A, 0.4 m nearer the sensors (y = 3.6, at 0.45 m/s: within the merge's
+// speed gate of A's standing track). A sensor does not see A while B's body (0.25 m radius) is on
+// its line of sight to A; both are blocked while B is within about 0.2 m of x = 2 (0.9 s). The
+// trackers drop A when they lose it and start new tracks on A when they see it again. Returns
+// the fused ids nearest A and B (within 0.3 m) before and after the hiding, and the counters.
+struct HiddenBehindResult {
+  std::set<std::uint64_t> a_before, a_after, b_before, b_after;
+  FusionCounters counters;
+};
+HiddenBehindResult RunHiddenBehindPasserBy(const FusionOptions& options) {
+  Scene scene;
+  scene.sensors = {Sensor("a", 1.5, 0, 90), Sensor("b", 2.5, 0, 90, 0.02)};
+  const Eigen::Vector2d a_pos(2.0, 4.0);
+  const SimPerson b = Walker({-1.0, 3.6}, {5.0, 3.6}, 0.45);
+  SimPerson a;
+  a.position = [=](double) { return a_pos; };
+  std::vector<Eigen::Vector2d> sensor_at;
+  for (const SimSensor& s : scene.sensors) sensor_at.push_back(s.truth.translation());
+  a.seen_by = [=](std::size_t s, double t) {
+    // B's distance to the line of sight from the sensor to A.
+    const Eigen::Vector2d ray = a_pos - sensor_at[s], to_b = b.position(t) - sensor_at[s];
+    const double along = std::clamp(to_b.dot(ray) / ray.squaredNorm(), 0.0, 1.0);
+    return (to_b - along * ray).norm() > 0.25;
+  };
+  scene.people = {a, b};
+  // B blocks both sensors' view of A from about 6.2 s to 7.1 s.
+  Fuser fuser(options);
+  fuser.SetPlacements(scene.Placements());
+  HiddenBehindResult r;
+  scene.Run(fuser, 12.0, 0.05, [&](double t, UtcNs now) {
+    if (t < 1.0 || (t > 5.0 && t < 8.0)) return;
+    const auto fused = fuser.Snapshot(now);
+    const auto* fa = testing::Nearest(fused, a_pos, 0.3);
+    const auto* fb = testing::Nearest(fused, b.position(t), 0.3);
+    if (fa != nullptr) (t < 5.0 ? r.a_before : r.a_after).insert(fa->id);
+    if (fb != nullptr) (t < 5.0 ? r.b_before : r.b_after).insert(fb->id);
+  });
+  r.counters = fuser.counters();
+  return r;
+}
+
+TEST(FusedFilterTest, APersonHiddenBehindAPasserByKeepsItsIdAndIsNotMergedIntoIt) {
+  // Without the shadow test (earlier releases): A's fused track, without sources, coasting within
+  // the merge gates of B's, is merged into it: B goes on with A's (older) id, A gets a new one.
+  FusionOptions no_shadow;
+  no_shadow.merge_sourceless_shadow_m = 0.0;
+  const HiddenBehindResult before = RunHiddenBehindPasserBy(no_shadow);
+  ASSERT_EQ(before.a_before.size(), 1u);
+  ASSERT_EQ(before.b_before.size(), 1u);
+  EXPECT_EQ(before.counters.fused_merged_sourceless, 1u);
+  EXPECT_EQ(before.b_after, before.a_before);
+  EXPECT_NE(before.a_after, before.a_before);
+
+  const HiddenBehindResult r = RunHiddenBehindPasserBy(FusionOptions{});
+  EXPECT_GT(r.counters.merge_sourceless_shadowed, 0u);
+  ASSERT_EQ(r.a_before.size(), 1u);
+  ASSERT_EQ(r.b_before.size(), 1u);
+  EXPECT_NE(*r.a_before.begin(), *r.b_before.begin());
+  EXPECT_EQ(r.a_after, r.a_before);  // A's id after it reappears
+  EXPECT_EQ(r.b_after, r.b_before);  // B's id after it passed
+  EXPECT_EQ(r.counters.fused_merged_sourceless, 0u);
+}
+
 TEST(FusedFilterTest, AFusedTrackNoTrackerHoldsIsKeptForItsIdButNotReported) {
   // A walker leaves the only sensor's view at t = 2 s (its tracker drops the track) and its
   // tracker starts a new track where the fused track coasted to at t = 2.7 s.
