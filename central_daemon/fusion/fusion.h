@@ -73,7 +73,8 @@
 // also under merge_max_distance_m, and velocity under merge_max_speed_difference_mps) for
 // merge_updates consecutive checks are one object: the younger is merged into the older id.
 // kFusedFilter: a fused track left without sources that coasts within the gates of a measured
-// one is merged into it too (merge_sourceless); the position gate may add
+// one is merged into it too (merge_sourceless), unless it stands in that track's shadow from the
+// sensors that saw it last (hidden by it: merge_sourceless_shadow_m); the position gate may add
 // merge_centre_spread_m to both covariances (two sensors see different sides of one body; off by
 // default). A fused track no sensor's track is bound to any more is kept for its id but not
 // reported (report_sourceless).
