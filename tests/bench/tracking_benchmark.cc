@@ -45,7 +45,9 @@
 //   --explain: per run on stderr, what became of an object's previous track at every id switch
 //   and missed scan, what the false positives are (by scan and by false track: a track left
 //   behind by its object, a second track beside a tracked one, clutter, furniture; see
-//   MotSequence::FalseClass) and the tracker's counters; --breakdown: a table more per section, the
+//   MotSequence::FalseClass; per sensor also where each false scan lies from the nearest object as
+//   the sensor sees it: straight behind it, in front of it or beside it, MotSequence::LineOfSight)
+//   and the tracker's counters; --breakdown: a table more per section, the
 //   per-sensor matched error along and across the line of sight by range and point count, and
 //   the filtered track's error beside that of the scan's measurement it was updated with, see
 //   Breakdown; --before-report-rules: a third tracker, "before", the new one without
@@ -355,6 +357,9 @@ struct Causes {
   std::map<std::string, double> false_classes, false_scan_classes, false_track_classes;
   // False scans per sensor by class and what was there (CoastingView).
   std::map<std::string, double> false_views;
+  // False scans per sensor by where they lie from the nearest object as the sensor sees it
+  // (LineOfSight): straight behind it, in front of it or beside it, by its range.
+  std::map<std::string, double> false_sight;
   // Tracks measured again more than kResumedAfterS after their previous measurement (a lost
   // track resumed): what they came back on, and their false scans within 1 s after.
   std::map<std::string, double> resumes;
@@ -366,6 +371,7 @@ struct Causes {
     for (const auto& [k, v] : o.resumes) resumes[k] += v;
     for (const auto& [k, v] : o.false_classes) false_classes[k] += v;
     for (const auto& [k, v] : o.false_views) false_views[k] += v;
+    for (const auto& [k, v] : o.false_sight) false_sight[k] += v;
     for (const auto& [k, v] : o.false_scan_classes) false_scan_classes[k] += v;
     for (const auto& [k, v] : o.false_track_classes) false_track_classes[k] += v;
     for (const auto& [k, v] : o.false_positives) false_positives[k] += v;
@@ -569,8 +575,40 @@ class MotSequence {
         timed += coast_s < 0.15 ? " < 0.15 s" : coast_s < 0.3 ? " 0.15-0.3 s" : " >= 0.3 s";
       }
       causes_.false_classes[timed] += 1;
-      if (!hyps[h].view.empty()) causes_.false_views[cls + " | " + hyps[h].view] += 1;
+      if (!hyps[h].view.empty()) {
+        causes_.false_views[cls + " | " + hyps[h].view] += 1;
+        causes_.false_sight[LineOfSight(hyps[h], truths)] += 1;
+      }
     }
+  }
+
+  // --explain, per sensor (the sensor at the origin): where a false scan lies from the nearest
+  // object along the sensor's line of sight to it: "straight behind" (farther by more than
+  // kMatchRadiusM, within kAcrossM of the ray), "in front", else "beside"; with the object's range.
+  // A knee-height track on the mixed pixels between a person's legs and what is behind them lies
+  // straight behind the person.
+  static std::string LineOfSight(const Hypothesis& hyp, const std::vector<Truth>& truths) {
+    constexpr double kAcrossM = 0.3;
+    const Truth* nearest = nullptr;
+    for (const Truth& t : truths) {
+      if (nearest == nullptr || (hyp.p - t.p).norm() < (hyp.p - nearest->p).norm()) nearest = &t;
+    }
+    const std::string state = hyp.measured ? "measured" : "coasting";
+    if (nearest == nullptr || !(nearest->p.norm() > 0.0)) return "no object in view, " + state;
+    const Vector2d ray = nearest->p.normalized();
+    const Vector2d d = hyp.p - nearest->p;
+    const double along = d.dot(ray);
+    const double across = std::abs(ray.x() * d.y() - ray.y() * d.x());
+    const double range = nearest->p.norm();
+    const std::string where = across > kAcrossM          ? "beside the nearest object"
+                              : along > kMatchRadiusM    ? "straight behind the nearest object"
+                              : along < -kMatchRadiusM   ? "straight in front of the nearest object"
+                                                         : "beside the nearest object";
+    const std::string bin = range < 8.0    ? "< 8 m"
+                            : range < 12.0 ? "8-12 m"
+                            : range < 15.0 ? "12-15 m"
+                                           : ">= 15 m";
+    return where + ", it at " + bin + ", " + state;
   }
 
   // The class of a false positive: a track that held an object before ("left behind": its object
@@ -1251,6 +1289,9 @@ void Explain(const std::string& scenario, const std::string& mount, const RunRes
       std::fprintf(stderr, "  false tracks: %-71s %6.0f\n", cls.c_str(), count);
     for (const auto& [cls, count] : r.causes[v].false_views)
       std::fprintf(stderr, "  false scans, what was there: %-100s %6.0f\n", cls.c_str(), count);
+    for (const auto& [where, count] : r.causes[v].false_sight)
+      std::fprintf(stderr, "  false scans, seen from the sensor: %-70s %6.0f\n", where.c_str(),
+                   count);
     for (const auto& [cls, count] : r.fused_causes[v].false_scan_classes)
       std::fprintf(stderr, "  fused false scans: %-66s %6.0f\n", cls.c_str(), count);
     for (const auto& [cls, count] : r.fused_causes[v].false_track_classes)
