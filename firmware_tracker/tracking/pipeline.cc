@@ -56,6 +56,13 @@ bool PersonBackLineRmsAbove(const ShapeOptions& o, double extent_m, double thres
   return 1.0 - PowerOf(u, o.person_exponent) < PowerOf(w, o.person_exponent);
 }
 
+double OutlineDepartureVar(const ShapeOptions& o, double rms_m, double range_m) {
+  const double noise = o.fit.point_sigma_m + o.fit.point_sigma_per_m * range_m;
+  const double excess = rms_m * rms_m - noise * noise;
+  if (!(excess > 0.0)) return 0.0;
+  return o.outline_departure_gain * o.outline_departure_gain * excess;
+}
+
 }  // namespace internal
 
 namespace {
@@ -280,14 +287,16 @@ class TrackingPipeline::Refiner final : public MeasurementRefiner {
     // ShapeOptions::outline_departure_gain: at upper-body height the fit's residuals measure how
     // far the outline departs from the model; the fixed allowances for it shrink to
     // outline_fixed_share (shared) and outline_model_share (per scan).
-    const bool measured_outline = !ob.legs && o.outline_departure_gain > 0.0;
+    const bool measured_outline =
+        o.mount == Mount::kTorso && !ob.legs && o.outline_departure_gain > 0.0;
     const double share = measured_outline ? o.outline_fixed_share : 1.0;
     const double model_sigma_m =
         (measured_outline ? o.outline_model_share : 1.0) * o.centre_model_sigma_m;
     measurement.covariance_m2 += model_sigma_m * model_sigma_m * Eigen::Matrix2d::Identity();
     double departure_var = 0.0;
     if (measured_outline) {
-      departure_var = OutlineDepartureVar(measurement, o);
+      departure_var = internal::OutlineDepartureVar(o, measurement.rms_residual_m,
+                                                    measurement.position_m.norm());
       if (departure_var > 0.0) ++widened;
       shape.departure_m2 += (departure_var - shape.departure_m2) /
                             std::min(kDepartureMemory, static_cast<double>(shape.updates + 1));
@@ -327,16 +336,6 @@ class TrackingPipeline::Refiner final : public MeasurementRefiner {
   std::uint64_t failed = 0;
   std::uint64_t across_walk = 0;
   std::uint64_t widened = 0;
-
-  // ShapeOptions::outline_departure_gain: the variance (per axis) the outline's departure from the
-  // model adds to a body-centre measurement, from its fit's residuals: departure^2 = rms^2 -
-  // noise^2 (the range noise at the centre's range removed, never negative), times the gain^2.
-  static double OutlineDepartureVar(const Measurement& m, const ShapeOptions& o) {
-    const double noise = o.fit.point_sigma_m + o.fit.point_sigma_per_m * m.position_m.norm();
-    const double excess = m.rms_residual_m * m.rms_residual_m - noise * noise;
-    if (!(excess > 0.0)) return 0.0;
-    return o.outline_departure_gain * o.outline_departure_gain * excess;
-  }
 
   // How many of the observation's two outline ends are silhouettes (MakePart: not an occluder's
   // edge, not the field of view's end).
