@@ -18,6 +18,7 @@ mkdir -p results
   --before-one-leg --before-confirm-time --before-whole-person --before-box-size --before-single-beam \
   --before-deep-pieces --before-deep-evidence --before-isotropic-bias --before-across-walk \
   --before-few-point-legs --before-legs-seen-through --before-legs-report-coasting \
+  --before-outline-departure \
   --before-fusion-merge --before-report-sourceless \
   --out results/tracking_benchmark.md
 "$build_dir/tests/bench/store_benchmark" results/store_benchmark.md

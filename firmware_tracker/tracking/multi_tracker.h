@@ -259,6 +259,9 @@ struct TrackShape {
   // outline not being the model's): added to the reported position covariance, not to the
   // filter's.
   Eigen::Matrix2d centre_bias_cov_m2 = Eigen::Matrix2d::Zero();
+  // Mean over recent scans of the variance the outline's departure from the model adds
+  // (ShapeOptions::outline_departure_gain).
+  double departure_m2 = 0.0;
 };
 
 // Replaces an associated measurement with one made with what its track knows (the pipeline's shape

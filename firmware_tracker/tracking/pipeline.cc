@@ -17,6 +17,8 @@ bool Positive(double v) { return std::isfinite(v) && v > 0.0; }
 constexpr std::uint32_t kMinFlatnessUpdates = 5;
 // The running mean of the flatness becomes an exponential one after this many updates.
 constexpr double kFlatnessMemory = 20.0;
+// Scans over which a track's outline departure is averaged (ShapeOptions::outline_departure_gain).
+constexpr double kDepartureMemory = 10.0;
 // Fits with fewer points carry no flatness evidence (two points always lie on a line).
 constexpr std::size_t kMinFlatnessPoints = 4;
 // RMS distance to their principal line of points spread evenly over an arc of sagitta s: the
@@ -52,6 +54,13 @@ bool PersonBackLineRmsAbove(const ShapeOptions& o, double extent_m, double thres
   const double w = 1.0 - threshold_m / (kArcLineRmsShare * o.person_minor_m);
   if (!(w > 0.0)) return false;
   return 1.0 - PowerOf(u, o.person_exponent) < PowerOf(w, o.person_exponent);
+}
+
+double OutlineDepartureVar(const ShapeOptions& o, double rms_m, double range_m) {
+  const double noise = o.fit.point_sigma_m + o.fit.point_sigma_per_m * range_m;
+  const double excess = rms_m * rms_m - noise * noise;
+  if (!(excess > 0.0)) return 0.0;
+  return o.outline_departure_gain * o.outline_departure_gain * excess;
 }
 
 }  // namespace internal
@@ -166,6 +175,17 @@ std::optional<std::string> Validate(const ShapeOptions& o) {
     return "size_drift_m_per_sqrt_s must be >= 0";
   }
   if (!Positive(o.centre_model_sigma_m)) return "centre_model_sigma_m must be > 0";
+  if (!(std::isfinite(o.outline_departure_gain) && o.outline_departure_gain >= 0.0)) {
+    return "outline_departure_gain must be >= 0";
+  }
+  if (!(std::isfinite(o.outline_fixed_share) && o.outline_fixed_share > 0.0 &&
+        o.outline_fixed_share <= 1.0)) {
+    return "outline_fixed_share must be in (0, 1]";
+  }
+  if (!(std::isfinite(o.outline_model_share) && o.outline_model_share > 0.0 &&
+        o.outline_model_share <= 1.0)) {
+    return "outline_model_share must be in (0, 1]";
+  }
   if (!(std::isfinite(o.size_floor_sigma_m) && o.size_floor_sigma_m >= 0.0)) {
     return "size_floor_sigma_m must be >= 0";
   }
@@ -264,25 +284,48 @@ class TrackingPipeline::Refiner final : public MeasurementRefiner {
     const bool ok = ob.legs ? RefineLegs(ob, predicted, predicted_cov, shape, measurement)
                             : RefineBody(ob, predicted, predicted_cov, shape, measurement);
     if (!ok) return false;
-    measurement.covariance_m2 +=
-        o.centre_model_sigma_m * o.centre_model_sigma_m * Eigen::Matrix2d::Identity();
+    // ShapeOptions::outline_departure_gain: at upper-body height the fit's residuals measure how
+    // far the outline departs from the model; the fixed allowances for it shrink to
+    // outline_fixed_share (shared) and outline_model_share (per scan).
+    const bool measured_outline =
+        o.mount == Mount::kTorso && !ob.legs && o.outline_departure_gain > 0.0;
+    const double share = measured_outline ? o.outline_fixed_share : 1.0;
+    const double model_sigma_m =
+        (measured_outline ? o.outline_model_share : 1.0) * o.centre_model_sigma_m;
+    measurement.covariance_m2 += model_sigma_m * model_sigma_m * Eigen::Matrix2d::Identity();
+    double departure_var = 0.0;
+    if (measured_outline) {
+      departure_var = internal::OutlineDepartureVar(o, measurement.rms_residual_m,
+                                                    measurement.position_m.norm());
+      if (departure_var > 0.0) ++widened;
+      shape.departure_m2 += (departure_var - shape.departure_m2) /
+                            std::min(kDepartureMemory, static_cast<double>(shape.updates + 1));
+    }
     measurement.kind = MeasurementKind::kShapeFit;
     // What successive measurements share goes into the report: the size state's error (never
     // taken as smaller than the floor) and the outline's departure from the model.
     const double floor_m = shape.model == ShapeModel::kBox
-                               ? std::max(o.size_floor_sigma_m, o.box_size_floor_sigma_m)
-                               : o.size_floor_sigma_m;
+                               ? std::max(share * o.size_floor_sigma_m, o.box_size_floor_sigma_m)
+                               : share * o.size_floor_sigma_m;
+    const double bias_sigma_m = share * o.centre_bias_sigma_m;
     const double range_m = measurement.position_m.norm();
     if (o.centre_bias_along_ray && range_m > 0.0 && shape.model != ShapeModel::kBox) {
       const double step_rad = ob.part_count > 0 ? ob.parts[0].silhouette.step_rad : 0.0;
       shape.centre_bias_cov_m2 =
           CentreBiasAlongRay(shape, measurement.position_m / range_m, range_m, step_rad,
-                             SilhouetteEdges(ob), floor_m, o);
+                             SilhouetteEdges(ob), floor_m, bias_sigma_m, o);
     } else {
       const double size_var =
           std::max({shape.size_cov_m2(0, 0), shape.size_cov_m2(1, 1), floor_m * floor_m});
       shape.centre_bias_cov_m2 =
-          (o.centre_bias_sigma_m * o.centre_bias_sigma_m + size_var) * Eigen::Matrix2d::Identity();
+          (bias_sigma_m * bias_sigma_m + size_var) * Eigen::Matrix2d::Identity();
+    }
+    // The outline's departure in this scan, or on average over the track's recent scans, is
+    // shared by successive scans as the outline is (a second object in the segment, a partial
+    // view, arms held out): reported, not given to the filter as noise it could average away.
+    if (measured_outline) {
+      shape.centre_bias_cov_m2 +=
+          std::max(departure_var, shape.departure_m2) * Eigen::Matrix2d::Identity();
     }
     shape.stamp_ns = at_ns;
     ++shape.updates;
@@ -292,6 +335,7 @@ class TrackingPipeline::Refiner final : public MeasurementRefiner {
   std::uint64_t fits = 0;
   std::uint64_t failed = 0;
   std::uint64_t across_walk = 0;
+  std::uint64_t widened = 0;
 
   // How many of the observation's two outline ends are silhouettes (MakePart: not an occluder's
   // edge, not the field of view's end).
@@ -311,10 +355,12 @@ class TrackingPipeline::Refiner final : public MeasurementRefiner {
   }
 
   // ShapeOptions::centre_bias_along_ray: u the unit ray from the sensor through the centre at
-  // range_m, step_rad the scan's beam step, edges the silhouette ends (SilhouetteEdges).
+  // range_m, step_rad the scan's beam step, edges the silhouette ends (SilhouetteEdges), floor_m
+  // the size's floor and bias_sigma_m the outline's sigma along the ray.
   static Eigen::Matrix2d CentreBiasAlongRay(const TrackShape& shape, const Eigen::Vector2d& u,
                                             double range_m, double step_rad, int edges,
-                                            double floor_m, const ShapeOptions& o) {
+                                            double floor_m, double bias_sigma_m,
+                                            const ShapeOptions& o) {
     // The size's covariance, each semi-axis no more certain than the floor (a PSD diagonal added).
     Eigen::Matrix2d size_cov = shape.size_cov_m2;
     size_cov(0, 0) += std::max(0.0, floor_m * floor_m - size_cov(0, 0));
@@ -323,7 +369,7 @@ class TrackingPipeline::Refiner final : public MeasurementRefiner {
     // by J dsize.
     const Eigen::Vector2d j_radial = ExtentJacobian(shape, -u);
     const double radial_var =
-        j_radial.dot(size_cov * j_radial) + o.centre_bias_sigma_m * o.centre_bias_sigma_m;
+        j_radial.dot(size_cov * j_radial) + bias_sigma_m * bias_sigma_m;
     // Across: each silhouette end lies uniformly within one beam step of its last returning beam,
     // variance (R step)^2 / 12, shared by the scans of a track while it moves less than a beam
     // spacing across the ray; the centre is the mean of the two ends (half that variance). With
@@ -1300,11 +1346,13 @@ const ScanTracks& TrackingPipeline::Process(const ScanView& scan, std::uint32_t 
 
   const std::uint64_t fits_before = refiner_->fits, failed_before = refiner_->failed;
   const std::uint64_t across_walk_before = refiner_->across_walk;
+  const std::uint64_t widened_before = refiner_->widened;
   tracker_.Step(scan.stamp_ns, measurements_.span(), offsets_s_.span(),
                 shape_fit ? refiner_.get() : nullptr, tracks_);
   counters_.shape_fits += refiner_->fits - fits_before;
   counters_.failed_shape_fits += refiner_->failed - failed_before;
   counters_.legs_across_walk += refiner_->across_walk - across_walk_before;
+  counters_.outline_departure_widened += refiner_->widened - widened_before;
   if (bg.scan_error == ScanError::kNone && bg.learned) {
     AbsorbStatic(scan);
     if (shape_fit) DropCoasting(scan);

@@ -369,6 +369,41 @@ TEST(TrackerOptionsTest, DefaultsValidAndErrorsNameTheSectionAndField) {
   o = {};
   o.shape.centre_bias_across_sigma_m = std::nan("");
   EXPECT_EQ(Validate(o)->rfind("shape.centre_bias_across_sigma_m", 0), 0u) << *Validate(o);
+  o = {};
+  o.shape.outline_departure_gain = -0.5;
+  EXPECT_EQ(Validate(o)->rfind("shape.outline_departure_gain", 0), 0u) << *Validate(o);
+  o.shape.outline_departure_gain = std::nan("");
+  EXPECT_EQ(Validate(o)->rfind("shape.outline_departure_gain", 0), 0u) << *Validate(o);
+  o = {};
+  o.shape.outline_fixed_share = 0.0;
+  EXPECT_EQ(Validate(o)->rfind("shape.outline_fixed_share", 0), 0u) << *Validate(o);
+  o.shape.outline_fixed_share = 1.5;
+  EXPECT_EQ(Validate(o)->rfind("shape.outline_fixed_share", 0), 0u) << *Validate(o);
+  o = {};
+  o.shape.outline_model_share = 0.0;
+  EXPECT_EQ(Validate(o)->rfind("shape.outline_model_share", 0), 0u) << *Validate(o);
+  o.shape.outline_model_share = std::nan("");
+  EXPECT_EQ(Validate(o)->rfind("shape.outline_model_share", 0), 0u) << *Validate(o);
+  o = {};
+  o.shape.outline_departure_gain = 0.0;  // off: the shares are not used, but still checked
+  EXPECT_EQ(Validate(o), std::nullopt);
+}
+
+// ShapeOptions::outline_departure_gain: residuals at or below the range noise (0.015 + 0.001 R)
+// add nothing; beyond it, gain^2 (rms^2 - noise^2).
+TEST(PipelineScenarioTest, OutlineDepartureIsTheResidualBeyondTheRangeNoise) {
+  ShapeOptions o;
+  o.outline_departure_gain = 1.5;
+  o.fit.point_sigma_m = 0.015;
+  o.fit.point_sigma_per_m = 0.001;
+  // At 5 m the noise is 0.02 m: an RMS of 0.05 m departs by sqrt(0.0025 - 0.0004).
+  EXPECT_NEAR(internal::OutlineDepartureVar(o, 0.05, 5.0), 2.25 * (0.0025 - 0.0004), 1e-12);
+  EXPECT_EQ(internal::OutlineDepartureVar(o, 0.02, 5.0), 0.0);
+  EXPECT_EQ(internal::OutlineDepartureVar(o, 0.01, 5.0), 0.0);
+  // At 15 m the noise is 0.03 m: the same RMS departs less.
+  EXPECT_NEAR(internal::OutlineDepartureVar(o, 0.05, 15.0), 2.25 * (0.0025 - 0.0009), 1e-12);
+  o.outline_departure_gain = 0.0;
+  EXPECT_EQ(internal::OutlineDepartureVar(o, 0.05, 5.0), 0.0);
 }
 
 class CrossingTest : public ::testing::TestWithParam<MeasurementKind> {};
@@ -1410,7 +1445,10 @@ RayErrors WalkAcrossTheRay(const TrackerOptions& options, double range_m) {
 }
 
 TEST(PipelineScenarioTest, CovarianceAlongAndAcrossTheRayContainsTheErrorAtEveryRange) {
-  const TrackerOptions options = Synthetic();
+  // The fixed allowances' two forms against each other (the measured outline departure, the same
+  // in every direction, is AModelLikeOutlineIsReportedWithTheFixedAllowancesCut's).
+  TrackerOptions options = Synthetic();
+  options.shape.outline_departure_gain = 0.0;
   ASSERT_TRUE(options.shape.centre_bias_along_ray);
   TrackerOptions isotropic = options;
   isotropic.shape.centre_bias_along_ray = false;
@@ -1434,6 +1472,30 @@ TEST(PipelineScenarioTest, CovarianceAlongAndAcrossTheRayContainsTheErrorAtEvery
     RecordProperty("nees_at_" + std::to_string(static_cast<int>(range_m)) + "_m",
                    std::to_string(e.nees / e.n));
   }
+}
+
+// The model's own outline (an ellipse, no clutter) at 8 m: its residuals are the range noise, so
+// with the departure measured (ShapeOptions::outline_departure_gain) the fixed allowances for the
+// outline are cut: the reported sigmas shrink towards the error (the NEES rises) and still contain
+// it (RMS error within the RMS sigma in both directions). With the gain 0 the sigmas are the
+// whole fixed allowances.
+TEST(PipelineScenarioTest, AModelLikeOutlineIsReportedWithTheFixedAllowancesCut) {
+  const TrackerOptions options = Synthetic();
+  ASSERT_GT(options.shape.outline_departure_gain, 0.0);
+  TrackerOptions before = options;
+  before.shape.outline_departure_gain = 0.0;
+  const RayErrors e = WalkAcrossTheRay(options, 8.0);
+  const RayErrors old = WalkAcrossTheRay(before, 8.0);
+  ASSERT_GT(e.n, 150);
+  ASSERT_GT(old.n, 150);
+  EXPECT_LT(e.Rms(e.sigma_radial_sq), 0.9 * old.Rms(old.sigma_radial_sq));
+  EXPECT_LT(e.Rms(e.sigma_across_sq), old.Rms(old.sigma_across_sq));
+  EXPECT_LE(e.Rms(e.radial_sq), e.Rms(e.sigma_radial_sq));
+  EXPECT_LE(e.Rms(e.across_sq), e.Rms(e.sigma_across_sq));
+  EXPECT_GT(e.nees / e.n, old.nees / old.n);
+  EXPECT_LT(e.nees / e.n, 3.0);
+  RecordProperty("nees", std::to_string(e.nees / e.n));
+  RecordProperty("nees_before", std::to_string(old.nees / old.n));
 }
 
 TEST(PipelineScenarioTest, AWideBeamDoesNotPullTheCentreTowardsTheSensor) {

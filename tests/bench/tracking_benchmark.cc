@@ -39,7 +39,7 @@
 //                       [--before-box-size] [--before-single-beam] [--before-deep-pieces]
 //                       [--before-deep-evidence] [--before-isotropic-bias] [--before-across-walk]
 //                       [--before-few-point-legs] [--before-legs-seen-through]
-//                       [--before-legs-report-coasting]
+//                       [--before-legs-report-coasting] [--before-outline-departure]
 //                       [--before-fusion-merge] [--before-report-sourceless]]
 //   (--extra: more scenario folders, e.g. held-out scenes, reported in their own section;
 //   --explain: per run on stderr, what became of an object's previous track at every id switch
@@ -80,6 +80,9 @@
 //   sees through every place its legs may stand, ShapeOptions::legs_seen_through = false;
 //   --before-legs-report-coasting: "before" reports a knee-height coasting track for all of
 //   MultiTrackerOptions::report_coasting_s, ShapeOptions::legs_report_coasting_s = 0;
+//   --before-outline-departure: "before" reports an upper-body centre with the fixed allowances
+//   for the outline alone, not the departure its fit's residuals measure,
+//   ShapeOptions::outline_departure_gain = 0;
 //   --before-fusion-merge: "before"'s fusion leaves a fused track without sources to coast beside
 //   the track that took its object and reports fused tracks no tracker holds any more,
 //   FusionOptions::merge_sourceless = false and report_sourceless = true (its tracker is the new
@@ -783,6 +786,9 @@ bool g_before_legs_seen_through = false;
 // --before-legs-report-coasting: "before" reports a knee-height coasting track for all of
 // report_coasting_s (ShapeOptions::legs_report_coasting_s = 0).
 bool g_before_legs_report_coasting = false;
+// --before-outline-departure: "before" reports an upper-body centre with the fixed allowances for
+// the outline alone (ShapeOptions::outline_departure_gain = 0).
+bool g_before_outline_departure = false;
 // --before-fusion-merge: "before"'s fusion without merging fused tracks left without sources and
 // reporting fused tracks no tracker holds any more (FusionOptions::merge_sourceless = false,
 // report_sourceless = true).
@@ -829,8 +835,8 @@ std::vector<Variant> Variants(sim::Mount mount, double range_m) {
              g_before_box_size || g_before_single_beam || g_before_deep_pieces ||
              g_before_deep_evidence || g_before_isotropic_bias || g_before_across_walk ||
              g_before_few_point_legs || g_before_legs_seen_through ||
-             g_before_legs_report_coasting || g_before_fusion_merge ||
-             g_before_report_sourceless) {
+             g_before_legs_report_coasting || g_before_outline_departure ||
+             g_before_fusion_merge || g_before_report_sourceless) {
     tracking::TrackerOptions before = fresh;
     if (g_before_one_leg) before.shape.hidden_leg_behind = false;
     if (g_before_mixed_pixels) before.shape.drop_mixed_pixel_legs = false;
@@ -847,6 +853,7 @@ std::vector<Variant> Variants(sim::Mount mount, double range_m) {
     if (g_before_few_point_legs) before.shape.split_few_point_legs = false;
     if (g_before_legs_seen_through) before.shape.legs_seen_through = false;
     if (g_before_legs_report_coasting) before.shape.legs_report_coasting_s = 0.0;
+    if (g_before_outline_departure) before.shape.outline_departure_gain = 0.0;
     variants.push_back({"before", before});
   }
   return variants;
@@ -1709,8 +1716,8 @@ std::string KneeHeightBefore() {
   if (!(g_before_one_leg || g_before_confirm_time || g_before_whole_person || g_before_box_size ||
         g_before_single_beam || g_before_deep_pieces || g_before_deep_evidence ||
         g_before_isotropic_bias || g_before_across_walk || g_before_few_point_legs ||
-        g_before_legs_seen_through || g_before_legs_report_coasting || g_before_fusion_merge ||
-        g_before_report_sourceless) ||
+        g_before_legs_seen_through || g_before_legs_report_coasting ||
+        g_before_outline_departure || g_before_fusion_merge || g_before_report_sourceless) ||
       g_before_mixed_pixels || g_before_far || g_before_evidence_coasting ||
       g_before_report_rules) {
     return "";
@@ -1775,6 +1782,11 @@ std::string KneeHeightBefore() {
         "reporting a knee-height coasting track for all of `tracking.report_coasting_s` "
         "(`shape.legs_report_coasting_s` 0)");
   }
+  if (g_before_outline_departure) {
+    without.push_back(
+        "reporting an upper-body centre with the whole fixed allowances for the outline, not the "
+        "departure its fit's residuals measure (`shape.outline_departure_gain` 0)");
+  }
   std::string text = "\"before\": the new tracker" + std::string(without.empty() ? "" : " ");
   for (std::size_t i = 0; i < without.size(); ++i) {
     text += (i == 0 ? "" : i + 1 == without.size() ? " and " : ", ") + without[i];
@@ -1791,7 +1803,11 @@ std::string KneeHeightBefore() {
             "(`fusion.report_sourceless` true)";
   }
   const char* const same =
-      g_before_isotropic_bias
+      g_before_outline_departure
+          ? ", on the same scans in the same run; upper-body tracks differ by the measurement's "
+            "fixed allowance (centre_model_sigma_m), their reported covariance (so NEES and what "
+            "fusion makes of them) by the measured departure"
+      : g_before_isotropic_bias
           ? ", on the same scans in the same run; upper-body tracks are the same by construction, "
             "their reported covariance (so NEES and what fusion makes of them) is not"
           : ", on the same scans in the same run; upper-body rows are the same by construction";
@@ -1864,6 +1880,8 @@ int main(int argc, char** argv) {
       g_before_legs_seen_through = true;
     } else if (a == "--before-legs-report-coasting") {
       g_before_legs_report_coasting = true;
+    } else if (a == "--before-outline-departure") {
+      g_before_outline_departure = true;
     } else if (a == "--before-fusion-merge") {
       g_before_fusion_merge = true;
     } else if (a == "--before-report-sourceless") {
@@ -1880,7 +1898,8 @@ int main(int argc, char** argv) {
                    "[--before-deep-pieces] [--before-deep-evidence] [--before-isotropic-bias] "
                    "[--before-across-walk] [--before-few-point-legs] "
                    "[--before-legs-seen-through] [--before-legs-report-coasting] "
-                   "[--before-fusion-merge] [--before-report-sourceless]]\n");
+                   "[--before-outline-departure] [--before-fusion-merge] "
+                   "[--before-report-sourceless]]\n");
       return 2;
     }
   }
