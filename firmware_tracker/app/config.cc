@@ -297,7 +297,8 @@ void VisitShape(tracking::ShapeOptions& o, ConfigVisitor& v) {
           "Mount torso: the fit's residuals beyond the range noise measure the outline's departure "
           "from the model (a second object in the segment, a partial view, a body unlike the "
           "prior); gain^2 (rms^2 - noise^2) per axis, or its mean over the track's last 10 scans "
-          "if larger, is added to the reported covariance, and the fixed allowances for the "
+          "if larger, is added to the covariance reported with measured scans, and the fixed "
+          "allowances for the "
           "outline are cut (outline_fixed_share, outline_model_share). 0: off.");
   v.Field("outline_fixed_share", o.outline_fixed_share,
           "With outline_departure_gain > 0, mount torso: centre_bias_sigma_m and "

@@ -758,8 +758,14 @@ void MultiTracker::Report(common::UtcNs scan_start_ns, ScanTracks& out) {
     r->y_m = x(1);
     r->vx_mps = x(2);
     r->vy_mps = x(3);
-    // The filter averages its measurements as independent; what they share is added back.
+    // The filter averages its measurements as independent; what they share is added back. The
+    // outline's departure only where this scan measured it: a coasting report stands for where
+    // the body may be now (the filter's prediction, which grows with the time coasted), and the
+    // coasting checks (seen through, unseen) take their reach from it; an outline that was not
+    // the model's in the last scans is no reason to report the track where the beams pass.
     p.topLeftCorner<2, 2>() += t.shape.centre_bias_cov_m2;
+    if (t.updated)
+      p.topLeftCorner<2, 2>() += t.shape.reported_departure_m2 * Eigen::Matrix2d::Identity();
     r->covariance = p;
     r->age_scans = t.age_scans;
     r->points = t.points;

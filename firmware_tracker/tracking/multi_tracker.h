@@ -262,6 +262,9 @@ struct TrackShape {
   // Mean over recent scans of the variance the outline's departure from the model adds
   // (ShapeOptions::outline_departure_gain).
   double departure_m2 = 0.0;
+  // The departure's variance reported with the track's measured scans (the larger of this scan's
+  // and the mean), per axis. Not with coasting reports: see MultiTracker's Report.
+  double reported_departure_m2 = 0.0;
 };
 
 // Replaces an associated measurement with one made with what its track knows (the pipeline's shape

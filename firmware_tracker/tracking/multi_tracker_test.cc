@@ -671,6 +671,61 @@ TEST(MultiTrackerTest, RefinedMeasurementFarBeyondTheGateIsNotUsed) {
   }
 }
 
+// A refiner that reports a fixed outline departure with every measurement.
+class DepartureRefiner final : public MeasurementRefiner {
+ public:
+  explicit DepartureRefiner(double departure_m2) : departure_m2_(departure_m2) {}
+  bool Refine(std::size_t, common::UtcNs, const Eigen::Vector4d*, const Eigen::Matrix4d*,
+              TrackShape& shape, Measurement& m) override {
+    shape.shape = ObjectShape::kTorso;
+    shape.reported_departure_m2 = departure_m2_;
+    m.covariance_m2 = 0.02 * 0.02 * Eigen::Matrix2d::Identity();
+    return true;
+  }
+
+ private:
+  double departure_m2_;
+};
+
+TEST(MultiTrackerTest, OutlineDepartureIsReportedWithMeasuredScansOnly) {
+  // The same track with and without a departure of 0.05^2 m^2 per axis: the confirmed reports
+  // differ by exactly that, the coasting ones not at all (their reach for the coasting checks is
+  // the filter's prediction), and the filter itself never sees it.
+  const std::vector<Measurement> echo = {Meas(3.0, 1.0, 0.02)};
+  const auto run = [&](double departure_m2, std::vector<Eigen::Matrix2d>* confirmed,
+                       std::vector<Eigen::Matrix2d>* coasting) {
+    MultiTracker tracker(Opts());
+    DepartureRefiner refiner(departure_m2);
+    ScanTracks out;
+    for (std::int64_t k = 0; k < 10; ++k) {
+      tracker.Step(ScanNs(k), echo, {}, &refiner, out);
+      if (!out.tracks.empty() && out.tracks[0].state == TrackState::kConfirmed) {
+        confirmed->push_back(out.tracks[0].covariance.topLeftCorner<2, 2>());
+      }
+    }
+    for (std::int64_t k = 10; k < 13; ++k) {
+      tracker.Step(ScanNs(k), std::vector<Measurement>{}, {}, &refiner, out);
+      ASSERT_EQ(out.tracks.size(), 1u);
+      ASSERT_EQ(out.tracks[0].state, TrackState::kCoasting);
+      coasting->push_back(out.tracks[0].covariance.topLeftCorner<2, 2>());
+    }
+  };
+  std::vector<Eigen::Matrix2d> confirmed0, coasting0, confirmed1, coasting1;
+  run(0.0, &confirmed0, &coasting0);
+  run(0.05 * 0.05, &confirmed1, &coasting1);
+  ASSERT_FALSE(confirmed0.empty());
+  ASSERT_EQ(confirmed0.size(), confirmed1.size());
+  for (std::size_t i = 0; i < confirmed0.size(); ++i) {
+    EXPECT_TRUE(
+        (confirmed1[i] - confirmed0[i]).isApprox(0.05 * 0.05 * Eigen::Matrix2d::Identity(), 1e-9))
+        << i;
+  }
+  ASSERT_EQ(coasting0.size(), coasting1.size());
+  for (std::size_t i = 0; i < coasting0.size(); ++i) {
+    EXPECT_TRUE(coasting1[i].isApprox(coasting0[i], 1e-12)) << i;
+  }
+}
+
 TEST(MultiTrackerTest, CoastingTracksAreReportedOnlyBrieflyButKeptUntilTheTimeout) {
   MultiTrackerOptions options = Opts();
   options.report_coasting_s = 0.3;

@@ -323,10 +323,8 @@ class TrackingPipeline::Refiner final : public MeasurementRefiner {
     // The outline's departure in this scan, or on average over the track's recent scans, is
     // shared by successive scans as the outline is (a second object in the segment, a partial
     // view, arms held out): reported, not given to the filter as noise it could average away.
-    if (measured_outline) {
-      shape.centre_bias_cov_m2 +=
-          std::max(departure_var, shape.departure_m2) * Eigen::Matrix2d::Identity();
-    }
+    shape.reported_departure_m2 =
+        measured_outline ? std::max(departure_var, shape.departure_m2) : 0.0;
     shape.stamp_ns = at_ns;
     ++shape.updates;
     return true;
@@ -368,8 +366,7 @@ class TrackingPipeline::Refiner final : public MeasurementRefiner {
     // Along the ray: the centre lies h(-u) behind the visible side, a size error dsize moves it
     // by J dsize.
     const Eigen::Vector2d j_radial = ExtentJacobian(shape, -u);
-    const double radial_var =
-        j_radial.dot(size_cov * j_radial) + bias_sigma_m * bias_sigma_m;
+    const double radial_var = j_radial.dot(size_cov * j_radial) + bias_sigma_m * bias_sigma_m;
     // Across: each silhouette end lies uniformly within one beam step of its last returning beam,
     // variance (R step)^2 / 12, shared by the scans of a track while it moves less than a beam
     // spacing across the ray; the centre is the mean of the two ends (half that variance). With
@@ -1238,8 +1235,8 @@ bool TrackingPipeline::SeenThrough(const ScanView& scan, const Eigen::Vector2d& 
   // A leg at the region's far side falls between two beams farther apart than its width there,
   // and a beam wider than it returns a mixed pixel between it and what lies behind.
   if (max_beam_gap_m > 0.0 &&
-      !((range + half_width_m) * std::max(std::abs(scan.angle_step_rad),
-                                          options_.shape.beam_divergence_rad) <
+      !((range + half_width_m) *
+            std::max(std::abs(scan.angle_step_rad), options_.shape.beam_divergence_rad) <
         max_beam_gap_m)) {
     return false;
   }

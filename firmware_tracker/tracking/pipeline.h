@@ -242,18 +242,20 @@ struct ShapeOptions {
   // (sway, the torso's turn, an outline that is not the model's).
   double centre_model_sigma_m = 0.015;
   // Upper-body mount: the outline's departure from the model, measured. A fit whose residuals
-  // exceed the range noise sees an outline that is not the model's (a second object in the
-  // segment, a partial view, arms held out, a body unlike the prior), and its centre is off by a
-  // multiple of that departure; where the residuals are at the range noise, the outline is the
-  // model's and the centre is as good as the points. The departure's variance, gain^2 (rms^2 -
-  // noise^2) per axis (noise: fit.point_sigma_m + fit.point_sigma_per_m R, never negative), or its
-  // mean over the track's last 10 scans if larger (what successive scans share), is added to the
-  // reported covariance (not the filter's: it does not average away). With it measured, the fixed
-  // allowances for the outline are cut at upper-body height (knee height keeps them whole): what
-  // successive scans share (centre_bias_sigma_m, size_floor_sigma_m) to outline_fixed_share of
-  // their sigma, the per-scan centre_model_sigma_m (given to the filter) to outline_model_share
-  // (1: the filter and so the tracks unchanged; 0.67, what is left of it being the sway and the
-  // torso's turn, ~0.01 m, follows people closer but keeps more coasting reports alive).
+  // exceed the range noise sees an outline that is not the model's (a second object in the segment,
+  // a partial view, arms held out, a body unlike the prior), and its centre is off by a multiple of
+  // that departure; where the residuals are at the range noise, the outline is the model's and the
+  // centre is as good as the points. The departure's variance, gain^2 (rms^2 - noise^2) per axis
+  // (noise: fit.point_sigma_m + fit.point_sigma_per_m R, never negative), or its mean over the
+  // track's last 10 scans if larger (what successive scans share), is added to the covariance
+  // reported with measured scans (not the filter's: it does not average away; not to coasting
+  // reports, the filter's prediction, from which the coasting checks take their reach). With it
+  // measured, the fixed allowances for the outline are cut at upper-body height (knee height keeps
+  // them whole): what successive scans share (centre_bias_sigma_m, size_floor_sigma_m) to
+  // outline_fixed_share of their sigma, the per-scan centre_model_sigma_m (given to the filter) to
+  // outline_model_share (1: the filter and so the tracks unchanged; 0.67, what is left of it being
+  // the sway and the torso's turn, ~0.01 m, follows people closer but keeps more coasting reports
+  // alive).
   // The gain: over the shipped scenes' upper-body matches, binned by residual RMS over the range
   // noise, the centre's error is 1.5-3 times the departure. outline_departure_gain 0: off, the
   // fixed allowances whole, as before.
@@ -365,7 +367,7 @@ struct PipelineCounters {
   std::uint64_t single_beam_legs = 0;   // observations of single-beam legs (single_beam_legs)
   std::uint64_t legs_across_walk = 0;   // one leg measured across the walk (single_leg_across_walk)
   std::uint64_t outline_departure_widened = 0;  // body fits widened (outline_departure_gain)
-  std::uint64_t split_few_point_legs = 0;  // 2-3 point segments split into two legs
+  std::uint64_t split_few_point_legs = 0;       // 2-3 point segments split into two legs
   std::uint64_t veiled_segments = 0;    // legs: mixed pixels (beside a nearer edge, deep), dropped
   std::uint64_t deep_pieces_kept = 0;   // legs: deep pieces with no surface behind, kept
   std::uint64_t shadowed_legs = 0;      // legs: straight behind a confirmed track, dropped

@@ -603,10 +603,10 @@ class MotSequence {
     const double along = d.dot(ray);
     const double across = std::abs(ray.x() * d.y() - ray.y() * d.x());
     const double range = nearest->p.norm();
-    const std::string where = across > kAcrossM          ? "beside the nearest object"
-                              : along > kMatchRadiusM    ? "straight behind the nearest object"
-                              : along < -kMatchRadiusM   ? "straight in front of the nearest object"
-                                                         : "beside the nearest object";
+    const std::string where = across > kAcrossM        ? "beside the nearest object"
+                              : along > kMatchRadiusM  ? "straight behind the nearest object"
+                              : along < -kMatchRadiusM ? "straight in front of the nearest object"
+                                                       : "beside the nearest object";
     const std::string bin = range < 8.0    ? "< 8 m"
                             : range < 12.0 ? "8-12 m"
                             : range < 15.0 ? "12-15 m"
@@ -835,8 +835,8 @@ std::vector<Variant> Variants(sim::Mount mount, double range_m) {
              g_before_box_size || g_before_single_beam || g_before_deep_pieces ||
              g_before_deep_evidence || g_before_isotropic_bias || g_before_across_walk ||
              g_before_few_point_legs || g_before_legs_seen_through ||
-             g_before_legs_report_coasting || g_before_outline_departure ||
-             g_before_fusion_merge || g_before_report_sourceless) {
+             g_before_legs_report_coasting || g_before_outline_departure || g_before_fusion_merge ||
+             g_before_report_sourceless) {
     tracking::TrackerOptions before = fresh;
     if (g_before_one_leg) before.shape.hidden_leg_behind = false;
     if (g_before_mixed_pixels) before.shape.drop_mixed_pixel_legs = false;
@@ -1716,8 +1716,8 @@ std::string KneeHeightBefore() {
   if (!(g_before_one_leg || g_before_confirm_time || g_before_whole_person || g_before_box_size ||
         g_before_single_beam || g_before_deep_pieces || g_before_deep_evidence ||
         g_before_isotropic_bias || g_before_across_walk || g_before_few_point_legs ||
-        g_before_legs_seen_through || g_before_legs_report_coasting ||
-        g_before_outline_departure || g_before_fusion_merge || g_before_report_sourceless) ||
+        g_before_legs_seen_through || g_before_legs_report_coasting || g_before_outline_departure ||
+        g_before_fusion_merge || g_before_report_sourceless) ||
       g_before_mixed_pixels || g_before_far || g_before_evidence_coasting ||
       g_before_report_rules) {
     return "";
@@ -1803,11 +1803,7 @@ std::string KneeHeightBefore() {
             "(`fusion.report_sourceless` true)";
   }
   const char* const same =
-      g_before_outline_departure
-          ? ", on the same scans in the same run; upper-body tracks differ by the measurement's "
-            "fixed allowance (centre_model_sigma_m), their reported covariance (so NEES and what "
-            "fusion makes of them) by the measured departure"
-      : g_before_isotropic_bias
+      g_before_outline_departure || g_before_isotropic_bias
           ? ", on the same scans in the same run; upper-body tracks are the same by construction, "
             "their reported covariance (so NEES and what fusion makes of them) is not"
           : ", on the same scans in the same run; upper-body rows are the same by construction";
