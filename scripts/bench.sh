@@ -19,7 +19,7 @@ mkdir -p results
   --before-deep-pieces --before-deep-evidence --before-isotropic-bias --before-across-walk \
   --before-few-point-legs --before-legs-seen-through --before-legs-report-coasting \
   --before-outline-departure \
-  --before-fusion-merge --before-report-sourceless \
+  --before-fusion-merge \
   --out results/tracking_benchmark.md
 "$build_dir/tests/bench/store_benchmark" results/store_benchmark.md
 "$build_dir/tests/bench/daemon_benchmark" --out results/daemon_benchmark.md

@@ -320,9 +320,10 @@ TEST(SystemTest, SimTrackersDaemonCalibrateFuseSurviveATrackerRestartAndCorrectA
   // Fused-track continuity: two people, so (almost) never more than two confirmed fused tracks at
   // once, few distinct ids, and the two longest-lived ids cover most of the fused time. Between
   // the bump and its flag s3's tracker takes walls for people and its tracks went through its old
-  // pose; after the flag, the fused tracks only s3 fed coast on until fusion.max_coast_s (1.5 s)
-  // has passed without an update (measured: the last of them ended 1.47 s after the flag). Not
-  // counted (that is what the flag bounds, asserted above); one publish period of margin.
+  // pose; after the flag, the fused tracks only s3 fed are kept until fusion.max_coast_s (1.5 s)
+  // has passed without an update (published as coasting only with fusion.report_sourceless on;
+  // measured with it: the last of them ended 1.47 s after the flag). Not counted (that is what
+  // the flag bounds, asserted above); one publish period of margin.
   constexpr std::int64_t kCoastNs = 1'500'000'000LL + 100'000'000LL;
   std::ifstream fused(dir / "fused.jsonl");
   ASSERT_TRUE(fused) << "no fused tracks recorded";
@@ -330,8 +331,8 @@ TEST(SystemTest, SimTrackersDaemonCalibrateFuseSurviveATrackerRestartAndCorrectA
   std::map<std::uint64_t, std::size_t> seen;  // confirmed id → snapshots
   // The same before the bump and after the flag: s3's tracks fed through its old pose before the
   // flag may have pulled a person's fused track away so that the others start a new one for them
-  // (measured: one such switch, the old id coasting on without sources until max_coast_s); the
-  // ids are to be kept on either side.
+  // (measured: one such switch, the old id kept without sources until max_coast_s); the ids are
+  // to be kept on either side.
   std::array<std::map<std::uint64_t, std::size_t>, 2> seen_side;
   std::map<std::uint64_t, std::pair<std::int64_t, std::int64_t>> span;  // id → first, last stamp
   for (std::string line; std::getline(fused, line);) {

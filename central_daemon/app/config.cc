@@ -425,7 +425,9 @@ bool TopicLevelOk(const std::string& s) {
 std::optional<std::string> ValidateZonesAndMqtt(DaemonConfig& c) {
   if (auto e = ParseZones(c.zones_list, &c.zones)) return e;
   if (!(c.absent_hold_s <= 3600.0)) return "zones.absent_hold_s: must be at most 3600";
-  c.zone_options.absent_hold_s = c.absent_hold_s < 0.0 ? c.fusion.max_coast_s : c.absent_hold_s;
+  // The default follows fusion.max_coast_s (unbounded there), at most the zones' own bound.
+  c.zone_options.absent_hold_s =
+      c.absent_hold_s < 0.0 ? std::min(c.fusion.max_coast_s, 3600.0) : c.absent_hold_s;
   if (auto e = Prefixed("zones", zones::Validate(c.zone_options))) return e;
   if (!(c.zones_update_hz >= 0.1 && c.zones_update_hz <= 100.0))
     return "zones.update_hz: must be in [0.1, 100]";

@@ -403,7 +403,7 @@ int RunLive(const RunOptions& run, DaemonConfig config) {
     }
   }
   if (!WriteStats(run.stats_out, daemon, &receiver, recorder ? &*recorder : nullptr, monitoring,
-                  &mqtt, &fusion))
+                  &mqtt, &fusion, &zones))
     exit_code = kExitFailure;
   std::printf("%s received=%llu kernel_drops=%llu requests_sent=%llu%s\n", Summary(daemon).c_str(),
               static_cast<unsigned long long>(receiver.counters().datagrams),

@@ -12,8 +12,8 @@
 // receive times offline), so a silent site still reports its sensors silent.
 // An object absent from the fused tracks is left out of the object list but held for
 // zones.absent_hold_s (see config.h) with its path: one that comes back within it continues its
-// path; the zones hold it likewise (zones.h), so its zone messages do not change while it is
-// hidden.
+// path; the zones hold it likewise (zones.h), so its zone counts and present list do not change
+// while it is hidden (its running dwell goes on).
 // Thread-safety: called on the io thread.
 
 #include <cstdint>

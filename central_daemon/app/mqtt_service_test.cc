@@ -9,6 +9,8 @@
 
 #include <boost/asio/io_context.hpp>
 #include <chrono>
+#include <filesystem>
+#include <fstream>
 #include <nlohmann/json.hpp>
 #include <set>
 #include <string>
@@ -17,6 +19,8 @@
 #include "central_daemon/app/config.h"
 #include "central_daemon/app/daemon.h"
 #include "central_daemon/app/fusion_service.h"
+#include "central_daemon/app/monitoring_service.h"
+#include "central_daemon/app/run_report.h"
 #include "central_daemon/app/zone_service.h"
 #include "central_daemon/io/mqtt_publisher.h"
 #include "tests/mosquitto_broker.h"
@@ -67,6 +71,7 @@ struct HideRun {
   std::vector<nlohmann::json> zone;     // the zone's messages, in order
   std::vector<nlohmann::json> objects;  // the object lists, in order
   MqttServiceCounters counters;
+  nlohmann::json zone_stats;  // --stats-out's "zones"
 };
 
 // One sensor at the origin sees a person standing at (3, 1), inside the zone "room". Its tracker
@@ -134,6 +139,16 @@ HideRun RunHide(std::uint16_t port, double hidden_s, double absent_hold_s) {
     if (m.topic == topics + "objects") run.objects.push_back(nlohmann::json::parse(m.payload));
   }
   run.counters = mqtt.counters();
+  // What --stats-out says of the zones' hold.
+  const std::filesystem::path stats =
+      std::filesystem::temp_directory_path() /
+      ("lrfnet-hide-stats-" + std::to_string(::getpid()) + "-" + config.mqtt.site + ".json");
+  MonitoringService monitoring(config);
+  EXPECT_TRUE(
+      WriteStats(stats.string(), daemon, nullptr, nullptr, monitoring, nullptr, &fusion, &zones));
+  std::ifstream in(stats);
+  run.zone_stats = nlohmann::json::parse(in).at("zones");
+  std::filesystem::remove(stats);
   return run;
 }
 
@@ -194,6 +209,9 @@ TEST_F(MqttServiceHide, AnIdHiddenAndBackWithinTheHoldGivesNoExitAndNoEntry) {
   EXPECT_GT(lists_without, 0);
   ASSERT_EQ(object_ids.size(), 1u);
   EXPECT_EQ(held.counters.objects_returned, 1u);
+  EXPECT_EQ(held.zone_stats["absent_held"], 1) << held.zone_stats.dump();
+  EXPECT_EQ(held.zone_stats["absent_returned"], 1) << held.zone_stats.dump();
+  EXPECT_EQ(held.zone_stats["absent_gone"], 0) << held.zone_stats.dump();
   // The object's path goes on from before the hiding (its oldest point is from about 0.2 s).
   EXPECT_LT(held.objects.back()["objects"][0]["path"][0][2].get<double>(), -6.0);
   // The zone: the id present in every message from its entry on, nothing lost, no dwell ended.
@@ -231,6 +249,9 @@ TEST_F(MqttServiceHide, AnIdHiddenForLongerThanTheHoldExitsExactlyOnce) {
   EXPECT_EQ(run.zone.back()["dwell"]["completed"], 1);
   EXPECT_EQ(run.counters.objects_returned, 0u);
   EXPECT_EQ(run.counters.objects_gone, 1u);
+  EXPECT_EQ(run.zone_stats["absent_held"], 1) << run.zone_stats.dump();
+  EXPECT_EQ(run.zone_stats["absent_returned"], 0) << run.zone_stats.dump();
+  EXPECT_EQ(run.zone_stats["absent_gone"], 1) << run.zone_stats.dump();
 }
 
 }  // namespace

@@ -207,7 +207,7 @@ int RunOffline(const RunOptions& run, DaemonConfig config, const std::vector<std
   }
   StopMqtt(&mqtt, zones, last_ns, 30.0);
   if (!WriteStats(run.stats_out, core, nullptr, recorder && tee.opened ? &*recorder : nullptr,
-                  monitoring, &mqtt, &fusion))
+                  monitoring, &mqtt, &fusion, &zones))
     exit_code = kExitFailure;
   std::printf("%s\n", Summary(core).c_str());
   std::fflush(stdout);

@@ -12,6 +12,7 @@
 #include "central_daemon/app/mqtt_output.h"
 #include "central_daemon/app/recorder.h"
 #include "central_daemon/app/stats_json.h"
+#include "central_daemon/app/zone_service.h"
 
 namespace lrfnet::daemon {
 
@@ -41,12 +42,19 @@ void LogEvents(Daemon& daemon, double silent_after_s) {
 
 bool WriteStats(const std::string& path, const Daemon& daemon, const UdpReceiver* receiver,
                 const Recorder* recorder, const MonitoringService& monitoring,
-                const MqttOutput* mqtt, const FusionService* fusion) {
+                const MqttOutput* mqtt, const FusionService* fusion, const ZoneService* zones) {
   if (path.empty()) return true;
   nlohmann::json j = StatsJson(daemon.ingest(), daemon.store());
   if (mqtt != nullptr && mqtt->publisher) j["mqtt"] = MqttJson(*mqtt);
   j["monitoring"] = monitoring.StatsJson();
   if (fusion != nullptr) j["fusion"] = fusion->StatsJson();
+  if (zones != nullptr && zones->enabled()) {
+    const zones::ZoneCounters& z = zones->counters();
+    j["zones"] = {{"updates", zones->updates()},
+                  {"absent_held", z.absent_held},
+                  {"absent_returned", z.absent_returned},
+                  {"absent_gone", z.absent_gone}};
+  }
   j["requests_sent"] = daemon.requests_sent();
   j["requests_dropped"] = daemon.requests_dropped();
   if (receiver != nullptr) j["receiver"] = ReceiverJson(receiver->counters());

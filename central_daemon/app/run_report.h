@@ -14,15 +14,18 @@ class FusionService;
 class MonitoringService;
 class Recorder;
 struct MqttOutput;
+class ZoneService;
 
 // Logs the events the core has collected since the last call (new, restarted, silent, back).
 void LogEvents(Daemon& daemon, double silent_after_s);
 
-// Writes every counter as JSON to `path` (nothing when empty); receiver, recorder, mqtt and
-// fusion are left out when null (or not started). False (logged) when the file cannot be written.
+// Writes every counter as JSON to `path` (nothing when empty); receiver, recorder, mqtt, fusion
+// and zones are left out when null (or not started, or no zone configured). False (logged) when
+// the file cannot be written.
 bool WriteStats(const std::string& path, const Daemon& daemon, const UdpReceiver* receiver,
                 const Recorder* recorder, const MonitoringService& monitoring,
-                const MqttOutput* mqtt = nullptr, const FusionService* fusion = nullptr);
+                const MqttOutput* mqtt = nullptr, const FusionService* fusion = nullptr,
+                const ZoneService* zones = nullptr);
 
 // "summary: sensors=N datagrams=N accepted=N rejected=N lost=N frames=N".
 std::string Summary(const Daemon& daemon);

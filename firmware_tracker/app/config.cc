@@ -293,13 +293,13 @@ void VisitShape(tracking::ShapeOptions& o, ConfigVisitor& v) {
   v.Field("centre_model_sigma_m", o.centre_model_sigma_m,
           "Added in quadrature to every centre measurement's sigma: what the fit cannot know "
           "(sway, an outline that is not the model's).");
-  v.Field("outline_departure_gain", o.outline_departure_gain,
-          "Mount torso: the fit's residuals beyond the range noise measure the outline's departure "
-          "from the model (a second object in the segment, a partial view, a body unlike the "
-          "prior); gain^2 (rms^2 - noise^2) per axis, or its mean over the track's last 10 scans "
-          "if larger, is added to the covariance reported with measured scans, and the fixed "
-          "allowances for the "
-          "outline are cut (outline_fixed_share, outline_model_share). 0: off.");
+  v.Field(
+      "outline_departure_gain", o.outline_departure_gain,
+      "Mount torso: the fit's residuals beyond the range noise measure the outline's departure "
+      "from the model (a second object in the segment, a partial view, a body unlike the "
+      "prior); gain^2 (rms^2 - noise^2) per axis, or its running mean (about the last 10 scans) "
+      "if larger, is added to the covariance reported with measured scans, and the fixed "
+      "allowances for the outline are cut (outline_fixed_share, outline_model_share). 0: off.");
   v.Field("outline_fixed_share", o.outline_fixed_share,
           "With outline_departure_gain > 0, mount torso: centre_bias_sigma_m and "
           "size_floor_sigma_m are taken at this share of their sigma (0 < share <= 1).");

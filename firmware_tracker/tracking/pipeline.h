@@ -246,8 +246,8 @@ struct ShapeOptions {
   // a partial view, arms held out, a body unlike the prior), and its centre is off by a multiple of
   // that departure; where the residuals are at the range noise, the outline is the model's and the
   // centre is as good as the points. The departure's variance, gain^2 (rms^2 - noise^2) per axis
-  // (noise: fit.point_sigma_m + fit.point_sigma_per_m R, never negative), or its mean over the
-  // track's last 10 scans if larger (what successive scans share), is added to the covariance
+  // (noise: fit.point_sigma_m + fit.point_sigma_per_m R, never negative), or its running mean
+  // (about the last 10 scans) if larger (what successive scans share), is added to the covariance
   // reported with measured scans (not the filter's: it does not average away; not to coasting
   // reports, the filter's prediction, from which the coasting checks take their reach). With it
   // measured, the fixed allowances for the outline are cut at upper-body height (knee height keeps

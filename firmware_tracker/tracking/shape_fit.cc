@@ -997,9 +997,8 @@ ShapeFitResult Fit(std::span<const Eigen::Vector2d> points, const Silhouette& si
   }
 
   if (!factored && !solver.Factor(h)) return result;
-  // Only the entries the result takes; the others were tested for finiteness before and are not
-  // formed now (with every diagonal entry finite, they could overflow only at covariances near
-  // 1e308, far beyond anything the priors leave).
+  // Only the entries the result takes: the others are used by nothing, so they are neither formed
+  // nor tested for finiteness.
   const Mat5 cov = solver.ResultInverse();
   if (!AllFinite(cov)) return result;
   result.centre_m = x.head<2>();
