@@ -161,6 +161,7 @@ ScratchDir* MqttSystem::dir_ = nullptr;
 
 std::string SchemaOf(const std::string& topic) {
   if (topic.ends_with("/objects")) return "mqtt_objects.schema.json";
+  if (topic.ends_with("/objects/ended")) return "mqtt_objects_ended.schema.json";
   if (topic.find("/zones/") != std::string::npos) return "mqtt_zone.schema.json";
   if (topic.ends_with("/calibration")) return "mqtt_calibration.schema.json";
   if (topic.ends_with("/health")) return "mqtt_sensor_health.schema.json";

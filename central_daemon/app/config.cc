@@ -254,8 +254,11 @@ void VisitFusion(DaemonConfig& c, ConfigVisitor& v) {
   v.Field("report_sourceless", o.report_sourceless,
           "fused_filter: also publish a fused track no sensor's track is bound to any more "
           "(coasting until max_coast_s); off: kept for its id, not published (an id may then "
-          "leave the published objects and come back: zones and MQTT hold an absent id for "
-          "zones.absent_hold_s).");
+          "leave the published objects and come back: zones and MQTT hold it while the fusion "
+          "keeps it).");
+  v.Field("ended_report_s", o.ended_report_s,
+          "How long the fusion keeps telling zones and MQTT that an id ended and why (merged "
+          "into another id, timed out), so they end it at once.");
   v.Field("merge_sourceless", o.merge_sourceless,
           "fused_filter: a fused track without sources coasting on a measured one is merged "
           "into it rather than left beside it as a second track.");
@@ -312,12 +315,13 @@ void VisitZones(DaemonConfig& c, ConfigVisitor& v) {
           "standing on it is counted once. Zones should be wider than twice this.");
   v.Field("update_hz", c.zones_update_hz, "The zones are evaluated this often (fused-track time).");
   v.Field("absent_hold_s", c.absent_hold_s,
-          "An id absent from the fused tracks (the fusion may leave a hidden person out and "
-          "publish the id again when a sensor sees them) is held this long before it is gone: "
-          "the zones keep its side, region and dwell, MQTT its path, and nothing is published "
-          "for it until it comes back (then its new position) or the time is up (then its exit, "
-          "as of when it disappeared). Negative: fusion.max_coast_s, the longest a fused id can "
-          "be left out and come back. 0: an absent id is gone at once.");
+          "An id absent from the fused tracks is held (the zones keep its side, region and "
+          "dwell, MQTT its path) while the fusion keeps it unpublished (a hidden person it may "
+          "publish again), and ends at once when the fusion ends it (merged into another id: "
+          "folded into that one; timed out: its exit, as of when it disappeared). This is how "
+          "long an absent id the fusion says nothing of is held before it is gone (e.g. an end "
+          "reported longer than fusion.ended_report_s ago). Negative: fusion.max_coast_s. 0: at "
+          "once.");
 }
 
 void VisitMqtt(DaemonConfig& c, ConfigVisitor& v) {
@@ -431,6 +435,14 @@ std::optional<std::string> ValidateZonesAndMqtt(DaemonConfig& c) {
   if (auto e = Prefixed("zones", zones::Validate(c.zone_options))) return e;
   if (!(c.zones_update_hz >= 0.1 && c.zones_update_hz <= 100.0))
     return "zones.update_hz: must be in [0.1, 100]";
+  // The zones and the object list learn of an end only while the fusion reports it.
+  if (!c.zones.empty() && c.fusion.ended_report_s < 2.0 / c.zones_update_hz) {
+    return "fusion.ended_report_s: must be at least two periods of zones.update_hz";
+  }
+  if (!c.mqtt.broker.empty() && c.mqtt.objects_hz > 0.0 &&
+      c.fusion.ended_report_s < 2.0 / c.mqtt.objects_hz) {
+    return "fusion.ended_report_s: must be at least two periods of mqtt.objects_hz";
+  }
   const MqttConfig& m = c.mqtt;
   std::string error;
   if (!m.broker.empty() && !common::ParseHostPort(m.broker, "mqtt.broker", 0, &error)) return error;

@@ -88,8 +88,9 @@ struct DaemonConfig {
   std::vector<zones::Zone> zones;  // from zones_list
   zones::ZoneOptions zone_options;  // absent_hold_s: set by Validate from absent_hold_s below
   double zones_update_hz = 10.0;
-  // How long an id absent from the fused tracks is held before zones and MQTT take it as gone
-  // [s]; negative: fusion.max_coast_s (the longest a fused id can be left out and come back).
+  // How long an id absent from the fused tracks that the fusion reports neither hidden nor ended
+  // is held before zones and MQTT take it as gone [s] (hidden ids are held while the fusion
+  // keeps them, ended ones end at once); negative: fusion.max_coast_s.
   double absent_hold_s = -1.0;
   // MQTT (section `mqtt`).
   MqttConfig mqtt;

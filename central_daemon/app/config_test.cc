@@ -128,6 +128,10 @@ TEST(DaemonConfigTest, ErrorsNameTheKey) {
       {"zones: {hysteresis_m: -1}", "zones.hysteresis_m"},
       {"zones: {absent_hold_s: 4000}", "zones.absent_hold_s"},
       {"zones: {absent_hold_s: .nan}", "zones.absent_hold_s"},
+      {"fusion: {ended_report_s: 0}", "ended_report_s"},
+      {"fusion: {ended_report_s: 5}\nzones: {update_hz: 0.1, list: [{name: a, line: [[0, 0], "
+       "[1, 0]]}]}",
+       "fusion.ended_report_s"},
       {"mqtt: {broker: 'nope'}", "mqtt.broker"},
       {"mqtt: {site: 'a/b'}", "mqtt.site"},
       {"mqtt: {topic_prefix: 'a/#'}", "mqtt.topic_prefix"},

@@ -61,6 +61,7 @@ void FusionService::Reconfigure(const DaemonConfig& config) {
   if (config.fusion == config_.fusion) return;  // the fuser keeps its tracks
   config_.fusion = config.fusion;
   fuser_ = fusion::Fuser(config_.fusion);
+  ++generation_;
   SetExcluded(excluded_);  // the placements without the excluded sensors
   for (const auto& [sensor_id, psd] : tracker_accel_psd_) fuser_.SetTrackerModel(sensor_id, psd);
   spdlog::info("fusion: options changed, fused tracks start afresh (method {})",

@@ -70,6 +70,9 @@ class FusionService final : public FrameListener {
   // The newest scan time received (gateway UTC), 0 before the first frame.
   common::UtcNs now_ns() const { return now_ns_; }
   const fusion::Fuser& fuser() const { return fuser_; }
+  // +1 each time a new fuser starts (Reconfigure with changed options): its fused ids start
+  // afresh, so the ids known from the previous one are no longer its ids.
+  std::uint64_t generation() const { return generation_; }
   const FusionServiceCounters& counters() const { return counters_; }
   // The service's and the fuser's counters and what the fuser has learnt of each sensor (the
   // centre offset per measurement kind and the placement error, with their sigmas): the
@@ -82,6 +85,7 @@ class FusionService final : public FrameListener {
   boost::asio::io_context& io_;
   DaemonConfig config_;
   fusion::Fuser fuser_;
+  std::uint64_t generation_ = 0;
   std::vector<fusion::SensorPlacement> placements_;  // of the latest calibration, excluded ones too
   std::map<std::string, double> tracker_accel_psd_;  // per sensor, from its SensorInfo
   bool calibrated_ = false;

@@ -70,6 +70,28 @@ std::string ObjectsJson(const std::string& site, std::uint64_t seq, common::UtcN
   return Dump(j);
 }
 
+std::string ObjectsEndedJson(const std::string& site, std::uint64_t seq, common::UtcNs stamp_ns,
+                             const std::vector<MqttEndedObject>& ended) {
+  Json j = Header("objects_ended", site);
+  j["seq"] = seq;
+  j["stamp_ns"] = stamp_ns;
+  Json list = Json::array();
+  for (const MqttEndedObject& e : ended) {
+    Json o;
+    o["id"] = e.id;
+    o["reason"] = e.reason;
+    if (e.merged_into != 0) {
+      o["merged_into"] = e.merged_into;
+    } else {
+      o["merged_into"] = nullptr;
+    }
+    o["ended_ns"] = e.ended_ns;
+    list.push_back(std::move(o));
+  }
+  j["ended"] = std::move(list);
+  return Dump(j);
+}
+
 std::string ZoneJson(const std::string& site, std::uint64_t seq, common::UtcNs stamp_ns,
                      const zones::ZoneState& zone) {
   Json j = Header("zone", site);

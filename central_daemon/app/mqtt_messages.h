@@ -38,6 +38,20 @@ struct MqttObject {
 std::string ObjectsJson(const std::string& site, std::uint64_t seq, common::UtcNs stamp_ns,
                         const std::vector<MqttObject>& objects);
 
+// An object that left the object list for good (the fusion ended its id).
+struct MqttEndedObject {
+  std::uint64_t id = 0;
+  std::string reason;             // fusion::FusedEndReason: "merged", "timed_out", ...
+  std::uint64_t merged_into = 0;  // "merged": the id the object goes on as, else 0
+  common::UtcNs ended_ns = 0;     // when the fusion ended it
+};
+
+// lrfnet/<site>/objects/ended (not retained), when objects of the list end:
+// {"type":"objects_ended","site":..,"seq":..,"stamp_ns":..,"ended":[{"id":..,"reason":..,
+//  "merged_into":..|null,"ended_ns":..}]}
+std::string ObjectsEndedJson(const std::string& site, std::uint64_t seq, common::UtcNs stamp_ns,
+                             const std::vector<MqttEndedObject>& ended);
+
 // lrfnet/<site>/zones/<name>:
 // {"type":"zone","site":..,"seq":..,"stamp_ns":..,"name":..,"kind":"line"|"polygon",
 //  "occupancy":..,"present":[{"id":..,"dwell_s":..}],"inbound":..,"outbound":..,

@@ -10,6 +10,23 @@ namespace {
 
 using nlohmann::json;
 
+TEST(MqttMessagesTest, EndedObjectsSayWhyAndWhichIdAMergedOneGoesOnAs) {
+  const json j = json::parse(ObjectsEndedJson(
+      "lab", 4, 3'500'000'000,
+      {{7, "merged", 3, 3'460'000'000}, {9, "timed_out", 0, 3'500'000'000}}));
+  EXPECT_EQ(j["type"], "objects_ended");
+  EXPECT_EQ(j["site"], "lab");
+  EXPECT_EQ(j["seq"], 4);
+  EXPECT_EQ(j["stamp_ns"], 3'500'000'000);
+  ASSERT_EQ(j["ended"].size(), 2u);
+  EXPECT_EQ(j["ended"][0]["id"], 7);
+  EXPECT_EQ(j["ended"][0]["reason"], "merged");
+  EXPECT_EQ(j["ended"][0]["merged_into"], 3);
+  EXPECT_EQ(j["ended"][0]["ended_ns"], 3'460'000'000);
+  EXPECT_EQ(j["ended"][1]["reason"], "timed_out");
+  EXPECT_TRUE(j["ended"][1]["merged_into"].is_null());
+}
+
 TEST(MqttMessagesTest, ObjectsCarryStateCovarianceSizeAgeSensorsAndPath) {
   MqttObject o;
   o.track.id = 7;

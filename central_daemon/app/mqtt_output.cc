@@ -74,7 +74,10 @@ nlohmann::json MqttJson(const MqttOutput& mqtt) {
           {"calibrations", s.calibrations},
           {"health", s.health},
           {"objects_returned", s.objects_returned},
-          {"objects_gone", s.objects_gone}};
+          {"objects_gone", s.objects_gone},
+          {"objects_merged", s.objects_merged},
+          {"objects_ended", s.objects_ended},
+          {"objects_ended_messages", s.objects_ended_messages}};
 }
 
 }  // namespace lrfnet::daemon

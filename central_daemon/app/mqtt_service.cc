@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
+#include <set>
 
 #include "common/host_port.h"
 
@@ -70,9 +71,86 @@ void MqttService::PublishZones(const ZoneService& zones) {
   if (zones.enabled() && zones.updates() > 0) PublishZonesDue(zones, true);
 }
 
+void MqttService::EndObjects(const fusion::FusionOutput& output, std::uint64_t generation,
+                             std::vector<MqttEndedObject>& ended_out) {
+  const common::UtcNs stamp_ns = output.stamp_ns;
+  if (generation != generation_) {
+    // A new fuser: its ids start afresh, every object known is gone.
+    for (const auto& [id, mark] : objects_) {
+      ended_out.push_back({id, "fusion_restarted", 0, stamp_ns});
+      ++counters_.objects_ended;
+    }
+    objects_.clear();
+    generation_ = generation;
+  }
+  std::set<std::uint64_t> alive, hidden;
+  for (const fusion::FusedTrack& t : output.tracks) alive.insert(t.id);
+  for (const fusion::HiddenFusedTrack& h : output.hidden) hidden.insert(h.id);
+  std::map<std::uint64_t, std::uint64_t> merged_into;
+  for (const fusion::EndedFusedTrack& e : output.ended) {
+    if (e.merged_into != 0) merged_into[e.id] = e.merged_into;
+  }
+  // Ended ids: gone at once. A merged one's path goes on in the survivor's when the survivor was
+  // hidden and the merged one not (the survivor's estimate is then the merged one's).
+  for (const fusion::EndedFusedTrack& e : output.ended) {
+    const auto it = objects_.find(e.id);
+    if (it == objects_.end() || alive.count(e.id) != 0) continue;
+    std::uint64_t survivor = e.merged_into;
+    for (std::size_t hops = 0; survivor != 0 && hops < output.ended.size(); ++hops) {
+      const auto next = merged_into.find(survivor);
+      if (next == merged_into.end() || alive.count(survivor) != 0) break;
+      survivor = next->second;
+    }
+    if (survivor != 0 && survivor != e.id) {
+      ObjectMark& merged = it->second;
+      const auto s = objects_.find(survivor);
+      if (s == objects_.end()) {
+        objects_.emplace(survivor, merged);
+      } else if (s->second.absent_since_ns != 0 && merged.absent_since_ns == 0) {
+        std::deque<PathSample>& path = s->second.path;
+        for (const PathSample& p : merged.path) {
+          if (path.empty() || p.t_ns > path.back().t_ns) path.push_back(p);
+        }
+        while (path.size() > static_cast<std::size_t>(std::max<std::int64_t>(config_.path_points, 0))) {
+          path.pop_front();
+        }
+      }
+      ++counters_.objects_merged;
+    } else {
+      ++counters_.objects_ended;
+    }
+    ended_out.push_back({e.id, fusion::ToString(e.reason), survivor != e.id ? survivor : 0,
+                         e.ended_ns});
+    objects_.erase(it);
+  }
+  // Other objects absent from the list: held while the fusion keeps them (hidden), else for at
+  // most zones.absent_hold_s.
+  for (auto it = objects_.begin(); it != objects_.end();) {
+    if (alive.count(it->first) != 0) {
+      ++it;
+      continue;
+    }
+    ObjectMark& mark = it->second;
+    if (mark.absent_since_ns == 0) mark.absent_since_ns = stamp_ns;
+    const bool expired = hidden.count(it->first) == 0 &&
+                         (stamp_ns - mark.absent_since_ns >= absent_hold_ns_ ||
+                          stamp_ns < mark.absent_since_ns);
+    if (expired) {
+      ended_out.push_back({it->first, "hold_expired", 0, stamp_ns});
+      ++counters_.objects_gone;
+      it = objects_.erase(it);
+    } else {
+      ++it;
+    }
+  }
+}
+
 void MqttService::PublishObjects(const Daemon& daemon, const FusionService& fusion) {
   const common::UtcNs stamp_ns = fusion.now_ns();
-  const std::vector<fusion::FusedTrack> tracks = fusion.fuser().Snapshot(stamp_ns);
+  const fusion::FusionOutput output = fusion.fuser().Output(stamp_ns);
+  const std::vector<fusion::FusedTrack>& tracks = output.tracks;
+  std::vector<MqttEndedObject> ended;
+  EndObjects(output, fusion.generation(), ended);
 
   // The newest frame of every sensor that is a source: the tracker's size estimates.
   std::map<std::string, std::vector<TrackObservation>, std::less<>> newest;
@@ -126,27 +204,14 @@ void MqttService::PublishObjects(const Daemon& daemon, const FusionService& fusi
     }
     objects.push_back(std::move(o));
   }
-  // Objects absent from the list: held for absent_hold_s (the fusion may publish the id again),
-  // then gone with their paths.
-  for (auto it = objects_.begin(); it != objects_.end();) {
-    const bool alive = std::any_of(tracks.begin(), tracks.end(),
-                                   [&](const fusion::FusedTrack& t) { return t.id == it->first; });
-    if (alive) {
-      ++it;
-      continue;
-    }
-    ObjectMark& mark = it->second;
-    if (mark.absent_since_ns == 0) mark.absent_since_ns = stamp_ns;
-    if (stamp_ns - mark.absent_since_ns >= absent_hold_ns_ || stamp_ns < mark.absent_since_ns) {
-      ++counters_.objects_gone;
-      it = objects_.erase(it);
-    } else {
-      ++it;
-    }
-  }
   sink_->Publish(Topic("objects"), ObjectsJson(config_.site, ++objects_seq_, stamp_ns, objects),
                  objects_qos_, false);
   ++counters_.objects;
+  if (!ended.empty()) {
+    sink_->Publish(Topic("objects/ended"),
+                   ObjectsEndedJson(config_.site, ++ended_seq_, stamp_ns, ended), qos_, false);
+    ++counters_.objects_ended_messages;
+  }
 }
 
 void MqttService::PublishZonesDue(const ZoneService& zones, bool force) {

@@ -10,10 +10,15 @@
 //   <prefix>/<site>/status               retained; "online" / "offline" (also the last will)
 // Objects and zones run on the fused tracks' time (gateway UTC), health on the daemon's clock (the
 // receive times offline), so a silent site still reports its sensors silent.
-// An object absent from the fused tracks is left out of the object list but held for
-// zones.absent_hold_s (see config.h) with its path: one that comes back within it continues its
-// path; the zones hold it likewise (zones.h), so its zone counts and present list do not change
-// while it is hidden (its running dwell goes on).
+//   <prefix>/<site>/objects/ended        when objects leave the list for good: each id, why
+//                                        ("merged" with the id it goes on as, "timed_out", ...)
+// An object absent from the fused tracks is left out of the object list. The fuser's output says
+// what became of it (fusion::FusionOutput): one the fusion keeps unpublished (hidden) is held with
+// its path for as long as the fusion keeps it, and continues its path when it comes back; one
+// that ended is gone at once (a merged object's path goes on in the id it was merged into when
+// that one was hidden); one the fusion reports nothing of is held for at most
+// zones.absent_hold_s (see config.h). The zones treat ids alike (zones.h), so a hidden person's
+// zone counts and present list do not change while it is hidden (its running dwell goes on).
 // Thread-safety: called on the io thread.
 
 #include <cstdint>
@@ -51,10 +56,16 @@ struct MqttServiceCounters {
   std::uint64_t calibrations = 0;
   std::uint64_t health = 0;
   std::uint64_t status = 0;
-  // Objects absent from the fused tracks that came back within absent_hold_s (path kept).
+  // Objects absent from the fused tracks that came back (path kept).
   std::uint64_t objects_returned = 0;
-  // Objects absent for absent_hold_s (path dropped).
+  // Objects the fusion reported nothing of, dropped after absent_hold_s (path dropped).
   std::uint64_t objects_gone = 0;
+  // Objects whose id the fusion merged into another id (dropped at once).
+  std::uint64_t objects_merged = 0;
+  // Objects whose id the fusion ended otherwise (timed out; every id at a new fuser).
+  std::uint64_t objects_ended = 0;
+  // Messages on .../objects/ended.
+  std::uint64_t objects_ended_messages = 0;
 };
 
 class MqttService {
@@ -86,6 +97,10 @@ class MqttService {
 
  private:
   void PublishObjects(const Daemon& daemon, const FusionService& fusion);
+  // Drops the objects the output says ended (and all at a new fuser generation), holds the
+  // hidden ones, and those it says nothing of for absent_hold_s; appends what ended.
+  void EndObjects(const fusion::FusionOutput& output, std::uint64_t generation,
+                  std::vector<MqttEndedObject>& ended_out);
   void PublishZonesDue(const ZoneService& zones, bool force);
   void PublishHealthDue(common::UtcNs now_ns, const Daemon& daemon, const FusionService& fusion);
 
@@ -111,6 +126,8 @@ class MqttService {
     common::UtcNs absent_since_ns = 0;  // 0: in the latest object list
   };
   std::map<std::uint64_t, ObjectMark> objects_;
+  std::uint64_t generation_ = 0;  // the fusion's, as of the latest object list
+  std::uint64_t ended_seq_ = 0;
 
   struct ZoneMark {
     std::uint64_t seq = 0;

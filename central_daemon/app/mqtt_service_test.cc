@@ -11,6 +11,7 @@
 #include <chrono>
 #include <filesystem>
 #include <fstream>
+#include <functional>
 #include <nlohmann/json.hpp>
 #include <set>
 #include <string>
@@ -49,30 +50,37 @@ calib::CalibrationResult OneSensorAtTheOrigin() {
   return r;
 }
 
-TrackFrameData FrameWith(double t_s, std::uint32_t scan, std::optional<std::uint32_t> track_id) {
+// A standing person's track at (x, y) in the sensor's frame.
+TrackObservation Standing(std::uint32_t track_id, double x_m = 3.0, double y_m = 1.0) {
+  TrackObservation track;
+  track.track_id = track_id;
+  track.state = TrackState::kConfirmed;
+  track.x_m = static_cast<float>(x_m);
+  track.y_m = static_cast<float>(y_m);
+  track.covariance = {0.0025f, 0, 0, 0, 0.0025f, 0, 0, 0.01f, 0, 0.01f};
+  return track;
+}
+
+TrackFrameData FrameWith(double t_s, std::uint32_t scan, std::vector<TrackObservation> tracks) {
   TrackFrameData frame;
   frame.session_id = 1;
   frame.scan_start_ns = At(t_s);
   frame.scan_period_s = 0.04;
   frame.scan_counter = scan;
-  if (track_id) {
-    TrackObservation track;
-    track.track_id = *track_id;
-    track.state = TrackState::kConfirmed;
-    track.x_m = 3.0f;
-    track.y_m = 1.0f;
-    track.covariance = {0.0025f, 0, 0, 0, 0.0025f, 0, 0, 0.01f, 0, 0.01f};
-    frame.tracks.push_back(track);
-  }
+  frame.tracks = std::move(tracks);
   return frame;
 }
 
 struct HideRun {
   std::vector<nlohmann::json> zone;     // the zone's messages, in order
   std::vector<nlohmann::json> objects;  // the object lists, in order
+  std::vector<nlohmann::json> ended;    // the objects/ended messages, in order
   MqttServiceCounters counters;
   nlohmann::json zone_stats;  // --stats-out's "zones"
 };
+
+using TracksAt = std::function<std::vector<TrackObservation>(double t_s)>;
+HideRun RunScene(std::uint16_t port, double absent_hold_s, const TracksAt& tracks_at);
 
 // One sensor at the origin sees a person standing at (3, 1), inside the zone "room". Its tracker
 // drops the person at 2 s and starts a new track on them hidden_s later (the fused id is left out
@@ -80,6 +88,16 @@ struct HideRun {
 // comes within fusion.max_coast_s). Everything runs through lrfnetd's fusion, zones and MQTT
 // services, published to a real broker; returns what a subscriber received.
 HideRun RunHide(std::uint16_t port, double hidden_s, double absent_hold_s) {
+  return RunScene(port, absent_hold_s, [hidden_s](double t) {
+    std::vector<TrackObservation> tracks;
+    if (t < 2.0) tracks.push_back(Standing(1));
+    if (t >= 2.0 + hidden_s) tracks.push_back(Standing(2));
+    return tracks;
+  });
+}
+
+// The same services and broker on the tracks tracks_at gives the sensor every 0.04 s for 8 s.
+HideRun RunScene(std::uint16_t port, double absent_hold_s, const TracksAt& tracks_at) {
   DaemonConfig config;
   config.zones_list = "[{name: room, polygon: [[2, 0], [4, 0], [4, 2], [2, 2]]}]";
   config.absent_hold_s = absent_hold_s;
@@ -112,10 +130,7 @@ HideRun RunHide(std::uint16_t port, double hidden_s, double absent_hold_s) {
 
   std::uint32_t scan = 0;
   for (double t = 0.0; t < 8.0 - 1e-9; t += 0.04) {
-    std::optional<std::uint32_t> track;
-    if (t < 2.0) track = 1;
-    if (t >= 2.0 + hidden_s) track = 2;
-    fusion.OnFrame("s1", FrameWith(t, scan++, track));
+    fusion.OnFrame("s1", FrameWith(t, scan++, tracks_at(t)));
     if (scan % 5 == 0) {  // every 0.2 s
       fusion.OnTick(t);
       zones.OnTick(fusion);
@@ -125,7 +140,8 @@ HideRun RunHide(std::uint16_t port, double hidden_s, double absent_hold_s) {
     }
   }
   EXPECT_TRUE(real.Flush(20.0));
-  const std::size_t sent = mqtt.counters().objects + mqtt.counters().zones;
+  const std::size_t sent =
+      mqtt.counters().objects + mqtt.counters().zones + mqtt.counters().objects_ended_messages;
   EXPECT_TRUE(subscriber.WaitFor([&](const std::vector<ReceivedMessage>& m) {
     std::size_t n = 0;
     for (const ReceivedMessage& r : m) n += r.topic.ends_with("/health") ? 0 : 1;
@@ -137,6 +153,7 @@ HideRun RunHide(std::uint16_t port, double hidden_s, double absent_hold_s) {
   for (const ReceivedMessage& m : subscriber.messages()) {
     if (m.topic == topics + "zones/room") run.zone.push_back(nlohmann::json::parse(m.payload));
     if (m.topic == topics + "objects") run.objects.push_back(nlohmann::json::parse(m.payload));
+    if (m.topic == topics + "objects/ended") run.ended.push_back(nlohmann::json::parse(m.payload));
   }
   run.counters = mqtt.counters();
   // What --stats-out says of the zones' hold.
@@ -223,10 +240,16 @@ TEST_F(MqttServiceHide, AnIdHiddenAndBackWithinTheHoldGivesNoExitAndNoEntry) {
   }
   EXPECT_EQ(present.back(), std::set<std::uint64_t>{object_ids[0]});
 
-  // Without the hold (earlier releases): an exit and an entry of the same id.
-  const HideRun at_once = RunHide(broker_.port(), 1.0, 0.0);
-  EXPECT_EQ(ExitEnterPairs(PresentIds(at_once)), 1);
-  EXPECT_EQ(at_once.zone.back()["lost_inside"], 1);
+  EXPECT_TRUE(held.ended.empty());
+
+  // zones.absent_hold_s 0 (earlier releases: an exit and an entry of the same id) or longer than
+  // the fusion keeps an id: the same, the fusion says the id is hidden.
+  for (const double hold_s : {0.0, 5.0}) {
+    const HideRun other = RunHide(broker_.port(), 1.0, hold_s);
+    EXPECT_EQ(ExitEnterPairs(PresentIds(other)), 0) << hold_s;
+    EXPECT_EQ(other.zone.back()["lost_inside"], 0) << hold_s;
+    EXPECT_EQ(other.counters.objects_returned, 1u) << hold_s;
+  }
 }
 
 TEST_F(MqttServiceHide, AnIdHiddenForLongerThanTheHoldExitsExactlyOnce) {
@@ -248,10 +271,69 @@ TEST_F(MqttServiceHide, AnIdHiddenForLongerThanTheHoldExitsExactlyOnce) {
   EXPECT_EQ(run.zone.back()["lost_inside"], 1);
   EXPECT_EQ(run.zone.back()["dwell"]["completed"], 1);
   EXPECT_EQ(run.counters.objects_returned, 0u);
-  EXPECT_EQ(run.counters.objects_gone, 1u);
+  EXPECT_EQ(run.counters.objects_ended, 1u);  // the fusion said it timed out
+  EXPECT_EQ(run.counters.objects_gone, 0u);
   EXPECT_EQ(run.zone_stats["absent_held"], 1) << run.zone_stats.dump();
   EXPECT_EQ(run.zone_stats["absent_returned"], 0) << run.zone_stats.dump();
   EXPECT_EQ(run.zone_stats["absent_gone"], 1) << run.zone_stats.dump();
+  EXPECT_EQ(run.zone_stats["ended"], 1) << run.zone_stats.dump();
+  EXPECT_EQ(run.zone_stats["expired"], 0) << run.zone_stats.dump();
+  // The object's end, published once with why.
+  ASSERT_EQ(run.ended.size(), 1u);
+  ASSERT_EQ(run.ended[0]["ended"].size(), 1u);
+  EXPECT_EQ(run.ended[0]["ended"][0]["reason"], "timed_out");
+  EXPECT_TRUE(run.ended[0]["ended"][0]["merged_into"].is_null());
+  // The exit is as of the disappearance: the dwell ended when the id left the object list
+  // (about 2.5 s, its source's timeout), not when the fusion deleted it (about 3.5 s).
+  EXPECT_NEAR(run.zone.back()["dwell"]["max_s"].get<double>(), 2.4, 0.25)
+      << run.zone.back().dump();
+}
+
+// The person's tracker starts a second track (2) on them 0.1 m beside the first at 2 s and drops
+// the first at 2.3 s: the fusion has two fused ids for one person until it merges the new one
+// into the older id. From the merge on the room counts one person, with no exit and nothing lost
+// (the person's dwell goes on from the first entry); the merged object leaves the object list at
+// once and its end says which id it goes on as. Before (the merged id held as absent for
+// absent_hold_s): two in the room for 1.5 s more, then one lost inside.
+TEST_F(MqttServiceHide, AMergedIdLeavesAtOnceAndIsNotLostInside) {
+  const HideRun run = RunScene(broker_.port(), -1.0, [](double t) {
+    std::vector<TrackObservation> tracks;
+    if (t < 2.3) tracks.push_back(Standing(1));
+    if (t >= 2.0) tracks.push_back(Standing(2, 3.0, 1.1));
+    return tracks;
+  });
+  ASSERT_FALSE(run.zone.empty());
+  EXPECT_EQ(run.counters.objects_merged, 1u);
+  EXPECT_EQ(run.zone_stats["merged"], 1) << run.zone_stats.dump();
+  ASSERT_EQ(run.ended.size(), 1u);
+  ASSERT_EQ(run.ended[0]["ended"].size(), 1u);
+  const nlohmann::json& end = run.ended[0]["ended"][0];
+  EXPECT_EQ(end["reason"], "merged");
+  const auto merged = end["id"].get<std::uint64_t>();
+  const auto survivor = end["merged_into"].get<std::uint64_t>();
+  EXPECT_LT(survivor, merged);
+  // The object lists: never the merged id after its end, the survivor in every one after it.
+  const auto ended_stamp = run.ended[0]["stamp_ns"].get<std::int64_t>();
+  for (const nlohmann::json& o : run.objects) {
+    if (o["stamp_ns"].get<std::int64_t>() < ended_stamp) continue;
+    ASSERT_EQ(o["objects"].size(), 1u) << o.dump();
+    EXPECT_EQ(o["objects"][0]["id"], survivor);
+  }
+  // The zone: one person from the merge on, the merged id never back, nothing lost, no dwell
+  // ended; the survivor's dwell from its first entry (0 s) to the end (about 7.8 s).
+  const auto present = PresentIds(run);
+  EXPECT_EQ(ExitEnterPairs(present), 0);
+  bool after_merge = false;
+  for (std::size_t i = 0; i < run.zone.size(); ++i) {
+    if (run.zone[i]["stamp_ns"].get<std::int64_t>() >= ended_stamp) after_merge = true;
+    if (after_merge) {
+      EXPECT_EQ(present[i], std::set<std::uint64_t>{survivor}) << run.zone[i].dump();
+    }
+    EXPECT_EQ(run.zone[i]["lost_inside"], 0) << run.zone[i].dump();
+    EXPECT_EQ(run.zone[i]["dwell"]["completed"], 0) << run.zone[i].dump();
+  }
+  EXPECT_TRUE(after_merge);
+  EXPECT_GT(run.zone.back()["present"][0]["dwell_s"].get<double>(), 7.0) << run.zone.back().dump();
 }
 
 }  // namespace

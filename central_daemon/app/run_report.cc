@@ -53,7 +53,11 @@ bool WriteStats(const std::string& path, const Daemon& daemon, const UdpReceiver
     j["zones"] = {{"updates", zones->updates()},
                   {"absent_held", z.absent_held},
                   {"absent_returned", z.absent_returned},
-                  {"absent_gone", z.absent_gone}};
+                  {"absent_gone", z.absent_gone},
+                  {"merged", z.merged},
+                  {"ended", z.ended},
+                  {"expired", z.expired},
+                  {"restarts", z.restarts}};
   }
   j["requests_sent"] = daemon.requests_sent();
   j["requests_dropped"] = daemon.requests_dropped();

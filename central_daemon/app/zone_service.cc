@@ -14,11 +14,23 @@ bool ZoneService::OnTick(const FusionService& fusion) {
   if (now_ns == 0) return false;
   // Timer jitter: due slightly early counts. A clock step back restarts the rhythm.
   if (updates_ > 0 && now_ns >= stamp_ns_ && now_ns - stamp_ns_ < period_ns_ * 9 / 10) return false;
+  if (fusion.generation() != generation_) {
+    if (updates_ > 0) counter_->EndAll(now_ns);
+    generation_ = fusion.generation();
+  }
+  const fusion::FusionOutput output = fusion.fuser().Output(now_ns);
   std::vector<zones::ZoneTrack> tracks;
-  for (const fusion::FusedTrack& t : fusion.fuser().Snapshot(now_ns)) {
+  tracks.reserve(output.tracks.size());
+  for (const fusion::FusedTrack& t : output.tracks) {
     tracks.push_back({t.id, t.x_m, t.y_m, t.state != fusion::FusedState::kCoasting});
   }
-  if (!counter_->Update(tracks, now_ns)) return false;
+  std::vector<std::uint64_t> hidden;
+  hidden.reserve(output.hidden.size());
+  for (const fusion::HiddenFusedTrack& h : output.hidden) hidden.push_back(h.id);
+  std::vector<zones::ZoneEnded> ended;
+  ended.reserve(output.ended.size());
+  for (const fusion::EndedFusedTrack& e : output.ended) ended.push_back({e.id, e.merged_into});
+  if (!counter_->Update(tracks, hidden, ended, now_ns)) return false;
   stamp_ns_ = now_ns;
   ++updates_;
   return true;

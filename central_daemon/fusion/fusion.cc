@@ -230,6 +230,18 @@ const char* ToString(FusedState state) {
   return "invalid";
 }
 
+const char* ToString(FusedEndReason reason) {
+  switch (reason) {
+    case FusedEndReason::kTimedOut:
+      return "timed_out";
+    case FusedEndReason::kMerged:
+      return "merged";
+    case FusedEndReason::kNoSources:
+      return "no_sources";
+  }
+  return "invalid";
+}
+
 std::optional<std::string> Validate(const FusionOptions& o) {
   auto positive = [](double v) { return std::isfinite(v) && v > 0.0; };
   if (!positive(o.gate_mahalanobis2)) return "gate_mahalanobis2 must be > 0";
@@ -305,6 +317,9 @@ std::optional<std::string> Validate(const FusionOptions& o) {
   if (!std::isfinite(o.merge_centre_spread_m) || o.merge_centre_spread_m < 0.0 ||
       o.merge_centre_spread_m > o.merge_max_distance_m) {
     return "merge_centre_spread_m must be in [0, merge_max_distance_m]";
+  }
+  if (!positive(o.ended_report_s) || o.ended_report_s > 3600.0) {
+    return "ended_report_s must be in (0, 3600]";
   }
   if (!positive(o.max_local_range_m)) return "max_local_range_m must be > 0";
   if (!positive(o.max_speed_mps)) return "max_speed_mps must be > 0";
@@ -397,6 +412,15 @@ void Fuser::Tick(common::UtcNs now_ns) { engine_->Tick(now_ns); }
 
 std::vector<FusedTrack> Fuser::Snapshot(common::UtcNs now_ns, bool include_tentative) const {
   return engine_->Snapshot(now_ns, include_tentative);
+}
+
+FusionOutput Fuser::Output(common::UtcNs now_ns, bool include_tentative) const {
+  FusionOutput out;
+  out.stamp_ns = now_ns;
+  out.tracks = engine_->Snapshot(now_ns, include_tentative);
+  out.hidden = engine_->Hidden(out.tracks);
+  out.ended.assign(engine_->ended().begin(), engine_->ended().end());
+  return out;
 }
 
 std::vector<WorldTrack> Fuser::WorldTracks(common::UtcNs now_ns) const {

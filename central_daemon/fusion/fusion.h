@@ -78,6 +78,12 @@
 // merge_centre_spread_m to both covariances (two sensors see different sides of one body; off by
 // default). A fused track no sensor's track is bound to any more is kept for its id but not
 // reported (report_sourceless).
+//   What the fuser reports (Output): the fused tracks (Snapshot), the confirmed ids it keeps
+// without reporting them (hidden, with when and where they were last measured), and the ids that
+// ended with why (timed out after max_coast_s, merged into id N, or tentative and left without
+// sources), for ended_report_s after their end. Every id is in at most one of the three, so a
+// consumer that follows ids over time holds exactly the hidden ones and ends the others at once;
+// the estimates are the same with or without it.
 // A tracker restart (TrackFrameData.session_id changes) unbinds every local track of the old
 // session; the new session's tracks (whose ids restart) are associated afresh.
 //
@@ -301,10 +307,15 @@ struct FusionOptions {
   // what hid it) is kept for max_coast_s to be picked up with its id but not reported (off, the
   // default: no sensor claims the object is there), or reported by Snapshot as coasting until
   // max_coast_s deletes it (on, earlier releases). Off, an id can leave Snapshot and come back
-  // within max_coast_s: lrfnetd's zones and MQTT output hold an absent id for
-  // zones.absent_hold_s (by default max_coast_s) before they take it as gone, so a hidden person
-  // who reappears is neither an exit nor a new entry there.
+  // within max_coast_s: Output lists it as hidden meanwhile, so lrfnetd's zones and MQTT output
+  // hold it exactly while the fuser keeps it (a hidden person who reappears is neither an exit
+  // nor a new entry there) and end it as soon as Output reports it ended.
   bool report_sourceless = false;
+  // How long [s] Output keeps reporting an id that ended (timed out, merged into another id),
+  // with why (counted from the latest Tick): consumers that take an output at least this often
+  // learn of every end (lrfnetd's zones and MQTT objects: at least every 10 s). Longer costs
+  // memory (at most max_fused_tracks entries are kept).
+  double ended_report_s = 30.0;
 
   // Plausibility of a local track (sensor frame); anything outside is skipped and counted.
   double max_local_range_m = 500.0;
@@ -346,6 +357,42 @@ struct FusedTrack {
   Eigen::Matrix4d covariance = Eigen::Matrix4d::Identity();
   std::uint64_t updates = 0;
   std::vector<FusedSource> sources;  // bound local tracks, sorted by sensor id
+};
+
+// Why a fused id ended (FusionOutput::ended).
+enum class FusedEndReason : std::uint8_t {
+  kTimedOut,   // no update for max_coast_s (every sensor lost the object)
+  kMerged,     // merged into another (older) fused id: the same object (merged_into)
+  kNoSources,  // a tentative fused track left without sources before it was confirmed
+};
+const char* ToString(FusedEndReason reason);
+
+// A fused track the fuser keeps but does not report in FusionOutput::tracks (report_sourceless
+// off and no tracker holds it, or older than max_coast_s awaiting Tick): its id may be reported
+// again when a sensor sees the object again.
+struct HiddenFusedTrack {
+  std::uint64_t id = 0;
+  common::UtcNs last_ns = 0;  // time of its last update (the last measurement it took)
+  double x_m = 0.0, y_m = 0.0;  // its estimate then, world frame
+  std::string last_sensor;      // the sensor whose track fed it last, if known
+};
+
+// A fused id that ended: it is never reported again (ids are never reused).
+struct EndedFusedTrack {
+  std::uint64_t id = 0;
+  common::UtcNs ended_ns = 0;  // when it ended (the merging frame's time, or Tick's)
+  FusedEndReason reason = FusedEndReason::kTimedOut;
+  std::uint64_t merged_into = 0;  // kMerged: the id that continues the object, else 0
+};
+
+// What the fuser holds at a time: its reported tracks and what it knows of the ids that are not
+// among them. Every id a consumer has seen in `tracks` is, at any later output, in exactly one
+// of: `tracks`, `hidden`, `ended` (for ended_report_s after its end), or none once that is over.
+struct FusionOutput {
+  common::UtcNs stamp_ns = 0;
+  std::vector<FusedTrack> tracks;          // as Snapshot
+  std::vector<HiddenFusedTrack> hidden;    // confirmed, kept, not in tracks; ordered by id
+  std::vector<EndedFusedTrack> ended;      // ended within ended_report_s, in the order they ended
 };
 
 // A local track in the world frame (what the live view draws as a "raw" track).
@@ -482,6 +529,11 @@ class Fuser {
   // Fused tracks predicted to now_ns (not modified), ordered by id. Tentative ones only when
   // include_tentative. Tracks older than max_coast_s at now_ns (awaiting Tick) are left out.
   std::vector<FusedTrack> Snapshot(common::UtcNs now_ns, bool include_tentative = false) const;
+  // Snapshot's tracks and, besides them, the confirmed fused ids the fuser keeps without
+  // reporting them (hidden) and the ids that ended within ended_report_s before the latest Tick,
+  // with why (FusionOutput). Consumers that follow ids over time (zones, MQTT objects) hold a
+  // hidden id and end an ended one at once.
+  FusionOutput Output(common::UtcNs now_ns, bool include_tentative = false) const;
   // Each sensor's latest local tracks in the world frame (those seen within source_timeout_s of
   // now_ns), with their fused ids, ordered by sensor id and track id.
   std::vector<WorldTrack> WorldTracks(common::UtcNs now_ns) const;

@@ -397,6 +397,9 @@ class FusedFilterEngine final : public Engine {
   void Tick(UtcNs now_ns) override;
   std::vector<FusedTrack> Snapshot(UtcNs now_ns, bool include_tentative) const override;
   std::vector<WorldTrack> WorldTracks(UtcNs now_ns) const override;
+  std::vector<HiddenFusedTrack> Hidden(const std::vector<FusedTrack>& reported) const override {
+    return HiddenTracks(tracks_, reported);
+  }
   CovarianceScales covariance_scales() const override {
     CovarianceScales out;
     out.pose = pose_scale_.scale;
@@ -1509,6 +1512,7 @@ void FusedFilterEngine::Merge(std::uint64_t older_id, std::uint64_t younger_id,
     }
   }
   ++counters_.fused_merged;
+  RecordEnded(younger_id, t, FusedEndReason::kMerged, older_id);
 }
 
 void FusedFilterEngine::Tick(UtcNs now_ns) {
@@ -1525,10 +1529,16 @@ void FusedFilterEngine::Tick(UtcNs now_ns) {
       continue;
     }
     ++counters_.fused_deleted;
+    if (f.updates > 0) {
+      RecordEnded(it->first, now_ns,
+                  age > options_.max_coast_s ? FusedEndReason::kTimedOut
+                                             : FusedEndReason::kNoSources);
+    }
     auto next = std::next(it);
     DeleteTrack(it);
     it = next;
   }
+  ForgetEnded(now_ns);
 }
 
 std::vector<FusedTrack> FusedFilterEngine::Snapshot(UtcNs now_ns, bool include_tentative) const {

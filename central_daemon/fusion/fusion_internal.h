@@ -9,6 +9,7 @@
 #include <array>
 #include <cmath>
 #include <cstdint>
+#include <deque>
 #include <functional>
 #include <limits>
 #include <map>
@@ -23,6 +24,9 @@
 namespace lrfnet::fusion::internal {
 
 using PlacementMap = std::map<std::string, SensorPlacement, std::less<>>;
+
+// a - b in seconds; saturates instead of overflowing for hostile stamps.
+double Seconds(common::UtcNs a, common::UtcNs b);
 
 // One fusion method. The Fuser validates placements and counts frames; the engine does the rest.
 class Engine {
@@ -43,15 +47,52 @@ class Engine {
   virtual std::vector<WorldTrack> WorldTracks(common::UtcNs now_ns) const = 0;
   virtual CovarianceScales covariance_scales() const { return {}; }
   virtual std::vector<SensorBias> sensor_biases() const { return {}; }
+  // The confirmed fused tracks kept but not in `reported` (Snapshot's tracks, ordered by id).
+  virtual std::vector<HiddenFusedTrack> Hidden(const std::vector<FusedTrack>& reported) const = 0;
 
   FusionCounters& counters() { return counters_; }
   const FusionCounters& counters() const { return counters_; }
   const FusionOptions& options() const { return options_; }
+  // The ids that ended within ended_report_s before the latest Tick, in the order they ended.
+  const std::deque<EndedFusedTrack>& ended() const { return ended_; }
 
  protected:
+  // Notes the end of a fused id for FusionOutput::ended.
+  void RecordEnded(std::uint64_t id, common::UtcNs ended_ns, FusedEndReason reason,
+                   std::uint64_t merged_into = 0) {
+    ended_.push_back(EndedFusedTrack{id, ended_ns, reason, merged_into});
+    while (ended_.size() > options_.max_fused_tracks) ended_.pop_front();
+  }
+  // Forgets the ends older than ended_report_s at now_ns (call from Tick).
+  void ForgetEnded(common::UtcNs now_ns) {
+    while (!ended_.empty() && Seconds(now_ns, ended_.front().ended_ns) > options_.ended_report_s) {
+      ended_.pop_front();
+    }
+  }
+
   FusionOptions options_;
   FusionCounters counters_;
+
+ private:
+  std::deque<EndedFusedTrack> ended_;
 };
+
+// The confirmed fused tracks of `tracks` (a map of id to a track with updates, confirmed,
+// stamp_ns, x and last_sensor) that are not in `reported` (ordered by id): what a snapshot left
+// out of them.
+template <typename Tracks>
+std::vector<HiddenFusedTrack> HiddenTracks(const Tracks& tracks,
+                                           const std::vector<FusedTrack>& reported) {
+  std::vector<HiddenFusedTrack> out;
+  for (const auto& [id, f] : tracks) {
+    if (f.updates == 0 || !f.confirmed) continue;
+    const auto r = std::lower_bound(reported.begin(), reported.end(), id,
+                                    [](const FusedTrack& t, std::uint64_t v) { return t.id < v; });
+    if (r != reported.end() && r->id == id) continue;
+    out.push_back(HiddenFusedTrack{id, f.stamp_ns, f.x(0), f.x(1), f.last_sensor});
+  }
+  return out;
+}
 
 // The latest-states combination (FusionMethod::kLatestStates, fusion_latest.cc).
 std::unique_ptr<Engine> MakeLatestStatesEngine(const FusionOptions& options);
@@ -87,9 +128,6 @@ FrameAdmission AdmitFrame(const daemon::TrackFrameData& frame, double max_out_of
 bool CountAdmission(FrameAdmission admission, FusionCounters& counters);
 
 // --- numbers --------------------------------------------------------------------------------
-
-// a - b in seconds; saturates instead of overflowing for hostile stamps.
-double Seconds(common::UtcNs a, common::UtcNs b);
 
 template <typename Derived>
 bool AllFinite(const Eigen::MatrixBase<Derived>& m) {

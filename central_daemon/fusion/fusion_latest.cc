@@ -68,6 +68,9 @@ class LatestStatesEngine final : public Engine {
   void SetPlacements(const PlacementMap& next, const PlacementMap& previous) override;
   void Tick(UtcNs now_ns) override;
   std::vector<FusedTrack> Snapshot(UtcNs now_ns, bool include_tentative) const override;
+  std::vector<HiddenFusedTrack> Hidden(const std::vector<FusedTrack>& reported) const override {
+    return HiddenTracks(tracks, reported);
+  }
   std::vector<WorldTrack> WorldTracks(UtcNs now_ns) const override;
 
  private:
@@ -486,6 +489,7 @@ class LatestStatesEngine final : public Engine {
       }
     }
     ++counters_.fused_merged;
+    RecordEnded(younger_id, t, FusedEndReason::kMerged, older_id);
     Update(older, t);
   }
 
@@ -727,10 +731,16 @@ void LatestStatesEngine::Tick(UtcNs now_ns) {
       continue;
     }
     ++counters_.fused_deleted;
+    if (f.updates > 0) {
+      RecordEnded(it->first, now_ns,
+                  age > options_.max_coast_s ? FusedEndReason::kTimedOut
+                                             : FusedEndReason::kNoSources);
+    }
     auto next = std::next(it);
     DeleteTrack(it);
     it = next;
   }
+  ForgetEnded(now_ns);
 }
 
 std::vector<FusedTrack> LatestStatesEngine::Snapshot(UtcNs now_ns, bool include_tentative) const {

@@ -7,6 +7,7 @@
 #include <cmath>
 #include <functional>
 #include <limits>
+#include <map>
 #include <optional>
 #include <random>
 #include <set>
@@ -211,6 +212,23 @@ TEST(FusionOptionsTest, DefaultsAreValidAndBadValuesNamed) {
   o = {};
   o.merge_centre_spread_m = o.merge_max_distance_m + 0.1;
   EXPECT_NE(Validate(o).value_or("").find("merge_centre_spread_m"), std::string::npos);
+  o = {};
+  o.ended_report_s = 0.0;
+  EXPECT_NE(Validate(o).value_or("").find("ended_report_s"), std::string::npos);
+  o.ended_report_s = 4000.0;
+  EXPECT_NE(Validate(o).value_or("").find("ended_report_s"), std::string::npos);
+}
+
+// Every id `out` reports (tracks, hidden, ended) in exactly one of its lists, and every id in
+// `seen` (reported in the tracks before) still in one of them; adds the tracks' ids to `seen`.
+void ExpectEveryIdAccounted(const FusionOutput& out, std::set<std::uint64_t>& seen) {
+  std::map<std::uint64_t, int> in;
+  for (const FusedTrack& t : out.tracks) ++in[t.id];
+  for (const HiddenFusedTrack& h : out.hidden) ++in[h.id];
+  for (const EndedFusedTrack& e : out.ended) ++in[e.id];
+  for (const auto& [id, n] : in) EXPECT_EQ(n, 1) << "id " << id << " in " << n << " lists";
+  for (const std::uint64_t id : seen) EXPECT_EQ(in.count(id), 1u) << "id " << id << " unaccounted";
+  for (const FusedTrack& t : out.tracks) seen.insert(t.id);
 }
 
 TEST_P(FuserTest, InvalidPlacementsAreIgnoredAndCounted) {
@@ -682,6 +700,19 @@ TEST_P(FuserSceneTest, DuplicatesOfABadCalibrationMergeIntoTheOlderId) {
   ASSERT_EQ(after.size(), 1u);
   EXPECT_EQ(*after.begin(), *before.begin());  // the older id
   EXPECT_EQ(fuser.counters().fused_merged, 1u);
+  // The output says the younger id ended, merged into the older one.
+  const FusionOutput out = fuser.Output(AtSeconds(6.0));
+  std::size_t merged = 0;
+  for (const EndedFusedTrack& e : out.ended) {
+    if (e.reason != FusedEndReason::kMerged) continue;
+    ++merged;
+    EXPECT_EQ(e.id, *before.rbegin());
+    EXPECT_EQ(e.merged_into, *before.begin());
+    EXPECT_GT(e.ended_ns, AtSeconds(3.0));
+  }
+  EXPECT_EQ(merged, 1u);
+  ASSERT_EQ(out.tracks.size(), 1u);
+  EXPECT_EQ(out.tracks[0].id, *before.begin());
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -1080,6 +1111,90 @@ std::pair<std::vector<FusedTrack>, FusionCounters> RunLeftBehind(bool merge_sour
     if (k == 50) at_3s = fuser.Snapshot(AtSeconds(t));
   }
   return {at_3s, fuser.counters()};
+}
+
+// The output of the left-behind run: the younger id (2) ends merged into the older (1), which
+// goes on with 2's estimate; at every step every id reported before is accounted for.
+TEST(FusedFilterTest, OutputReportsAMergedIdWithTheIdItGoesOnAs) {
+  Fuser fuser{FusionOptions{}};
+  fuser.SetPlacements({Placed("a", 0, 0, 0)});
+  const auto x = [](double t) { return 3.0 + 1.0 * (t - 1.0); };
+  std::set<std::uint64_t> seen;
+  FusionOutput out;
+  for (int k = 0; k <= 50; ++k) {
+    const double t = 1.0 + 0.04 * k;
+    std::vector<TrackObservation> tracks;
+    if (t < 2.3) tracks.push_back(Obs(1, x(t), 1.0, 1.0, 0.0));
+    if (t >= 2.0) tracks.push_back(Obs(2, x(t), 1.1, 1.0, 0.0));
+    fuser.AddFrame("a", FrameAt(t, std::move(tracks)));
+    fuser.Tick(AtSeconds(t));
+    out = fuser.Output(AtSeconds(t));
+    // The tracks are Snapshot's.
+    const auto snapshot = fuser.Snapshot(AtSeconds(t));
+    ASSERT_EQ(out.tracks.size(), snapshot.size());
+    for (std::size_t i = 0; i < snapshot.size(); ++i) {
+      EXPECT_EQ(out.tracks[i].id, snapshot[i].id);
+      EXPECT_EQ(out.tracks[i].x_m, snapshot[i].x_m);
+      EXPECT_EQ(out.tracks[i].covariance, snapshot[i].covariance);
+    }
+    ExpectEveryIdAccounted(out, seen);
+  }
+  EXPECT_EQ(seen, (std::set<std::uint64_t>{1, 2}));
+  ASSERT_EQ(out.ended.size(), 1u);
+  EXPECT_EQ(out.ended[0].id, 2u);
+  EXPECT_EQ(out.ended[0].reason, FusedEndReason::kMerged);
+  EXPECT_EQ(out.ended[0].merged_into, 1u);
+  ASSERT_EQ(out.tracks.size(), 1u);
+  EXPECT_EQ(out.tracks[0].id, 1u);
+  EXPECT_TRUE(out.hidden.empty());
+  // Reported for ended_report_s after the end, then forgotten (1 has timed out by then).
+  const UtcNs later = AtSeconds(3.0 + FusionOptions{}.ended_report_s + 1.0);
+  fuser.Tick(later);
+  const FusionOutput much_later = fuser.Output(later);
+  ASSERT_EQ(much_later.ended.size(), 1u);
+  EXPECT_EQ(much_later.ended[0].id, 1u);
+  EXPECT_EQ(much_later.ended[0].reason, FusedEndReason::kTimedOut);
+}
+
+// A walker leaves the only sensor's view at t = 2 s and is not seen again: once its source timed
+// out the fused id is hidden (kept, not reported: with its last update's time and place), and
+// max_coast_s after that update it ends as timed out.
+TEST(FusedFilterTest, OutputHoldsAHiddenIdUntilItTimesOut) {
+  Fuser fuser{FusionOptions{}};
+  fuser.SetPlacements({Placed("a", 0, 0, 0)});
+  std::set<std::uint64_t> seen;
+  double hidden_from = -1.0, ended_at = -1.0;
+  for (int k = 0; k <= 80; ++k) {
+    const double t = 1.0 + 0.04 * k;
+    std::vector<TrackObservation> tracks;
+    if (t < 2.0) tracks.push_back(Obs(1, 3.0 + (t - 1.0), 1.0, 1.0, 0.0));
+    fuser.AddFrame("a", FrameAt(t, std::move(tracks)));
+    fuser.Tick(AtSeconds(t));
+    const FusionOutput out = fuser.Output(AtSeconds(t));
+    ExpectEveryIdAccounted(out, seen);
+    if (!out.hidden.empty() && hidden_from < 0.0) {
+      hidden_from = t;
+      ASSERT_EQ(out.hidden.size(), 1u);
+      EXPECT_EQ(out.hidden[0].id, 1u);
+      // The last frame with the track.
+      EXPECT_NEAR(static_cast<double>(out.hidden[0].last_ns - AtSeconds(1.96)), 0.0, 1e3);
+      EXPECT_NEAR(out.hidden[0].x_m, 3.96, 0.05);
+      EXPECT_NEAR(out.hidden[0].y_m, 1.0, 0.05);
+      EXPECT_EQ(out.hidden[0].last_sensor, "a");
+    }
+    if (!out.ended.empty() && ended_at < 0.0) {
+      ended_at = t;
+      ASSERT_EQ(out.ended.size(), 1u);
+      EXPECT_EQ(out.ended[0].id, 1u);
+      EXPECT_EQ(out.ended[0].reason, FusedEndReason::kTimedOut);
+      EXPECT_EQ(out.ended[0].merged_into, 0u);
+      EXPECT_EQ(out.ended[0].ended_ns, AtSeconds(t));
+      EXPECT_TRUE(out.hidden.empty());
+    }
+  }
+  EXPECT_EQ(seen, std::set<std::uint64_t>{1});
+  EXPECT_NEAR(hidden_from, 1.96 + FusionOptions{}.source_timeout_s, 0.05);
+  EXPECT_NEAR(ended_at, 1.96 + FusionOptions{}.max_coast_s, 0.05);
 }
 
 TEST(FusedFilterTest, AFusedTrackLeftBehindByItsSourcesMergesIntoTheTrackThatTookItsObject) {

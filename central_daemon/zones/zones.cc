@@ -216,19 +216,99 @@ void ZoneCounter::UpdateTrack(const Zone& zone, ZoneData& data, const ZoneTrack&
   }
 }
 
-bool ZoneCounter::Update(std::span<const ZoneTrack> tracks, common::UtcNs now_ns) {
+bool ZoneCounter::Known(std::uint64_t id) const {
+  return std::any_of(data_.begin(), data_.end(),
+                     [&](const ZoneData& data) { return data.tracks.count(id) != 0; });
+}
+
+void ZoneCounter::Gone(std::uint64_t id, common::UtcNs since_ns) {
+  for (ZoneData& data : data_) {
+    const auto it = data.tracks.find(id);
+    if (it == data.tracks.end()) continue;
+    if (it->second.in_region) ++data.state.lost_inside;
+    EndDwell(data, it->second, since_ns);
+    data.tracks.erase(it);
+  }
+}
+
+void ZoneCounter::Fold(std::uint64_t merged, std::uint64_t survivor, common::UtcNs now_ns) {
+  // The survivor goes on from the merged id's estimate when it was held at the previous update
+  // (hidden) and the merged id was not.
+  const bool take_merged =
+      absent_since_ns_.count(survivor) != 0 && absent_since_ns_.count(merged) == 0;
+  for (ZoneData& data : data_) {
+    const auto m = data.tracks.find(merged);
+    if (m == data.tracks.end()) continue;
+    TrackInZone tm = m->second;
+    data.tracks.erase(m);
+    const auto s = data.tracks.find(survivor);
+    if (s == data.tracks.end()) {
+      data.tracks.emplace(survivor, tm);
+      continue;
+    }
+    TrackInZone& ts = s->second;
+    TrackInZone& kept = take_merged ? tm : ts;
+    TrackInZone& dropped = take_merged ? ts : tm;
+    if (kept.in_region && dropped.in_region) {
+      kept.region_since_ns = std::min(kept.region_since_ns, dropped.region_since_ns);
+    } else if (dropped.in_region) {
+      EndDwell(data, dropped, now_ns);  // the person is where the kept state says: not here
+    }
+    if (take_merged) ts = tm;
+  }
+}
+
+bool ZoneCounter::Update(std::span<const ZoneTrack> tracks,
+                         std::span<const std::uint64_t> hidden_ids,
+                         std::span<const ZoneEnded> ended, common::UtcNs now_ns) {
   if (started_ && now_ns < now_ns_) return false;
   started_ = true;
   now_ns_ = now_ns;
   std::set<std::uint64_t> seen;
   for (const ZoneTrack& track : tracks) {
+    if (std::isfinite(track.x_m) && std::isfinite(track.y_m)) seen.insert(track.id);
+  }
+  // Ids the fusion ended, first (as of the previous update: a survivor goes on from there): a
+  // merged one folded into the id that goes on (through a chain of merges), any other gone at
+  // once, as of the first update it was absent from.
+  std::map<std::uint64_t, std::uint64_t> merged_into;
+  for (const ZoneEnded& e : ended) {
+    if (e.merged_into != 0) merged_into[e.id] = e.merged_into;
+  }
+  for (const ZoneEnded& e : ended) {
+    if (seen.count(e.id) != 0 || !Known(e.id)) continue;
+    const auto held = absent_since_ns_.find(e.id);
+    const bool was_held = held != absent_since_ns_.end();
+    const common::UtcNs since_ns = was_held ? held->second : now_ns;
+    std::uint64_t survivor = e.merged_into;
+    for (std::size_t hops = 0; survivor != 0 && hops < ended.size(); ++hops) {
+      const auto next = merged_into.find(survivor);
+      if (next == merged_into.end() || seen.count(survivor) != 0) break;
+      survivor = next->second;
+    }
+    if (survivor != 0 && survivor != e.id) {
+      Fold(e.id, survivor, now_ns);
+      ++counters_.merged;
+    } else {
+      Gone(e.id, since_ns);
+      ++counters_.ended;
+    }
+    if (was_held) {
+      absent_since_ns_.erase(e.id);
+      ++counters_.absent_gone;
+    }
+  }
+  std::set<std::uint64_t> updated;
+  for (const ZoneTrack& track : tracks) {
     if (!std::isfinite(track.x_m) || !std::isfinite(track.y_m)) continue;
-    if (!seen.insert(track.id).second) continue;  // a duplicate id: the first one counts
+    if (!updated.insert(track.id).second) continue;  // a duplicate id: the first one counts
     if (absent_since_ns_.erase(track.id) != 0) ++counters_.absent_returned;
     for (std::size_t i = 0; i < zones_.size(); ++i) UpdateTrack(zones_[i], data_[i], track, now_ns);
   }
-  // Ids known to some zone but absent now: held until absent_hold_s, then gone as of the first
-  // update they were absent from.
+  // The other ids known to some zone but absent now: hidden ones held while the fusion keeps
+  // them; ones it reports nothing of held until absent_hold_s, then gone as of the first update
+  // they were absent from.
+  const std::set<std::uint64_t> hidden(hidden_ids.begin(), hidden_ids.end());
   const auto hold_ns = static_cast<common::DurationNs>(options_.absent_hold_s * 1e9);
   std::set<std::uint64_t> gone;
   for (const ZoneData& data : data_) {
@@ -237,22 +317,30 @@ bool ZoneCounter::Update(std::span<const ZoneTrack> tracks, common::UtcNs now_ns
       if (seen.count(id) != 0 || gone.count(id) != 0) continue;
       const auto [it, first] = absent_since_ns_.try_emplace(id, now_ns);
       if (first) ++counters_.absent_held;
-      if (now_ns - it->second >= hold_ns) gone.insert(id);
+      if (hidden.count(id) == 0 && now_ns - it->second >= hold_ns) gone.insert(id);
     }
   }
   for (const std::uint64_t id : gone) {
     const common::UtcNs since_ns = absent_since_ns_.at(id);
     absent_since_ns_.erase(id);
     ++counters_.absent_gone;
-    for (ZoneData& data : data_) {
-      const auto it = data.tracks.find(id);
-      if (it == data.tracks.end()) continue;
-      if (it->second.in_region) ++data.state.lost_inside;
-      EndDwell(data, it->second, since_ns);
-      data.tracks.erase(it);
-    }
+    ++counters_.expired;
+    Gone(id, since_ns);
   }
   return true;
+}
+
+void ZoneCounter::EndAll(common::UtcNs now_ns) {
+  std::set<std::uint64_t> ids;
+  for (const ZoneData& data : data_) {
+    for (const auto& entry : data.tracks) ids.insert(entry.first);
+  }
+  for (const std::uint64_t id : ids) {
+    const auto held = absent_since_ns_.find(id);
+    Gone(id, held != absent_since_ns_.end() ? held->second : now_ns);
+  }
+  absent_since_ns_.clear();
+  ++counters_.restarts;
 }
 
 std::vector<ZoneState> ZoneCounter::States() const {

@@ -26,13 +26,30 @@
 // is also counted as lost_inside (it left the sensors' view there, or its fused track was merged).
 //
 // Absent tracks: the fusion may leave a hidden person's id out of its published tracks for a while
-// and publish it again when a sensor sees the person again (fusion.report_sourceless off). An id
-// absent from an update is therefore *held* for absent_hold_s: it keeps its side, its region and
-// its dwell (a hidden person is still where it was last seen), and if it comes back within that
-// time it simply continues from its new position (a line crossed while hidden counts once, as one
-// straight step). Only an id absent for absent_hold_s is gone, as of the first update it was absent
-// from (the same instant as with absent_hold_s = 0, where an absent id is gone at once). Fused ids
-// are never reused.
+// and publish it again when a sensor sees the person again (fusion.report_sourceless off); it says
+// which ids it keeps so (hidden) and which ended and why (fusion::FusionOutput). An id absent from
+// an update is:
+// - hidden (the fusion keeps it): *held* for as long as the fusion keeps it, with no timer of the
+//   zones' own: it keeps its side, its region and its dwell (a hidden person is still where it
+//   was last seen), and if it comes back it simply continues from its new position (a line
+//   crossed while hidden counts once, as one straight step);
+// - merged into another id (the fusion found the two are one object): folded into the surviving
+//   id at once, before the update's positions are applied. No exit, no lost_inside: the person
+//   goes on as the survivor. Per zone, the survivor goes on from the state of whichever of the
+//   two was in the previous update (the merged id's when the survivor was held: the fusion
+//   continues the survivor from the merged id's estimate then; else its own); where both were in
+//   the region its dwell runs from the earlier start of the two; where only the one whose state
+//   is dropped was in the region, that stay ends there as a completed dwell (the person is where
+//   the other says). A survivor the zones did not know takes the merged id's state whole.
+//   Crossings both ids counted before the merge stay counted;
+// - otherwise ended (timed out): gone at once, as of the first update it was absent from;
+// - none of these (the fusion reports nothing of it: Update without the fusion's lists, or an id
+//   whose end is no longer reported): held for absent_hold_s, then gone as of the first update it
+//   was absent from (absent_hold_s = 0: at once).
+// A gone id ends its dwell and, inside a polygon or on a line, counts as lost_inside. Fused ids
+// are never reused within one fusion; EndAll ends every id when the fusion starts afresh.
+// Before a merge the fusion reports two ids for one person (e.g. a hidden id and the new one a
+// sensor started, until merge_updates checks join them), and the zones count both until then.
 //
 // Time is passed in (gateway UTC ns, the fused tracks' time base). Not thread-safe.
 
@@ -66,9 +83,10 @@ struct ZoneOptions {
   // a person's radius plus the fused position's noise; a polygon narrower than twice this never
   // holds a track.
   double hysteresis_m = 0.3;
-  // How long [s] an id absent from the updates is held before it is gone (see the header): the
-  // longest a fused id can be left out and come back, the fusion's max_coast_s (lrfnetd sets it
-  // from there unless configured). 0: an absent id is gone at once (earlier releases).
+  // How long [s] an absent id the fusion reports nothing of (neither hidden nor ended: see the
+  // header) is held before it is gone; lrfnetd sets it to the fusion's max_coast_s unless
+  // configured. Ids the fusion reports hidden are held as long as it keeps them, ended ones end
+  // at once, whatever this is. 0: gone at once.
   double absent_hold_s = 1.5;
 };
 std::optional<std::string> Validate(const ZoneOptions& options);
@@ -84,11 +102,21 @@ inline constexpr std::size_t kMaxZonePoints = 1024;
 // Signed distance [m] of p to the polygon's boundary, > 0 inside (even-odd rule).
 double SignedDistanceToPolygon(std::span<const Point> polygon, Point p);
 
-// What the hold of absent ids did (see the header), since start.
+// What became of absent ids (see the header), since start; ids known to some zone only.
 struct ZoneCounters {
   std::uint64_t absent_held = 0;      // ids absent from an update while in some zone's state
-  std::uint64_t absent_returned = 0;  // of these, came back within absent_hold_s
-  std::uint64_t absent_gone = 0;      // of these, gone after absent_hold_s
+  std::uint64_t absent_returned = 0;  // of these, came back
+  std::uint64_t absent_gone = 0;      // of these, gone or merged (not come back)
+  std::uint64_t merged = 0;           // ids merged into another id (folded into it, no exit)
+  std::uint64_t ended = 0;            // ids the fusion ended otherwise (gone at once)
+  std::uint64_t expired = 0;          // ids the fusion reported nothing of, gone after the hold
+  std::uint64_t restarts = 0;         // EndAll calls (every id gone)
+};
+
+// An id the fusion ended (fusion::EndedFusedTrack as the zones need it).
+struct ZoneEnded {
+  std::uint64_t id = 0;
+  std::uint64_t merged_into = 0;  // != 0: merged, the object goes on as this id
 };
 
 // A fused track as the zones see it.
@@ -117,9 +145,18 @@ class ZoneCounter {
   // Preconditions: Validate(zones), Validate(options) (checked; aborts otherwise).
   ZoneCounter(std::vector<Zone> zones, const ZoneOptions& options);
 
-  // All current tracks at now_ns (ids absent are held, then gone: see the header). Updates with
-  // a time before the previous one are ignored (returns false).
-  bool Update(std::span<const ZoneTrack> tracks, common::UtcNs now_ns);
+  // All current tracks at now_ns, the ids the fusion keeps without publishing them (hidden) and
+  // the ids it ended (in the order they ended; ids the zones do not know are ignored), see the
+  // header. Updates with a time before the previous one are ignored (returns false).
+  bool Update(std::span<const ZoneTrack> tracks, std::span<const std::uint64_t> hidden_ids,
+              std::span<const ZoneEnded> ended, common::UtcNs now_ns);
+  // Without the fusion's lists: every absent id is held for absent_hold_s.
+  bool Update(std::span<const ZoneTrack> tracks, common::UtcNs now_ns) {
+    return Update(tracks, {}, {}, now_ns);
+  }
+  // Every id gone as of now_ns (the fusion started afresh: its ids are no longer the ones known
+  // here); as when each ended.
+  void EndAll(common::UtcNs now_ns);
 
   // Every zone's state as of the last update, in the order of the zones.
   std::vector<ZoneState> States() const;
@@ -144,6 +181,11 @@ class ZoneCounter {
   };
   void UpdateTrack(const Zone& zone, ZoneData& data, const ZoneTrack& track, common::UtcNs now_ns);
   static void EndDwell(ZoneData& data, TrackInZone& t, common::UtcNs now_ns);
+  bool Known(std::uint64_t id) const;
+  // id gone as of since_ns in every zone (its dwell ends; lost_inside where it was in a region).
+  void Gone(std::uint64_t id, common::UtcNs since_ns);
+  // merged folded into survivor (see the header), as of the previous update.
+  void Fold(std::uint64_t merged, std::uint64_t survivor, common::UtcNs now_ns);
 
   std::vector<Zone> zones_;
   ZoneOptions options_;

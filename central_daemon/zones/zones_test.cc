@@ -2,6 +2,7 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <vector>
 
@@ -215,6 +216,141 @@ TEST(ZonesTest, AnIdAbsentForTheHoldIsGoneOnceAsOfItsDisappearance) {
   EXPECT_EQ(w.State().dwells_completed, 1u);
   EXPECT_EQ(w.counter().counters().absent_gone, 1u);
   EXPECT_EQ(w.counter().counters().absent_returned, 0u);
+}
+
+// Updates with the fusion's lists (what ZoneService passes from fusion::FusionOutput).
+struct FusionStep {
+  std::vector<ZoneTrack> tracks;
+  std::vector<std::uint64_t> hidden;
+  std::vector<ZoneEnded> ended;
+};
+class FusionFeed {
+ public:
+  FusionFeed(std::vector<Zone> zones, double absent_hold_s)
+      : counter_(std::move(zones), ZoneOptions{0.3, absent_hold_s}) {}
+  void Step(const FusionStep& s) { counter_.Update(s.tracks, s.hidden, s.ended, now_ns_ += kStepNs); }
+  ZoneState State(std::size_t i = 0) const { return counter_.States().at(i); }
+  const ZoneCounters& counters() const { return counter_.counters(); }
+  ZoneCounter& counter() { return counter_; }
+
+ private:
+  ZoneCounter counter_;
+  common::UtcNs now_ns_ = kT0;
+};
+
+// One person inside the room has two fused ids (2, a second sensor's duplicate started 1 s after
+// 1); the fusion merges 2 into 1. From that update on the room holds one person: no exit, no
+// lost_inside, one dwell running from 1's entry. Without the fusion's lists (earlier releases)
+// the merged id was held as absent for absent_hold_s: the room counted two, then lost one.
+TEST(ZonesTest, AMergedIdIsFoldedIntoItsSurvivorAtOnce) {
+  for (const bool with_lists : {false, true}) {
+    SCOPED_TRACE(with_lists);
+    FusionFeed f({Square("room", 0, 0, 4)}, 1.5);
+    for (int i = 0; i < 10; ++i) f.Step({{{1, 2.0, 2.0, true}}, {}, {}});
+    for (int i = 0; i < 10; ++i) f.Step({{{1, 2.0, 2.0, true}, {2, 2.1, 2.0, true}}, {}, {}});
+    EXPECT_EQ(f.State().present_ids, (std::vector<std::uint64_t>{1, 2}));
+    std::size_t most_after = 0;
+    for (int i = 0; i < 30; ++i) {  // 3 s after the merge
+      FusionStep s{{{1, 2.05, 2.0, true}}, {}, {}};
+      if (with_lists) s.ended = {{2, 1}};
+      f.Step(s);
+      most_after = std::max(most_after, f.State().present_ids.size());
+    }
+    const ZoneState room = f.State();
+    EXPECT_EQ(room.present_ids, std::vector<std::uint64_t>{1});
+    EXPECT_EQ(room.inbound, 0u);
+    EXPECT_EQ(room.outbound, 0u);
+    if (with_lists) {
+      EXPECT_EQ(most_after, 1u);
+      EXPECT_EQ(room.lost_inside, 0u);
+      EXPECT_EQ(room.dwells_completed, 0u);
+      EXPECT_NEAR(room.present_dwell_s[0], 4.9, 1e-6);  // from 1's first update
+      EXPECT_EQ(f.counters().merged, 1u);
+      EXPECT_EQ(f.counters().absent_held, 0u);
+    } else {
+      EXPECT_EQ(most_after, 2u);  // the merged id held for absent_hold_s
+      EXPECT_EQ(room.lost_inside, 1u);
+      EXPECT_EQ(room.dwells_completed, 1u);
+    }
+  }
+}
+
+// Survivor hidden: person id 1 walks towards the room's wall and is hidden from every sensor
+// outside it (the fusion keeps 1, hidden); a sensor starts id 2 on them inside the room; the
+// fusion merges 2 into the older 1, which goes on from 2's estimate. The room counts one entry
+// (2 was seen first inside: its side unknown, 1 goes on from it), nothing lost, one person.
+TEST(ZonesTest, AHiddenSurvivorGoesOnFromTheMergedIdsState) {
+  FusionFeed f({Square("room", 0, 0, 4)}, 1.5);
+  for (int i = 0; i <= 10; ++i) f.Step({{{1, -2.0 + 0.15 * i, 2.0, true}}, {}, {}});  // to x -0.5
+  for (int i = 0; i < 5; ++i) f.Step({{}, {1}, {}});                                // hidden
+  for (int i = 0; i < 5; ++i) f.Step({{{2, 0.5 + 0.1 * i, 2.0, true}}, {1}, {}});   // 2 inside
+  EXPECT_EQ(f.State().present_ids, std::vector<std::uint64_t>{2});  // 1 held outside
+  for (int i = 0; i < 10; ++i) {
+    FusionStep s{{{1, 1.0 + 0.1 * i, 2.0, true}}, {}, {{2, 1}}};
+    f.Step(s);
+    EXPECT_EQ(f.State().present_ids, std::vector<std::uint64_t>{1});
+  }
+  const ZoneState room = f.State();
+  EXPECT_EQ(room.inbound, 0u);  // seen first inside (as 2): no entry crossing
+  EXPECT_EQ(room.outbound, 0u);
+  EXPECT_EQ(room.lost_inside, 0u);
+  EXPECT_EQ(room.dwells_completed, 0u);
+  EXPECT_NEAR(room.present_dwell_s[0], 1.4, 1e-6);  // from 2's entry
+  EXPECT_EQ(f.counters().merged, 1u);
+  EXPECT_EQ(f.counters().absent_returned, 1u);
+}
+
+// A hidden id is held for as long as the fusion keeps it, whatever absent_hold_s is (no timer of
+// the zones' own that could end it early or keep it late); when the fusion ends it (timed out),
+// it is gone at once, as of the first update it was absent from.
+TEST(ZonesTest, AHiddenIdIsHeldWhileTheFusionKeepsItAndGoneWhenItEnds) {
+  for (const double hold_s : {0.0, 0.5, 1.5, 60.0}) {
+    SCOPED_TRACE(hold_s);
+    // Back after 1 s hidden: no exit, no entry.
+    FusionFeed back({Square("room", 0, 0, 4)}, hold_s);
+    for (int i = 0; i < 10; ++i) back.Step({{{1, 2.0, 2.0, true}}, {}, {}});
+    for (int i = 0; i < 10; ++i) {
+      back.Step({{}, {1}, {}});
+      EXPECT_EQ(back.State().present_ids, std::vector<std::uint64_t>{1});
+    }
+    for (int i = 0; i < 5; ++i) back.Step({{{1, 2.2, 2.0, true}}, {}, {}});
+    EXPECT_EQ(back.State().lost_inside, 0u);
+    EXPECT_EQ(back.State().dwells_completed, 0u);
+    EXPECT_EQ(back.counters().absent_returned, 1u);
+    // Hidden 1 s, then ended by the fusion: gone at that update, as of its disappearance.
+    FusionFeed ended({Square("room", 0, 0, 4)}, hold_s);
+    for (int i = 0; i < 10; ++i) ended.Step({{{1, 2.0, 2.0, true}}, {}, {}});
+    for (int i = 0; i < 10; ++i) ended.Step({{}, {1}, {}});
+    EXPECT_EQ(ended.State().present_ids, std::vector<std::uint64_t>{1});
+    ended.Step({{}, {}, {{1, 0}}});
+    EXPECT_TRUE(ended.State().present_ids.empty());
+    EXPECT_EQ(ended.State().lost_inside, 1u);
+    EXPECT_EQ(ended.State().dwells_completed, 1u);
+    EXPECT_NEAR(ended.State().dwell_max_s, 1.0, 1e-6);  // 0.1 s to 1.1 s, the first absence
+    EXPECT_EQ(ended.counters().ended, 1u);
+    EXPECT_EQ(ended.counters().absent_gone, 1u);
+    EXPECT_EQ(ended.counters().expired, 0u);
+    for (int i = 0; i < 5; ++i) ended.Step({{}, {}, {{1, 0}}});  // reported again: nothing
+    EXPECT_EQ(ended.State().lost_inside, 1u);
+  }
+}
+
+// A chain of merges reported at once (3 into 2, 2 into 1) folds both into 1; the fusion
+// starting afresh (EndAll) ends every id.
+TEST(ZonesTest, MergeChainsAndAFusionRestart) {
+  FusionFeed f({Square("room", 0, 0, 4)}, 1.5);
+  for (int i = 0; i < 5; ++i) {
+    f.Step({{{1, 2.0, 2.0, true}, {2, 2.1, 2.0, true}, {3, 2.2, 2.0, true}}, {}, {}});
+  }
+  EXPECT_EQ(f.State().present_ids.size(), 3u);
+  f.Step({{{1, 2.0, 2.0, true}}, {}, {{3, 2}, {2, 1}}});
+  EXPECT_EQ(f.State().present_ids, std::vector<std::uint64_t>{1});
+  EXPECT_EQ(f.State().lost_inside, 0u);
+  EXPECT_EQ(f.counters().merged, 2u);
+  f.counter().EndAll(kT0 + 10 * kStepNs);
+  EXPECT_TRUE(f.State().present_ids.empty());
+  EXPECT_EQ(f.State().lost_inside, 1u);
+  EXPECT_EQ(f.counters().restarts, 1u);
 }
 
 TEST(ZonesTest, ManyPeopleBothWaysAtOnce) {
