@@ -9,12 +9,14 @@
 
 #include <boost/asio/io_context.hpp>
 #include <chrono>
+#include <cmath>
 #include <filesystem>
 #include <fstream>
 #include <functional>
 #include <nlohmann/json.hpp>
 #include <set>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "central_daemon/app/config.h"
@@ -194,6 +196,62 @@ int ExitEnterPairs(const std::vector<std::set<std::uint64_t>>& present) {
     }
   }
   return pairs;
+}
+
+// Collects what the service publishes (no broker).
+class CollectingSink final : public MqttSink {
+ public:
+  void Publish(const std::string& topic, std::string payload, int, bool) override {
+    messages.emplace_back(topic, std::move(payload));
+  }
+  std::vector<std::pair<std::string, std::string>> messages;
+};
+
+// The fusion's options change at 3 s (lrfnetd reloads its config): a new fuser starts, its ids
+// start afresh. Every id known to the zones and MQTT ends then (the new fuser's id 1 is not the
+// old one's), and the person standing in the room comes back as the new fuser's id.
+TEST(MqttServiceRestart, ANewFuserEndsEveryIdKnown) {
+  DaemonConfig config;
+  config.zones_list = "[{name: room, polygon: [[2, 0], [4, 0], [4, 2], [2, 2]]}]";
+  config.mqtt.objects_hz = 10.0;
+  ASSERT_EQ(Validate(config), std::nullopt);
+  DaemonOptions options;
+  options.send_requests = false;
+  Daemon daemon(options, nullptr, nullptr, 1);
+  boost::asio::io_context io;
+  FusionService fusion(io, config);
+  fusion.SetCalibration(OneSensorAtTheOrigin());
+  ZoneService zones(config);
+  CollectingSink sink;
+  MqttService mqtt(config, &sink, "test");
+  std::uint32_t scan = 0;
+  for (double t = 0.0; t < 6.0 - 1e-9; t += 0.04) {
+    if (std::abs(t - 3.0) < 0.02) {
+      DaemonConfig changed = config;
+      changed.fusion.max_coast_s = 2.0;
+      fusion.Reconfigure(changed);
+    }
+    fusion.OnFrame("s1", FrameWith(t, scan++, {Standing(1)}));
+    if (scan % 5 == 0) {
+      fusion.OnTick(t);
+      zones.OnTick(fusion);
+      mqtt.OnTick(At(t), daemon, fusion, zones);
+    }
+  }
+  EXPECT_EQ(fusion.generation(), 1u);
+  EXPECT_EQ(zones.counters().restarts, 1u);
+  EXPECT_EQ(mqtt.counters().objects_ended, 1u);
+  const zones::ZoneState room = zones.States().at(0);
+  EXPECT_EQ(room.present_ids.size(), 1u);  // the new fuser's id for the person
+  EXPECT_EQ(room.lost_inside, 1u);         // the old fuser's id, ended at the restart
+  EXPECT_EQ(room.dwells_completed, 1u);
+  std::size_t ended_messages = 0;
+  for (const auto& [topic, payload] : sink.messages) {
+    if (!topic.ends_with("/objects/ended")) continue;
+    ++ended_messages;
+    EXPECT_EQ(nlohmann::json::parse(payload)["ended"][0]["reason"], "fusion_restarted");
+  }
+  EXPECT_EQ(ended_messages, 1u);
 }
 
 class MqttServiceHide : public ::testing::Test {
