@@ -329,6 +329,7 @@ void VisitMqtt(DaemonConfig& c, ConfigVisitor& v) {
   v.Section("mqtt",
             "Publishing to an MQTT broker (JSON, see central_daemon/schemas): "
             "<topic_prefix>/<site>/objects (the fused objects at objects_hz), "
+            "<topic_prefix>/<site>/objects/ended (objects that left the list for good, and why), "
             "<topic_prefix>/<site>/zones/<name> (each zone's state when it changes and every "
             "zones_interval_s), <topic_prefix>/<site>/calibration (retained, when it changes), "
             "<topic_prefix>/<site>/sensors/<id>/health (retained), <topic_prefix>/<site>/status "
