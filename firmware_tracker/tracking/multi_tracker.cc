@@ -5,6 +5,7 @@
 #include <cmath>
 #include <limits>
 
+#include "common/cv_model.h"
 #include "firmware_tracker/tracking/assignment.h"
 
 namespace lrfnet::tracking {
@@ -14,12 +15,13 @@ bool Positive(double v) { return std::isfinite(v) && v > 0.0; }
 
 // State and covariance of a constant-velocity filter moved by dt_s without process noise: used to
 // move a just-updated track from its measurement time back to the scan start (a few ms).
+// F x and F p F^T by F's structure (common/cv_model.h: the full products' arithmetic, whose other
+// terms are multiplications by 1 and additions of 0).
 void Extrapolate(double dt_s, Eigen::Vector4d& x, Eigen::Matrix4d& p) {
-  Eigen::Matrix4d f = Eigen::Matrix4d::Identity();
-  f(0, 2) = dt_s;
-  f(1, 3) = dt_s;
-  x = f * x;
-  p = f * p * f.transpose();
+  x(0) += dt_s * x(2);
+  x(1) += dt_s * x(3);
+  common::CvApplyTransition(dt_s, p);
+  common::CvApplyTransitionTransposed(dt_s, p);
   p = 0.5 * (p + p.transpose()).eval();
 }
 
