@@ -46,7 +46,8 @@
 //   and missed scan, what the false positives are (by scan and by false track: a track left
 //   behind by its object, a second track beside a tracked one, clutter, furniture; see
 //   MotSequence::FalseClass; per sensor also where each false scan lies from the nearest object as
-//   the sensor sees it: straight behind it, in front of it or beside it, MotSequence::LineOfSight)
+//   the sensor sees it: straight behind it (held by another track or untracked, and how far), in
+//   front of it or beside it, MotSequence::LineOfSight)
 //   and the tracker's counters; --breakdown: a table more per section, the
 //   per-sensor matched error along and across the line of sight by range and point count, and
 //   the filtered track's error beside that of the scan's measurement it was updated with, see
@@ -580,7 +581,7 @@ class MotSequence {
       causes_.false_classes[timed] += 1;
       if (!hyps[h].view.empty()) {
         causes_.false_views[cls + " | " + hyps[h].view] += 1;
-        causes_.false_sight[LineOfSight(hyps[h], truths)] += 1;
+        causes_.false_sight[LineOfSight(hyps[h], truths, truth_to_hyp)] += 1;
       }
     }
   }
@@ -589,12 +590,19 @@ class MotSequence {
   // object along the sensor's line of sight to it: "straight behind" (farther by more than
   // kMatchRadiusM, within kAcrossM of the ray), "in front", else "beside"; with the object's range.
   // A knee-height track on the mixed pixels between a person's legs and what is behind them lies
-  // straight behind the person.
-  static std::string LineOfSight(const Hypothesis& hyp, const std::vector<Truth>& truths) {
+  // straight behind the person. Straight behind also says whether another track held that object
+  // in this scan (a second track in its shadow) or none did (the false track is all the tracker
+  // has of it), and how far behind it lies (0.5-1, 1-2, >= 2 m).
+  static std::string LineOfSight(const Hypothesis& hyp, const std::vector<Truth>& truths,
+                                 const std::vector<int>& truth_to_hyp) {
     constexpr double kAcrossM = 0.3;
     const Truth* nearest = nullptr;
-    for (const Truth& t : truths) {
-      if (nearest == nullptr || (hyp.p - t.p).norm() < (hyp.p - nearest->p).norm()) nearest = &t;
+    bool held = false;
+    for (std::size_t t = 0; t < truths.size(); ++t) {
+      if (nearest == nullptr || (hyp.p - truths[t].p).norm() < (hyp.p - nearest->p).norm()) {
+        nearest = &truths[t];
+        held = t < truth_to_hyp.size() && truth_to_hyp[t] >= 0;
+      }
     }
     const std::string state = hyp.measured ? "measured" : "coasting";
     if (nearest == nullptr || !(nearest->p.norm() > 0.0)) return "no object in view, " + state;
@@ -611,6 +619,11 @@ class MotSequence {
                             : range < 12.0 ? "8-12 m"
                             : range < 15.0 ? "12-15 m"
                                            : ">= 15 m";
+    if (!(across > kAcrossM) && along > kMatchRadiusM) {
+      const std::string depth = along < 1.0 ? "0.5-1 m" : along < 2.0 ? "1-2 m" : ">= 2 m";
+      return where + " (" + (held ? "it tracked" : "it untracked") + ", " + depth +
+             " behind), it at " + bin + ", " + state;
+    }
     return where + ", it at " + bin + ", " + state;
   }
 
