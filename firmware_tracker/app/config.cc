@@ -239,6 +239,12 @@ void VisitShape(tracking::ShapeOptions& o, ConfigVisitor& v) {
           "anywhere within the legs' reach along the walk (sigma leg_pairing_distance_m / 2: "
           "successive scans share the stride's phase) (false: at the leg, with the hip and stride "
           "extent).");
+  v.Field("single_leg_side_uncertainty", o.single_leg_side_uncertainty,
+          "mount legs: with single_leg_across_walk, the side of the centre the leg stands on is "
+          "weighed, not taken as sure: where the predicted centre's error across the walk (its "
+          "variance, the leg's and gait_sigma_m^2) is not small against hip_half_width_m, the "
+          "other side's share of the two sides' spread (2 hip^2 (1 - tanh(hip |offset| / s^2))) "
+          "is added to the centre's variance across the walk (false: the side taken as sure).");
   v.Field("split_few_point_legs", o.split_few_point_legs,
           "mount legs: a leg-sized segment of two or three points spread across the line of "
           "sight wider than one leg can be (2 (leg_radius_m + 2 leg_radius_sigma_m)) is two legs "

@@ -56,6 +56,15 @@ bool PersonBackLineRmsAbove(const ShapeOptions& o, double extent_m, double thres
   return 1.0 - PowerOf(u, o.person_exponent) < PowerOf(w, o.person_exponent);
 }
 
+double SingleLegSideWeight(double hip_m, double offset_m, double s2_m2) {
+  if (!(s2_m2 > 0.0)) return 1.0;
+  return std::tanh(hip_m * std::abs(offset_m) / s2_m2);
+}
+
+double SingleLegOtherSideVar(double hip_m, double weight) {
+  return 2.0 * hip_m * hip_m * (1.0 - std::clamp(weight, 0.0, 1.0));
+}
+
 double OutlineDepartureVar(const ShapeOptions& o, double rms_m, double range_m) {
   const double noise = o.fit.point_sigma_m + o.fit.point_sigma_per_m * range_m;
   const double excess = rms_m * rms_m - noise * noise;
@@ -73,6 +82,9 @@ constexpr double kMaxLearningYawSigmaRad = 0.6;
 // many updates.
 constexpr double kCylinderAxisShare = 0.1;
 constexpr std::uint32_t kMinCylinderUpdates = 25;
+// ShapeOptions::single_leg_side_uncertainty: a single leg's side counts as uncertain (counted) below
+// this weight w = 2 q - 1 (the other side more likely than 2.5 %).
+constexpr double kSideKnownWeight = 0.95;
 // Pairing legs around a track: a single leg costs this much more than a pair.
 constexpr double kSingleLegPenaltyM = 0.25;
 // Sigma of a box's size when a track becomes one.
@@ -333,6 +345,7 @@ class TrackingPipeline::Refiner final : public MeasurementRefiner {
   std::uint64_t fits = 0;
   std::uint64_t failed = 0;
   std::uint64_t across_walk = 0;
+  std::uint64_t side_uncertain = 0;
   std::uint64_t widened = 0;
 
   // How many of the observation's two outline ends are silhouettes (MakePart: not an occluder's
@@ -546,6 +559,7 @@ class TrackingPipeline::Refiner final : public MeasurementRefiner {
     } else {
       m.position_m = legs[0].centre_m;
       const double range = legs[0].centre_m.norm();
+      double offset = 0.0;  // WalkingSide's
       if (ob.partner_behind && range > 0.0) {
         // The other leg hidden behind it (ShapeOptions::hidden_leg_behind): the centre, the legs'
         // midpoint, at least hip_half_width_m farther along the line of sight; the hidden leg
@@ -558,17 +572,26 @@ class TrackingPipeline::Refiner final : public MeasurementRefiner {
                           o.gait_sigma_m * o.gait_sigma_m * Eigen::Matrix2d::Identity() +
                           (o.leg_radius_m * o.leg_radius_m / 12.0) * across * across.transpose();
       } else if (Eigen::Vector2d left;
-                 WalkingSide(predicted, predicted_cov, legs[0].centre_m, left)) {
+                 WalkingSide(predicted, predicted_cov, legs[0].centre_m, left, offset)) {
         // One leg of a walking track (ShapeOptions::single_leg_across_walk): the centre
         // hip_half_width_m across the walk from it, on the side the prediction lies (sway and hip
-        // width: gait_sigma_m); ahead or behind it by a stride phase that successive scans share:
-        // within the legs' reach along the walk.
+        // width: gait_sigma_m, and with single_leg_side_uncertainty the other side's share);
+        // ahead or behind it by a stride phase that successive scans share: within the legs'
+        // reach along the walk.
         const Eigen::Vector2d forward(left.y(), -left.x());
-        m.position_m += o.hip_half_width_m * left;
-        const double gait2 = o.gait_sigma_m * o.gait_sigma_m;
+        const double hip = o.hip_half_width_m;
+        m.position_m += hip * left;
         const double reach = 0.5 * o.leg_pairing_distance_m;
+        double across2 = o.gait_sigma_m * o.gait_sigma_m;
+        if (o.single_leg_side_uncertainty) {
+          const double s2 = left.dot(predicted_cov->topLeftCorner<2, 2>() * left) +
+                            left.dot(legs[0].centre_cov_m2 * left) + across2;
+          const double w = internal::SingleLegSideWeight(hip, offset, s2);
+          across2 += internal::SingleLegOtherSideVar(hip, w);
+          if (w < kSideKnownWeight) ++side_uncertain;
+        }
         m.covariance_m2 = legs[0].centre_cov_m2 + reach * reach * forward * forward.transpose() +
-                          gait2 * left * left.transpose();
+                          across2 * left * left.transpose();
         ++across_walk;
       } else {
         // One leg: the body centre lies beside it (the hip) and ahead or behind (the stride).
@@ -590,9 +613,11 @@ class TrackingPipeline::Refiner final : public MeasurementRefiner {
   // ShapeOptions::single_leg_across_walk: whether a track predicted at `predicted` walks (speed at
   // least walking_speed_mps and twice its sigma) with the leg at `leg_m` clearly on one side of
   // its centre across the walk (more than hip_half_width_m / 2); then `towards_centre` is the unit
-  // vector across the walk from the leg towards the predicted centre.
+  // vector across the walk from the leg towards the predicted centre and `offset_m` the predicted
+  // centre's distance from the leg along it.
   bool WalkingSide(const Eigen::Vector4d* predicted, const Eigen::Matrix4d* predicted_cov,
-                   const Eigen::Vector2d& leg_m, Eigen::Vector2d& towards_centre) const {
+                   const Eigen::Vector2d& leg_m, Eigen::Vector2d& towards_centre,
+                   double& offset_m) const {
     const ShapeOptions& o = p_.options_.shape;
     if (!o.single_leg_across_walk || predicted == nullptr || predicted_cov == nullptr) return false;
     const Eigen::Vector2d v = predicted->tail<2>();
@@ -603,6 +628,7 @@ class TrackingPipeline::Refiner final : public MeasurementRefiner {
     const double offset = (predicted->head<2>() - leg_m).dot(left);
     if (!(std::abs(offset) > 0.5 * o.hip_half_width_m)) return false;
     towards_centre = offset > 0.0 ? left : Eigen::Vector2d(-left);
+    offset_m = std::abs(offset);
     return true;
   }
 
@@ -1343,12 +1369,14 @@ const ScanTracks& TrackingPipeline::Process(const ScanView& scan, std::uint32_t 
 
   const std::uint64_t fits_before = refiner_->fits, failed_before = refiner_->failed;
   const std::uint64_t across_walk_before = refiner_->across_walk;
+  const std::uint64_t side_uncertain_before = refiner_->side_uncertain;
   const std::uint64_t widened_before = refiner_->widened;
   tracker_.Step(scan.stamp_ns, measurements_.span(), offsets_s_.span(),
                 shape_fit ? refiner_.get() : nullptr, tracks_);
   counters_.shape_fits += refiner_->fits - fits_before;
   counters_.failed_shape_fits += refiner_->failed - failed_before;
   counters_.legs_across_walk += refiner_->across_walk - across_walk_before;
+  counters_.legs_side_uncertain += refiner_->side_uncertain - side_uncertain_before;
   counters_.outline_departure_widened += refiner_->widened - widened_before;
   if (bg.scan_error == ScanError::kNone && bg.learned) {
     AbsorbStatic(scan);

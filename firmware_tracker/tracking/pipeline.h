@@ -175,6 +175,20 @@ struct ShapeOptions {
   // / 2) and the filter's prediction carries the position there. false: such a leg is measured as
   // the leg itself with the hip and stride extent in every direction (the tree before this rule).
   bool single_leg_across_walk = true;
+  // ... and the side is weighed: the leg stands hip_half_width_m to one side of the centre or the
+  // other, and the predicted centre tells which only as far as its own error across the walk is
+  // small against the hip. With offset the predicted centre's distance from the leg across the
+  // walk and s^2 that distance's variance less the hip (the filter's predicted position variance
+  // across the walk, the leg fit's and the sway's, gait_sigma_m^2), the likelier side's
+  // probability is q = 1 / (1 + exp(-2 hip_half_width_m |offset| / s^2)); the centre is measured
+  // on that side as above, with the other side's share of the two sides' spread added to its
+  // variance across the walk: the second moment about the likelier side, 4 hip^2 (1 - q) =
+  // 2 hip^2 (1 - w), w = 2 q - 1 = tanh(hip |offset| / s^2). A track whose prediction has
+  // wandered across the walk (few measurements yet, a run of single legs) takes the side it
+  // guesses loosely instead of as if sure (a wrong side is 2 hip_half_width_m off). Counted (w
+  // below 0.95, the other side more likely than 2.5 %) in PipelineCounters::legs_side_uncertain.
+  // false: the side taken as sure (across the walk gait_sigma_m alone).
+  bool single_leg_side_uncertainty = true;
   // Legs mount: a leg-sized segment (no wider than a pair of legs) of two or three points whose
   // beams' centres spread across the line of sight wider than a leg two sigmas above the prior
   // (2 (leg_radius_m + 2 leg_radius_sigma_m)) holds two legs side by side: a beam returns a leg
@@ -366,6 +380,7 @@ struct PipelineCounters {
   std::uint64_t legs_behind = 0;        // of them: the other hidden behind (hidden_leg_behind)
   std::uint64_t single_beam_legs = 0;   // observations of single-beam legs (single_beam_legs)
   std::uint64_t legs_across_walk = 0;   // one leg measured across the walk (single_leg_across_walk)
+  std::uint64_t legs_side_uncertain = 0;  // of them: side uncertain (single_leg_side_uncertainty)
   std::uint64_t outline_departure_widened = 0;  // body fits widened (outline_departure_gain)
   std::uint64_t split_few_point_legs = 0;       // 2-3 point segments split into two legs
   std::uint64_t veiled_segments = 0;    // legs: mixed pixels (beside a nearer edge, deep), dropped
@@ -482,6 +497,16 @@ namespace internal {
 // - noise^2), noise = fit.point_sigma_m + fit.point_sigma_per_m range_m; 0 where the residuals are
 // within the range noise (the outline is the model's).
 double OutlineDepartureVar(const ShapeOptions& o, double rms_m, double range_m);
+
+// ShapeOptions::single_leg_side_uncertainty. A leg stands hip_m to one side of the body centre or
+// the other across the walk; the predicted centre lies offset_m from it there, with variance s2_m2
+// (the prediction's, the leg's and the sway's). The weight w = 2 q - 1 of the likelier side,
+// q = 1 / (1 + exp(-2 hip |offset| / s2)) its probability (two Gaussians of variance s2 at +-hip):
+// tanh(hip |offset| / s2); 1 for s2 <= 0.
+double SingleLegSideWeight(double hip_m, double offset_m, double s2_m2);
+// The variance across the walk the other side adds to a centre measured on the likelier side:
+// (2 hip)^2 (1 - q) = 2 hip^2 (1 - w), w clamped to [0, 1].
+double SingleLegOtherSideVar(double hip_m, double weight);
 
 // What the points of a person's back spread over extent_m show of their principal line (RMS
 // distance, m), and whether it exceeds threshold_m (the same test without the root).
