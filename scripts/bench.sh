@@ -17,7 +17,7 @@ mkdir -p results
 "$build_dir/tests/bench/tracking_benchmark" --scenarios tools/scenarios --jobs 2 --breakdown --explain \
   --before-one-leg --before-confirm-time --before-whole-person --before-box-size --before-single-beam \
   --before-deep-pieces --before-deep-evidence --before-isotropic-bias --before-across-walk \
-  --before-side-uncertainty \
+  --before-side-uncertainty --before-side-from-view \
   --before-few-point-legs --before-legs-seen-through --before-legs-report-coasting \
   --before-outline-departure \
   --before-fusion-merge \

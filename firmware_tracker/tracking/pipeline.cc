@@ -346,6 +346,7 @@ class TrackingPipeline::Refiner final : public MeasurementRefiner {
   std::uint64_t failed = 0;
   std::uint64_t across_walk = 0;
   std::uint64_t side_uncertain = 0;
+  std::uint64_t side_from_view = 0;
   std::uint64_t widened = 0;
 
   // How many of the observation's two outline ends are silhouettes (MakePart: not an occluder's
@@ -586,7 +587,7 @@ class TrackingPipeline::Refiner final : public MeasurementRefiner {
         if (o.single_leg_side_uncertainty) {
           const double s2 = left.dot(predicted_cov->topLeftCorner<2, 2>() * left) +
                             left.dot(legs[0].centre_cov_m2 * left) + across2;
-          const double w = internal::SingleLegSideWeight(hip, offset, s2);
+          const double w = offset < 0.0 ? 1.0 : internal::SingleLegSideWeight(hip, offset, s2);
           across2 += internal::SingleLegOtherSideVar(hip, w);
           if (w < kSideKnownWeight) ++side_uncertain;
         }
@@ -617,7 +618,7 @@ class TrackingPipeline::Refiner final : public MeasurementRefiner {
   // centre's distance from the leg along it.
   bool WalkingSide(const Eigen::Vector4d* predicted, const Eigen::Matrix4d* predicted_cov,
                    const Eigen::Vector2d& leg_m, Eigen::Vector2d& towards_centre,
-                   double& offset_m) const {
+                   double& offset_m) {
     const ShapeOptions& o = p_.options_.shape;
     if (!o.single_leg_across_walk || predicted == nullptr || predicted_cov == nullptr) return false;
     const Eigen::Vector2d v = predicted->tail<2>();
@@ -626,6 +627,28 @@ class TrackingPipeline::Refiner final : public MeasurementRefiner {
     if (!(speed >= o.walking_speed_mps && speed >= 2.0 * speed_sigma)) return false;
     const Eigen::Vector2d left(-v.y() / speed, v.x() / speed);
     const double offset = (predicted->head<2>() - leg_m).dot(left);
+    // ShapeOptions::single_leg_side_from_view: the side whose every place for the other leg the
+    // scan sees through is not the centre's.
+    if (o.single_leg_side_from_view && p_.scan_ != nullptr) {
+      const double span = 2.0 * o.hip_half_width_m;
+      const Eigen::Vector2d fwd(left.y(), -left.x());
+      const auto open = [&](double side) {
+        // Every place along the walk within the legs' reach seen through.
+        const double reach = 0.5 * o.leg_pairing_distance_m;
+        for (double a = -reach; a <= reach + 1e-9; a += o.leg_radius_m) {
+          if (!p_.OtherLegSeenThrough(*p_.scan_, leg_m + side * span * left + a * fwd)) return false;
+        }
+        return true;
+      };
+      const bool left_open = open(1.0);
+      const bool right_open = open(-1.0);
+      if (left_open != right_open) {
+        towards_centre = left_open ? Eigen::Vector2d(-left) : left;
+        offset_m = -1.0;  // sure
+        ++side_from_view;
+        return true;
+      }
+    }
     if (!(std::abs(offset) > 0.5 * o.hip_half_width_m)) return false;
     towards_centre = offset > 0.0 ? left : Eigen::Vector2d(-left);
     offset_m = std::abs(offset);
@@ -1281,6 +1304,28 @@ bool TrackingPipeline::SeenThrough(const ScanView& scan, const Eigen::Vector2d& 
   return beyond >= 2;
 }
 
+bool TrackingPipeline::OtherLegSeenThrough(const ScanView& scan,
+                                           const Eigen::Vector2d& leg_m) const {
+  const ShapeOptions& o = options_.shape;
+  const double range = leg_m.norm();
+  const double r = o.leg_radius_m;
+  if (!(range > 2.0 * r)) return false;
+  // A leg there would have returned a beam: beams closer together than its width.
+  if (!(range * std::max(std::abs(scan.angle_step_rad), o.beam_divergence_rad) < 2.0 * r)) {
+    return false;
+  }
+  std::size_t lo = 0, hi = 0;
+  if (!BeamsAcross(scan, leg_m, std::asin(r / range), scan.range_m.size(), &lo, &hi)) return false;
+  std::size_t beyond = 0;
+  for (std::size_t i = lo; i <= hi; ++i) {
+    const double b = scan.range_m[i];
+    if (!(b > 0.0)) continue;                                 // no echo: unknown
+    if (b <= range + r + o.seen_through_margin_m) return false;  // could be the leg or hide it
+    ++beyond;
+  }
+  return beyond >= 1;
+}
+
 bool TrackingPipeline::ForegroundNear(const ScanView& scan, const Eigen::Vector2d& position_m,
                                       double sigma_m) const {
   const double reach_m = options_.shape.person_major_m + 2.0 * sigma_m;
@@ -1370,13 +1415,17 @@ const ScanTracks& TrackingPipeline::Process(const ScanView& scan, std::uint32_t 
   const std::uint64_t fits_before = refiner_->fits, failed_before = refiner_->failed;
   const std::uint64_t across_walk_before = refiner_->across_walk;
   const std::uint64_t side_uncertain_before = refiner_->side_uncertain;
+  const std::uint64_t side_from_view_before = refiner_->side_from_view;
   const std::uint64_t widened_before = refiner_->widened;
+  scan_ = &scan;
   tracker_.Step(scan.stamp_ns, measurements_.span(), offsets_s_.span(),
                 shape_fit ? refiner_.get() : nullptr, tracks_);
+  scan_ = nullptr;
   counters_.shape_fits += refiner_->fits - fits_before;
   counters_.failed_shape_fits += refiner_->failed - failed_before;
   counters_.legs_across_walk += refiner_->across_walk - across_walk_before;
   counters_.legs_side_uncertain += refiner_->side_uncertain - side_uncertain_before;
+  counters_.legs_side_from_view += refiner_->side_from_view - side_from_view_before;
   counters_.outline_departure_widened += refiner_->widened - widened_before;
   if (bg.scan_error == ScanError::kNone && bg.learned) {
     AbsorbStatic(scan);

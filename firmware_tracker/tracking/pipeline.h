@@ -189,6 +189,17 @@ struct ShapeOptions {
   // below 0.95, the other side more likely than 2.5 %) in PipelineCounters::legs_side_uncertain.
   // false: the side taken as sure (across the walk gait_sigma_m alone).
   bool single_leg_side_uncertainty = true;
+  // ... and the side is first taken from what the scan shows: the hidden leg stands
+  // 2 hip_half_width_m across the walk from the seen one, somewhere within the legs' reach along
+  // it (leg_pairing_distance_m / 2 either way). Where on one side every such place (every
+  // leg_radius_m along the walk) is seen through (each beam over a leg there returned from more
+  // than seen_through_margin_m beyond it, at least one did, the beams closer together there than a
+  // leg's width) and on the other side not, the other leg is on the latter and so is the centre:
+  // measured hip_half_width_m towards it as sure, whatever the prediction says. This also holds
+  // where the prediction has settled on the seen leg itself (no side to tell from it: the leg
+  // otherwise measured as the centre with the hip and stride extent, the track staying a hip off).
+  // Counted in PipelineCounters::legs_side_from_view. false: the side from the prediction alone.
+  bool single_leg_side_from_view = true;
   // Legs mount: a leg-sized segment (no wider than a pair of legs) of two or three points whose
   // beams' centres spread across the line of sight wider than a leg two sigmas above the prior
   // (2 (leg_radius_m + 2 leg_radius_sigma_m)) holds two legs side by side: a beam returns a leg
@@ -381,6 +392,7 @@ struct PipelineCounters {
   std::uint64_t single_beam_legs = 0;   // observations of single-beam legs (single_beam_legs)
   std::uint64_t legs_across_walk = 0;   // one leg measured across the walk (single_leg_across_walk)
   std::uint64_t legs_side_uncertain = 0;  // of them: side uncertain (single_leg_side_uncertainty)
+  std::uint64_t legs_side_from_view = 0;  // of them: side from the scan (single_leg_side_from_view)
   std::uint64_t outline_departure_widened = 0;  // body fits widened (outline_departure_gain)
   std::uint64_t split_few_point_legs = 0;       // 2-3 point segments split into two legs
   std::uint64_t veiled_segments = 0;    // legs: mixed pixels (beside a nearer edge, deep), dropped
@@ -467,6 +479,10 @@ class TrackingPipeline {
   bool Veiled(const ScanView& scan, const Segment& segment) const;
   bool PartnerBehind(const ScanView& scan, const ObservationPart& part,
                      const Eigen::Vector2d& centre_m) const;
+  // ShapeOptions::single_leg_side_from_view: the beams over a leg at leg_m (at least one with an
+  // echo) all returned from more than seen_through_margin_m beyond it, where they lie closer
+  // together than a leg's width.
+  bool OtherLegSeenThrough(const ScanView& scan, const Eigen::Vector2d& leg_m) const;
   bool ForegroundNear(const ScanView& scan, const Eigen::Vector2d& position_m,
                       double sigma_m) const;
 
@@ -486,6 +502,7 @@ class TrackingPipeline {
   std::size_t single_beam_first_ = 0;
   std::array<TrackPrediction, kMaxTracks> predictions_{};
   MultiTracker tracker_;
+  const ScanView* scan_ = nullptr;  // the scan being processed (for the refiner), else null
   std::unique_ptr<Refiner> refiner_;
   ScanTracks tracks_;
 };

@@ -1098,12 +1098,14 @@ struct OneLegWalk {
   int n = 0;
   std::uint64_t across_walk = 0;
   std::uint64_t side_uncertain = 0;
+  std::uint64_t side_from_view = 0;
 };
 // mirrored: the screen hides the left leg instead of the right. side_uncertainty:
 // ShapeOptions::single_leg_side_uncertainty; screen_from_s: when the screen appears after the
 // walker starts.
 OneLegWalk WalkWithOneLegSeen(bool across_walk, bool mirrored, bool side_uncertainty = true,
-                              double screen_from_s = 1.5, double skip_s = 0.5) {
+                              double screen_from_s = 1.5, double skip_s = 0.5,
+                              bool side_from_view = true) {
   Scene scene;
   scene.legs = true;
   scene.walls = {{{15.0, -7.0}, {15.0, 7.0}},
@@ -1121,6 +1123,7 @@ OneLegWalk WalkWithOneLegSeen(bool across_walk, bool mirrored, bool side_uncerta
   TrackerOptions options = LegsOptions();
   options.shape.single_leg_across_walk = across_walk;
   options.shape.single_leg_side_uncertainty = side_uncertainty;
+  options.shape.single_leg_side_from_view = side_from_view;
   const SceneRun run = Simulate(scene, scene.walkers[0].end_s() + 0.2, options);
   OneLegWalk out;
   for (const Frame& f : run.frames) {
@@ -1146,6 +1149,7 @@ OneLegWalk WalkWithOneLegSeen(bool across_walk, bool mirrored, bool side_uncerta
   }
   out.across_walk = run.pipeline->counters().legs_across_walk;
   out.side_uncertain = run.pipeline->counters().legs_side_uncertain;
+  out.side_from_view = run.pipeline->counters().legs_side_from_view;
   return out;
 }
 
@@ -1155,7 +1159,7 @@ std::string Describe(const OneLegWalk& w) {
          " m (|.| " + std::to_string(w.across_abs_m) + "), error " + std::to_string(w.error_m) +
          " m, NEES " + std::to_string(w.nees) + " (" + std::to_string(w.n) + "), across the walk " +
          std::to_string(w.across_walk) + " (side uncertain " + std::to_string(w.side_uncertain) +
-         ")";
+         ", from the view " + std::to_string(w.side_from_view) + ")";
 }
 
 // ShapeOptions::single_leg_side_uncertainty: the likelier side's weight and the other side's
@@ -1201,16 +1205,17 @@ TEST(PipelineScenarioTest, OneLegOfAWalkerIsMeasuredAsTheCentreAcrossTheWalk) {
 }
 
 // ShapeOptions::single_leg_side_uncertainty on the walker of WalkWithOneLegSeen whose right (or
-// left) leg is hidden from 0.3 s or 1.5 s after the start: a young track's prediction is less
-// sure across the walk; where the hip offset is not sure against it (the other side more likely
-// than 2.5 %) the scan is counted and its covariance across the walk widened by the other side's
-// share, never narrowed; the same scans are measured across the walk, and the positions stay
+// left) leg is hidden from 0.3 s or 1.5 s after the start, the side taken from the prediction
+// (single_leg_side_from_view off: here the view tells every side): a young track's prediction is
+// less sure across the walk; where the hip offset is not sure against it (the other side more
+// likely than 2.5 %) the scan is counted and its covariance across the walk widened by the other
+// side's share, never narrowed; the same scans are measured across the walk, and the positions stay
 // within millimetres of taking every side as sure.
 TEST(PipelineScenarioTest, OneLegSideIsWeighedAgainstThePredictionsError) {
   for (const bool mirrored : {false, true}) {
     for (const double screen_from_s : {0.3, 1.5}) {
-      const OneLegWalk sure = WalkWithOneLegSeen(true, mirrored, false, screen_from_s, 0.0);
-      const OneLegWalk weighed = WalkWithOneLegSeen(true, mirrored, true, screen_from_s, 0.0);
+      const OneLegWalk sure = WalkWithOneLegSeen(true, mirrored, false, screen_from_s, 0.0, false);
+      const OneLegWalk weighed = WalkWithOneLegSeen(true, mirrored, true, screen_from_s, 0.0, false);
       SCOPED_TRACE(std::string(mirrored ? "right leg seen" : "left leg seen") + " from " +
                    std::to_string(screen_from_s) + " s; sure: " + Describe(sure) +
                    "; weighed: " + Describe(weighed));
@@ -1224,6 +1229,27 @@ TEST(PipelineScenarioTest, OneLegSideIsWeighedAgainstThePredictionsError) {
       EXPECT_NEAR(weighed.error_m, sure.error_m, 0.002);
       EXPECT_LT(std::abs(weighed.across_mean_m), 0.03);
     }
+  }
+}
+
+// ShapeOptions::single_leg_side_from_view: the walker's right leg hidden by the screen from 0.2 s
+// after the start (a track born while both legs were seen only briefly). From the prediction alone
+// the track settles on the seen left leg (a hip to the left of the centre) and no side is told
+// from it; the scan sees through every place the other leg could stand left of the seen one (the
+// far wall behind), not right of it (the screen): the centre is on the right.
+TEST(PipelineScenarioTest, OneLegSideIsTakenFromWhereTheScanSeesThrough) {
+  for (const bool mirrored : {false, true}) {
+    const OneLegWalk prediction = WalkWithOneLegSeen(true, mirrored, true, 0.2, 0.5, false);
+    const OneLegWalk view = WalkWithOneLegSeen(true, mirrored, true, 0.2, 0.5, true);
+    SCOPED_TRACE(std::string(mirrored ? "right leg seen" : "left leg seen") +
+                 "; prediction: " + Describe(prediction) + "; view: " + Describe(view));
+    ASSERT_GT(view.n, 60);
+    EXPECT_EQ(prediction.side_from_view, 0u);
+    EXPECT_GT(view.side_from_view, 60u);
+    EXPECT_LT(std::abs(view.across_mean_m), 0.03);
+    EXPECT_LT(view.error_m, 0.09);
+    EXPECT_GT(view.nees, 0.2);
+    EXPECT_LT(view.nees, 3.0);
   }
 }
 

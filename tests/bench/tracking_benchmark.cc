@@ -77,6 +77,8 @@
 //   ShapeOptions::single_leg_across_walk = false;
 //   --before-side-uncertainty: "before" takes a walking track's single leg's side of the centre as
 //   sure, ShapeOptions::single_leg_side_uncertainty = false;
+//   --before-side-from-view: "before" takes that side from the prediction alone, not from where
+//   the scan sees through the other leg's place, ShapeOptions::single_leg_side_from_view = false;
 //   --before-few-point-legs: "before" measures a knee-height segment of two or three points wider
 //   than a leg as one leg, ShapeOptions::split_few_point_legs = false;
 //   --before-legs-seen-through: "before" reports a knee-height coasting track also where the scan
@@ -795,6 +797,9 @@ bool g_before_across_walk = false;
 // --before-side-uncertainty: "before" takes the side of the centre a walking track's single leg
 // stands on as sure (ShapeOptions::single_leg_side_uncertainty = false).
 bool g_before_side_uncertainty = false;
+// --before-side-from-view: "before" takes the side of the centre a walking track's single leg
+// stands on from the prediction alone (ShapeOptions::single_leg_side_from_view = false).
+bool g_before_side_from_view = false;
 // --before-few-point-legs: "before" fits a leg-sized segment of two or three points wider than a
 // leg as one leg (ShapeOptions::split_few_point_legs = false).
 bool g_before_few_point_legs = false;
@@ -852,7 +857,7 @@ std::vector<Variant> Variants(sim::Mount mount, double range_m) {
              g_before_one_leg || g_before_confirm_time || g_before_whole_person ||
              g_before_box_size || g_before_single_beam || g_before_deep_pieces ||
              g_before_deep_evidence || g_before_isotropic_bias || g_before_across_walk ||
-             g_before_side_uncertainty || g_before_few_point_legs || g_before_legs_seen_through ||
+             g_before_side_uncertainty || g_before_side_from_view || g_before_few_point_legs || g_before_legs_seen_through ||
              g_before_legs_report_coasting || g_before_outline_departure || g_before_fusion_merge ||
              g_before_report_sourceless) {
     tracking::TrackerOptions before = fresh;
@@ -869,6 +874,7 @@ std::vector<Variant> Variants(sim::Mount mount, double range_m) {
     if (g_before_deep_evidence) before.shape.deep_mixed_pixel_behind_ratio = 0.0;
     if (g_before_across_walk) before.shape.single_leg_across_walk = false;
     if (g_before_side_uncertainty) before.shape.single_leg_side_uncertainty = false;
+    if (g_before_side_from_view) before.shape.single_leg_side_from_view = false;
     if (g_before_few_point_legs) before.shape.split_few_point_legs = false;
     if (g_before_legs_seen_through) before.shape.legs_seen_through = false;
     if (g_before_legs_report_coasting) before.shape.legs_report_coasting_s = 0.0;
@@ -1735,7 +1741,7 @@ std::string KneeHeightBefore() {
   if (!(g_before_one_leg || g_before_confirm_time || g_before_whole_person || g_before_box_size ||
         g_before_single_beam || g_before_deep_pieces || g_before_deep_evidence ||
         g_before_isotropic_bias || g_before_across_walk || g_before_side_uncertainty ||
-        g_before_few_point_legs ||
+        g_before_side_from_view || g_before_few_point_legs ||
         g_before_legs_seen_through || g_before_legs_report_coasting || g_before_outline_departure ||
         g_before_fusion_merge || g_before_report_sourceless) ||
       g_before_mixed_pixels || g_before_far || g_before_evidence_coasting ||
@@ -1791,6 +1797,11 @@ std::string KneeHeightBefore() {
     without.push_back(
         "taking the side of the centre a walking track's single leg stands on as sure, however "
         "uncertain the prediction it is taken from (`shape.single_leg_side_uncertainty` false)");
+  }
+  if (g_before_side_from_view) {
+    without.push_back(
+        "taking that side from the prediction alone, not from where the scan sees through the "
+        "other leg's place (`shape.single_leg_side_from_view` false)");
   }
   if (g_before_few_point_legs) {
     without.push_back(
@@ -1897,6 +1908,8 @@ int main(int argc, char** argv) {
       g_before_across_walk = true;
     } else if (a == "--before-side-uncertainty") {
       g_before_side_uncertainty = true;
+    } else if (a == "--before-side-from-view") {
+      g_before_side_from_view = true;
     } else if (a == "--before-few-point-legs") {
       g_before_few_point_legs = true;
     } else if (a == "--before-legs-seen-through") {
@@ -1920,7 +1933,7 @@ int main(int argc, char** argv) {
                    "[--before-whole-person] [--before-box-size] [--before-single-beam] "
                    "[--before-deep-pieces] [--before-deep-evidence] [--before-isotropic-bias] "
                    "[--before-across-walk] [--before-side-uncertainty] "
-                   "[--before-few-point-legs] "
+                   "[--before-side-from-view] [--before-few-point-legs] "
                    "[--before-legs-seen-through] [--before-legs-report-coasting] "
                    "[--before-outline-departure] [--before-fusion-merge] "
                    "[--before-report-sourceless]]\n");
