@@ -56,16 +56,27 @@ std::string FusionService::Open() {
 }
 
 void FusionService::Reconfigure(const DaemonConfig& config) {
+  // Disabled, the fuser gets no frames and no Tick: its ids would neither go on nor end. A new
+  // fuser ends every one of them for the zones and MQTT (the generation), cleanly, at once.
+  const bool disabled = config_.fusion_enabled && !config.fusion_enabled;
   config_.fusion_enabled = config.fusion_enabled;
   config_.fusion_publish_hz = config.fusion_publish_hz;
-  if (config.fusion == config_.fusion) return;  // the fuser keeps its tracks
+  if (config.fusion == config_.fusion && !disabled) return;  // the fuser keeps its tracks
   config_.fusion = config.fusion;
+  Restart();
+  if (disabled) {
+    spdlog::info("fusion: disabled, every fused track ends");
+  } else {
+    spdlog::info("fusion: options changed, fused tracks start afresh (method {})",
+                 fusion::ToString(config_.fusion.method));
+  }
+}
+
+void FusionService::Restart() {
   fuser_ = fusion::Fuser(config_.fusion);
   ++generation_;
   SetExcluded(excluded_);  // the placements without the excluded sensors
   for (const auto& [sensor_id, psd] : tracker_accel_psd_) fuser_.SetTrackerModel(sensor_id, psd);
-  spdlog::info("fusion: options changed, fused tracks start afresh (method {})",
-               fusion::ToString(config_.fusion.method));
 }
 
 void FusionService::SetCalibration(const calib::CalibrationResult& result) {

@@ -48,8 +48,9 @@ class FusionService final : public FrameListener {
 
   // Opens the UDP socket and the record file. Returns "" or the error.
   std::string Open();
-  // Applies what may change at run time (not publish / record). Changed fusion options start a
-  // new fuser (fused ids start afresh) with the current placements and tracker models.
+  // Applies what may change at run time (not publish / record). Changed fusion options, or
+  // fusion_enabled turned off, start a new fuser (every fused id ends) with the current
+  // placements and tracker models.
   void Reconfigure(const DaemonConfig& config);
   // A new calibration: its calibrated sensors are placed (fused ids are kept).
   void SetCalibration(const calib::CalibrationResult& result);
@@ -70,8 +71,8 @@ class FusionService final : public FrameListener {
   // The newest scan time received (gateway UTC), 0 before the first frame.
   common::UtcNs now_ns() const { return now_ns_; }
   const fusion::Fuser& fuser() const { return fuser_; }
-  // +1 each time a new fuser starts (Reconfigure with changed options): its fused ids start
-  // afresh, so the ids known from the previous one are no longer its ids.
+  // +1 each time a new fuser starts (Reconfigure with changed options, or fusion_enabled turned
+  // off): the ids known from the previous one are no longer its ids, every one of them ended.
   std::uint64_t generation() const { return generation_; }
   const FusionServiceCounters& counters() const { return counters_; }
   // The service's and the fuser's counters and what the fuser has learnt of each sensor (the
@@ -81,6 +82,8 @@ class FusionService final : public FrameListener {
 
  private:
   void Publish();
+  // Replaces the fuser by a new one with config_.fusion (the placements and tracker models kept).
+  void Restart();
 
   boost::asio::io_context& io_;
   DaemonConfig config_;

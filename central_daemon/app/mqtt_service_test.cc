@@ -254,6 +254,52 @@ TEST(MqttServiceRestart, ANewFuserEndsEveryIdKnown) {
   EXPECT_EQ(ended_messages, 1u);
 }
 
+// Fusion disabled at 3 s (lrfnetd reloads its config): the fuser gets no frames and no Tick any
+// more, so its ids can neither go on nor end. Every id known to the zones and MQTT ends then
+// (fusion_restarted), instead of being held as hidden for good.
+TEST(MqttServiceRestart, FusionDisabledEndsEveryIdKnown) {
+  DaemonConfig config;
+  config.zones_list = "[{name: room, polygon: [[2, 0], [4, 0], [4, 2], [2, 2]]}]";
+  config.mqtt.objects_hz = 10.0;
+  ASSERT_EQ(Validate(config), std::nullopt);
+  DaemonOptions options;
+  options.send_requests = false;
+  Daemon daemon(options, nullptr, nullptr, 1);
+  boost::asio::io_context io;
+  FusionService fusion(io, config);
+  fusion.SetCalibration(OneSensorAtTheOrigin());
+  ZoneService zones(config);
+  CollectingSink sink;
+  MqttService mqtt(config, &sink, "test");
+  std::uint32_t scan = 0;
+  for (double t = 0.0; t < 30.0 - 1e-9; t += 0.04) {
+    if (std::abs(t - 3.0) < 0.02) {
+      DaemonConfig changed = config;
+      changed.fusion_enabled = false;
+      fusion.Reconfigure(changed);
+    }
+    fusion.OnFrame("s1", FrameWith(t, scan++, {Standing(1)}));
+    if (scan % 5 == 0) {
+      fusion.OnTick(t);
+      zones.OnTick(fusion);
+      mqtt.OnTick(At(t), daemon, fusion, zones);
+    }
+  }
+  EXPECT_EQ(fusion.generation(), 1u);
+  EXPECT_EQ(zones.counters().restarts, 1u);
+  EXPECT_EQ(mqtt.counters().objects_ended, 1u);
+  const zones::ZoneState room = zones.States().at(0);
+  EXPECT_TRUE(room.present_ids.empty());
+  EXPECT_EQ(room.lost_inside, 1u);
+  std::size_t ended_messages = 0;
+  for (const auto& [topic, payload] : sink.messages) {
+    if (!topic.ends_with("/objects/ended")) continue;
+    ++ended_messages;
+    EXPECT_EQ(nlohmann::json::parse(payload)["ended"][0]["reason"], "fusion_restarted");
+  }
+  EXPECT_EQ(ended_messages, 1u);
+}
+
 class MqttServiceHide : public ::testing::Test {
  protected:
   void SetUp() override {

@@ -418,7 +418,7 @@ FusionOutput Fuser::Output(common::UtcNs now_ns, bool include_tentative) const {
   FusionOutput out;
   out.stamp_ns = now_ns;
   out.tracks = engine_->Snapshot(now_ns, include_tentative);
-  out.hidden = engine_->Hidden(out.tracks);
+  out.hidden = engine_->Hidden(out.tracks, now_ns);
   out.ended.assign(engine_->ended().begin(), engine_->ended().end());
   return out;
 }

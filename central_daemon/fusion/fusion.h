@@ -368,8 +368,9 @@ enum class FusedEndReason : std::uint8_t {
 const char* ToString(FusedEndReason reason);
 
 // A fused track the fuser keeps but does not report in FusionOutput::tracks (report_sourceless
-// off and no tracker holds it, or older than max_coast_s awaiting Tick): its id may be reported
-// again when a sensor sees the object again.
+// off and no tracker holds it): its id may be reported again when a sensor sees the object
+// again. A track older than max_coast_s at the output's time is not hidden (it ends at the next
+// Tick; without Ticks, a consumer bounds it by its own hold).
 struct HiddenFusedTrack {
   std::uint64_t id = 0;
   common::UtcNs last_ns = 0;  // time of its last update (the last measurement it took)
@@ -391,7 +392,8 @@ struct EndedFusedTrack {
 struct FusionOutput {
   common::UtcNs stamp_ns = 0;
   std::vector<FusedTrack> tracks;          // as Snapshot
-  std::vector<HiddenFusedTrack> hidden;    // confirmed, kept, not in tracks; ordered by id
+  std::vector<HiddenFusedTrack> hidden;    // confirmed, kept, not in tracks, not older than
+                                           // max_coast_s; ordered by id
   std::vector<EndedFusedTrack> ended;      // ended within ended_report_s, in the order they ended
 };
 

@@ -397,8 +397,9 @@ class FusedFilterEngine final : public Engine {
   void Tick(UtcNs now_ns) override;
   std::vector<FusedTrack> Snapshot(UtcNs now_ns, bool include_tentative) const override;
   std::vector<WorldTrack> WorldTracks(UtcNs now_ns) const override;
-  std::vector<HiddenFusedTrack> Hidden(const std::vector<FusedTrack>& reported) const override {
-    return HiddenTracks(tracks_, reported);
+  std::vector<HiddenFusedTrack> Hidden(const std::vector<FusedTrack>& reported,
+                                       UtcNs now_ns) const override {
+    return HiddenTracks(tracks_, reported, now_ns, options_.max_coast_s);
   }
   CovarianceScales covariance_scales() const override {
     CovarianceScales out;

@@ -47,8 +47,10 @@ class Engine {
   virtual std::vector<WorldTrack> WorldTracks(common::UtcNs now_ns) const = 0;
   virtual CovarianceScales covariance_scales() const { return {}; }
   virtual std::vector<SensorBias> sensor_biases() const { return {}; }
-  // The confirmed fused tracks kept but not in `reported` (Snapshot's tracks, ordered by id).
-  virtual std::vector<HiddenFusedTrack> Hidden(const std::vector<FusedTrack>& reported) const = 0;
+  // The confirmed fused tracks kept but not in `reported` (Snapshot's tracks at now_ns, ordered
+  // by id) and not older than max_coast_s at now_ns (those end at the next Tick).
+  virtual std::vector<HiddenFusedTrack> Hidden(const std::vector<FusedTrack>& reported,
+                                               common::UtcNs now_ns) const = 0;
 
   FusionCounters& counters() { return counters_; }
   const FusionCounters& counters() const { return counters_; }
@@ -79,13 +81,17 @@ class Engine {
 
 // The confirmed fused tracks of `tracks` (a map of id to a track with updates, confirmed,
 // stamp_ns, x and last_sensor) that are not in `reported` (ordered by id): what a snapshot left
-// out of them.
+// out of them, without the ones older than max_coast_s at now_ns. Those are due to end at the
+// next Tick; should no Tick come (fusion disabled), a consumer bounds them by its own hold
+// instead of holding them for good.
 template <typename Tracks>
 std::vector<HiddenFusedTrack> HiddenTracks(const Tracks& tracks,
-                                           const std::vector<FusedTrack>& reported) {
+                                           const std::vector<FusedTrack>& reported,
+                                           common::UtcNs now_ns, double max_coast_s) {
   std::vector<HiddenFusedTrack> out;
   for (const auto& [id, f] : tracks) {
     if (f.updates == 0 || !f.confirmed) continue;
+    if (Seconds(now_ns, f.stamp_ns) > max_coast_s) continue;
     const auto r = std::lower_bound(reported.begin(), reported.end(), id,
                                     [](const FusedTrack& t, std::uint64_t v) { return t.id < v; });
     if (r != reported.end() && r->id == id) continue;

@@ -68,8 +68,9 @@ class LatestStatesEngine final : public Engine {
   void SetPlacements(const PlacementMap& next, const PlacementMap& previous) override;
   void Tick(UtcNs now_ns) override;
   std::vector<FusedTrack> Snapshot(UtcNs now_ns, bool include_tentative) const override;
-  std::vector<HiddenFusedTrack> Hidden(const std::vector<FusedTrack>& reported) const override {
-    return HiddenTracks(tracks, reported);
+  std::vector<HiddenFusedTrack> Hidden(const std::vector<FusedTrack>& reported,
+                                       UtcNs now_ns) const override {
+    return HiddenTracks(tracks, reported, now_ns, options_.max_coast_s);
   }
   std::vector<WorldTrack> WorldTracks(UtcNs now_ns) const override;
 

@@ -1197,6 +1197,33 @@ TEST(FusedFilterTest, OutputHoldsAHiddenIdUntilItTimesOut) {
   EXPECT_NEAR(ended_at, 1.96 + FusionOptions{}.max_coast_s, 0.05);
 }
 
+// Without Tick (fusion disabled) a hidden id older than max_coast_s is no longer listed as
+// hidden: it would otherwise be held by the consumers for good.
+TEST(FusedFilterTest, OutputDoesNotHoldAnIdOlderThanMaxCoastWithoutTick) {
+  Fuser fuser{FusionOptions{}};
+  fuser.SetPlacements({Placed("a", 0, 0, 0)});
+  for (int k = 0; k <= 40; ++k) {
+    const double t = 1.0 + 0.04 * k;
+    std::vector<TrackObservation> tracks;
+    if (t < 2.0) tracks.push_back(Obs(1, 3.0 + (t - 1.0), 1.0, 1.0, 0.0));
+    fuser.AddFrame("a", FrameAt(t, std::move(tracks)));
+    fuser.Tick(AtSeconds(t));
+  }
+  // Hidden now (its source timed out), and still within max_coast_s of its last update.
+  const double last_s = 1.96;
+  const FusionOutput hidden = fuser.Output(AtSeconds(2.6));
+  EXPECT_TRUE(hidden.tracks.empty());
+  ASSERT_EQ(hidden.hidden.size(), 1u);
+  EXPECT_EQ(hidden.hidden[0].id, 1u);
+  const double coast_s = FusionOptions{}.max_coast_s;
+  EXPECT_EQ(fuser.Output(AtSeconds(last_s + coast_s - 0.1)).hidden.size(), 1u);
+  // No Tick since: past max_coast_s the id is neither reported nor hidden.
+  const FusionOutput later = fuser.Output(AtSeconds(last_s + coast_s + 0.1));
+  EXPECT_TRUE(later.tracks.empty());
+  EXPECT_TRUE(later.hidden.empty());
+  EXPECT_TRUE(fuser.Output(AtSeconds(last_s + 100.0 * coast_s)).hidden.empty());
+}
+
 TEST(FusedFilterTest, AFusedTrackLeftBehindByItsSourcesMergesIntoTheTrackThatTookItsObject) {
   const auto [before, before_counters] = RunLeftBehind(false);
   ASSERT_EQ(before_counters.fused_created, 2u);
