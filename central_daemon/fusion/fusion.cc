@@ -419,7 +419,7 @@ FusionOutput Fuser::Output(common::UtcNs now_ns, bool include_tentative) const {
   out.stamp_ns = now_ns;
   out.tracks = engine_->Snapshot(now_ns, include_tentative);
   out.hidden = engine_->Hidden(out.tracks, now_ns);
-  out.ended.assign(engine_->ended().begin(), engine_->ended().end());
+  out.ended = engine_->OutputEnded(now_ns);
   return out;
 }
 

@@ -81,7 +81,7 @@
 //   What the fuser reports (Output): the fused tracks (Snapshot), the confirmed ids it keeps
 // without reporting them (hidden, with when and where they were last measured), and the ids that
 // ended with why (timed out after max_coast_s, merged into id N, or tentative and left without
-// sources), for ended_report_s after their end. Every id is in at most one of the three, so a
+// sources), for ended_report_s of outputs after the first that listed the end. Every id is in at most one of the three, so a
 // consumer that follows ids over time holds exactly the hidden ones and ends the others at once;
 // the estimates are the same with or without it.
 // A tracker restart (TrackFrameData.session_id changes) unbinds every local track of the old
@@ -312,9 +312,12 @@ struct FusionOptions {
   // nor a new entry there) and end it as soon as Output reports it ended.
   bool report_sourceless = false;
   // How long [s] Output keeps reporting an id that ended (timed out, merged into another id),
-  // with why (counted from the latest Tick): consumers that take an output at least this often
-  // learn of every end (lrfnetd's zones and MQTT objects: at least every 10 s). Longer costs
-  // memory (at most max_fused_tracks entries are kept).
+  // with why, in the time of the outputs: from the first Output that listed the end until the
+  // outputs since span more than ended_report_s (it is forgotten at the next Tick), so a gap in
+  // the data does not take an end away before a consumer read it. Consumers that take an output
+  // at least every ended_report_s / 2 (two of their periods fit in it) learn of every end
+  // (lrfnetd's zones and MQTT objects: at least every 10 s). At most max_fused_tracks ends are
+  // kept: beyond that the oldest is forgotten earlier.
   double ended_report_s = 30.0;
 
   // Plausibility of a local track (sensor frame); anything outside is skipped and counted.
@@ -388,13 +391,14 @@ struct EndedFusedTrack {
 
 // What the fuser holds at a time: its reported tracks and what it knows of the ids that are not
 // among them. Every id a consumer has seen in `tracks` is, at any later output, in exactly one
-// of: `tracks`, `hidden`, `ended` (for ended_report_s after its end), or none once that is over.
+// of: `tracks`, `hidden`, `ended` (for ended_report_s of outputs, see FusionOptions), or none
+// once that is over.
 struct FusionOutput {
   common::UtcNs stamp_ns = 0;
   std::vector<FusedTrack> tracks;          // as Snapshot
   std::vector<HiddenFusedTrack> hidden;    // confirmed, kept, not in tracks, not older than
                                            // max_coast_s; ordered by id
-  std::vector<EndedFusedTrack> ended;      // ended within ended_report_s, in the order they ended
+  std::vector<EndedFusedTrack> ended;      // kept ends (ended_report_s), in the order recorded
 };
 
 // A local track in the world frame (what the live view draws as a "raw" track).
@@ -532,7 +536,7 @@ class Fuser {
   // include_tentative. Tracks older than max_coast_s at now_ns (awaiting Tick) are left out.
   std::vector<FusedTrack> Snapshot(common::UtcNs now_ns, bool include_tentative = false) const;
   // Snapshot's tracks and, besides them, the confirmed fused ids the fuser keeps without
-  // reporting them (hidden) and the ids that ended within ended_report_s before the latest Tick,
+  // reporting them (hidden) and the ids that ended and are still kept (ended_report_s),
   // with why (FusionOutput). Consumers that follow ids over time (zones, MQTT objects) hold a
   // hidden id and end an ended one at once.
   FusionOutput Output(common::UtcNs now_ns, bool include_tentative = false) const;

@@ -1539,7 +1539,7 @@ void FusedFilterEngine::Tick(UtcNs now_ns) {
     DeleteTrack(it);
     it = next;
   }
-  ForgetEnded(now_ns);
+  ForgetEnded();
 }
 
 std::vector<FusedTrack> FusedFilterEngine::Snapshot(UtcNs now_ns, bool include_tentative) const {

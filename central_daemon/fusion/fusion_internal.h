@@ -55,19 +55,32 @@ class Engine {
   FusionCounters& counters() { return counters_; }
   const FusionCounters& counters() const { return counters_; }
   const FusionOptions& options() const { return options_; }
-  // The ids that ended within ended_report_s before the latest Tick, in the order they ended.
-  const std::deque<EndedFusedTrack>& ended() const { return ended_; }
+  // The ends kept (FusionOutput::ended), in the order recorded, for an output at now_ns: notes
+  // that they were output then (their retention counts from their first output).
+  std::vector<EndedFusedTrack> OutputEnded(common::UtcNs now_ns) const {
+    latest_output_ns_ = now_ns;
+    std::vector<EndedFusedTrack> out;
+    out.reserve(ended_.size());
+    for (KeptEnd& k : ended_) {
+      if (k.first_output_ns == 0) k.first_output_ns = now_ns;
+      out.push_back(k.end);
+    }
+    return out;
+  }
 
  protected:
   // Notes the end of a fused id for FusionOutput::ended.
   void RecordEnded(std::uint64_t id, common::UtcNs ended_ns, FusedEndReason reason,
                    std::uint64_t merged_into = 0) {
-    ended_.push_back(EndedFusedTrack{id, ended_ns, reason, merged_into});
+    ended_.push_back(KeptEnd{EndedFusedTrack{id, ended_ns, reason, merged_into}, 0});
     while (ended_.size() > options_.max_fused_tracks) ended_.pop_front();
   }
-  // Forgets the ends older than ended_report_s at now_ns (call from Tick).
-  void ForgetEnded(common::UtcNs now_ns) {
-    while (!ended_.empty() && Seconds(now_ns, ended_.front().ended_ns) > options_.ended_report_s) {
+  // Forgets the ends that were in outputs spanning more than ended_report_s (call from Tick):
+  // the time is the outputs', so a gap in the data between an end and the next output does not
+  // take the end away before a consumer read it. Ends first output later are behind the others.
+  void ForgetEnded() {
+    while (!ended_.empty() && ended_.front().first_output_ns != 0 &&
+           Seconds(latest_output_ns_, ended_.front().first_output_ns) > options_.ended_report_s) {
       ended_.pop_front();
     }
   }
@@ -76,7 +89,13 @@ class Engine {
   FusionCounters counters_;
 
  private:
-  std::deque<EndedFusedTrack> ended_;
+  struct KeptEnd {
+    EndedFusedTrack end;
+    common::UtcNs first_output_ns = 0;  // the first output it was in, 0 before
+  };
+  // Output (const) notes which ends it gave out: the fuser is used from one thread.
+  mutable std::deque<KeptEnd> ended_;
+  mutable common::UtcNs latest_output_ns_ = 0;
 };
 
 // The confirmed fused tracks of `tracks` (a map of id to a track with updates, confirmed,

@@ -741,7 +741,7 @@ void LatestStatesEngine::Tick(UtcNs now_ns) {
     DeleteTrack(it);
     it = next;
   }
-  ForgetEnded(now_ns);
+  ForgetEnded();
 }
 
 std::vector<FusedTrack> LatestStatesEngine::Snapshot(UtcNs now_ns, bool include_tentative) const {

@@ -1147,13 +1147,23 @@ TEST(FusedFilterTest, OutputReportsAMergedIdWithTheIdItGoesOnAs) {
   ASSERT_EQ(out.tracks.size(), 1u);
   EXPECT_EQ(out.tracks[0].id, 1u);
   EXPECT_TRUE(out.hidden.empty());
-  // Reported for ended_report_s after the end, then forgotten (1 has timed out by then).
+  // A gap in the data longer than ended_report_s: the end is still reported after it (no
+  // output took it in between), 1 has timed out meanwhile.
   const UtcNs later = AtSeconds(3.0 + FusionOptions{}.ended_report_s + 1.0);
   fuser.Tick(later);
   const FusionOutput much_later = fuser.Output(later);
-  ASSERT_EQ(much_later.ended.size(), 1u);
-  EXPECT_EQ(much_later.ended[0].id, 1u);
-  EXPECT_EQ(much_later.ended[0].reason, FusedEndReason::kTimedOut);
+  ASSERT_EQ(much_later.ended.size(), 2u);
+  EXPECT_EQ(much_later.ended[0].id, 2u);
+  EXPECT_EQ(much_later.ended[0].reason, FusedEndReason::kMerged);
+  EXPECT_EQ(much_later.ended[1].id, 1u);
+  EXPECT_EQ(much_later.ended[1].reason, FusedEndReason::kTimedOut);
+  // Its outputs now span more than ended_report_s: forgotten at the next Tick; 1's end stays
+  // (first output just now).
+  fuser.Tick(later + 40'000'000);
+  const FusionOutput next = fuser.Output(later + 40'000'000);
+  ASSERT_EQ(next.ended.size(), 1u);
+  EXPECT_EQ(next.ended[0].id, 1u);
+  EXPECT_EQ(next.ended[0].reason, FusedEndReason::kTimedOut);
 }
 
 // A walker leaves the only sensor's view at t = 2 s and is not seen again: once its source timed
