@@ -180,6 +180,7 @@ nlohmann::json FusionService::StatsJson() const {
   j["observations_invalid"] = f.observations_invalid;
   j["fused_created"] = f.fused_created;
   j["fused_merged"] = f.fused_merged;
+  j["ended_evicted"] = f.ended_evicted;
   j["fused_merged_sourceless"] = f.fused_merged_sourceless;
   j["merge_checks_spread"] = f.merge_checks_spread;
   j["merge_sourceless_shadowed"] = f.merge_sourceless_shadowed;

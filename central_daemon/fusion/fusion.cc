@@ -236,8 +236,6 @@ const char* ToString(FusedEndReason reason) {
       return "timed_out";
     case FusedEndReason::kMerged:
       return "merged";
-    case FusedEndReason::kNoSources:
-      return "no_sources";
   }
   return "invalid";
 }

@@ -80,8 +80,7 @@
 // reported (report_sourceless).
 //   What the fuser reports (Output): the fused tracks (Snapshot), the confirmed ids it keeps
 // without reporting them (hidden, with when and where they were last measured), and the ids that
-// ended with why (timed out after max_coast_s, merged into id N, or tentative and left without
-// sources), for ended_report_s of outputs after the first that listed the end. Every id is in at most one of the three, so a
+// ended with why (timed out after max_coast_s, merged into id N), for ended_report_s of outputs after the first that listed the end. Every id is in at most one of the three, so a
 // consumer that follows ids over time holds exactly the hidden ones and ends the others at once;
 // the estimates are the same with or without it.
 // A tracker restart (TrackFrameData.session_id changes) unbinds every local track of the old
@@ -366,7 +365,6 @@ struct FusedTrack {
 enum class FusedEndReason : std::uint8_t {
   kTimedOut,   // no update for max_coast_s (every sensor lost the object)
   kMerged,     // merged into another (older) fused id: the same object (merged_into)
-  kNoSources,  // a tentative fused track left without sources before it was confirmed
 };
 const char* ToString(FusedEndReason reason);
 
@@ -449,6 +447,9 @@ struct FusionCounters {
   std::uint64_t fused_created = 0;
   std::uint64_t fused_deleted = 0;  // timed out (merged ones are not counted here)
   std::uint64_t fused_merged = 0;   // merged into an older fused track
+  // Ends of confirmed ids forgotten before their ended_report_s was over: more than
+  // max_fused_tracks ends kept (a consumer may have missed them; it bounds them by its own hold).
+  std::uint64_t ended_evicted = 0;
   // kFusedFilter: of fused_merged, a track without sources merged with the measured track it
   // coasted on (merge_sourceless).
   std::uint64_t fused_merged_sourceless = 0;

@@ -1505,6 +1505,7 @@ void FusedFilterEngine::Merge(std::uint64_t older_id, std::uint64_t younger_id,
   older.confirmed = older.confirmed || younger.confirmed;
   older.merge_into = 0;
   older.merge_count = 0;
+  const bool younger_confirmed = younger.confirmed;
   tracks_.erase(yit);
   for (auto& [id, tr] : tracks_) {
     if (tr.merge_into == younger_id) {
@@ -1513,7 +1514,7 @@ void FusedFilterEngine::Merge(std::uint64_t older_id, std::uint64_t younger_id,
     }
   }
   ++counters_.fused_merged;
-  RecordEnded(younger_id, t, FusedEndReason::kMerged, older_id);
+  if (younger_confirmed) RecordEnded(younger_id, t, FusedEndReason::kMerged, older_id);
 }
 
 void FusedFilterEngine::Tick(UtcNs now_ns) {
@@ -1530,11 +1531,8 @@ void FusedFilterEngine::Tick(UtcNs now_ns) {
       continue;
     }
     ++counters_.fused_deleted;
-    if (f.updates > 0) {
-      RecordEnded(it->first, now_ns,
-                  age > options_.max_coast_s ? FusedEndReason::kTimedOut
-                                             : FusedEndReason::kNoSources);
-    }
+    // A confirmed track ends only by timing out (a tentative one is never reported).
+    if (f.updates > 0 && f.confirmed) RecordEnded(it->first, now_ns, FusedEndReason::kTimedOut);
     auto next = std::next(it);
     DeleteTrack(it);
     it = next;

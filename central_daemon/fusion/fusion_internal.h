@@ -69,11 +69,15 @@ class Engine {
   }
 
  protected:
-  // Notes the end of a fused id for FusionOutput::ended.
+  // Notes the end of a confirmed fused id for FusionOutput::ended (a tentative id was never
+  // reported: nobody follows it, and it must not push real ends out of the bounded list).
   void RecordEnded(std::uint64_t id, common::UtcNs ended_ns, FusedEndReason reason,
                    std::uint64_t merged_into = 0) {
     ended_.push_back(KeptEnd{EndedFusedTrack{id, ended_ns, reason, merged_into}, 0});
-    while (ended_.size() > options_.max_fused_tracks) ended_.pop_front();
+    while (ended_.size() > options_.max_fused_tracks) {
+      ended_.pop_front();
+      ++counters_.ended_evicted;
+    }
   }
   // Forgets the ends that were in outputs spanning more than ended_report_s (call from Tick):
   // the time is the outputs', so a gap in the data between an end and the next output does not

@@ -482,6 +482,7 @@ class LatestStatesEngine final : public Engine {
     older.ref_valid = false;
     older.merge_into = 0;
     older.merge_count = 0;
+    const bool younger_confirmed = younger.confirmed;
     tracks.erase(yit);
     for (auto& [id, tr] : tracks) {
       if (tr.merge_into == younger_id) {
@@ -490,7 +491,7 @@ class LatestStatesEngine final : public Engine {
       }
     }
     ++counters_.fused_merged;
-    RecordEnded(younger_id, t, FusedEndReason::kMerged, older_id);
+    if (younger_confirmed) RecordEnded(younger_id, t, FusedEndReason::kMerged, older_id);
     Update(older, t);
   }
 
@@ -732,11 +733,8 @@ void LatestStatesEngine::Tick(UtcNs now_ns) {
       continue;
     }
     ++counters_.fused_deleted;
-    if (f.updates > 0) {
-      RecordEnded(it->first, now_ns,
-                  age > options_.max_coast_s ? FusedEndReason::kTimedOut
-                                             : FusedEndReason::kNoSources);
-    }
+    // A confirmed track ends only by timing out (a tentative one is never reported).
+    if (f.updates > 0 && f.confirmed) RecordEnded(it->first, now_ns, FusedEndReason::kTimedOut);
     auto next = std::next(it);
     DeleteTrack(it);
     it = next;

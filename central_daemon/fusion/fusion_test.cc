@@ -1234,6 +1234,48 @@ TEST(FusedFilterTest, OutputDoesNotHoldAnIdOlderThanMaxCoastWithoutTick) {
   EXPECT_TRUE(fuser.Output(AtSeconds(last_s + 100.0 * coast_s)).hidden.empty());
 }
 
+// A track seen in one frame only (tentative, never reported) ends without a trace in the output;
+// confirmed ids that end are listed, and beyond max_fused_tracks kept ends the oldest is
+// forgotten and counted.
+TEST(FusedFilterTest, OutputListsOnlyEndsOfConfirmedIdsAndCountsEvictedOnes) {
+  FusionOptions options;
+  options.max_fused_tracks = 2;
+  Fuser fuser{options};
+  fuser.SetPlacements({Placed("a", 0, 0, 0)});
+  // A flicker at 1 s: one frame, then the walker alone.
+  double t = 1.0;
+  fuser.AddFrame("a", FrameAt(t, {Obs(9, 6.0, -2.0, 0.0, 0.0)}));
+  fuser.Tick(AtSeconds(t));
+  for (int k = 1; k <= 100; ++k) {
+    t = 1.0 + 0.04 * k;
+    fuser.AddFrame("a", FrameAt(t, {}));
+    fuser.Tick(AtSeconds(t));
+  }
+  EXPECT_EQ(fuser.counters().fused_created, 1u);
+  EXPECT_EQ(fuser.counters().fused_deleted, 1u);
+  EXPECT_TRUE(fuser.Output(AtSeconds(t)).ended.empty());
+  // Three walkers confirmed one after the other, each timing out: two ends kept, one evicted.
+  std::uint32_t local = 10;
+  for (int walker = 0; walker < 3; ++walker, ++local) {
+    for (int k = 0; k < 25; ++k) {
+      t += 0.04;
+      fuser.AddFrame("a", FrameAt(t, {Obs(local, 3.0 + 0.04 * k, 1.0, 1.0, 0.0)}));
+      fuser.Tick(AtSeconds(t));
+    }
+    for (int k = 0; k < 100; ++k) {
+      t += 0.04;
+      fuser.AddFrame("a", FrameAt(t, {}));
+      fuser.Tick(AtSeconds(t));
+    }
+  }
+  const FusionOutput out = fuser.Output(AtSeconds(t));
+  ASSERT_EQ(out.ended.size(), 2u);
+  EXPECT_EQ(out.ended[0].reason, FusedEndReason::kTimedOut);
+  EXPECT_EQ(out.ended[1].reason, FusedEndReason::kTimedOut);
+  EXPECT_LT(out.ended[0].id, out.ended[1].id);
+  EXPECT_EQ(fuser.counters().ended_evicted, 1u);
+}
+
 TEST(FusedFilterTest, AFusedTrackLeftBehindByItsSourcesMergesIntoTheTrackThatTookItsObject) {
   const auto [before, before_counters] = RunLeftBehind(false);
   ASSERT_EQ(before_counters.fused_created, 2u);
