@@ -160,7 +160,8 @@ void VisitFusion(DaemonConfig& c, ConfigVisitor& v) {
             "several sensors merged into one fused track (ids kept across sensor hand-over, "
             "tracker id swaps and short gaps in every sensor's view), streamed as JSON over UDP "
             "and recorded as JSON lines. SIGHUP applies everything but publish and record (those "
-            "need a restart); changed fusion options start the fused tracks afresh (new ids).");
+            "need a restart); changed fusion options (but ended_report_s alone) start the fused "
+            "tracks afresh (new ids, never one given before).");
   v.Field("enabled", c.fusion_enabled, "Fuse tracks once a calibration exists.");
   v.Field("publish", c.fusion_publish,
           "Send the fused tracks as JSON datagrams to this HOST:PORT; empty: none. --fused-udp.");

@@ -61,7 +61,16 @@ void FusionService::Reconfigure(const DaemonConfig& config) {
   const bool disabled = config_.fusion_enabled && !config.fusion_enabled;
   config_.fusion_enabled = config.fusion_enabled;
   config_.fusion_publish_hz = config.fusion_publish_hz;
-  if (config.fusion == config_.fusion && !disabled) return;  // the fuser keeps its tracks
+  // ended_report_s only says how long ends are reported: the fuser keeps its tracks for it.
+  fusion::FusionOptions others = config.fusion;
+  others.ended_report_s = config_.fusion.ended_report_s;
+  if (others == config_.fusion && !disabled) {
+    if (config.fusion.ended_report_s != config_.fusion.ended_report_s) {
+      fuser_.SetEndedReportS(config.fusion.ended_report_s);
+      config_.fusion.ended_report_s = config.fusion.ended_report_s;
+    }
+    return;  // the fuser keeps its tracks
+  }
   config_.fusion = config.fusion;
   Restart();
   if (disabled) {
@@ -73,7 +82,11 @@ void FusionService::Reconfigure(const DaemonConfig& config) {
 }
 
 void FusionService::Restart() {
+  // The new fuser's ids go on from the old one's: an id is never given twice in a run, so a
+  // consumer that missed the restart cannot take a new object for an old one.
+  const std::uint64_t next_id = fuser_.next_id();
   fuser_ = fusion::Fuser(config_.fusion);
+  fuser_.ContinueIdsFrom(next_id);
   ++generation_;
   SetExcluded(excluded_);  // the placements without the excluded sensors
   for (const auto& [sensor_id, psd] : tracker_accel_psd_) fuser_.SetTrackerModel(sensor_id, psd);

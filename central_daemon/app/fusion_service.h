@@ -49,8 +49,9 @@ class FusionService final : public FrameListener {
   // Opens the UDP socket and the record file. Returns "" or the error.
   std::string Open();
   // Applies what may change at run time (not publish / record). Changed fusion options, or
-  // fusion_enabled turned off, start a new fuser (every fused id ends) with the current
-  // placements and tracker models.
+  // fusion_enabled turned off, start a new fuser (every fused id ends; its ids go on from the
+  // old one's) with the current placements and tracker models; a change of
+  // fusion.ended_report_s alone keeps the fuser.
   void Reconfigure(const DaemonConfig& config);
   // A new calibration: its calibrated sensors are placed (fused ids are kept).
   void SetCalibration(const calib::CalibrationResult& result);

@@ -75,7 +75,7 @@ void MqttService::EndObjects(const fusion::FusionOutput& output, std::uint64_t g
                              std::vector<MqttEndedObject>& ended_out) {
   const common::UtcNs stamp_ns = output.stamp_ns;
   if (generation != generation_) {
-    // A new fuser: its ids start afresh, every object known is gone.
+    // A new fuser: every object known is gone (its ids go on from the old one's, unused).
     for (const auto& [id, mark] : objects_) {
       ended_out.push_back({id, "fusion_restarted", 0, stamp_ns});
       ++counters_.objects_ended;

@@ -207,9 +207,9 @@ class CollectingSink final : public MqttSink {
   std::vector<std::pair<std::string, std::string>> messages;
 };
 
-// The fusion's options change at 3 s (lrfnetd reloads its config): a new fuser starts, its ids
-// start afresh. Every id known to the zones and MQTT ends then (the new fuser's id 1 is not the
-// old one's), and the person standing in the room comes back as the new fuser's id.
+// The fusion's options change at 3 s (lrfnetd reloads its config): a new fuser starts. Every id
+// known to the zones and MQTT ends then, and the person standing in the room comes back as the
+// new fuser's id.
 TEST(MqttServiceRestart, ANewFuserEndsEveryIdKnown) {
   DaemonConfig config;
   config.zones_list = "[{name: room, polygon: [[2, 0], [4, 0], [4, 2], [2, 2]]}]";
@@ -252,6 +252,45 @@ TEST(MqttServiceRestart, ANewFuserEndsEveryIdKnown) {
     EXPECT_EQ(nlohmann::json::parse(payload)["ended"][0]["reason"], "fusion_restarted");
   }
   EXPECT_EQ(ended_messages, 1u);
+}
+
+// A new fuser's ids go on from the old one's (no id is given twice in a run); a reload that
+// changes only fusion.ended_report_s keeps the fuser and its ids.
+TEST(MqttServiceRestart, ANewFuserGoesOnFromTheOldIdsAndEndedReportAloneKeepsIt) {
+  DaemonConfig config;
+  ASSERT_EQ(Validate(config), std::nullopt);
+  boost::asio::io_context io;
+  FusionService fusion(io, config);
+  fusion.SetCalibration(OneSensorAtTheOrigin());
+  std::uint32_t scan = 0;
+  std::set<std::uint64_t> ids_before, ids_after;
+  std::set<std::uint64_t>* ids = &ids_before;
+  for (double t = 0.0; t < 9.0 - 1e-9; t += 0.04) {
+    if (std::abs(t - 3.0) < 0.02) {
+      DaemonConfig changed = config;
+      changed.fusion.ended_report_s = 60.0;
+      fusion.Reconfigure(changed);
+      EXPECT_EQ(fusion.generation(), 0u);
+      EXPECT_EQ(fusion.fuser().options().ended_report_s, 60.0);
+    }
+    if (std::abs(t - 6.0) < 0.02) {
+      DaemonConfig changed = config;
+      changed.fusion.max_coast_s = 2.0;
+      fusion.Reconfigure(changed);
+      EXPECT_EQ(fusion.generation(), 1u);
+      ids = &ids_after;
+    }
+    fusion.OnFrame("s1", FrameWith(t, scan++, {Standing(1)}));
+    if (scan % 5 == 0) {
+      fusion.OnTick(t);
+      for (const fusion::FusedTrack& f : fusion.fuser().Snapshot(fusion.now_ns())) {
+        ids->insert(f.id);
+      }
+    }
+  }
+  ASSERT_EQ(ids_before.size(), 1u);  // the same id before and after the ended_report_s change
+  ASSERT_EQ(ids_after.size(), 1u);
+  EXPECT_GT(*ids_after.begin(), *ids_before.begin());
 }
 
 // Fusion disabled at 3 s (lrfnetd reloads its config): the fuser gets no frames and no Tick any

@@ -421,6 +421,18 @@ FusionOutput Fuser::Output(common::UtcNs now_ns, bool include_tentative) const {
   return out;
 }
 
+std::uint64_t Fuser::next_id() const { return engine_->next_id(); }
+
+void Fuser::ContinueIdsFrom(std::uint64_t next_id) { engine_->ContinueIdsFrom(next_id); }
+
+void Fuser::SetEndedReportS(double ended_report_s) {
+  FusionOptions changed = options_;
+  changed.ended_report_s = ended_report_s;
+  if (Validate(changed)) std::abort();
+  options_ = changed;
+  engine_->SetEndedReportS(ended_report_s);
+}
+
 std::vector<WorldTrack> Fuser::WorldTracks(common::UtcNs now_ns) const {
   return engine_->WorldTracks(now_ns);
 }

@@ -351,7 +351,7 @@ struct FusedSource {
 };
 
 struct FusedTrack {
-  std::uint64_t id = 0;  // unique for the Fuser's life, never reused
+  std::uint64_t id = 0;  // never reused (lrfnetd: not across fuser restarts either)
   FusedState state = FusedState::kTentative;
   common::UtcNs stamp_ns = 0;  // time of the estimate (the latest update, or the snapshot time)
   common::UtcNs first_ns = 0;  // first update
@@ -541,6 +541,14 @@ class Fuser {
   // with why (FusionOutput). Consumers that follow ids over time (zones, MQTT objects) hold a
   // hidden id and end an ended one at once.
   FusionOutput Output(common::UtcNs now_ns, bool include_tentative = false) const;
+  // The id the next fused track gets (ids grow by one from 1).
+  std::uint64_t next_id() const;
+  // Makes the next fused ids start at next_id at least (a fuser that replaces another passes
+  // the other's next_id(), so ids stay unique across both).
+  void ContinueIdsFrom(std::uint64_t next_id);
+  // Changes ended_report_s alone, keeping the tracks (the other options need a new fuser).
+  // Precondition: valid as in Validate (checked; aborts otherwise).
+  void SetEndedReportS(double ended_report_s);
   // Each sensor's latest local tracks in the world frame (those seen within source_timeout_s of
   // now_ns), with their fused ids, ordered by sensor id and track id.
   std::vector<WorldTrack> WorldTracks(common::UtcNs now_ns) const;

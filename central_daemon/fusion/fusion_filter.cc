@@ -883,7 +883,6 @@ class FusedFilterEngine final : public Engine {
   // Scale of the calibration's pose covariances, learnt from how well sensors' tracks fit the
   // fused tracks of other sensors when they join them (adapt_covariances).
   CovarianceScale pose_scale_;
-  std::uint64_t next_id_ = 1;
   bool have_newest_ = false;
   UtcNs newest_ns_ = 0;
 };

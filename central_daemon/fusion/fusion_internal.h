@@ -53,6 +53,9 @@ class Engine {
                                                common::UtcNs now_ns) const = 0;
 
   FusionCounters& counters() { return counters_; }
+  std::uint64_t next_id() const { return next_id_; }
+  void ContinueIdsFrom(std::uint64_t next_id) { next_id_ = std::max(next_id_, next_id); }
+  void SetEndedReportS(double s) { options_.ended_report_s = s; }
   const FusionCounters& counters() const { return counters_; }
   const FusionOptions& options() const { return options_; }
   // The ends kept (FusionOutput::ended), in the order recorded, for an output at now_ns: notes
@@ -91,6 +94,7 @@ class Engine {
 
   FusionOptions options_;
   FusionCounters counters_;
+  std::uint64_t next_id_ = 1;  // the id of the next fused track
 
  private:
   struct KeptEnd {

@@ -133,7 +133,6 @@ class LatestStatesEngine final : public Engine {
 
   std::map<std::string, SensorState, std::less<>> sensors;
   std::map<std::uint64_t, Track> tracks;
-  std::uint64_t next_id = 1;
   bool have_newest = false;
   UtcNs newest_ns = 0;
 
@@ -668,7 +667,7 @@ class LatestStatesEngine final : public Engine {
           continue;
         }
         Track f;
-        f.id = next_id++;
+        f.id = next_id_++;
         f.first_ns = t;
         f.stamp_ns = t;
         Track& stored = tracks.emplace(f.id, std::move(f)).first->second;
