@@ -428,6 +428,19 @@ bool TopicLevelOk(const std::string& s) {
   return true;
 }
 
+std::optional<std::string> CheckEndedReport(const fusion::FusionOptions& fusion,
+                                            const DaemonConfig& rates) {
+  // The zones and the object list learn of an end only while the fusion reports it.
+  if (!rates.zones.empty() && fusion.ended_report_s < 2.0 / rates.zones_update_hz) {
+    return "fusion.ended_report_s: must be at least two periods of zones.update_hz";
+  }
+  if (!rates.mqtt.broker.empty() && rates.mqtt.objects_hz > 0.0 &&
+      fusion.ended_report_s < 2.0 / rates.mqtt.objects_hz) {
+    return "fusion.ended_report_s: must be at least two periods of mqtt.objects_hz";
+  }
+  return std::nullopt;
+}
+
 std::optional<std::string> ValidateZonesAndMqtt(DaemonConfig& c) {
   if (auto e = ParseZones(c.zones_list, &c.zones)) return e;
   if (!(c.absent_hold_s <= 3600.0)) return "zones.absent_hold_s: must be at most 3600";
@@ -437,14 +450,6 @@ std::optional<std::string> ValidateZonesAndMqtt(DaemonConfig& c) {
   if (auto e = Prefixed("zones", zones::Validate(c.zone_options))) return e;
   if (!(c.zones_update_hz >= 0.1 && c.zones_update_hz <= 100.0))
     return "zones.update_hz: must be in [0.1, 100]";
-  // The zones and the object list learn of an end only while the fusion reports it.
-  if (!c.zones.empty() && c.fusion.ended_report_s < 2.0 / c.zones_update_hz) {
-    return "fusion.ended_report_s: must be at least two periods of zones.update_hz";
-  }
-  if (!c.mqtt.broker.empty() && c.mqtt.objects_hz > 0.0 &&
-      c.fusion.ended_report_s < 2.0 / c.mqtt.objects_hz) {
-    return "fusion.ended_report_s: must be at least two periods of mqtt.objects_hz";
-  }
   const MqttConfig& m = c.mqtt;
   std::string error;
   if (!m.broker.empty() && !common::ParseHostPort(m.broker, "mqtt.broker", 0, &error)) return error;
@@ -478,7 +483,8 @@ std::optional<std::string> ValidateZonesAndMqtt(DaemonConfig& c) {
   if (!(m.reconnect_min_s >= 0.01 && m.reconnect_min_s <= m.reconnect_max_s &&
         m.reconnect_max_s <= 3600.0))
     return "mqtt.reconnect_min_s: need 0.01 <= reconnect_min_s <= reconnect_max_s <= 3600";
-  return std::nullopt;
+  // After the rates' own checks, so a bad rate is reported as itself.
+  return CheckEndedReport(c.fusion, c);
 }
 
 void VisitMonitoring(DaemonConfig& c, ConfigVisitor& v) {
@@ -642,6 +648,11 @@ std::optional<std::string> Validate(DaemonConfig& c) {
   if (auto e = ValidateZonesAndMqtt(c)) return e;
   if (auto e = ValidateMonitoring(c)) return e;
   return std::nullopt;
+}
+
+std::optional<std::string> ValidateEndedReport(const fusion::FusionOptions& fusion,
+                                               const DaemonConfig& rates) {
+  return CheckEndedReport(fusion, rates);
 }
 
 std::optional<std::string> LoadDaemonConfig(std::string_view yaml_text, DaemonConfig& config) {

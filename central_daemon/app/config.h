@@ -113,6 +113,14 @@ bool IsLoopbackHost(std::string_view host);
 // `listen` into receiver.address/port and `zones.list` into zones.
 std::optional<std::string> Validate(DaemonConfig& config);
 
+// fusion.ended_report_s of `fusion` against the rates at which the zones (zones.update_hz, when
+// there are zones) and MQTT objects (mqtt.objects_hz, with a broker) of `rates` take the
+// fusion's output: at least two of their periods. Validate checks a config against its own
+// rates; a reload checks the new fusion options against the running config's (the zones and
+// MQTT keep the rates they started with).
+std::optional<std::string> ValidateEndedReport(const fusion::FusionOptions& fusion,
+                                               const DaemonConfig& rates);
+
 // Loads a YAML document over `config` and validates the result.
 std::optional<std::string> LoadDaemonConfig(std::string_view yaml_text, DaemonConfig& config);
 

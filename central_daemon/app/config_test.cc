@@ -139,6 +139,8 @@ TEST(DaemonConfigTest, ErrorsNameTheKey) {
       {"mqtt: {password: x}", "mqtt.password"},
       {"mqtt: {tls_ca_file: ca.pem}", "mqtt.tls"},
       {"mqtt: {objects_hz: 0}", "mqtt.objects_hz"},
+      // A bad rate is named itself, not through fusion.ended_report_s's check against it.
+      {"mqtt: {broker: 'localhost:1883', objects_hz: 0.05}", "mqtt.objects_hz"},
       {"mqtt: {reconnect_min_s: 50}", "mqtt.reconnect_min_s"},
       {"fusion: {method: kalman}", "fusion.method"},
       {"fusion: {centre_sigma_shape_fit_m: 0}", "fusion.centre_sigma_shape_fit_m"},
@@ -195,6 +197,25 @@ mqtt:
   EXPECT_EQ(back.zones[1].points[2].x_m, 5.0);
   EXPECT_EQ(back.mqtt.broker, "127.0.0.1:1883");
   EXPECT_EQ(back.mqtt.password, "p: w");
+}
+
+// A reload checks fusion.ended_report_s against the rates the zones and MQTT run with, not
+// against rates the reloaded file names (those change only with a restart).
+TEST(DaemonConfigTest, EndedReportIsCheckedAgainstTheRunningRates) {
+  DaemonConfig running;
+  ASSERT_EQ(LoadDaemonConfig("zones: {update_hz: 1, list: [{name: a, line: [[0, 0], [1, 0]]}]}",
+                             running),
+            std::nullopt);
+  DaemonConfig reloaded;
+  ASSERT_EQ(LoadDaemonConfig("fusion: {ended_report_s: 1}\nzones: {update_hz: 10, list: [{name: "
+                             "a, line: [[0, 0], [1, 0]]}]}",
+                             reloaded),
+            std::nullopt);  // fits the file's own rate
+  const auto error = ValidateEndedReport(reloaded.fusion, running);
+  ASSERT_TRUE(error.has_value());
+  EXPECT_NE(error->find("zones.update_hz"), std::string::npos) << *error;
+  reloaded.fusion.ended_report_s = 2.0;
+  EXPECT_EQ(ValidateEndedReport(reloaded.fusion, running), std::nullopt);
 }
 
 TEST(DaemonConfigTest, AbsentIdsAreHeldForTheFusionsMaxCoastUnlessConfigured) {
