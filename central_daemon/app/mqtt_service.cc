@@ -105,7 +105,10 @@ void MqttService::EndObjects(const fusion::FusionOutput& output, std::uint64_t g
       ObjectMark& merged = it->second;
       const auto s = objects_.find(survivor);
       if (s == objects_.end()) {
-        objects_.emplace(survivor, merged);
+        // The survivor goes on with the merged one's path; it is absent only if not listed.
+        ObjectMark mark = merged;
+        if (alive.count(survivor) != 0) mark.absent_since_ns = 0;
+        objects_.emplace(survivor, std::move(mark));
       } else if (s->second.absent_since_ns != 0 && merged.absent_since_ns == 0) {
         std::deque<PathSample>& path = s->second.path;
         for (const PathSample& p : merged.path) {

@@ -337,7 +337,9 @@ void ZoneCounter::EndAll(common::UtcNs now_ns) {
   }
   for (const std::uint64_t id : ids) {
     const auto held = absent_since_ns_.find(id);
-    Gone(id, held != absent_since_ns_.end() ? held->second : now_ns);
+    const bool was_held = held != absent_since_ns_.end();
+    Gone(id, was_held ? held->second : now_ns);
+    if (was_held) ++counters_.absent_gone;  // absent_held = returned + gone + still held
   }
   absent_since_ns_.clear();
   ++counters_.restarts;

@@ -347,10 +347,15 @@ TEST(ZonesTest, MergeChainsAndAFusionRestart) {
   EXPECT_EQ(f.State().present_ids, std::vector<std::uint64_t>{1});
   EXPECT_EQ(f.State().lost_inside, 0u);
   EXPECT_EQ(f.counters().merged, 2u);
+  f.Step({{}, {1}, {}});  // 1 hidden: held
+  EXPECT_EQ(f.counters().absent_held, 1u);
   f.counter().EndAll(kT0 + 10 * kStepNs);
   EXPECT_TRUE(f.State().present_ids.empty());
   EXPECT_EQ(f.State().lost_inside, 1u);
   EXPECT_EQ(f.counters().restarts, 1u);
+  // The held id ended with the restart: held = returned + gone.
+  EXPECT_EQ(f.counters().absent_returned, 0u);
+  EXPECT_EQ(f.counters().absent_gone, 1u);
 }
 
 TEST(ZonesTest, ManyPeopleBothWaysAtOnce) {
