@@ -258,8 +258,11 @@ void VisitFusion(DaemonConfig& c, ConfigVisitor& v) {
           "leave the published objects and come back: zones and MQTT hold it while the fusion "
           "keeps it).");
   v.Field("ended_report_s", o.ended_report_s,
-          "How long the fusion keeps telling zones and MQTT that an id ended and why (merged "
-          "into another id, timed out), so they end it at once.");
+          "How long (s, of the outputs the zones and MQTT take, from the first that listed the "
+          "end) the fusion keeps telling them that an id ended and why (merged into another id, "
+          "timed out), so they end it at once. At least two periods of zones.update_hz and of "
+          "mqtt.objects_hz; at most max_fused_tracks ends are kept (beyond that the oldest is "
+          "forgotten, counted as ended_evicted; such an id falls to zones.absent_hold_s).");
   v.Field("merge_sourceless", o.merge_sourceless,
           "fused_filter: a fused track without sources coasting on a measured one is merged "
           "into it rather than left beside it as a second track.");

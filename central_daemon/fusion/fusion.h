@@ -316,7 +316,7 @@ struct FusionOptions {
   // the data does not take an end away before a consumer read it. Consumers that take an output
   // at least every ended_report_s / 2 (two of their periods fit in it) learn of every end
   // (lrfnetd's zones and MQTT objects: at least every 10 s). At most max_fused_tracks ends are
-  // kept: beyond that the oldest is forgotten earlier.
+  // kept: beyond that the oldest is forgotten earlier (FusionCounters::ended_evicted).
   double ended_report_s = 30.0;
 
   // Plausibility of a local track (sensor frame); anything outside is skipped and counted.
@@ -384,13 +384,17 @@ struct EndedFusedTrack {
   std::uint64_t id = 0;
   common::UtcNs ended_ns = 0;  // when it ended (the merging frame's time, or Tick's)
   FusedEndReason reason = FusedEndReason::kTimedOut;
-  std::uint64_t merged_into = 0;  // kMerged: the id that continues the object, else 0
+  // kMerged: the id it was merged into, else 0. That id may itself be merged later (its own
+  // entry then follows): the id that continues the object is the last of the chain.
+  std::uint64_t merged_into = 0;
 };
 
 // What the fuser holds at a time: its reported tracks and what it knows of the ids that are not
 // among them. Every id a consumer has seen in `tracks` is, at any later output, in exactly one
-// of: `tracks`, `hidden`, `ended` (for ended_report_s of outputs, see FusionOptions), or none
-// once that is over.
+// of: `tracks`, `hidden`, `ended` (for ended_report_s of outputs, see FusionOptions, as long as
+// no more than max_fused_tracks ends are kept: beyond that the oldest is forgotten earlier,
+// FusionCounters::ended_evicted), or none once that is over. A kept track older than
+// max_coast_s whose end awaits Tick is in none either.
 struct FusionOutput {
   common::UtcNs stamp_ns = 0;
   std::vector<FusedTrack> tracks;          // as Snapshot
