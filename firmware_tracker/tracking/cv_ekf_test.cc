@@ -1,7 +1,5 @@
 #include "firmware_tracker/tracking/cv_ekf.h"
 
-#include "common/cv_model.h"
-
 #include <gtest/gtest.h>
 
 #include <Eigen/Cholesky>
@@ -15,37 +13,6 @@ namespace {
 bool SymmetricPositiveDefinite(const Eigen::Matrix4d& p) {
   return p.allFinite() && p == p.transpose() &&
          Eigen::LLT<Eigen::Matrix4d>(p).info() == Eigen::Success;
-}
-
-TEST(CvModelTest, TransitionByStructureHasTheFullProductsBits) {
-  // The tracker moves a just-updated track back to the scan start (a negative dt of a few ms) with
-  // F's structure instead of 4 x 4 products: the same state and covariance, bit for bit, as the
-  // full products F x and F P F^T (re-symmetrised), for either sign of dt.
-  std::mt19937 rng(11);
-  std::uniform_real_distribution<double> u(-1.0, 1.0);
-  for (int trial = 0; trial < 500; ++trial) {
-    Eigen::Matrix4d a;
-    for (int i = 0; i < 16; ++i) a(i / 4, i % 4) = u(rng);
-    Eigen::Matrix4d p = a * a.transpose() + 1e-3 * Eigen::Matrix4d::Identity();
-    p = (0.5 * (p + p.transpose())).eval();
-    const Eigen::Vector4d x(3.0 * u(rng), 3.0 * u(rng), u(rng), u(rng));
-    const double dt_s = 0.04 * u(rng);
-    const Eigen::Matrix4d f = common::CvTransition(dt_s);
-    const Eigen::Vector4d x_full = f * x;
-    Eigen::Matrix4d p_full = f * p * f.transpose();
-    p_full = 0.5 * (p_full + p_full.transpose()).eval();
-    Eigen::Vector4d x_fast = x;
-    x_fast(0) += dt_s * x_fast(2);
-    x_fast(1) += dt_s * x_fast(3);
-    Eigen::Matrix4d p_fast = p;
-    common::CvApplyTransition(dt_s, p_fast);
-    common::CvApplyTransitionTransposed(dt_s, p_fast);
-    p_fast = 0.5 * (p_fast + p_fast.transpose()).eval();
-    for (int i = 0; i < 4; ++i) {
-      ASSERT_EQ(x_fast(i), x_full(i)) << "trial " << trial;
-      for (int j = 0; j < 4; ++j) ASSERT_EQ(p_fast(i, j), p_full(i, j)) << "trial " << trial;
-    }
-  }
 }
 
 TEST(CvEkfOptionsTest, DefaultsValidAndBadValuesRejected) {

@@ -13,18 +13,6 @@ namespace {
 
 bool Positive(double v) { return std::isfinite(v) && v > 0.0; }
 
-// State and covariance of a constant-velocity filter moved by dt_s without process noise: used to
-// move a just-updated track from its measurement time back to the scan start (a few ms).
-// F x and F p F^T by F's structure (common/cv_model.h: the full products' arithmetic, whose other
-// terms are multiplications by 1 and additions of 0).
-void Extrapolate(double dt_s, Eigen::Vector4d& x, Eigen::Matrix4d& p) {
-  x(0) += dt_s * x(2);
-  x(1) += dt_s * x(3);
-  common::CvApplyTransition(dt_s, p);
-  common::CvApplyTransitionTransposed(dt_s, p);
-  p = 0.5 * (p + p.transpose()).eval();
-}
-
 // scan_start_ns + offset without int64 overflow on hostile stamps (offset_s is in [0, gap limit]).
 common::UtcNs AtOffset(common::UtcNs scan_start_ns, double offset_s) {
   const common::DurationNs offset_ns = common::SecondsToNs(offset_s);
@@ -41,6 +29,21 @@ double LargestEigenvalue(const Eigen::Matrix2d& m) {
 }
 
 }  // namespace
+
+namespace internal {
+
+// F x and F p F^T by F's structure (common/cv_model.h): the same result as the full products up to
+// floating-point contraction (their other terms are multiplications by 1 and additions of 0; a
+// target that fuses multiply-adds may round the two forms differently).
+void Extrapolate(double dt_s, Eigen::Vector4d& x, Eigen::Matrix4d& p) {
+  x(0) += dt_s * x(2);
+  x(1) += dt_s * x(3);
+  common::CvApplyTransition(dt_s, p);
+  common::CvApplyTransitionTransposed(dt_s, p);
+  p = 0.5 * (p + p.transpose()).eval();
+}
+
+}  // namespace internal
 
 std::optional<std::string> Validate(const MultiTrackerOptions& o) {
   if (auto e = Validate(o.ekf)) return "ekf." + *e;
@@ -749,7 +752,7 @@ void MultiTracker::Report(common::UtcNs scan_start_ns, ScanTracks& out) {
     Eigen::Vector4d x = t.filter.state();
     Eigen::Matrix4d p = t.filter.covariance();
     const double back_s = common::NsToSeconds(scan_start_ns - t.filter_ns);
-    if (back_s < 0.0) Extrapolate(back_s, x, p);
+    if (back_s < 0.0) internal::Extrapolate(back_s, x, p);
     TrackReport* r = out.tracks.emplace_slot();
     if (r == nullptr) break;  // max_tracks <= kMaxTracks: cannot happen
     r->track_id = t.id;

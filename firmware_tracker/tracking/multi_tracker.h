@@ -325,6 +325,9 @@ struct Candidate {
   std::size_t source = 0;      // index into the caller's measurements
   bool evidence_only = false;  // Measurement::evidence_only
 };
+// State and covariance of a constant-velocity filter moved by dt_s without process noise: used to
+// move a just-updated track from its measurement time back to the scan start (a few ms).
+void Extrapolate(double dt_s, Eigen::Vector4d& x, Eigen::Matrix4d& p);
 }  // namespace internal
 
 class MultiTracker {

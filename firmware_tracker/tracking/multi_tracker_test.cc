@@ -5,9 +5,12 @@
 #include <Eigen/Eigenvalues>
 #include <cmath>
 #include <limits>
+#include <random>
 #include <set>
 #include <utility>
 #include <vector>
+
+#include "common/cv_model.h"
 
 namespace lrfnet::tracking {
 namespace {
@@ -33,6 +36,42 @@ Measurement Meas(double x, double y, double sigma_m = 0.05) {
   m.covariance_m2 = sigma_m * sigma_m * Eigen::Matrix2d::Identity();
   m.point_count = 12;
   return m;
+}
+
+// internal::Extrapolate moves a just-updated track back to the scan start (a negative dt of a few
+// ms) by F's structure instead of 4 x 4 products: the same state and covariance as the full
+// products F x and F P F^T (re-symmetrised), for either sign of dt, up to floating-point
+// contraction (a few units in the last place where multiply-adds are fused, else bit for bit).
+TEST(MultiTrackerTest, ExtrapolateIsTheFullProducts) {
+  std::mt19937 rng(11);
+  std::uniform_real_distribution<double> u(-1.0, 1.0);
+  for (int trial = 0; trial < 500; ++trial) {
+    Eigen::Matrix4d a;
+    for (int i = 0; i < 16; ++i) a(i / 4, i % 4) = u(rng);
+    Eigen::Matrix4d p = a * a.transpose() + 1e-3 * Eigen::Matrix4d::Identity();
+    p = (0.5 * (p + p.transpose())).eval();
+    const Eigen::Vector4d x(3.0 * u(rng), 3.0 * u(rng), u(rng), u(rng));
+    const double dt_s = 0.04 * u(rng);
+    const Eigen::Matrix4d f = common::CvTransition(dt_s);
+    const Eigen::Vector4d x_full = f * x;
+    Eigen::Matrix4d p_full = f * p * f.transpose();
+    p_full = 0.5 * (p_full + p_full.transpose()).eval();
+    Eigen::Vector4d x_fast = x;
+    Eigen::Matrix4d p_fast = p;
+    internal::Extrapolate(dt_s, x_fast, p_fast);
+    const double tol = 8.0 * std::numeric_limits<double>::epsilon();
+    for (int i = 0; i < 4; ++i) {
+      ASSERT_NEAR(x_fast(i), x_full(i), tol * (1.0 + std::abs(x_full(i)))) << "trial " << trial;
+      for (int j = 0; j < 4; ++j) {
+        ASSERT_NEAR(p_fast(i, j), p_full(i, j), tol * (1.0 + p_full.cwiseAbs().maxCoeff()))
+            << "trial " << trial;
+      }
+    }
+    // A move by dt is not the identity: the test sees the function act.
+    if (std::abs(dt_s * x(2)) > 1e-6) {
+      ASSERT_NE(x_fast(0), x(0));
+    }
+  }
 }
 
 const TrackReport* FindId(const ScanTracks& out, std::uint32_t id) {
