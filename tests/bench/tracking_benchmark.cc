@@ -77,8 +77,9 @@
 //   ShapeOptions::single_leg_across_walk = false;
 //   --before-side-uncertainty: "before" takes a walking track's single leg's side of the centre as
 //   sure, ShapeOptions::single_leg_side_uncertainty = false;
-//   --before-side-from-view: "before" takes that side from the prediction alone, not from where
-//   the scan sees through the other leg's place, ShapeOptions::single_leg_side_from_view = false;
+//   --before-side-from-view: "before" takes the side of the centre a walking track's single leg
+//   stands on from the prediction alone, not from where the scan sees through the other leg's
+//   place, ShapeOptions::single_leg_side_from_view = false;
 //   --before-few-point-legs: "before" measures a knee-height segment of two or three points wider
 //   than a leg as one leg, ShapeOptions::split_few_point_legs = false;
 //   --before-legs-seen-through: "before" reports a knee-height coasting track also where the scan
@@ -624,7 +625,9 @@ class MotSequence {
                             : range < 15.0 ? "12-15 m"
                                            : ">= 15 m";
     if (!(across > kAcrossM) && along > kMatchRadiusM) {
-      const std::string depth = along < 1.0 ? "0.5-1 m" : along < 2.0 ? "1-2 m" : ">= 2 m";
+      char near_bin[32];
+      std::snprintf(near_bin, sizeof near_bin, "%g-1 m", kMatchRadiusM);
+      const std::string depth = along < 1.0 ? near_bin : along < 2.0 ? "1-2 m" : ">= 2 m";
       return where + " (" + (held ? "it tracked" : "it untracked") + ", " + depth +
              " behind), it at " + bin + ", " + state;
     }
@@ -857,9 +860,9 @@ std::vector<Variant> Variants(sim::Mount mount, double range_m) {
              g_before_one_leg || g_before_confirm_time || g_before_whole_person ||
              g_before_box_size || g_before_single_beam || g_before_deep_pieces ||
              g_before_deep_evidence || g_before_isotropic_bias || g_before_across_walk ||
-             g_before_side_uncertainty || g_before_side_from_view || g_before_few_point_legs || g_before_legs_seen_through ||
-             g_before_legs_report_coasting || g_before_outline_departure || g_before_fusion_merge ||
-             g_before_report_sourceless) {
+             g_before_side_uncertainty || g_before_side_from_view || g_before_few_point_legs ||
+             g_before_legs_seen_through || g_before_legs_report_coasting ||
+             g_before_outline_departure || g_before_fusion_merge || g_before_report_sourceless) {
     tracking::TrackerOptions before = fresh;
     if (g_before_one_leg) before.shape.hidden_leg_behind = false;
     if (g_before_mixed_pixels) before.shape.drop_mixed_pixel_legs = false;
@@ -1800,8 +1803,9 @@ std::string KneeHeightBefore() {
   }
   if (g_before_side_from_view) {
     without.push_back(
-        "taking that side from the prediction alone, not from where the scan sees through the "
-        "other leg's place (`shape.single_leg_side_from_view` false)");
+        "taking the side of the centre a walking track's single leg stands on from the "
+        "prediction alone, not from where the scan sees through the other leg's place "
+        "(`shape.single_leg_side_from_view` false)");
   }
   if (g_before_few_point_legs) {
     without.push_back(
