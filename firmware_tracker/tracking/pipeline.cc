@@ -82,9 +82,10 @@ constexpr double kMaxLearningYawSigmaRad = 0.6;
 // many updates.
 constexpr double kCylinderAxisShare = 0.1;
 constexpr std::uint32_t kMinCylinderUpdates = 25;
-// ShapeOptions::single_leg_side_uncertainty: a single leg's side counts as uncertain (counted) below
-// this weight w = 2 q - 1 (the other side more likely than 2.5 %).
-constexpr double kSideKnownWeight = 0.95;
+using internal::kSideKnownWeight;
+// ShapeOptions::single_leg_side_from_view: at most this many steps between the places checked for
+// the other leg along the walk on each side.
+constexpr int kMaxSidePlaces = 16;
 // Pairing legs around a track: a single leg costs this much more than a pair.
 constexpr double kSingleLegPenaltyM = 0.25;
 // Sigma of a box's size when a track becomes one.
@@ -347,6 +348,7 @@ class TrackingPipeline::Refiner final : public MeasurementRefiner {
   std::uint64_t across_walk = 0;
   std::uint64_t side_uncertain = 0;
   std::uint64_t side_from_view = 0;
+  std::uint64_t view_overruled = 0;
   std::uint64_t widened = 0;
 
   // How many of the observation's two outline ends are silhouettes (MakePart: not an occluder's
@@ -560,7 +562,7 @@ class TrackingPipeline::Refiner final : public MeasurementRefiner {
     } else {
       m.position_m = legs[0].centre_m;
       const double range = legs[0].centre_m.norm();
-      double offset = 0.0;  // WalkingSide's
+      WalkSide side;
       if (ob.partner_behind && range > 0.0) {
         // The other leg hidden behind it (ShapeOptions::hidden_leg_behind): the centre, the legs'
         // midpoint, at least hip_half_width_m farther along the line of sight; the hidden leg
@@ -572,24 +574,24 @@ class TrackingPipeline::Refiner final : public MeasurementRefiner {
         m.covariance_m2 = legs[0].centre_cov_m2 +
                           o.gait_sigma_m * o.gait_sigma_m * Eigen::Matrix2d::Identity() +
                           (o.leg_radius_m * o.leg_radius_m / 12.0) * across * across.transpose();
-      } else if (Eigen::Vector2d left;
-                 WalkingSide(predicted, predicted_cov, legs[0].centre_m, left, offset)) {
+      } else if (WalkingSide(predicted, predicted_cov, legs[0].centre_m, legs[0].centre_cov_m2,
+                             side)) {
         // One leg of a walking track (ShapeOptions::single_leg_across_walk): the centre
-        // hip_half_width_m across the walk from it, on the side the prediction lies (sway and hip
-        // width: gait_sigma_m, and with single_leg_side_uncertainty the other side's share);
-        // ahead or behind it by a stride phase that successive scans share: within the legs'
-        // reach along the walk.
+        // hip_half_width_m across the walk from it, on the side WalkingSide found: the side the
+        // scan shows (single_leg_side_from_view: sure, only the sway and hip width, gait_sigma_m,
+        // across the walk) or else the side the prediction lies (gait_sigma_m, and with
+        // single_leg_side_uncertainty the other side's share 2 hip^2 (1 - w), which vanishes as
+        // the weight w nears 1); ahead or behind it by a stride phase that successive scans share:
+        // within the legs' reach along the walk.
+        const Eigen::Vector2d left = side.towards_centre;
         const Eigen::Vector2d forward(left.y(), -left.x());
         const double hip = o.hip_half_width_m;
         m.position_m += hip * left;
         const double reach = 0.5 * o.leg_pairing_distance_m;
         double across2 = o.gait_sigma_m * o.gait_sigma_m;
-        if (o.single_leg_side_uncertainty) {
-          const double s2 = left.dot(predicted_cov->topLeftCorner<2, 2>() * left) +
-                            left.dot(legs[0].centre_cov_m2 * left) + across2;
-          const double w = offset < 0.0 ? 1.0 : internal::SingleLegSideWeight(hip, offset, s2);
-          across2 += internal::SingleLegOtherSideVar(hip, w);
-          if (w < kSideKnownWeight) ++side_uncertain;
+        if (o.single_leg_side_uncertainty && !side.sure) {
+          across2 += internal::SingleLegOtherSideVar(hip, side.weight);
+          if (side.weight < kSideKnownWeight) ++side_uncertain;
         }
         m.covariance_m2 = legs[0].centre_cov_m2 + reach * reach * forward * forward.transpose() +
                           across2 * left * left.transpose();
@@ -611,14 +613,26 @@ class TrackingPipeline::Refiner final : public MeasurementRefiner {
     return true;
   }
 
+  // WalkingSide's answer: the unit vector across the walk from the leg towards the centre, the
+  // weight w = 2 q - 1 of that side (internal::SingleLegSideWeight) and whether the side is sure
+  // (taken from the scan: nothing of the other side added).
+  struct WalkSide {
+    Eigen::Vector2d towards_centre = Eigen::Vector2d::Zero();
+    double weight = 0.0;
+    bool sure = false;
+  };
+
   // ShapeOptions::single_leg_across_walk: whether a track predicted at `predicted` walks (speed at
-  // least walking_speed_mps and twice its sigma) with the leg at `leg_m` clearly on one side of
-  // its centre across the walk (more than hip_half_width_m / 2); then `towards_centre` is the unit
-  // vector across the walk from the leg towards the predicted centre and `offset_m` the predicted
-  // centre's distance from the leg along it.
+  // least walking_speed_mps and twice its sigma) with the side of its centre across the walk known
+  // for the leg at `leg_m` (fit covariance `leg_cov`). The side: with single_leg_side_from_view,
+  // the one the scan leaves for the other leg (every place on the other side seen through; sure),
+  // unless the prediction is confident (weight at least kSideKnownWeight) of the opposite side,
+  // which then stands (counted in view_overruled); else the side the predicted centre lies on when
+  // it is more than hip_half_width_m / 2 from the leg across the walk, its weight from the
+  // predicted centre's offset against its variance across the walk (the prediction's, the leg
+  // fit's and the sway's).
   bool WalkingSide(const Eigen::Vector4d* predicted, const Eigen::Matrix4d* predicted_cov,
-                   const Eigen::Vector2d& leg_m, Eigen::Vector2d& towards_centre,
-                   double& offset_m) {
+                   const Eigen::Vector2d& leg_m, const Eigen::Matrix2d& leg_cov, WalkSide& out) {
     const ShapeOptions& o = p_.options_.shape;
     if (!o.single_leg_across_walk || predicted == nullptr || predicted_cov == nullptr) return false;
     const Eigen::Vector2d v = predicted->tail<2>();
@@ -626,33 +640,74 @@ class TrackingPipeline::Refiner final : public MeasurementRefiner {
     const double speed_sigma = std::sqrt(0.5 * predicted_cov->bottomRightCorner<2, 2>().trace());
     if (!(speed >= o.walking_speed_mps && speed >= 2.0 * speed_sigma)) return false;
     const Eigen::Vector2d left(-v.y() / speed, v.x() / speed);
+    const double hip = o.hip_half_width_m;
     const double offset = (predicted->head<2>() - leg_m).dot(left);
-    // ShapeOptions::single_leg_side_from_view: the side whose every place for the other leg the
-    // scan sees through is not the centre's.
+    const bool predicted_side = std::abs(offset) > 0.5 * hip;
+    const double s2 = left.dot(predicted_cov->topLeftCorner<2, 2>() * left) +
+                      left.dot(leg_cov * left) + o.gait_sigma_m * o.gait_sigma_m;
+    const double weight = internal::SingleLegSideWeight(hip, offset, s2);
     if (o.single_leg_side_from_view && p_.scan_ != nullptr) {
-      const double span = 2.0 * o.hip_half_width_m;
-      const Eigen::Vector2d fwd(left.y(), -left.x());
-      const auto open = [&](double side) {
-        // Every place along the walk within the legs' reach seen through.
-        const double reach = 0.5 * o.leg_pairing_distance_m;
-        for (double a = -reach; a <= reach + 1e-9; a += o.leg_radius_m) {
-          if (!p_.OtherLegSeenThrough(*p_.scan_, leg_m + side * span * left + a * fwd)) return false;
+      const int view = SideFromView(leg_m, left);  // +1 left, -1 right, 0 unknown
+      if (view != 0) {
+        if (predicted_side && weight >= kSideKnownWeight && (offset > 0.0) != (view > 0)) {
+          ++view_overruled;  // a confident prediction against the view: the weighed side stands
+        } else {
+          out.towards_centre = view > 0 ? left : Eigen::Vector2d(-left);
+          out.weight = 1.0;
+          out.sure = true;
+          ++side_from_view;
+          return true;
         }
-        return true;
-      };
-      const bool left_open = open(1.0);
-      const bool right_open = open(-1.0);
-      if (left_open != right_open) {
-        towards_centre = left_open ? Eigen::Vector2d(-left) : left;
-        offset_m = -1.0;  // sure
-        ++side_from_view;
-        return true;
       }
     }
-    if (!(std::abs(offset) > 0.5 * o.hip_half_width_m)) return false;
-    towards_centre = offset > 0.0 ? left : Eigen::Vector2d(-left);
-    offset_m = std::abs(offset);
+    if (!predicted_side) return false;
+    out.towards_centre = offset > 0.0 ? left : Eigen::Vector2d(-left);
+    out.weight = weight;
+    out.sure = false;
     return true;
+  }
+
+  // ShapeOptions::single_leg_side_from_view: the side of the leg at `leg_m` across the walk
+  // (`left` its unit vector) the other leg, and so the centre, stands on as the scan shows it: +1
+  // along `left`, -1 against it, 0 unknown. The other leg stands 2 hip_half_width_m across the walk
+  // within the legs' reach along it, at places a_i = -reach + i (2 reach / n), i = 0..n,
+  // n = min(kMaxSidePlaces, ceil(2 reach / leg_radius_m)); a side is open when every place there is
+  // seen through (OtherLegSeenThrough); exactly one side open: the centre is on the other.
+  int SideFromView(const Eigen::Vector2d& leg_m, const Eigen::Vector2d& left) const {
+    const ShapeOptions& o = p_.options_.shape;
+    const ScanView& scan = *p_.scan_;
+    const double span = 2.0 * o.hip_half_width_m;
+    const double reach = 0.5 * o.leg_pairing_distance_m;
+    const Eigen::Vector2d fwd(left.y(), -left.x());
+    const double footprint = std::max(std::abs(scan.angle_step_rad), o.beam_divergence_rad);
+    // A side can be open only where a leg at its farthest place (an end of the places' segment:
+    // the range is convex along it) would have returned a beam: beams there closer than a leg.
+    const auto may_open = [&](double s) {
+      const Eigen::Vector2d c = leg_m + s * span * left;
+      const double far = std::max((c - reach * fwd).norm(), (c + reach * fwd).norm());
+      return far * footprint < 2.0 * o.leg_radius_m;
+    };
+    const bool may_left = may_open(1.0);
+    const bool may_right = may_open(-1.0);
+    if (!may_left && !may_right) return 0;
+    const int n = std::min(
+        kMaxSidePlaces,
+        std::max(1, static_cast<int>(std::ceil(2.0 * reach / std::max(o.leg_radius_m, 1e-3)))));
+    const double step = 2.0 * reach / n;
+    // Every place on the side seen through; stops at the first that is not.
+    const auto open = [&](double s) {
+      const Eigen::Vector2d c = leg_m + s * span * left;
+      for (int i = 0; i <= n; ++i) {
+        if (!p_.OtherLegSeenThrough(scan, c + (-reach + i * step) * fwd)) return false;
+      }
+      return true;
+    };
+    // Exactly one side open decides: the first side's answer leaves the second to be checked
+    // either way (open where the first is closed, closed where it is open).
+    const bool left_open = may_left && open(1.0);
+    const bool right_open = may_right && open(-1.0);
+    if (left_open == right_open) return 0;
+    return left_open ? -1 : 1;
   }
 
   // The track's size state after a fit whose posterior (prior: the state) is (size, size_cov):
@@ -1323,7 +1378,8 @@ bool TrackingPipeline::OtherLegSeenThrough(const ScanView& scan,
     if (b <= range + r + o.seen_through_margin_m) return false;  // could be the leg or hide it
     ++beyond;
   }
-  return beyond >= 1;
+  // Two echoes beyond, as SeenThrough asks, where the window holds two beams.
+  return beyond >= std::min<std::size_t>(2, hi - lo + 1);
 }
 
 bool TrackingPipeline::ForegroundNear(const ScanView& scan, const Eigen::Vector2d& position_m,
@@ -1416,6 +1472,7 @@ const ScanTracks& TrackingPipeline::Process(const ScanView& scan, std::uint32_t 
   const std::uint64_t across_walk_before = refiner_->across_walk;
   const std::uint64_t side_uncertain_before = refiner_->side_uncertain;
   const std::uint64_t side_from_view_before = refiner_->side_from_view;
+  const std::uint64_t view_overruled_before = refiner_->view_overruled;
   const std::uint64_t widened_before = refiner_->widened;
   scan_ = &scan;
   tracker_.Step(scan.stamp_ns, measurements_.span(), offsets_s_.span(),
@@ -1426,6 +1483,7 @@ const ScanTracks& TrackingPipeline::Process(const ScanView& scan, std::uint32_t 
   counters_.legs_across_walk += refiner_->across_walk - across_walk_before;
   counters_.legs_side_uncertain += refiner_->side_uncertain - side_uncertain_before;
   counters_.legs_side_from_view += refiner_->side_from_view - side_from_view_before;
+  counters_.legs_side_view_overruled += refiner_->view_overruled - view_overruled_before;
   counters_.outline_departure_widened += refiner_->widened - widened_before;
   if (bg.scan_error == ScanError::kNone && bg.learned) {
     AbsorbStatic(scan);

@@ -178,27 +178,37 @@ struct ShapeOptions {
   // ... and the side is weighed: the leg stands hip_half_width_m to one side of the centre or the
   // other, and the predicted centre tells which only as far as its own error across the walk is
   // small against the hip. With offset the predicted centre's distance from the leg across the
-  // walk and s^2 that distance's variance less the hip (the filter's predicted position variance
-  // across the walk, the leg fit's and the sway's, gait_sigma_m^2), the likelier side's
-  // probability is q = 1 / (1 + exp(-2 hip_half_width_m |offset| / s^2)); the centre is measured
-  // on that side as above, with the other side's share of the two sides' spread added to its
-  // variance across the walk: the second moment about the likelier side, 4 hip^2 (1 - q) =
-  // 2 hip^2 (1 - w), w = 2 q - 1 = tanh(hip |offset| / s^2). A track whose prediction has
-  // wandered across the walk (few measurements yet, a run of single legs) takes the side it
-  // guesses loosely instead of as if sure (a wrong side is 2 hip_half_width_m off). Counted (w
-  // below 0.95, the other side more likely than 2.5 %) in PipelineCounters::legs_side_uncertain.
-  // false: the side taken as sure (across the walk gait_sigma_m alone).
+  // walk and s^2 that distance's variance without the +-hip of the two sides (the filter's
+  // predicted position variance across the walk, the leg fit's and the sway's, gait_sigma_m^2),
+  // the likelier side's probability is q = 1 / (1 + exp(-2 hip_half_width_m |offset| / s^2)); the
+  // centre is measured on that side as above, with the other side's share of the two sides'
+  // spread always added to its variance across the walk: the second moment about the likelier
+  // side, 4 hip^2 (1 - q) = 2 hip^2 (1 - w), w = 2 q - 1 = tanh(hip |offset| / s^2), which
+  // vanishes as the side grows sure. A track whose prediction has wandered across the walk (few
+  // measurements yet, a run of single legs) takes the side it guesses loosely instead of as if
+  // sure (a wrong side is 2 hip_half_width_m off). A side taken from the scan
+  // (single_leg_side_from_view) is sure: nothing added. Counted (w below 0.95, the other side more
+  // likely than 2.5 %) in PipelineCounters::legs_side_uncertain. false: the side taken as sure
+  // (across the walk gait_sigma_m alone).
   bool single_leg_side_uncertainty = true;
   // ... and the side is first taken from what the scan shows: the hidden leg stands
   // 2 hip_half_width_m across the walk from the seen one, somewhere within the legs' reach along
-  // it (leg_pairing_distance_m / 2 either way). Where on one side every such place (every
-  // leg_radius_m along the walk) is seen through (each beam over a leg there returned from more
-  // than seen_through_margin_m beyond it, at least one did, the beams closer together there than a
-  // leg's width) and on the other side not, the other leg is on the latter and so is the centre:
-  // measured hip_half_width_m towards it as sure, whatever the prediction says. This also holds
-  // where the prediction has settled on the seen leg itself (no side to tell from it: the leg
-  // otherwise measured as the centre with the hip and stride extent, the track staying a hip off).
-  // Counted in PipelineCounters::legs_side_from_view. false: the side from the prediction alone.
+  // it (reach = leg_pairing_distance_m / 2 either way; places a_i = -reach + i 2 reach / n,
+  // i = 0..n, n = ceil(2 reach / leg_radius_m), at most 16). Where on one side every such place is
+  // seen through (each beam over a leg there with an echo returned from more than
+  // seen_through_margin_m beyond it, at least two did where two beams cross it) and on the other
+  // side not, the other leg is on the latter and so is the centre: measured hip_half_width_m
+  // towards it as sure. A place tells only where a leg there would have returned a beam: the beams
+  // and their footprint, max(angle_step, beam_divergence_rad), narrower than a leg there, i.e.
+  // within 2 leg_radius_m / max(angle_step, beam_divergence_rad) of the sensor (8 m with the
+  // defaults); farther out the side comes from the prediction. This also holds where the
+  // prediction has settled on the seen leg itself (no side to tell from it: the leg otherwise
+  // measured as the centre with the hip and stride extent, the track staying a hip off). A
+  // prediction sure of the opposite side (weight w, as for single_leg_side_uncertainty, at least
+  // 0.95) keeps its side, weighed, counted in PipelineCounters::legs_side_view_overruled: the
+  // places are where the other leg should stand, and a confident track says it stands elsewhere
+  // (a stride beyond the reach). Counted in PipelineCounters::legs_side_from_view. false: the
+  // side from the prediction alone.
   bool single_leg_side_from_view = true;
   // Legs mount: a leg-sized segment (no wider than a pair of legs) of two or three points whose
   // beams' centres spread across the line of sight wider than a leg two sigmas above the prior
@@ -393,6 +403,7 @@ struct PipelineCounters {
   std::uint64_t legs_across_walk = 0;   // one leg measured across the walk (single_leg_across_walk)
   std::uint64_t legs_side_uncertain = 0;  // of them: side uncertain (single_leg_side_uncertainty)
   std::uint64_t legs_side_from_view = 0;  // of them: side from the scan (single_leg_side_from_view)
+  std::uint64_t legs_side_view_overruled = 0;   // scan's side against a confident prediction: kept
   std::uint64_t outline_departure_widened = 0;  // body fits widened (outline_departure_gain)
   std::uint64_t split_few_point_legs = 0;       // 2-3 point segments split into two legs
   std::uint64_t veiled_segments = 0;    // legs: mixed pixels (beside a nearer edge, deep), dropped
@@ -479,9 +490,11 @@ class TrackingPipeline {
   bool Veiled(const ScanView& scan, const Segment& segment) const;
   bool PartnerBehind(const ScanView& scan, const ObservationPart& part,
                      const Eigen::Vector2d& centre_m) const;
-  // ShapeOptions::single_leg_side_from_view: the beams over a leg at leg_m (at least one with an
-  // echo) all returned from more than seen_through_margin_m beyond it, where they lie closer
-  // together than a leg's width.
+  // ShapeOptions::single_leg_side_from_view: the beams over a leg at leg_m with an echo (at least
+  // two, or the one beam where only one crosses it) all returned from more than
+  // seen_through_margin_m beyond it, where the beams and their footprint (max(angle_step,
+  // beam_divergence_rad)) are narrower than a leg there (within 2 leg_radius_m / that footprint of
+  // the sensor).
   bool OtherLegSeenThrough(const ScanView& scan, const Eigen::Vector2d& leg_m) const;
   bool ForegroundNear(const ScanView& scan, const Eigen::Vector2d& position_m,
                       double sigma_m) const;
@@ -524,6 +537,10 @@ double SingleLegSideWeight(double hip_m, double offset_m, double s2_m2);
 // The variance across the walk the other side adds to a centre measured on the likelier side:
 // (2 hip)^2 (1 - q) = 2 hip^2 (1 - w), w clamped to [0, 1].
 double SingleLegOtherSideVar(double hip_m, double weight);
+// A single leg's side counts as uncertain (PipelineCounters::legs_side_uncertain) below this weight
+// w = 2 q - 1, the other side more likely than 2.5 % (q below 0.975); a prediction at least this
+// sure of the side against the scan's (single_leg_side_from_view) keeps its own.
+inline constexpr double kSideKnownWeight = 0.95;
 
 // What the points of a person's back spread over extent_m show of their principal line (RMS
 // distance, m), and whether it exceeds threshold_m (the same test without the root).
