@@ -241,16 +241,19 @@ void VisitShape(tracking::ShapeOptions& o, ConfigVisitor& v) {
           "extent).");
   v.Field("single_leg_side_uncertainty", o.single_leg_side_uncertainty,
           "mount legs: with single_leg_across_walk, the side of the centre the leg stands on is "
-          "weighed, not taken as sure: where the predicted centre's error across the walk (its "
-          "variance, the leg's and gait_sigma_m^2) is not small against hip_half_width_m, the "
-          "other side's share of the two sides' spread (2 hip^2 (1 - tanh(hip |offset| / s^2))) "
-          "is added to the centre's variance across the walk (false: the side taken as sure).");
+          "weighed, not taken as sure: the other side's share of the two sides' spread "
+          "(2 hip^2 (1 - tanh(hip |offset| / s^2)), s^2 the predicted centre's variance across the "
+          "walk, the leg's and gait_sigma_m^2) is always added to the centre's variance across the "
+          "walk, vanishing as the prediction grows sure of the side; a side taken from the scan "
+          "(single_leg_side_from_view) is sure, nothing added (false: the side taken as sure).");
   v.Field("single_leg_side_from_view", o.single_leg_side_from_view,
           "mount legs: with single_leg_across_walk, where the scan sees through every place the "
           "other leg may stand on one side of the seen one (2 hip_half_width_m across the walk, "
           "within leg_pairing_distance_m / 2 along it) and not on the other, the centre is on the "
-          "latter side, whatever the prediction says (false: the side from the prediction "
-          "alone).");
+          "latter side, sure; only where the beams and their footprint (max(angle_step, "
+          "beam_divergence_rad)) are narrower than a leg, within 2 leg_radius_m / that footprint "
+          "of the sensor; a prediction sure of the other side (weight at least 0.95) keeps its "
+          "own (false: the side from the prediction alone).");
   v.Field("split_few_point_legs", o.split_few_point_legs,
           "mount legs: a leg-sized segment of two or three points spread across the line of "
           "sight wider than one leg can be (2 (leg_radius_m + 2 leg_radius_sigma_m)) is two legs "
