@@ -252,8 +252,9 @@ void VisitShape(tracking::ShapeOptions& o, ConfigVisitor& v) {
           "within leg_pairing_distance_m / 2 along it) and not on the other, the centre is on the "
           "latter side, sure; only where the beams and their footprint (max(angle_step, "
           "beam_divergence_rad)) are narrower than a leg, within 2 leg_radius_m / that footprint "
-          "of the sensor; a prediction sure of the other side (weight at least 0.95) keeps its "
-          "own (false: the side from the prediction alone).");
+          "of the sensor; against a prediction sure of the other side (weight at least 0.95) the "
+          "scan's side is taken with the other side's whole share (false: the side from the "
+          "prediction alone).");
   v.Field("split_few_point_legs", o.split_few_point_legs,
           "mount legs: a leg-sized segment of two or three points spread across the line of "
           "sight wider than one leg can be (2 (leg_radius_m + 2 leg_radius_sigma_m)) is two legs "

@@ -348,7 +348,7 @@ class TrackingPipeline::Refiner final : public MeasurementRefiner {
   std::uint64_t across_walk = 0;
   std::uint64_t side_uncertain = 0;
   std::uint64_t side_from_view = 0;
-  std::uint64_t view_overruled = 0;
+  std::uint64_t view_contested = 0;
   std::uint64_t widened = 0;
 
   // How many of the observation's two outline ends are silhouettes (MakePart: not an occluder's
@@ -626,8 +626,9 @@ class TrackingPipeline::Refiner final : public MeasurementRefiner {
   // least walking_speed_mps and twice its sigma) with the side of its centre across the walk known
   // for the leg at `leg_m` (fit covariance `leg_cov`). The side: with single_leg_side_from_view,
   // the one the scan leaves for the other leg (every place on the other side seen through; sure),
-  // unless the prediction is confident (weight at least kSideKnownWeight) of the opposite side,
-  // which then stands (counted in view_overruled); else the side the predicted centre lies on when
+  // or where the prediction is confident (weight at least kSideKnownWeight) of the opposite side,
+  // the same side not sure (weight 0, counted in view_contested); else the side the predicted
+  // centre lies on when
   // it is more than hip_half_width_m / 2 from the leg across the walk, its weight from the
   // predicted centre's offset against its variance across the walk (the prediction's, the leg
   // fit's and the sway's).
@@ -649,15 +650,21 @@ class TrackingPipeline::Refiner final : public MeasurementRefiner {
     if (o.single_leg_side_from_view && p_.scan_ != nullptr) {
       const int view = SideFromView(leg_m, left);  // +1 left, -1 right, 0 unknown
       if (view != 0) {
+        out.towards_centre = view > 0 ? left : Eigen::Vector2d(-left);
         if (predicted_side && weight >= kSideKnownWeight && (offset > 0.0) != (view > 0)) {
-          ++view_overruled;  // a confident prediction against the view: the weighed side stands
+          // A confident prediction against the view: the two disagree, neither side is sure.
+          // The prediction's confidence grows from its own past sides (a track that took the
+          // wrong side once keeps being fed measurements there), the view is each scan's own: its
+          // side, with the other side's whole share (w = 0).
+          out.weight = 0.0;
+          out.sure = false;
+          ++view_contested;
         } else {
-          out.towards_centre = view > 0 ? left : Eigen::Vector2d(-left);
           out.weight = 1.0;
           out.sure = true;
           ++side_from_view;
-          return true;
         }
+        return true;
       }
     }
     if (!predicted_side) return false;
@@ -1472,7 +1479,7 @@ const ScanTracks& TrackingPipeline::Process(const ScanView& scan, std::uint32_t 
   const std::uint64_t across_walk_before = refiner_->across_walk;
   const std::uint64_t side_uncertain_before = refiner_->side_uncertain;
   const std::uint64_t side_from_view_before = refiner_->side_from_view;
-  const std::uint64_t view_overruled_before = refiner_->view_overruled;
+  const std::uint64_t view_contested_before = refiner_->view_contested;
   const std::uint64_t widened_before = refiner_->widened;
   scan_ = &scan;
   tracker_.Step(scan.stamp_ns, measurements_.span(), offsets_s_.span(),
@@ -1483,7 +1490,7 @@ const ScanTracks& TrackingPipeline::Process(const ScanView& scan, std::uint32_t 
   counters_.legs_across_walk += refiner_->across_walk - across_walk_before;
   counters_.legs_side_uncertain += refiner_->side_uncertain - side_uncertain_before;
   counters_.legs_side_from_view += refiner_->side_from_view - side_from_view_before;
-  counters_.legs_side_view_overruled += refiner_->view_overruled - view_overruled_before;
+  counters_.legs_side_view_contested += refiner_->view_contested - view_contested_before;
   counters_.outline_departure_widened += refiner_->widened - widened_before;
   if (bg.scan_error == ScanError::kNone && bg.learned) {
     AbsorbStatic(scan);

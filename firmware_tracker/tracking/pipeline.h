@@ -203,12 +203,13 @@ struct ShapeOptions {
   // within 2 leg_radius_m / max(angle_step, beam_divergence_rad) of the sensor (8 m with the
   // defaults); farther out the side comes from the prediction. This also holds where the
   // prediction has settled on the seen leg itself (no side to tell from it: the leg otherwise
-  // measured as the centre with the hip and stride extent, the track staying a hip off). A
+  // measured as the centre with the hip and stride extent, the track staying a hip off). Where a
   // prediction sure of the opposite side (weight w, as for single_leg_side_uncertainty, at least
-  // 0.95) keeps its side, weighed, counted in PipelineCounters::legs_side_view_overruled: the
-  // places are where the other leg should stand, and a confident track says it stands elsewhere
-  // (a stride beyond the reach). Counted in PipelineCounters::legs_side_from_view. false: the
-  // side from the prediction alone.
+  // 0.95) contests the view, the view's side is taken not sure, with the other side's whole share
+  // (w = 0): the prediction's confidence grows from its own past sides (a track that took the wrong
+  // side is fed measurements there), the view is each scan's own. Counted in
+  // PipelineCounters::legs_side_from_view (sure) and legs_side_view_contested. false: the side
+  // from the prediction alone.
   bool single_leg_side_from_view = true;
   // Legs mount: a leg-sized segment (no wider than a pair of legs) of two or three points whose
   // beams' centres spread across the line of sight wider than a leg two sigmas above the prior
@@ -403,7 +404,7 @@ struct PipelineCounters {
   std::uint64_t legs_across_walk = 0;   // one leg measured across the walk (single_leg_across_walk)
   std::uint64_t legs_side_uncertain = 0;  // of them: side uncertain (single_leg_side_uncertainty)
   std::uint64_t legs_side_from_view = 0;  // of them: side from the scan (single_leg_side_from_view)
-  std::uint64_t legs_side_view_overruled = 0;   // scan's side against a confident prediction: kept
+  std::uint64_t legs_side_view_contested = 0;   // scan's side against a sure prediction: weighed
   std::uint64_t outline_departure_widened = 0;  // body fits widened (outline_departure_gain)
   std::uint64_t split_few_point_legs = 0;       // 2-3 point segments split into two legs
   std::uint64_t veiled_segments = 0;    // legs: mixed pixels (beside a nearer edge, deep), dropped
@@ -539,7 +540,7 @@ double SingleLegSideWeight(double hip_m, double offset_m, double s2_m2);
 double SingleLegOtherSideVar(double hip_m, double weight);
 // A single leg's side counts as uncertain (PipelineCounters::legs_side_uncertain) below this weight
 // w = 2 q - 1, the other side more likely than 2.5 % (q below 0.975); a prediction at least this
-// sure of the side against the scan's (single_leg_side_from_view) keeps its own.
+// sure of the side against the scan's (single_leg_side_from_view) contests it.
 inline constexpr double kSideKnownWeight = 0.95;
 
 // What the points of a person's back spread over extent_m show of their principal line (RMS
