@@ -1226,7 +1226,8 @@ TEST(PipelineScenarioTest, OneLegSideIsWeighedAgainstThePredictionsError) {
   for (const bool mirrored : {false, true}) {
     for (const double screen_from_s : {0.3, 1.5}) {
       const OneLegWalk sure = WalkWithOneLegSeen(true, mirrored, false, screen_from_s, 0.0, false);
-      const OneLegWalk weighed = WalkWithOneLegSeen(true, mirrored, true, screen_from_s, 0.0, false);
+      const OneLegWalk weighed =
+          WalkWithOneLegSeen(true, mirrored, true, screen_from_s, 0.0, false);
       SCOPED_TRACE(std::string(mirrored ? "right leg seen" : "left leg seen") + " from " +
                    std::to_string(screen_from_s) + " s; sure: " + Describe(sure) +
                    "; weighed: " + Describe(weighed));
