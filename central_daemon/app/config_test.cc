@@ -203,9 +203,9 @@ mqtt:
 // against rates the reloaded file names (those change only with a restart).
 TEST(DaemonConfigTest, EndedReportIsCheckedAgainstTheRunningRates) {
   DaemonConfig running;
-  ASSERT_EQ(LoadDaemonConfig("zones: {update_hz: 1, list: [{name: a, line: [[0, 0], [1, 0]]}]}",
-                             running),
-            std::nullopt);
+  ASSERT_EQ(
+      LoadDaemonConfig("zones: {update_hz: 1, list: [{name: a, line: [[0, 0], [1, 0]]}]}", running),
+      std::nullopt);
   DaemonConfig reloaded;
   ASSERT_EQ(LoadDaemonConfig("fusion: {ended_report_s: 1}\nzones: {update_hz: 10, list: [{name: "
                              "a, line: [[0, 0], [1, 0]]}]}",

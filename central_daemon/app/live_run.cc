@@ -341,9 +341,10 @@ int RunLive(const RunOptions& run, DaemonConfig config) {
         spdlog::error("SIGHUP: config not reloaded: {}", *e);
       } else if (auto ended = ValidateEndedReport(reloaded.fusion, config)) {
         // The zones and MQTT keep the rates they started with: the new options must fit those.
-        spdlog::error("SIGHUP: config not reloaded: {} (the running zones.update_hz and "
-                      "mqtt.objects_hz; they change only with a restart)",
-                      *ended);
+        spdlog::error(
+            "SIGHUP: config not reloaded: {} (the running zones.update_hz and "
+            "mqtt.objects_hz; they change only with a restart)",
+            *ended);
       } else {
         if (reloaded.listen != config.listen || reloaded.record_path != config.record_path ||
             reloaded.record_max_file_mb != config.record_max_file_mb ||

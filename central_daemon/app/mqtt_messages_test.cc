@@ -11,9 +11,9 @@ namespace {
 using nlohmann::json;
 
 TEST(MqttMessagesTest, EndedObjectsSayWhyAndWhichIdAMergedOneGoesOnAs) {
-  const json j = json::parse(ObjectsEndedJson(
-      "lab", 4, 3'500'000'000,
-      {{7, "merged", 3, 3'460'000'000}, {9, "timed_out", 0, 3'500'000'000}}));
+  const json j = json::parse(
+      ObjectsEndedJson("lab", 4, 3'500'000'000,
+                       {{7, "merged", 3, 3'460'000'000}, {9, "timed_out", 0, 3'500'000'000}}));
   EXPECT_EQ(j["type"], "objects_ended");
   EXPECT_EQ(j["site"], "lab");
   EXPECT_EQ(j["seq"], 4);

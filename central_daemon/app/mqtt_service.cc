@@ -114,7 +114,8 @@ void MqttService::EndObjects(const fusion::FusionOutput& output, std::uint64_t g
         for (const PathSample& p : merged.path) {
           if (path.empty() || p.t_ns > path.back().t_ns) path.push_back(p);
         }
-        while (path.size() > static_cast<std::size_t>(std::max<std::int64_t>(config_.path_points, 0))) {
+        while (path.size() >
+               static_cast<std::size_t>(std::max<std::int64_t>(config_.path_points, 0))) {
           path.pop_front();
         }
       }
@@ -122,8 +123,8 @@ void MqttService::EndObjects(const fusion::FusionOutput& output, std::uint64_t g
     } else {
       ++counters_.objects_ended;
     }
-    ended_out.push_back({e.id, fusion::ToString(e.reason), survivor != e.id ? survivor : 0,
-                         e.ended_ns});
+    ended_out.push_back(
+        {e.id, fusion::ToString(e.reason), survivor != e.id ? survivor : 0, e.ended_ns});
     objects_.erase(it);
   }
   // Other objects absent from the list: held while the fusion keeps them (hidden), else for at
@@ -135,9 +136,9 @@ void MqttService::EndObjects(const fusion::FusionOutput& output, std::uint64_t g
     }
     ObjectMark& mark = it->second;
     if (mark.absent_since_ns == 0) mark.absent_since_ns = stamp_ns;
-    const bool expired = hidden.count(it->first) == 0 &&
-                         (stamp_ns - mark.absent_since_ns >= absent_hold_ns_ ||
-                          stamp_ns < mark.absent_since_ns);
+    const bool expired =
+        hidden.count(it->first) == 0 &&
+        (stamp_ns - mark.absent_since_ns >= absent_hold_ns_ || stamp_ns < mark.absent_since_ns);
     if (expired) {
       ended_out.push_back({it->first, "hold_expired", 0, stamp_ns});
       ++counters_.objects_gone;

@@ -412,8 +412,7 @@ TEST_F(MqttServiceHide, AnIdHiddenForLongerThanTheHoldExitsExactlyOnce) {
   EXPECT_TRUE(run.ended[0]["ended"][0]["merged_into"].is_null());
   // The exit is as of the disappearance: the dwell ended when the id left the object list
   // (about 2.5 s, its source's timeout), not when the fusion deleted it (about 3.5 s).
-  EXPECT_NEAR(run.zone.back()["dwell"]["max_s"].get<double>(), 2.4, 0.25)
-      << run.zone.back().dump();
+  EXPECT_NEAR(run.zone.back()["dwell"]["max_s"].get<double>(), 2.4, 0.25) << run.zone.back().dump();
 }
 
 // The person's tracker starts a second track (2) on them 0.1 m beside the first at 2 s and drops

@@ -80,11 +80,12 @@
 // reported (report_sourceless).
 //   What the fuser reports (Output): the fused tracks (Snapshot), the confirmed ids it keeps
 // without reporting them (hidden, with when and where they were last measured), and the ids that
-// ended with why (timed out after max_coast_s, merged into id N), for ended_report_s of outputs after the first that listed the end. Every id is in at most one of the three, so a
-// consumer that follows ids over time holds exactly the hidden ones and ends the others at once;
-// the estimates are the same with or without it.
-// A tracker restart (TrackFrameData.session_id changes) unbinds every local track of the old
-// session; the new session's tracks (whose ids restart) are associated afresh.
+// ended with why (timed out after max_coast_s, merged into id N), for ended_report_s of outputs
+// after the first that listed the end. Every id is in at most one of the three, so a consumer that
+// follows ids over time holds exactly the hidden ones and ends the others at once; the estimates
+// are the same with or without it. A tracker restart (TrackFrameData.session_id changes) unbinds
+// every local track of the old session; the new session's tracks (whose ids restart) are associated
+// afresh.
 //
 // Where a bias model of the trackers' centres is applied to each sample: CentreCorrected in
 // fusion_internal.h, for both methods (DESIGN.md, "Measurement model").
@@ -363,8 +364,8 @@ struct FusedTrack {
 
 // Why a fused id ended (FusionOutput::ended).
 enum class FusedEndReason : std::uint8_t {
-  kTimedOut,   // no update for max_coast_s (every sensor lost the object)
-  kMerged,     // merged into another (older) fused id: the same object (merged_into)
+  kTimedOut,  // no update for max_coast_s (every sensor lost the object)
+  kMerged,    // merged into another (older) fused id: the same object (merged_into)
 };
 const char* ToString(FusedEndReason reason);
 
@@ -374,7 +375,7 @@ const char* ToString(FusedEndReason reason);
 // Tick; without Ticks, a consumer bounds it by its own hold).
 struct HiddenFusedTrack {
   std::uint64_t id = 0;
-  common::UtcNs last_ns = 0;  // time of its last update (the last measurement it took)
+  common::UtcNs last_ns = 0;    // time of its last update (the last measurement it took)
   double x_m = 0.0, y_m = 0.0;  // its estimate then, world frame
   std::string last_sensor;      // the sensor whose track fed it last, if known
 };
@@ -397,10 +398,10 @@ struct EndedFusedTrack {
 // max_coast_s whose end awaits Tick is in none either.
 struct FusionOutput {
   common::UtcNs stamp_ns = 0;
-  std::vector<FusedTrack> tracks;          // as Snapshot
-  std::vector<HiddenFusedTrack> hidden;    // confirmed, kept, not in tracks, not older than
-                                           // max_coast_s; ordered by id
-  std::vector<EndedFusedTrack> ended;      // kept ends (ended_report_s), in the order recorded
+  std::vector<FusedTrack> tracks;        // as Snapshot
+  std::vector<HiddenFusedTrack> hidden;  // confirmed, kept, not in tracks, not older than
+                                         // max_coast_s; ordered by id
+  std::vector<EndedFusedTrack> ended;    // kept ends (ended_report_s), in the order recorded
 };
 
 // A local track in the world frame (what the live view draws as a "raw" track).

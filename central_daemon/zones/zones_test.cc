@@ -228,7 +228,9 @@ class FusionFeed {
  public:
   FusionFeed(std::vector<Zone> zones, double absent_hold_s)
       : counter_(std::move(zones), ZoneOptions{0.3, absent_hold_s}) {}
-  void Step(const FusionStep& s) { counter_.Update(s.tracks, s.hidden, s.ended, now_ns_ += kStepNs); }
+  void Step(const FusionStep& s) {
+    counter_.Update(s.tracks, s.hidden, s.ended, now_ns_ += kStepNs);
+  }
   ZoneState State(std::size_t i = 0) const { return counter_.States().at(i); }
   const ZoneCounters& counters() const { return counter_.counters(); }
   ZoneCounter& counter() { return counter_; }
@@ -282,8 +284,8 @@ TEST(ZonesTest, AMergedIdIsFoldedIntoItsSurvivorAtOnce) {
 TEST(ZonesTest, AHiddenSurvivorGoesOnFromTheMergedIdsState) {
   FusionFeed f({Square("room", 0, 0, 4)}, 1.5);
   for (int i = 0; i <= 10; ++i) f.Step({{{1, -2.0 + 0.15 * i, 2.0, true}}, {}, {}});  // to x -0.5
-  for (int i = 0; i < 5; ++i) f.Step({{}, {1}, {}});                                // hidden
-  for (int i = 0; i < 5; ++i) f.Step({{{2, 0.5 + 0.1 * i, 2.0, true}}, {1}, {}});   // 2 inside
+  for (int i = 0; i < 5; ++i) f.Step({{}, {1}, {}});                                  // hidden
+  for (int i = 0; i < 5; ++i) f.Step({{{2, 0.5 + 0.1 * i, 2.0, true}}, {1}, {}});     // 2 inside
   EXPECT_EQ(f.State().present_ids, std::vector<std::uint64_t>{2});  // 1 held outside
   for (int i = 0; i < 10; ++i) {
     FusionStep s{{{1, 1.0 + 0.1 * i, 2.0, true}}, {}, {{2, 1}}};

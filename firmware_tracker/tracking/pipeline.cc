@@ -1381,7 +1381,7 @@ bool TrackingPipeline::OtherLegSeenThrough(const ScanView& scan,
   std::size_t beyond = 0;
   for (std::size_t i = lo; i <= hi; ++i) {
     const double b = scan.range_m[i];
-    if (!(b > 0.0)) continue;                                 // no echo: unknown
+    if (!(b > 0.0)) continue;                                    // no echo: unknown
     if (b <= range + r + o.seen_through_margin_m) return false;  // could be the leg or hide it
     ++beyond;
   }

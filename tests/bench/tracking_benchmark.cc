@@ -1744,9 +1744,9 @@ std::string KneeHeightBefore() {
   if (!(g_before_one_leg || g_before_confirm_time || g_before_whole_person || g_before_box_size ||
         g_before_single_beam || g_before_deep_pieces || g_before_deep_evidence ||
         g_before_isotropic_bias || g_before_across_walk || g_before_side_uncertainty ||
-        g_before_side_from_view || g_before_few_point_legs ||
-        g_before_legs_seen_through || g_before_legs_report_coasting || g_before_outline_departure ||
-        g_before_fusion_merge || g_before_report_sourceless) ||
+        g_before_side_from_view || g_before_few_point_legs || g_before_legs_seen_through ||
+        g_before_legs_report_coasting || g_before_outline_departure || g_before_fusion_merge ||
+        g_before_report_sourceless) ||
       g_before_mixed_pixels || g_before_far || g_before_evidence_coasting ||
       g_before_report_rules) {
     return "";
