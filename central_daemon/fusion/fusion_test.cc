@@ -1088,6 +1088,19 @@ TEST(FusedFilterTest, ALocalTrackSentAgainAfterTheSourceTimeoutFeedsItsFusedTrac
   for (const FusedTrack& f : fused) EXPECT_EQ(f.sources.size(), 1u) << f.id;
 }
 
+// Step k (every 0.04 s from t = 1 s) of the scene below: track 1 until 2.3 s, track 2 0.1 m
+// beside it from 2 s on; the frame added and the fuser ticked. Returns t.
+double StepLeftBehind(Fuser& fuser, int k) {
+  const double t = 1.0 + 0.04 * k;
+  const double x = 3.0 + 1.0 * (t - 1.0);
+  std::vector<TrackObservation> tracks;
+  if (t < 2.3) tracks.push_back(Obs(1, x, 1.0, 1.0, 0.0));
+  if (t >= 2.0) tracks.push_back(Obs(2, x, 1.1, 1.0, 0.0));
+  fuser.AddFrame("a", FrameAt(t, std::move(tracks)));
+  fuser.Tick(AtSeconds(t));
+  return t;
+}
+
 // One sensor's tracker follows a walker with track 1, starts a second track (2) on the same
 // walker 0.1 m beside it at t = 2 s and drops track 1 at t = 2.3 s. Track 2 starts a fused track
 // of its own (the walker's fused track took track 1 in that frame); once track 1 is gone its fused
@@ -1099,15 +1112,9 @@ std::pair<std::vector<FusedTrack>, FusionCounters> RunLeftBehind(bool merge_sour
   o.report_sourceless = !merge_sourceless;  // earlier releases: both off / on
   Fuser fuser(o);
   fuser.SetPlacements({Placed("a", 0, 0, 0)});
-  const auto x = [](double t) { return 3.0 + 1.0 * (t - 1.0); };
   std::vector<FusedTrack> at_3s;
   for (int k = 0; k <= 50; ++k) {
-    const double t = 1.0 + 0.04 * k;
-    std::vector<TrackObservation> tracks;
-    if (t < 2.3) tracks.push_back(Obs(1, x(t), 1.0, 1.0, 0.0));
-    if (t >= 2.0) tracks.push_back(Obs(2, x(t), 1.1, 1.0, 0.0));
-    fuser.AddFrame("a", FrameAt(t, std::move(tracks)));
-    fuser.Tick(AtSeconds(t));
+    const double t = StepLeftBehind(fuser, k);
     if (k == 50) at_3s = fuser.Snapshot(AtSeconds(t));
   }
   return {at_3s, fuser.counters()};
@@ -1118,16 +1125,10 @@ std::pair<std::vector<FusedTrack>, FusionCounters> RunLeftBehind(bool merge_sour
 TEST(FusedFilterTest, OutputReportsAMergedIdWithTheIdItGoesOnAs) {
   Fuser fuser{FusionOptions{}};
   fuser.SetPlacements({Placed("a", 0, 0, 0)});
-  const auto x = [](double t) { return 3.0 + 1.0 * (t - 1.0); };
   std::set<std::uint64_t> seen;
   FusionOutput out;
   for (int k = 0; k <= 50; ++k) {
-    const double t = 1.0 + 0.04 * k;
-    std::vector<TrackObservation> tracks;
-    if (t < 2.3) tracks.push_back(Obs(1, x(t), 1.0, 1.0, 0.0));
-    if (t >= 2.0) tracks.push_back(Obs(2, x(t), 1.1, 1.0, 0.0));
-    fuser.AddFrame("a", FrameAt(t, std::move(tracks)));
-    fuser.Tick(AtSeconds(t));
+    const double t = StepLeftBehind(fuser, k);
     out = fuser.Output(AtSeconds(t));
     // The tracks are Snapshot's.
     const auto snapshot = fuser.Snapshot(AtSeconds(t));

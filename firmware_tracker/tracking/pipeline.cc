@@ -628,10 +628,9 @@ class TrackingPipeline::Refiner final : public MeasurementRefiner {
   // the one the scan leaves for the other leg (every place on the other side seen through; sure),
   // or where the prediction is confident (weight at least kSideKnownWeight) of the opposite side,
   // the same side not sure (weight 0, counted in view_contested); else the side the predicted
-  // centre lies on when
-  // it is more than hip_half_width_m / 2 from the leg across the walk, its weight from the
-  // predicted centre's offset against its variance across the walk (the prediction's, the leg
-  // fit's and the sway's).
+  // centre lies on when it is more than hip_half_width_m / 2 from the leg across the walk, its
+  // weight from the predicted centre's offset against its variance across the walk (the
+  // prediction's, the leg fit's and the sway's).
   bool WalkingSide(const Eigen::Vector4d* predicted, const Eigen::Matrix4d* predicted_cov,
                    const Eigen::Vector2d& leg_m, const Eigen::Matrix2d& leg_cov, WalkSide& out) {
     const ShapeOptions& o = p_.options_.shape;
