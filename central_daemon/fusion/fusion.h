@@ -83,7 +83,8 @@
 // ended with why (timed out after max_coast_s, merged into id N), for ended_report_s of outputs
 // after the first that listed the end. Every id is in at most one of the three, so a consumer that
 // follows ids over time holds exactly the hidden ones and ends the others at once; the estimates
-// are the same with or without it. A tracker restart (TrackFrameData.session_id changes) unbinds
+// are the same with or without it. IdFollower (id_follower.h) does that following for a consumer:
+// per period and id, present, held, merged into its survivor (chains resolved) or ended. A tracker restart (TrackFrameData.session_id changes) unbinds
 // every local track of the old session; the new session's tracks (whose ids restart) are associated
 // afresh.
 //
@@ -544,7 +545,8 @@ class Fuser {
   // Snapshot's tracks and, besides them, the confirmed fused ids the fuser keeps without
   // reporting them (hidden) and the ids that ended and are still kept (ended_report_s),
   // with why (FusionOutput). Consumers that follow ids over time (zones, MQTT objects) hold a
-  // hidden id and end an ended one at once.
+  // hidden id and end an ended one at once (IdFollower). An output marks the ends it lists as
+  // reported (ended_report_s runs from then): lrfnetd computes one per output time and shares it.
   FusionOutput Output(common::UtcNs now_ns, bool include_tentative = false) const;
   // The id the next fused track gets (ids grow by one from 1).
   std::uint64_t next_id() const;
