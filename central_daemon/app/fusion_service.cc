@@ -66,6 +66,7 @@ void FusionService::Reconfigure(const DaemonConfig& config) {
   others.ended_report_s = config_.fusion.ended_report_s;
   if (others == config_.fusion && !disabled) {
     if (config.fusion.ended_report_s != config_.fusion.ended_report_s) {
+      Invalidate();
       fuser_.SetEndedReportS(config.fusion.ended_report_s);
       config_.fusion.ended_report_s = config.fusion.ended_report_s;
     }
@@ -85,6 +86,7 @@ void FusionService::Restart() {
   // The new fuser's ids go on from the old one's: an id is never given twice in a run, so a
   // consumer that missed the restart cannot take a new object for an old one.
   const std::uint64_t next_id = fuser_.next_id();
+  Invalidate();
   fuser_ = fusion::Fuser(config_.fusion);
   fuser_.ContinueIdsFrom(next_id);
   ++generation_;
@@ -105,18 +107,23 @@ void FusionService::SetExcluded(const std::set<std::string>& sensor_ids) {
   for (const fusion::SensorPlacement& p : placements_) {
     if (excluded_.count(p.id) == 0) placed.push_back(p);
   }
-  if (calibrated_) fuser_.SetPlacements(placed);
+  if (calibrated_) {
+    Invalidate();
+    fuser_.SetPlacements(placed);
+  }
 }
 
 void FusionService::OnSensorInfo(const std::string& sensor_id, const SensorDescription& info) {
   // 0: an older tracker that does not say; the fuser then assumes fusion.tracker_accel_psd.
   tracker_accel_psd_[sensor_id] = info.accel_psd_m2ps3;
+  Invalidate();
   fuser_.SetTrackerModel(sensor_id, info.accel_psd_m2ps3);
 }
 
 void FusionService::OnFrame(const std::string& sensor_id, const TrackFrameData& frame) {
   now_ns_ = std::max(now_ns_, frame.scan_start_ns);
   if (calibrated_ && config_.fusion_enabled && excluded_.count(sensor_id) == 0) {
+    Invalidate();
     fuser_.AddFrame(sensor_id, frame);
   }
 }
@@ -133,8 +140,9 @@ void FusionService::OnTick(double now_s) {
 
 void FusionService::Publish() {
   if (now_ns_ == 0) return;
+  Invalidate();
   fuser_.Tick(now_ns_);
-  const std::vector<fusion::FusedTrack> tracks = fuser_.Snapshot(now_ns_);
+  const std::vector<fusion::FusedTrack>& tracks = Output().tracks;
   ++counters_.publishes;
   if (socket_) {
     for (const std::string& datagram : fusion::FusedTrackDatagrams(tracks, now_ns_)) {
@@ -162,6 +170,14 @@ void FusionService::Publish() {
   }
 }
 
+const fusion::FusionOutput& FusionService::Output() const {
+  if (!output_ || output_->now_ns != now_ns_ || output_->generation != generation_) {
+    output_ = CachedOutput{now_ns_, generation_, fuser_.Output(now_ns_)};
+    ++counters_.outputs_computed;
+  }
+  return output_->output;
+}
+
 void FusionService::Close() {
   if (record_ != nullptr) {
     std::fclose(record_);
@@ -185,6 +201,7 @@ nlohmann::json FusionService::StatsJson() const {
   j["lines_recorded"] = counters_.lines_recorded;
   j["record_errors"] = counters_.record_errors;
   j["calibrations"] = counters_.calibrations;
+  j["outputs_computed"] = counters_.outputs_computed;
   const fusion::FusionCounters& f = fuser_.counters();
   j["frames"] = f.frames;
   j["frames_unplaced"] = f.frames_unplaced;

@@ -34,6 +34,9 @@ struct FusionServiceCounters {
   std::uint64_t lines_recorded = 0;
   std::uint64_t record_errors = 0;
   std::uint64_t calibrations = 0;  // placements applied
+  // Fuser outputs computed (Output): one per output time and fuser state, however many
+  // consumers read it.
+  std::uint64_t outputs_computed = 0;
 };
 
 // The placements of the calibrated sensors of a calibration result.
@@ -72,6 +75,11 @@ class FusionService final : public FrameListener {
   // The newest scan time received (gateway UTC), 0 before the first frame.
   common::UtcNs now_ns() const { return now_ns_; }
   const fusion::Fuser& fuser() const { return fuser_; }
+  // The fuser's Output at now_ns() (fusion::Fuser::Output: the published tracks, the hidden
+  // and the ended ids), computed once and handed to every consumer (the publish, the zones,
+  // MQTT, the live view) until the fuser's input changes: a frame, a Tick, placements, tracker
+  // models or options (another fuser: the generation). The reference is valid until then.
+  const fusion::FusionOutput& Output() const;
   // +1 each time a new fuser starts (Reconfigure with changed options, or fusion_enabled turned
   // off): the ids known from the previous one are no longer its ids, every one of them ended.
   std::uint64_t generation() const { return generation_; }
@@ -85,6 +93,8 @@ class FusionService final : public FrameListener {
   void Publish();
   // Replaces the fuser by a new one with config_.fusion (the placements and tracker models kept).
   void Restart();
+  // The fuser's input changed: the next Output is computed afresh.
+  void Invalidate() { output_.reset(); }
 
   boost::asio::io_context& io_;
   DaemonConfig config_;
@@ -99,7 +109,14 @@ class FusionService final : public FrameListener {
   std::optional<boost::asio::ip::udp::socket> socket_;
   boost::asio::ip::udp::endpoint destination_;
   std::FILE* record_ = nullptr;
-  FusionServiceCounters counters_;
+  // Output's cache: the output and what it was computed for (now_ns_, generation_).
+  struct CachedOutput {
+    common::UtcNs now_ns = 0;
+    std::uint64_t generation = 0;
+    fusion::FusionOutput output;
+  };
+  mutable std::optional<CachedOutput> output_;
+  mutable FusionServiceCounters counters_;  // outputs_computed counts in Output
 };
 
 }  // namespace lrfnet::daemon

@@ -158,7 +158,7 @@ LiveState LiveFeed::Build(const Daemon& daemon, const CalibrationService& calibr
       track.fused_id = t.fused_id;
       state.tracks.push_back(std::move(track));
     }
-    for (const fusion::FusedTrack& f : fusion.fuser().Snapshot(fusion.now_ns())) {
+    for (const fusion::FusedTrack& f : fusion.Output().tracks) {
       LiveFusedTrack fused;
       fused.id = f.id;
       fused.state = fusion::ToString(f.state);

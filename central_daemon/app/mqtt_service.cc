@@ -3,7 +3,6 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
-#include <set>
 
 #include "common/host_port.h"
 
@@ -31,7 +30,7 @@ MqttService::MqttService(const DaemonConfig& config, MqttSink* sink, std::string
       path_interval_ns_(PeriodNs(config.mqtt.path_interval_s)),
       zones_interval_ns_(PeriodNs(config.mqtt.zones_interval_s)),
       health_interval_ns_(PeriodNs(config.mqtt.health_interval_s)),
-      absent_hold_ns_(PeriodNs(config.zone_options.absent_hold_s)) {}
+      follower_(fusion::IdFollowerOptions{.absent_hold_s = config.zone_options.absent_hold_s}) {}
 
 std::string MqttService::Topic(std::string_view suffix) const {
   return config_.topic_prefix + "/" + config_.site + "/" + std::string(suffix);
@@ -71,90 +70,51 @@ void MqttService::PublishZones(const ZoneService& zones) {
   if (zones.enabled() && zones.updates() > 0) PublishZonesDue(zones, true);
 }
 
-void MqttService::EndObjects(const fusion::FusionOutput& output, std::uint64_t generation,
+void MqttService::EndObjects(const std::vector<fusion::IdEvent>& events,
                              std::vector<MqttEndedObject>& ended_out) {
-  const common::UtcNs stamp_ns = output.stamp_ns;
-  if (generation != generation_) {
-    // A new fuser: every object known is gone (its ids go on from the old one's, unused).
-    for (const auto& [id, mark] : objects_) {
-      ended_out.push_back({id, "fusion_restarted", 0, stamp_ns});
-      ++counters_.objects_ended;
-    }
-    objects_.clear();
-    generation_ = generation;
-  }
-  std::set<std::uint64_t> alive, hidden;
-  for (const fusion::FusedTrack& t : output.tracks) alive.insert(t.id);
-  for (const fusion::HiddenFusedTrack& h : output.hidden) hidden.insert(h.id);
-  std::map<std::uint64_t, std::uint64_t> merged_into;
-  for (const fusion::EndedFusedTrack& e : output.ended) {
-    if (e.merged_into != 0) merged_into[e.id] = e.merged_into;
-  }
-  // Ended ids: gone at once. A merged one's path goes on in the survivor's when the survivor was
-  // hidden and the merged one not (the survivor's estimate is then the merged one's).
-  for (const fusion::EndedFusedTrack& e : output.ended) {
-    const auto it = objects_.find(e.id);
-    if (it == objects_.end() || alive.count(e.id) != 0) continue;
-    std::uint64_t survivor = e.merged_into;
-    for (std::size_t hops = 0; survivor != 0 && hops < output.ended.size(); ++hops) {
-      const auto next = merged_into.find(survivor);
-      if (next == merged_into.end() || alive.count(survivor) != 0) break;
-      survivor = next->second;
-    }
-    if (survivor != 0 && survivor != e.id) {
-      ObjectMark& merged = it->second;
-      const auto s = objects_.find(survivor);
-      if (s == objects_.end()) {
-        // The survivor goes on with the merged one's path; it is absent only if not listed.
-        ObjectMark mark = merged;
-        if (alive.count(survivor) != 0) mark.absent_since_ns = 0;
-        objects_.emplace(survivor, std::move(mark));
-      } else if (s->second.absent_since_ns != 0 && merged.absent_since_ns == 0) {
-        std::deque<PathSample>& path = s->second.path;
-        for (const PathSample& p : merged.path) {
-          if (path.empty() || p.t_ns > path.back().t_ns) path.push_back(p);
+  for (const fusion::IdEvent& e : events) {
+    if (e.kind == fusion::IdEventKind::kMerged) {
+      const auto it = paths_.find(e.id);
+      if (it != paths_.end()) {
+        if (!e.survivor_known) {
+          paths_[e.survivor] = std::move(it->second);  // the survivor goes on with its path
+        } else if (e.survivor_held && !e.was_held) {
+          // The survivor's estimate is now the merged one's: its path goes on from there.
+          std::deque<PathSample>& path = paths_[e.survivor];
+          for (const PathSample& p : it->second) {
+            if (path.empty() || p.t_ns > path.back().t_ns) path.push_back(p);
+          }
+          while (path.size() >
+                 static_cast<std::size_t>(std::max<std::int64_t>(config_.path_points, 0))) {
+            path.pop_front();
+          }
         }
-        while (path.size() >
-               static_cast<std::size_t>(std::max<std::int64_t>(config_.path_points, 0))) {
-          path.pop_front();
-        }
+        paths_.erase(e.id);
       }
+      ended_out.push_back(
+          {e.id, fusion::ToString(fusion::FusedEndReason::kMerged), e.survivor, e.ended_ns});
       ++counters_.objects_merged;
-    } else {
-      ++counters_.objects_ended;
-    }
-    ended_out.push_back(
-        {e.id, fusion::ToString(e.reason), survivor != e.id ? survivor : 0, e.ended_ns});
-    objects_.erase(it);
-  }
-  // Other objects absent from the list: held while the fusion keeps them (hidden), else for at
-  // most zones.absent_hold_s.
-  for (auto it = objects_.begin(); it != objects_.end();) {
-    if (alive.count(it->first) != 0) {
-      ++it;
-      continue;
-    }
-    ObjectMark& mark = it->second;
-    if (mark.absent_since_ns == 0) mark.absent_since_ns = stamp_ns;
-    const bool expired =
-        hidden.count(it->first) == 0 &&
-        (stamp_ns - mark.absent_since_ns >= absent_hold_ns_ || stamp_ns < mark.absent_since_ns);
-    if (expired) {
-      ended_out.push_back({it->first, "hold_expired", 0, stamp_ns});
-      ++counters_.objects_gone;
-      it = objects_.erase(it);
-    } else {
-      ++it;
+    } else if (e.kind == fusion::IdEventKind::kEnded) {
+      paths_.erase(e.id);
+      ended_out.push_back({e.id, fusion::ToString(e.reason), 0, e.ended_ns});
+      if (e.reason == fusion::IdEndReason::kHoldExpired) {
+        ++counters_.objects_gone;
+      } else {
+        ++counters_.objects_ended;
+      }
     }
   }
 }
 
 void MqttService::PublishObjects(const Daemon& daemon, const FusionService& fusion) {
   const common::UtcNs stamp_ns = fusion.now_ns();
-  const fusion::FusionOutput output = fusion.fuser().Output(stamp_ns);
+  const fusion::FusionOutput& output = fusion.Output();
   const std::vector<fusion::FusedTrack>& tracks = output.tracks;
+  // Ended ids first (a new fuser ends every one), then the present ones; held ones stay.
+  const std::vector<fusion::IdEvent>& events =
+      follower_.Update(output, fusion.generation(), stamp_ns);
   std::vector<MqttEndedObject> ended;
-  EndObjects(output, fusion.generation(), ended);
+  EndObjects(events, ended);
 
   // The newest frame of every sensor that is a source: the tracker's size estimates.
   std::map<std::string, std::vector<TrackObservation>, std::less<>> newest;
@@ -171,7 +131,9 @@ void MqttService::PublishObjects(const Daemon& daemon, const FusionService& fusi
 
   std::vector<MqttObject> objects;
   objects.reserve(tracks.size());
-  for (const fusion::FusedTrack& t : tracks) {
+  for (const fusion::IdEvent& e : events) {
+    if (e.kind != fusion::IdEventKind::kPresent) continue;
+    const fusion::FusedTrack& t = *e.track;
     MqttObject o;
     o.track = t;
     // The size of the best-measured source (smallest sigma), if any tracker estimated one.
@@ -190,12 +152,8 @@ void MqttService::PublishObjects(const Daemon& daemon, const FusionService& fusi
       }
     }
     // The path: samples every path_interval_s, the newest last, then the current position.
-    ObjectMark& mark = objects_[t.id];
-    if (mark.absent_since_ns != 0) {
-      mark.absent_since_ns = 0;
-      ++counters_.objects_returned;
-    }
-    std::deque<PathSample>& path = mark.path;
+    if (e.returned) ++counters_.objects_returned;
+    std::deque<PathSample>& path = paths_[t.id];
     if (config_.path_points > 0) {
       if (path.empty() || stamp_ns - path.back().t_ns >= path_interval_ns_ ||
           stamp_ns < path.back().t_ns) {

@@ -18,7 +18,8 @@
 // that ended is gone at once (a merged object's path goes on in the id it was merged into when
 // that one was hidden); one the fusion reports nothing of is held for at most
 // zones.absent_hold_s (see config.h). The zones treat ids alike (zones.h), so a hidden person's
-// zone counts and present list do not change while it is hidden (its running dwell goes on).
+// zone counts and present list do not change while it is hidden (its running dwell goes on): both
+// follow the ids with fusion::IdFollower (id_follower.h), from the same FusionService::Output.
 // Thread-safety: called on the io thread.
 
 #include <cstdint>
@@ -32,6 +33,7 @@
 #include "central_daemon/app/fusion_service.h"
 #include "central_daemon/app/mqtt_messages.h"
 #include "central_daemon/app/zone_service.h"
+#include "central_daemon/fusion/id_follower.h"
 #include "central_daemon/io/mqtt_publisher.h"
 
 namespace lrfnet::daemon {
@@ -97,9 +99,9 @@ class MqttService {
 
  private:
   void PublishObjects(const Daemon& daemon, const FusionService& fusion);
-  // Drops the objects the output says ended (and all at a new fuser generation), holds the
-  // hidden ones, and those it says nothing of for absent_hold_s; appends what ended.
-  void EndObjects(const fusion::FusionOutput& output, std::uint64_t generation,
+  // Drops the objects the follower's events end or merge (a merged one's path goes on in its
+  // survivor's where that takes its place); appends what ended.
+  void EndObjects(const std::vector<fusion::IdEvent>& events,
                   std::vector<MqttEndedObject>& ended_out);
   void PublishZonesDue(const ZoneService& zones, bool force);
   void PublishHealthDue(common::UtcNs now_ns, const Daemon& daemon, const FusionService& fusion);
@@ -113,7 +115,6 @@ class MqttService {
   common::DurationNs path_interval_ns_;
   common::DurationNs zones_interval_ns_;
   common::DurationNs health_interval_ns_;
-  common::DurationNs absent_hold_ns_;
 
   std::uint64_t objects_seq_ = 0;
   common::UtcNs last_objects_ns_ = 0;
@@ -121,12 +122,10 @@ class MqttService {
     common::UtcNs t_ns = 0;
     double x_m = 0.0, y_m = 0.0;
   };
-  struct ObjectMark {
-    std::deque<PathSample> path;
-    common::UtcNs absent_since_ns = 0;  // 0: in the latest object list
-  };
-  std::map<std::uint64_t, ObjectMark> objects_;
-  std::uint64_t generation_ = 0;  // the fusion's, as of the latest object list
+  // Which object ids are known, held, merged or ended (the fusion's output, its generation,
+  // zones.absent_hold_s), and the path of each known one.
+  fusion::IdFollower follower_;
+  std::map<std::uint64_t, std::deque<PathSample>> paths_;
   std::uint64_t ended_seq_ = 0;
 
   struct ZoneMark {

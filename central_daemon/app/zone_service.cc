@@ -18,7 +18,7 @@ bool ZoneService::OnTick(const FusionService& fusion) {
     if (updates_ > 0) counter_->EndAll(now_ns);
     generation_ = fusion.generation();
   }
-  const fusion::FusionOutput output = fusion.fuser().Output(now_ns);
+  const fusion::FusionOutput& output = fusion.Output();
   std::vector<zones::ZoneTrack> tracks;
   tracks.reserve(output.tracks.size());
   for (const fusion::FusedTrack& t : output.tracks) {

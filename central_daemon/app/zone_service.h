@@ -6,7 +6,8 @@
 // without publishing them (held: a hidden person stays where it was last seen) and which ended and
 // why (a merged id is folded into the id that goes on, any other is gone at once); an id it says
 // nothing of is held for zones.absent_hold_s (see zones.h). When the fusion starts afresh (new
-// options, or disabled: FusionService::generation) every id known is gone.
+// options, or disabled: FusionService::generation) every id known is gone. The output is the
+// fusion service's shared one (FusionService::Output).
 // Thread-safety: called on the io thread.
 
 #include <optional>

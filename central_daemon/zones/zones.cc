@@ -139,7 +139,9 @@ double SignedDistanceToPolygon(std::span<const Point> polygon, Point p) {
 }
 
 ZoneCounter::ZoneCounter(std::vector<Zone> zones, const ZoneOptions& options)
-    : zones_(std::move(zones)), options_(options) {
+    : zones_(std::move(zones)),
+      options_(options),
+      follower_(fusion::IdFollowerOptions{.absent_hold_s = options.absent_hold_s}) {
   if (auto e = Validate(zones_)) {
     std::fprintf(stderr, "ZoneCounter: %s\n", e->c_str());
     std::abort();
@@ -216,11 +218,6 @@ void ZoneCounter::UpdateTrack(const Zone& zone, ZoneData& data, const ZoneTrack&
   }
 }
 
-bool ZoneCounter::Known(std::uint64_t id) const {
-  return std::any_of(data_.begin(), data_.end(),
-                     [&](const ZoneData& data) { return data.tracks.count(id) != 0; });
-}
-
 void ZoneCounter::Gone(std::uint64_t id, common::UtcNs since_ns) {
   for (ZoneData& data : data_) {
     const auto it = data.tracks.find(id);
@@ -231,11 +228,8 @@ void ZoneCounter::Gone(std::uint64_t id, common::UtcNs since_ns) {
   }
 }
 
-void ZoneCounter::Fold(std::uint64_t merged, std::uint64_t survivor, common::UtcNs now_ns) {
-  // The survivor goes on from the merged id's estimate when it was held at the previous update
-  // (hidden) and the merged id was not.
-  const bool take_merged =
-      absent_since_ns_.count(survivor) != 0 && absent_since_ns_.count(merged) == 0;
+void ZoneCounter::Fold(std::uint64_t merged, std::uint64_t survivor, bool take_merged,
+                       common::UtcNs now_ns) {
   for (ZoneData& data : data_) {
     const auto m = data.tracks.find(merged);
     if (m == data.tracks.end()) continue;
@@ -258,90 +252,78 @@ void ZoneCounter::Fold(std::uint64_t merged, std::uint64_t survivor, common::Utc
   }
 }
 
+void ZoneCounter::Apply(const std::vector<fusion::IdEvent>& events,
+                        std::span<const ZoneTrack> tracks, std::span<const std::size_t> track_index,
+                        common::UtcNs now_ns) {
+  using fusion::IdEndReason;
+  using fusion::IdEventKind;
+  for (const fusion::IdEvent& e : events) {
+    // An id that ends is gone as of the first update it was absent from.
+    const common::UtcNs since_ns = e.was_held ? e.held_since_ns : now_ns;
+    switch (e.kind) {
+      case IdEventKind::kPresent: {
+        if (e.returned) ++counters_.absent_returned;
+        const ZoneTrack& track = tracks[track_index[e.index]];
+        for (std::size_t i = 0; i < zones_.size(); ++i) {
+          UpdateTrack(zones_[i], data_[i], track, now_ns);
+        }
+        break;
+      }
+      case IdEventKind::kHeld:
+        if (e.newly_held) ++counters_.absent_held;
+        break;
+      case IdEventKind::kMerged:
+        // The survivor goes on from the merged id's state when it was held at the previous
+        // update (hidden) and the merged id was not.
+        Fold(e.id, e.survivor, e.survivor_known && e.survivor_held && !e.was_held, now_ns);
+        ++counters_.merged;
+        if (e.was_held) ++counters_.absent_gone;
+        break;
+      case IdEventKind::kEnded:
+        if (e.reason == IdEndReason::kHoldExpired) {
+          if (!e.was_held) ++counters_.absent_held;  // absent_hold_s 0: held and gone at once
+          ++counters_.absent_gone;
+          ++counters_.expired;
+          Gone(e.id, e.held_since_ns);
+          break;
+        }
+        Gone(e.id, since_ns);
+        if (e.was_held) ++counters_.absent_gone;  // absent_held = returned + gone + still held
+        if (e.reason != IdEndReason::kFusionRestarted) ++counters_.ended;
+        break;
+    }
+  }
+}
+
 bool ZoneCounter::Update(std::span<const ZoneTrack> tracks,
                          std::span<const std::uint64_t> hidden_ids,
                          std::span<const ZoneEnded> ended, common::UtcNs now_ns) {
   if (started_ && now_ns < now_ns_) return false;
   started_ = true;
   now_ns_ = now_ns;
-  std::set<std::uint64_t> seen;
-  for (const ZoneTrack& track : tracks) {
-    if (std::isfinite(track.x_m) && std::isfinite(track.y_m)) seen.insert(track.id);
+  if (zones_.empty()) return true;  // no zone knows any id
+  // Tracks without a finite position are absent.
+  std::vector<std::uint64_t> present;
+  std::vector<std::size_t> track_index;
+  for (std::size_t i = 0; i < tracks.size(); ++i) {
+    if (!std::isfinite(tracks[i].x_m) || !std::isfinite(tracks[i].y_m)) continue;
+    present.push_back(tracks[i].id);
+    track_index.push_back(i);
   }
-  // Ids the fusion ended, first (as of the previous update: a survivor goes on from there): a
-  // merged one folded into the id that goes on (through a chain of merges), any other gone at
-  // once, as of the first update it was absent from.
-  std::map<std::uint64_t, std::uint64_t> merged_into;
+  std::vector<fusion::EndedFusedTrack> ends;
+  ends.reserve(ended.size());
   for (const ZoneEnded& e : ended) {
-    if (e.merged_into != 0) merged_into[e.id] = e.merged_into;
+    ends.push_back({e.id, now_ns,
+                    e.merged_into != 0 ? fusion::FusedEndReason::kMerged
+                                       : fusion::FusedEndReason::kTimedOut,
+                    e.merged_into});
   }
-  for (const ZoneEnded& e : ended) {
-    if (seen.count(e.id) != 0 || !Known(e.id)) continue;
-    const auto held = absent_since_ns_.find(e.id);
-    const bool was_held = held != absent_since_ns_.end();
-    const common::UtcNs since_ns = was_held ? held->second : now_ns;
-    std::uint64_t survivor = e.merged_into;
-    for (std::size_t hops = 0; survivor != 0 && hops < ended.size(); ++hops) {
-      const auto next = merged_into.find(survivor);
-      if (next == merged_into.end() || seen.count(survivor) != 0) break;
-      survivor = next->second;
-    }
-    if (survivor != 0 && survivor != e.id) {
-      Fold(e.id, survivor, now_ns);
-      ++counters_.merged;
-    } else {
-      Gone(e.id, since_ns);
-      ++counters_.ended;
-    }
-    if (was_held) {
-      absent_since_ns_.erase(e.id);
-      ++counters_.absent_gone;
-    }
-  }
-  std::set<std::uint64_t> updated;
-  for (const ZoneTrack& track : tracks) {
-    if (!std::isfinite(track.x_m) || !std::isfinite(track.y_m)) continue;
-    if (!updated.insert(track.id).second) continue;  // a duplicate id: the first one counts
-    if (absent_since_ns_.erase(track.id) != 0) ++counters_.absent_returned;
-    for (std::size_t i = 0; i < zones_.size(); ++i) UpdateTrack(zones_[i], data_[i], track, now_ns);
-  }
-  // The other ids known to some zone but absent now: hidden ones held while the fusion keeps
-  // them; ones it reports nothing of held until absent_hold_s, then gone as of the first update
-  // they were absent from.
-  const std::set<std::uint64_t> hidden(hidden_ids.begin(), hidden_ids.end());
-  const auto hold_ns = static_cast<common::DurationNs>(options_.absent_hold_s * 1e9);
-  std::set<std::uint64_t> gone;
-  for (const ZoneData& data : data_) {
-    for (const auto& entry : data.tracks) {
-      const std::uint64_t id = entry.first;
-      if (seen.count(id) != 0 || gone.count(id) != 0) continue;
-      const auto [it, first] = absent_since_ns_.try_emplace(id, now_ns);
-      if (first) ++counters_.absent_held;
-      if (hidden.count(id) == 0 && now_ns - it->second >= hold_ns) gone.insert(id);
-    }
-  }
-  for (const std::uint64_t id : gone) {
-    const common::UtcNs since_ns = absent_since_ns_.at(id);
-    absent_since_ns_.erase(id);
-    ++counters_.absent_gone;
-    ++counters_.expired;
-    Gone(id, since_ns);
-  }
+  Apply(follower_.Update(present, hidden_ids, ends, 0, now_ns), tracks, track_index, now_ns);
   return true;
 }
 
 void ZoneCounter::EndAll(common::UtcNs now_ns) {
-  std::set<std::uint64_t> ids;
-  for (const ZoneData& data : data_) {
-    for (const auto& entry : data.tracks) ids.insert(entry.first);
-  }
-  for (const std::uint64_t id : ids) {
-    const auto held = absent_since_ns_.find(id);
-    const bool was_held = held != absent_since_ns_.end();
-    Gone(id, was_held ? held->second : now_ns);
-    if (was_held) ++counters_.absent_gone;  // absent_held = returned + gone + still held
-  }
-  absent_since_ns_.clear();
+  Apply(follower_.EndAll(now_ns), {}, {}, now_ns);
   ++counters_.restarts;
 }
 

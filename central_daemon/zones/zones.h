@@ -48,6 +48,8 @@
 //   was absent from (absent_hold_s = 0: at once).
 // A gone id ends its dwell and, inside a polygon or on a line, counts as lost_inside. Fused ids
 // are never reused within one fusion; EndAll ends every id when the fusion starts afresh.
+// Which of these an id is in each update is fusion::IdFollower's answer (id_follower.h: chains of
+// merges, hostile lists), the same as for lrfnetd's MQTT objects.
 // Before a merge the fusion reports two ids for one person (e.g. a hidden id and the new one a
 // sensor started, until merge_updates checks join them), and the zones count both until then.
 //
@@ -60,6 +62,7 @@
 #include <string>
 #include <vector>
 
+#include "central_daemon/fusion/id_follower.h"
 #include "common/time.h"
 
 namespace lrfnet::zones {
@@ -181,17 +184,20 @@ class ZoneCounter {
   };
   void UpdateTrack(const Zone& zone, ZoneData& data, const ZoneTrack& track, common::UtcNs now_ns);
   static void EndDwell(ZoneData& data, TrackInZone& t, common::UtcNs now_ns);
-  bool Known(std::uint64_t id) const;
   // id gone as of since_ns in every zone (its dwell ends; lost_inside where it was in a region).
   void Gone(std::uint64_t id, common::UtcNs since_ns);
-  // merged folded into survivor (see the header), as of the previous update.
-  void Fold(std::uint64_t merged, std::uint64_t survivor, common::UtcNs now_ns);
+  // merged folded into survivor (see the header), as of the previous update; take_merged: the
+  // survivor goes on from the merged id's state.
+  void Fold(std::uint64_t merged, std::uint64_t survivor, bool take_merged, common::UtcNs now_ns);
+  // What the id follower says of a period: tracks[track_index[e.index]] for present ids.
+  void Apply(const std::vector<fusion::IdEvent>& events, std::span<const ZoneTrack> tracks,
+             std::span<const std::size_t> track_index, common::UtcNs now_ns);
 
   std::vector<Zone> zones_;
   ZoneOptions options_;
   std::vector<ZoneData> data_;
-  // Ids absent from the latest update and since when (the first update they were absent from).
-  std::map<std::uint64_t, common::UtcNs> absent_since_ns_;
+  // Which ids are known, held, merged or gone (absent_hold_s; the fusion's lists).
+  fusion::IdFollower follower_;
   ZoneCounters counters_;
   common::UtcNs now_ns_ = 0;
   bool started_ = false;
