@@ -41,7 +41,7 @@ std::string ObjectsJson(const std::string& site, std::uint64_t seq, common::UtcN
 // An object that left the object list for good (the fusion ended its id).
 struct MqttEndedObject {
   std::uint64_t id = 0;
-  std::string reason;             // fusion::FusedEndReason: "merged", "timed_out", ...
+  std::string reason;             // "merged", or fusion::IdEndReason: "timed_out", ...
   std::uint64_t merged_into = 0;  // "merged": the id the object goes on as, else 0
   common::UtcNs ended_ns = 0;     // when the fusion ended it
 };
