@@ -158,7 +158,14 @@ LiveState LiveFeed::Build(const Daemon& daemon, const CalibrationService& calibr
       track.fused_id = t.fused_id;
       state.tracks.push_back(std::move(track));
     }
-    for (const fusion::FusedTrack& f : fusion.Output().tracks) {
+    const fusion::FusionOutput& output = fusion.Output();
+    for (const fusion::HiddenFusedTrack& h : output.hidden) {
+      state.hidden.push_back({h.id, h.x_m, h.y_m,
+                              common::NsToSeconds(std::max<common::DurationNs>(
+                                  0, output.stamp_ns - h.last_ns)),
+                              h.last_sensor});
+    }
+    for (const fusion::FusedTrack& f : output.tracks) {
       LiveFusedTrack fused;
       fused.id = f.id;
       fused.state = fusion::ToString(f.state);

@@ -1,6 +1,7 @@
 #pragma once
 // Fills the live view's LiveState from the daemon's parts (sensors, health, backgrounds,
-// calibration state, raw and fused tracks). Keeps the counters of the previous call to give rates.
+// calibration state, raw and fused tracks, where the people the fusion keeps unpublished were
+// last seen). Keeps the counters of the previous call to give rates.
 // Thread-safety: called on the io thread.
 
 #include <map>

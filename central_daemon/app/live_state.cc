@@ -372,6 +372,23 @@ std::string LiveStateJson(const LiveState& state) {
   w.BeginArray();
   for (const auto& f : state.fused) WriteFused(w, f);
   w.EndArray();
+  w.Key("hidden");
+  w.BeginArray();
+  for (const LiveHiddenTrack& h : state.hidden) {
+    w.BeginObject();
+    w.Key("id");
+    w.UInt(h.id);
+    w.Key("x_m");
+    w.Metres(h.x_m);
+    w.Key("y_m");
+    w.Metres(h.y_m);
+    w.Key("age_s");
+    w.Metres(h.age_s);
+    w.Key("sensor");
+    w.String(h.sensor);
+    w.EndObject();
+  }
+  w.EndArray();
   w.Key("zones");
   w.BeginArray();
   for (const LiveZone& z : state.zones) {

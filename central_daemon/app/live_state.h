@@ -74,6 +74,15 @@ struct LiveFusedTrack {
   std::vector<std::string> sensors;
 };
 
+// A person the fusion keeps without publishing them (fusion::HiddenFusedTrack): where and by which
+// sensor they were last measured, and how long ago (the fused tracks' time).
+struct LiveHiddenTrack {
+  std::uint64_t id = 0;
+  double x_m = 0.0, y_m = 0.0;  // world frame
+  double age_s = 0.0;
+  std::string sensor;  // "" when not known
+};
+
 struct LiveCalibration {
   std::string state;      // "collecting", "calibrating", "calibrated", "failed"
   double progress = 0.0;  // 0..1 towards the first calibration
@@ -102,6 +111,7 @@ struct LiveState {
   std::vector<LiveSensor> sensors;
   std::vector<LiveTrack> tracks;
   std::vector<LiveFusedTrack> fused;
+  std::vector<LiveHiddenTrack> hidden;
   std::vector<LiveZone> zones;
 };
 
@@ -115,6 +125,7 @@ struct LiveState {
 //    "flag":".."} or null}],
 //  "tracks":[{"sensor":"s1","id":3,"state":"confirmed","x_m":..,...,"fused":7}],
 //  "fused":[{"id":7,"state":"confirmed","x_m":..,...,"sensors":["s1","s2"]}],
+//  "hidden":[{"id":5,"x_m":..,"y_m":..,"age_s":..,"sensor":"s1"}],
 //  "zones":[{"name":"door","kind":"line","points":[[x,y],...],"occupancy":0,"inbound":3,
 //   "outbound":1}]}
 // Coordinates with millimetre precision; strings escaped; non-finite numbers written as null.

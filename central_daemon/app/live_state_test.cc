@@ -143,6 +143,19 @@ TEST(LiveStateJson, ParsesBackWithTheValues) {
   EXPECT_EQ(f["sensors"], json::parse(R"(["s1","s2"])"));
 }
 
+TEST(LiveStateJson, HiddenPeopleSayWhereAndWhenTheyWereLastSeen) {
+  LiveState state;
+  state.hidden.push_back({5, 1.2344, -2.5, 0.75, "s2"});
+  const json j = Parse(LiveStateJson(state));
+  ASSERT_EQ(j["hidden"].size(), 1u);
+  EXPECT_EQ(j["hidden"][0]["id"], 5);
+  EXPECT_DOUBLE_EQ(j["hidden"][0]["x_m"].get<double>(), 1.234);
+  EXPECT_DOUBLE_EQ(j["hidden"][0]["y_m"].get<double>(), -2.5);
+  EXPECT_DOUBLE_EQ(j["hidden"][0]["age_s"].get<double>(), 0.75);
+  EXPECT_EQ(j["hidden"][0]["sensor"], "s2");
+  EXPECT_TRUE(Parse(LiveStateJson(LiveState{}))["hidden"].empty());
+}
+
 TEST(LiveStateJson, EmptyStateIsAValidMessage) {
   const json j = Parse(LiveStateJson(LiveState{}));
   EXPECT_EQ(j["type"], "state");

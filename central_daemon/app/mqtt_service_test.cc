@@ -586,6 +586,18 @@ TEST(MqttServiceMerge, ASurvivorKnownOnlyAsAMergeTargetIsCountedOnceAndPublished
       started = true;  // from here on MQTT follows the ids: it never saw the hidden one
       hidden_id = output.hidden[0].id;
       first_id = output.tracks[0].id;
+      // The live view draws where the hidden person was last measured, and by which sensor.
+      LiveFeed feed(100);
+      const nlohmann::json live = nlohmann::json::parse(
+          LiveStateJson(feed.Build(x.daemon, x.calibration, fusion, At(t), "test", &x.zones)));
+      ASSERT_EQ(live["hidden"].size(), 1u) << live.dump();
+      EXPECT_EQ(live["hidden"][0]["id"], hidden_id);
+      EXPECT_NEAR(live["hidden"][0]["x_m"].get<double>(), 3.0, 0.05);
+      EXPECT_NEAR(live["hidden"][0]["y_m"].get<double>(), 1.0, 0.05);
+      EXPECT_EQ(live["hidden"][0]["sensor"], "s1");
+      // Last measured by the first track (before 1 s).
+      EXPECT_GT(live["hidden"][0]["age_s"].get<double>(), t - 1.0);
+      EXPECT_EQ(live["fused"].size(), 1u);
     }
     if (started) x.mqtt.OnTick(At(t), x.daemon, fusion, x.zones);
   }
