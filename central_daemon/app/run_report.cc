@@ -57,7 +57,9 @@ bool WriteStats(const std::string& path, const Daemon& daemon, const UdpReceiver
                   {"merged", z.merged},
                   {"ended", z.ended},
                   {"expired", z.expired},
-                  {"restarts", z.restarts}};
+                  {"restarts", z.restarts},
+                  {"merges_unresolved", z.merges_unresolved},
+                  {"duplicates", z.duplicates}};
   }
   j["requests_sent"] = daemon.requests_sent();
   j["requests_dropped"] = daemon.requests_dropped();

@@ -290,6 +290,7 @@ void ZoneCounter::Apply(const std::vector<fusion::IdEvent>& events,
         Gone(e.id, since_ns);
         if (e.was_held) ++counters_.absent_gone;  // absent_held = returned + gone + still held
         if (e.reason != IdEndReason::kFusionRestarted) ++counters_.ended;
+        if (e.reason == IdEndReason::kMergeUnresolved) ++counters_.merges_unresolved;
         break;
     }
   }
@@ -319,6 +320,7 @@ bool ZoneCounter::Update(std::span<const ZoneTrack> tracks,
                     e.merged_into});
   }
   Apply(follower_.Update(present, hidden_ids, ends, 0, now_ns), tracks, track_index, now_ns);
+  counters_.duplicates = follower_.counters().duplicates;
   return true;
 }
 

@@ -114,6 +114,10 @@ struct ZoneCounters {
   std::uint64_t ended = 0;            // ids the fusion ended otherwise (gone at once)
   std::uint64_t expired = 0;          // ids the fusion reported nothing of, gone after the hold
   std::uint64_t restarts = 0;         // EndAll calls (every id gone)
+  // Of ended: a merge the fusion listed that cannot be followed (into the id itself, into a
+  // cycle, along more merges than the follower follows, into an id that ended in the same list).
+  std::uint64_t merges_unresolved = 0;
+  std::uint64_t duplicates = 0;  // ids listed again in one update's tracks (the first counts)
 };
 
 // An id the fusion ended (fusion::EndedFusedTrack as the zones need it).

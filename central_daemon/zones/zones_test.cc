@@ -360,6 +360,23 @@ TEST(ZonesTest, MergeChainsAndAFusionRestart) {
   EXPECT_EQ(f.counters().absent_gone, 1u);
 }
 
+// Lists no sound fuser gives: an id merged into itself and a cycle of two merges end the ids
+// (gone, lost inside), counted; a duplicate id counts once.
+TEST(ZonesTest, UnresolvableMergesEndTheIdsAndDuplicatesCountOnce) {
+  FusionFeed f({Square("room", 0, 0, 4)}, 1.5);
+  f.Step({{{1, 2.0, 2.0, true}, {2, 2.5, 2.0, true}, {3, 3.0, 2.0, true}, {1, 9.0, 9.0, true}},
+          {},
+          {}});
+  EXPECT_EQ(f.State().present_ids, (std::vector<std::uint64_t>{1, 2, 3}));
+  EXPECT_EQ(f.counters().duplicates, 1u);
+  f.Step({{}, {}, {{1, 1}, {2, 3}, {3, 2}}});
+  EXPECT_TRUE(f.State().present_ids.empty());
+  EXPECT_EQ(f.State().lost_inside, 3u);
+  EXPECT_EQ(f.counters().ended, 3u);
+  EXPECT_EQ(f.counters().merges_unresolved, 3u);
+  EXPECT_EQ(f.counters().merged, 0u);
+}
+
 TEST(ZonesTest, ManyPeopleBothWaysAtOnce) {
   Walk w({Line("corridor", {0, 0}, {0, 10})});  // left of +y is -x: inbound walks towards -x
   ZoneCounter& c = w.counter();
