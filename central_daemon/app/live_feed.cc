@@ -160,10 +160,10 @@ LiveState LiveFeed::Build(const Daemon& daemon, const CalibrationService& calibr
     }
     const fusion::FusionOutput& output = fusion.Output();
     for (const fusion::HiddenFusedTrack& h : output.hidden) {
-      state.hidden.push_back({h.id, h.x_m, h.y_m,
-                              common::NsToSeconds(std::max<common::DurationNs>(
-                                  0, output.stamp_ns - h.last_ns)),
-                              h.last_sensor});
+      state.hidden.push_back(
+          {h.id, h.x_m, h.y_m,
+           common::NsToSeconds(std::max<common::DurationNs>(0, output.stamp_ns - h.last_ns)),
+           h.last_sensor});
     }
     for (const fusion::FusedTrack& f : output.tracks) {
       LiveFusedTrack fused;

@@ -20,9 +20,9 @@
 #include <utility>
 #include <vector>
 
+#include "central_daemon/app/calibration_service.h"
 #include "central_daemon/app/config.h"
 #include "central_daemon/app/daemon.h"
-#include "central_daemon/app/calibration_service.h"
 #include "central_daemon/app/fusion_service.h"
 #include "central_daemon/app/live_feed.h"
 #include "central_daemon/app/monitoring_service.h"

@@ -84,9 +84,9 @@
 // after the first that listed the end. Every id is in at most one of the three, so a consumer that
 // follows ids over time holds exactly the hidden ones and ends the others at once; the estimates
 // are the same with or without it. IdFollower (id_follower.h) does that following for a consumer:
-// per period and id, present, held, merged into its survivor (chains resolved) or ended. A tracker restart (TrackFrameData.session_id changes) unbinds
-// every local track of the old session; the new session's tracks (whose ids restart) are associated
-// afresh.
+// per period and id, present, held, merged into its survivor (chains resolved) or ended. A tracker
+// restart (TrackFrameData.session_id changes) unbinds every local track of the old session; the new
+// session's tracks (whose ids restart) are associated afresh.
 //
 // Where a bias model of the trackers' centres is applied to each sample: CentreCorrected in
 // fusion_internal.h, for both methods (DESIGN.md, "Measurement model").

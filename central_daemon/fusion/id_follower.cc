@@ -58,8 +58,8 @@ bool IdFollower::Held(std::uint64_t id) const {
   return it != ids_.end() && it->second.held;
 }
 
-const std::vector<IdEvent>& IdFollower::Update(const FusionOutput& output,
-                                               std::uint64_t generation, common::UtcNs now_ns) {
+const std::vector<IdEvent>& IdFollower::Update(const FusionOutput& output, std::uint64_t generation,
+                                               common::UtcNs now_ns) {
   std::vector<std::uint64_t> present_ids;
   present_ids.reserve(output.tracks.size());
   for (const FusedTrack& t : output.tracks) present_ids.push_back(t.id);

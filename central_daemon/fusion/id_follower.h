@@ -62,12 +62,12 @@ enum class IdEventKind : std::uint8_t { kPresent, kHeld, kMerged, kEnded };
 const char* ToString(IdEventKind kind);
 
 enum class IdEndReason : std::uint8_t {
-  kTimedOut,          // the fusion ended it (no update for its max_coast_s)
+  kTimedOut,  // the fusion ended it (no update for its max_coast_s)
   // merged into itself, into a cycle, along a chain beyond max_merge_hops, or into an id that
   // ended earlier in the same output
   kMergeUnresolved,
-  kFusionRestarted,   // a new fuser (generation) or EndAll
-  kHoldExpired,       // absent for absent_hold_s with no word from the fusion
+  kFusionRestarted,  // a new fuser (generation) or EndAll
+  kHoldExpired,      // absent for absent_hold_s with no word from the fusion
 };
 // "timed_out", "merge_unresolved", "fusion_restarted", "hold_expired".
 const char* ToString(IdEndReason reason);

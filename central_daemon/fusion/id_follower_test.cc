@@ -141,7 +141,8 @@ TEST(IdFollowerTest, MergeChainsInOneOutputAndOverSeveral) {
             (Events{"3 merged 1", "2 merged 1", "1 present"}));
   Feed several;
   several.Step({1, 2, 3});
-  EXPECT_EQ(several.Step({1, 2}, {}, {Merged(3, 2)}), (Events{"3 merged 2", "1 present", "2 present"}));
+  EXPECT_EQ(several.Step({1, 2}, {}, {Merged(3, 2)}),
+            (Events{"3 merged 2", "1 present", "2 present"}));
   EXPECT_EQ(several.Step({1}, {}, {Merged(3, 2), Merged(2, 1)}),
             (Events{"2 merged 1", "1 present"}));
   EXPECT_EQ(several.Step({1}, {}, {Merged(3, 2), Merged(2, 1)}), (Events{"1 present"}));
@@ -201,9 +202,9 @@ TEST(IdFollowerTest, AFusionRestartEndsEveryKnownId) {
 TEST(IdFollowerTest, HostileInputIsBoundedAndCounted) {
   Feed f;
   f.Step({1, 2, 3});
-  EXPECT_EQ(f.Step({}, {}, {Merged(1, 1), Merged(2, 3), Merged(3, 2), TimedOut(9), Merged(8, 1)}),
-            (Events{"1 ended merge_unresolved", "2 ended merge_unresolved",
-                    "3 ended merge_unresolved"}));
+  EXPECT_EQ(
+      f.Step({}, {}, {Merged(1, 1), Merged(2, 3), Merged(3, 2), TimedOut(9), Merged(8, 1)}),
+      (Events{"1 ended merge_unresolved", "2 ended merge_unresolved", "3 ended merge_unresolved"}));
   EXPECT_EQ(f.follower().counters().merge_cycles, 3u);
   EXPECT_EQ(f.follower().size(), 0u);
   // A cycle with a member in the tracks goes on as that member.

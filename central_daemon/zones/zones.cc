@@ -314,10 +314,10 @@ bool ZoneCounter::Update(std::span<const ZoneTrack> tracks,
   std::vector<fusion::EndedFusedTrack> ends;
   ends.reserve(ended.size());
   for (const ZoneEnded& e : ended) {
-    ends.push_back({e.id, now_ns,
-                    e.merged_into != 0 ? fusion::FusedEndReason::kMerged
-                                       : fusion::FusedEndReason::kTimedOut,
-                    e.merged_into});
+    ends.push_back(
+        {e.id, now_ns,
+         e.merged_into != 0 ? fusion::FusedEndReason::kMerged : fusion::FusedEndReason::kTimedOut,
+         e.merged_into});
   }
   Apply(follower_.Update(present, hidden_ids, ends, 0, now_ns), tracks, track_index, now_ns);
   counters_.duplicates = follower_.counters().duplicates;
