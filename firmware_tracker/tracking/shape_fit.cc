@@ -720,6 +720,32 @@ namespace {
   return {std::cos(mid_angle), std::sin(mid_angle)};
 }
 
+// How far the start's guess (ShapePrior::centre_guess_m) may lie from the start on the ray.
+constexpr double kMaxGuessOffsetM = 0.5;
+
+// Whether `guess` lies within kMaxGuessOffsetM of (nearest_along + depth) ray for every depth the
+// superellipse's support function along the ray can take, by a margin far above the roots' and
+// the sums' rounding: h = (|a p|^k + |b q|^k)^(1/k) (p, q the ray's components along the axes,
+// k >= 1) lies between the largest of a |p|, b |q| and their sum (the k-norm between the max-norm
+// and the 1-norm), and the distance to the guess, a convex function of the depth, is largest at
+// an end of that interval. False where that does not settle it (or for the other models, whose
+// support function is cheap): the caller then computes the depth.
+bool GuessWithinReach(ShapeModel model, const Vec5& x, double cos_yaw, double sin_yaw,
+                      const Eigen::Vector2d& ray, double nearest_along,
+                      const Eigen::Vector2d& guess) {
+  if (model != ShapeModel::kSuperellipse) return false;
+  constexpr double kMarginM = 1e-6;
+  const double ap = std::abs(x(kA) * (ray.x() * cos_yaw + ray.y() * sin_yaw));
+  const double bq = std::abs(x(kB) * (-ray.x() * sin_yaw + ray.y() * cos_yaw));
+  const double low = std::max(ap, bq), high = ap + bq;
+  const Eigen::Vector2d e = guess - nearest_along * ray;
+  const double along = e.dot(ray);
+  const double across = e.x() * ray.y() - e.y() * ray.x();
+  const double far = std::max(std::abs(along - low), std::abs(along - high));
+  const double reach = kMaxGuessOffsetM - kMarginM;
+  return across * across + far * far < reach * reach;
+}
+
 // kReference: the fit's numerics before RootN and the ray by the bisector (libm's roots, the ray's
 // angle by atan2), for the equivalence test. kPaired: two points' and the two edges' arithmetic
 // side by side (SumPointsPaired, SupportPair; the same results).
@@ -791,9 +817,16 @@ ShapeFitResult Fit(std::span<const Eigen::Vector2d> points, const Silhouette& si
   const ShapeModel model = prior.model;
   const bool circle = model == ShapeModel::kCircle;
   Vec5 x = Vec5::Zero();
-  x(kYaw) = circle ? 0.0 : prior.yaw_rad;
+  x(kYaw) = circle                                                       ? 0.0
+            : prior.yaw_guess_rad && std::isfinite(*prior.yaw_guess_rad) ? *prior.yaw_guess_rad
+                                                                         : prior.yaw_rad;
   x(kA) = std::clamp(prior.size_m.x(), o.min_size_m, o.max_size_m);
   x(kB) = circle ? x(kA) : std::clamp(prior.size_m.y(), o.min_size_m, o.max_size_m);
+  const Eigen::Vector2d size0(x(kA), x(kB));  // the size prior's mean
+  if (!circle && prior.size_guess_m && prior.size_guess_m->allFinite()) {
+    x(kA) = std::clamp(prior.size_guess_m->x(), o.min_size_m, o.max_size_m);
+    x(kB) = std::clamp(prior.size_guess_m->y(), o.min_size_m, o.max_size_m);
+  }
 
   // Start: on the ray through the middle of the silhouette, the body's extent behind the points
   // (the bisector of the first and last point's directions: their mean angle without atan2).
@@ -816,11 +849,21 @@ ShapeFitResult Fit(std::span<const Eigen::Vector2d> points, const Silhouette& si
   const double exponent = std::max(2.0, prior.exponent);
   // The sine and cosine of the last yaw evaluated (the start's is the first evaluation's too).
   double cos_yaw = std::cos(x(kYaw)), sin_yaw = std::sin(x(kYaw)), trig_yaw = x(kYaw);
-  const double depth = Support<kReference>(model, x, cos_yaw, sin_yaw, ray, exponent, nullptr);
-  Eigen::Vector2d start = (nearest_along + depth) * ray;
-  if (prior.centre_guess_m && prior.centre_guess_m->allFinite()) {
-    const Eigen::Vector2d& g = *prior.centre_guess_m;
-    if (g.dot(ray) > nearest_along && (g - start).norm() < 0.5) start = g;
+  // The guess (the track's prediction) is taken where it lies behind the points and within
+  // kMaxGuessOffsetM of the start on the ray. Where that holds for every depth the body's extent
+  // along the ray can have, the depth's support function (a chain of roots) is not needed.
+  const bool guess = prior.centre_guess_m && prior.centre_guess_m->allFinite();
+  Eigen::Vector2d start;
+  if (guess && prior.centre_guess_m->dot(ray) > nearest_along &&
+      GuessWithinReach(model, x, cos_yaw, sin_yaw, ray, nearest_along, *prior.centre_guess_m)) {
+    start = *prior.centre_guess_m;
+  } else {
+    const double depth = Support<kReference>(model, x, cos_yaw, sin_yaw, ray, exponent, nullptr);
+    start = (nearest_along + depth) * ray;
+    if (guess) {
+      const Eigen::Vector2d& g = *prior.centre_guess_m;
+      if (g.dot(ray) > nearest_along && (g - start).norm() < kMaxGuessOffsetM) start = g;
+    }
   }
   x(kCx) = start.x();
   x(kCy) = start.y();
@@ -861,7 +904,6 @@ ShapeFitResult Fit(std::span<const Eigen::Vector2d> points, const Silhouette& si
   }
   const double yaw_info = circle ? 0.0 : 1.0 / (prior.yaw_sigma_rad * prior.yaw_sigma_rad + 1e-12);
   const double centre_info = 1.0 / (kCentrePriorSigmaM * kCentrePriorSigmaM);
-  const Eigen::Vector2d size0(x(kA), x(kB));
 
   // The objective at x: Huber on the points (rho(s) = s^2 within k, 2 k |s| - k^2 beyond, s the
   // normalised distance), squares on edges and priors. Fills the Gauss-Newton normal matrix h and
@@ -869,7 +911,9 @@ ShapeFitResult Fit(std::span<const Eigen::Vector2d> points, const Silhouette& si
   const double k2 = o.robust_k * o.robust_k;
   const SumPointsFn sum_points = SumPointsFor(model, exponent, kPaired);
   const bool paired_edges = kPaired && n_edges == 2 && PairedSupport(model, exponent);
+  int evaluations = 0;
   auto evaluate = [&](const Vec5& at, Mat5* h, Vec5* g, double* points_sq) {
+    ++evaluations;
     // A circle has no orientation (its yaw stays 0).
     if (!circle && !(at(kYaw) == trig_yaw)) {
       // Both from one local value, so that the compiler makes them one sincos call (the captured
@@ -1015,6 +1059,7 @@ ShapeFitResult Fit(std::span<const Eigen::Vector2d> points, const Silhouette& si
   }
   result.rms_m = std::sqrt(points_cost / static_cast<double>(n));
   result.iterations = iterations;
+  result.evaluations = evaluations;
   result.ok = AllFinite(result.centre_m) && AllFinite(result.centre_cov_m2);
   return result;
 }
@@ -1038,6 +1083,17 @@ ShapeFitResult FitShapeUnpaired(std::span<const Eigen::Vector2d> points,
                                 const Silhouette& silhouette, const ShapePrior& prior,
                                 const ShapeFitOptions& options) {
   return Fit<NormalSolver, false, false>(points, silhouette, prior, options);
+}
+
+bool GuessWithinReach(ShapeModel model, const Eigen::Vector2d& size_m, double yaw_rad,
+                      const Eigen::Vector2d& ray, double nearest_along,
+                      const Eigen::Vector2d& guess) {
+  Vec5 x = Vec5::Zero();
+  x(kYaw) = yaw_rad;
+  x(kA) = size_m.x();
+  x(kB) = size_m.y();
+  return lrfnet::tracking::GuessWithinReach(model, x, std::cos(yaw_rad), std::sin(yaw_rad), ray,
+                                            nearest_along, guess);
 }
 
 Mat5 NormalSolverInverse(const Mat5& h, bool result_entries_only) {

@@ -70,6 +70,11 @@ struct ShapePrior {
   double yaw_sigma_rad = kUnknownYawSigmaRad;
   // Where to start (e.g. the track's predicted centre); used when it lies behind the points.
   std::optional<Eigen::Vector2d> centre_guess_m;
+  // Where to start the orientation (e.g. the track's last fit's); unset: at yaw_rad. Only the
+  // start: the prior stays N(yaw_rad, yaw_sigma_rad^2).
+  std::optional<double> yaw_guess_rad;
+  // Where to start the size (a, b); unset: at size_m (the prior stays N(size_m, size_cov_m2)).
+  std::optional<Eigen::Vector2d> size_guess_m;
 };
 
 struct ShapeFitOptions {
@@ -100,6 +105,7 @@ struct ShapeFitResult {
   double extent_m = 0.0;    // first to last point
   std::size_t points_used = 0;
   int iterations = 0;
+  int evaluations = 0;  // evaluations of the objective (each one pass over the points)
 };
 
 // Precondition: options valid; prior sizes positive, covariance positive definite.
@@ -123,6 +129,13 @@ ShapeFitResult FitShapeUnpaired(std::span<const Eigen::Vector2d> points,
 // 0). For the test that both give those entries with the same bits.
 Eigen::Matrix<double, 5, 5> NormalSolverInverse(const Eigen::Matrix<double, 5, 5>& h,
                                                 bool result_entries_only);
+// Whether the start's guess lies within reach (0.5 m) of (nearest_along + depth) ray for every
+// depth (the support function along the ray) a superellipse of this size and orientation can
+// have; false where that does not settle it or for the other models. Where true, the fit takes
+// the guess without computing the depth.
+bool GuessWithinReach(ShapeModel model, const Eigen::Vector2d& size_m, double yaw_rad,
+                      const Eigen::Vector2d& ray, double nearest_along,
+                      const Eigen::Vector2d& guess);
 }  // namespace internal
 
 // Support function of the shape (extent from the centre in direction n, unit vector); d_size, if

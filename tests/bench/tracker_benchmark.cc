@@ -293,6 +293,23 @@ class CaseRunner {
   std::uint64_t confirmed_tracks() const {
     return node_->pipeline().tracker().counters().confirmed;
   }
+  // The shape fits' evaluations of their objective so far, to stderr: fits, evaluations per fit
+  // and the fits by their count of evaluations (the last bin: that many or more).
+  void PrintFitEvaluations() const {
+    const auto& histogram = node_->pipeline().counters().shape_fit_evaluations;
+    std::uint64_t fits = 0, evaluations = 0;
+    std::string bins;
+    for (std::size_t e = 0; e < histogram.size(); ++e) {
+      fits += histogram[e];
+      evaluations += e * histogram[e];
+      bins += " " + std::to_string(e) + (e + 1 == histogram.size() ? "+:" : ":") +
+              std::to_string(histogram[e]);
+    }
+    if (fits == 0) return;
+    std::fprintf(stderr, "fit evaluations: %s: %llu fits, %.4f per fit;%s\n", case_->name.c_str(),
+                 static_cast<unsigned long long>(fits),
+                 static_cast<double>(evaluations) / static_cast<double>(fits), bins.c_str());
+  }
 
  private:
   const Case* case_;
@@ -349,6 +366,7 @@ void RunCase(benchmark::State& state, const Case* c) {
   row.uplink_bytes_per_s = runner.uplink_bytes() / seconds;
   row.raw_bytes_per_s = runner.raw_bytes() / seconds;
   row.confirmed_tracks = runner.confirmed_tracks();
+  runner.PrintFitEvaluations();
   state.counters["median_us"] = row.median_us;
   state.counters["p99_us"] = row.p99_us;
   state.counters["allocs"] = static_cast<double>(row.allocations);
@@ -428,6 +446,7 @@ std::string Interleaved(const std::vector<const Case*>& cases, std::size_t round
       "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n";
   char line[512];
   for (std::size_t c = 0; c < n; ++c) {
+    runners[c]->PrintFitEvaluations();
     const std::vector<double>& m = round_median[c];
     const std::size_t e = EmptySceneOf(cases, c);
     std::vector<double> ratio;
