@@ -322,11 +322,6 @@ void VisitShape(tracking::ShapeOptions& o, ConfigVisitor& v) {
   v.Field("outline_model_share", o.outline_model_share,
           "With outline_departure_gain > 0, mount torso: centre_model_sigma_m (given to the "
           "filter) is taken at this share (1: tracks unchanged; 0 < share <= 1).");
-  v.Field("fit_start_from_last_fit", o.fit_start_from_last_fit,
-          "A tracked body's fit starts from the track's last fit's orientation and size (the "
-          "priors stay the walking direction's orientation and the learned size): fewer "
-          "Gauss-Newton steps, the same optimum within the fit's convergence test. false: the "
-          "start at the priors'.");
   v.Field("flat_rms_m", o.flat_rms_m,
           "Outlines whose points stay closer than this to a straight line (noise removed) are "
           "flat: not a person (a door leaf, a board).");

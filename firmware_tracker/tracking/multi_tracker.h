@@ -247,9 +247,6 @@ struct TrackShape {
   Eigen::Matrix2d size_cov_m2 = Eigen::Matrix2d::Identity();  // of size_m
   double yaw_rad = 0.0;                                       // direction of axis a
   double yaw_sigma_rad = kUnknownYawSigmaRad;
-  // The last body fit's size (a, b), axis a along yaw_rad (zero before the first): where the next
-  // fit starts (ShapeOptions::fit_start_from_last_fit).
-  Eigen::Vector2d fit_size_m = Eigen::Vector2d::Zero();
   double exponent = 2.0;       // superellipse exponent (2: ellipse or cylinder)
   common::UtcNs stamp_ns = 0;  // time of the state (the last refined measurement)
   std::uint32_t updates = 0;

@@ -345,7 +345,6 @@ class TrackingPipeline::Refiner final : public MeasurementRefiner {
 
   std::uint64_t fits = 0;
   std::uint64_t failed = 0;
-  std::uint64_t from_last_fit = 0;
   std::array<std::uint64_t, std::tuple_size_v<decltype(PipelineCounters::shape_fit_evaluations)>>
       evaluations{};
   std::uint64_t across_walk = 0;
@@ -470,13 +469,6 @@ class TrackingPipeline::Refiner final : public MeasurementRefiner {
     prior.yaw_sigma_rad = shape.yaw_sigma_rad;
     if (predicted != nullptr) {
       prior.centre_guess_m = predicted->head<2>();
-      if (o.fit_start_from_last_fit && shape.fit_size_m.allFinite() &&
-          shape.fit_size_m.minCoeff() > 0.0) {
-        // The last fit's orientation and size (fit_start_from_last_fit); the priors unchanged.
-        prior.yaw_guess_rad = shape.yaw_rad;
-        prior.size_guess_m = shape.fit_size_m;
-        ++from_last_fit;
-      }
       const Eigen::Vector2d v = predicted->tail<2>();
       const double speed = v.norm();
       if (speed > o.walking_speed_mps) {
@@ -517,7 +509,6 @@ class TrackingPipeline::Refiner final : public MeasurementRefiner {
     // Size learning. Only where the orientation is known: without it, what the outline shows cannot
     // be told apart into size and orientation. And only a share kSizeLearningShare of what the scan
     // says: model errors of successive scans are alike, not independent.
-    shape.fit_size_m = size;
     if (prior.yaw_sigma_rad < kMaxLearningYawSigmaRad || shape.model == ShapeModel::kBox) {
       LearnSize(size, size_cov, shape);
     }
@@ -1495,7 +1486,6 @@ const ScanTracks& TrackingPipeline::Process(const ScanView& scan, std::uint32_t 
 
   const std::uint64_t fits_before = refiner_->fits, failed_before = refiner_->failed;
   const auto evaluations_before = refiner_->evaluations;
-  const std::uint64_t from_last_fit_before = refiner_->from_last_fit;
   const std::uint64_t across_walk_before = refiner_->across_walk;
   const std::uint64_t side_uncertain_before = refiner_->side_uncertain;
   const std::uint64_t side_from_view_before = refiner_->side_from_view;
@@ -1510,7 +1500,6 @@ const ScanTracks& TrackingPipeline::Process(const ScanView& scan, std::uint32_t 
     counters_.shape_fit_evaluations[e] += refiner_->evaluations[e] - evaluations_before[e];
   }
   counters_.failed_shape_fits += refiner_->failed - failed_before;
-  counters_.fits_from_last_fit += refiner_->from_last_fit - from_last_fit_before;
   counters_.legs_across_walk += refiner_->across_walk - across_walk_before;
   counters_.legs_side_uncertain += refiner_->side_uncertain - side_uncertain_before;
   counters_.legs_side_from_view += refiner_->side_from_view - side_from_view_before;

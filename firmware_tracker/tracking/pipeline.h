@@ -298,13 +298,6 @@ struct ShapeOptions {
   double outline_departure_gain = 2.0;
   double outline_fixed_share = 0.3;
   double outline_model_share = 1.0;
-  // The fit of a tracked body (not legs) starts from the track's last fit's orientation and size
-  // (ShapePrior::yaw_guess_rad, size_guess_m) and its predicted centre: the body turns and its
-  // outline changes little between scans, so the last fit lies nearer this scan's answer than the
-  // walking direction's orientation or the slowly learned size (the priors, which stay as they
-  // are): fewer Gauss-Newton steps, the same optimum within the fit's convergence test. false:
-  // the start at the priors' orientation and size.
-  bool fit_start_from_last_fit = true;
   // Flat objects (not person-like).
   double flat_rms_m = 0.015;
   double flat_min_extent_m = 0.25;
@@ -407,11 +400,9 @@ struct PipelineCounters {
   // Shape fits by the evaluations of their objective (ShapeFitResult::evaluations; each one pass
   // over the points): index e counts the fits with e, the last those with that many or more.
   std::array<std::uint64_t, 8> shape_fit_evaluations{};
-  std::uint64_t fits_from_last_fit =
-      0;                          // body fits started at the last fit's (fit_start_from_last_fit)
-  std::uint64_t leg_pairs = 0;    // observations of two legs (kLegs)
-  std::uint64_t single_legs = 0;  // observations of one leg
-  std::uint64_t legs_behind = 0;  // of them: the other hidden behind (hidden_leg_behind)
+  std::uint64_t leg_pairs = 0;         // observations of two legs (kLegs)
+  std::uint64_t single_legs = 0;       // observations of one leg
+  std::uint64_t legs_behind = 0;       // of them: the other hidden behind (hidden_leg_behind)
   std::uint64_t single_beam_legs = 0;  // observations of single-beam legs (single_beam_legs)
   std::uint64_t legs_across_walk = 0;  // one leg measured across the walk (single_leg_across_walk)
   std::uint64_t legs_side_uncertain = 0;  // of them: side uncertain (single_leg_side_uncertainty)

@@ -817,16 +817,9 @@ ShapeFitResult Fit(std::span<const Eigen::Vector2d> points, const Silhouette& si
   const ShapeModel model = prior.model;
   const bool circle = model == ShapeModel::kCircle;
   Vec5 x = Vec5::Zero();
-  x(kYaw) = circle                                                       ? 0.0
-            : prior.yaw_guess_rad && std::isfinite(*prior.yaw_guess_rad) ? *prior.yaw_guess_rad
-                                                                         : prior.yaw_rad;
+  x(kYaw) = circle ? 0.0 : prior.yaw_rad;
   x(kA) = std::clamp(prior.size_m.x(), o.min_size_m, o.max_size_m);
   x(kB) = circle ? x(kA) : std::clamp(prior.size_m.y(), o.min_size_m, o.max_size_m);
-  const Eigen::Vector2d size0(x(kA), x(kB));  // the size prior's mean
-  if (!circle && prior.size_guess_m && prior.size_guess_m->allFinite()) {
-    x(kA) = std::clamp(prior.size_guess_m->x(), o.min_size_m, o.max_size_m);
-    x(kB) = std::clamp(prior.size_guess_m->y(), o.min_size_m, o.max_size_m);
-  }
 
   // Start: on the ray through the middle of the silhouette, the body's extent behind the points
   // (the bisector of the first and last point's directions: their mean angle without atan2).
@@ -904,6 +897,7 @@ ShapeFitResult Fit(std::span<const Eigen::Vector2d> points, const Silhouette& si
   }
   const double yaw_info = circle ? 0.0 : 1.0 / (prior.yaw_sigma_rad * prior.yaw_sigma_rad + 1e-12);
   const double centre_info = 1.0 / (kCentrePriorSigmaM * kCentrePriorSigmaM);
+  const Eigen::Vector2d size0(x(kA), x(kB));
 
   // The objective at x: Huber on the points (rho(s) = s^2 within k, 2 k |s| - k^2 beyond, s the
   // normalised distance), squares on edges and priors. Fills the Gauss-Newton normal matrix h and

@@ -70,11 +70,6 @@ struct ShapePrior {
   double yaw_sigma_rad = kUnknownYawSigmaRad;
   // Where to start (e.g. the track's predicted centre); used when it lies behind the points.
   std::optional<Eigen::Vector2d> centre_guess_m;
-  // Where to start the orientation (e.g. the track's last fit's); unset: at yaw_rad. Only the
-  // start: the prior stays N(yaw_rad, yaw_sigma_rad^2).
-  std::optional<double> yaw_guess_rad;
-  // Where to start the size (a, b); unset: at size_m (the prior stays N(size_m, size_cov_m2)).
-  std::optional<Eigen::Vector2d> size_guess_m;
 };
 
 struct ShapeFitOptions {

@@ -40,7 +40,6 @@
 //                       [--before-deep-evidence] [--before-isotropic-bias] [--before-across-walk]
 //                       [--before-few-point-legs] [--before-legs-seen-through]
 //                       [--before-legs-report-coasting] [--before-outline-departure]
-//                       [--before-fit-start]
 //                       [--before-fusion-merge] [--before-report-sourceless]]
 //   (--extra: more scenario folders, e.g. held-out scenes, reported in their own section;
 //   --explain: per run on stderr, what became of an object's previous track at every id switch
@@ -90,8 +89,6 @@
 //   --before-outline-departure: "before" reports an upper-body centre with the fixed allowances
 //   for the outline alone, not the departure its fit's residuals measure,
 //   ShapeOptions::outline_departure_gain = 0;
-//   --before-fit-start: "before" starts a tracked body's fit at the priors' orientation and size,
-//   not at the track's last fit's, ShapeOptions::fit_start_from_last_fit = false;
 //   --before-fusion-merge: "before"'s fusion leaves a fused track without sources to coast beside
 //   the track that took its object and reports fused tracks no tracker holds any more,
 //   FusionOptions::merge_sourceless = false and report_sourceless = true (its tracker is the new
@@ -818,9 +815,6 @@ bool g_before_legs_report_coasting = false;
 // --before-outline-departure: "before" reports an upper-body centre with the fixed allowances for
 // the outline alone (ShapeOptions::outline_departure_gain = 0).
 bool g_before_outline_departure = false;
-// --before-fit-start: "before" starts a tracked body's fit at the priors' orientation and size,
-// not at the track's last fit's (ShapeOptions::fit_start_from_last_fit = false).
-bool g_before_fit_start = false;
 // --before-fusion-merge: "before"'s fusion without merging fused tracks left without sources and
 // reporting fused tracks no tracker holds any more (FusionOptions::merge_sourceless = false,
 // report_sourceless = true).
@@ -868,8 +862,7 @@ std::vector<Variant> Variants(sim::Mount mount, double range_m) {
              g_before_deep_evidence || g_before_isotropic_bias || g_before_across_walk ||
              g_before_side_uncertainty || g_before_side_from_view || g_before_few_point_legs ||
              g_before_legs_seen_through || g_before_legs_report_coasting ||
-             g_before_outline_departure || g_before_fit_start || g_before_fusion_merge ||
-             g_before_report_sourceless) {
+             g_before_outline_departure || g_before_fusion_merge || g_before_report_sourceless) {
     tracking::TrackerOptions before = fresh;
     if (g_before_one_leg) before.shape.hidden_leg_behind = false;
     if (g_before_mixed_pixels) before.shape.drop_mixed_pixel_legs = false;
@@ -889,7 +882,6 @@ std::vector<Variant> Variants(sim::Mount mount, double range_m) {
     if (g_before_legs_seen_through) before.shape.legs_seen_through = false;
     if (g_before_legs_report_coasting) before.shape.legs_report_coasting_s = 0.0;
     if (g_before_outline_departure) before.shape.outline_departure_gain = 0.0;
-    if (g_before_fit_start) before.shape.fit_start_from_last_fit = false;
     variants.push_back({"before", before});
   }
   return variants;
@@ -1753,8 +1745,8 @@ std::string KneeHeightBefore() {
         g_before_single_beam || g_before_deep_pieces || g_before_deep_evidence ||
         g_before_isotropic_bias || g_before_across_walk || g_before_side_uncertainty ||
         g_before_side_from_view || g_before_few_point_legs || g_before_legs_seen_through ||
-        g_before_legs_report_coasting || g_before_outline_departure || g_before_fit_start ||
-        g_before_fusion_merge || g_before_report_sourceless) ||
+        g_before_legs_report_coasting || g_before_outline_departure || g_before_fusion_merge ||
+        g_before_report_sourceless) ||
       g_before_mixed_pixels || g_before_far || g_before_evidence_coasting ||
       g_before_report_rules) {
     return "";
@@ -1835,11 +1827,6 @@ std::string KneeHeightBefore() {
         "reporting an upper-body centre with the whole fixed allowances for the outline, not the "
         "departure its fit's residuals measure (`shape.outline_departure_gain` 0)");
   }
-  if (g_before_fit_start) {
-    without.push_back(
-        "starting a tracked body's fit at the priors' orientation and size, not at the track's "
-        "last fit's (`shape.fit_start_from_last_fit` false)");
-  }
   std::string text = "\"before\": the new tracker" + std::string(without.empty() ? "" : " ");
   for (std::size_t i = 0; i < without.size(); ++i) {
     text += (i == 0 ? "" : i + 1 == without.size() ? " and " : ", ") + without[i];
@@ -1856,10 +1843,7 @@ std::string KneeHeightBefore() {
             "(`fusion.report_sourceless` true)";
   }
   const char* const same =
-      g_before_fit_start
-          ? ", on the same scans in the same run; upper-body tracks differ by where their fits "
-            "start (the same optimum within the fit's convergence test)"
-      : g_before_outline_departure || g_before_isotropic_bias
+      g_before_outline_departure || g_before_isotropic_bias
           ? ", on the same scans in the same run; upper-body tracks are the same by construction, "
             "their reported covariance (so NEES and what fusion makes of them) is not"
           : ", on the same scans in the same run; upper-body rows are the same by construction";
@@ -1938,8 +1922,6 @@ int main(int argc, char** argv) {
       g_before_legs_report_coasting = true;
     } else if (a == "--before-outline-departure") {
       g_before_outline_departure = true;
-    } else if (a == "--before-fit-start") {
-      g_before_fit_start = true;
     } else if (a == "--before-fusion-merge") {
       g_before_fusion_merge = true;
     } else if (a == "--before-report-sourceless") {
@@ -1957,7 +1939,7 @@ int main(int argc, char** argv) {
                    "[--before-across-walk] [--before-side-uncertainty] "
                    "[--before-side-from-view] [--before-few-point-legs] "
                    "[--before-legs-seen-through] [--before-legs-report-coasting] "
-                   "[--before-outline-departure] [--before-fit-start] [--before-fusion-merge] "
+                   "[--before-outline-departure] [--before-fusion-merge] "
                    "[--before-report-sourceless]]\n");
       return 2;
     }
