@@ -271,7 +271,9 @@ MeasurementKind KindOf(MeasurementMethod method) {
 // The shape fit of an observation with what its track knows (MeasurementRefiner).
 class TrackingPipeline::Refiner final : public MeasurementRefiner {
  public:
-  explicit Refiner(const TrackingPipeline& pipeline) : p_(pipeline) {}
+  // evaluations: where the fits are counted by their evaluations (PipelineCounters).
+  Refiner(const TrackingPipeline& pipeline, std::span<std::uint64_t> evaluations)
+      : p_(pipeline), evaluations_(evaluations) {}
 
   bool Refine(std::size_t source, common::UtcNs at_ns, const Eigen::Vector4d* predicted,
               const Eigen::Matrix4d* predicted_cov, TrackShape& shape,
@@ -345,8 +347,6 @@ class TrackingPipeline::Refiner final : public MeasurementRefiner {
 
   std::uint64_t fits = 0;
   std::uint64_t failed = 0;
-  std::array<std::uint64_t, std::tuple_size_v<decltype(PipelineCounters::shape_fit_evaluations)>>
-      evaluations{};
   std::uint64_t across_walk = 0;
   std::uint64_t side_uncertain = 0;
   std::uint64_t side_from_view = 0;
@@ -424,8 +424,8 @@ class TrackingPipeline::Refiner final : public MeasurementRefiner {
 
   void CountEvaluations(const ShapeFitResult& fit) {
     const auto bin = std::min<std::size_t>(static_cast<std::size_t>(std::max(0, fit.evaluations)),
-                                           evaluations.size() - 1);
-    ++evaluations[bin];
+                                           evaluations_.size() - 1);
+    ++evaluations_[bin];
   }
 
   std::span<const Eigen::Vector2d> Points(const ObservationPart& part) const {
@@ -753,13 +753,14 @@ class TrackingPipeline::Refiner final : public MeasurementRefiner {
   static std::uint32_t& flat_count(TrackShape& shape) { return shape.evidence_updates; }
 
   const TrackingPipeline& p_;
+  std::span<std::uint64_t> evaluations_;
 };
 
 TrackingPipeline::TrackingPipeline(const TrackerOptions& options)
     : options_(Resolved(Checked(options))),
       background_(options.background),
       tracker_(options_.tracking),
-      refiner_(std::make_unique<Refiner>(*this)) {}
+      refiner_(std::make_unique<Refiner>(*this, counters_.shape_fit_evaluations)) {}
 
 TrackingPipeline::~TrackingPipeline() = default;
 
@@ -1485,7 +1486,6 @@ const ScanTracks& TrackingPipeline::Process(const ScanView& scan, std::uint32_t 
   }
 
   const std::uint64_t fits_before = refiner_->fits, failed_before = refiner_->failed;
-  const auto evaluations_before = refiner_->evaluations;
   const std::uint64_t across_walk_before = refiner_->across_walk;
   const std::uint64_t side_uncertain_before = refiner_->side_uncertain;
   const std::uint64_t side_from_view_before = refiner_->side_from_view;
@@ -1496,9 +1496,6 @@ const ScanTracks& TrackingPipeline::Process(const ScanView& scan, std::uint32_t 
                 shape_fit ? refiner_.get() : nullptr, tracks_);
   scan_ = nullptr;
   counters_.shape_fits += refiner_->fits - fits_before;
-  for (std::size_t e = 0; e < evaluations_before.size(); ++e) {
-    counters_.shape_fit_evaluations[e] += refiner_->evaluations[e] - evaluations_before[e];
-  }
   counters_.failed_shape_fits += refiner_->failed - failed_before;
   counters_.legs_across_walk += refiner_->across_walk - across_walk_before;
   counters_.legs_side_uncertain += refiner_->side_uncertain - side_uncertain_before;

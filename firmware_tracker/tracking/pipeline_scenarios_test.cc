@@ -504,6 +504,25 @@ TEST(PipelineScenarioTest, TwoPeoplePassingEachOtherKeepTheirIds) {
   EXPECT_EQ(AllReportedIds(run), ids);
 }
 
+// PipelineCounters::shape_fit_evaluations: every shape fit counted once, by the evaluations of its
+// objective (at least one: the start); a person walking in the open converges within a few.
+TEST(PipelineScenarioTest, ShapeFitsAreCountedByTheirEvaluations) {
+  Scene scene;
+  scene.walkers = {Walker::Path(kLearnedS, {{1.5, -4.0}, {6.0, 4.0}}, 1.2)};
+  const SceneRun run = Simulate(scene, scene.walkers[0].end_s() + 2.0);
+  const PipelineCounters& c = run.pipeline->counters();
+  const auto& histogram = c.shape_fit_evaluations;
+  std::uint64_t fits = 0, within_three = 0;
+  for (std::size_t e = 0; e < histogram.size(); ++e) {
+    fits += histogram[e];
+    if (e >= 1 && e <= 3) within_three += histogram[e];
+  }
+  EXPECT_EQ(histogram[0], 0u);
+  EXPECT_GT(c.shape_fits, 100u);
+  EXPECT_EQ(fits, c.shape_fits + c.failed_shape_fits);
+  EXPECT_GT(static_cast<double>(within_three), 0.9 * static_cast<double>(fits));
+}
+
 TEST(PipelineScenarioTest, TwoPeoplePassingSideBySideKeepTheirIds) {
   // Walking towards and away from the sensor 0.6 m apart: at the crossing the gap between them is
   // 10 cm, so their points may merge into one segment for a few scans.
