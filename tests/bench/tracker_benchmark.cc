@@ -28,6 +28,10 @@
 // few hundred milliseconds; the table gives the median over the rounds and its spread. Without
 // --rounds the cases run one after the other as before and then once more in 10 rounds, whose
 // ratios the table's last column gives (--no-turns leaves that run out).
+//
+// For every case with shape fits, stderr gets the fits' evaluations of their objective (each one
+// pass over the points): fits, evaluations per fit and the fits by their count of evaluations
+// (PipelineCounters::shape_fit_evaluations).
 
 #include <benchmark/benchmark.h>
 #include <sys/resource.h>
