@@ -397,14 +397,11 @@ struct PipelineCounters {
   std::uint64_t com_measurements = 0;
   std::uint64_t shape_fits = 0;         // refined measurements (kShapeFit)
   std::uint64_t failed_shape_fits = 0;  // degenerate input
-  // Shape fits by the evaluations of their objective (ShapeFitResult::evaluations; each one pass
-  // over the points): index e counts the fits with e, the last those with that many or more.
-  std::array<std::uint64_t, 8> shape_fit_evaluations{};
-  std::uint64_t leg_pairs = 0;         // observations of two legs (kLegs)
-  std::uint64_t single_legs = 0;       // observations of one leg
-  std::uint64_t legs_behind = 0;       // of them: the other hidden behind (hidden_leg_behind)
-  std::uint64_t single_beam_legs = 0;  // observations of single-beam legs (single_beam_legs)
-  std::uint64_t legs_across_walk = 0;  // one leg measured across the walk (single_leg_across_walk)
+  std::uint64_t leg_pairs = 0;          // observations of two legs (kLegs)
+  std::uint64_t single_legs = 0;        // observations of one leg
+  std::uint64_t legs_behind = 0;        // of them: the other hidden behind (hidden_leg_behind)
+  std::uint64_t single_beam_legs = 0;   // observations of single-beam legs (single_beam_legs)
+  std::uint64_t legs_across_walk = 0;   // one leg measured across the walk (single_leg_across_walk)
   std::uint64_t legs_side_uncertain = 0;  // of them: side uncertain (single_leg_side_uncertainty)
   std::uint64_t legs_side_from_view = 0;  // of them: side from the scan (single_leg_side_from_view)
   std::uint64_t legs_side_view_contested = 0;   // scan's side against a sure prediction: weighed
@@ -417,6 +414,9 @@ struct PipelineCounters {
   std::uint64_t seen_through = 0;       // coasting track reports dropped (seen through)
   std::uint64_t unseen_coasting = 0;    // coasting track reports dropped (nothing seen near)
   std::uint64_t legs_seen_through = 0;  // knee height: coasting reports dropped (legs seen through)
+  // Shape fits by the evaluations of their objective (ShapeFitResult::evaluations; each one pass
+  // over the points): index e counts the fits with e, the last those with that many or more.
+  std::array<std::uint64_t, 8> shape_fit_evaluations{};
 };
 
 // One piece of an observation: consecutive points of one segment and where its silhouette ends.
