@@ -146,6 +146,7 @@ struct Truth {
   std::size_t id = 0;
   Vector2d p = Vector2d::Zero();
   Vector2d v = Vector2d::Zero();  // velocity of its path (--breakdown), same frame
+  bool trolley = false;           // --breakdown: the object is a trolley
 };
 struct Hypothesis {
   std::uint64_t id = 0;
@@ -244,9 +245,12 @@ constexpr const char* kPointBins[] = {"points 0 (coasting)", "points 1",     "po
                                       "points 5-9",          "points 10-19", "points 20+"};
 // What the scan's measurement of a track was made of (the pipeline's observation): knee height
 // one leg (its partner not seen, or both legs in one segment of too few points to split), one
-// part wider than a leg (two legs that touch), two legs, a segment wider than a pair of legs, one
-// leg taken as hiding the other (ShapeOptions::hidden_leg_behind); coasting, with or without an
-// observation within 0.5 m of the track (one it could have taken).
+// part wider than a leg (two legs that touch; over the shipped scenes nearly all 2-3 points that
+// spread 0.2-0.4 m along the line of sight at 5-15 m: a leg with the other leg or mixed echoes
+// behind it), two legs, a segment wider than a pair of legs (of a person, or of a trolley, a
+// box at every height: its own row), one leg taken as hiding the other
+// (ShapeOptions::hidden_leg_behind); coasting, with or without an observation within 0.5 m of the
+// track (one it could have taken).
 constexpr const char* kPartsBins[] = {"parts: coasting",
                                       "parts: one segment (torso)",
                                       "parts: one leg",
@@ -254,11 +258,12 @@ constexpr const char* kPartsBins[] = {"parts: coasting",
                                       "parts: two legs",
                                       "parts: wider than two legs",
                                       "parts: coasting beside an observation (0.5 m)",
-                                      "parts: one leg hiding the other"};
+                                      "parts: one leg hiding the other",
+                                      "parts: wider than two legs, a trolley"};
 struct Breakdown {
   std::array<BreakdownCell, 4> by_range;
   std::array<BreakdownCell, 6> by_points;
-  std::array<BreakdownCell, 8> by_parts;
+  std::array<BreakdownCell, 9> by_parts;
   // Knee height, by the number of legs measured and the range.
   std::array<BreakdownCell, 4> one_leg_by_range, two_legs_by_range;
   BreakdownCell total;
@@ -278,7 +283,7 @@ struct Breakdown {
                           : parts == 4 ? &two_legs_by_range[RangeBin(range_m)]
                                        : nullptr;
     BreakdownCell* cells[] = {&by_range[RangeBin(range_m)], &by_points[PointBin(h.points)],
-                              &by_parts[parts], &total, legs};
+                              &by_parts[parts == 5 && t.trolley ? 8 : parts], &total, legs};
     const Vector2d e = h.p - t.p;
     for (BreakdownCell* c : cells) {
       if (c != nullptr) c->all.Add(e, los, t.v);
@@ -1135,7 +1140,7 @@ void RunSensor(const sim::Simulator& simulator, std::size_t sensor,
         if (!Scored(target.shape())) furniture.push_back(p);
         continue;
       }
-      truths.push_back({ts.target, p, vel});
+      truths.push_back({ts.target, p, vel, target.shape() == sim::TargetShape::kTrolley});
       seen.push_back(ts.target);
     }
     for (std::size_t v = 0; v < variants.size(); ++v) {
