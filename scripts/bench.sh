@@ -18,7 +18,7 @@ mkdir -p results
   --before-one-leg --before-confirm-time --before-whole-person --before-box-size --before-single-beam \
   --before-deep-pieces --before-deep-evidence --before-isotropic-bias --before-across-walk \
   --before-side-uncertainty --before-side-from-view \
-  --before-few-point-legs --before-legs-seen-through --before-legs-report-coasting \
+  --before-few-point-legs --before-deep-legs --before-legs-seen-through --before-legs-report-coasting \
   --before-outline-departure \
   --before-fusion-merge \
   --out results/tracking_benchmark.md

@@ -72,6 +72,18 @@ double OutlineDepartureVar(const ShapeOptions& o, double rms_m, double range_m) 
   return o.outline_departure_gain * o.outline_departure_gain * excess;
 }
 
+double DeepLegExcessDepth(const ShapeOptions& o, std::span<const Eigen::Vector2d> pts) {
+  if (pts.size() < 2) return 0.0;
+  double nearest = std::numeric_limits<double>::infinity(), farthest = 0.0;
+  for (const Eigen::Vector2d& p : pts) {
+    nearest = std::min(nearest, p.norm());
+    farthest = std::max(farthest, p.norm());
+  }
+  const double noise = o.fit.point_sigma_m + o.fit.point_sigma_per_m * nearest;
+  const double deepest = o.leg_radius_m + 2.0 * o.leg_radius_sigma_m + 3.0 * noise;
+  return std::max(0.0, farthest - nearest - deepest);
+}
+
 }  // namespace internal
 
 namespace {
@@ -560,6 +572,15 @@ class TrackingPipeline::Refiner final : public MeasurementRefiner {
       m.covariance_m2 = 0.25 * (legs[0].centre_cov_m2 + legs[1].centre_cov_m2) +
                         o.gait_sigma_m * o.gait_sigma_m * Eigen::Matrix2d::Identity();
       m.rms_residual_m = std::max(legs[0].rms_m, legs[1].rms_m);
+      const double range = m.position_m.norm();
+      if (ob.deep_pair && range > 0.0) {
+        // ShapeOptions::deep_legs_as_pair: what lies behind the nearer leg may be echoes mixed
+        // between the two legs, nearer than the far leg: the midpoint anywhere within half the
+        // parts' depth apart along the ray.
+        const Eigen::Vector2d ray = m.position_m / range;
+        const double depth = std::abs((legs[1].centre_m - legs[0].centre_m).dot(ray));
+        m.covariance_m2 += (0.25 * depth * depth) * ray * ray.transpose();
+      }
       // Both legs measured the same radius, each with the track's prior: count the prior once.
       const double i0 = 1.0 / std::max(legs[0].size_cov_m2(0, 0), 1e-12);
       const double i1 = 1.0 / std::max(legs[1].size_cov_m2(0, 0), 1e-12);
@@ -925,7 +946,21 @@ void TrackingPipeline::BuildObservations(const ScanView& scan) {
     }
     const std::size_t split = LegSplit(s, pts);
     if (split == 0) {
-      (void)leg_parts_.push_back(MakePart(scan, s, 0, s.point_count));
+      ObservationPart part = MakePart(scan, s, 0, s.point_count);
+      // ShapeOptions::deep_legs_as_pair: where the points are deeper along the ray than one leg,
+      // the place of the widest gap (nearer leg | what lies behind it).
+      if (o.deep_legs_as_pair && pts.size() >= 2 && pts.size() < 4 &&
+          internal::DeepLegExcessDepth(o, pts) > 0.0) {
+        double widest = -1.0;
+        for (std::size_t i = 1; i < pts.size(); ++i) {
+          const double gap = (pts[i] - pts[i - 1]).norm();
+          if (gap > widest) {
+            widest = gap;
+            part.deep_split = i;
+          }
+        }
+      }
+      (void)leg_parts_.push_back(part);
     } else {
       (void)leg_parts_.push_back(MakePart(scan, s, 0, split));
       (void)leg_parts_.push_back(MakePart(scan, s, split, s.point_count - split));
@@ -1282,9 +1317,34 @@ void TrackingPipeline::PairLegs(const ScanView& scan, std::size_t tracks) {
       }
     }
   };
+  // ShapeOptions::deep_legs_as_pair: a confirmed track's single leg deeper than a leg is its two
+  // legs, the nearer and what lies behind it, measured as a pair.
+  const auto emit_deep = [&](std::size_t a) {
+    const ObservationPart& whole = leg_parts_[a];
+    Segment seg;
+    seg.begin_beam = whole.begin_beam;
+    seg.end_beam = whole.end_beam;
+    seg.first_point = whole.first_point;
+    seg.point_count = whole.point_count;
+    Observation ob;
+    ob.legs = true;
+    ob.parts[0] = MakePart(scan, seg, 0, whole.deep_split);
+    ob.parts[1] = MakePart(scan, seg, whole.deep_split, whole.point_count - whole.deep_split);
+    ob.part_count = 2;
+    ob.deep_pair = true;
+    leg_used_[a] = true;
+    ++counters_.leg_pairs;
+    ++counters_.deep_leg_pairs;
+    AddObservation(scan, ob);
+  };
   for (std::size_t t = 0; t < tracks; ++t) {
     std::size_t best_a = n, best_b = n;
     nearest(predictions_[t].position_m, 0, single_beam_first_, best_a, best_b);
+    if (best_a < n && best_a == best_b && predictions_[t].confirmed &&
+        leg_parts_[best_a].deep_split > 0) {
+      emit_deep(best_a);
+      continue;
+    }
     // A confirmed track that found no leg of a segment: its single-beam legs (evidence only).
     if (best_a == n && predictions_[t].confirmed) {
       nearest(predictions_[t].position_m, single_beam_first_, n, best_a, best_b);

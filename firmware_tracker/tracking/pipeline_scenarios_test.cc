@@ -1373,6 +1373,76 @@ TEST(PipelineScenarioTest, TwoLegsSideBySideInOneFewPointSegmentAreMeasuredAsAPa
   EXPECT_LT(after.nees, 3.0);
 }
 
+TEST(PipelineScenarioTest, DeepLegExcessDepthIsWhatLiesBeyondOneLegsVisibleHalf) {
+  const ShapeOptions o = LegsOptions().shape;
+  // Nearest at 6 m: one leg spans at most 0.06 + 2 x 0.015 + 3 (0.015 + 0.001 x 6) = 0.153 m.
+  const std::array<Eigen::Vector2d, 2> deep = {Eigen::Vector2d(6.0, 0.0),
+                                               Eigen::Vector2d(6.25, 0.0)};
+  EXPECT_NEAR(internal::DeepLegExcessDepth(o, deep), 0.25 - 0.153, 1e-9);
+  const std::array<Eigen::Vector2d, 2> leg = {Eigen::Vector2d(6.0, 0.0),
+                                              Eigen::Vector2d(6.1, 0.05)};
+  EXPECT_EQ(internal::DeepLegExcessDepth(o, leg), 0.0);
+  EXPECT_EQ(internal::DeepLegExcessDepth(o, std::span(deep).first(1)), 0.0);
+}
+
+// A person walking across the line of sight at knee height, 6-9 m out at 0.5 deg: one leg stands
+// behind the other along the ray (the hip across the walk), and where a beam grazes both, or the
+// far leg shows past the near one's edge, a segment of two or three points spreads deeper along
+// the ray than one leg. The confirmed track's error and NEES with or without
+// ShapeOptions::deep_legs_as_pair.
+struct CrossingDeep {
+  double error_m = 0.0, nees = 0.0;
+  int n = 0;
+  std::uint64_t deep_pairs = 0;
+};
+CrossingDeep CrossAtKneeHeight(bool deep) {
+  CrossingDeep out;
+  for (const double x : {6.0, 7.0, 8.0, 9.0}) {
+    Scene scene;
+    scene.legs = true;
+    scene.walkers = {Walker::Path(kLearnedS, {{x, -4.0}, {x, 4.0}}, 1.3)};
+    TrackerOptions options = LegsOptions();
+    options.shape.deep_legs_as_pair = deep;
+    const SceneRun run = Simulate(scene, scene.walkers[0].end_s(), options);
+    for (const Frame& f : run.frames) {
+      if (!f.truth[0]) continue;
+      for (const TrackReport& r : f.tracks) {
+        const Eigen::Vector2d e = Position(r) - *f.truth[0];
+        if (r.state != TrackState::kConfirmed || e.norm() > 0.5) continue;
+        out.error_m += e.norm();
+        out.nees += e.dot(r.covariance.topLeftCorner<2, 2>().ldlt().solve(e));
+        ++out.n;
+      }
+    }
+    out.deep_pairs += run.pipeline->counters().deep_leg_pairs;
+  }
+  if (out.n > 0) {
+    out.error_m /= out.n;
+    out.nees /= out.n;
+  }
+  return out;
+}
+
+std::string Describe(const CrossingDeep& c) {
+  return "error " + std::to_string(c.error_m) + " m, NEES " + std::to_string(c.nees) + " (" +
+         std::to_string(c.n) + "), deep pairs " + std::to_string(c.deep_pairs);
+}
+
+TEST(PipelineScenarioTest, ADeepFewPointLegOfAConfirmedTrackIsMeasuredAsItsTwoLegs) {
+  const CrossingDeep before = CrossAtKneeHeight(false);
+  const CrossingDeep after = CrossAtKneeHeight(true);
+  SCOPED_TRACE("before: " + Describe(before) + "; after: " + Describe(after));
+  RecordProperty("before", Describe(before));
+  RecordProperty("after", Describe(after));
+  ASSERT_GT(before.n, 200);
+  ASSERT_GT(after.n, 200);
+  EXPECT_EQ(before.deep_pairs, 0u);
+  EXPECT_GT(after.deep_pairs, 10u);
+  EXPECT_LT(after.error_m, before.error_m);
+  EXPECT_GT(after.nees, 0.2);
+  EXPECT_LT(after.nees, 3.0);
+}
+
 // Six people crossing the room one after another (1.5 s apart, alternating directions), of the
 // sizes given (upper body) or as legs.
 Scene SixCrossing(std::vector<Eigen::Vector2d> sizes, bool legs) {

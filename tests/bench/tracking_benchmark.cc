@@ -38,7 +38,8 @@
 //                       [--before-one-leg] [--before-confirm-time] [--before-whole-person]
 //                       [--before-box-size] [--before-single-beam] [--before-deep-pieces]
 //                       [--before-deep-evidence] [--before-isotropic-bias] [--before-across-walk]
-//                       [--before-few-point-legs] [--before-legs-seen-through]
+//                       [--before-few-point-legs] [--before-deep-legs]
+//                       [--before-legs-seen-through]
 //                       [--before-legs-report-coasting] [--before-outline-departure]
 //                       [--before-fusion-merge] [--before-report-sourceless]]
 //   (--extra: more scenario folders, e.g. held-out scenes, reported in their own section;
@@ -82,6 +83,9 @@
 //   place, ShapeOptions::single_leg_side_from_view = false;
 //   --before-few-point-legs: "before" measures a knee-height segment of two or three points wider
 //   than a leg as one leg, ShapeOptions::split_few_point_legs = false;
+//   --before-deep-legs: "before" measures a confirmed track's knee-height segment of two or three
+//   points deeper along the line of sight than a leg as one leg, ShapeOptions::deep_legs_as_pair
+//   = false;
 //   --before-legs-seen-through: "before" reports a knee-height coasting track also where the scan
 //   sees through every place its legs may stand, ShapeOptions::legs_seen_through = false;
 //   --before-legs-report-coasting: "before" reports a knee-height coasting track for all of
@@ -811,6 +815,10 @@ bool g_before_side_from_view = false;
 // --before-few-point-legs: "before" fits a leg-sized segment of two or three points wider than a
 // leg as one leg (ShapeOptions::split_few_point_legs = false).
 bool g_before_few_point_legs = false;
+// --before-deep-legs: "before" measures a knee-height segment of two or three points deeper along
+// the line of sight than a leg as one leg also for a confirmed track
+// (ShapeOptions::deep_legs_as_pair = false).
+bool g_before_deep_legs = false;
 // --before-legs-seen-through: "before" reports a knee-height coasting track also where the scan
 // sees through every place its legs may stand (ShapeOptions::legs_seen_through = false).
 bool g_before_legs_seen_through = false;
@@ -853,6 +861,7 @@ std::vector<Variant> Variants(sim::Mount mount, double range_m) {
   old.shape.drop_deep_mixed_pixel_pieces = false;
   old.shape.single_leg_across_walk = false;
   old.shape.split_few_point_legs = false;
+  old.shape.deep_legs_as_pair = false;
   old.shape.legs_report_coasting_s = 0.0;
   old.shape.legs_seen_through = false;
   std::vector<Variant> variants = {{"old", old}, {"new", fresh}};
@@ -866,7 +875,7 @@ std::vector<Variant> Variants(sim::Mount mount, double range_m) {
              g_before_box_size || g_before_single_beam || g_before_deep_pieces ||
              g_before_deep_evidence || g_before_isotropic_bias || g_before_across_walk ||
              g_before_side_uncertainty || g_before_side_from_view || g_before_few_point_legs ||
-             g_before_legs_seen_through || g_before_legs_report_coasting ||
+             g_before_deep_legs || g_before_legs_seen_through || g_before_legs_report_coasting ||
              g_before_outline_departure || g_before_fusion_merge || g_before_report_sourceless) {
     tracking::TrackerOptions before = fresh;
     if (g_before_one_leg) before.shape.hidden_leg_behind = false;
@@ -884,6 +893,7 @@ std::vector<Variant> Variants(sim::Mount mount, double range_m) {
     if (g_before_side_uncertainty) before.shape.single_leg_side_uncertainty = false;
     if (g_before_side_from_view) before.shape.single_leg_side_from_view = false;
     if (g_before_few_point_legs) before.shape.split_few_point_legs = false;
+    if (g_before_deep_legs) before.shape.deep_legs_as_pair = false;
     if (g_before_legs_seen_through) before.shape.legs_seen_through = false;
     if (g_before_legs_report_coasting) before.shape.legs_report_coasting_s = 0.0;
     if (g_before_outline_departure) before.shape.outline_departure_gain = 0.0;
@@ -1749,9 +1759,9 @@ std::string KneeHeightBefore() {
   if (!(g_before_one_leg || g_before_confirm_time || g_before_whole_person || g_before_box_size ||
         g_before_single_beam || g_before_deep_pieces || g_before_deep_evidence ||
         g_before_isotropic_bias || g_before_across_walk || g_before_side_uncertainty ||
-        g_before_side_from_view || g_before_few_point_legs || g_before_legs_seen_through ||
-        g_before_legs_report_coasting || g_before_outline_departure || g_before_fusion_merge ||
-        g_before_report_sourceless) ||
+        g_before_side_from_view || g_before_few_point_legs || g_before_deep_legs ||
+        g_before_legs_seen_through || g_before_legs_report_coasting || g_before_outline_departure ||
+        g_before_fusion_merge || g_before_report_sourceless) ||
       g_before_mixed_pixels || g_before_far || g_before_evidence_coasting ||
       g_before_report_rules) {
     return "";
@@ -1816,6 +1826,12 @@ std::string KneeHeightBefore() {
     without.push_back(
         "measuring a knee-height segment of two or three points wider than a leg as one leg "
         "rather than two legs side by side (`shape.split_few_point_legs` false)");
+  }
+  if (g_before_deep_legs) {
+    without.push_back(
+        "measuring a confirmed knee-height track's segment of two or three points deeper along "
+        "the line of sight than a leg as one leg rather than its two legs "
+        "(`shape.deep_legs_as_pair` false)");
   }
   if (g_before_legs_seen_through) {
     without.push_back(
@@ -1921,6 +1937,8 @@ int main(int argc, char** argv) {
       g_before_side_from_view = true;
     } else if (a == "--before-few-point-legs") {
       g_before_few_point_legs = true;
+    } else if (a == "--before-deep-legs") {
+      g_before_deep_legs = true;
     } else if (a == "--before-legs-seen-through") {
       g_before_legs_seen_through = true;
     } else if (a == "--before-legs-report-coasting") {
@@ -1942,7 +1960,7 @@ int main(int argc, char** argv) {
                    "[--before-whole-person] [--before-box-size] [--before-single-beam] "
                    "[--before-deep-pieces] [--before-deep-evidence] [--before-isotropic-bias] "
                    "[--before-across-walk] [--before-side-uncertainty] "
-                   "[--before-side-from-view] [--before-few-point-legs] "
+                   "[--before-side-from-view] [--before-few-point-legs] [--before-deep-legs] "
                    "[--before-legs-seen-through] [--before-legs-report-coasting] "
                    "[--before-outline-departure] [--before-fusion-merge] "
                    "[--before-report-sourceless]]\n");
