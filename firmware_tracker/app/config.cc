@@ -263,10 +263,10 @@ void VisitShape(tracking::ShapeOptions& o, ConfigVisitor& v) {
   v.Field("deep_legs_as_pair", o.deep_legs_as_pair,
           "mount legs: a leg-sized segment of two or three points spread along the line of "
           "sight deeper than one leg's visible half can be (leg_radius_m + 2 leg_radius_sigma_m "
-          "+ 3 sigma of the range noise), taken by a confirmed track, is that track's two legs "
-          "(the nearer, and the other or the echoes mixed between them behind it): split at its "
-          "widest gap and measured as a pair, half the parts' depth apart as its sigma along the "
-          "ray (false: one leg).");
+          "+ 3 sigma of the range noise), taken by a confirmed track whose predicted centre lies "
+          "beyond the near leg's front, is that track's two legs (the nearer, and the other or "
+          "the echoes mixed between them behind it): split at its widest gap and measured as a "
+          "pair, half the parts' depth apart as its sigma along the ray (false: one leg).");
   v.Field("single_beam_legs", o.single_beam_legs,
           "mount legs: a leg returned by a single beam (below segmentation.min_points), where "
           "a leg is narrower than two beams' spacing, within leg_pairing_distance_m of one "

@@ -1317,8 +1317,9 @@ void TrackingPipeline::PairLegs(const ScanView& scan, std::size_t tracks) {
       }
     }
   };
-  // ShapeOptions::deep_legs_as_pair: a confirmed track's single leg deeper than a leg is its two
-  // legs, the nearer and what lies behind it, measured as a pair.
+  // ShapeOptions::deep_legs_as_pair: a confirmed track's single leg deeper than a leg, with the
+  // track's predicted centre beyond the near leg's front, is its two legs, the nearer and what
+  // lies behind it, measured as a pair.
   const auto emit_deep = [&](std::size_t a) {
     const ObservationPart& whole = leg_parts_[a];
     Segment seg;
@@ -1341,7 +1342,9 @@ void TrackingPipeline::PairLegs(const ScanView& scan, std::size_t tracks) {
     std::size_t best_a = n, best_b = n;
     nearest(predictions_[t].position_m, 0, single_beam_first_, best_a, best_b);
     if (best_a < n && best_a == best_b && predictions_[t].confirmed &&
-        leg_parts_[best_a].deep_split > 0) {
+        leg_parts_[best_a].deep_split > 0 &&
+        (predictions_[t].position_m - leg_centres_m_[best_a]).dot(leg_centres_m_[best_a]) >
+            -o.leg_radius_m * leg_centres_m_[best_a].norm()) {
       emit_deep(best_a);
       continue;
     }
