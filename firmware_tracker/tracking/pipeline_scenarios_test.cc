@@ -241,6 +241,30 @@ SceneRun Simulate(const Scene& scene, double duration_s,
 
 Eigen::Vector2d Position(const TrackReport& r) { return {r.x_m, r.y_m}; }
 
+// The mean error and NEES of the confirmed tracks within max_error_m of walker 0's truth, from
+// from_s on, summed over runs by Add and divided by Mean.
+struct ConfirmedError {
+  double error_m = 0.0, nees = 0.0;
+  int n = 0;
+  void Add(const SceneRun& run, double from_s, double max_error_m) {
+    for (const Frame& f : run.frames) {
+      if (!f.truth[0] || f.t_s < from_s) continue;
+      for (const TrackReport& r : f.tracks) {
+        const Eigen::Vector2d e = Position(r) - *f.truth[0];
+        if (r.state != TrackState::kConfirmed || e.norm() > max_error_m) continue;
+        error_m += e.norm();
+        nees += e.dot(r.covariance.topLeftCorner<2, 2>().ldlt().solve(e));
+        ++n;
+      }
+    }
+  }
+  void Mean() {
+    if (n == 0) return;
+    error_m /= n;
+    nees /= n;
+  }
+};
+
 // Id of the reported track nearest to walker w's truth within radius_m, 0 if none.
 std::uint32_t MatchedId(const Frame& f, std::size_t w, double radius_m) {
   if (!f.truth[w]) return 0;
@@ -1311,9 +1335,7 @@ TEST(PipelineScenarioTest, OneLegSideIsNotTakenFromTheViewBeyondALegsFootprint) 
 // two or three points, wider across the ray than a leg. The standing person's error (confirmed
 // tracks from 0.5 s after the stop), with or without ShapeOptions::split_few_point_legs, over
 // lateral offsets that move the beams across the legs.
-struct StandingFar {
-  double error_m = 0.0, nees = 0.0;
-  int n = 0;
+struct StandingFar : ConfirmedError {
   std::uint64_t splits = 0;
 };
 StandingFar StandFarAtKneeHeight(bool split) {
@@ -1331,22 +1353,10 @@ StandingFar StandFarAtKneeHeight(bool split) {
     TrackerOptions options = LegsOptions();
     options.shape.split_few_point_legs = split;
     const SceneRun run = Simulate(scene, stop_s + 3.0, options);
-    for (const Frame& f : run.frames) {
-      if (!f.truth[0] || f.t_s < stop_s + 0.5) continue;
-      for (const TrackReport& r : f.tracks) {
-        const Eigen::Vector2d e = Position(r) - *f.truth[0];
-        if (r.state != TrackState::kConfirmed || e.norm() > 0.4) continue;
-        out.error_m += e.norm();
-        out.nees += e.dot(r.covariance.topLeftCorner<2, 2>().ldlt().solve(e));
-        ++out.n;
-      }
-    }
+    out.Add(run, stop_s + 0.5, 0.4);
     out.splits += run.pipeline->counters().split_few_point_legs;
   }
-  if (out.n > 0) {
-    out.error_m /= out.n;
-    out.nees /= out.n;
-  }
+  out.Mean();
   return out;
 }
 
@@ -1390,9 +1400,7 @@ TEST(PipelineScenarioTest, DeepLegExcessDepthIsWhatLiesBeyondOneLegsVisibleHalf)
 // far leg shows past the near one's edge, a segment of two or three points spreads deeper along
 // the ray than one leg. The confirmed track's error and NEES with or without
 // ShapeOptions::deep_legs_as_pair.
-struct CrossingDeep {
-  double error_m = 0.0, nees = 0.0;
-  int n = 0;
+struct CrossingDeep : ConfirmedError {
   std::uint64_t deep_pairs = 0;
 };
 CrossingDeep CrossAtKneeHeight(bool deep) {
@@ -1404,22 +1412,10 @@ CrossingDeep CrossAtKneeHeight(bool deep) {
     TrackerOptions options = LegsOptions();
     options.shape.deep_legs_as_pair = deep;
     const SceneRun run = Simulate(scene, scene.walkers[0].end_s(), options);
-    for (const Frame& f : run.frames) {
-      if (!f.truth[0]) continue;
-      for (const TrackReport& r : f.tracks) {
-        const Eigen::Vector2d e = Position(r) - *f.truth[0];
-        if (r.state != TrackState::kConfirmed || e.norm() > 0.5) continue;
-        out.error_m += e.norm();
-        out.nees += e.dot(r.covariance.topLeftCorner<2, 2>().ldlt().solve(e));
-        ++out.n;
-      }
-    }
+    out.Add(run, 0.0, 0.5);
     out.deep_pairs += run.pipeline->counters().deep_leg_pairs;
   }
-  if (out.n > 0) {
-    out.error_m /= out.n;
-    out.nees /= out.n;
-  }
+  out.Mean();
   return out;
 }
 
