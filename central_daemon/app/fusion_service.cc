@@ -142,7 +142,7 @@ void FusionService::Publish() {
   if (now_ns_ == 0) return;
   Invalidate();
   fuser_.Tick(now_ns_);
-  const std::vector<fusion::FusedTrack>& tracks = Output().tracks;
+  const std::vector<fusion::FusedTrack>& tracks = PeekOutput().tracks;
   ++counters_.publishes;
   if (socket_) {
     for (const std::string& datagram : fusion::FusedTrackDatagrams(tracks, now_ns_)) {
@@ -170,13 +170,24 @@ void FusionService::Publish() {
   }
 }
 
-const fusion::FusionOutput& FusionService::Output() const {
+const fusion::FusionOutput& FusionService::CachedOrFresh(bool mark) const {
+  using EndsRead = fusion::Fuser::EndsRead;
   if (!output_ || output_->now_ns != now_ns_ || output_->generation != generation_) {
-    output_ = CachedOutput{now_ns_, generation_, fuser_.Output(now_ns_)};
+    output_ =
+        CachedOutput{now_ns_, generation_,
+                     fuser_.Output(now_ns_, false, mark ? EndsRead::kMark : EndsRead::kPeek), mark};
     ++counters_.outputs_computed;
+  } else if (mark && !output_->ends_marked) {
+    // Computed for a look: the same ends, read now.
+    fuser_.MarkEndsRead(now_ns_);
+    output_->ends_marked = true;
   }
   return output_->output;
 }
+
+const fusion::FusionOutput& FusionService::Output() const { return CachedOrFresh(true); }
+
+const fusion::FusionOutput& FusionService::PeekOutput() const { return CachedOrFresh(false); }
 
 void FusionService::Close() {
   if (record_ != nullptr) {

@@ -79,7 +79,12 @@ class FusionService final : public FrameListener {
   // and the ended ids), computed once and handed to every consumer (the publish, the zones,
   // MQTT, the live view) until the fuser's input changes: a frame, a Tick, placements, tracker
   // models or options (another fuser: the generation). The reference is valid until then.
+  // Output is for the consumers that follow ids (the zones, MQTT objects): it marks the ends it
+  // lists as read (their ended_report_s runs from then). PeekOutput is for the ones that only
+  // look (the publish, the live view, the status line): it marks nothing, so a look cannot take
+  // an end away before the followers read it (the same cached output serves both).
   const fusion::FusionOutput& Output() const;
+  const fusion::FusionOutput& PeekOutput() const;
   // +1 each time a new fuser starts (Reconfigure with changed options, or fusion_enabled turned
   // off): the ids known from the previous one are no longer its ids, every one of them ended.
   std::uint64_t generation() const { return generation_; }
@@ -109,11 +114,15 @@ class FusionService final : public FrameListener {
   std::optional<boost::asio::ip::udp::socket> socket_;
   boost::asio::ip::udp::endpoint destination_;
   std::FILE* record_ = nullptr;
-  // Output's cache: the output and what it was computed for (now_ns_, generation_).
+  // The cached output, computed afresh when its input changed; mark: its ends are marked read.
+  const fusion::FusionOutput& CachedOrFresh(bool mark) const;
+  // Output's cache: the output, what it was computed for (now_ns_, generation_) and whether its
+  // ends were marked read.
   struct CachedOutput {
     common::UtcNs now_ns = 0;
     std::uint64_t generation = 0;
     fusion::FusionOutput output;
+    bool ends_marked = false;
   };
   mutable std::optional<CachedOutput> output_;
   mutable FusionServiceCounters counters_;  // outputs_computed counts in Output

@@ -158,7 +158,7 @@ LiveState LiveFeed::Build(const Daemon& daemon, const CalibrationService& calibr
       track.fused_id = t.fused_id;
       state.tracks.push_back(std::move(track));
     }
-    const fusion::FusionOutput& output = fusion.Output();
+    const fusion::FusionOutput& output = fusion.PeekOutput();
     for (const fusion::HiddenFusedTrack& h : output.hidden) {
       state.hidden.push_back(
           {h.id, h.x_m, h.y_m,

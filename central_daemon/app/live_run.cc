@@ -244,7 +244,7 @@ int RunLive(const RunOptions& run, DaemonConfig config) {
       line += " | " + calibration.StatusText();
       if (const std::string moved = monitoring.StatusText(); !moved.empty()) line += " | " + moved;
       if (fusion.calibrated()) {
-        line += fmt::format(" | fused tracks {}", fusion.Output().tracks.size());
+        line += fmt::format(" | fused tracks {}", fusion.PeekOutput().tracks.size());
       }
       if (mqtt.publisher) {
         const MqttCounters m = mqtt.publisher->counters();

@@ -558,6 +558,80 @@ TEST(MqttServiceOutput, EveryConsumerSeesOneOutputPerPeriod) {
   EXPECT_EQ(fusion.counters().outputs_computed, 20u);
 }
 
+// MQTT alone follows the ids, every 10 s of data (objects_hz 0.1; ends kept for 20 s). A person
+// stands in front of the sensor until 12 s; their fused id ends (timed out) at about 13.5 s,
+// after MQTT's last object list; the data stop at 14 s and resume 60 s later. The fused tracks'
+// publish (10 Hz) and the live view only look at the outputs in between: the end is still
+// reported when MQTT next reads, which ends the object as timed out with its path. Before (a look
+// marked the end as read): forgotten at the publish 0.2 s after the data resumed, the object
+// ended as hold_expired.
+TEST(MqttServiceOutput, AnEndOnlyLookedAtIsKeptUntilTheFollowersReadIt) {
+  DaemonConfig config;
+  config.fusion.report_sourceless = false;
+  config.fusion.ended_report_s = 20.0;
+  config.mqtt.objects_hz = 0.1;
+  config.mqtt.path_points = 40;
+  Services x(config);
+  FusionService& fusion = x.fusion;
+  LiveFeed feed(100);
+  std::uint32_t scan = 0;
+  std::uint64_t id = 0;
+  for (double t = 0.0; t < 90.0 - 1e-9; t += 0.04) {
+    if (t >= 14.0 && t < 74.0) continue;  // no data
+    std::vector<TrackObservation> tracks;
+    if (t < 12.0) tracks.push_back(Standing(1));
+    fusion.OnFrame("s1", FrameWith(t, scan++, tracks));
+    if (scan % 5 == 0) {
+      fusion.OnTick(t);
+      feed.Build(x.daemon, x.calibration, fusion, At(t), "test", &x.zones);
+      if (id == 0 && !fusion.PeekOutput().tracks.empty()) id = fusion.PeekOutput().tracks[0].id;
+    }
+    if (scan % 25 == 0) x.mqtt.OnTick(At(t), x.daemon, fusion, x.zones);
+  }
+  ASSERT_NE(id, 0u);
+  const std::vector<nlohmann::json> ended = x.Messages("/objects/ended");
+  ASSERT_EQ(ended.size(), 1u);
+  ASSERT_EQ(ended[0]["ended"].size(), 1u);
+  EXPECT_EQ(ended[0]["ended"][0]["id"], id);
+  EXPECT_EQ(ended[0]["ended"][0]["reason"], "timed_out");
+  // Read after the data resumed.
+  EXPECT_GT(ended[0]["stamp_ns"].get<common::UtcNs>(), At(74.0));
+  EXPECT_EQ(x.mqtt.counters().objects_ended, 1u);
+  EXPECT_EQ(x.mqtt.counters().objects_gone, 0u);
+}
+
+// The fusion service's output is computed for the publish (a look) and then read by a consumer
+// that follows ids at the same data time: the read comes from the cache and still marks the ends
+// it lists as read, so their ended_report_s runs from then. A person is seen until 1 s (their id
+// ends at about 3 s); the end is read at 4 s, then only looked at until 30 s (ended_report_s
+// 20 s): read again then, and forgotten at the next publish.
+TEST(MqttServiceOutput, AReadOfACachedLookMarksTheEnds) {
+  DaemonConfig config;
+  config.fusion.report_sourceless = false;
+  config.fusion.ended_report_s = 20.0;
+  Services x(config);
+  FusionService& fusion = x.fusion;
+  std::uint32_t scan = 0;
+  bool read = false;
+  for (double t = 0.0; t < 30.0 - 1e-9; t += 0.04) {
+    std::vector<TrackObservation> tracks;
+    if (t < 1.0) tracks.push_back(Standing(1));
+    fusion.OnFrame("s1", FrameWith(t, scan++, tracks));
+    if (scan % 5 != 0) continue;
+    fusion.OnTick(t);  // the publish looks
+    if (!read && t >= 4.0) {
+      const std::uint64_t computed = fusion.counters().outputs_computed;
+      ASSERT_EQ(fusion.Output().ended.size(), 1u);  // read from the cached look
+      EXPECT_EQ(fusion.counters().outputs_computed, computed);
+      read = true;
+    }
+  }
+  ASSERT_TRUE(read);
+  ASSERT_EQ(fusion.Output().ended.size(), 1u);  // read at 30 s: more than 20 s after 4 s
+  fusion.OnTick(40.0);                          // a publish: its Tick forgets the end
+  EXPECT_TRUE(fusion.PeekOutput().ended.empty());
+}
+
 // MQTT meets the survivor of a merge only as the merge's target: the person's first fused id (1)
 // is hidden (its tracker dropped it; a new track started beside it) before the MQTT output's first
 // object list, which holds only the new id; the fusion then merges the new id into 1. The object

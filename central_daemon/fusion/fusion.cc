@@ -412,14 +412,16 @@ std::vector<FusedTrack> Fuser::Snapshot(common::UtcNs now_ns, bool include_tenta
   return engine_->Snapshot(now_ns, include_tentative);
 }
 
-FusionOutput Fuser::Output(common::UtcNs now_ns, bool include_tentative) const {
+FusionOutput Fuser::Output(common::UtcNs now_ns, bool include_tentative, EndsRead ends_read) const {
   FusionOutput out;
   out.stamp_ns = now_ns;
   out.tracks = engine_->Snapshot(now_ns, include_tentative);
   out.hidden = engine_->Hidden(out.tracks, now_ns);
-  out.ended = engine_->OutputEnded(now_ns);
+  out.ended = engine_->OutputEnded(now_ns, ends_read == EndsRead::kMark);
   return out;
 }
+
+void Fuser::MarkEndsRead(common::UtcNs now_ns) const { engine_->MarkEndedRead(now_ns); }
 
 std::uint64_t Fuser::next_id() const { return engine_->next_id(); }
 

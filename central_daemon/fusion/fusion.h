@@ -313,12 +313,14 @@ struct FusionOptions {
   // nor a new entry there) and end it as soon as Output reports it ended.
   bool report_sourceless = false;
   // How long [s] Output keeps reporting an id that ended (timed out, merged into another id),
-  // with why, in the time of the outputs: from the first Output that listed the end until the
-  // outputs since span more than ended_report_s (it is forgotten at the next Tick), so a gap in
-  // the data does not take an end away before a consumer read it. Consumers that take an output
-  // at least every ended_report_s / 2 (two of their periods fit in it) learn of every end
-  // (lrfnetd's zones and MQTT objects: at least every 10 s). At most max_fused_tracks ends are
-  // kept: beyond that the oldest is forgotten earlier (FusionCounters::ended_evicted).
+  // with why, in the time of the outputs read by consumers that follow ids (Output with
+  // EndsRead::kMark): from the first such Output that listed the end until the ones since span
+  // more than ended_report_s (it is forgotten at the next Tick), so a gap in the data does not
+  // take an end away before a consumer read it; outputs only looked at (kPeek) do not count.
+  // Consumers that take an output at least every ended_report_s / 2 (two of their periods fit in
+  // it) learn of every end (lrfnetd's zones and MQTT objects: at least every 10 s). At most
+  // max_fused_tracks ends are kept: beyond that the oldest is forgotten earlier
+  // (FusionCounters::ended_evicted); ends no consumer reads are kept until then.
   double ended_report_s = 30.0;
 
   // Plausibility of a local track (sensor frame); anything outside is skipped and counted.
@@ -545,9 +547,17 @@ class Fuser {
   // Snapshot's tracks and, besides them, the confirmed fused ids the fuser keeps without
   // reporting them (hidden) and the ids that ended and are still kept (ended_report_s),
   // with why (FusionOutput). Consumers that follow ids over time (zones, MQTT objects) hold a
-  // hidden id and end an ended one at once (IdFollower). An output marks the ends it lists as
-  // reported (ended_report_s runs from then): lrfnetd computes one per output time and shares it.
-  FusionOutput Output(common::UtcNs now_ns, bool include_tentative = false) const;
+  // hidden id and end an ended one at once (IdFollower). An output read by such a consumer
+  // (EndsRead::kMark) marks the ends it lists as read (ended_report_s runs from then, in the time
+  // of the marked outputs); one that is only looked at (kPeek: the fused tracks' publish, a live
+  // view, a status line) changes nothing, so it cannot take an end away before the consumers read
+  // it. lrfnetd computes one per output time and shares it.
+  enum class EndsRead : std::uint8_t { kMark, kPeek };
+  FusionOutput Output(common::UtcNs now_ns, bool include_tentative = false,
+                      EndsRead ends_read = EndsRead::kMark) const;
+  // Marks the ends kept as read at now_ns, as Output with kMark does (for a consumer that reads an
+  // output computed earlier with kPeek at the same now_ns and fuser state).
+  void MarkEndsRead(common::UtcNs now_ns) const;
   // The id the next fused track gets (ids grow by one from 1).
   std::uint64_t next_id() const;
   // Makes the next fused ids start at next_id at least (a fuser that replaces another passes

@@ -58,17 +58,22 @@ class Engine {
   void SetEndedReportS(double s) { options_.ended_report_s = s; }
   const FusionCounters& counters() const { return counters_; }
   const FusionOptions& options() const { return options_; }
-  // The ends kept (FusionOutput::ended), in the order recorded, for an output at now_ns: notes
-  // that they were output then (their retention counts from their first output).
-  std::vector<EndedFusedTrack> OutputEnded(common::UtcNs now_ns) const {
-    latest_output_ns_ = now_ns;
+  // The ends kept (FusionOutput::ended), in the order recorded, for an output at now_ns. When
+  // mark_read: notes that they were read then (their retention counts from their first read, and
+  // only reads advance its clock); else they are only looked at.
+  std::vector<EndedFusedTrack> OutputEnded(common::UtcNs now_ns, bool mark_read) const {
+    if (mark_read) MarkEndedRead(now_ns);
     std::vector<EndedFusedTrack> out;
     out.reserve(ended_.size());
+    for (const KeptEnd& k : ended_) out.push_back(k.end);
+    return out;
+  }
+  // Notes that the ends kept were read at now_ns (as OutputEnded with mark_read).
+  void MarkEndedRead(common::UtcNs now_ns) const {
+    latest_output_ns_ = now_ns;
     for (KeptEnd& k : ended_) {
       if (k.first_output_ns == 0) k.first_output_ns = now_ns;
-      out.push_back(k.end);
     }
-    return out;
   }
 
  protected:
@@ -82,9 +87,9 @@ class Engine {
       ++counters_.ended_evicted;
     }
   }
-  // Forgets the ends that were in outputs spanning more than ended_report_s (call from Tick):
-  // the time is the outputs', so a gap in the data between an end and the next output does not
-  // take the end away before a consumer read it. Ends first output later are behind the others.
+  // Forgets the ends that were in read outputs spanning more than ended_report_s (call from
+  // Tick): the time is the reads', so a gap in the data between an end and the next read does
+  // not take the end away before a consumer read it. Ends first read later are behind the others.
   void ForgetEnded() {
     while (!ended_.empty() && ended_.front().first_output_ns != 0 &&
            Seconds(latest_output_ns_, ended_.front().first_output_ns) > options_.ended_report_s) {
@@ -99,9 +104,9 @@ class Engine {
  private:
   struct KeptEnd {
     EndedFusedTrack end;
-    common::UtcNs first_output_ns = 0;  // the first output it was in, 0 before
+    common::UtcNs first_output_ns = 0;  // the first read output it was in, 0 before
   };
-  // Output (const) notes which ends it gave out: the fuser is used from one thread.
+  // Output (const) notes which ends were read: the fuser is used from one thread.
   mutable std::deque<KeptEnd> ended_;
   mutable common::UtcNs latest_output_ns_ = 0;
 };

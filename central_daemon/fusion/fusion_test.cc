@@ -1167,6 +1167,40 @@ TEST(FusedFilterTest, OutputReportsAMergedIdWithTheIdItGoesOnAs) {
   EXPECT_EQ(next.ended[0].reason, FusedEndReason::kTimedOut);
 }
 
+// The left-behind run looked at only (Output with EndsRead::kPeek, as the fused tracks' publish
+// and a live view do): its ends are not marked read, so however long the outputs looked at span
+// they stay; their ended_report_s runs from the first output read with kMark, in the time of
+// such outputs alone.
+TEST(FusedFilterTest, OutputsOnlyLookedAtKeepTheEndsForTheReaders) {
+  Fuser fuser{FusionOptions{}};
+  fuser.SetPlacements({Placed("a", 0, 0, 0)});
+  const double report_s = FusionOptions{}.ended_report_s;
+  for (int k = 0; k <= 50; ++k) {
+    const double t = StepLeftBehind(fuser, k);
+    fuser.Output(AtSeconds(t), false, Fuser::EndsRead::kPeek);
+  }
+  // Looked at over more than ended_report_s: 2's end (and 1's, timed out meanwhile) stay.
+  for (double t = 4.0; t < 4.0 + 2.0 * report_s; t += 1.0) {
+    fuser.Tick(AtSeconds(t));
+    fuser.Output(AtSeconds(t), false, Fuser::EndsRead::kPeek);
+  }
+  const double read_s = 4.0 + 2.0 * report_s;
+  fuser.Tick(AtSeconds(read_s));
+  const FusionOutput read = fuser.Output(AtSeconds(read_s));  // read: marked now
+  ASSERT_EQ(read.ended.size(), 2u);
+  EXPECT_EQ(read.ended[0].id, 2u);
+  EXPECT_EQ(read.ended[1].id, 1u);
+  // Looks later than ended_report_s after the read do not advance the reads' time: kept.
+  fuser.Tick(AtSeconds(read_s + report_s + 1.0));
+  EXPECT_EQ(
+      fuser.Output(AtSeconds(read_s + report_s + 1.0), false, Fuser::EndsRead::kPeek).ended.size(),
+      2u);
+  // A read then, and a Tick: forgotten.
+  fuser.MarkEndsRead(AtSeconds(read_s + report_s + 1.0));
+  fuser.Tick(AtSeconds(read_s + report_s + 1.04));
+  EXPECT_TRUE(fuser.Output(AtSeconds(read_s + report_s + 1.04)).ended.empty());
+}
+
 // A walker leaves the only sensor's view at t = 2 s and is not seen again: once its source timed
 // out the fused id is hidden (kept, not reported: with its last update's time and place), and
 // max_coast_s after that update it ends as timed out.
