@@ -73,7 +73,12 @@ const std::vector<IdEvent>& IdFollower::Update(const FusionOutput& output, std::
   return events_;
 }
 
-std::uint64_t IdFollower::Survivor(std::uint64_t id, std::uint64_t into) {
+bool IdFollower::EndedBefore(std::uint64_t id, std::size_t position) const {
+  const auto it = ended_at_.find(id);
+  return it != ended_at_.end() && it->second < position;
+}
+
+std::uint64_t IdFollower::Survivor(std::uint64_t id, std::uint64_t into, std::size_t position) {
   // Through ids absent from the tracks that were merged on themselves, to the id that goes on.
   std::set<std::uint64_t> visited{id};
   std::uint64_t survivor = into;
@@ -83,6 +88,12 @@ std::uint64_t IdFollower::Survivor(std::uint64_t id, std::uint64_t into) {
       return 0;
     }
     if (std::binary_search(present_.begin(), present_.end(), survivor)) return survivor;
+    // An id that ended (not merged) before this end in the output cannot take the object on,
+    // whether the consumer knew it or not.
+    if (EndedBefore(survivor, position)) {
+      ++counters_.merges_into_ended;
+      return 0;
+    }
     const auto next = merged_into_.find(survivor);
     if (next == merged_into_.end()) return survivor;
     if (hops >= options_.max_merge_hops) {
@@ -120,13 +131,20 @@ const std::vector<IdEvent>& IdFollower::Update(std::span<const std::uint64_t> pr
     return std::binary_search(present_.begin(), present_.end(), id);
   };
   merged_into_.clear();
-  for (const EndedFusedTrack& e : ended) {
-    if (e.merged_into != 0) merged_into_[e.id] = e.merged_into;
+  ended_at_.clear();
+  for (std::size_t i = 0; i < ended.size(); ++i) {
+    const EndedFusedTrack& e = ended[i];
+    if (e.merged_into != 0) {
+      merged_into_[e.id] = e.merged_into;
+    } else if (!present(e.id)) {
+      ended_at_.try_emplace(e.id, i);  // known or not: its first end without a merge
+    }
   }
 
-  // Ends, as of the previous period.
+  // Ends, as of the previous period. Known ids whose merge is unresolved end too.
   std::set<std::uint64_t> ended_now;
-  for (const EndedFusedTrack& e : ended) {
+  for (std::size_t i = 0; i < ended.size(); ++i) {
+    const EndedFusedTrack& e = ended[i];
     const auto it = ids_.find(e.id);
     if (it == ids_.end() || present(e.id)) continue;
     IdEvent ev;
@@ -136,9 +154,13 @@ const std::vector<IdEvent>& IdFollower::Update(std::span<const std::uint64_t> pr
     ev.ended_ns = e.ended_ns;
     const Followed followed = it->second;
     ids_.erase(it);
-    std::uint64_t survivor = e.merged_into != 0 ? Survivor(e.id, e.merged_into) : 0;
-    // A survivor that ended earlier in this output cannot take the object on.
-    if (survivor != 0 && ended_now.count(survivor) != 0) survivor = 0;
+    std::uint64_t survivor = e.merged_into != 0 ? Survivor(e.id, e.merged_into, i) : 0;
+    // A survivor that ended earlier in this output (its own merge unresolved) cannot take the
+    // object on.
+    if (survivor != 0 && ended_now.count(survivor) != 0) {
+      ++counters_.merges_into_ended;
+      survivor = 0;
+    }
     if (survivor != 0) {
       ev.kind = IdEventKind::kMerged;
       ev.survivor = survivor;

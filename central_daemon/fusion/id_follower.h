@@ -16,8 +16,9 @@
 //   the tracks; the walk stops at an id in the tracks. A survivor the consumer did not know takes
 //   the merged id's place whole (its hold too, if it was held): the consumer moves its state to
 //   it. A merge into itself, into a cycle of merges, along more than max_merge_hops merges (all
-//   counted), or into an id that ended earlier in the same output is not followed: the id ends
-//   (kMergeUnresolved).
+//   counted), or into an id that ended earlier in the same output (timed out, or its own merge
+//   not followed; whether the consumer knew that id or not; counted) is not followed: the id
+//   ends (kMergeUnresolved).
 // - ended: timed out (the fusion's end), fusion_restarted (a new generation, or EndAll: every
 //   known id ends), hold_expired (absent without a word from the fusion for absent_hold_s, or a
 //   hold that began after the period's time: the clock stepped back). Ended and merged ids are
@@ -113,6 +114,8 @@ struct IdFollowerCounters {
   std::uint64_t merge_cycles = 0;      // merges into itself or into a cycle (ended)
   std::uint64_t merge_chains_cut = 0;  // chains longer than max_merge_hops (ended)
   std::uint64_t duplicates = 0;        // ids listed again in one period's tracks (ignored)
+  // Merges into an id that ended earlier in the same output (known to the consumer or not; ended)
+  std::uint64_t merges_into_ended = 0;
 };
 
 class IdFollower {
@@ -144,8 +147,11 @@ class IdFollower {
     common::UtcNs held_since_ns = 0;
   };
   void EndAllInto(common::UtcNs now_ns);
-  // The survivor of a merge of `id` into `into` (0: unresolved, counted).
-  std::uint64_t Survivor(std::uint64_t id, std::uint64_t into);
+  // The survivor of a merge of `id` into `into` listed at `position` of the output's ends (0:
+  // unresolved, counted).
+  std::uint64_t Survivor(std::uint64_t id, std::uint64_t into, std::size_t position);
+  // Whether the output ends `id` without a merge before `position` of its ends.
+  bool EndedBefore(std::uint64_t id, std::size_t position) const;
 
   IdFollowerOptions options_;
   std::map<std::uint64_t, Followed> ids_;
@@ -156,6 +162,9 @@ class IdFollower {
   std::vector<std::uint64_t> present_;
   std::vector<std::uint64_t> hidden_;
   std::map<std::uint64_t, std::uint64_t> merged_into_;
+  // Per period, reused: every id the output ends without a merge (absent from the tracks, known
+  // or not) and the position of its first such end.
+  std::map<std::uint64_t, std::size_t> ended_at_;
   IdFollowerCounters counters_;
 };
 

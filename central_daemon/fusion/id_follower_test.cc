@@ -228,6 +228,31 @@ TEST(IdFollowerTest, HostileInputIsBoundedAndCounted) {
   EXPECT_EQ(t.Step({}, {}, {TimedOut(1), Merged(2, 1)}),
             (Events{"1 ended timed_out", "2 ended merge_unresolved"}));
   EXPECT_FALSE(t.follower().Known(1));
+  EXPECT_EQ(t.follower().counters().merges_into_ended, 1u);
+}
+
+// A merge into an id that ended earlier in the same output is unresolved whether the consumer
+// knew that id or not: an ended id never takes an object on.
+TEST(IdFollowerTest, AMergeIntoAnIdEndedEarlierIsUnresolvedKnownOrNot) {
+  // The consumer never knew the survivor (it was hidden from before the consumer's first
+  // period): 1 ended, nothing goes on as it.
+  Feed u;
+  u.Step({2}, {1});
+  EXPECT_EQ(u.Step({}, {}, {TimedOut(1), Merged(2, 1)}), (Events{"2 ended merge_unresolved"}));
+  EXPECT_FALSE(u.follower().Known(1));
+  EXPECT_EQ(u.follower().counters().taken_over, 0u);
+  EXPECT_EQ(u.follower().counters().merges_into_ended, 1u);
+  // Through a chain: 3 -> 2 -> 1 with 1 (unknown) timed out before; 2 (unknown) merged after.
+  Feed w;
+  w.Step({3}, {1, 2});
+  EXPECT_EQ(w.Step({}, {}, {TimedOut(1), Merged(3, 2), Merged(2, 1)}),
+            (Events{"3 ended merge_unresolved"}));
+  EXPECT_EQ(w.follower().size(), 0u);
+  // An id that ends after the merge into it (later in the list) took the object on first.
+  Feed v;
+  v.Step({2}, {1});
+  EXPECT_EQ(v.Step({}, {}, {Merged(2, 1), TimedOut(1)}),
+            (Events{"2 merged 1", "1 ended timed_out"}));
 }
 
 // A clock stepped back: a hold that began after the period's time is over.
