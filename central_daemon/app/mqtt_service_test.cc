@@ -529,7 +529,7 @@ TEST(MqttServiceOutput, EveryConsumerSeesOneOutputPerPeriod) {
     ASSERT_TRUE(x.zones.OnTick(fusion));
     x.mqtt.OnTick(At(t), x.daemon, fusion, x.zones);
     const LiveState live = feed.Build(x.daemon, x.calibration, fusion, At(t), "test", &x.zones);
-    EXPECT_EQ(&fusion.Output(), output);
+    // One output computed for the publish, the zones, MQTT and the live view.
     EXPECT_EQ(fusion.counters().outputs_computed, computed + 1);
     // What MQTT published is the output's tracks.
     std::vector<std::pair<std::uint64_t, double>> published, fused, drawn;
@@ -630,6 +630,108 @@ TEST(MqttServiceOutput, AReadOfACachedLookMarksTheEnds) {
   ASSERT_EQ(fusion.Output().ended.size(), 1u);  // read at 30 s: more than 20 s after 4 s
   fusion.OnTick(40.0);                          // a publish: its Tick forgets the end
   EXPECT_TRUE(fusion.PeekOutput().ended.empty());
+}
+
+// Two sensors at the origin (the same place: they see a person at the same point).
+calib::CalibrationResult TwoSensorsAtTheOrigin() {
+  calib::CalibrationResult r = OneSensorAtTheOrigin();
+  calib::SensorPose p = r.sensors.front();
+  p.id = "s2";
+  r.sensors.push_back(p);
+  return r;
+}
+
+// The sensors' ids of the output's only track.
+std::set<std::string> SourcesOfTheTrack(const fusion::FusionOutput& output) {
+  std::set<std::string> out;
+  if (output.tracks.size() != 1) return out;
+  for (const fusion::FusedSource& s : output.tracks[0].sources) out.insert(s.sensor_id);
+  return out;
+}
+
+// A frame that comes after a publish with a scan time no later than the newest (a second
+// sensor's, at the same time) is in the next output at that time, not the one cached before it.
+TEST(MqttServiceOutput, ALateFrameAfterAPublishIsInTheOutput) {
+  Services x(DaemonConfig{});
+  FusionService& fusion = x.fusion;
+  fusion.SetCalibration(TwoSensorsAtTheOrigin());
+  std::uint32_t scan = 0;
+  for (double t = 0.0; t < 1.0 - 1e-9; t += 0.04) {
+    fusion.OnFrame("s1", FrameWith(t, scan++, {Standing(1)}));
+    fusion.OnTick(t);
+  }
+  const common::UtcNs now_ns = fusion.now_ns();
+  EXPECT_EQ(SourcesOfTheTrack(fusion.Output()), (std::set<std::string>{"s1"}));
+  TrackFrameData late = FrameWith(0.0, 0, {Standing(7)});
+  late.scan_start_ns = now_ns;
+  fusion.OnFrame("s2", late);
+  ASSERT_EQ(fusion.now_ns(), now_ns);
+  EXPECT_EQ(SourcesOfTheTrack(fusion.Output()), (std::set<std::string>{"s1", "s2"}));
+}
+
+// Excluding the only sensor (or a calibration that no longer places it) drops its bindings at
+// once: at the same data time the person's id is no longer in the output's tracks (hidden).
+TEST(MqttServiceOutput, ExcludingOrUnplacingASensorShowsInTheOutputAtOnce) {
+  for (const bool exclude : {true, false}) {
+    SCOPED_TRACE(exclude ? "SetExcluded" : "SetCalibration");
+    DaemonConfig config;
+    config.fusion.report_sourceless = false;
+    Services x(config);
+    FusionService& fusion = x.fusion;
+    std::uint32_t scan = 0;
+    for (double t = 0.0; t < 1.0 - 1e-9; t += 0.04) {
+      fusion.OnFrame("s1", FrameWith(t, scan++, {Standing(1)}));
+      fusion.OnTick(t);
+    }
+    ASSERT_EQ(fusion.Output().tracks.size(), 1u);
+    const std::uint64_t id = fusion.Output().tracks[0].id;
+    if (exclude) {
+      fusion.SetExcluded({"s1"});
+    } else {
+      calib::CalibrationResult unplaced = OneSensorAtTheOrigin();
+      unplaced.sensors[0].calibrated = false;
+      fusion.SetCalibration(unplaced);
+    }
+    const fusion::FusionOutput& output = fusion.Output();
+    EXPECT_TRUE(output.tracks.empty());
+    ASSERT_EQ(output.hidden.size(), 1u);
+    EXPECT_EQ(output.hidden[0].id, id);
+  }
+}
+
+// The person's fused id is due to end (no update for more than max_coast_s) when a frame comes
+// at 5 s; the live view looks at the output first, then the publish's Tick ends the id at the
+// same data time: the zones and MQTT reading after it are told of the end (no data follows, so
+// they learn of it then or never).
+TEST(MqttServiceOutput, AnEndByATickAtTheSameTimeIsListedToTheFollowers) {
+  DaemonConfig config;
+  config.zones_list = "[{name: room, polygon: [[2, 0], [4, 0], [4, 2], [2, 2]]}]";
+  config.fusion.report_sourceless = false;
+  config.mqtt.objects_hz = 10.0;
+  Services x(config);
+  FusionService& fusion = x.fusion;
+  LiveFeed feed(100);
+  std::uint32_t scan = 0;
+  std::uint64_t id = 0;
+  for (double t = 0.0; t < 5.0 + 1e-9; t += 0.04) {
+    if (t >= 1.2 && t < 5.0 - 1e-9) continue;  // no data
+    std::vector<TrackObservation> tracks;
+    if (t < 1.0) tracks.push_back(Standing(1));
+    fusion.OnFrame("s1", FrameWith(t, scan++, tracks));
+    feed.Build(x.daemon, x.calibration, fusion, At(t), "test", &x.zones);  // a look first
+    fusion.OnTick(t);
+    x.zones.OnTick(fusion);
+    x.mqtt.OnTick(At(t), x.daemon, fusion, x.zones);
+    if (id == 0 && !fusion.PeekOutput().tracks.empty()) id = fusion.PeekOutput().tracks[0].id;
+  }
+  ASSERT_NE(id, 0u);
+  const std::vector<nlohmann::json> ended = x.Messages("/objects/ended");
+  ASSERT_EQ(ended.size(), 1u);
+  EXPECT_EQ(ended[0]["ended"][0]["id"], id);
+  EXPECT_EQ(ended[0]["ended"][0]["reason"], "timed_out");
+  EXPECT_EQ(x.zones.counters().ended, 1u);
+  EXPECT_EQ(x.zones.counters().expired, 0u);
+  EXPECT_TRUE(x.zones.States().at(0).present_ids.empty());
 }
 
 // MQTT meets the survivor of a merge only as the merge's target: the person's first fused id (1)
