@@ -40,7 +40,10 @@
 //   continues the survivor from the merged id's estimate then; else its own); where both were in
 //   the region its dwell runs from the earlier start of the two; where only the one whose state
 //   is dropped was in the region, that stay ends there as a completed dwell (the person is where
-//   the other says). A survivor the zones did not know takes the merged id's state whole.
+//   the other says). A survivor the zones did not know takes the merged id's state whole, its
+//   hold too: the object was last seen when the merged id was, so a survivor absent without a
+//   word from the fusion is gone absent_hold_s after the merged id was first absent (its dwell
+//   ending then), not absent_hold_s after the merge (as lrfnetd's MQTT objects).
 //   Crossings both ids counted before the merge stay counted;
 // - otherwise ended (timed out): gone at once, as of the first update it was absent from;
 // - none of these (the fusion reports nothing of it: Update without the fusion's lists, or an id

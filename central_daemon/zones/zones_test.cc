@@ -302,6 +302,31 @@ TEST(ZonesTest, AHiddenSurvivorGoesOnFromTheMergedIdsState) {
   EXPECT_EQ(f.counters().absent_returned, 1u);
 }
 
+// The zones know only id 2 (1 was hidden before their first update), inside the room; 2 is
+// absent without a word from the fusion for 1 s, then merged into 1, of which the fusion says
+// nothing either. The object was last seen when 2 was: 1 takes 2's hold whole and is gone
+// absent_hold_s (1.5 s) after 2 was first absent, 0.5 s after the merge, lost inside with the
+// dwell ending where 2 was last seen (1 s long).
+TEST(ZonesTest, AnUnknownSurvivorTakesTheMergedIdsHoldWhole) {
+  FusionFeed f({Square("room", 0, 0, 4)}, 1.5);
+  for (int i = 0; i < 10; ++i) f.Step({{{2, 2.0, 2.0, true}}, {}, {}});
+  for (int i = 0; i < 10; ++i) f.Step({});  // 2 absent: 0 .. 0.9 s
+  f.Step({{}, {}, {{2, 1}}});               // 1.0 s: merged into 1
+  EXPECT_EQ(f.State().present_ids, std::vector<std::uint64_t>{1});
+  for (int i = 0; i < 4; ++i) {  // 1.1 .. 1.4 s
+    f.Step({});
+    EXPECT_EQ(f.State().present_ids, std::vector<std::uint64_t>{1});
+  }
+  f.Step({});  // 1.5 s after 2 was first absent: gone
+  const ZoneState room = f.State();
+  EXPECT_TRUE(room.present_ids.empty());
+  EXPECT_EQ(room.lost_inside, 1u);
+  EXPECT_EQ(room.dwells_completed, 1u);
+  EXPECT_NEAR(room.dwell_max_s, 1.0, 1e-6);
+  EXPECT_EQ(f.counters().merged, 1u);
+  EXPECT_EQ(f.counters().expired, 1u);
+}
+
 // A hidden id is held for as long as the fusion keeps it, whatever absent_hold_s is (no timer of
 // the zones' own that could end it early or keep it late); when the fusion ends it (timed out),
 // it is gone at once, as of the first update it was absent from.
