@@ -202,6 +202,12 @@ TEST_F(MqttSystem, OfflineObjectsAndZoneCountsMatchTheTruthAndEveryMessageItsSch
   const json stats = Parse(ReadText(out / "stats.json"));
   ASSERT_TRUE(stats.contains("mqtt")) << stats.dump();
   const json& m = stats["mqtt"];
+  // The fuser's lists hold nothing the id follower cannot follow (exported, all 0).
+  for (const char* key : {"objects_duplicates", "objects_merge_cycles", "objects_merge_chains_cut",
+                          "objects_merges_into_ended"}) {
+    ASSERT_TRUE(m.contains(key)) << key;
+    EXPECT_EQ(m[key], 0) << key;
+  }
   // Offline the daemon waits for the broker instead of dropping.
   EXPECT_EQ(m["dropped_queue_full"], 0);
   EXPECT_EQ(m["dropped_disconnected"], 0);

@@ -77,7 +77,11 @@ nlohmann::json MqttJson(const MqttOutput& mqtt) {
           {"objects_gone", s.objects_gone},
           {"objects_merged", s.objects_merged},
           {"objects_ended", s.objects_ended},
-          {"objects_ended_messages", s.objects_ended_messages}};
+          {"objects_ended_messages", s.objects_ended_messages},
+          {"objects_duplicates", s.objects_duplicates},
+          {"objects_merge_cycles", s.objects_merge_cycles},
+          {"objects_merge_chains_cut", s.objects_merge_chains_cut},
+          {"objects_merges_into_ended", s.objects_merges_into_ended}};
 }
 
 }  // namespace lrfnet::daemon

@@ -113,6 +113,11 @@ void MqttService::PublishObjects(const Daemon& daemon, const FusionService& fusi
   // Ended ids first (a new fuser ends every one), then the present ones; held ones stay.
   const std::vector<fusion::IdEvent>& events =
       follower_.Update(output, fusion.generation(), stamp_ns);
+  const fusion::IdFollowerCounters& f = follower_.counters();
+  counters_.objects_duplicates = f.duplicates;
+  counters_.objects_merge_cycles = f.merge_cycles;
+  counters_.objects_merge_chains_cut = f.merge_chains_cut;
+  counters_.objects_merges_into_ended = f.merges_into_ended;
   std::vector<MqttEndedObject> ended;
   EndObjects(events, ended);
 

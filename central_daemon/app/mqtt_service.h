@@ -68,6 +68,14 @@ struct MqttServiceCounters {
   std::uint64_t objects_ended = 0;
   // Messages on .../objects/ended.
   std::uint64_t objects_ended_messages = 0;
+  // What the id follower dropped or could not follow in the fusion's outputs (fusion::
+  // IdFollowerCounters): ids listed again in one output's tracks (left out of the object list),
+  // merges into a cycle and chains longer than it follows, merges into an id that ended earlier
+  // in the same output (the merged objects end, merge_unresolved).
+  std::uint64_t objects_duplicates = 0;
+  std::uint64_t objects_merge_cycles = 0;
+  std::uint64_t objects_merge_chains_cut = 0;
+  std::uint64_t objects_merges_into_ended = 0;
 };
 
 class MqttService {

@@ -13,6 +13,7 @@
 #include <filesystem>
 #include <fstream>
 #include <functional>
+#include <memory>
 #include <nlohmann/json.hpp>
 #include <set>
 #include <string>
@@ -26,6 +27,7 @@
 #include "central_daemon/app/fusion_service.h"
 #include "central_daemon/app/live_feed.h"
 #include "central_daemon/app/monitoring_service.h"
+#include "central_daemon/app/mqtt_output.h"
 #include "central_daemon/app/run_report.h"
 #include "central_daemon/app/zone_service.h"
 #include "central_daemon/io/mqtt_publisher.h"
@@ -809,6 +811,31 @@ TEST(MqttServiceMerge, ASurvivorKnownOnlyAsAMergeTargetIsCountedOnceAndPublished
   }
   EXPECT_GT(after, 10);
   EXPECT_LT(lists.back()["objects"][0]["path"][0][2].get<double>(), -2.0) << lists.back().dump();
+}
+
+// --stats-out's "mqtt" says what the id follower dropped or could not follow in the fusion's
+// lists, as the service counts it (nothing in an ordinary run).
+TEST(MqttServiceStats, TheIdFollowersDropsAreExported) {
+  DaemonConfig config;
+  config.mqtt.broker = "127.0.0.1:1";
+  Services x(config);
+  std::uint32_t scan = 0;
+  for (double t = 0.0; t < 1.0 - 1e-9; t += 0.04) {
+    x.fusion.OnFrame("s1", FrameWith(t, scan++, {Standing(1)}));
+    x.fusion.OnTick(t);
+    x.mqtt.OnTick(At(t), x.daemon, x.fusion, x.zones);
+  }
+  MqttOutput out;
+  out.service = std::make_unique<MqttService>(x.config, &x.sink, "test");
+  out.publisher = std::make_unique<MqttPublisher>(PublisherOptions(x.config, *out.service));
+  const nlohmann::json j = MqttJson(out);
+  for (const char* key : {"objects_duplicates", "objects_merge_cycles", "objects_merge_chains_cut",
+                          "objects_merges_into_ended"}) {
+    ASSERT_TRUE(j.contains(key)) << key << " " << j.dump();
+    EXPECT_EQ(j[key], 0) << key;
+  }
+  EXPECT_EQ(x.mqtt.counters().objects_duplicates, 0u);
+  EXPECT_GT(x.mqtt.counters().objects, 0u);
 }
 
 }  // namespace

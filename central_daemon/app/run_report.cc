@@ -59,7 +59,8 @@ bool WriteStats(const std::string& path, const Daemon& daemon, const UdpReceiver
                   {"expired", z.expired},
                   {"restarts", z.restarts},
                   {"merges_unresolved", z.merges_unresolved},
-                  {"duplicates", z.duplicates}};
+                  {"duplicates", z.duplicates},
+                  {"merges_into_ended", z.merges_into_ended}};
   }
   j["requests_sent"] = daemon.requests_sent();
   j["requests_dropped"] = daemon.requests_dropped();

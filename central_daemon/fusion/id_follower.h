@@ -91,7 +91,9 @@ struct IdEvent {
   bool was_held = false;
   common::UtcNs held_since_ns = 0;
   // kMerged: the id that goes on as the object, whether the consumer knew it before this event
-  // (else it takes this id's place whole), and whether that survivor was held then.
+  // (else it takes this id's place whole; one that took an earlier merged id's place in this
+  // period counts as known), and whether that survivor was held at the end of the previous
+  // period (for one that took an earlier merged id's place in this period: whether that id was).
   std::uint64_t survivor = 0;
   bool survivor_known = false;
   bool survivor_held = false;

@@ -138,18 +138,28 @@ double SignedDistanceToPolygon(std::span<const Point> polygon, Point p) {
   return inside ? distance : -distance;
 }
 
+namespace {
+
+// The options, once the zones and they are valid (checked before the id follower is built from
+// them: a bad option aborts naming the zones' option; aborts otherwise).
+const ZoneOptions& Checked(std::span<const Zone> zones, const ZoneOptions& options) {
+  if (auto e = Validate(zones)) {
+    std::fprintf(stderr, "ZoneCounter: %s\n", e->c_str());
+    std::abort();
+  }
+  if (auto e = Validate(options)) {
+    std::fprintf(stderr, "ZoneCounter: %s\n", e->c_str());
+    std::abort();
+  }
+  return options;
+}
+
+}  // namespace
+
 ZoneCounter::ZoneCounter(std::vector<Zone> zones, const ZoneOptions& options)
     : zones_(std::move(zones)),
-      options_(options),
-      follower_(fusion::IdFollowerOptions{.absent_hold_s = options.absent_hold_s}) {
-  if (auto e = Validate(zones_)) {
-    std::fprintf(stderr, "ZoneCounter: %s\n", e->c_str());
-    std::abort();
-  }
-  if (auto e = Validate(options_)) {
-    std::fprintf(stderr, "ZoneCounter: %s\n", e->c_str());
-    std::abort();
-  }
+      options_(Checked(zones_, options)),
+      follower_(fusion::IdFollowerOptions{.absent_hold_s = options_.absent_hold_s}) {
   for (const Zone& z : zones_) {
     ZoneData data;
     data.state.name = z.name;
@@ -321,6 +331,7 @@ bool ZoneCounter::Update(std::span<const ZoneTrack> tracks,
   }
   Apply(follower_.Update(present, hidden_ids, ends, 0, now_ns), tracks, track_index, now_ns);
   counters_.duplicates = follower_.counters().duplicates;
+  counters_.merges_into_ended = follower_.counters().merges_into_ended;
   return true;
 }
 

@@ -121,6 +121,8 @@ struct ZoneCounters {
   // cycle, along more merges than the follower follows, into an id that ended in the same list).
   std::uint64_t merges_unresolved = 0;
   std::uint64_t duplicates = 0;  // ids listed again in one update's tracks (the first counts)
+  // Of merges_unresolved: merges into an id that ended earlier in the same list.
+  std::uint64_t merges_into_ended = 0;
 };
 
 // An id the fusion ended (fusion::EndedFusedTrack as the zones need it).

@@ -400,6 +400,14 @@ TEST(ZonesTest, UnresolvableMergesEndTheIdsAndDuplicatesCountOnce) {
   EXPECT_EQ(f.counters().ended, 3u);
   EXPECT_EQ(f.counters().merges_unresolved, 3u);
   EXPECT_EQ(f.counters().merged, 0u);
+  EXPECT_EQ(f.counters().merges_into_ended, 0u);
+  // A merge into an id that timed out earlier in the same list (one the zones never knew).
+  f.Step({{{4, 2.0, 2.0, true}}, {5}, {}});
+  f.Step({{}, {}, {{5, 0}, {4, 5}}});
+  EXPECT_TRUE(f.State().present_ids.empty());
+  EXPECT_EQ(f.counters().merges_unresolved, 4u);
+  EXPECT_EQ(f.counters().merges_into_ended, 1u);
+  EXPECT_EQ(f.counters().merged, 0u);
 }
 
 TEST(ZonesTest, ManyPeopleBothWaysAtOnce) {
@@ -454,6 +462,15 @@ TEST(ZonesTest, ValidationNamesTheZoneAndTheProblem) {
   EXPECT_NE(Validate(std::span<const Zone>(twice))->find("twice"), std::string::npos);
   EXPECT_FALSE(Validate(Square("ok-zone_1", 0, 0, 1)).has_value());
   EXPECT_TRUE(Validate(ZoneOptions{-1.0}).has_value());
+}
+
+// The zone counter checks its options before it builds anything from them: a bad absent_hold_s
+// aborts with the zones' message.
+TEST(ZonesDeathTest, ABadOptionAbortsNamingTheZoneCounter) {
+  EXPECT_DEATH(ZoneCounter({Square("room", 0, 0, 4)}, ZoneOptions{0.3, -1.0}),
+               "ZoneCounter: absent_hold_s");
+  EXPECT_DEATH(ZoneCounter({Square("room", 0, 0, 4)}, ZoneOptions{0.3, 1e9}),
+               "ZoneCounter: absent_hold_s");
 }
 
 }  // namespace
