@@ -428,13 +428,13 @@ struct PipelineCounters {
   std::uint64_t legs_side_view_contested = 0;   // scan's side against a sure prediction: weighed
   std::uint64_t outline_departure_widened = 0;  // body fits widened (outline_departure_gain)
   std::uint64_t split_few_point_legs = 0;       // 2-3 point segments split into two legs
-  std::uint64_t deep_leg_pairs = 0;  // deep 2-3 point legs measured as a pair (deep_legs_as_pair)
-  std::uint64_t veiled_segments = 0;    // legs: mixed pixels (beside a nearer edge, deep), dropped
-  std::uint64_t deep_pieces_kept = 0;   // legs: deep pieces with no surface behind, kept
-  std::uint64_t shadowed_legs = 0;      // legs: straight behind a confirmed track, dropped
-  std::uint64_t absorbed_objects = 0;   // static objects handed to the background
-  std::uint64_t seen_through = 0;       // coasting track reports dropped (seen through)
-  std::uint64_t unseen_coasting = 0;    // coasting track reports dropped (nothing seen near)
+  std::uint64_t deep_leg_pairs = 0;    // deep 2-3 point legs measured as a pair (deep_legs_as_pair)
+  std::uint64_t veiled_segments = 0;   // legs: mixed pixels (beside a nearer edge, deep), dropped
+  std::uint64_t deep_pieces_kept = 0;  // legs: deep pieces with no surface behind, kept
+  std::uint64_t shadowed_legs = 0;     // legs: straight behind a confirmed track, dropped
+  std::uint64_t absorbed_objects = 0;  // static objects handed to the background
+  std::uint64_t seen_through = 0;      // coasting track reports dropped (seen through)
+  std::uint64_t unseen_coasting = 0;   // coasting track reports dropped (nothing seen near)
   std::uint64_t legs_seen_through = 0;  // knee height: coasting reports dropped (legs seen through)
   // Shape fits by the evaluations of their objective (ShapeFitResult::evaluations; each one pass
   // over the points): index e counts the fits with e, the last those with that many or more.
