@@ -76,8 +76,9 @@ double DeepLegExcessDepth(const ShapeOptions& o, std::span<const Eigen::Vector2d
   if (pts.size() < 2) return 0.0;
   double nearest = std::numeric_limits<double>::infinity(), farthest = 0.0;
   for (const Eigen::Vector2d& p : pts) {
-    nearest = std::min(nearest, p.norm());
-    farthest = std::max(farthest, p.norm());
+    const double range = p.norm();
+    nearest = std::min(nearest, range);
+    farthest = std::max(farthest, range);
   }
   const double noise = o.fit.point_sigma_m + o.fit.point_sigma_per_m * nearest;
   const double deepest = o.leg_radius_m + 2.0 * o.leg_radius_sigma_m + 3.0 * noise;
