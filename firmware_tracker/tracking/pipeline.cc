@@ -1474,11 +1474,13 @@ bool TrackingPipeline::ForegroundNear(const ScanView& scan, const Eigen::Vector2
                    std::min(scan.range_m.size(), foreground.size()), &lo, &hi)) {
     return true;  // outside the field of view: unknown
   }
+  // The beams' directions from the segmentation's table of this scan (SegmentScan ran before: the
+  // same cos and sin of the same angles, without a sincos per beam).
+  const BeamDirections& directions = segments_.directions;
   for (std::size_t i = lo; i <= hi; ++i) {
     const double r = scan.range_m[i];
     if (foreground[i] == 0 || !(r > 0.0)) continue;
-    const double angle = scan.first_angle_rad + scan.angle_step_rad * static_cast<double>(i);
-    if ((r * Eigen::Vector2d(std::cos(angle), std::sin(angle)) - position_m).norm() <= reach_m)
+    if ((r * Eigen::Vector2d(directions.cos(i), directions.sin(i)) - position_m).norm() <= reach_m)
       return true;
   }
   return false;
