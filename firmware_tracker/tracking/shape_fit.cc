@@ -518,7 +518,7 @@ SumPointsFn SumPointsFor(ShapeModel model, double exponent, bool paired) {
 // (rounding on a nearly singular matrix) falls back to the pivoted LDLT. Without square roots the
 // factorisation's dependent chain is one division per column (L L^T had a square root and a
 // division). The loops are unrolled completely (the pragmas): with constant bounds the triangular
-// loops become straight code.
+// loops become straight code. Factor reads h's upper triangle only (the fit forms only that).
 class NormalSolver {
  public:
   bool Factor(const Mat5& h) {
@@ -535,7 +535,7 @@ class NormalSolver {
       inv_diag_[j] = 1.0 / d;
 #pragma GCC unroll 5
       for (int i = j + 1; i < 5; ++i) {
-        double v = h(i, j);
+        double v = h(j, i);  // h(i, j) of the symmetric matrix
 #pragma GCC unroll 5
         for (int k = 0; k < j; ++k) v -= u_[i][k] * l_[j][k];
         u_[i][j] = v;
@@ -622,7 +622,8 @@ class NormalSolver {
   // that its code does not share the instruction cache with the fit's hot path.
   [[gnu::cold, gnu::noinline]] bool FactorLdlt(const Mat5& h) {
     use_ldlt_ = true;
-    ldlt_.compute(h);
+    const Mat5 full = h.selfadjointView<Eigen::Upper>();
+    ldlt_.compute(full);
     return ldlt_.info() == Eigen::Success;
   }
   [[gnu::cold, gnu::noinline]] Vec5 SolveLdlt(const Vec5& b) const { return ldlt_.solve(b); }
@@ -639,8 +640,10 @@ class NormalSolver {
 // reference of the equivalence test (internal::FitShapeWithPivotedLdlt).
 class PivotedLdltSolver {
  public:
+  // h's upper triangle, as NormalSolver.
   bool Factor(const Mat5& h) {
-    ldlt_.compute(h);
+    const Mat5 full = h.selfadjointView<Eigen::Upper>();
+    ldlt_.compute(full);
     return ldlt_.info() == Eigen::Success;
   }
   Vec5 Solve(const Vec5& b) const { return ldlt_.solve(b); }
@@ -802,14 +805,23 @@ ShapeFitResult Fit(std::span<const Eigen::Vector2d> points, const Silhouette& si
   }
   mean /= static_cast<double>(n);
   const double mean_range = range_sum / static_cast<double>(n);
-  Eigen::Matrix2d scatter = Eigen::Matrix2d::Zero();
-  for (const auto& p : used) scatter += (p - mean) * (p - mean).transpose();
-  scatter /= static_cast<double>(n);
+  // The scatter matrix's three distinct entries, each the same sum of the same products as the
+  // matrix's outer-product sum.
+  double sxx = 0.0, sxy = 0.0, syy = 0.0;
+  for (const auto& p : used) {
+    const double dx = p.x() - mean.x(), dy = p.y() - mean.y();
+    sxx += dx * dx;
+    sxy += dx * dy;
+    syy += dy * dy;
+  }
   {
-    const double half_trace = 0.5 * (scatter(0, 0) + scatter(1, 1));
-    const double half_diff = 0.5 * (scatter(0, 0) - scatter(1, 1));
-    const double smallest =
-        half_trace - std::sqrt(half_diff * half_diff + scatter(0, 1) * scatter(0, 1));
+    const double count = static_cast<double>(n);
+    sxx /= count;
+    sxy /= count;
+    syy /= count;
+    const double half_trace = 0.5 * (sxx + syy);
+    const double half_diff = 0.5 * (sxx - syy);
+    const double smallest = half_trace - std::sqrt(half_diff * half_diff + sxy * sxy);
     result.line_rms_m = std::sqrt(std::max(0.0, smallest));
   }
   result.extent_m = (used.front() - used.back()).norm();
@@ -900,8 +912,10 @@ ShapeFitResult Fit(std::span<const Eigen::Vector2d> points, const Silhouette& si
   const Eigen::Vector2d size0(x(kA), x(kB));
 
   // The objective at x: Huber on the points (rho(s) = s^2 within k, 2 k |s| - k^2 beyond, s the
-  // normalised distance), squares on edges and priors. Fills the Gauss-Newton normal matrix h and
-  // gradient g (halves) with the IRLS weights min(1, k / |s|) of x; one pass over the points.
+  // normalised distance), squares on edges and priors. Fills the Gauss-Newton normal matrix h (its
+  // upper triangle, which is all the solvers read; below it the sums' zeros and the size prior's
+  // lower entry) and gradient g (halves) with the IRLS weights min(1, k / |s|) of x; one pass over
+  // the points.
   const double k2 = o.robust_k * o.robust_k;
   const SumPointsFn sum_points = SumPointsFor(model, exponent, kPaired);
   const bool paired_edges = kPaired && n_edges == 2 && PairedSupport(model, exponent);
@@ -973,7 +987,7 @@ ShapeFitResult Fit(std::span<const Eigen::Vector2d> points, const Silhouette& si
       gg(kYaw) += yaw_info * dyaw;
       cost += yaw_info * dyaw * dyaw;
     }
-    *h = hh.selfadjointView<Eigen::Upper>();
+    *h = hh;
     *g = gg;
     if (points_sq != nullptr) *points_sq = sq;
     return cost;

@@ -428,6 +428,31 @@ TEST(ShapeFitTest, CovarianceOfTheReportedEntriesOnlyHasTheFullInversesBits) {
   }
 }
 
+TEST(ShapeFitTest, NormalSolverReadsTheUpperTriangleOnly) {
+  // The fit forms only the normal matrix's upper triangle: whatever lies below it, the solver's
+  // inverse is the symmetric matrix's, bit for bit.
+  std::mt19937 rng(6);
+  std::uniform_real_distribution<double> uniform(-1.0, 1.0);
+  for (int k = 0; k < 500; ++k) {
+    Eigen::Matrix<double, 5, 5> a;
+    for (int i = 0; i < 5; ++i) {
+      for (int j = 0; j < 5; ++j) a(i, j) = uniform(rng) * std::pow(10.0, 3.0 * uniform(rng));
+    }
+    const Eigen::Matrix<double, 5, 5> h =
+        a * a.transpose() + 1e-3 * Eigen::Matrix<double, 5, 5>::Identity();
+    Eigen::Matrix<double, 5, 5> upper = h;
+    for (int i = 1; i < 5; ++i) {
+      for (int j = 0; j < i; ++j) upper(i, j) = k % 2 == 0 ? 0.0 : 1e6 * uniform(rng);
+    }
+    const Eigen::Matrix<double, 5, 5> expected = internal::NormalSolverInverse(h, false);
+    const Eigen::Matrix<double, 5, 5> got = internal::NormalSolverInverse(upper, false);
+    ASSERT_TRUE(expected.allFinite());
+    for (int i = 0; i < 5; ++i) {
+      for (int j = 0; j < 5; ++j) EXPECT_EQ(got(i, j), expected(i, j)) << k << " " << i << " " << j;
+    }
+  }
+}
+
 TEST(ShapeFitTest, CholeskySolverGivesThePivotedLdltResults) {
   std::mt19937 rng(14);
   std::uniform_real_distribution<double> uniform(0.0, 1.0);
