@@ -684,8 +684,11 @@ double ShapeSupport(ShapeModel model, const Eigen::Vector2d& size_m, double yaw_
   x(kA) = size_m.x();
   x(kB) = size_m.y();
   Vec5 grad = Vec5::Zero();
-  const double h = Support(model, x, std::cos(yaw_rad), std::sin(yaw_rad), n, exponent,
-                           d_size != nullptr ? &grad : nullptr);
+  // Both from one local value, so that the compiler makes them one sincos call.
+  const double yaw = yaw_rad;
+  const double cos_yaw = std::cos(yaw), sin_yaw = std::sin(yaw);
+  const double h =
+      Support(model, x, cos_yaw, sin_yaw, n, exponent, d_size != nullptr ? &grad : nullptr);
   if (d_size != nullptr) *d_size = Eigen::Vector2d(grad(kA), grad(kB));
   return h;
 }
