@@ -849,7 +849,6 @@ std::vector<Variant> Variants(sim::Mount mount, double range_m) {
   tracking::TrackerOptions fresh;
   fresh.background.max_range_m = std::max(fresh.background.max_range_m, range_m + 1.0);
   fresh.shape.mount = mount == sim::Mount::kLegs ? tracking::Mount::kLegs : tracking::Mount::kTorso;
-  if (const char* e = std::getenv("LRF_RV")) fresh.shape.recent_veil_s = std::atof(e);  // TMP
   tracking::TrackerOptions old = fresh;
   old.method = tracking::MeasurementMethod::kEllipse;
   old.tracking.static_objects = false;
