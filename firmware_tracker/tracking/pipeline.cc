@@ -1108,6 +1108,11 @@ void TrackingPipeline::AddSingleBeamLegs(const ScanView& scan, std::size_t track
       segments_.points_m.pop_back();
       continue;
     }
+    if (o.recent_veil_s > 0.0 && RecentlyVeiled(scan, single)) {
+      ++counters_.recently_veiled;
+      segments_.points_m.pop_back();
+      continue;
+    }
     (void)leg_parts_.push_back(MakePart(scan, single, 0, 1));
   }
 }
