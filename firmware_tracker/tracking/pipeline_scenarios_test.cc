@@ -2233,6 +2233,51 @@ TEST(PipelineScenarioTest, EchoesBehindTheReturnTheirBeamsHadAScanBeforeAreMixed
   EXPECT_EQ(walker_veiled, 0u);
 }
 
+// Knee height, 25 Hz, 0.5 deg, a wall at 16 m: a person stands at 13 m (legs on beams 176-177 and
+// 181-182, 0.57 m apart) until confirmed. Two scans before the end, something nearer crosses beam
+// 179 between the legs (12.0 m, one scan); in the last scan only that beam returns, at 13.1 m,
+// within the pairing distance of the track: a single-beam leg for it, but behind the return the
+// same beam had 0.08 s before by more than the pairing distance and what a body at 2.5 m/s moves
+// meanwhile. With shape.recent_veil_s it is dropped (counted in recently_veiled), no single-beam
+// leg; without, it is taken as one.
+TEST(PipelineScenarioTest, ASingleBeamBehindItsBeamsRecentNearerReturnIsNoLeg) {
+  constexpr std::size_t kBeams = 361;
+  constexpr double kStepRad = 0.5 * common::kPi / 180.0;
+  const auto run = [&](double recent_veil_s) {
+    TrackerOptions options;
+    options.shape.mount = Mount::kLegs;
+    options.shape.recent_veil_s = recent_veil_s;
+    TrackingPipeline pipeline(options);
+    std::vector<float> ranges(kBeams);
+    const auto k0 = static_cast<std::int64_t>(kLearnedS * 25.0);
+    const std::int64_t last = k0 + 50;
+    PipelineCounters before_last;
+    for (std::int64_t k = 0; k <= last; ++k) {
+      std::fill(ranges.begin(), ranges.end(), 16.0f);
+      if (k >= k0 && k < last) {
+        for (const std::size_t b : {std::size_t{176}, std::size_t{177}, std::size_t{181},
+                                    std::size_t{182}}) {
+          ranges[b] = 13.0f;
+        }
+        if (k == last - 2) ranges[179] = 12.0f;
+      } else if (k == last) {
+        ranges[179] = 13.1f;
+        before_last = pipeline.counters();
+      }
+      const ScanView scan = RangesScan(ranges, -0.5 * common::kPi, kStepRad, k, 40);
+      (void)pipeline.Process(scan, static_cast<std::uint32_t>(k));
+    }
+    return std::make_pair(pipeline.counters().recently_veiled - before_last.recently_veiled,
+                          pipeline.counters().single_beam_legs - before_last.single_beam_legs);
+  };
+  const auto [veiled_now, single_now] = run(0.3);
+  EXPECT_EQ(veiled_now, 1u);
+  EXPECT_EQ(single_now, 0u);
+  const auto [veiled_before, single_before] = run(0.0);
+  EXPECT_EQ(veiled_before, 0u);
+  EXPECT_EQ(single_before, 1u);
+}
+
 // Knee height, 25 Hz, 0.5 deg: a person walks across the view at 10 m (0.44 m/s), each leg
 // returned by 2 beams (one segment split into two legs), then for 1 s by a single beam each, 3
 // beams apart (two one-point segments, below min_points), then by 2 beams again. With
