@@ -1215,8 +1215,7 @@ bool TrackingPipeline::RecentlyVeiled(const ScanView& scan, const Segment& segme
     if (!(r > 0.0f)) return false;
     const double age_s = common::NsToSeconds(scan.stamp_ns - recent_near_ns_[beam]);
     if (!(age_s > 0.0 && age_s <= o.recent_veil_s)) return false;
-    return static_cast<double>(r) <
-           nearest_m - margin_m - options_.tracking.max_speed_mps * age_s;
+    return static_cast<double>(r) < nearest_m - margin_m - options_.tracking.max_speed_mps * age_s;
   };
   for (std::size_t b = segment.begin_beam; b < segment.end_beam; ++b) {
     if (!(nearer(b) || (b > 0 && nearer(b - 1)) || (b + 1 < n && nearer(b + 1)))) return false;
@@ -1234,8 +1233,8 @@ void TrackingPipeline::NoteRecentReturns(const ScanView& scan) {
   for (std::size_t b = 0; b < n; ++b) {
     const float r = scan.range_m[b];
     const bool fg = b < foreground.size() && foreground[b] != 0 && std::isfinite(r) && r > 0.0f;
-    const bool expired = common::NsToSeconds(scan.stamp_ns - recent_near_ns_[b]) >
-                         options_.shape.recent_veil_s;
+    const bool expired =
+        common::NsToSeconds(scan.stamp_ns - recent_near_ns_[b]) > options_.shape.recent_veil_s;
     if (fg && (expired || !(recent_near_m_[b] > 0.0f) || r <= recent_near_m_[b])) {
       recent_near_m_[b] = r;
       recent_near_ns_[b] = scan.stamp_ns;

@@ -2255,8 +2255,8 @@ TEST(PipelineScenarioTest, ASingleBeamBehindItsBeamsRecentNearerReturnIsNoLeg) {
     for (std::int64_t k = 0; k <= last; ++k) {
       std::fill(ranges.begin(), ranges.end(), 16.0f);
       if (k >= k0 && k < last) {
-        for (const std::size_t b : {std::size_t{176}, std::size_t{177}, std::size_t{181},
-                                    std::size_t{182}}) {
+        for (const std::size_t b :
+             {std::size_t{176}, std::size_t{177}, std::size_t{181}, std::size_t{182}}) {
           ranges[b] = 13.0f;
         }
         if (k == last - 2) ranges[179] = 12.0f;
