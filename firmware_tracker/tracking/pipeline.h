@@ -12,7 +12,8 @@
 //   leg_pairing_distance_m of each other, or a single leg when the other is hidden), confirmed
 //   tracks first; the legs left over pair with their nearest neighbour within
 //   leg_pairing_distance_m, the rest stay single (one track per person, not per leg). Mixed
-//   pixels at a leg's edge are not legs (ShapeOptions::drop_mixed_pixel_legs).
+//   pixels at a leg's edge are not legs (ShapeOptions::drop_mixed_pixel_legs), nor echoes behind
+//   a nearer return their beams had a moment before (ShapeOptions::recent_veil_s).
 // Each observation gets a cheap first position for association (the middle of its silhouette,
 // behind the nearest point by the prior's extent, sigma association_sigma_m). The tracker then
 // asks for the real measurement of every observation it associated or starts a track with
