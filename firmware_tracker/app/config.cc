@@ -224,6 +224,13 @@ void VisitShape(tracking::ShapeOptions& o, ConfigVisitor& v) {
           "a fifth of the energy: 4); elsewhere nothing stands behind to mix with and the piece "
           "is kept (two legs in radial stride, an object end-on). 0: no surface behind "
           "required.");
+  v.Field("recent_veil_s", o.recent_veil_s,
+          "mount legs: ... also leg-sized pieces, where a leg fills no beam footprint, behind a "
+          "foreground return their beams (each, or a neighbour) had within this time, nearer by "
+          "more than the segmentation's jump and leg_pairing_distance_m plus "
+          "tracking.max_speed_mps times its age: a mixed pixel's range runs between the leg's "
+          "and the background's as the leg's share of the beam changes from scan to scan. About "
+          "a leg's swing. 0: off.");
   v.Field("gait_sigma_m", o.gait_sigma_m,
           "mount legs: how far the midpoint of the legs strays from the body centre while "
           "walking (1 sigma).");

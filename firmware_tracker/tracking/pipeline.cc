@@ -247,6 +247,9 @@ std::optional<std::string> Validate(const ShapeOptions& o) {
   if (!(std::isfinite(o.mixed_pixel_min_footprint_m) && o.mixed_pixel_min_footprint_m >= 0.0)) {
     return "mixed_pixel_min_footprint_m must be >= 0 (0: off)";
   }
+  if (!(std::isfinite(o.recent_veil_s) && o.recent_veil_s >= 0.0 && o.recent_veil_s <= 2.0)) {
+    return "recent_veil_s must be in [0, 2]";
+  }
   if (!(std::isfinite(o.deep_mixed_pixel_behind_ratio) && o.deep_mixed_pixel_behind_ratio >= 0.0)) {
     return "deep_mixed_pixel_behind_ratio must be >= 0";
   }
@@ -938,6 +941,10 @@ void TrackingPipeline::BuildObservations(const ScanView& scan) {
       ++counters_.veiled_segments;
       continue;
     }
+    if (o.recent_veil_s > 0.0 && s.width_m <= pair_width && RecentlyVeiled(scan, s)) {
+      ++counters_.recently_veiled;
+      continue;
+    }
     if (s.width_m > pair_width) {
       Observation ob;
       ob.parts[0] = MakePart(scan, s, 0, s.point_count);
@@ -1101,6 +1108,11 @@ void TrackingPipeline::AddSingleBeamLegs(const ScanView& scan, std::size_t track
       segments_.points_m.pop_back();
       continue;
     }
+    if (o.recent_veil_s > 0.0 && RecentlyVeiled(scan, single)) {
+      ++counters_.recently_veiled;
+      segments_.points_m.pop_back();
+      continue;
+    }
     (void)leg_parts_.push_back(MakePart(scan, single, 0, 1));
   }
 }
@@ -1180,6 +1192,56 @@ bool TrackingPipeline::Veiled(const ScanView& scan, const Segment& segment) cons
     }
   }
   return false;
+}
+
+// ShapeOptions::recent_veil_s: a leg-sized segment, where a leg fills no beam, behind the nearer
+// foreground returns its beams (each, or a neighbour) had in the recent scans, by more than the
+// segmentation's jump and the pairing distance plus what a body at max_speed_mps moves meanwhile.
+bool TrackingPipeline::RecentlyVeiled(const ScanView& scan, const Segment& segment) const {
+  const SegmentationOptions& g = options_.segmentation;
+  const ShapeOptions& o = options_.shape;
+  const std::size_t n = scan.range_m.size();
+  if (recent_beams_ != n || segment.end_beam > n || segment.begin_beam >= segment.end_beam) {
+    return false;
+  }
+  const auto pts = segments_.Points(segment);
+  double nearest_m = std::numeric_limits<double>::infinity();
+  for (const Eigen::Vector2d& p : pts) nearest_m = std::min(nearest_m, p.norm());
+  if (!(nearest_m * o.beam_divergence_rad >= 2.0 * o.leg_radius_m)) return false;
+  const double margin_m =
+      std::max(g.jump_base_m + g.jump_per_m * nearest_m, o.leg_pairing_distance_m);
+  const auto nearer = [&](std::size_t beam) {
+    const float r = recent_near_m_[beam];
+    if (!(r > 0.0f)) return false;
+    const double age_s = common::NsToSeconds(scan.stamp_ns - recent_near_ns_[beam]);
+    if (!(age_s > 0.0 && age_s <= o.recent_veil_s)) return false;
+    return static_cast<double>(r) < nearest_m - margin_m - options_.tracking.max_speed_mps * age_s;
+  };
+  for (std::size_t b = segment.begin_beam; b < segment.end_beam; ++b) {
+    if (!(nearer(b) || (b > 0 && nearer(b - 1)) || (b + 1 < n && nearer(b + 1)))) return false;
+  }
+  return true;
+}
+
+void TrackingPipeline::NoteRecentReturns(const ScanView& scan) {
+  const std::size_t n = std::min(scan.range_m.size(), kMaxBeams);
+  const auto foreground = background_.foreground();
+  if (recent_beams_ != scan.range_m.size()) {
+    recent_near_m_.fill(0.0f);
+    recent_beams_ = scan.range_m.size();
+  }
+  for (std::size_t b = 0; b < n; ++b) {
+    const float r = scan.range_m[b];
+    const bool fg = b < foreground.size() && foreground[b] != 0 && std::isfinite(r) && r > 0.0f;
+    const bool expired =
+        common::NsToSeconds(scan.stamp_ns - recent_near_ns_[b]) > options_.shape.recent_veil_s;
+    if (fg && (expired || !(recent_near_m_[b] > 0.0f) || r <= recent_near_m_[b])) {
+      recent_near_m_[b] = r;
+      recent_near_ns_[b] = scan.stamp_ns;
+    } else if (expired) {
+      recent_near_m_[b] = 0.0f;
+    }
+  }
 }
 
 // One leg whose partner is hidden behind it (ShapeOptions::hidden_leg_behind): every other beam
@@ -1546,6 +1608,9 @@ const ScanTracks& TrackingPipeline::Process(const ScanView& scan, std::uint32_t 
     counters_.dropped_segments += segments_.dropped_segments;
     if (shape_fit) {
       BuildObservations(scan);
+      if (options_.shape.mount == Mount::kLegs && options_.shape.recent_veil_s > 0.0) {
+        NoteRecentReturns(scan);
+      }
     } else {
       MeasureLegacy(scan);
     }

@@ -12,7 +12,8 @@
 //   leg_pairing_distance_m of each other, or a single leg when the other is hidden), confirmed
 //   tracks first; the legs left over pair with their nearest neighbour within
 //   leg_pairing_distance_m, the rest stay single (one track per person, not per leg). Mixed
-//   pixels at a leg's edge are not legs (ShapeOptions::drop_mixed_pixel_legs).
+//   pixels at a leg's edge are not legs (ShapeOptions::drop_mixed_pixel_legs), nor echoes behind
+//   a nearer return their beams had a moment before (ShapeOptions::recent_veil_s).
 // Each observation gets a cheap first position for association (the middle of its silhouette,
 // behind the nearest point by the prior's extent, sigma association_sigma_m). The tracker then
 // asks for the real measurement of every observation it associated or starts a track with
@@ -142,6 +143,26 @@ struct ShapeOptions {
   // end-on) is kept and counted in PipelineCounters::deep_pieces_kept. 0: no surface behind
   // required (the piece's shape alone).
   double deep_mixed_pixel_behind_ratio = 4.0;
+  // ... and a leg-sized segment behind a nearer return its beams had in the last recent_veil_s:
+  // a mixed pixel's range is the energy-weighted mean of the leg's echo and the surface's behind
+  // it, weighted by the leg's share of the beam, and that share changes from scan to scan as the
+  // leg moves across the footprint; so where a leg fills no beam (the segment's nearest range
+  // times beam_divergence_rad at least 2 leg_radius_m) its returns jump along the ray between the
+  // leg and the background, and one of them lies behind the nearer one the same beam returned a
+  // scan or two before, by more than a body moves along the ray meanwhile. Dropped: a segment
+  // every beam of which (or a neighbour) returned a foreground echo within recent_veil_s that was
+  // nearer than the segment's nearest point by more than the segmentation's jump and
+  // leg_pairing_distance_m (not the same person's other leg) plus tracking.max_speed_mps times
+  // its age (a body walking away along the ray was nearer before). Where one beam returns a leg
+  // only in some scans (12-15 m at 0.5 deg), this catches the echoes metres behind it that no
+  // nearer return of the same scan explains. Single-beam legs (single_beam_legs) likewise
+  // (knee height per sensor precision 0.9783 -> 0.9796, fused 0.9548 -> 0.9573). The time: about
+  // a leg's swing (~0.4 s of a ~1 s
+  // gait cycle), within which the leg crosses the footprint and its share of the beam runs from
+  // most to none (tracking_benchmark, knee height per sensor, precision 0.9701 -> 0.9783 at 0.3 s,
+  // 0.9782 at 0.5 s with fragments 7.44 -> 7.47). Counted in PipelineCounters::recently_veiled.
+  // 0: off.
+  double recent_veil_s = 0.3;
   double gait_sigma_m = 0.05;
   // Legs mount: one leg whose partner is hidden behind it. Walking legs are always
   // 2 hip_half_width_m apart across the walk, so where one leg hides the other, the other stands
@@ -432,6 +453,7 @@ struct PipelineCounters {
   std::uint64_t veiled_segments = 0;   // legs: mixed pixels (beside a nearer edge, deep), dropped
   std::uint64_t deep_pieces_kept = 0;  // legs: deep pieces with no surface behind, kept
   std::uint64_t shadowed_legs = 0;     // legs: straight behind a confirmed track, dropped
+  std::uint64_t recently_veiled = 0;   // legs: behind a recent nearer return (recent_veil_s)
   std::uint64_t absorbed_objects = 0;  // static objects handed to the background
   std::uint64_t seen_through = 0;      // coasting track reports dropped (seen through)
   std::uint64_t unseen_coasting = 0;   // coasting track reports dropped (nothing seen near)
@@ -519,6 +541,11 @@ class TrackingPipeline {
   bool DeepMixedPixels(std::span<const Eigen::Vector2d> pts, double pair_width_m) const;
   bool SurfaceBehind(const ScanView& scan, const Segment& segment) const;
   bool Veiled(const ScanView& scan, const Segment& segment) const;
+  // ShapeOptions::recent_veil_s: every beam of the segment (or a neighbour) returned, within that
+  // time before this scan, a foreground echo nearer than the segment by the margin there.
+  bool RecentlyVeiled(const ScanView& scan, const Segment& segment) const;
+  // Keeps, per beam, the nearest foreground return of the last recent_veil_s (and its time).
+  void NoteRecentReturns(const ScanView& scan);
   bool PartnerBehind(const ScanView& scan, const ObservationPart& part,
                      const Eigen::Vector2d& centre_m) const;
   // ShapeOptions::single_leg_side_from_view: the beams over a leg at leg_m with an echo (at least
@@ -545,6 +572,11 @@ class TrackingPipeline {
   // leg_parts_ from this index on are single-beam legs (ShapeOptions::single_beam_legs).
   std::size_t single_beam_first_ = 0;
   std::array<TrackPrediction, kMaxTracks> predictions_{};
+  // ShapeOptions::recent_veil_s: per beam the nearest foreground range of the recent scans (0:
+  // none) and its scan's time; recent_beams_ the scan's beam count they were kept for.
+  std::array<float, kMaxBeams> recent_near_m_{};
+  std::array<common::UtcNs, kMaxBeams> recent_near_ns_{};
+  std::size_t recent_beams_ = 0;
   MultiTracker tracker_;
   const ScanView* scan_ = nullptr;  // the scan being processed (for the refiner), else null
   std::unique_ptr<Refiner> refiner_;

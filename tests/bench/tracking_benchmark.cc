@@ -41,6 +41,7 @@
 //                       [--before-few-point-legs] [--before-deep-legs]
 //                       [--before-legs-seen-through]
 //                       [--before-legs-report-coasting] [--before-outline-departure]
+//                       [--before-recent-veil]
 //                       [--before-fusion-merge] [--before-report-sourceless]]
 //   (--extra: more scenario folders, e.g. held-out scenes, reported in their own section;
 //   --explain: per run on stderr, what became of an object's previous track at every id switch
@@ -90,6 +91,8 @@
 //   sees through every place its legs may stand, ShapeOptions::legs_seen_through = false;
 //   --before-legs-report-coasting: "before" reports a knee-height coasting track for all of
 //   MultiTrackerOptions::report_coasting_s, ShapeOptions::legs_report_coasting_s = 0;
+//   --before-recent-veil: "before" takes a knee-height leg-sized segment behind a nearer return its
+//   beams had in the last scans for a leg, ShapeOptions::recent_veil_s = 0;
 //   --before-outline-departure: "before" reports an upper-body centre with the fixed allowances
 //   for the outline alone, not the departure its fit's residuals measure,
 //   ShapeOptions::outline_departure_gain = 0;
@@ -825,6 +828,9 @@ bool g_before_legs_seen_through = false;
 // --before-legs-report-coasting: "before" reports a knee-height coasting track for all of
 // report_coasting_s (ShapeOptions::legs_report_coasting_s = 0).
 bool g_before_legs_report_coasting = false;
+// --before-recent-veil: "before" takes a knee-height leg-sized segment behind a nearer return its
+// beams had in the last scans for a leg (ShapeOptions::recent_veil_s = 0).
+bool g_before_recent_veil = false;
 // --before-outline-departure: "before" reports an upper-body centre with the fixed allowances for
 // the outline alone (ShapeOptions::outline_departure_gain = 0).
 bool g_before_outline_departure = false;
@@ -864,6 +870,7 @@ std::vector<Variant> Variants(sim::Mount mount, double range_m) {
   old.shape.deep_legs_as_pair = false;
   old.shape.legs_report_coasting_s = 0.0;
   old.shape.legs_seen_through = false;
+  old.shape.recent_veil_s = 0.0;
   std::vector<Variant> variants = {{"old", old}, {"new", fresh}};
   if (g_before_report_rules) {
     tracking::TrackerOptions before = fresh;
@@ -876,7 +883,8 @@ std::vector<Variant> Variants(sim::Mount mount, double range_m) {
              g_before_deep_evidence || g_before_isotropic_bias || g_before_across_walk ||
              g_before_side_uncertainty || g_before_side_from_view || g_before_few_point_legs ||
              g_before_deep_legs || g_before_legs_seen_through || g_before_legs_report_coasting ||
-             g_before_outline_departure || g_before_fusion_merge || g_before_report_sourceless) {
+             g_before_outline_departure || g_before_fusion_merge || g_before_report_sourceless ||
+             g_before_recent_veil) {
     tracking::TrackerOptions before = fresh;
     if (g_before_one_leg) before.shape.hidden_leg_behind = false;
     if (g_before_mixed_pixels) before.shape.drop_mixed_pixel_legs = false;
@@ -897,6 +905,7 @@ std::vector<Variant> Variants(sim::Mount mount, double range_m) {
     if (g_before_legs_seen_through) before.shape.legs_seen_through = false;
     if (g_before_legs_report_coasting) before.shape.legs_report_coasting_s = 0.0;
     if (g_before_outline_departure) before.shape.outline_departure_gain = 0.0;
+    if (g_before_recent_veil) before.shape.recent_veil_s = 0.0;
     variants.push_back({"before", before});
   }
   return variants;
@@ -1761,7 +1770,7 @@ std::string KneeHeightBefore() {
         g_before_isotropic_bias || g_before_across_walk || g_before_side_uncertainty ||
         g_before_side_from_view || g_before_few_point_legs || g_before_deep_legs ||
         g_before_legs_seen_through || g_before_legs_report_coasting || g_before_outline_departure ||
-        g_before_fusion_merge || g_before_report_sourceless) ||
+        g_before_fusion_merge || g_before_report_sourceless || g_before_recent_veil) ||
       g_before_mixed_pixels || g_before_far || g_before_evidence_coasting ||
       g_before_report_rules) {
     return "";
@@ -1847,6 +1856,11 @@ std::string KneeHeightBefore() {
     without.push_back(
         "reporting an upper-body centre with the whole fixed allowances for the outline, not the "
         "departure its fit's residuals measure (`shape.outline_departure_gain` 0)");
+  }
+  if (g_before_recent_veil) {
+    without.push_back(
+        "taking a knee-height leg-sized segment behind a nearer return its beams had in the last "
+        "scans for a leg (`shape.recent_veil_s` 0)");
   }
   std::string text = "\"before\": the new tracker" + std::string(without.empty() ? "" : " ");
   for (std::size_t i = 0; i < without.size(); ++i) {
@@ -1945,6 +1959,8 @@ int main(int argc, char** argv) {
       g_before_legs_report_coasting = true;
     } else if (a == "--before-outline-departure") {
       g_before_outline_departure = true;
+    } else if (a == "--before-recent-veil") {
+      g_before_recent_veil = true;
     } else if (a == "--before-fusion-merge") {
       g_before_fusion_merge = true;
     } else if (a == "--before-report-sourceless") {
@@ -1962,7 +1978,7 @@ int main(int argc, char** argv) {
                    "[--before-across-walk] [--before-side-uncertainty] "
                    "[--before-side-from-view] [--before-few-point-legs] [--before-deep-legs] "
                    "[--before-legs-seen-through] [--before-legs-report-coasting] "
-                   "[--before-outline-departure] [--before-fusion-merge] "
+                   "[--before-outline-departure] [--before-recent-veil] [--before-fusion-merge] "
                    "[--before-report-sourceless]]\n");
       return 2;
     }
