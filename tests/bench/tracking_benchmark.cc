@@ -105,7 +105,10 @@
 //   --before-fusion-merge is given too); several:
 //   without any of them). --explain also
 //   writes the false positives' classes to the results (ExplainTable) and, on stderr, what the
-//   tracks measured again after more than 1 s (a lost track resumed) came back on.
+//   tracks measured again after more than 1 s (a lost track resumed) came back on, and what the
+//   measured false scans of tracks that held an object before were measured on (LeftBehind: the
+//   nearest object to the measurement, how far it and the track's own object are, the time since
+//   the track last matched, its age and the measurement's point count).
 
 #include <Eigen/Cholesky>
 #include <Eigen/Core>
@@ -387,7 +390,10 @@ struct Causes {
   // A reported track coasting beside a person the scan returned (the nearest track within
   // kMatchRadiusM of them, not measured): what became of the person's returns (CoastingCause).
   std::map<std::string, double> coasting;
+  // Measured false scans of tracks that held an object before: what measured them (LeftBehind).
+  std::map<std::string, double> left_measured;
   void Add(const Causes& o) {
+    for (const auto& [k, v] : o.left_measured) left_measured[k] += v;
     for (const auto& [k, v] : o.coasting) coasting[k] += v;
     for (const auto& [k, v] : o.resumes) resumes[k] += v;
     for (const auto& [k, v] : o.false_classes) false_classes[k] += v;
@@ -528,6 +534,7 @@ class MotSequence {
       hs.frames += 1;
       hs.ever_matched = true;
       hs.last_truth = truths[t].id;
+      hs.last_matched_s = now_s_ + dt_s;
     }
     for (std::size_t h = 0; h < hyps.size(); ++h) {
       if (hyp_taken[h]) continue;
@@ -596,11 +603,51 @@ class MotSequence {
         timed += coast_s < 0.15 ? " < 0.15 s" : coast_s < 0.3 ? " 0.15-0.3 s" : " >= 0.3 s";
       }
       causes_.false_classes[timed] += 1;
+      if (hs.ever_matched && hyps[h].measured) {
+        causes_.left_measured[LeftBehind(hyps[h], hs.last_truth, now_s_ - hs.last_matched_s,
+                                         hyp_age_[hyps[h].id], truths, truth_to_hyp)] += 1;
+      }
       if (!hyps[h].view.empty()) {
         causes_.false_views[cls + " | " + hyps[h].view] += 1;
         causes_.false_sight[LineOfSight(hyps[h], truths, truth_to_hyp)] += 1;
       }
     }
+  }
+
+  // --explain: a measured false scan of a track that held an object before, by what measured it:
+  // the nearest object to the track's measurement (its own object that it held last, another one
+  // held by a track or untracked) and how far, how far its own object is, how long since the track
+  // last matched it and how long the track has been reported.
+  static std::string LeftBehind(const Hypothesis& hyp, std::size_t last_truth, double since_s,
+                                double age_s, const std::vector<Truth>& truths,
+                                const std::vector<int>& truth_to_hyp) {
+    const Vector2d z = hyp.points > 0 ? hyp.z : hyp.p;
+    const Truth* nearest = nullptr;
+    bool held = false;
+    double own_d = std::numeric_limits<double>::infinity();
+    for (std::size_t t = 0; t < truths.size(); ++t) {
+      if (truths[t].id == last_truth) own_d = (hyp.p - truths[t].p).norm();
+      if (nearest == nullptr || (z - truths[t].p).norm() < (z - nearest->p).norm()) {
+        nearest = &truths[t];
+        held = truth_to_hyp[t] >= 0;
+      }
+    }
+    auto bin = [](double d) {
+      return d < 0.3 ? "<0.3" : d < 0.5 ? "0.3-0.5" : d < 1.0 ? "0.5-1" : d < 2.0 ? "1-2" : ">=2";
+    };
+    std::string s = "own ";
+    s += std::isfinite(own_d) ? bin(own_d) : "gone";
+    if (nearest != nullptr) {
+      const double d = (z - nearest->p).norm();
+      s += std::string(", z nearest ") +
+           (nearest->id == last_truth ? "own" : held ? "other held" : "other untracked") + " " +
+           bin(d);
+    }
+    s += std::string(", since match ") +
+         (since_s < 0.2 ? "<0.2s" : since_s < 0.5 ? "0.2-0.5s" : since_s < 2 ? "0.5-2s" : ">=2s");
+    s += std::string(", age ") + (age_s < 2 ? "<2s" : age_s < 10 ? "2-10s" : ">=10s");
+    s += ", pts " + std::to_string(std::min<std::uint32_t>(hyp.points, 9));
+    return s;
   }
 
   // --explain, per sensor (the sensor at the origin): where a false scan lies from the nearest
@@ -722,6 +769,7 @@ class MotSequence {
     bool ever_matched = false;
     std::size_t last_truth = 0;
     double last_measured_s = 0;  // time of its last measured report (MotSequence's clock)
+    double last_matched_s = 0;   // time of its last match
     Vector2d last_measured_p = Vector2d::Zero();
     std::string resumed_cls;  // what it came back on when last resumed
     double resumed_at_s = 0;
@@ -1361,6 +1409,8 @@ void Explain(const std::string& scenario, const std::string& mount, const RunRes
       std::fprintf(stderr, "  resumed: %-90s %5.0f\n", why.c_str(), count);
     for (const auto& [why, count] : r.causes[v].coasting)
       std::fprintf(stderr, "  coasting beside the person: %-80s %6.0f\n", why.c_str(), count);
+    for (const auto& [why, count] : r.causes[v].left_measured)
+      std::fprintf(stderr, "  left behind, measured on: %-90s %6.0f\n", why.c_str(), count);
   }
 }
 
