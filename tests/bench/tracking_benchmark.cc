@@ -640,11 +640,15 @@ class MotSequence {
     if (nearest != nullptr) {
       const double d = (z - nearest->p).norm();
       s += std::string(", z nearest ") +
-           (nearest->id == last_truth ? "own" : held ? "other held" : "other untracked") + " " +
-           bin(d);
+           (nearest->id == last_truth ? "own"
+            : held                    ? "other held"
+                                      : "other untracked") +
+           " " + bin(d);
     }
-    s += std::string(", since match ") +
-         (since_s < 0.2 ? "<0.2s" : since_s < 0.5 ? "0.2-0.5s" : since_s < 2 ? "0.5-2s" : ">=2s");
+    s += std::string(", since match ") + (since_s < 0.2   ? "<0.2s"
+                                          : since_s < 0.5 ? "0.2-0.5s"
+                                          : since_s < 2   ? "0.5-2s"
+                                                          : ">=2s");
     s += std::string(", age ") + (age_s < 2 ? "<2s" : age_s < 10 ? "2-10s" : ">=10s");
     s += ", pts " + std::to_string(std::min<std::uint32_t>(hyp.points, 9));
     return s;
