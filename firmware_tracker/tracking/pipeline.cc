@@ -827,6 +827,44 @@ ObservationPart TrackingPipeline::MakePart(const ScanView& scan, const Segment& 
   };
   s.first_valid = part.begin_beam > 0 && clear(part.begin_beam - 1, points.front());
   s.last_valid = part.end_beam < scan.range_m.size() && clear(part.end_beam, points.back());
+  if (options_.shape.mount == Mount::kLegs && options_.shape.leg_edge_in_mixed_beam) {
+    // ShapeOptions::leg_edge_in_mixed_beam: a beam beyond the edge that returned from between the
+    // part and what lies beyond it is a mixed echo, its range the energy-weighted mean of the two:
+    // its share of the part's surface w = (r_beyond - r) / (r_beyond - r_edge), and the tangent
+    // within its footprint, (w - 1/2) beam_divergence_rad from its centre towards the part's
+    // outside (energy spread evenly across the footprint).
+    const std::size_t n = scan.range_m.size();
+    const auto in_mixed_beam = [&](bool valid, std::size_t beam, std::size_t beyond,
+                                   const Eigen::Vector2d& edge_point, double outside,
+                                   double& edge_rad) {
+      if (!valid || beam >= n || beyond >= n) return false;
+      const double r = static_cast<double>(scan.range_m[beam]);
+      const double r_beyond = static_cast<double>(scan.range_m[beyond]);
+      const double r_edge = Range(edge_point);
+      // One edge within the footprint only where the footprint is narrower than a leg.
+      if (!(r_edge * options_.shape.beam_divergence_rad + options_.shape.beam_exit_diameter_m <
+            2.0 * options_.shape.leg_radius_m)) {
+        return false;
+      }
+      const double noise = 3.0 * (options_.shape.fit.point_sigma_m +
+                                  options_.shape.fit.point_sigma_per_m * r_edge);
+      if (!(std::isfinite(r) && std::isfinite(r_beyond) && r > r_edge + noise &&
+            r_beyond > r + noise)) {
+        return false;
+      }
+      const double w = std::clamp((r_beyond - r) / (r_beyond - r_edge), 0.0, 1.0);
+      edge_rad =
+          scan.BeamAngleRad(beam) + outside * (w - 0.5) * options_.shape.beam_divergence_rad;
+      return true;
+    };
+    part.first_edge_in_mixed_beam =
+        part.begin_beam >= 2 &&
+        in_mixed_beam(s.first_valid, part.begin_beam - 1, part.begin_beam - 2, points.front(),
+                      -direction, s.first_edge_rad);
+    part.last_edge_in_mixed_beam =
+        in_mixed_beam(s.last_valid, part.end_beam, part.end_beam + 1, points.back(), direction,
+                      s.last_edge_rad);
+  }
   MarkMixedPixels(scan, points, part);
   return part;
 }
@@ -864,6 +902,8 @@ void TrackingPipeline::AddObservation(const ScanView& scan, const Observation& o
   std::size_t points = 0;
   for (std::size_t k = 0; k < observation.part_count; ++k) {
     const ObservationPart& part = observation.parts[k];
+    counters_.leg_edges_in_mixed_beam +=
+        (part.first_edge_in_mixed_beam ? 1 : 0) + (part.last_edge_in_mixed_beam ? 1 : 0);
     const auto pts = segments_.points_m.span().subspan(part.first_point, part.point_count);
     // The ray half way between the first and the last point's: the sum of their unit vectors
     // (the direction at the mean of their bearings, without atan2, cos and sin; a part spans far

@@ -232,6 +232,21 @@ struct ShapeOptions {
   // PipelineCounters::legs_side_from_view (sure) and legs_side_view_contested. false: the side
   // from the prediction alone.
   bool single_leg_side_from_view = true;
+  // Legs mount: a leg's silhouette edge where the beam beyond it is a mixed echo. A beam returns
+  // a leg cleanly only where nearly all of its footprint falls on it; where the leg's outline
+  // runs through the footprint of the next beam with something behind it, that beam reports a
+  // range between the two (the energy-weighted mean of the echoes), so the tangent lies about a
+  // step beyond the last clean beam, not half a step: taken there the visible width is a step too
+  // narrow, the leg radius learnt too small and the centre put towards the sensor
+  // (tracking_benchmark: circle fits of two-leg parts within 5 m 0.010 m nearer than the true leg
+  // centre, their radius 0.005-0.010 m small). true: such an edge (the beam beyond behind the
+  // part's edge point and the beam after it farther still, each by three sigma of the range
+  // noise, fit.point_sigma_m + fit.point_sigma_per_m R) is taken where that beam's share of the
+  // leg, w = (r_beyond - r) / (r_beyond - r_edge), puts it: (w - 1/2) beam_divergence_rad from
+  // the beam's centre towards the leg's outside, the beam's energy spread evenly across its
+  // footprint. Counted in PipelineCounters::leg_edges_in_mixed_beam. false: every edge half a
+  // step beyond the last returning beam.
+  bool leg_edge_in_mixed_beam = true;
   // Legs mount: a leg-sized segment (no wider than a pair of legs) of two or three points whose
   // beams' centres spread across the line of sight wider than a leg two sigmas above the prior
   // (2 (leg_radius_m + 2 leg_radius_sigma_m)) holds two legs side by side: a beam returns a leg
@@ -450,6 +465,7 @@ struct PipelineCounters {
   std::uint64_t outline_departure_widened = 0;  // body fits widened (outline_departure_gain)
   std::uint64_t split_few_point_legs = 0;       // 2-3 point segments split into two legs
   std::uint64_t deep_leg_pairs = 0;    // deep 2-3 point legs measured as a pair (deep_legs_as_pair)
+  std::uint64_t leg_edges_in_mixed_beam = 0;  // leg edges within a mixed echo (leg_edge_in_mixed_beam)
   std::uint64_t veiled_segments = 0;   // legs: mixed pixels (beside a nearer edge, deep), dropped
   std::uint64_t deep_pieces_kept = 0;  // legs: deep pieces with no surface behind, kept
   std::uint64_t shadowed_legs = 0;     // legs: straight behind a confirmed track, dropped
@@ -476,6 +492,10 @@ struct ObservationPart {
   // Legs mount: where the part's points are deeper along the ray than one leg, the index of the
   // point after its widest gap (ShapeOptions::deep_legs_as_pair), else 0.
   std::size_t deep_split = 0;
+  // Legs mount: the first / last silhouette edge placed within the mixed echo beyond it
+  // (ShapeOptions::leg_edge_in_mixed_beam).
+  bool first_edge_in_mixed_beam = false;
+  bool last_edge_in_mixed_beam = false;
 };
 
 // What one object shows in a scan: one segment (torso), or one or two legs.
