@@ -262,6 +262,13 @@ void VisitShape(tracking::ShapeOptions& o, ConfigVisitor& v) {
           "of the sensor; against a prediction sure of the other side (weight at least 0.95) the "
           "scan's side is taken with the other side's whole share (false: the side from the "
           "prediction alone).");
+  v.Field("leg_edge_in_mixed_beam", o.leg_edge_in_mixed_beam,
+          "mount legs: where the beam beyond a leg's edge returned from between the leg and what "
+          "the beam after it sees (each farther by three sigma of the range noise), a mixed echo "
+          "of the two, the leg's tangent is taken within that beam's footprint, (w - 1/2) "
+          "beam_divergence_rad from its centre towards the outside, w = (r_beyond - r) / "
+          "(r_beyond - r_edge) its share of the leg; only where the footprint is narrower than a "
+          "leg (2 leg_radius_m) (false: every edge half a step beyond the last returning beam).");
   v.Field("split_few_point_legs", o.split_few_point_legs,
           "mount legs: a leg-sized segment of two or three points spread across the line of "
           "sight wider than one leg can be (2 (leg_radius_m + 2 leg_radius_sigma_m)) is two legs "

@@ -2349,6 +2349,60 @@ TEST(PipelineScenarioTest, SingleBeamLegsUpdateAConfirmedTrackButStartNone) {
   EXPECT_TRUE(alone.ids.empty());
 }
 
+// ShapeOptions::leg_edge_in_mixed_beam: knee height, 0.5 deg, a wall at 5 m; a leg at 3 m
+// returned by beams 180-183 (the last at 3.02 m), beam 184 a mixed echo at 3.6 m (its share of
+// the leg w = (5 - 3.6) / (5 - 3.02) = 0.71), beam 179 the wall. The last edge lies within beam 184's
+// footprint, (w - 0.5) beam_divergence_rad beyond its centre; the first stays half a step
+// beyond beam 180. Without the option both are half a step beyond the last returning beam.
+TEST(PipelineScenarioTest, ALegsEdgeLiesWithinTheMixedEchoBeyondIt) {
+  constexpr std::size_t kBeams = 361;
+  constexpr double kStepRad = 0.5 * common::kPi / 180.0;
+  constexpr double kFirstRad = -0.5 * common::kPi;
+  const auto edges = [&](bool in_mixed_beam, std::uint64_t* counted) {
+    TrackerOptions options;
+    options.shape.mount = Mount::kLegs;
+    options.shape.leg_edge_in_mixed_beam = in_mixed_beam;
+    TrackingPipeline pipeline(options);
+    std::vector<float> ranges(kBeams);
+    const auto k0 = static_cast<std::int64_t>(kLearnedS * 25.0);
+    std::optional<Silhouette> found;
+    for (std::int64_t k = 0; k <= k0; ++k) {
+      std::fill(ranges.begin(), ranges.end(), 5.0f);
+      if (k == k0) {
+        ranges[180] = 3.02f;
+        ranges[181] = 3.0f;
+        ranges[182] = 3.0f;
+        ranges[183] = 3.02f;
+        ranges[184] = 3.6f;
+      }
+      (void)pipeline.Process(RangesScan(ranges, kFirstRad, kStepRad, k, 40),
+                             static_cast<std::uint32_t>(k));
+    }
+    for (const Observation& ob : pipeline.observations()) {
+      for (std::size_t p = 0; p < ob.part_count; ++p) {
+        if (ob.parts[p].begin_beam == 180) found = ob.parts[p].silhouette;
+      }
+    }
+    *counted = pipeline.counters().leg_edges_in_mixed_beam;
+    return found;
+  };
+  const double divergence = ShapeOptions{}.beam_divergence_rad;
+  std::uint64_t counted = 0, counted_before = 0;
+  const std::optional<Silhouette> now = edges(true, &counted);
+  const std::optional<Silhouette> before = edges(false, &counted_before);
+  ASSERT_TRUE(now.has_value());
+  ASSERT_TRUE(before.has_value());
+  ASSERT_TRUE(now->first_valid && now->last_valid);
+  const auto angle = [&](double beam) { return kFirstRad + beam * kStepRad; };
+  EXPECT_NEAR(now->first_edge_rad, angle(179.5), 1e-9);
+  // The edge point's range is 3.02 m: w = (5 - 3.6) / (5 - 3.02).
+  EXPECT_NEAR(now->last_edge_rad, angle(184.0) + (1.4 / 1.98 - 0.5) * divergence, 1e-6);
+  EXPECT_EQ(counted, 1u);
+  EXPECT_NEAR(before->first_edge_rad, angle(179.5), 1e-9);
+  EXPECT_NEAR(before->last_edge_rad, angle(183.5), 1e-9);
+  EXPECT_EQ(counted_before, 0u);
+}
+
 TEST(TrackerOptionsTest, ConfirmationInTimeAppliesAtKneeHeightOnly) {
   TrackerOptions options;
   ASSERT_GT(options.tracking.confirm_min_s, 0.0);
