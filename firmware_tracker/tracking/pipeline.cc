@@ -846,24 +846,22 @@ ObservationPart TrackingPipeline::MakePart(const ScanView& scan, const Segment& 
             2.0 * options_.shape.leg_radius_m)) {
         return false;
       }
-      const double noise = 3.0 * (options_.shape.fit.point_sigma_m +
-                                  options_.shape.fit.point_sigma_per_m * r_edge);
+      const double noise =
+          3.0 * (options_.shape.fit.point_sigma_m + options_.shape.fit.point_sigma_per_m * r_edge);
       if (!(std::isfinite(r) && std::isfinite(r_beyond) && r > r_edge + noise &&
             r_beyond > r + noise)) {
         return false;
       }
       const double w = std::clamp((r_beyond - r) / (r_beyond - r_edge), 0.0, 1.0);
-      edge_rad =
-          scan.BeamAngleRad(beam) + outside * (w - 0.5) * options_.shape.beam_divergence_rad;
+      edge_rad = scan.BeamAngleRad(beam) + outside * (w - 0.5) * options_.shape.beam_divergence_rad;
       return true;
     };
     part.first_edge_in_mixed_beam =
         part.begin_beam >= 2 &&
         in_mixed_beam(s.first_valid, part.begin_beam - 1, part.begin_beam - 2, points.front(),
                       -direction, s.first_edge_rad);
-    part.last_edge_in_mixed_beam =
-        in_mixed_beam(s.last_valid, part.end_beam, part.end_beam + 1, points.back(), direction,
-                      s.last_edge_rad);
+    part.last_edge_in_mixed_beam = in_mixed_beam(s.last_valid, part.end_beam, part.end_beam + 1,
+                                                 points.back(), direction, s.last_edge_rad);
   }
   MarkMixedPixels(scan, points, part);
   return part;

@@ -2351,8 +2351,8 @@ TEST(PipelineScenarioTest, SingleBeamLegsUpdateAConfirmedTrackButStartNone) {
 
 // ShapeOptions::leg_edge_in_mixed_beam: knee height, 0.5 deg, a wall at 5 m; a leg at 3 m
 // returned by beams 180-183 (the last at 3.02 m), beam 184 a mixed echo at 3.6 m (its share of
-// the leg w = (5 - 3.6) / (5 - 3.02) = 0.71), beam 179 the wall. The last edge lies within beam 184's
-// footprint, (w - 0.5) beam_divergence_rad beyond its centre; the first stays half a step
+// the leg w = (5 - 3.6) / (5 - 3.02) = 0.71), beam 179 the wall. The last edge lies within beam
+// 184's footprint, (w - 0.5) beam_divergence_rad beyond its centre; the first stays half a step
 // beyond beam 180. Without the option both are half a step beyond the last returning beam.
 TEST(PipelineScenarioTest, ALegsEdgeLiesWithinTheMixedEchoBeyondIt) {
   constexpr std::size_t kBeams = 361;

@@ -40,8 +40,8 @@
 //                       [--before-deep-evidence] [--before-isotropic-bias] [--before-across-walk]
 //                       [--before-few-point-legs] [--before-deep-legs]
 //                       [--before-legs-seen-through]
-//                       [--before-legs-report-coasting] [--before-outline-departure]
-//                       [--before-recent-veil]
+//                       [--before-legs-report-coasting] [--before-leg-edges]
+//                       [--before-outline-departure] [--before-recent-veil]
 //                       [--before-fusion-merge] [--before-report-sourceless]]
 //   (--extra: more scenario folders, e.g. held-out scenes, reported in their own section;
 //   --explain: per run on stderr, what became of an object's previous track at every id switch
@@ -93,6 +93,9 @@
 //   MultiTrackerOptions::report_coasting_s, ShapeOptions::legs_report_coasting_s = 0;
 //   --before-recent-veil: "before" takes a knee-height leg-sized segment behind a nearer return its
 //   beams had in the last scans for a leg, ShapeOptions::recent_veil_s = 0;
+//   --before-leg-edges: "before" takes a knee-height leg's silhouette edge half a step beyond its
+//   last returning beam also where the beam beyond is a mixed echo,
+//   ShapeOptions::leg_edge_in_mixed_beam = false;
 //   --before-outline-departure: "before" reports an upper-body centre with the fixed allowances
 //   for the outline alone, not the departure its fit's residuals measure,
 //   ShapeOptions::outline_departure_gain = 0;
@@ -883,6 +886,10 @@ bool g_before_legs_report_coasting = false;
 // --before-recent-veil: "before" takes a knee-height leg-sized segment behind a nearer return its
 // beams had in the last scans for a leg (ShapeOptions::recent_veil_s = 0).
 bool g_before_recent_veil = false;
+// --before-leg-edges: "before" takes a knee-height leg's silhouette edge half a step beyond its
+// last returning beam also where the beam beyond is a mixed echo
+// (ShapeOptions::leg_edge_in_mixed_beam = false).
+bool g_before_leg_edges = false;
 // --before-outline-departure: "before" reports an upper-body centre with the fixed allowances for
 // the outline alone (ShapeOptions::outline_departure_gain = 0).
 bool g_before_outline_departure = false;
@@ -935,8 +942,8 @@ std::vector<Variant> Variants(sim::Mount mount, double range_m) {
              g_before_deep_evidence || g_before_isotropic_bias || g_before_across_walk ||
              g_before_side_uncertainty || g_before_side_from_view || g_before_few_point_legs ||
              g_before_deep_legs || g_before_legs_seen_through || g_before_legs_report_coasting ||
-             g_before_outline_departure || g_before_fusion_merge || g_before_report_sourceless ||
-             g_before_recent_veil) {
+             g_before_leg_edges || g_before_outline_departure || g_before_fusion_merge ||
+             g_before_report_sourceless || g_before_recent_veil) {
     tracking::TrackerOptions before = fresh;
     if (g_before_one_leg) before.shape.hidden_leg_behind = false;
     if (g_before_mixed_pixels) before.shape.drop_mixed_pixel_legs = false;
@@ -956,6 +963,7 @@ std::vector<Variant> Variants(sim::Mount mount, double range_m) {
     if (g_before_deep_legs) before.shape.deep_legs_as_pair = false;
     if (g_before_legs_seen_through) before.shape.legs_seen_through = false;
     if (g_before_legs_report_coasting) before.shape.legs_report_coasting_s = 0.0;
+    if (g_before_leg_edges) before.shape.leg_edge_in_mixed_beam = false;
     if (g_before_outline_departure) before.shape.outline_departure_gain = 0.0;
     if (g_before_recent_veil) before.shape.recent_veil_s = 0.0;
     variants.push_back({"before", before});
@@ -1823,8 +1831,9 @@ std::string KneeHeightBefore() {
         g_before_single_beam || g_before_deep_pieces || g_before_deep_evidence ||
         g_before_isotropic_bias || g_before_across_walk || g_before_side_uncertainty ||
         g_before_side_from_view || g_before_few_point_legs || g_before_deep_legs ||
-        g_before_legs_seen_through || g_before_legs_report_coasting || g_before_outline_departure ||
-        g_before_fusion_merge || g_before_report_sourceless || g_before_recent_veil) ||
+        g_before_legs_seen_through || g_before_legs_report_coasting || g_before_leg_edges ||
+        g_before_outline_departure || g_before_fusion_merge || g_before_report_sourceless ||
+        g_before_recent_veil) ||
       g_before_mixed_pixels || g_before_far || g_before_evidence_coasting ||
       g_before_report_rules) {
     return "";
@@ -1905,6 +1914,12 @@ std::string KneeHeightBefore() {
     without.push_back(
         "reporting a knee-height coasting track for all of `tracking.report_coasting_s` "
         "(`shape.legs_report_coasting_s` 0)");
+  }
+  if (g_before_leg_edges) {
+    without.push_back(
+        "taking a knee-height leg's silhouette edge half a step beyond its last returning beam "
+        "also where the beam beyond is a mixed echo of the leg and what lies behind it "
+        "(`shape.leg_edge_in_mixed_beam` false)");
   }
   if (g_before_outline_departure) {
     without.push_back(
@@ -2011,6 +2026,8 @@ int main(int argc, char** argv) {
       g_before_legs_seen_through = true;
     } else if (a == "--before-legs-report-coasting") {
       g_before_legs_report_coasting = true;
+    } else if (a == "--before-leg-edges") {
+      g_before_leg_edges = true;
     } else if (a == "--before-outline-departure") {
       g_before_outline_departure = true;
     } else if (a == "--before-recent-veil") {
@@ -2032,7 +2049,8 @@ int main(int argc, char** argv) {
                    "[--before-across-walk] [--before-side-uncertainty] "
                    "[--before-side-from-view] [--before-few-point-legs] [--before-deep-legs] "
                    "[--before-legs-seen-through] [--before-legs-report-coasting] "
-                   "[--before-outline-departure] [--before-recent-veil] [--before-fusion-merge] "
+                   "[--before-leg-edges] [--before-outline-departure] [--before-recent-veil] "
+                   "[--before-fusion-merge] "
                    "[--before-report-sourceless]]\n");
       return 2;
     }
