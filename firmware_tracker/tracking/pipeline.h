@@ -244,8 +244,10 @@ struct ShapeOptions {
   // noise, fit.point_sigma_m + fit.point_sigma_per_m R) is taken where that beam's share of the
   // leg, w = (r_beyond - r) / (r_beyond - r_edge), puts it: (w - 1/2) beam_divergence_rad from
   // the beam's centre towards the leg's outside, the beam's energy spread evenly across its
-  // footprint. Counted in PipelineCounters::leg_edges_in_mixed_beam. false: every edge half a
-  // step beyond the last returning beam.
+  // footprint; only where that footprint (beam_divergence_rad R + beam_exit_diameter_m) is
+  // narrower than a leg (2 leg_radius_m), as one edge of the leg then lies within it. Counted in
+  // PipelineCounters::leg_edges_in_mixed_beam. false: every edge half a step beyond the last
+  // returning beam.
   bool leg_edge_in_mixed_beam = true;
   // Legs mount: a leg-sized segment (no wider than a pair of legs) of two or three points whose
   // beams' centres spread across the line of sight wider than a leg two sigmas above the prior
@@ -465,7 +467,6 @@ struct PipelineCounters {
   std::uint64_t outline_departure_widened = 0;  // body fits widened (outline_departure_gain)
   std::uint64_t split_few_point_legs = 0;       // 2-3 point segments split into two legs
   std::uint64_t deep_leg_pairs = 0;    // deep 2-3 point legs measured as a pair (deep_legs_as_pair)
-  std::uint64_t leg_edges_in_mixed_beam = 0;  // leg edges within a mixed echo (leg_edge_in_mixed_beam)
   std::uint64_t veiled_segments = 0;   // legs: mixed pixels (beside a nearer edge, deep), dropped
   std::uint64_t deep_pieces_kept = 0;  // legs: deep pieces with no surface behind, kept
   std::uint64_t shadowed_legs = 0;     // legs: straight behind a confirmed track, dropped
@@ -474,6 +475,8 @@ struct PipelineCounters {
   std::uint64_t seen_through = 0;      // coasting track reports dropped (seen through)
   std::uint64_t unseen_coasting = 0;   // coasting track reports dropped (nothing seen near)
   std::uint64_t legs_seen_through = 0;  // knee height: coasting reports dropped (legs seen through)
+  // Leg silhouette edges placed within the mixed echo beyond them (leg_edge_in_mixed_beam).
+  std::uint64_t leg_edges_in_mixed_beam = 0;
   // Shape fits by the evaluations of their objective (ShapeFitResult::evaluations; each one pass
   // over the points): index e counts the fits with e, the last those with that many or more.
   std::array<std::uint64_t, 8> shape_fit_evaluations{};
