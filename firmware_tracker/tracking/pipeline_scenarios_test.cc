@@ -2469,5 +2469,101 @@ TEST(PersonBackLineRms, RootFreeTestAgreesWithTheRms) {
   EXPECT_FALSE(internal::PersonBackLineRmsAbove(o, 0.3, std::nan("")));
 }
 
+// shape.recent_veil_s against real far people behind a nearer moving one, at knee height with the
+// simulator's legs: the tracker models the real beam (beam_divergence_rad 0.015, so that beyond
+// ~8 m a leg fills no beam and the rule applies) while the synthetic scanner's beams are pencils
+// (no mixed pixels: every far echo is a real leg). Walker 1 is the far person; from far_from_s on
+// (confirmed) to the end of its walk it must keep one id that is reported within 0.5 m for all
+// but a few scans (a short gap while the near person covers it): max_unmatched without the rule,
+// max_unmatched_veiled with it (the gap the rule adds is its cost on such a scene).
+struct VeilCase {
+  VeilCase() {
+    scene.legs = true;
+    scene.walls = {{{16.0, -7.0}, {16.0, 7.0}},
+                   {{-2.0, 7.0}, {16.0, 7.0}},
+                   {{-2.0, -7.0}, {16.0, -7.0}},
+                   {{-2.0, 7.0}, {-2.0, -7.0}}};
+  }
+  Scene scene;  // a hall 18 m x 14 m, its far wall at 16 m
+  double far_from_s = 0.0;
+  int max_unmatched = 0, max_unmatched_veiled = 0;
+  double max_mean_error_m = 0.15;
+};
+std::pair<Follow, std::uint64_t> FollowFarWithVeil(const VeilCase& c, double recent_veil_s,
+                                                   std::size_t w = 1) {
+  TrackerOptions options = LegsOptions();
+  options.shape.beam_divergence_rad = TrackerOptions().shape.beam_divergence_rad;
+  options.shape.recent_veil_s = recent_veil_s;
+  const Walker& far = c.scene.walkers[w];
+  const SceneRun run = Simulate(c.scene, far.end_s() + 0.5, options);
+  return {FollowWalker(run, far, w, c.far_from_s, far.end_s(), 0.5),
+          run.pipeline->counters().recently_veiled};
+}
+void ExpectFarKept(const VeilCase& c, std::size_t w = 1) {
+  for (const double veil_s : {0.3, 0.0}) {
+    const auto [f, veiled] = FollowFarWithVeil(c, veil_s, w);
+    SCOPED_TRACE("recent_veil_s " + std::to_string(veil_s) + ", recently_veiled " +
+                 std::to_string(veiled) + ": " + Describe(f));
+    EXPECT_EQ(f.frames_per_id.size(), 1u);
+    EXPECT_LE(f.unmatched, veil_s > 0.0 ? c.max_unmatched_veiled : c.max_unmatched);
+    EXPECT_LT(f.mean_error_m, c.max_mean_error_m);
+  }
+}
+
+// Disabled: the rear person is never tracked here with either setting (recently_veiled stays 0:
+// the loss is not this rule's), kept to show the scene.
+// 1) Two people walk away one behind the other along nearly the same ray (1.2 m/s), the rear one
+// 2 m behind and 0.6 m aside (the front one's legs hide one of the rear one's at times), from
+// 9.5 to 12.5 m at 0.5 m/s: the rear one's beams had the front one's legs
+// (nearer by ~1.5 m) a moment before.
+TEST(PipelineScenarioTest, DISABLED_RecentVeilKeepsAFarPersonWalkingBehindANearerOne) {
+  VeilCase c;
+  c.scene.walkers = {Walker::Path(kLearnedS, {{7.5, 0.0}, {10.5, 0.0}}, 0.5),
+                     Walker::Path(kLearnedS, {{9.5, 0.6}, {12.5, 0.6}}, 0.5)};
+  c.far_from_s = kLearnedS + 1.0;
+  c.max_unmatched = 10;
+  c.max_unmatched_veiled = 10;
+  ExpectFarKept(c);
+}
+
+// 2) A near person (3.5 m) walks across the view at 1.2 m/s in front of a far person walking
+// slowly across at 11 m (0.5 m/s): the near one covers the far one's ray for ~0.2 s.
+TEST(PipelineScenarioTest, RecentVeilKeepsAFarPersonWhenANearOneCrossesInFront) {
+  VeilCase c;
+  c.scene.walkers = {Walker::Path(kLearnedS + 2.0, {{3.5, -2.0}, {3.5, 2.0}}, 1.2),
+                     Walker::Path(kLearnedS, {{11.0, -1.5}, {11.0, 1.5}}, 0.5)};
+  c.far_from_s = kLearnedS + 1.0;
+  c.max_unmatched = 3;  // measured: 0
+  c.max_unmatched_veiled = 10;  // measured: 8 (0.32 s)
+  ExpectFarKept(c);
+}
+
+// 3) A far person walks slowly across at 12 m (0.3 m/s), seen past and between the legs of a near
+// person walking slowly across at 4 m (0.4 m/s) on nearly the same rays.
+TEST(PipelineScenarioTest, RecentVeilKeepsAFarPersonSeenBetweenTheLegsOfANearOne) {
+  VeilCase c;
+  c.scene.walkers = {Walker::Path(kLearnedS, {{4.0, -0.8}, {4.0, 0.8}}, 0.4),
+                     Walker::Path(kLearnedS, {{12.0, -1.2}, {12.0, 1.2}}, 0.3)};
+  c.far_from_s = kLearnedS + 1.5;
+  c.max_unmatched = 10;  // measured: 7 (0.28 s)
+  c.max_unmatched_veiled = 40;  // measured: 34 (1.36 s): the rule hides the far person ~1 s longer
+  ExpectFarKept(c);
+}
+
+// Disabled: the rear person is never tracked here with either setting (recently_veiled stays 0:
+// the loss is not this rule's), kept to show the scene.
+// 4) Two far people walk across side by side at 10 and 11 m (0.5 m/s), the rear one 0.6 m
+// beside the front one's line of sight (its nearer leg hidden at times): both keep their track.
+TEST(PipelineScenarioTest, DISABLED_RecentVeilKeepsTwoFarPeopleOnePartlyBehindTheOther) {
+  VeilCase c;
+  c.scene.walkers = {Walker::Path(kLearnedS, {{10.0, -2.0}, {10.0, 2.0}}, 0.5),
+                     Walker::Path(kLearnedS, {{11.0, -1.6}, {11.0, 2.4}}, 0.5)};
+  c.far_from_s = kLearnedS + 1.0;
+  c.max_unmatched = 10;
+  c.max_unmatched_veiled = 10;
+  ExpectFarKept(c, 1);
+  ExpectFarKept(c, 0);
+}
+
 }  // namespace
 }  // namespace lrfnet::tracking
