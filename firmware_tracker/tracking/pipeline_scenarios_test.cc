@@ -2533,7 +2533,7 @@ TEST(PipelineScenarioTest, RecentVeilKeepsAFarPersonWhenANearOneCrossesInFront) 
   c.scene.walkers = {Walker::Path(kLearnedS + 2.0, {{3.5, -2.0}, {3.5, 2.0}}, 1.2),
                      Walker::Path(kLearnedS, {{11.0, -1.5}, {11.0, 1.5}}, 0.5)};
   c.far_from_s = kLearnedS + 1.0;
-  c.max_unmatched = 3;  // measured: 0
+  c.max_unmatched = 3;          // measured: 0
   c.max_unmatched_veiled = 10;  // measured: 8 (0.32 s)
   ExpectFarKept(c);
 }
@@ -2545,7 +2545,7 @@ TEST(PipelineScenarioTest, RecentVeilKeepsAFarPersonSeenBetweenTheLegsOfANearOne
   c.scene.walkers = {Walker::Path(kLearnedS, {{4.0, -0.8}, {4.0, 0.8}}, 0.4),
                      Walker::Path(kLearnedS, {{12.0, -1.2}, {12.0, 1.2}}, 0.3)};
   c.far_from_s = kLearnedS + 1.5;
-  c.max_unmatched = 10;  // measured: 7 (0.28 s)
+  c.max_unmatched = 10;         // measured: 7 (0.28 s)
   c.max_unmatched_veiled = 40;  // measured: 34 (1.36 s): the rule hides the far person ~1 s longer
   ExpectFarKept(c);
 }
