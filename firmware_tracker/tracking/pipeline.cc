@@ -1248,15 +1248,31 @@ bool TrackingPipeline::RecentlyVeiled(const ScanView& scan, const Segment& segme
   if (!(nearest_m * o.beam_divergence_rad >= 2.0 * o.leg_radius_m)) return false;
   const double margin_m =
       std::max(g.jump_base_m + g.jump_per_m * nearest_m, o.leg_pairing_distance_m);
-  const auto nearer = [&](std::size_t beam) {
+  // A nearer object still in beam b's footprint now, wide enough to fill a beam where it stands,
+  // fills a neighbouring beam of this scan: that beam returns nearer than the segment now.
+  const auto nearer_now = [&](std::size_t b) {
+    const auto near_return = [&](std::size_t j) {
+      const float r = scan.range_m[j];
+      return std::isfinite(r) && r > 0.0f && static_cast<double>(r) < nearest_m - margin_m;
+    };
+    return (b > 0 && near_return(b - 1)) || (b + 1 < n && near_return(b + 1));
+  };
+  // Beyond this range a leg-wide object can lie partly in a beam without filling a neighbour.
+  const double fills_a_beam_m =
+      2.0 * o.leg_radius_m / (std::abs(scan.angle_step_rad) + o.beam_divergence_rad);
+  const auto nearer = [&](std::size_t beam, bool present_now) {
     const float r = recent_near_m_[beam];
     if (!(r > 0.0f)) return false;
     const double age_s = common::NsToSeconds(scan.stamp_ns - recent_near_ns_[beam]);
     if (!(age_s > 0.0 && age_s <= o.recent_veil_s)) return false;
+    if (static_cast<double>(r) <= fills_a_beam_m && !present_now) return false;
     return static_cast<double>(r) < nearest_m - margin_m - options_.tracking.max_speed_mps * age_s;
   };
   for (std::size_t b = segment.begin_beam; b < segment.end_beam; ++b) {
-    if (!(nearer(b) || (b > 0 && nearer(b - 1)) || (b + 1 < n && nearer(b + 1)))) return false;
+    const bool now = nearer_now(b);
+    if (!(nearer(b, now) || (b > 0 && nearer(b - 1, now)) || (b + 1 < n && nearer(b + 1, now)))) {
+      return false;
+    }
   }
   return true;
 }

@@ -153,7 +153,12 @@ struct ShapeOptions {
   // every beam of which (or a neighbour) returned a foreground echo within recent_veil_s that was
   // nearer than the segment's nearest point by more than the segmentation's jump and
   // leg_pairing_distance_m (not the same person's other leg) plus tracking.max_speed_mps times
-  // its age (a body walking away along the ray was nearer before). Where one beam returns a leg
+  // its age (a body walking away along the ray was nearer before). A nearer return from a range
+  // where a leg-wide object fills a beam (within 2 leg_radius_m / (angle step +
+  // beam_divergence_rad)) counts only while a neighbour beam of this scan still returns nearer
+  // than the segment by that margin: such an object, still partly in the beam's footprint, fills
+  // a neighbour beam; once it has moved off (a near person walking past a far one) it cannot mix
+  // into the echo and the far leg is real. Where one beam returns a leg
   // only in some scans (12-15 m at 0.5 deg), this catches the echoes metres behind it that no
   // nearer return of the same scan explains. Single-beam legs (single_beam_legs) likewise
   // (knee height per sensor precision 0.9783 -> 0.9796, fused 0.9548 -> 0.9573). The time: about
@@ -565,7 +570,8 @@ class TrackingPipeline {
   bool SurfaceBehind(const ScanView& scan, const Segment& segment) const;
   bool Veiled(const ScanView& scan, const Segment& segment) const;
   // ShapeOptions::recent_veil_s: every beam of the segment (or a neighbour) returned, within that
-  // time before this scan, a foreground echo nearer than the segment by the margin there.
+  // time before this scan, a foreground echo nearer than the segment by the margin there (from a
+  // near object wide enough to fill a beam: only while a neighbour beam still returns it).
   bool RecentlyVeiled(const ScanView& scan, const Segment& segment) const;
   // Keeps, per beam, the nearest foreground return of the last recent_veil_s (and its time).
   void NoteRecentReturns(const ScanView& scan);
