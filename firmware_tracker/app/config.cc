@@ -365,11 +365,6 @@ void VisitShape(tracking::ShapeOptions& o, ConfigVisitor& v) {
           "leg_pairing_distance_m plus leg_radius_m of it returned from more than "
           "seen_through_margin_m beyond it), where the beams and their footprint are narrower "
           "than a leg; a person hidden behind something stays reported.");
-  v.Field("legs_taken_elsewhere", o.legs_taken_elsewhere,
-          "Knee-height mount: a coasting track is not reported where every beam across the "
-          "place its legs may stand (as legs_seen_through) returned from beyond it or from a leg "
-          "a confirmed track was measured with in this scan (not in front of it), at least one "
-          "such: the legs there are another person's.");
   v.Field("legs_report_coasting_s", o.legs_report_coasting_s,
           "Knee-height mount: a coasting track is sent for at most this long after its last "
           "measurement (tracking.report_coasting_s where that is shorter): a track predicted "

@@ -731,15 +731,6 @@ void MultiTracker::StartTracks(common::UtcNs scan_start_ns,
   }
 }
 
-std::size_t MultiTracker::ConfirmedSources(std::span<std::size_t> out) const {
-  std::size_t n = 0;
-  for (const Track& t : tracks_) {
-    if (n >= out.size()) break;
-    if (t.confirmed && t.updated) out[n++] = t.source;
-  }
-  return n;
-}
-
 void MultiTracker::Report(common::UtcNs scan_start_ns, ScanTracks& out) {
   out.scan_start_ns = scan_start_ns;
   out.tracks.clear();

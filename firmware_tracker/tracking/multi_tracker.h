@@ -356,9 +356,6 @@ class MultiTracker {
   std::size_t Predict(common::UtcNs t_ns, std::span<TrackPrediction> out) const;
   // Measurements (indices as given to Step) of the tracks the last Step handed to the background.
   std::span<const std::size_t> absorbed_sources() const { return absorbed_.span(); }
-  // Measurements (indices as given to Step) that confirmed tracks were updated with in the last
-  // Step (evidence-only ones included); returns how many were written (at most out.size()).
-  std::size_t ConfirmedSources(std::span<std::size_t> out) const;
 
   // Deletes all tracks (not counted as deletions); ids keep counting.
   void Clear();

@@ -1579,72 +1579,6 @@ bool TrackingPipeline::OtherLegSeenThrough(const ScanView& scan,
   return beyond >= std::min<std::size_t>(2, hi - lo + 1);
 }
 
-bool TrackingPipeline::LegsTakenElsewhere(const ScanView& scan, const Eigen::Vector2d& position_m,
-                                          double half_width_m, double max_beam_gap_m,
-                                          std::span<const std::size_t> taken) const {
-  if (taken.empty()) return false;
-  const double range = position_m.norm();
-  if (!(range > half_width_m)) return false;
-  // As SeenThrough: a leg at the region's far side must fill a beam.
-  if (!((range + half_width_m) *
-            std::max(std::abs(scan.angle_step_rad), options_.shape.beam_divergence_rad) <
-        max_beam_gap_m)) {
-    return false;
-  }
-  std::size_t lo = 0, hi = 0;
-  if (!BeamsAcross(scan, position_m, std::atan(half_width_m / range), scan.range_m.size(), &lo,
-                   &hi)) {
-    return false;  // outside the field of view: unknown
-  }
-  const auto in_taken = [&](std::size_t beam) {
-    for (const std::size_t source : taken) {
-      if (source >= observations_.size()) continue;
-      const Observation& ob = observations_[source];
-      if (!ob.legs) continue;
-      // A track measured within this track's own leg reach may hold this person's legs.
-      if (source < measurements_.size() &&
-          (measurements_[source].position_m - position_m).norm() <
-              0.5 * options_.shape.leg_pairing_distance_m + options_.shape.leg_radius_m) {
-        continue;
-      }
-      for (std::size_t k = 0; k < ob.part_count; ++k) {
-        if (beam >= ob.parts[k].begin_beam && beam < ob.parts[k].end_beam) return true;
-      }
-    }
-    return false;
-  };
-  // Each beam crosses the disc of half_width_m about position_m between t_in and t_out (ranges):
-  // an echo beyond t_out passed it, one inside it from the background (a wall, nothing in front
-  // of it on that beam) or from another track's leg leaves no leg of this track on that beam; a
-  // foreground echo inside it no track took could be this track's leg, one before t_in could
-  // hide it.
-  const std::span<const std::uint8_t> foreground = background_.foreground();
-  const BeamDirections& directions = segments_.directions;
-  const double hw2 = half_width_m * half_width_m;
-  std::size_t clear = 0, others = 0;
-  for (std::size_t i = lo; i <= hi; ++i) {
-    const double r = scan.range_m[i];
-    if (!(r > 0.0)) continue;  // no echo: unknown
-    const Eigen::Vector2d u(directions.cos(i), directions.sin(i));
-    const double along = u.dot(position_m);
-    const double across = u.x() * position_m.y() - u.y() * position_m.x();
-    if (across * across >= hw2) continue;  // misses the disc
-    const double half_chord = std::sqrt(hw2 - across * across);
-    if (r > along + half_chord) {
-      ++clear;
-    } else if (r < along - half_chord) {
-      return false;  // something in front could hide a leg
-    } else if (in_taken(i)) {
-      ++others;  // another person's leg
-    } else if (i < foreground.size() && foreground[i] == 0) {
-      ++clear;  // the background, nothing in front of it on this beam
-    } else {
-      return false;  // could be this track's leg
-    }
-  }
-  return others >= 1 && clear + others >= 2;
-}
-
 bool TrackingPipeline::ForegroundNear(const ScanView& scan, const Eigen::Vector2d& position_m,
                                       double sigma_m) const {
   const double reach_m = options_.shape.person_major_m + 2.0 * sigma_m;
@@ -1671,10 +1605,6 @@ bool TrackingPipeline::ForegroundNear(const ScanView& scan, const Eigen::Vector2
 void TrackingPipeline::DropCoasting(const ScanView& scan) {
   const ShapeOptions& o = options_.shape;
   const bool torso = o.mount == Mount::kTorso;
-  std::array<std::size_t, kMaxTracks> taken_buffer{};
-  const std::span<const std::size_t> taken(
-      taken_buffer.data(),
-      !torso && o.legs_taken_elsewhere ? tracker_.ConfirmedSources(taken_buffer) : 0);
   std::size_t kept = 0;
   for (std::size_t i = 0; i < tracks_.tracks.size(); ++i) {
     const TrackReport& r = tracks_.tracks[i];
@@ -1695,14 +1625,6 @@ void TrackingPipeline::DropCoasting(const ScanView& scan) {
                       0.5 * o.leg_pairing_distance_m + o.leg_radius_m + 2.0 * sigma_m,
                       2.0 * o.leg_radius_m)) {
         ++counters_.legs_seen_through;
-        continue;
-      }
-      // Knee height: the legs there are those another (confirmed, measured) track took.
-      if (!torso && o.legs_taken_elsewhere && o.seen_through_margin_m > 0.0 &&
-          LegsTakenElsewhere(scan, position,
-                             0.5 * o.leg_pairing_distance_m + o.leg_radius_m + 2.0 * sigma_m,
-                             2.0 * o.leg_radius_m, taken)) {
-        ++counters_.legs_taken_elsewhere;
         continue;
       }
       const double coasted_m = std::hypot(r.vx_mps, r.vy_mps) * r.coasted_s;

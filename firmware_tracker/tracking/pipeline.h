@@ -429,16 +429,6 @@ struct ShapeOptions {
   // mostly where the person is not (tracking_benchmark, knee height, "left behind" false
   // positives). 0: off (tracking.report_coasting_s at every mount).
   double legs_report_coasting_s = 0.3;
-  // Knee-height mount: a coasting track is not reported where every beam across the place its
-  // legs may stand (as legs_seen_through: the same reach, beams closer together than a leg's
-  // width) returned either from more than seen_through_margin_m beyond it or from a leg that a
-  // confirmed track was measured with in this scan, at the region's range or beyond (not in front
-  // of it, where it could hide a leg), at least one beam such a leg's: the legs there are another
-  // person's, and this track's own legs, which would stand among them, returned no beam. A track
-  // split off its person (two tracks on one walker, the other one measured) or left beside a
-  // neighbour it had followed. A leg no track took (a person not measured, returns in no segment)
-  // keeps the report. false: off (legs_seen_through alone).
-  bool legs_taken_elsewhere = true;
 };
 
 std::optional<std::string> Validate(const ShapeOptions& options);
@@ -490,7 +480,6 @@ struct PipelineCounters {
   std::uint64_t seen_through = 0;      // coasting track reports dropped (seen through)
   std::uint64_t unseen_coasting = 0;   // coasting track reports dropped (nothing seen near)
   std::uint64_t legs_seen_through = 0;  // knee height: coasting reports dropped (legs seen through)
-  std::uint64_t legs_taken_elsewhere = 0;  // knee height: dropped (legs there are another track's)
   // Leg silhouette edges placed within the mixed echo beyond them (leg_edge_in_mixed_beam).
   std::uint64_t leg_edges_in_mixed_beam = 0;
   // Shape fits by the evaluations of their objective (ShapeFitResult::evaluations; each one pass
@@ -594,12 +583,6 @@ class TrackingPipeline {
   // beam_divergence_rad)) are narrower than a leg there (within 2 leg_radius_m / that footprint of
   // the sensor).
   bool OtherLegSeenThrough(const ScanView& scan, const Eigen::Vector2d& leg_m) const;
-  // ShapeOptions::legs_taken_elsewhere: as SeenThrough (beams at most max_beam_gap_m apart), with
-  // beams inside an observation of `taken` (measurements confirmed tracks were updated with) at
-  // range - half_width_m or beyond counting as not this track's; at least one such beam.
-  bool LegsTakenElsewhere(const ScanView& scan, const Eigen::Vector2d& position_m,
-                          double half_width_m, double max_beam_gap_m,
-                          std::span<const std::size_t> taken) const;
   bool ForegroundNear(const ScanView& scan, const Eigen::Vector2d& position_m,
                       double sigma_m) const;
 

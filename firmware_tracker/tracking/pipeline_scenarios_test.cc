@@ -1009,50 +1009,6 @@ TEST(PipelineScenarioTest, AKneeHeightCoastingTrackIsNotReportedWhereTheScanSees
   EXPECT_GE(with.dropped, 4u);
 }
 
-// At knee height two people walk side by side, 0.6 m apart along the line of sight; the nearer one
-// vanishes at y = 0.5 m (as through a door). The beams across every place the vanished person's
-// legs could stand return from the wall behind or from the legs of the other, whose confirmed
-// track is measured with them: with shape.legs_taken_elsewhere the coasting track is no longer
-// reported; without it (legs_seen_through alone, which the other's legs stop) it is reported at
-// its prediction for report_coasting_s. The other person keeps their one track.
-TEST(PipelineScenarioTest, AKneeHeightCoastingTrackIsNotReportedWhereTheLegsAreAnotherTracks) {
-  Scene scene;
-  scene.legs = true;
-  scene.walkers = {Walker::Path(kLearnedS, {{4.5, -3.0}, {4.5, 0.5}}, 1.2),
-                   Walker::Path(kLearnedS, {{5.1, -3.0}, {5.1, 3.0}}, 1.2)};
-  const Walker& gone = scene.walkers[0];
-  const Walker& stays = scene.walkers[1];
-  struct Result {
-    int coasting = 0;
-    std::uint64_t dropped = 0;
-    std::size_t stays_ids = 0;
-  };
-  auto run_with = [&](const TrackerOptions& options) {
-    const SceneRun run = Simulate(scene, stays.end_s() + 0.5, options);
-    Result result;
-    for (const Frame& f : run.frames) {
-      for (const TrackReport& r : f.tracks) {
-        if (f.t_s > gone.end_s() && f.t_s < stays.end_s() && r.state == TrackState::kCoasting) {
-          ++result.coasting;
-        }
-      }
-    }
-    result.dropped = run.pipeline->counters().legs_taken_elsewhere;
-    const Follow f = FollowWalker(run, stays, 1, gone.end_s(), stays.end_s(), 0.35);
-    result.stays_ids = f.frames_per_id.size();
-    return result;
-  };
-  TrackerOptions off = LegsOptions();
-  off.shape.legs_taken_elsewhere = false;
-  const Result without = run_with(off);
-  EXPECT_GE(without.coasting, 4);
-  EXPECT_EQ(without.dropped, 0u);
-  const Result with = run_with(LegsOptions());
-  EXPECT_LE(with.coasting, 1);
-  EXPECT_GE(with.dropped, 3u);
-  EXPECT_EQ(with.stays_ids, 1u);
-}
-
 TEST(PipelineScenarioTest, TwoPeopleSideBySideAtKneeHeightKeepTheirLegsAndIds) {
   Scene scene;
   scene.legs = true;
