@@ -286,11 +286,6 @@ void VisitShape(tracking::ShapeOptions& o, ConfigVisitor& v) {
           "a leg is narrower than two beams' spacing, within leg_pairing_distance_m of one "
           "confirmed track that still knows where it is, updates that track where it found no "
           "other leg; it never starts a track (false: such beams are dropped).");
-  v.Field("single_beam_leg_reach", o.single_beam_leg_reach,
-          "mount legs: such a single beam only within a leg's reach of the track's prediction "
-          "(half leg_pairing_distance_m plus leg_radius_m, plus two sigma of the position): a "
-          "lone beam farther off is not that person's leg (false: within "
-          "leg_pairing_distance_m).");
   v.Field("walking_speed_mps", o.walking_speed_mps,
           "Faster than this a person faces where they walk (the yaw prior of the fit).");
   v.Field("walking_yaw_sigma_rad", o.walking_yaw_sigma_rad,

@@ -1126,26 +1126,17 @@ void TrackingPipeline::AddSingleBeamLegs(const ScanView& scan, std::size_t track
     // And only one that still knows where the legs are (its position sigma within their reach):
     // a track coasting for long would follow whatever beam flickers near it.
     std::size_t near_tracks = 0, known = 0;
-    double distance_m = 0.0, sigma_m = 0.0;
     for (std::size_t t = 0; t < tracks; ++t) {
-      const double d = (predictions_[t].position_m - p).norm();
-      if (!predictions_[t].confirmed || d > o.leg_pairing_distance_m) continue;
+      if (!predictions_[t].confirmed ||
+          (predictions_[t].position_m - p).norm() > o.leg_pairing_distance_m) {
+        continue;
+      }
       ++near_tracks;
-      const double variance = 0.5 * predictions_[t].covariance_m2.trace();
-      if (variance <= reach * reach) ++known;
-      distance_m = d;
-      sigma_m = std::sqrt(std::max(0.0, variance));
+      if (0.5 * predictions_[t].covariance_m2.trace() <= reach * reach) ++known;
     }
-    if (near_tracks != 1 || known != 1) continue;
-    // A leg stands at most half a stride (half leg_pairing_distance_m) plus its radius from the
-    // body centre: a lone beam farther from the prediction than that and two sigma of it is not
-    // this person's leg (ShapeOptions::single_beam_leg_reach).
-    if (o.single_beam_leg_reach &&
-        distance_m > 0.5 * o.leg_pairing_distance_m + o.leg_radius_m + 2.0 * sigma_m) {
-      ++counters_.single_beams_out_of_reach;
+    if (near_tracks != 1 || known != 1 || leg_parts_.full() || !segments_.points_m.push_back(p)) {
       continue;
     }
-    if (leg_parts_.full() || !segments_.points_m.push_back(p)) continue;
     Segment single;
     single.begin_beam = b;
     single.end_beam = b + 1;

@@ -299,14 +299,6 @@ struct ShapeOptions {
   // track coasting beside a person the scan returned, 82 % had only single-beam returns near the
   // person. false: such beams are dropped.
   bool single_beam_legs = true;
-  // ... and only within a leg's reach of that track's prediction: half leg_pairing_distance_m (half
-  // a stride) plus leg_radius_m, plus two sigma of the position. A person's leg stands no farther
-  // from their body centre; a lone beam beyond it (still within leg_pairing_distance_m) is
-  // someone else's leg, a mixed pixel or clutter, and taken for a leg it pulls the track off its
-  // person (tracking_benchmark --explain, knee height: tracks "left behind" measured on two
-  // single beams 0.5-1 m off their person). Counted in
-  // PipelineCounters::single_beams_out_of_reach. false: within leg_pairing_distance_m.
-  bool single_beam_leg_reach = true;
   // Yaw prior: faster than walking_speed_mps a person faces where they walk (sigma
   // walking_yaw_sigma_rad: the torso turns with the gait, people step sideways); standing, the last
   // orientation, less certain by yaw_drift_rad_per_s.
@@ -473,7 +465,6 @@ struct PipelineCounters {
   std::uint64_t single_legs = 0;        // observations of one leg
   std::uint64_t legs_behind = 0;        // of them: the other hidden behind (hidden_leg_behind)
   std::uint64_t single_beam_legs = 0;   // observations of single-beam legs (single_beam_legs)
-  std::uint64_t single_beams_out_of_reach = 0;  // lone beams beyond a leg's reach, not taken
   std::uint64_t legs_across_walk = 0;   // one leg measured across the walk (single_leg_across_walk)
   std::uint64_t legs_side_uncertain = 0;  // of them: side uncertain (single_leg_side_uncertainty)
   std::uint64_t legs_side_from_view = 0;  // of them: side from the scan (single_leg_side_from_view)

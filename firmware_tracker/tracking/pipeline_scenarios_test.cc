@@ -2278,53 +2278,6 @@ TEST(PipelineScenarioTest, ASingleBeamBehindItsBeamsRecentNearerReturnIsNoLeg) {
   EXPECT_EQ(single_before, 1u);
 }
 
-// Knee height, 25 Hz, 0.5 deg, a wall at 16 m: a person stands at 13 m (legs on beams 176-177 and
-// 181-182, the body centre on beam 179) until confirmed. In the last scan a single beam returns,
-// at 13 m: beam 182 (a leg's place, 0.34 m from the centre) is a single-beam leg for the track;
-// beam 185 (0.68 m off, within leg_pairing_distance_m but beyond half a stride and a leg's
-// radius plus two sigma of the standing track) is with shape.single_beam_leg_reach no leg of it
-// (counted in single_beams_out_of_reach), without it one.
-TEST(PipelineScenarioTest, ASingleBeamBeyondALegsReachOfTheTrackIsNoLeg) {
-  constexpr std::size_t kBeams = 361;
-  constexpr double kStepRad = 0.5 * common::kPi / 180.0;
-  const auto run = [&](bool reach, std::size_t beam) {
-    TrackerOptions options;
-    options.shape.mount = Mount::kLegs;
-    options.shape.single_beam_leg_reach = reach;
-    TrackingPipeline pipeline(options);
-    std::vector<float> ranges(kBeams);
-    const auto k0 = static_cast<std::int64_t>(kLearnedS * 25.0);
-    const std::int64_t last = k0 + 50;
-    PipelineCounters before_last;
-    for (std::int64_t k = 0; k <= last; ++k) {
-      std::fill(ranges.begin(), ranges.end(), 16.0f);
-      if (k >= k0 && k < last) {
-        for (const std::size_t b :
-             {std::size_t{176}, std::size_t{177}, std::size_t{181}, std::size_t{182}}) {
-          ranges[b] = 13.0f;
-        }
-      } else if (k == last) {
-        ranges[beam] = 13.0f;
-        before_last = pipeline.counters();
-      }
-      const ScanView scan = RangesScan(ranges, -0.5 * common::kPi, kStepRad, k, 40);
-      (void)pipeline.Process(scan, static_cast<std::uint32_t>(k));
-    }
-    return std::make_pair(pipeline.counters().single_beam_legs - before_last.single_beam_legs,
-                          pipeline.counters().single_beams_out_of_reach -
-                              before_last.single_beams_out_of_reach);
-  };
-  const auto [far_now, out_now] = run(true, 185);
-  EXPECT_EQ(far_now, 0u);
-  EXPECT_EQ(out_now, 1u);
-  const auto [far_before, out_before] = run(false, 185);
-  EXPECT_EQ(far_before, 1u);
-  EXPECT_EQ(out_before, 0u);
-  const auto [near_now, near_out] = run(true, 182);
-  EXPECT_EQ(near_now, 1u);
-  EXPECT_EQ(near_out, 0u);
-}
-
 // Knee height, 25 Hz, 0.5 deg: a person walks across the view at 10 m (0.44 m/s), each leg
 // returned by 2 beams (one segment split into two legs), then for 1 s by a single beam each, 3
 // beams apart (two one-point segments, below min_points), then by 2 beams again. With

@@ -39,7 +39,7 @@
 //                       [--before-box-size] [--before-single-beam] [--before-deep-pieces]
 //                       [--before-deep-evidence] [--before-isotropic-bias] [--before-across-walk]
 //                       [--before-few-point-legs] [--before-deep-legs]
-//                       [--before-legs-seen-through] [--before-single-beam-reach]
+//                       [--before-legs-seen-through]
 //                       [--before-legs-report-coasting] [--before-leg-edges]
 //                       [--before-outline-departure] [--before-recent-veil]
 //                       [--before-fusion-merge] [--before-report-sourceless]]
@@ -89,9 +89,6 @@
 //   = false;
 //   --before-legs-seen-through: "before" reports a knee-height coasting track also where the scan
 //   sees through every place its legs may stand, ShapeOptions::legs_seen_through = false;
-//   --before-single-beam-reach: "before" takes a knee-height single-beam leg for a confirmed track
-//   anywhere within leg_pairing_distance_m of its prediction, ShapeOptions::single_beam_leg_reach
-//   = false;
 //   --before-legs-report-coasting: "before" reports a knee-height coasting track for all of
 //   MultiTrackerOptions::report_coasting_s, ShapeOptions::legs_report_coasting_s = 0;
 //   --before-recent-veil: "before" takes a knee-height leg-sized segment behind a nearer return its
@@ -883,10 +880,6 @@ bool g_before_deep_legs = false;
 // --before-legs-seen-through: "before" reports a knee-height coasting track also where the scan
 // sees through every place its legs may stand (ShapeOptions::legs_seen_through = false).
 bool g_before_legs_seen_through = false;
-// --before-single-beam-reach: "before" takes a knee-height single-beam leg for a confirmed track
-// anywhere within leg_pairing_distance_m of its prediction (ShapeOptions::single_beam_leg_reach =
-// false).
-bool g_before_single_beam_reach = false;
 // --before-legs-report-coasting: "before" reports a knee-height coasting track for all of
 // report_coasting_s (ShapeOptions::legs_report_coasting_s = 0).
 bool g_before_legs_report_coasting = false;
@@ -930,7 +923,6 @@ std::vector<Variant> Variants(sim::Mount mount, double range_m) {
   old.shape.drop_mixed_pixel_legs_whole_person = false;
   old.shape.hidden_leg_behind = false;
   old.shape.single_beam_legs = false;
-  old.shape.single_beam_leg_reach = false;
   old.shape.drop_deep_mixed_pixel_pieces = false;
   old.shape.single_leg_across_walk = false;
   old.shape.split_few_point_legs = false;
@@ -950,7 +942,6 @@ std::vector<Variant> Variants(sim::Mount mount, double range_m) {
              g_before_deep_evidence || g_before_isotropic_bias || g_before_across_walk ||
              g_before_side_uncertainty || g_before_side_from_view || g_before_few_point_legs ||
              g_before_deep_legs || g_before_legs_seen_through || g_before_legs_report_coasting ||
-             g_before_single_beam_reach ||
              g_before_leg_edges || g_before_outline_departure || g_before_fusion_merge ||
              g_before_report_sourceless || g_before_recent_veil) {
     tracking::TrackerOptions before = fresh;
@@ -971,7 +962,6 @@ std::vector<Variant> Variants(sim::Mount mount, double range_m) {
     if (g_before_few_point_legs) before.shape.split_few_point_legs = false;
     if (g_before_deep_legs) before.shape.deep_legs_as_pair = false;
     if (g_before_legs_seen_through) before.shape.legs_seen_through = false;
-    if (g_before_single_beam_reach) before.shape.single_beam_leg_reach = false;
     if (g_before_legs_report_coasting) before.shape.legs_report_coasting_s = 0.0;
     if (g_before_leg_edges) before.shape.leg_edge_in_mixed_beam = false;
     if (g_before_outline_departure) before.shape.outline_departure_gain = 0.0;
@@ -1842,7 +1832,6 @@ std::string KneeHeightBefore() {
         g_before_isotropic_bias || g_before_across_walk || g_before_side_uncertainty ||
         g_before_side_from_view || g_before_few_point_legs || g_before_deep_legs ||
         g_before_legs_seen_through || g_before_legs_report_coasting || g_before_leg_edges ||
-        g_before_single_beam_reach ||
         g_before_outline_departure || g_before_fusion_merge || g_before_report_sourceless ||
         g_before_recent_veil) ||
       g_before_mixed_pixels || g_before_far || g_before_evidence_coasting ||
@@ -1920,11 +1909,6 @@ std::string KneeHeightBefore() {
     without.push_back(
         "reporting a knee-height coasting track also where the scan sees through every place its "
         "legs may stand (`shape.legs_seen_through` false)");
-  }
-  if (g_before_single_beam_reach) {
-    without.push_back(
-        "taking a knee-height single-beam leg for a confirmed track anywhere within "
-        "`shape.leg_pairing_distance_m` of its prediction (`shape.single_beam_leg_reach` false)");
   }
   if (g_before_legs_report_coasting) {
     without.push_back(
@@ -2040,8 +2024,6 @@ int main(int argc, char** argv) {
       g_before_deep_legs = true;
     } else if (a == "--before-legs-seen-through") {
       g_before_legs_seen_through = true;
-    } else if (a == "--before-single-beam-reach") {
-      g_before_single_beam_reach = true;
     } else if (a == "--before-legs-report-coasting") {
       g_before_legs_report_coasting = true;
     } else if (a == "--before-leg-edges") {
@@ -2066,8 +2048,7 @@ int main(int argc, char** argv) {
                    "[--before-deep-pieces] [--before-deep-evidence] [--before-isotropic-bias] "
                    "[--before-across-walk] [--before-side-uncertainty] "
                    "[--before-side-from-view] [--before-few-point-legs] [--before-deep-legs] "
-                   "[--before-legs-seen-through] [--before-single-beam-reach] "
-                   "[--before-legs-report-coasting] "
+                   "[--before-legs-seen-through] [--before-legs-report-coasting] "
                    "[--before-leg-edges] [--before-outline-departure] [--before-recent-veil] "
                    "[--before-fusion-merge] "
                    "[--before-report-sourceless]]\n");
