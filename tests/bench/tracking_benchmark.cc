@@ -49,7 +49,9 @@
 //   behind by its object, a second track beside a tracked one, clutter, furniture; see
 //   MotSequence::FalseClass; per sensor also where each false scan lies from the nearest object as
 //   the sensor sees it: straight behind it (held by another track or untracked, and how far), in
-//   front of it or beside it, MotSequence::LineOfSight)
+//   front of it or beside it, MotSequence::LineOfSight; and how a track parted from the object
+//   it held the scan before: its object out of view, coasting while its object was visible and
+//   what became of the object's returns, or measured on something else, how far off and on what)
 //   and the tracker's counters; --breakdown: a table more per section, the
 //   per-sensor matched error along and across the line of sight by range and point count, and
 //   the filtered track's error beside that of the scan's measurement it was updated with, see
@@ -395,7 +397,13 @@ struct Causes {
   std::map<std::string, double> coasting;
   // Measured false scans of tracks that held an object before: what measured them (LeftBehind).
   std::map<std::string, double> left_measured;
+  // Per sensor: how a track parted from the object it held in the scan before (its first false
+  // scan after a match): its object out of view; coasting while its object was visible (what
+  // became of the object's returns, CoastingCause); measured on something else (how far its
+  // measurement lay from its object and what it was made of).
+  std::map<std::string, double> partings;
   void Add(const Causes& o) {
+    for (const auto& [k, v] : o.partings) partings[k] += v;
     for (const auto& [k, v] : o.left_measured) left_measured[k] += v;
     for (const auto& [k, v] : o.coasting) coasting[k] += v;
     for (const auto& [k, v] : o.resumes) resumes[k] += v;
@@ -418,6 +426,7 @@ class MotSequence {
   void Frame(double dt_s, const std::vector<Truth>& truths, const std::vector<Hypothesis>& hyps,
              const std::vector<Vector2d>& dont_care, const std::set<std::uint64_t>* alive = nullptr,
              const std::vector<Vector2d>* furniture = nullptr) {
+    partings_.clear();
     std::set<std::size_t> present;
     for (const Truth& t : truths) present.insert(t.id);
     for (auto& [id, st] : state_) {
@@ -538,6 +547,7 @@ class MotSequence {
       hs.ever_matched = true;
       hs.last_truth = truths[t].id;
       hs.last_matched_s = now_s_ + dt_s;
+      hs.last_matched_frame = frame_ + 1;
     }
     for (std::size_t h = 0; h < hyps.size(); ++h) {
       if (hyp_taken[h]) continue;
@@ -559,6 +569,7 @@ class MotSequence {
       }
     }
     now_s_ += dt_s;
+    ++frame_;
     for (const Hypothesis& h : hyps) {
       hyp_age_[h.id] += dt_s;
       if (h.measured) {
@@ -594,6 +605,9 @@ class MotSequence {
             1;
       }
       HypState& hs = hyps_[hyps[h].id];
+      if (hs.ever_matched && hs.last_matched_frame + 1 == frame_) {
+        partings_.push_back({h, hs.last_truth});
+      }
       hs.frames += 1;
       hs.unmatched += 1;
       const std::string cls =
@@ -777,6 +791,7 @@ class MotSequence {
     std::size_t last_truth = 0;
     double last_measured_s = 0;  // time of its last measured report (MotSequence's clock)
     double last_matched_s = 0;   // time of its last match
+    std::uint64_t last_matched_frame = 0;  // frame number of its last match (from 1)
     Vector2d last_measured_p = Vector2d::Zero();
     std::string resumed_cls;  // what it came back on when last resumed
     double resumed_at_s = 0;
@@ -801,6 +816,18 @@ class MotSequence {
 
   Mot mot_;
   double now_s_ = 0;  // sum of the frames' dt_s
+  std::uint64_t frame_ = 0;  // frames seen
+
+ public:
+  // The last Frame's partings: (index into its hyps, the object the track held the frame before).
+  struct Parting {
+    std::size_t hyp = 0;
+    std::size_t truth_id = 0;
+  };
+  const std::vector<Parting>& partings() const { return partings_; }
+
+ private:
+  std::vector<Parting> partings_;
   std::map<std::size_t, TruthState> state_;
   std::map<std::uint64_t, HypState> hyps_;
   std::map<std::uint64_t, double> hyp_age_;  // seconds reported
@@ -1261,6 +1288,25 @@ void RunSensor(const sim::Simulator& simulator, std::size_t sensor,
       for (std::size_t a = 0; a < n_alive; ++a) alive.insert(predictions[a].id);
       sequences[v].Frame(period_s, truths, hyps, dont_care, &alive, &furniture);
       if (g_explain_coasting) {
+        for (const MotSequence::Parting& parting : sequences[v].partings()) {
+          const Hypothesis& h = hyps[parting.hyp];
+          const Truth* own = nullptr;
+          for (const Truth& t : truths) own = t.id == parting.truth_id ? &t : own;
+          std::string why;
+          if (own == nullptr) {
+            why = std::string("c: its object out of view, ") +
+                  (h.measured ? "measured" : "coasting");
+          } else if (!h.measured) {
+            why = "a: coasting, its object visible: " + CoastingCause(*pipelines[v], view, own->p, h.p);
+          } else {
+            const double d = (h.z - own->p).norm();
+            why = std::string("b: measured ") +
+                  (d < 0.5 ? "< 0.5 m" : d < 1.0 ? "0.5-1 m" : ">= 1 m") +
+                  " from its object, on " + kPartsBins[h.parts] + ", " +
+                  std::to_string(std::min<std::uint32_t>(h.points, 9)) + " points";
+          }
+          (*causes)[v].partings[why] += 1.0;
+        }
         for (const Truth& t : truths) {
           const Hypothesis* nearest = nullptr;
           double best = kMatchRadiusM;
@@ -1283,8 +1329,10 @@ void RunSensor(const sim::Simulator& simulator, std::size_t sensor,
   for (std::size_t v = 0; v < variants.size(); ++v) {
     (*mots)[v].Add(sequences[v].Finish());
     const auto coasting = std::move((*causes)[v].coasting);
+    const auto partings = std::move((*causes)[v].partings);
     (*causes)[v] = sequences[v].causes();
     (*causes)[v].coasting = coasting;
+    (*causes)[v].partings = partings;
     (*counters)[v] = pipelines[v]->tracker().counters();
   }
 }
@@ -1423,6 +1471,8 @@ void Explain(const std::string& scenario, const std::string& mount, const RunRes
       std::fprintf(stderr, "  coasting beside the person: %-80s %6.0f\n", why.c_str(), count);
     for (const auto& [why, count] : r.causes[v].left_measured)
       std::fprintf(stderr, "  left behind, measured on: %-90s %6.0f\n", why.c_str(), count);
+    for (const auto& [why, count] : r.causes[v].partings)
+      std::fprintf(stderr, "  parted from its object: %-100s %6.0f\n", why.c_str(), count);
   }
 }
 
