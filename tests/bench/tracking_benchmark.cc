@@ -50,7 +50,7 @@
 //   MotSequence::FalseClass; per sensor also where each false scan lies from the nearest object as
 //   the sensor sees it: straight behind it (held by another track or untracked, and how far), in
 //   front of it or beside it, MotSequence::LineOfSight; and how a track parted from the object
-//   it held the scan before: its object out of view, coasting while its object was visible and
+//   it held (its first false scan since): its object out of view, coasting while its object was visible and
 //   what became of the object's returns, or measured on something else, how far off and on what)
 //   and the tracker's counters; --breakdown: a table more per section, the
 //   per-sensor matched error along and across the line of sight by range and point count, and
@@ -397,8 +397,9 @@ struct Causes {
   std::map<std::string, double> coasting;
   // Measured false scans of tracks that held an object before: what measured them (LeftBehind).
   std::map<std::string, double> left_measured;
-  // Per sensor: how a track parted from the object it held in the scan before (its first false
-  // scan after a match): its object out of view; coasting while its object was visible (what
+  // Per sensor: how a track parted from the object it held (its first false scan since it last
+  // held it, by how many scans since; a track unreported or on a hidden object meanwhile parted
+  // later than that scan): its object out of view; coasting while its object was visible (what
   // became of the object's returns, CoastingCause); measured on something else (how far its
   // measurement lay from its object and what it was made of).
   std::map<std::string, double> partings;
@@ -548,6 +549,7 @@ class MotSequence {
       hs.last_truth = truths[t].id;
       hs.last_matched_s = now_s_ + dt_s;
       hs.last_matched_frame = frame_ + 1;
+      hs.parted = false;
     }
     for (std::size_t h = 0; h < hyps.size(); ++h) {
       if (hyp_taken[h]) continue;
@@ -605,8 +607,9 @@ class MotSequence {
             1;
       }
       HypState& hs = hyps_[hyps[h].id];
-      if (hs.ever_matched && hs.last_matched_frame + 1 == frame_) {
-        partings_.push_back({h, hs.last_truth});
+      if (hs.ever_matched && !hs.parted) {
+        hs.parted = true;
+        partings_.push_back({h, hs.last_truth, frame_ - hs.last_matched_frame});
       }
       hs.frames += 1;
       hs.unmatched += 1;
@@ -792,6 +795,7 @@ class MotSequence {
     double last_measured_s = 0;  // time of its last measured report (MotSequence's clock)
     double last_matched_s = 0;   // time of its last match
     std::uint64_t last_matched_frame = 0;  // frame number of its last match (from 1)
+    bool parted = false;                    // a false scan since its last match
     Vector2d last_measured_p = Vector2d::Zero();
     std::string resumed_cls;  // what it came back on when last resumed
     double resumed_at_s = 0;
@@ -819,10 +823,12 @@ class MotSequence {
   std::uint64_t frame_ = 0;  // frames seen
 
  public:
-  // The last Frame's partings: (index into its hyps, the object the track held the frame before).
+  // The last Frame's partings, a track's first false scan since it last held an object: index
+  // into its hyps, that object, and how many frames ago it held it.
   struct Parting {
     std::size_t hyp = 0;
     std::size_t truth_id = 0;
+    std::uint64_t frames_since = 0;
   };
   const std::vector<Parting>& partings() const { return partings_; }
 
@@ -1306,6 +1312,11 @@ void RunSensor(const sim::Simulator& simulator, std::size_t sensor,
                   std::to_string(std::min<std::uint32_t>(h.points, 9)) + " points";
           }
           (*causes)[v].partings[why] += 1.0;
+          (*causes)[v].partings[std::string(why.substr(0, 2)) +
+                                (parting.frames_since <= 1   ? " (all): held it the scan before"
+                                 : parting.frames_since <= 5 ? " (all): held it 2-5 scans before"
+                                                             : " (all): held it > 5 scans before")] +=
+              1.0;
         }
         for (const Truth& t : truths) {
           const Hypothesis* nearest = nullptr;
