@@ -50,12 +50,12 @@
 //   MotSequence::FalseClass; per sensor also where each false scan lies from the nearest object as
 //   the sensor sees it: straight behind it (held by another track or untracked, and how far), in
 //   front of it or beside it, MotSequence::LineOfSight; and how a track parted from the object
-//   it held (its first false scan since): its object out of view, coasting while its object was visible and
-//   what became of the object's returns, or measured on something else, how far off and on what)
-//   and the tracker's counters; --breakdown: a table more per section, the
-//   per-sensor matched error along and across the line of sight by range and point count, and
-//   the filtered track's error beside that of the scan's measurement it was updated with, see
-//   Breakdown; --before-report-rules: a third tracker, "before", the new one without
+//   it held (its first false scan since): its object out of view, coasting while its object was
+//   visible and what became of the object's returns, or measured on something else, how far off and
+//   on what) and the tracker's counters; --breakdown: a table more per section, the per-sensor
+//   matched error along and across the line of sight by range and point count, and the filtered
+//   track's error beside that of the scan's measurement it was updated with, see Breakdown;
+//   --before-report-rules: a third tracker, "before", the new one without
 //   ShapeOptions::unseen_coasting_m and MultiTrackerOptions::moving_speed_mps, the tree before
 //   them; --before-mixed-pixels: "before" is the new one taking knee-height mixed pixels for legs,
 //   ShapeOptions::drop_mixed_pixel_legs = false; --before-far: "before" is the new one without the
@@ -792,10 +792,10 @@ class MotSequence {
     double unmatched = 0;
     bool ever_matched = false;
     std::size_t last_truth = 0;
-    double last_measured_s = 0;  // time of its last measured report (MotSequence's clock)
-    double last_matched_s = 0;   // time of its last match
+    double last_measured_s = 0;            // time of its last measured report (MotSequence's clock)
+    double last_matched_s = 0;             // time of its last match
     std::uint64_t last_matched_frame = 0;  // frame number of its last match (from 1)
-    bool parted = false;                    // a false scan since its last match
+    bool parted = false;                   // a false scan since its last match
     Vector2d last_measured_p = Vector2d::Zero();
     std::string resumed_cls;  // what it came back on when last resumed
     double resumed_at_s = 0;
@@ -819,7 +819,7 @@ class MotSequence {
   }
 
   Mot mot_;
-  double now_s_ = 0;  // sum of the frames' dt_s
+  double now_s_ = 0;         // sum of the frames' dt_s
   std::uint64_t frame_ = 0;  // frames seen
 
  public:
@@ -1300,23 +1300,26 @@ void RunSensor(const sim::Simulator& simulator, std::size_t sensor,
           for (const Truth& t : truths) own = t.id == parting.truth_id ? &t : own;
           std::string why;
           if (own == nullptr) {
-            why = std::string("c: its object out of view, ") +
-                  (h.measured ? "measured" : "coasting");
+            why =
+                std::string("c: its object out of view, ") + (h.measured ? "measured" : "coasting");
           } else if (!h.measured) {
-            why = "a: coasting, its object visible: " + CoastingCause(*pipelines[v], view, own->p, h.p);
+            why = "a: coasting, its object visible: " +
+                  CoastingCause(*pipelines[v], view, own->p, h.p);
           } else {
             const double d = (h.z - own->p).norm();
             why = std::string("b: measured ") +
-                  (d < 0.5 ? "< 0.5 m" : d < 1.0 ? "0.5-1 m" : ">= 1 m") +
+                  (d < 0.5   ? "< 0.5 m"
+                   : d < 1.0 ? "0.5-1 m"
+                             : ">= 1 m") +
                   " from its object, on " + kPartsBins[h.parts] + ", " +
                   std::to_string(std::min<std::uint32_t>(h.points, 9)) + " points";
           }
           (*causes)[v].partings[why] += 1.0;
-          (*causes)[v].partings[std::string(why.substr(0, 2)) +
-                                (parting.frames_since <= 1   ? " (all): held it the scan before"
-                                 : parting.frames_since <= 5 ? " (all): held it 2-5 scans before"
-                                                             : " (all): held it > 5 scans before")] +=
-              1.0;
+          (*causes)[v]
+              .partings[std::string(why.substr(0, 2)) +
+                        (parting.frames_since <= 1   ? " (all): held it the scan before"
+                         : parting.frames_since <= 5 ? " (all): held it 2-5 scans before"
+                                                     : " (all): held it > 5 scans before")] += 1.0;
         }
         for (const Truth& t : truths) {
           const Hypothesis* nearest = nullptr;
