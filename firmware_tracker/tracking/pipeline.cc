@@ -814,11 +814,15 @@ ObservationPart TrackingPipeline::MakePart(const ScanView& scan, const Segment& 
   // that much towards the sensor (tracking_benchmark --breakdown: radial mean -0.034 m at torso
   // height; a 0.25 m cylinder learnt as 0.21 x 0.19 m).
   const double step = std::abs(scan.angle_step_rad);
-  const double outwards = 0.5 * step;
   const double direction = scan.angle_step_rad < 0 ? -1.0 : 1.0;
   s.step_rad = step;
-  s.first_edge_rad = scan.BeamAngleRad(part.begin_beam) - direction * outwards;
-  s.last_edge_rad = scan.BeamAngleRad(part.end_beam - 1) + direction * outwards;
+  s.first_edge_rad = scan.EdgeBeforeRad(part.begin_beam);
+  s.last_edge_rad = scan.EdgeAfterRad(part.end_beam - 1);
+  // Their directions from the segmentation's table of this scan (the same values as the cosine
+  // and sine of the angles): the fit then needs no sincos for its edges.
+  s.first_edge_unit = segments_.directions.edge_before(part.begin_beam);
+  s.last_edge_unit = segments_.directions.edge_after(part.end_beam - 1);
+  s.first_edge_unit_known = s.last_edge_unit_known = true;
   // An edge is the outline's when the beam beyond it saw nothing nearer (no echo, the background,
   // something behind): a nearer return is an occluder, and the field of view's end hides the rest.
   const auto clear = [&](std::size_t beam, const Eigen::Vector2d& edge_point) {
@@ -862,6 +866,9 @@ ObservationPart TrackingPipeline::MakePart(const ScanView& scan, const Segment& 
                       -direction, s.first_edge_rad);
     part.last_edge_in_mixed_beam = in_mixed_beam(s.last_valid, part.end_beam, part.end_beam + 1,
                                                  points.back(), direction, s.last_edge_rad);
+    // An edge moved into its mixed beam: its direction is the fit's to compute.
+    if (part.first_edge_in_mixed_beam) s.first_edge_unit_known = false;
+    if (part.last_edge_in_mixed_beam) s.last_edge_unit_known = false;
   }
   MarkMixedPixels(scan, points, part);
   return part;

@@ -30,6 +30,9 @@ void BeamDirections::Fit(const ScanView& scan) {
     const double angle_rad = scan.BeamAngleRad(i);
     cos_[i] = std::cos(angle_rad);
     sin_[i] = std::sin(angle_rad);
+    const double before_rad = scan.EdgeBeforeRad(i), after_rad = scan.EdgeAfterRad(i);
+    before_[i] = {std::cos(before_rad), std::sin(before_rad)};
+    after_[i] = {std::cos(after_rad), std::sin(after_rad)};
   }
 }
 

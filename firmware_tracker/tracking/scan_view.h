@@ -6,6 +6,7 @@
 // ranges are not owned (the span must outlive the call that receives the view).
 
 #include <array>
+#include <cmath>
 #include <cstddef>
 #include <span>
 
@@ -27,6 +28,16 @@ struct ScanView {
   double BeamAngleRad(std::size_t i) const {
     return first_angle_rad + static_cast<double>(i) * angle_step_rad;
   }
+  // Half a beam step before beam i (towards beam i - 1) and after it (towards beam i + 1): where
+  // the outline's tangent lies beyond the first and the last beam that returned an object.
+  double EdgeBeforeRad(std::size_t i) const {
+    const double direction = angle_step_rad < 0 ? -1.0 : 1.0;
+    return BeamAngleRad(i) - direction * (0.5 * std::abs(angle_step_rad));
+  }
+  double EdgeAfterRad(std::size_t i) const {
+    const double direction = angle_step_rad < 0 ? -1.0 : 1.0;
+    return BeamAngleRad(i) + direction * (0.5 * std::abs(angle_step_rad));
+  }
 };
 
 // Why a scan cannot be used at all. A status value, not a string, so rejecting a scan never
@@ -42,7 +53,8 @@ enum class ScanError {
 ScanError CheckScan(const ScanView& scan);
 const char* ToString(ScanError error);
 
-// cos and sin of every beam's angle (BeamAngleRad, the same values) for one scan geometry, kept
+// cos and sin of every beam's angle (BeamAngleRad, the same values) and of the two angles half a
+// step beside it (EdgeBeforeRad, EdgeAfterRad: a silhouette's ends) for one scan geometry, kept
 // between scans: Fit recomputes them only when the first angle, the step or the beam count change.
 // Fixed storage for kMaxBeams beams, no allocation.
 class BeamDirections {
@@ -51,6 +63,9 @@ class BeamDirections {
   void Fit(const ScanView& scan);
   double cos(std::size_t beam) const { return cos_[beam]; }
   double sin(std::size_t beam) const { return sin_[beam]; }
+  // (cos, sin) of EdgeBeforeRad(beam) and EdgeAfterRad(beam).
+  const std::array<double, 2>& edge_before(std::size_t beam) const { return before_[beam]; }
+  const std::array<double, 2>& edge_after(std::size_t beam) const { return after_[beam]; }
 
  private:
   double first_angle_rad_ = 0.0;
@@ -58,6 +73,8 @@ class BeamDirections {
   std::size_t beams_ = 0;  // 0: nothing computed yet
   std::array<double, kMaxBeams> cos_{};
   std::array<double, kMaxBeams> sin_{};
+  std::array<std::array<double, 2>, kMaxBeams> before_{};
+  std::array<std::array<double, 2>, kMaxBeams> after_{};
 };
 
 }  // namespace lrfnet::tracking

@@ -3,6 +3,7 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <memory>
 #include <vector>
 
 #include "common/geometry.h"
@@ -77,6 +78,32 @@ TEST(SegmentationTest, OneListFollowsChangingBeamGeometries) {
         ASSERT_EQ(pts[b].x(), r * std::cos(angle_rad)) << "scan " << k << " beam " << b;
         ASSERT_EQ(pts[b].y(), r * std::sin(angle_rad)) << "scan " << k << " beam " << b;
       }
+    }
+  }
+}
+
+// The table's silhouette directions: the cosine and sine of the angles half a step beside each
+// beam (ScanView::EdgeBeforeRad, EdgeAfterRad), the same values as libm's of those angles, for
+// either sign of the step.
+TEST(SegmentationTest, BeamTableHoldsTheEdgeDirectionsHalfAStepBesideEachBeam) {
+  for (const double step : {common::DegToRad(0.1667), common::DegToRad(-0.5)}) {
+    std::vector<float> ranges(761, 5.0f);
+    ScanView scan;
+    scan.first_angle_rad = common::DegToRad(-95.0);
+    scan.angle_step_rad = step;
+    scan.range_m = ranges;
+    scan.scan_period_s = 0.04;
+    const auto table_storage = std::make_unique<BeamDirections>();  // large: not on the stack
+    BeamDirections& table = *table_storage;
+    table.Fit(scan);
+    for (std::size_t i = 0; i < ranges.size(); i += 7) {
+      const double before = scan.EdgeBeforeRad(i), after = scan.EdgeAfterRad(i);
+      EXPECT_NEAR(before, scan.BeamAngleRad(i) - 0.5 * step, 1e-15);  // towards beam i - 1
+      EXPECT_NEAR(after, scan.BeamAngleRad(i) + 0.5 * step, 1e-15);
+      EXPECT_EQ(table.edge_before(i)[0], std::cos(before));
+      EXPECT_EQ(table.edge_before(i)[1], std::sin(before));
+      EXPECT_EQ(table.edge_after(i)[0], std::cos(after));
+      EXPECT_EQ(table.edge_after(i)[1], std::sin(after));
     }
   }
 }

@@ -884,13 +884,23 @@ ShapeFitResult Fit(std::span<const Eigen::Vector2d> points, const Silhouette& si
     const double range_sigma = mean_range * silhouette.step_rad / std::sqrt(12.0);
     const double weight =
         1.0 / (range_sigma * range_sigma + o.edge_floor_sigma_m * o.edge_floor_sigma_m);
-    const auto add = [&](double angle) {
-      Eigen::Vector2d nrm(std::sin(angle), -std::cos(angle));
+    // The edge ray's direction (cos, sin): the caller's where it has them (the same values).
+    const auto add = [&](double angle, bool unit_known, const std::array<double, 2>& unit) {
+      Eigen::Vector2d nrm;
+      if (unit_known && !kReference) {
+        nrm = Eigen::Vector2d(unit[1], -unit[0]);
+      } else {
+        nrm = Eigen::Vector2d(std::sin(angle), -std::cos(angle));
+      }
       if (nrm.dot(start) > 0.0) nrm = -nrm;
       edges[n_edges++] = {nrm, weight};
     };
-    if (silhouette.first_valid) add(silhouette.first_edge_rad);
-    if (silhouette.last_valid) add(silhouette.last_edge_rad);
+    if (silhouette.first_valid) {
+      add(silhouette.first_edge_rad, silhouette.first_edge_unit_known, silhouette.first_edge_unit);
+    }
+    if (silhouette.last_valid) {
+      add(silhouette.last_edge_rad, silhouette.last_edge_unit_known, silhouette.last_edge_unit);
+    }
   }
 
   // Per-point weights: noise and model error, discounted for correlation.

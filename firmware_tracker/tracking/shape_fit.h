@@ -39,6 +39,7 @@
 // scratch on the stack, at most max_points points are used: evenly subsampled beyond that).
 
 #include <Eigen/Core>
+#include <array>
 #include <cstddef>
 #include <cstdint>
 #include <optional>
@@ -59,6 +60,13 @@ struct Silhouette {
   double step_rad = 0.0;        // uncertainty of those angles (a uniform width, radians)
   bool first_valid = false;
   bool last_valid = false;
+  // (cos, sin) of first_edge_rad and last_edge_rad where the caller has them (the same values as
+  // std::cos and std::sin of the angles, e.g. from a table of the scan's beams); unknown: the fit
+  // computes them.
+  std::array<double, 2> first_edge_unit = {0.0, 0.0};
+  std::array<double, 2> last_edge_unit = {0.0, 0.0};
+  bool first_edge_unit_known = false;
+  bool last_edge_unit_known = false;
 };
 
 struct ShapePrior {

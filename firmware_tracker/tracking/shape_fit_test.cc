@@ -522,6 +522,53 @@ TEST(ShapeFitTest, CholeskySolverGivesThePivotedLdltResults) {
               worst_centre_m, identical);
 }
 
+// The silhouette edges' directions handed in by the caller (Silhouette::first_edge_unit and
+// last_edge_unit: the cosine and sine of the angles, as the pipeline's table of the scan's beams
+// holds them) give the same fit, bit for bit, as the fit's own sincos of the angles.
+TEST(ShapeFitTest, EdgeDirectionsFromTheCallerGiveTheSameBits) {
+  std::mt19937 rng(33);
+  std::uniform_real_distribution<double> uniform(0.0, 1.0);
+  int compared = 0;
+  for (int k = 0; k < 300; ++k) {
+    const double range = 2.0 + 20.0 * uniform(rng);
+    const double bearing = -1.2 + 2.4 * uniform(rng);
+    const double yaw = common::kPi * uniform(rng);
+    const Body body{range * Eigen::Vector2d(std::cos(bearing), std::sin(bearing)),
+                    0.2 + 0.05 * uniform(rng), 0.12 + 0.04 * uniform(rng), yaw};
+    View v = Look(body, k % 2 == 0 ? 0.1667 : 0.5, 0.012, static_cast<std::uint32_t>(k + 7));
+    if (v.points.empty()) continue;
+    v.silhouette.first_valid = uniform(rng) > 0.2;
+    v.silhouette.last_valid = uniform(rng) > 0.2;
+    ShapePrior prior;
+    prior.exponent = k % 3 == 0 ? 2.0 : 2.5;
+    prior.yaw_rad = yaw + 0.3 * (uniform(rng) - 0.5);
+    prior.yaw_sigma_rad = 0.35;
+    const ShapeFitResult own = FitShape(v.points, v.silhouette, prior, ShapeFitOptions{});
+    Silhouette given = v.silhouette;
+    given.first_edge_unit = {std::cos(given.first_edge_rad), std::sin(given.first_edge_rad)};
+    given.last_edge_unit = {std::cos(given.last_edge_rad), std::sin(given.last_edge_rad)};
+    given.first_edge_unit_known = given.last_edge_unit_known = true;
+    const ShapeFitResult fit = FitShape(v.points, given, prior, ShapeFitOptions{});
+    SCOPED_TRACE("case " + std::to_string(k));
+    ASSERT_EQ(fit.ok, own.ok);
+    if (!fit.ok) continue;
+    ++compared;
+    EXPECT_EQ(fit.centre_m, own.centre_m);
+    EXPECT_EQ(fit.centre_cov_m2, own.centre_cov_m2);
+    EXPECT_EQ(fit.size_m, own.size_m);
+    EXPECT_EQ(fit.yaw_rad, own.yaw_rad);
+    EXPECT_EQ(fit.evaluations, own.evaluations);
+    // A wrong direction handed in is used: the fit takes the caller's values, not the angle's.
+    if (v.silhouette.first_valid && k % 10 == 0) {
+      Silhouette wrong = given;
+      wrong.first_edge_unit = {std::cos(given.first_edge_rad + 0.05),
+                               std::sin(given.first_edge_rad + 0.05)};
+      EXPECT_NE(FitShape(v.points, wrong, prior, ShapeFitOptions{}).centre_m, own.centre_m);
+    }
+  }
+  EXPECT_GT(compared, 250);
+}
+
 // The start's guess taken without the depth (internal::GuessWithinReach) only where the full test
 // takes it too: within 0.5 m of the start on the ray, (nearest_along + h) ray with h the
 // superellipse's support function along the ray, whatever h is; and near the body (a track's
