@@ -6,6 +6,7 @@
 #include <array>
 #include <cmath>
 #include <cstdio>
+#include <limits>
 #include <random>
 #include <vector>
 
@@ -385,6 +386,16 @@ TEST(ShapeFitTest, EvenlySubsampledPointsWithAndWithoutNonFiniteOnes) {
       EXPECT_EQ(with_holes.centre_m, all.centre_m) << count << " points, max " << max_points;
       EXPECT_EQ(with_holes.centre_cov_m2, all.centre_cov_m2) << count;
       EXPECT_EQ(with_holes.extent_m, all.extent_m) << count;
+      // Infinite coordinates are not finite either (one of them alone among finite points).
+      std::vector<Eigen::Vector2d> infinite = arc;
+      const double inf = std::numeric_limits<double>::infinity();
+      infinite.insert(infinite.begin() + static_cast<std::ptrdiff_t>(count / 2), {-inf, 0.5});
+      const ShapeFitResult with_infinity = FitShape(infinite, edges, prior, options);
+      EXPECT_EQ(with_infinity.points_used, all.points_used) << count;
+      EXPECT_EQ(with_infinity.centre_m, all.centre_m) << count;
+      EXPECT_FALSE(FitShape(std::vector<Eigen::Vector2d>{{inf, 1.0}, {nan, nan}}, edges, prior,
+                            options)
+                       .ok);
       // The first and last points are always taken.
       EXPECT_DOUBLE_EQ(all.extent_m, (arc.front() - arc.back()).norm()) << count;
       EXPECT_NEAR(all.centre_m.x(), 4.0, 0.05) << count;
