@@ -398,8 +398,17 @@ class TrackingPipeline::Refiner final : public MeasurementRefiner {
     size_cov(0, 0) += std::max(0.0, floor_m * floor_m - size_cov(0, 0));
     size_cov(1, 1) += std::max(0.0, floor_m * floor_m - size_cov(1, 1));
     // Along the ray: the centre lies h(-u) behind the visible side, a size error dsize moves it
-    // by J dsize.
-    const Eigen::Vector2d j_radial = ExtentJacobian(shape, -u);
+    // by J dsize. With fewer than two silhouette ends the extent across the ray is needed too
+    // (below): both directions' derivatives at once (the same values as one at a time).
+    const Eigen::Vector2d w(-u.y(), u.x());
+    Eigen::Vector2d j_radial, j_across = Eigen::Vector2d::Zero();
+    if (edges < 2 && shape.model != ShapeModel::kCircle) {
+      ShapeSupportPair(shape.model, shape.size_m, shape.yaw_rad, -u, w, shape.exponent, &j_radial,
+                       &j_across);
+    } else {
+      j_radial = ExtentJacobian(shape, -u);
+      if (edges < 2) j_across = ExtentJacobian(shape, w);
+    }
     const double radial_var = j_radial.dot(size_cov * j_radial) + bias_sigma_m * bias_sigma_m;
     // Across: each silhouette end lies uniformly within one beam step of its last returning beam,
     // variance (R step)^2 / 12, shared by the scans of a track while it moves less than a beam
@@ -409,11 +418,7 @@ class TrackingPipeline::Refiner final : public MeasurementRefiner {
     const double width_m = range_m * step_rad;
     double across_var = o.centre_bias_across_sigma_m * o.centre_bias_across_sigma_m +
                         width_m * width_m / (12.0 * std::max(1, edges));
-    if (edges < 2) {
-      const Eigen::Vector2d w(-u.y(), u.x());
-      const Eigen::Vector2d j_across = ExtentJacobian(shape, w);
-      across_var += j_across.dot(size_cov * j_across);
-    }
+    if (edges < 2) across_var += j_across.dot(size_cov * j_across);
     const Eigen::Matrix2d along = u * u.transpose();
     return radial_var * along + across_var * (Eigen::Matrix2d::Identity() - along);
   }

@@ -693,6 +693,26 @@ double ShapeSupport(ShapeModel model, const Eigen::Vector2d& size_m, double yaw_
   return h;
 }
 
+void ShapeSupportPair(ShapeModel model, const Eigen::Vector2d& size_m, double yaw_rad,
+                      const Eigen::Vector2d& n0, const Eigen::Vector2d& n1, double exponent,
+                      Eigen::Vector2d* d_size0, Eigen::Vector2d* d_size1) {
+  Vec5 x = Vec5::Zero();
+  x(kYaw) = yaw_rad;
+  x(kA) = size_m.x();
+  x(kB) = size_m.y();
+  Vec5 grad0 = Vec5::Zero(), grad1 = Vec5::Zero();
+  const double yaw = yaw_rad;
+  const double cos_yaw = std::cos(yaw), sin_yaw = std::sin(yaw);
+  if (PairedSupport(model, exponent)) {
+    (void)SupportPair(x, cos_yaw, sin_yaw, Edge{n0, 0.0}, Edge{n1, 0.0}, exponent, &grad0, &grad1);
+  } else {
+    (void)Support(model, x, cos_yaw, sin_yaw, n0, exponent, &grad0);
+    (void)Support(model, x, cos_yaw, sin_yaw, n1, exponent, &grad1);
+  }
+  *d_size0 = Eigen::Vector2d(grad0(kA), grad0(kB));
+  *d_size1 = Eigen::Vector2d(grad1(kA), grad1(kB));
+}
+
 namespace {
 
 // The rare paths of Fit out of line and in the cold section (their code then does not share the

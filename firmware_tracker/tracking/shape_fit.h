@@ -147,4 +147,11 @@ double ShapeSupport(ShapeModel model, const Eigen::Vector2d& size_m, double yaw_
                     const Eigen::Vector2d& n, double exponent = 2.0,
                     Eigen::Vector2d* d_size = nullptr);
 
+// ShapeSupport in two directions n0 and n1 of the same shape at once (the same values as two
+// calls; one sine and cosine of the yaw, the superellipse's two chains of roots side by side):
+// their derivatives with respect to the size into d_size0 and d_size1 (both required).
+void ShapeSupportPair(ShapeModel model, const Eigen::Vector2d& size_m, double yaw_rad,
+                      const Eigen::Vector2d& n0, const Eigen::Vector2d& n1, double exponent,
+                      Eigen::Vector2d* d_size0, Eigen::Vector2d* d_size1);
+
 }  // namespace lrfnet::tracking

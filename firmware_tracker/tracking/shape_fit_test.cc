@@ -111,6 +111,38 @@ TEST(ShapeFitTest, SupportFunctionSizeDerivativeMatchesDifferences) {
 // The person model's support function (exponent 2.5: the dual norm with k = 5/3) by the fit's own
 // roots against the libm powers it used before (|x|^k = x cbrt(x^2), h = pow(t, 1 / k)), over sizes
 // from a micrometre to a kilometre and far beyond (1e-100..1e100 m) and every direction.
+// ShapeSupportPair: the size derivatives of two directions at once, the same values as two calls
+// of ShapeSupport (for every model and the exponents with and without their own path).
+TEST(ShapeFitTest, SupportPairGivesTheSingleDirectionsDerivatives) {
+  std::mt19937 rng(5);
+  std::uniform_real_distribution<double> uniform(0.0, 1.0);
+  const ShapeModel models[] = {ShapeModel::kSuperellipse, ShapeModel::kBox, ShapeModel::kCircle};
+  for (int k = 0; k < 2000; ++k) {
+    const ShapeModel model = models[k % 3];
+    const double exponent = (k / 3) % 3 == 0 ? 2.0 : ((k / 3) % 3 == 1 ? 2.5 : 3.0);
+    const Eigen::Vector2d size(0.1 + 0.3 * uniform(rng), 0.05 + 0.2 * uniform(rng));
+    const double yaw = 2.0 * common::kPi * uniform(rng) - common::kPi;
+    const double a0 = 2.0 * common::kPi * uniform(rng), a1 = a0 + 0.5 * common::kPi;
+    const Eigen::Vector2d n0(std::cos(a0), std::sin(a0)), n1(std::cos(a1), std::sin(a1));
+    Eigen::Vector2d single0, single1, pair0, pair1;
+    ShapeSupport(model, size, yaw, n0, exponent, &single0);
+    ShapeSupport(model, size, yaw, n1, exponent, &single1);
+    ShapeSupportPair(model, size, yaw, n0, n1, exponent, &pair0, &pair1);
+    SCOPED_TRACE("case " + std::to_string(k));
+    EXPECT_NEAR((pair0 - single0).norm(), 0.0, 1e-13 * (1.0 + single0.norm()));
+    EXPECT_NEAR((pair1 - single1).norm(), 0.0, 1e-13 * (1.0 + single1.norm()));
+  }
+  // Known values: an ellipse (exponent 2) of semi-axes (0.3, 0.2) along x: h = (a^2 p^2 +
+  // b^2 q^2)^(1/2), dh/da = a p^2 / h, dh/db = b q^2 / h; along its axes (1, 0) and (0, 1).
+  Eigen::Vector2d along, across;
+  ShapeSupportPair(ShapeModel::kSuperellipse, {0.3, 0.2}, 0.0, {1.0, 0.0}, {0.0, 1.0}, 2.0, &along,
+                   &across);
+  EXPECT_NEAR(along.x(), 1.0, 1e-15);
+  EXPECT_NEAR(along.y(), 0.0, 1e-15);
+  EXPECT_NEAR(across.x(), 0.0, 1e-15);
+  EXPECT_NEAR(across.y(), 1.0, 1e-15);
+}
+
 TEST(ShapeFitTest, PersonSupportFunctionMatchesLibmPowers) {
   std::mt19937 rng(5);
   std::uniform_real_distribution<double> uniform(0.0, 1.0);
