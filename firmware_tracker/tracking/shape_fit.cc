@@ -629,9 +629,11 @@ class NormalSolver {
   [[gnu::cold, gnu::noinline]] Vec5 SolveLdlt(const Vec5& b) const { return ldlt_.solve(b); }
   [[gnu::cold, gnu::noinline]] Mat5 InverseLdlt() const { return ldlt_.solve(Mat5::Identity()); }
 
-  double l_[5][5] = {};               // L below the diagonal
-  double u_[5][5] = {};               // L D below the diagonal
-  std::array<double, 5> inv_diag_{};  // D^-1
+  // Not zeroed (one solver per fit): Factor writes every entry below the diagonal and every
+  // inverse pivot before Solve and the inverse read them, and nothing reads the rest.
+  double l_[5][5];                  // L below the diagonal
+  double u_[5][5];                  // L D below the diagonal
+  std::array<double, 5> inv_diag_;  // D^-1
   bool use_ldlt_ = false;
   Eigen::LDLT<Mat5> ldlt_;
 };
