@@ -162,7 +162,16 @@ struct Truth {
   Vector2d p = Vector2d::Zero();
   Vector2d v = Vector2d::Zero();  // velocity of its path (--breakdown), same frame
   bool trolley = false;           // --breakdown: the object is a trolley
+  // --breakdown: a walking person's leg nearer the sensor in stance (0) or in swing (1), else -1;
+  // a trolley's view: its heading within 30 deg of the line of sight, coming nearer (0) or going
+  // away (3), within 30 deg of across it (2), between (1), else (standing) -1.
+  int gait = -1;
+  int view = -1;
 };
+// --breakdown: a person walks (Truth::gait) above this speed, a trolley moves (Truth::view); a
+// trolley is seen end-on or broadside within this angle of it.
+constexpr double kWalkingMps = 0.3;
+constexpr double kViewSectorRad = 30.0 * 3.14159265358979323846 / 180.0;
 struct Hypothesis {
   std::uint64_t id = 0;
   Vector2d p = Vector2d::Zero();
@@ -281,6 +290,9 @@ struct Breakdown {
   std::array<BreakdownCell, 9> by_parts;
   // Knee height, by the number of legs measured and the range.
   std::array<BreakdownCell, 4> one_leg_by_range, two_legs_by_range;
+  // Knee height, one leg: the nearer leg in stance / swing (Truth::gait); a trolley by its view.
+  std::array<BreakdownCell, 2> one_leg_by_gait;
+  std::array<BreakdownCell, 4> trolley_by_view;
   BreakdownCell total;
   static std::size_t RangeBin(double r_m) {
     return r_m < 5.0 ? 0 : r_m < 10.0 ? 1 : r_m < 20.0 ? 2 : 3;
@@ -297,8 +309,12 @@ struct Breakdown {
                               ? &one_leg_by_range[RangeBin(range_m)]
                           : parts == 4 ? &two_legs_by_range[RangeBin(range_m)]
                                        : nullptr;
+    BreakdownCell* gait = parts == 2 && t.gait >= 0 ? &one_leg_by_gait[t.gait] : nullptr;
+    BreakdownCell* view = parts == 5 && t.trolley && t.view >= 0 ? &trolley_by_view[t.view]
+                                                                 : nullptr;
     BreakdownCell* cells[] = {&by_range[RangeBin(range_m)], &by_points[PointBin(h.points)],
-                              &by_parts[parts == 5 && t.trolley ? 8 : parts], &total, legs};
+                              &by_parts[parts == 5 && t.trolley ? 8 : parts], &total, legs, gait,
+                              view};
     const Vector2d e = h.p - t.p;
     for (BreakdownCell* c : cells) {
       if (c != nullptr) c->all.Add(e, los, t.v);
@@ -320,6 +336,12 @@ struct Breakdown {
     for (std::size_t i = 0; i < by_range.size(); ++i) {
       one_leg_by_range[i].Merge(o.one_leg_by_range[i]);
       two_legs_by_range[i].Merge(o.two_legs_by_range[i]);
+    }
+    for (std::size_t i = 0; i < one_leg_by_gait.size(); ++i) {
+      one_leg_by_gait[i].Merge(o.one_leg_by_gait[i]);
+    }
+    for (std::size_t i = 0; i < trolley_by_view.size(); ++i) {
+      trolley_by_view[i].Merge(o.trolley_by_view[i]);
     }
     total.Merge(o.total);
   }
@@ -1252,7 +1274,22 @@ void RunSensor(const sim::Simulator& simulator, std::size_t sensor,
         if (!Scored(target.shape())) furniture.push_back(p);
         continue;
       }
-      truths.push_back({ts.target, p, vel, target.shape() == sim::TargetShape::kTrolley});
+      Truth truth{ts.target, p, vel, target.shape() == sim::TargetShape::kTrolley};
+      const double range = p.norm();
+      if (target.shape() == sim::TargetShape::kPerson && ts.state.speed_mps > kWalkingMps &&
+          range > 0.0) {
+        const Vector2d l0 = sensor_from_world * Vector2d(ts.state.legs[0].x, ts.state.legs[0].y);
+        const Vector2d l1 = sensor_from_world * Vector2d(ts.state.legs[1].x, ts.state.legs[1].y);
+        const double phase = ts.state.gait_phase + (l0.norm() <= l1.norm() ? 0.0 : 0.5);
+        truth.gait = phase - std::floor(phase) < sim::kStanceFraction ? 0 : 1;
+      }
+      if (truth.trolley && range > 0.0 && vel.norm() > kWalkingMps) {
+        const double c = std::abs(vel.dot(p)) / (vel.norm() * range);
+        truth.view = c > std::cos(kViewSectorRad) ? (vel.dot(p) < 0.0 ? 0 : 3)
+                     : c < std::sin(kViewSectorRad) ? 2
+                                                    : 1;
+      }
+      truths.push_back(truth);
       seen.push_back(ts.target);
     }
     for (std::size_t v = 0; v < variants.size(); ++v) {
@@ -1825,6 +1862,16 @@ std::string BreakdownTable(const Section& s) {
         t += BreakdownRow(lead, std::string("one leg, ") + kRangeBins[i], b.one_leg_by_range[i]);
       if (b.two_legs_by_range[i].all.n > 0)
         t += BreakdownRow(lead, std::string("two legs, ") + kRangeBins[i], b.two_legs_by_range[i]);
+    }
+    const char* const gaits[] = {"one leg, the nearer leg in stance",
+                                 "one leg, the nearer leg in swing"};
+    for (std::size_t i = 0; i < b.one_leg_by_gait.size(); ++i) {
+      if (b.one_leg_by_gait[i].all.n > 0) t += BreakdownRow(lead, gaits[i], b.one_leg_by_gait[i]);
+    }
+    const char* const views[] = {"trolley, end-on, coming nearer", "trolley, oblique",
+                                 "trolley, broadside", "trolley, end-on, going away"};
+    for (std::size_t i = 0; i < b.trolley_by_view.size(); ++i) {
+      if (b.trolley_by_view[i].all.n > 0) t += BreakdownRow(lead, views[i], b.trolley_by_view[i]);
     }
   }
   return t + s.breakdown_rows;
