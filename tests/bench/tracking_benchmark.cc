@@ -310,10 +310,14 @@ struct Breakdown {
                           : parts == 4 ? &two_legs_by_range[RangeBin(range_m)]
                                        : nullptr;
     BreakdownCell* gait = parts == 2 && t.gait >= 0 ? &one_leg_by_gait[t.gait] : nullptr;
-    BreakdownCell* view = parts == 5 && t.trolley && t.view >= 0 ? &trolley_by_view[t.view]
-                                                                 : nullptr;
-    BreakdownCell* cells[] = {&by_range[RangeBin(range_m)], &by_points[PointBin(h.points)],
-                              &by_parts[parts == 5 && t.trolley ? 8 : parts], &total, legs, gait,
+    BreakdownCell* view =
+        parts == 5 && t.trolley && t.view >= 0 ? &trolley_by_view[t.view] : nullptr;
+    BreakdownCell* cells[] = {&by_range[RangeBin(range_m)],
+                              &by_points[PointBin(h.points)],
+                              &by_parts[parts == 5 && t.trolley ? 8 : parts],
+                              &total,
+                              legs,
+                              gait,
                               view};
     const Vector2d e = h.p - t.p;
     for (BreakdownCell* c : cells) {
@@ -1285,7 +1289,7 @@ void RunSensor(const sim::Simulator& simulator, std::size_t sensor,
       }
       if (truth.trolley && range > 0.0 && vel.norm() > kWalkingMps) {
         const double c = std::abs(vel.dot(p)) / (vel.norm() * range);
-        truth.view = c > std::cos(kViewSectorRad) ? (vel.dot(p) < 0.0 ? 0 : 3)
+        truth.view = c > std::cos(kViewSectorRad)   ? (vel.dot(p) < 0.0 ? 0 : 3)
                      : c < std::sin(kViewSectorRad) ? 2
                                                     : 1;
       }
