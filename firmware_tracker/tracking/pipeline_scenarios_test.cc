@@ -2535,7 +2535,7 @@ TEST(PipelineScenarioTest, RecentVeilKeepsAFarPersonWhenANearOneCrossesInFront) 
   c.scene.walkers = {Walker::Path(kLearnedS + 2.0, {{3.5, -2.0}, {3.5, 2.0}}, 1.2),
                      Walker::Path(kLearnedS, {{11.0, -1.5}, {11.0, 1.5}}, 0.5)};
   c.far_from_s = kLearnedS + 1.0;
-  c.max_unmatched = 3;          // measured: 0
+  c.max_unmatched = 3;         // measured: 0
   c.max_unmatched_veiled = 3;  // measured: 1 (8 when a near return's age alone counted)
   ExpectFarKept(c);
 }
