@@ -425,9 +425,8 @@ TEST(ShapeFitTest, EvenlySubsampledPointsWithAndWithoutNonFiniteOnes) {
       const ShapeFitResult with_infinity = FitShape(infinite, edges, prior, options);
       EXPECT_EQ(with_infinity.points_used, all.points_used) << count;
       EXPECT_EQ(with_infinity.centre_m, all.centre_m) << count;
-      EXPECT_FALSE(FitShape(std::vector<Eigen::Vector2d>{{inf, 1.0}, {nan, nan}}, edges, prior,
-                            options)
-                       .ok);
+      EXPECT_FALSE(
+          FitShape(std::vector<Eigen::Vector2d>{{inf, 1.0}, {nan, nan}}, edges, prior, options).ok);
       // The first and last points are always taken.
       EXPECT_DOUBLE_EQ(all.extent_m, (arc.front() - arc.back()).norm()) << count;
       EXPECT_NEAR(all.centre_m.x(), 4.0, 0.05) << count;
