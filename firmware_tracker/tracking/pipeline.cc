@@ -385,6 +385,15 @@ class TrackingPipeline::Refiner final : public MeasurementRefiner {
     ShapeSupport(shape.model, shape.size_m, shape.yaw_rad, n, shape.exponent, &jacobian);
     return jacobian;
   }
+  // ExtentJacobian in two directions n0 and n1 at once (the same values as one at a time).
+  static void ExtentJacobians(const TrackShape& shape, const Eigen::Vector2d& n0,
+                              const Eigen::Vector2d& n1, Eigen::Vector2d* j0, Eigen::Vector2d* j1) {
+    if (shape.model == ShapeModel::kCircle) {
+      *j0 = *j1 = Eigen::Vector2d(1.0, 0.0);
+      return;
+    }
+    ShapeSupportPair(shape.model, shape.size_m, shape.yaw_rad, n0, n1, shape.exponent, j0, j1);
+  }
 
   // ShapeOptions::centre_bias_along_ray: u the unit ray from the sensor through the centre at
   // range_m, step_rad the scan's beam step, edges the silhouette ends (SilhouetteEdges), floor_m
@@ -402,12 +411,10 @@ class TrackingPipeline::Refiner final : public MeasurementRefiner {
     // (below): both directions' derivatives at once (the same values as one at a time).
     const Eigen::Vector2d w(-u.y(), u.x());
     Eigen::Vector2d j_radial, j_across = Eigen::Vector2d::Zero();
-    if (edges < 2 && shape.model != ShapeModel::kCircle) {
-      ShapeSupportPair(shape.model, shape.size_m, shape.yaw_rad, -u, w, shape.exponent, &j_radial,
-                       &j_across);
+    if (edges < 2) {
+      ExtentJacobians(shape, -u, w, &j_radial, &j_across);
     } else {
       j_radial = ExtentJacobian(shape, -u);
-      if (edges < 2) j_across = ExtentJacobian(shape, w);
     }
     const double radial_var = j_radial.dot(size_cov * j_radial) + bias_sigma_m * bias_sigma_m;
     // Across: each silhouette end lies uniformly within one beam step of its last returning beam,

@@ -6,7 +6,6 @@
 // ranges are not owned (the span must outlive the call that receives the view).
 
 #include <array>
-#include <cmath>
 #include <cstddef>
 #include <span>
 
@@ -30,14 +29,8 @@ struct ScanView {
   }
   // Half a beam step before beam i (towards beam i - 1) and after it (towards beam i + 1): where
   // the outline's tangent lies beyond the first and the last beam that returned an object.
-  double EdgeBeforeRad(std::size_t i) const {
-    const double direction = angle_step_rad < 0 ? -1.0 : 1.0;
-    return BeamAngleRad(i) - direction * (0.5 * std::abs(angle_step_rad));
-  }
-  double EdgeAfterRad(std::size_t i) const {
-    const double direction = angle_step_rad < 0 ? -1.0 : 1.0;
-    return BeamAngleRad(i) + direction * (0.5 * std::abs(angle_step_rad));
-  }
+  double EdgeBeforeRad(std::size_t i) const { return BeamAngleRad(i) - 0.5 * angle_step_rad; }
+  double EdgeAfterRad(std::size_t i) const { return BeamAngleRad(i) + 0.5 * angle_step_rad; }
 };
 
 // Why a scan cannot be used at all. A status value, not a string, so rejecting a scan never

@@ -703,8 +703,7 @@ void ShapeSupportPair(ShapeModel model, const Eigen::Vector2d& size_m, double ya
   x(kA) = size_m.x();
   x(kB) = size_m.y();
   Vec5 grad0 = Vec5::Zero(), grad1 = Vec5::Zero();
-  const double yaw = yaw_rad;
-  const double cos_yaw = std::cos(yaw), sin_yaw = std::sin(yaw);
+  const double cos_yaw = std::cos(yaw_rad), sin_yaw = std::sin(yaw_rad);
   if (PairedSupport(model, exponent)) {
     (void)SupportPair(x, cos_yaw, sin_yaw, Edge{n0, 0.0}, Edge{n1, 0.0}, exponent, &grad0, &grad1);
   } else {
