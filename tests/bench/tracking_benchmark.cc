@@ -171,7 +171,7 @@ struct Truth {
 // --breakdown: a person walks (Truth::gait) above this speed, a trolley moves (Truth::view); a
 // trolley is seen end-on or broadside within this angle of it.
 constexpr double kWalkingMps = 0.3;
-constexpr double kViewSectorRad = 30.0 * 3.14159265358979323846 / 180.0;
+constexpr double kViewSectorRad = common::kPi / 6.0;  // 30 degrees
 struct Hypothesis {
   std::uint64_t id = 0;
   Vector2d p = Vector2d::Zero();
