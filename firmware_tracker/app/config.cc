@@ -378,6 +378,10 @@ void VisitShape(tracking::ShapeOptions& o, ConfigVisitor& v) {
   VisitInteger(v, "max_points", o.fit.max_points,
                "At most this many points of a segment go into the fit (evenly spaced).");
   VisitInteger(v, "max_iterations", o.fit.max_iterations, "Gauss-Newton iterations per fit.");
+  v.Field("single_precision_points", o.fit.single_precision_points,
+          "A person's outline fit takes its points in single precision, four at a time (a "
+          "distance rounded to about 1e-8 m, far below the range noise). false: double, two at "
+          "a time.");
 }
 
 constexpr std::array<std::string_view, 2> kAssociationNames = {"global_nearest_neighbour",

@@ -3,6 +3,7 @@
 #include <gtest/gtest.h>
 
 #include <Eigen/Cholesky>
+#include <algorithm>
 #include <array>
 #include <cmath>
 #include <cstdio>
@@ -528,9 +529,12 @@ TEST(ShapeFitTest, CholeskySolverGivesThePivotedLdltResults) {
       prior.centre_guess_m =
           body.centre_m + Eigen::Vector2d(0.2 * (uniform(rng) - 0.5), 0.2 * (uniform(rng) - 0.5));
     }
-    const ShapeFitResult fit = FitShape(v.points, v.silhouette, prior, ShapeFitOptions{});
+    // The double-precision points (the single-precision ones: SinglePrecisionPoints... below).
+    ShapeFitOptions exact;
+    exact.single_precision_points = false;
+    const ShapeFitResult fit = FitShape(v.points, v.silhouette, prior, exact);
     const ShapeFitResult ref =
-        internal::FitShapeWithPivotedLdlt(v.points, v.silhouette, prior, ShapeFitOptions{});
+        internal::FitShapeWithPivotedLdlt(v.points, v.silhouette, prior, exact);
     SCOPED_TRACE("case " + std::to_string(k) + " points " + std::to_string(v.points.size()));
     ASSERT_EQ(fit.ok, ref.ok);
     if (!fit.ok) continue;
@@ -545,7 +549,7 @@ TEST(ShapeFitTest, CholeskySolverGivesThePivotedLdltResults) {
     EXPECT_NEAR(fit.rms_m, ref.rms_m, 1e-9);
     worst_centre_m = std::max(worst_centre_m, (fit.centre_m - ref.centre_m).norm());
     const ShapeFitResult unpaired =
-        internal::FitShapeUnpaired(v.points, v.silhouette, prior, ShapeFitOptions{});
+        internal::FitShapeUnpaired(v.points, v.silhouette, prior, exact);
     ASSERT_TRUE(unpaired.ok);
     EXPECT_EQ(fit.iterations, unpaired.iterations);
     EXPECT_LE((fit.centre_m - unpaired.centre_m).norm(), 1e-12);
@@ -562,6 +566,71 @@ TEST(ShapeFitTest, CholeskySolverGivesThePivotedLdltResults) {
   EXPECT_GT(fits, 500);
   std::printf("%d fits, largest centre difference %.3g m; side by side: %d identical\n", fits,
               worst_centre_m, identical);
+}
+
+// A person's points in single precision, four at a time (ShapeFitOptions::single_precision_points),
+// against the same fits in double: the answers differ (the other arithmetic is taken) by
+// far less than the points' noise, and both find the known body.
+TEST(ShapeFitTest, SinglePrecisionPointsGiveTheDoubleFitWithinItsRounding) {
+  std::mt19937 rng(15);
+  std::uniform_real_distribution<double> uniform(0.0, 1.0);
+  const double steps_deg[] = {0.1667, 0.25, 0.5, 1.0};
+  ShapeFitOptions exact;
+  exact.single_precision_points = false;
+  int fits = 0, differing = 0, same_iterations = 0;
+  std::vector<double> centre_differences;
+  for (int k = 0; k < 600; ++k) {
+    const double range = 2.0 + 23.0 * uniform(rng);
+    const double bearing = -1.2 + 2.4 * uniform(rng);
+    const double yaw = common::kPi * uniform(rng);
+    const double a = 0.15 + 0.15 * uniform(rng);
+    const double b = 0.1 + 0.08 * uniform(rng);
+    const Body body{range * Eigen::Vector2d(std::cos(bearing), std::sin(bearing)), a, b, yaw};
+    View v = Look(body, steps_deg[(k / 3) % 4], 0.012, static_cast<std::uint32_t>(k + 1));
+    if (v.points.empty()) continue;
+    ShapePrior prior;
+    prior.model = ShapeModel::kSuperellipse;
+    prior.exponent = k % 2 == 0 ? 2.5 : 2.0;
+    prior.size_m = {a + 0.05 * (uniform(rng) - 0.5), b + 0.05 * (uniform(rng) - 0.5)};
+    if (uniform(rng) > 0.3) {
+      prior.yaw_rad = yaw + 0.3 * (uniform(rng) - 0.5);
+      prior.yaw_sigma_rad = 0.35;
+    }
+    if (uniform(rng) > 0.3) {
+      prior.centre_guess_m =
+          body.centre_m + Eigen::Vector2d(0.2 * (uniform(rng) - 0.5), 0.2 * (uniform(rng) - 0.5));
+    }
+    const ShapeFitResult single = FitShape(v.points, v.silhouette, prior, ShapeFitOptions{});
+    const ShapeFitResult dbl = FitShape(v.points, v.silhouette, prior, exact);
+    SCOPED_TRACE("case " + std::to_string(k) + " points " + std::to_string(v.points.size()));
+    ASSERT_EQ(single.ok, dbl.ok);
+    if (!dbl.ok) continue;
+    ++fits;
+    const double dc = (single.centre_m - dbl.centre_m).norm();
+    centre_differences.push_back(dc);
+    differing += single.centre_m != dbl.centre_m ? 1 : 0;
+    same_iterations += single.iterations == dbl.iterations ? 1 : 0;
+    // Within a Gauss-Newton step's stopping threshold (3 mm) always, however the rounding falls.
+    EXPECT_LT(dc, 0.003);
+    EXPECT_LT((single.size_m - dbl.size_m).norm(), 0.003);
+    EXPECT_NEAR(single.rms_m, dbl.rms_m, 1e-3);
+    EXPECT_LT((single.centre_cov_m2 - dbl.centre_cov_m2).norm(), 0.05 * dbl.centre_cov_m2.norm());
+    // Both as far from the body (noise 12 mm on the range).
+    EXPECT_NEAR((single.centre_m - body.centre_m).norm(), (dbl.centre_m - body.centre_m).norm(),
+                1e-5);
+  }
+  ASSERT_GT(fits, 500);
+  std::sort(centre_differences.begin(), centre_differences.end());
+  const double p99 = centre_differences[centre_differences.size() * 99 / 100];
+  std::printf("%d fits, %d with other bits, %d with the same iterations; centre difference "
+              "median %.3g m, p99 %.3g m, largest %.3g m\n",
+              fits, differing, same_iterations, centre_differences[centre_differences.size() / 2],
+              p99, centre_differences.back());
+  // The other arithmetic is taken...
+  EXPECT_GT(differing, fits / 2);
+  // ... and nearly every answer is the double one to within a micrometre.
+  EXPECT_LT(p99, 1e-6);
+  EXPECT_GT(same_iterations, fits * 98 / 100);
 }
 
 // The silhouette edges' directions handed in by the caller (Silhouette::first_edge_unit and

@@ -13,7 +13,7 @@
 // --out FILE (replacing its header and table; the file's "## " sections after them are kept).
 //
 //   tracker_benchmark [--out FILE] [--scans N] [--people LIST] [--no-send] [--rounds R]
-//                     [--no-turns] [google benchmark flags]
+//                     [--no-turns] [--before-single-precision-fit] [google benchmark flags]
 //
 // --people 0,50 renders only those synthetic scenes and skips the capture (for profiling one case
 // under callgrind, where rendering every scene costs more than the timed loop). --no-send drops the
@@ -28,6 +28,10 @@
 // few hundred milliseconds; the table gives the median over the rounds and its spread. Without
 // --rounds the cases run one after the other as before and then once more in 10 rounds, whose
 // ratios the table's last column gives (--no-turns leaves that run out).
+//
+// --before-single-precision-fit fits a person's outline with every point in double precision
+// (ShapeFitOptions::single_precision_points = false), the previous arithmetic, so that the same
+// binary measures both.
 //
 // For every case with shape fits, stderr gets the fits' evaluations of their objective (each one
 // pass over the points): fits, evaluations per fit and the fits by their count of evaluations
@@ -228,6 +232,9 @@ double Quantile(std::vector<double> values, double q) {
   return values[std::min(i, values.size() - 1)];
 }
 
+// --before-single-precision-fit.
+bool g_before_single_precision_fit = false;
+
 struct Case {
   const Input* input = nullptr;
   bool old_measurement = false;
@@ -260,6 +267,7 @@ class CaseRunner {
     tracker::TrackerConfig config;
     config.sensor_id = "bench";
     config.tracking.background.max_range_m = 40.0;
+    if (g_before_single_precision_fit) config.tracking.shape.fit.single_precision_points = false;
     if (case_->old_measurement) {
       config.tracking.method = tracking::MeasurementMethod::kEllipse;
       config.tracking.tracking.static_objects = false;
@@ -549,6 +557,8 @@ int main(int argc, char** argv) {
       rounds = static_cast<std::size_t>(std::stoul(argv[++i]));
     } else if (std::strcmp(argv[i], "--no-turns") == 0) {
       turns = false;
+    } else if (std::strcmp(argv[i], "--before-single-precision-fit") == 0) {
+      g_before_single_precision_fit = true;
     } else if (std::strcmp(argv[i], "--no-send") == 0) {
       send = false;
     } else if (std::strcmp(argv[i], "--people") == 0 && i + 1 < argc) {

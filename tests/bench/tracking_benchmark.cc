@@ -42,6 +42,7 @@
 //                       [--before-legs-seen-through]
 //                       [--before-legs-report-coasting] [--before-leg-edges]
 //                       [--before-outline-departure] [--before-recent-veil]
+//                       [--before-single-precision-fit]
 //                       [--before-fusion-merge] [--before-report-sourceless]]
 //   (--extra: more scenario folders, e.g. held-out scenes, reported in their own section;
 //   --explain: per run on stderr, what became of an object's previous track at every id switch
@@ -95,6 +96,8 @@
 //   MultiTrackerOptions::report_coasting_s, ShapeOptions::legs_report_coasting_s = 0;
 //   --before-recent-veil: "before" takes a knee-height leg-sized segment behind a nearer return its
 //   beams had in the last scans for a leg, ShapeOptions::recent_veil_s = 0;
+//   --before-single-precision-fit: "before" fits a person's outline with every point in double
+//   precision, two at a time, ShapeFitOptions::single_precision_points = false;
 //   --before-leg-edges: "before" takes a knee-height leg's silhouette edge half a step beyond its
 //   last returning beam also where the beam beyond is a mixed echo,
 //   ShapeOptions::leg_edge_in_mixed_beam = false;
@@ -945,6 +948,9 @@ bool g_before_legs_report_coasting = false;
 // --before-recent-veil: "before" takes a knee-height leg-sized segment behind a nearer return its
 // beams had in the last scans for a leg (ShapeOptions::recent_veil_s = 0).
 bool g_before_recent_veil = false;
+// --before-single-precision-fit: "before" fits a person's outline with every point in double
+// precision (ShapeFitOptions::single_precision_points = false).
+bool g_before_single_precision_fit = false;
 // --before-leg-edges: "before" takes a knee-height leg's silhouette edge half a step beyond its
 // last returning beam also where the beam beyond is a mixed echo
 // (ShapeOptions::leg_edge_in_mixed_beam = false).
@@ -1002,7 +1008,8 @@ std::vector<Variant> Variants(sim::Mount mount, double range_m) {
              g_before_side_uncertainty || g_before_side_from_view || g_before_few_point_legs ||
              g_before_deep_legs || g_before_legs_seen_through || g_before_legs_report_coasting ||
              g_before_leg_edges || g_before_outline_departure || g_before_fusion_merge ||
-             g_before_report_sourceless || g_before_recent_veil) {
+             g_before_report_sourceless || g_before_recent_veil ||
+             g_before_single_precision_fit) {
     tracking::TrackerOptions before = fresh;
     if (g_before_one_leg) before.shape.hidden_leg_behind = false;
     if (g_before_mixed_pixels) before.shape.drop_mixed_pixel_legs = false;
@@ -1025,6 +1032,7 @@ std::vector<Variant> Variants(sim::Mount mount, double range_m) {
     if (g_before_leg_edges) before.shape.leg_edge_in_mixed_beam = false;
     if (g_before_outline_departure) before.shape.outline_departure_gain = 0.0;
     if (g_before_recent_veil) before.shape.recent_veil_s = 0.0;
+    if (g_before_single_precision_fit) before.shape.fit.single_precision_points = false;
     variants.push_back({"before", before});
   }
   return variants;
@@ -1948,7 +1956,7 @@ std::string KneeHeightBefore() {
         g_before_side_from_view || g_before_few_point_legs || g_before_deep_legs ||
         g_before_legs_seen_through || g_before_legs_report_coasting || g_before_leg_edges ||
         g_before_outline_departure || g_before_fusion_merge || g_before_report_sourceless ||
-        g_before_recent_veil) ||
+        g_before_recent_veil || g_before_single_precision_fit) ||
       g_before_mixed_pixels || g_before_far || g_before_evidence_coasting ||
       g_before_report_rules) {
     return "";
@@ -2046,6 +2054,11 @@ std::string KneeHeightBefore() {
         "taking a knee-height leg-sized segment behind a nearer return its beams had in the last "
         "scans for a leg (`shape.recent_veil_s` 0)");
   }
+  if (g_before_single_precision_fit) {
+    without.push_back(
+        "fitting a person's outline with every point in double precision, two at a time "
+        "(`shape.single_precision_points` false)");
+  }
   std::string text = "\"before\": the new tracker" + std::string(without.empty() ? "" : " ");
   for (std::size_t i = 0; i < without.size(); ++i) {
     text += (i == 0 ? "" : i + 1 == without.size() ? " and " : ", ") + without[i];
@@ -2062,7 +2075,8 @@ std::string KneeHeightBefore() {
             "(`fusion.report_sourceless` true)";
   }
   const char* const same =
-      g_before_outline_departure || g_before_isotropic_bias
+      g_before_single_precision_fit ? ", on the same scans in the same run"
+      : g_before_outline_departure || g_before_isotropic_bias
           ? ", on the same scans in the same run; upper-body tracks are the same by construction, "
             "their reported covariance (so NEES and what fusion makes of them) is not"
           : ", on the same scans in the same run; upper-body rows are the same by construction";
@@ -2147,6 +2161,8 @@ int main(int argc, char** argv) {
       g_before_outline_departure = true;
     } else if (a == "--before-recent-veil") {
       g_before_recent_veil = true;
+    } else if (a == "--before-single-precision-fit") {
+      g_before_single_precision_fit = true;
     } else if (a == "--before-fusion-merge") {
       g_before_fusion_merge = true;
     } else if (a == "--before-report-sourceless") {
@@ -2165,6 +2181,7 @@ int main(int argc, char** argv) {
                    "[--before-side-from-view] [--before-few-point-legs] [--before-deep-legs] "
                    "[--before-legs-seen-through] [--before-legs-report-coasting] "
                    "[--before-leg-edges] [--before-outline-departure] [--before-recent-veil] "
+                   "[--before-single-precision-fit] "
                    "[--before-fusion-merge] "
                    "[--before-report-sourceless]]\n");
       return 2;
