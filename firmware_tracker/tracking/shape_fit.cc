@@ -338,8 +338,8 @@ class UpperSum5 {
     s23_ += w2 * g23(1);
     s44_ += w4 * g4;
   }
-  // The sums of the upper triangle's entries given (entry (r, c) as src<r><c>), e.g. taken apart
-  // from another order of summation.
+  // A sum formed elsewhere (in another order), handed in as the members hold it: the entries
+  // (0, 0) and (1, 1) as one pair, (0, 2) and (1, 2) as the next, and so on.
   static UpperSum5 FromEntries(const Lanes& s00_11, const Lanes& s02_12, const Lanes& s03_13,
                                const Lanes& s04_14, const Lanes& s22_33, const Lanes& s24_34,
                                double s01, double s23, double s44) {
@@ -539,7 +539,7 @@ SumPointsFn SumPointsFor(ShapeModel model, double exponent, bool paired) {
 // where float's 24 bits resolve 0.1 um), the centre's offset from that origin is formed in double
 // and then rounded. Each lane sums its points; the four lanes are added at the end and the sums
 // continue in double (edges, priors, solver). Rounding: about 1e-7 relative on each distance and
-// each sum, i.e. about 1e-8 m on a distance, six hundred times below a point's range noise
+// each sum, i.e. about 1e-8 m on a distance, about a million times below a point's range noise
 // (point_sigma_m); the Gauss-Newton step inherits it, the solve and the covariance stay in double
 // (shape_fit_test: over 598 random fits the centres differ by 8e-9 m median, 1e-7 m p99).
 struct QuadPoints {
