@@ -432,7 +432,15 @@ struct Causes {
   // became of the object's returns, CoastingCause); measured on something else (how far its
   // measurement lay from its object and what it was made of).
   std::map<std::string, double> partings;
+  // Per sensor: a track's first coasting scan on the object it was measured on in the scan
+  // before, by what its last measurements were (CoastStart): count, summed error, summed error of
+  // the state before its last update predicted on (where the scan before that was measured too),
+  // and how many had that.
+  std::map<std::string, std::array<double, 4>> coast_start;
   void Add(const Causes& o) {
+    for (const auto& [k, v] : o.coast_start) {
+      for (std::size_t i = 0; i < v.size(); ++i) coast_start[k][i] += v[i];
+    }
     for (const auto& [k, v] : o.partings) partings[k] += v;
     for (const auto& [k, v] : o.left_measured) left_measured[k] += v;
     for (const auto& [k, v] : o.coasting) coasting[k] += v;
@@ -457,6 +465,7 @@ class MotSequence {
              const std::vector<Vector2d>& dont_care, const std::set<std::uint64_t>* alive = nullptr,
              const std::vector<Vector2d>* furniture = nullptr) {
     partings_.clear();
+    matched_truth_.assign(hyps.size(), -1);
     std::set<std::size_t> present;
     for (const Truth& t : truths) present.insert(t.id);
     for (auto& [id, st] : state_) {
@@ -531,6 +540,7 @@ class MotSequence {
         continue;
       }
       const Hypothesis& h = hyps[static_cast<std::size_t>(truth_to_hyp[t])];
+      matched_truth_[static_cast<std::size_t>(truth_to_hyp[t])] = static_cast<long>(truths[t].id);
       if (breakdown_ != nullptr) breakdown_->Add(truths[t], h);
       ++mot_.matches;
       const Vector2d e = h.p - truths[t].p;
@@ -860,9 +870,12 @@ class MotSequence {
     std::uint64_t frames_since = 0;
   };
   const std::vector<Parting>& partings() const { return partings_; }
+  // The last Frame's match of each hyp: the object's id, -1 unmatched.
+  const std::vector<long>& matched_truth() const { return matched_truth_; }
 
  private:
   std::vector<Parting> partings_;
+  std::vector<long> matched_truth_;
   std::map<std::size_t, TruthState> state_;
   std::map<std::uint64_t, HypState> hyps_;
   std::map<std::uint64_t, double> hyp_age_;  // seconds reported
@@ -1260,6 +1273,27 @@ void RunSensor(const sim::Simulator& simulator, std::size_t sensor,
   std::vector<std::uint32_t> hits;
   const std::int64_t start_ns = simulator.scenario().start_utc_ns;
   const double period_s = setup.device.period_s;
+  // --explain, what a track starts to coast from (Causes::coast_start, "coast start" on stderr):
+  // per variant, per track, its last three measured reports in a row: the reported position and
+  // velocity, what the measurement was made of (kPartsBins) and its point count, the object it
+  // matched, the report's and the measurement's error against it, and how far the update moved
+  // the report from the previous one predicted on (a measurement that pulls the state). At a
+  // track's first coasting scan on the object it matched in the scan before, its error is binned
+  // by those, beside the error the state before its last update, predicted on, would have had.
+  struct CoastEntry {
+    Vector2d p = Vector2d::Zero(), v = Vector2d::Zero();
+    std::size_t parts = 0, truth = 0;
+    std::uint32_t points = 0;
+    bool has_truth = false;
+    double raw_err = 0, filt_err = 0, move = 0;
+  };
+  struct CoastHist {
+    std::uint64_t frame = 0;  // k + 1 of its last report
+    bool measured = false;    // that report measured
+    int run = 0;              // measured reports in a row up to it
+    std::array<CoastEntry, 3> e;
+  };
+  std::vector<std::map<std::uint64_t, CoastHist>> coast_hist(variants.size());
   for (std::uint64_t k = 0; k < setup.scan_count; ++k) {
     const sim::ScanTiming timing = simulator.Timing(sensor, k);
     simulator.SimulateScan(sensor, k, telegram.get(), &hits);
@@ -1343,6 +1377,91 @@ void RunSensor(const sim::Simulator& simulator, std::size_t sensor,
       for (std::size_t a = 0; a < n_alive; ++a) alive.insert(predictions[a].id);
       sequences[v].Frame(period_s, truths, hyps, dont_care, &alive, &furniture);
       if (g_explain_coasting) {
+        for (std::size_t hi = 0; hi < hyps.size(); ++hi) {
+          const Hypothesis& h = hyps[hi];
+          const tracking::TrackReport* rep = nullptr;
+          for (const tracking::TrackReport& r : out.tracks) rep = r.track_id == h.id ? &r : rep;
+          const Vector2d vel =
+              rep != nullptr ? Vector2d(rep->vx_mps, rep->vy_mps) : Vector2d::Zero();
+          CoastHist& ch = coast_hist[v][h.id];
+          const bool consecutive = ch.frame == k && ch.measured && ch.run > 0;
+          auto bin = [](double d, double a, double b) {
+            return d < a   ? "<" + std::to_string(static_cast<int>(a * 100)) + "cm"
+                   : d < b ? std::to_string(static_cast<int>(a * 100)) + "-" +
+                                 std::to_string(static_cast<int>(b * 100)) + "cm"
+                           : ">=" + std::to_string(static_cast<int>(b * 100)) + "cm";
+          };
+          if (!h.measured && consecutive && ch.e[0].has_truth) {
+            const Truth* own = nullptr;
+            for (const Truth& t : truths) own = t.id == ch.e[0].truth ? &t : own;
+            if (own != nullptr && sequences[v].matched_truth()[hi] == static_cast<long>(own->id)) {
+              const double ec = (h.p - own->p).norm();
+              double ea = 0, na = 0;
+              if (ch.run >= 2) {
+                ea = (ch.e[1].p + 2.0 * period_s * ch.e[1].v - own->p).norm();
+                na = 1;
+              }
+              const CoastEntry& l = ch.e[0];
+              const std::string pts = std::to_string(std::min<std::uint32_t>(l.points, 5));
+              const std::string prev =
+                  ch.run >= 2 ? std::string(kPartsBins[ch.e[1].parts]).substr(7) : "none";
+              const std::string keys[] = {
+                  "all",
+                  "last " + std::string(kPartsBins[l.parts]).substr(7) + ", pts " + pts,
+                  "last raw err " + bin(l.raw_err, 0.05, 0.1),
+                  "last filt err " + bin(l.filt_err, 0.05, 0.1),
+                  "last move " + bin(l.move, 0.03, 0.08),
+                  "last two: " + std::string(kPartsBins[l.parts]).substr(7) + " <- " + prev,
+                  "run " + std::to_string(std::min(ch.run, 5)),
+                  "range " + std::string(own->p.norm() < 5    ? "<5"
+                                         : own->p.norm() < 10 ? "5-10"
+                                                              : ">=10"),
+                  "filt " + bin(l.filt_err, 0.05, 0.1) + ": last " +
+                      std::string(kPartsBins[l.parts]).substr(7) + ", raw " +
+                      bin(l.raw_err, 0.05, 0.1),
+                  "filt " + bin(l.filt_err, 0.05, 0.1) + ": filt before " +
+                      (ch.run >= 2 ? bin(ch.e[1].filt_err, 0.05, 0.1) : "none") + ", " +
+                      (ch.run >= 3 ? bin(ch.e[2].filt_err, 0.05, 0.1) : "none"),
+                  "filt " + bin(l.filt_err, 0.05, 0.1) + ": speed " +
+                      (own->v.norm() < 0.3 ? "<0.3" : "walking") + ", radial " +
+                      bin(std::abs((l.p - own->p).dot(own->p.normalized())), 0.05, 0.1),
+              };
+              for (const std::string& key : keys) {
+                auto& a = (*causes)[v].coast_start[key];
+                a[0] += 1;
+                a[1] += ec;
+                a[2] += ea;
+                a[3] += na;
+              }
+            }
+          }
+          CoastEntry e;
+          e.p = h.p;
+          e.v = vel;
+          e.parts = h.parts;
+          e.points = h.points;
+          if (consecutive) e.move = (h.p - (ch.e[0].p + period_s * ch.e[0].v)).norm();
+          const Truth* nearest = nullptr;
+          for (const Truth& t : truths) {
+            if (static_cast<long>(t.id) == sequences[v].matched_truth()[hi]) nearest = &t;
+          }
+          if (nearest != nullptr) {
+            e.has_truth = true;
+            e.truth = nearest->id;
+            e.filt_err = (h.p - nearest->p).norm();
+            e.raw_err = (h.z - (nearest->p + h.z_offset_s * nearest->v)).norm();
+          }
+          if (h.measured) {
+            ch.run = consecutive ? ch.run + 1 : 1;
+            ch.e[2] = ch.e[1];
+            ch.e[1] = ch.e[0];
+            ch.e[0] = e;
+          } else {
+            ch.run = 0;
+          }
+          ch.measured = h.measured;
+          ch.frame = k + 1;
+        }
         for (const MotSequence::Parting& parting : sequences[v].partings()) {
           const Hypothesis& h = hyps[parting.hyp];
           const Truth* own = nullptr;
@@ -1356,7 +1475,11 @@ void RunSensor(const sim::Simulator& simulator, std::size_t sensor,
                   CoastingCause(*pipelines[v], view, own->p, h.p);
           } else {
             const double d = (h.z - own->p).norm();
+            const auto it = coast_hist[v].find(h.id);
             why = std::string("b: measured ") +
+                  (it != coast_hist[v].end() && it->second.frame == k + 1 && it->second.run >= 2
+                       ? "after measured, "
+                       : "after coasting, ") +
                   (d < 0.5   ? "< 0.5 m"
                    : d < 1.0 ? "0.5-1 m"
                              : ">= 1 m") +
@@ -1393,7 +1516,9 @@ void RunSensor(const sim::Simulator& simulator, std::size_t sensor,
     (*mots)[v].Add(sequences[v].Finish());
     const auto coasting = std::move((*causes)[v].coasting);
     const auto partings = std::move((*causes)[v].partings);
+    const auto coast_start = std::move((*causes)[v].coast_start);
     (*causes)[v] = sequences[v].causes();
+    (*causes)[v].coast_start = coast_start;
     (*causes)[v].coasting = coasting;
     (*causes)[v].partings = partings;
     (*counters)[v] = pipelines[v]->tracker().counters();
@@ -1536,6 +1661,9 @@ void Explain(const std::string& scenario, const std::string& mount, const RunRes
       std::fprintf(stderr, "  left behind, measured on: %-90s %6.0f\n", why.c_str(), count);
     for (const auto& [why, count] : r.causes[v].partings)
       std::fprintf(stderr, "  parted from its object: %-100s %6.0f\n", why.c_str(), count);
+    for (const auto& [why, a] : r.causes[v].coast_start)
+      std::fprintf(stderr, "  coast start: %-70s | %6.0f %9.3f %9.3f %6.0f\n", why.c_str(), a[0],
+                   a[1], a[2], a[3]);
   }
 }
 
