@@ -19,7 +19,7 @@ mkdir -p results
   --before-deep-pieces --before-deep-evidence --before-isotropic-bias --before-across-walk \
   --before-side-uncertainty --before-side-from-view \
   --before-few-point-legs --before-deep-legs --before-legs-seen-through --before-legs-report-coasting \
-  --before-leg-edges --before-outline-departure --before-recent-veil \
+  --before-leg-edges --before-outline-departure --before-recent-veil --before-stance-weight \
   --before-single-precision-fit \
   --before-fusion-merge \
   --out results/tracking_benchmark.md

@@ -234,6 +234,17 @@ void VisitShape(tracking::ShapeOptions& o, ConfigVisitor& v) {
   v.Field("gait_sigma_m", o.gait_sigma_m,
           "mount legs: how far the midpoint of the legs strays from the body centre while "
           "walking (1 sigma).");
+  v.Field("stance_leg_weight", o.stance_leg_weight,
+          "mount legs: two legs of a walking track, one standing (it moved less along the walk "
+          "since the track's last two-leg measurement) and one swinging: the body centre is "
+          "taken with this weight on the standing leg and the rest on the swinging one along "
+          "the walk (the stance's share of the gait cycle: the hip's offsets from the two knees "
+          "cancel), their midpoint across it; the weight moves from 0.5 to this one as the "
+          "legs' displacements differ by more than the leg fits' noise (legs that move alike "
+          "keep the midpoint). 0.5: the midpoint always.");
+  v.Field("stance_memory_s", o.stance_memory_s,
+          "mount legs: with stance_leg_weight, the track's last two-leg measurement counts for "
+          "telling the standing leg from the swinging one for at most this long.");
   v.Field("hidden_leg_behind", o.hidden_leg_behind,
           "mount legs: a single leg whose neighbouring beams all pass leg_pairing_distance_m "
           "around it (or return from straight behind it), where a leg beside would have returned "

@@ -265,6 +265,11 @@ struct TrackShape {
   // The departure's variance reported with the track's measured scans (the larger of this scan's
   // and the mean), per axis. Not with coasting reports: see MultiTracker's Report.
   double reported_departure_m2 = 0.0;
+  // Knee height: the leg centres of the track's last two-leg measurement, their fits' variance
+  // (mean over the axes) and its time, 0: none (ShapeOptions::stance_leg_weight).
+  std::array<Eigen::Vector2d, 2> legs_m{Eigen::Vector2d::Zero(), Eigen::Vector2d::Zero()};
+  std::array<double, 2> legs_var_m2{};
+  common::UtcNs legs_ns = 0;
 };
 
 // Replaces an associated measurement with one made with what its track knows (the pipeline's shape

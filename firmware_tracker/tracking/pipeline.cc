@@ -72,6 +72,43 @@ double OutlineDepartureVar(const ShapeOptions& o, double rms_m, double range_m) 
   return o.outline_departure_gain * o.outline_departure_gain * excess;
 }
 
+StanceCentre StanceWeightedCentre(const ShapeOptions& o, const Eigen::Vector2d& forward,
+                                  const std::array<Eigen::Vector2d, 2>& legs_m,
+                                  const std::array<double, 2>& legs_var_m2,
+                                  const std::array<Eigen::Vector2d, 2>& last_m,
+                                  const std::array<double, 2>& last_var_m2, double dt_s,
+                                  double step_m) {
+  StanceCentre out;
+  out.centre_m = 0.5 * (legs_m[0] + legs_m[1]);
+  if (!(dt_s > 0.0 && dt_s <= o.stance_memory_s) || o.stance_leg_weight == 0.5) return out;
+  // A leg keeps its side of the walk: matched by the order across it.
+  const Eigen::Vector2d left(-forward.y(), forward.x());
+  const bool now_0_left = legs_m[0].dot(left) >= legs_m[1].dot(left);
+  const bool last_0_left = last_m[0].dot(left) >= last_m[1].dot(left);
+  const std::size_t j0 = now_0_left == last_0_left ? 0 : 1;  // the last leg matched to legs_m[0]
+  const double d0 = (legs_m[0] - last_m[j0]).dot(forward);
+  const double d1 = (legs_m[1] - last_m[1 - j0]).dot(forward);
+  const double var = legs_var_m2[0] + legs_var_m2[1] + last_var_m2[0] + last_var_m2[1];
+  const double diff = d0 - d1;
+  // Two hypotheses, the displacements' difference +-step_m (the standing knee moves at about half
+  // the body's speed, the swinging one at one and a half times it or more), with variance var:
+  // the slower leg stands with probability q, 1 / (1 + exp(-2 step |diff| / var)); the weight
+  // moves from 1/2 towards stance_leg_weight by 2 q - 1 = tanh(step |diff| / var).
+  const double certainty =
+      var > 0.0 ? std::tanh(std::max(0.0, step_m) * std::abs(diff) / var) : 1.0;
+  if (!(certainty > 0.0)) return out;
+  out.standing = d0 < d1 ? 0 : 1;
+  out.weight = 0.5 + certainty * (o.stance_leg_weight - 0.5);
+  // Along the walk the weight on the standing leg, the rest on the swinging one; across, the
+  // midpoint.
+  const Eigen::Matrix2d along = forward * forward.transpose();
+  const Eigen::Matrix2d half = 0.5 * Eigen::Matrix2d::Identity();
+  out.m[out.standing] = half + (out.weight - 0.5) * along;
+  out.m[1 - out.standing] = half - (out.weight - 0.5) * along;
+  out.centre_m = out.m[0] * legs_m[0] + out.m[1] * legs_m[1];
+  return out;
+}
+
 double DeepLegExcessDepth(const ShapeOptions& o, std::span<const Eigen::Vector2d> pts) {
   if (pts.size() < 2) return 0.0;
   double nearest = std::numeric_limits<double>::infinity(), farthest = 0.0;
@@ -192,6 +229,13 @@ std::optional<std::string> Validate(const ShapeOptions& o) {
     return "hip_half_width_m must be >= 0";
   }
   if (!Positive(o.gait_sigma_m)) return "gait_sigma_m must be > 0";
+  if (!(std::isfinite(o.stance_leg_weight) && o.stance_leg_weight >= 0.5 &&
+        o.stance_leg_weight <= 1.0)) {
+    return "stance_leg_weight must be in [0.5, 1]";
+  }
+  if (!(std::isfinite(o.stance_memory_s) && o.stance_memory_s >= 0.0)) {
+    return "stance_memory_s must be >= 0";
+  }
   if (!Positive(o.walking_speed_mps)) return "walking_speed_mps must be > 0";
   if (!Positive(o.walking_yaw_sigma_rad)) return "walking_yaw_sigma_rad must be > 0";
   if (!(std::isfinite(o.yaw_drift_rad_per_s) && o.yaw_drift_rad_per_s >= 0.0)) {
@@ -312,7 +356,7 @@ class TrackingPipeline::Refiner final : public MeasurementRefiner {
     // An observation of the other kind than the track's (legs of a cart's track, a cart's outline
     // for a person's legs): not this track's measurement.
     if (ob.legs != (shape.model == ShapeModel::kCircle)) return false;
-    const bool ok = ob.legs ? RefineLegs(ob, predicted, predicted_cov, shape, measurement)
+    const bool ok = ob.legs ? RefineLegs(ob, at_ns, predicted, predicted_cov, shape, measurement)
                             : RefineBody(ob, predicted, predicted_cov, shape, measurement);
     if (!ok) return false;
     // ShapeOptions::outline_departure_gain: at upper-body height the fit's residuals measure how
@@ -368,6 +412,7 @@ class TrackingPipeline::Refiner final : public MeasurementRefiner {
   std::uint64_t side_from_view = 0;
   std::uint64_t view_contested = 0;
   std::uint64_t widened = 0;
+  std::uint64_t stance_weighted = 0;
 
   // How many of the observation's two outline ends are silhouettes (MakePart: not an occluder's
   // edge, not the field of view's end).
@@ -561,7 +606,7 @@ class TrackingPipeline::Refiner final : public MeasurementRefiner {
     return true;
   }
 
-  bool RefineLegs(const Observation& ob, const Eigen::Vector4d* predicted,
+  bool RefineLegs(const Observation& ob, common::UtcNs at_ns, const Eigen::Vector4d* predicted,
                   const Eigen::Matrix4d* predicted_cov, TrackShape& shape, Measurement& m) {
     const ShapeOptions& o = p_.options_.shape;
     std::array<ShapeFitResult, 2> legs;
@@ -584,8 +629,26 @@ class TrackingPipeline::Refiner final : public MeasurementRefiner {
     m.orientation_rad = 0.0;
     const double prior_info = 1.0 / std::max(shape.size_cov_m2(0, 0), 1e-12);
     if (ob.part_count == 2) {
-      m.position_m = 0.5 * (legs[0].centre_m + legs[1].centre_m);
-      m.covariance_m2 = 0.25 * (legs[0].centre_cov_m2 + legs[1].centre_cov_m2) +
+      const std::array<Eigen::Vector2d, 2> now{legs[0].centre_m, legs[1].centre_m};
+      const std::array<double, 2> now_var{0.5 * legs[0].centre_cov_m2.trace(),
+                                          0.5 * legs[1].centre_cov_m2.trace()};
+      internal::StanceCentre centre;
+      centre.centre_m = 0.5 * (now[0] + now[1]);
+      // ShapeOptions::stance_leg_weight: a walking track's standing leg weighs more.
+      if (shape.legs_ns != 0 && WalkingDirection(predicted, predicted_cov, &centre.centre_m)) {
+        const Eigen::Vector2d forward = centre.centre_m;
+        const double dt_s = common::NsToSeconds(at_ns - shape.legs_ns);
+        centre = internal::StanceWeightedCentre(o, forward, now, now_var, shape.legs_m,
+                                                shape.legs_var_m2, dt_s,
+                                                predicted->tail<2>().norm() * dt_s);
+        if (centre.standing >= 0) ++stance_weighted;
+      }
+      shape.legs_m = now;
+      shape.legs_var_m2 = now_var;
+      shape.legs_ns = at_ns;
+      m.position_m = centre.centre_m;
+      m.covariance_m2 = centre.m[0] * legs[0].centre_cov_m2 * centre.m[0].transpose() +
+                        centre.m[1] * legs[1].centre_cov_m2 * centre.m[1].transpose() +
                         o.gait_sigma_m * o.gait_sigma_m * Eigen::Matrix2d::Identity();
       m.rms_residual_m = std::max(legs[0].rms_m, legs[1].rms_m);
       const double range = m.position_m.norm();
@@ -657,6 +720,19 @@ class TrackingPipeline::Refiner final : public MeasurementRefiner {
     ++flat_count(shape);
     shape.person_like =
         flat_count(shape) < kMinFlatnessUpdates || shape.size_m.x() >= o.person_min_leg_radius_m;
+    return true;
+  }
+
+  // Whether a track predicted at `predicted` walks (speed at least walking_speed_mps and twice its
+  // sigma); then *forward is the unit walking direction.
+  bool WalkingDirection(const Eigen::Vector4d* predicted, const Eigen::Matrix4d* predicted_cov,
+                        Eigen::Vector2d* forward) const {
+    if (predicted == nullptr || predicted_cov == nullptr) return false;
+    const Eigen::Vector2d v = predicted->tail<2>();
+    const double speed = v.norm();
+    const double speed_sigma = std::sqrt(0.5 * predicted_cov->bottomRightCorner<2, 2>().trace());
+    if (!(speed >= p_.options_.shape.walking_speed_mps && speed >= 2.0 * speed_sigma)) return false;
+    *forward = v / speed;
     return true;
   }
 
@@ -1695,6 +1771,7 @@ const ScanTracks& TrackingPipeline::Process(const ScanView& scan, std::uint32_t 
   const std::uint64_t side_from_view_before = refiner_->side_from_view;
   const std::uint64_t view_contested_before = refiner_->view_contested;
   const std::uint64_t widened_before = refiner_->widened;
+  const std::uint64_t stance_weighted_before = refiner_->stance_weighted;
   scan_ = &scan;
   tracker_.Step(scan.stamp_ns, measurements_.span(), offsets_s_.span(),
                 shape_fit ? refiner_.get() : nullptr, tracks_);
@@ -1706,6 +1783,7 @@ const ScanTracks& TrackingPipeline::Process(const ScanView& scan, std::uint32_t 
   counters_.legs_side_from_view += refiner_->side_from_view - side_from_view_before;
   counters_.legs_side_view_contested += refiner_->view_contested - view_contested_before;
   counters_.outline_departure_widened += refiner_->widened - widened_before;
+  counters_.stance_weighted_pairs += refiner_->stance_weighted - stance_weighted_before;
   if (bg.scan_error == ScanError::kNone && bg.learned) {
     AbsorbStatic(scan);
     if (shape_fit) DropCoasting(scan);

@@ -20,7 +20,8 @@
 // (MeasurementRefiner): the shape fit with the track's size state as the prior, its walking
 // direction as the yaw prior (the shoulders across it; a box's length along it) and its predicted
 // position as the start; legs: a circle per leg with the track's leg radius, the body centre their
-// midpoint (plus gait_sigma_m: the legs' midpoint swings about the body's centre as they step), or
+// midpoint (plus gait_sigma_m: the legs' midpoint swings about the body's centre as they step;
+// weighted along the walk towards the standing leg, ShapeOptions::stance_leg_weight), or
 // one leg: hip_half_width_m behind it along the line of sight where it hides the other
 // (ShapeOptions::hidden_leg_behind), else its centre (plus the hip and stride extent). The fit's
 // size posterior becomes the track's size state (drifting by size_drift_m_per_sqrt_s between
@@ -169,6 +170,24 @@ struct ShapeOptions {
   // 0: off.
   double recent_veil_s = 0.3;
   double gait_sigma_m = 0.05;
+  // Legs mount: two legs of a walking track, one standing and the other swinging. A standing
+  // foot is planted while the hip passes over it and the swinging foot comes from behind to ahead
+  // of it; both pass the same half step either side of the hip, the standing one in the stance's
+  // share of the gait cycle (~60 % in human walking), the swinging one in the swing's (~40 %), so
+  // relative to the hip the swinging knee moves faster by the ratio of the two and the legs'
+  // midpoint lies off the hip towards the swinging leg by (stance share - 1/2) of their spread
+  // along the walk (zero where they pass each other, most a stride apart). The centre is taken
+  // as the legs weighted by their phases' shares, this weight on the standing leg along the walk
+  // (across it the midpoint): the hip's offsets from the two knees cancel. Which leg stands: the
+  // one whose centre moved less along the walk since the track's last two-leg measurement (at
+  // most stance_memory_s ago; the standing knee moves at about half the body's speed, the
+  // swinging one at one and a half times it or more), weighed by how sure that is against the
+  // four leg fits' variance (internal::StanceWeightedCentre: the weight moves from 1/2 towards
+  // this one as the two legs' displacements differ by more than their noise; legs that move
+  // alike, both standing, keep the midpoint). Counted in PipelineCounters::stance_weighted_pairs.
+  // 0.5: the midpoint always.
+  double stance_leg_weight = 0.6;
+  double stance_memory_s = 0.15;
   // Legs mount: one leg whose partner is hidden behind it. Walking legs are always
   // 2 hip_half_width_m apart across the walk, so where one leg hides the other, the other stands
   // straight behind it along the line of sight, at least that far: the body centre, their
@@ -471,6 +490,8 @@ struct PipelineCounters {
   std::uint64_t legs_side_view_contested = 0;   // scan's side against a sure prediction: weighed
   std::uint64_t outline_departure_widened = 0;  // body fits widened (outline_departure_gain)
   std::uint64_t split_few_point_legs = 0;       // 2-3 point segments split into two legs
+  std::uint64_t stance_weighted_pairs =
+      0;                               // two legs weighted to the standing one (stance_leg_weight)
   std::uint64_t deep_leg_pairs = 0;    // deep 2-3 point legs measured as a pair (deep_legs_as_pair)
   std::uint64_t veiled_segments = 0;   // legs: mixed pixels (beside a nearer edge, deep), dropped
   std::uint64_t deep_pieces_kept = 0;  // legs: deep pieces with no surface behind, kept
@@ -639,6 +660,31 @@ inline constexpr double kSideKnownWeight = 0.95;
 // leg_radius_sigma_m + 3 (fit.point_sigma_m + fit.point_sigma_per_m R), R the nearest range; 0
 // for fewer than two points or within that.
 double DeepLegExcessDepth(const ShapeOptions& o, std::span<const Eigen::Vector2d> pts);
+
+// ShapeOptions::stance_leg_weight: the body centre from two legs legs_m (fit variances legs_var_m2,
+// mean over the axes) of a track walking along the unit vector forward, step_m in dt_s (its
+// speed times dt_s), with the track's last two-leg measurement last_m (last_var_m2) dt_s before.
+// The legs are matched to the last ones by their order across the walk (a leg keeps its side);
+// the one that moved less along the walk stands with probability q = 1 / (1 + exp(-2 step_m |d| /
+// s2)), d the two displacements' difference, s2 the four variances summed (two hypotheses: the
+// difference +-step_m). The centre: weight w = 1/2 + (2 q - 1) (stance_leg_weight - 1/2) on the
+// standing leg and 1 - w on the other along the walk, their midpoint across it; standing is its
+// index, weight w and m the matrices that map each leg to the centre (centre = m[0] legs_m[0] +
+// m[1] legs_m[1]). Else (dt_s outside (0, stance_memory_s], stance_leg_weight 1/2 or d = 0) the
+// midpoint, standing -1.
+struct StanceCentre {
+  Eigen::Vector2d centre_m = Eigen::Vector2d::Zero();
+  std::array<Eigen::Matrix2d, 2> m{0.5 * Eigen::Matrix2d::Identity(),
+                                   0.5 * Eigen::Matrix2d::Identity()};
+  int standing = -1;
+  double weight = 0.5;
+};
+StanceCentre StanceWeightedCentre(const ShapeOptions& o, const Eigen::Vector2d& forward,
+                                  const std::array<Eigen::Vector2d, 2>& legs_m,
+                                  const std::array<double, 2>& legs_var_m2,
+                                  const std::array<Eigen::Vector2d, 2>& last_m,
+                                  const std::array<double, 2>& last_var_m2, double dt_s,
+                                  double step_m);
 
 // What the points of a person's back spread over extent_m show of their principal line (RMS
 // distance, m), and whether it exceeds threshold_m (the same test without the root).

@@ -43,6 +43,7 @@
 //                       [--before-legs-report-coasting] [--before-leg-edges]
 //                       [--before-outline-departure] [--before-recent-veil]
 //                       [--before-single-precision-fit]
+//                       [--before-stance-weight]
 //                       [--before-fusion-merge] [--before-report-sourceless]]
 //   (--extra: more scenario folders, e.g. held-out scenes, reported in their own section;
 //   --explain: per run on stderr, what became of an object's previous track at every id switch
@@ -101,6 +102,8 @@
 //   --before-leg-edges: "before" takes a knee-height leg's silhouette edge half a step beyond its
 //   last returning beam also where the beam beyond is a mixed echo,
 //   ShapeOptions::leg_edge_in_mixed_beam = false;
+//   --before-stance-weight: "before" measures a walking knee-height track's two legs by their
+//   midpoint also where one stands and the other swings, ShapeOptions::stance_leg_weight = 0.5;
 //   --before-outline-departure: "before" reports an upper-body centre with the fixed allowances
 //   for the outline alone, not the departure its fit's residuals measure,
 //   ShapeOptions::outline_departure_gain = 0;
@@ -170,6 +173,10 @@ struct Truth {
   // away (3), within 30 deg of across it (2), between (1), else (standing) -1.
   int gait = -1;
   int view = -1;
+  // --breakdown, knee height, a walking person: how far apart the legs stand along the walk (m, -1
+  // standing) and whether one leg swings while the other stands (0) or both stand (1).
+  double legs_spread_m = -1.0;
+  int legs_support = -1;
 };
 // --breakdown: a person walks (Truth::gait) above this speed, a trolley moves (Truth::view); a
 // trolley is seen end-on or broadside within this angle of it.
@@ -295,10 +302,17 @@ struct Breakdown {
   std::array<BreakdownCell, 4> one_leg_by_range, two_legs_by_range;
   // Knee height, one leg: the nearer leg in stance / swing (Truth::gait); a trolley by its view.
   std::array<BreakdownCell, 2> one_leg_by_gait;
+  // Knee height, two legs of a walking person: by the legs' spread along the walk
+  // (kSpreadBins) and by one leg swinging or both standing (Truth::legs_support).
+  std::array<BreakdownCell, 4> two_legs_by_spread;
+  std::array<BreakdownCell, 2> two_legs_by_support;
   std::array<BreakdownCell, 4> trolley_by_view;
   BreakdownCell total;
   static std::size_t RangeBin(double r_m) {
     return r_m < 5.0 ? 0 : r_m < 10.0 ? 1 : r_m < 20.0 ? 2 : 3;
+  }
+  static std::size_t SpreadBin(double d_m) {
+    return d_m < 0.1 ? 0 : d_m < 0.2 ? 1 : d_m < 0.3 ? 2 : 3;
   }
   static std::size_t PointBin(std::uint32_t n) {
     return n == 0 ? 0 : n == 1 ? 1 : n <= 4 ? 2 : n <= 9 ? 3 : n <= 19 ? 4 : 5;
@@ -315,13 +329,20 @@ struct Breakdown {
     BreakdownCell* gait = parts == 2 && t.gait >= 0 ? &one_leg_by_gait[t.gait] : nullptr;
     BreakdownCell* view =
         parts == 5 && t.trolley && t.view >= 0 ? &trolley_by_view[t.view] : nullptr;
+    BreakdownCell* spread = parts == 4 && t.legs_spread_m >= 0.0
+                                ? &two_legs_by_spread[SpreadBin(t.legs_spread_m)]
+                                : nullptr;
+    BreakdownCell* support =
+        parts == 4 && t.legs_support >= 0 ? &two_legs_by_support[t.legs_support] : nullptr;
     BreakdownCell* cells[] = {&by_range[RangeBin(range_m)],
                               &by_points[PointBin(h.points)],
                               &by_parts[parts == 5 && t.trolley ? 8 : parts],
                               &total,
                               legs,
                               gait,
-                              view};
+                              view,
+                              spread,
+                              support};
     const Vector2d e = h.p - t.p;
     for (BreakdownCell* c : cells) {
       if (c != nullptr) c->all.Add(e, los, t.v);
@@ -346,6 +367,12 @@ struct Breakdown {
     }
     for (std::size_t i = 0; i < one_leg_by_gait.size(); ++i) {
       one_leg_by_gait[i].Merge(o.one_leg_by_gait[i]);
+    }
+    for (std::size_t i = 0; i < two_legs_by_spread.size(); ++i) {
+      two_legs_by_spread[i].Merge(o.two_legs_by_spread[i]);
+    }
+    for (std::size_t i = 0; i < two_legs_by_support.size(); ++i) {
+      two_legs_by_support[i].Merge(o.two_legs_by_support[i]);
     }
     for (std::size_t i = 0; i < trolley_by_view.size(); ++i) {
       trolley_by_view[i].Merge(o.trolley_by_view[i]);
@@ -971,6 +998,9 @@ bool g_before_leg_edges = false;
 // --before-outline-departure: "before" reports an upper-body centre with the fixed allowances for
 // the outline alone (ShapeOptions::outline_departure_gain = 0).
 bool g_before_outline_departure = false;
+// --before-stance-weight: "before" measures two legs by their midpoint also where one stands and
+// the other swings (ShapeOptions::stance_leg_weight = 0.5).
+bool g_before_stance_weight = false;
 // --before-fusion-merge: "before"'s fusion without merging fused tracks left without sources and
 // reporting fused tracks no tracker holds any more (FusionOptions::merge_sourceless = false,
 // report_sourceless = true).
@@ -1021,8 +1051,8 @@ std::vector<Variant> Variants(sim::Mount mount, double range_m) {
              g_before_side_uncertainty || g_before_side_from_view || g_before_few_point_legs ||
              g_before_deep_legs || g_before_legs_seen_through || g_before_legs_report_coasting ||
              g_before_leg_edges || g_before_outline_departure || g_before_fusion_merge ||
-             g_before_report_sourceless || g_before_recent_veil ||
-             g_before_single_precision_fit) {
+             g_before_report_sourceless || g_before_recent_veil || g_before_single_precision_fit ||
+             g_before_stance_weight) {
     tracking::TrackerOptions before = fresh;
     if (g_before_one_leg) before.shape.hidden_leg_behind = false;
     if (g_before_mixed_pixels) before.shape.drop_mixed_pixel_legs = false;
@@ -1046,6 +1076,7 @@ std::vector<Variant> Variants(sim::Mount mount, double range_m) {
     if (g_before_outline_departure) before.shape.outline_departure_gain = 0.0;
     if (g_before_recent_veil) before.shape.recent_veil_s = 0.0;
     if (g_before_single_precision_fit) before.shape.fit.single_precision_points = false;
+    if (g_before_stance_weight) before.shape.stance_leg_weight = 0.5;
     variants.push_back({"before", before});
   }
   return variants;
@@ -1328,6 +1359,10 @@ void RunSensor(const sim::Simulator& simulator, std::size_t sensor,
         const Vector2d l1 = sensor_from_world * Vector2d(ts.state.legs[1].x, ts.state.legs[1].y);
         const double phase = ts.state.gait_phase + (l0.norm() <= l1.norm() ? 0.0 : 0.5);
         truth.gait = phase - std::floor(phase) < sim::kStanceFraction ? 0 : 1;
+        if (vel.norm() > 0.0) truth.legs_spread_m = std::abs((l0 - l1).dot(vel.normalized()));
+        const double p0 = ts.state.gait_phase - std::floor(ts.state.gait_phase);
+        const double p1 = ts.state.gait_phase + 0.5 - std::floor(ts.state.gait_phase + 0.5);
+        truth.legs_support = p0 < sim::kStanceFraction && p1 < sim::kStanceFraction ? 1 : 0;
       }
       if (truth.trolley && range > 0.0 && vel.norm() > kWalkingMps) {
         const double c = std::abs(vel.dot(p)) / (vel.norm() * range);
@@ -2008,6 +2043,19 @@ std::string BreakdownTable(const Section& s) {
     for (std::size_t i = 0; i < b.one_leg_by_gait.size(); ++i) {
       if (b.one_leg_by_gait[i].all.n > 0) t += BreakdownRow(lead, gaits[i], b.one_leg_by_gait[i]);
     }
+    const char* const spreads[] = {
+        "two legs, walking, spread along the walk 0-0.1 m", "two legs, walking, spread 0.1-0.2 m",
+        "two legs, walking, spread 0.2-0.3 m", "two legs, walking, spread 0.3+ m"};
+    for (std::size_t i = 0; i < b.two_legs_by_spread.size(); ++i) {
+      if (b.two_legs_by_spread[i].all.n > 0)
+        t += BreakdownRow(lead, spreads[i], b.two_legs_by_spread[i]);
+    }
+    const char* const supports[] = {"two legs, walking, one leg swinging",
+                                    "two legs, walking, both legs standing"};
+    for (std::size_t i = 0; i < b.two_legs_by_support.size(); ++i) {
+      if (b.two_legs_by_support[i].all.n > 0)
+        t += BreakdownRow(lead, supports[i], b.two_legs_by_support[i]);
+    }
     const char* const views[] = {"trolley, end-on, coming nearer", "trolley, oblique",
                                  "trolley, broadside", "trolley, end-on, going away"};
     for (std::size_t i = 0; i < b.trolley_by_view.size(); ++i) {
@@ -2084,7 +2132,7 @@ std::string KneeHeightBefore() {
         g_before_side_from_view || g_before_few_point_legs || g_before_deep_legs ||
         g_before_legs_seen_through || g_before_legs_report_coasting || g_before_leg_edges ||
         g_before_outline_departure || g_before_fusion_merge || g_before_report_sourceless ||
-        g_before_recent_veil || g_before_single_precision_fit) ||
+        g_before_recent_veil || g_before_single_precision_fit || g_before_stance_weight) ||
       g_before_mixed_pixels || g_before_far || g_before_evidence_coasting ||
       g_before_report_rules) {
     return "";
@@ -2186,6 +2234,11 @@ std::string KneeHeightBefore() {
     without.push_back(
         "fitting a person's outline with every point in double precision, two at a time "
         "(`shape.single_precision_points` false)");
+  }
+  if (g_before_stance_weight) {
+    without.push_back(
+        "measuring a walking knee-height track's two legs by their midpoint also where one "
+        "stands and the other swings (`shape.stance_leg_weight` 0.5)");
   }
   std::string text = "\"before\": the new tracker" + std::string(without.empty() ? "" : " ");
   for (std::size_t i = 0; i < without.size(); ++i) {
@@ -2291,6 +2344,8 @@ int main(int argc, char** argv) {
       g_before_recent_veil = true;
     } else if (a == "--before-single-precision-fit") {
       g_before_single_precision_fit = true;
+    } else if (a == "--before-stance-weight") {
+      g_before_stance_weight = true;
     } else if (a == "--before-fusion-merge") {
       g_before_fusion_merge = true;
     } else if (a == "--before-report-sourceless") {
@@ -2310,7 +2365,7 @@ int main(int argc, char** argv) {
                    "[--before-legs-seen-through] [--before-legs-report-coasting] "
                    "[--before-leg-edges] [--before-outline-departure] [--before-recent-veil] "
                    "[--before-single-precision-fit] "
-                   "[--before-fusion-merge] "
+                   "[--before-stance-weight] [--before-fusion-merge] "
                    "[--before-report-sourceless]]\n");
       return 2;
     }
