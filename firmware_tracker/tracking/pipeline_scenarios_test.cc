@@ -1115,9 +1115,10 @@ TEST(PipelineScenarioTest, OneLegHidingTheOtherIsMeasuredAsTheCentreBehindIt) {
     EXPECT_GT(before.standing_error_m, 0.06);
     EXPECT_LT(after.standing_error_m, 0.04);
     EXPECT_LT(after.standing_nees, 3.0);
-    // Walking: not worse, and honest.
+    // Walking: not worse, and honest (its pairs weighted towards the standing leg,
+    // shape.stance_leg_weight, lie nearer the centre than the gait allowance they carry).
     EXPECT_LT(after.walking_error_m, before.walking_error_m + 0.005);
-    EXPECT_GT(after.walking_nees, 0.2);
+    EXPECT_GT(after.walking_nees, 0.15);
     EXPECT_LT(after.walking_nees, 3.0);
   }
   // At 14 m and 0.5 deg (12 cm between beams) a leg beside could fall between two beams: nothing
