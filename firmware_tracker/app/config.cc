@@ -237,11 +237,11 @@ void VisitShape(tracking::ShapeOptions& o, ConfigVisitor& v) {
   v.Field("stance_leg_weight", o.stance_leg_weight,
           "mount legs: two legs of a walking track, one standing (it moved less along the walk "
           "since the track's last two-leg measurement) and one swinging: the body centre is "
-          "taken with this weight on the standing leg and the rest on the swinging one along "
-          "the walk (the stance's share of the gait cycle: the hip's offsets from the two knees "
-          "cancel), their midpoint across it; the weight moves from 0.5 to this one as the "
-          "legs' displacements differ by more than the leg fits' noise (legs that move alike "
-          "keep the midpoint). 0.5: the midpoint always.");
+          "taken with this weight on the standing leg and the rest on the swinging one (the "
+          "stance's share of the gait cycle: along the walk the hip's offsets from the two knees "
+          "cancel, across it the body leans over the standing foot); the weight moves from 0.5 "
+          "to this one as the legs' displacements differ by more than the leg fits' noise (legs "
+          "that move alike keep the midpoint). 0.5: the midpoint always.");
   v.Field("stance_memory_s", o.stance_memory_s,
           "mount legs: with stance_leg_weight, the track's last two-leg measurement counts for "
           "telling the standing leg from the swinging one for at most this long.");

@@ -99,13 +99,11 @@ StanceCentre StanceWeightedCentre(const ShapeOptions& o, const Eigen::Vector2d& 
   if (!(certainty > 0.0)) return out;
   out.standing = d0 < d1 ? 0 : 1;
   out.weight = 0.5 + certainty * (o.stance_leg_weight - 0.5);
-  // Along the walk the weight on the standing leg, the rest on the swinging one; across, the
-  // midpoint.
-  const Eigen::Matrix2d along = forward * forward.transpose();
-  const Eigen::Matrix2d half = 0.5 * Eigen::Matrix2d::Identity();
-  out.m[out.standing] = half + (out.weight - 0.5) * along;
-  out.m[1 - out.standing] = half - (out.weight - 0.5) * along;
-  out.centre_m = out.m[0] * legs_m[0] + out.m[1] * legs_m[1];
+  // The weight on the standing leg, the rest on the swinging one: along the walk the hip's
+  // offsets from the two knees cancel; across it the body leans over the standing foot.
+  out.m[out.standing] = out.weight * Eigen::Matrix2d::Identity();
+  out.m[1 - out.standing] = (1.0 - out.weight) * Eigen::Matrix2d::Identity();
+  out.centre_m = out.weight * legs_m[out.standing] + (1.0 - out.weight) * legs_m[1 - out.standing];
   return out;
 }
 

@@ -21,7 +21,7 @@
 // direction as the yaw prior (the shoulders across it; a box's length along it) and its predicted
 // position as the start; legs: a circle per leg with the track's leg radius, the body centre their
 // midpoint (plus gait_sigma_m: the legs' midpoint swings about the body's centre as they step;
-// weighted along the walk towards the standing leg, ShapeOptions::stance_leg_weight), or
+// weighted towards the standing leg, ShapeOptions::stance_leg_weight), or
 // one leg: hip_half_width_m behind it along the line of sight where it hides the other
 // (ShapeOptions::hidden_leg_behind), else its centre (plus the hip and stride extent). The fit's
 // size posterior becomes the track's size state (drifting by size_drift_m_per_sqrt_s between
@@ -177,8 +177,9 @@ struct ShapeOptions {
   // relative to the hip the swinging knee moves faster by the ratio of the two and the legs'
   // midpoint lies off the hip towards the swinging leg by (stance share - 1/2) of their spread
   // along the walk (zero where they pass each other, most a stride apart). The centre is taken
-  // as the legs weighted by their phases' shares, this weight on the standing leg along the walk
-  // (across it the midpoint): the hip's offsets from the two knees cancel. Which leg stands: the
+  // as the legs weighted by their phases' shares, this weight on the standing leg: along the walk
+  // the hip's offsets from the two knees cancel, and across it the body leans over the standing
+  // foot (a fifth of the hip's width at 0.6, about the pelvis' sway). Which leg stands: the
   // one whose centre moved less along the walk since the track's last two-leg measurement (at
   // most stance_memory_s ago; the standing knee moves at about half the body's speed, the
   // swinging one at one and a half times it or more), weighed by how sure that is against the
@@ -668,10 +669,9 @@ double DeepLegExcessDepth(const ShapeOptions& o, std::span<const Eigen::Vector2d
 // the one that moved less along the walk stands with probability q = 1 / (1 + exp(-2 step_m |d| /
 // s2)), d the two displacements' difference, s2 the four variances summed (two hypotheses: the
 // difference +-step_m). The centre: weight w = 1/2 + (2 q - 1) (stance_leg_weight - 1/2) on the
-// standing leg and 1 - w on the other along the walk, their midpoint across it; standing is its
-// index, weight w and m the matrices that map each leg to the centre (centre = m[0] legs_m[0] +
-// m[1] legs_m[1]). Else (dt_s outside (0, stance_memory_s], stance_leg_weight 1/2 or d = 0) the
-// midpoint, standing -1.
+// standing leg and 1 - w on the other; standing is its index, weight w and m the matrices that
+// map each leg to the centre (centre = m[0] legs_m[0] + m[1] legs_m[1]). Else (dt_s outside (0,
+// stance_memory_s], stance_leg_weight 1/2 or d = 0) the midpoint, standing -1.
 struct StanceCentre {
   Eigen::Vector2d centre_m = Eigen::Vector2d::Zero();
   std::array<Eigen::Matrix2d, 2> m{0.5 * Eigen::Matrix2d::Identity(),

@@ -1239,10 +1239,10 @@ TEST(PipelineScenarioTest, SingleLegSideWeightIsTheTwoSidesMixture) {
   EXPECT_GT(internal::SingleLegSideWeight(0.1, 0.1, 0.01 / 1.84), internal::kSideKnownWeight);
 }
 
-// ShapeOptions::stance_leg_weight: walking along x, the left leg (+y) stood still since the last
+// ShapeOptions::stance_leg_weight: walking along x, the left leg (+y) moved 0.02 m since the last
 // two-leg measurement and the right one swung 0.1 m forward: the centre lies 0.6 of the way from
-// the swinging leg to the standing one along the walk, between them across it. The legs are
-// matched to the last ones by their side, whatever their order.
+// the swinging leg to the standing one. The legs are matched to the last ones by their side,
+// whatever their order.
 TEST(PipelineScenarioTest, StanceWeightedCentreWeighsTheStandingLegAlongTheWalk) {
   ShapeOptions o;
   const Eigen::Vector2d forward(1.0, 0.0);
@@ -1254,7 +1254,7 @@ TEST(PipelineScenarioTest, StanceWeightedCentreWeighsTheStandingLegAlongTheWalk)
   EXPECT_EQ(c.standing, 1);
   EXPECT_NEAR(c.weight, 0.6, 1e-6);  // tanh(0.05 * 0.08 / 4e-4) = tanh(10)
   EXPECT_NEAR(c.centre_m.x(), 0.6 * 0.02 + 0.4 * -0.1, 1e-6);
-  EXPECT_NEAR(c.centre_m.y(), 0.0, 1e-12);
+  EXPECT_NEAR(c.centre_m.y(), 0.6 * 0.1 + 0.4 * -0.1, 1e-6);
   // The same with the legs' noise: tanh(0.05 * 0.08 / 0.004) = tanh(1) of the way to 0.6.
   const std::array<double, 2> noisy{1e-3, 1e-3};
   const internal::StanceCentre n =
@@ -1262,6 +1262,7 @@ TEST(PipelineScenarioTest, StanceWeightedCentreWeighsTheStandingLegAlongTheWalk)
   EXPECT_EQ(n.standing, 1);
   EXPECT_NEAR(n.weight, 0.5 + 0.1 * 0.761594, 1e-6);
   EXPECT_NEAR(n.centre_m.x(), -0.1 + n.weight * 0.12, 1e-6);
+  EXPECT_NEAR(n.centre_m.y(), -0.1 + n.weight * 0.2, 1e-6);
   // Legs that moved alike (both standing): the midpoint; a last measurement too old, or the
   // option at 0.5: the midpoint, no leg taken as standing.
   const std::array<Eigen::Vector2d, 2> alike{Eigen::Vector2d(-0.18, -0.1),
@@ -1270,6 +1271,7 @@ TEST(PipelineScenarioTest, StanceWeightedCentreWeighsTheStandingLegAlongTheWalk)
       internal::StanceWeightedCentre(o, forward, alike, sure, last, sure, 0.04, 0.05);
   EXPECT_NEAR(both.weight, 0.5, 1e-6);
   EXPECT_NEAR(both.centre_m.x(), -0.08, 1e-6);
+  EXPECT_NEAR(both.centre_m.y(), 0.0, 1e-6);
   EXPECT_EQ(internal::StanceWeightedCentre(o, forward, now, sure, last, sure, 0.2, 0.25).standing,
             -1);
   ShapeOptions off = o;
@@ -1278,6 +1280,7 @@ TEST(PipelineScenarioTest, StanceWeightedCentreWeighsTheStandingLegAlongTheWalk)
       internal::StanceWeightedCentre(off, forward, now, sure, last, sure, 0.04, 0.05);
   EXPECT_EQ(mid.standing, -1);
   EXPECT_NEAR(mid.centre_m.x(), -0.04, 1e-12);
+  EXPECT_NEAR(mid.centre_m.y(), 0.0, 1e-12);
 }
 
 // A walker at knee height: the legs' midpoint runs ahead of and behind the hip with the gait (the
