@@ -3,6 +3,8 @@
 #include <pb_encode.h>
 
 #include <algorithm>
+#include <array>
+#include <bit>
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
@@ -75,46 +77,6 @@ lrfnet_proto_ClockSyncState ToProto(ClockSync sync) {
   return lrfnet_proto_ClockSyncState_CLOCK_SYNC_UNSPECIFIED;
 }
 
-// Fills the wire track; false when a value is not finite as a float (such a track would poison the
-// daemon's filters).
-bool ToProto(const tracking::TrackReport& r, lrfnet_proto_Track* t) {
-  *t = lrfnet_proto_Track{};
-  t->track_id = r.track_id;
-  t->state = ToProto(r.state);
-  t->kind = ToProto(r.kind);
-  t->x_m = static_cast<float>(r.x_m);
-  t->y_m = static_cast<float>(r.y_m);
-  t->vx_mps = static_cast<float>(r.vx_mps);
-  t->vy_mps = static_cast<float>(r.vy_mps);
-  bool finite = std::isfinite(t->x_m) && std::isfinite(t->y_m) && std::isfinite(t->vx_mps) &&
-                std::isfinite(t->vy_mps);
-  // Upper triangle, row-major (the order documented in lrfnet.proto).
-  pb_size_t n = 0;
-  for (int row = 0; row < 4; ++row) {
-    for (int col = row; col < 4; ++col) {
-      const auto v = static_cast<float>(r.covariance(row, col));
-      finite = finite && std::isfinite(v);
-      t->covariance[n++] = v;
-    }
-  }
-  t->covariance_count = n;
-  t->age_scans = r.age_scans;
-  t->points = r.points;
-  if (r.kind != tracking::MeasurementKind::kCenterOfMass) {
-    t->ellipse_yaw_rad = static_cast<float>(r.ellipse_yaw_rad);
-    finite = finite && std::isfinite(t->ellipse_yaw_rad);
-  }
-  if (r.shape != tracking::ObjectShape::kUnspecified) {
-    t->shape = ToProto(r.shape);
-    t->size_major_m = static_cast<float>(r.size_major_m);
-    t->size_minor_m = static_cast<float>(r.size_minor_m);
-    t->size_sigma_m = static_cast<float>(r.size_sigma_m);
-    finite = finite && std::isfinite(t->size_major_m) && std::isfinite(t->size_minor_m) &&
-             std::isfinite(t->size_sigma_m);
-  }
-  return finite;
-}
-
 // Protobuf wire format written directly, with nanopb's rules for proto3 fields: in field-number
 // order, defaults left out (a zero number, a float or double whose bits are all zero (nanopb writes
 // -0.0), an empty string or repeated field). For the track frames, which are most of the traffic:
@@ -129,17 +91,17 @@ class WireWriter {
   void Tag(std::uint32_t field, pb_wire_type_t wire_type) {
     Raw((std::uint64_t{field} << 3) | static_cast<std::uint64_t>(wire_type));
   }
-  // The bytes go through a local array and memcpy: a store through a byte pointer may alias n_,
-  // which would be reloaded after every byte.
+  // The bytes are stored through a local pointer and counted in a local: a store through a byte
+  // pointer may alias n_, which would otherwise be reloaded after every byte (and a copy through a
+  // local array takes a call of memcpy for its variable length).
   void Raw(std::uint64_t v) {
-    std::uint8_t bytes[10];
+    std::uint8_t* const p = out_ + n_;
     std::size_t k = 0;
     while (v >= 0x80) {
-      bytes[k++] = static_cast<std::uint8_t>(v | 0x80);
+      p[k++] = static_cast<std::uint8_t>(v | 0x80);
       v >>= 7;
     }
-    bytes[k++] = static_cast<std::uint8_t>(v);
-    std::memcpy(out_ + n_, bytes, k);
+    p[k++] = static_cast<std::uint8_t>(v);
     n_ += k;
   }
   void Bytes(const std::uint8_t* data, std::size_t size) {
@@ -197,30 +159,58 @@ class WireWriter {
   std::size_t n_ = 0;
 };
 
-// One Track; at most kMaxTrackBytes.
-std::size_t WriteTrack(const lrfnet_proto_Track& t, std::uint8_t* out) {
-  WireWriter w(out);
-  w.Varint(1, t.track_id);
-  w.Varint(2, static_cast<std::uint32_t>(t.state));
-  w.Varint(3, static_cast<std::uint32_t>(t.kind));
-  w.Fixed32(4, t.x_m);
-  w.Fixed32(5, t.y_m);
-  w.Fixed32(6, t.vx_mps);
-  w.Fixed32(7, t.vy_mps);
-  if (t.covariance_count > 0) {  // packed: tag, byte length, the values
-    w.Tag(8, PB_WT_STRING);
-    w.Raw(4u * t.covariance_count);
-    for (pb_size_t i = 0; i < t.covariance_count; ++i) {
-      w.Le32(WireWriter::FloatBits(t.covariance[i]));
-    }
+// One Track, written straight from the report (no lrfnet_proto_Track in between: that struct's
+// clearing and copying cost more than the writing); at most kMaxTrackBytes. The values are the
+// report's as floats, the fields and bytes those nanopb writes for the Track the report converts
+// to (the ellipse's yaw only where the kind is not the centre of mass, the shape's fields only where
+// it is specified). *finite: false when a value sent is not finite as a float (such a track would
+// poison the daemon's filters); decided by one sum of v - v over the values sent, NaN only if one is
+// not finite.
+std::size_t WriteTrack(const tracking::TrackReport& r, std::uint8_t* out, bool* finite) {
+  const auto x = static_cast<float>(r.x_m);
+  const auto y = static_cast<float>(r.y_m);
+  const auto vx = static_cast<float>(r.vx_mps);
+  const auto vy = static_cast<float>(r.vy_mps);
+  // Upper triangle, row-major (the order documented in lrfnet.proto).
+  std::array<float, 10> cov;
+  std::size_t n = 0;
+  for (int row = 0; row < 4; ++row) {
+    for (int col = row; col < 4; ++col) cov[n++] = static_cast<float>(r.covariance(row, col));
   }
-  w.Varint(9, t.age_scans);
-  w.Varint(10, t.points);
-  w.Fixed32(11, t.ellipse_yaw_rad);
-  w.Varint(12, static_cast<std::uint32_t>(t.shape));
-  w.Fixed32(13, t.size_major_m);
-  w.Fixed32(14, t.size_minor_m);
-  w.Fixed32(15, t.size_sigma_m);
+  const bool has_yaw = r.kind != tracking::MeasurementKind::kCenterOfMass;
+  const bool has_shape = r.shape != tracking::ObjectShape::kUnspecified;
+  const float yaw = has_yaw ? static_cast<float>(r.ellipse_yaw_rad) : 0.0f;
+  const float major = has_shape ? static_cast<float>(r.size_major_m) : 0.0f;
+  const float minor = has_shape ? static_cast<float>(r.size_minor_m) : 0.0f;
+  const float sigma = has_shape ? static_cast<float>(r.size_sigma_m) : 0.0f;
+  float nan_if_not_finite = (x - x) + (y - y) + (vx - vx) + (vy - vy) + (yaw - yaw) +
+                            (major - major) + (minor - minor) + (sigma - sigma);
+  for (const float v : cov) nan_if_not_finite += v - v;
+  *finite = nan_if_not_finite == nan_if_not_finite;
+
+  WireWriter w(out);
+  w.Varint(1, r.track_id);
+  w.Varint(2, static_cast<std::uint32_t>(ToProto(r.state)));
+  w.Varint(3, static_cast<std::uint32_t>(ToProto(r.kind)));
+  w.Fixed32(4, x);
+  w.Fixed32(5, y);
+  w.Fixed32(6, vx);
+  w.Fixed32(7, vy);
+  // Packed: tag, byte length, the values.
+  w.Tag(8, PB_WT_STRING);
+  w.Raw(4u * cov.size());
+  if constexpr (std::endian::native == std::endian::little) {
+    w.Bytes(reinterpret_cast<const std::uint8_t*>(cov.data()), sizeof cov);  // the same bytes
+  } else {
+    for (const float v : cov) w.Le32(WireWriter::FloatBits(v));
+  }
+  w.Varint(9, r.age_scans);
+  w.Varint(10, r.points);
+  w.Fixed32(11, yaw);
+  w.Varint(12, static_cast<std::uint32_t>(ToProto(r.shape)));  // 0 where unspecified
+  w.Fixed32(13, major);
+  w.Fixed32(14, minor);
+  w.Fixed32(15, sigma);
   return w.size();
 }
 
@@ -308,11 +298,11 @@ std::size_t DatagramEncoder::EncodeTracks(const tracking::ScanTracks& scan, comm
   // encoded four times; the frame is assembled here from the encoded tracks instead, in field
   // order (the same bytes).
   std::size_t valid = 0;
-  lrfnet_proto_Track track;
   for (std::size_t i = 0; i < scan.tracks.size(); ++i) {
-    if (!ToProto(scan.tracks[i], &track)) continue;
-    track_sizes_[valid] = WriteTrack(track, track_bytes_[valid].data());
-    ++valid;
+    // A track not finite is written into the next slot too, and that slot taken by the next one.
+    bool finite = true;
+    track_sizes_[valid] = WriteTrack(scan.tracks[i], track_bytes_[valid].data(), &finite);
+    valid += finite ? 1 : 0;
   }
   counters_.dropped_tracks += scan.tracks.size() - valid;
   const std::size_t parts = std::max<std::size_t>(1, (valid + kTracksPerPart - 1) / kTracksPerPart);

@@ -410,6 +410,51 @@ TEST(DatagramEncoderTest, TracksWithNonFiniteValuesAreDroppedAndCounted) {
   EXPECT_EQ(encoder.counters().tracks, 10u);
 }
 
+// Only the values a track sends decide whether it is dropped: a centre-of-mass track sends no
+// orientation and a track of unspecified shape no size, whatever those hold. A dropped track's
+// bytes leave no trace in the next one's.
+TEST(DatagramEncoderTest, ValuesNotSentDoNotDropATrack) {
+  DatagramEncoder encoder(Options());
+  CollectSink sink;
+  tracking::ScanTracks scan;
+  for (std::uint32_t i = 0; i < 4; ++i) ASSERT_TRUE(scan.tracks.push_back(MakeTrack(i)));
+  const double nan = std::numeric_limits<double>::quiet_NaN();
+  scan.tracks[0].kind = tracking::MeasurementKind::kCenterOfMass;
+  scan.tracks[0].ellipse_yaw_rad = nan;
+  scan.tracks[1].size_major_m = nan;  // shape unspecified
+  scan.tracks[1].size_sigma_m = std::numeric_limits<double>::infinity();
+  scan.tracks[2].ellipse_yaw_rad = nan;  // sent (an ellipse): dropped
+  scan.tracks[3].shape = tracking::ObjectShape::kCylinder;
+  scan.tracks[3].size_major_m = scan.tracks[3].size_minor_m = 0.25;
+  scan.tracks[3].size_sigma_m = 0.02;
+  ASSERT_EQ(encoder.EncodeTracks(scan, kSentNs, sink), 1u);
+  const lrfnet_proto_Datagram d = Decode(sink.datagrams[0]);
+  const lrfnet_proto_TrackFrame& f = d.payload.track_frame;
+  ASSERT_EQ(f.tracks_count, 3);
+  EXPECT_EQ(f.tracks[0].track_id, 0u);
+  EXPECT_EQ(f.tracks[0].ellipse_yaw_rad, 0.0f);
+  EXPECT_EQ(f.tracks[1].track_id, 1u);
+  EXPECT_EQ(f.tracks[1].shape, lrfnet_proto_ObjectShape_OBJECT_SHAPE_UNSPECIFIED);
+  EXPECT_EQ(f.tracks[1].size_major_m, 0.0f);
+  EXPECT_EQ(f.tracks[1].size_sigma_m, 0.0f);
+  EXPECT_EQ(f.tracks[1].ellipse_yaw_rad, 0.75f);
+  EXPECT_EQ(f.tracks[2].track_id, 3u);
+  EXPECT_EQ(f.tracks[2].shape, lrfnet_proto_ObjectShape_OBJECT_SHAPE_CYLINDER);
+  EXPECT_EQ(f.tracks[2].size_minor_m, 0.25f);
+  EXPECT_EQ(f.tracks[2].size_sigma_m, 0.02f);
+  EXPECT_EQ(f.tracks[2].x_m, 4.5f);
+  EXPECT_EQ(f.tracks[2].covariance_count, 10);
+  EXPECT_EQ(f.tracks[2].covariance[1], 0.002f);
+  EXPECT_EQ(f.tracks[2].covariance[9], static_cast<float>(0.14));
+  EXPECT_EQ(encoder.counters().dropped_tracks, 1u);
+  // The frame is nanopb's own encoding of what it decodes to.
+  std::array<std::uint8_t, kMaxDatagramBytes> again{};
+  pb_ostream_t stream = pb_ostream_from_buffer(again.data(), again.size());
+  ASSERT_TRUE(pb_encode(&stream, lrfnet_proto_Datagram_fields, &d));
+  EXPECT_EQ(std::vector<std::uint8_t>(again.begin(), again.begin() + stream.bytes_written),
+            sink.datagrams[0]);
+}
+
 TEST(DatagramEncoderTest, BackgroundSnapshotOf4561BeamsReassembles) {
   DatagramEncoder encoder(Options(std::string(32, 'x')));
   CollectSink sink;
