@@ -577,6 +577,9 @@ class TrackingPipeline {
   std::size_t LegSplit(const Segment& segment, std::span<const Eigen::Vector2d> pts);
   void AddSingleBeamLegs(const ScanView& scan, std::size_t tracks);
   void AddObservation(const ScanView& scan, const Observation& observation);
+  // AddObservation's measurement and beam time for an observation already stored as the last of
+  // observations_ (built in place: not copied in).
+  void MeasureObservation(const ScanView& scan, const Observation& observation);
   ObservationPart MakePart(const ScanView& scan, const Segment& segment, std::size_t first,
                            std::size_t count) const;
   void MarkMixedPixels(const ScanView& scan, std::span<const Eigen::Vector2d> points,
