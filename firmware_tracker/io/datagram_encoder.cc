@@ -162,10 +162,10 @@ class WireWriter {
 // One Track, written straight from the report (no lrfnet_proto_Track in between: that struct's
 // clearing and copying cost more than the writing); at most kMaxTrackBytes. The values are the
 // report's as floats, the fields and bytes those nanopb writes for the Track the report converts
-// to (the ellipse's yaw only where the kind is not the centre of mass, the shape's fields only where
-// it is specified). *finite: false when a value sent is not finite as a float (such a track would
-// poison the daemon's filters); decided by one sum of v - v over the values sent, NaN only if one is
-// not finite.
+// to (the ellipse's yaw only where the kind is not the centre of mass, the shape's fields only
+// where it is specified). *finite: false when a value sent is not finite as a float (such a track
+// would poison the daemon's filters); decided by one sum of v - v over the values sent, NaN only if
+// one is not finite.
 std::size_t WriteTrack(const tracking::TrackReport& r, std::uint8_t* out, bool* finite) {
   const auto x = static_cast<float>(r.x_m);
   const auto y = static_cast<float>(r.y_m);
