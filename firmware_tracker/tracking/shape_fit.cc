@@ -674,8 +674,8 @@ void SumPointsQuad(const Vec5& at, double c, double s, double inv_a, double inv_
   sums.sq = static_cast<double>(s5(1));
 }
 
-using SumQuadsFn = void (*)(const Vec5&, double, double, double, double, const QuadPoints&,
-                            double, double, PointSums&);
+using SumQuadsFn = void (*)(const Vec5&, double, double, double, double, const QuadPoints&, double,
+                            double, PointSums&);
 
 // SumPointsQuad where it serves (a superellipse with exponent 2 or 2.5), else nullptr.
 SumQuadsFn SumQuadsFor(ShapeModel model, double exponent) {
@@ -1134,9 +1134,8 @@ ShapeFitResult Fit(std::span<const Eigen::Vector2d> points, const Silhouette& si
   // the points.
   const double k2 = o.robust_k * o.robust_k;
   const SumPointsFn sum_points = SumPointsFor(model, exponent, kPaired);
-  const SumQuadsFn sum_quads = kPaired && !kReference && o.single_precision_points
-                                   ? SumQuadsFor(model, exponent)
-                                   : nullptr;
+  const SumQuadsFn sum_quads =
+      kPaired && !kReference && o.single_precision_points ? SumQuadsFor(model, exponent) : nullptr;
   QuadPoints quad_points;
   if (sum_quads != nullptr) {
     quad_points.origin = mean;

@@ -622,10 +622,11 @@ TEST(ShapeFitTest, SinglePrecisionPointsGiveTheDoubleFitWithinItsRounding) {
   ASSERT_GT(fits, 500);
   std::sort(centre_differences.begin(), centre_differences.end());
   const double p99 = centre_differences[centre_differences.size() * 99 / 100];
-  std::printf("%d fits, %d with other bits, %d with the same iterations; centre difference "
-              "median %.3g m, p99 %.3g m, largest %.3g m\n",
-              fits, differing, same_iterations, centre_differences[centre_differences.size() / 2],
-              p99, centre_differences.back());
+  std::printf(
+      "%d fits, %d with other bits, %d with the same iterations; centre difference "
+      "median %.3g m, p99 %.3g m, largest %.3g m\n",
+      fits, differing, same_iterations, centre_differences[centre_differences.size() / 2], p99,
+      centre_differences.back());
   // The other arithmetic is taken...
   EXPECT_GT(differing, fits / 2);
   // ... and nearly every answer is the double one to within a micrometre.
