@@ -1412,6 +1412,15 @@ void RunSensor(const sim::Simulator& simulator, std::size_t sensor,
       for (std::size_t a = 0; a < n_alive; ++a) alive.insert(predictions[a].id);
       sequences[v].Frame(period_s, truths, hyps, dont_care, &alive, &furniture);
       if (g_explain_coasting) {
+        const auto bin = [](double d, double a, double b) {
+          return d < a   ? "<" + std::to_string(static_cast<int>(a * 100)) + "cm"
+                 : d < b ? std::to_string(static_cast<int>(a * 100)) + "-" +
+                               std::to_string(static_cast<int>(b * 100)) + "cm"
+                         : ">=" + std::to_string(static_cast<int>(b * 100)) + "cm";
+        };
+        const auto part = [](std::size_t parts) {
+          return std::string(kPartsBins[parts]).substr(7);
+        };
         for (std::size_t hi = 0; hi < hyps.size(); ++hi) {
           const Hypothesis& h = hyps[hi];
           const tracking::TrackReport* rep = nullptr;
@@ -1420,16 +1429,14 @@ void RunSensor(const sim::Simulator& simulator, std::size_t sensor,
               rep != nullptr ? Vector2d(rep->vx_mps, rep->vy_mps) : Vector2d::Zero();
           CoastHist& ch = coast_hist[v][h.id];
           const bool consecutive = ch.frame == k && ch.measured && ch.run > 0;
-          auto bin = [](double d, double a, double b) {
-            return d < a   ? "<" + std::to_string(static_cast<int>(a * 100)) + "cm"
-                   : d < b ? std::to_string(static_cast<int>(a * 100)) + "-" +
-                                 std::to_string(static_cast<int>(b * 100)) + "cm"
-                           : ">=" + std::to_string(static_cast<int>(b * 100)) + "cm";
-          };
+          // The object this scan matched the track to.
+          const Truth* matched = nullptr;
+          for (const Truth& t : truths) {
+            if (static_cast<long>(t.id) == sequences[v].matched_truth()[hi]) matched = &t;
+          }
           if (!h.measured && consecutive && ch.e[0].has_truth) {
-            const Truth* own = nullptr;
-            for (const Truth& t : truths) own = t.id == ch.e[0].truth ? &t : own;
-            if (own != nullptr && sequences[v].matched_truth()[hi] == static_cast<long>(own->id)) {
+            const Truth* own = matched;  // still the object its last measurement matched
+            if (own != nullptr && own->id == ch.e[0].truth) {
               const double ec = (h.p - own->p).norm();
               double ea = 0, na = 0;
               if (ch.run >= 2) {
@@ -1438,27 +1445,27 @@ void RunSensor(const sim::Simulator& simulator, std::size_t sensor,
               }
               const CoastEntry& l = ch.e[0];
               const std::string pts = std::to_string(std::min<std::uint32_t>(l.points, 5));
-              const std::string prev =
-                  ch.run >= 2 ? std::string(kPartsBins[ch.e[1].parts]).substr(7) : "none";
+              const std::string prev = ch.run >= 2 ? part(ch.e[1].parts) : "none";
+              const std::string last = part(l.parts);
+              const std::string filt = bin(l.filt_err, 0.05, 0.1);
+              const std::string raw = bin(l.raw_err, 0.05, 0.1);
               const std::string keys[] = {
                   "all",
-                  "last " + std::string(kPartsBins[l.parts]).substr(7) + ", pts " + pts,
-                  "last raw err " + bin(l.raw_err, 0.05, 0.1),
-                  "last filt err " + bin(l.filt_err, 0.05, 0.1),
+                  "last " + last + ", pts " + pts,
+                  "last raw err " + raw,
+                  "last filt err " + filt,
                   "last move " + bin(l.move, 0.03, 0.08),
-                  "last two: " + std::string(kPartsBins[l.parts]).substr(7) + " <- " + prev,
+                  "last two: " + last + " <- " + prev,
                   "run " + std::to_string(std::min(ch.run, 5)),
                   "range " + std::string(own->p.norm() < 5    ? "<5"
                                          : own->p.norm() < 10 ? "5-10"
                                                               : ">=10"),
-                  "filt " + bin(l.filt_err, 0.05, 0.1) + ": last " +
-                      std::string(kPartsBins[l.parts]).substr(7) + ", raw " +
-                      bin(l.raw_err, 0.05, 0.1),
-                  "filt " + bin(l.filt_err, 0.05, 0.1) + ": filt before " +
+                  "filt " + filt + ": last " + last + ", raw " + raw,
+                  "filt " + filt + ": filt before " +
                       (ch.run >= 2 ? bin(ch.e[1].filt_err, 0.05, 0.1) : "none") + ", " +
                       (ch.run >= 3 ? bin(ch.e[2].filt_err, 0.05, 0.1) : "none"),
-                  "filt " + bin(l.filt_err, 0.05, 0.1) + ": speed " +
-                      (own->v.norm() < 0.3 ? "<0.3" : "walking") + ", radial " +
+                  "filt " + filt + ": speed " + (own->v.norm() < 0.3 ? "<0.3" : "walking") +
+                      ", radial " +
                       bin(std::abs((l.p - own->p).dot(own->p.normalized())), 0.05, 0.1),
               };
               for (const std::string& key : keys) {
@@ -1476,15 +1483,11 @@ void RunSensor(const sim::Simulator& simulator, std::size_t sensor,
           e.parts = h.parts;
           e.points = h.points;
           if (consecutive) e.move = (h.p - (ch.e[0].p + period_s * ch.e[0].v)).norm();
-          const Truth* nearest = nullptr;
-          for (const Truth& t : truths) {
-            if (static_cast<long>(t.id) == sequences[v].matched_truth()[hi]) nearest = &t;
-          }
-          if (nearest != nullptr) {
+          if (matched != nullptr) {
             e.has_truth = true;
-            e.truth = nearest->id;
-            e.filt_err = (h.p - nearest->p).norm();
-            e.raw_err = (h.z - (nearest->p + h.z_offset_s * nearest->v)).norm();
+            e.truth = matched->id;
+            e.filt_err = (h.p - matched->p).norm();
+            e.raw_err = (h.z - (matched->p + h.z_offset_s * matched->v)).norm();
           }
           if (h.measured) {
             ch.run = consecutive ? ch.run + 1 : 1;
