@@ -633,8 +633,8 @@ class TrackingPipeline::Refiner final : public MeasurementRefiner {
       internal::StanceCentre centre;
       centre.centre_m = 0.5 * (now[0] + now[1]);
       // ShapeOptions::stance_leg_weight: a walking track's standing leg weighs more.
-      if (shape.legs_ns != 0 && WalkingDirection(predicted, predicted_cov, &centre.centre_m)) {
-        const Eigen::Vector2d forward = centre.centre_m;
+      Eigen::Vector2d forward;
+      if (shape.legs_ns != 0 && WalkingDirection(predicted, predicted_cov, &forward)) {
         const double dt_s = common::NsToSeconds(at_ns - shape.legs_ns);
         centre = internal::StanceWeightedCentre(o, forward, now, now_var, shape.legs_m,
                                                 shape.legs_var_m2, dt_s,
@@ -755,12 +755,11 @@ class TrackingPipeline::Refiner final : public MeasurementRefiner {
   bool WalkingSide(const Eigen::Vector4d* predicted, const Eigen::Matrix4d* predicted_cov,
                    const Eigen::Vector2d& leg_m, const Eigen::Matrix2d& leg_cov, WalkSide& out) {
     const ShapeOptions& o = p_.options_.shape;
-    if (!o.single_leg_across_walk || predicted == nullptr || predicted_cov == nullptr) return false;
-    const Eigen::Vector2d v = predicted->tail<2>();
-    const double speed = v.norm();
-    const double speed_sigma = std::sqrt(0.5 * predicted_cov->bottomRightCorner<2, 2>().trace());
-    if (!(speed >= o.walking_speed_mps && speed >= 2.0 * speed_sigma)) return false;
-    const Eigen::Vector2d left(-v.y() / speed, v.x() / speed);
+    Eigen::Vector2d forward;
+    if (!o.single_leg_across_walk || !WalkingDirection(predicted, predicted_cov, &forward)) {
+      return false;
+    }
+    const Eigen::Vector2d left(-forward.y(), forward.x());
     const double hip = o.hip_half_width_m;
     const double offset = (predicted->head<2>() - leg_m).dot(left);
     const bool predicted_side = std::abs(offset) > 0.5 * hip;
