@@ -443,6 +443,14 @@ void VisitTracking(tracking::TrackerOptions& p, ConfigVisitor& v) {
           "resumed with its id by a measurement within its gate: someone hidden for a moment "
           "comes back as themselves (confirmed again as a new track is). 0: off. Not at knee "
           "height (shape.mount: legs).");
+  v.Field("adopt_successor_m", o.adopt_successor_m,
+          "A confirmed track coasting since its last measurement takes over a track born after "
+          "it within this distance of its prediction (once that one was measured in "
+          "adopt_after_hits scans): someone the prediction lost and a new track found again keeps "
+          "one track and their id instead of a new one beside a coasting one. 0: off. Knee "
+          "height only (shape.mount: legs).");
+  VisitInteger(v, "adopt_after_hits", o.adopt_after_hits,
+               "Measured scans of the younger track before adopt_successor_m takes it over.");
   v.Field("max_time_gap_s", o.max_time_gap_s,
           "A jump between consecutive scans beyond this (either way) deletes all tracks.");
   v.Field("report_tentative", o.report_tentative, "Also send tentative (unconfirmed) tracks.");

@@ -52,12 +52,12 @@ std::string MultiTrackerSummary(const tracking::MultiTrackerCounters& c) {
       "deleted_covariance={} deleted_time_reset={} deleted_static={} dropped_capacity={} "
       "births_suppressed={} rejected_measurements={} measurements_over_capacity={} "
       "failed_updates={} time_steps_backwards={} time_resets={} refine_failures={} "
-      "speed_clamps={} recovered={} resumed={} coasting_unreported={}",
+      "speed_clamps={} recovered={} resumed={} coasting_unreported={} adopted={}",
       c.measurements, c.associations, c.deleted_tentative, c.deleted_coast_timeout,
       c.deleted_covariance, c.deleted_time_reset, c.deleted_static, c.dropped_capacity,
       c.births_suppressed, c.rejected_measurements, c.measurements_over_capacity, c.failed_updates,
       c.time_steps_backwards, c.time_resets, c.refine_failures, c.speed_clamps, c.recovered,
-      c.resumed, c.coasting_unreported);
+      c.resumed, c.coasting_unreported, c.adopted);
 }
 
 std::string NodeSummary(const TrackerNode& node) {

@@ -125,12 +125,13 @@ TEST(TrackerRun, MultiTrackerSummaryNamesEveryCounterButTheTwoBeforeIt) {
   c.recovered = 17;
   c.resumed = 18;
   c.coasting_unreported = 19;
+  c.adopted = 20;
   EXPECT_EQ(MultiTrackerSummary(c),
             "measurements=1 associations=2 deleted_tentative=3 deleted_coast_timeout=4 "
             "deleted_covariance=5 deleted_time_reset=6 deleted_static=7 dropped_capacity=8 "
             "births_suppressed=9 rejected_measurements=10 measurements_over_capacity=11 "
             "failed_updates=12 time_steps_backwards=13 time_resets=14 refine_failures=15 "
-            "speed_clamps=16 recovered=17 resumed=18 coasting_unreported=19");
+            "speed_clamps=16 recovered=17 resumed=18 coasting_unreported=19 adopted=20");
 }
 
 TEST(TrackerRun, NodeSummaryEndsWithThePipelinesCounters) {

@@ -74,6 +74,12 @@ std::optional<std::string> Validate(const MultiTrackerOptions& o) {
   if (!(std::isfinite(o.resume_window_s) && o.resume_window_s >= 0.0)) {
     return "resume_window_s must be >= 0";
   }
+  if (!(std::isfinite(o.adopt_successor_m) && o.adopt_successor_m >= 0.0)) {
+    return "adopt_successor_m must be >= 0";
+  }
+  if (o.adopt_after_hits < 1 || o.adopt_after_hits > 32) {
+    return "adopt_after_hits must be in [1, 32]";
+  }
   if (!Positive(o.max_position_sigma_m)) return "max_position_sigma_m must be > 0";
   if (o.max_tracks < 1 || o.max_tracks > kMaxTracks) {
     return "max_tracks must be in [1, " + std::to_string(kMaxTracks) + "]";
@@ -167,6 +173,7 @@ void MultiTracker::Step(common::UtcNs scan_start_ns, std::span<const Measurement
   Recover();
   UpdateAssigned(scan_start_ns, measurements, refiner);
   ManageLifecycle(scan_start_ns);
+  AdoptSuccessors(scan_start_ns);
   StartTracks(scan_start_ns, measurements, refiner);
   Report(scan_start_ns, out);
 }
@@ -578,6 +585,66 @@ void MultiTracker::ManageLifecycle(common::UtcNs scan_start_ns) {
     ++kept;
   }
   while (tracks_.size() > kept) tracks_.pop_back();
+}
+
+void MultiTracker::AdoptSuccessors(common::UtcNs scan_start_ns) {
+  if (!(options_.adopt_successor_m > 0.0)) return;
+  const double reach_sq = options_.adopt_successor_m * options_.adopt_successor_m;
+  for (;;) {
+    // The nearest pair of a coasting confirmed track (its filter at the scan start) and a younger
+    // track measured in this scan.
+    double best = reach_sq;
+    std::size_t best_old = tracks_.size(), best_young = tracks_.size();
+    for (std::size_t i = 0; i < tracks_.size(); ++i) {
+      const Track& old = tracks_[i];
+      if (!old.confirmed || old.updated) continue;
+      for (std::size_t k = 0; k < tracks_.size(); ++k) {
+        const Track& young = tracks_[k];
+        if (k == i || !young.updated || young.first_update_ns <= old.last_update_ns ||
+            static_cast<std::uint32_t>(std::popcount(young.hits)) < options_.adopt_after_hits) {
+          continue;
+        }
+        // Of the same kind (a trolley's track does not take over its pusher's).
+        if (old.shape.shape != ObjectShape::kUnspecified &&
+            young.shape.shape != ObjectShape::kUnspecified && old.shape.shape != young.shape.shape) {
+          continue;
+        }
+        // The coasting filter lives at the scan start (UpdateAssigned); the younger one's at its
+        // measurement's beam time: moved on by that offset.
+        const Eigen::Vector2d predicted =
+            old.filter.position_m() + young.z_offset_s * old.filter.velocity_mps();
+        const double d_sq = (young.filter.position_m() - predicted).squaredNorm();
+        if (d_sq < best) {
+          best = d_sq;
+          best_old = i;
+          best_young = k;
+        }
+      }
+    }
+    if (best_old == tracks_.size()) return;
+    Track& old = tracks_[best_old];
+    const Track& young = tracks_[best_young];
+    old.filter = young.filter;
+    old.filter_ns = young.filter_ns;
+    old.last_update_ns = young.last_update_ns;
+    old.measured_s += young.measured_s;
+    old.updated = true;
+    old.hits |= 1u;
+    old.kind = young.kind;
+    old.ellipse_yaw_rad = young.ellipse_yaw_rad;
+    old.points = young.points;
+    old.shape = young.shape;
+    old.source = young.source;
+    old.z_m = young.z_m;
+    old.z_offset_s = young.z_offset_s;
+    // Where it stands now is where the static-object clocks start again.
+    old.anchor_m = young.filter.position_m();
+    old.anchor_ns = scan_start_ns;
+    ++counters_.adopted;
+    // Removed in place: the others keep their order (reports by id).
+    for (std::size_t k = best_young; k + 1 < tracks_.size(); ++k) tracks_[k] = tracks_[k + 1];
+    tracks_.pop_back();
+  }
 }
 
 void MultiTracker::Lose(const Track& t, common::UtcNs scan_start_ns) {

@@ -58,6 +58,13 @@
 //  3c. A measurement marked evidence_only (Measurement::evidence_only, e.g. a knee-height leg
 //     returned by a single beam) is a candidate for confirmed tracks only (steps 3 and 3b) and
 //     starts or resumes no track (step 6).
+//  5b. Successors: a confirmed track that coasts in this scan takes over a track measured in this
+//     scan, in adopt_after_hits scans in all, whose first measurement came after the coasting
+//     track's last one, that the refiner did not take for another kind of object (TrackShape's
+//     shape: a trolley's track does not take over its pusher's) and that lies within
+//     adopt_successor_m of the coasting track's prediction (nearest pairs first): the coasting track takes the younger one's filter, shape and
+//     measurement, keeps its id and its confirmed and moved state, and the younger one is
+//     deleted (counted as adopted, not as a deletion).
 //  6. Births. A measurement that was not assigned starts a tentative track unless it lies within
 //     the gate of an existing track or of a track born earlier in the same scan (a person split
 //     into two segments must not become two tracks). Births beyond max_tracks are dropped and
@@ -164,6 +171,18 @@ struct MultiTrackerOptions {
   // for the evaluation, a fragment and an id switch). 0: off. The pipeline turns it off at knee
   // height (ShapeOptions::mount kLegs).
   double resume_window_s = 1.0;
+  // Successors (step 5b): a confirmed track coasting since its last measurement takes over a track
+  // born after that measurement (never measured beside it) within this distance of its prediction
+  // once the younger one was measured in adopt_after_hits scans and is measured in this one: the
+  // same id on the same person, reported at once. A person whose walk the constant-velocity
+  // prediction lost (a turn, a stop, a step hidden by the other leg at knee height) is found
+  // again by a new track beside the old one while the old one coasts on where nobody is: two
+  // tracks of one person, one of them false, until the new one is confirmed and the old one times
+  // out (an id switch and a fragment). 1 m: a walking person's reach within the report time of a
+  // coasting track, the gate's Euclidean bound. 0: off. The pipeline applies it at knee height
+  // only (ShapeOptions::mount kLegs).
+  double adopt_successor_m = 1.0;
+  std::uint32_t adopt_after_hits = 2;  // >= 1
   // Safety net for covariance growth (large coast_timeout_s, fresh tracks with the 1.5 m/s velocity
   // prior): a track whose position sigma exceeds this can no longer be associated sensibly.
   double max_position_sigma_m = 1.0;
@@ -228,6 +247,7 @@ struct MultiTrackerCounters {
   std::uint64_t deleted_static = 0;   // handed to the background (step 5)
   std::uint64_t recovered = 0;        // associations made in the wider gate (step 3b)
   std::uint64_t resumed = 0;          // deleted tracks found again (resume_window_s)
+  std::uint64_t adopted = 0;          // younger tracks taken over by a coasting one (step 5b)
   // Confirmed coasting tracks' reports withheld: coasting for longer than report_coasting_s (or
   // report_coasting_per_measured_s times how long they were seen), per scan.
   std::uint64_t coasting_unreported = 0;
@@ -384,6 +404,7 @@ class MultiTracker {
   void UpdateAssigned(common::UtcNs scan_start_ns, std::span<const Measurement> measurements,
                       MeasurementRefiner* refiner);
   void ManageLifecycle(common::UtcNs scan_start_ns);
+  void AdoptSuccessors(common::UtcNs scan_start_ns);
   void StartTracks(common::UtcNs scan_start_ns, std::span<const Measurement> measurements,
                    MeasurementRefiner* refiner);
   // Step 6's resumption: true when candidate c resumed a lost track (moved back into tracks_).

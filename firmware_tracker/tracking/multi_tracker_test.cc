@@ -125,6 +125,9 @@ TEST(MultiTrackerOptionsTest, DefaultsValidAndEachBadValueNamesItsField) {
       {with([](auto& o) { o.inflate_nis_above = -1.0; }), "inflate_nis_above"},
       {with([](auto& o) { o.coast_timeout_s = 0.0; }), "coast_timeout_s"},
       {with([](auto& o) { o.resume_window_s = -1.0; }), "resume_window_s"},
+      {with([](auto& o) { o.adopt_successor_m = -1.0; }), "adopt_successor_m"},
+      {with([nan](auto& o) { o.adopt_successor_m = nan; }), "adopt_successor_m"},
+      {with([](auto& o) { o.adopt_after_hits = 0; }), "adopt_after_hits"},
       {with([nan](auto& o) { o.resume_window_s = nan; }), "resume_window_s"},
       {with([](auto& o) { o.max_position_sigma_m = 0.0; }), "max_position_sigma_m"},
       {with([](auto& o) { o.max_tracks = 0; }), "max_tracks"},
@@ -667,6 +670,7 @@ TEST(MultiTrackerTest, PersonWhoStartsWalkingOrTurnsKeepsOneTrack) {
   MultiTrackerOptions off = o;
   off.recover_gate_mahalanobis_sq = 0.0;
   off.inflate_nis_above = 0.0;
+  off.adopt_successor_m = 0.0;  // which would also keep one id (the new track taken over)
   const StartResult lost = StandThenWalk(off);
   EXPECT_GT(lost.ids.size(), 1u) << "the scene no longer tests the start";
   EXPECT_EQ(lost.recovered, 0u);
@@ -878,6 +882,76 @@ TEST(MultiTrackerTest, ConfirmationTakesAMinimumTimeAtEveryScanRateSoClutterBurs
       FirstReportedS(options, k50Hz, 100, [](std::int64_t k) { return k % 4 != 3; });
   EXPECT_GE(latency_gaps_s, 0.2 - 1e-9);
   EXPECT_LE(latency_gaps_s, 0.24 + 1e-9);
+}
+
+// Successors (adopt_successor_m): someone walking along +y at 1.2 m/s steps 0.6 m aside at scan 50
+// (beyond every gate of a track that knows them to a few cm). A new track starts on them; with the
+// rule the coasting track takes it over at its second measurement: one id, one report per scan,
+// on the person from then on. Without it, the old track is reported coasting beside the person
+// while the new one is confirmed: two ids, two reports in some scans.
+struct SidestepResult {
+  std::set<std::uint32_t> ids;
+  std::size_t max_reports = 0;
+  double max_error_after_m = 0.0;  // from scan 52 on, the reported track nearest the person
+  std::uint64_t adopted = 0;
+};
+SidestepResult Sidestep(const MultiTrackerOptions& o) {
+  MultiTracker tracker(o);
+  ScanTracks out;
+  SidestepResult r;
+  for (std::int64_t k = 0; k < 100; ++k) {
+    const Eigen::Vector2d p(4.0 + (k >= 50 ? 0.6 : 0.0), 1.2 * 0.04 * static_cast<double>(k));
+    tracker.Step(ScanNs(k), std::vector<Measurement>{Meas(p.x(), p.y(), 0.02)}, out);
+    r.max_reports = std::max(r.max_reports, out.tracks.size());
+    double nearest = std::numeric_limits<double>::infinity();
+    for (const TrackReport& t : out.tracks) {
+      r.ids.insert(t.track_id);
+      nearest = std::min(nearest, (Eigen::Vector2d(t.x_m, t.y_m) - p).norm());
+    }
+    if (k >= 52) r.max_error_after_m = std::max(r.max_error_after_m, nearest);
+  }
+  r.adopted = tracker.counters().adopted;
+  return r;
+}
+
+TEST(MultiTrackerTest, CoastingTrackAdoptsTheTrackThatFoundItsPersonAgain) {
+  MultiTrackerOptions o = Opts();
+  o.adopt_successor_m = 1.0;
+  o.adopt_after_hits = 2;
+  const SidestepResult one = Sidestep(o);
+  EXPECT_EQ(one.ids, std::set<std::uint32_t>{1u});
+  EXPECT_EQ(one.max_reports, 1u);
+  EXPECT_EQ(one.adopted, 1u);
+  EXPECT_LT(one.max_error_after_m, 0.1);
+
+  MultiTrackerOptions off = o;
+  off.adopt_successor_m = 0.0;
+  const SidestepResult two = Sidestep(off);
+  EXPECT_EQ(two.ids.size(), 2u) << "the scene no longer loses the person";
+  EXPECT_EQ(two.max_reports, 2u);
+  EXPECT_EQ(two.adopted, 0u);
+}
+
+// A track measured beside the coasting one (two people 0.6 m apart, one hidden from scan 30) is
+// someone else: not taken over, both keep their ids.
+TEST(MultiTrackerTest, CoastingTrackDoesNotAdoptATrackMeasuredBesideIt) {
+  MultiTrackerOptions o = Opts();
+  o.adopt_successor_m = 1.0;
+  MultiTracker tracker(o);
+  ScanTracks out;
+  bool both_reported_after = true;
+  for (std::int64_t k = 0; k < 45; ++k) {
+    const double y = 1.2 * 0.04 * static_cast<double>(k);
+    std::vector<Measurement> ms = {Meas(4.6, y, 0.02)};
+    if (k < 30) ms.push_back(Meas(4.0, y, 0.02));
+    tracker.Step(ScanNs(k), ms, out);
+    if (k >= 31) both_reported_after = both_reported_after && out.tracks.size() == 2;
+  }
+  EXPECT_EQ(tracker.counters().adopted, 0u);
+  EXPECT_TRUE(both_reported_after);
+  ASSERT_EQ(out.tracks.size(), 2u);
+  EXPECT_EQ(out.tracks[1].track_id, 2u);
+  EXPECT_EQ(out.tracks[1].state, TrackState::kCoasting);
 }
 
 }  // namespace

@@ -43,7 +43,7 @@
 //                       [--before-legs-report-coasting] [--before-leg-edges]
 //                       [--before-outline-departure] [--before-recent-veil]
 //                       [--before-single-precision-fit]
-//                       [--before-stance-weight]
+//                       [--before-stance-weight] [--before-adopt]
 //                       [--before-fusion-merge] [--before-report-sourceless]]
 //   (--extra: more scenario folders, e.g. held-out scenes, reported in their own section;
 //   --explain: per run on stderr, what became of an object's previous track at every id switch
@@ -104,6 +104,8 @@
 //   ShapeOptions::leg_edge_in_mixed_beam = false;
 //   --before-stance-weight: "before" measures a walking knee-height track's two legs by their
 //   midpoint also where one stands and the other swings, ShapeOptions::stance_leg_weight = 0.5;
+//   --before-adopt: "before" leaves a track born beside a coasting one to itself, the coasting one
+//   reported until its time is up, MultiTrackerOptions::adopt_successor_m = 0;
 //   --before-outline-departure: "before" reports an upper-body centre with the fixed allowances
 //   for the outline alone, not the departure its fit's residuals measure,
 //   ShapeOptions::outline_departure_gain = 0;
@@ -459,6 +461,11 @@ struct Causes {
   // became of the object's returns, CoastingCause); measured on something else (how far its
   // measurement lay from its object and what it was made of).
   std::map<std::string, double> partings;
+  // Per sensor: a false scan beside an untracked object (left behind by it while it is visible, or
+  // never matched and 0.5-1.5 m off it): what the tracker holds at that object (a tentative track,
+  // a confirmed one not reported, none), what became of its returns (CoastingCause), and for the
+  // never matched, where the false track was first reported (beside a person or not).
+  std::map<std::string, double> untracked;
   // Per sensor: a track's first coasting scan on the object it was measured on in the scan
   // before, by what its last measurements were (CoastStart): count, summed error, summed error of
   // the state before its last update predicted on (where the scan before that was measured too),
@@ -469,6 +476,7 @@ struct Causes {
       for (std::size_t i = 0; i < v.size(); ++i) coast_start[k][i] += v[i];
     }
     for (const auto& [k, v] : o.partings) partings[k] += v;
+    for (const auto& [k, v] : o.untracked) untracked[k] += v;
     for (const auto& [k, v] : o.left_measured) left_measured[k] += v;
     for (const auto& [k, v] : o.coasting) coasting[k] += v;
     for (const auto& [k, v] : o.resumes) resumes[k] += v;
@@ -493,6 +501,8 @@ class MotSequence {
              const std::vector<Vector2d>* furniture = nullptr) {
     partings_.clear();
     matched_truth_.assign(hyps.size(), -1);
+    false_class_.assign(hyps.size(), std::string());
+    false_object_.assign(hyps.size(), -1);
     std::set<std::size_t> present;
     for (const Truth& t : truths) present.insert(t.id);
     for (auto& [id, st] : state_) {
@@ -682,6 +692,18 @@ class MotSequence {
       const std::string cls =
           FalseClass(hyps[h], hs.ever_matched, hs.last_truth, truths, truth_to_hyp, furniture);
       causes_.false_scan_classes[cls] += 1;
+      false_class_[h] = cls;
+      if (hs.ever_matched) {
+        false_object_[h] = static_cast<long>(hs.last_truth);
+      } else {
+        double nearest_d = std::numeric_limits<double>::infinity();
+        for (const Truth& t : truths) {
+          if ((hyps[h].p - t.p).norm() < nearest_d) {
+            nearest_d = (hyps[h].p - t.p).norm();
+            false_object_[h] = static_cast<long>(t.id);
+          }
+        }
+      }
       hs.classes[cls] += 1;
       std::string timed = cls;
       if (!hyps[h].measured) {
@@ -899,8 +921,14 @@ class MotSequence {
   const std::vector<Parting>& partings() const { return partings_; }
   // The last Frame's match of each hyp: the object's id, -1 unmatched.
   const std::vector<long>& matched_truth() const { return matched_truth_; }
+  // The last Frame's false class of each hyp (FalseClass, empty when matched) and the object it
+  // refers to (its last object when it held one, else the nearest; -1 none).
+  const std::vector<std::string>& false_class() const { return false_class_; }
+  const std::vector<long>& false_object() const { return false_object_; }
 
  private:
+  std::vector<std::string> false_class_;
+  std::vector<long> false_object_;
   std::vector<Parting> partings_;
   std::vector<long> matched_truth_;
   std::map<std::size_t, TruthState> state_;
@@ -1001,6 +1029,9 @@ bool g_before_outline_departure = false;
 // --before-stance-weight: "before" measures two legs by their midpoint also where one stands and
 // the other swings (ShapeOptions::stance_leg_weight = 0.5).
 bool g_before_stance_weight = false;
+// --before-adopt: "before" leaves a track born beside a coasting one to itself, the coasting one
+// reported until its time is up (MultiTrackerOptions::adopt_successor_m = 0).
+bool g_before_adopt = false;
 // --before-fusion-merge: "before"'s fusion without merging fused tracks left without sources and
 // reporting fused tracks no tracker holds any more (FusionOptions::merge_sourceless = false,
 // report_sourceless = true).
@@ -1052,7 +1083,7 @@ std::vector<Variant> Variants(sim::Mount mount, double range_m) {
              g_before_deep_legs || g_before_legs_seen_through || g_before_legs_report_coasting ||
              g_before_leg_edges || g_before_outline_departure || g_before_fusion_merge ||
              g_before_report_sourceless || g_before_recent_veil || g_before_single_precision_fit ||
-             g_before_stance_weight) {
+             g_before_stance_weight || g_before_adopt) {
     tracking::TrackerOptions before = fresh;
     if (g_before_one_leg) before.shape.hidden_leg_behind = false;
     if (g_before_mixed_pixels) before.shape.drop_mixed_pixel_legs = false;
@@ -1077,6 +1108,7 @@ std::vector<Variant> Variants(sim::Mount mount, double range_m) {
     if (g_before_recent_veil) before.shape.recent_veil_s = 0.0;
     if (g_before_single_precision_fit) before.shape.fit.single_precision_points = false;
     if (g_before_stance_weight) before.shape.stance_leg_weight = 0.5;
+    if (g_before_adopt) before.tracking.adopt_successor_m = 0.0;
     variants.push_back({"before", before});
   }
   return variants;
@@ -1325,6 +1357,9 @@ void RunSensor(const sim::Simulator& simulator, std::size_t sensor,
     std::array<CoastEntry, 3> e;
   };
   std::vector<std::map<std::uint64_t, CoastHist>> coast_hist(variants.size());
+  // --explain: where each track was first reported: how far from the nearest object and whether
+  // another track held that object then.
+  std::vector<std::map<std::uint64_t, std::string>> birth(variants.size());
   for (std::uint64_t k = 0; k < setup.scan_count; ++k) {
     const sim::ScanTiming timing = simulator.Timing(sensor, k);
     simulator.SimulateScan(sensor, k, telegram.get(), &hits);
@@ -1411,6 +1446,26 @@ void RunSensor(const sim::Simulator& simulator, std::size_t sensor,
       std::set<std::uint64_t> alive;
       for (std::size_t a = 0; a < n_alive; ++a) alive.insert(predictions[a].id);
       sequences[v].Frame(period_s, truths, hyps, dont_care, &alive, &furniture);
+      if (g_explain_coasting) {
+        for (std::size_t hi = 0; hi < hyps.size(); ++hi) {
+          if (birth[v].count(hyps[hi].id)) continue;
+          double nd = std::numeric_limits<double>::infinity();
+          long nid = -1;
+          for (const Truth& t : truths) {
+            if ((hyps[hi].p - t.p).norm() < nd) {
+              nd = (hyps[hi].p - t.p).norm();
+              nid = static_cast<long>(t.id);
+            }
+          }
+          bool held = false;
+          for (std::size_t o = 0; o < hyps.size(); ++o) {
+            held = held || (o != hi && sequences[v].matched_truth()[o] == nid);
+          }
+          birth[v][hyps[hi].id] =
+              std::string(nd < 0.5 ? "on an object" : nd < 1.0 ? "0.5-1 m off" : nd < 1.5 ? "1-1.5 m off" : "far") +
+              (nd < 1.5 ? (held ? ", held by another" : ", untracked") : "");
+        }
+      }
       if (g_explain_coasting) {
         const auto bin = [](double d, double a, double b) {
           return d < a   ? "<" + std::to_string(static_cast<int>(a * 100)) + "cm"
@@ -1531,6 +1586,50 @@ void RunSensor(const sim::Simulator& simulator, std::size_t sensor,
                          : parting.frames_since <= 5 ? " (all): held it 2-5 scans before"
                                                      : " (all): held it > 5 scans before")] += 1.0;
         }
+        for (std::size_t hi = 0; hi < hyps.size(); ++hi) {
+          const std::string& cls = sequences[v].false_class()[hi];
+          const bool left = cls.rfind("left behind: its object visible, untracked", 0) == 0;
+          const bool off = cls.rfind("never matched: 0.5-1.5 m off", 0) == 0;
+          if (!left && !off) continue;
+          const Truth* obj = nullptr;
+          for (const Truth& t : truths) {
+            if (static_cast<long>(t.id) == sequences[v].false_object()[hi]) obj = &t;
+          }
+          if (obj == nullptr) continue;
+          const Hypothesis& h = hyps[hi];
+          // The nearest other live track at the object.
+          double best = kMatchRadiusM;
+          const tracking::TrackPrediction* at = nullptr;
+          for (std::size_t a = 0; a < n_alive; ++a) {
+            if (predictions[a].id == h.id) continue;
+            const double d = (predictions[a].position_m - obj->p).norm();
+            if (d < best) {
+              best = d;
+              at = &predictions[a];
+            }
+          }
+          bool reported = false;
+          for (const Hypothesis& o : hyps) reported = reported || (at != nullptr && o.id == at->id);
+          const std::string holder = at == nullptr   ? "none at it"
+                                     : !at->confirmed ? "a tentative track at it"
+                                     : reported       ? "a reported track at it (unmatched?)"
+                                                      : "a confirmed unreported track at it";
+          const double dist = (h.p - obj->p).norm();
+          const std::string prefix = std::string(left ? "left" : "off") +
+                                     (h.measured ? " measured" : " coasting");
+          auto& u = (*causes)[v].untracked;
+          u[prefix + " | holder: " + holder] += 1;
+          u[prefix + " | returns: " + CoastingCause(*pipelines[v], view, obj->p, h.p)] += 1;
+          u[prefix + " | track-object " +
+            (dist < 0.7 ? "0.5-0.7 m" : dist < 1.0 ? "0.7-1 m" : dist < 1.5 ? "1-1.5 m" : ">= 1.5 m")] +=
+              1;
+          u[prefix + " | object speed " + (obj->v.norm() < 0.3 ? "< 0.3" : "walking") + ", range " +
+            (obj->p.norm() < 5 ? "< 5" : obj->p.norm() < 10 ? "5-10" : ">= 10")] += 1;
+          if (off) {
+            const auto b = birth[v].find(h.id);
+            if (b != birth[v].end()) u[prefix + " | first reported: " + b->second] += 1;
+          }
+        }
         for (const Truth& t : truths) {
           const Hypothesis* nearest = nullptr;
           double best = kMatchRadiusM;
@@ -1554,11 +1653,13 @@ void RunSensor(const sim::Simulator& simulator, std::size_t sensor,
     (*mots)[v].Add(sequences[v].Finish());
     const auto coasting = std::move((*causes)[v].coasting);
     const auto partings = std::move((*causes)[v].partings);
+    const auto untracked = std::move((*causes)[v].untracked);
     const auto coast_start = std::move((*causes)[v].coast_start);
     (*causes)[v] = sequences[v].causes();
     (*causes)[v].coast_start = coast_start;
     (*causes)[v].coasting = coasting;
     (*causes)[v].partings = partings;
+    (*causes)[v].untracked = untracked;
     (*counters)[v] = pipelines[v]->tracker().counters();
   }
 }
@@ -1648,6 +1749,7 @@ void AddCounters(const tracking::MultiTrackerCounters& c, tracking::MultiTracker
   sum->associations += c.associations;
   sum->recovered += c.recovered;
   sum->resumed += c.resumed;
+  sum->adopted += c.adopted;
 }
 
 // --explain: the causes and the tracker's counters of one run, per variant, on stderr.
@@ -1659,7 +1761,7 @@ void Explain(const std::string& scenario, const std::string& mount, const RunRes
         stderr,
         "%s %s %s: created %llu confirmed %llu deleted: tentative %llu coast %llu "
         "covariance %llu static %llu; births suppressed %llu refine failures %llu speed "
-        "clamps %llu recovered %llu resumed %llu\n",
+        "clamps %llu recovered %llu resumed %llu adopted %llu\n",
         scenario.c_str(), mount.c_str(), names[v], static_cast<unsigned long long>(c.created),
         static_cast<unsigned long long>(c.confirmed),
         static_cast<unsigned long long>(c.deleted_tentative),
@@ -1669,7 +1771,8 @@ void Explain(const std::string& scenario, const std::string& mount, const RunRes
         static_cast<unsigned long long>(c.births_suppressed),
         static_cast<unsigned long long>(c.refine_failures),
         static_cast<unsigned long long>(c.speed_clamps),
-        static_cast<unsigned long long>(c.recovered), static_cast<unsigned long long>(c.resumed));
+        static_cast<unsigned long long>(c.recovered), static_cast<unsigned long long>(c.resumed),
+        static_cast<unsigned long long>(c.adopted));
     for (const auto& [why, count] : r.causes[v].switches)
       std::fprintf(stderr, "  switch: %-60s %5.0f\n", why.c_str(), count);
     for (const auto& [why, count] : r.causes[v].false_positives)
@@ -1697,6 +1800,8 @@ void Explain(const std::string& scenario, const std::string& mount, const RunRes
       std::fprintf(stderr, "  coasting beside the person: %-80s %6.0f\n", why.c_str(), count);
     for (const auto& [why, count] : r.causes[v].left_measured)
       std::fprintf(stderr, "  left behind, measured on: %-90s %6.0f\n", why.c_str(), count);
+    for (const auto& [why, count] : r.causes[v].untracked)
+      std::fprintf(stderr, "  beside untracked: %-100s %6.0f\n", why.c_str(), count);
     for (const auto& [why, count] : r.causes[v].partings)
       std::fprintf(stderr, "  parted from its object: %-100s %6.0f\n", why.c_str(), count);
     for (const auto& [why, a] : r.causes[v].coast_start)
@@ -2135,7 +2240,8 @@ std::string KneeHeightBefore() {
         g_before_side_from_view || g_before_few_point_legs || g_before_deep_legs ||
         g_before_legs_seen_through || g_before_legs_report_coasting || g_before_leg_edges ||
         g_before_outline_departure || g_before_fusion_merge || g_before_report_sourceless ||
-        g_before_recent_veil || g_before_single_precision_fit || g_before_stance_weight) ||
+        g_before_recent_veil || g_before_single_precision_fit || g_before_stance_weight ||
+        g_before_adopt) ||
       g_before_mixed_pixels || g_before_far || g_before_evidence_coasting ||
       g_before_report_rules) {
     return "";
@@ -2243,6 +2349,11 @@ std::string KneeHeightBefore() {
         "measuring a walking knee-height track's two legs by their midpoint also where one "
         "stands and the other swings (`shape.stance_leg_weight` 0.5)");
   }
+  if (g_before_adopt) {
+    without.push_back(
+        "leaving a track born beside a coasting one to itself while the coasting one is reported "
+        "until its time is up (`tracking.adopt_successor_m` 0)");
+  }
   std::string text = "\"before\": the new tracker" + std::string(without.empty() ? "" : " ");
   for (std::size_t i = 0; i < without.size(); ++i) {
     text += (i == 0 ? "" : i + 1 == without.size() ? " and " : ", ") + without[i];
@@ -2349,6 +2460,8 @@ int main(int argc, char** argv) {
       g_before_single_precision_fit = true;
     } else if (a == "--before-stance-weight") {
       g_before_stance_weight = true;
+    } else if (a == "--before-adopt") {
+      g_before_adopt = true;
     } else if (a == "--before-fusion-merge") {
       g_before_fusion_merge = true;
     } else if (a == "--before-report-sourceless") {
@@ -2368,7 +2481,7 @@ int main(int argc, char** argv) {
                    "[--before-legs-seen-through] [--before-legs-report-coasting] "
                    "[--before-leg-edges] [--before-outline-departure] [--before-recent-veil] "
                    "[--before-single-precision-fit] "
-                   "[--before-stance-weight] [--before-fusion-merge] "
+                   "[--before-stance-weight] [--before-adopt] [--before-fusion-merge] "
                    "[--before-report-sourceless]]\n");
       return 2;
     }
