@@ -886,7 +886,7 @@ TEST(MultiTrackerTest, ConfirmationTakesAMinimumTimeAtEveryScanRateSoClutterBurs
 
 // Successors (adopt_successor_m): someone walking along +y at 1.2 m/s steps 0.6 m aside at scan 50
 // (beyond every gate of a track that knows them to a few cm). A new track starts on them; with the
-// rule the coasting track takes it over at its second measurement: one id, one report per scan,
+// rule the coasting track takes it over at its third measurement: one id, one report per scan,
 // on the person from then on. Without it, the old track is reported coasting beside the person
 // while the new one is confirmed: two ids, two reports in some scans.
 struct SidestepResult {
@@ -917,7 +917,6 @@ SidestepResult Sidestep(const MultiTrackerOptions& o) {
 TEST(MultiTrackerTest, CoastingTrackAdoptsTheTrackThatFoundItsPersonAgain) {
   MultiTrackerOptions o = Opts();
   o.adopt_successor_m = 1.0;
-  o.adopt_after_hits = 2;
   const SidestepResult one = Sidestep(o);
   EXPECT_EQ(one.ids, std::set<std::uint32_t>{1u});
   EXPECT_EQ(one.max_reports, 1u);
