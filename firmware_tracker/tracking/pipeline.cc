@@ -362,9 +362,9 @@ class TrackingPipeline::Refiner final : public MeasurementRefiner {
     // An observation of the other kind than the track's (legs of a cart's track, a cart's outline
     // for a person's legs): not this track's measurement.
     if (ob.legs != (shape.model == ShapeModel::kCircle)) return false;
-    const bool ok = ob.legs ? RefineLegs(source, ob, at_ns, predicted, predicted_cov, shape,
-                                         measurement)
-                            : RefineBody(ob, predicted, predicted_cov, shape, measurement);
+    const bool ok =
+        ob.legs ? RefineLegs(source, ob, at_ns, predicted, predicted_cov, shape, measurement)
+                : RefineBody(ob, predicted, predicted_cov, shape, measurement);
     if (!ok) return false;
     // ShapeOptions::outline_departure_gain: at upper-body height the fit's residuals measure how
     // far the outline departs from the model; the fixed allowances for it shrink to

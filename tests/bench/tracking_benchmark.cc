@@ -1172,7 +1172,6 @@ void LineOfSightErrors(const tracking::TrackingPipeline& pipeline, const trackin
                        const tracking::ScanTracks& out, const std::vector<Hypothesis>& hyps,
                        const std::vector<Truth>& truths, const std::vector<long>& matched,
                        std::map<std::string, std::array<double, 4>>* los) {
-  (void)scan;
   const auto obs = pipeline.observations();
   const auto ms = pipeline.measurements();
   for (std::size_t hi = 0; hi < hyps.size() && hi < matched.size(); ++hi) {
@@ -1209,7 +1208,8 @@ void LineOfSightErrors(const tracking::TrackingPipeline& pipeline, const trackin
     double nees = 0.0;
     {
       const Eigen::LDLT<Matrix2d> ldlt(R);
-      if (ldlt.info() == Eigen::Success && R(0, 0) * R(1, 1) - R(0, 1) * R(1, 0) > 0.0) nees = ez.dot(ldlt.solve(ez));
+      if (ldlt.info() == Eigen::Success && R(0, 0) * R(1, 1) - R(0, 1) * R(1, 0) > 0.0)
+        nees = ez.dot(ldlt.solve(ez));
     }
     const std::size_t parts = h.parts;
     const std::string cls = std::string(kPartsBins[parts]).substr(7);
@@ -1228,7 +1228,7 @@ void LineOfSightErrors(const tracking::TrackingPipeline& pipeline, const trackin
     const double dn = std::remainder(bearing(t->legs[f]) - bearing(t->legs[n]), 2.0 * common::kPi);
     const double cover =
         std::clamp((std::min(dn + hf, hn) - std::max(dn - hf, -hn)) / (2.0 * hf), 0.0, 1.0);
-    const std::string hidden = cover >= 0.9   ? "far leg hidden"
+    const std::string hidden = cover >= 0.9  ? "far leg hidden"
                                : cover > 0.1 ? "far leg partly hidden"
                                              : "legs apart";
     // Which legs its points lie on (within 3 cm of the circle), and points on neither.
@@ -1253,7 +1253,8 @@ void LineOfSightErrors(const tracking::TrackingPipeline& pipeline, const trackin
         depth_hi = std::max(depth_hi, q.dot(u));
       }
       edges += (part.silhouette.first_valid ? 1 : 0) + (part.silhouette.last_valid ? 1 : 0);
-      mixed_edges += (part.first_edge_in_mixed_beam ? 1 : 0) + (part.last_edge_in_mixed_beam ? 1 : 0);
+      mixed_edges +=
+          (part.first_edge_in_mixed_beam ? 1 : 0) + (part.last_edge_in_mixed_beam ? 1 : 0);
     }
     const std::string on = std::string(on_n > 0 && on_f > 0 ? "both legs"
                                        : on_n > 0           ? "nearer leg"
@@ -1286,26 +1287,76 @@ void LineOfSightErrors(const tracking::TrackingPipeline& pipeline, const trackin
       const double r0 = centre_of(ob.parts[0]), r1 = centre_of(ob.parts[1]);
       const std::size_t far_points = r0 > r1 ? ob.parts[0].point_count : ob.parts[1].point_count;
       const double apart = std::abs(r0 - r1);
-      pair = std::string(gap == 0 ? "touching" : gap <= 2 ? "gap 1-2 beams" : "gap 3+ beams") +
-             ", far part " + (far_points == 1 ? "1 pt" : far_points <= 3 ? "2-3 pts" : "4+ pts") +
-             ", depth apart " + (apart < 0.1 ? "<0.1" : apart < 0.2 ? "0.1-0.2" : ">=0.2") +
+      pair = std::string(gap == 0   ? "touching"
+                         : gap <= 2 ? "gap 1-2 beams"
+                                    : "gap 3+ beams") +
+             ", far part " +
+             (far_points == 1   ? "1 pt"
+              : far_points <= 3 ? "2-3 pts"
+                                : "4+ pts") +
+             ", depth apart " +
+             (apart < 0.1   ? "<0.1"
+              : apart < 0.2 ? "0.1-0.2"
+                            : ">=0.2") +
              (ob.deep_pair ? ", deep pair" : "");
       // Each part's fitted leg against the nearest true leg, along the ray: which is off.
       std::string part_err;
       for (std::size_t k = 0; k < 2; ++k) {
         const Vector2d c = pipeline.LegCentre(found, k);
-        const Vector2d& tl = (c - t->legs[0]).norm() < (c - t->legs[1]).norm() ? t->legs[0]
-                                                                               : t->legs[1];
+        const Vector2d& tl =
+            (c - t->legs[0]).norm() < (c - t->legs[1]).norm() ? t->legs[0] : t->legs[1];
         const double e = (c - tl).dot(tl.normalized());
         const bool is_far = (k == 0) == (r0 > r1);
-        part_err += std::string(is_far ? " far " : " near ") +
-                    (e < -0.1 ? "<-0.1" : e < -0.04 ? "-0.1..-0.04" : e < 0.04 ? "ok" : e < 0.1 ? "0.04..0.1" : ">0.1");
+        part_err += std::string(is_far ? " far " : " near ") + (e < -0.1    ? "<-0.1"
+                                                                : e < -0.04 ? "-0.1..-0.04"
+                                                                : e < 0.04  ? "ok"
+                                                                : e < 0.1   ? "0.04..0.1"
+                                                                            : ">0.1");
       }
       pair += ";" + part_err;
+    }
+    // One leg: the beams that returned from the true leg its points do not lie on (within 3 cm of
+    // its circle), and whether those are in a segment.
+    std::string other_leg;
+    if (ob.part_count == 1) {
+      const std::size_t seen = on_n >= on_f ? n : f;
+      const Vector2d& o_leg = t->legs[1 - seen];
+      int hits = 0, in_segment = 0;
+      bool in_obs = false;
+      for (std::size_t b = 0; b < scan.range_m.size(); ++b) {
+        const float rb = scan.range_m[b];
+        if (!(std::isfinite(rb) && rb > 0.0f)) continue;
+        const double a = scan.BeamAngleRad(b);
+        const Vector2d q = static_cast<double>(rb) * Vector2d(std::cos(a), std::sin(a));
+        if (std::abs((q - o_leg).norm() - lr) > 0.03) continue;
+        ++hits;
+        for (const tracking::Observation& any : obs) {
+          for (std::size_t k = 0; k < any.part_count; ++k) {
+            if (b >= any.parts[k].begin_beam && b < any.parts[k].end_beam) in_obs = true;
+          }
+        }
+        for (const tracking::Segment& sg : pipeline.segments().segments) {
+          if (b >= sg.begin_beam && b < sg.end_beam) {
+            ++in_segment;
+            break;
+          }
+        }
+      }
+      const std::string where = std::string(in_segment == 0     ? ", in no segment"
+                                            : in_segment < hits ? ", partly in a segment"
+                                                                : ", in a segment") +
+                                (in_obs ? ", in an observation" : ", in none");
+      other_leg = "other leg " +
+                  std::string(hits == 0   ? "unseen"
+                              : hits == 1 ? "1 beam"
+                                          : "2+ beams") +
+                  (hits > 0 ? where : "");
     }
     const std::string keys[] = {
         "",
         cls,
+        cls + " | " + other_leg,
+        cls + " | " + other_leg + ", " + hidden,
         cls + " | pair " + pair,
         cls + " | pair " + pair.substr(0, pair.find(',')) + ", " + sign,
         cls + " | pts " + pts,
