@@ -21,7 +21,8 @@
 // direction as the yaw prior (the shoulders across it; a box's length along it) and its predicted
 // position as the start; legs: a circle per leg with the track's leg radius, the body centre their
 // midpoint (plus gait_sigma_m: the legs' midpoint swings about the body's centre as they step;
-// weighted towards the standing leg, ShapeOptions::stance_leg_weight), or
+// weighted towards the standing leg, ShapeOptions::stance_leg_weight; two legs that touch in the
+// scan with the farther leg's depth along the ray, ShapeOptions::touching_legs_along_ray), or
 // one leg: hip_half_width_m behind it along the line of sight where it hides the other
 // (ShapeOptions::hidden_leg_behind), else its centre (plus the hip and stride extent). The fit's
 // size posterior becomes the track's size state (drifting by size_drift_m_per_sqrt_s between
