@@ -20,7 +20,7 @@ mkdir -p results
   --before-side-uncertainty --before-side-from-view \
   --before-few-point-legs --before-deep-legs --before-legs-seen-through --before-legs-report-coasting \
   --before-leg-edges --before-outline-departure --before-recent-veil --before-stance-weight \
-  --before-single-precision-fit --before-adopt \
+  --before-single-precision-fit --before-adopt --before-touching-legs \
   --before-fusion-merge \
   --out results/tracking_benchmark.md
 "$build_dir/tests/bench/store_benchmark" results/store_benchmark.md

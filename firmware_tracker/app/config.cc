@@ -292,6 +292,12 @@ void VisitShape(tracking::ShapeOptions& o, ConfigVisitor& v) {
           "beyond the near leg's front, is that track's two legs (the nearer, and the other or "
           "the echoes mixed between them behind it): split at its widest gap and measured as a "
           "pair, half the parts' depth apart as its sigma along the ray (false: one leg).");
+  v.Field("touching_legs_along_ray", o.touching_legs_along_ray,
+          "mount legs: two legs that touch in the scan (no beam between them) and are not a "
+          "deep pair: the farther leg is seen only beside the nearer one's occluding edge, so "
+          "its centre is known along the line of sight only to within a leg's diameter; the "
+          "midpoint's variance along the ray grows by leg_radius_m^2 / 3 (false: a touching "
+          "pair's covariance as any pair's).");
   v.Field("single_beam_legs", o.single_beam_legs,
           "mount legs: a leg returned by a single beam (below segmentation.min_points), where "
           "a leg is narrower than two beams' spacing, within leg_pairing_distance_m of one "

@@ -120,6 +120,14 @@ double DeepLegExcessDepth(const ShapeOptions& o, std::span<const Eigen::Vector2d
   return std::max(0.0, farthest - nearest - deepest);
 }
 
+double TouchingLegsAlongRayVar(const ShapeOptions& o, const ObservationPart& first,
+                               const ObservationPart& second, bool deep_pair) {
+  if (!o.touching_legs_along_ray || deep_pair || second.begin_beam > first.end_beam) return 0.0;
+  // The farther leg's centre uniform within +-2 leg_radius_m along the ray (4 r^2 / 3), the
+  // midpoint's a quarter of that.
+  return o.leg_radius_m * o.leg_radius_m / 3.0;
+}
+
 }  // namespace internal
 
 namespace {
@@ -359,8 +367,9 @@ class TrackingPipeline::Refiner final : public MeasurementRefiner {
     // An observation of the other kind than the track's (legs of a cart's track, a cart's outline
     // for a person's legs): not this track's measurement.
     if (ob.legs != (shape.model == ShapeModel::kCircle)) return false;
-    const bool ok = ob.legs ? RefineLegs(ob, at_ns, predicted, predicted_cov, shape, measurement)
-                            : RefineBody(ob, predicted, predicted_cov, shape, measurement);
+    const bool ok =
+        ob.legs ? RefineLegs(source, ob, at_ns, predicted, predicted_cov, shape, measurement)
+                : RefineBody(ob, predicted, predicted_cov, shape, measurement);
     if (!ok) return false;
     // ShapeOptions::outline_departure_gain: at upper-body height the fit's residuals measure how
     // far the outline departs from the model; the fixed allowances for it shrink to
@@ -405,8 +414,15 @@ class TrackingPipeline::Refiner final : public MeasurementRefiner {
         measured_outline ? std::max(departure_var, shape.departure_m2) : 0.0;
     shape.stamp_ns = at_ns;
     ++shape.updates;
+    if (source < refined_cov.size()) refined_cov[source] = measurement.covariance_m2;
     return true;
   }
+
+  // Per observation of the scan: the covariance of the measurement last refined from it, and its
+  // legs' fitted radii (0 where none); TrackingPipeline::RefinedCovariance and LegRadius.
+  std::array<Eigen::Matrix2d, kMaxSegments> refined_cov{};
+  std::array<std::array<double, 2>, kMaxSegments> leg_radius{};
+  std::array<std::array<Eigen::Vector2d, 2>, kMaxSegments> leg_centre{};
 
   std::uint64_t fits = 0;
   std::uint64_t failed = 0;
@@ -416,6 +432,7 @@ class TrackingPipeline::Refiner final : public MeasurementRefiner {
   std::uint64_t view_contested = 0;
   std::uint64_t widened = 0;
   std::uint64_t stance_weighted = 0;
+  std::uint64_t touching = 0;
 
   // How many of the observation's two outline ends are silhouettes (MakePart: not an occluder's
   // edge, not the field of view's end).
@@ -609,8 +626,9 @@ class TrackingPipeline::Refiner final : public MeasurementRefiner {
     return true;
   }
 
-  bool RefineLegs(const Observation& ob, common::UtcNs at_ns, const Eigen::Vector4d* predicted,
-                  const Eigen::Matrix4d* predicted_cov, TrackShape& shape, Measurement& m) {
+  bool RefineLegs(std::size_t source, const Observation& ob, common::UtcNs at_ns,
+                  const Eigen::Vector4d* predicted, const Eigen::Matrix4d* predicted_cov,
+                  TrackShape& shape, Measurement& m) {
     const ShapeOptions& o = p_.options_.shape;
     std::array<ShapeFitResult, 2> legs;
     std::size_t points = 0;
@@ -630,6 +648,11 @@ class TrackingPipeline::Refiner final : public MeasurementRefiner {
     }
     m.point_count = points;
     m.orientation_rad = 0.0;
+    if (source < leg_radius.size()) {
+      leg_radius[source] = {legs[0].size_m.x(), ob.part_count == 2 ? legs[1].size_m.x() : 0.0};
+      leg_centre[source] = {legs[0].centre_m,
+                            ob.part_count == 2 ? legs[1].centre_m : Eigen::Vector2d::Zero()};
+    }
     const double prior_info = 1.0 / std::max(shape.size_cov_m2(0, 0), 1e-12);
     if (ob.part_count == 2) {
       const std::array<Eigen::Vector2d, 2> now{legs[0].centre_m, legs[1].centre_m};
@@ -662,6 +685,15 @@ class TrackingPipeline::Refiner final : public MeasurementRefiner {
         const Eigen::Vector2d ray = m.position_m / range;
         const double depth = std::abs((legs[1].centre_m - legs[0].centre_m).dot(ray));
         m.covariance_m2 += (0.25 * depth * depth) * ray * ray.transpose();
+      }
+      // ShapeOptions::touching_legs_along_ray: touching legs, the farther cut by the nearer's
+      // occluding edge, its centre known along the ray to within a leg's diameter.
+      const double touching_var =
+          internal::TouchingLegsAlongRayVar(o, ob.parts[0], ob.parts[1], ob.deep_pair);
+      if (touching_var > 0.0 && range > 0.0) {
+        const Eigen::Vector2d ray = m.position_m / range;
+        m.covariance_m2 += touching_var * ray * ray.transpose();
+        ++touching;
       }
       // Both legs measured the same radius, each with the track's prior: count the prior once.
       const double i0 = 1.0 / std::max(legs[0].size_cov_m2(0, 0), 1e-12);
@@ -878,6 +910,23 @@ TrackingPipeline::TrackingPipeline(const TrackerOptions& options)
       refiner_(std::make_unique<Refiner>(*this, counters_.shape_fit_evaluations)) {}
 
 TrackingPipeline::~TrackingPipeline() = default;
+
+Eigen::Matrix2d TrackingPipeline::RefinedCovariance(std::size_t observation) const {
+  return observation < refiner_->refined_cov.size() ? refiner_->refined_cov[observation]
+                                                    : Eigen::Matrix2d::Zero();
+}
+
+Eigen::Vector2d TrackingPipeline::LegCentre(std::size_t observation, std::size_t part) const {
+  return observation < refiner_->leg_centre.size() && part < 2
+             ? refiner_->leg_centre[observation][part]
+             : Eigen::Vector2d::Zero();
+}
+
+double TrackingPipeline::LegRadius(std::size_t observation, std::size_t part) const {
+  return observation < refiner_->leg_radius.size() && part < 2
+             ? refiner_->leg_radius[observation][part]
+             : 0.0;
+}
 
 ObservationPart TrackingPipeline::MakePart(const ScanView& scan, const Segment& segment,
                                            std::size_t first, std::size_t count) const {
@@ -1784,6 +1833,7 @@ const ScanTracks& TrackingPipeline::Process(const ScanView& scan, std::uint32_t 
   const std::uint64_t view_contested_before = refiner_->view_contested;
   const std::uint64_t widened_before = refiner_->widened;
   const std::uint64_t stance_weighted_before = refiner_->stance_weighted;
+  const std::uint64_t touching_before = refiner_->touching;
   scan_ = &scan;
   tracker_.Step(scan.stamp_ns, measurements_.span(), offsets_s_.span(),
                 shape_fit ? refiner_.get() : nullptr, tracks_);
@@ -1796,6 +1846,7 @@ const ScanTracks& TrackingPipeline::Process(const ScanView& scan, std::uint32_t 
   counters_.legs_side_view_contested += refiner_->view_contested - view_contested_before;
   counters_.outline_departure_widened += refiner_->widened - widened_before;
   counters_.stance_weighted_pairs += refiner_->stance_weighted - stance_weighted_before;
+  counters_.touching_leg_pairs += refiner_->touching - touching_before;
   if (bg.scan_error == ScanError::kNone && bg.learned) {
     AbsorbStatic(scan);
     if (shape_fit) DropCoasting(scan);

@@ -43,7 +43,7 @@
 //                       [--before-legs-report-coasting] [--before-leg-edges]
 //                       [--before-outline-departure] [--before-recent-veil]
 //                       [--before-single-precision-fit]
-//                       [--before-stance-weight] [--before-adopt]
+//                       [--before-stance-weight] [--before-adopt] [--before-touching-legs]
 //                       [--before-fusion-merge] [--before-report-sourceless]]
 //   (--extra: more scenario folders, e.g. held-out scenes, reported in their own section;
 //   --explain: per run on stderr, what became of an object's previous track at every id switch
@@ -106,6 +106,8 @@
 //   midpoint also where one stands and the other swings, ShapeOptions::stance_leg_weight = 0.5;
 //   --before-adopt: "before" leaves a track born beside a coasting one to itself, the coasting one
 //   reported until its time is up, MultiTrackerOptions::adopt_successor_m = 0;
+//   --before-touching-legs: "before" measures two legs that touch in the scan with a pair's
+//   covariance, ShapeOptions::touching_legs_along_ray = false;
 //   --before-outline-departure: "before" reports an upper-body centre with the fixed allowances
 //   for the outline alone, not the departure its fit's residuals measure,
 //   ShapeOptions::outline_departure_gain = 0;
@@ -179,6 +181,9 @@ struct Truth {
   // standing) and whether one leg swings while the other stands (0) or both stand (1).
   double legs_spread_m = -1.0;
   int legs_support = -1;
+  // --explain, knee height, a person: its legs' centres (same frame) and radius (0: not a person).
+  std::array<Vector2d, 2> legs{Vector2d::Zero(), Vector2d::Zero()};
+  double leg_radius_m = 0.0;
 };
 // --breakdown: a person walks (Truth::gait) above this speed, a trolley moves (Truth::view); a
 // trolley is seen end-on or broadside within this angle of it.
@@ -471,7 +476,14 @@ struct Causes {
   // the state before its last update predicted on (where the scan before that was measured too),
   // and how many had that.
   std::map<std::string, std::array<double, 4>> coast_start;
+  // Knee height, per sensor: measured matches of a person by their measurement's error along the
+  // line of sight (LineOfSightErrors): count, summed |radial error|, summed radial NEES (the
+  // radial error squared over the measurement's variance along the ray), summed 2-dof NEES.
+  std::map<std::string, std::array<double, 4>> los;
   void Add(const Causes& o) {
+    for (const auto& [k, v] : o.los) {
+      for (std::size_t i = 0; i < v.size(); ++i) los[k][i] += v[i];
+    }
     for (const auto& [k, v] : o.coast_start) {
       for (std::size_t i = 0; i < v.size(); ++i) coast_start[k][i] += v[i];
     }
@@ -1032,6 +1044,9 @@ bool g_before_stance_weight = false;
 // --before-adopt: "before" leaves a track born beside a coasting one to itself, the coasting one
 // reported until its time is up (MultiTrackerOptions::adopt_successor_m = 0).
 bool g_before_adopt = false;
+// --before-touching-legs: "before" measures two legs that touch in the scan with a pair's
+// covariance (ShapeOptions::touching_legs_along_ray = false).
+bool g_before_touching_legs = false;
 // --before-fusion-merge: "before"'s fusion without merging fused tracks left without sources and
 // reporting fused tracks no tracker holds any more (FusionOptions::merge_sourceless = false,
 // report_sourceless = true).
@@ -1083,7 +1098,7 @@ std::vector<Variant> Variants(sim::Mount mount, double range_m) {
              g_before_deep_legs || g_before_legs_seen_through || g_before_legs_report_coasting ||
              g_before_leg_edges || g_before_outline_departure || g_before_fusion_merge ||
              g_before_report_sourceless || g_before_recent_veil || g_before_single_precision_fit ||
-             g_before_stance_weight || g_before_adopt) {
+             g_before_stance_weight || g_before_adopt || g_before_touching_legs) {
     tracking::TrackerOptions before = fresh;
     if (g_before_one_leg) before.shape.hidden_leg_behind = false;
     if (g_before_mixed_pixels) before.shape.drop_mixed_pixel_legs = false;
@@ -1109,6 +1124,7 @@ std::vector<Variant> Variants(sim::Mount mount, double range_m) {
     if (g_before_single_precision_fit) before.shape.fit.single_precision_points = false;
     if (g_before_stance_weight) before.shape.stance_leg_weight = 0.5;
     if (g_before_adopt) before.tracking.adopt_successor_m = 0.0;
+    if (g_before_touching_legs) before.shape.touching_legs_along_ray = false;
     variants.push_back({"before", before});
   }
   return variants;
@@ -1176,6 +1192,227 @@ std::size_t PartsOf(const tracking::TrackingPipeline& pipeline, const tracking::
       pipeline.segments().points_m.span().subspan(ob.parts[0].first_point, ob.parts[0].point_count);
   const tracking::ShapeOptions& o = pipeline.options().shape;
   return (pts.back() - pts.front()).norm() > 2.0 * o.leg_radius_m + 0.08 ? 3 : 2;
+}
+
+// --explain, knee height: every measured match of a person, its measurement's error along the
+// line of sight binned by what made it (Causes::los): all of them ("all ...") and those off by at
+// least 0.1 m ("off ..."), by the observation's class, point count, range, sign (nearer / farther
+// than the truth), which of the true legs its points lie on, how much of the farther leg the
+// nearer hides, its silhouette ends (outline or occluded) and mixed-beam edges, the points' depth
+// along the ray, the fitted leg radius against the true one.
+void LineOfSightErrors(const tracking::TrackingPipeline& pipeline, const tracking::ScanView& scan,
+                       const tracking::ScanTracks& out, const std::vector<Hypothesis>& hyps,
+                       const std::vector<Truth>& truths, const std::vector<long>& matched,
+                       std::map<std::string, std::array<double, 4>>* los) {
+  const auto obs = pipeline.observations();
+  const auto ms = pipeline.measurements();
+  for (std::size_t hi = 0; hi < hyps.size() && hi < matched.size(); ++hi) {
+    const Hypothesis& h = hyps[hi];
+    if (!h.measured || matched[hi] < 0) continue;
+    const Truth* t = nullptr;
+    for (const Truth& c : truths) t = static_cast<long>(c.id) == matched[hi] ? &c : t;
+    if (t == nullptr || t->leg_radius_m <= 0.0) continue;
+    const tracking::TrackReport* rep = nullptr;
+    for (const tracking::TrackReport& r : out.tracks) rep = r.track_id == h.id ? &r : rep;
+    if (rep == nullptr) continue;
+    // Its observation (as PartsOf finds it).
+    double best = std::numeric_limits<double>::infinity();
+    std::size_t found = obs.size();
+    for (std::size_t i = 0; i < obs.size() && i < ms.size(); ++i) {
+      std::size_t points = 0;
+      for (std::size_t k = 0; k < obs[i].part_count; ++k) points += obs[i].parts[k].point_count;
+      const double d = (ms[i].position_m - h.z).norm();
+      if (points == rep->points && d < best) {
+        best = d;
+        found = i;
+      }
+    }
+    if (found == obs.size()) continue;
+    const tracking::Observation& ob = obs[found];
+    const double range = t->p.norm();
+    if (!(range > 0.0)) continue;
+    const Vector2d u = t->p / range;
+    const Vector2d ez = h.z - (t->p + h.z_offset_s * t->v);
+    const double er = ez.dot(u);
+    const Matrix2d R = pipeline.RefinedCovariance(found);
+    const double var_r = u.dot(R * u);
+    const double nees_r = var_r > 0.0 ? er * er / var_r : 0.0;
+    double nees = 0.0;
+    {
+      const Eigen::LDLT<Matrix2d> ldlt(R);
+      if (ldlt.info() == Eigen::Success && R(0, 0) * R(1, 1) - R(0, 1) * R(1, 0) > 0.0)
+        nees = ez.dot(ldlt.solve(ez));
+    }
+    const std::size_t parts = h.parts;
+    const std::string cls = std::string(kPartsBins[parts]).substr(7);
+    const std::string pts = rep->points <= 1   ? "1"
+                            : rep->points <= 3 ? "2-3"
+                            : rep->points <= 6 ? "4-6"
+                                               : "7+";
+    const std::string rng = range < 5.0 ? "<5" : range < 10.0 ? "5-10" : ">=10";
+    const std::string sign = er < 0.0 ? "nearer" : "farther";
+    // The legs: the nearer (n) and the farther (f); how much of f's bearing interval n covers.
+    const std::size_t n = t->legs[0].norm() <= t->legs[1].norm() ? 0 : 1, f = 1 - n;
+    const double lr = t->leg_radius_m;
+    const auto bearing = [](const Vector2d& p) { return std::atan2(p.y(), p.x()); };
+    const double hn = std::asin(std::min(1.0, lr / t->legs[n].norm()));
+    const double hf = std::asin(std::min(1.0, lr / t->legs[f].norm()));
+    const double dn = std::remainder(bearing(t->legs[f]) - bearing(t->legs[n]), 2.0 * common::kPi);
+    const double cover =
+        std::clamp((std::min(dn + hf, hn) - std::max(dn - hf, -hn)) / (2.0 * hf), 0.0, 1.0);
+    const std::string hidden = cover >= 0.9  ? "far leg hidden"
+                               : cover > 0.1 ? "far leg partly hidden"
+                                             : "legs apart";
+    // Which legs its points lie on (within 3 cm of the circle), and points on neither.
+    std::size_t on_n = 0, on_f = 0, other = 0;
+    double depth_lo = std::numeric_limits<double>::infinity(), depth_hi = -depth_lo;
+    int edges = 0, mixed_edges = 0;
+    for (std::size_t k = 0; k < ob.part_count; ++k) {
+      const tracking::ObservationPart& part = ob.parts[k];
+      const auto p =
+          pipeline.segments().points_m.span().subspan(part.first_point, part.point_count);
+      for (const Vector2d& q : p) {
+        const double a = std::abs((q - t->legs[n]).norm() - lr);
+        const double b = std::abs((q - t->legs[f]).norm() - lr);
+        if (std::min(a, b) > 0.03) {
+          ++other;
+        } else if (a <= b) {
+          ++on_n;
+        } else {
+          ++on_f;
+        }
+        depth_lo = std::min(depth_lo, q.dot(u));
+        depth_hi = std::max(depth_hi, q.dot(u));
+      }
+      edges += (part.silhouette.first_valid ? 1 : 0) + (part.silhouette.last_valid ? 1 : 0);
+      mixed_edges +=
+          (part.first_edge_in_mixed_beam ? 1 : 0) + (part.last_edge_in_mixed_beam ? 1 : 0);
+    }
+    const std::string on = std::string(on_n > 0 && on_f > 0 ? "both legs"
+                                       : on_n > 0           ? "nearer leg"
+                                       : on_f > 0           ? "farther leg"
+                                                            : "no leg") +
+                           (other > 0 ? " + other points" : "");
+    const double depth = depth_hi - depth_lo;
+    const std::string dep = depth < 0.06 ? "<0.06" : depth < 0.12 ? "0.06-0.12" : ">=0.12";
+    const std::string edge = std::to_string(edges) + " outline ends of " +
+                             std::to_string(2 * ob.part_count) + ", mixed " +
+                             std::to_string(mixed_edges);
+    const double fit_r = pipeline.LegRadius(found, 0);
+    const std::string rad = fit_r - lr < -0.02  ? "fit r < true - 2cm"
+                            : fit_r - lr > 0.02 ? "fit r > true + 2cm"
+                                                : "fit r within 2cm";
+    // Two parts: beams between them (0: touching, the farther may be echoes mixed between the
+    // nearer and what lies behind), the farther part's points, their depth apart along the ray.
+    std::string pair;
+    if (ob.part_count == 2) {
+      const std::size_t gap = ob.parts[1].begin_beam >= ob.parts[0].end_beam
+                                  ? ob.parts[1].begin_beam - ob.parts[0].end_beam
+                                  : 0;
+      const auto centre_of = [&](const tracking::ObservationPart& part) {
+        const auto p =
+            pipeline.segments().points_m.span().subspan(part.first_point, part.point_count);
+        double r = std::numeric_limits<double>::infinity();
+        for (const Vector2d& q : p) r = std::min(r, q.norm());
+        return r;
+      };
+      const double r0 = centre_of(ob.parts[0]), r1 = centre_of(ob.parts[1]);
+      const std::size_t far_points = r0 > r1 ? ob.parts[0].point_count : ob.parts[1].point_count;
+      const double apart = std::abs(r0 - r1);
+      pair = std::string(gap == 0   ? "touching"
+                         : gap <= 2 ? "gap 1-2 beams"
+                                    : "gap 3+ beams") +
+             ", far part " +
+             (far_points == 1   ? "1 pt"
+              : far_points <= 3 ? "2-3 pts"
+                                : "4+ pts") +
+             ", depth apart " +
+             (apart < 0.1   ? "<0.1"
+              : apart < 0.2 ? "0.1-0.2"
+                            : ">=0.2") +
+             (ob.deep_pair ? ", deep pair" : "");
+      // Each part's fitted leg against the nearest true leg, along the ray: which is off.
+      std::string part_err;
+      for (std::size_t k = 0; k < 2; ++k) {
+        const Vector2d c = pipeline.LegCentre(found, k);
+        const Vector2d& tl =
+            (c - t->legs[0]).norm() < (c - t->legs[1]).norm() ? t->legs[0] : t->legs[1];
+        const double e = (c - tl).dot(tl.normalized());
+        const bool is_far = (k == 0) == (r0 > r1);
+        part_err += std::string(is_far ? " far " : " near ") + (e < -0.1    ? "<-0.1"
+                                                                : e < -0.04 ? "-0.1..-0.04"
+                                                                : e < 0.04  ? "ok"
+                                                                : e < 0.1   ? "0.04..0.1"
+                                                                            : ">0.1");
+      }
+      pair += ";" + part_err;
+    }
+    // One leg: the beams that returned from the true leg its points do not lie on (within 3 cm of
+    // its circle), and whether those are in a segment.
+    std::string other_leg;
+    if (ob.part_count == 1) {
+      const std::size_t seen = on_n >= on_f ? n : f;
+      const Vector2d& o_leg = t->legs[1 - seen];
+      int hits = 0, in_segment = 0;
+      bool in_obs = false;
+      for (std::size_t b = 0; b < scan.range_m.size(); ++b) {
+        const float rb = scan.range_m[b];
+        if (!(std::isfinite(rb) && rb > 0.0f)) continue;
+        const double a = scan.BeamAngleRad(b);
+        const Vector2d q = static_cast<double>(rb) * Vector2d(std::cos(a), std::sin(a));
+        if (std::abs((q - o_leg).norm() - lr) > 0.03) continue;
+        ++hits;
+        for (const tracking::Observation& any : obs) {
+          for (std::size_t k = 0; k < any.part_count; ++k) {
+            if (b >= any.parts[k].begin_beam && b < any.parts[k].end_beam) in_obs = true;
+          }
+        }
+        for (const tracking::Segment& sg : pipeline.segments().segments) {
+          if (b >= sg.begin_beam && b < sg.end_beam) {
+            ++in_segment;
+            break;
+          }
+        }
+      }
+      const std::string where = std::string(in_segment == 0     ? ", in no segment"
+                                            : in_segment < hits ? ", partly in a segment"
+                                                                : ", in a segment") +
+                                (in_obs ? ", in an observation" : ", in none");
+      other_leg = "other leg " +
+                  std::string(hits == 0   ? "unseen"
+                              : hits == 1 ? "1 beam"
+                                          : "2+ beams") +
+                  (hits > 0 ? where : "");
+    }
+    const std::string keys[] = {
+        "",
+        cls,
+        cls + " | " + other_leg,
+        cls + " | " + other_leg + ", " + hidden,
+        cls + " | pair " + pair,
+        cls + " | pair " + pair.substr(0, pair.find(',')) + ", " + sign,
+        cls + " | pts " + pts,
+        cls + " | range " + rng,
+        cls + " | " + sign,
+        cls + " | " + hidden,
+        cls + " | on " + on,
+        cls + " | " + edge,
+        cls + " | depth " + dep,
+        cls + " | " + rad,
+        cls + " | " + sign + ", " + hidden + ", on " + on,
+    };
+    const bool off = std::abs(er) >= 0.1;
+    for (const std::string& key : keys) {
+      for (const char* which : {"all", "off"}) {
+        if (which[0] == 'o' && !off) continue;
+        auto& a = (*los)[std::string(which) + " " + key];
+        a[0] += 1;
+        a[1] += std::abs(er);
+        a[2] += nees_r;
+        a[3] += nees;
+      }
+    }
+  }
 }
 
 struct SensorFrames {
@@ -1387,6 +1624,11 @@ void RunSensor(const sim::Simulator& simulator, std::size_t sensor,
         continue;
       }
       Truth truth{ts.target, p, vel, target.shape() == sim::TargetShape::kTrolley};
+      if (target.shape() == sim::TargetShape::kPerson) {
+        truth.legs[0] = sensor_from_world * Vector2d(ts.state.legs[0].x, ts.state.legs[0].y);
+        truth.legs[1] = sensor_from_world * Vector2d(ts.state.legs[1].x, ts.state.legs[1].y);
+        truth.leg_radius_m = target.body().leg_radius_m;
+      }
       const double range = p.norm();
       if (target.shape() == sim::TargetShape::kPerson && ts.state.speed_mps > kWalkingMps &&
           range > 0.0) {
@@ -1446,6 +1688,10 @@ void RunSensor(const sim::Simulator& simulator, std::size_t sensor,
       std::set<std::uint64_t> alive;
       for (std::size_t a = 0; a < n_alive; ++a) alive.insert(predictions[a].id);
       sequences[v].Frame(period_s, truths, hyps, dont_care, &alive, &furniture);
+      if (g_explain_coasting && pipelines[v]->options().shape.mount == tracking::Mount::kLegs) {
+        LineOfSightErrors(*pipelines[v], view, out, hyps, truths, sequences[v].matched_truth(),
+                          &(*causes)[v].los);
+      }
       if (g_explain_coasting) {
         for (std::size_t hi = 0; hi < hyps.size(); ++hi) {
           if (birth[v].count(hyps[hi].id)) continue;
@@ -1655,8 +1901,10 @@ void RunSensor(const sim::Simulator& simulator, std::size_t sensor,
     const auto partings = std::move((*causes)[v].partings);
     const auto untracked = std::move((*causes)[v].untracked);
     const auto coast_start = std::move((*causes)[v].coast_start);
+    const auto los = std::move((*causes)[v].los);
     (*causes)[v] = sequences[v].causes();
     (*causes)[v].coast_start = coast_start;
+    (*causes)[v].los = los;
     (*causes)[v].coasting = coasting;
     (*causes)[v].partings = partings;
     (*causes)[v].untracked = untracked;
@@ -1804,6 +2052,9 @@ void Explain(const std::string& scenario, const std::string& mount, const RunRes
       std::fprintf(stderr, "  beside untracked: %-100s %6.0f\n", why.c_str(), count);
     for (const auto& [why, count] : r.causes[v].partings)
       std::fprintf(stderr, "  parted from its object: %-100s %6.0f\n", why.c_str(), count);
+    for (const auto& [why, a] : r.causes[v].los)
+      std::fprintf(stderr, "  los: %-90s | %6.0f %9.3f %9.3f %9.3f\n", why.c_str(), a[0], a[1],
+                   a[2], a[3]);
     for (const auto& [why, a] : r.causes[v].coast_start)
       std::fprintf(stderr, "  coast start: %-70s | %6.0f %9.3f %9.3f %6.0f\n", why.c_str(), a[0],
                    a[1], a[2], a[3]);
@@ -2241,7 +2492,7 @@ std::string KneeHeightBefore() {
         g_before_legs_seen_through || g_before_legs_report_coasting || g_before_leg_edges ||
         g_before_outline_departure || g_before_fusion_merge || g_before_report_sourceless ||
         g_before_recent_veil || g_before_single_precision_fit || g_before_stance_weight ||
-        g_before_adopt) ||
+        g_before_adopt || g_before_touching_legs) ||
       g_before_mixed_pixels || g_before_far || g_before_evidence_coasting ||
       g_before_report_rules) {
     return "";
@@ -2354,6 +2605,12 @@ std::string KneeHeightBefore() {
         "leaving a track born beside a coasting one to itself while the coasting one is reported "
         "until its time is up (`tracking.adopt_successor_m` 0)");
   }
+  if (g_before_touching_legs) {
+    without.push_back(
+        "measuring a knee-height track's two legs that touch in the scan with a pair's "
+        "covariance, not the farther leg's cut arc's along the line of sight "
+        "(`shape.touching_legs_along_ray` false)");
+  }
   std::string text = "\"before\": the new tracker" + std::string(without.empty() ? "" : " ");
   for (std::size_t i = 0; i < without.size(); ++i) {
     text += (i == 0 ? "" : i + 1 == without.size() ? " and " : ", ") + without[i];
@@ -2462,6 +2719,8 @@ int main(int argc, char** argv) {
       g_before_stance_weight = true;
     } else if (a == "--before-adopt") {
       g_before_adopt = true;
+    } else if (a == "--before-touching-legs") {
+      g_before_touching_legs = true;
     } else if (a == "--before-fusion-merge") {
       g_before_fusion_merge = true;
     } else if (a == "--before-report-sourceless") {
@@ -2481,7 +2740,7 @@ int main(int argc, char** argv) {
                    "[--before-legs-seen-through] [--before-legs-report-coasting] "
                    "[--before-leg-edges] [--before-outline-departure] [--before-recent-veil] "
                    "[--before-single-precision-fit] "
-                   "[--before-stance-weight] [--before-adopt] [--before-fusion-merge] "
+                   "[--before-stance-weight] [--before-adopt] [--before-touching-legs] [--before-fusion-merge] "
                    "[--before-report-sourceless]]\n");
       return 2;
     }
