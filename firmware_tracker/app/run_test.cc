@@ -90,6 +90,8 @@ TEST(TrackerRun, PipelineSummaryNamesEveryCounter) {
   c.recently_veiled = 27;
   c.leg_edges_in_mixed_beam = 28;
   c.stance_weighted_pairs = 29;
+  c.box_occluded_fits = 30;
+  c.box_sizes_unseen = 31;
   EXPECT_EQ(PipelineSummary(c),
             "rejected_scans=1 learning_scans=2 segments=3 dropped_segments=4 "
             "ellipse_measurements=5 com_measurements=6 shape_fits=7 failed_shape_fits=8 "
@@ -98,7 +100,8 @@ TEST(TrackerRun, PipelineSummaryNamesEveryCounter) {
             "legs_across_walk=18 split_few_point_legs=19 legs_seen_through=20 "
             "deep_pieces_kept=21 outline_departure_widened=22 legs_side_uncertain=23 "
             "legs_side_from_view=24 legs_side_view_contested=25 deep_leg_pairs=26 "
-            "recently_veiled=27 leg_edges_in_mixed_beam=28 stance_weighted_pairs=29");
+            "recently_veiled=27 leg_edges_in_mixed_beam=28 stance_weighted_pairs=29 "
+            "box_occluded_fits=30 box_sizes_unseen=31");
 }
 
 TEST(TrackerRun, MultiTrackerSummaryNamesEveryCounterButTheTwoBeforeIt) {
