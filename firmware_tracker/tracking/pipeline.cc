@@ -172,11 +172,10 @@ std::size_t BoxUnoccludedPoints(const ShapeOptions& o, const Eigen::Vector2d& ce
     }
     std::size_t end = i;
     while (end < n && in_front[end]) ++end;
-    const bool stepped_before =
-        i == 0 || points[i - 1].norm() - points[i].norm() > margin[i - 1];
+    const bool stepped_before = i > 0 && points[i - 1].norm() - points[i].norm() > margin[i - 1];
     const bool stepped_after =
-        end == n || points[end].norm() - points[end - 1].norm() > margin[end];
-    if (!stepped_before || !stepped_after || (i == 0 && end == n)) {
+        end < n && points[end].norm() - points[end - 1].norm() > margin[end];
+    if (!stepped_before && !stepped_after) {
       for (std::size_t k = i; k < end; ++k) in_front[k] = false;
     }
     i = end;

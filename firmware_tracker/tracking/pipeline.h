@@ -370,9 +370,10 @@ struct ShapeOptions {
   // widened by three sigma of the predicted position along the ray), which holds where the
   // pusher returns as many beams as the face (a far trolley) and a fit of all of them would take
   // the pusher for the face; then against the box fitted to the rest. Only a run of such points
-  // whose range steps from the box's neighbouring points by more than that noise on each side
-  // where it meets them counts (something in front is a surface of its own; a run continuous
-  // with the face is the box turned from the expected yaw). Such points are left out and the box
+  // whose range steps from the box's neighbouring points by more than that noise where it meets
+  // them (on one side at least: a mixed echo of the two may bridge the other) counts: something
+  // in front is a surface of its own, while a run continuous with the face on every side it
+  // meets it is the box turned from the expected yaw. Such points are left out and the box
   // fitted without them; where they are the segment's first or last point, that end is an
   // occluder's edge, not the box's silhouette. Counted in
   // PipelineCounters::box_occluded_fits. false: every point of the segment is the box's.
@@ -682,7 +683,7 @@ double OutlineDepartureVar(const ShapeOptions& o, double rms_m, double range_m);
 // in front where its range is less than where its beam enters the box by more than
 // kOccluderSigmas of the range noise and the model error plus extra_margin_m (the box's own
 // uncertainty along the ray), in a run of such points whose range steps by more than that noise
-// (without extra_margin_m) from the kept point on each side it has one (not the whole segment).
+// (without extra_margin_m) from a neighbouring point not in front, on one side at least.
 // Where the first or last point is in front, that silhouette end is
 // cleared in *silhouette. Precondition: kept.size() >= points.size(); kept may be points' storage.
 std::size_t BoxUnoccludedPoints(const ShapeOptions& o, const Eigen::Vector2d& centre_m,

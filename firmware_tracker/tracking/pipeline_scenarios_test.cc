@@ -1673,6 +1673,14 @@ TEST(PipelineTest, BoxUnoccludedPointsLeavesOutWhatStandsInFrontOfTheBox) {
   EXPECT_EQ(internal::BoxUnoccludedPoints(o, Eigen::Vector2d(5.0, 0.0), Eigen::Vector2d(0.45, 0.3),
                                           0.0, points, kept, &silhouette),
             5u);
+  // A leg whose one side meets the face through a mixed echo (no step there): still dropped.
+  points = {{4.55, -0.2}, {4.55, -0.1}, {4.5, -0.05}, {4.45, 0.0}, {4.2, 0.05}, {4.2, 0.1},
+            {4.55, 0.15}, {4.55, 0.2}};
+  EXPECT_EQ(internal::BoxUnoccludedPoints(o, Eigen::Vector2d(5.0, 0.0), Eigen::Vector2d(0.45, 0.3),
+                                          0.0, points, kept, &silhouette),
+            5u);
+  EXPECT_EQ(kept[2], points[2]);
+  EXPECT_EQ(kept[3], points[6]);
   // A point 2 cm in front of the face is range noise (3 sigma at 4.5 m: 0.07 m): kept.
   points = {{4.53, 0.0}};
   EXPECT_EQ(internal::BoxUnoccludedPoints(o, Eigen::Vector2d(5.0, 0.0), Eigen::Vector2d(0.45, 0.3),
