@@ -331,7 +331,7 @@ void VisitShape(tracking::ShapeOptions& o, ConfigVisitor& v) {
   v.Field("box_size_from_faces_seen", o.box_size_from_faces_seen,
           "A box's half-length is learned only from scans that show one of its sides, its "
           "half-width only from scans that show one of its ends (at least three beams across the "
-          "face). false: both from every box fit.");
+          "face). Default false: both from every box fit.");
   v.Field("beam_divergence_rad", o.beam_divergence_rad,
           "Full beam divergence of the scanner (LMS1xx, TiM: 0.015; LMS5xx: 0.011); the beam's "
           "footprint at range R is R times this plus beam_exit_diameter_m (mixed pixels of legs "

@@ -387,9 +387,14 @@ struct ShapeOptions {
   // end-on again (tracking_benchmark before this: trolley end-on, coming nearer, knee height,
   // radial mean -0.08 m, NEES 8). The axis not shown keeps its state (its uncertainty drifting as
   // size_drift_m_per_sqrt_s says), which the reported covariance carries along the ray. Counted
-  // (fits with an axis not shown) in PipelineCounters::box_sizes_unseen. false: both semi-axes
-  // learned from every box fit.
-  bool box_size_from_faces_seen = true;
+  // (fits with an axis not shown) in PipelineCounters::box_sizes_unseen. Off by default:
+  // tracking_benchmark with it (box_drop_occluders on in both), knee height trolley end-on coming
+  // nearer MOTP 0.090 -> 0.067 m,
+  // but the upper-body trolley broadside 0.069 -> 0.103 m, and a flat piece at a wall's end that
+  // grows beam by beam (a box showing its front only) is followed by several tracks in turn
+  // instead of one (the unit test MixedPixelsWithinAPersonsReachOfANearerReturnAreNotLegs: 7
+  // ids for 1). false (the default): both semi-axes learned from every box fit.
+  bool box_size_from_faces_seen = false;
   // Added in quadrature to every body-centre measurement (sigma per axis): what the fit cannot know
   // (sway, the torso's turn, an outline that is not the model's).
   double centre_model_sigma_m = 0.015;

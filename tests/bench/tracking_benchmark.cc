@@ -44,7 +44,6 @@
 //                       [--before-outline-departure] [--before-recent-veil]
 //                       [--before-single-precision-fit]
 //                       [--before-stance-weight] [--before-box-occluders]
-//                       [--before-box-faces]
 //                       [--before-fusion-merge] [--before-report-sourceless]]
 //   (--extra: more scenario folders, e.g. held-out scenes, reported in their own section;
 //   --explain: per run on stderr, what became of an object's previous track at every id switch
@@ -107,8 +106,6 @@
 //   midpoint also where one stands and the other swings, ShapeOptions::stance_leg_weight = 0.5;
 //   --before-box-occluders: "before" fits a box (a cart) to every point of its segment, also to
 //   those in front of it (its pusher's), ShapeOptions::box_drop_occluders = false;
-//   --before-box-faces: "before" learns both of a box's semi-axes from every fit, also from scans
-//   that do not show them, ShapeOptions::box_size_from_faces_seen = false;
 //   --before-outline-departure: "before" reports an upper-body centre with the fixed allowances
 //   for the outline alone, not the departure its fit's residuals measure,
 //   ShapeOptions::outline_departure_gain = 0;
@@ -1008,9 +1005,6 @@ bool g_before_stance_weight = false;
 // --before-box-occluders: "before" fits a box to every point of its segment, also those in front
 // of it (ShapeOptions::box_drop_occluders = false).
 bool g_before_box_occluders = false;
-// --before-box-faces: "before" learns both of a box's semi-axes from every fit
-// (ShapeOptions::box_size_from_faces_seen = false).
-bool g_before_box_faces = false;
 // --before-fusion-merge: "before"'s fusion without merging fused tracks left without sources and
 // reporting fused tracks no tracker holds any more (FusionOptions::merge_sourceless = false,
 // report_sourceless = true).
@@ -1062,7 +1056,7 @@ std::vector<Variant> Variants(sim::Mount mount, double range_m) {
              g_before_deep_legs || g_before_legs_seen_through || g_before_legs_report_coasting ||
              g_before_leg_edges || g_before_outline_departure || g_before_fusion_merge ||
              g_before_report_sourceless || g_before_recent_veil || g_before_single_precision_fit ||
-             g_before_stance_weight || g_before_box_occluders || g_before_box_faces) {
+             g_before_stance_weight || g_before_box_occluders) {
     tracking::TrackerOptions before = fresh;
     if (g_before_one_leg) before.shape.hidden_leg_behind = false;
     if (g_before_mixed_pixels) before.shape.drop_mixed_pixel_legs = false;
@@ -1088,7 +1082,6 @@ std::vector<Variant> Variants(sim::Mount mount, double range_m) {
     if (g_before_single_precision_fit) before.shape.fit.single_precision_points = false;
     if (g_before_stance_weight) before.shape.stance_leg_weight = 0.5;
     if (g_before_box_occluders) before.shape.box_drop_occluders = false;
-    if (g_before_box_faces) before.shape.box_size_from_faces_seen = false;
     variants.push_back({"before", before});
   }
   return variants;
@@ -2148,7 +2141,7 @@ std::string KneeHeightBefore() {
         g_before_legs_seen_through || g_before_legs_report_coasting || g_before_leg_edges ||
         g_before_outline_departure || g_before_fusion_merge || g_before_report_sourceless ||
         g_before_recent_veil || g_before_single_precision_fit || g_before_stance_weight ||
-        g_before_box_occluders || g_before_box_faces) ||
+        g_before_box_occluders) ||
       g_before_mixed_pixels || g_before_far || g_before_evidence_coasting ||
       g_before_report_rules) {
     return "";
@@ -2261,11 +2254,6 @@ std::string KneeHeightBefore() {
         "fitting a box (a cart) to every point of its segment, also to those in front of it (its "
         "pusher's) (`shape.box_drop_occluders` false)");
   }
-  if (g_before_box_faces) {
-    without.push_back(
-        "learning both of a box's semi-axes from every fit, also from scans that show only one "
-        "face (`shape.box_size_from_faces_seen` false)");
-  }
   std::string text = "\"before\": the new tracker" + std::string(without.empty() ? "" : " ");
   for (std::size_t i = 0; i < without.size(); ++i) {
     text += (i == 0 ? "" : i + 1 == without.size() ? " and " : ", ") + without[i];
@@ -2374,8 +2362,6 @@ int main(int argc, char** argv) {
       g_before_stance_weight = true;
     } else if (a == "--before-box-occluders") {
       g_before_box_occluders = true;
-    } else if (a == "--before-box-faces") {
-      g_before_box_faces = true;
     } else if (a == "--before-fusion-merge") {
       g_before_fusion_merge = true;
     } else if (a == "--before-report-sourceless") {
@@ -2395,7 +2381,7 @@ int main(int argc, char** argv) {
                    "[--before-legs-seen-through] [--before-legs-report-coasting] "
                    "[--before-leg-edges] [--before-outline-departure] [--before-recent-veil] "
                    "[--before-single-precision-fit] "
-                   "[--before-stance-weight] [--before-box-occluders] [--before-box-faces] "
+                   "[--before-stance-weight] [--before-box-occluders] "
                    "[--before-fusion-merge] "
                    "[--before-report-sourceless]]\n");
       return 2;
