@@ -330,6 +330,14 @@ void VisitShape(tracking::ShapeOptions& o, ConfigVisitor& v) {
   v.Field("box_size_floor_sigma_m", o.box_size_floor_sigma_m,
           "A box's (cart's) size state counts as no more certain than this in that shared error: "
           "learned from the few faces a passing cart shows, each scan sharing that view's error.");
+  v.Field("box_drop_occluders", o.box_drop_occluders,
+          "A box's (cart's) points nearer than where their beam enters the fitted box (by three "
+          "sigma of the range noise and model error) are something in front of it (its pusher): "
+          "left out and the box refitted without them. false: every point is the box's.");
+  v.Field("box_size_from_faces_seen", o.box_size_from_faces_seen,
+          "A box's half-length is learned only from scans that show one of its sides, its "
+          "half-width only from scans that show one of its ends (at least three beams across the "
+          "face). Default false: both from every box fit.");
   v.Field("beam_divergence_rad", o.beam_divergence_rad,
           "Full beam divergence of the scanner (LMS1xx, TiM: 0.015; LMS5xx: 0.011); the beam's "
           "footprint at range R is R times this plus beam_exit_diameter_m (mixed pixels of legs "

@@ -4,6 +4,7 @@
 #include <Eigen/LU>
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <utility>
 
 #include "common/geometry.h"
@@ -24,6 +25,12 @@ constexpr std::size_t kMinFlatnessPoints = 4;
 // RMS distance to their principal line of points spread evenly over an arc of sagitta s: the
 // parabola v = k u^2 on [-h, h] less its mean, sqrt(1/5 - 1/9) k h^2 = 0.298 s.
 constexpr double kArcLineRmsShare = 0.298;
+// ShapeOptions::box_drop_occluders: a box's point nearer than the box along its beam by more than
+// this many sigmas of the range noise and the outline's model error lies in front of it.
+constexpr double kOccluderSigmas = 3.0;
+// ShapeOptions::box_size_from_faces_seen: a face shows its length where at least this many beams
+// fall across it (fewer cannot tell its length from where its corners lie between beams).
+constexpr double kFaceMinBeams = 3.0;
 
 // x^p for x >= 0: the common exponents by algebra (2: x x; 2.5: x x sqrt(x)), others by pow.
 double PowerOf(double x, double p) {
@@ -126,6 +133,87 @@ double TouchingLegsAlongRayVar(const ShapeOptions& o, const ObservationPart& fir
   // The farther leg's centre uniform within +-2 leg_radius_m along the ray (4 r^2 / 3), the
   // midpoint's a quarter of that.
   return o.leg_radius_m * o.leg_radius_m / 3.0;
+}
+
+std::size_t BoxUnoccludedPoints(const ShapeOptions& o, const Eigen::Vector2d& centre_m,
+                                const Eigen::Vector2d& size_m, double yaw_rad,
+                                std::span<const Eigen::Vector2d> points,
+                                std::span<Eigen::Vector2d> kept, Silhouette* silhouette,
+                                double extra_margin_m) {
+  const double c = std::cos(yaw_rad), s = std::sin(yaw_rad);
+  Eigen::Matrix2d to_box;
+  to_box << c, s, -s, c;  // R(yaw)^T
+  const Eigen::Vector2d origin = to_box * (-centre_m);  // the sensor in the box's frame
+  const std::size_t n = std::min(points.size(), kMaxSegmentPoints);
+  std::array<bool, kMaxSegmentPoints> in_front{};
+  std::array<double, kMaxSegmentPoints> margin{};
+  for (std::size_t i = 0; i < n; ++i) {
+    const Eigen::Vector2d& p = points[i];
+    const double range = p.norm();
+    const double noise = o.fit.point_sigma_m + o.fit.point_sigma_per_m * range;
+    margin[i] = kOccluderSigmas * std::hypot(noise, o.fit.model_sigma_m);
+    if (!(range > 0.0)) continue;
+    // Where the point's beam enters the box (slab test in the box's frame): a beam returns the
+    // first surface it meets, so a return nearer than that by more than the range noise is
+    // something standing in front of the box.
+    const Eigen::Vector2d dir = to_box * (p / range);
+    double enter = 0.0, leave = std::numeric_limits<double>::infinity();
+    for (int k = 0; k < 2; ++k) {
+      if (std::abs(dir(k)) < 1e-12) {
+        if (std::abs(origin(k)) > size_m(k)) leave = -1.0;
+        continue;
+      }
+      const double t0 = (-size_m(k) - origin(k)) / dir(k);
+      const double t1 = (size_m(k) - origin(k)) / dir(k);
+      enter = std::max(enter, std::min(t0, t1));
+      leave = std::min(leave, std::max(t0, t1));
+    }
+    in_front[i] = enter <= leave && range < enter - margin[i] - extra_margin_m;
+  }
+  // Something in front of the box is a surface of its own: where a run of such points meets the
+  // box's points, the range steps by more than the noise. A run that does not (a face turned
+  // from the box's expected one) is the box's after all.
+  for (std::size_t i = 0; i < n;) {
+    if (!in_front[i]) {
+      ++i;
+      continue;
+    }
+    std::size_t end = i;
+    while (end < n && in_front[end]) ++end;
+    const bool stepped_before = i > 0 && points[i - 1].norm() - points[i].norm() > margin[i - 1];
+    const bool stepped_after =
+        end < n && points[end].norm() - points[end - 1].norm() > margin[end];
+    if (!stepped_before && !stepped_after) {
+      for (std::size_t k = i; k < end; ++k) in_front[k] = false;
+    }
+    i = end;
+  }
+  std::size_t count = 0;
+  for (std::size_t i = 0; i < n; ++i) {
+    if (!in_front[i] && count < kept.size()) kept[count++] = points[i];
+  }
+  // The box's outline goes on behind an occluder at the segment's end: that end is not its
+  // silhouette.
+  if (n > 0 && in_front[0]) silhouette->first_valid = false;
+  if (n > 0 && in_front[n - 1]) silhouette->last_valid = false;
+  return count;
+}
+
+std::array<bool, 2> BoxFacesShown(const Eigen::Vector2d& centre_m, const Eigen::Vector2d& size_m,
+                                  double yaw_rad, double step_rad) {
+  const double range = centre_m.norm();
+  if (!(range > 0.0) || !(step_rad > 0.0)) return {true, true};
+  const Eigen::Vector2d e1(std::cos(yaw_rad), std::sin(yaw_rad)), e2(-e1.y(), e1.x());
+  const Eigen::Vector2d u = centre_m / range, w(-u.y(), u.x());
+  const Eigen::Vector2d sensor(-centre_m.dot(e1), -centre_m.dot(e2));  // in the box's frame
+  const double beam_m = range * step_rad;
+  // Semi-axis a is the half-length of the sides (normal e2), b of the ends (normal e1): a face
+  // shows it where it faces the sensor and kFaceMinBeams beams fall across it.
+  const bool a_shown = std::abs(sensor.y()) > size_m.y() &&
+                       2.0 * size_m.x() * std::abs(w.dot(e1)) >= kFaceMinBeams * beam_m;
+  const bool b_shown = std::abs(sensor.x()) > size_m.x() &&
+                       2.0 * size_m.y() * std::abs(w.dot(e2)) >= kFaceMinBeams * beam_m;
+  return {a_shown, b_shown};
 }
 
 }  // namespace internal
@@ -433,6 +521,8 @@ class TrackingPipeline::Refiner final : public MeasurementRefiner {
   std::uint64_t widened = 0;
   std::uint64_t stance_weighted = 0;
   std::uint64_t touching = 0;
+  std::uint64_t box_occluded = 0;
+  std::uint64_t box_unseen_sizes = 0;
 
   // How many of the observation's two outline ends are silhouettes (MakePart: not an occluder's
   // edge, not the field of view's end).
@@ -577,14 +667,52 @@ class TrackingPipeline::Refiner final : public MeasurementRefiner {
       }
     }
     const ObservationPart& part = ob.parts[0];
-    const std::span<const Eigen::Vector2d> points = ReliablePoints(part);
-    const ShapeFitResult fit = FitShape(points, part.silhouette, prior, o.fit);
+    std::span<const Eigen::Vector2d> points = ReliablePoints(part);
+    Silhouette silhouette = part.silhouette;
+    const bool occluders = shape.model == ShapeModel::kBox && o.box_drop_occluders;
+    bool occluded = false;
+    if (occluders && predicted != nullptr && predicted_cov != nullptr) {
+      // ShapeOptions::box_drop_occluders: first against the predicted box (its near face is what
+      // the track's measurements put there), widened by the prediction's sigma along the ray.
+      const Eigen::Vector2d c = predicted->head<2>();
+      const double range = c.norm();
+      const double along_var =
+          range > 0.0 ? (c / range).dot(predicted_cov->topLeftCorner<2, 2>() * (c / range)) : 0.0;
+      const std::size_t kept =
+          internal::BoxUnoccludedPoints(o, c, shape.size_m, prior.yaw_rad, points, kept_points_,
+                                        &silhouette, kOccluderSigmas * std::sqrt(along_var));
+      if (kept >= 2 && kept < points.size()) {
+        points = std::span<const Eigen::Vector2d>(kept_points_.data(), kept);
+        occluded = true;
+      } else {
+        silhouette = part.silhouette;
+      }
+    }
+    ShapeFitResult fit = FitShape(points, silhouette, prior, o.fit);
     CountEvaluations(fit);
     if (!fit.ok) {
       ++failed;
       return false;
     }
     ++fits;
+    if (occluders) {
+      // ... then against the fitted one: the points in front of it are another object's (its
+      // pusher); the box refitted without them, behind an occluder's edge there.
+      Silhouette refit_silhouette = silhouette;
+      const std::size_t kept = internal::BoxUnoccludedPoints(
+          o, fit.centre_m, fit.size_m, fit.yaw_rad, points, kept_points_, &refit_silhouette, 0.0);
+      if (kept >= 2 && kept < points.size()) {
+        const ShapeFitResult refit =
+            FitShape(std::span<const Eigen::Vector2d>(kept_points_.data(), kept),
+                     refit_silhouette, prior, o.fit);
+        CountEvaluations(refit);
+        if (refit.ok) {
+          fit = refit;
+          occluded = true;
+        }
+      }
+    }
+    if (occluded) ++box_occluded;
     m.position_m = fit.centre_m;
     m.covariance_m2 = fit.centre_cov_m2;
     m.orientation_rad = fit.yaw_rad;
@@ -603,7 +731,12 @@ class TrackingPipeline::Refiner final : public MeasurementRefiner {
     // be told apart into size and orientation. And only a share kSizeLearningShare of what the scan
     // says: model errors of successive scans are alike, not independent.
     if (prior.yaw_sigma_rad < kMaxLearningYawSigmaRad || shape.model == ShapeModel::kBox) {
-      LearnSize(size, size_cov, shape);
+      std::array<bool, 2> shown = {true, true};
+      if (shape.model == ShapeModel::kBox && o.box_size_from_faces_seen) {
+        shown = internal::BoxFacesShown(fit.centre_m, size, yaw, part.silhouette.step_rad);
+        if (!shown[0] || !shown[1]) ++box_unseen_sizes;
+      }
+      LearnSize(size, size_cov, shape, shown);
     }
     shape.yaw_rad = std::remainder(yaw, common::kPi);
     shape.yaw_sigma_rad = fit.yaw_sigma_rad;
@@ -875,14 +1008,21 @@ class TrackingPipeline::Refiner final : public MeasurementRefiner {
 
   // The track's size state after a fit whose posterior (prior: the state) is (size, size_cov):
   // the fit's information beyond the prior, scaled by kSizeLearningShare, added to the state.
+  // shown: per semi-axis whether the scan showed it (ShapeOptions::box_size_from_faces_seen);
+  // the information gained on one it did not show is not taken.
   static void LearnSize(const Eigen::Vector2d& size, const Eigen::Matrix2d& size_cov,
-                        TrackShape& shape) {
+                        TrackShape& shape, const std::array<bool, 2>& shown = {true, true}) {
     Eigen::Matrix2d prior_info, post_info;
     bool ok_prior = false, ok_post = false;
     shape.size_cov_m2.computeInverseWithCheck(prior_info, ok_prior, 1e-18);
     size_cov.computeInverseWithCheck(post_info, ok_post, 1e-18);
     if (!ok_prior || !ok_post) return;
-    const Eigen::Matrix2d gained = kSizeLearningShare * (post_info - prior_info);
+    Eigen::Matrix2d gained = kSizeLearningShare * (post_info - prior_info);
+    for (int k = 0; k < 2; ++k) {
+      if (shown[k]) continue;
+      gained.row(k).setZero();
+      gained.col(k).setZero();
+    }
     const Eigen::Matrix2d info = prior_info + gained;
     Eigen::Matrix2d cov;
     bool ok = false;
@@ -901,6 +1041,8 @@ class TrackingPipeline::Refiner final : public MeasurementRefiner {
 
   const TrackingPipeline& p_;
   std::span<std::uint64_t> evaluations_;
+  // ShapeOptions::box_drop_occluders: a box's points without those in front of it.
+  std::array<Eigen::Vector2d, kMaxSegmentPoints> kept_points_{};
 };
 
 TrackingPipeline::TrackingPipeline(const TrackerOptions& options)
@@ -1834,6 +1976,8 @@ const ScanTracks& TrackingPipeline::Process(const ScanView& scan, std::uint32_t 
   const std::uint64_t widened_before = refiner_->widened;
   const std::uint64_t stance_weighted_before = refiner_->stance_weighted;
   const std::uint64_t touching_before = refiner_->touching;
+  const std::uint64_t box_occluded_before = refiner_->box_occluded;
+  const std::uint64_t box_unseen_before = refiner_->box_unseen_sizes;
   scan_ = &scan;
   tracker_.Step(scan.stamp_ns, measurements_.span(), offsets_s_.span(),
                 shape_fit ? refiner_.get() : nullptr, tracks_);
@@ -1847,6 +1991,8 @@ const ScanTracks& TrackingPipeline::Process(const ScanView& scan, std::uint32_t 
   counters_.outline_departure_widened += refiner_->widened - widened_before;
   counters_.stance_weighted_pairs += refiner_->stance_weighted - stance_weighted_before;
   counters_.touching_leg_pairs += refiner_->touching - touching_before;
+  counters_.box_occluded_fits += refiner_->box_occluded - box_occluded_before;
+  counters_.box_sizes_unseen += refiner_->box_unseen_sizes - box_unseen_before;
   if (bg.scan_error == ScanError::kNone && bg.learned) {
     AbsorbStatic(scan);
     if (shape_fit) DropCoasting(scan);

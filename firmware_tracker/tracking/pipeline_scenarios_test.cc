@@ -1715,6 +1715,72 @@ TEST(PipelineScenarioTest, ForkliftAtFourMetresPerSecondNeedsTheLimitsRaised) {
       << walking_ids.size() << " ids, " << walking_matched << " matched, " << walking_error;
 }
 
+// ShapeOptions::box_drop_occluders: the points of a box's near end (x = 4.55, the box centred at
+// (5, 0), 0.9 x 0.6 m along x) are kept, a pusher's two legs 0.35 m in front of it are not, and
+// where the segment ends on them that silhouette end is no longer the box's.
+TEST(PipelineTest, BoxUnoccludedPointsLeavesOutWhatStandsInFrontOfTheBox) {
+  ShapeOptions o;
+  std::vector<Eigen::Vector2d> points;
+  for (int i = 0; i <= 12; ++i) points.emplace_back(4.55, -0.28 + 0.04 * i);  // the near end
+  points.emplace_back(4.2, 0.05);  // a leg in front of it, at the segment's last point
+  std::vector<Eigen::Vector2d> kept(points.size());
+  Silhouette silhouette;
+  silhouette.first_valid = silhouette.last_valid = true;
+  const std::size_t n = internal::BoxUnoccludedPoints(o, Eigen::Vector2d(5.0, 0.0),
+                                                      Eigen::Vector2d(0.45, 0.3), 0.0, points,
+                                                      kept, &silhouette);
+  EXPECT_EQ(n, 13u);
+  for (std::size_t i = 0; i < n; ++i) EXPECT_EQ(kept[i], points[i]);
+  EXPECT_TRUE(silhouette.first_valid);
+  EXPECT_FALSE(silhouette.last_valid);
+  // A leg in the middle of the face: dropped, both ends stay silhouettes.
+  points = {{4.55, -0.2}, {4.55, -0.1}, {4.2, 0.0}, {4.2, 0.04}, {4.55, 0.1}, {4.55, 0.2}};
+  silhouette.last_valid = true;
+  EXPECT_EQ(internal::BoxUnoccludedPoints(o, Eigen::Vector2d(5.0, 0.0), Eigen::Vector2d(0.45, 0.3),
+                                          0.0, points, kept, &silhouette),
+            4u);
+  EXPECT_EQ(kept[2], points[4]);
+  EXPECT_TRUE(silhouette.first_valid && silhouette.last_valid);
+  // Points in front of the box but continuous with its face (no range step where they meet it:
+  // a face turned from the box's expected one) are the box's.
+  points = {{4.55, -0.2}, {4.55, -0.1}, {4.5, 0.0}, {4.45, 0.1}, {4.4, 0.2}};
+  EXPECT_EQ(internal::BoxUnoccludedPoints(o, Eigen::Vector2d(5.0, 0.0), Eigen::Vector2d(0.45, 0.3),
+                                          0.0, points, kept, &silhouette),
+            5u);
+  // A leg whose one side meets the face through a mixed echo (no step there): still dropped.
+  points = {{4.55, -0.2}, {4.55, -0.1}, {4.5, -0.05}, {4.45, 0.0}, {4.2, 0.05}, {4.2, 0.1},
+            {4.55, 0.15}, {4.55, 0.2}};
+  EXPECT_EQ(internal::BoxUnoccludedPoints(o, Eigen::Vector2d(5.0, 0.0), Eigen::Vector2d(0.45, 0.3),
+                                          0.0, points, kept, &silhouette),
+            5u);
+  EXPECT_EQ(kept[2], points[2]);
+  EXPECT_EQ(kept[3], points[6]);
+  // A point 2 cm in front of the face is range noise (3 sigma at 4.5 m: 0.07 m): kept.
+  points = {{4.53, 0.0}};
+  EXPECT_EQ(internal::BoxUnoccludedPoints(o, Eigen::Vector2d(5.0, 0.0), Eigen::Vector2d(0.45, 0.3),
+                                          0.0, points, kept, &silhouette),
+            1u);
+}
+
+// ShapeOptions::box_size_from_faces_seen: a 0.9 x 0.6 m box at 5 m (0.5 deg beams) seen end-on
+// shows its half-width only, broadside its half-length only, at 45 deg both; a side seen at a
+// grazing angle, across fewer than three beams, shows nothing.
+TEST(PipelineTest, BoxFacesShownAreTheFacesTheSensorSees) {
+  const Eigen::Vector2d centre(5.0, 0.0), size(0.45, 0.3);
+  const double step = 0.5 * common::kPi / 180.0;  // 0.044 m between beams at 5 m
+  EXPECT_EQ(internal::BoxFacesShown(centre, size, 0.0, step), (std::array<bool, 2>{false, true}));
+  EXPECT_EQ(internal::BoxFacesShown(centre, size, common::kPi / 2, step),
+            (std::array<bool, 2>{true, false}));
+  EXPECT_EQ(internal::BoxFacesShown(centre, size, common::kPi / 4, step),
+            (std::array<bool, 2>{true, true}));
+  // Turned by 5 deg: the side's 0.9 m spans 0.08 m across the ray, under three beams (0.13 m).
+  EXPECT_EQ(internal::BoxFacesShown(centre, size, 5.0 * common::kPi / 180.0, step),
+            (std::array<bool, 2>{false, true}));
+  // Turned by 15 deg: 0.23 m, five beams.
+  EXPECT_EQ(internal::BoxFacesShown(centre, size, 15.0 * common::kPi / 180.0, step),
+            (std::array<bool, 2>{true, true}));
+}
+
 TEST(PipelineScenarioTest, CovarianceOfPeopleOfDifferentSizesMatchesTheirError) {
   // Four people of different builds crossing and turning in front of the sensor: the normalised
   // error squared (NEES, 2 dof) of measured confirmed tracks has a mean near 2. The synthetic

@@ -44,6 +44,7 @@
 //                       [--before-outline-departure] [--before-recent-veil]
 //                       [--before-single-precision-fit]
 //                       [--before-stance-weight] [--before-adopt] [--before-touching-legs]
+//                       [--before-box-occluders]
 //                       [--before-fusion-merge] [--before-report-sourceless]]
 //   (--extra: more scenario folders, e.g. held-out scenes, reported in their own section;
 //   --explain: per run on stderr, what became of an object's previous track at every id switch
@@ -108,6 +109,8 @@
 //   reported until its time is up, MultiTrackerOptions::adopt_successor_m = 0;
 //   --before-touching-legs: "before" measures two legs that touch in the scan with a pair's
 //   covariance, ShapeOptions::touching_legs_along_ray = false;
+//   --before-box-occluders: "before" fits a box (a cart) to every point of its segment, also to
+//   those in front of it (its pusher's), ShapeOptions::box_drop_occluders = false;
 //   --before-outline-departure: "before" reports an upper-body centre with the fixed allowances
 //   for the outline alone, not the departure its fit's residuals measure,
 //   ShapeOptions::outline_departure_gain = 0;
@@ -138,7 +141,6 @@
 #include <limits>
 #include <map>
 #include <memory>
-#include <mutex>
 #include <set>
 #include <string>
 #include <thread>
@@ -1047,6 +1049,9 @@ bool g_before_adopt = false;
 // --before-touching-legs: "before" measures two legs that touch in the scan with a pair's
 // covariance (ShapeOptions::touching_legs_along_ray = false).
 bool g_before_touching_legs = false;
+// --before-box-occluders: "before" fits a box to every point of its segment, also those in front
+// of it (ShapeOptions::box_drop_occluders = false).
+bool g_before_box_occluders = false;
 // --before-fusion-merge: "before"'s fusion without merging fused tracks left without sources and
 // reporting fused tracks no tracker holds any more (FusionOptions::merge_sourceless = false,
 // report_sourceless = true).
@@ -1098,7 +1103,8 @@ std::vector<Variant> Variants(sim::Mount mount, double range_m) {
              g_before_deep_legs || g_before_legs_seen_through || g_before_legs_report_coasting ||
              g_before_leg_edges || g_before_outline_departure || g_before_fusion_merge ||
              g_before_report_sourceless || g_before_recent_veil || g_before_single_precision_fit ||
-             g_before_stance_weight || g_before_adopt || g_before_touching_legs) {
+             g_before_stance_weight || g_before_adopt || g_before_touching_legs || {
+             g_before_box_occluders) {
     tracking::TrackerOptions before = fresh;
     if (g_before_one_leg) before.shape.hidden_leg_behind = false;
     if (g_before_mixed_pixels) before.shape.drop_mixed_pixel_legs = false;
@@ -1125,6 +1131,7 @@ std::vector<Variant> Variants(sim::Mount mount, double range_m) {
     if (g_before_stance_weight) before.shape.stance_leg_weight = 0.5;
     if (g_before_adopt) before.tracking.adopt_successor_m = 0.0;
     if (g_before_touching_legs) before.shape.touching_legs_along_ray = false;
+    if (g_before_box_occluders) before.shape.box_drop_occluders = false;
     variants.push_back({"before", before});
   }
   return variants;
@@ -2492,7 +2499,8 @@ std::string KneeHeightBefore() {
         g_before_legs_seen_through || g_before_legs_report_coasting || g_before_leg_edges ||
         g_before_outline_departure || g_before_fusion_merge || g_before_report_sourceless ||
         g_before_recent_veil || g_before_single_precision_fit || g_before_stance_weight ||
-        g_before_adopt || g_before_touching_legs) ||
+        g_before_adopt || g_before_touching_legs || ||
+        g_before_box_occluders) ||
       g_before_mixed_pixels || g_before_far || g_before_evidence_coasting ||
       g_before_report_rules) {
     return "";
@@ -2611,6 +2619,11 @@ std::string KneeHeightBefore() {
         "covariance, not the farther leg's cut arc's along the line of sight "
         "(`shape.touching_legs_along_ray` false)");
   }
+  if (g_before_box_occluders) {
+    without.push_back(
+        "fitting a box (a cart) to every point of its segment, also to those in front of it (its "
+        "pusher's) (`shape.box_drop_occluders` false)");
+  }
   std::string text = "\"before\": the new tracker" + std::string(without.empty() ? "" : " ");
   for (std::size_t i = 0; i < without.size(); ++i) {
     text += (i == 0 ? "" : i + 1 == without.size() ? " and " : ", ") + without[i];
@@ -2721,6 +2734,8 @@ int main(int argc, char** argv) {
       g_before_adopt = true;
     } else if (a == "--before-touching-legs") {
       g_before_touching_legs = true;
+    } else if (a == "--before-box-occluders") {
+      g_before_box_occluders = true;
     } else if (a == "--before-fusion-merge") {
       g_before_fusion_merge = true;
     } else if (a == "--before-report-sourceless") {
@@ -2740,7 +2755,8 @@ int main(int argc, char** argv) {
                    "[--before-legs-seen-through] [--before-legs-report-coasting] "
                    "[--before-leg-edges] [--before-outline-departure] [--before-recent-veil] "
                    "[--before-single-precision-fit] "
-                   "[--before-stance-weight] [--before-adopt] [--before-touching-legs] [--before-fusion-merge] "
+                   "[--before-stance-weight] [--before-adopt] [--before-touching-legs] "
+                   "[--before-box-occluders] [--before-fusion-merge] "
                    "[--before-report-sourceless]]\n");
       return 2;
     }
