@@ -1103,7 +1103,7 @@ std::vector<Variant> Variants(sim::Mount mount, double range_m) {
              g_before_deep_legs || g_before_legs_seen_through || g_before_legs_report_coasting ||
              g_before_leg_edges || g_before_outline_departure || g_before_fusion_merge ||
              g_before_report_sourceless || g_before_recent_veil || g_before_single_precision_fit ||
-             g_before_stance_weight || g_before_adopt || g_before_touching_legs || {
+             g_before_stance_weight || g_before_adopt || g_before_touching_legs ||
              g_before_box_occluders) {
     tracking::TrackerOptions before = fresh;
     if (g_before_one_leg) before.shape.hidden_leg_behind = false;
@@ -2499,7 +2499,7 @@ std::string KneeHeightBefore() {
         g_before_legs_seen_through || g_before_legs_report_coasting || g_before_leg_edges ||
         g_before_outline_departure || g_before_fusion_merge || g_before_report_sourceless ||
         g_before_recent_veil || g_before_single_precision_fit || g_before_stance_weight ||
-        g_before_adopt || g_before_touching_legs || ||
+        g_before_adopt || g_before_touching_legs ||
         g_before_box_occluders) ||
       g_before_mixed_pixels || g_before_far || g_before_evidence_coasting ||
       g_before_report_rules) {
