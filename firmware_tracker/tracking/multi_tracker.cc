@@ -606,7 +606,8 @@ void MultiTracker::AdoptSuccessors(common::UtcNs scan_start_ns) {
         }
         // Of the same kind (a trolley's track does not take over its pusher's).
         if (old.shape.shape != ObjectShape::kUnspecified &&
-            young.shape.shape != ObjectShape::kUnspecified && old.shape.shape != young.shape.shape) {
+            young.shape.shape != ObjectShape::kUnspecified &&
+            old.shape.shape != young.shape.shape) {
           continue;
         }
         // The coasting filter lives at the scan start (UpdateAssigned); the younger one's at its

@@ -62,9 +62,9 @@
 //     scan, in adopt_after_hits scans in all, whose first measurement came after the coasting
 //     track's last one, that the refiner did not take for another kind of object (TrackShape's
 //     shape: a trolley's track does not take over its pusher's) and that lies within
-//     adopt_successor_m of the coasting track's prediction (nearest pairs first): the coasting track takes the younger one's filter, shape and
-//     measurement, keeps its id and its confirmed and moved state, and the younger one is
-//     deleted (counted as adopted, not as a deletion).
+//     adopt_successor_m of the coasting track's prediction (nearest pairs first): the coasting
+//     track takes the younger one's filter, shape and measurement, keeps its id and its confirmed
+//     and moved state, and the younger one is deleted (counted as adopted, not as a deletion).
 //  6. Births. A measurement that was not assigned starts a tentative track unless it lies within
 //     the gate of an existing track or of a track born earlier in the same scan (a person split
 //     into two segments must not become two tracks). Births beyond max_tracks are dropped and

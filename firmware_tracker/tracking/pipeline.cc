@@ -142,7 +142,7 @@ std::size_t BoxUnoccludedPoints(const ShapeOptions& o, const Eigen::Vector2d& ce
                                 double extra_margin_m) {
   const double c = std::cos(yaw_rad), s = std::sin(yaw_rad);
   Eigen::Matrix2d to_box;
-  to_box << c, s, -s, c;  // R(yaw)^T
+  to_box << c, s, -s, c;                                // R(yaw)^T
   const Eigen::Vector2d origin = to_box * (-centre_m);  // the sensor in the box's frame
   const std::size_t n = std::min(points.size(), kMaxSegmentPoints);
   std::array<bool, kMaxSegmentPoints> in_front{};
@@ -181,8 +181,7 @@ std::size_t BoxUnoccludedPoints(const ShapeOptions& o, const Eigen::Vector2d& ce
     std::size_t end = i;
     while (end < n && in_front[end]) ++end;
     const bool stepped_before = i > 0 && points[i - 1].norm() - points[i].norm() > margin[i - 1];
-    const bool stepped_after =
-        end < n && points[end].norm() - points[end - 1].norm() > margin[end];
+    const bool stepped_after = end < n && points[end].norm() - points[end - 1].norm() > margin[end];
     if (!stepped_before && !stepped_after) {
       for (std::size_t k = i; k < end; ++k) in_front[k] = false;
     }
@@ -703,8 +702,8 @@ class TrackingPipeline::Refiner final : public MeasurementRefiner {
           o, fit.centre_m, fit.size_m, fit.yaw_rad, points, kept_points_, &refit_silhouette, 0.0);
       if (kept >= 2 && kept < points.size()) {
         const ShapeFitResult refit =
-            FitShape(std::span<const Eigen::Vector2d>(kept_points_.data(), kept),
-                     refit_silhouette, prior, o.fit);
+            FitShape(std::span<const Eigen::Vector2d>(kept_points_.data(), kept), refit_silhouette,
+                     prior, o.fit);
         CountEvaluations(refit);
         if (refit.ok) {
           fit = refit;

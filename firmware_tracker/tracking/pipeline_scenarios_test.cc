@@ -1726,9 +1726,8 @@ TEST(PipelineTest, BoxUnoccludedPointsLeavesOutWhatStandsInFrontOfTheBox) {
   std::vector<Eigen::Vector2d> kept(points.size());
   Silhouette silhouette;
   silhouette.first_valid = silhouette.last_valid = true;
-  const std::size_t n = internal::BoxUnoccludedPoints(o, Eigen::Vector2d(5.0, 0.0),
-                                                      Eigen::Vector2d(0.45, 0.3), 0.0, points,
-                                                      kept, &silhouette);
+  const std::size_t n = internal::BoxUnoccludedPoints(
+      o, Eigen::Vector2d(5.0, 0.0), Eigen::Vector2d(0.45, 0.3), 0.0, points, kept, &silhouette);
   EXPECT_EQ(n, 13u);
   for (std::size_t i = 0; i < n; ++i) EXPECT_EQ(kept[i], points[i]);
   EXPECT_TRUE(silhouette.first_valid);
@@ -1748,8 +1747,8 @@ TEST(PipelineTest, BoxUnoccludedPointsLeavesOutWhatStandsInFrontOfTheBox) {
                                           0.0, points, kept, &silhouette),
             5u);
   // A leg whose one side meets the face through a mixed echo (no step there): still dropped.
-  points = {{4.55, -0.2}, {4.55, -0.1}, {4.5, -0.05}, {4.45, 0.0}, {4.2, 0.05}, {4.2, 0.1},
-            {4.55, 0.15}, {4.55, 0.2}};
+  points = {{4.55, -0.2}, {4.55, -0.1}, {4.5, -0.05}, {4.45, 0.0},
+            {4.2, 0.05},  {4.2, 0.1},   {4.55, 0.15}, {4.55, 0.2}};
   EXPECT_EQ(internal::BoxUnoccludedPoints(o, Eigen::Vector2d(5.0, 0.0), Eigen::Vector2d(0.45, 0.3),
                                           0.0, points, kept, &silhouette),
             5u);

@@ -1714,9 +1714,11 @@ void RunSensor(const sim::Simulator& simulator, std::size_t sensor,
           for (std::size_t o = 0; o < hyps.size(); ++o) {
             held = held || (o != hi && sequences[v].matched_truth()[o] == nid);
           }
-          birth[v][hyps[hi].id] =
-              std::string(nd < 0.5 ? "on an object" : nd < 1.0 ? "0.5-1 m off" : nd < 1.5 ? "1-1.5 m off" : "far") +
-              (nd < 1.5 ? (held ? ", held by another" : ", untracked") : "");
+          birth[v][hyps[hi].id] = std::string(nd < 0.5   ? "on an object"
+                                              : nd < 1.0 ? "0.5-1 m off"
+                                              : nd < 1.5 ? "1-1.5 m off"
+                                                         : "far") +
+                                  (nd < 1.5 ? (held ? ", held by another" : ", untracked") : "");
         }
       }
       if (g_explain_coasting) {
@@ -1863,21 +1865,25 @@ void RunSensor(const sim::Simulator& simulator, std::size_t sensor,
           }
           bool reported = false;
           for (const Hypothesis& o : hyps) reported = reported || (at != nullptr && o.id == at->id);
-          const std::string holder = at == nullptr   ? "none at it"
+          const std::string holder = at == nullptr    ? "none at it"
                                      : !at->confirmed ? "a tentative track at it"
                                      : reported       ? "a reported track at it (unmatched?)"
                                                       : "a confirmed unreported track at it";
           const double dist = (h.p - obj->p).norm();
-          const std::string prefix = std::string(left ? "left" : "off") +
-                                     (h.measured ? " measured" : " coasting");
+          const std::string prefix =
+              std::string(left ? "left" : "off") + (h.measured ? " measured" : " coasting");
           auto& u = (*causes)[v].untracked;
           u[prefix + " | holder: " + holder] += 1;
           u[prefix + " | returns: " + CoastingCause(*pipelines[v], view, obj->p, h.p)] += 1;
           u[prefix + " | track-object " +
-            (dist < 0.7 ? "0.5-0.7 m" : dist < 1.0 ? "0.7-1 m" : dist < 1.5 ? "1-1.5 m" : ">= 1.5 m")] +=
-              1;
+            (dist < 0.7   ? "0.5-0.7 m"
+             : dist < 1.0 ? "0.7-1 m"
+             : dist < 1.5 ? "1-1.5 m"
+                          : ">= 1.5 m")] += 1;
           u[prefix + " | object speed " + (obj->v.norm() < 0.3 ? "< 0.3" : "walking") + ", range " +
-            (obj->p.norm() < 5 ? "< 5" : obj->p.norm() < 10 ? "5-10" : ">= 10")] += 1;
+            (obj->p.norm() < 5    ? "< 5"
+             : obj->p.norm() < 10 ? "5-10"
+                                  : ">= 10")] += 1;
           if (off) {
             const auto b = birth[v].find(h.id);
             if (b != birth[v].end()) u[prefix + " | first reported: " + b->second] += 1;
@@ -2499,8 +2505,7 @@ std::string KneeHeightBefore() {
         g_before_legs_seen_through || g_before_legs_report_coasting || g_before_leg_edges ||
         g_before_outline_departure || g_before_fusion_merge || g_before_report_sourceless ||
         g_before_recent_veil || g_before_single_precision_fit || g_before_stance_weight ||
-        g_before_adopt || g_before_touching_legs ||
-        g_before_box_occluders) ||
+        g_before_adopt || g_before_touching_legs || g_before_box_occluders) ||
       g_before_mixed_pixels || g_before_far || g_before_evidence_coasting ||
       g_before_report_rules) {
     return "";
