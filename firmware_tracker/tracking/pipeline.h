@@ -543,10 +543,10 @@ struct PipelineCounters {
   std::uint64_t split_few_point_legs = 0;       // 2-3 point segments split into two legs
   std::uint64_t stance_weighted_pairs = 0;      // two legs weighted to the standing leg
   std::uint64_t touching_leg_pairs = 0;         // touching legs widened along the ray
-  std::uint64_t box_occluded_fits =
-      0;  // box fits refitted without points in front (box_drop_occluders)
-  std::uint64_t box_sizes_unseen =
-      0;  // box fits showing a semi-axis not (box_size_from_faces_seen)
+  // Box fits refitted without the points in front of the box (box_drop_occluders).
+  std::uint64_t box_occluded_fits = 0;
+  // Box fits that did not show one of the semi-axes (box_size_from_faces_seen).
+  std::uint64_t box_sizes_unseen = 0;
   std::uint64_t deep_leg_pairs = 0;    // deep 2-3 point legs measured as a pair (deep_legs_as_pair)
   std::uint64_t veiled_segments = 0;   // legs: mixed pixels (beside a nearer edge, deep), dropped
   std::uint64_t deep_pieces_kept = 0;  // legs: deep pieces with no surface behind, kept
