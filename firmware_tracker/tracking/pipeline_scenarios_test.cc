@@ -1423,22 +1423,29 @@ TEST(PipelineScenarioTest, OneLegSideIsNotTakenFromTheViewBeyondALegsFootprint) 
 struct StandingFar : ConfirmedError {
   std::uint64_t splits = 0;
 };
+// A person at knee height in a 17 x 14 m room walking from `from_m` (once the background is learned)
+// to `to_m` in 2 s and standing there for 3 s; the stop at kWalkAndStandStopS.
+constexpr double kWalkAndStandStopS = kLearnedS + 2.0;
+SceneRun WalkAndStandAtKneeHeight(const Eigen::Vector2d& from_m, const Eigen::Vector2d& to_m,
+                                  const TrackerOptions& options) {
+  Scene scene;
+  scene.legs = true;
+  scene.walls = {{{15.0, -7.0}, {15.0, 7.0}},
+                 {{-2.0, 7.0}, {15.0, 7.0}},
+                 {{-2.0, -7.0}, {15.0, -7.0}},
+                 {{-2.0, 7.0}, {-2.0, -7.0}}};
+  const double stop_s = kWalkAndStandStopS;
+  scene.walkers = {Walker({{kLearnedS, from_m}, {stop_s, to_m}, {stop_s + 3.0, to_m}})};
+  return Simulate(scene, stop_s + 3.0, options);
+}
+
 StandingFar StandFarAtKneeHeight(bool split) {
   StandingFar out;
   for (const double y : {0.0, 0.02, 0.04, 0.06, 0.08}) {
-    Scene scene;
-    scene.legs = true;
-    scene.walls = {{{15.0, -7.0}, {15.0, 7.0}},
-                   {{-2.0, 7.0}, {15.0, 7.0}},
-                   {{-2.0, -7.0}, {15.0, -7.0}},
-                   {{-2.0, 7.0}, {-2.0, -7.0}}};
-    const double stop_s = kLearnedS + 2.0;
-    scene.walkers = {
-        Walker({{kLearnedS, {9.0, y}}, {stop_s, {11.0, y}}, {stop_s + 3.0, {11.0, y}}})};
     TrackerOptions options = LegsOptions();
     options.shape.split_few_point_legs = split;
-    const SceneRun run = Simulate(scene, stop_s + 3.0, options);
-    out.Add(run, stop_s + 0.5, 0.4);
+    const SceneRun run = WalkAndStandAtKneeHeight({9.0, y}, {11.0, y}, options);
+    out.Add(run, kWalkAndStandStopS + 0.5, 0.4);
     out.splits += run.pipeline->counters().split_few_point_legs;
   }
   out.Mean();
@@ -1558,19 +1565,10 @@ StandingTouching StandWithTouchingLegs(bool along_ray) {
   StandingTouching out;
   for (const double y : {0.0, 0.02, 0.04}) {
     for (const double x : {8.0, 9.0}) {
-      Scene scene;
-      scene.legs = true;
-      scene.walls = {{{15.0, -7.0}, {15.0, 7.0}},
-                     {{-2.0, 7.0}, {15.0, 7.0}},
-                     {{-2.0, -7.0}, {15.0, -7.0}},
-                     {{-2.0, 7.0}, {-2.0, -7.0}}};
-      const double stop_s = kLearnedS + 2.0;
-      scene.walkers = {
-          Walker({{kLearnedS, {x + 2.5, y}}, {stop_s, {x, y}}, {stop_s + 3.0, {x, y}}})};
       TrackerOptions options = LegsOptions();
       options.shape.touching_legs_along_ray = along_ray;
-      const SceneRun run = Simulate(scene, stop_s + 3.0, options);
-      out.Add(run, stop_s + 0.5, 0.4);
+      const SceneRun run = WalkAndStandAtKneeHeight({x + 2.5, y}, {x, y}, options);
+      out.Add(run, kWalkAndStandStopS + 0.5, 0.4);
       out.touching += run.pipeline->counters().touching_leg_pairs;
     }
   }
