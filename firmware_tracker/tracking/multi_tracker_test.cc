@@ -636,6 +636,19 @@ struct StartResult {
   double max_error_m = 0.0;  // of the reported track nearest the truth, while walking
   std::uint64_t recovered = 0;
 };
+
+// The distance from p to the nearest reported track (infinity without one); every reported id
+// added to ids.
+double NearestReport(const ScanTracks& out, const Eigen::Vector2d& p,
+                     std::set<std::uint32_t>* ids) {
+  double nearest = std::numeric_limits<double>::infinity();
+  for (const TrackReport& t : out.tracks) {
+    ids->insert(t.track_id);
+    nearest = std::min(nearest, (Eigen::Vector2d(t.x_m, t.y_m) - p).norm());
+  }
+  return nearest;
+}
+
 StartResult StandThenWalk(const MultiTrackerOptions& o) {
   MultiTracker tracker(o);
   ScanTracks out;
@@ -648,11 +661,7 @@ StartResult StandThenWalk(const MultiTrackerOptions& o) {
     const double nx = 0.02 * std::sin(1.7 * static_cast<double>(k));
     const double ny = 0.02 * std::cos(2.3 * static_cast<double>(k));
     tracker.Step(ScanNs(k), std::vector<Measurement>{Meas(p.x() + nx, p.y() + ny, 0.02)}, out);
-    double nearest = std::numeric_limits<double>::infinity();
-    for (const TrackReport& t : out.tracks) {
-      r.ids.insert(t.track_id);
-      nearest = std::min(nearest, (Eigen::Vector2d(t.x_m, t.y_m) - p).norm());
-    }
+    const double nearest = NearestReport(out, p, &r.ids);
     if (k >= 50) r.max_error_m = std::max(r.max_error_m, nearest);
   }
   r.recovered = tracker.counters().recovered;
@@ -903,11 +912,7 @@ SidestepResult Sidestep(const MultiTrackerOptions& o) {
     const Eigen::Vector2d p(4.0 + (k >= 50 ? 0.6 : 0.0), 1.2 * 0.04 * static_cast<double>(k));
     tracker.Step(ScanNs(k), std::vector<Measurement>{Meas(p.x(), p.y(), 0.02)}, out);
     r.max_reports = std::max(r.max_reports, out.tracks.size());
-    double nearest = std::numeric_limits<double>::infinity();
-    for (const TrackReport& t : out.tracks) {
-      r.ids.insert(t.track_id);
-      nearest = std::min(nearest, (Eigen::Vector2d(t.x_m, t.y_m) - p).norm());
-    }
+    const double nearest = NearestReport(out, p, &r.ids);
     if (k >= 52) r.max_error_after_m = std::max(r.max_error_after_m, nearest);
   }
   r.adopted = tracker.counters().adopted;
