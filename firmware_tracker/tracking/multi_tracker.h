@@ -59,9 +59,9 @@
 //     returned by a single beam) is a candidate for confirmed tracks only (steps 3 and 3b) and
 //     starts or resumes no track (step 6).
 //  5b. Successors: a confirmed track that coasts in this scan takes over a track measured in this
-//     scan, in adopt_after_hits scans in all, whose first measurement came after the coasting
-//     track's last one, that the refiner did not take for another kind of object (TrackShape's
-//     shape: a trolley's track does not take over its pusher's) and that lies within
+//     scan, in adopt_after_hits of its last 32 scans, whose first measurement came after the
+//     coasting track's last one, that the refiner did not take for another kind of object
+//     (TrackShape's shape: a trolley's track does not take over its pusher's) and that lies within
 //     adopt_successor_m of the coasting track's prediction (nearest pairs first): the coasting
 //     track takes the younger one's filter, shape and measurement, keeps its id and its confirmed
 //     and moved state, and the younger one is deleted (counted as adopted, not as a deletion).

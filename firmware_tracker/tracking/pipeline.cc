@@ -215,6 +215,43 @@ std::array<bool, 2> BoxFacesShown(const Eigen::Vector2d& centre_m, const Eigen::
   return {a_shown, b_shown};
 }
 
+void LearnSize(const Eigen::Vector2d& size, const Eigen::Matrix2d& size_cov, double share,
+               const std::array<bool, 2>& shown, TrackShape& shape) {
+  Eigen::Matrix2d prior_info, post_info;
+  bool ok_prior = false, ok_post = false;
+  shape.size_cov_m2.computeInverseWithCheck(prior_info, ok_prior, 1e-18);
+  size_cov.computeInverseWithCheck(post_info, ok_post, 1e-18);
+  if (!ok_prior || !ok_post) return;
+  Eigen::Matrix2d gained = share * (post_info - prior_info);
+  for (int k = 0; k < 2; ++k) {
+    if (shown[k]) continue;
+    gained.row(k).setZero();
+    gained.col(k).setZero();
+  }
+  const Eigen::Matrix2d info = prior_info + gained;
+  Eigen::Matrix2d cov;
+  bool ok = false;
+  info.computeInverseWithCheck(cov, ok, 1e-18);
+  if (!ok || !cov.allFinite()) return;
+  Eigen::Vector2d mean;
+  if (shown[0] && shown[1]) {
+    mean =
+        cov * (prior_info * shape.size_m + share * (post_info * size - prior_info * shape.size_m));
+  } else {
+    // The same mean in innovation form, state + cov share post_info (size - state), with the
+    // pull on a semi-axis the scan did not show taken away: no information on it, no move of it
+    // (the information form would still move it by the fit's own prior share).
+    Eigen::Vector2d pull = share * post_info * (size - shape.size_m);
+    for (int k = 0; k < 2; ++k) {
+      if (!shown[k]) pull(k) = 0.0;
+    }
+    mean = shape.size_m + cov * pull;
+  }
+  if (!mean.allFinite() || !(mean.minCoeff() > 0.0)) return;
+  shape.size_m = mean;
+  shape.size_cov_m2 = 0.5 * (cov + cov.transpose());
+}
+
 }  // namespace internal
 
 namespace {
@@ -680,7 +717,7 @@ class TrackingPipeline::Refiner final : public MeasurementRefiner {
       const std::size_t kept =
           internal::BoxUnoccludedPoints(o, c, shape.size_m, prior.yaw_rad, points, kept_points_,
                                         &silhouette, kOccluderSigmas * std::sqrt(along_var));
-      if (kept >= 2 && kept < points.size()) {
+      if (kept >= 2 && kept < std::min(points.size(), kMaxSegmentPoints)) {
         points = std::span<const Eigen::Vector2d>(kept_points_.data(), kept);
         occluded = true;
       } else {
@@ -700,7 +737,7 @@ class TrackingPipeline::Refiner final : public MeasurementRefiner {
       Silhouette refit_silhouette = silhouette;
       const std::size_t kept = internal::BoxUnoccludedPoints(
           o, fit.centre_m, fit.size_m, fit.yaw_rad, points, kept_points_, &refit_silhouette, 0.0);
-      if (kept >= 2 && kept < points.size()) {
+      if (kept >= 2 && kept < std::min(points.size(), kMaxSegmentPoints)) {
         const ShapeFitResult refit =
             FitShape(std::span<const Eigen::Vector2d>(kept_points_.data(), kept), refit_silhouette,
                      prior, o.fit);
@@ -1005,34 +1042,9 @@ class TrackingPipeline::Refiner final : public MeasurementRefiner {
     return left_open ? -1 : 1;
   }
 
-  // The track's size state after a fit whose posterior (prior: the state) is (size, size_cov):
-  // the fit's information beyond the prior, scaled by kSizeLearningShare, added to the state.
-  // shown: per semi-axis whether the scan showed it (ShapeOptions::box_size_from_faces_seen);
-  // the information gained on one it did not show is not taken.
   static void LearnSize(const Eigen::Vector2d& size, const Eigen::Matrix2d& size_cov,
                         TrackShape& shape, const std::array<bool, 2>& shown = {true, true}) {
-    Eigen::Matrix2d prior_info, post_info;
-    bool ok_prior = false, ok_post = false;
-    shape.size_cov_m2.computeInverseWithCheck(prior_info, ok_prior, 1e-18);
-    size_cov.computeInverseWithCheck(post_info, ok_post, 1e-18);
-    if (!ok_prior || !ok_post) return;
-    Eigen::Matrix2d gained = kSizeLearningShare * (post_info - prior_info);
-    for (int k = 0; k < 2; ++k) {
-      if (shown[k]) continue;
-      gained.row(k).setZero();
-      gained.col(k).setZero();
-    }
-    const Eigen::Matrix2d info = prior_info + gained;
-    Eigen::Matrix2d cov;
-    bool ok = false;
-    info.computeInverseWithCheck(cov, ok, 1e-18);
-    if (!ok || !cov.allFinite()) return;
-    const Eigen::Vector2d mean =
-        cov * (prior_info * shape.size_m +
-               kSizeLearningShare * (post_info * size - prior_info * shape.size_m));
-    if (!mean.allFinite() || !(mean.minCoeff() > 0.0)) return;
-    shape.size_m = mean;
-    shape.size_cov_m2 = 0.5 * (cov + cov.transpose());
+    internal::LearnSize(size, size_cov, kSizeLearningShare, shown, shape);
   }
 
   // Updates that carried flatness evidence (kept in the state's spare counter: updates counts all).

@@ -543,9 +543,10 @@ struct PipelineCounters {
   std::uint64_t split_few_point_legs = 0;       // 2-3 point segments split into two legs
   std::uint64_t stance_weighted_pairs = 0;      // two legs weighted to the standing leg
   std::uint64_t touching_leg_pairs = 0;         // touching legs widened along the ray
-  // Box fits refitted without the points in front of the box (box_drop_occluders).
+  // Box refinements refitted without the points in front of the box (box_drop_occluders; counted
+  // per refinement, also of candidates the tracker then does not take).
   std::uint64_t box_occluded_fits = 0;
-  // Box fits that did not show one of the semi-axes (box_size_from_faces_seen).
+  // Box refinements that did not show one of the semi-axes (box_size_from_faces_seen).
   std::uint64_t box_sizes_unseen = 0;
   std::uint64_t deep_leg_pairs = 0;    // deep 2-3 point legs measured as a pair (deep_legs_as_pair)
   std::uint64_t veiled_segments = 0;   // legs: mixed pixels (beside a nearer edge, deep), dropped
@@ -617,9 +618,11 @@ class TrackingPipeline {
   std::span<const Measurement> measurements() const { return measurements_.span(); }
   std::span<const double> measurement_offsets_s() const { return offsets_s_.span(); }
   std::size_t last_segment_count() const { return segments_.segments.size(); }
-  // Of the last scan's observation `observation` (shape fit): the covariance of the measurement
-  // last refined from it, and the fitted radius and centre of its leg `part` (knee height; 0 where
-  // none).
+  // Diagnostics of observation `observation` (shape fit): the covariance of the measurement last
+  // refined from it, and the fitted radius and centre of its leg `part` (knee height; 0 where
+  // none). Written when an observation is refined and not cleared between scans: valid for the
+  // last scan's observations that were refined in it (each measured one was), an earlier scan's
+  // values for the others.
   Eigen::Matrix2d RefinedCovariance(std::size_t observation) const;
   double LegRadius(std::size_t observation, std::size_t part) const;
   Eigen::Vector2d LegCentre(std::size_t observation, std::size_t part) const;
@@ -725,6 +728,14 @@ std::size_t BoxUnoccludedPoints(const ShapeOptions& o, const Eigen::Vector2d& ce
 // half-width b (an end faces it, likewise). Both true where the range or the step is not positive.
 std::array<bool, 2> BoxFacesShown(const Eigen::Vector2d& centre_m, const Eigen::Vector2d& size_m,
                                   double yaw_rad, double step_rad);
+
+// A track's size state after a fit whose posterior (prior: the state) is (size, size_cov): the
+// fit's information beyond the prior, scaled by share, added to the state (information form).
+// shown: per semi-axis whether the scan showed it (ShapeOptions::box_size_from_faces_seen): on one
+// it did not show, neither the information gained nor the pull of the fit's size is taken, so its
+// mean and variance stay. Unchanged where either covariance is singular or the mean not positive.
+void LearnSize(const Eigen::Vector2d& size, const Eigen::Matrix2d& size_cov, double share,
+               const std::array<bool, 2>& shown, TrackShape& shape);
 
 // ShapeOptions::single_leg_side_uncertainty. A leg stands hip_m to one side of the body centre or
 // the other across the walk; the predicted centre lies offset_m from it there, with variance s2_m2

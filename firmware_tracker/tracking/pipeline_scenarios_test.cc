@@ -1423,8 +1423,9 @@ TEST(PipelineScenarioTest, OneLegSideIsNotTakenFromTheViewBeyondALegsFootprint) 
 struct StandingFar : ConfirmedError {
   std::uint64_t splits = 0;
 };
-// A person at knee height in a 17 x 14 m room walking from `from_m` (once the background is learned)
-// to `to_m` in 2 s and standing there for 3 s; the stop at kWalkAndStandStopS.
+
+// A person at knee height in a 17 x 14 m room walking from `from_m` (once the background is
+// learned) to `to_m` in 2 s and standing there for 3 s; the stop at kWalkAndStandStopS.
 constexpr double kWalkAndStandStopS = kLearnedS + 2.0;
 SceneRun WalkAndStandAtKneeHeight(const Eigen::Vector2d& from_m, const Eigen::Vector2d& to_m,
                                   const TrackerOptions& options) {
@@ -1776,6 +1777,38 @@ TEST(PipelineTest, BoxFacesShownAreTheFacesTheSensorSees) {
   // Turned by 15 deg: 0.23 m, five beams.
   EXPECT_EQ(internal::BoxFacesShown(centre, size, 15.0 * common::kPi / 180.0, step),
             (std::array<bool, 2>{true, true}));
+}
+
+// A box's size state 0.4 x 0.3 m (sigma 0.1 m each) and a fit whose posterior says 0.5 x 0.3 m
+// (sigma 0.05 m each), share 0.25: per axis the information 100 + 0.25 (400 - 100) = 175, the
+// variance 1 / 175, the mean (100 0.4 + 0.25 (400 0.5 - 100 0.4)) / 175 = 0.45714 m. A semi-axis
+// the scan did not show keeps its mean and variance, also where the fit agrees with the state.
+TEST(PipelineTest, LearnSizeTakesNothingOnASemiAxisTheScanDidNotShow) {
+  const Eigen::Matrix2d state_cov = 0.01 * Eigen::Matrix2d::Identity();
+  const Eigen::Matrix2d fit_cov = 0.0025 * Eigen::Matrix2d::Identity();
+  TrackShape shape;
+  shape.size_m = {0.4, 0.3};
+  shape.size_cov_m2 = state_cov;
+  internal::LearnSize({0.5, 0.3}, fit_cov, 0.25, {true, true}, shape);
+  EXPECT_NEAR(shape.size_m.x(), 0.32 / 0.7, 1e-12);
+  EXPECT_NEAR(shape.size_m.y(), 0.3, 1e-12);
+  EXPECT_NEAR(shape.size_cov_m2(0, 0), 1.0 / 175.0, 1e-12);
+  EXPECT_NEAR(shape.size_cov_m2(1, 1), 1.0 / 175.0, 1e-12);
+  // The half-length not shown (an end-on view): it stays, the half-width learns as before.
+  shape.size_m = {0.4, 0.3};
+  shape.size_cov_m2 = state_cov;
+  internal::LearnSize({0.5, 0.35}, fit_cov, 0.25, {false, true}, shape);
+  EXPECT_DOUBLE_EQ(shape.size_m.x(), 0.4);
+  EXPECT_DOUBLE_EQ(shape.size_cov_m2(0, 0), 0.01);
+  EXPECT_NEAR(shape.size_m.y(), (100.0 * 0.3 + 0.25 * (400.0 * 0.35 - 100.0 * 0.3)) / 175.0, 1e-12);
+  EXPECT_NEAR(shape.size_cov_m2(1, 1), 1.0 / 175.0, 1e-12);
+  // The fit agreeing with the state on the axis not shown moves it neither.
+  shape.size_m = {0.4, 0.3};
+  shape.size_cov_m2 = state_cov;
+  for (int i = 0; i < 100; ++i)
+    internal::LearnSize({0.4, 0.3}, fit_cov, 0.25, {false, true}, shape);
+  EXPECT_DOUBLE_EQ(shape.size_m.x(), 0.4);
+  EXPECT_DOUBLE_EQ(shape.size_cov_m2(0, 0), 0.01);
 }
 
 TEST(PipelineScenarioTest, CovarianceOfPeopleOfDifferentSizesMatchesTheirError) {
