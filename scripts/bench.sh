@@ -17,7 +17,7 @@ mkdir -p results
 "$build_dir/tests/bench/tracking_benchmark" --scenarios tools/scenarios --jobs 2 --breakdown --explain \
   --before-one-leg --before-confirm-time --before-whole-person --before-box-size --before-single-beam \
   --before-deep-pieces --before-deep-evidence --before-isotropic-bias --before-across-walk \
-  --before-side-uncertainty --before-side-from-view \
+  --before-side-uncertainty --before-side-from-view --before-lone-leg-standing \
   --before-few-point-legs --before-deep-legs --before-legs-seen-through --before-legs-report-coasting \
   --before-leg-edges --before-outline-departure --before-recent-veil --before-stance-weight \
   --before-box-occluders \

@@ -273,6 +273,17 @@ void VisitShape(tracking::ShapeOptions& o, ConfigVisitor& v) {
           "of the sensor; against a prediction sure of the other side (weight at least 0.95) the "
           "scan's side is taken with the other side's whole share (false: the side from the "
           "prediction alone).");
+  v.Field("single_leg_from_standing", o.single_leg_from_standing,
+          "mount legs: with single_leg_across_walk, where the track's last two-leg measurement "
+          "(at most standing_leg_memory_s ago) told which leg stood and the leg seen now is the "
+          "other one (by its side across the walk), the centre along the walk is taken from the "
+          "two: the hidden standing leg's knee carried forward by half the body's displacement "
+          "since, weighted by stance_leg_weight against the seen leg, its variance growing with "
+          "the time since (false: along the walk anywhere within the legs' reach).");
+  v.Field("standing_leg_memory_s", o.standing_leg_memory_s,
+          "mount legs: with single_leg_from_standing, the leg that stood at the track's last "
+          "two-leg measurement counts as still standing for at most this long (the rest of a "
+          "stance).");
   v.Field("leg_edge_in_mixed_beam", o.leg_edge_in_mixed_beam,
           "mount legs: where the beam beyond a leg's edge returned from between the leg and what "
           "the beam after it sees (each farther by three sigma of the range noise), a mixed echo "

@@ -152,6 +152,7 @@ INSTANTIATE_TEST_SUITE_P(
         BadCase{"measurement:\n  kind: blob\n", "one of: center_of_mass, ellipse"},
         BadCase{"background:\n  learn_duration_s: -1\n", "background."},
         BadCase{"shape:\n  stance_leg_weight: 0.4\n", "shape.stance_leg_weight"},
+        BadCase{"shape:\n  standing_leg_memory_s: -0.1\n", "shape.standing_leg_memory_s"},
         BadCase{"publish:\n  frame_every_n_scans: 0\n", "publish.frame_every_n_scans"},
         BadCase{"clock:\n  max_error_s: 0\n", "clock.max_error_s"},
         BadCase{"link:\n  backoff_jitter: 1.5\n", "link"}));

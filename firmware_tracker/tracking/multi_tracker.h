@@ -295,6 +295,9 @@ struct TrackShape {
   std::array<Eigen::Vector2d, 2> legs_m{Eigen::Vector2d::Zero(), Eigen::Vector2d::Zero()};
   std::array<double, 2> legs_var_m2{};
   common::UtcNs legs_ns = 0;
+  // Which of legs_m stood then (-1: not known at least half sure; ShapeOptions::
+  // single_leg_from_standing).
+  int legs_standing = -1;
 };
 
 // Replaces an associated measurement with one made with what its track knows (the pipeline's shape

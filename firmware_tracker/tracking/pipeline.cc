@@ -114,6 +114,27 @@ StanceCentre StanceWeightedCentre(const ShapeOptions& o, const Eigen::Vector2d& 
   return out;
 }
 
+Eigen::Vector2d LoneLegCentreFromStanding(const ShapeOptions& o, const Eigen::Vector2d& forward,
+                                          const Eigen::Vector2d& velocity_mps,
+                                          const Eigen::Vector2d& leg_m, double leg_var_m2,
+                                          const Eigen::Vector2d& standing_m,
+                                          double standing_var_m2, double dt_s,
+                                          double* along_var_m2) {
+  // The standing knee, about halfway between the planted foot and the hip, moves at about half
+  // the body's speed: carried forward by half the displacement since it was seen, known to half.
+  const Eigen::Vector2d displacement = velocity_mps * std::max(0.0, dt_s);
+  const Eigen::Vector2d standing_now = standing_m + 0.5 * displacement;
+  const double carried = 0.25 * displacement.norm();
+  const double w = o.stance_leg_weight;
+  // As for two seen legs (stance_leg_weight): w on the standing leg, 1 - w on the swinging one.
+  const double along = (w * standing_now + (1.0 - w) * leg_m).dot(forward);
+  if (along_var_m2 != nullptr) {
+    *along_var_m2 = w * w * (standing_var_m2 + carried * carried) +
+                    (1.0 - w) * (1.0 - w) * leg_var_m2 + o.gait_sigma_m * o.gait_sigma_m;
+  }
+  return leg_m + (along - leg_m.dot(forward)) * forward;
+}
+
 double DeepLegExcessDepth(const ShapeOptions& o, std::span<const Eigen::Vector2d> pts) {
   if (pts.size() < 2) return 0.0;
   double nearest = std::numeric_limits<double>::infinity(), farthest = 0.0;
@@ -371,6 +392,9 @@ std::optional<std::string> Validate(const ShapeOptions& o) {
   if (!(std::isfinite(o.stance_memory_s) && o.stance_memory_s >= 0.0)) {
     return "stance_memory_s must be >= 0";
   }
+  if (!(std::isfinite(o.standing_leg_memory_s) && o.standing_leg_memory_s >= 0.0)) {
+    return "standing_leg_memory_s must be >= 0";
+  }
   if (!Positive(o.walking_speed_mps)) return "walking_speed_mps must be > 0";
   if (!Positive(o.walking_yaw_sigma_rad)) return "walking_yaw_sigma_rad must be > 0";
   if (!(std::isfinite(o.yaw_drift_rad_per_s) && o.yaw_drift_rad_per_s >= 0.0)) {
@@ -554,6 +578,7 @@ class TrackingPipeline::Refiner final : public MeasurementRefiner {
   std::uint64_t side_uncertain = 0;
   std::uint64_t side_from_view = 0;
   std::uint64_t view_contested = 0;
+  std::uint64_t along_from_standing = 0;
   std::uint64_t widened = 0;
   std::uint64_t stance_weighted = 0;
   std::uint64_t touching = 0;
@@ -838,6 +863,12 @@ class TrackingPipeline::Refiner final : public MeasurementRefiner {
                                                 predicted->tail<2>().norm() * dt_s);
         if (centre.standing >= 0) ++stance_weighted;
       }
+      // ShapeOptions::single_leg_from_standing: the standing leg, where at least half sure.
+      shape.legs_standing = -1;
+      if (centre.standing >= 0 && o.stance_leg_weight > 0.5 &&
+          centre.weight - 0.5 >= 0.5 * (o.stance_leg_weight - 0.5)) {
+        shape.legs_standing = centre.standing;
+      }
       shape.legs_m = now;
       shape.legs_var_m2 = now_var;
       shape.legs_ns = at_ns;
@@ -909,6 +940,32 @@ class TrackingPipeline::Refiner final : public MeasurementRefiner {
         }
         m.covariance_m2 = legs[0].centre_cov_m2 + reach * reach * forward * forward.transpose() +
                           across2 * left * left.transpose();
+        // ShapeOptions::single_leg_from_standing: the hidden leg stood at the last two-leg
+        // measurement and stands still; the seen one is the other (its side across the walk).
+        const double since_s = common::NsToSeconds(at_ns - shape.legs_ns);
+        if (o.single_leg_from_standing && shape.legs_ns != 0 && shape.legs_standing >= 0 &&
+            since_s > 0.0 && since_s <= o.standing_leg_memory_s) {
+          // The seen leg lies opposite the centre: the remembered leg farther against `left`.
+          const int seen = shape.legs_m[0].dot(left) < shape.legs_m[1].dot(left) ? 0 : 1;
+          if (seen != shape.legs_standing) {
+            const Eigen::Vector2d v = predicted->tail<2>();
+            const Eigen::Vector2d walk = v / v.norm();
+            double along2 = 0.0;
+            const Eigen::Vector2d centre = internal::LoneLegCentreFromStanding(
+                o, walk, v, legs[0].centre_m, 0.0, shape.legs_m[shape.legs_standing],
+                shape.legs_var_m2[shape.legs_standing], since_s, &along2);
+            m.position_m += (centre - legs[0].centre_m).dot(walk) * walk;
+            // The seen leg's fit enters along the walk with 1 - stance_leg_weight, across it
+            // whole.
+            const Eigen::Vector2d side_of_walk(-walk.y(), walk.x());
+            const Eigen::Matrix2d j = (1.0 - o.stance_leg_weight) * walk * walk.transpose() +
+                                      side_of_walk * side_of_walk.transpose();
+            m.covariance_m2 = j * legs[0].centre_cov_m2 * j.transpose() +
+                              along2 * walk * walk.transpose() +
+                              across2 * left * left.transpose();
+            ++along_from_standing;
+          }
+        }
         ++across_walk;
       } else {
         // One leg: the body centre lies beside it (the hip) and ahead or behind (the stride).
@@ -1984,6 +2041,7 @@ const ScanTracks& TrackingPipeline::Process(const ScanView& scan, std::uint32_t 
   const std::uint64_t side_uncertain_before = refiner_->side_uncertain;
   const std::uint64_t side_from_view_before = refiner_->side_from_view;
   const std::uint64_t view_contested_before = refiner_->view_contested;
+  const std::uint64_t along_from_standing_before = refiner_->along_from_standing;
   const std::uint64_t widened_before = refiner_->widened;
   const std::uint64_t stance_weighted_before = refiner_->stance_weighted;
   const std::uint64_t touching_before = refiner_->touching;
@@ -1999,6 +2057,7 @@ const ScanTracks& TrackingPipeline::Process(const ScanView& scan, std::uint32_t 
   counters_.legs_side_uncertain += refiner_->side_uncertain - side_uncertain_before;
   counters_.legs_side_from_view += refiner_->side_from_view - side_from_view_before;
   counters_.legs_side_view_contested += refiner_->view_contested - view_contested_before;
+  counters_.legs_along_from_standing += refiner_->along_from_standing - along_from_standing_before;
   counters_.outline_departure_widened += refiner_->widened - widened_before;
   counters_.stance_weighted_pairs += refiner_->stance_weighted - stance_weighted_before;
   counters_.touching_leg_pairs += refiner_->touching - touching_before;

@@ -258,6 +258,22 @@ struct ShapeOptions {
   // PipelineCounters::legs_side_from_view (sure) and legs_side_view_contested. false: the side
   // from the prediction alone.
   bool single_leg_side_from_view = true;
+  // ... and along the walk, where the track's last two-leg measurement (at most
+  // standing_leg_memory_s ago) told which leg stood (internal::StanceWeightedCentre, at least
+  // half sure) and the leg seen now is the other one (matched by its side across the walk: a leg
+  // keeps its side): a standing foot does not move while the body passes over it, so the hidden
+  // leg still stands where it was, its knee carried forward by about half the body's
+  // displacement since (the knee lies about halfway between the moving hip and the planted foot).
+  // The centre along the walk is then the two legs weighted as for two seen legs
+  // (stance_leg_weight on the standing one) instead of anywhere within the legs' reach. Its
+  // variance along the walk: the two legs' weighted fit variances, the midpoint's swing
+  // (gait_sigma_m^2) and the knee's carried displacement known to half (sigma a quarter of the
+  // body's displacement), which grows with the time since the leg was seen; beyond
+  // standing_leg_memory_s (a stance's remaining share: the standing foot lifts within about half a
+  // gait cycle) the reach as before. Counted in PipelineCounters::legs_along_from_standing. false:
+  // along the walk the legs' reach.
+  bool single_leg_from_standing = true;
+  double standing_leg_memory_s = 0.3;
   // Legs mount: a leg's silhouette edge where the beam beyond it is a mixed echo. A beam returns
   // a leg cleanly only where nearly all of its footprint falls on it; where the leg's outline
   // runs through the footprint of the next beam with something behind it, that beam reports a
@@ -538,6 +554,7 @@ struct PipelineCounters {
   std::uint64_t legs_across_walk = 0;   // one leg measured across the walk (single_leg_across_walk)
   std::uint64_t legs_side_uncertain = 0;  // of them: side uncertain (single_leg_side_uncertainty)
   std::uint64_t legs_side_from_view = 0;  // of them: side from the scan (single_leg_side_from_view)
+  std::uint64_t legs_along_from_standing = 0;  // of them: along the walk from the standing leg
   std::uint64_t legs_side_view_contested = 0;   // scan's side against a sure prediction: weighed
   std::uint64_t outline_departure_widened = 0;  // body fits widened (outline_departure_gain)
   std::uint64_t split_few_point_legs = 0;       // 2-3 point segments split into two legs
@@ -787,6 +804,20 @@ StanceCentre StanceWeightedCentre(const ShapeOptions& o, const Eigen::Vector2d& 
                                   const std::array<Eigen::Vector2d, 2>& last_m,
                                   const std::array<double, 2>& last_var_m2, double dt_s,
                                   double step_m);
+
+// ShapeOptions::single_leg_from_standing: the body centre along the walk (unit vector forward,
+// velocity velocity_mps) from the seen swinging leg leg_m (fit variance along the walk
+// leg_var_m2) and the hidden standing leg last seen at standing_m (variance standing_var_m2)
+// dt_s ago: the standing knee now at standing_m + velocity dt / 2, the centre w of the way from
+// the seen leg to it (w = stance_leg_weight). Returns the centre (its component across the walk
+// the seen leg's) and *along_var_m2 its variance along the walk:
+// w^2 (standing_var + (|velocity| dt / 4)^2) + (1 - w)^2 leg_var + gait_sigma_m^2.
+Eigen::Vector2d LoneLegCentreFromStanding(const ShapeOptions& o, const Eigen::Vector2d& forward,
+                                          const Eigen::Vector2d& velocity_mps,
+                                          const Eigen::Vector2d& leg_m, double leg_var_m2,
+                                          const Eigen::Vector2d& standing_m,
+                                          double standing_var_m2, double dt_s,
+                                          double* along_var_m2);
 
 // What the points of a person's back spread over extent_m show of their principal line (RMS
 // distance, m), and whether it exceeds threshold_m (the same test without the root).

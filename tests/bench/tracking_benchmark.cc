@@ -87,6 +87,9 @@
 //   --before-side-from-view: "before" takes the side of the centre a walking track's single leg
 //   stands on from the prediction alone, not from where the scan sees through the other leg's
 //   place, ShapeOptions::single_leg_side_from_view = false;
+//   --before-lone-leg-standing: "before" takes a walking track's single leg's centre along the
+//   walk as anywhere within the legs' reach also where the hidden leg stood at the last two-leg
+//   measurement, ShapeOptions::single_leg_from_standing = false;
 //   --before-few-point-legs: "before" measures a knee-height segment of two or three points wider
 //   than a leg as one leg, ShapeOptions::split_few_point_legs = false;
 //   --before-deep-legs: "before" measures a confirmed track's knee-height segment of two or three
@@ -1014,6 +1017,10 @@ bool g_before_side_uncertainty = false;
 // --before-side-from-view: "before" takes the side of the centre a walking track's single leg
 // stands on from the prediction alone (ShapeOptions::single_leg_side_from_view = false).
 bool g_before_side_from_view = false;
+// --before-lone-leg-standing: "before" takes a walking track's single leg's centre along the walk
+// as anywhere within the legs' reach, also where the hidden leg stood at the last two-leg
+// measurement (ShapeOptions::single_leg_from_standing = false).
+bool g_before_lone_leg_standing = false;
 // --before-few-point-legs: "before" fits a leg-sized segment of two or three points wider than a
 // leg as one leg (ShapeOptions::split_few_point_legs = false).
 bool g_before_few_point_legs = false;
@@ -1105,7 +1112,7 @@ std::vector<Variant> Variants(sim::Mount mount, double range_m) {
              g_before_leg_edges || g_before_outline_departure || g_before_fusion_merge ||
              g_before_report_sourceless || g_before_recent_veil || g_before_single_precision_fit ||
              g_before_stance_weight || g_before_adopt || g_before_touching_legs ||
-             g_before_box_occluders) {
+             g_before_box_occluders || g_before_lone_leg_standing) {
     tracking::TrackerOptions before = fresh;
     if (g_before_one_leg) before.shape.hidden_leg_behind = false;
     if (g_before_mixed_pixels) before.shape.drop_mixed_pixel_legs = false;
@@ -1121,6 +1128,7 @@ std::vector<Variant> Variants(sim::Mount mount, double range_m) {
     if (g_before_across_walk) before.shape.single_leg_across_walk = false;
     if (g_before_side_uncertainty) before.shape.single_leg_side_uncertainty = false;
     if (g_before_side_from_view) before.shape.single_leg_side_from_view = false;
+    if (g_before_lone_leg_standing) before.shape.single_leg_from_standing = false;
     if (g_before_few_point_legs) before.shape.split_few_point_legs = false;
     if (g_before_deep_legs) before.shape.deep_legs_as_pair = false;
     if (g_before_legs_seen_through) before.shape.legs_seen_through = false;
@@ -2502,8 +2510,8 @@ std::string KneeHeightBefore() {
   if (!(g_before_one_leg || g_before_confirm_time || g_before_whole_person || g_before_box_size ||
         g_before_single_beam || g_before_deep_pieces || g_before_deep_evidence ||
         g_before_isotropic_bias || g_before_across_walk || g_before_side_uncertainty ||
-        g_before_side_from_view || g_before_few_point_legs || g_before_deep_legs ||
-        g_before_legs_seen_through || g_before_legs_report_coasting || g_before_leg_edges ||
+        g_before_side_from_view || g_before_lone_leg_standing || g_before_few_point_legs ||
+        g_before_deep_legs || g_before_legs_seen_through || g_before_legs_report_coasting || g_before_leg_edges ||
         g_before_outline_departure || g_before_fusion_merge || g_before_report_sourceless ||
         g_before_recent_veil || g_before_single_precision_fit || g_before_stance_weight ||
         g_before_adopt || g_before_touching_legs || g_before_box_occluders) ||
@@ -2566,6 +2574,12 @@ std::string KneeHeightBefore() {
         "taking the side of the centre a walking track's single leg stands on from the "
         "prediction alone, not from where the scan sees through the other leg's place "
         "(`shape.single_leg_side_from_view` false)");
+  }
+  if (g_before_lone_leg_standing) {
+    without.push_back(
+        "taking a walking track's single leg's centre along the walk as anywhere within the legs' "
+        "reach, also where the hidden leg stood at the last two-leg measurement "
+        "(`shape.single_leg_from_standing` false)");
   }
   if (g_before_few_point_legs) {
     without.push_back(
@@ -2718,6 +2732,8 @@ int main(int argc, char** argv) {
       g_before_side_uncertainty = true;
     } else if (a == "--before-side-from-view") {
       g_before_side_from_view = true;
+    } else if (a == "--before-lone-leg-standing") {
+      g_before_lone_leg_standing = true;
     } else if (a == "--before-few-point-legs") {
       g_before_few_point_legs = true;
     } else if (a == "--before-deep-legs") {
@@ -2757,7 +2773,7 @@ int main(int argc, char** argv) {
                    "[--before-whole-person] [--before-box-size] [--before-single-beam] "
                    "[--before-deep-pieces] [--before-deep-evidence] [--before-isotropic-bias] "
                    "[--before-across-walk] [--before-side-uncertainty] "
-                   "[--before-side-from-view] [--before-few-point-legs] [--before-deep-legs] "
+                   "[--before-side-from-view] [--before-lone-leg-standing] [--before-few-point-legs] [--before-deep-legs] "
                    "[--before-legs-seen-through] [--before-legs-report-coasting] "
                    "[--before-leg-edges] [--before-outline-departure] [--before-recent-veil] "
                    "[--before-single-precision-fit] "
