@@ -314,6 +314,9 @@ struct Breakdown {
   std::array<BreakdownCell, 4> one_leg_by_range, two_legs_by_range;
   // Knee height, one leg: the nearer leg in stance / swing (Truth::gait); a trolley by its view.
   std::array<BreakdownCell, 2> one_leg_by_gait;
+  // Knee height, one leg: by the time since the object's last two-leg measurement (kSinceBins;
+  // the last bin also where there was none).
+  std::array<BreakdownCell, 3> one_leg_by_since;
   // Knee height, two legs of a walking person: by the legs' spread along the walk
   // (kSpreadBins) and by one leg swinging or both standing (Truth::legs_support).
   std::array<BreakdownCell, 4> two_legs_by_spread;
@@ -323,13 +326,15 @@ struct Breakdown {
   static std::size_t RangeBin(double r_m) {
     return r_m < 5.0 ? 0 : r_m < 10.0 ? 1 : r_m < 20.0 ? 2 : 3;
   }
+  static std::size_t SinceBin(double s) { return s < 0.3 ? 0 : s < 1.0 ? 1 : 2; }
   static std::size_t SpreadBin(double d_m) {
     return d_m < 0.1 ? 0 : d_m < 0.2 ? 1 : d_m < 0.3 ? 2 : 3;
   }
   static std::size_t PointBin(std::uint32_t n) {
     return n == 0 ? 0 : n == 1 ? 1 : n <= 4 ? 2 : n <= 9 ? 3 : n <= 19 ? 4 : 5;
   }
-  void Add(const Truth& t, const Hypothesis& h) {
+  // since_two_legs_s: the time since the object's last two-leg measurement (infinite: none).
+  void Add(const Truth& t, const Hypothesis& h, double since_two_legs_s) {
     const double range_m = t.p.norm();
     if (!(range_m > 1e-6)) return;
     const Vector2d los = t.p / range_m;
@@ -339,6 +344,7 @@ struct Breakdown {
                           : parts == 4 ? &two_legs_by_range[RangeBin(range_m)]
                                        : nullptr;
     BreakdownCell* gait = parts == 2 && t.gait >= 0 ? &one_leg_by_gait[t.gait] : nullptr;
+    BreakdownCell* since = parts == 2 ? &one_leg_by_since[SinceBin(since_two_legs_s)] : nullptr;
     BreakdownCell* view =
         parts == 5 && t.trolley && t.view >= 0 ? &trolley_by_view[t.view] : nullptr;
     BreakdownCell* spread = parts == 4 && t.legs_spread_m >= 0.0
@@ -352,6 +358,7 @@ struct Breakdown {
                               &total,
                               legs,
                               gait,
+                              since,
                               view,
                               spread,
                               support};
@@ -379,6 +386,9 @@ struct Breakdown {
     }
     for (std::size_t i = 0; i < one_leg_by_gait.size(); ++i) {
       one_leg_by_gait[i].Merge(o.one_leg_by_gait[i]);
+    }
+    for (std::size_t i = 0; i < one_leg_by_since.size(); ++i) {
+      one_leg_by_since[i].Merge(o.one_leg_by_since[i]);
     }
     for (std::size_t i = 0; i < two_legs_by_spread.size(); ++i) {
       two_legs_by_spread[i].Merge(o.two_legs_by_spread[i]);
@@ -595,7 +605,12 @@ class MotSequence {
       }
       const Hypothesis& h = hyps[static_cast<std::size_t>(truth_to_hyp[t])];
       matched_truth_[static_cast<std::size_t>(truth_to_hyp[t])] = static_cast<long>(truths[t].id);
-      if (breakdown_ != nullptr) breakdown_->Add(truths[t], h);
+      if (breakdown_ != nullptr) {
+        if (h.measured && h.parts == 4) s.two_legs_at_s = s.visible_s;
+        breakdown_->Add(truths[t], h,
+                        s.two_legs_at_s >= 0 ? s.visible_s - s.two_legs_at_s
+                                             : std::numeric_limits<double>::infinity());
+      }
       ++mot_.matches;
       const Vector2d e = h.p - truths[t].p;
       mot_.errors.push_back(e.norm());
@@ -891,6 +906,7 @@ class MotSequence {
     bool interrupted = false;
     std::uint64_t last_hyp = 0;
     double visible_s = 0;
+    double two_legs_at_s = -1;  // visible_s at its last two-leg measurement (--breakdown), -1 none
   };
   struct HypState {
     double frames = 0;
@@ -2423,6 +2439,13 @@ std::string BreakdownTable(const Section& s) {
                                  "one leg, the nearer leg in swing"};
     for (std::size_t i = 0; i < b.one_leg_by_gait.size(); ++i) {
       if (b.one_leg_by_gait[i].all.n > 0) t += BreakdownRow(lead, gaits[i], b.one_leg_by_gait[i]);
+    }
+    const char* const sinces[] = {"one leg, 0-0.3 s since the last two legs",
+                                  "one leg, 0.3-1 s since the last two legs",
+                                  "one leg, 1 s or more since the last two legs (or none)"};
+    for (std::size_t i = 0; i < b.one_leg_by_since.size(); ++i) {
+      if (b.one_leg_by_since[i].all.n > 0)
+        t += BreakdownRow(lead, sinces[i], b.one_leg_by_since[i]);
     }
     const char* const spreads[] = {
         "two legs, walking, spread along the walk 0-0.1 m", "two legs, walking, spread 0.1-0.2 m",
