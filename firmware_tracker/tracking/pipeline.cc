@@ -135,34 +135,6 @@ Eigen::Vector2d LoneLegCentreFromStanding(const ShapeOptions& o, const Eigen::Ve
   return leg_m + (along - leg_m.dot(forward)) * forward;
 }
 
-bool LoneStandingLegCentre(const ShapeOptions& o, const Eigen::Vector2d& forward,
-                           const Eigen::Vector2d& velocity_mps, const Eigen::Vector2d& leg_m,
-                           double leg_var_m2, const std::array<Eigen::Vector2d, 2>& last_m,
-                           const std::array<double, 2>& last_var_m2, int standing, double dt_s,
-                           Eigen::Vector2d* centre_m, double* along_var_m2) {
-  if (standing < 0 || standing > 1) return false;
-  const auto s = static_cast<std::size_t>(standing);
-  const Eigen::Vector2d displacement = velocity_mps * std::max(0.0, dt_s);
-  const double carried = 0.25 * displacement.norm();
-  // Still standing: the seen knee where the standing one was, carried forward by half the body's
-  // displacement.
-  const double moved = (leg_m - last_m[s] - 0.5 * displacement).dot(forward);
-  const double moved_var = leg_var_m2 + last_var_m2[s] + carried * carried;
-  if (moved * moved > 9.0 * moved_var) return false;
-  // The centre then lay w of the way from the swinging leg to the standing one, (1 - w) (swinging
-  // - standing) from the standing knee; since, the hip moved the whole displacement and the knee
-  // half of it.
-  const double w = o.stance_leg_weight;
-  const double along = leg_m.dot(forward) + (1.0 - w) * (last_m[1 - s] - last_m[s]).dot(forward) +
-                       0.5 * displacement.dot(forward);
-  if (centre_m != nullptr) *centre_m = leg_m + (along - leg_m.dot(forward)) * forward;
-  if (along_var_m2 != nullptr) {
-    *along_var_m2 = (1.0 - w) * (1.0 - w) * (last_var_m2[0] + last_var_m2[1]) +
-                    carried * carried + o.gait_sigma_m * o.gait_sigma_m;
-  }
-  return true;
-}
-
 double DeepLegExcessDepth(const ShapeOptions& o, std::span<const Eigen::Vector2d> pts) {
   if (pts.size() < 2) return 0.0;
   double nearest = std::numeric_limits<double>::infinity(), farthest = 0.0;
@@ -975,32 +947,18 @@ class TrackingPipeline::Refiner final : public MeasurementRefiner {
             since_s > 0.0 && since_s <= o.standing_leg_memory_s) {
           // The seen leg lies opposite the centre: the remembered leg farther against `left`.
           const int seen = shape.legs_m[0].dot(left) < shape.legs_m[1].dot(left) ? 0 : 1;
-          const Eigen::Vector2d v = predicted->tail<2>();
-          const Eigen::Vector2d walk = v / v.norm();
-          double along2 = 0.0;
-          bool taken = false;
-          Eigen::Vector2d centre;
-          double seen_along_weight = 1.0;  // the seen leg's share of the centre along the walk
           if (seen != shape.legs_standing) {
-            // The seen leg swings, the hidden one stands.
-            centre = internal::LoneLegCentreFromStanding(
+            const Eigen::Vector2d v = predicted->tail<2>();
+            const Eigen::Vector2d walk = v / v.norm();
+            double along2 = 0.0;
+            const Eigen::Vector2d centre = internal::LoneLegCentreFromStanding(
                 o, walk, v, legs[0].centre_m, 0.0, shape.legs_m[shape.legs_standing],
                 shape.legs_var_m2[shape.legs_standing], since_s, &along2);
-            seen_along_weight = 1.0 - o.stance_leg_weight;
-            taken = true;
-          } else {
-            // The seen leg stood then: where it still stands (at its place carried forward by
-            // half the body's displacement, within three sigma of the leg fits and of that
-            // carried displacement's uncertainty), the centre keeps its place relative to it.
-            taken = internal::LoneStandingLegCentre(
-                o, walk, v, legs[0].centre_m, walk.dot(legs[0].centre_cov_m2 * walk), shape.legs_m,
-                shape.legs_var_m2, shape.legs_standing, since_s, &centre, &along2);
-          }
-          if (taken) {
             m.position_m += (centre - legs[0].centre_m).dot(walk) * walk;
-            // The seen leg's fit enters along the walk with its share, across it whole.
+            // The seen leg's fit enters along the walk with 1 - stance_leg_weight, across it
+            // whole.
             const Eigen::Vector2d side_of_walk(-walk.y(), walk.x());
-            const Eigen::Matrix2d j = seen_along_weight * walk * walk.transpose() +
+            const Eigen::Matrix2d j = (1.0 - o.stance_leg_weight) * walk * walk.transpose() +
                                       side_of_walk * side_of_walk.transpose();
             m.covariance_m2 = j * legs[0].centre_cov_m2 * j.transpose() +
                               along2 * walk * walk.transpose() +

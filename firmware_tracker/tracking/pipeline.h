@@ -818,20 +818,6 @@ Eigen::Vector2d LoneLegCentreFromStanding(const ShapeOptions& o, const Eigen::Ve
                                           const Eigen::Vector2d& standing_m,
                                           double standing_var_m2, double dt_s,
                                           double* along_var_m2);
-// ... and where the seen leg leg_m (fit variance along the walk leg_var_m2) is the one that stood
-// at the last two-leg measurement (last_m, last_var_m2, index standing) dt_s ago: still standing
-// where its knee lies within three sigma (the leg fits' and a quarter of the body's displacement)
-// of its place then carried forward by half the body's displacement; then the centre keeps its
-// offset then from the standing knee, (1 - w) (swinging - standing), plus the other half of the
-// displacement (the hip moved all of it): *centre_m (across the walk the seen leg's) and
-// *along_var_m2 its variance along the walk without the seen leg's fit:
-// (1 - w)^2 (last_var_m2[0] + last_var_m2[1]) + (|velocity| dt / 4)^2 + gait_sigma_m^2. False: the
-// seen leg has moved off its place (it swings now), or standing is not 0 or 1.
-bool LoneStandingLegCentre(const ShapeOptions& o, const Eigen::Vector2d& forward,
-                           const Eigen::Vector2d& velocity_mps, const Eigen::Vector2d& leg_m,
-                           double leg_var_m2, const std::array<Eigen::Vector2d, 2>& last_m,
-                           const std::array<double, 2>& last_var_m2, int standing, double dt_s,
-                           Eigen::Vector2d* centre_m, double* along_var_m2);
 
 // What the points of a person's back spread over extent_m show of their principal line (RMS
 // distance, m), and whether it exceeds threshold_m (the same test without the root).
