@@ -24,7 +24,10 @@
 // weighted towards the standing leg, ShapeOptions::stance_leg_weight; two legs that touch in the
 // scan with the farther leg's depth along the ray, ShapeOptions::touching_legs_along_ray), or
 // one leg: hip_half_width_m behind it along the line of sight where it hides the other
-// (ShapeOptions::hidden_leg_behind), else its centre (plus the hip and stride extent). The fit's
+// (ShapeOptions::hidden_leg_behind), a walking track's hip_half_width_m across the walk from it
+// (ShapeOptions::single_leg_across_walk) and along the walk from the hidden leg that stood at the
+// last two-leg measurement (ShapeOptions::single_leg_from_standing), else its centre (plus the hip
+// and stride extent). The fit's
 // size posterior becomes the track's size state (drifting by size_drift_m_per_sqrt_s between
 // scans), and a track whose learned semi-axis a exceeds box_min_half_length_m is fitted as a box
 // from then on. Whether an object is person-like (static objects, multi_tracker.h): torso: not flat
