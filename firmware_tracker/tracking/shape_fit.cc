@@ -131,6 +131,36 @@ Lanes RootN(const Lanes& x) {
   return r;
 }
 
+// RootN of two pairs of values, x's and y's, in one sequence whose two chains of Halley steps
+// interleave: the same steps per lane as RootN's (the same bits), but the second pair's divisions
+// run while the first's are in flight instead of after them (the support function's two powers are
+// independent of each other; called one after the other, each waited on its own chain).
+template <int kN>
+[[gnu::always_inline]] inline void RootNInterleaved(const Lanes& x, const Lanes& y, Lanes* root_x,
+                                                    Lanes* root_y) {
+  if (!((x >= 1e-290).all() && (x <= 1e290).all() && (y >= 1e-290).all() &&
+        (y <= 1e290).all())) [[unlikely]] {
+    *root_x = RootN<kN>(x);
+    *root_y = RootN<kN>(y);
+    return;
+  }
+  Lanes r(RootGuess<kN>(x(0)), RootGuess<kN>(x(1)));
+  Lanes q(RootGuess<kN>(y(0)), RootGuess<kN>(y(1)));
+  constexpr double kLow = kN - 1, kHigh = kN + 1;
+  for (int i = 0; i < kRootSteps; ++i) {
+    Lanes rn = r * r;  // r^n
+    Lanes qn = q * q;  // q^n
+    for (int k = 2; k < kN; ++k) {
+      rn *= r;
+      qn *= q;
+    }
+    r *= (kLow * rn + kHigh * x) / (kHigh * rn + kLow * x);
+    q *= (kLow * qn + kHigh * y) / (kHigh * qn + kLow * y);
+  }
+  *root_x = r;
+  *root_y = q;
+}
+
 // (cos_yaw, sin_yaw) of x(kYaw) and (inv_a, inv_b) = (1 / x(kA), 1 / x(kB)): the caller's, once
 // per evaluation rather than per point. Instantiated per model and exponent kind for the fit's
 // loop over the points (no branch on either per point; the same arithmetic).
@@ -280,8 +310,16 @@ Lanes SupportPair(const Vec5& x, double c, double s, const Edge& e0, const Edge&
   const Lanes ap = (a * p).abs(), bq = (b * q).abs();
   const bool square = exponent / (exponent - 1.0) == 2.0;
   // |x|^k: k = 2, or 5/3 (x^(5/3) = x cbrt(x^2)).
-  const Lanes tp = square ? Lanes(ap * ap) : Lanes(ap * RootN<3>(Lanes(ap * ap)));
-  const Lanes tq = square ? Lanes(bq * bq) : Lanes(bq * RootN<3>(Lanes(bq * bq)));
+  Lanes tp, tq;
+  if (square) {
+    tp = ap * ap;
+    tq = bq * bq;
+  } else {
+    Lanes root_p, root_q;
+    RootNInterleaved<3>(Lanes(ap * ap), Lanes(bq * bq), &root_p, &root_q);
+    tp = ap * root_p;
+    tq = bq * root_q;
+  }
   const Lanes t = tp + tq;
   Lanes h;
   if (square) {
