@@ -144,6 +144,38 @@ TEST(ShapeFitTest, SupportPairGivesTheSingleDirectionsDerivatives) {
   EXPECT_NEAR(across.y(), 1.0, 1e-15);
 }
 
+// The pair's two cube roots per edge run interleaved in one sequence of Halley steps; each lane
+// does the single direction's arithmetic, so on x86-64 (no fused multiply-adds) the bits are the
+// same, also where one power leaves the roots' normal range (sizes down to 1e-160 m: the pair then
+// takes each root alone, as the single direction does).
+TEST(ShapeFitTest, SupportPairsInterleavedRootsGiveTheSingleDirectionsBits) {
+#if defined(__x86_64__)
+  std::mt19937 rng(17);
+  std::uniform_real_distribution<double> uniform(0.0, 1.0);
+  int out_of_range = 0;
+  for (int k = 0; k < 4000; ++k) {
+    const double scale = k % 4 == 3 ? std::pow(10.0, -160.0 * uniform(rng)) : 1.0;
+    const Eigen::Vector2d size((0.1 + 0.3 * uniform(rng)) * scale, 0.05 + 0.2 * uniform(rng));
+    const double yaw = 2.0 * common::kPi * uniform(rng) - common::kPi;
+    const double a0 = 2.0 * common::kPi * uniform(rng), a1 = a0 + 0.5 * common::kPi * uniform(rng);
+    const Eigen::Vector2d n0(std::cos(a0), std::sin(a0)), n1(std::cos(a1), std::sin(a1));
+    Eigen::Vector2d single0, single1, pair0, pair1;
+    ShapeSupport(ShapeModel::kSuperellipse, size, yaw, n0, 2.5, &single0);
+    ShapeSupport(ShapeModel::kSuperellipse, size, yaw, n1, 2.5, &single1);
+    ShapeSupportPair(ShapeModel::kSuperellipse, size, yaw, n0, n1, 2.5, &pair0, &pair1);
+    out_of_range += size.x() < 1e-146 ? 1 : 0;  // (a p)^2 below 1e-290
+    SCOPED_TRACE("case " + std::to_string(k));
+    EXPECT_EQ(pair0.x(), single0.x());
+    EXPECT_EQ(pair0.y(), single0.y());
+    EXPECT_EQ(pair1.x(), single1.x());
+    EXPECT_EQ(pair1.y(), single1.y());
+  }
+  EXPECT_GT(out_of_range, 50);
+#else
+  GTEST_SKIP() << "fused multiply-adds may round the lanes and the single path differently";
+#endif
+}
+
 TEST(ShapeFitTest, PersonSupportFunctionMatchesLibmPowers) {
   std::mt19937 rng(5);
   std::uniform_real_distribution<double> uniform(0.0, 1.0);
