@@ -314,6 +314,12 @@ void VisitShape(tracking::ShapeOptions& o, ConfigVisitor& v) {
           "a leg is narrower than two beams' spacing, within leg_pairing_distance_m of one "
           "confirmed track that still knows where it is, updates that track where it found no "
           "other leg; it never starts a track (false: such beams are dropped).");
+  v.Field("single_beam_partner", o.single_beam_partner,
+          "mount legs (with single_beam_legs): a lone beam, at any range, is the second leg of a "
+          "confirmed track that takes a single leg of a segment where it lies within "
+          "leg_pairing_distance_m of that leg (the person's other leg with its edge in one "
+          "beam); not a beam beside the leg's edge returning from behind it (its mixed echo) "
+          "(false: a lone beam partners no segment's leg).");
   v.Field("walking_speed_mps", o.walking_speed_mps,
           "Faster than this a person faces where they walk (the yaw prior of the fit).");
   v.Field("walking_yaw_sigma_rad", o.walking_yaw_sigma_rad,
