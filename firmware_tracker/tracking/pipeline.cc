@@ -1770,6 +1770,10 @@ void TrackingPipeline::PairLegs(const ScanView& scan, std::size_t tracks) {
     if (a >= single_beam_first_ || b >= single_beam_first_) {
       ++counters_.single_beam_legs;
       if (measurements_.size() > before) measurements_[before].evidence_only = true;
+    } else if (b == a && o.edge_echo_no_birth && measurements_.size() > before &&
+               BesideNearerEdge(scan, leg_parts_[a])) {
+      ++counters_.edge_echo_births;
+      measurements_[before].evidence_only = true;
     }
   };
   // Around the live tracks, confirmed first: the pair (or single leg) nearest to the prediction.
@@ -1890,6 +1894,49 @@ void TrackingPipeline::PairLegs(const ScanView& scan, std::size_t tracks) {
   for (std::size_t a = 0; a < n; ++a) {
     if (!leg_used_[a]) emit(a, a);
   }
+}
+
+// ShapeOptions::edge_echo_no_birth: the part spans no more beams than those whose footprint
+// reaches past an edge, and a beam within as many beams beyond either end returns nearer than the
+// part's nearest point by more than the segmentation's jump (a mixed range lies between the edge's
+// and the background's).
+bool TrackingPipeline::BesideNearerEdge(const ScanView& scan, const ObservationPart& part) const {
+  const SegmentationOptions& g = options_.segmentation;
+  const ShapeOptions& o = options_.shape;
+  const double step = std::abs(scan.angle_step_rad);
+  const auto footprint_beams =
+      static_cast<std::size_t>(std::ceil(0.5 * o.beam_divergence_rad / std::max(step, 1e-9))) + 1;
+  if (part.end_beam - part.begin_beam > footprint_beams) return false;
+  double nearest_m = std::numeric_limits<double>::infinity();
+  for (std::size_t k = 0; k < part.point_count; ++k) {
+    nearest_m = std::min(nearest_m, segments_.points_m[part.first_point + k].norm());
+  }
+  const double limit_m = nearest_m - (g.jump_base_m + g.jump_per_m * nearest_m);
+  const std::size_t n = scan.range_m.size();
+  double edge_m = std::numeric_limits<double>::infinity();
+  const auto nearer = [&](std::size_t b) {
+    const float r = scan.range_m[b];
+    if (std::isfinite(r) && r > 0.0f && static_cast<double>(r) < limit_m) {
+      edge_m = std::min(edge_m, static_cast<double>(r));
+    }
+  };
+  for (std::size_t k = 1; k <= footprint_beams; ++k) {
+    if (part.begin_beam >= k) nearer(part.begin_beam - k);
+    if (part.end_beam + k - 1 < n) nearer(part.end_beam + k - 1);
+  }
+  if (!std::isfinite(edge_m)) return false;
+  // A mixed range m = w n + (1 - w) f (each weight at least s) has the far surface f no more than
+  // deep_mixed_pixel_behind_ratio (1 - s) / s times m - n behind it: the learned background of
+  // one of the part's beams lies there (SurfaceBehind's bound).
+  const double ratio = o.deep_mixed_pixel_behind_ratio;
+  if (!(ratio > 0.0)) return true;
+  const double limit_far_m = nearest_m + ratio * (nearest_m - edge_m);
+  const auto background = background_.background_range_m();
+  for (std::size_t b = part.begin_beam; b < part.end_beam && b < background.size(); ++b) {
+    const double f = static_cast<double>(background[b]);
+    if (f > nearest_m && f <= limit_far_m) return true;  // 0 = free: no surface
+  }
+  return false;
 }
 
 // ShapeOptions::single_beam_partner: the single-beam leg that pairs with segment leg a for the
