@@ -314,6 +314,18 @@ void VisitShape(tracking::ShapeOptions& o, ConfigVisitor& v) {
           "a leg is narrower than two beams' spacing, within leg_pairing_distance_m of one "
           "confirmed track that still knows where it is, updates that track where it found no "
           "other leg; it never starts a track (false: such beams are dropped).");
+  v.Field("single_beam_partner", o.single_beam_partner,
+          "mount legs (with single_beam_legs): a lone beam, at any range, is the second leg of a "
+          "confirmed track that takes a single leg of a segment where it lies within "
+          "leg_pairing_distance_m of that leg (the person's other leg with its edge in one "
+          "beam); not a beam beside the leg's edge returning from behind it (its mixed echo) "
+          "(false: a lone beam partners no segment's leg).");
+  v.Field("edge_echo_no_birth", o.edge_echo_no_birth,
+          "mount legs: a single leg no wider than the beams whose footprint reaches past an "
+          "edge, beside a return nearer by more than the segmentation's jump, with the learned "
+          "background of one of its beams within deep_mixed_pixel_behind_ratio's bound behind "
+          "it, may be the mixed echo of that edge and that surface: it updates a track but "
+          "never starts one (false: such legs may start tracks).");
   v.Field("walking_speed_mps", o.walking_speed_mps,
           "Faster than this a person faces where they walk (the yaw prior of the fit).");
   v.Field("walking_yaw_sigma_rad", o.walking_yaw_sigma_rad,

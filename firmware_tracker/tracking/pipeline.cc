@@ -1379,6 +1379,7 @@ void TrackingPipeline::BuildObservations(const ScanView& scan) {
     }
   }
   single_beam_first_ = leg_parts_.size();
+  leg_partner_only_.fill(false);
   const std::size_t tracks = tracker_.Predict(scan.stamp_ns, predictions_);
   if (o.single_beam_legs) AddSingleBeamLegs(scan, tracks);
   PairLegs(scan, tracks);
@@ -1486,8 +1487,11 @@ void TrackingPipeline::AddSingleBeamLegs(const ScanView& scan, std::size_t track
     const Eigen::Vector2d p =
         static_cast<double>(r) * Eigen::Vector2d(std::cos(angle), std::sin(angle));
     // Only where a leg may return one beam (narrower than two beams' spacing): nearer, a lone
-    // beam is clutter or a mixed pixel.
-    if (o.leg_radius_m >= static_cast<double>(r) * std::abs(scan.angle_step_rad)) continue;
+    // beam is clutter or a mixed pixel -- unless it may be a segment leg's partner
+    // (ShapeOptions::single_beam_partner; PairLegs takes it only as that).
+    const bool partner_only =
+        o.leg_radius_m >= static_cast<double>(r) * std::abs(scan.angle_step_rad);
+    if (partner_only && !(o.single_beam_partner && NearSegmentLeg(p))) continue;
     // Near exactly one confirmed track: between two, whose it is is unknown.
     // And only one that still knows where the legs are (its position sigma within their reach):
     // a track coasting for long would follow whatever beam flickers near it.
@@ -1517,8 +1521,26 @@ void TrackingPipeline::AddSingleBeamLegs(const ScanView& scan, std::size_t track
       segments_.points_m.pop_back();
       continue;
     }
+    leg_partner_only_[leg_parts_.size()] = partner_only;
     (void)leg_parts_.push_back(MakePart(scan, single, 0, 1));
   }
+}
+
+// A segment's leg (leg_parts_ before single_beam_first_) whose centre lies within
+// leg_pairing_distance_m of the centre of a leg whose front is at p (ShapeOptions::single_beam_partner).
+bool TrackingPipeline::NearSegmentLeg(const Eigen::Vector2d& p) const {
+  const ShapeOptions& o = options_.shape;
+  const Eigen::Vector2d centre = p + o.leg_radius_m * p.normalized();
+  for (std::size_t i = 0; i < single_beam_first_; ++i) {
+    const ObservationPart& part = leg_parts_[i];
+    Eigen::Vector2d mean = Eigen::Vector2d::Zero();
+    for (std::size_t k = 0; k < part.point_count; ++k) mean += segments_.points_m[part.first_point + k];
+    mean /= static_cast<double>(std::max<std::size_t>(part.point_count, 1));
+    if ((mean + o.leg_radius_m * mean.normalized() - centre).norm() <= o.leg_pairing_distance_m) {
+      return true;
+    }
+  }
+  return false;
 }
 
 // Mixed pixels of a nearer leg's edge (ShapeOptions::drop_mixed_pixel_legs): a segment beside a
@@ -1748,6 +1770,10 @@ void TrackingPipeline::PairLegs(const ScanView& scan, std::size_t tracks) {
     if (a >= single_beam_first_ || b >= single_beam_first_) {
       ++counters_.single_beam_legs;
       if (measurements_.size() > before) measurements_[before].evidence_only = true;
+    } else if (b == a && o.edge_echo_no_birth && measurements_.size() > before &&
+               BesideNearerEdge(scan, leg_parts_[a])) {
+      ++counters_.edge_echo_births;
+      measurements_[before].evidence_only = true;
     }
   };
   // Around the live tracks, confirmed first: the pair (or single leg) nearest to the prediction.
@@ -1780,7 +1806,7 @@ void TrackingPipeline::PairLegs(const ScanView& scan, std::size_t tracks) {
     double best = 0.6 * reach;
     best_a = best_b = n;
     for (std::size_t a = first; a < last; ++a) {
-      if (leg_used_[a] || (leg_centres_m_[a] - c).norm() > reach) continue;
+      if (leg_used_[a] || leg_partner_only_[a] || (leg_centres_m_[a] - c).norm() > reach) continue;
       // A single leg counts as lying its hip offset from the centre, and as worse than a pair that
       // fits: the other leg is usually there.
       const double single =
@@ -1790,7 +1816,10 @@ void TrackingPipeline::PairLegs(const ScanView& scan, std::size_t tracks) {
         best_a = best_b = a;
       }
       for (std::size_t b = a + 1; b < last; ++b) {
-        if (leg_used_[b] || (leg_centres_m_[a] - leg_centres_m_[b]).norm() > reach) continue;
+        if (leg_used_[b] || leg_partner_only_[b] ||
+            (leg_centres_m_[a] - leg_centres_m_[b]).norm() > reach) {
+          continue;
+        }
         const double d = (0.5 * (leg_centres_m_[a] + leg_centres_m_[b]) - c).norm();
         if (d < best) {
           best = d;
@@ -1834,6 +1863,10 @@ void TrackingPipeline::PairLegs(const ScanView& scan, std::size_t tracks) {
     // A confirmed track that found no leg of a segment: its single-beam legs (evidence only).
     if (best_a == n && predictions_[t].confirmed) {
       nearest(predictions_[t].position_m, single_beam_first_, n, best_a, best_b);
+    } else if (o.single_beam_partner && best_a < n && best_a == best_b &&
+               predictions_[t].confirmed) {
+      best_b = SingleBeamPartner(scan, predictions_[t].position_m, best_a);
+      if (best_b != best_a) ++counters_.single_beam_partners;
     }
     if (best_a < n) emit(best_a, best_b);
   }
@@ -1861,6 +1894,84 @@ void TrackingPipeline::PairLegs(const ScanView& scan, std::size_t tracks) {
   for (std::size_t a = 0; a < n; ++a) {
     if (!leg_used_[a]) emit(a, a);
   }
+}
+
+// ShapeOptions::edge_echo_no_birth: the part spans no more beams than those whose footprint
+// reaches past an edge, and a beam within as many beams beyond either end returns nearer than the
+// part's nearest point by more than the segmentation's jump (a mixed range lies between the edge's
+// and the background's).
+bool TrackingPipeline::BesideNearerEdge(const ScanView& scan, const ObservationPart& part) const {
+  const SegmentationOptions& g = options_.segmentation;
+  const ShapeOptions& o = options_.shape;
+  const double step = std::abs(scan.angle_step_rad);
+  const auto footprint_beams =
+      static_cast<std::size_t>(std::ceil(0.5 * o.beam_divergence_rad / std::max(step, 1e-9))) + 1;
+  if (part.end_beam - part.begin_beam > footprint_beams) return false;
+  double nearest_m = std::numeric_limits<double>::infinity();
+  for (std::size_t k = 0; k < part.point_count; ++k) {
+    nearest_m = std::min(nearest_m, segments_.points_m[part.first_point + k].norm());
+  }
+  const double limit_m = nearest_m - (g.jump_base_m + g.jump_per_m * nearest_m);
+  const std::size_t n = scan.range_m.size();
+  double edge_m = std::numeric_limits<double>::infinity();
+  const auto nearer = [&](std::size_t b) {
+    const float r = scan.range_m[b];
+    if (std::isfinite(r) && r > 0.0f && static_cast<double>(r) < limit_m) {
+      edge_m = std::min(edge_m, static_cast<double>(r));
+    }
+  };
+  for (std::size_t k = 1; k <= footprint_beams; ++k) {
+    if (part.begin_beam >= k) nearer(part.begin_beam - k);
+    if (part.end_beam + k - 1 < n) nearer(part.end_beam + k - 1);
+  }
+  if (!std::isfinite(edge_m)) return false;
+  // A mixed range m = w n + (1 - w) f (each weight at least s) has the far surface f no more than
+  // deep_mixed_pixel_behind_ratio (1 - s) / s times m - n behind it: the learned background of
+  // one of the part's beams lies there (SurfaceBehind's bound).
+  const double ratio = o.deep_mixed_pixel_behind_ratio;
+  if (!(ratio > 0.0)) return true;
+  const double limit_far_m = nearest_m + ratio * (nearest_m - edge_m);
+  const auto background = background_.background_range_m();
+  for (std::size_t b = part.begin_beam; b < part.end_beam && b < background.size(); ++b) {
+    const double f = static_cast<double>(background[b]);
+    if (f > nearest_m && f <= limit_far_m) return true;  // 0 = free: no surface
+  }
+  return false;
+}
+
+// ShapeOptions::single_beam_partner: the single-beam leg that pairs with segment leg a for the
+// confirmed track predicted at c -- within leg_pairing_distance_m of it, the pair's midpoint nearer
+// to c than the single leg counts (PairLegs' nearest), not the edge's mixed echo (a beam within a
+// footprint's beams of the leg's edge, returning from behind the leg's nearest point) -- else a.
+std::size_t TrackingPipeline::SingleBeamPartner(const ScanView& scan, const Eigen::Vector2d& c,
+                                                std::size_t a) const {
+  const ShapeOptions& o = options_.shape;
+  const ObservationPart& leg = leg_parts_[a];
+  double nearest_m = std::numeric_limits<double>::infinity();
+  for (std::size_t k = 0; k < leg.point_count; ++k) {
+    nearest_m = std::min(nearest_m, segments_.points_m[leg.first_point + k].norm());
+  }
+  const double step = std::abs(scan.angle_step_rad);
+  const auto footprint_beams =
+      static_cast<std::size_t>(std::ceil(0.5 * o.beam_divergence_rad / std::max(step, 1e-9))) + 1;
+  double best =
+      std::max(0.0, (leg_centres_m_[a] - c).norm() - o.hip_half_width_m) + kSingleLegPenaltyM;
+  std::size_t partner = a;
+  for (std::size_t b = single_beam_first_; b < leg_parts_.size(); ++b) {
+    if (leg_used_[b] || (leg_centres_m_[b] - leg_centres_m_[a]).norm() > o.leg_pairing_distance_m) {
+      continue;
+    }
+    const ObservationPart& beam = leg_parts_[b];
+    const bool beside = beam.begin_beam + footprint_beams >= leg.begin_beam &&
+                        beam.begin_beam < leg.end_beam + footprint_beams;
+    if (beside && segments_.points_m[beam.first_point].norm() > nearest_m) continue;
+    const double d = (0.5 * (leg_centres_m_[a] + leg_centres_m_[b]) - c).norm();
+    if (d < best) {
+      best = d;
+      partner = b;
+    }
+  }
+  return partner;
 }
 
 void TrackingPipeline::MeasureLegacy(const ScanView& scan) {

@@ -353,6 +353,24 @@ struct ShapeOptions {
   // track coasting beside a person the scan returned, 82 % had only single-beam returns near the
   // person. false: such beams are dropped.
   bool single_beam_legs = true;
+  // Legs mount (with single_beam_legs): a lone beam is a confirmed track's second leg where the
+  // track takes a single leg of a segment and the beam's leg lies within leg_pairing_distance_m of
+  // it, at any range: there it is that person's other leg with its edge in one beam (nearer than
+  // single_beam_legs' range a lone beam is dropped elsewhere: a thin thing or a mixed pixel). Not
+  // a beam beside that leg's edge (within a footprint's beams) that returns from behind it: that
+  // is the edge's mixed echo. The pair is measured as any pair (evidence only, as
+  // single_beam_legs'); counted in PipelineCounters::single_beam_partners. false: a lone beam
+  // partners no segment's leg.
+  bool single_beam_partner = true;
+  // Legs mount: a single leg no wider than the beams whose footprint reaches past an edge
+  // (ceil(beam_divergence_rad / 2 step) + 1), beside a nearer return by more than the
+  // segmentation's jump, may be the mixed echo of that edge and what lies behind it (its range
+  // between the two) where the learned background of one of its beams lies within the mixed
+  // range's bound behind it (deep_mixed_pixel_behind_ratio, as SurfaceBehind): it is evidence
+  // for a track (Measurement::evidence_only) but never starts one. tracking_benchmark: knee
+  // per sensor false-positive scans -151, most of them second tracks beside a person (split).
+  // Counted in PipelineCounters::edge_echo_births. false: such legs may start tracks.
+  bool edge_echo_no_birth = true;
   // Yaw prior: faster than walking_speed_mps a person faces where they walk (sigma
   // walking_yaw_sigma_rad: the torso turns with the gait, people step sideways); standing, the last
   // orientation, less certain by yaw_drift_rad_per_s.
@@ -556,6 +574,8 @@ struct PipelineCounters {
   std::uint64_t single_legs = 0;        // observations of one leg
   std::uint64_t legs_behind = 0;        // of them: the other hidden behind (hidden_leg_behind)
   std::uint64_t single_beam_legs = 0;   // observations of single-beam legs (single_beam_legs)
+  std::uint64_t single_beam_partners = 0;  // of them: a segment's leg and a lone beam (partner)
+  std::uint64_t edge_echo_births = 0;  // single legs beside a nearer edge: no birth (edge_echo_no_birth)
   std::uint64_t legs_across_walk = 0;   // one leg measured across the walk (single_leg_across_walk)
   std::uint64_t legs_side_uncertain = 0;  // of them: side uncertain (single_leg_side_uncertainty)
   std::uint64_t legs_side_from_view = 0;  // of them: side from the scan (single_leg_side_from_view)
@@ -661,6 +681,10 @@ class TrackingPipeline {
   // leg's first point, 0 for one leg (ShapeOptions::split_few_point_legs for 2-3 points).
   std::size_t LegSplit(const Segment& segment, std::span<const Eigen::Vector2d> pts);
   void AddSingleBeamLegs(const ScanView& scan, std::size_t tracks);
+  bool NearSegmentLeg(const Eigen::Vector2d& p) const;
+  bool BesideNearerEdge(const ScanView& scan, const ObservationPart& part) const;
+  std::size_t SingleBeamPartner(const ScanView& scan, const Eigen::Vector2d& c,
+                                std::size_t a) const;
   void AddObservation(const ScanView& scan, const Observation& observation);
   // AddObservation's measurement and beam time for an observation already stored as the last of
   // observations_ (built in place: not copied in).
@@ -708,6 +732,9 @@ class TrackingPipeline {
   common::FixedVector<ObservationPart, 2 * kMaxSegments> leg_parts_;
   std::array<Eigen::Vector2d, 2 * kMaxSegments> leg_centres_m_{};
   std::array<bool, 2 * kMaxSegments> leg_used_{};
+  // A single-beam leg nearer than a lone leg may be: only a segment leg's partner
+  // (ShapeOptions::single_beam_partner).
+  std::array<bool, 2 * kMaxSegments> leg_partner_only_{};
   // leg_parts_ from this index on are single-beam legs (ShapeOptions::single_beam_legs).
   std::size_t single_beam_first_ = 0;
   std::array<TrackPrediction, kMaxTracks> predictions_{};

@@ -2696,6 +2696,112 @@ TEST(PipelineScenarioTest, SingleBeamLegsUpdateAConfirmedTrackButStartNone) {
   EXPECT_TRUE(alone.ids.empty());
 }
 
+// ShapeOptions::single_beam_partner: knee height, 25 Hz, 0.5 deg, a person walks across the view
+// at 5 m (nearer than a lone beam counts as a leg: 0.06 m < 5 m x 0.5 deg), each leg returned by 3
+// beams, 4 beams apart; then for 1 s the right leg by one beam (its inner edge) only, then by 3
+// again. With the option the confirmed track takes the left leg and that beam as its pair (one
+// id, every such scan counted, the centre within a few centimetres); without, the lone beam is
+// dropped and the track is measured from the left leg alone.
+TEST(PipelineScenarioTest, ALoneBeamPartnersAConfirmedTracksSegmentLeg) {
+  constexpr std::size_t kBeams = 361;
+  constexpr double kStepRad = 0.5 * common::kPi / 180.0;
+  constexpr double kFirstRad = -0.5 * common::kPi;
+  struct Run {
+    std::set<std::uint32_t> ids;
+    int single_scans = 0, measured = 0;
+    double error_sum_m = 0.0;
+    std::uint64_t partners = 0;
+  };
+  const auto run = [&](bool partner) {
+    TrackerOptions options;
+    options.shape.mount = Mount::kLegs;
+    options.shape.single_beam_partner = partner;
+    TrackingPipeline pipeline(options);
+    std::vector<float> ranges(kBeams);
+    Run out;
+    const auto k0 = static_cast<std::int64_t>(kLearnedS * 25.0);
+    for (std::int64_t k = 0; k < k0 + 100; ++k) {
+      std::fill(ranges.begin(), ranges.end(), 30.0f);
+      const bool walking = k >= k0;
+      const std::int64_t i = k - k0;
+      const bool single = walking && i >= 50 && i < 75;
+      const auto c = static_cast<std::size_t>(120 + std::max<std::int64_t>(i, 0) / 5);
+      if (walking) {
+        for (std::size_t b = c - 4; b <= c - 2; ++b) ranges[b] = 5.0f;
+        ranges[c + 2] = 5.0f;
+        if (!single) ranges[c + 3] = ranges[c + 4] = 5.0f;
+      }
+      const ScanView scan = RangesScan(ranges, kFirstRad, kStepRad, k, 40);
+      const ScanTracks& tracks = pipeline.Process(scan, static_cast<std::uint32_t>(k));
+      for (const TrackReport& r : tracks.tracks) out.ids.insert(r.track_id);
+      if (!single) continue;
+      ++out.single_scans;
+      // Truth: the legs' midpoint, a leg radius behind their front.
+      const double bearing = kFirstRad + static_cast<double>(c) * kStepRad;
+      const Eigen::Vector2d truth = 5.06 * Eigen::Vector2d(std::cos(bearing), std::sin(bearing));
+      for (const TrackReport& r : tracks.tracks) {
+        if (r.state != TrackState::kConfirmed) continue;
+        ++out.measured;
+        out.error_sum_m += (Eigen::Vector2d(r.x_m, r.y_m) - truth).norm();
+      }
+    }
+    out.partners = pipeline.counters().single_beam_partners;
+    return out;
+  };
+  const Run now = run(true);
+  const Run before = run(false);
+  ASSERT_EQ(now.single_scans, 25);
+  EXPECT_EQ(now.ids.size(), 1u);
+  EXPECT_GE(now.partners, 24u);
+  EXPECT_EQ(before.partners, 0u);
+  EXPECT_GE(now.measured, 24);
+  const double now_mean = now.error_sum_m / std::max(now.measured, 1);
+  const double before_mean = before.error_sum_m / std::max(before.measured, 1);
+  EXPECT_LT(now_mean, 0.05);        // 0.027 m
+  EXPECT_GT(before_mean, 0.1);      // 0.129 m: the left leg alone
+}
+
+// ShapeOptions::edge_echo_no_birth: knee height, 25 Hz, 0.5 deg, a wall at 9 m; a person walks
+// along it at 8 m (each leg 2 beams, 3 wall beams between them) and the 2 beams beyond the right
+// leg's edge return mixed echoes at 8.5 m (between the leg and the wall, beyond the segmentation's
+// jump: a piece of their own). With the option that piece starts no track (one
+// id); without, it becomes a second track behind the person.
+TEST(PipelineScenarioTest, AnEdgesMixedEchoStartsNoTrack) {
+  constexpr std::size_t kBeams = 361;
+  constexpr double kStepRad = 0.5 * common::kPi / 180.0;
+  constexpr double kFirstRad = -0.5 * common::kPi;
+  const auto run = [&](bool no_birth, std::uint64_t* counted) {
+    TrackerOptions options;
+    options.shape.mount = Mount::kLegs;
+    options.shape.edge_echo_no_birth = no_birth;
+    TrackingPipeline pipeline(options);
+    std::vector<float> ranges(kBeams);
+    std::set<std::uint32_t> ids;
+    const auto k0 = static_cast<std::int64_t>(kLearnedS * 25.0);
+    for (std::int64_t k = 0; k < k0 + 100; ++k) {
+      std::fill(ranges.begin(), ranges.end(), 9.0f);
+      if (k >= k0) {
+        const auto c = static_cast<std::size_t>(150 + (k - k0) / 5);
+        ranges[c - 3] = ranges[c - 2] = 8.0f;
+        ranges[c + 2] = ranges[c + 3] = 8.0f;
+        ranges[c + 4] = ranges[c + 5] = 8.5f;
+      }
+      const ScanView scan = RangesScan(ranges, kFirstRad, kStepRad, k, 40);
+      const ScanTracks& tracks = pipeline.Process(scan, static_cast<std::uint32_t>(k));
+      for (const TrackReport& r : tracks.tracks) {
+        if (r.state == TrackState::kConfirmed) ids.insert(r.track_id);
+      }
+    }
+    *counted = pipeline.counters().edge_echo_births;
+    return ids.size();
+  };
+  std::uint64_t now_counted = 0, before_counted = 0;
+  EXPECT_EQ(run(true, &now_counted), 1u);
+  EXPECT_GE(now_counted, 90u);
+  EXPECT_EQ(run(false, &before_counted), 2u);
+  EXPECT_EQ(before_counted, 0u);
+}
+
 // ShapeOptions::leg_edge_in_mixed_beam: knee height, 0.5 deg, a wall at 5 m; a leg at 3 m
 // returned by beams 180-183 (the last at 3.02 m), beam 184 a mixed echo at 3.6 m (its share of
 // the leg w = (5 - 3.6) / (5 - 3.02) = 0.71), beam 179 the wall. The last edge lies within beam

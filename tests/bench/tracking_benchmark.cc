@@ -1013,6 +1013,12 @@ bool g_before_box_size = false;
 // --before-single-beam: "before" drops knee-height legs returned by a single beam, also beside a
 // confirmed track (ShapeOptions::single_beam_legs = false).
 bool g_before_single_beam = false;
+// --before-single-beam-partner: "before" pairs no knee-height leg of a segment with a lone beam
+// (ShapeOptions::single_beam_partner = false).
+bool g_before_single_beam_partner = false;
+// --before-edge-echo-birth: "before" lets a knee-height single leg beside a nearer edge start a
+// track (ShapeOptions::edge_echo_no_birth = false).
+bool g_before_edge_echo_birth = false;
 // --before-deep-pieces: "before" measures knee-height pieces deep along the line of sight but no
 // wider across it than a pair of legs as wide objects, also where a leg fills no beam
 // (ShapeOptions::drop_deep_mixed_pixel_pieces = false).
@@ -1105,6 +1111,8 @@ std::vector<Variant> Variants(sim::Mount mount, double range_m) {
   old.shape.drop_mixed_pixel_legs_whole_person = false;
   old.shape.hidden_leg_behind = false;
   old.shape.single_beam_legs = false;
+  old.shape.single_beam_partner = false;
+  old.shape.edge_echo_no_birth = false;
   old.shape.drop_deep_mixed_pixel_pieces = false;
   old.shape.single_leg_across_walk = false;
   old.shape.split_few_point_legs = false;
@@ -1128,7 +1136,8 @@ std::vector<Variant> Variants(sim::Mount mount, double range_m) {
              g_before_leg_edges || g_before_outline_departure || g_before_fusion_merge ||
              g_before_report_sourceless || g_before_recent_veil || g_before_single_precision_fit ||
              g_before_stance_weight || g_before_adopt || g_before_touching_legs ||
-             g_before_box_occluders || g_before_lone_leg_standing) {
+             g_before_box_occluders || g_before_lone_leg_standing ||
+             g_before_single_beam_partner || g_before_edge_echo_birth) {
     tracking::TrackerOptions before = fresh;
     if (g_before_one_leg) before.shape.hidden_leg_behind = false;
     if (g_before_mixed_pixels) before.shape.drop_mixed_pixel_legs = false;
@@ -1157,6 +1166,8 @@ std::vector<Variant> Variants(sim::Mount mount, double range_m) {
     if (g_before_adopt) before.tracking.adopt_successor_m = 0.0;
     if (g_before_touching_legs) before.shape.touching_legs_along_ray = false;
     if (g_before_box_occluders) before.shape.box_drop_occluders = false;
+    if (g_before_single_beam_partner) before.shape.single_beam_partner = false;
+    if (g_before_edge_echo_birth) before.shape.edge_echo_no_birth = false;
     variants.push_back({"before", before});
   }
   return variants;
@@ -2537,7 +2548,8 @@ std::string KneeHeightBefore() {
         g_before_deep_legs || g_before_legs_seen_through || g_before_legs_report_coasting || g_before_leg_edges ||
         g_before_outline_departure || g_before_fusion_merge || g_before_report_sourceless ||
         g_before_recent_veil || g_before_single_precision_fit || g_before_stance_weight ||
-        g_before_adopt || g_before_touching_legs || g_before_box_occluders) ||
+        g_before_adopt || g_before_touching_legs || g_before_box_occluders ||
+        g_before_single_beam_partner || g_before_edge_echo_birth) ||
       g_before_mixed_pixels || g_before_far || g_before_evidence_coasting ||
       g_before_report_rules) {
     return "";
@@ -2662,6 +2674,16 @@ std::string KneeHeightBefore() {
         "covariance, not the farther leg's cut arc's along the line of sight "
         "(`shape.touching_legs_along_ray` false)");
   }
+  if (g_before_single_beam_partner) {
+    without.push_back(
+        "pairing no knee-height leg of a segment with a lone beam within the pairing distance "
+        "(`shape.single_beam_partner` false)");
+  }
+  if (g_before_edge_echo_birth) {
+    without.push_back(
+        "letting a knee-height single leg beside a nearer edge, no wider than that edge's mixed "
+        "echo, start a track (`shape.edge_echo_no_birth` false)");
+  }
   if (g_before_box_occluders) {
     without.push_back(
         "fitting a box (a cart) to every point of its segment, also to those in front of it (its "
@@ -2743,6 +2765,10 @@ int main(int argc, char** argv) {
       g_before_box_size = true;
     } else if (a == "--before-single-beam") {
       g_before_single_beam = true;
+    } else if (a == "--before-single-beam-partner") {
+      g_before_single_beam_partner = true;
+    } else if (a == "--before-edge-echo-birth") {
+      g_before_edge_echo_birth = true;
     } else if (a == "--before-deep-pieces") {
       g_before_deep_pieces = true;
     } else if (a == "--before-deep-evidence") {
