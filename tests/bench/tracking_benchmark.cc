@@ -1121,6 +1121,7 @@ std::vector<Variant> Variants(sim::Mount mount, double range_m) {
   old.shape.legs_seen_through = false;
   old.shape.recent_veil_s = 0.0;
   old.tracking.adopt_successor_m = 0.0;
+  old.shape.single_leg_from_standing = false;
   std::vector<Variant> variants = {{"old", old}, {"new", fresh}};
   if (g_before_report_rules) {
     tracking::TrackerOptions before = fresh;
