@@ -306,6 +306,9 @@ constexpr const char* kPartsBins[] = {"parts: coasting",
                                       "parts: coasting beside an observation (0.5 m)",
                                       "parts: one leg hiding the other",
                                       "parts: wider than two legs, a trolley"};
+constexpr const char* kHeadingBins[] = {
+    "walking along the line of sight, coming nearer", "walking oblique to the line of sight",
+    "walking across the line of sight", "walking along the line of sight, going away"};
 struct Breakdown {
   std::array<BreakdownCell, 4> by_range;
   std::array<BreakdownCell, 6> by_points;
@@ -322,9 +325,20 @@ struct Breakdown {
   std::array<BreakdownCell, 4> two_legs_by_spread;
   std::array<BreakdownCell, 2> two_legs_by_support;
   std::array<BreakdownCell, 4> trolley_by_view;
+  // A walking person (faster than kWalkingMps, not a trolley): its heading against the line of
+  // sight (HeadingBin, kHeadingBins), over every range and per range bin (kRangeBins).
+  std::array<BreakdownCell, 4> walking_by_heading;
+  std::array<std::array<BreakdownCell, 4>, 4> walking_by_heading_range;
   BreakdownCell total;
   static std::size_t RangeBin(double r_m) {
     return r_m < 5.0 ? 0 : r_m < 10.0 ? 1 : r_m < 20.0 ? 2 : 3;
+  }
+  // The truth's velocity v against the line of sight los (unit): within kViewSectorRad of it,
+  // coming nearer (0) or going away (3), within kViewSectorRad of across it (2), between (1).
+  static std::size_t HeadingBin(const Vector2d& v, const Vector2d& los) {
+    const double c = v.normalized().dot(los);
+    const double along = std::cos(kViewSectorRad), across = std::sin(kViewSectorRad);
+    return c <= -along ? 0 : c >= along ? 3 : std::abs(c) <= across ? 2 : 1;
   }
   static std::size_t SinceBin(double s) { return s < 0.3 ? 0 : s < 1.0 ? 1 : 2; }
   static std::size_t SpreadBin(double d_m) {
@@ -352,6 +366,10 @@ struct Breakdown {
                                 : nullptr;
     BreakdownCell* support =
         parts == 4 && t.legs_support >= 0 ? &two_legs_by_support[t.legs_support] : nullptr;
+    const bool walking = !t.trolley && t.v.norm() > kWalkingMps;
+    BreakdownCell* heading = walking ? &walking_by_heading[HeadingBin(t.v, los)] : nullptr;
+    BreakdownCell* heading_range =
+        walking ? &walking_by_heading_range[HeadingBin(t.v, los)][RangeBin(range_m)] : nullptr;
     BreakdownCell* cells[] = {&by_range[RangeBin(range_m)],
                               &by_points[PointBin(h.points)],
                               &by_parts[parts == 5 && t.trolley ? 8 : parts],
@@ -361,7 +379,9 @@ struct Breakdown {
                               since,
                               view,
                               spread,
-                              support};
+                              support,
+                              heading,
+                              heading_range};
     const Vector2d e = h.p - t.p;
     for (BreakdownCell* c : cells) {
       if (c != nullptr) c->all.Add(e, los, t.v);
@@ -398,6 +418,12 @@ struct Breakdown {
     }
     for (std::size_t i = 0; i < trolley_by_view.size(); ++i) {
       trolley_by_view[i].Merge(o.trolley_by_view[i]);
+    }
+    for (std::size_t i = 0; i < walking_by_heading.size(); ++i) {
+      walking_by_heading[i].Merge(o.walking_by_heading[i]);
+      for (std::size_t j = 0; j < walking_by_heading_range[i].size(); ++j) {
+        walking_by_heading_range[i][j].Merge(o.walking_by_heading_range[i][j]);
+      }
     }
     total.Merge(o.total);
   }
@@ -2476,6 +2502,15 @@ std::string BreakdownTable(const Section& s) {
                                  "trolley, broadside", "trolley, end-on, going away"};
     for (std::size_t i = 0; i < b.trolley_by_view.size(); ++i) {
       if (b.trolley_by_view[i].all.n > 0) t += BreakdownRow(lead, views[i], b.trolley_by_view[i]);
+    }
+    for (std::size_t i = 0; i < b.walking_by_heading.size(); ++i) {
+      if (b.walking_by_heading[i].all.n == 0) continue;
+      t += BreakdownRow(lead, kHeadingBins[i], b.walking_by_heading[i]);
+      for (std::size_t j = 0; j < b.walking_by_heading_range[i].size(); ++j) {
+        if (b.walking_by_heading_range[i][j].all.n > 0)
+          t += BreakdownRow(lead, std::string(kHeadingBins[i]) + ", " + kRangeBins[j],
+                            b.walking_by_heading_range[i][j]);
+      }
     }
   }
   return t + s.breakdown_rows;
