@@ -236,6 +236,15 @@ std::array<bool, 2> BoxFacesShown(const Eigen::Vector2d& centre_m, const Eigen::
   return {a_shown, b_shown};
 }
 
+std::array<bool, 2> PersonAxesShown(const Eigen::Vector2d& centre_m, double yaw_rad) {
+  const double range = centre_m.norm();
+  if (!(range > 0.0)) return {true, true};
+  // |cos| of the angle between axis a and the ray.
+  const double along = std::abs(std::cos(yaw_rad) * centre_m.x() + std::sin(yaw_rad) * centre_m.y()) / range;
+  const bool a_across = along < std::sqrt(0.5);
+  return {a_across, !a_across};
+}
+
 void LearnSize(const Eigen::Vector2d& size, const Eigen::Matrix2d& size_cov, double share,
                const std::array<bool, 2>& shown, TrackShape& shape) {
   Eigen::Matrix2d prior_info, post_info;
@@ -584,6 +593,7 @@ class TrackingPipeline::Refiner final : public MeasurementRefiner {
   std::uint64_t touching = 0;
   std::uint64_t box_occluded = 0;
   std::uint64_t box_unseen_sizes = 0;
+  std::uint64_t person_one_axis = 0;
 
   // How many of the observation's two outline ends are silhouettes (MakePart: not an occluder's
   // edge, not the field of view's end).
@@ -796,6 +806,10 @@ class TrackingPipeline::Refiner final : public MeasurementRefiner {
       if (shape.model == ShapeModel::kBox && o.box_size_from_faces_seen) {
         shown = internal::BoxFacesShown(fit.centre_m, size, yaw, part.silhouette.step_rad);
         if (!shown[0] || !shown[1]) ++box_unseen_sizes;
+      } else if (shape.model == ShapeModel::kSuperellipse && o.mount == Mount::kTorso &&
+                 o.person_size_across_ray) {
+        shown = internal::PersonAxesShown(fit.centre_m, yaw);
+        if (!shown[0] || !shown[1]) ++person_one_axis;
       }
       LearnSize(size, size_cov, shape, shown);
     }
@@ -2158,6 +2172,7 @@ const ScanTracks& TrackingPipeline::Process(const ScanView& scan, std::uint32_t 
   const std::uint64_t touching_before = refiner_->touching;
   const std::uint64_t box_occluded_before = refiner_->box_occluded;
   const std::uint64_t box_unseen_before = refiner_->box_unseen_sizes;
+  const std::uint64_t person_one_axis_before = refiner_->person_one_axis;
   scan_ = &scan;
   tracker_.Step(scan.stamp_ns, measurements_.span(), offsets_s_.span(),
                 shape_fit ? refiner_.get() : nullptr, tracks_);
@@ -2174,6 +2189,7 @@ const ScanTracks& TrackingPipeline::Process(const ScanView& scan, std::uint32_t 
   counters_.touching_leg_pairs += refiner_->touching - touching_before;
   counters_.box_occluded_fits += refiner_->box_occluded - box_occluded_before;
   counters_.box_sizes_unseen += refiner_->box_unseen_sizes - box_unseen_before;
+  counters_.person_sizes_one_axis += refiner_->person_one_axis - person_one_axis_before;
   if (bg.scan_error == ScanError::kNone && bg.learned) {
     AbsorbStatic(scan);
     if (shape_fit) DropCoasting(scan);

@@ -44,7 +44,7 @@
 //                       [--before-outline-departure] [--before-recent-veil]
 //                       [--before-single-precision-fit]
 //                       [--before-stance-weight] [--before-adopt] [--before-touching-legs]
-//                       [--before-box-occluders]
+//                       [--before-box-occluders] [--before-person-size]
 //                       [--before-fusion-merge] [--before-report-sourceless]]
 //   (--extra: more scenario folders, e.g. held-out scenes, reported in their own section;
 //   --explain: per run on stderr, what became of an object's previous track at every id switch
@@ -114,6 +114,8 @@
 //   covariance, ShapeOptions::touching_legs_along_ray = false;
 //   --before-box-occluders: "before" fits a box (a cart) to every point of its segment, also to
 //   those in front of it (its pusher's), ShapeOptions::box_drop_occluders = false;
+//   --before-person-size: "before" learns both semi-axes of an upper-body person from every fit,
+//   also its extent along the ray, ShapeOptions::person_size_across_ray = false;
 //   --before-outline-departure: "before" reports an upper-body centre with the fixed allowances
 //   for the outline alone, not the departure its fit's residuals measure,
 //   ShapeOptions::outline_departure_gain = 0;
@@ -1045,6 +1047,9 @@ bool g_before_single_beam_partner = false;
 // --before-edge-echo-birth: "before" lets a knee-height single leg beside a nearer edge start a
 // track (ShapeOptions::edge_echo_no_birth = false).
 bool g_before_edge_echo_birth = false;
+// --before-person-size: "before" learns both semi-axes of an upper-body person from every fit,
+// also the extent along the ray (ShapeOptions::person_size_across_ray = false).
+bool g_before_person_size = false;
 // --before-deep-pieces: "before" measures knee-height pieces deep along the line of sight but no
 // wider across it than a pair of legs as wide objects, also where a leg fills no beam
 // (ShapeOptions::drop_deep_mixed_pixel_pieces = false).
@@ -1164,7 +1169,7 @@ std::vector<Variant> Variants(sim::Mount mount, double range_m) {
              g_before_report_sourceless || g_before_recent_veil || g_before_single_precision_fit ||
              g_before_stance_weight || g_before_adopt || g_before_touching_legs ||
              g_before_box_occluders || g_before_lone_leg_standing ||
-             g_before_single_beam_partner || g_before_edge_echo_birth) {
+             g_before_single_beam_partner || g_before_edge_echo_birth || g_before_person_size) {
     tracking::TrackerOptions before = fresh;
     if (g_before_one_leg) before.shape.hidden_leg_behind = false;
     if (g_before_mixed_pixels) before.shape.drop_mixed_pixel_legs = false;
@@ -1195,6 +1200,7 @@ std::vector<Variant> Variants(sim::Mount mount, double range_m) {
     if (g_before_box_occluders) before.shape.box_drop_occluders = false;
     if (g_before_single_beam_partner) before.shape.single_beam_partner = false;
     if (g_before_edge_echo_birth) before.shape.edge_echo_no_birth = false;
+    if (g_before_person_size) before.shape.person_size_across_ray = false;
     variants.push_back({"before", before});
   }
   return variants;
@@ -2585,7 +2591,7 @@ std::string KneeHeightBefore() {
         g_before_outline_departure || g_before_fusion_merge || g_before_report_sourceless ||
         g_before_recent_veil || g_before_single_precision_fit || g_before_stance_weight ||
         g_before_adopt || g_before_touching_legs || g_before_box_occluders ||
-        g_before_single_beam_partner || g_before_edge_echo_birth) ||
+        g_before_single_beam_partner || g_before_edge_echo_birth || g_before_person_size) ||
       g_before_mixed_pixels || g_before_far || g_before_evidence_coasting ||
       g_before_report_rules) {
     return "";
@@ -2715,6 +2721,11 @@ std::string KneeHeightBefore() {
         "pairing no knee-height leg of a segment with a lone beam within the pairing distance "
         "(`shape.single_beam_partner` false)");
   }
+  if (g_before_person_size) {
+    without.push_back(
+        "learning both semi-axes of an upper-body person from every fit, also its extent along "
+        "the ray (`shape.person_size_across_ray` false)");
+  }
   if (g_before_edge_echo_birth) {
     without.push_back(
         "letting a knee-height single leg beside a nearer edge, no wider than that edge's mixed "
@@ -2805,6 +2816,8 @@ int main(int argc, char** argv) {
       g_before_single_beam_partner = true;
     } else if (a == "--before-edge-echo-birth") {
       g_before_edge_echo_birth = true;
+    } else if (a == "--before-person-size") {
+      g_before_person_size = true;
     } else if (a == "--before-deep-pieces") {
       g_before_deep_pieces = true;
     } else if (a == "--before-deep-evidence") {
@@ -2863,7 +2876,7 @@ int main(int argc, char** argv) {
                    "[--before-leg-edges] [--before-outline-departure] [--before-recent-veil] "
                    "[--before-single-precision-fit] "
                    "[--before-stance-weight] [--before-adopt] [--before-touching-legs] "
-                   "[--before-box-occluders] [--before-fusion-merge] "
+                   "[--before-box-occluders] [--before-person-size] [--before-fusion-merge] "
                    "[--before-report-sourceless]]\n");
       return 2;
     }
