@@ -362,11 +362,11 @@ void VisitShape(tracking::ShapeOptions& o, ConfigVisitor& v) {
           "half-width only from scans that show one of its ends (at least three beams across the "
           "face). Default false: both from every box fit.");
   v.Field("person_size_across_ray", o.person_size_across_ray,
-          "Upper-body mount: a person's half-width a is learned only from scans that see it "
-          "front-on or back-on, the half-depth b only from scans that see it from the side (the "
-          "semi-axis within 45 deg of across the ray); the extent along the ray that a fit reads "
-          "from the visible arc's curvature is the outline's departure from the model more than "
-          "the size. false: both from every fit.");
+          "Upper-body mount: a person's semi-axes learn from each fit by their share of the "
+          "width across the ray (the shoulders' half-width from a front-on or back-on view, the "
+          "half-depth from a side view); the extent along the ray that a fit reads from the "
+          "visible arc's curvature is the outline's departure from the model more than the size. "
+          "false: both from every fit.");
   v.Field("beam_divergence_rad", o.beam_divergence_rad,
           "Full beam divergence of the scanner (LMS1xx, TiM: 0.015; LMS5xx: 0.011); the beam's "
           "footprint at range R is R times this plus beam_exit_diameter_m (mixed pixels of legs "

@@ -236,13 +236,39 @@ std::array<bool, 2> BoxFacesShown(const Eigen::Vector2d& centre_m, const Eigen::
   return {a_shown, b_shown};
 }
 
-std::array<bool, 2> PersonAxesShown(const Eigen::Vector2d& centre_m, double yaw_rad) {
+std::array<double, 2> PersonAxisWeights(const Eigen::Vector2d& centre_m, double yaw_rad) {
   const double range = centre_m.norm();
-  if (!(range > 0.0)) return {true, true};
-  // |cos| of the angle between axis a and the ray.
-  const double along = std::abs(std::cos(yaw_rad) * centre_m.x() + std::sin(yaw_rad) * centre_m.y()) / range;
-  const bool a_across = along < std::sqrt(0.5);
-  return {a_across, !a_across};
+  if (!(range > 0.0)) return {1.0, 1.0};
+  // cos of the angle between axis a and the ray: a's share across the ray is 1 - c^2.
+  const double c = (std::cos(yaw_rad) * centre_m.x() + std::sin(yaw_rad) * centre_m.y()) / range;
+  const double along = std::min(1.0, c * c);
+  return {1.0 - along, along};
+}
+
+void LearnSizeWeighted(const Eigen::Vector2d& size, const Eigen::Matrix2d& size_cov, double share,
+                       const std::array<double, 2>& weights, TrackShape& shape) {
+  Eigen::Matrix2d prior_info, post_info;
+  bool ok_prior = false, ok_post = false;
+  shape.size_cov_m2.computeInverseWithCheck(prior_info, ok_prior, 1e-18);
+  size_cov.computeInverseWithCheck(post_info, ok_post, 1e-18);
+  if (!ok_prior || !ok_post) return;
+  // D (share (post - prior)) D with D = diag(sqrt(weights)): PSD where the fit's is.
+  const Eigen::Vector2d root(std::sqrt(std::max(0.0, weights[0])),
+                             std::sqrt(std::max(0.0, weights[1])));
+  const Eigen::Matrix2d gained =
+      share * root.asDiagonal() * (post_info - prior_info) * root.asDiagonal();
+  Eigen::Matrix2d cov;
+  bool ok = false;
+  (prior_info + gained).computeInverseWithCheck(cov, ok, 1e-18);
+  if (!ok || !cov.allFinite()) return;
+  // Innovation form (LearnSize), each semi-axis's pull scaled by its weight.
+  Eigen::Vector2d pull = share * post_info * (size - shape.size_m);
+  pull(0) *= std::max(0.0, weights[0]);
+  pull(1) *= std::max(0.0, weights[1]);
+  const Eigen::Vector2d mean = shape.size_m + cov * pull;
+  if (!mean.allFinite() || !(mean.minCoeff() > 0.0)) return;
+  shape.size_m = mean;
+  shape.size_cov_m2 = 0.5 * (cov + cov.transpose());
 }
 
 void LearnSize(const Eigen::Vector2d& size, const Eigen::Matrix2d& size_cov, double share,
@@ -593,7 +619,7 @@ class TrackingPipeline::Refiner final : public MeasurementRefiner {
   std::uint64_t touching = 0;
   std::uint64_t box_occluded = 0;
   std::uint64_t box_unseen_sizes = 0;
-  std::uint64_t person_one_axis = 0;
+  std::uint64_t person_across_ray = 0;
 
   // How many of the observation's two outline ends are silhouettes (MakePart: not an occluder's
   // edge, not the field of view's end).
@@ -806,12 +832,16 @@ class TrackingPipeline::Refiner final : public MeasurementRefiner {
       if (shape.model == ShapeModel::kBox && o.box_size_from_faces_seen) {
         shown = internal::BoxFacesShown(fit.centre_m, size, yaw, part.silhouette.step_rad);
         if (!shown[0] || !shown[1]) ++box_unseen_sizes;
-      } else if (shape.model == ShapeModel::kSuperellipse && o.mount == Mount::kTorso &&
-                 o.person_size_across_ray) {
-        shown = internal::PersonAxesShown(fit.centre_m, yaw);
-        if (!shown[0] || !shown[1]) ++person_one_axis;
       }
-      LearnSize(size, size_cov, shape, shown);
+      if (shape.model == ShapeModel::kSuperellipse && o.mount == Mount::kTorso &&
+          o.person_size_across_ray) {
+        // ShapeOptions::person_size_across_ray.
+        internal::LearnSizeWeighted(size, size_cov, kSizeLearningShare,
+                                    internal::PersonAxisWeights(fit.centre_m, yaw), shape);
+        ++person_across_ray;
+      } else {
+        LearnSize(size, size_cov, shape, shown);
+      }
     }
     shape.yaw_rad = std::remainder(yaw, common::kPi);
     shape.yaw_sigma_rad = fit.yaw_sigma_rad;
@@ -2172,7 +2202,7 @@ const ScanTracks& TrackingPipeline::Process(const ScanView& scan, std::uint32_t 
   const std::uint64_t touching_before = refiner_->touching;
   const std::uint64_t box_occluded_before = refiner_->box_occluded;
   const std::uint64_t box_unseen_before = refiner_->box_unseen_sizes;
-  const std::uint64_t person_one_axis_before = refiner_->person_one_axis;
+  const std::uint64_t person_across_ray_before = refiner_->person_across_ray;
   scan_ = &scan;
   tracker_.Step(scan.stamp_ns, measurements_.span(), offsets_s_.span(),
                 shape_fit ? refiner_.get() : nullptr, tracks_);
@@ -2189,7 +2219,7 @@ const ScanTracks& TrackingPipeline::Process(const ScanView& scan, std::uint32_t 
   counters_.touching_leg_pairs += refiner_->touching - touching_before;
   counters_.box_occluded_fits += refiner_->box_occluded - box_occluded_before;
   counters_.box_sizes_unseen += refiner_->box_unseen_sizes - box_unseen_before;
-  counters_.person_sizes_one_axis += refiner_->person_one_axis - person_one_axis_before;
+  counters_.person_sizes_across_ray += refiner_->person_across_ray - person_across_ray_before;
   if (bg.scan_error == ScanError::kNone && bg.learned) {
     AbsorbStatic(scan);
     if (shape_fit) DropCoasting(scan);

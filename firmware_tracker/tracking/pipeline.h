@@ -447,23 +447,25 @@ struct ShapeOptions {
   // instead of one (the unit test MixedPixelsWithinAPersonsReachOfANearerReturnAreNotLegs: 7
   // ids for 1). false (the default): both semi-axes learned from every box fit.
   bool box_size_from_faces_seen = false;
-  // Upper-body mount: a person's size is learned per semi-axis only from scans in which that
-  // semi-axis lies across the ray (within 45 deg of it): the shoulders' half-width a from a person
-  // seen front-on or back-on, the half-depth b from one seen from the side. The silhouette's two
-  // ends fix the body's width across the ray; its extent along the ray, which puts the centre
-  // behind the visible side, a fit reads from the visible arc's curvature alone, and there it
-  // reads the outline's departure from the model (a torso rounder or boxier than the fixed
-  // exponent, ranges averaged over the beam's footprint on a curved front) more than the size:
-  // every fit of the shipped and held-out scenes put b 0.01-0.02 m above a prior of 0.14 m, in
-  // every view. Learned from each scan (kSizeLearningShare) a person walking towards or away
+  // Upper-body mount: a person's size is learned only as far as the scan shows it across the ray.
+  // The silhouette's two ends fix the body's width across the ray; its extent along the ray,
+  // which puts the centre behind the visible side, a fit reads from the visible arc's curvature
+  // alone, and there it reads the outline's departure from the model (a torso rounder or boxier
+  // than the fixed exponent, ranges averaged over the beam's footprint on a curved front) more
+  // than the size: fits of the benchmark's scenes put b 0.01-0.02 m above a prior of 0.14 m in
+  // every view. Learned from each scan (kSizeLearningShare), a person walking towards or away
   // from a sensor for seconds (a corridor's end) builds a depth semi-axis centimetres too large
   // with millimetres of claimed sigma, and the centre lies that much too far from the sensor
-  // (tracking_benchmark before this, upper body, walking along the line of sight, a 32 m
-  // corridor: learned b 0.17-0.18 m, radial mean +0.02 to +0.04 m, NEES 4-6). The semi-axis not
-  // shown keeps its state (its sigma drifting as size_drift_m_per_sqrt_s says), which the
-  // reported covariance carries along the ray (centre_bias_along_ray). Counted in
-  // PipelineCounters::person_sizes_one_axis. false: both semi-axes learned from every fit, as
-  // before.
+  // (tracking_benchmark --breakdown before this, upper body, walking along the line of sight, a
+  // 32 m corridor: learned b 0.17-0.18 m, radial mean +0.02 to +0.04 m, NEES 4-6). Each semi-axis
+  // takes the fit's information and pull weighted by its share of the squared half-width across
+  // the ray (an ellipse's h(w)^2 = a^2 (w.e_a)^2 + b^2 (w.e_b)^2, w across the ray): a by
+  // 1 - c^2, b by c^2, c the cosine between axis a and the ray (PersonAxisWeights): front-on the
+  // shoulders' half-width alone, from the side the half-depth alone, at 45 deg each half. What a
+  // view does not show keeps its state (its sigma drifting as size_drift_m_per_sqrt_s says),
+  // which the reported covariance carries along the ray (centre_bias_along_ray). Counted in
+  // PipelineCounters::person_sizes_across_ray. false: both semi-axes learned in full from every
+  // fit, as before.
   bool person_size_across_ray = true;
   // Added in quadrature to every body-centre measurement (sigma per axis): what the fit cannot know
   // (sway, the torso's turn, an outline that is not the model's).
@@ -608,8 +610,9 @@ struct PipelineCounters {
   std::uint64_t box_occluded_fits = 0;
   // Box refinements that did not show one of the semi-axes (box_size_from_faces_seen).
   std::uint64_t box_sizes_unseen = 0;
-  // Person (upper-body) refinements that learned one semi-axis only (person_size_across_ray).
-  std::uint64_t person_sizes_one_axis = 0;
+  // Person (upper-body) refinements whose size was learned per semi-axis by its share across the
+  // ray (person_size_across_ray).
+  std::uint64_t person_sizes_across_ray = 0;
   std::uint64_t deep_leg_pairs = 0;    // deep 2-3 point legs measured as a pair (deep_legs_as_pair)
   std::uint64_t veiled_segments = 0;   // legs: mixed pixels (beside a nearer edge, deep), dropped
   std::uint64_t deep_pieces_kept = 0;  // legs: deep pieces with no surface behind, kept
@@ -798,11 +801,18 @@ std::size_t BoxUnoccludedPoints(const ShapeOptions& o, const Eigen::Vector2d& ce
 std::array<bool, 2> BoxFacesShown(const Eigen::Vector2d& centre_m, const Eigen::Vector2d& size_m,
                                   double yaw_rad, double step_rad);
 
-// ShapeOptions::person_size_across_ray: which semi-axes of a body centred at centre_m (sensor at
-// the origin) with axis a along yaw_rad a scan shows: a where it lies within 45 deg of across the
-// ray (|cos| of its angle to the ray below 1/sqrt(2)), b otherwise (at 45 deg exactly: b). Both
-// true where centre_m is at the origin.
-std::array<bool, 2> PersonAxesShown(const Eigen::Vector2d& centre_m, double yaw_rad);
+// ShapeOptions::person_size_across_ray: the weights of a body's semi-axes (a along yaw_rad, b
+// across it) centred at centre_m (sensor at the origin) in what a scan shows across the ray:
+// {1 - c^2, c^2}, c the cosine of the angle between axis a and the ray. {1, 1} where centre_m is
+// at the origin.
+std::array<double, 2> PersonAxisWeights(const Eigen::Vector2d& centre_m, double yaw_rad);
+
+// ShapeOptions::person_size_across_ray: LearnSize with the fit's information beyond the prior
+// taken as D share (post - prior) D, D = diag(sqrt(weights)), and its pull on each semi-axis
+// (innovation form, share post (size - state)) scaled by that semi-axis's weight: weights {1, 1}
+// are LearnSize with both semi-axes shown, a weight 0 is LearnSize with that one not shown.
+void LearnSizeWeighted(const Eigen::Vector2d& size, const Eigen::Matrix2d& size_cov, double share,
+                       const std::array<double, 2>& weights, TrackShape& shape);
 
 // A track's size state after a fit whose posterior (prior: the state) is (size, size_cov): the
 // fit's information beyond the prior, scaled by share, added to the state (information form).
