@@ -761,7 +761,9 @@ TEST(PipelineScenarioTest, DoorSwingingTowardsTheSensorBecomesBackgroundSoonAfte
   // nothing is tracked there any more.
   Scene scene;
   scene.moving_walls = SwingingDoor(+1.0);  // towards -x: into the room
-  const TrackerOptions options = Synthetic();
+  TrackerOptions options = Synthetic();
+  // Measured with both semi-axes learned from every fit (ShapeOptions::person_size_across_ray).
+  options.shape.person_size_across_ray = false;
   const double open_s = 9.5;
   const double gone_s = open_s + options.tracking.static_object_to_background_s + 1.0;
   const SceneRun run = Simulate(scene, gone_s + 5.0, options);
@@ -2003,6 +2005,8 @@ TEST(PipelineScenarioTest, CovarianceOfPeopleOfDifferentSizesMatchesTheirError) 
   // the cluttered, superelliptic people of tracking_benchmark's scenes it gives a mean NEES of 2.0
   // (upper body) and 2.3 (legs).
   TrackerOptions options = Synthetic();
+  // Measured with both semi-axes learned from every fit (ShapeOptions::person_size_across_ray).
+  options.shape.person_size_across_ray = false;
   options.shape.centre_bias_sigma_m = 0.02;
   Scene scene;
   scene.walkers = {Walker::Path(kLearnedS, {{1.5, -4.0}, {6.0, 0.0}, {2.0, 4.0}}, 1.2),
@@ -2084,6 +2088,8 @@ TEST(PipelineScenarioTest, CovarianceAlongAndAcrossTheRayContainsTheErrorAtEvery
   // The fixed allowances' two forms against each other (the measured outline departure, the same
   // in every direction, is AModelLikeOutlineIsReportedWithTheFixedAllowancesCut's).
   TrackerOptions options = Synthetic();
+  // Measured with both semi-axes learned from every fit (ShapeOptions::person_size_across_ray).
+  options.shape.person_size_across_ray = false;
   options.shape.outline_departure_gain = 0.0;
   ASSERT_TRUE(options.shape.centre_bias_along_ray);
   TrackerOptions isotropic = options;
@@ -2116,7 +2122,9 @@ TEST(PipelineScenarioTest, CovarianceAlongAndAcrossTheRayContainsTheErrorAtEvery
 // it (RMS error within the RMS sigma in both directions). With the gain 0 the sigmas are the
 // whole fixed allowances.
 TEST(PipelineScenarioTest, AModelLikeOutlineIsReportedWithTheFixedAllowancesCut) {
-  const TrackerOptions options = Synthetic();
+  TrackerOptions options = Synthetic();
+  // Measured with both semi-axes learned from every fit (ShapeOptions::person_size_across_ray).
+  options.shape.person_size_across_ray = false;
   ASSERT_GT(options.shape.outline_departure_gain, 0.0);
   TrackerOptions before = options;
   before.shape.outline_departure_gain = 0.0;
@@ -2240,6 +2248,8 @@ TEST(PipelineScenarioTest, MixedPixelsAtAFarBodysEdgesDoNotPushItsCentreAway) {
   TrackerOptions options;
   options.background.max_range_m = 40.0;
   options.shape.person_exponent = 2.0;
+  // Measured with both semi-axes learned from every fit (ShapeOptions::person_size_across_ray).
+  options.shape.person_size_across_ray = false;
   const MixedPixelRun with = RunMixedPixels(options);
   options.shape.mixed_pixel_min_footprint_m = 0.0;
   const MixedPixelRun without = RunMixedPixels(options);
