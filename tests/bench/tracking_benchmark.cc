@@ -56,8 +56,10 @@
 //   it held (its first false scan since): its object out of view, coasting while its object was
 //   visible and what became of the object's returns, or measured on something else, how far off and
 //   on what) and the tracker's counters; --breakdown: a table more per section, the per-sensor
-//   matched error along and across the line of sight by range and point count, and the filtered
-//   track's error beside that of the scan's measurement it was updated with, see Breakdown;
+//   matched error along and across the line of sight by range and point count, by the sensor's
+//   model and scan rate, the person's size and outline, the object's speed, a partial view (a
+//   nearer return beside it) or another object near it, and the filtered track's error beside
+//   that of the scan's measurement it was updated with, see Breakdown;
 //   --before-report-rules: a third tracker, "before", the new one without
 //   ShapeOptions::unseen_coasting_m and MultiTrackerOptions::moving_speed_mps, the tree before
 //   them; --before-mixed-pixels: "before" is the new one taking knee-height mixed pixels for legs,
@@ -146,6 +148,7 @@
 #include <memory>
 #include <set>
 #include <string>
+#include <string_view>
 #include <thread>
 #include <vector>
 
@@ -189,6 +192,15 @@ struct Truth {
   // --explain, knee height, a person: its legs' centres (same frame) and radius (0: not a person).
   std::array<Vector2d, 2> legs{Vector2d::Zero(), Vector2d::Zero()};
   double leg_radius_m = 0.0;
+  // --breakdown: the sensor's model (kModelBins), a person's upper-body semi-axis across the
+  // shoulders and its cross-section's superellipse exponent (0: not a person), and whether the scan
+  // has a return nearer than the object's front beside or in front of it (a partial view).
+  std::size_t model = 0;
+  double a_m = 0.0;
+  double exponent = 0.0;
+  bool occluded = false;
+  double nearest_other_m = std::numeric_limits<double>::infinity();  // to another object's centre
+  double rate_hz = 0.0;                                              // the sensor's scan rate
 };
 // --breakdown: a person walks (Truth::gait) above this speed, a trolley moves (Truth::view); a
 // trolley is seen end-on or broadside within this angle of it.
@@ -306,7 +318,45 @@ constexpr const char* kPartsBins[] = {"parts: coasting",
                                       "parts: coasting beside an observation (0.5 m)",
                                       "parts: one leg hiding the other",
                                       "parts: wider than two legs, a trolley"};
+// The sensor's model (the simulator's key); a person's shoulder semi-axis a_m (the shipped scenes
+// draw 0.23 +- 0.02 per person) and the upper body's superellipse exponent (2: an ellipse); a
+// partial view: a return nearer than the object's front within its angular extent plus two beams
+// to either side.
+constexpr const char* kModelBins[] = {"sensor lms111", "sensor lms151", "sensor lms511",
+                                      "sensor tim561", "sensor tim781", "sensor other"};
+constexpr const char* kSizeBins[] = {"person a < 0.22 m", "person a 0.22-0.27 m",
+                                     "person a > 0.27 m"};
+constexpr const char* kExponentBins[] = {"person torso ellipse (exponent < 2.25)",
+                                         "person torso boxier (exponent >= 2.25)"};
+constexpr const char* kOcclusionBins[] = {"unoccluded", "a nearer return beside it"};
+constexpr const char* kRateBins[] = {"scan rate <= 15 Hz", "scan rate 15-30 Hz",
+                                     "scan rate > 30 Hz"};
+constexpr const char* kSpeedBins[] = {"speed < 0.3 m/s", "speed 0.3-1.0 m/s", "speed 1.0-1.3 m/s",
+                                      "speed > 1.3 m/s"};
+constexpr const char* kCrowdBins[] = {"another object within 1 m", "another object 1-2 m",
+                                      "no other object within 2 m"};
+std::size_t ModelBin(std::string_view key) {
+  for (std::size_t i = 0; i + 1 < std::size(kModelBins); ++i) {
+    if (std::string_view(kModelBins[i]).substr(7) == key) return i;
+  }
+  return std::size(kModelBins) - 1;
+}
 struct Breakdown {
+  std::array<BreakdownCell, std::size(kModelBins)> by_model;
+  std::array<BreakdownCell, std::size(kSizeBins)> by_size;
+  std::array<BreakdownCell, std::size(kExponentBins)> by_exponent;
+  std::array<BreakdownCell, std::size(kOcclusionBins)> by_occlusion;
+  std::array<BreakdownCell, std::size(kSpeedBins)> by_speed;
+  std::array<BreakdownCell, std::size(kCrowdBins)> by_crowd;
+  std::array<BreakdownCell, std::size(kSpeedBins)> unoccluded_by_speed;
+  std::array<BreakdownCell, std::size(kCrowdBins)> unoccluded_by_crowd;
+  // Unoccluded with no other object within 2 m (a clear view): by sensor model, size, exponent.
+  std::array<BreakdownCell, std::size(kModelBins)> clear_by_model;
+  std::array<BreakdownCell, std::size(kSizeBins)> clear_by_size;
+  std::array<BreakdownCell, std::size(kExponentBins)> clear_by_exponent;
+  std::array<BreakdownCell, std::size(kRateBins)> by_rate, clear_by_rate;
+  // Points 2-4 and 5-9 split by the person's size (few points: where the size prior counts most).
+  std::array<BreakdownCell, std::size(kSizeBins)> few_points_by_size, some_points_by_size;
   std::array<BreakdownCell, 4> by_range;
   std::array<BreakdownCell, 6> by_points;
   std::array<BreakdownCell, 9> by_parts;
@@ -352,7 +402,35 @@ struct Breakdown {
                                 : nullptr;
     BreakdownCell* support =
         parts == 4 && t.legs_support >= 0 ? &two_legs_by_support[t.legs_support] : nullptr;
-    BreakdownCell* cells[] = {&by_range[RangeBin(range_m)],
+    const std::size_t size_bin = t.a_m < 0.22 ? 0 : t.a_m <= 0.27 ? 1 : 2;
+    const bool person = t.a_m > 0.0;
+    const double speed = t.v.norm();
+    const std::size_t speed_bin = speed < 0.3 ? 0 : speed < 1.0 ? 1 : speed <= 1.3 ? 2 : 3;
+    const std::size_t crowd_bin = t.nearest_other_m < 1.0 ? 0 : t.nearest_other_m < 2.0 ? 1 : 2;
+    const bool clear = !t.occluded && crowd_bin == 2;
+    const std::size_t rate_bin = t.rate_hz <= 15.0 ? 0 : t.rate_hz <= 30.0 ? 1 : 2;
+    BreakdownCell* cells[] = {&by_model[std::min(t.model, by_model.size() - 1)],
+                              person ? &by_size[size_bin] : nullptr,
+                              person ? &by_exponent[t.exponent < 2.25 ? 0 : 1] : nullptr,
+                              &by_occlusion[t.occluded ? 1 : 0],
+                              &by_speed[speed_bin],
+                              &by_crowd[crowd_bin],
+                              t.occluded ? nullptr : &unoccluded_by_speed[speed_bin],
+                              t.occluded ? nullptr : &unoccluded_by_crowd[crowd_bin],
+                              clear ? &clear_by_model[std::min(t.model, by_model.size() - 1)]
+                                    : nullptr,
+                              clear && person ? &clear_by_size[size_bin] : nullptr,
+                              &by_rate[rate_bin],
+                              clear ? &clear_by_rate[rate_bin] : nullptr,
+                              clear && person ? &clear_by_exponent[t.exponent < 2.25 ? 0 : 1]
+                                              : nullptr,
+                              person && h.points >= 2 && h.points <= 4
+                                  ? &few_points_by_size[size_bin]
+                                  : nullptr,
+                              person && h.points >= 5 && h.points <= 9
+                                  ? &some_points_by_size[size_bin]
+                                  : nullptr,
+                              &by_range[RangeBin(range_m)],
                               &by_points[PointBin(h.points)],
                               &by_parts[parts == 5 && t.trolley ? 8 : parts],
                               &total,
@@ -377,6 +455,31 @@ struct Breakdown {
     }
   }
   void Merge(const Breakdown& o) {
+    for (std::size_t i = 0; i < by_model.size(); ++i) by_model[i].Merge(o.by_model[i]);
+    for (std::size_t i = 0; i < by_size.size(); ++i) {
+      by_size[i].Merge(o.by_size[i]);
+      few_points_by_size[i].Merge(o.few_points_by_size[i]);
+      some_points_by_size[i].Merge(o.some_points_by_size[i]);
+    }
+    for (std::size_t i = 0; i < by_exponent.size(); ++i) by_exponent[i].Merge(o.by_exponent[i]);
+    for (std::size_t i = 0; i < by_occlusion.size(); ++i) by_occlusion[i].Merge(o.by_occlusion[i]);
+    for (std::size_t i = 0; i < by_model.size(); ++i) clear_by_model[i].Merge(o.clear_by_model[i]);
+    for (std::size_t i = 0; i < by_size.size(); ++i) clear_by_size[i].Merge(o.clear_by_size[i]);
+    for (std::size_t i = 0; i < by_exponent.size(); ++i) {
+      clear_by_exponent[i].Merge(o.clear_by_exponent[i]);
+    }
+    for (std::size_t i = 0; i < by_rate.size(); ++i) {
+      by_rate[i].Merge(o.by_rate[i]);
+      clear_by_rate[i].Merge(o.clear_by_rate[i]);
+    }
+    for (std::size_t i = 0; i < by_speed.size(); ++i) {
+      by_speed[i].Merge(o.by_speed[i]);
+      unoccluded_by_speed[i].Merge(o.unoccluded_by_speed[i]);
+    }
+    for (std::size_t i = 0; i < by_crowd.size(); ++i) {
+      by_crowd[i].Merge(o.by_crowd[i]);
+      unoccluded_by_crowd[i].Merge(o.unoccluded_by_crowd[i]);
+    }
     for (std::size_t i = 0; i < by_range.size(); ++i) by_range[i].Merge(o.by_range[i]);
     for (std::size_t i = 0; i < by_points.size(); ++i) by_points[i].Merge(o.by_points[i]);
     for (std::size_t i = 0; i < by_parts.size(); ++i) by_parts[i].Merge(o.by_parts[i]);
@@ -1691,8 +1794,34 @@ void RunSensor(const sim::Simulator& simulator, std::size_t sensor,
                      : c < std::sin(kViewSectorRad) ? 2
                                                     : 1;
       }
+      truth.rate_hz = period_s > 0.0 ? 1.0 / period_s : 0.0;
+      truth.model = ModelBin(setup.device.model != nullptr ? setup.device.model->key : "");
+      double extent_m = 0.3;
+      if (target.shape() == sim::TargetShape::kPerson) {
+        truth.a_m = target.body().a_m;
+        truth.exponent = target.body().exponent;
+        extent_m = target.body().a_m;
+      }
+      if (range > extent_m) {
+        const double bearing = std::atan2(p.y(), p.x());
+        const double half = std::atan(extent_m / range) + 2.0 * view.angle_step_rad;
+        for (std::size_t b = 0; b < view.range_m.size() && !truth.occluded; ++b) {
+          const double a = view.first_angle_rad + static_cast<double>(b) * view.angle_step_rad;
+          if (std::abs(std::remainder(a - bearing, 2.0 * common::kPi)) > half) continue;
+          const double r = static_cast<double>(view.range_m[b]);
+          truth.occluded = r > 0.0 && r < range - extent_m - 0.1;
+        }
+      }
       truths.push_back(truth);
       seen.push_back(ts.target);
+    }
+    for (Truth& t : truths) {
+      for (const Truth& o : truths) {
+        if (&o != &t) t.nearest_other_m = std::min(t.nearest_other_m, (o.p - t.p).norm());
+      }
+      for (const Vector2d& o : dont_care) {
+        t.nearest_other_m = std::min(t.nearest_other_m, (o - t.p).norm());
+      }
     }
     for (std::size_t v = 0; v < variants.size(); ++v) {
       const tracking::ScanTracks& out = pipelines[v]->Process(view, static_cast<std::uint32_t>(k));
@@ -2434,6 +2563,71 @@ std::string BreakdownTable(const Section& s) {
     const std::size_t space = key.find(' ');
     const std::string lead = "all | " + key.substr(0, space) + " | " + key.substr(space + 1);
     t += BreakdownRow(lead, "all", b.total);
+    for (std::size_t i = 0; i < b.by_model.size(); ++i) {
+      if (b.by_model[i].all.n > 0) t += BreakdownRow(lead, kModelBins[i], b.by_model[i]);
+    }
+    for (std::size_t i = 0; i < b.by_size.size(); ++i) {
+      if (b.by_size[i].all.n > 0) t += BreakdownRow(lead, kSizeBins[i], b.by_size[i]);
+    }
+    for (std::size_t i = 0; i < b.by_size.size(); ++i) {
+      if (b.few_points_by_size[i].all.n > 0) {
+        t += BreakdownRow(lead, std::string("points 2-4, ") + kSizeBins[i], b.few_points_by_size[i]);
+      }
+      if (b.some_points_by_size[i].all.n > 0) {
+        t += BreakdownRow(lead, std::string("points 5-9, ") + kSizeBins[i],
+                          b.some_points_by_size[i]);
+      }
+    }
+    for (std::size_t i = 0; i < b.by_exponent.size(); ++i) {
+      if (b.by_exponent[i].all.n > 0) t += BreakdownRow(lead, kExponentBins[i], b.by_exponent[i]);
+    }
+    for (std::size_t i = 0; i < b.by_occlusion.size(); ++i) {
+      if (b.by_occlusion[i].all.n > 0) {
+        t += BreakdownRow(lead, kOcclusionBins[i], b.by_occlusion[i]);
+      }
+    }
+    for (std::size_t i = 0; i < b.by_speed.size(); ++i) {
+      if (b.by_speed[i].all.n > 0) t += BreakdownRow(lead, kSpeedBins[i], b.by_speed[i]);
+    }
+    for (std::size_t i = 0; i < b.by_crowd.size(); ++i) {
+      if (b.by_crowd[i].all.n > 0) t += BreakdownRow(lead, kCrowdBins[i], b.by_crowd[i]);
+    }
+    for (std::size_t i = 0; i < b.by_speed.size(); ++i) {
+      if (b.unoccluded_by_speed[i].all.n > 0) {
+        t += BreakdownRow(lead, std::string("unoccluded, ") + kSpeedBins[i],
+                          b.unoccluded_by_speed[i]);
+      }
+    }
+    for (std::size_t i = 0; i < b.by_crowd.size(); ++i) {
+      if (b.unoccluded_by_crowd[i].all.n > 0) {
+        t += BreakdownRow(lead, std::string("unoccluded, ") + kCrowdBins[i],
+                          b.unoccluded_by_crowd[i]);
+      }
+    }
+    const std::string clear = "clear view (unoccluded, nothing within 2 m), ";
+    for (std::size_t i = 0; i < b.clear_by_model.size(); ++i) {
+      if (b.clear_by_model[i].all.n > 0) {
+        t += BreakdownRow(lead, clear + kModelBins[i], b.clear_by_model[i]);
+      }
+    }
+    for (std::size_t i = 0; i < b.by_rate.size(); ++i) {
+      if (b.by_rate[i].all.n > 0) t += BreakdownRow(lead, kRateBins[i], b.by_rate[i]);
+    }
+    for (std::size_t i = 0; i < b.clear_by_rate.size(); ++i) {
+      if (b.clear_by_rate[i].all.n > 0) {
+        t += BreakdownRow(lead, clear + kRateBins[i], b.clear_by_rate[i]);
+      }
+    }
+    for (std::size_t i = 0; i < b.clear_by_size.size(); ++i) {
+      if (b.clear_by_size[i].all.n > 0) {
+        t += BreakdownRow(lead, clear + kSizeBins[i], b.clear_by_size[i]);
+      }
+    }
+    for (std::size_t i = 0; i < b.clear_by_exponent.size(); ++i) {
+      if (b.clear_by_exponent[i].all.n > 0) {
+        t += BreakdownRow(lead, clear + kExponentBins[i], b.clear_by_exponent[i]);
+      }
+    }
     for (std::size_t i = 0; i < b.by_range.size(); ++i)
       t += BreakdownRow(lead, kRangeBins[i], b.by_range[i]);
     for (std::size_t i = 0; i < b.by_points.size(); ++i)
