@@ -41,7 +41,8 @@
 //                       [--before-few-point-legs] [--before-deep-legs]
 //                       [--before-legs-seen-through]
 //                       [--before-legs-report-coasting] [--before-leg-edges]
-//                       [--before-outline-departure] [--before-recent-veil]
+//                       [--before-outline-departure] [--before-partial-view]
+//                       [--before-recent-veil]
 //                       [--before-single-precision-fit]
 //                       [--before-stance-weight] [--before-adopt] [--before-touching-legs]
 //                       [--before-box-occluders]
@@ -118,7 +119,8 @@
 //   those in front of it (its pusher's), ShapeOptions::box_drop_occluders = false;
 //   --before-outline-departure: "before" reports an upper-body centre with the fixed allowances
 //   for the outline alone, not the departure its fit's residuals measure,
-//   ShapeOptions::outline_departure_gain = 0;
+//   ShapeOptions::outline_departure_gain = 0; --before-partial-view: "before" reports an
+//   upper-body partial view as a whole one, ShapeOptions::partial_view_shared = false;
 //   --before-fusion-merge: "before"'s fusion leaves a fused track without sources to coast beside
 //   the track that took its object and reports fused tracks no tracker holds any more,
 //   FusionOptions::merge_sourceless = false and report_sourceless = true (its tracker is the new
@@ -217,6 +219,7 @@ struct Hypothesis {
   Vector2d z = Vector2d::Zero();
   double z_offset_s = 0.0;
   std::size_t parts = 0;  // --breakdown: the measurement's observation, a Breakdown::PartsBin
+  int edges = -1;         // --breakdown: its observation's silhouette ends (0-2), -1 unknown
   // --explain, per sensor, coasting: what the scan shows across its body (CoastingView).
   std::string view;
 };
@@ -235,6 +238,7 @@ struct ErrorStats {
   double n = 0, sum = 0, radial = 0, radial2 = 0, across2 = 0;
   double moving = 0, along = 0, along2 = 0, beside2 = 0;  // beside: across the motion
   double nees = 0;                                        // sum of the position's NEES (AddNees)
+  double var = 0;  // sum of the reported covariance's trace / 2 (AddNees)
   std::vector<double> norms;
   void Add(const Vector2d& e, const Vector2d& los, const Vector2d& v) {
     const Vector2d across(-los.y(), los.x());
@@ -256,6 +260,7 @@ struct ErrorStats {
   void AddNees(const Vector2d& e, const Matrix2d& cov) {
     const Eigen::LDLT<Matrix2d> ldlt(cov);
     if (ldlt.info() == Eigen::Success) nees += e.dot(ldlt.solve(e));
+    var += 0.5 * cov.trace();
   }
   void Merge(const ErrorStats& o) {
     n += o.n;
@@ -268,6 +273,7 @@ struct ErrorStats {
     along2 += o.along2;
     beside2 += o.beside2;
     nees += o.nees;
+    var += o.var;
     norms.insert(norms.end(), o.norms.begin(), o.norms.end());
   }
   double Mean() const { return n > 0 ? sum / n : 0.0; }
@@ -279,6 +285,7 @@ struct ErrorStats {
   double AlongRms() const { return moving > 0 ? std::sqrt(along2 / moving) : 0.0; }
   double BesideRms() const { return moving > 0 ? std::sqrt(beside2 / moving) : 0.0; }
   double Nees() const { return n > 0 ? nees / n : 0.0; }
+  double ReportedSigma() const { return n > 0 ? std::sqrt(var / n) : 0.0; }
   double P95() const {
     if (norms.empty()) return 0.0;
     std::vector<double> e = norms;
@@ -331,6 +338,8 @@ constexpr const char* kExponentBins[] = {"person torso ellipse (exponent < 2.25)
 constexpr const char* kOcclusionBins[] = {"unoccluded", "a nearer return beside it"};
 constexpr const char* kRateBins[] = {"scan rate <= 15 Hz", "scan rate 15-30 Hz",
                                      "scan rate > 30 Hz"};
+constexpr const char* kEdgeBins[] = {"silhouette ends 0", "silhouette ends 1",
+                                     "silhouette ends 2"};
 constexpr const char* kSpeedBins[] = {"speed < 0.3 m/s", "speed 0.3-1.0 m/s", "speed 1.0-1.3 m/s",
                                       "speed > 1.3 m/s"};
 constexpr const char* kCrowdBins[] = {"another object within 1 m", "another object 1-2 m",
@@ -355,6 +364,8 @@ struct Breakdown {
   std::array<BreakdownCell, std::size(kSizeBins)> clear_by_size;
   std::array<BreakdownCell, std::size(kExponentBins)> clear_by_exponent;
   std::array<BreakdownCell, std::size(kRateBins)> by_rate, clear_by_rate;
+  // By the measured observation's silhouette ends, with and without a nearer return beside it.
+  std::array<BreakdownCell, std::size(kEdgeBins)> occluded_by_edges, unoccluded_by_edges;
   // Points 2-4 and 5-9 split by the person's size (few points: where the size prior counts most).
   std::array<BreakdownCell, std::size(kSizeBins)> few_points_by_size, some_points_by_size;
   std::array<BreakdownCell, 4> by_range;
@@ -421,6 +432,10 @@ struct Breakdown {
                                     : nullptr,
                               clear && person ? &clear_by_size[size_bin] : nullptr,
                               &by_rate[rate_bin],
+                              h.measured && h.edges >= 0
+                                  ? (t.occluded ? &occluded_by_edges[static_cast<std::size_t>(h.edges)]
+                                                : &unoccluded_by_edges[static_cast<std::size_t>(h.edges)])
+                                  : nullptr,
                               clear ? &clear_by_rate[rate_bin] : nullptr,
                               clear && person ? &clear_by_exponent[t.exponent < 2.25 ? 0 : 1]
                                               : nullptr,
@@ -467,6 +482,10 @@ struct Breakdown {
     for (std::size_t i = 0; i < by_size.size(); ++i) clear_by_size[i].Merge(o.clear_by_size[i]);
     for (std::size_t i = 0; i < by_exponent.size(); ++i) {
       clear_by_exponent[i].Merge(o.clear_by_exponent[i]);
+    }
+    for (std::size_t i = 0; i < occluded_by_edges.size(); ++i) {
+      occluded_by_edges[i].Merge(o.occluded_by_edges[i]);
+      unoccluded_by_edges[i].Merge(o.unoccluded_by_edges[i]);
     }
     for (std::size_t i = 0; i < by_rate.size(); ++i) {
       by_rate[i].Merge(o.by_rate[i]);
@@ -1172,6 +1191,9 @@ bool g_before_leg_edges = false;
 // --before-outline-departure: "before" reports an upper-body centre with the fixed allowances for
 // the outline alone (ShapeOptions::outline_departure_gain = 0).
 bool g_before_outline_departure = false;
+// --before-partial-view: "before" reports an upper-body partial view (fewer than two silhouette
+// ends) as a whole one, without its fit's covariance (ShapeOptions::partial_view_shared = false).
+bool g_before_partial_view = false;
 // --before-stance-weight: "before" measures two legs by their midpoint also where one stands and
 // the other swings (ShapeOptions::stance_leg_weight = 0.5).
 bool g_before_stance_weight = false;
@@ -1237,7 +1259,8 @@ std::vector<Variant> Variants(sim::Mount mount, double range_m) {
              g_before_deep_evidence || g_before_isotropic_bias || g_before_across_walk ||
              g_before_side_uncertainty || g_before_side_from_view || g_before_few_point_legs ||
              g_before_deep_legs || g_before_legs_seen_through || g_before_legs_report_coasting ||
-             g_before_leg_edges || g_before_outline_departure || g_before_fusion_merge ||
+             g_before_leg_edges || g_before_outline_departure || g_before_partial_view ||
+             g_before_fusion_merge ||
              g_before_report_sourceless || g_before_recent_veil || g_before_single_precision_fit ||
              g_before_stance_weight || g_before_adopt || g_before_touching_legs ||
              g_before_box_occluders || g_before_lone_leg_standing ||
@@ -1264,6 +1287,7 @@ std::vector<Variant> Variants(sim::Mount mount, double range_m) {
     if (g_before_legs_report_coasting) before.shape.legs_report_coasting_s = 0.0;
     if (g_before_leg_edges) before.shape.leg_edge_in_mixed_beam = false;
     if (g_before_outline_departure) before.shape.outline_departure_gain = 0.0;
+    if (g_before_partial_view) before.shape.partial_view_shared = false;
     if (g_before_recent_veil) before.shape.recent_veil_s = 0.0;
     if (g_before_single_precision_fit) before.shape.fit.single_precision_points = false;
     if (g_before_stance_weight) before.shape.stance_leg_weight = 0.5;
@@ -1339,6 +1363,30 @@ std::size_t PartsOf(const tracking::TrackingPipeline& pipeline, const tracking::
       pipeline.segments().points_m.span().subspan(ob.parts[0].first_point, ob.parts[0].point_count);
   const tracking::ShapeOptions& o = pipeline.options().shape;
   return (pts.back() - pts.front()).norm() > 2.0 * o.leg_radius_m + 0.08 ? 3 : 2;
+}
+
+// --breakdown: the silhouette ends (MakePart: not an occluder's edge nor the field of view's end)
+// of the observation a measured track was updated with, -1 where not found.
+int EdgesOf(const tracking::TrackingPipeline& pipeline, const tracking::TrackReport& r) {
+  if (r.state != tracking::TrackState::kConfirmed) return -1;
+  const auto obs = pipeline.observations();
+  const auto ms = pipeline.measurements();
+  const Vector2d z(r.measured_x_m, r.measured_y_m);
+  double best = std::numeric_limits<double>::infinity();
+  std::size_t found = obs.size();
+  for (std::size_t i = 0; i < obs.size() && i < ms.size(); ++i) {
+    std::size_t points = 0;
+    for (std::size_t k = 0; k < obs[i].part_count; ++k) points += obs[i].parts[k].point_count;
+    const double d = (ms[i].position_m - z).norm();
+    if (points == r.points && d < best) {
+      best = d;
+      found = i;
+    }
+  }
+  if (found == obs.size() || obs[found].part_count == 0) return -1;
+  const tracking::Observation& ob = obs[found];
+  return (ob.parts[0].silhouette.first_valid ? 1 : 0) +
+         (ob.parts[ob.part_count - 1].silhouette.last_valid ? 1 : 0);
 }
 
 // --explain, knee height: every measured match of a person, its measurement's error along the
@@ -1853,6 +1901,7 @@ void RunSensor(const sim::Simulator& simulator, std::size_t sensor,
                         {r.measured_x_m, r.measured_y_m},
                         r.measured_offset_s,
                         PartsOf(*pipelines[v], r),
+                        EdgesOf(*pipelines[v], r),
                         std::move(coasting_view)});
         frame.tracks.push_back(ToObservation(r));
       }
@@ -2350,20 +2399,20 @@ const char* kBreakdownHeader =
     "| scenario | mount | tracker | bin | matches | MOTP m | p95 m | radial mean m | radial RMS m "
     "| across RMS m | measured | filtered RMS m | raw RMS m | filtered radial mean m | raw radial "
     "mean m | filtered along-motion mean m | raw along-motion mean m | raw along-motion RMS m | "
-    "raw across-motion RMS m | filtered NEES |\n"
+    "raw across-motion RMS m | filtered NEES | reported sigma m |\n"
     "|---|---|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|--"
-    "-:"
-    "|\n";
+    "-:|---:|\n";
 
 std::string BreakdownRow(const std::string& lead, const std::string& bin, const BreakdownCell& c) {
   char line[512];
   std::snprintf(line, sizeof line,
                 "| %s | %s | %.0f | %.3f | %.3f | %+.3f | %.3f | %.3f | %.0f | %.3f | %.3f | "
-                "%+.3f | %+.3f | %+.3f | %+.3f | %.3f | %.3f | %.2f |\n",
+                "%+.3f | %+.3f | %+.3f | %+.3f | %.3f | %.3f | %.2f | %.3f |\n",
                 lead.c_str(), bin.c_str(), c.all.n, c.all.Mean(), c.all.P95(), c.all.RadialMean(),
                 c.all.RadialRms(), c.all.AcrossRms(), c.filtered.n, c.filtered.Rms(), c.raw.Rms(),
                 c.filtered.RadialMean(), c.raw.RadialMean(), c.filtered.AlongMean(),
-                c.raw.AlongMean(), c.raw.AlongRms(), c.raw.BesideRms(), c.filtered.Nees());
+                c.raw.AlongMean(), c.raw.AlongRms(), c.raw.BesideRms(), c.filtered.Nees(),
+                c.filtered.ReportedSigma());
   return line;
 }
 
@@ -2610,6 +2659,16 @@ std::string BreakdownTable(const Section& s) {
         t += BreakdownRow(lead, clear + kModelBins[i], b.clear_by_model[i]);
       }
     }
+    for (std::size_t i = 0; i < b.occluded_by_edges.size(); ++i) {
+      if (b.occluded_by_edges[i].all.n > 0) {
+        t += BreakdownRow(lead, std::string("a nearer return beside it, ") + kEdgeBins[i],
+                          b.occluded_by_edges[i]);
+      }
+      if (b.unoccluded_by_edges[i].all.n > 0) {
+        t += BreakdownRow(lead, std::string("unoccluded, ") + kEdgeBins[i],
+                          b.unoccluded_by_edges[i]);
+      }
+    }
     for (std::size_t i = 0; i < b.by_rate.size(); ++i) {
       if (b.by_rate[i].all.n > 0) t += BreakdownRow(lead, kRateBins[i], b.by_rate[i]);
     }
@@ -2741,7 +2800,8 @@ std::string KneeHeightBefore() {
         g_before_isotropic_bias || g_before_across_walk || g_before_side_uncertainty ||
         g_before_side_from_view || g_before_lone_leg_standing || g_before_few_point_legs ||
         g_before_deep_legs || g_before_legs_seen_through || g_before_legs_report_coasting || g_before_leg_edges ||
-        g_before_outline_departure || g_before_fusion_merge || g_before_report_sourceless ||
+        g_before_outline_departure || g_before_partial_view || g_before_fusion_merge ||
+        g_before_report_sourceless ||
         g_before_recent_veil || g_before_single_precision_fit || g_before_stance_weight ||
         g_before_adopt || g_before_touching_legs || g_before_box_occluders ||
         g_before_single_beam_partner || g_before_edge_echo_birth) ||
@@ -2843,6 +2903,11 @@ std::string KneeHeightBefore() {
         "reporting an upper-body centre with the whole fixed allowances for the outline, not the "
         "departure its fit's residuals measure (`shape.outline_departure_gain` 0)");
   }
+  if (g_before_partial_view) {
+    without.push_back(
+        "reporting an upper-body partial view (an occluder's edge at an end of the outline) as a "
+        "whole one, without its fit's covariance (`shape.partial_view_shared` false)");
+  }
   if (g_before_recent_veil) {
     without.push_back(
         "taking a knee-height leg-sized segment behind a nearer return its beams had in the last "
@@ -2901,7 +2966,7 @@ std::string KneeHeightBefore() {
   }
   const char* const same =
       g_before_single_precision_fit ? ", on the same scans in the same run"
-      : g_before_outline_departure || g_before_isotropic_bias
+      : g_before_outline_departure || g_before_isotropic_bias || g_before_partial_view
           ? ", on the same scans in the same run; upper-body tracks are the same by construction, "
             "their reported covariance (so NEES and what fusion makes of them) is not"
           : ", on the same scans in the same run; upper-body rows are the same by construction";
@@ -2990,6 +3055,8 @@ int main(int argc, char** argv) {
       g_before_leg_edges = true;
     } else if (a == "--before-outline-departure") {
       g_before_outline_departure = true;
+    } else if (a == "--before-partial-view") {
+      g_before_partial_view = true;
     } else if (a == "--before-recent-veil") {
       g_before_recent_veil = true;
     } else if (a == "--before-single-precision-fit") {
@@ -3019,7 +3086,8 @@ int main(int argc, char** argv) {
                    "[--before-across-walk] [--before-side-uncertainty] "
                    "[--before-side-from-view] [--before-lone-leg-standing] [--before-few-point-legs] [--before-deep-legs] "
                    "[--before-legs-seen-through] [--before-legs-report-coasting] "
-                   "[--before-leg-edges] [--before-outline-departure] [--before-recent-veil] "
+                   "[--before-leg-edges] [--before-outline-departure] [--before-partial-view] "
+                   "[--before-recent-veil] "
                    "[--before-single-precision-fit] "
                    "[--before-stance-weight] [--before-adopt] [--before-touching-legs] "
                    "[--before-box-occluders] [--before-fusion-merge] "
