@@ -338,6 +338,7 @@ constexpr const char* kExponentBins[] = {"person torso ellipse (exponent < 2.25)
 constexpr const char* kOcclusionBins[] = {"unoccluded", "a nearer return beside it"};
 constexpr const char* kRateBins[] = {"scan rate <= 15 Hz", "scan rate 15-30 Hz",
                                      "scan rate > 30 Hz"};
+constexpr const char* kObjectBins[] = {"object: a person", "object: a trolley", "object: other"};
 constexpr const char* kEdgeBins[] = {"silhouette ends 0", "silhouette ends 1",
                                      "silhouette ends 2"};
 constexpr const char* kSpeedBins[] = {"speed < 0.3 m/s", "speed 0.3-1.0 m/s", "speed 1.0-1.3 m/s",
@@ -364,6 +365,7 @@ struct Breakdown {
   std::array<BreakdownCell, std::size(kSizeBins)> clear_by_size;
   std::array<BreakdownCell, std::size(kExponentBins)> clear_by_exponent;
   std::array<BreakdownCell, std::size(kRateBins)> by_rate, clear_by_rate;
+  std::array<BreakdownCell, std::size(kObjectBins)> by_object;
   // By the measured observation's silhouette ends, with and without a nearer return beside it.
   std::array<BreakdownCell, std::size(kEdgeBins)> occluded_by_edges, unoccluded_by_edges;
   // Points 2-4 and 5-9 split by the person's size (few points: where the size prior counts most).
@@ -432,6 +434,7 @@ struct Breakdown {
                                     : nullptr,
                               clear && person ? &clear_by_size[size_bin] : nullptr,
                               &by_rate[rate_bin],
+                              &by_object[person ? 0 : t.trolley ? 1 : 2],
                               h.measured && h.edges >= 0
                                   ? (t.occluded ? &occluded_by_edges[static_cast<std::size_t>(h.edges)]
                                                 : &unoccluded_by_edges[static_cast<std::size_t>(h.edges)])
@@ -483,6 +486,7 @@ struct Breakdown {
     for (std::size_t i = 0; i < by_exponent.size(); ++i) {
       clear_by_exponent[i].Merge(o.clear_by_exponent[i]);
     }
+    for (std::size_t i = 0; i < by_object.size(); ++i) by_object[i].Merge(o.by_object[i]);
     for (std::size_t i = 0; i < occluded_by_edges.size(); ++i) {
       occluded_by_edges[i].Merge(o.occluded_by_edges[i]);
       unoccluded_by_edges[i].Merge(o.unoccluded_by_edges[i]);
@@ -2658,6 +2662,9 @@ std::string BreakdownTable(const Section& s) {
       if (b.clear_by_model[i].all.n > 0) {
         t += BreakdownRow(lead, clear + kModelBins[i], b.clear_by_model[i]);
       }
+    }
+    for (std::size_t i = 0; i < b.by_object.size(); ++i) {
+      if (b.by_object[i].all.n > 0) t += BreakdownRow(lead, kObjectBins[i], b.by_object[i]);
     }
     for (std::size_t i = 0; i < b.occluded_by_edges.size(); ++i) {
       if (b.occluded_by_edges[i].all.n > 0) {
