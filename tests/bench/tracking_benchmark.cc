@@ -42,6 +42,7 @@
 //                       [--before-legs-seen-through]
 //                       [--before-legs-report-coasting] [--before-leg-edges]
 //                       [--before-outline-departure] [--before-partial-view]
+//                       [--before-underdetermined-fit]
 //                       [--before-recent-veil]
 //                       [--before-single-precision-fit]
 //                       [--before-stance-weight] [--before-adopt] [--before-touching-legs]
@@ -121,6 +122,9 @@
 //   for the outline alone, not the departure its fit's residuals measure,
 //   ShapeOptions::outline_departure_gain = 0; --before-partial-view: "before" reports an
 //   upper-body partial view as a whole one, ShapeOptions::partial_view_shared = false;
+//   --before-underdetermined-fit: "before" reports an upper-body fit of no more points and
+//   silhouette ends than its parameters as any other,
+//   ShapeOptions::underdetermined_fit_shared = false;
 //   --before-fusion-merge: "before"'s fusion leaves a fused track without sources to coast beside
 //   the track that took its object and reports fused tracks no tracker holds any more,
 //   FusionOptions::merge_sourceless = false and report_sourceless = true (its tracker is the new
@@ -1198,6 +1202,10 @@ bool g_before_outline_departure = false;
 // --before-partial-view: "before" reports an upper-body partial view (fewer than two silhouette
 // ends) as a whole one, without its fit's covariance (ShapeOptions::partial_view_shared = false).
 bool g_before_partial_view = false;
+// --before-underdetermined-fit: "before" reports an upper-body fit of no more points and
+// silhouette ends than its parameters as any other, without its fit's covariance
+// (ShapeOptions::underdetermined_fit_shared = false).
+bool g_before_underdetermined_fit = false;
 // --before-stance-weight: "before" measures two legs by their midpoint also where one stands and
 // the other swings (ShapeOptions::stance_leg_weight = 0.5).
 bool g_before_stance_weight = false;
@@ -1264,6 +1272,7 @@ std::vector<Variant> Variants(sim::Mount mount, double range_m) {
              g_before_side_uncertainty || g_before_side_from_view || g_before_few_point_legs ||
              g_before_deep_legs || g_before_legs_seen_through || g_before_legs_report_coasting ||
              g_before_leg_edges || g_before_outline_departure || g_before_partial_view ||
+             g_before_underdetermined_fit ||
              g_before_fusion_merge ||
              g_before_report_sourceless || g_before_recent_veil || g_before_single_precision_fit ||
              g_before_stance_weight || g_before_adopt || g_before_touching_legs ||
@@ -1292,6 +1301,7 @@ std::vector<Variant> Variants(sim::Mount mount, double range_m) {
     if (g_before_leg_edges) before.shape.leg_edge_in_mixed_beam = false;
     if (g_before_outline_departure) before.shape.outline_departure_gain = 0.0;
     if (g_before_partial_view) before.shape.partial_view_shared = false;
+    if (g_before_underdetermined_fit) before.shape.underdetermined_fit_shared = false;
     if (g_before_recent_veil) before.shape.recent_veil_s = 0.0;
     if (g_before_single_precision_fit) before.shape.fit.single_precision_points = false;
     if (g_before_stance_weight) before.shape.stance_leg_weight = 0.5;
@@ -2807,7 +2817,8 @@ std::string KneeHeightBefore() {
         g_before_isotropic_bias || g_before_across_walk || g_before_side_uncertainty ||
         g_before_side_from_view || g_before_lone_leg_standing || g_before_few_point_legs ||
         g_before_deep_legs || g_before_legs_seen_through || g_before_legs_report_coasting || g_before_leg_edges ||
-        g_before_outline_departure || g_before_partial_view || g_before_fusion_merge ||
+        g_before_outline_departure || g_before_partial_view || g_before_underdetermined_fit ||
+        g_before_fusion_merge ||
         g_before_report_sourceless ||
         g_before_recent_veil || g_before_single_precision_fit || g_before_stance_weight ||
         g_before_adopt || g_before_touching_legs || g_before_box_occluders ||
@@ -2915,6 +2926,11 @@ std::string KneeHeightBefore() {
         "reporting an upper-body partial view (an occluder's edge at an end of the outline) as a "
         "whole one, without its fit's covariance (`shape.partial_view_shared` false)");
   }
+  if (g_before_underdetermined_fit) {
+    without.push_back(
+        "reporting an upper-body fit of no more points and silhouette ends than its parameters as "
+        "any other, without its fit's covariance (`shape.underdetermined_fit_shared` false)");
+  }
   if (g_before_recent_veil) {
     without.push_back(
         "taking a knee-height leg-sized segment behind a nearer return its beams had in the last "
@@ -2973,7 +2989,8 @@ std::string KneeHeightBefore() {
   }
   const char* const same =
       g_before_single_precision_fit ? ", on the same scans in the same run"
-      : g_before_outline_departure || g_before_isotropic_bias || g_before_partial_view
+      : g_before_outline_departure || g_before_isotropic_bias || g_before_partial_view ||
+              g_before_underdetermined_fit
           ? ", on the same scans in the same run; upper-body tracks are the same by construction, "
             "their reported covariance (so NEES and what fusion makes of them) is not"
           : ", on the same scans in the same run; upper-body rows are the same by construction";
@@ -3064,6 +3081,8 @@ int main(int argc, char** argv) {
       g_before_outline_departure = true;
     } else if (a == "--before-partial-view") {
       g_before_partial_view = true;
+    } else if (a == "--before-underdetermined-fit") {
+      g_before_underdetermined_fit = true;
     } else if (a == "--before-recent-veil") {
       g_before_recent_veil = true;
     } else if (a == "--before-single-precision-fit") {
@@ -3094,6 +3113,7 @@ int main(int argc, char** argv) {
                    "[--before-side-from-view] [--before-lone-leg-standing] [--before-few-point-legs] [--before-deep-legs] "
                    "[--before-legs-seen-through] [--before-legs-report-coasting] "
                    "[--before-leg-edges] [--before-outline-departure] [--before-partial-view] "
+                   "[--before-underdetermined-fit] "
                    "[--before-recent-veil] "
                    "[--before-single-precision-fit] "
                    "[--before-stance-weight] [--before-adopt] [--before-touching-legs] "
