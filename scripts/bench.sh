@@ -19,7 +19,8 @@ mkdir -p results
   --before-deep-pieces --before-deep-evidence --before-isotropic-bias --before-across-walk \
   --before-side-uncertainty --before-side-from-view --before-lone-leg-standing \
   --before-few-point-legs --before-deep-legs --before-legs-seen-through --before-legs-report-coasting \
-  --before-leg-edges --before-outline-departure --before-recent-veil --before-stance-weight \
+  --before-leg-edges --before-outline-departure --before-partial-view --before-underdetermined-fit \
+  --before-recent-veil --before-stance-weight \
   --before-box-occluders --before-single-beam-partner --before-edge-echo-birth --before-person-size \
   --before-single-precision-fit --before-adopt --before-touching-legs \
   --before-fusion-merge \

@@ -837,8 +837,10 @@ void MultiTracker::Report(common::UtcNs scan_start_ns, ScanTracks& out) {
     // coasting checks (seen through, unseen) take their reach from it; an outline that was not
     // the model's in the last scans is no reason to report the track where the beams pass.
     p.topLeftCorner<2, 2>() += t.shape.centre_bias_cov_m2;
-    if (t.updated)
+    if (t.updated) {
       p.topLeftCorner<2, 2>() += t.shape.reported_departure_m2 * Eigen::Matrix2d::Identity();
+      p.topLeftCorner<2, 2>() += t.shape.reported_partial_cov_m2;
+    }
     r->covariance = p;
     r->age_scans = t.age_scans;
     r->points = t.points;

@@ -290,6 +290,9 @@ struct TrackShape {
   // The departure's variance reported with the track's measured scans (the larger of this scan's
   // and the mean), per axis. Not with coasting reports: see MultiTracker's Report.
   double reported_departure_m2 = 0.0;
+  // A partial view's fit covariance, reported with the track's measured scans
+  // (ShapeOptions::partial_view_shared); zero otherwise. Not with coasting reports.
+  Eigen::Matrix2d reported_partial_cov_m2 = Eigen::Matrix2d::Zero();
   // Knee height: the leg centres of the track's last two-leg measurement, their fits' variance
   // (mean over the axes) and its time, 0: none (ShapeOptions::stance_leg_weight).
   std::array<Eigen::Vector2d, 2> legs_m{Eigen::Vector2d::Zero(), Eigen::Vector2d::Zero()};

@@ -778,6 +778,65 @@ TEST(MultiTrackerTest, OutlineDepartureIsReportedWithMeasuredScansOnly) {
   }
 }
 
+// A refiner that reports a fixed partial view's covariance with every measurement.
+class PartialViewRefiner final : public MeasurementRefiner {
+ public:
+  explicit PartialViewRefiner(const Eigen::Matrix2d& cov_m2) : cov_m2_(cov_m2) {}
+  bool Refine(std::size_t, common::UtcNs, const Eigen::Vector4d*, const Eigen::Matrix4d*,
+              TrackShape& shape, Measurement& m) override {
+    shape.shape = ObjectShape::kTorso;
+    shape.reported_partial_cov_m2 = cov_m2_;
+    m.covariance_m2 = 0.02 * 0.02 * Eigen::Matrix2d::Identity();
+    return true;
+  }
+
+ private:
+  Eigen::Matrix2d cov_m2_;
+};
+
+TEST(MultiTrackerTest, PartialViewCovarianceIsReportedWithMeasuredScansOnly) {
+  // The same track with and without a partial view's covariance: the confirmed reports differ by
+  // exactly that matrix, the coasting ones not at all, and the filter never sees it.
+  const std::vector<Measurement> echo = {Meas(3.0, 1.0, 0.02)};
+  Eigen::Matrix2d partial;
+  partial << 0.004, 0.001, 0.001, 0.002;
+  const auto run = [&](const Eigen::Matrix2d& cov_m2, std::vector<TrackReport>* confirmed,
+                       std::vector<TrackReport>* coasting) {
+    MultiTracker tracker(Opts());
+    PartialViewRefiner refiner(cov_m2);
+    ScanTracks out;
+    for (std::int64_t k = 0; k < 10; ++k) {
+      tracker.Step(ScanNs(k), echo, {}, &refiner, out);
+      if (!out.tracks.empty() && out.tracks[0].state == TrackState::kConfirmed) {
+        confirmed->push_back(out.tracks[0]);
+      }
+    }
+    for (std::int64_t k = 10; k < 13; ++k) {
+      tracker.Step(ScanNs(k), std::vector<Measurement>{}, {}, &refiner, out);
+      ASSERT_EQ(out.tracks.size(), 1u);
+      ASSERT_EQ(out.tracks[0].state, TrackState::kCoasting);
+      coasting->push_back(out.tracks[0]);
+    }
+  };
+  std::vector<TrackReport> confirmed0, coasting0, confirmed1, coasting1;
+  run(Eigen::Matrix2d::Zero(), &confirmed0, &coasting0);
+  run(partial, &confirmed1, &coasting1);
+  ASSERT_FALSE(confirmed0.empty());
+  ASSERT_EQ(confirmed0.size(), confirmed1.size());
+  for (std::size_t i = 0; i < confirmed0.size(); ++i) {
+    EXPECT_TRUE((confirmed1[i].covariance.topLeftCorner<2, 2>() -
+                 confirmed0[i].covariance.topLeftCorner<2, 2>())
+                    .isApprox(partial, 1e-9))
+        << i;
+    EXPECT_DOUBLE_EQ(confirmed1[i].x_m, confirmed0[i].x_m);
+    EXPECT_DOUBLE_EQ(confirmed1[i].y_m, confirmed0[i].y_m);
+  }
+  ASSERT_EQ(coasting0.size(), coasting1.size());
+  for (std::size_t i = 0; i < coasting0.size(); ++i) {
+    EXPECT_TRUE(coasting1[i].covariance.isApprox(coasting0[i].covariance, 1e-12)) << i;
+  }
+}
+
 TEST(MultiTrackerTest, CoastingTracksAreReportedOnlyBrieflyButKeptUntilTheTimeout) {
   MultiTrackerOptions options = Opts();
   options.report_coasting_s = 0.3;

@@ -522,6 +522,10 @@ MeasurementKind KindOf(MeasurementMethod method) {
   return MeasurementKind::kShapeFit;
 }
 
+// The upper-body fit's parameters: centre (2), semi-axes (2), yaw (ShapeOptions::
+// underdetermined_fit_shared).
+constexpr std::size_t kBodyFitParameters = 5;
+
 // The shape fit of an observation with what its track knows (MeasurementRefiner).
 class TrackingPipeline::Refiner final : public MeasurementRefiner {
  public:
@@ -559,6 +563,22 @@ class TrackingPipeline::Refiner final : public MeasurementRefiner {
     // outline_fixed_share (shared) and outline_model_share (per scan).
     const bool measured_outline =
         o.mount == Mount::kTorso && !ob.legs && o.outline_departure_gain > 0.0;
+    // ShapeOptions::partial_view_shared, underdetermined_fit_shared: the fit's own centre
+    // covariance, before the per-scan allowance below, where the outline is seen to one end or
+    // none, or where its points and silhouette ends are no more than the fit's parameters.
+    const bool body =
+        o.mount == Mount::kTorso && !ob.legs && shape.model == ShapeModel::kSuperellipse;
+    const int edges = SilhouetteEdges(ob);
+    std::size_t points = 0;
+    for (std::size_t k = 0; k < ob.part_count; ++k) points += ob.parts[k].point_count;
+    const bool partial = body && o.partial_view_shared && edges < 2;
+    const bool underdetermined = body && o.underdetermined_fit_shared &&
+                                 points + static_cast<std::size_t>(edges) <= kBodyFitParameters;
+    shape.reported_partial_cov_m2 = partial || underdetermined
+                                        ? Eigen::Matrix2d(measurement.covariance_m2)
+                                        : Eigen::Matrix2d::Zero();
+    if (partial) ++partial_widened;
+    if (underdetermined) ++underdetermined_widened;
     const double share = measured_outline ? o.outline_fixed_share : 1.0;
     const double model_sigma_m =
         (measured_outline ? o.outline_model_share : 1.0) * o.centre_model_sigma_m;
@@ -615,6 +635,8 @@ class TrackingPipeline::Refiner final : public MeasurementRefiner {
   std::uint64_t view_contested = 0;
   std::uint64_t along_from_standing = 0;
   std::uint64_t widened = 0;
+  std::uint64_t partial_widened = 0;
+  std::uint64_t underdetermined_widened = 0;
   std::uint64_t stance_weighted = 0;
   std::uint64_t touching = 0;
   std::uint64_t box_occluded = 0;
@@ -2198,6 +2220,8 @@ const ScanTracks& TrackingPipeline::Process(const ScanView& scan, std::uint32_t 
   const std::uint64_t view_contested_before = refiner_->view_contested;
   const std::uint64_t along_from_standing_before = refiner_->along_from_standing;
   const std::uint64_t widened_before = refiner_->widened;
+  const std::uint64_t partial_widened_before = refiner_->partial_widened;
+  const std::uint64_t underdetermined_before = refiner_->underdetermined_widened;
   const std::uint64_t stance_weighted_before = refiner_->stance_weighted;
   const std::uint64_t touching_before = refiner_->touching;
   const std::uint64_t box_occluded_before = refiner_->box_occluded;
@@ -2215,6 +2239,9 @@ const ScanTracks& TrackingPipeline::Process(const ScanView& scan, std::uint32_t 
   counters_.legs_side_view_contested += refiner_->view_contested - view_contested_before;
   counters_.legs_along_from_standing += refiner_->along_from_standing - along_from_standing_before;
   counters_.outline_departure_widened += refiner_->widened - widened_before;
+  counters_.partial_view_widened += refiner_->partial_widened - partial_widened_before;
+  counters_.underdetermined_fit_widened +=
+      refiner_->underdetermined_widened - underdetermined_before;
   counters_.stance_weighted_pairs += refiner_->stance_weighted - stance_weighted_before;
   counters_.touching_leg_pairs += refiner_->touching - touching_before;
   counters_.box_occluded_fits += refiner_->box_occluded - box_occluded_before;

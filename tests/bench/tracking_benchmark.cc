@@ -41,7 +41,9 @@
 //                       [--before-few-point-legs] [--before-deep-legs]
 //                       [--before-legs-seen-through]
 //                       [--before-legs-report-coasting] [--before-leg-edges]
-//                       [--before-outline-departure] [--before-recent-veil]
+//                       [--before-outline-departure] [--before-partial-view]
+//                       [--before-underdetermined-fit]
+//                       [--before-recent-veil]
 //                       [--before-single-precision-fit]
 //                       [--before-stance-weight] [--before-adopt] [--before-touching-legs]
 //                       [--before-box-occluders] [--before-person-size]
@@ -56,8 +58,10 @@
 //   it held (its first false scan since): its object out of view, coasting while its object was
 //   visible and what became of the object's returns, or measured on something else, how far off and
 //   on what) and the tracker's counters; --breakdown: a table more per section, the per-sensor
-//   matched error along and across the line of sight by range and point count, and the filtered
-//   track's error beside that of the scan's measurement it was updated with, see Breakdown;
+//   matched error along and across the line of sight by range and point count, by the sensor's
+//   model and scan rate, the person's size and outline, the object's speed, a partial view (a
+//   nearer return beside it) or another object near it, and the filtered track's error beside
+//   that of the scan's measurement it was updated with, see Breakdown;
 //   --before-report-rules: a third tracker, "before", the new one without
 //   ShapeOptions::unseen_coasting_m and MultiTrackerOptions::moving_speed_mps, the tree before
 //   them; --before-mixed-pixels: "before" is the new one taking knee-height mixed pixels for legs,
@@ -118,7 +122,11 @@
 //   also its extent along the ray, ShapeOptions::person_size_across_ray = false;
 //   --before-outline-departure: "before" reports an upper-body centre with the fixed allowances
 //   for the outline alone, not the departure its fit's residuals measure,
-//   ShapeOptions::outline_departure_gain = 0;
+//   ShapeOptions::outline_departure_gain = 0; --before-partial-view: "before" reports an
+//   upper-body partial view as a whole one, ShapeOptions::partial_view_shared = false;
+//   --before-underdetermined-fit: "before" reports an upper-body fit of no more points and
+//   silhouette ends than its parameters as any other,
+//   ShapeOptions::underdetermined_fit_shared = false;
 //   --before-fusion-merge: "before"'s fusion leaves a fused track without sources to coast beside
 //   the track that took its object and reports fused tracks no tracker holds any more,
 //   FusionOptions::merge_sourceless = false and report_sourceless = true (its tracker is the new
@@ -148,6 +156,7 @@
 #include <memory>
 #include <set>
 #include <string>
+#include <string_view>
 #include <thread>
 #include <vector>
 
@@ -191,6 +200,15 @@ struct Truth {
   // --explain, knee height, a person: its legs' centres (same frame) and radius (0: not a person).
   std::array<Vector2d, 2> legs{Vector2d::Zero(), Vector2d::Zero()};
   double leg_radius_m = 0.0;
+  // --breakdown: the sensor's model (kModelBins), a person's upper-body semi-axis across the
+  // shoulders and its cross-section's superellipse exponent (0: not a person), and whether the scan
+  // has a return nearer than the object's front beside or in front of it (a partial view).
+  std::size_t model = 0;
+  double a_m = 0.0;
+  double exponent = 0.0;
+  bool occluded = false;
+  double nearest_other_m = std::numeric_limits<double>::infinity();  // to another object's centre
+  double rate_hz = 0.0;                                              // the sensor's scan rate
 };
 // --breakdown: a person walks (Truth::gait) above this speed, a trolley moves (Truth::view); a
 // trolley is seen end-on or broadside within this angle of it.
@@ -207,6 +225,7 @@ struct Hypothesis {
   Vector2d z = Vector2d::Zero();
   double z_offset_s = 0.0;
   std::size_t parts = 0;  // --breakdown: the measurement's observation, a Breakdown::PartsBin
+  int edges = -1;         // --breakdown: its observation's silhouette ends (0-2), -1 unknown
   // --explain, per sensor, coasting: what the scan shows across its body (CoastingView).
   std::string view;
 };
@@ -225,6 +244,7 @@ struct ErrorStats {
   double n = 0, sum = 0, radial = 0, radial2 = 0, across2 = 0;
   double moving = 0, along = 0, along2 = 0, beside2 = 0;  // beside: across the motion
   double nees = 0;                                        // sum of the position's NEES (AddNees)
+  double var = 0;  // sum of the reported covariance's trace / 2 (AddNees)
   std::vector<double> norms;
   void Add(const Vector2d& e, const Vector2d& los, const Vector2d& v) {
     const Vector2d across(-los.y(), los.x());
@@ -246,6 +266,7 @@ struct ErrorStats {
   void AddNees(const Vector2d& e, const Matrix2d& cov) {
     const Eigen::LDLT<Matrix2d> ldlt(cov);
     if (ldlt.info() == Eigen::Success) nees += e.dot(ldlt.solve(e));
+    var += 0.5 * cov.trace();
   }
   void Merge(const ErrorStats& o) {
     n += o.n;
@@ -258,6 +279,7 @@ struct ErrorStats {
     along2 += o.along2;
     beside2 += o.beside2;
     nees += o.nees;
+    var += o.var;
     norms.insert(norms.end(), o.norms.begin(), o.norms.end());
   }
   double Mean() const { return n > 0 ? sum / n : 0.0; }
@@ -269,6 +291,7 @@ struct ErrorStats {
   double AlongRms() const { return moving > 0 ? std::sqrt(along2 / moving) : 0.0; }
   double BesideRms() const { return moving > 0 ? std::sqrt(beside2 / moving) : 0.0; }
   double Nees() const { return n > 0 ? nees / n : 0.0; }
+  double ReportedSigma() const { return n > 0 ? std::sqrt(var / n) : 0.0; }
   double P95() const {
     if (norms.empty()) return 0.0;
     std::vector<double> e = norms;
@@ -311,7 +334,51 @@ constexpr const char* kPartsBins[] = {"parts: coasting",
 constexpr const char* kHeadingBins[] = {
     "walking along the line of sight, coming nearer", "walking oblique to the line of sight",
     "walking across the line of sight", "walking along the line of sight, going away"};
+// The sensor's model (the simulator's key); a person's shoulder semi-axis a_m (the shipped scenes
+// draw 0.23 +- 0.02 per person) and the upper body's superellipse exponent (2: an ellipse); a
+// partial view: a return nearer than the object's front within its angular extent plus two beams
+// to either side.
+constexpr const char* kModelBins[] = {"sensor lms111", "sensor lms151", "sensor lms511",
+                                      "sensor tim561", "sensor tim781", "sensor other"};
+constexpr const char* kSizeBins[] = {"person a < 0.22 m", "person a 0.22-0.27 m",
+                                     "person a > 0.27 m"};
+constexpr const char* kExponentBins[] = {"person torso ellipse (exponent < 2.25)",
+                                         "person torso boxier (exponent >= 2.25)"};
+constexpr const char* kOcclusionBins[] = {"unoccluded", "a nearer return beside it"};
+constexpr const char* kRateBins[] = {"scan rate <= 15 Hz", "scan rate 15-30 Hz",
+                                     "scan rate > 30 Hz"};
+constexpr const char* kObjectBins[] = {"object: a person", "object: a trolley", "object: other"};
+constexpr const char* kEdgeBins[] = {"silhouette ends 0", "silhouette ends 1",
+                                     "silhouette ends 2"};
+constexpr const char* kSpeedBins[] = {"speed < 0.3 m/s", "speed 0.3-1.0 m/s", "speed 1.0-1.3 m/s",
+                                      "speed > 1.3 m/s"};
+constexpr const char* kCrowdBins[] = {"another object within 1 m", "another object 1-2 m",
+                                      "no other object within 2 m"};
+std::size_t ModelBin(std::string_view key) {
+  for (std::size_t i = 0; i + 1 < std::size(kModelBins); ++i) {
+    if (std::string_view(kModelBins[i]).substr(7) == key) return i;
+  }
+  return std::size(kModelBins) - 1;
+}
 struct Breakdown {
+  std::array<BreakdownCell, std::size(kModelBins)> by_model;
+  std::array<BreakdownCell, std::size(kSizeBins)> by_size;
+  std::array<BreakdownCell, std::size(kExponentBins)> by_exponent;
+  std::array<BreakdownCell, std::size(kOcclusionBins)> by_occlusion;
+  std::array<BreakdownCell, std::size(kSpeedBins)> by_speed;
+  std::array<BreakdownCell, std::size(kCrowdBins)> by_crowd;
+  std::array<BreakdownCell, std::size(kSpeedBins)> unoccluded_by_speed;
+  std::array<BreakdownCell, std::size(kCrowdBins)> unoccluded_by_crowd;
+  // Unoccluded with no other object within 2 m (a clear view): by sensor model, size, exponent.
+  std::array<BreakdownCell, std::size(kModelBins)> clear_by_model;
+  std::array<BreakdownCell, std::size(kSizeBins)> clear_by_size;
+  std::array<BreakdownCell, std::size(kExponentBins)> clear_by_exponent;
+  std::array<BreakdownCell, std::size(kRateBins)> by_rate, clear_by_rate;
+  std::array<BreakdownCell, std::size(kObjectBins)> by_object;
+  // By the measured observation's silhouette ends, with and without a nearer return beside it.
+  std::array<BreakdownCell, std::size(kEdgeBins)> occluded_by_edges, unoccluded_by_edges;
+  // Points 2-4 and 5-9 split by the person's size (few points: where the size prior counts most).
+  std::array<BreakdownCell, std::size(kSizeBins)> few_points_by_size, some_points_by_size;
   std::array<BreakdownCell, 4> by_range;
   std::array<BreakdownCell, 6> by_points;
   std::array<BreakdownCell, 9> by_parts;
@@ -372,7 +439,40 @@ struct Breakdown {
     BreakdownCell* heading = walking ? &walking_by_heading[HeadingBin(t.v, los)] : nullptr;
     BreakdownCell* heading_range =
         walking ? &walking_by_heading_range[HeadingBin(t.v, los)][RangeBin(range_m)] : nullptr;
-    BreakdownCell* cells[] = {&by_range[RangeBin(range_m)],
+    const std::size_t size_bin = t.a_m < 0.22 ? 0 : t.a_m <= 0.27 ? 1 : 2;
+    const bool person = t.a_m > 0.0;
+    const double speed = t.v.norm();
+    const std::size_t speed_bin = speed < 0.3 ? 0 : speed < 1.0 ? 1 : speed <= 1.3 ? 2 : 3;
+    const std::size_t crowd_bin = t.nearest_other_m < 1.0 ? 0 : t.nearest_other_m < 2.0 ? 1 : 2;
+    const bool clear = !t.occluded && crowd_bin == 2;
+    const std::size_t rate_bin = t.rate_hz <= 15.0 ? 0 : t.rate_hz <= 30.0 ? 1 : 2;
+    BreakdownCell* cells[] = {&by_model[std::min(t.model, by_model.size() - 1)],
+                              person ? &by_size[size_bin] : nullptr,
+                              person ? &by_exponent[t.exponent < 2.25 ? 0 : 1] : nullptr,
+                              &by_occlusion[t.occluded ? 1 : 0],
+                              &by_speed[speed_bin],
+                              &by_crowd[crowd_bin],
+                              t.occluded ? nullptr : &unoccluded_by_speed[speed_bin],
+                              t.occluded ? nullptr : &unoccluded_by_crowd[crowd_bin],
+                              clear ? &clear_by_model[std::min(t.model, by_model.size() - 1)]
+                                    : nullptr,
+                              clear && person ? &clear_by_size[size_bin] : nullptr,
+                              &by_rate[rate_bin],
+                              &by_object[person ? 0 : t.trolley ? 1 : 2],
+                              h.measured && h.edges >= 0
+                                  ? (t.occluded ? &occluded_by_edges[static_cast<std::size_t>(h.edges)]
+                                                : &unoccluded_by_edges[static_cast<std::size_t>(h.edges)])
+                                  : nullptr,
+                              clear ? &clear_by_rate[rate_bin] : nullptr,
+                              clear && person ? &clear_by_exponent[t.exponent < 2.25 ? 0 : 1]
+                                              : nullptr,
+                              person && h.points >= 2 && h.points <= 4
+                                  ? &few_points_by_size[size_bin]
+                                  : nullptr,
+                              person && h.points >= 5 && h.points <= 9
+                                  ? &some_points_by_size[size_bin]
+                                  : nullptr,
+                              &by_range[RangeBin(range_m)],
                               &by_points[PointBin(h.points)],
                               &by_parts[parts == 5 && t.trolley ? 8 : parts],
                               &total,
@@ -399,6 +499,36 @@ struct Breakdown {
     }
   }
   void Merge(const Breakdown& o) {
+    for (std::size_t i = 0; i < by_model.size(); ++i) by_model[i].Merge(o.by_model[i]);
+    for (std::size_t i = 0; i < by_size.size(); ++i) {
+      by_size[i].Merge(o.by_size[i]);
+      few_points_by_size[i].Merge(o.few_points_by_size[i]);
+      some_points_by_size[i].Merge(o.some_points_by_size[i]);
+    }
+    for (std::size_t i = 0; i < by_exponent.size(); ++i) by_exponent[i].Merge(o.by_exponent[i]);
+    for (std::size_t i = 0; i < by_occlusion.size(); ++i) by_occlusion[i].Merge(o.by_occlusion[i]);
+    for (std::size_t i = 0; i < by_model.size(); ++i) clear_by_model[i].Merge(o.clear_by_model[i]);
+    for (std::size_t i = 0; i < by_size.size(); ++i) clear_by_size[i].Merge(o.clear_by_size[i]);
+    for (std::size_t i = 0; i < by_exponent.size(); ++i) {
+      clear_by_exponent[i].Merge(o.clear_by_exponent[i]);
+    }
+    for (std::size_t i = 0; i < by_object.size(); ++i) by_object[i].Merge(o.by_object[i]);
+    for (std::size_t i = 0; i < occluded_by_edges.size(); ++i) {
+      occluded_by_edges[i].Merge(o.occluded_by_edges[i]);
+      unoccluded_by_edges[i].Merge(o.unoccluded_by_edges[i]);
+    }
+    for (std::size_t i = 0; i < by_rate.size(); ++i) {
+      by_rate[i].Merge(o.by_rate[i]);
+      clear_by_rate[i].Merge(o.clear_by_rate[i]);
+    }
+    for (std::size_t i = 0; i < by_speed.size(); ++i) {
+      by_speed[i].Merge(o.by_speed[i]);
+      unoccluded_by_speed[i].Merge(o.unoccluded_by_speed[i]);
+    }
+    for (std::size_t i = 0; i < by_crowd.size(); ++i) {
+      by_crowd[i].Merge(o.by_crowd[i]);
+      unoccluded_by_crowd[i].Merge(o.unoccluded_by_crowd[i]);
+    }
     for (std::size_t i = 0; i < by_range.size(); ++i) by_range[i].Merge(o.by_range[i]);
     for (std::size_t i = 0; i < by_points.size(); ++i) by_points[i].Merge(o.by_points[i]);
     for (std::size_t i = 0; i < by_parts.size(); ++i) by_parts[i].Merge(o.by_parts[i]);
@@ -1100,6 +1230,13 @@ bool g_before_leg_edges = false;
 // --before-outline-departure: "before" reports an upper-body centre with the fixed allowances for
 // the outline alone (ShapeOptions::outline_departure_gain = 0).
 bool g_before_outline_departure = false;
+// --before-partial-view: "before" reports an upper-body partial view (fewer than two silhouette
+// ends) as a whole one, without its fit's covariance (ShapeOptions::partial_view_shared = false).
+bool g_before_partial_view = false;
+// --before-underdetermined-fit: "before" reports an upper-body fit of no more points and
+// silhouette ends than its parameters as any other, without its fit's covariance
+// (ShapeOptions::underdetermined_fit_shared = false).
+bool g_before_underdetermined_fit = false;
 // --before-stance-weight: "before" measures two legs by their midpoint also where one stands and
 // the other swings (ShapeOptions::stance_leg_weight = 0.5).
 bool g_before_stance_weight = false;
@@ -1165,7 +1302,9 @@ std::vector<Variant> Variants(sim::Mount mount, double range_m) {
              g_before_deep_evidence || g_before_isotropic_bias || g_before_across_walk ||
              g_before_side_uncertainty || g_before_side_from_view || g_before_few_point_legs ||
              g_before_deep_legs || g_before_legs_seen_through || g_before_legs_report_coasting ||
-             g_before_leg_edges || g_before_outline_departure || g_before_fusion_merge ||
+             g_before_leg_edges || g_before_outline_departure || g_before_partial_view ||
+             g_before_underdetermined_fit ||
+             g_before_fusion_merge ||
              g_before_report_sourceless || g_before_recent_veil || g_before_single_precision_fit ||
              g_before_stance_weight || g_before_adopt || g_before_touching_legs ||
              g_before_box_occluders || g_before_lone_leg_standing ||
@@ -1192,6 +1331,8 @@ std::vector<Variant> Variants(sim::Mount mount, double range_m) {
     if (g_before_legs_report_coasting) before.shape.legs_report_coasting_s = 0.0;
     if (g_before_leg_edges) before.shape.leg_edge_in_mixed_beam = false;
     if (g_before_outline_departure) before.shape.outline_departure_gain = 0.0;
+    if (g_before_partial_view) before.shape.partial_view_shared = false;
+    if (g_before_underdetermined_fit) before.shape.underdetermined_fit_shared = false;
     if (g_before_recent_veil) before.shape.recent_veil_s = 0.0;
     if (g_before_single_precision_fit) before.shape.fit.single_precision_points = false;
     if (g_before_stance_weight) before.shape.stance_leg_weight = 0.5;
@@ -1268,6 +1409,30 @@ std::size_t PartsOf(const tracking::TrackingPipeline& pipeline, const tracking::
       pipeline.segments().points_m.span().subspan(ob.parts[0].first_point, ob.parts[0].point_count);
   const tracking::ShapeOptions& o = pipeline.options().shape;
   return (pts.back() - pts.front()).norm() > 2.0 * o.leg_radius_m + 0.08 ? 3 : 2;
+}
+
+// --breakdown: the silhouette ends (MakePart: not an occluder's edge nor the field of view's end)
+// of the observation a measured track was updated with, -1 where not found.
+int EdgesOf(const tracking::TrackingPipeline& pipeline, const tracking::TrackReport& r) {
+  if (r.state != tracking::TrackState::kConfirmed) return -1;
+  const auto obs = pipeline.observations();
+  const auto ms = pipeline.measurements();
+  const Vector2d z(r.measured_x_m, r.measured_y_m);
+  double best = std::numeric_limits<double>::infinity();
+  std::size_t found = obs.size();
+  for (std::size_t i = 0; i < obs.size() && i < ms.size(); ++i) {
+    std::size_t points = 0;
+    for (std::size_t k = 0; k < obs[i].part_count; ++k) points += obs[i].parts[k].point_count;
+    const double d = (ms[i].position_m - z).norm();
+    if (points == r.points && d < best) {
+      best = d;
+      found = i;
+    }
+  }
+  if (found == obs.size() || obs[found].part_count == 0) return -1;
+  const tracking::Observation& ob = obs[found];
+  return (ob.parts[0].silhouette.first_valid ? 1 : 0) +
+         (ob.parts[ob.part_count - 1].silhouette.last_valid ? 1 : 0);
 }
 
 // --explain, knee height: every measured match of a person, its measurement's error along the
@@ -1723,8 +1888,34 @@ void RunSensor(const sim::Simulator& simulator, std::size_t sensor,
                      : c < std::sin(kViewSectorRad) ? 2
                                                     : 1;
       }
+      truth.rate_hz = period_s > 0.0 ? 1.0 / period_s : 0.0;
+      truth.model = ModelBin(setup.device.model != nullptr ? setup.device.model->key : "");
+      double extent_m = 0.3;
+      if (target.shape() == sim::TargetShape::kPerson) {
+        truth.a_m = target.body().a_m;
+        truth.exponent = target.body().exponent;
+        extent_m = target.body().a_m;
+      }
+      if (range > extent_m) {
+        const double bearing = std::atan2(p.y(), p.x());
+        const double half = std::atan(extent_m / range) + 2.0 * view.angle_step_rad;
+        for (std::size_t b = 0; b < view.range_m.size() && !truth.occluded; ++b) {
+          const double a = view.first_angle_rad + static_cast<double>(b) * view.angle_step_rad;
+          if (std::abs(std::remainder(a - bearing, 2.0 * common::kPi)) > half) continue;
+          const double r = static_cast<double>(view.range_m[b]);
+          truth.occluded = r > 0.0 && r < range - extent_m - 0.1;
+        }
+      }
       truths.push_back(truth);
       seen.push_back(ts.target);
+    }
+    for (Truth& t : truths) {
+      for (const Truth& o : truths) {
+        if (&o != &t) t.nearest_other_m = std::min(t.nearest_other_m, (o.p - t.p).norm());
+      }
+      for (const Vector2d& o : dont_care) {
+        t.nearest_other_m = std::min(t.nearest_other_m, (o - t.p).norm());
+      }
     }
     for (std::size_t v = 0; v < variants.size(); ++v) {
       const tracking::ScanTracks& out = pipelines[v]->Process(view, static_cast<std::uint32_t>(k));
@@ -1756,6 +1947,7 @@ void RunSensor(const sim::Simulator& simulator, std::size_t sensor,
                         {r.measured_x_m, r.measured_y_m},
                         r.measured_offset_s,
                         PartsOf(*pipelines[v], r),
+                        EdgesOf(*pipelines[v], r),
                         std::move(coasting_view)});
         frame.tracks.push_back(ToObservation(r));
       }
@@ -2253,20 +2445,20 @@ const char* kBreakdownHeader =
     "| scenario | mount | tracker | bin | matches | MOTP m | p95 m | radial mean m | radial RMS m "
     "| across RMS m | measured | filtered RMS m | raw RMS m | filtered radial mean m | raw radial "
     "mean m | filtered along-motion mean m | raw along-motion mean m | raw along-motion RMS m | "
-    "raw across-motion RMS m | filtered NEES |\n"
+    "raw across-motion RMS m | filtered NEES | reported sigma m |\n"
     "|---|---|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|--"
-    "-:"
-    "|\n";
+    "-:|---:|\n";
 
 std::string BreakdownRow(const std::string& lead, const std::string& bin, const BreakdownCell& c) {
   char line[512];
   std::snprintf(line, sizeof line,
                 "| %s | %s | %.0f | %.3f | %.3f | %+.3f | %.3f | %.3f | %.0f | %.3f | %.3f | "
-                "%+.3f | %+.3f | %+.3f | %+.3f | %.3f | %.3f | %.2f |\n",
+                "%+.3f | %+.3f | %+.3f | %+.3f | %.3f | %.3f | %.2f | %.3f |\n",
                 lead.c_str(), bin.c_str(), c.all.n, c.all.Mean(), c.all.P95(), c.all.RadialMean(),
                 c.all.RadialRms(), c.all.AcrossRms(), c.filtered.n, c.filtered.Rms(), c.raw.Rms(),
                 c.filtered.RadialMean(), c.raw.RadialMean(), c.filtered.AlongMean(),
-                c.raw.AlongMean(), c.raw.AlongRms(), c.raw.BesideRms(), c.filtered.Nees());
+                c.raw.AlongMean(), c.raw.AlongRms(), c.raw.BesideRms(), c.filtered.Nees(),
+                c.filtered.ReportedSigma());
   return line;
 }
 
@@ -2466,6 +2658,84 @@ std::string BreakdownTable(const Section& s) {
     const std::size_t space = key.find(' ');
     const std::string lead = "all | " + key.substr(0, space) + " | " + key.substr(space + 1);
     t += BreakdownRow(lead, "all", b.total);
+    for (std::size_t i = 0; i < b.by_model.size(); ++i) {
+      if (b.by_model[i].all.n > 0) t += BreakdownRow(lead, kModelBins[i], b.by_model[i]);
+    }
+    for (std::size_t i = 0; i < b.by_size.size(); ++i) {
+      if (b.by_size[i].all.n > 0) t += BreakdownRow(lead, kSizeBins[i], b.by_size[i]);
+    }
+    for (std::size_t i = 0; i < b.by_size.size(); ++i) {
+      if (b.few_points_by_size[i].all.n > 0) {
+        t += BreakdownRow(lead, std::string("points 2-4, ") + kSizeBins[i], b.few_points_by_size[i]);
+      }
+      if (b.some_points_by_size[i].all.n > 0) {
+        t += BreakdownRow(lead, std::string("points 5-9, ") + kSizeBins[i],
+                          b.some_points_by_size[i]);
+      }
+    }
+    for (std::size_t i = 0; i < b.by_exponent.size(); ++i) {
+      if (b.by_exponent[i].all.n > 0) t += BreakdownRow(lead, kExponentBins[i], b.by_exponent[i]);
+    }
+    for (std::size_t i = 0; i < b.by_occlusion.size(); ++i) {
+      if (b.by_occlusion[i].all.n > 0) {
+        t += BreakdownRow(lead, kOcclusionBins[i], b.by_occlusion[i]);
+      }
+    }
+    for (std::size_t i = 0; i < b.by_speed.size(); ++i) {
+      if (b.by_speed[i].all.n > 0) t += BreakdownRow(lead, kSpeedBins[i], b.by_speed[i]);
+    }
+    for (std::size_t i = 0; i < b.by_crowd.size(); ++i) {
+      if (b.by_crowd[i].all.n > 0) t += BreakdownRow(lead, kCrowdBins[i], b.by_crowd[i]);
+    }
+    for (std::size_t i = 0; i < b.by_speed.size(); ++i) {
+      if (b.unoccluded_by_speed[i].all.n > 0) {
+        t += BreakdownRow(lead, std::string("unoccluded, ") + kSpeedBins[i],
+                          b.unoccluded_by_speed[i]);
+      }
+    }
+    for (std::size_t i = 0; i < b.by_crowd.size(); ++i) {
+      if (b.unoccluded_by_crowd[i].all.n > 0) {
+        t += BreakdownRow(lead, std::string("unoccluded, ") + kCrowdBins[i],
+                          b.unoccluded_by_crowd[i]);
+      }
+    }
+    const std::string clear = "clear view (unoccluded, nothing within 2 m), ";
+    for (std::size_t i = 0; i < b.clear_by_model.size(); ++i) {
+      if (b.clear_by_model[i].all.n > 0) {
+        t += BreakdownRow(lead, clear + kModelBins[i], b.clear_by_model[i]);
+      }
+    }
+    for (std::size_t i = 0; i < b.by_object.size(); ++i) {
+      if (b.by_object[i].all.n > 0) t += BreakdownRow(lead, kObjectBins[i], b.by_object[i]);
+    }
+    for (std::size_t i = 0; i < b.occluded_by_edges.size(); ++i) {
+      if (b.occluded_by_edges[i].all.n > 0) {
+        t += BreakdownRow(lead, std::string("a nearer return beside it, ") + kEdgeBins[i],
+                          b.occluded_by_edges[i]);
+      }
+      if (b.unoccluded_by_edges[i].all.n > 0) {
+        t += BreakdownRow(lead, std::string("unoccluded, ") + kEdgeBins[i],
+                          b.unoccluded_by_edges[i]);
+      }
+    }
+    for (std::size_t i = 0; i < b.by_rate.size(); ++i) {
+      if (b.by_rate[i].all.n > 0) t += BreakdownRow(lead, kRateBins[i], b.by_rate[i]);
+    }
+    for (std::size_t i = 0; i < b.clear_by_rate.size(); ++i) {
+      if (b.clear_by_rate[i].all.n > 0) {
+        t += BreakdownRow(lead, clear + kRateBins[i], b.clear_by_rate[i]);
+      }
+    }
+    for (std::size_t i = 0; i < b.clear_by_size.size(); ++i) {
+      if (b.clear_by_size[i].all.n > 0) {
+        t += BreakdownRow(lead, clear + kSizeBins[i], b.clear_by_size[i]);
+      }
+    }
+    for (std::size_t i = 0; i < b.clear_by_exponent.size(); ++i) {
+      if (b.clear_by_exponent[i].all.n > 0) {
+        t += BreakdownRow(lead, clear + kExponentBins[i], b.clear_by_exponent[i]);
+      }
+    }
     for (std::size_t i = 0; i < b.by_range.size(); ++i)
       t += BreakdownRow(lead, kRangeBins[i], b.by_range[i]);
     for (std::size_t i = 0; i < b.by_points.size(); ++i)
@@ -2588,7 +2858,9 @@ std::string KneeHeightBefore() {
         g_before_isotropic_bias || g_before_across_walk || g_before_side_uncertainty ||
         g_before_side_from_view || g_before_lone_leg_standing || g_before_few_point_legs ||
         g_before_deep_legs || g_before_legs_seen_through || g_before_legs_report_coasting || g_before_leg_edges ||
-        g_before_outline_departure || g_before_fusion_merge || g_before_report_sourceless ||
+        g_before_outline_departure || g_before_partial_view || g_before_underdetermined_fit ||
+        g_before_fusion_merge ||
+        g_before_report_sourceless ||
         g_before_recent_veil || g_before_single_precision_fit || g_before_stance_weight ||
         g_before_adopt || g_before_touching_legs || g_before_box_occluders ||
         g_before_single_beam_partner || g_before_edge_echo_birth || g_before_person_size) ||
@@ -2690,6 +2962,16 @@ std::string KneeHeightBefore() {
         "reporting an upper-body centre with the whole fixed allowances for the outline, not the "
         "departure its fit's residuals measure (`shape.outline_departure_gain` 0)");
   }
+  if (g_before_partial_view) {
+    without.push_back(
+        "reporting an upper-body partial view (an occluder's edge at an end of the outline) as a "
+        "whole one, without its fit's covariance (`shape.partial_view_shared` false)");
+  }
+  if (g_before_underdetermined_fit) {
+    without.push_back(
+        "reporting an upper-body fit of no more points and silhouette ends than its parameters as "
+        "any other, without its fit's covariance (`shape.underdetermined_fit_shared` false)");
+  }
   if (g_before_recent_veil) {
     without.push_back(
         "taking a knee-height leg-sized segment behind a nearer return its beams had in the last "
@@ -2753,7 +3035,8 @@ std::string KneeHeightBefore() {
   }
   const char* const same =
       g_before_single_precision_fit ? ", on the same scans in the same run"
-      : g_before_outline_departure || g_before_isotropic_bias
+      : g_before_outline_departure || g_before_isotropic_bias || g_before_partial_view ||
+              g_before_underdetermined_fit
           ? ", on the same scans in the same run; upper-body tracks are the same by construction, "
             "their reported covariance (so NEES and what fusion makes of them) is not"
           : ", on the same scans in the same run; upper-body rows are the same by construction";
@@ -2844,6 +3127,10 @@ int main(int argc, char** argv) {
       g_before_leg_edges = true;
     } else if (a == "--before-outline-departure") {
       g_before_outline_departure = true;
+    } else if (a == "--before-partial-view") {
+      g_before_partial_view = true;
+    } else if (a == "--before-underdetermined-fit") {
+      g_before_underdetermined_fit = true;
     } else if (a == "--before-recent-veil") {
       g_before_recent_veil = true;
     } else if (a == "--before-single-precision-fit") {
@@ -2873,7 +3160,9 @@ int main(int argc, char** argv) {
                    "[--before-across-walk] [--before-side-uncertainty] "
                    "[--before-side-from-view] [--before-lone-leg-standing] [--before-few-point-legs] [--before-deep-legs] "
                    "[--before-legs-seen-through] [--before-legs-report-coasting] "
-                   "[--before-leg-edges] [--before-outline-departure] [--before-recent-veil] "
+                   "[--before-leg-edges] [--before-outline-departure] [--before-partial-view] "
+                   "[--before-underdetermined-fit] "
+                   "[--before-recent-veil] "
                    "[--before-single-precision-fit] "
                    "[--before-stance-weight] [--before-adopt] [--before-touching-legs] "
                    "[--before-box-occluders] [--before-person-size] [--before-fusion-merge] "
