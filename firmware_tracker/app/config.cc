@@ -367,6 +367,14 @@ void VisitShape(tracking::ShapeOptions& o, ConfigVisitor& v) {
           "half-depth from a side view); the extent along the ray that a fit reads from the "
           "visible arc's curvature is the outline's departure from the model more than the size. "
           "false: both from every fit.");
+  v.Field("partial_view_shared", o.partial_view_shared,
+          "Upper-body mount: a fit that sees fewer than two real silhouette ends (one is an "
+          "occluder's edge) reports its own centre covariance with its measured scans, since "
+          "successive scans share that view's error. false: a partial view reported as a whole one.");
+  v.Field("underdetermined_fit_shared", o.underdetermined_fit_shared,
+          "Upper-body mount: a fit whose points and silhouette ends are no more than its five "
+          "parameters (centre, semi-axes, yaw) reports its own centre covariance (the priors') "
+          "with its measured scans. false: such a fit reported as any other.");
   v.Field("beam_divergence_rad", o.beam_divergence_rad,
           "Full beam divergence of the scanner (LMS1xx, TiM: 0.015; LMS5xx: 0.011); the beam's "
           "footprint at range R is R times this plus beam_exit_diameter_m (mixed pixels of legs "
