@@ -466,9 +466,14 @@ struct ShapeOptions {
   // shoulders' half-width alone, from the side the half-depth alone, at 45 deg each half. What a
   // view does not show keeps its state (its sigma drifting as size_drift_m_per_sqrt_s says),
   // which the reported covariance carries along the ray (centre_bias_along_ray). Counted in
-  // PipelineCounters::person_sizes_across_ray. false: both semi-axes learned in full from every
-  // fit, as before.
-  bool person_size_across_ray = true;
+  // PipelineCounters::person_sizes_across_ray. Off by default: a round object (the cylinders of
+  // calibration_benchmark's quenzel and schenk scenes, a person deeper than the prior) seen
+  // mostly along the ray keeps the prior's depth, and its centre lies that much too near each
+  // sensor; shape-fit calibration with it on, 3 seeds: quenzel_sim_far d_t 0.024 -> 0.064 m,
+  // quenzel_sim 0.006 -> 0.016 m, schenk_B 0.014 -> 0.024 m, schenk_D d_R 0.127 -> 0.170 deg
+  // (office_distributed and shop_floor better). false: both semi-axes learned in full from
+  // every fit.
+  bool person_size_across_ray = false;
   // Added in quadrature to every body-centre measurement (sigma per axis): what the fit cannot know
   // (sway, the torso's turn, an outline that is not the model's).
   double centre_model_sigma_m = 0.015;

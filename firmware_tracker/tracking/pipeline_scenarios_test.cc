@@ -762,9 +762,7 @@ TEST(PipelineScenarioTest, DoorSwingingTowardsTheSensorBecomesBackgroundSoonAfte
   // nothing is tracked there any more.
   Scene scene;
   scene.moving_walls = SwingingDoor(+1.0);  // towards -x: into the room
-  TrackerOptions options = Synthetic();
-  // Measured with both semi-axes learned from every fit (ShapeOptions::person_size_across_ray).
-  options.shape.person_size_across_ray = false;
+  const TrackerOptions options = Synthetic();
   const double open_s = 9.5;
   const double gone_s = open_s + options.tracking.static_object_to_background_s + 1.0;
   const SceneRun run = Simulate(scene, gone_s + 5.0, options);
@@ -2006,8 +2004,6 @@ TEST(PipelineScenarioTest, CovarianceOfPeopleOfDifferentSizesMatchesTheirError) 
   // the cluttered, superelliptic people of tracking_benchmark's scenes it gives a mean NEES of 2.0
   // (upper body) and 2.3 (legs).
   TrackerOptions options = Synthetic();
-  // Measured with both semi-axes learned from every fit (ShapeOptions::person_size_across_ray).
-  options.shape.person_size_across_ray = false;
   options.shape.centre_bias_sigma_m = 0.02;
   Scene scene;
   scene.walkers = {Walker::Path(kLearnedS, {{1.5, -4.0}, {6.0, 0.0}, {2.0, 4.0}}, 1.2),
@@ -2089,8 +2085,6 @@ TEST(PipelineScenarioTest, CovarianceAlongAndAcrossTheRayContainsTheErrorAtEvery
   // The fixed allowances' two forms against each other (the measured outline departure, the same
   // in every direction, is AModelLikeOutlineIsReportedWithTheFixedAllowancesCut's).
   TrackerOptions options = Synthetic();
-  // Measured with both semi-axes learned from every fit (ShapeOptions::person_size_across_ray).
-  options.shape.person_size_across_ray = false;
   options.shape.outline_departure_gain = 0.0;
   ASSERT_TRUE(options.shape.centre_bias_along_ray);
   TrackerOptions isotropic = options;
@@ -2123,9 +2117,7 @@ TEST(PipelineScenarioTest, CovarianceAlongAndAcrossTheRayContainsTheErrorAtEvery
 // it (RMS error within the RMS sigma in both directions). With the gain 0 the sigmas are the
 // whole fixed allowances.
 TEST(PipelineScenarioTest, AModelLikeOutlineIsReportedWithTheFixedAllowancesCut) {
-  TrackerOptions options = Synthetic();
-  // Measured with both semi-axes learned from every fit (ShapeOptions::person_size_across_ray).
-  options.shape.person_size_across_ray = false;
+  const TrackerOptions options = Synthetic();
   ASSERT_GT(options.shape.outline_departure_gain, 0.0);
   TrackerOptions before = options;
   before.shape.outline_departure_gain = 0.0;
@@ -2346,8 +2338,6 @@ TEST(PipelineScenarioTest, MixedPixelsAtAFarBodysEdgesDoNotPushItsCentreAway) {
   TrackerOptions options;
   options.background.max_range_m = 40.0;
   options.shape.person_exponent = 2.0;
-  // Measured with both semi-axes learned from every fit (ShapeOptions::person_size_across_ray).
-  options.shape.person_size_across_ray = false;
   const MixedPixelRun with = RunMixedPixels(options);
   options.shape.mixed_pixel_min_footprint_m = 0.0;
   const MixedPixelRun without = RunMixedPixels(options);

@@ -118,8 +118,9 @@
 //   covariance, ShapeOptions::touching_legs_along_ray = false;
 //   --before-box-occluders: "before" fits a box (a cart) to every point of its segment, also to
 //   those in front of it (its pusher's), ShapeOptions::box_drop_occluders = false;
-//   --before-person-size: "before" learns both semi-axes of an upper-body person from every fit,
-//   also its extent along the ray, ShapeOptions::person_size_across_ray = false;
+//   --before-person-size: "before" runs with ShapeOptions::person_size_across_ray the other way
+//   round from the default (off by default since it moves round objects' centres towards the
+//   sensor: "before" learns each semi-axis only from views that show it across the ray);
 //   --before-outline-departure: "before" reports an upper-body centre with the fixed allowances
 //   for the outline alone, not the departure its fit's residuals measure,
 //   ShapeOptions::outline_departure_gain = 0; --before-partial-view: "before" reports an
@@ -1177,8 +1178,8 @@ bool g_before_single_beam_partner = false;
 // --before-edge-echo-birth: "before" lets a knee-height single leg beside a nearer edge start a
 // track (ShapeOptions::edge_echo_no_birth = false).
 bool g_before_edge_echo_birth = false;
-// --before-person-size: "before" learns both semi-axes of an upper-body person from every fit,
-// also the extent along the ray (ShapeOptions::person_size_across_ray = false).
+// --before-person-size: "before" runs with ShapeOptions::person_size_across_ray the other way
+// round from the default (default off: "before" learns each semi-axis across the ray only).
 bool g_before_person_size = false;
 // --before-deep-pieces: "before" measures knee-height pieces deep along the line of sight but no
 // wider across it than a pair of legs as wide objects, also where a leg fills no beam
@@ -1341,7 +1342,9 @@ std::vector<Variant> Variants(sim::Mount mount, double range_m) {
     if (g_before_box_occluders) before.shape.box_drop_occluders = false;
     if (g_before_single_beam_partner) before.shape.single_beam_partner = false;
     if (g_before_edge_echo_birth) before.shape.edge_echo_no_birth = false;
-    if (g_before_person_size) before.shape.person_size_across_ray = false;
+    if (g_before_person_size) {
+      before.shape.person_size_across_ray = !fresh.shape.person_size_across_ray;
+    }
     variants.push_back({"before", before});
   }
   return variants;
@@ -3005,8 +3008,8 @@ std::string KneeHeightBefore() {
   }
   if (g_before_person_size) {
     without.push_back(
-        "learning both semi-axes of an upper-body person from every fit, also its extent along "
-        "the ray (`shape.person_size_across_ray` false)");
+        "`shape.person_size_across_ray` the other way round from the default (on: each "
+        "semi-axis of an upper-body person learnt only from views that show it across the ray)");
   }
   if (g_before_edge_echo_birth) {
     without.push_back(
