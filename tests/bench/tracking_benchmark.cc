@@ -2465,6 +2465,17 @@ std::string BreakdownRow(const std::string& lead, const std::string& bin, const 
   return line;
 }
 
+// The rows of one bin array that hold matches, each bin's name after prefix.
+template <std::size_t N>
+std::string BreakdownRows(const std::string& lead, const std::string& prefix,
+                          const char* const (&bins)[N], const std::array<BreakdownCell, N>& cells) {
+  std::string t;
+  for (std::size_t i = 0; i < N; ++i) {
+    if (cells[i].all.n > 0) t += BreakdownRow(lead, prefix + bins[i], cells[i]);
+  }
+  return t;
+}
+
 struct Section {
   std::string title;
   std::string table;
@@ -2661,12 +2672,8 @@ std::string BreakdownTable(const Section& s) {
     const std::size_t space = key.find(' ');
     const std::string lead = "all | " + key.substr(0, space) + " | " + key.substr(space + 1);
     t += BreakdownRow(lead, "all", b.total);
-    for (std::size_t i = 0; i < b.by_model.size(); ++i) {
-      if (b.by_model[i].all.n > 0) t += BreakdownRow(lead, kModelBins[i], b.by_model[i]);
-    }
-    for (std::size_t i = 0; i < b.by_size.size(); ++i) {
-      if (b.by_size[i].all.n > 0) t += BreakdownRow(lead, kSizeBins[i], b.by_size[i]);
-    }
+    t += BreakdownRows(lead, "", kModelBins, b.by_model);
+    t += BreakdownRows(lead, "", kSizeBins, b.by_size);
     for (std::size_t i = 0; i < b.by_size.size(); ++i) {
       if (b.few_points_by_size[i].all.n > 0) {
         t += BreakdownRow(lead, std::string("points 2-4, ") + kSizeBins[i], b.few_points_by_size[i]);
@@ -2676,41 +2683,15 @@ std::string BreakdownTable(const Section& s) {
                           b.some_points_by_size[i]);
       }
     }
-    for (std::size_t i = 0; i < b.by_exponent.size(); ++i) {
-      if (b.by_exponent[i].all.n > 0) t += BreakdownRow(lead, kExponentBins[i], b.by_exponent[i]);
-    }
-    for (std::size_t i = 0; i < b.by_occlusion.size(); ++i) {
-      if (b.by_occlusion[i].all.n > 0) {
-        t += BreakdownRow(lead, kOcclusionBins[i], b.by_occlusion[i]);
-      }
-    }
-    for (std::size_t i = 0; i < b.by_speed.size(); ++i) {
-      if (b.by_speed[i].all.n > 0) t += BreakdownRow(lead, kSpeedBins[i], b.by_speed[i]);
-    }
-    for (std::size_t i = 0; i < b.by_crowd.size(); ++i) {
-      if (b.by_crowd[i].all.n > 0) t += BreakdownRow(lead, kCrowdBins[i], b.by_crowd[i]);
-    }
-    for (std::size_t i = 0; i < b.by_speed.size(); ++i) {
-      if (b.unoccluded_by_speed[i].all.n > 0) {
-        t += BreakdownRow(lead, std::string("unoccluded, ") + kSpeedBins[i],
-                          b.unoccluded_by_speed[i]);
-      }
-    }
-    for (std::size_t i = 0; i < b.by_crowd.size(); ++i) {
-      if (b.unoccluded_by_crowd[i].all.n > 0) {
-        t += BreakdownRow(lead, std::string("unoccluded, ") + kCrowdBins[i],
-                          b.unoccluded_by_crowd[i]);
-      }
-    }
+    t += BreakdownRows(lead, "", kExponentBins, b.by_exponent);
+    t += BreakdownRows(lead, "", kOcclusionBins, b.by_occlusion);
+    t += BreakdownRows(lead, "", kSpeedBins, b.by_speed);
+    t += BreakdownRows(lead, "", kCrowdBins, b.by_crowd);
+    t += BreakdownRows(lead, "unoccluded, ", kSpeedBins, b.unoccluded_by_speed);
+    t += BreakdownRows(lead, "unoccluded, ", kCrowdBins, b.unoccluded_by_crowd);
     const std::string clear = "clear view (unoccluded, nothing within 2 m), ";
-    for (std::size_t i = 0; i < b.clear_by_model.size(); ++i) {
-      if (b.clear_by_model[i].all.n > 0) {
-        t += BreakdownRow(lead, clear + kModelBins[i], b.clear_by_model[i]);
-      }
-    }
-    for (std::size_t i = 0; i < b.by_object.size(); ++i) {
-      if (b.by_object[i].all.n > 0) t += BreakdownRow(lead, kObjectBins[i], b.by_object[i]);
-    }
+    t += BreakdownRows(lead, clear, kModelBins, b.clear_by_model);
+    t += BreakdownRows(lead, "", kObjectBins, b.by_object);
     for (std::size_t i = 0; i < b.occluded_by_edges.size(); ++i) {
       if (b.occluded_by_edges[i].all.n > 0) {
         t += BreakdownRow(lead, std::string("a nearer return beside it, ") + kEdgeBins[i],
@@ -2721,24 +2702,10 @@ std::string BreakdownTable(const Section& s) {
                           b.unoccluded_by_edges[i]);
       }
     }
-    for (std::size_t i = 0; i < b.by_rate.size(); ++i) {
-      if (b.by_rate[i].all.n > 0) t += BreakdownRow(lead, kRateBins[i], b.by_rate[i]);
-    }
-    for (std::size_t i = 0; i < b.clear_by_rate.size(); ++i) {
-      if (b.clear_by_rate[i].all.n > 0) {
-        t += BreakdownRow(lead, clear + kRateBins[i], b.clear_by_rate[i]);
-      }
-    }
-    for (std::size_t i = 0; i < b.clear_by_size.size(); ++i) {
-      if (b.clear_by_size[i].all.n > 0) {
-        t += BreakdownRow(lead, clear + kSizeBins[i], b.clear_by_size[i]);
-      }
-    }
-    for (std::size_t i = 0; i < b.clear_by_exponent.size(); ++i) {
-      if (b.clear_by_exponent[i].all.n > 0) {
-        t += BreakdownRow(lead, clear + kExponentBins[i], b.clear_by_exponent[i]);
-      }
-    }
+    t += BreakdownRows(lead, "", kRateBins, b.by_rate);
+    t += BreakdownRows(lead, clear, kRateBins, b.clear_by_rate);
+    t += BreakdownRows(lead, clear, kSizeBins, b.clear_by_size);
+    t += BreakdownRows(lead, clear, kExponentBins, b.clear_by_exponent);
     for (std::size_t i = 0; i < b.by_range.size(); ++i)
       t += BreakdownRow(lead, kRangeBins[i], b.by_range[i]);
     for (std::size_t i = 0; i < b.by_points.size(); ++i)
