@@ -236,6 +236,27 @@ std::array<bool, 2> BoxFacesShown(const Eigen::Vector2d& centre_m, const Eigen::
   return {a_shown, b_shown};
 }
 
+namespace {
+
+// The track's size information and the fit's (LearnSize, LearnSizeWeighted); false where either
+// covariance is singular.
+bool SizeInformation(const TrackShape& shape, const Eigen::Matrix2d& size_cov,
+                     Eigen::Matrix2d& prior_info, Eigen::Matrix2d& post_info) {
+  bool ok_prior = false, ok_post = false;
+  shape.size_cov_m2.computeInverseWithCheck(prior_info, ok_prior, 1e-18);
+  size_cov.computeInverseWithCheck(post_info, ok_post, 1e-18);
+  return ok_prior && ok_post;
+}
+
+// The learned size where it is finite and positive (LearnSize, LearnSizeWeighted).
+void StoreSize(const Eigen::Vector2d& mean, const Eigen::Matrix2d& cov, TrackShape& shape) {
+  if (!mean.allFinite() || !(mean.minCoeff() > 0.0)) return;
+  shape.size_m = mean;
+  shape.size_cov_m2 = 0.5 * (cov + cov.transpose());
+}
+
+}  // namespace
+
 std::array<double, 2> PersonAxisWeights(const Eigen::Vector2d& centre_m, double yaw_rad) {
   const double range = centre_m.norm();
   if (!(range > 0.0)) return {1.0, 1.0};
@@ -248,10 +269,7 @@ std::array<double, 2> PersonAxisWeights(const Eigen::Vector2d& centre_m, double 
 void LearnSizeWeighted(const Eigen::Vector2d& size, const Eigen::Matrix2d& size_cov, double share,
                        const std::array<double, 2>& weights, TrackShape& shape) {
   Eigen::Matrix2d prior_info, post_info;
-  bool ok_prior = false, ok_post = false;
-  shape.size_cov_m2.computeInverseWithCheck(prior_info, ok_prior, 1e-18);
-  size_cov.computeInverseWithCheck(post_info, ok_post, 1e-18);
-  if (!ok_prior || !ok_post) return;
+  if (!SizeInformation(shape, size_cov, prior_info, post_info)) return;
   // D (share (post - prior)) D with D = diag(sqrt(weights)): PSD where the fit's is.
   const Eigen::Vector2d root(std::sqrt(std::max(0.0, weights[0])),
                              std::sqrt(std::max(0.0, weights[1])));
@@ -266,18 +284,13 @@ void LearnSizeWeighted(const Eigen::Vector2d& size, const Eigen::Matrix2d& size_
   pull(0) *= std::max(0.0, weights[0]);
   pull(1) *= std::max(0.0, weights[1]);
   const Eigen::Vector2d mean = shape.size_m + cov * pull;
-  if (!mean.allFinite() || !(mean.minCoeff() > 0.0)) return;
-  shape.size_m = mean;
-  shape.size_cov_m2 = 0.5 * (cov + cov.transpose());
+  StoreSize(mean, cov, shape);
 }
 
 void LearnSize(const Eigen::Vector2d& size, const Eigen::Matrix2d& size_cov, double share,
                const std::array<bool, 2>& shown, TrackShape& shape) {
   Eigen::Matrix2d prior_info, post_info;
-  bool ok_prior = false, ok_post = false;
-  shape.size_cov_m2.computeInverseWithCheck(prior_info, ok_prior, 1e-18);
-  size_cov.computeInverseWithCheck(post_info, ok_post, 1e-18);
-  if (!ok_prior || !ok_post) return;
+  if (!SizeInformation(shape, size_cov, prior_info, post_info)) return;
   Eigen::Matrix2d gained = share * (post_info - prior_info);
   for (int k = 0; k < 2; ++k) {
     if (shown[k]) continue;
@@ -303,9 +316,7 @@ void LearnSize(const Eigen::Vector2d& size, const Eigen::Matrix2d& size_cov, dou
     }
     mean = shape.size_m + cov * pull;
   }
-  if (!mean.allFinite() || !(mean.minCoeff() > 0.0)) return;
-  shape.size_m = mean;
-  shape.size_cov_m2 = 0.5 * (cov + cov.transpose());
+  StoreSize(mean, cov, shape);
 }
 
 }  // namespace internal
