@@ -1,4 +1,5 @@
 #include "common/config_yaml.h"
+#include "common/one_line.h"
 
 #include <spdlog/fmt/fmt.h>
 #include <spdlog/fmt/ranges.h>
@@ -148,7 +149,8 @@ class Loader final : public ConfigVisitor {
   }
   std::string Path(std::string_view key) const { return section_name_ + "." + std::string(key); }
   void Fail(const std::string& where, const std::string& what) {
-    if (error_.empty()) error_ = where + ": " + what;
+    // Keys and values come from the file: one line, a hostile one cut short.
+    if (error_.empty()) error_ = OneLine(where, 80) + ": " + OneLine(what, 600);
   }
 
   const YAML::Node& root_;
@@ -270,7 +272,7 @@ std::optional<std::string> LoadYamlConfig(std::string_view yaml_text, const Conf
     root = YAML::Load(std::string(yaml_text));
   } catch (const YAML::Exception& e) {
     return fmt::format("YAML syntax error at line {}, column {}: {}", e.mark.line + 1,
-                       e.mark.column + 1, e.msg);
+                       e.mark.column + 1, OneLine(e.msg));
   }
   if (!root || root.IsNull()) return std::nullopt;
   if (!root.IsMap()) return std::string("the top level must be a map of sections");
@@ -282,7 +284,7 @@ std::optional<std::string> LoadYamlConfig(std::string_view yaml_text, const Conf
     visit(loader);
     loader.CheckUnknown();
   } catch (const YAML::Exception& e) {
-    return fmt::format("malformed config: {}", e.msg);
+    return fmt::format("malformed config: {}", OneLine(e.msg));
   }
   if (!loader.error().empty()) return loader.error();
   return std::nullopt;

@@ -11,6 +11,8 @@
 #include <cstring>
 #include <filesystem>
 
+#include "common/one_line.h"
+
 namespace lrfnet::auth {
 namespace {
 
@@ -65,13 +67,13 @@ std::optional<std::string> ParseKeyFile(std::string_view text, KeyFile* out) {
         space == std::string_view::npos ? std::string_view() : Trim(line.substr(space));
     const std::string where = "line " + std::to_string(line_number) + ": ";
     const auto once = [&](bool& seen) -> std::optional<std::string> {
-      if (seen) return where + "'" + std::string(name) + "' given twice";
+      if (seen) return where + "'" + common::OneLine(name, 40) + "' given twice";
       seen = true;
       return std::nullopt;
     };
     if (name == "lrfnet-key") {
       if (auto e = once(has_format)) return e;
-      if (value != "1") return where + "unknown key file format '" + std::string(value) + "'";
+      if (value != "1") return where + "unknown key file format '" + common::OneLine(value, 40) + "'";
     } else if (name == "kind") {
       if (auto e = once(has_kind)) return e;
       if (value == "site") {
@@ -96,7 +98,7 @@ std::optional<std::string> ParseKeyFile(std::string_view text, KeyFile* out) {
       if (auto e = once(has_key)) return e;
       if (!FromHex(value, f.key)) return where + "key must be 64 hex digits";
     } else {
-      return where + "unknown entry '" + std::string(name) + "'";
+      return where + "unknown entry '" + common::OneLine(name, 40) + "'";
     }
   }
   if (!has_format) return "not an lrfnet key file (no 'lrfnet-key 1' line)";

@@ -5,6 +5,7 @@
 #include <cmath>
 
 #include "common/host_port.h"
+#include "common/one_line.h"
 
 namespace lrfnet::daemon {
 namespace {
@@ -662,7 +663,9 @@ std::optional<std::string> LoadDaemonConfig(std::string_view yaml_text, DaemonCo
   if (auto e = common::LoadYamlConfig(yaml_text,
                                       [&](ConfigVisitor& v) { VisitDaemonConfig(config, v); }))
     return e;
-  return Validate(config);
+  // Validate quotes values of the file (zone names, addresses): one line whatever they hold.
+  if (auto e = Validate(config)) return common::OneLine(*e, 1000);
+  return std::nullopt;
 }
 
 std::string PrintDaemonConfig(const DaemonConfig& config) {

@@ -14,6 +14,8 @@
 #include <fstream>
 #include <set>
 
+#include "common/one_line.h"
+
 namespace lrfnet::calib {
 
 namespace {
@@ -260,15 +262,9 @@ class Reader {
     return true;
   }
 
-  // Error messages quote at most this much of a hostile value.
-  // Control characters (a hostile file's bytes) are shown as '?', so the error stays one line.
+  // Error messages quote at most this much of a hostile value, on one line.
   static std::string Clip(const std::string& s, std::size_t max_chars = 40) {
-    std::string out;
-    for (const char ch : s.substr(0, max_chars)) {
-      const auto c = static_cast<unsigned char>(ch);
-      out += c < 0x20 || c == 0x7f ? '?' : ch;
-    }
-    return s.size() > max_chars ? out + "..." : out;
+    return common::OneLine(s, max_chars);
   }
 
   bool ParseRoot(const YAML::Node& root, PoseFile* out) {

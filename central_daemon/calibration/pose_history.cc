@@ -7,6 +7,8 @@
 #include <cmath>
 #include <cstdlib>
 
+#include "common/one_line.h"
+
 namespace lrfnet::calib {
 
 namespace {
@@ -43,7 +45,8 @@ class Reader {
     if (near.IsDefined() && !near.Mark().is_null()) {
       where = "line " + std::to_string(near.Mark().line + 1) + ": ";
     }
-    error = where + key + ": " + message;
+    // Keys and values come from the file: one line, a hostile one cut short.
+    error = where + common::OneLine(key, 120) + ": " + common::OneLine(message, 600);
     return false;
   }
 
@@ -113,7 +116,7 @@ YAML::Node Load(const std::string& text, std::string* error) {
     return YAML::Load(text);
   } catch (const YAML::Exception& e) {
     *error = (e.mark.is_null() ? "" : "line " + std::to_string(e.mark.line + 1) + ": ") +
-             "not valid YAML: " + e.msg.substr(0, 120);
+             "not valid YAML: " + common::OneLine(e.msg);
     return YAML::Node(YAML::NodeType::Undefined);
   }
 }

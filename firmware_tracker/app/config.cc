@@ -3,6 +3,7 @@
 #include <array>
 #include <cmath>
 
+#include "common/one_line.h"
 #include "firmware_tracker/io/datagram_encoder.h"
 
 namespace lrfnet::tracker {
@@ -588,7 +589,7 @@ void VisitTrackerConfig(TrackerConfig& c, ConfigVisitor& v) {
 
 std::optional<std::string> Validate(const TrackerConfig& c) {
   if (!c.sensor_id.empty() && !io::IsValidSensorId(c.sensor_id))
-    return "sensor.id: '" + c.sensor_id + "' is not 1 to 32 letters, digits, '_', '.' or '-'";
+    return "sensor.id: '" + common::OneLine(c.sensor_id, 40) + "' is not 1 to 32 letters, digits, '_', '.' or '-'";
   if (c.encrypt && c.key_file.empty()) return "auth.encrypt: needs auth.key (--key)";
   // The link's host is checked where it is set (the live mode); validate the rest with a
   // placeholder so a config without an address passes.
@@ -605,7 +606,9 @@ std::optional<std::string> Validate(const TrackerConfig& c) {
 std::optional<std::string> LoadTrackerConfig(std::string_view yaml_text, TrackerConfig& config) {
   if (auto e = LoadYamlConfig(yaml_text, [&](ConfigVisitor& v) { VisitTrackerConfig(config, v); }))
     return e;
-  return Validate(config);
+  // Validate quotes values of the file (the sensor id): one line whatever they hold.
+  if (auto e = Validate(config)) return common::OneLine(*e, 1000);
+  return std::nullopt;
 }
 
 std::string PrintTrackerConfig(const TrackerConfig& config) {

@@ -2,6 +2,7 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <fstream>
 #include <ostream>
 #include <sstream>
@@ -129,6 +130,9 @@ TEST_P(TrackerConfigErrors, OneLineNamingTheKey) {
   ASSERT_TRUE(error.has_value()) << GetParam().yaml;
   EXPECT_NE(error->find(GetParam().expected), std::string::npos) << *error;
   EXPECT_EQ(error->find('\n'), std::string::npos) << *error;
+  EXPECT_TRUE(std::none_of(error->begin(), error->end(),
+                           [](char c) { return static_cast<unsigned char>(c) < 0x20; }))
+      << *error;
 }
 
 INSTANTIATE_TEST_SUITE_P(
@@ -155,7 +159,12 @@ INSTANTIATE_TEST_SUITE_P(
         BadCase{"shape:\n  standing_leg_memory_s: -0.1\n", "shape.standing_leg_memory_s"},
         BadCase{"publish:\n  frame_every_n_scans: 0\n", "publish.frame_every_n_scans"},
         BadCase{"clock:\n  max_error_s: 0\n", "clock.max_error_s"},
-        BadCase{"link:\n  backoff_jitter: 1.5\n", "link"}));
+        BadCase{"link:\n  backoff_jitter: 1.5\n", "link"},
+        // Hostile bytes quoted in the error are shown as '?': the error stays one line.
+        BadCase{"\"track\\ning\": 1\n", "track?ing: unknown section"},
+        BadCase{"tracking:\n  \"max\\ttracks\": 3\n", "tracking.max?tracks: unknown option"},
+        BadCase{"tracking:\n  gate_mahalanobis_sq: \"1\\n2\"\n", "got '1?2'"},
+        BadCase{"tracking: \"\\\r\"\n", "unknown escape character: ?"}));
 
 }  // namespace
 }  // namespace lrfnet::tracker

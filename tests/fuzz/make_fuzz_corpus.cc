@@ -99,6 +99,8 @@ int main(int argc, char** argv) {
   lrfnet::fuzz::WriteSopasSeeds((out / "sopas_fuzz").string());
   std::filesystem::create_directories(out / "calibration_yaml_fuzz");
   lrfnet::fuzz::WriteCalibrationYamlSeeds((out / "calibration_yaml_fuzz").string());
+  std::filesystem::create_directories(out / "config_fuzz");
+  lrfnet::fuzz::WriteConfigSeeds((out / "config_fuzz").string());
 
   std::size_t files = 0;
   for (const auto& d : {cola_dir, reassembler_dir, packet_dir, request_dir, datagram_dir, recording_dir}) {

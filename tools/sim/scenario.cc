@@ -5,6 +5,8 @@
 #include <cstdio>
 #include <set>
 
+#include "common/one_line.h"
+
 namespace lrfnet::sim {
 
 namespace {
@@ -42,7 +44,8 @@ class Checker {
     std::string prefix;
     if (!s_.source.empty())
       prefix = s_.source + (line > 0 ? ":" + std::to_string(line) : "") + ": ";
-    error = prefix + path + ": " + message;
+    // Ids and names come from the file: one line, a hostile one cut short.
+    error = prefix + common::OneLine(path, 120) + ": " + common::OneLine(message, 600);
     return false;
   }
 

@@ -16,6 +16,7 @@
 #include <sstream>
 #include <vector>
 
+#include "common/one_line.h"
 #include "tools/sim/scenario.h"
 
 namespace lrfnet::sim {
@@ -33,7 +34,9 @@ class Parser {
     std::string where = source_;
     const int line = LineOf(near);
     if (line > 0) where += (where.empty() ? "line " : ":") + std::to_string(line);
-    error = (where.empty() ? "" : where + ": ") + path + ": " + message;
+    // Keys and values come from the file: one line, a hostile one cut short.
+    error = (where.empty() ? "" : where + ": ") + common::OneLine(path, 120) + ": " +
+            common::OneLine(message, 600);
     return false;
   }
 
@@ -516,7 +519,7 @@ bool ParseScenario(const std::string& yaml_text, const std::string& source, Scen
     std::string where = source;
     if (!e.mark.is_null())
       where += (where.empty() ? "line " : ":") + std::to_string(e.mark.line + 1);
-    *error = (where.empty() ? "" : where + ": ") + "not valid YAML: " + e.msg;
+    *error = (where.empty() ? "" : where + ": ") + "not valid YAML: " + common::OneLine(e.msg);
     return false;
   }
   if (parser.error) {
