@@ -1,8 +1,9 @@
 // Fuzz target for the files an operator writes and the programs read at start and on reload: the
 // tracker's config (lrfnet-tracker --config), the daemon's config (lrfnetd --config, its zones
-// list), a simulator scenario (lrfnet sim), a key file (lrfnet keys, --key-file) and the `history`
-// of a calibration.yaml. The input's first byte chooses the reader (byte % 5, in that order), the
-// rest is the file's text (seeds: config_seeds.cc).
+// list), a simulator scenario (lrfnet sim), a key file (lrfnet keys, --key-file), the `history`
+// of a calibration.yaml and the `poses` of a truth.yaml (lrfnet eval --truth). The input's first
+// byte chooses the reader (byte % 6, in that order), the rest is the file's text (seeds:
+// config_seeds.cc).
 // Properties checked with __builtin_trap:
 //   - every reader either accepts the text or refuses it with a non-empty error of one line (no
 //     control characters: a hostile file's bytes are not echoed raw), and never throws (a YAML
@@ -11,13 +12,16 @@
 //     into a default config and prints the same text: what the programs print, they read;
 //   - an accepted scenario validates;
 //   - an accepted key file, formatted again, reads back the same kind, sensor, epoch and key;
-//   - an accepted history, written again, reads back the same events (by their written text).
+//   - an accepted history, written again, reads back the same events (by their written text);
+//   - accepted truth poses name each sensor once, with a finite pose.
 // Built in the ordinary build only (its readers need the tracker's and daemon's app libraries,
 // which the libFuzzer tree does not build); there it runs every seed and a fixed number of
 // deterministic mutations as a test.
 
+#include <cmath>
 #include <cstddef>
 #include <cstdint>
+#include <set>
 #include <string>
 #include <string_view>
 #include <vector>
@@ -106,18 +110,33 @@ void History(const std::string& text) {
   Check(lrfnet::calib::HistoryYaml(back) == written);
 }
 
+void TruthPoses(const std::string& text) {
+  lrfnet::calib::PoseFile poses;
+  std::string error;
+  if (!lrfnet::calib::TruthPosesAt(text, 30.0, &poses, &error)) {
+    CheckError(error);
+    return;
+  }
+  std::set<std::string> ids;
+  for (const auto& [id, pose] : poses.sensors) {
+    Check(ids.insert(id).second);
+    Check(std::isfinite(pose.x_m) && std::isfinite(pose.y_m) && std::isfinite(pose.yaw_rad));
+  }
+}
+
 }  // namespace
 
 extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
   if (size == 0) return 0;
   const std::string text(reinterpret_cast<const char*>(data) + 1, size - 1);
   try {
-    switch (data[0] % 5) {
+    switch (data[0] % 6) {
       case 0: TrackerConfig(text); break;
       case 1: DaemonConfig(text); break;
       case 2: Scenario(text); break;
       case 3: KeyFile(text); break;
-      default: History(text); break;
+      case 4: History(text); break;
+      default: TruthPoses(text); break;
     }
   } catch (...) {
     __builtin_trap();  // a reader let an exception out

@@ -1,5 +1,5 @@
 // Seeds for config_fuzz (its first byte chooses the reader: 0 tracker config, 1 daemon config,
-// 2 scenario, 3 key file, 4 calibration history): the configs the programs print (defaults and a
+// 2 scenario, 3 key file, 4 calibration history, 5 truth poses): the configs the programs print (defaults and a
 // site's values), every shipped scenario, site and sensor key files, a history of each event kind,
 // and damaged copies of each (cut at several places, a value replaced by hostile YAML).
 
@@ -89,6 +89,13 @@ void WriteConfigSeeds(const std::string& dir) {
   events[2] = {"", 0, "s3", "background_relearned", "", "a door opened", {}, {}};
   add(4, WithDamage(calib::HistoryYaml(events), {"stamp_ns:", "before:", "event:"}));
   add(4, {"history: []\n", "history: {}\n", "sensors: []\n"});
+
+  add(5, WithDamage("sensors:\n  - {id: a, x_m: 5, y_m: 0, yaw_deg: 10}\n"
+                    "poses:\n"
+                    "  - {id: a, from_s: 0, to_s: 30, from_utc_ns: 0, x_m: 4, y_m: 0, yaw_deg: 0}\n"
+                    "  - {id: a, from_s: 30, to_s: 60, from_utc_ns: 30000000000, x_m: 5, y_m: 0, yaw_deg: 10}\n"
+                    "  - {id: b, from_s: 0, to_s: 60, from_utc_ns: 0, x_m: 1, y_m: 1, yaw_deg: 0}\n",
+                    {"from_s:", "x_m:", "id:"}));
 
   for (std::size_t i = 0; i < seeds.size(); ++i) {
     std::ofstream(std::filesystem::path(dir) / ("seed_" + std::to_string(i)), std::ios::binary) << seeds[i];

@@ -14,8 +14,8 @@ void WriteRecordingSeeds(const std::string& dir);
 void WriteAuthSeeds(const std::string& dir);
 // calibration_yaml_fuzz: calibration.yaml files the writer made, older formats, damaged copies.
 void WriteCalibrationYamlSeeds(const std::string& dir);
-// config_fuzz: the printed configs, the shipped scenarios, key files, calibration histories, damaged
-// copies (config_seeds.cc; ordinary build only).
+// config_fuzz: the printed configs, the shipped scenarios, key files, calibration histories, truth
+// poses, damaged copies (config_seeds.cc; ordinary build only).
 void WriteConfigSeeds(const std::string& dir);
 
 }  // namespace lrfnet::fuzz
