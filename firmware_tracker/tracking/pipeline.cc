@@ -242,7 +242,8 @@ bool InsideGrownBox(const Eigen::Vector2d& centre_m, const Eigen::Vector2d& size
   const Eigen::Vector2d e1(std::cos(yaw_rad), std::sin(yaw_rad)), e2(-e1.y(), e1.x());
   for (const Eigen::Vector2d& p : points) {
     const Eigen::Vector2d d = p - centre_m;
-    if (std::abs(d.dot(e1)) > size_m.x() + margin_m || std::abs(d.dot(e2)) > size_m.y() + margin_m) {
+    if (std::abs(d.dot(e1)) > size_m.x() + margin_m ||
+        std::abs(d.dot(e2)) > size_m.y() + margin_m) {
       return false;
     }
   }
@@ -1518,13 +1519,12 @@ std::size_t TrackingPipeline::BoxPiecesEnd(std::size_t first, std::size_t tracks
     const TrackPrediction& pr = predictions_[t];
     if (!pr.confirmed || pr.model != ShapeModel::kBox) continue;
     const Eigen::SelfAdjointEigenSolver<Eigen::Matrix2d> position(pr.covariance_m2,
-                                                                 Eigen::EigenvaluesOnly);
+                                                                  Eigen::EigenvaluesOnly);
     // The size no more certain than when the track became a box: a view cut into pieces shows
     // part of the outline only, and what the track learned from such views is not its size.
-    const double state_var =
-        std::max({pr.size_cov_m2(0, 0), pr.size_cov_m2(1, 1),
-                  o.box_size_sigma_m * o.box_size_sigma_m}) +
-        position.eigenvalues().maxCoeff();
+    const double state_var = std::max({pr.size_cov_m2(0, 0), pr.size_cov_m2(1, 1),
+                                       o.box_size_sigma_m * o.box_size_sigma_m}) +
+                             position.eigenvalues().maxCoeff();
     std::size_t end = first;
     for (std::size_t k = first; k <= chain; ++k) {
       const Segment& s = segments[k];

@@ -3148,7 +3148,8 @@ int main(int argc, char** argv) {
                    "[--before-recent-veil] "
                    "[--before-single-precision-fit] "
                    "[--before-stance-weight] [--before-adopt] [--before-touching-legs] "
-                   "[--before-box-occluders] [--before-box-rejoin] [--before-person-size] [--before-fusion-merge] "
+                   "[--before-box-occluders] [--before-box-rejoin] [--before-person-size] "
+                   "[--before-fusion-merge] "
                    "[--before-report-sourceless]]\n");
       return 2;
     }
