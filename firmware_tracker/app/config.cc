@@ -358,6 +358,16 @@ void VisitShape(tracking::ShapeOptions& o, ConfigVisitor& v) {
           "A box's (cart's) points nearer than where their beam enters the fitted box (by three "
           "sigma of the range noise and model error) are something in front of it (its pusher): "
           "left out and the box refitted without them. false: every point is the box's.");
+  v.Field("box_size_sigma_m", o.box_size_sigma_m,
+          "Sigma of a box's (cart's) semi-axes when a track becomes one.");
+  v.Field("box_rejoin_pieces", o.box_rejoin_pieces,
+          "Upper-body mount: consecutive segments cut apart only by segmentation.max_width_m "
+          "whose points all lie on a confirmed box track's predicted rectangle (grown by "
+          "box_rejoin_sigmas of its uncertainty, the size's at least box_size_sigma_m) are "
+          "measured as one segment. false: every segment is an observation.");
+  v.Field("box_rejoin_sigmas", o.box_rejoin_sigmas,
+          "With box_rejoin_pieces: sigmas of the range noise, model error, size state and "
+          "predicted position by which the box's rectangle is grown.");
   v.Field("box_size_from_faces_seen", o.box_size_from_faces_seen,
           "A box's half-length is learned only from scans that show one of its sides, its "
           "half-width only from scans that show one of its ends (at least three beams across the "

@@ -147,6 +147,10 @@ std::size_t MultiTracker::Predict(common::UtcNs t_ns, std::span<TrackPrediction>
       p.confirmed = t.confirmed;
       p.position_m = f.position_m();
       p.covariance_m2 = f.covariance().topLeftCorner<2, 2>();
+      p.model = t.shape.model;
+      p.size_m = t.shape.size_m;
+      p.size_cov_m2 = t.shape.size_cov_m2;
+      p.yaw_rad = t.shape.yaw_rad;
     }
   }
   return n;

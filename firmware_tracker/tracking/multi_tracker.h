@@ -317,12 +317,18 @@ class MeasurementRefiner {
                       Measurement& measurement) = 0;
 };
 
-// A live track's position predicted to some time (for the pipeline's pairing of legs).
+// A live track's position predicted to some time (for the pipeline's pairing of legs and its
+// rejoining of a box's pieces).
 struct TrackPrediction {
   std::uint32_t id = 0;
   bool confirmed = false;
   Eigen::Vector2d position_m = Eigen::Vector2d::Zero();
   Eigen::Matrix2d covariance_m2 = Eigen::Matrix2d::Identity();
+  // The track's shape state (TrackShape): its model, learned size, its covariance and yaw.
+  ShapeModel model = ShapeModel::kSuperellipse;
+  Eigen::Vector2d size_m = Eigen::Vector2d::Zero();
+  Eigen::Matrix2d size_cov_m2 = Eigen::Matrix2d::Zero();
+  double yaw_rad = 0.0;
 };
 
 namespace internal {

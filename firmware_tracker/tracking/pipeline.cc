@@ -236,6 +236,20 @@ std::array<bool, 2> BoxFacesShown(const Eigen::Vector2d& centre_m, const Eigen::
   return {a_shown, b_shown};
 }
 
+bool InsideGrownBox(const Eigen::Vector2d& centre_m, const Eigen::Vector2d& size_m, double yaw_rad,
+                    double margin_m, std::span<const Eigen::Vector2d> points) {
+  if (points.empty()) return false;
+  const Eigen::Vector2d e1(std::cos(yaw_rad), std::sin(yaw_rad)), e2(-e1.y(), e1.x());
+  for (const Eigen::Vector2d& p : points) {
+    const Eigen::Vector2d d = p - centre_m;
+    if (std::abs(d.dot(e1)) > size_m.x() + margin_m ||
+        std::abs(d.dot(e2)) > size_m.y() + margin_m) {
+      return false;
+    }
+  }
+  return true;
+}
+
 namespace {
 
 // The track's size information and the fit's (LearnSize, LearnSizeWeighted); false where either
@@ -335,8 +349,6 @@ using internal::kSideKnownWeight;
 constexpr int kMaxSidePlaces = 16;
 // Pairing legs around a track: a single leg costs this much more than a pair.
 constexpr double kSingleLegPenaltyM = 0.25;
-// Sigma of a box's size when a track becomes one.
-constexpr double kBoxSizeSigmaM = 0.2;
 // Share of a fit's size information the track's state takes (see LearnSize).
 constexpr double kSizeLearningShare = 0.25;
 
@@ -505,6 +517,8 @@ std::optional<std::string> Validate(const ShapeOptions& o) {
   if (!(std::isfinite(o.mixed_pixel_min_gap_m) && o.mixed_pixel_min_gap_m >= 0.0)) {
     return "mixed_pixel_min_gap_m must be >= 0";
   }
+  if (!Positive(o.box_rejoin_sigmas)) return "box_rejoin_sigmas must be > 0";
+  if (!Positive(o.box_size_sigma_m)) return "box_size_sigma_m must be > 0";
   return std::nullopt;
 }
 
@@ -766,8 +780,9 @@ class TrackingPipeline::Refiner final : public MeasurementRefiner {
     if (shape.model == ShapeModel::kSuperellipse && shape.size_m.x() > o.box_min_half_length_m) {
       // A cart: from now on its outline is a rectangle, whose depth the person prior does not know.
       shape.model = ShapeModel::kBox;
-      shape.size_cov_m2(0, 0) = std::max(shape.size_cov_m2(0, 0), kBoxSizeSigmaM * kBoxSizeSigmaM);
-      shape.size_cov_m2(1, 1) = std::max(shape.size_cov_m2(1, 1), kBoxSizeSigmaM * kBoxSizeSigmaM);
+      const double box_var = o.box_size_sigma_m * o.box_size_sigma_m;
+      shape.size_cov_m2(0, 0) = std::max(shape.size_cov_m2(0, 0), box_var);
+      shape.size_cov_m2(1, 1) = std::max(shape.size_cov_m2(1, 1), box_var);
     }
     if (shape.model == ShapeModel::kSuperellipse && shape.updates >= kMinCylinderUpdates &&
         shape.size_m.x() - shape.size_m.y() < kCylinderAxisShare * shape.size_m.x()) {
@@ -1392,11 +1407,26 @@ void TrackingPipeline::BuildObservations(const ScanView& scan) {
   if (options_.shape.mount == Mount::kTorso) {
     // Each observation is built in its slot of observations_ (one copy of ~300 bytes less per
     // segment than building it aside and adding it).
-    for (const Segment& s : segments_.segments) {
+    const std::size_t tracks =
+        options_.shape.box_rejoin_pieces ? tracker_.Predict(scan.stamp_ns, predictions_) : 0;
+    const auto& segments = segments_.segments;
+    for (std::size_t i = 0; i < segments.size();) {
+      Segment s = segments[i];
+      const std::size_t last = BoxPiecesEnd(i, tracks);
+      for (std::size_t k = i + 1; k <= last; ++k) {
+        // ShapeOptions::box_rejoin_pieces: the pieces as the one segment they would have been.
+        s.end_beam = segments[k].end_beam;
+        s.point_count += segments[k].point_count;
+      }
+      counters_.box_pieces_rejoined += last - i;
+      i = last + 1;
       if (observations_.full()) {
         ++counters_.dropped_segments;  // as AddObservation counts it
         continue;
       }
+      s.width_m = (segments_.points_m[s.first_point + s.point_count - 1] -
+                   segments_.points_m[s.first_point])
+                      .norm();
       Observation* ob = observations_.emplace_slot();
       ob->parts[0] = MakePart(scan, s, 0, s.point_count);
       ob->part_count = 1;
@@ -1460,6 +1490,58 @@ void TrackingPipeline::BuildObservations(const ScanView& scan) {
   const std::size_t tracks = tracker_.Predict(scan.stamp_ns, predictions_);
   if (o.single_beam_legs) AddSingleBeamLegs(scan, tracks);
   PairLegs(scan, tracks);
+}
+
+std::size_t TrackingPipeline::BoxPiecesEnd(std::size_t first, std::size_t tracks) const {
+  const auto& segments = segments_.segments;
+  const SegmentationOptions& so = options_.segmentation;
+  const ShapeOptions& o = options_.shape;
+  // The run of pieces from `first` the segmentation cut only for their width (or point count).
+  std::size_t chain = first;
+  std::size_t points = segments[first].point_count;
+  while (chain + 1 < segments.size()) {
+    const Segment& a = segments[chain];
+    const Segment& b = segments[chain + 1];
+    if (b.first_point != a.first_point + a.point_count || b.begin_beam < a.end_beam ||
+        b.begin_beam - a.end_beam > so.max_missing_beams ||
+        points + b.point_count > kMaxSegmentPoints) {
+      break;
+    }
+    const Eigen::Vector2d& p = segments_.points_m[b.first_point];
+    const Eigen::Vector2d& q = segments_.points_m[a.first_point + a.point_count - 1];
+    if ((p - q).norm() > so.jump_base_m + so.jump_per_m * Range(p)) break;
+    points += b.point_count;
+    ++chain;
+  }
+  if (chain == first) return first;
+  std::size_t best = first;
+  for (std::size_t t = 0; t < tracks; ++t) {
+    const TrackPrediction& pr = predictions_[t];
+    if (!pr.confirmed || pr.model != ShapeModel::kBox) continue;
+    const Eigen::SelfAdjointEigenSolver<Eigen::Matrix2d> position(pr.covariance_m2,
+                                                                  Eigen::EigenvaluesOnly);
+    // The size no more certain than when the track became a box: a view cut into pieces shows
+    // part of the outline only, and what the track learned from such views is not its size.
+    const double state_var = std::max({pr.size_cov_m2(0, 0), pr.size_cov_m2(1, 1),
+                                       o.box_size_sigma_m * o.box_size_sigma_m}) +
+                             position.eigenvalues().maxCoeff();
+    std::size_t end = first;
+    for (std::size_t k = first; k <= chain; ++k) {
+      const Segment& s = segments[k];
+      const double range = Range(segments_.points_m[s.first_point]);
+      const double noise = o.fit.point_sigma_m + o.fit.point_sigma_per_m * range;
+      const double margin = o.box_rejoin_sigmas *
+                            std::sqrt(noise * noise + o.fit.model_sigma_m * o.fit.model_sigma_m +
+                                      std::max(0.0, state_var));
+      if (!internal::InsideGrownBox(pr.position_m, pr.size_m, pr.yaw_rad, margin,
+                                    segments_.Points(s))) {
+        break;
+      }
+      end = k;
+    }
+    if (end > best) best = end;
+  }
+  return best;
 }
 
 std::size_t TrackingPipeline::LegSplit(const Segment& segment,

@@ -97,6 +97,9 @@ struct ShapeOptions {
   double person_exponent = 2.5;
   // A track whose learned semi-axis a exceeds this is a cart or trolley: fitted as a box.
   double box_min_half_length_m = 0.36;
+  // Sigma of a box's semi-axes when a track becomes one (its size state's variance raised to at
+  // least this square): the person prior it learned from says little of a cart's size.
+  double box_size_sigma_m = 0.2;
   // Legs mount: a leg's radius at knee height and its sigma; legs of one person are at most this
   // far apart (centre to centre); a leg thinner than person_min_leg_radius_m is not a person's
   // (a chair's).
@@ -447,6 +450,21 @@ struct ShapeOptions {
   // instead of one (the unit test MixedPixelsWithinAPersonsReachOfANearerReturnAreNotLegs: 7
   // ids for 1). false (the default): both semi-axes learned from every box fit.
   bool box_size_from_faces_seen = false;
+  // Upper-body mount: the pieces segmentation.max_width_m cuts a large box's outline into (a
+  // trolley seen obliquely spans up to its diagonal) are one observation again where they fall on
+  // a confirmed box track's predicted outline. Consecutive segments that the segmentation would
+  // have joined but for its width limit (points consecutive, beams at most max_missing_beams
+  // apart, the jump within its limit), every point of them inside the track's predicted rectangle
+  // (its centre predicted to the scan, its learned size and yaw) grown by box_rejoin_sigmas times
+  // the root of the range noise, the model error, the size state's largest variance (at least
+  // box_size_sigma_m^2: the pieces of a split view show part of the outline, and a size learned
+  // from them is no better known than that) and the prediction's largest positional variance,
+  // are measured as one segment. Without it each piece
+  // is an observation of its own: one updates the box's track, the others start person-sized
+  // tracks beside it. Counted (segments joined to the one before) in
+  // PipelineCounters::box_pieces_rejoined. false: every segment is an observation.
+  bool box_rejoin_pieces = true;
+  double box_rejoin_sigmas = 3.0;
   // Upper-body mount: a person's size is learned only as far as the scan shows it across the ray.
   // The silhouette's two ends fix the body's width across the ray; its extent along the ray,
   // which puts the centre behind the visible side, a fit reads from the visible arc's curvature
@@ -641,6 +659,8 @@ struct PipelineCounters {
   std::uint64_t box_occluded_fits = 0;
   // Box refinements that did not show one of the semi-axes (box_size_from_faces_seen).
   std::uint64_t box_sizes_unseen = 0;
+  // Segments measured together with the one before them as a box's outline (box_rejoin_pieces).
+  std::uint64_t box_pieces_rejoined = 0;
   // Person (upper-body) refinements whose size was learned per semi-axis by its share across the
   // ray (person_size_across_ray).
   std::uint64_t person_sizes_across_ray = 0;
@@ -729,6 +749,10 @@ class TrackingPipeline {
 
   void MeasureLegacy(const ScanView& scan);
   void BuildObservations(const ScanView& scan);
+  // ShapeOptions::box_rejoin_pieces: the last of the segments from `first` on that are pieces of
+  // one outline lying on a confirmed box track's predicted rectangle (predictions_, `tracks` of
+  // them); `first` where none follows.
+  std::size_t BoxPiecesEnd(std::size_t first, std::size_t tracks) const;
   // tracks: the live tracks' predictions at the scan's time, in predictions_ (predicted once).
   void PairLegs(const ScanView& scan, std::size_t tracks);
   // Where a leg-sized segment splits into two legs: the index of the second
@@ -831,6 +855,11 @@ std::size_t BoxUnoccludedPoints(const ShapeOptions& o, const Eigen::Vector2d& ce
 // half-width b (an end faces it, likewise). Both true where the range or the step is not positive.
 std::array<bool, 2> BoxFacesShown(const Eigen::Vector2d& centre_m, const Eigen::Vector2d& size_m,
                                   double yaw_rad, double step_rad);
+
+// ShapeOptions::box_rejoin_pieces: whether every point lies inside the box (centre_m, half-lengths
+// size_m along yaw_rad and across it) grown by margin_m on every side; false for no points.
+bool InsideGrownBox(const Eigen::Vector2d& centre_m, const Eigen::Vector2d& size_m, double yaw_rad,
+                    double margin_m, std::span<const Eigen::Vector2d> points);
 
 // ShapeOptions::person_size_across_ray: the weights of a body's semi-axes (a along yaw_rad, b
 // across it) centred at centre_m (sensor at the origin) in what a scan shows across the ray:

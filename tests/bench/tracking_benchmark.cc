@@ -46,7 +46,7 @@
 //                       [--before-recent-veil]
 //                       [--before-single-precision-fit]
 //                       [--before-stance-weight] [--before-adopt] [--before-touching-legs]
-//                       [--before-box-occluders] [--before-person-size]
+//                       [--before-box-occluders] [--before-box-rejoin] [--before-person-size]
 //                       [--before-fusion-merge] [--before-report-sourceless]]
 //   (--extra: more scenario folders, e.g. held-out scenes, reported in their own section;
 //   --explain: per run on stderr, what became of an object's previous track at every id switch
@@ -118,6 +118,8 @@
 //   covariance, ShapeOptions::touching_legs_along_ray = false;
 //   --before-box-occluders: "before" fits a box (a cart) to every point of its segment, also to
 //   those in front of it (its pusher's), ShapeOptions::box_drop_occluders = false;
+//   --before-box-rejoin: "before" measures every segment on its own, also the pieces the width
+//   limit cuts a box's outline into, ShapeOptions::box_rejoin_pieces = false;
 //   --before-person-size: "before" runs with ShapeOptions::person_size_across_ray the other way
 //   round from the default (off by default since it moves round objects' centres towards the
 //   sensor: "before" learns each semi-axis only from views that show it across the ray);
@@ -1250,6 +1252,9 @@ bool g_before_touching_legs = false;
 // --before-box-occluders: "before" fits a box to every point of its segment, also those in front
 // of it (ShapeOptions::box_drop_occluders = false).
 bool g_before_box_occluders = false;
+// --before-box-rejoin: "before" measures every segment on its own, also the pieces the width limit
+// cuts a box's outline into (ShapeOptions::box_rejoin_pieces = false).
+bool g_before_box_rejoin = false;
 // --before-fusion-merge: "before"'s fusion without merging fused tracks left without sources and
 // reporting fused tracks no tracker holds any more (FusionOptions::merge_sourceless = false,
 // report_sourceless = true).
@@ -1308,7 +1313,7 @@ std::vector<Variant> Variants(sim::Mount mount, double range_m) {
              g_before_fusion_merge ||
              g_before_report_sourceless || g_before_recent_veil || g_before_single_precision_fit ||
              g_before_stance_weight || g_before_adopt || g_before_touching_legs ||
-             g_before_box_occluders || g_before_lone_leg_standing ||
+             g_before_box_occluders || g_before_box_rejoin || g_before_lone_leg_standing ||
              g_before_single_beam_partner || g_before_edge_echo_birth || g_before_person_size) {
     tracking::TrackerOptions before = fresh;
     if (g_before_one_leg) before.shape.hidden_leg_behind = false;
@@ -1340,6 +1345,7 @@ std::vector<Variant> Variants(sim::Mount mount, double range_m) {
     if (g_before_adopt) before.tracking.adopt_successor_m = 0.0;
     if (g_before_touching_legs) before.shape.touching_legs_along_ray = false;
     if (g_before_box_occluders) before.shape.box_drop_occluders = false;
+    if (g_before_box_rejoin) before.shape.box_rejoin_pieces = false;
     if (g_before_single_beam_partner) before.shape.single_beam_partner = false;
     if (g_before_edge_echo_birth) before.shape.edge_echo_no_birth = false;
     if (g_before_person_size) {
@@ -2832,7 +2838,7 @@ std::string KneeHeightBefore() {
         g_before_fusion_merge ||
         g_before_report_sourceless ||
         g_before_recent_veil || g_before_single_precision_fit || g_before_stance_weight ||
-        g_before_adopt || g_before_touching_legs || g_before_box_occluders ||
+        g_before_adopt || g_before_touching_legs || g_before_box_occluders || g_before_box_rejoin ||
         g_before_single_beam_partner || g_before_edge_echo_birth || g_before_person_size) ||
       g_before_mixed_pixels || g_before_far || g_before_evidence_coasting ||
       g_before_report_rules) {
@@ -2988,6 +2994,11 @@ std::string KneeHeightBefore() {
         "fitting a box (a cart) to every point of its segment, also to those in front of it (its "
         "pusher's) (`shape.box_drop_occluders` false)");
   }
+  if (g_before_box_rejoin) {
+    without.push_back(
+        "measuring every segment on its own, also the pieces the width limit cuts a box's "
+        "outline into (`shape.box_rejoin_pieces` false)");
+  }
   std::string text = "\"before\": the new tracker" + std::string(without.empty() ? "" : " ");
   for (std::size_t i = 0; i < without.size(); ++i) {
     text += (i == 0 ? "" : i + 1 == without.size() ? " and " : ", ") + without[i];
@@ -3113,6 +3124,8 @@ int main(int argc, char** argv) {
       g_before_touching_legs = true;
     } else if (a == "--before-box-occluders") {
       g_before_box_occluders = true;
+    } else if (a == "--before-box-rejoin") {
+      g_before_box_rejoin = true;
     } else if (a == "--before-fusion-merge") {
       g_before_fusion_merge = true;
     } else if (a == "--before-report-sourceless") {
@@ -3135,7 +3148,8 @@ int main(int argc, char** argv) {
                    "[--before-recent-veil] "
                    "[--before-single-precision-fit] "
                    "[--before-stance-weight] [--before-adopt] [--before-touching-legs] "
-                   "[--before-box-occluders] [--before-person-size] [--before-fusion-merge] "
+                   "[--before-box-occluders] [--before-box-rejoin] [--before-person-size] "
+                   "[--before-fusion-merge] "
                    "[--before-report-sourceless]]\n");
       return 2;
     }
