@@ -518,6 +518,22 @@ struct ShapeOptions {
   // 2-4: 2.0, 5.4, 3.6). Counted in PipelineCounters::underdetermined_fit_widened. false: such a
   // fit reported as any other.
   bool underdetermined_fit_shared = true;
+  // Upper-body mount, a person's track: a segment can hold another object's points beside the
+  // person (within the segmentation's jump of its outline: another person, a pillar), and its end
+  // is then that object's, not the person's silhouette; the fit takes both for one body and its
+  // two "silhouette ends" for the person's (tracking_benchmark --explain, persons with a nearer
+  // return beside them over scenes not in the repository: end point another object's, the end
+  // taken for a silhouette, radial mean -0.155 m, NEES 49; two such views in three of those with
+  // two ends and a nearer return beside them). A run of points at either end of the segment
+  // beyond the reach of the track's predicted body (farther from its predicted centre than the
+  // largest radius a superellipse of the track's size can have, by more than kOccluderSigmas of
+  // the range noise, the model error and the prediction's sigma in that direction), whose range
+  // steps from the person's neighbouring point by more than the noise, is left out of the fit;
+  // that end is an occluder's edge where the run lies nearer than the person's end point, and the
+  // person's silhouette (half a beam outside the end point's beam) where it lies behind it. At
+  // least two points stay. Counted in PipelineCounters::person_beyond_reach_fits. false: every
+  // point of the segment is the person's.
+  bool person_drop_beyond_reach = true;
   double outline_fixed_share = 0.3;
   double outline_model_share = 1.0;
   // Flat objects (not person-like).
@@ -644,6 +660,9 @@ struct PipelineCounters {
   // Person (upper-body) refinements whose size was learned per semi-axis by its share across the
   // ray (person_size_across_ray).
   std::uint64_t person_sizes_across_ray = 0;
+  // Person (upper-body) refinements without a run of points beyond the reach of the predicted
+  // body at an end of the segment (person_drop_beyond_reach; counted per refinement).
+  std::uint64_t person_beyond_reach_fits = 0;
   std::uint64_t deep_leg_pairs = 0;    // deep 2-3 point legs measured as a pair (deep_legs_as_pair)
   std::uint64_t veiled_segments = 0;   // legs: mixed pixels (beside a nearer edge, deep), dropped
   std::uint64_t deep_pieces_kept = 0;  // legs: deep pieces with no surface behind, kept
@@ -824,6 +843,25 @@ std::size_t BoxUnoccludedPoints(const ShapeOptions& o, const Eigen::Vector2d& ce
                                 std::span<const Eigen::Vector2d> points,
                                 std::span<Eigen::Vector2d> kept, Silhouette* silhouette,
                                 double extra_margin_m = 0.0);
+
+// ShapeOptions::person_drop_beyond_reach: copies into kept the points of the segment (in beam
+// order, beams step_rad apart, signed as the scan's) without a run at either end that lies beyond
+// reach_m of centre_m (the predicted centre, covariance centre_cov_m2) by more than
+// kOccluderSigmas of hypot(range noise, model error, the centre's sigma towards the point) and
+// whose range steps from its neighbouring point by more than kOccluderSigmas of the noise; returns
+// their count (points.size() and every point where fewer than two would stay). An end whose run
+// was dropped is an occluder's edge in *silhouette where the run's nearest point lies nearer than
+// the kept end point, else a silhouette half a step outside the kept end point's beam.
+// Precondition: kept.size() >= points.size(); kept is not points' storage.
+std::size_t PersonReachablePoints(const ShapeOptions& o, const Eigen::Vector2d& centre_m,
+                                  const Eigen::Matrix2d& centre_cov_m2, double reach_m,
+                                  std::span<const Eigen::Vector2d> points, double step_rad,
+                                  std::span<Eigen::Vector2d> kept, Silhouette* silhouette);
+
+// The largest distance from its centre of a superellipse |u / a|^p + |v / b|^p = 1 with semi-axes
+// at most size_m's larger one and exponent p >= 2: max(a, b) 2^(1/2 - 1/p) (its diagonal where
+// a = b; an upper bound otherwise).
+double SuperellipseReach(const Eigen::Vector2d& size_m, double exponent);
 
 // ShapeOptions::box_size_from_faces_seen: whether a box (centre_m, half-lengths size_m along
 // yaw_rad and across it) seen from the sensor at the origin with beams step_rad apart shows its
