@@ -21,7 +21,7 @@ mkdir -p results
   --before-few-point-legs --before-deep-legs --before-legs-seen-through --before-legs-report-coasting \
   --before-leg-edges --before-outline-departure --before-partial-view --before-underdetermined-fit \
   --before-recent-veil --before-stance-weight \
-  --before-box-occluders --before-single-beam-partner --before-edge-echo-birth --before-person-reach \
+  --before-box-occluders --before-single-beam-partner --before-edge-echo-birth --before-person-reach --before-partial-extent \
   --before-single-precision-fit --before-adopt --before-touching-legs \
   --before-fusion-merge \
   --out results/tracking_benchmark.md

@@ -219,6 +219,10 @@ std::size_t BoxUnoccludedPoints(const ShapeOptions& o, const Eigen::Vector2d& ce
   return count;
 }
 
+double PartialViewSizeFloor(const ShapeOptions& o, bool body, int edges, double floor_m) {
+  return body && edges < 2 ? std::max(floor_m, o.partial_view_size_sigma_m) : floor_m;
+}
+
 double SuperellipseReach(const Eigen::Vector2d& size_m, double exponent) {
   return std::max(size_m.x(), size_m.y()) * std::pow(2.0, 0.5 - 1.0 / std::max(exponent, 2.0));
 }
@@ -526,6 +530,9 @@ std::optional<std::string> Validate(const ShapeOptions& o) {
   if (!(std::isfinite(o.size_floor_sigma_m) && o.size_floor_sigma_m >= 0.0)) {
     return "size_floor_sigma_m must be >= 0";
   }
+  if (!(std::isfinite(o.partial_view_size_sigma_m) && o.partial_view_size_sigma_m >= 0.0)) {
+    return "partial_view_size_sigma_m must be >= 0";
+  }
   if (!(std::isfinite(o.box_size_floor_sigma_m) && o.box_size_floor_sigma_m >= 0.0)) {
     return "box_size_floor_sigma_m must be >= 0";
   }
@@ -678,9 +685,12 @@ class TrackingPipeline::Refiner final : public MeasurementRefiner {
     const double range_m = measurement.position_m.norm();
     if (o.centre_bias_along_ray && range_m > 0.0 && shape.model != ShapeModel::kBox) {
       const double step_rad = ob.part_count > 0 ? ob.parts[0].silhouette.step_rad : 0.0;
+      // ShapeOptions::partial_view_size_sigma_m.
+      const double bias_floor_m = internal::PartialViewSizeFloor(o, body, edges, floor_m);
+      if (bias_floor_m > floor_m) ++partial_size_floored;
       shape.centre_bias_cov_m2 =
           CentreBiasAlongRay(shape, measurement.position_m / range_m, range_m, step_rad, edges,
-                             floor_m, bias_sigma_m, o);
+                             bias_floor_m, bias_sigma_m, o);
     } else {
       const double size_var =
           std::max({shape.size_cov_m2(0, 0), shape.size_cov_m2(1, 1), floor_m * floor_m});
@@ -720,6 +730,7 @@ class TrackingPipeline::Refiner final : public MeasurementRefiner {
   std::uint64_t box_unseen_sizes = 0;
   std::uint64_t person_across_ray = 0;
   std::uint64_t person_beyond_reach = 0;
+  std::uint64_t partial_size_floored = 0;
 
   // How many of the observation's two outline ends are silhouettes (MakePart: not an occluder's
   // edge, not the field of view's end).
@@ -2332,6 +2343,7 @@ const ScanTracks& TrackingPipeline::Process(const ScanView& scan, std::uint32_t 
   const std::uint64_t box_unseen_before = refiner_->box_unseen_sizes;
   const std::uint64_t person_across_ray_before = refiner_->person_across_ray;
   const std::uint64_t person_beyond_reach_before = refiner_->person_beyond_reach;
+  const std::uint64_t partial_size_floored_before = refiner_->partial_size_floored;
   scan_ = &scan;
   tracker_.Step(scan.stamp_ns, measurements_.span(), offsets_s_.span(),
                 shape_fit ? refiner_.get() : nullptr, tracks_);
@@ -2353,6 +2365,8 @@ const ScanTracks& TrackingPipeline::Process(const ScanView& scan, std::uint32_t 
   counters_.box_sizes_unseen += refiner_->box_unseen_sizes - box_unseen_before;
   counters_.person_sizes_across_ray += refiner_->person_across_ray - person_across_ray_before;
   counters_.person_beyond_reach_fits += refiner_->person_beyond_reach - person_beyond_reach_before;
+  counters_.partial_view_size_floored +=
+      refiner_->partial_size_floored - partial_size_floored_before;
   if (bg.scan_error == ScanError::kNone && bg.learned) {
     AbsorbStatic(scan);
     if (shape_fit) DropCoasting(scan);

@@ -1916,6 +1916,23 @@ TEST(PipelineTest, PersonReachablePointsLeavesOutAnotherObjectBesideThePerson) {
   EXPECT_EQ(internal::PersonReachablePoints(o, centre, cov, reach, points, step, kept, &s), 3u);
 }
 
+// ShapeOptions::partial_view_size_sigma_m: an upper-body person's fit with one silhouette end or
+// none takes the size's sigma in its shared covariance at 0.04 m (a whole view's floor, 0.006 m,
+// otherwise); two ends, a leg or the option at 0: the whole view's floor.
+TEST(PipelineTest, PartialViewSizeFloorSaysTheHiddenExtentIsUnknown) {
+  ShapeOptions o;
+  EXPECT_DOUBLE_EQ(o.partial_view_size_sigma_m, 0.04);
+  EXPECT_DOUBLE_EQ(internal::PartialViewSizeFloor(o, true, 1, 0.006), 0.04);
+  EXPECT_DOUBLE_EQ(internal::PartialViewSizeFloor(o, true, 0, 0.006), 0.04);
+  EXPECT_DOUBLE_EQ(internal::PartialViewSizeFloor(o, true, 2, 0.006), 0.006);
+  EXPECT_DOUBLE_EQ(internal::PartialViewSizeFloor(o, false, 1, 0.006), 0.006);
+  EXPECT_DOUBLE_EQ(internal::PartialViewSizeFloor(o, true, 1, 0.06), 0.06);
+  o.partial_view_size_sigma_m = 0.0;
+  EXPECT_DOUBLE_EQ(internal::PartialViewSizeFloor(o, true, 1, 0.006), 0.006);
+  o.partial_view_size_sigma_m = -0.01;
+  EXPECT_TRUE(Validate(o).has_value());
+}
+
 // ShapeOptions::box_size_from_faces_seen: a 0.9 x 0.6 m box at 5 m (0.5 deg beams) seen end-on
 // shows its half-width only, broadside its half-length only, at 45 deg both; a side seen at a
 // grazing angle, across fewer than three beams, shows nothing.

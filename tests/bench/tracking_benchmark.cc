@@ -47,7 +47,7 @@
 //                       [--before-single-precision-fit]
 //                       [--before-stance-weight] [--before-adopt] [--before-touching-legs]
 //                       [--before-box-occluders] [--before-person-size]
-//                       [--before-person-reach]
+//                       [--before-person-reach] [--before-partial-extent]
 //                       [--before-fusion-merge] [--before-report-sourceless]]
 //   (--extra: more scenario folders, e.g. held-out scenes, reported in their own section;
 //   --explain: per run on stderr, what became of an object's previous track at every id switch
@@ -125,6 +125,8 @@
 //   --before-person-reach: "before" fits an upper-body person to every point of its segment, also
 //   to a run at its end beyond the reach of the predicted body (another object's),
 //   ShapeOptions::person_drop_beyond_reach = false;
+//   --before-partial-extent: "before" reports an upper-body partial view's shared covariance
+//   with the size's own sigma, ShapeOptions::partial_view_size_sigma_m = 0;
 //   --before-outline-departure: "before" reports an upper-body centre with the fixed allowances
 //   for the outline alone, not the departure its fit's residuals measure,
 //   ShapeOptions::outline_departure_gain = 0; --before-partial-view: "before" reports an
@@ -1194,6 +1196,9 @@ bool g_before_person_size = false;
 // --before-person-reach: "before" fits an upper-body person to every point of its segment
 // (ShapeOptions::person_drop_beyond_reach = false).
 bool g_before_person_reach = false;
+// --before-partial-extent: "before" reports an upper-body partial view's shared covariance with
+// the size's own sigma (ShapeOptions::partial_view_size_sigma_m = 0).
+bool g_before_partial_extent = false;
 // --before-deep-pieces: "before" measures knee-height pieces deep along the line of sight but no
 // wider across it than a pair of legs as wide objects, also where a leg fills no beam
 // (ShapeOptions::drop_deep_mixed_pixel_pieces = false).
@@ -1321,7 +1326,8 @@ std::vector<Variant> Variants(sim::Mount mount, double range_m) {
              g_before_recent_veil || g_before_single_precision_fit || g_before_stance_weight ||
              g_before_adopt || g_before_touching_legs || g_before_box_occluders ||
              g_before_lone_leg_standing || g_before_single_beam_partner ||
-             g_before_edge_echo_birth || g_before_person_size || g_before_person_reach) {
+             g_before_edge_echo_birth || g_before_person_size || g_before_person_reach ||
+             g_before_partial_extent) {
     tracking::TrackerOptions before = fresh;
     if (g_before_one_leg) before.shape.hidden_leg_behind = false;
     if (g_before_mixed_pixels) before.shape.drop_mixed_pixel_legs = false;
@@ -1358,6 +1364,7 @@ std::vector<Variant> Variants(sim::Mount mount, double range_m) {
       before.shape.person_size_across_ray = !fresh.shape.person_size_across_ray;
     }
     if (g_before_person_reach) before.shape.person_drop_beyond_reach = false;
+    if (g_before_partial_extent) before.shape.partial_view_size_sigma_m = 0.0;
     variants.push_back({"before", before});
   }
   return variants;
@@ -3001,7 +3008,7 @@ std::string KneeHeightBefore() {
         g_before_recent_veil || g_before_single_precision_fit || g_before_stance_weight ||
         g_before_adopt || g_before_touching_legs || g_before_box_occluders ||
         g_before_single_beam_partner || g_before_edge_echo_birth || g_before_person_size ||
-        g_before_person_reach) ||
+        g_before_person_reach || g_before_partial_extent) ||
       g_before_mixed_pixels || g_before_far || g_before_evidence_coasting ||
       g_before_report_rules) {
     return "";
@@ -3141,6 +3148,11 @@ std::string KneeHeightBefore() {
         "pairing no knee-height leg of a segment with a lone beam within the pairing distance "
         "(`shape.single_beam_partner` false)");
   }
+  if (g_before_partial_extent) {
+    without.push_back(
+        "reporting an upper-body partial view's shared covariance with the size's own sigma "
+        "(`shape.partial_view_size_sigma_m` 0)");
+  }
   if (g_before_person_reach) {
     without.push_back(
         "fitting an upper-body person to every point of its segment, also to a run at its end "
@@ -3179,7 +3191,7 @@ std::string KneeHeightBefore() {
   const char* const same =
       g_before_single_precision_fit ? ", on the same scans in the same run"
       : g_before_outline_departure || g_before_isotropic_bias || g_before_partial_view ||
-              g_before_underdetermined_fit
+              g_before_underdetermined_fit || g_before_partial_extent
           ? ", on the same scans in the same run; upper-body tracks are the same by construction, "
             "their reported covariance (so NEES and what fusion makes of them) is not"
           : ", on the same scans in the same run; upper-body rows are the same by construction";
@@ -3246,6 +3258,8 @@ int main(int argc, char** argv) {
       g_before_person_size = true;
     } else if (a == "--before-person-reach") {
       g_before_person_reach = true;
+    } else if (a == "--before-partial-extent") {
+      g_before_partial_extent = true;
     } else if (a == "--before-deep-pieces") {
       g_before_deep_pieces = true;
     } else if (a == "--before-deep-evidence") {
@@ -3312,6 +3326,7 @@ int main(int argc, char** argv) {
                    "[--before-single-precision-fit] "
                    "[--before-stance-weight] [--before-adopt] [--before-touching-legs] "
                    "[--before-box-occluders] [--before-person-size] [--before-person-reach] "
+                   "[--before-partial-extent] "
                    "[--before-fusion-merge] "
                    "[--before-report-sourceless]]\n");
       return 2;
