@@ -1748,7 +1748,8 @@ void TorsoEndErrors(const tracking::TrackingPipeline& pipeline, const tracking::
         const std::size_t j = last_end ? i + 1 : i - 1;
         const double step = pts[j].norm() - pts[i].norm();
         const double from_track = (end_point - h.p).norm();
-        return std::string(" [run ") + std::to_string(k) + (k > 3 ? "+" : "") + " pts, step " +
+        return std::string(" [run ") + (k > 3 ? std::string("4+") : std::to_string(k)) +
+               " pts, step " +
                (step > 0.08    ? "behind"
                 : step < -0.08 ? "in front"
                                : "none") +
