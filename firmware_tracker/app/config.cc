@@ -386,6 +386,16 @@ void VisitShape(tracking::ShapeOptions& o, ConfigVisitor& v) {
           "Upper-body mount: a fit whose points and silhouette ends are no more than its five "
           "parameters (centre, semi-axes, yaw) reports its own centre covariance (the priors') "
           "with its measured scans. false: such a fit reported as any other.");
+  v.Field("person_drop_beyond_reach", o.person_drop_beyond_reach,
+          "Upper-body mount, a person's track: a run of points at an end of its segment beyond "
+          "the reach of the predicted body (another object beside the person, within the "
+          "segmentation's jump), whose range steps from the person's points, is left out of the "
+          "fit; that end is an occluder's edge where the run is nearer, the person's silhouette "
+          "where it is behind. false: every point of the segment is the person's.");
+  v.Field("partial_view_size_sigma_m", o.partial_view_size_sigma_m,
+          "Upper-body mount, a partial view (fewer than two silhouette ends): in the centre "
+          "covariance successive scans share, each semi-axis's sigma is at least this (m), since "
+          "the scan does not show the extent towards the hidden side. 0: the size's own sigma.");
   v.Field("beam_divergence_rad", o.beam_divergence_rad,
           "Full beam divergence of the scanner (LMS1xx, TiM: 0.015; LMS5xx: 0.011); the beam's "
           "footprint at range R is R times this plus beam_exit_diameter_m (mixed pixels of legs "

@@ -219,6 +219,72 @@ std::size_t BoxUnoccludedPoints(const ShapeOptions& o, const Eigen::Vector2d& ce
   return count;
 }
 
+double PartialViewSizeFloor(const ShapeOptions& o, bool body, int edges, double floor_m) {
+  return body && edges < 2 ? std::max(floor_m, o.partial_view_size_sigma_m) : floor_m;
+}
+
+double SuperellipseReach(const Eigen::Vector2d& size_m, double exponent) {
+  return std::max(size_m.x(), size_m.y()) * std::pow(2.0, 0.5 - 1.0 / std::max(exponent, 2.0));
+}
+
+std::size_t PersonReachablePoints(const ShapeOptions& o, const Eigen::Vector2d& centre_m,
+                                  const Eigen::Matrix2d& centre_cov_m2, double reach_m,
+                                  std::span<const Eigen::Vector2d> points, double step_rad,
+                                  std::span<Eigen::Vector2d> kept, Silhouette* silhouette) {
+  const std::size_t n = std::min(points.size(), kMaxSegmentPoints);
+  const auto noise_of = [&](const Eigen::Vector2d& p) {
+    return o.fit.point_sigma_m + o.fit.point_sigma_per_m * p.norm();
+  };
+  // Beyond reach: farther from the predicted centre than any point of the body can be, by more
+  // than what the range noise, the outline's departure and the prediction leave open.
+  const auto beyond = [&](const Eigen::Vector2d& p) {
+    const Eigen::Vector2d d = p - centre_m;
+    const double dist = d.norm();
+    if (!(dist > reach_m)) return false;
+    const Eigen::Vector2d u = d / dist;
+    const double noise = noise_of(p);
+    const double var = noise * noise + o.fit.model_sigma_m * o.fit.model_sigma_m +
+                       std::max(0.0, u.dot(centre_cov_m2 * u));
+    return dist - reach_m > kOccluderSigmas * std::sqrt(var);
+  };
+  // A surface of its own: the range steps where the run meets the person's points.
+  const auto stepped = [&](const Eigen::Vector2d& inner, const Eigen::Vector2d& outer) {
+    return std::abs(outer.norm() - inner.norm()) >
+           kOccluderSigmas * std::hypot(noise_of(inner), noise_of(outer));
+  };
+  std::size_t begin = 0, end = n;
+  while (begin < n && beyond(points[begin])) ++begin;
+  while (end > begin && beyond(points[end - 1])) --end;
+  if (begin > 0 && (begin >= n || !stepped(points[begin], points[begin - 1]))) begin = 0;
+  if (end < n && (end == 0 || !stepped(points[end - 1], points[end]))) end = n;
+  if (end < begin + 2 || (begin == 0 && end == n)) {
+    for (std::size_t i = 0; i < n; ++i) kept[i] = points[i];
+    return n;
+  }
+  for (std::size_t i = begin; i < end; ++i) kept[i - begin] = points[i];
+  // The run nearer than the person's end point hides the outline beyond it; behind it, the
+  // outline ended between the two beams.
+  const auto nearest = [&](std::size_t from, std::size_t to) {
+    double r = std::numeric_limits<double>::infinity();
+    for (std::size_t i = from; i < to; ++i) r = std::min(r, points[i].norm());
+    return r;
+  };
+  const auto edge_rad = [&](const Eigen::Vector2d& p, double outwards) {
+    return std::atan2(p.y(), p.x()) + outwards * 0.5 * step_rad;
+  };
+  if (begin > 0) {
+    silhouette->first_valid = nearest(0, begin) > points[begin].norm();
+    silhouette->first_edge_rad = edge_rad(points[begin], -1.0);
+    silhouette->first_edge_unit_known = false;
+  }
+  if (end < n) {
+    silhouette->last_valid = nearest(end, n) > points[end - 1].norm();
+    silhouette->last_edge_rad = edge_rad(points[end - 1], 1.0);
+    silhouette->last_edge_unit_known = false;
+  }
+  return end - begin;
+}
+
 std::array<bool, 2> BoxFacesShown(const Eigen::Vector2d& centre_m, const Eigen::Vector2d& size_m,
                                   double yaw_rad, double step_rad) {
   const double range = centre_m.norm();
@@ -476,6 +542,9 @@ std::optional<std::string> Validate(const ShapeOptions& o) {
   if (!(std::isfinite(o.size_floor_sigma_m) && o.size_floor_sigma_m >= 0.0)) {
     return "size_floor_sigma_m must be >= 0";
   }
+  if (!(std::isfinite(o.partial_view_size_sigma_m) && o.partial_view_size_sigma_m >= 0.0)) {
+    return "partial_view_size_sigma_m must be >= 0";
+  }
   if (!(std::isfinite(o.box_size_floor_sigma_m) && o.box_size_floor_sigma_m >= 0.0)) {
     return "box_size_floor_sigma_m must be >= 0";
   }
@@ -593,9 +662,13 @@ class TrackingPipeline::Refiner final : public MeasurementRefiner {
     // none, or where its points and silhouette ends are no more than the fit's parameters.
     const bool body =
         o.mount == Mount::kTorso && !ob.legs && shape.model == ShapeModel::kSuperellipse;
-    const int edges = SilhouetteEdges(ob);
+    // The fit's silhouette ends and points where it left a run beyond the person's reach out
+    // (ShapeOptions::person_drop_beyond_reach), else the observation's.
+    const bool reach_dropped = body && body_fit_reduced_;
+    const int edges = reach_dropped ? body_fit_edges_ : SilhouetteEdges(ob);
     std::size_t points = 0;
     for (std::size_t k = 0; k < ob.part_count; ++k) points += ob.parts[k].point_count;
+    if (reach_dropped) points = body_fit_points_;
     const bool partial = body && o.partial_view_shared && edges < 2;
     const bool underdetermined = body && o.underdetermined_fit_shared &&
                                  points + static_cast<std::size_t>(edges) <= kBodyFitParameters;
@@ -626,9 +699,12 @@ class TrackingPipeline::Refiner final : public MeasurementRefiner {
     const double range_m = measurement.position_m.norm();
     if (o.centre_bias_along_ray && range_m > 0.0 && shape.model != ShapeModel::kBox) {
       const double step_rad = ob.part_count > 0 ? ob.parts[0].silhouette.step_rad : 0.0;
+      // ShapeOptions::partial_view_size_sigma_m.
+      const double bias_floor_m = internal::PartialViewSizeFloor(o, body, edges, floor_m);
+      if (bias_floor_m > floor_m) ++partial_size_floored;
       shape.centre_bias_cov_m2 =
-          CentreBiasAlongRay(shape, measurement.position_m / range_m, range_m, step_rad,
-                             SilhouetteEdges(ob), floor_m, bias_sigma_m, o);
+          CentreBiasAlongRay(shape, measurement.position_m / range_m, range_m, step_rad, edges,
+                             bias_floor_m, bias_sigma_m, o);
     } else {
       const double size_var =
           std::max({shape.size_cov_m2(0, 0), shape.size_cov_m2(1, 1), floor_m * floor_m});
@@ -667,6 +743,8 @@ class TrackingPipeline::Refiner final : public MeasurementRefiner {
   std::uint64_t box_occluded = 0;
   std::uint64_t box_unseen_sizes = 0;
   std::uint64_t person_across_ray = 0;
+  std::uint64_t person_beyond_reach = 0;
+  std::uint64_t partial_size_floored = 0;
 
   // How many of the observation's two outline ends are silhouettes (MakePart: not an occluder's
   // edge, not the field of view's end).
@@ -777,6 +855,7 @@ class TrackingPipeline::Refiner final : public MeasurementRefiner {
   bool RefineBody(const Observation& ob, const Eigen::Vector4d* predicted,
                   const Eigen::Matrix4d* predicted_cov, TrackShape& shape, Measurement& m) {
     const ShapeOptions& o = p_.options_.shape;
+    body_fit_reduced_ = false;
     if (shape.model == ShapeModel::kSuperellipse && shape.size_m.x() > o.box_min_half_length_m) {
       // A cart: from now on its outline is a rectangle, whose depth the person prior does not know.
       shape.model = ShapeModel::kBox;
@@ -831,6 +910,26 @@ class TrackingPipeline::Refiner final : public MeasurementRefiner {
         occluded = true;
       } else {
         silhouette = part.silhouette;
+      }
+    }
+    if (shape.model == ShapeModel::kSuperellipse && o.mount == Mount::kTorso &&
+        o.person_drop_beyond_reach && predicted != nullptr && predicted_cov != nullptr) {
+      // ShapeOptions::person_drop_beyond_reach.
+      const Eigen::Vector2d reach_size =
+          shape.size_m + 2.0 * Eigen::Vector2d(std::sqrt(std::max(0.0, shape.size_cov_m2(0, 0))),
+                                               std::sqrt(std::max(0.0, shape.size_cov_m2(1, 1))));
+      const std::size_t kept = internal::PersonReachablePoints(
+          o, predicted->head<2>(), predicted_cov->topLeftCorner<2, 2>(),
+          internal::SuperellipseReach(reach_size, shape.exponent), points,
+          part.silhouette.step_rad *
+              (p_.scan_ != nullptr && p_.scan_->angle_step_rad < 0 ? -1.0 : 1.0),
+          kept_points_, &silhouette);
+      if (kept < points.size()) {
+        points = std::span<const Eigen::Vector2d>(kept_points_.data(), kept);
+        ++person_beyond_reach;
+        body_fit_reduced_ = true;
+        body_fit_points_ = kept;
+        body_fit_edges_ = (silhouette.first_valid ? 1 : 0) + (silhouette.last_valid ? 1 : 0);
       }
     }
     ShapeFitResult fit = FitShape(points, silhouette, prior, o.fit);
@@ -1203,6 +1302,11 @@ class TrackingPipeline::Refiner final : public MeasurementRefiner {
   std::span<std::uint64_t> evaluations_;
   // ShapeOptions::box_drop_occluders: a box's points without those in front of it.
   std::array<Eigen::Vector2d, kMaxSegmentPoints> kept_points_{};
+  // The last RefineBody's fit without a run beyond the person's reach
+  // (ShapeOptions::person_drop_beyond_reach): its points and silhouette ends.
+  bool body_fit_reduced_ = false;
+  std::size_t body_fit_points_ = 0;
+  int body_fit_edges_ = 0;
 };
 
 TrackingPipeline::TrackingPipeline(const TrackerOptions& options)
@@ -2320,6 +2424,8 @@ const ScanTracks& TrackingPipeline::Process(const ScanView& scan, std::uint32_t 
   const std::uint64_t box_occluded_before = refiner_->box_occluded;
   const std::uint64_t box_unseen_before = refiner_->box_unseen_sizes;
   const std::uint64_t person_across_ray_before = refiner_->person_across_ray;
+  const std::uint64_t person_beyond_reach_before = refiner_->person_beyond_reach;
+  const std::uint64_t partial_size_floored_before = refiner_->partial_size_floored;
   scan_ = &scan;
   tracker_.Step(scan.stamp_ns, measurements_.span(), offsets_s_.span(),
                 shape_fit ? refiner_.get() : nullptr, tracks_);
@@ -2340,6 +2446,9 @@ const ScanTracks& TrackingPipeline::Process(const ScanView& scan, std::uint32_t 
   counters_.box_occluded_fits += refiner_->box_occluded - box_occluded_before;
   counters_.box_sizes_unseen += refiner_->box_unseen_sizes - box_unseen_before;
   counters_.person_sizes_across_ray += refiner_->person_across_ray - person_across_ray_before;
+  counters_.person_beyond_reach_fits += refiner_->person_beyond_reach - person_beyond_reach_before;
+  counters_.partial_view_size_floored +=
+      refiner_->partial_size_floored - partial_size_floored_before;
   if (bg.scan_error == ScanError::kNone && bg.learned) {
     AbsorbStatic(scan);
     if (shape_fit) DropCoasting(scan);

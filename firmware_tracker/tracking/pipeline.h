@@ -536,6 +536,33 @@ struct ShapeOptions {
   // 2-4: 2.0, 5.4, 3.6). Counted in PipelineCounters::underdetermined_fit_widened. false: such a
   // fit reported as any other.
   bool underdetermined_fit_shared = true;
+  // Upper-body mount, a person's track: a segment can hold another object's points beside the
+  // person (within the segmentation's jump of its outline: another person, a pillar), and its end
+  // is then that object's, not the person's silhouette; the fit takes both for one body and its
+  // two "silhouette ends" for the person's (tracking_benchmark --explain, persons with a nearer
+  // return beside them over scenes not in the repository: end point another object's, the end
+  // taken for a silhouette, radial mean -0.155 m, NEES 49; two such views in three of those with
+  // two ends and a nearer return beside them). A run of points at either end of the segment
+  // beyond the reach of the track's predicted body (farther from its predicted centre than the
+  // largest radius a superellipse of the track's size can have, by more than kOccluderSigmas of
+  // the range noise, the model error and the prediction's sigma in that direction), whose range
+  // steps from the person's neighbouring point by more than the noise, is left out of the fit;
+  // that end is an occluder's edge where the run lies nearer than the person's end point, and the
+  // person's silhouette (half a beam outside the end point's beam) where it lies behind it. At
+  // least two points stay. Counted in PipelineCounters::person_beyond_reach_fits. false: every
+  // point of the segment is the person's.
+  bool person_drop_beyond_reach = true;
+  // Upper-body mount, a partial view (fewer than two silhouette ends): the centre across the ray
+  // and along it rests on the body's extent towards the hidden side, which the scan does not
+  // show; the size state the track learned (from scans whose errors are alike, floored at
+  // size_floor_sigma_m, and a third of that where the outline is measured) says that extent to
+  // millimetres. In the covariance successive scans share (centre_bias_along_ray) each
+  // semi-axis's sigma is at least this for such a view (0.04 m: person_size_sigma_m, the
+  // population's spread). tracking_benchmark before this, upper body per sensor, a nearer return
+  // beside the body with one silhouette end: NEES 2.34 over the shipped scenes, 4.95 and 3.88
+  // over the scenes not in the repository. Counted in PipelineCounters::partial_view_size_floored.
+  // 0: the size's own sigma and floor, as for a whole view.
+  double partial_view_size_sigma_m = 0.04;
   double outline_fixed_share = 0.3;
   double outline_model_share = 1.0;
   // Flat objects (not person-like).
@@ -664,6 +691,12 @@ struct PipelineCounters {
   // Person (upper-body) refinements whose size was learned per semi-axis by its share across the
   // ray (person_size_across_ray).
   std::uint64_t person_sizes_across_ray = 0;
+  // Person (upper-body) refinements without a run of points beyond the reach of the predicted
+  // body at an end of the segment (person_drop_beyond_reach; counted per refinement).
+  std::uint64_t person_beyond_reach_fits = 0;
+  // Person (upper-body) refinements of a partial view whose shared covariance took the size's
+  // sigma at partial_view_size_sigma_m (above the track's own and its floor).
+  std::uint64_t partial_view_size_floored = 0;
   std::uint64_t deep_leg_pairs = 0;    // deep 2-3 point legs measured as a pair (deep_legs_as_pair)
   std::uint64_t veiled_segments = 0;   // legs: mixed pixels (beside a nearer edge, deep), dropped
   std::uint64_t deep_pieces_kept = 0;  // legs: deep pieces with no surface behind, kept
@@ -848,6 +881,30 @@ std::size_t BoxUnoccludedPoints(const ShapeOptions& o, const Eigen::Vector2d& ce
                                 std::span<const Eigen::Vector2d> points,
                                 std::span<Eigen::Vector2d> kept, Silhouette* silhouette,
                                 double extra_margin_m = 0.0);
+
+// ShapeOptions::person_drop_beyond_reach: copies into kept the points of the segment (in beam
+// order, beams step_rad apart, signed as the scan's) without a run at either end that lies beyond
+// reach_m of centre_m (the predicted centre, covariance centre_cov_m2) by more than
+// kOccluderSigmas of hypot(range noise, model error, the centre's sigma towards the point) and
+// whose range steps from its neighbouring point by more than kOccluderSigmas of the noise; returns
+// their count (points.size() and every point where fewer than two would stay). An end whose run
+// was dropped is an occluder's edge in *silhouette where the run's nearest point lies nearer than
+// the kept end point, else a silhouette half a step outside the kept end point's beam.
+// Precondition: kept.size() >= points.size(); kept is not points' storage.
+std::size_t PersonReachablePoints(const ShapeOptions& o, const Eigen::Vector2d& centre_m,
+                                  const Eigen::Matrix2d& centre_cov_m2, double reach_m,
+                                  std::span<const Eigen::Vector2d> points, double step_rad,
+                                  std::span<Eigen::Vector2d> kept, Silhouette* silhouette);
+
+// ShapeOptions::partial_view_size_sigma_m: the size's sigma floor in the centre's shared
+// covariance of a fit (floor_m that of a whole view): at least partial_view_size_sigma_m for an
+// upper-body person's fit (body) with fewer than two silhouette ends, else floor_m.
+double PartialViewSizeFloor(const ShapeOptions& o, bool body, int edges, double floor_m);
+
+// The largest distance from its centre of a superellipse |u / a|^p + |v / b|^p = 1 with semi-axes
+// at most size_m's larger one and exponent p >= 2: max(a, b) 2^(1/2 - 1/p) (its diagonal where
+// a = b; an upper bound otherwise).
+double SuperellipseReach(const Eigen::Vector2d& size_m, double exponent);
 
 // ShapeOptions::box_size_from_faces_seen: whether a box (centre_m, half-lengths size_m along
 // yaw_rad and across it) seen from the sensor at the origin with beams step_rad apart shows its

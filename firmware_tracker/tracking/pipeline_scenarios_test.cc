@@ -1943,6 +1943,83 @@ TEST(PipelineTest, BoxUnoccludedPointsLeavesOutWhatStandsInFrontOfTheBox) {
             1u);
 }
 
+// ShapeOptions::person_drop_beyond_reach: a person predicted at (5, 0) (a round body of radius
+// 0.2 m: reach 0.2 m; prediction sigma 0.02 m) shows the near half of its outline, and the segment
+// goes on with another object's points beside it. In front (x = 4.7, 0.2 m nearer than the
+// person's end point): left out, that end an occluder's edge. Behind (x = 5.3): left out, that end
+// the person's silhouette half a step outside its last point's beam. Continuous with the outline
+// (no range step), or where fewer than two points would stay: every point kept.
+TEST(PipelineTest, PersonReachablePointsLeavesOutAnotherObjectBesideThePerson) {
+  ShapeOptions o;
+  const Eigen::Vector2d centre(5.0, 0.0);
+  const Eigen::Matrix2d cov = 0.02 * 0.02 * Eigen::Matrix2d::Identity();
+  const double step = 0.5 * common::kPi / 180.0;
+  EXPECT_DOUBLE_EQ(internal::SuperellipseReach(Eigen::Vector2d(0.2, 0.2), 2.0), 0.2);
+  EXPECT_NEAR(internal::SuperellipseReach(Eigen::Vector2d(0.23, 0.14), 2.5),
+              0.23 * std::pow(2.0, 0.1), 1e-12);
+  std::vector<Eigen::Vector2d> person;
+  for (int i = -6; i <= 6; ++i) {
+    const double phi = 10.0 * i * common::kPi / 180.0;
+    person.push_back(centre + 0.2 * Eigen::Vector2d(-std::cos(phi), std::sin(phi)));
+  }
+  const double reach = internal::SuperellipseReach(Eigen::Vector2d(0.2, 0.2), 2.0);
+  std::vector<Eigen::Vector2d> kept(32);
+  const auto with = [&](double x) {
+    std::vector<Eigen::Vector2d> points = person;
+    for (int i = 0; i < 4; ++i) points.emplace_back(x, 0.25 + 0.05 * i);
+    return points;
+  };
+  Silhouette s;
+  s.first_valid = s.last_valid = true;
+  std::vector<Eigen::Vector2d> points = with(4.7);
+  EXPECT_EQ(internal::PersonReachablePoints(o, centre, cov, reach, points, step, kept, &s),
+            person.size());
+  for (std::size_t i = 0; i < person.size(); ++i) EXPECT_EQ(kept[i], person[i]);
+  EXPECT_TRUE(s.first_valid);
+  EXPECT_FALSE(s.last_valid);
+  EXPECT_FALSE(s.last_edge_unit_known);
+  EXPECT_DOUBLE_EQ(s.last_edge_rad, std::atan2(person.back().y(), person.back().x()) + 0.5 * step);
+  s = Silhouette{};
+  s.first_valid = true;
+  points = with(5.3);
+  EXPECT_EQ(internal::PersonReachablePoints(o, centre, cov, reach, points, step, kept, &s),
+            person.size());
+  EXPECT_TRUE(s.first_valid && s.last_valid);
+  EXPECT_DOUBLE_EQ(s.last_edge_rad, std::atan2(person.back().y(), person.back().x()) + 0.5 * step);
+  // Beyond reach but at the end point's range, beam after beam: the same surface, kept.
+  points = person;
+  const double r_end = person.back().norm(),
+               a_end = std::atan2(person.back().y(), person.back().x());
+  for (int i = 1; i <= 4; ++i) {
+    points.push_back(r_end *
+                     Eigen::Vector2d(std::cos(a_end + 0.02 * i), std::sin(a_end + 0.02 * i)));
+  }
+  s = Silhouette{};
+  EXPECT_EQ(internal::PersonReachablePoints(o, centre, cov, reach, points, step, kept, &s),
+            points.size());
+  EXPECT_FALSE(s.first_valid || s.last_valid);
+  // One point of the person and the other object's: nothing left out.
+  points = {person[6], {4.7, 0.25}, {4.7, 0.3}};
+  EXPECT_EQ(internal::PersonReachablePoints(o, centre, cov, reach, points, step, kept, &s), 3u);
+}
+
+// ShapeOptions::partial_view_size_sigma_m: an upper-body person's fit with one silhouette end or
+// none takes the size's sigma in its shared covariance at 0.04 m (a whole view's floor, 0.006 m,
+// otherwise); two ends, a leg or the option at 0: the whole view's floor.
+TEST(PipelineTest, PartialViewSizeFloorSaysTheHiddenExtentIsUnknown) {
+  ShapeOptions o;
+  EXPECT_DOUBLE_EQ(o.partial_view_size_sigma_m, 0.04);
+  EXPECT_DOUBLE_EQ(internal::PartialViewSizeFloor(o, true, 1, 0.006), 0.04);
+  EXPECT_DOUBLE_EQ(internal::PartialViewSizeFloor(o, true, 0, 0.006), 0.04);
+  EXPECT_DOUBLE_EQ(internal::PartialViewSizeFloor(o, true, 2, 0.006), 0.006);
+  EXPECT_DOUBLE_EQ(internal::PartialViewSizeFloor(o, false, 1, 0.006), 0.006);
+  EXPECT_DOUBLE_EQ(internal::PartialViewSizeFloor(o, true, 1, 0.06), 0.06);
+  o.partial_view_size_sigma_m = 0.0;
+  EXPECT_DOUBLE_EQ(internal::PartialViewSizeFloor(o, true, 1, 0.006), 0.006);
+  o.partial_view_size_sigma_m = -0.01;
+  EXPECT_TRUE(Validate(o).has_value());
+}
+
 // ShapeOptions::box_size_from_faces_seen: a 0.9 x 0.6 m box at 5 m (0.5 deg beams) seen end-on
 // shows its half-width only, broadside its half-length only, at 45 deg both; a side seen at a
 // grazing angle, across fewer than three beams, shows nothing.

@@ -47,6 +47,7 @@
 //                       [--before-single-precision-fit]
 //                       [--before-stance-weight] [--before-adopt] [--before-touching-legs]
 //                       [--before-box-occluders] [--before-box-rejoin] [--before-person-size]
+//                       [--before-person-reach] [--before-partial-extent]
 //                       [--before-fusion-merge] [--before-report-sourceless]]
 //   (--extra: more scenario folders, e.g. held-out scenes, reported in their own section;
 //   --explain: per run on stderr, what became of an object's previous track at every id switch
@@ -123,6 +124,11 @@
 //   --before-person-size: "before" runs with ShapeOptions::person_size_across_ray the other way
 //   round from the default (off by default since it moves round objects' centres towards the
 //   sensor: "before" learns each semi-axis only from views that show it across the ray);
+//   --before-person-reach: "before" fits an upper-body person to every point of its segment, also
+//   to a run at its end beyond the reach of the predicted body (another object's),
+//   ShapeOptions::person_drop_beyond_reach = false;
+//   --before-partial-extent: "before" reports an upper-body partial view's shared covariance
+//   with the size's own sigma, ShapeOptions::partial_view_size_sigma_m = 0;
 //   --before-outline-departure: "before" reports an upper-body centre with the fixed allowances
 //   for the outline alone, not the departure its fit's residuals measure,
 //   ShapeOptions::outline_departure_gain = 0; --before-partial-view: "before" reports an
@@ -656,9 +662,15 @@ struct Causes {
   // line of sight (LineOfSightErrors): count, summed |radial error|, summed radial NEES (the
   // radial error squared over the measurement's variance along the ray), summed 2-dof NEES.
   std::map<std::string, std::array<double, 4>> los;
+  // Upper-body height, per sensor: measured matches of a person by what lies beyond their
+  // observation's ends (TorsoEndErrors): count, summed and squared radial error, summed NEES.
+  std::map<std::string, std::array<double, 4>> torso_ends;
   void Add(const Causes& o) {
     for (const auto& [k, v] : o.los) {
       for (std::size_t i = 0; i < v.size(); ++i) los[k][i] += v[i];
+    }
+    for (const auto& [k, v] : o.torso_ends) {
+      for (std::size_t i = 0; i < v.size(); ++i) torso_ends[k][i] += v[i];
     }
     for (const auto& [k, v] : o.coast_start) {
       for (std::size_t i = 0; i < v.size(); ++i) coast_start[k][i] += v[i];
@@ -1183,6 +1195,12 @@ bool g_before_edge_echo_birth = false;
 // --before-person-size: "before" runs with ShapeOptions::person_size_across_ray the other way
 // round from the default (default off: "before" learns each semi-axis across the ray only).
 bool g_before_person_size = false;
+// --before-person-reach: "before" fits an upper-body person to every point of its segment
+// (ShapeOptions::person_drop_beyond_reach = false).
+bool g_before_person_reach = false;
+// --before-partial-extent: "before" reports an upper-body partial view's shared covariance with
+// the size's own sigma (ShapeOptions::partial_view_size_sigma_m = 0).
+bool g_before_partial_extent = false;
 // --before-deep-pieces: "before" measures knee-height pieces deep along the line of sight but no
 // wider across it than a pair of legs as wide objects, also where a leg fills no beam
 // (ShapeOptions::drop_deep_mixed_pixel_pieces = false).
@@ -1309,12 +1327,12 @@ std::vector<Variant> Variants(sim::Mount mount, double range_m) {
              g_before_side_uncertainty || g_before_side_from_view || g_before_few_point_legs ||
              g_before_deep_legs || g_before_legs_seen_through || g_before_legs_report_coasting ||
              g_before_leg_edges || g_before_outline_departure || g_before_partial_view ||
-             g_before_underdetermined_fit ||
-             g_before_fusion_merge ||
-             g_before_report_sourceless || g_before_recent_veil || g_before_single_precision_fit ||
-             g_before_stance_weight || g_before_adopt || g_before_touching_legs ||
-             g_before_box_occluders || g_before_box_rejoin || g_before_lone_leg_standing ||
-             g_before_single_beam_partner || g_before_edge_echo_birth || g_before_person_size) {
+             g_before_underdetermined_fit || g_before_fusion_merge || g_before_report_sourceless ||
+             g_before_recent_veil || g_before_single_precision_fit || g_before_stance_weight ||
+             g_before_adopt || g_before_touching_legs || g_before_box_occluders ||
+             g_before_box_rejoin || g_before_lone_leg_standing || g_before_single_beam_partner ||
+             g_before_edge_echo_birth || g_before_person_size || g_before_person_reach ||
+             g_before_partial_extent) {
     tracking::TrackerOptions before = fresh;
     if (g_before_one_leg) before.shape.hidden_leg_behind = false;
     if (g_before_mixed_pixels) before.shape.drop_mixed_pixel_legs = false;
@@ -1351,6 +1369,8 @@ std::vector<Variant> Variants(sim::Mount mount, double range_m) {
     if (g_before_person_size) {
       before.shape.person_size_across_ray = !fresh.shape.person_size_across_ray;
     }
+    if (g_before_person_reach) before.shape.person_drop_beyond_reach = false;
+    if (g_before_partial_extent) before.shape.partial_view_size_sigma_m = 0.0;
     variants.push_back({"before", before});
   }
   return variants;
@@ -1665,6 +1685,152 @@ void LineOfSightErrors(const tracking::TrackingPipeline& pipeline, const trackin
   }
 }
 
+// --explain, upper-body height: every measured match of a person, binned by what lies beyond each
+// end of its observation's outline and whether the tracker took that end for a silhouette
+// (Causes::torso_ends): "real" where the ray of the beam beyond the end misses the person's body
+// (at that beam's time), else hidden, by that beam's return against the end point's range r_e and
+// the body's range on that beam (no return; nearer than r_e by less or more than 0.1 m; between
+// r_e and the body; at the body) and whether another object's body returned it; "end point off the
+// body" where the end point lies more than 0.05 m off the body along its beam. Count, summed radial
+// error of the measurement (signed: + away from the sensor), summed squares, summed NEES of the
+// reported track.
+void TorsoEndErrors(const tracking::TrackingPipeline& pipeline, const tracking::ScanView& scan,
+                    const sim::Simulator& simulator, std::size_t sensor, double start_s,
+                    const std::vector<Hypothesis>& hyps, const std::vector<Truth>& truths,
+                    const std::vector<long>& matched,
+                    std::map<std::string, std::array<double, 4>>* ends) {
+  const auto obs = pipeline.observations();
+  const auto ms = pipeline.measurements();
+  const sim::SensorSetup& setup = simulator.sensor(sensor);
+  const double yaw = common::DegToRad(setup.yaw_deg);
+  const sim::Vec2 origin{setup.x_m, setup.y_m};
+  const std::size_t beams = scan.range_m.size();
+  for (std::size_t hi = 0; hi < hyps.size() && hi < matched.size(); ++hi) {
+    const Hypothesis& h = hyps[hi];
+    if (!h.measured || matched[hi] < 0) continue;
+    const Truth* t = nullptr;
+    for (const Truth& c : truths) t = static_cast<long>(c.id) == matched[hi] ? &c : t;
+    if (t == nullptr || (t->a_m <= 0.0 && !t->trolley) || h.edges < 0) continue;
+    // Its observation (as EdgesOf finds it).
+    double best = std::numeric_limits<double>::infinity();
+    std::size_t found = obs.size();
+    for (std::size_t i = 0; i < obs.size() && i < ms.size(); ++i) {
+      std::size_t points = 0;
+      for (std::size_t k = 0; k < obs[i].part_count; ++k) points += obs[i].parts[k].point_count;
+      const double d = (ms[i].position_m - h.z).norm();
+      if (points == h.points && d < best) {
+        best = d;
+        found = i;
+      }
+    }
+    if (found == obs.size() || obs[found].part_count == 0) continue;
+    const tracking::Observation& ob = obs[found];
+    const double range = t->p.norm();
+    if (!(range > 0.0)) continue;
+    const auto body_range = [&](std::size_t target, std::size_t beam) {
+      const double a = yaw + scan.BeamAngleRad(beam);
+      const double t_beam = start_s + static_cast<double>(beam) * setup.device.beam_time_s;
+      const sim::Target& tg = simulator.targets()[target];
+      const sim::TargetState st = tg.StateAt(t_beam);
+      if (!st.present) return sim::kNoHit;
+      return tg.Intersect({origin, {std::cos(a), std::sin(a)}}, st, setup.mount);
+    };
+    // Where the end point is another object's: from that end inwards, the first point on the
+    // person's body; the range step there and how far the foreign end point lies from the track.
+    const auto foreign = [&](bool last_end) {
+      const tracking::ObservationPart& part = ob.parts[last_end ? ob.part_count - 1 : 0];
+      const auto pts =
+          pipeline.segments().points_m.span().subspan(part.first_point, part.point_count);
+      const std::size_t n = pts.size();
+      const Vector2d end_point = last_end ? pts[n - 1] : pts[0];
+      for (std::size_t k = 0; k < n; ++k) {
+        const std::size_t i = last_end ? n - 1 - k : k;
+        const double a = std::atan2(pts[i].y(), pts[i].x());
+        const long beam = std::lround((a - scan.first_angle_rad) / scan.angle_step_rad);
+        if (beam < 0 || static_cast<std::size_t>(beam) >= beams) continue;
+        const double d = body_range(t->id, static_cast<std::size_t>(beam));
+        if (!(std::abs(d - pts[i].norm()) < 0.05)) continue;
+        if (k == 0) return std::string(" [no foreign run]");
+        const std::size_t j = last_end ? i + 1 : i - 1;
+        const double step = pts[j].norm() - pts[i].norm();
+        const double from_track = (end_point - h.p).norm();
+        return std::string(" [run ") + (k > 3 ? std::string("4+") : std::to_string(k)) +
+               " pts, step " +
+               (step > 0.08    ? "behind"
+                : step < -0.08 ? "in front"
+                               : "none") +
+               ", end point " +
+               (from_track > 0.4   ? "> 0.4"
+                : from_track > 0.3 ? "0.3-0.4"
+                                   : "< 0.3") +
+               " m from track]";
+      }
+      return std::string(" [no point on the body]");
+    };
+    const auto classify = [&](bool judged, std::size_t edge_beam, long beyond_signed,
+                              const Vector2d& edge_point) {
+      std::string c = judged ? "taken " : "left out ";
+      if (beyond_signed < 0 || static_cast<std::size_t>(beyond_signed) >= beams) {
+        return c + "field of view";
+      }
+      const std::size_t beyond = static_cast<std::size_t>(beyond_signed);
+      const double r_e = edge_point.norm();
+      const double d_edge = body_range(t->id, edge_beam);
+      bool edge_other = false;
+      for (std::size_t j = 0; j < simulator.targets().size(); ++j) {
+        if (j != t->id && std::abs(body_range(j, edge_beam) - r_e) < 0.1) edge_other = true;
+      }
+      const std::string mixed =
+          !std::isfinite(d_edge)
+              ? (edge_other ? ", end point another object's" +
+                                  foreign(static_cast<long>(edge_beam) < beyond_signed)
+                            : ", end point off the body (beside it)")
+          : r_e < d_edge - 0.05 ? ", end point off the body (nearer)"
+          : r_e > d_edge + 0.05 ? ", end point off the body (farther)"
+                                : "";
+      const double d_body = body_range(t->id, beyond);
+      if (!std::isfinite(d_body)) return c + "real" + mixed;
+      const double r = static_cast<double>(scan.range_m[beyond]);
+      c += "hidden: ";
+      if (!(std::isfinite(r) && r > 0.0)) return c + "no return" + mixed;
+      bool other = false;
+      for (std::size_t j = 0; j < simulator.targets().size(); ++j) {
+        if (j != t->id && std::abs(body_range(j, beyond) - r) < 0.1) other = true;
+      }
+      const std::string who = other ? " (another object)" : " (background)";
+      if (std::abs(r - d_body) < 0.05) return c + "at the body" + mixed;
+      if (r > d_body) return c + "behind the body" + mixed;
+      if (r < r_e - 0.1) return c + "nearer than the end by >= 0.1 m" + who + mixed;
+      if (r <= r_e) return c + "nearer than the end by < 0.1 m" + who + mixed;
+      return c + "between the end and the body" + who + mixed;
+    };
+    const tracking::ObservationPart& first = ob.parts[0];
+    const tracking::ObservationPart& last = ob.parts[ob.part_count - 1];
+    const auto pts = pipeline.segments().points_m.span();
+    const std::string a = classify(first.silhouette.first_valid, first.begin_beam,
+                                   static_cast<long>(first.begin_beam) - 1, pts[first.first_point]);
+    const std::string b =
+        classify(last.silhouette.last_valid, last.end_beam - 1, static_cast<long>(last.end_beam),
+                 pts[last.first_point + last.point_count - 1]);
+    const Vector2d u = t->p / range;
+    const double er = (h.z - (t->p + h.z_offset_s * t->v)).dot(u);
+    double nees = 0.0;
+    const Eigen::LDLT<Matrix2d> ldlt(h.cov);
+    if (ldlt.info() == Eigen::Success) nees = (h.p - t->p).dot(ldlt.solve(h.p - t->p));
+    const std::string occl = std::string(t->trolley ? "trolley, " : "person, ") +
+                             (t->occluded ? "nearer return beside | " : "unoccluded | ");
+    for (const std::string& key :
+         {std::string("all ") + occl + std::to_string(h.edges) + " ends",
+          std::string("end ") + occl + a, std::string("end ") + occl + b}) {
+      auto& s = (*ends)[key];
+      s[0] += 1;
+      s[1] += er;
+      s[2] += er * er;
+      s[3] += nees;
+    }
+  }
+}
+
 struct SensorFrames {
   std::string id;
   std::vector<daemon::TrackFrameData> frames;  // per scan
@@ -1969,6 +2135,10 @@ void RunSensor(const sim::Simulator& simulator, std::size_t sensor,
         LineOfSightErrors(*pipelines[v], view, out, hyps, truths, sequences[v].matched_truth(),
                           &(*causes)[v].los);
       }
+      if (g_explain_coasting && pipelines[v]->options().shape.mount == tracking::Mount::kTorso) {
+        TorsoEndErrors(*pipelines[v], view, simulator, sensor, timing.start_s, hyps, truths,
+                       sequences[v].matched_truth(), &(*causes)[v].torso_ends);
+      }
       if (g_explain_coasting) {
         for (std::size_t hi = 0; hi < hyps.size(); ++hi) {
           if (birth[v].count(hyps[hi].id)) continue;
@@ -2185,7 +2355,9 @@ void RunSensor(const sim::Simulator& simulator, std::size_t sensor,
     const auto untracked = std::move((*causes)[v].untracked);
     const auto coast_start = std::move((*causes)[v].coast_start);
     const auto los = std::move((*causes)[v].los);
+    const auto torso_ends = std::move((*causes)[v].torso_ends);
     (*causes)[v] = sequences[v].causes();
+    (*causes)[v].torso_ends = torso_ends;
     (*causes)[v].coast_start = coast_start;
     (*causes)[v].los = los;
     (*causes)[v].coasting = coasting;
@@ -2338,6 +2510,10 @@ void Explain(const std::string& scenario, const std::string& mount, const RunRes
     for (const auto& [why, a] : r.causes[v].los)
       std::fprintf(stderr, "  los: %-90s | %6.0f %9.3f %9.3f %9.3f\n", why.c_str(), a[0], a[1],
                    a[2], a[3]);
+    for (const auto& [why, a] : r.causes[v].torso_ends) {
+      std::fprintf(stderr, "  torso ends: %-110s | %6.0f %8.3f %8.3f %7.2f\n", why.c_str(), a[0],
+                   a[1] / a[0], std::sqrt(a[2] / a[0]), a[3] / a[0]);
+    }
     for (const auto& [why, a] : r.causes[v].coast_start)
       std::fprintf(stderr, "  coast start: %-70s | %6.0f %9.3f %9.3f %6.0f\n", why.c_str(), a[0],
                    a[1], a[2], a[3]);
@@ -2833,13 +3009,13 @@ std::string KneeHeightBefore() {
         g_before_single_beam || g_before_deep_pieces || g_before_deep_evidence ||
         g_before_isotropic_bias || g_before_across_walk || g_before_side_uncertainty ||
         g_before_side_from_view || g_before_lone_leg_standing || g_before_few_point_legs ||
-        g_before_deep_legs || g_before_legs_seen_through || g_before_legs_report_coasting || g_before_leg_edges ||
-        g_before_outline_departure || g_before_partial_view || g_before_underdetermined_fit ||
-        g_before_fusion_merge ||
-        g_before_report_sourceless ||
+        g_before_deep_legs || g_before_legs_seen_through || g_before_legs_report_coasting ||
+        g_before_leg_edges || g_before_outline_departure || g_before_partial_view ||
+        g_before_underdetermined_fit || g_before_fusion_merge || g_before_report_sourceless ||
         g_before_recent_veil || g_before_single_precision_fit || g_before_stance_weight ||
         g_before_adopt || g_before_touching_legs || g_before_box_occluders || g_before_box_rejoin ||
-        g_before_single_beam_partner || g_before_edge_echo_birth || g_before_person_size) ||
+        g_before_single_beam_partner || g_before_edge_echo_birth || g_before_person_size ||
+        g_before_person_reach || g_before_partial_extent) ||
       g_before_mixed_pixels || g_before_far || g_before_evidence_coasting ||
       g_before_report_rules) {
     return "";
@@ -2979,6 +3155,16 @@ std::string KneeHeightBefore() {
         "pairing no knee-height leg of a segment with a lone beam within the pairing distance "
         "(`shape.single_beam_partner` false)");
   }
+  if (g_before_partial_extent) {
+    without.push_back(
+        "reporting an upper-body partial view's shared covariance with the size's own sigma "
+        "(`shape.partial_view_size_sigma_m` 0)");
+  }
+  if (g_before_person_reach) {
+    without.push_back(
+        "fitting an upper-body person to every point of its segment, also to a run at its end "
+        "beyond the reach of the predicted body (`shape.person_drop_beyond_reach` false)");
+  }
   if (g_before_person_size) {
     without.push_back(
         "`shape.person_size_across_ray` the other way round from the default (on: each "
@@ -3017,7 +3203,7 @@ std::string KneeHeightBefore() {
   const char* const same =
       g_before_single_precision_fit ? ", on the same scans in the same run"
       : g_before_outline_departure || g_before_isotropic_bias || g_before_partial_view ||
-              g_before_underdetermined_fit
+              g_before_underdetermined_fit || g_before_partial_extent
           ? ", on the same scans in the same run; upper-body tracks are the same by construction, "
             "their reported covariance (so NEES and what fusion makes of them) is not"
           : ", on the same scans in the same run; upper-body rows are the same by construction";
@@ -3082,6 +3268,10 @@ int main(int argc, char** argv) {
       g_before_edge_echo_birth = true;
     } else if (a == "--before-person-size") {
       g_before_person_size = true;
+    } else if (a == "--before-person-reach") {
+      g_before_person_reach = true;
+    } else if (a == "--before-partial-extent") {
+      g_before_partial_extent = true;
     } else if (a == "--before-deep-pieces") {
       g_before_deep_pieces = true;
     } else if (a == "--before-deep-evidence") {
@@ -3141,7 +3331,8 @@ int main(int argc, char** argv) {
                    "[--before-whole-person] [--before-box-size] [--before-single-beam] "
                    "[--before-deep-pieces] [--before-deep-evidence] [--before-isotropic-bias] "
                    "[--before-across-walk] [--before-side-uncertainty] "
-                   "[--before-side-from-view] [--before-lone-leg-standing] [--before-few-point-legs] [--before-deep-legs] "
+                   "[--before-side-from-view] [--before-lone-leg-standing] "
+                   "[--before-few-point-legs] [--before-deep-legs] "
                    "[--before-legs-seen-through] [--before-legs-report-coasting] "
                    "[--before-leg-edges] [--before-outline-departure] [--before-partial-view] "
                    "[--before-underdetermined-fit] "
@@ -3149,6 +3340,7 @@ int main(int argc, char** argv) {
                    "[--before-single-precision-fit] "
                    "[--before-stance-weight] [--before-adopt] [--before-touching-legs] "
                    "[--before-box-occluders] [--before-box-rejoin] [--before-person-size] "
+                   "[--before-person-reach] [--before-partial-extent] "
                    "[--before-fusion-merge] "
                    "[--before-report-sourceless]]\n");
       return 2;
