@@ -1753,25 +1753,42 @@ TEST(PipelineScenarioTest, MountCheckFindsLegsUnderAnUpperBodyMountAndNothingEls
                               " leg-sized, median " + std::to_string(right.median_half_width_m));
 }
 
-TEST(PipelineScenarioTest, ForkliftAtFourMetresPerSecondNeedsTheLimitsRaised) {
-  // A 1.2 x 0.8 m forklift crossing the room at 4 m/s.
-  Scene scene;
-  const double start_s = kLearnedS, speed = 4.0;
-  const Eigen::Vector2d from(4.5, -4.0), to(4.5, 4.5);
-  const double end_s = start_s + (to - from).norm() / speed;
-  const auto centre_at = [=](double t_s) -> std::optional<Eigen::Vector2d> {
+// A box (a forklift, a trolley) of half-lengths half_x_m, half_y_m along the axes, whose centre
+// moves from `from` to `to` at speed_mps once the background is learned, added to the scene's
+// moving walls.
+struct MovingBox {
+  double start_s = 0.0, end_s = 0.0;
+  std::function<std::optional<Eigen::Vector2d>(double)> centre_at;  // nullopt outside its run
+};
+
+MovingBox AddMovingBox(Scene& scene, const Eigen::Vector2d& from, const Eigen::Vector2d& to,
+                       double speed_mps, double half_x_m, double half_y_m) {
+  MovingBox box;
+  box.start_s = kLearnedS;
+  box.end_s = box.start_s + (to - from).norm() / speed_mps;
+  box.centre_at = [=, start_s = box.start_s,
+                   end_s = box.end_s](double t_s) -> std::optional<Eigen::Vector2d> {
     if (t_s < start_s || t_s > end_s) return std::nullopt;
     return from + (t_s - start_s) / (end_s - start_s) * (to - from);
   };
-  scene.moving_walls = [=](double t_s) {
+  scene.moving_walls = [centre_at = box.centre_at, half_x_m, half_y_m](double t_s) {
     const auto c = centre_at(t_s);
     if (!c) return std::vector<Wall>{};
-    const Eigen::Vector2d u(0.0, 0.6), v(0.4, 0.0);  // length along y
+    const Eigen::Vector2d u(0.0, half_y_m), v(half_x_m, 0.0);
     return std::vector<Wall>{{*c + u + v, *c - u + v},
                              {*c - u + v, *c - u - v},
                              {*c - u - v, *c + u - v},
                              {*c + u - v, *c + u + v}};
   };
+  return box;
+}
+
+TEST(PipelineScenarioTest, ForkliftAtFourMetresPerSecondNeedsTheLimitsRaised) {
+  // A 1.2 x 0.8 m forklift crossing the room at 4 m/s.
+  Scene scene;
+  const MovingBox box = AddMovingBox(scene, {4.5, -4.0}, {4.5, 4.5}, 4.0, 0.4, 0.6);
+  const auto& centre_at = box.centre_at;
+  const double start_s = box.start_s, end_s = box.end_s;
   const auto follow = [&](const TrackerOptions& options, std::set<std::uint32_t>* ids) {
     const SceneRun run = Simulate(scene, end_s + 0.5, options);
     double error_sum = 0.0;
@@ -1823,22 +1840,9 @@ struct TrolleyPieces {
 
 TrolleyPieces PassTrolley(bool rejoin) {
   Scene scene;
-  const double start_s = kLearnedS, speed = 0.8;
-  const Eigen::Vector2d from(5.3, -4.2), to(5.3, 0.0);
-  const double end_s = start_s + (to - from).norm() / speed;
-  const auto centre_at = [=](double t_s) -> std::optional<Eigen::Vector2d> {
-    if (t_s < start_s || t_s > end_s) return std::nullopt;
-    return from + (t_s - start_s) / (end_s - start_s) * (to - from);
-  };
-  scene.moving_walls = [=](double t_s) {
-    const auto c = centre_at(t_s);
-    if (!c) return std::vector<Wall>{};
-    const Eigen::Vector2d u(0.0, 0.6), v(0.35, 0.0);  // length along y
-    return std::vector<Wall>{{*c + u + v, *c - u + v},
-                             {*c - u + v, *c - u - v},
-                             {*c - u - v, *c + u - v},
-                             {*c + u - v, *c + u + v}};
-  };
+  const MovingBox box = AddMovingBox(scene, {5.3, -4.2}, {5.3, 0.0}, 0.8, 0.35, 0.6);
+  const auto& centre_at = box.centre_at;
+  const double start_s = box.start_s, end_s = box.end_s;
   TrackerOptions options = Synthetic();
   options.shape.box_rejoin_pieces = rejoin;
   const SceneRun run = Simulate(scene, end_s + 0.2, options);

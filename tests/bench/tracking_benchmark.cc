@@ -1464,6 +1464,25 @@ int EdgesOf(const tracking::TrackingPipeline& pipeline, const tracking::TrackRep
          (ob.parts[ob.part_count - 1].silhouette.last_valid ? 1 : 0);
 }
 
+// The scan's observation a measured track was updated with: of those with `points` points, the one
+// whose measurement lies nearest z; obs.size() when none has that many.
+std::size_t ObservationOf(std::span<const tracking::Observation> obs,
+                          std::span<const tracking::Measurement> ms, const Eigen::Vector2d& z,
+                          std::size_t points) {
+  double best = std::numeric_limits<double>::infinity();
+  std::size_t found = obs.size();
+  for (std::size_t i = 0; i < obs.size() && i < ms.size(); ++i) {
+    std::size_t n = 0;
+    for (std::size_t k = 0; k < obs[i].part_count; ++k) n += obs[i].parts[k].point_count;
+    const double d = (ms[i].position_m - z).norm();
+    if (n == points && d < best) {
+      best = d;
+      found = i;
+    }
+  }
+  return found;
+}
+
 // --explain, knee height: every measured match of a person, its measurement's error along the
 // line of sight binned by what made it (Causes::los): all of them ("all ...") and those off by at
 // least 0.1 m ("off ..."), by the observation's class, point count, range, sign (nearer / farther
@@ -1486,17 +1505,7 @@ void LineOfSightErrors(const tracking::TrackingPipeline& pipeline, const trackin
     for (const tracking::TrackReport& r : out.tracks) rep = r.track_id == h.id ? &r : rep;
     if (rep == nullptr) continue;
     // Its observation (as PartsOf finds it).
-    double best = std::numeric_limits<double>::infinity();
-    std::size_t found = obs.size();
-    for (std::size_t i = 0; i < obs.size() && i < ms.size(); ++i) {
-      std::size_t points = 0;
-      for (std::size_t k = 0; k < obs[i].part_count; ++k) points += obs[i].parts[k].point_count;
-      const double d = (ms[i].position_m - h.z).norm();
-      if (points == rep->points && d < best) {
-        best = d;
-        found = i;
-      }
-    }
+    const std::size_t found = ObservationOf(obs, ms, h.z, rep->points);
     if (found == obs.size()) continue;
     const tracking::Observation& ob = obs[found];
     const double range = t->p.norm();
@@ -1712,17 +1721,7 @@ void TorsoEndErrors(const tracking::TrackingPipeline& pipeline, const tracking::
     for (const Truth& c : truths) t = static_cast<long>(c.id) == matched[hi] ? &c : t;
     if (t == nullptr || (t->a_m <= 0.0 && !t->trolley) || h.edges < 0) continue;
     // Its observation (as EdgesOf finds it).
-    double best = std::numeric_limits<double>::infinity();
-    std::size_t found = obs.size();
-    for (std::size_t i = 0; i < obs.size() && i < ms.size(); ++i) {
-      std::size_t points = 0;
-      for (std::size_t k = 0; k < obs[i].part_count; ++k) points += obs[i].parts[k].point_count;
-      const double d = (ms[i].position_m - h.z).norm();
-      if (points == h.points && d < best) {
-        best = d;
-        found = i;
-      }
-    }
+    const std::size_t found = ObservationOf(obs, ms, h.z, h.points);
     if (found == obs.size() || obs[found].part_count == 0) continue;
     const tracking::Observation& ob = obs[found];
     const double range = t->p.norm();
