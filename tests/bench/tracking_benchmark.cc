@@ -1403,6 +1403,25 @@ daemon::TrackObservation ToObservation(const tracking::TrackReport& r) {
   return o;
 }
 
+// The scan's observation a measured track was updated with: of those with `points` points, the one
+// whose measurement lies nearest z; obs.size() when none has that many.
+std::size_t ObservationOf(std::span<const tracking::Observation> obs,
+                          std::span<const tracking::Measurement> ms, const Eigen::Vector2d& z,
+                          std::size_t points) {
+  double best = std::numeric_limits<double>::infinity();
+  std::size_t found = obs.size();
+  for (std::size_t i = 0; i < obs.size() && i < ms.size(); ++i) {
+    std::size_t n = 0;
+    for (std::size_t k = 0; k < obs[i].part_count; ++k) n += obs[i].parts[k].point_count;
+    const double d = (ms[i].position_m - z).norm();
+    if (n == points && d < best) {
+      best = d;
+      found = i;
+    }
+  }
+  return found;
+}
+
 // --breakdown: what the measurement of a track measured in this scan was made of (a kPartsBins
 // index): the pipeline's observation with the track's point count whose first position lies
 // nearest to the refined measurement.
@@ -1417,17 +1436,7 @@ std::size_t PartsOf(const tracking::TrackingPipeline& pipeline, const tracking::
     }
     return 0;
   }
-  double best = std::numeric_limits<double>::infinity();
-  std::size_t found = obs.size();
-  for (std::size_t i = 0; i < obs.size() && i < ms.size(); ++i) {
-    std::size_t points = 0;
-    for (std::size_t k = 0; k < obs[i].part_count; ++k) points += obs[i].parts[k].point_count;
-    const double d = (ms[i].position_m - z).norm();
-    if (points == r.points && d < best) {
-      best = d;
-      found = i;
-    }
-  }
+  const std::size_t found = ObservationOf(obs, ms, z, r.points);
   if (found == obs.size()) return 0;
   const tracking::Observation& ob = obs[found];
   if (pipeline.options().shape.mount == tracking::Mount::kTorso) return 1;
@@ -1447,40 +1456,11 @@ int EdgesOf(const tracking::TrackingPipeline& pipeline, const tracking::TrackRep
   const auto obs = pipeline.observations();
   const auto ms = pipeline.measurements();
   const Vector2d z(r.measured_x_m, r.measured_y_m);
-  double best = std::numeric_limits<double>::infinity();
-  std::size_t found = obs.size();
-  for (std::size_t i = 0; i < obs.size() && i < ms.size(); ++i) {
-    std::size_t points = 0;
-    for (std::size_t k = 0; k < obs[i].part_count; ++k) points += obs[i].parts[k].point_count;
-    const double d = (ms[i].position_m - z).norm();
-    if (points == r.points && d < best) {
-      best = d;
-      found = i;
-    }
-  }
+  const std::size_t found = ObservationOf(obs, ms, z, r.points);
   if (found == obs.size() || obs[found].part_count == 0) return -1;
   const tracking::Observation& ob = obs[found];
   return (ob.parts[0].silhouette.first_valid ? 1 : 0) +
          (ob.parts[ob.part_count - 1].silhouette.last_valid ? 1 : 0);
-}
-
-// The scan's observation a measured track was updated with: of those with `points` points, the one
-// whose measurement lies nearest z; obs.size() when none has that many.
-std::size_t ObservationOf(std::span<const tracking::Observation> obs,
-                          std::span<const tracking::Measurement> ms, const Eigen::Vector2d& z,
-                          std::size_t points) {
-  double best = std::numeric_limits<double>::infinity();
-  std::size_t found = obs.size();
-  for (std::size_t i = 0; i < obs.size() && i < ms.size(); ++i) {
-    std::size_t n = 0;
-    for (std::size_t k = 0; k < obs[i].part_count; ++k) n += obs[i].parts[k].point_count;
-    const double d = (ms[i].position_m - z).norm();
-    if (n == points && d < best) {
-      best = d;
-      found = i;
-    }
-  }
-  return found;
 }
 
 // --explain, knee height: every measured match of a person, its measurement's error along the
