@@ -11,6 +11,7 @@
 #include <vector>
 
 #include "common/cv_model.h"
+#include "common/eigen_instances.h"
 #include "firmware_tracker/tracking/cv_ekf.h"
 
 namespace lrfnet::calib {

@@ -14,6 +14,7 @@
 #include <fstream>
 #include <set>
 
+#include "common/eigen_instances.h"
 #include "common/one_line.h"
 
 namespace lrfnet::calib {

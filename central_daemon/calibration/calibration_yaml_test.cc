@@ -1,4 +1,5 @@
 #include "central_daemon/calibration/calibration_yaml.h"
+#include "common/eigen_instances.h"
 
 #include <gtest/gtest.h>
 #include <unistd.h>

@@ -9,6 +9,8 @@
 #include <cstdint>
 #include <cstdio>
 
+#include "common/eigen_instances.h"
+
 namespace lrfnet::calib {
 namespace {
 

@@ -6,6 +6,8 @@
 #include <cmath>
 #include <limits>
 
+#include "common/eigen_instances.h"
+
 namespace lrfnet::calib {
 namespace {
 

@@ -9,6 +9,7 @@
 #include <vector>
 
 #include "common/cv_model.h"
+#include "common/eigen_instances.h"
 #include "firmware_tracker/tracking/cv_ekf.h"
 
 namespace lrfnet::calib {
@@ -23,7 +24,7 @@ bool SymmetricPositiveDefinite(const Eigen::Matrix4d& p) {
 
 // Smallest eigenvalue of a symmetric matrix.
 double MinEigenvalue(const Eigen::Matrix4d& m) {
-  return Eigen::SelfAdjointEigenSolver<Eigen::Matrix4d>(0.5 * (m + m.transpose()))
+  return Eigen::SelfAdjointEigenSolver<Eigen::Matrix4d>(Eigen::Matrix4d(0.5 * (m + m.transpose())))
       .eigenvalues()
       .minCoeff();
 }

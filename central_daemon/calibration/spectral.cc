@@ -6,6 +6,8 @@
 #include <complex>
 #include <random>
 
+#include "common/eigen_instances.h"
+
 namespace lrfnet::calib {
 namespace {
 

@@ -20,6 +20,7 @@
 
 #include "central_daemon/fusion/fusion.h"
 #include "common/cv_model.h"
+#include "common/eigen_instances.h"
 
 namespace lrfnet::fusion::internal {
 

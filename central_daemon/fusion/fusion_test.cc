@@ -13,6 +13,7 @@
 #include <set>
 
 #include "central_daemon/fusion/fusion_test_util.h"
+#include "common/eigen_instances.h"
 
 namespace lrfnet::fusion {
 namespace {

@@ -8,6 +8,8 @@
 #include <cstdio>
 #include <cstdlib>
 
+#include "common/eigen_instances.h"
+
 namespace lrfnet::monitoring {
 
 namespace {

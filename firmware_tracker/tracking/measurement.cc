@@ -7,6 +7,7 @@
 #include <cmath>
 #include <complex>
 
+#include "common/eigen_instances.h"
 #include "common/geometry.h"
 #include "firmware_tracker/tracking/segmentation.h"
 

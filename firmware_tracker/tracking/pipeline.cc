@@ -7,6 +7,7 @@
 #include <limits>
 #include <utility>
 
+#include "common/eigen_instances.h"
 #include "common/geometry.h"
 
 namespace lrfnet::tracking {

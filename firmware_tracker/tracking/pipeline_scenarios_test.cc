@@ -23,6 +23,7 @@
 #include <utility>
 #include <vector>
 
+#include "common/eigen_instances.h"
 #include "common/mount_check.h"
 #include "firmware_tracker/tracking/pipeline.h"
 #include "firmware_tracker/tracking/tracking_test_util.h"
@@ -2341,7 +2342,7 @@ TEST(PipelineScenarioTest, APartialViewIsReportedWithItsFitsCovariance) {
         continue;
       }
       // Larger by a positive definite matrix: the fit's covariance.
-      const Eigen::SelfAdjointEigenSolver<Eigen::Matrix2d> added(c - c_old);
+      const Eigen::SelfAdjointEigenSolver<Eigen::Matrix2d> added(Eigen::Matrix2d(c - c_old));
       EXPECT_GT(added.eigenvalues().minCoeff(), 0.0);
       ++wider;
       const Eigen::Vector2d e = Eigen::Vector2d(r.x_m, r.y_m) - *run.frames[k].truth[0];
@@ -2388,7 +2389,7 @@ TEST(PipelineScenarioTest, AnUnderdeterminedFitIsReportedWithItsFitsCovariance) 
       const Eigen::Matrix2d c = r.covariance.topLeftCorner<2, 2>();
       const Eigen::Matrix2d c_old = o->covariance.topLeftCorner<2, 2>();
       if ((c - c_old).norm() < 1e-12) continue;
-      const Eigen::SelfAdjointEigenSolver<Eigen::Matrix2d> added(c - c_old);
+      const Eigen::SelfAdjointEigenSolver<Eigen::Matrix2d> added(Eigen::Matrix2d(c - c_old));
       EXPECT_GT(added.eigenvalues().minCoeff(), 0.0);
       ++wider;
       const Eigen::Vector2d e = Eigen::Vector2d(r.x_m, r.y_m) - *run.frames[k].truth[0];

@@ -21,6 +21,7 @@
 #include <string>
 
 #include "central_daemon/calibration/calibration_yaml.h"
+#include "common/eigen_instances.h"
 #include "common/geometry.h"
 
 namespace {
