@@ -3,9 +3,11 @@
 #   scripts/build.sh [BUILD_DIR]        the three programs lrfnet-tracker, lrfnetd and lrfnet (what
 #                                       scripts/demo.sh runs; about half of the whole build)
 #   scripts/build.sh --all [BUILD_DIR]  everything scripts/test.sh builds (tests, fuzz targets)
-# The tree is configured as scripts/test.sh configures it, so a later test run reuses every object.
+# The tree is configured as scripts/test.sh configures it, so a later test run reuses every object; both
+# compile through ccache when it is installed (scripts/ccache_env.sh, LRFNET_CCACHE=0 without).
 set -euo pipefail
 cd "$(dirname "$0")/.."
+. scripts/ccache_env.sh
 targets=(--target lrfnet-tracker lrfnetd lrfnet)
 build_dir=build
 for arg in "$@"; do

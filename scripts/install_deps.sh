@@ -21,6 +21,7 @@ done
 # Configure and build the three programs (CMake also looks for the test libraries: they are small).
 demo_pkgs=(
   build-essential cmake ninja-build pkg-config git
+  ccache                              # scripts/build.sh and test.sh compile through it
   libeigen3-dev libboost-dev libboost-program-options-dev
   libprotobuf-dev protobuf-compiler libspdlog-dev libfmt-dev
   libpcap-dev libyaml-cpp-dev nlohmann-json3-dev nanopb libnanopb-dev

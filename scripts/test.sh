@@ -6,9 +6,11 @@
 #   LRFNET_SKIP_CROSS=1   skip the aarch64 stage; LRFNET_SKIP_FUZZ=1 skip the libFuzzer stage
 #   LRFNET_SKIP_PACKAGES=1 skip the Debian packages (built from the trees above, installed into a
 #                         throw-away root; the arm64 one run under qemu)
+#   LRFNET_CCACHE=0       compile without ccache (used when installed: scripts/ccache_env.sh)
 set -uo pipefail
 cd "$(dirname "$0")/.."
 root=$(pwd)
+. scripts/ccache_env.sh
 jobs=$(nproc)
 fuzz_seconds=${LRFNET_FUZZ_SECONDS:-20}
 passed=0
