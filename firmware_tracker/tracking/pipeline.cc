@@ -259,7 +259,10 @@ std::size_t PersonReachablePoints(const ShapeOptions& o, const Eigen::Vector2d& 
   if (begin > 0 && (begin >= n || !stepped(points[begin], points[begin - 1]))) begin = 0;
   if (end < n && (end == 0 || !stepped(points[end - 1], points[end]))) end = n;
   if (end < begin + 2 || (begin == 0 && end == n)) {
-    for (std::size_t i = 0; i < n; ++i) kept[i] = points[i];
+    // Nothing left out: kept is read only where the count falls short of points.size().
+    if (n < points.size()) {
+      for (std::size_t i = 0; i < n; ++i) kept[i] = points[i];
+    }
     return n;
   }
   for (std::size_t i = begin; i < end; ++i) kept[i - begin] = points[i];

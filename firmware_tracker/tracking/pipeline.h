@@ -887,7 +887,8 @@ std::size_t BoxUnoccludedPoints(const ShapeOptions& o, const Eigen::Vector2d& ce
 // reach_m of centre_m (the predicted centre, covariance centre_cov_m2) by more than
 // kOccluderSigmas of hypot(range noise, model error, the centre's sigma towards the point) and
 // whose range steps from its neighbouring point by more than kOccluderSigmas of the noise; returns
-// their count (points.size() and every point where fewer than two would stay). An end whose run
+// their count (points.size(), kept left as it was, where fewer than two would stay or nothing is
+// left out; the first kMaxSegmentPoints of a longer segment copied into kept). An end whose run
 // was dropped is an occluder's edge in *silhouette where the run's nearest point lies nearer than
 // the kept end point, else a silhouette half a step outside the kept end point's beam.
 // Precondition: kept.size() >= points.size(); kept is not points' storage.

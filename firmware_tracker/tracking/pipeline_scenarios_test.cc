@@ -2000,9 +2000,11 @@ TEST(PipelineTest, PersonReachablePointsLeavesOutAnotherObjectBesideThePerson) {
                      Eigen::Vector2d(std::cos(a_end + 0.02 * i), std::sin(a_end + 0.02 * i)));
   }
   s = Silhouette{};
+  const std::vector<Eigen::Vector2d> before = kept;
   EXPECT_EQ(internal::PersonReachablePoints(o, centre, cov, reach, points, step, kept, &s),
             points.size());
   EXPECT_FALSE(s.first_valid || s.last_valid);
+  EXPECT_EQ(kept, before);  // Nothing left out: the caller reads points, not kept.
   // One point of the person and the other object's: nothing left out.
   points = {person[6], {4.7, 0.25}, {4.7, 0.3}};
   EXPECT_EQ(internal::PersonReachablePoints(o, centre, cov, reach, points, step, kept, &s), 3u);
