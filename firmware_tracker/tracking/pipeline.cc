@@ -568,6 +568,9 @@ std::optional<std::string> Validate(const ShapeOptions& o) {
   if (!(std::isfinite(o.legs_report_coasting_s) && o.legs_report_coasting_s >= 0.0)) {
     return "legs_report_coasting_s must be >= 0";
   }
+  if (!(std::isfinite(o.legs_coasting_max_sigma_m) && o.legs_coasting_max_sigma_m >= 0.0)) {
+    return "legs_coasting_max_sigma_m must be >= 0";
+  }
   if (!(std::isfinite(o.beam_divergence_rad) && o.beam_divergence_rad >= 0.0)) {
     return "beam_divergence_rad must be >= 0";
   }
@@ -2365,6 +2368,12 @@ void TrackingPipeline::DropCoasting(const ScanView& scan) {
                       0.5 * o.leg_pairing_distance_m + o.leg_radius_m + 2.0 * sigma_m,
                       2.0 * o.leg_radius_m)) {
         ++counters_.legs_seen_through;
+        continue;
+      }
+      // Knee height: only while the prediction still says where a leg stands (its sigma within
+      // legs_coasting_max_sigma_m); beyond, the report is as likely beside the person as at them.
+      if (!torso && o.legs_coasting_max_sigma_m > 0.0 && sigma_m > o.legs_coasting_max_sigma_m) {
+        ++counters_.legs_coasting_uncertain;
         continue;
       }
       const double coasted_m = std::hypot(r.vx_mps, r.vy_mps) * r.coasted_s;
