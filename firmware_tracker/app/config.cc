@@ -448,6 +448,10 @@ void VisitShape(tracking::ShapeOptions& o, ConfigVisitor& v) {
           "leg_pairing_distance_m plus leg_radius_m of it returned from more than "
           "seen_through_margin_m beyond it), where the beams and their footprint are narrower "
           "than a leg; a person hidden behind something stays reported.");
+  v.Field("legs_coasting_max_sigma_m", o.legs_coasting_max_sigma_m,
+          "Knee-height mount: a coasting track is reported only while its position sigma is at "
+          "most this (a leg's diameter: the prediction still tells where a leg stands). "
+          "0: off.");
   v.Field("legs_report_coasting_s", o.legs_report_coasting_s,
           "Knee-height mount: a coasting track is sent for at most this long after its last "
           "measurement (tracking.report_coasting_s where that is shorter): a track predicted "

@@ -572,6 +572,9 @@ std::optional<std::string> Validate(const ShapeOptions& o) {
   if (!(std::isfinite(o.legs_report_coasting_s) && o.legs_report_coasting_s >= 0.0)) {
     return "legs_report_coasting_s must be >= 0";
   }
+  if (!(std::isfinite(o.legs_coasting_max_sigma_m) && o.legs_coasting_max_sigma_m >= 0.0)) {
+    return "legs_coasting_max_sigma_m must be >= 0";
+  }
   if (!(std::isfinite(o.beam_divergence_rad) && o.beam_divergence_rad >= 0.0)) {
     return "beam_divergence_rad must be >= 0";
   }
@@ -2323,6 +2326,23 @@ bool TrackingPipeline::OtherLegSeenThrough(const ScanView& scan,
   return beyond >= std::min<std::size_t>(2, hi - lo + 1);
 }
 
+bool TrackingPipeline::HiddenBehindNearer(const ScanView& scan, const Eigen::Vector2d& position_m,
+                                          double reach_m) const {
+  const double range = position_m.norm();
+  if (!(range > reach_m)) return false;
+  const std::span<const std::uint8_t> foreground = background_.foreground();
+  std::size_t lo = 0, hi = 0;
+  if (!BeamsAcross(scan, position_m, std::asin(reach_m / range),
+                   std::min(scan.range_m.size(), foreground.size()), &lo, &hi)) {
+    return false;
+  }
+  for (std::size_t i = lo; i <= hi; ++i) {
+    const double r = scan.range_m[i];
+    if (foreground[i] != 0 && r > 0.0 && r < range - reach_m) return true;
+  }
+  return false;
+}
+
 bool TrackingPipeline::ForegroundNear(const ScanView& scan, const Eigen::Vector2d& position_m,
                                       double sigma_m) const {
   const double reach_m = options_.shape.person_major_m + 2.0 * sigma_m;
@@ -2369,6 +2389,15 @@ void TrackingPipeline::DropCoasting(const ScanView& scan) {
                       0.5 * o.leg_pairing_distance_m + o.leg_radius_m + 2.0 * sigma_m,
                       2.0 * o.leg_radius_m)) {
         ++counters_.legs_seen_through;
+        continue;
+      }
+      // Knee height: only while the prediction still says where a leg stands (its sigma within
+      // legs_coasting_max_sigma_m); beyond, the report is as likely beside the person as at them.
+      // Not where something nearer hides where its legs may stand (someone walking past in front).
+      if (!torso && o.legs_coasting_max_sigma_m > 0.0 && sigma_m > o.legs_coasting_max_sigma_m &&
+          !HiddenBehindNearer(scan, position,
+                              0.5 * o.leg_pairing_distance_m + o.leg_radius_m + 2.0 * sigma_m)) {
+        ++counters_.legs_coasting_uncertain;
         continue;
       }
       const double coasted_m = std::hypot(r.vx_mps, r.vy_mps) * r.coasted_s;

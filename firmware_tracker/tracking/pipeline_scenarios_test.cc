@@ -382,6 +382,9 @@ TEST(TrackerOptionsTest, DefaultsValidAndErrorsNameTheSectionAndField) {
   o.shape.unseen_coasting_m = -0.1;
   EXPECT_EQ(Validate(o)->rfind("shape.unseen_coasting_m", 0), 0u) << *Validate(o);
   o = {};
+  o.shape.legs_coasting_max_sigma_m = -0.1;
+  EXPECT_EQ(Validate(o)->rfind("shape.legs_coasting_max_sigma_m", 0), 0u) << *Validate(o);
+  o = {};
   o.shape.legs_report_coasting_s = -0.1;
   EXPECT_EQ(Validate(o)->rfind("shape.legs_report_coasting_s", 0), 0u) << *Validate(o);
   o = {};
@@ -1009,6 +1012,59 @@ TEST(PipelineScenarioTest, AKneeHeightCoastingTrackIsNotReportedWhereTheScanSees
   const Result with = run_with(LegsOptions());
   EXPECT_LE(with.coasting, 1);
   EXPECT_GE(with.dropped, 4u);
+}
+
+// At knee height a person walking across the room vanishes at x = 4.5 m (as through a door) with
+// the scan seeing through nothing (shape.legs_seen_through off in both runs): the coasting track is
+// reported only while its position sigma stays within shape.legs_coasting_max_sigma_m (here
+// 0.06 m, below what this track's sigma grows to within legs_report_coasting_s; the default, a
+// leg's diameter, is reached by tracks measured from one or two beams per leg far out); with the
+// rule off it is reported whatever its sigma, for all of legs_report_coasting_s.
+TEST(PipelineScenarioTest, AKneeHeightCoastingTrackIsReportedOnlyWhileItsSigmaIsWithinALeg) {
+  Scene scene;
+  scene.legs = true;
+  scene.walkers = {Walker::Path(kLearnedS, {{4.5, -3.0}, {4.5, 0.5}}, 1.2)};
+  const Walker& walker = scene.walkers[0];
+  constexpr double kMaxSigmaM = 0.06;
+  struct Result {
+    int coasting = 0;
+    int coasting_beyond = 0;  // reported with a sigma above kMaxSigmaM
+    std::uint64_t dropped = 0;
+  };
+  auto run_with = [&](const TrackerOptions& options) {
+    const SceneRun run = Simulate(scene, walker.end_s() + 1.5, options);
+    Result result;
+    int before = 0;
+    for (const Frame& f : run.frames) {
+      for (const TrackReport& r : f.tracks) {
+        if (f.t_s > walker.start_s() + 0.5 && f.t_s < walker.end_s()) ++before;
+        if (f.t_s <= walker.end_s() || r.state != TrackState::kCoasting) continue;
+        ++result.coasting;
+        const Eigen::Matrix2d p = r.covariance.topLeftCorner<2, 2>();
+        if (std::sqrt(0.5 * p.trace()) > kMaxSigmaM) ++result.coasting_beyond;
+      }
+    }
+    EXPECT_GT(before, 50);  // tracked while walking
+    result.dropped = run.pipeline->counters().legs_coasting_uncertain;
+    return result;
+  };
+  TrackerOptions off = LegsOptions();
+  off.shape.legs_seen_through = false;
+  off.shape.legs_coasting_max_sigma_m = 0.0;
+  const Result without = run_with(off);
+  EXPECT_GE(without.coasting_beyond, 1) << without.coasting;
+  EXPECT_EQ(without.dropped, 0u);
+  TrackerOptions on = LegsOptions();
+  on.shape.legs_seen_through = false;
+  on.shape.legs_coasting_max_sigma_m = kMaxSigmaM;
+  const Result with = run_with(on);
+  EXPECT_EQ(with.coasting_beyond, 0);
+  EXPECT_GE(with.coasting, 1);  // reported while still within it
+  EXPECT_LT(with.coasting, without.coasting);
+  EXPECT_GE(with.dropped, 1u);
+  // The default: a leg's diameter.
+  EXPECT_DOUBLE_EQ(TrackerOptions{}.shape.legs_coasting_max_sigma_m,
+                   2.0 * TrackerOptions{}.shape.leg_radius_m);
 }
 
 TEST(PipelineScenarioTest, TwoPeopleSideBySideAtKneeHeightKeepTheirLegsAndIds) {
