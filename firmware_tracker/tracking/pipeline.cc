@@ -1518,12 +1518,12 @@ void TrackingPipeline::BuildObservations(const ScanView& scan) {
   if (options_.shape.mount == Mount::kTorso) {
     // Each observation is built in its slot of observations_ (one copy of ~300 bytes less per
     // segment than building it aside and adding it).
-    const std::size_t tracks =
-        options_.shape.box_rejoin_pieces ? tracker_.Predict(scan.stamp_ns, predictions_) : 0;
+    // The tracks are predicted on the first run of pieces only (most scans have none).
+    std::optional<std::size_t> tracks;
     const auto& segments = segments_.segments;
     for (std::size_t i = 0; i < segments.size();) {
       Segment s = segments[i];
-      const std::size_t last = BoxPiecesEnd(i, tracks);
+      const std::size_t last = options_.shape.box_rejoin_pieces ? BoxPiecesEnd(i, scan.stamp_ns, tracks) : i;
       for (std::size_t k = i + 1; k <= last; ++k) {
         // ShapeOptions::box_rejoin_pieces: the pieces as the one segment they would have been.
         s.end_beam = segments[k].end_beam;
@@ -1603,7 +1603,8 @@ void TrackingPipeline::BuildObservations(const ScanView& scan) {
   PairLegs(scan, tracks);
 }
 
-std::size_t TrackingPipeline::BoxPiecesEnd(std::size_t first, std::size_t tracks) const {
+std::size_t TrackingPipeline::BoxPiecesEnd(std::size_t first, common::UtcNs stamp_ns,
+                                           std::optional<std::size_t>& tracks) {
   const auto& segments = segments_.segments;
   const SegmentationOptions& so = options_.segmentation;
   const ShapeOptions& o = options_.shape;
@@ -1625,8 +1626,9 @@ std::size_t TrackingPipeline::BoxPiecesEnd(std::size_t first, std::size_t tracks
     ++chain;
   }
   if (chain == first) return first;
+  if (!tracks) tracks = tracker_.Predict(stamp_ns, predictions_);
   std::size_t best = first;
-  for (std::size_t t = 0; t < tracks; ++t) {
+  for (std::size_t t = 0; t < *tracks; ++t) {
     const TrackPrediction& pr = predictions_[t];
     if (!pr.confirmed || pr.model != ShapeModel::kBox) continue;
     const Eigen::SelfAdjointEigenSolver<Eigen::Matrix2d> position(pr.covariance_m2,

@@ -800,8 +800,10 @@ class TrackingPipeline {
   void BuildObservations(const ScanView& scan);
   // ShapeOptions::box_rejoin_pieces: the last of the segments from `first` on that are pieces of
   // one outline lying on a confirmed box track's predicted rectangle (predictions_, `tracks` of
-  // them); `first` where none follows.
-  std::size_t BoxPiecesEnd(std::size_t first, std::size_t tracks) const;
+  // them, predicted at `stamp_ns` on the first run of pieces of the scan); `first` where none
+  // follows.
+  std::size_t BoxPiecesEnd(std::size_t first, common::UtcNs stamp_ns,
+                           std::optional<std::size_t>& tracks);
   // tracks: the live tracks' predictions at the scan's time, in predictions_ (predicted once).
   void PairLegs(const ScanView& scan, std::size_t tracks);
   // Where a leg-sized segment splits into two legs: the index of the second
