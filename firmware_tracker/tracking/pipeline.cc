@@ -725,13 +725,19 @@ class TrackingPipeline::Refiner final : public MeasurementRefiner {
         measured_outline ? std::max(departure_var, shape.departure_m2) : 0.0;
     shape.stamp_ns = at_ns;
     ++shape.updates;
-    if (source < refined_cov.size()) refined_cov[source] = measurement.covariance_m2;
+    if (source < refined_cov.size()) {
+      refined_cov[source] = measurement.covariance_m2;
+      refined_step[source] = scans;
+    }
     return true;
   }
 
-  // Per observation of the scan: the covariance of the measurement last refined from it, and its
-  // legs' fitted radii (0 where none); TrackingPipeline::RefinedCovariance and LegRadius.
+  // Per observation of the scan: the covariance of the measurement last refined from it (valid
+  // where refined_step is the current count of scans), and its legs' fitted radii (0 where none);
+  // TrackingPipeline::RefinedCovariance and LegRadius.
+  std::uint64_t scans = 0;
   std::array<Eigen::Matrix2d, kMaxSegments> refined_cov{};
+  std::array<std::uint64_t, kMaxSegments> refined_step{};
   std::array<std::array<double, 2>, kMaxSegments> leg_radius{};
   std::array<std::array<Eigen::Vector2d, 2>, kMaxSegments> leg_centre{};
 
@@ -1324,9 +1330,12 @@ TrackingPipeline::TrackingPipeline(const TrackerOptions& options)
 
 TrackingPipeline::~TrackingPipeline() = default;
 
-Eigen::Matrix2d TrackingPipeline::RefinedCovariance(std::size_t observation) const {
-  return observation < refiner_->refined_cov.size() ? refiner_->refined_cov[observation]
-                                                    : Eigen::Matrix2d::Zero();
+std::optional<Eigen::Matrix2d> TrackingPipeline::RefinedCovariance(std::size_t observation) const {
+  if (observation >= refiner_->refined_cov.size() ||
+      refiner_->refined_step[observation] != refiner_->scans) {
+    return std::nullopt;
+  }
+  return refiner_->refined_cov[observation];
 }
 
 Eigen::Vector2d TrackingPipeline::LegCentre(std::size_t observation, std::size_t part) const {
@@ -2462,6 +2471,7 @@ const ScanTracks& TrackingPipeline::Process(const ScanView& scan, std::uint32_t 
   const std::uint64_t person_beyond_reach_before = refiner_->person_beyond_reach;
   const std::uint64_t partial_size_floored_before = refiner_->partial_size_floored;
   scan_ = &scan;
+  ++refiner_->scans;
   tracker_.Step(scan.stamp_ns, measurements_.span(), offsets_s_.span(),
                 shape_fit ? refiner_.get() : nullptr, tracks_);
   scan_ = nullptr;

@@ -783,12 +783,12 @@ class TrackingPipeline {
   std::span<const Measurement> measurements() const { return measurements_.span(); }
   std::span<const double> measurement_offsets_s() const { return offsets_s_.span(); }
   std::size_t last_segment_count() const { return segments_.segments.size(); }
-  // Diagnostics of observation `observation` (shape fit): the covariance of the measurement last
-  // refined from it, and the fitted radius and centre of its leg `part` (knee height; 0 where
-  // none). Written when an observation is refined and not cleared between scans: valid for the
-  // last scan's observations that were refined in it (each measured one was), an earlier scan's
-  // values for the others.
-  Eigen::Matrix2d RefinedCovariance(std::size_t observation) const;
+  // Diagnostics of observation `observation` (shape fit): the covariance of the measurement
+  // refined from it in the last scan (nullopt where none was), and the fitted radius and centre of
+  // its leg `part` (knee height; 0 where none). The legs' values are written when an observation
+  // is refined and not cleared between scans: valid for the last scan's observations that were
+  // refined in it (each measured one was), an earlier scan's values for the others.
+  std::optional<Eigen::Matrix2d> RefinedCovariance(std::size_t observation) const;
   double LegRadius(std::size_t observation, std::size_t part) const;
   Eigen::Vector2d LegCentre(std::size_t observation, std::size_t part) const;
 

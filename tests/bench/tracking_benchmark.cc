@@ -1501,7 +1501,9 @@ void LineOfSightErrors(const tracking::TrackingPipeline& pipeline, const trackin
     const Vector2d u = t->p / range;
     const Vector2d ez = h.z - (t->p + h.z_offset_s * t->v);
     const double er = ez.dot(u);
-    const Matrix2d R = pipeline.RefinedCovariance(found);
+    const std::optional<Matrix2d> refined = pipeline.RefinedCovariance(found);
+    if (!refined) continue;  // not refined in this scan
+    const Matrix2d& R = *refined;
     const double var_r = u.dot(R * u);
     const double nees_r = var_r > 0.0 ? er * er / var_r : 0.0;
     double nees = 0.0;
