@@ -684,6 +684,21 @@ TEST(PipelineScenarioTest, ACoastingTrackIsNotReportedWhereTheScanSeesThroughIt)
   EXPECT_LE(coasting_reports(Synthetic()), 1);
 }
 
+// The reports of a walker's track: how many fell while it walked (from 0.5 s after its start),
+// and on_coasting called for each coasting report after its walk ended.
+template <typename OnCoasting>
+int ReportsAroundTheWalk(const SceneRun& run, const Walker& walker, OnCoasting&& on_coasting) {
+  int walking = 0;
+  for (const Frame& f : run.frames) {
+    for (const TrackReport& r : f.tracks) {
+      if (f.t_s > walker.start_s() + 0.5 && f.t_s < walker.end_s()) ++walking;
+      if (f.t_s <= walker.end_s() || r.state != TrackState::kCoasting) continue;
+      on_coasting(r);
+    }
+  }
+  return walking;
+}
+
 // A person walking towards the front wall leaves the view 0.3 m before it (as round a corner or
 // through a side door): the straight prediction runs on into the wall, the beams across it return
 // from the wall at or just behind it, none from in front of it. Reported until it has coasted
@@ -701,16 +716,11 @@ TEST(PipelineScenarioTest, ACoastingTrackIsNotReportedWhereTheScanShowsNothingOf
   auto run_with = [&](const TrackerOptions& options) {
     const SceneRun run = Simulate(scene, walker.end_s() + 1.5, options);
     Result result;
-    int before = 0;
-    for (const Frame& f : run.frames) {
-      for (const TrackReport& r : f.tracks) {
-        if (f.t_s > walker.start_s() + 0.5 && f.t_s < walker.end_s()) ++before;
-        if (f.t_s <= walker.end_s() || r.state != TrackState::kCoasting) continue;
-        ++result.coasting;
-        result.farthest_m =
-            std::max(result.farthest_m, std::hypot(r.vx_mps, r.vy_mps) * r.coasted_s);
-      }
-    }
+    const int before = ReportsAroundTheWalk(run, walker, [&](const TrackReport& r) {
+      ++result.coasting;
+      result.farthest_m =
+          std::max(result.farthest_m, std::hypot(r.vx_mps, r.vy_mps) * r.coasted_s);
+    });
     EXPECT_GT(before, 50);                                 // tracked while walking
     EXPECT_EQ(run.pipeline->counters().seen_through, 0u);  // the wall is right behind it
     result.dropped = run.pipeline->counters().unseen_coasting;
@@ -1034,16 +1044,11 @@ TEST(PipelineScenarioTest, AKneeHeightCoastingTrackIsReportedOnlyWhileItsSigmaIs
   auto run_with = [&](const TrackerOptions& options) {
     const SceneRun run = Simulate(scene, walker.end_s() + 1.5, options);
     Result result;
-    int before = 0;
-    for (const Frame& f : run.frames) {
-      for (const TrackReport& r : f.tracks) {
-        if (f.t_s > walker.start_s() + 0.5 && f.t_s < walker.end_s()) ++before;
-        if (f.t_s <= walker.end_s() || r.state != TrackState::kCoasting) continue;
-        ++result.coasting;
-        const Eigen::Matrix2d p = r.covariance.topLeftCorner<2, 2>();
-        if (std::sqrt(0.5 * p.trace()) > kMaxSigmaM) ++result.coasting_beyond;
-      }
-    }
+    const int before = ReportsAroundTheWalk(run, walker, [&](const TrackReport& r) {
+      ++result.coasting;
+      const Eigen::Matrix2d p = r.covariance.topLeftCorner<2, 2>();
+      if (std::sqrt(0.5 * p.trace()) > kMaxSigmaM) ++result.coasting_beyond;
+    });
     EXPECT_GT(before, 50);  // tracked while walking
     result.dropped = run.pipeline->counters().legs_coasting_uncertain;
     return result;
