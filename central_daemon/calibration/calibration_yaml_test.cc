@@ -1,5 +1,4 @@
 #include "central_daemon/calibration/calibration_yaml.h"
-#include "common/eigen_instances.h"
 
 #include <gtest/gtest.h>
 #include <unistd.h>
@@ -12,6 +11,8 @@
 #include <limits>
 #include <random>
 #include <string>
+
+#include "common/eigen_instances.h"
 
 namespace lrfnet::calib {
 namespace {

@@ -1073,7 +1073,8 @@ PairEstimate EstimateWithIntervals(const AlignedTracks& aligned, std::size_t r, 
   }
   // Information: a pose the honest covariance leaves uncertain is a candidate only.
   const double yaw_sigma_deg = RadToDeg(std::sqrt(std::max(0.0, est.covariance(2, 2))));
-  const Eigen::SelfAdjointEigenSolver<Eigen::Matrix2d> eig(Eigen::Matrix2d(est.covariance.topLeftCorner<2, 2>()));
+  const Eigen::SelfAdjointEigenSolver<Eigen::Matrix2d> eig(
+      Eigen::Matrix2d(est.covariance.topLeftCorner<2, 2>()));
   const double translation_sigma_m = std::sqrt(std::max(0.0, eig.eigenvalues().maxCoeff()));
   if (!(yaw_sigma_deg <= o.max_yaw_sigma_deg) ||
       !(translation_sigma_m <= o.max_translation_sigma_m)) {

@@ -548,7 +548,8 @@ void ApplyIcp(const AlignedTracks& tracks, const CalibrationOptions& options,
     if (p.weak) {
       // The walls may fix what the tracks alone left open.
       const double yaw_sigma_deg = common::RadToDeg(std::sqrt(std::max(0.0, p.covariance(2, 2))));
-      const Eigen::SelfAdjointEigenSolver<Eigen::Matrix2d> eig(Eigen::Matrix2d(p.covariance.topLeftCorner<2, 2>()));
+      const Eigen::SelfAdjointEigenSolver<Eigen::Matrix2d> eig(
+          Eigen::Matrix2d(p.covariance.topLeftCorner<2, 2>()));
       const double t_sigma = std::sqrt(std::max(0.0, eig.eigenvalues().maxCoeff()));
       if (yaw_sigma_deg <= options.pairwise.max_yaw_sigma_deg &&
           t_sigma <= options.pairwise.max_translation_sigma_m) {
@@ -568,7 +569,8 @@ Eigen::Matrix3d AtLeast(const Eigen::Matrix3d& a, const Eigen::Matrix3d& b) {
   const Eigen::Matrix3d l = llt.matrixL();
   const Eigen::Matrix3d l_inv = l.inverse();
   const Eigen::Matrix3d w = l_inv * bs * l_inv.transpose();  // b in a's whitened coordinates
-  const Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> eig(Eigen::Matrix3d(0.5 * (w + w.transpose())));
+  const Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> eig(
+      Eigen::Matrix3d(0.5 * (w + w.transpose())));
   const Eigen::Vector3d grown = eig.eigenvalues().cwiseMax(1.0);
   const Eigen::Matrix3d out =
       l * (eig.eigenvectors() * grown.asDiagonal() * eig.eigenvectors().transpose()) *

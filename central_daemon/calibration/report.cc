@@ -555,7 +555,8 @@ std::vector<std::pair<std::string, Pose2>> GhostPoses(const ReportInput& in) {
 std::vector<Vector2d> SigmaEllipseWorld(const SensorPose& sp, double k) {
   const Eigen::Matrix2d c = sp.covariance.topLeftCorner<2, 2>();
   if (!c.allFinite()) return {};
-  const Eigen::SelfAdjointEigenSolver<Eigen::Matrix2d> eig(Eigen::Matrix2d(0.5 * (c + c.transpose())));
+  const Eigen::SelfAdjointEigenSolver<Eigen::Matrix2d> eig(
+      Eigen::Matrix2d(0.5 * (c + c.transpose())));
   const Vector2d axes = eig.eigenvalues().cwiseMax(0.0).cwiseSqrt() * k;
   if (axes.maxCoeff() <= 0.0) return {};
   std::vector<Vector2d> ring;

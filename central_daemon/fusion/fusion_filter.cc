@@ -540,7 +540,8 @@ class FusedFilterEngine final : public Engine {
     // variance of zero (the calibration's reference sensor) fixes that parameter at zero.
     const BiasMat data_info = b.a[0] / b.noise_m2[0] + b.a[1] / b.noise_m2[1];
     const BiasVec rhs = b.c[0] / b.noise_m2[0] + b.c[1] / b.noise_m2[1];
-    const Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> pose_eig(Eigen::Matrix3d(prior.topLeftCorner<3, 3>()));
+    const Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> pose_eig(
+        Eigen::Matrix3d(prior.topLeftCorner<3, 3>()));
     if (pose_eig.info() != Eigen::Success) return;
     constexpr double kFixed = 1e-12;  // variance below which a direction is fixed
     Eigen::Matrix3d pose_info = Eigen::Matrix3d::Zero();
@@ -1098,8 +1099,8 @@ bool FusedFilterEngine::Update(Track& f, const Measurement& m0, const std::strin
     if (llt_b.info() == Eigen::Success) {
       const Eigen::Matrix2d l_inv = llt_b.matrixL().solve(Eigen::Matrix2d::Identity());
       const Eigen::Matrix2d w = l_inv * v * l_inv.transpose();
-      const Eigen::SelfAdjointEigenSolver<Eigen::Matrix2d> eig(Eigen::Matrix2d(0.5 * (w + w.transpose())),
-                                                               Eigen::EigenvaluesOnly);
+      const Eigen::SelfAdjointEigenSolver<Eigen::Matrix2d> eig(
+          Eigen::Matrix2d(0.5 * (w + w.transpose())), Eigen::EigenvaluesOnly);
       if (eig.info() == Eigen::Success && eig.eigenvalues().maxCoeff() <= 0.5) {
         const Eigen::Vector2d y = b * (b - v).ldlt().solve(mean);
         if (AllFinite(y)) *bias_sample = y;

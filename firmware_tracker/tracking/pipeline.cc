@@ -1532,7 +1532,8 @@ void TrackingPipeline::BuildObservations(const ScanView& scan) {
     const auto& segments = segments_.segments;
     for (std::size_t i = 0; i < segments.size();) {
       Segment s = segments[i];
-      const std::size_t last = options_.shape.box_rejoin_pieces ? BoxPiecesEnd(i, scan.stamp_ns, tracks) : i;
+      const std::size_t last =
+          options_.shape.box_rejoin_pieces ? BoxPiecesEnd(i, scan.stamp_ns, tracks) : i;
       for (std::size_t k = i + 1; k <= last; ++k) {
         // ShapeOptions::box_rejoin_pieces: the pieces as the one segment they would have been.
         s.end_beam = segments[k].end_beam;

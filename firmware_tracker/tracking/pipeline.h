@@ -642,9 +642,9 @@ struct ShapeOptions {
   // scans, 1,830 coasting, the largest class "left behind: its object visible, untracked"
   // coasting with foreground at it, 642). The track is kept to be found again, as at
   // legs_report_coasting_s. Not where a beam across its legs' reach (leg_pairing_distance_m / 2 +
-  // leg_radius_m + 2 sigma) returns a foreground echo from nearer than that reach in front of it: someone hidden
-  // behind a passer-by is found again there. Counted in PipelineCounters::legs_coasting_uncertain.
-  // 0: off.
+  // leg_radius_m + 2 sigma) returns a foreground echo from nearer than that reach in front of it:
+  // someone hidden behind a passer-by is found again there. Counted in
+  // PipelineCounters::legs_coasting_uncertain. 0: off.
   double legs_coasting_max_sigma_m = 0.12;
 };
 
@@ -848,8 +848,8 @@ class TrackingPipeline {
   bool OtherLegSeenThrough(const ScanView& scan, const Eigen::Vector2d& leg_m) const;
   bool ForegroundNear(const ScanView& scan, const Eigen::Vector2d& position_m,
                       double sigma_m) const;
-  // A foreground beam within reach_m of position_m (across the ray) returned from nearer than its range less
-  // reach_m: something in front may hide it (ShapeOptions::legs_coasting_max_sigma_m).
+  // A foreground beam within reach_m of position_m (across the ray) returned from nearer than its
+  // range less reach_m: something in front may hide it (ShapeOptions::legs_coasting_max_sigma_m).
   bool HiddenBehindNearer(const ScanView& scan, const Eigen::Vector2d& position_m,
                           double reach_m) const;
 

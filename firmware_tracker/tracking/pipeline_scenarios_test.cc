@@ -718,8 +718,7 @@ TEST(PipelineScenarioTest, ACoastingTrackIsNotReportedWhereTheScanShowsNothingOf
     Result result;
     const int before = ReportsAroundTheWalk(run, walker, [&](const TrackReport& r) {
       ++result.coasting;
-      result.farthest_m =
-          std::max(result.farthest_m, std::hypot(r.vx_mps, r.vy_mps) * r.coasted_s);
+      result.farthest_m = std::max(result.farthest_m, std::hypot(r.vx_mps, r.vy_mps) * r.coasted_s);
     });
     EXPECT_GT(before, 50);                                 // tracked while walking
     EXPECT_EQ(run.pipeline->counters().seen_through, 0u);  // the wall is right behind it
