@@ -19,7 +19,7 @@ mkdir -p results
   --before-deep-pieces --before-deep-evidence --before-isotropic-bias --before-across-walk \
   --before-side-uncertainty --before-side-from-view --before-lone-leg-standing \
   --before-few-point-legs --before-deep-legs --before-legs-seen-through --before-legs-report-coasting \
-  --before-legs-coasting-sigma \
+  --before-legs-coasting-sigma --before-coasting-sigma \
   --before-leg-edges --before-outline-departure --before-partial-view --before-underdetermined-fit \
   --before-recent-veil --before-stance-weight \
   --before-box-occluders --before-box-rejoin --before-single-beam-partner --before-edge-echo-birth \

@@ -442,6 +442,10 @@ void VisitShape(tracking::ShapeOptions& o, ConfigVisitor& v) {
           "last measurement) is reported only where the scan shows something of it (a "
           "foreground return within its body's reach): someone who turned out of view is off "
           "the straight prediction. Torso mount. 0: off.");
+  v.Field("coasting_max_sigma_m", o.coasting_max_sigma_m,
+          "Torso mount: a coasting track is reported only while its position sigma is at most "
+          "this (the body's half-depth: the prediction still tells where the body stands). "
+          "0: off.");
   v.Field("legs_seen_through", o.legs_seen_through,
           "Knee-height mount: a coasting track is not reported where the scan sees through "
           "every place its legs may stand (every beam with an echo within half "

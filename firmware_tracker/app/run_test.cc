@@ -101,6 +101,7 @@ TEST(TrackerRun, PipelineSummaryNamesEveryCounter) {
   c.underdetermined_fit_widened = 38;
   c.box_pieces_rejoined = 39;
   c.legs_coasting_uncertain = 40;
+  c.coasting_uncertain = 41;
   EXPECT_EQ(PipelineSummary(c),
             "rejected_scans=1 learning_scans=2 segments=3 dropped_segments=4 "
             "ellipse_measurements=5 com_measurements=6 shape_fits=7 failed_shape_fits=8 "
@@ -113,7 +114,7 @@ TEST(TrackerRun, PipelineSummaryNamesEveryCounter) {
             "touching_leg_pairs=30 box_occluded_fits=31 box_sizes_unseen=32 "
             "legs_along_from_standing=33 single_beam_partners=34 edge_echo_births=35 "
             "person_sizes_across_ray=36 partial_view_widened=37 "
-            "underdetermined_fit_widened=38 box_pieces_rejoined=39 legs_coasting_uncertain=40");
+            "underdetermined_fit_widened=38 box_pieces_rejoined=39 legs_coasting_uncertain=40 coasting_uncertain=41");
 }
 
 TEST(TrackerRun, MultiTrackerSummaryNamesEveryCounterButTheTwoBeforeIt) {

@@ -572,6 +572,9 @@ std::optional<std::string> Validate(const ShapeOptions& o) {
   if (!(std::isfinite(o.legs_report_coasting_s) && o.legs_report_coasting_s >= 0.0)) {
     return "legs_report_coasting_s must be >= 0";
   }
+  if (!(std::isfinite(o.coasting_max_sigma_m) && o.coasting_max_sigma_m >= 0.0)) {
+    return "coasting_max_sigma_m must be >= 0";
+  }
   if (!(std::isfinite(o.legs_coasting_max_sigma_m) && o.legs_coasting_max_sigma_m >= 0.0)) {
     return "legs_coasting_max_sigma_m must be >= 0";
   }
@@ -2410,6 +2413,11 @@ void TrackingPipeline::DropCoasting(const ScanView& scan) {
           !HiddenBehindNearer(scan, position,
                               0.5 * o.leg_pairing_distance_m + o.leg_radius_m + 2.0 * sigma_m)) {
         ++counters_.legs_coasting_uncertain;
+        continue;
+      }
+      // Upper body: only while the prediction still says where the body stands.
+      if (torso && o.coasting_max_sigma_m > 0.0 && sigma_m > o.coasting_max_sigma_m) {
+        ++counters_.coasting_uncertain;
         continue;
       }
       const double coasted_m = std::hypot(r.vx_mps, r.vy_mps) * r.coasted_s;

@@ -382,6 +382,9 @@ TEST(TrackerOptionsTest, DefaultsValidAndErrorsNameTheSectionAndField) {
   o.shape.unseen_coasting_m = -0.1;
   EXPECT_EQ(Validate(o)->rfind("shape.unseen_coasting_m", 0), 0u) << *Validate(o);
   o = {};
+  o.shape.coasting_max_sigma_m = -0.1;
+  EXPECT_EQ(Validate(o)->rfind("shape.coasting_max_sigma_m", 0), 0u) << *Validate(o);
+  o = {};
   o.shape.legs_coasting_max_sigma_m = -0.1;
   EXPECT_EQ(Validate(o)->rfind("shape.legs_coasting_max_sigma_m", 0), 0u) << *Validate(o);
   o = {};
@@ -629,9 +632,11 @@ TEST(PipelineScenarioTest, OcclusionBehindAPillarCoastsAndReacquiresTheSameId) {
   // 0.25 s at 1.2 m/s: nothing of it in the scan, it may have turned behind the pillar).
   EXPECT_LE(f.unmatched, 9);
   {
-    // Without that limit, not reported only while hidden longer than report_coasting_s (0.5 s).
+    // Without that limit (nor shape.coasting_max_sigma_m), not reported only while hidden longer
+    // than report_coasting_s (0.5 s).
     TrackerOptions no_limit = Synthetic();
     no_limit.shape.unseen_coasting_m = 0.0;
+    no_limit.shape.coasting_max_sigma_m = 0.0;
     const SceneRun all = Simulate(scene, walker.end_s() + 2.0, no_limit);
     const Follow g = FollowWalker(all, walker, 0, walker.start_s() + 0.5, walker.end_s(), 0.6);
     SCOPED_TRACE(Describe(g));
@@ -727,6 +732,7 @@ TEST(PipelineScenarioTest, ACoastingTrackIsNotReportedWhereTheScanShowsNothingOf
   };
   TrackerOptions off = Synthetic();
   off.shape.unseen_coasting_m = 0.0;
+  off.shape.coasting_max_sigma_m = 0.0;  // reported whatever its sigma: the test below
   const Result without = run_with(off);
   EXPECT_GE(without.farthest_m, 0.5);
   EXPECT_EQ(without.dropped, 0u);
@@ -1069,6 +1075,52 @@ TEST(PipelineScenarioTest, AKneeHeightCoastingTrackIsReportedOnlyWhileItsSigmaIs
   // The default: a leg's diameter.
   EXPECT_DOUBLE_EQ(TrackerOptions{}.shape.legs_coasting_max_sigma_m,
                    2.0 * TrackerOptions{}.shape.leg_radius_m);
+}
+
+// At upper-body height a person walking across the room vanishes at x = 4.5 m (as through a
+// door) with neither the see-through nor the nothing-seen check (both off in both runs): the
+// coasting track is reported only while its position sigma stays within
+// shape.coasting_max_sigma_m (here 0.05 m, below what this track's sigma grows to within
+// report_coasting_s; the default, the body's half-depth, is reached by tracks measured from a few
+// beams far out or coasting longer); with the rule off it is reported whatever its sigma, for
+// all of report_coasting_s.
+TEST(PipelineScenarioTest, AnUpperBodyCoastingTrackIsReportedOnlyWhileItsSigmaIsWithinTheBody) {
+  Scene scene;
+  scene.walkers = {Walker::Path(kLearnedS, {{4.5, -3.0}, {4.5, 0.5}}, 1.2)};
+  const Walker& walker = scene.walkers[0];
+  constexpr double kMaxSigmaM = 0.05;
+  struct Result {
+    int coasting = 0;
+    int coasting_beyond = 0;  // reported with a sigma above kMaxSigmaM
+    std::uint64_t dropped = 0;
+  };
+  auto run_with = [&](double max_sigma_m) {
+    TrackerOptions options = Synthetic();
+    options.shape.seen_through_margin_m = 0.0;
+    options.shape.unseen_coasting_m = 0.0;
+    options.shape.coasting_max_sigma_m = max_sigma_m;
+    const SceneRun run = Simulate(scene, walker.end_s() + 1.5, options);
+    Result result;
+    const int before = ReportsAroundTheWalk(run, walker, [&](const TrackReport& r) {
+      ++result.coasting;
+      const Eigen::Matrix2d p = r.covariance.topLeftCorner<2, 2>();
+      if (std::sqrt(0.5 * p.trace()) > kMaxSigmaM) ++result.coasting_beyond;
+    });
+    EXPECT_GT(before, 50);  // tracked while walking
+    result.dropped = run.pipeline->counters().coasting_uncertain;
+    return result;
+  };
+  const Result without = run_with(0.0);
+  EXPECT_GE(without.coasting_beyond, 1) << without.coasting;
+  EXPECT_EQ(without.dropped, 0u);
+  const Result with = run_with(kMaxSigmaM);
+  EXPECT_EQ(with.coasting_beyond, 0);
+  EXPECT_GE(with.coasting, 1);  // reported while still within it
+  EXPECT_LT(with.coasting, without.coasting);
+  EXPECT_GE(with.dropped, 1u);
+  // The default: the body's half-depth.
+  EXPECT_DOUBLE_EQ(TrackerOptions{}.shape.coasting_max_sigma_m,
+                   TrackerOptions{}.shape.person_minor_m);
 }
 
 TEST(PipelineScenarioTest, TwoPeopleSideBySideAtKneeHeightKeepTheirLegsAndIds) {

@@ -106,6 +106,8 @@
 //   MultiTrackerOptions::report_coasting_s, ShapeOptions::legs_report_coasting_s = 0;
 //   --before-legs-coasting-sigma: "before" reports a knee-height coasting track whatever its
 //   position sigma, ShapeOptions::legs_coasting_max_sigma_m = 0;
+//   --before-coasting-sigma: "before" reports an upper-body coasting track whatever its position
+//   sigma, ShapeOptions::coasting_max_sigma_m = 0;
 //   --before-recent-veil: "before" takes a knee-height leg-sized segment behind a nearer return its
 //   beams had in the last scans for a leg, ShapeOptions::recent_veil_s = 0;
 //   --before-single-precision-fit: "before" fits a person's outline with every point in double
@@ -1243,6 +1245,9 @@ bool g_before_legs_report_coasting = false;
 // --before-legs-coasting-sigma: "before" reports a knee-height coasting track whatever its position
 // sigma (ShapeOptions::legs_coasting_max_sigma_m = 0).
 bool g_before_legs_coasting_sigma = false;
+// --before-coasting-sigma: "before" reports an upper-body coasting track whatever its position
+// sigma (ShapeOptions::coasting_max_sigma_m = 0).
+bool g_before_coasting_sigma = false;
 // --before-recent-veil: "before" takes a knee-height leg-sized segment behind a nearer return its
 // beams had in the last scans for a leg (ShapeOptions::recent_veil_s = 0).
 bool g_before_recent_veil = false;
@@ -1317,6 +1322,7 @@ std::vector<Variant> Variants(sim::Mount mount, double range_m) {
   old.shape.legs_report_coasting_s = 0.0;
   old.shape.legs_seen_through = false;
   old.shape.legs_coasting_max_sigma_m = 0.0;
+  old.shape.coasting_max_sigma_m = 0.0;
   old.shape.recent_veil_s = 0.0;
   old.tracking.adopt_successor_m = 0.0;
   old.shape.single_leg_from_standing = false;
@@ -1332,7 +1338,7 @@ std::vector<Variant> Variants(sim::Mount mount, double range_m) {
              g_before_deep_evidence || g_before_isotropic_bias || g_before_across_walk ||
              g_before_side_uncertainty || g_before_side_from_view || g_before_few_point_legs ||
              g_before_deep_legs || g_before_legs_seen_through || g_before_legs_report_coasting ||
-             g_before_legs_coasting_sigma || g_before_leg_edges || g_before_outline_departure ||
+             g_before_legs_coasting_sigma || g_before_coasting_sigma || g_before_leg_edges || g_before_outline_departure ||
              g_before_partial_view || g_before_underdetermined_fit || g_before_fusion_merge ||
              g_before_report_sourceless || g_before_recent_veil || g_before_single_precision_fit ||
              g_before_stance_weight || g_before_adopt || g_before_touching_legs ||
@@ -1360,6 +1366,7 @@ std::vector<Variant> Variants(sim::Mount mount, double range_m) {
     if (g_before_legs_seen_through) before.shape.legs_seen_through = false;
     if (g_before_legs_report_coasting) before.shape.legs_report_coasting_s = 0.0;
     if (g_before_legs_coasting_sigma) before.shape.legs_coasting_max_sigma_m = 0.0;
+    if (g_before_coasting_sigma) before.shape.coasting_max_sigma_m = 0.0;
     if (g_before_leg_edges) before.shape.leg_edge_in_mixed_beam = false;
     if (g_before_outline_departure) before.shape.outline_departure_gain = 0.0;
     if (g_before_partial_view) before.shape.partial_view_shared = false;
@@ -2998,7 +3005,7 @@ std::string KneeHeightBefore() {
         g_before_isotropic_bias || g_before_across_walk || g_before_side_uncertainty ||
         g_before_side_from_view || g_before_lone_leg_standing || g_before_few_point_legs ||
         g_before_deep_legs || g_before_legs_seen_through || g_before_legs_report_coasting ||
-        g_before_legs_coasting_sigma || g_before_leg_edges || g_before_outline_departure ||
+        g_before_legs_coasting_sigma || g_before_coasting_sigma || g_before_leg_edges || g_before_outline_departure ||
         g_before_partial_view || g_before_underdetermined_fit || g_before_fusion_merge ||
         g_before_report_sourceless || g_before_recent_veil || g_before_single_precision_fit ||
         g_before_stance_weight || g_before_adopt || g_before_touching_legs ||
@@ -3096,6 +3103,11 @@ std::string KneeHeightBefore() {
     without.push_back(
         "reporting a knee-height coasting track whatever its position sigma "
         "(`shape.legs_coasting_max_sigma_m` 0)");
+  }
+  if (g_before_coasting_sigma) {
+    without.push_back(
+        "reporting an upper-body coasting track whatever its position sigma "
+        "(`shape.coasting_max_sigma_m` 0)");
   }
   if (g_before_leg_edges) {
     without.push_back(
@@ -3290,6 +3302,8 @@ int main(int argc, char** argv) {
       g_before_legs_report_coasting = true;
     } else if (a == "--before-legs-coasting-sigma") {
       g_before_legs_coasting_sigma = true;
+    } else if (a == "--before-coasting-sigma") {
+      g_before_coasting_sigma = true;
     } else if (a == "--before-leg-edges") {
       g_before_leg_edges = true;
     } else if (a == "--before-outline-departure") {
