@@ -114,7 +114,8 @@ TEST(TrackerRun, PipelineSummaryNamesEveryCounter) {
             "touching_leg_pairs=30 box_occluded_fits=31 box_sizes_unseen=32 "
             "legs_along_from_standing=33 single_beam_partners=34 edge_echo_births=35 "
             "person_sizes_across_ray=36 partial_view_widened=37 "
-            "underdetermined_fit_widened=38 box_pieces_rejoined=39 legs_coasting_uncertain=40 coasting_uncertain=41");
+            "underdetermined_fit_widened=38 box_pieces_rejoined=39 legs_coasting_uncertain=40 "
+            "coasting_uncertain=41");
 }
 
 TEST(TrackerRun, MultiTrackerSummaryNamesEveryCounterButTheTwoBeforeIt) {

@@ -1338,7 +1338,8 @@ std::vector<Variant> Variants(sim::Mount mount, double range_m) {
              g_before_deep_evidence || g_before_isotropic_bias || g_before_across_walk ||
              g_before_side_uncertainty || g_before_side_from_view || g_before_few_point_legs ||
              g_before_deep_legs || g_before_legs_seen_through || g_before_legs_report_coasting ||
-             g_before_legs_coasting_sigma || g_before_coasting_sigma || g_before_leg_edges || g_before_outline_departure ||
+             g_before_legs_coasting_sigma || g_before_coasting_sigma || g_before_leg_edges ||
+             g_before_outline_departure ||
              g_before_partial_view || g_before_underdetermined_fit || g_before_fusion_merge ||
              g_before_report_sourceless || g_before_recent_veil || g_before_single_precision_fit ||
              g_before_stance_weight || g_before_adopt || g_before_touching_legs ||
@@ -3005,7 +3006,8 @@ std::string KneeHeightBefore() {
         g_before_isotropic_bias || g_before_across_walk || g_before_side_uncertainty ||
         g_before_side_from_view || g_before_lone_leg_standing || g_before_few_point_legs ||
         g_before_deep_legs || g_before_legs_seen_through || g_before_legs_report_coasting ||
-        g_before_legs_coasting_sigma || g_before_coasting_sigma || g_before_leg_edges || g_before_outline_departure ||
+        g_before_legs_coasting_sigma || g_before_coasting_sigma || g_before_leg_edges ||
+        g_before_outline_departure ||
         g_before_partial_view || g_before_underdetermined_fit || g_before_fusion_merge ||
         g_before_report_sourceless || g_before_recent_veil || g_before_single_precision_fit ||
         g_before_stance_weight || g_before_adopt || g_before_touching_legs ||
