@@ -22,7 +22,8 @@ mkdir -p results
   --before-legs-coasting-sigma --before-coasting-sigma \
   --before-leg-edges --before-outline-departure --before-partial-view --before-underdetermined-fit \
   --before-recent-veil --before-stance-weight \
-  --before-box-occluders --before-box-rejoin --before-single-beam-partner --before-edge-echo-birth \
+  --before-box-occluders --before-box-rejoin --before-box-unseen-cov --before-single-beam-partner \
+  --before-edge-echo-birth \
   --before-person-reach --before-partial-extent \
   --before-single-precision-fit --before-adopt --before-touching-legs \
   --before-fusion-merge \

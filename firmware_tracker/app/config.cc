@@ -368,6 +368,12 @@ void VisitShape(tracking::ShapeOptions& o, ConfigVisitor& v) {
   v.Field("box_rejoin_sigmas", o.box_rejoin_sigmas,
           "With box_rejoin_pieces: sigmas of the range noise, model error, size state and "
           "predicted position by which the box's rectangle is grown.");
+  v.Field("box_unseen_depth_cov", o.box_unseen_depth_cov,
+          "A box (cart) whose scan does not show one of its semi-axes (one face seen): its "
+          "reported centre covariance along that axis is at least box_unseen_sigma_m^2 (or the "
+          "size state's variance). false: the same size term in every direction.");
+  v.Field("box_unseen_sigma_m", o.box_unseen_sigma_m,
+          "With box_unseen_depth_cov: sigma of a box's semi-axis the scan does not show.");
   v.Field("box_size_from_faces_seen", o.box_size_from_faces_seen,
           "A box's half-length is learned only from scans that show one of its sides, its "
           "half-width only from scans that show one of its ends (at least three beams across the "

@@ -306,6 +306,20 @@ std::array<bool, 2> BoxFacesShown(const Eigen::Vector2d& centre_m, const Eigen::
   return {a_shown, b_shown};
 }
 
+Eigen::Matrix2d BoxUnseenCentreCov(const Eigen::Matrix2d& cov_m2, double size_var_m2,
+                                   const Eigen::Matrix2d& size_cov_m2, double yaw_rad,
+                                   const std::array<bool, 2>& shown, double unseen_sigma_m) {
+  Eigen::Matrix2d cov = cov_m2;
+  const Eigen::Vector2d e1(std::cos(yaw_rad), std::sin(yaw_rad)), e2(-e1.y(), e1.x());
+  for (int k = 0; k < 2; ++k) {
+    if (shown[static_cast<std::size_t>(k)]) continue;
+    const Eigen::Vector2d& e = k == 0 ? e1 : e2;
+    const double extra = std::max(size_cov_m2(k, k), unseen_sigma_m * unseen_sigma_m) - size_var_m2;
+    if (extra > 0.0) cov += extra * e * e.transpose();
+  }
+  return cov;
+}
+
 bool InsideGrownBox(const Eigen::Vector2d& centre_m, const Eigen::Vector2d& size_m, double yaw_rad,
                     double margin_m, std::span<const Eigen::Vector2d> points) {
   if (points.empty()) return false;
@@ -598,6 +612,7 @@ std::optional<std::string> Validate(const ShapeOptions& o) {
   }
   if (!Positive(o.box_rejoin_sigmas)) return "box_rejoin_sigmas must be > 0";
   if (!Positive(o.box_size_sigma_m)) return "box_size_sigma_m must be > 0";
+  if (!Positive(o.box_unseen_sigma_m)) return "box_unseen_sigma_m must be > 0";
   return std::nullopt;
 }
 
@@ -720,6 +735,17 @@ class TrackingPipeline::Refiner final : public MeasurementRefiner {
           std::max({shape.size_cov_m2(0, 0), shape.size_cov_m2(1, 1), floor_m * floor_m});
       shape.centre_bias_cov_m2 =
           (bias_sigma_m * bias_sigma_m + size_var) * Eigen::Matrix2d::Identity();
+      if (shape.model == ShapeModel::kBox && o.box_unseen_depth_cov && ob.part_count > 0) {
+        // ShapeOptions::box_unseen_depth_cov: along a box axis whose semi-axis the scan does not
+        // show, the centre is as uncertain as that semi-axis.
+        const std::array<bool, 2> shown =
+            internal::BoxFacesShown(measurement.position_m, shape.size_m, shape.yaw_rad,
+                                    std::abs(ob.parts[0].silhouette.step_rad));
+        shape.centre_bias_cov_m2 =
+            internal::BoxUnseenCentreCov(shape.centre_bias_cov_m2, size_var, shape.size_cov_m2,
+                                         shape.yaw_rad, shown, o.box_unseen_sigma_m);
+        if (!shown[0] || !shown[1]) ++box_unseen_widened;
+      }
     }
     // The outline's departure in this scan, or on average over the track's recent scans, is
     // shared by successive scans as the outline is (a second object in the segment, a partial
@@ -758,6 +784,7 @@ class TrackingPipeline::Refiner final : public MeasurementRefiner {
   std::uint64_t touching = 0;
   std::uint64_t box_occluded = 0;
   std::uint64_t box_unseen_sizes = 0;
+  std::uint64_t box_unseen_widened = 0;
   std::uint64_t person_across_ray = 0;
   std::uint64_t person_beyond_reach = 0;
   std::uint64_t partial_size_floored = 0;
@@ -2475,6 +2502,7 @@ const ScanTracks& TrackingPipeline::Process(const ScanView& scan, std::uint32_t 
   const std::uint64_t stance_weighted_before = refiner_->stance_weighted;
   const std::uint64_t touching_before = refiner_->touching;
   const std::uint64_t box_occluded_before = refiner_->box_occluded;
+  const std::uint64_t box_unseen_widened_before = refiner_->box_unseen_widened;
   const std::uint64_t box_unseen_before = refiner_->box_unseen_sizes;
   const std::uint64_t person_across_ray_before = refiner_->person_across_ray;
   const std::uint64_t person_beyond_reach_before = refiner_->person_beyond_reach;
@@ -2498,6 +2526,7 @@ const ScanTracks& TrackingPipeline::Process(const ScanView& scan, std::uint32_t 
   counters_.stance_weighted_pairs += refiner_->stance_weighted - stance_weighted_before;
   counters_.touching_leg_pairs += refiner_->touching - touching_before;
   counters_.box_occluded_fits += refiner_->box_occluded - box_occluded_before;
+  counters_.box_unseen_widened += refiner_->box_unseen_widened - box_unseen_widened_before;
   counters_.box_sizes_unseen += refiner_->box_unseen_sizes - box_unseen_before;
   counters_.person_sizes_across_ray += refiner_->person_across_ray - person_across_ray_before;
   counters_.person_beyond_reach_fits += refiner_->person_beyond_reach - person_beyond_reach_before;

@@ -465,6 +465,16 @@ struct ShapeOptions {
   // PipelineCounters::box_pieces_rejoined. false: every segment is an observation.
   bool box_rejoin_pieces = true;
   double box_rejoin_sigmas = 3.0;
+  // A box (a cart) seen on one face only: the semi-axis across that face (its depth along the
+  // ray) is not in the scan; the fit puts the centre that learned semi-axis behind the face, so
+  // the centre is off along the box's axis by the semi-axis's error, which the scans that showed
+  // only this face did not measure. The reported centre covariance gets, along each box axis
+  // whose semi-axis the scan does not show (internal::BoxFacesShown), the variance
+  // max(size state's, box_unseen_sigma_m^2) instead of the isotropic size term below
+  // (box_size_floor_sigma_m). Counted in PipelineCounters::box_unseen_widened. false: the
+  // isotropic size term for every box.
+  bool box_unseen_depth_cov = true;
+  double box_unseen_sigma_m = 0.2;
   // Upper-body mount: a person's size is learned only as far as the scan shows it across the ray.
   // The silhouette's two ends fix the body's width across the ray; its extent along the ray,
   // which puts the centre behind the visible side, a fit reads from the visible arc's curvature
@@ -712,6 +722,8 @@ struct PipelineCounters {
   std::uint64_t box_sizes_unseen = 0;
   // Segments measured together with the one before them as a box's outline (box_rejoin_pieces).
   std::uint64_t box_pieces_rejoined = 0;
+  // Box refinements whose reported covariance took an unseen semi-axis (box_unseen_depth_cov).
+  std::uint64_t box_unseen_widened = 0;
   // Person (upper-body) refinements whose size was learned per semi-axis by its share across the
   // ray (person_size_across_ray).
   std::uint64_t person_sizes_across_ray = 0;
@@ -947,6 +959,14 @@ double SuperellipseReach(const Eigen::Vector2d& size_m, double exponent);
 // half-width b (an end faces it, likewise). Both true where the range or the step is not positive.
 std::array<bool, 2> BoxFacesShown(const Eigen::Vector2d& centre_m, const Eigen::Vector2d& size_m,
                                   double yaw_rad, double step_rad);
+
+// ShapeOptions::box_unseen_depth_cov: the box's (semi-axes a along yaw_rad, b across it) centre
+// covariance cov_m2 (the isotropic size term size_var_m2 in it) with, along each box axis whose
+// semi-axis is not shown, the variance raised from size_var_m2 to max(size_cov_m2(k, k),
+// unseen_sigma_m^2) (never lowered).
+Eigen::Matrix2d BoxUnseenCentreCov(const Eigen::Matrix2d& cov_m2, double size_var_m2,
+                                   const Eigen::Matrix2d& size_cov_m2, double yaw_rad,
+                                   const std::array<bool, 2>& shown, double unseen_sigma_m);
 
 // ShapeOptions::box_rejoin_pieces: whether every point lies inside the box (centre_m, half-lengths
 // size_m along yaw_rad and across it) grown by margin_m on every side; false for no points.

@@ -2014,6 +2014,68 @@ TEST(PipelineScenarioTest, AnObliqueTrolleysPiecesOnItsPredictedOutlineAreOneObs
   EXPECT_LT(after.extra_scans, before.extra_scans);
 }
 
+// ShapeOptions::box_unseen_depth_cov: a box's (semi-axes 0.6 along yaw 90 deg, 0.35 across)
+// centre covariance with the isotropic size term 0.06^2; its half-width b not shown: along x
+// (axis b) the variance becomes max(size state's 0.01^2, 0.2^2), along y it stays; with a shown
+// as well nothing changes; a size state less certain than 0.2 m counts as it is.
+TEST(PipelineTest, BoxUnseenCentreCovIsTheUnseenSemiAxisAlongItsAxis) {
+  const double floor_var = 0.06 * 0.06;
+  const Eigen::Matrix2d cov = (0.01 * 0.01 + floor_var) * Eigen::Matrix2d::Identity();
+  const Eigen::Matrix2d size_cov = 0.01 * 0.01 * Eigen::Matrix2d::Identity();
+  const double yaw = common::kPi / 2;
+  const Eigen::Matrix2d b_unseen =
+      internal::BoxUnseenCentreCov(cov, floor_var, size_cov, yaw, {true, false}, 0.2);
+  EXPECT_NEAR(b_unseen(0, 0), 0.01 * 0.01 + 0.2 * 0.2, 1e-12);
+  EXPECT_NEAR(b_unseen(1, 1), cov(1, 1), 1e-12);
+  EXPECT_NEAR(b_unseen(0, 1), 0.0, 1e-12);
+  const Eigen::Matrix2d both =
+      internal::BoxUnseenCentreCov(cov, floor_var, size_cov, yaw, {true, true}, 0.2);
+  EXPECT_TRUE(both.isApprox(cov));
+  Eigen::Matrix2d wide_size = size_cov;
+  wide_size(1, 1) = 0.3 * 0.3;
+  const Eigen::Matrix2d wide =
+      internal::BoxUnseenCentreCov(cov, floor_var, wide_size, yaw, {true, false}, 0.2);
+  EXPECT_NEAR(wide(0, 0), 0.01 * 0.01 + 0.3 * 0.3, 1e-12);
+}
+
+// ShapeOptions::box_unseen_depth_cov: a 1.2 x 0.7 m trolley pushed along y at x = 5.3 m is seen
+// on its long side near y = 0, its depth (x, along the ray) not shown: the reported sigma along
+// x is at least box_unseen_sigma_m (0.2 m) there; without, the size floor's (0.06 m) and the
+// filter's.
+double TrolleyBroadsideSigmaX(bool unseen_cov, std::uint64_t* widened) {
+  Scene scene;
+  const MovingBox box = AddMovingBox(scene, {5.3, -4.2}, {5.3, 0.0}, 0.8, 0.35, 0.6);
+  TrackerOptions options = Synthetic();
+  options.shape.box_unseen_depth_cov = unseen_cov;
+  const SceneRun run = Simulate(scene, box.end_s + 0.2, options);
+  double var = 0.0;
+  int n = 0;
+  for (const Frame& f : run.frames) {
+    const auto c = box.centre_at(f.t_s);
+    if (!c || f.t_s < box.start_s + 1.0 || c->y() < -1.0) continue;
+    for (const TrackReport& r : f.tracks) {
+      if (r.state != TrackState::kConfirmed || r.shape != ObjectShape::kBox) continue;
+      if ((Position(r) - *c).norm() > 0.5) continue;
+      var += r.covariance(0, 0);
+      ++n;
+    }
+  }
+  *widened = run.pipeline->counters().box_unseen_widened;
+  return n > 0 ? std::sqrt(var / n) : 0.0;
+}
+
+TEST(PipelineScenarioTest, ABroadsideTrolleysUnseenDepthIsInItsReportedCovariance) {
+  std::uint64_t widened_before = 0, widened_after = 0;
+  const double before = TrolleyBroadsideSigmaX(false, &widened_before);
+  const double after = TrolleyBroadsideSigmaX(true, &widened_after);
+  SCOPED_TRACE("sigma x before " + std::to_string(before) + ", after " + std::to_string(after));
+  EXPECT_EQ(widened_before, 0u);
+  EXPECT_GT(widened_after, 0u);
+  EXPECT_GT(before, 0.0);
+  EXPECT_LT(before, 0.15);
+  EXPECT_GE(after, 0.2);
+}
+
 // ShapeOptions::box_drop_occluders: the points of a box's near end (x = 4.55, the box centred at
 // (5, 0), 0.9 x 0.6 m along x) are kept, a pusher's two legs 0.35 m in front of it are not, and
 // where the segment ends on them that silhouette end is no longer the box's.

@@ -46,7 +46,8 @@
 //                       [--before-recent-veil]
 //                       [--before-single-precision-fit]
 //                       [--before-stance-weight] [--before-adopt] [--before-touching-legs]
-//                       [--before-box-occluders] [--before-box-rejoin] [--before-person-size]
+//                       [--before-box-occluders] [--before-box-rejoin] [--before-box-unseen-cov]
+//                       [--before-person-size]
 //                       [--before-person-reach] [--before-partial-extent]
 //                       [--before-fusion-merge] [--before-report-sourceless]]
 //   (--extra: more scenario folders, e.g. held-out scenes, reported in their own section;
@@ -123,6 +124,8 @@
 //   covariance, ShapeOptions::touching_legs_along_ray = false;
 //   --before-box-occluders: "before" fits a box (a cart) to every point of its segment, also to
 //   those in front of it (its pusher's), ShapeOptions::box_drop_occluders = false;
+//   --before-box-unseen-cov: "before" reports a box's size error as the same in every direction,
+//   also along an axis the scan does not show, ShapeOptions::box_unseen_depth_cov = false;
 //   --before-box-rejoin: "before" measures every segment on its own, also the pieces the width
 //   limit cuts a box's outline into, ShapeOptions::box_rejoin_pieces = false;
 //   --before-person-size: "before" runs with ShapeOptions::person_size_across_ray the other way
@@ -1283,6 +1286,9 @@ bool g_before_box_occluders = false;
 // --before-box-rejoin: "before" measures every segment on its own, also the pieces the width limit
 // cuts a box's outline into (ShapeOptions::box_rejoin_pieces = false).
 bool g_before_box_rejoin = false;
+// --before-box-unseen-cov: "before" reports a box's size error as the same in every direction,
+// also along an axis the scan does not show (ShapeOptions::box_unseen_depth_cov = false).
+bool g_before_box_unseen_cov = false;
 // --before-fusion-merge: "before"'s fusion without merging fused tracks left without sources and
 // reporting fused tracks no tracker holds any more (FusionOptions::merge_sourceless = false,
 // report_sourceless = true).
@@ -1339,11 +1345,11 @@ std::vector<Variant> Variants(sim::Mount mount, double range_m) {
              g_before_side_uncertainty || g_before_side_from_view || g_before_few_point_legs ||
              g_before_deep_legs || g_before_legs_seen_through || g_before_legs_report_coasting ||
              g_before_legs_coasting_sigma || g_before_coasting_sigma || g_before_leg_edges ||
-             g_before_outline_departure ||
-             g_before_partial_view || g_before_underdetermined_fit || g_before_fusion_merge ||
-             g_before_report_sourceless || g_before_recent_veil || g_before_single_precision_fit ||
-             g_before_stance_weight || g_before_adopt || g_before_touching_legs ||
-             g_before_box_occluders || g_before_box_rejoin || g_before_lone_leg_standing ||
+             g_before_outline_departure || g_before_partial_view || g_before_underdetermined_fit ||
+             g_before_fusion_merge || g_before_report_sourceless || g_before_recent_veil ||
+             g_before_single_precision_fit || g_before_stance_weight || g_before_adopt ||
+             g_before_touching_legs || g_before_box_occluders || g_before_box_rejoin ||
+             g_before_box_unseen_cov || g_before_lone_leg_standing ||
              g_before_single_beam_partner || g_before_edge_echo_birth || g_before_person_size ||
              g_before_person_reach || g_before_partial_extent) {
     tracking::TrackerOptions before = fresh;
@@ -1379,6 +1385,7 @@ std::vector<Variant> Variants(sim::Mount mount, double range_m) {
     if (g_before_touching_legs) before.shape.touching_legs_along_ray = false;
     if (g_before_box_occluders) before.shape.box_drop_occluders = false;
     if (g_before_box_rejoin) before.shape.box_rejoin_pieces = false;
+    if (g_before_box_unseen_cov) before.shape.box_unseen_depth_cov = false;
     if (g_before_single_beam_partner) before.shape.single_beam_partner = false;
     if (g_before_edge_echo_birth) before.shape.edge_echo_no_birth = false;
     if (g_before_person_size) {
@@ -3007,13 +3014,12 @@ std::string KneeHeightBefore() {
         g_before_side_from_view || g_before_lone_leg_standing || g_before_few_point_legs ||
         g_before_deep_legs || g_before_legs_seen_through || g_before_legs_report_coasting ||
         g_before_legs_coasting_sigma || g_before_coasting_sigma || g_before_leg_edges ||
-        g_before_outline_departure ||
-        g_before_partial_view || g_before_underdetermined_fit || g_before_fusion_merge ||
-        g_before_report_sourceless || g_before_recent_veil || g_before_single_precision_fit ||
-        g_before_stance_weight || g_before_adopt || g_before_touching_legs ||
-        g_before_box_occluders || g_before_box_rejoin || g_before_single_beam_partner ||
-        g_before_edge_echo_birth || g_before_person_size || g_before_person_reach ||
-        g_before_partial_extent) ||
+        g_before_outline_departure || g_before_partial_view || g_before_underdetermined_fit ||
+        g_before_fusion_merge || g_before_report_sourceless || g_before_recent_veil ||
+        g_before_single_precision_fit || g_before_stance_weight || g_before_adopt ||
+        g_before_touching_legs || g_before_box_occluders || g_before_box_rejoin ||
+        g_before_box_unseen_cov || g_before_single_beam_partner || g_before_edge_echo_birth ||
+        g_before_person_size || g_before_person_reach || g_before_partial_extent) ||
       g_before_mixed_pixels || g_before_far || g_before_evidence_coasting ||
       g_before_report_rules) {
     return "";
@@ -3188,6 +3194,11 @@ std::string KneeHeightBefore() {
         "fitting a box (a cart) to every point of its segment, also to those in front of it (its "
         "pusher's) (`shape.box_drop_occluders` false)");
   }
+  if (g_before_box_unseen_cov) {
+    without.push_back(
+        "reporting a box's (a cart's) size error as the same in every direction, also along an "
+        "axis whose semi-axis the scan does not show (`shape.box_unseen_depth_cov` false)");
+  }
   if (g_before_box_rejoin) {
     without.push_back(
         "measuring every segment on its own, also the pieces the width limit cuts a box's "
@@ -3326,6 +3337,8 @@ int main(int argc, char** argv) {
       g_before_touching_legs = true;
     } else if (a == "--before-box-occluders") {
       g_before_box_occluders = true;
+    } else if (a == "--before-box-unseen-cov") {
+      g_before_box_unseen_cov = true;
     } else if (a == "--before-box-rejoin") {
       g_before_box_rejoin = true;
     } else if (a == "--before-fusion-merge") {
@@ -3351,7 +3364,8 @@ int main(int argc, char** argv) {
                    "[--before-recent-veil] "
                    "[--before-single-precision-fit] "
                    "[--before-stance-weight] [--before-adopt] [--before-touching-legs] "
-                   "[--before-box-occluders] [--before-box-rejoin] [--before-person-size] "
+                   "[--before-box-occluders] [--before-box-rejoin] [--before-box-unseen-cov] "
+                   "[--before-person-size] "
                    "[--before-person-reach] [--before-partial-extent] "
                    "[--before-fusion-merge] "
                    "[--before-report-sourceless]]\n");
