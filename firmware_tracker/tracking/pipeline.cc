@@ -2443,7 +2443,13 @@ void TrackingPipeline::DropCoasting(const ScanView& scan) {
         continue;
       }
       // Upper body: only while the prediction still says where the body stands.
-      if (torso && o.coasting_max_sigma_m > 0.0 && sigma_m > o.coasting_max_sigma_m) {
+      // A box's reported covariance carries its unseen depth (box_unseen_depth_cov), up to
+      // box_unseen_sigma_m^2 along one axis, half of that in sigma_m^2: not where it stands.
+      const double max_sigma_m = o.box_unseen_depth_cov && r.shape == ObjectShape::kBox
+                                     ? std::sqrt(o.coasting_max_sigma_m * o.coasting_max_sigma_m +
+                                                 0.5 * o.box_unseen_sigma_m * o.box_unseen_sigma_m)
+                                     : o.coasting_max_sigma_m;
+      if (torso && o.coasting_max_sigma_m > 0.0 && sigma_m > max_sigma_m) {
         ++counters_.coasting_uncertain;
         continue;
       }

@@ -471,8 +471,10 @@ struct ShapeOptions {
   // only this face did not measure. The reported centre covariance gets, along each box axis
   // whose semi-axis the scan does not show (internal::BoxFacesShown), the variance
   // max(size state's, box_unseen_sigma_m^2) instead of the isotropic size term below
-  // (box_size_floor_sigma_m). Counted in PipelineCounters::box_unseen_widened. false: the
-  // isotropic size term for every box.
+  // (box_size_floor_sigma_m). A coasting box is reported while its sigma is within
+  // coasting_max_sigma_m with that depth's share (box_unseen_sigma_m^2 / 2) added: it is no
+  // uncertainty of where the box stands. Counted in PipelineCounters::box_unseen_widened. false:
+  // the isotropic size term for every box.
   bool box_unseen_depth_cov = true;
   double box_unseen_sigma_m = 0.2;
   // Upper-body mount: a person's size is learned only as far as the scan shows it across the ray.
