@@ -470,7 +470,8 @@ void VisitShape(tracking::ShapeOptions& o, ConfigVisitor& v) {
           "measurement (tracking.report_coasting_s where that is shorter): a track predicted "
           "from legs leaves someone who turns or stops unseen sooner. 0: off.");
   v.Field("point_sigma_m", o.fit.point_sigma_m, "Range noise of a point at 0 m (1 sigma).");
-  v.Field("point_sigma_per_m", o.fit.point_sigma_per_m, "Growth of the range noise per metre.");
+  v.Field("point_sigma_per_m", o.fit.point_sigma_per_m,
+          "Growth of the range noise per metre (LMS1xx, TiM: none; LMS5xx: ~0.0003-0.0004).");
   v.Field("model_sigma_m", o.fit.model_sigma_m,
           "How far a real outline departs from the model shape, per point (1 sigma).");
   v.Field("effective_points", o.fit.effective_points,

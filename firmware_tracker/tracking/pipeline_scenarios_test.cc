@@ -1688,10 +1688,10 @@ TEST(PipelineScenarioTest, TwoLegsSideBySideInOneFewPointSegmentAreMeasuredAsAPa
 
 TEST(PipelineScenarioTest, DeepLegExcessDepthIsWhatLiesBeyondOneLegsVisibleHalf) {
   const ShapeOptions o = LegsOptions().shape;
-  // Nearest at 6 m: one leg spans at most 0.06 + 2 x 0.015 + 3 (0.015 + 0.001 x 6) = 0.153 m.
+  // Nearest at 6 m: one leg spans at most 0.06 + 2 x 0.015 + 3 (0.015 + 0.0002 x 6) = 0.1386 m.
   const std::array<Eigen::Vector2d, 2> deep = {Eigen::Vector2d(6.0, 0.0),
                                                Eigen::Vector2d(6.25, 0.0)};
-  EXPECT_NEAR(internal::DeepLegExcessDepth(o, deep), 0.25 - 0.153, 1e-9);
+  EXPECT_NEAR(internal::DeepLegExcessDepth(o, deep), 0.25 - 0.1386, 1e-9);
   const std::array<Eigen::Vector2d, 2> leg = {Eigen::Vector2d(6.0, 0.0),
                                               Eigen::Vector2d(6.1, 0.05)};
   EXPECT_EQ(internal::DeepLegExcessDepth(o, leg), 0.0);
