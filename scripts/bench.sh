@@ -24,7 +24,7 @@ mkdir -p results
   --before-recent-veil --before-stance-weight \
   --before-box-occluders --before-box-rejoin --before-box-unseen-cov --before-single-beam-partner \
   --before-edge-echo-birth \
-  --before-person-reach --before-partial-extent \
+  --before-person-reach --before-partial-extent --before-neighbour --before-range-noise \
   --before-single-precision-fit --before-adopt --before-touching-legs \
   --before-fusion-merge \
   --out results/tracking_benchmark.md

@@ -402,6 +402,15 @@ void VisitShape(tracking::ShapeOptions& o, ConfigVisitor& v) {
           "Upper-body mount, a partial view (fewer than two silhouette ends): in the centre "
           "covariance successive scans share, each semi-axis's sigma is at least this (m), since "
           "the scan does not show the extent towards the hidden side. 0: the size's own sigma.");
+  v.Field("neighbour_distance_m", o.neighbour_distance_m,
+          "Upper-body mount: another observation of the scan within this of a person's (their "
+          "first measurements' centres) is an object beside the person (neighbour_sigma_m).");
+  v.Field("neighbour_sigma_m", o.neighbour_sigma_m,
+          "Upper-body mount, a person with another object within neighbour_distance_m: what the "
+          "segmentation and the fit may make of the two together (points joined or cut off, an "
+          "end taken for the silhouette), shared by the scans while they stay close: this "
+          "squared, times 1 - distance / neighbour_distance_m, per axis, is reported with the "
+          "person's measured scans (m). 0: off.");
   v.Field("beam_divergence_rad", o.beam_divergence_rad,
           "Full beam divergence of the scanner (LMS1xx, TiM: 0.015; LMS5xx: 0.011); the beam's "
           "footprint at range R is R times this plus beam_exit_diameter_m (mixed pixels of legs "
@@ -467,7 +476,8 @@ void VisitShape(tracking::ShapeOptions& o, ConfigVisitor& v) {
           "measurement (tracking.report_coasting_s where that is shorter): a track predicted "
           "from legs leaves someone who turns or stops unseen sooner. 0: off.");
   v.Field("point_sigma_m", o.fit.point_sigma_m, "Range noise of a point at 0 m (1 sigma).");
-  v.Field("point_sigma_per_m", o.fit.point_sigma_per_m, "Growth of the range noise per metre.");
+  v.Field("point_sigma_per_m", o.fit.point_sigma_per_m,
+          "Growth of the range noise per metre (LMS1xx, TiM: none; LMS5xx: ~0.0003-0.0004).");
   v.Field("model_sigma_m", o.fit.model_sigma_m,
           "How far a real outline departs from the model shape, per point (1 sigma).");
   v.Field("effective_points", o.fit.effective_points,

@@ -844,6 +844,7 @@ void MultiTracker::Report(common::UtcNs scan_start_ns, ScanTracks& out) {
     if (t.updated) {
       p.topLeftCorner<2, 2>() += t.shape.reported_departure_m2 * Eigen::Matrix2d::Identity();
       p.topLeftCorner<2, 2>() += t.shape.reported_partial_cov_m2;
+      p.topLeftCorner<2, 2>() += t.shape.reported_neighbour_m2 * Eigen::Matrix2d::Identity();
     }
     r->covariance = p;
     r->age_scans = t.age_scans;

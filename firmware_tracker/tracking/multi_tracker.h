@@ -293,6 +293,9 @@ struct TrackShape {
   // A partial view's fit covariance, reported with the track's measured scans
   // (ShapeOptions::partial_view_shared); zero otherwise. Not with coasting reports.
   Eigen::Matrix2d reported_partial_cov_m2 = Eigen::Matrix2d::Zero();
+  // Another object beside the body (ShapeOptions::neighbour_sigma_m): the variance per axis
+  // reported with the track's measured scans; zero otherwise. Not with coasting reports.
+  double reported_neighbour_m2 = 0.0;
   // Knee height: the leg centres of the track's last two-leg measurement, their fits' variance
   // (mean over the axes) and its time, 0: none (ShapeOptions::stance_leg_weight).
   std::array<Eigen::Vector2d, 2> legs_m{Eigen::Vector2d::Zero(), Eigen::Vector2d::Zero()};

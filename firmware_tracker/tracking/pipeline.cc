@@ -224,6 +224,12 @@ double PartialViewSizeFloor(const ShapeOptions& o, bool body, int edges, double 
   return body && edges < 2 ? std::max(floor_m, o.partial_view_size_sigma_m) : floor_m;
 }
 
+double NeighbourVar(const ShapeOptions& o, double distance_m) {
+  if (!(distance_m < o.neighbour_distance_m)) return 0.0;
+  return o.neighbour_sigma_m * o.neighbour_sigma_m *
+         (1.0 - std::max(0.0, distance_m) / o.neighbour_distance_m);
+}
+
 double SuperellipseReach(const Eigen::Vector2d& size_m, double exponent) {
   return std::max(size_m.x(), size_m.y()) * std::pow(2.0, 0.5 - 1.0 / std::max(exponent, 2.0));
 }
@@ -610,6 +616,10 @@ std::optional<std::string> Validate(const ShapeOptions& o) {
   if (!(std::isfinite(o.mixed_pixel_min_gap_m) && o.mixed_pixel_min_gap_m >= 0.0)) {
     return "mixed_pixel_min_gap_m must be >= 0";
   }
+  if (!Positive(o.neighbour_distance_m)) return "neighbour_distance_m must be > 0";
+  if (!(std::isfinite(o.neighbour_sigma_m) && o.neighbour_sigma_m >= 0.0)) {
+    return "neighbour_sigma_m must be >= 0 (0: off)";
+  }
   if (!Positive(o.box_rejoin_sigmas)) return "box_rejoin_sigmas must be > 0";
   if (!Positive(o.box_size_sigma_m)) return "box_size_sigma_m must be > 0";
   if (!Positive(o.box_unseen_sigma_m)) return "box_unseen_sigma_m must be > 0";
@@ -701,6 +711,18 @@ class TrackingPipeline::Refiner final : public MeasurementRefiner {
                                         ? Eigen::Matrix2d(measurement.covariance_m2)
                                         : Eigen::Matrix2d::Zero();
     if (partial) ++partial_widened;
+    // ShapeOptions::neighbour_sigma_m: the nearest other observation of the scan.
+    shape.reported_neighbour_m2 = 0.0;
+    if (body && o.neighbour_sigma_m > 0.0 && source < p_.measurements_.size()) {
+      const Eigen::Vector2d here = p_.measurements_[source].position_m;
+      double nearest_m = std::numeric_limits<double>::infinity();
+      for (std::size_t k = 0; k < p_.measurements_.size(); ++k) {
+        if (k == source) continue;
+        nearest_m = std::min(nearest_m, (p_.measurements_[k].position_m - here).norm());
+      }
+      shape.reported_neighbour_m2 = internal::NeighbourVar(o, nearest_m);
+      if (shape.reported_neighbour_m2 > 0.0) ++neighbour_widened;
+    }
     if (underdetermined) ++underdetermined_widened;
     const double share = measured_outline ? o.outline_fixed_share : 1.0;
     const double model_sigma_m =
@@ -788,6 +810,7 @@ class TrackingPipeline::Refiner final : public MeasurementRefiner {
   std::uint64_t person_across_ray = 0;
   std::uint64_t person_beyond_reach = 0;
   std::uint64_t partial_size_floored = 0;
+  std::uint64_t neighbour_widened = 0;
 
   // How many of the observation's two outline ends are silhouettes (MakePart: not an occluder's
   // edge, not the field of view's end).
@@ -2513,6 +2536,7 @@ const ScanTracks& TrackingPipeline::Process(const ScanView& scan, std::uint32_t 
   const std::uint64_t person_across_ray_before = refiner_->person_across_ray;
   const std::uint64_t person_beyond_reach_before = refiner_->person_beyond_reach;
   const std::uint64_t partial_size_floored_before = refiner_->partial_size_floored;
+  const std::uint64_t neighbour_widened_before = refiner_->neighbour_widened;
   scan_ = &scan;
   ++refiner_->scans;
   tracker_.Step(scan.stamp_ns, measurements_.span(), offsets_s_.span(),
@@ -2538,6 +2562,7 @@ const ScanTracks& TrackingPipeline::Process(const ScanView& scan, std::uint32_t 
   counters_.person_beyond_reach_fits += refiner_->person_beyond_reach - person_beyond_reach_before;
   counters_.partial_view_size_floored +=
       refiner_->partial_size_floored - partial_size_floored_before;
+  counters_.neighbour_widened += refiner_->neighbour_widened - neighbour_widened_before;
   if (bg.scan_error == ScanError::kNone && bg.learned) {
     AbsorbStatic(scan);
     if (shape_fit) DropCoasting(scan);

@@ -13,6 +13,7 @@
 #include <cmath>
 #include <cstdint>
 #include <functional>
+#include <limits>
 #include <map>
 #include <memory>
 #include <optional>
@@ -1687,10 +1688,10 @@ TEST(PipelineScenarioTest, TwoLegsSideBySideInOneFewPointSegmentAreMeasuredAsAPa
 
 TEST(PipelineScenarioTest, DeepLegExcessDepthIsWhatLiesBeyondOneLegsVisibleHalf) {
   const ShapeOptions o = LegsOptions().shape;
-  // Nearest at 6 m: one leg spans at most 0.06 + 2 x 0.015 + 3 (0.015 + 0.001 x 6) = 0.153 m.
+  // Nearest at 6 m: one leg spans at most 0.06 + 2 x 0.015 + 3 (0.015 + 0.0002 x 6) = 0.1386 m.
   const std::array<Eigen::Vector2d, 2> deep = {Eigen::Vector2d(6.0, 0.0),
                                                Eigen::Vector2d(6.25, 0.0)};
-  EXPECT_NEAR(internal::DeepLegExcessDepth(o, deep), 0.25 - 0.153, 1e-9);
+  EXPECT_NEAR(internal::DeepLegExcessDepth(o, deep), 0.25 - 0.1386, 1e-9);
   const std::array<Eigen::Vector2d, 2> leg = {Eigen::Vector2d(6.0, 0.0),
                                               Eigen::Vector2d(6.1, 0.05)};
   EXPECT_EQ(internal::DeepLegExcessDepth(o, leg), 0.0);
@@ -2529,6 +2530,65 @@ TEST(PipelineScenarioTest, APartialViewIsReportedWithItsFitsCovariance) {
   EXPECT_GE(wider, 5);
   EXPECT_GT(same, 100);  // a whole view: reported as before
   EXPECT_LT(nees, nees_before);
+}
+
+// ShapeOptions::neighbour_sigma_m: neighbour_sigma_m^2 (1 - d / neighbour_distance_m) per axis
+// within neighbour_distance_m, nothing beyond it or with the sigma 0.
+TEST(PipelineTest, NeighbourVarFallsToZeroAtTheNeighbourDistance) {
+  ShapeOptions o;
+  o.neighbour_distance_m = 1.0;
+  o.neighbour_sigma_m = 0.06;
+  EXPECT_NEAR(internal::NeighbourVar(o, 0.0), 0.0036, 1e-15);
+  EXPECT_NEAR(internal::NeighbourVar(o, 0.5), 0.0018, 1e-15);
+  EXPECT_NEAR(internal::NeighbourVar(o, 0.75), 0.0009, 1e-15);
+  EXPECT_EQ(internal::NeighbourVar(o, 1.0), 0.0);
+  EXPECT_EQ(internal::NeighbourVar(o, 3.0), 0.0);
+  EXPECT_EQ(internal::NeighbourVar(o, std::numeric_limits<double>::infinity()), 0.0);
+  o.neighbour_sigma_m = 0.0;
+  EXPECT_EQ(internal::NeighbourVar(o, 0.5), 0.0);
+}
+
+// ShapeOptions::neighbour_sigma_m: two people walk past each other 0.7 m apart at 4.5-5.2 m.
+// While the other is within neighbour_distance_m, each one's measured scans are reported wider by
+// a multiple of the identity (the positions are the same either way: the filter is not changed);
+// apart, as before. Off: none counted, every report as a lone person's.
+TEST(PipelineScenarioTest, APersonBesideAnotherIsReportedWider) {
+  Scene scene;
+  scene.walkers = {Walker::Path(kLearnedS, {{4.5, -3.5}, {4.5, 3.5}}, 1.2),
+                   Walker::Path(kLearnedS, {{5.2, 3.5}, {5.2, -3.5}}, 1.2)};
+  const double end_s = std::max(scene.walkers[0].end_s(), scene.walkers[1].end_s());
+  const TrackerOptions options = Synthetic();
+  ASSERT_GT(options.shape.neighbour_sigma_m, 0.0);
+  TrackerOptions before = options;
+  before.shape.neighbour_sigma_m = 0.0;
+  const SceneRun run = Simulate(scene, end_s + 0.5, options);
+  const SceneRun old = Simulate(scene, end_s + 0.5, before);
+  EXPECT_GT(run.pipeline->counters().neighbour_widened, 20u);
+  EXPECT_EQ(old.pipeline->counters().neighbour_widened, 0u);
+  ASSERT_EQ(run.frames.size(), old.frames.size());
+  int wider = 0, same = 0;
+  for (std::size_t k = 0; k < run.frames.size(); ++k) {
+    for (const TrackReport& r : run.frames[k].tracks) {
+      if (r.state != TrackState::kConfirmed) continue;
+      const TrackReport* o = Find(old.frames[k], r.track_id);
+      ASSERT_NE(o, nullptr);
+      EXPECT_NEAR(r.x_m, o->x_m, 1e-9);
+      EXPECT_NEAR(r.y_m, o->y_m, 1e-9);
+      const Eigen::Matrix2d added =
+          r.covariance.topLeftCorner<2, 2>() - o->covariance.topLeftCorner<2, 2>();
+      if (added.norm() < 1e-12) {
+        ++same;
+        continue;
+      }
+      ++wider;
+      EXPECT_GT(added(0, 0), 0.0);
+      EXPECT_NEAR(added(0, 0), added(1, 1), 1e-12);
+      EXPECT_NEAR(added(0, 1), 0.0, 1e-12);
+      EXPECT_LE(added(0, 0), options.shape.neighbour_sigma_m * options.shape.neighbour_sigma_m);
+    }
+  }
+  EXPECT_GE(wider, 20);
+  EXPECT_GT(same, 100);
 }
 
 // ShapeOptions::underdetermined_fit_shared: a scanner with a coarse 1.5 deg step sees a person

@@ -1208,6 +1208,12 @@ bool g_before_person_reach = false;
 // --before-partial-extent: "before" reports an upper-body partial view's shared covariance with
 // the size's own sigma (ShapeOptions::partial_view_size_sigma_m = 0).
 bool g_before_partial_extent = false;
+// --before-neighbour: "before" reports an upper-body person with another object beside it as
+// one alone (ShapeOptions::neighbour_sigma_m = 0).
+bool g_before_neighbour = false;
+// --before-range-noise: "before" fits with the range noise growing by 1 mm per metre
+// (ShapeFitOptions::point_sigma_per_m = 0.001).
+bool g_before_range_noise = false;
 // --before-deep-pieces: "before" measures knee-height pieces deep along the line of sight but no
 // wider across it than a pair of legs as wide objects, also where a leg fills no beam
 // (ShapeOptions::drop_deep_mixed_pixel_pieces = false).
@@ -1351,7 +1357,8 @@ std::vector<Variant> Variants(sim::Mount mount, double range_m) {
              g_before_touching_legs || g_before_box_occluders || g_before_box_rejoin ||
              g_before_box_unseen_cov || g_before_lone_leg_standing ||
              g_before_single_beam_partner || g_before_edge_echo_birth || g_before_person_size ||
-             g_before_person_reach || g_before_partial_extent) {
+             g_before_person_reach || g_before_partial_extent || g_before_neighbour ||
+             g_before_range_noise) {
     tracking::TrackerOptions before = fresh;
     if (g_before_one_leg) before.shape.hidden_leg_behind = false;
     if (g_before_mixed_pixels) before.shape.drop_mixed_pixel_legs = false;
@@ -1393,6 +1400,8 @@ std::vector<Variant> Variants(sim::Mount mount, double range_m) {
     }
     if (g_before_person_reach) before.shape.person_drop_beyond_reach = false;
     if (g_before_partial_extent) before.shape.partial_view_size_sigma_m = 0.0;
+    if (g_before_neighbour) before.shape.neighbour_sigma_m = 0.0;
+    if (g_before_range_noise) before.shape.fit.point_sigma_per_m = 0.001;
     variants.push_back({"before", before});
   }
   return variants;
@@ -3019,7 +3028,8 @@ std::string KneeHeightBefore() {
         g_before_single_precision_fit || g_before_stance_weight || g_before_adopt ||
         g_before_touching_legs || g_before_box_occluders || g_before_box_rejoin ||
         g_before_box_unseen_cov || g_before_single_beam_partner || g_before_edge_echo_birth ||
-        g_before_person_size || g_before_person_reach || g_before_partial_extent) ||
+        g_before_person_size || g_before_person_reach || g_before_partial_extent ||
+        g_before_neighbour || g_before_range_noise) ||
       g_before_mixed_pixels || g_before_far || g_before_evidence_coasting ||
       g_before_report_rules) {
     return "";
@@ -3169,6 +3179,16 @@ std::string KneeHeightBefore() {
         "pairing no knee-height leg of a segment with a lone beam within the pairing distance "
         "(`shape.single_beam_partner` false)");
   }
+  if (g_before_range_noise) {
+    without.push_back(
+        "fitting with the range noise growing by 1 mm per metre (`shape.point_sigma_per_m` "
+        "0.001)");
+  }
+  if (g_before_neighbour) {
+    without.push_back(
+        "reporting an upper-body person with another observation beside it as one alone "
+        "(`shape.neighbour_sigma_m` 0)");
+  }
   if (g_before_partial_extent) {
     without.push_back(
         "reporting an upper-body partial view's shared covariance with the size's own sigma "
@@ -3222,7 +3242,7 @@ std::string KneeHeightBefore() {
   const char* const same =
       g_before_single_precision_fit ? ", on the same scans in the same run"
       : g_before_outline_departure || g_before_isotropic_bias || g_before_partial_view ||
-              g_before_underdetermined_fit || g_before_partial_extent
+              g_before_underdetermined_fit || g_before_partial_extent || g_before_neighbour
           ? ", on the same scans in the same run; upper-body tracks are the same by construction, "
             "their reported covariance (so NEES and what fusion makes of them) is not"
           : ", on the same scans in the same run; upper-body rows are the same by construction";
@@ -3291,6 +3311,10 @@ int main(int argc, char** argv) {
       g_before_person_reach = true;
     } else if (a == "--before-partial-extent") {
       g_before_partial_extent = true;
+    } else if (a == "--before-neighbour") {
+      g_before_neighbour = true;
+    } else if (a == "--before-range-noise") {
+      g_before_range_noise = true;
     } else if (a == "--before-deep-pieces") {
       g_before_deep_pieces = true;
     } else if (a == "--before-deep-evidence") {
