@@ -40,7 +40,8 @@ std::string PipelineSummary(const tracking::PipelineCounters& c) {
       "box_occluded_fits={} box_sizes_unseen={} legs_along_from_standing={} "
       "single_beam_partners={} edge_echo_births={} person_sizes_across_ray={} "
       "partial_view_widened={} underdetermined_fit_widened={} box_pieces_rejoined={} "
-      "legs_coasting_uncertain={} coasting_uncertain={} box_unseen_widened={}",
+      "legs_coasting_uncertain={} coasting_uncertain={} box_unseen_widened={} "
+      "neighbour_widened={}",
       c.rejected_scans, c.learning_scans, c.segments, c.dropped_segments, c.ellipse_measurements,
       c.com_measurements, c.shape_fits, c.failed_shape_fits, c.leg_pairs, c.single_legs,
       c.legs_behind, c.veiled_segments, c.shadowed_legs, c.absorbed_objects, c.seen_through,
@@ -50,7 +51,8 @@ std::string PipelineSummary(const tracking::PipelineCounters& c) {
       c.leg_edges_in_mixed_beam, c.stance_weighted_pairs, c.touching_leg_pairs, c.box_occluded_fits,
       c.box_sizes_unseen, c.legs_along_from_standing, c.single_beam_partners, c.edge_echo_births,
       c.person_sizes_across_ray, c.partial_view_widened, c.underdetermined_fit_widened,
-      c.box_pieces_rejoined, c.legs_coasting_uncertain, c.coasting_uncertain, c.box_unseen_widened);
+      c.box_pieces_rejoined, c.legs_coasting_uncertain, c.coasting_uncertain, c.box_unseen_widened,
+      c.neighbour_widened);
 }
 
 std::string MultiTrackerSummary(const tracking::MultiTrackerCounters& c) {
