@@ -715,12 +715,13 @@ class TrackingPipeline::Refiner final : public MeasurementRefiner {
     shape.reported_neighbour_m2 = 0.0;
     if (body && o.neighbour_sigma_m > 0.0 && source < p_.measurements_.size()) {
       const Eigen::Vector2d here = p_.measurements_[source].position_m;
-      double nearest_m = std::numeric_limits<double>::infinity();
+      // Squared distances, one square root (the same nearest distance, bit for bit).
+      double nearest_m2 = std::numeric_limits<double>::infinity();
       for (std::size_t k = 0; k < p_.measurements_.size(); ++k) {
         if (k == source) continue;
-        nearest_m = std::min(nearest_m, (p_.measurements_[k].position_m - here).norm());
+        nearest_m2 = std::min(nearest_m2, (p_.measurements_[k].position_m - here).squaredNorm());
       }
-      shape.reported_neighbour_m2 = internal::NeighbourVar(o, nearest_m);
+      shape.reported_neighbour_m2 = internal::NeighbourVar(o, std::sqrt(nearest_m2));
       if (shape.reported_neighbour_m2 > 0.0) ++neighbour_widened;
     }
     if (underdetermined) ++underdetermined_widened;
