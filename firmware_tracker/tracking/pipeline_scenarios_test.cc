@@ -705,6 +705,30 @@ int ReportsAroundTheWalk(const SceneRun& run, const Walker& walker, OnCoasting&&
   return walking;
 }
 
+// A coasting-sigma rule's run: the walker's coasting reports after its walk, how many of them had a
+// position sigma (square root of half the trace) above max_sigma_m, and the rule's counter.
+struct CoastingSigmaResult {
+  int coasting = 0;
+  int coasting_beyond = 0;  // reported with a sigma above max_sigma_m
+  std::uint64_t dropped = 0;
+};
+
+template <typename Counter>
+CoastingSigmaResult CoastingReportsBeyond(const Scene& scene, const TrackerOptions& options,
+                                          double max_sigma_m, Counter&& counter) {
+  const Walker& walker = scene.walkers[0];
+  const SceneRun run = Simulate(scene, walker.end_s() + 1.5, options);
+  CoastingSigmaResult result;
+  const int before = ReportsAroundTheWalk(run, walker, [&](const TrackReport& r) {
+    ++result.coasting;
+    const Eigen::Matrix2d p = r.covariance.topLeftCorner<2, 2>();
+    if (std::sqrt(0.5 * p.trace()) > max_sigma_m) ++result.coasting_beyond;
+  });
+  EXPECT_GT(before, 50);  // tracked while walking
+  result.dropped = counter(run.pipeline->counters());
+  return result;
+}
+
 // A person walking towards the front wall leaves the view 0.3 m before it (as round a corner or
 // through a side door): the straight prediction runs on into the wall, the beams across it return
 // from the wall at or just behind it, none from in front of it. Reported until it has coasted
@@ -1040,35 +1064,22 @@ TEST(PipelineScenarioTest, AKneeHeightCoastingTrackIsReportedOnlyWhileItsSigmaIs
   Scene scene;
   scene.legs = true;
   scene.walkers = {Walker::Path(kLearnedS, {{4.5, -3.0}, {4.5, 0.5}}, 1.2)};
-  const Walker& walker = scene.walkers[0];
   constexpr double kMaxSigmaM = 0.06;
-  struct Result {
-    int coasting = 0;
-    int coasting_beyond = 0;  // reported with a sigma above kMaxSigmaM
-    std::uint64_t dropped = 0;
-  };
   auto run_with = [&](const TrackerOptions& options) {
-    const SceneRun run = Simulate(scene, walker.end_s() + 1.5, options);
-    Result result;
-    const int before = ReportsAroundTheWalk(run, walker, [&](const TrackReport& r) {
-      ++result.coasting;
-      const Eigen::Matrix2d p = r.covariance.topLeftCorner<2, 2>();
-      if (std::sqrt(0.5 * p.trace()) > kMaxSigmaM) ++result.coasting_beyond;
+    return CoastingReportsBeyond(scene, options, kMaxSigmaM, [](const PipelineCounters& c) {
+      return c.legs_coasting_uncertain;
     });
-    EXPECT_GT(before, 50);  // tracked while walking
-    result.dropped = run.pipeline->counters().legs_coasting_uncertain;
-    return result;
   };
   TrackerOptions off = LegsOptions();
   off.shape.legs_seen_through = false;
   off.shape.legs_coasting_max_sigma_m = 0.0;
-  const Result without = run_with(off);
+  const CoastingSigmaResult without = run_with(off);
   EXPECT_GE(without.coasting_beyond, 1) << without.coasting;
   EXPECT_EQ(without.dropped, 0u);
   TrackerOptions on = LegsOptions();
   on.shape.legs_seen_through = false;
   on.shape.legs_coasting_max_sigma_m = kMaxSigmaM;
-  const Result with = run_with(on);
+  const CoastingSigmaResult with = run_with(on);
   EXPECT_EQ(with.coasting_beyond, 0);
   EXPECT_GE(with.coasting, 1);  // reported while still within it
   EXPECT_LT(with.coasting, without.coasting);
@@ -1088,33 +1099,19 @@ TEST(PipelineScenarioTest, AKneeHeightCoastingTrackIsReportedOnlyWhileItsSigmaIs
 TEST(PipelineScenarioTest, AnUpperBodyCoastingTrackIsReportedOnlyWhileItsSigmaIsWithinTheBody) {
   Scene scene;
   scene.walkers = {Walker::Path(kLearnedS, {{4.5, -3.0}, {4.5, 0.5}}, 1.2)};
-  const Walker& walker = scene.walkers[0];
   constexpr double kMaxSigmaM = 0.05;
-  struct Result {
-    int coasting = 0;
-    int coasting_beyond = 0;  // reported with a sigma above kMaxSigmaM
-    std::uint64_t dropped = 0;
-  };
   auto run_with = [&](double max_sigma_m) {
     TrackerOptions options = Synthetic();
     options.shape.seen_through_margin_m = 0.0;
     options.shape.unseen_coasting_m = 0.0;
     options.shape.coasting_max_sigma_m = max_sigma_m;
-    const SceneRun run = Simulate(scene, walker.end_s() + 1.5, options);
-    Result result;
-    const int before = ReportsAroundTheWalk(run, walker, [&](const TrackReport& r) {
-      ++result.coasting;
-      const Eigen::Matrix2d p = r.covariance.topLeftCorner<2, 2>();
-      if (std::sqrt(0.5 * p.trace()) > kMaxSigmaM) ++result.coasting_beyond;
-    });
-    EXPECT_GT(before, 50);  // tracked while walking
-    result.dropped = run.pipeline->counters().coasting_uncertain;
-    return result;
+    return CoastingReportsBeyond(scene, options, kMaxSigmaM,
+                                 [](const PipelineCounters& c) { return c.coasting_uncertain; });
   };
-  const Result without = run_with(0.0);
+  const CoastingSigmaResult without = run_with(0.0);
   EXPECT_GE(without.coasting_beyond, 1) << without.coasting;
   EXPECT_EQ(without.dropped, 0u);
-  const Result with = run_with(kMaxSigmaM);
+  const CoastingSigmaResult with = run_with(kMaxSigmaM);
   EXPECT_EQ(with.coasting_beyond, 0);
   EXPECT_GE(with.coasting, 1);  // reported while still within it
   EXPECT_LT(with.coasting, without.coasting);
