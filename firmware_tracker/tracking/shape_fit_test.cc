@@ -591,7 +591,9 @@ TEST(ShapeFitTest, CholeskySolverGivesThePivotedLdltResults) {
     // Up to rounding: 2e-9 relative (a size covariance of 7e-4 m^2 differed by 8e-13).
     EXPECT_LT((fit.size_cov_m2 - ref.size_cov_m2).norm(), 2e-9 * ref.size_cov_m2.norm());
     EXPECT_NEAR(fit.yaw_rad, ref.yaw_rad, 1e-9);
-    EXPECT_NEAR(fit.yaw_sigma_rad, ref.yaw_sigma_rad, 1e-9 * ref.yaw_sigma_rad);
+    // Up to rounding: 1e-8 relative (aarch64's fused multiply-adds put a poorly determined yaw's
+    // sigma of 0.32 rad 1.5e-9 apart).
+    EXPECT_NEAR(fit.yaw_sigma_rad, ref.yaw_sigma_rad, 1e-8 * ref.yaw_sigma_rad);
     EXPECT_NEAR(fit.rms_m, ref.rms_m, 1e-9);
     worst_centre_m = std::max(worst_centre_m, (fit.centre_m - ref.centre_m).norm());
     const ShapeFitResult unpaired =
