@@ -991,7 +991,9 @@ class TrackingPipeline::Refiner final : public MeasurementRefiner {
           part.silhouette.step_rad *
               (p_.scan_ != nullptr && p_.scan_->angle_step_rad < 0 ? -1.0 : 1.0),
           kept_points_, &silhouette);
-      if (kept < points.size()) {
+      // Points beyond kMaxSegmentPoints are not taken by the fit either: only a shorter count
+      // left something out.
+      if (kept < std::min(points.size(), kMaxSegmentPoints)) {
         points = std::span<const Eigen::Vector2d>(kept_points_.data(), kept);
         ++person_beyond_reach;
         body_fit_reduced_ = true;

@@ -729,6 +729,17 @@ CoastingSigmaResult CoastingReportsBeyond(const Scene& scene, const TrackerOptio
   return result;
 }
 
+// A coasting-sigma rule's effect: without it some coasting reports exceed the limit and nothing is
+// dropped; with it none does, the track is still reported while within it, and the rule counted.
+void ExpectOnlyWithinTheLimit(const CoastingSigmaResult& without, const CoastingSigmaResult& with) {
+  EXPECT_GE(without.coasting_beyond, 1) << without.coasting;
+  EXPECT_EQ(without.dropped, 0u);
+  EXPECT_EQ(with.coasting_beyond, 0);
+  EXPECT_GE(with.coasting, 1);  // reported while still within it
+  EXPECT_LT(with.coasting, without.coasting);
+  EXPECT_GE(with.dropped, 1u);
+}
+
 // A person walking towards the front wall leaves the view 0.3 m before it (as round a corner or
 // through a side door): the straight prediction runs on into the wall, the beams across it return
 // from the wall at or just behind it, none from in front of it. Reported until it has coasted
@@ -1073,17 +1084,10 @@ TEST(PipelineScenarioTest, AKneeHeightCoastingTrackIsReportedOnlyWhileItsSigmaIs
   TrackerOptions off = LegsOptions();
   off.shape.legs_seen_through = false;
   off.shape.legs_coasting_max_sigma_m = 0.0;
-  const CoastingSigmaResult without = run_with(off);
-  EXPECT_GE(without.coasting_beyond, 1) << without.coasting;
-  EXPECT_EQ(without.dropped, 0u);
   TrackerOptions on = LegsOptions();
   on.shape.legs_seen_through = false;
   on.shape.legs_coasting_max_sigma_m = kMaxSigmaM;
-  const CoastingSigmaResult with = run_with(on);
-  EXPECT_EQ(with.coasting_beyond, 0);
-  EXPECT_GE(with.coasting, 1);  // reported while still within it
-  EXPECT_LT(with.coasting, without.coasting);
-  EXPECT_GE(with.dropped, 1u);
+  ExpectOnlyWithinTheLimit(run_with(off), run_with(on));
   // The default: a leg's diameter.
   EXPECT_DOUBLE_EQ(TrackerOptions{}.shape.legs_coasting_max_sigma_m,
                    2.0 * TrackerOptions{}.shape.leg_radius_m);
@@ -1108,14 +1112,7 @@ TEST(PipelineScenarioTest, AnUpperBodyCoastingTrackIsReportedOnlyWhileItsSigmaIs
     return CoastingReportsBeyond(scene, options, kMaxSigmaM,
                                  [](const PipelineCounters& c) { return c.coasting_uncertain; });
   };
-  const CoastingSigmaResult without = run_with(0.0);
-  EXPECT_GE(without.coasting_beyond, 1) << without.coasting;
-  EXPECT_EQ(without.dropped, 0u);
-  const CoastingSigmaResult with = run_with(kMaxSigmaM);
-  EXPECT_EQ(with.coasting_beyond, 0);
-  EXPECT_GE(with.coasting, 1);  // reported while still within it
-  EXPECT_LT(with.coasting, without.coasting);
-  EXPECT_GE(with.dropped, 1u);
+  ExpectOnlyWithinTheLimit(run_with(0.0), run_with(kMaxSigmaM));
   // The default: the body's half-depth.
   EXPECT_DOUBLE_EQ(TrackerOptions{}.shape.coasting_max_sigma_m,
                    TrackerOptions{}.shape.person_minor_m);
