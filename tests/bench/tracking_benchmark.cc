@@ -387,6 +387,9 @@ struct Breakdown {
   std::array<BreakdownCell, std::size(kCrowdBins)> unoccluded_by_crowd;
   // Unoccluded with no other object within 2 m (a clear view): by sensor model, size, exponent.
   std::array<BreakdownCell, std::size(kModelBins)> clear_by_model;
+  // ... and per range bin (kRangeBins): a sensor model's bias along the ray by range.
+  std::array<std::array<BreakdownCell, std::size(kRangeBins)>, std::size(kModelBins)>
+      clear_by_model_range;
   std::array<BreakdownCell, std::size(kSizeBins)> clear_by_size;
   std::array<BreakdownCell, std::size(kExponentBins)> clear_by_exponent;
   std::array<BreakdownCell, std::size(kRateBins)> by_rate, clear_by_rate;
@@ -472,6 +475,9 @@ struct Breakdown {
                               t.occluded ? nullptr : &unoccluded_by_crowd[crowd_bin],
                               clear ? &clear_by_model[std::min(t.model, by_model.size() - 1)]
                                     : nullptr,
+                              clear ? &clear_by_model_range[std::min(t.model, by_model.size() - 1)]
+                                                           [RangeBin(range_m)]
+                                    : nullptr,
                               clear && person ? &clear_by_size[size_bin] : nullptr,
                               &by_rate[rate_bin],
                               &by_object[person ? 0 : t.trolley ? 1 : 2],
@@ -524,6 +530,11 @@ struct Breakdown {
     for (std::size_t i = 0; i < by_exponent.size(); ++i) by_exponent[i].Merge(o.by_exponent[i]);
     for (std::size_t i = 0; i < by_occlusion.size(); ++i) by_occlusion[i].Merge(o.by_occlusion[i]);
     for (std::size_t i = 0; i < by_model.size(); ++i) clear_by_model[i].Merge(o.clear_by_model[i]);
+    for (std::size_t i = 0; i < by_model.size(); ++i) {
+      for (std::size_t j = 0; j < clear_by_model_range[i].size(); ++j) {
+        clear_by_model_range[i][j].Merge(o.clear_by_model_range[i][j]);
+      }
+    }
     for (std::size_t i = 0; i < by_size.size(); ++i) clear_by_size[i].Merge(o.clear_by_size[i]);
     for (std::size_t i = 0; i < by_exponent.size(); ++i) {
       clear_by_exponent[i].Merge(o.clear_by_exponent[i]);
@@ -2885,6 +2896,13 @@ std::string BreakdownTable(const Section& s) {
     t += BreakdownRows(lead, "unoccluded, ", kCrowdBins, b.unoccluded_by_crowd);
     const std::string clear = "clear view (unoccluded, nothing within 2 m), ";
     t += BreakdownRows(lead, clear, kModelBins, b.clear_by_model);
+    for (std::size_t i = 0; i < b.clear_by_model_range.size(); ++i) {
+      for (std::size_t j = 0; j < b.clear_by_model_range[i].size(); ++j) {
+        if (b.clear_by_model_range[i][j].all.n == 0) continue;
+        t += BreakdownRow(lead, clear + kModelBins[i] + ", " + kRangeBins[j],
+                          b.clear_by_model_range[i][j]);
+      }
+    }
     t += BreakdownRows(lead, "", kObjectBins, b.by_object);
     for (std::size_t i = 0; i < b.occluded_by_edges.size(); ++i) {
       if (b.occluded_by_edges[i].all.n > 0) {
