@@ -155,7 +155,10 @@
 //   tracks measured again after more than 1 s (a lost track resumed) came back on, and what the
 //   measured false scans of tracks that held an object before were measured on (LeftBehind: the
 //   nearest object to the measurement, how far it and the track's own object are, the time since
-//   the track last matched, its age and the measurement's point count).
+//   the track last matched, its age and the measurement's point count); at upper-body height also
+//   the matches of a person more than 0.25 m off by what the track was updated with ("far off":
+//   coasting, or the observation's points on the person's body, another object's, the
+//   background, with their share of those matches; FarOffErrors).
 
 #include <Eigen/Cholesky>
 #include <Eigen/Core>
