@@ -155,7 +155,10 @@
 //   tracks measured again after more than 1 s (a lost track resumed) came back on, and what the
 //   measured false scans of tracks that held an object before were measured on (LeftBehind: the
 //   nearest object to the measurement, how far it and the track's own object are, the time since
-//   the track last matched, its age and the measurement's point count).
+//   the track last matched, its age and the measurement's point count); at upper-body height also
+//   the matches of a person more than 0.25 m off by what the track was updated with ("far off":
+//   coasting, or the observation's points on the person's body, another object's, the
+//   background, with their share of those matches; FarOffErrors).
 
 #include <Eigen/Cholesky>
 #include <Eigen/Core>
@@ -683,7 +686,13 @@ struct Causes {
   // Upper-body height, per sensor: measured matches of a person by what lies beyond their
   // observation's ends (TorsoEndErrors): count, summed and squared radial error, summed NEES.
   std::map<std::string, std::array<double, 4>> torso_ends;
+  // Upper-body height, per sensor: matches of a person more than kFarOffM off (FarOffErrors) by
+  // what the track was updated with: count, summed error, summed NEES, matches of a person.
+  std::map<std::string, std::array<double, 4>> far_off;
   void Add(const Causes& o) {
+    for (const auto& [k, v] : o.far_off) {
+      for (std::size_t i = 0; i < v.size(); ++i) far_off[k][i] += v[i];
+    }
     for (const auto& [k, v] : o.los) {
       for (std::size_t i = 0; i < v.size(); ++i) los[k][i] += v[i];
     }
@@ -1854,6 +1863,121 @@ void TorsoEndErrors(const tracking::TrackingPipeline& pipeline, const tracking::
   }
 }
 
+// --explain, upper-body height: every match of a person more than kFarOffM off (Causes::far_off),
+// by what the track was updated with: coasting (a nearer return beside the person or not);
+// measured on a measurement within kFarOffM of the truth (the filter off, not its input); else by
+// the observation's points (each by its beam: on the person's body within 0.05 m, on another
+// object's within 0.1 m, else background): some of another object's, none on the body, some of
+// the background, or the body's alone (a nearer return beside it or not, its silhouette ends, the
+// points' extent across the ray against the body's width 2a), and whether another reported track
+// lies within 1 m. Count, summed error, summed NEES; "~person matches": every match of a person.
+constexpr double kFarOffM = 0.25;
+void FarOffErrors(const tracking::TrackingPipeline& pipeline, const tracking::ScanView& scan,
+                  const sim::Simulator& simulator, std::size_t sensor, double start_s,
+                  const std::vector<Hypothesis>& hyps, const std::vector<Truth>& truths,
+                  const std::vector<long>& matched,
+                  std::map<std::string, std::array<double, 4>>* far) {
+  const auto obs = pipeline.observations();
+  const auto ms = pipeline.measurements();
+  const sim::SensorSetup& setup = simulator.sensor(sensor);
+  const double yaw = common::DegToRad(setup.yaw_deg);
+  const sim::Vec2 origin{setup.x_m, setup.y_m};
+  const std::size_t beams = scan.range_m.size();
+  std::size_t person_matches = 0;
+  std::vector<std::pair<std::string, std::array<double, 2>>> rows;
+  for (std::size_t hi = 0; hi < hyps.size() && hi < matched.size(); ++hi) {
+    const Hypothesis& h = hyps[hi];
+    if (matched[hi] < 0) continue;
+    const Truth* t = nullptr;
+    for (const Truth& c : truths) t = static_cast<long>(c.id) == matched[hi] ? &c : t;
+    if (t == nullptr || t->a_m <= 0.0 || t->trolley) continue;
+    ++person_matches;
+    const double err = (h.p - t->p).norm();
+    if (!(err > kFarOffM)) continue;
+    double nees = 0.0;
+    const Eigen::LDLT<Matrix2d> ldlt(h.cov);
+    if (ldlt.info() == Eigen::Success) nees = (h.p - t->p).dot(ldlt.solve(h.p - t->p));
+    bool near_track = false;
+    for (std::size_t o = 0; o < hyps.size(); ++o) {
+      if (o != hi && (hyps[o].p - h.p).norm() < 1.0) near_track = true;
+    }
+    const std::string occl = t->occluded ? "nearer return beside" : "unoccluded";
+    const std::string crowd = near_track ? ", another track within 1 m" : "";
+    std::string key;
+    const std::size_t found = h.measured ? ObservationOf(obs, ms, h.z, h.points) : obs.size();
+    const Vector2d ez = h.z - (t->p + h.z_offset_s * t->v);
+    if (!h.measured) {
+      key = "coasting, " + occl + crowd;
+    } else if (ez.norm() <= kFarOffM) {
+      key = "measured, its measurement within 0.25 m (the filter off)" + crowd;
+    } else if (found == obs.size() || obs[found].part_count == 0) {
+      key = "measured, observation not found";
+    } else {
+      const tracking::Observation& ob = obs[found];
+      const auto body_range = [&](std::size_t target, std::size_t beam) {
+        const double a = yaw + scan.BeamAngleRad(beam);
+        const double t_beam = start_s + static_cast<double>(beam) * setup.device.beam_time_s;
+        const sim::Target& tg = simulator.targets()[target];
+        const sim::TargetState st = tg.StateAt(t_beam);
+        if (!st.present) return sim::kNoHit;
+        return tg.Intersect({origin, {std::cos(a), std::sin(a)}}, st, setup.mount);
+      };
+      std::size_t own = 0, other = 0, background = 0;
+      double lo = std::numeric_limits<double>::infinity(), hi_a = -lo;
+      const double bearing = std::atan2(t->p.y(), t->p.x());
+      const auto pts = pipeline.segments().points_m.span();
+      for (std::size_t pi = 0; pi < ob.part_count; ++pi) {
+        const tracking::ObservationPart& part = ob.parts[pi];
+        for (std::size_t k = 0; k < part.point_count; ++k) {
+          const Vector2d& q = pts[part.first_point + k];
+          const double a = std::atan2(q.y(), q.x());
+          const long beam = std::lround((a - scan.first_angle_rad) / scan.angle_step_rad);
+          if (beam < 0 || static_cast<std::size_t>(beam) >= beams) continue;
+          const double r = q.norm();
+          if (std::abs(body_range(t->id, static_cast<std::size_t>(beam)) - r) < 0.05) {
+            ++own;
+            const double across = std::remainder(a - bearing, 2.0 * common::kPi) * r;
+            lo = std::min(lo, across);
+            hi_a = std::max(hi_a, across);
+            continue;
+          }
+          bool o = false;
+          for (std::size_t j = 0; j < simulator.targets().size() && !o; ++j) {
+            if (j != t->id && std::abs(body_range(j, static_cast<std::size_t>(beam)) - r) < 0.1)
+              o = true;
+          }
+          ++(o ? other : background);
+        }
+      }
+      if (own == 0) {
+        key = std::string("measured, no point on its body") +
+              (other > 0 ? " (another object's)" : " (background)") + crowd;
+      } else if (other > 0) {
+        key = std::string("measured, another object's points too (") +
+              (other == 1 ? "1" : other <= 3 ? "2-3" : "4+") + "), " + occl + crowd;
+      } else if (background > 0) {
+        key = "measured, background points too, " + occl + crowd;
+      } else {
+        const double seen = own > 1 ? (hi_a - lo) / (2.0 * t->a_m) : 0.0;
+        key = "measured, its own points alone, " + occl + ", " + std::to_string(h.edges) +
+              " ends, extent " +
+              (seen < 0.33 ? "< 1/3" : seen < 0.67 ? "1/3-2/3" : ">= 2/3") + " of 2a" + crowd;
+      }
+    }
+    rows.push_back({key, {err, nees}});
+  }
+  for (const auto& [key, v] : rows) {
+    auto& s = (*far)[key];
+    s[0] += 1;
+    s[1] += v[0];
+    s[2] += v[1];
+  }
+  (*far)["all (> 0.25 m off)"][0] += static_cast<double>(rows.size());
+  for (const auto& [key, v] : rows) (*far)["all (> 0.25 m off)"][1] += v[0];
+  for (const auto& [key, v] : rows) (*far)["all (> 0.25 m off)"][2] += v[1];
+  (*far)["~person matches"][0] += static_cast<double>(person_matches);
+}
+
 struct SensorFrames {
   std::string id;
   std::vector<daemon::TrackFrameData> frames;  // per scan
@@ -2161,6 +2285,8 @@ void RunSensor(const sim::Simulator& simulator, std::size_t sensor,
       if (g_explain_coasting && pipelines[v]->options().shape.mount == tracking::Mount::kTorso) {
         TorsoEndErrors(*pipelines[v], view, simulator, sensor, timing.start_s, hyps, truths,
                        sequences[v].matched_truth(), &(*causes)[v].torso_ends);
+        FarOffErrors(*pipelines[v], view, simulator, sensor, timing.start_s, hyps, truths,
+                     sequences[v].matched_truth(), &(*causes)[v].far_off);
       }
       if (g_explain_coasting) {
         for (std::size_t hi = 0; hi < hyps.size(); ++hi) {
@@ -2379,8 +2505,10 @@ void RunSensor(const sim::Simulator& simulator, std::size_t sensor,
     const auto coast_start = std::move((*causes)[v].coast_start);
     const auto los = std::move((*causes)[v].los);
     const auto torso_ends = std::move((*causes)[v].torso_ends);
+    const auto far_off = std::move((*causes)[v].far_off);
     (*causes)[v] = sequences[v].causes();
     (*causes)[v].torso_ends = torso_ends;
+    (*causes)[v].far_off = far_off;
     (*causes)[v].coast_start = coast_start;
     (*causes)[v].los = los;
     (*causes)[v].coasting = coasting;
@@ -2536,6 +2664,14 @@ void Explain(const std::string& scenario, const std::string& mount, const RunRes
     for (const auto& [why, a] : r.causes[v].torso_ends) {
       std::fprintf(stderr, "  torso ends: %-110s | %6.0f %8.3f %8.3f %7.2f\n", why.c_str(), a[0],
                    a[1] / a[0], std::sqrt(a[2] / a[0]), a[3] / a[0]);
+    }
+    const auto far_all = r.causes[v].far_off.find("all (> 0.25 m off)");
+    for (const auto& [why, a] : r.causes[v].far_off) {
+      // Count, its share of the matches more than 0.25 m off, mean error, mean NEES.
+      const double n_far = far_all != r.causes[v].far_off.end() ? far_all->second[0] : 0.0;
+      std::fprintf(stderr, "  far off: %-110s | %6.0f %5.1f%% %7.3f %8.2f\n", why.c_str(), a[0],
+                   n_far > 0 ? 100.0 * a[0] / n_far : 0.0, a[0] > 0 ? a[1] / a[0] : 0.0,
+                   a[0] > 0 ? a[2] / a[0] : 0.0);
     }
     for (const auto& [why, a] : r.causes[v].coast_start)
       std::fprintf(stderr, "  coast start: %-70s | %6.0f %9.3f %9.3f %6.0f\n", why.c_str(), a[0],
