@@ -23,6 +23,19 @@ inline double NormalizeAngle(double angle_rad) {
   return a;
 }
 
+// std::remainder(a_rad, kPi) bit for bit (in [-pi/2, pi/2]), without the libm call where the
+// quotient's nearest integer n is plain: |a| < pi/2 gives n = 0 (a itself); pi/2 < |a| < 3 pi/2
+// gives n = +-1, and a -+ pi is exact there (Sterbenz: within a factor 2 of pi). |a| = pi (a zero
+// whose sign libm takes from a), pi/2 and 3 pi/2 (ties), beyond, and NaN go to libm.
+inline double RemainderHalfTurn(double a_rad) {
+  const double m = std::abs(a_rad);
+  if (m < kPi / 2) return a_rad;
+  // 1.5 * kPi rounds to a neighbour of 3 pi/2: no double lies strictly between the two, so
+  // m < 1.5 * kPi holds for the same doubles as m < 3 pi/2.
+  if (m > kPi / 2 && m < 1.5 * kPi && m != kPi) return a_rad > 0.0 ? a_rad - kPi : a_rad + kPi;
+  return std::remainder(a_rad, kPi);
+}
+
 // Smallest signed difference a - b, wrapped to (-pi, pi].
 inline double AngleDiff(double a_rad, double b_rad) { return NormalizeAngle(a_rad - b_rad); }
 

@@ -2,6 +2,11 @@
 
 #include <gtest/gtest.h>
 
+#include <bit>
+#include <cstdint>
+#include <limits>
+#include <vector>
+
 namespace lrfnet::common {
 namespace {
 
@@ -11,6 +16,37 @@ TEST(AngleTest, NormalizeWrapsIntoHalfOpenInterval) {
   EXPECT_NEAR(NormalizeAngle(-3 * kPi / 2), kPi / 2, 1e-12);
   EXPECT_NEAR(NormalizeAngle(0.1 + 20 * kPi), 0.1, 1e-9);
   EXPECT_NEAR(AngleDiff(DegToRad(179), DegToRad(-179)), DegToRad(-2), 1e-12);
+}
+
+// The same bits as std::remainder(a, pi), on every side of each boundary of its fast paths.
+TEST(AngleTest, RemainderHalfTurnIsLibmRemainderBitForBit) {
+  std::vector<double> angles = {0.0, -0.0, kPi, -kPi, 2 * kPi, 1e-300, 1e300,
+                                std::numeric_limits<double>::infinity(),
+                                -std::numeric_limits<double>::infinity()};
+  for (const double edge : {kPi / 2, kPi, 1.5 * kPi, 3 * kPi / 2, 2 * kPi}) {
+    for (const double sign : {1.0, -1.0}) {
+      double below = sign * edge, above = sign * edge;
+      for (int k = 0; k < 4; ++k) {
+        angles.push_back(below);
+        angles.push_back(above);
+        below = std::nextafter(below, 0.0);
+        above = std::nextafter(above, sign * 10.0);
+      }
+    }
+  }
+  for (int i = -200000; i <= 200000; ++i) angles.push_back(i * 2.5e-5 * kPi);
+  for (const double a : angles) {
+    const double expected = std::remainder(a, kPi);
+    const double got = RemainderHalfTurn(a);
+    EXPECT_EQ(std::bit_cast<std::uint64_t>(got), std::bit_cast<std::uint64_t>(expected))
+        << "a = " << a << " got " << got << " expected " << expected;
+  }
+  EXPECT_TRUE(std::isnan(RemainderHalfTurn(std::numeric_limits<double>::quiet_NaN())));
+  // Known answers: a yaw beyond a quarter turn maps onto the axis' other end.
+  EXPECT_NEAR(RemainderHalfTurn(kPi / 2 + 0.25), 0.25 - kPi / 2, 1e-15);
+  EXPECT_DOUBLE_EQ(RemainderHalfTurn(4.0), 4.0 - kPi);
+  EXPECT_DOUBLE_EQ(RemainderHalfTurn(-2.0), -2.0 + kPi);
+  EXPECT_EQ(std::signbit(RemainderHalfTurn(-kPi)), std::signbit(std::remainder(-kPi, kPi)));
 }
 
 TEST(Pose2Test, ComposeWithInverseIsIdentity) {

@@ -231,7 +231,7 @@ void MultiTracker::AcceptMeasurements(std::span<const Measurement> measurements,
 
 double MultiTracker::MahalanobisSq(const Eigen::Vector2d& predicted_m,
                                    const Eigen::Matrix2d& predicted_cov_m2, const Candidate& c,
-                                   double* log_det) const {
+                                   double* det_out) const {
   constexpr double kInf = std::numeric_limits<double>::infinity();
   const Eigen::Vector2d y = c.z_m - predicted_m;
   if (!(y.norm() <= options_.max_gate_distance_m)) return kInf;
@@ -242,18 +242,18 @@ double MultiTracker::MahalanobisSq(const Eigen::Vector2d& predicted_m,
   const double m2 =
       (s(1, 1) * y.x() * y.x() - (s(0, 1) + s(1, 0)) * y.x() * y.y() + s(0, 0) * y.y() * y.y()) /
       det;
-  if (log_det != nullptr) *log_det = std::log(det);
+  if (det_out != nullptr) *det_out = det;
   return std::isfinite(m2) ? m2 : kInf;
 }
 
 bool MultiTracker::InsideGate(const Eigen::Vector2d& predicted_m,
                               const Eigen::Matrix2d& predicted_cov_m2, const Candidate& c,
                               double* d2, double* log_det) const {
-  double ld = 0.0;
-  const double m2 = MahalanobisSq(predicted_m, predicted_cov_m2, c, &ld);
+  double det = 1.0;
+  const double m2 = MahalanobisSq(predicted_m, predicted_cov_m2, c, &det);
   if (!(m2 <= options_.gate_mahalanobis_sq)) return false;
   if (d2 != nullptr) *d2 = m2;
-  if (log_det != nullptr) *log_det = ld;
+  if (log_det != nullptr) *log_det = std::log(det);
   return true;
 }
 
@@ -324,12 +324,12 @@ void MultiTracker::Gate(common::UtcNs scan_start_ns) {
                                     d * (p.topRightCorner<2, 2>() + p.bottomLeftCorner<2, 2>()) +
                                     d * d * p.bottomRightCorner<2, 2>() +
                                     (q * d * d * d / 3.0) * Eigen::Matrix2d::Identity();
-        double log_det = 0.0;
-        const double d2 = MahalanobisSq(at, cov, c, &log_det);
+        double det = 1.0;
+        const double d2 = MahalanobisSq(at, cov, c, &det);
         const bool inside = d2 <= options_.gate_mahalanobis_sq;
         d2_row[j] = d2;
         gated_row[j] = inside;
-        cost_row[j] = inside ? d2 + log_det : kUnassignableCost;
+        cost_row[j] = inside ? d2 + std::log(det) : kUnassignableCost;
       }
     }
   }

@@ -444,9 +444,11 @@ class MultiTracker {
   void Report(common::UtcNs scan_start_ns, ScanTracks& out);
   bool InsideGate(const Eigen::Vector2d& predicted_m, const Eigen::Matrix2d& predicted_cov_m2,
                   const Candidate& c, double* d2, double* log_det) const;
-  // y^T S^-1 y of the pair (infinity beyond max_gate_distance_m or for a degenerate S).
+  // y^T S^-1 y of the pair (infinity beyond max_gate_distance_m or for a degenerate S); det: S's
+  // determinant where finite (its log only where a pair is inside the gate: one log per gated pair
+  // instead of one per pair within max_gate_distance_m).
   double MahalanobisSq(const Eigen::Vector2d& predicted_m, const Eigen::Matrix2d& predicted_cov_m2,
-                       const Candidate& c, double* log_det) const;
+                       const Candidate& c, double* det) const;
   std::uint32_t NewId();
 
   MultiTrackerOptions options_;

@@ -230,8 +230,12 @@ double NeighbourVar(const ShapeOptions& o, double distance_m) {
          (1.0 - std::max(0.0, distance_m) / o.neighbour_distance_m);
 }
 
+double SuperellipseReachFactor(double exponent) {
+  return std::pow(2.0, 0.5 - 1.0 / std::max(exponent, 2.0));
+}
+
 double SuperellipseReach(const Eigen::Vector2d& size_m, double exponent) {
-  return std::max(size_m.x(), size_m.y()) * std::pow(2.0, 0.5 - 1.0 / std::max(exponent, 2.0));
+  return std::max(size_m.x(), size_m.y()) * SuperellipseReachFactor(exponent);
 }
 
 std::size_t PersonReachablePoints(const ShapeOptions& o, const Eigen::Vector2d& centre_m,
@@ -894,6 +898,16 @@ class TrackingPipeline::Refiner final : public MeasurementRefiner {
     shape.stamp_ns = at_ns;
   }
 
+  // internal::SuperellipseReachFactor(exponent), the pow only where the exponent differs from the
+  // last one asked (the same value: one pow per exponent rather than one per fit).
+  double ReachFactor(double exponent) {
+    if (!(exponent == reach_exponent_)) {
+      reach_exponent_ = exponent;
+      reach_factor_ = internal::SuperellipseReachFactor(exponent);
+    }
+    return reach_factor_;
+  }
+
   void CountEvaluations(const ShapeFitResult& fit) {
     const auto bin = std::min<std::size_t>(static_cast<std::size_t>(std::max(0, fit.evaluations)),
                                            evaluations_.size() - 1);
@@ -987,7 +1001,7 @@ class TrackingPipeline::Refiner final : public MeasurementRefiner {
                                                std::sqrt(std::max(0.0, shape.size_cov_m2(1, 1))));
       const std::size_t kept = internal::PersonReachablePoints(
           o, predicted->head<2>(), predicted_cov->topLeftCorner<2, 2>(),
-          internal::SuperellipseReach(reach_size, shape.exponent), points,
+          std::max(reach_size.x(), reach_size.y()) * ReachFactor(shape.exponent), points,
           part.silhouette.step_rad *
               (p_.scan_ != nullptr && p_.scan_->angle_step_rad < 0 ? -1.0 : 1.0),
           kept_points_, &silhouette);
@@ -1059,7 +1073,7 @@ class TrackingPipeline::Refiner final : public MeasurementRefiner {
         LearnSize(size, size_cov, shape, shown);
       }
     }
-    shape.yaw_rad = std::remainder(yaw, common::kPi);
+    shape.yaw_rad = common::RemainderHalfTurn(yaw);  // std::remainder(yaw, pi), bit for bit
     shape.yaw_sigma_rad = fit.yaw_sigma_rad;
     shape.shape = shape.model == ShapeModel::kBox ? ObjectShape::kBox
                   : shape.exponent == 2.0         ? ObjectShape::kCylinder
@@ -1376,6 +1390,10 @@ class TrackingPipeline::Refiner final : public MeasurementRefiner {
   bool body_fit_reduced_ = false;
   std::size_t body_fit_points_ = 0;
   int body_fit_edges_ = 0;
+  // internal::SuperellipseReachFactor of the last exponent asked (ReachFactor): a track's exponent
+  // changes seldom, a pow per fit cost more than the rest of the reach test.
+  double reach_exponent_ = std::numeric_limits<double>::quiet_NaN();
+  double reach_factor_ = 0.0;
 };
 
 TrackingPipeline::TrackingPipeline(const TrackerOptions& options)

@@ -984,6 +984,9 @@ double NeighbourVar(const ShapeOptions& o, double distance_m);
 // at most size_m's larger one and exponent p >= 2: max(a, b) 2^(1/2 - 1/p) (its diagonal where
 // a = b; an upper bound otherwise).
 double SuperellipseReach(const Eigen::Vector2d& size_m, double exponent);
+// SuperellipseReach's factor 2^(1/2 - 1/p) (exponent p, at least 2): SuperellipseReach(size_m, p)
+// is max(size_m) times it, bit for bit (a caller keeps it per exponent instead of a pow per fit).
+double SuperellipseReachFactor(double exponent);
 
 // ShapeOptions::box_size_from_faces_seen: whether a box (centre_m, half-lengths size_m along
 // yaw_rad and across it) seen from the sensor at the origin with beams step_rad apart shows its

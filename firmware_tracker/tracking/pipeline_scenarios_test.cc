@@ -2131,6 +2131,14 @@ TEST(PipelineTest, PersonReachablePointsLeavesOutAnotherObjectBesideThePerson) {
   EXPECT_DOUBLE_EQ(internal::SuperellipseReach(Eigen::Vector2d(0.2, 0.2), 2.0), 0.2);
   EXPECT_NEAR(internal::SuperellipseReach(Eigen::Vector2d(0.23, 0.14), 2.5),
               0.23 * std::pow(2.0, 0.1), 1e-12);
+  // The factor alone: SuperellipseReach is max(size) times it, bit for bit.
+  EXPECT_EQ(internal::SuperellipseReachFactor(2.0), 1.0);
+  EXPECT_EQ(internal::SuperellipseReachFactor(1.5), 1.0);
+  EXPECT_NEAR(internal::SuperellipseReachFactor(2.5), std::pow(2.0, 0.1), 1e-15);
+  for (const double p : {2.0, 2.5, 3.0, 4.0}) {
+    EXPECT_EQ(internal::SuperellipseReach(Eigen::Vector2d(0.23, 0.14), p),
+              0.23 * internal::SuperellipseReachFactor(p));
+  }
   std::vector<Eigen::Vector2d> person;
   for (int i = -6; i <= 6; ++i) {
     const double phi = 10.0 * i * common::kPi / 180.0;

@@ -45,10 +45,11 @@ bool AllFinite(const Eigen::MatrixBase<Derived>& m) {
 }
 
 // Axis directions are defined modulo pi. Within (-pi/2, pi/2) (a yaw's deviation from its prior,
-// nearly always) remainder(a, pi) is a itself: no libm call there.
+// nearly always) remainder(a, pi) is a itself, within 3 pi/2 (a fitted yaw) a -+ pi: no libm call
+// there (common::RemainderHalfTurn).
 double WrapHalfTurn(double a) {
   if (std::abs(a) < common::kPi / 2) return a;
-  a = std::remainder(a, common::kPi);
+  a = common::RemainderHalfTurn(a);
   if (a <= -common::kPi / 2) a += common::kPi;
   return a;
 }
