@@ -20,7 +20,13 @@ TEST(AngleTest, NormalizeWrapsIntoHalfOpenInterval) {
 
 // The same bits as std::remainder(a, pi), on every side of each boundary of its fast paths.
 TEST(AngleTest, RemainderHalfTurnIsLibmRemainderBitForBit) {
-  std::vector<double> angles = {0.0, -0.0, kPi, -kPi, 2 * kPi, 1e-300, 1e300,
+  std::vector<double> angles = {0.0,
+                                -0.0,
+                                kPi,
+                                -kPi,
+                                2 * kPi,
+                                1e-300,
+                                1e300,
                                 std::numeric_limits<double>::infinity(),
                                 -std::numeric_limits<double>::infinity()};
   for (const double edge : {kPi / 2, kPi, 1.5 * kPi, 3 * kPi / 2, 2 * kPi}) {

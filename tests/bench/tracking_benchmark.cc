@@ -468,47 +468,43 @@ struct Breakdown {
     const std::size_t crowd_bin = t.nearest_other_m < 1.0 ? 0 : t.nearest_other_m < 2.0 ? 1 : 2;
     const bool clear = !t.occluded && crowd_bin == 2;
     const std::size_t rate_bin = t.rate_hz <= 15.0 ? 0 : t.rate_hz <= 30.0 ? 1 : 2;
-    BreakdownCell* cells[] = {&by_model[std::min(t.model, by_model.size() - 1)],
-                              person ? &by_size[size_bin] : nullptr,
-                              person ? &by_exponent[t.exponent < 2.25 ? 0 : 1] : nullptr,
-                              &by_occlusion[t.occluded ? 1 : 0],
-                              &by_speed[speed_bin],
-                              &by_crowd[crowd_bin],
-                              t.occluded ? nullptr : &unoccluded_by_speed[speed_bin],
-                              t.occluded ? nullptr : &unoccluded_by_crowd[crowd_bin],
-                              clear ? &clear_by_model[std::min(t.model, by_model.size() - 1)]
-                                    : nullptr,
-                              clear ? &clear_by_model_range[std::min(t.model, by_model.size() - 1)]
-                                                           [RangeBin(range_m)]
-                                    : nullptr,
-                              clear && person ? &clear_by_size[size_bin] : nullptr,
-                              &by_rate[rate_bin],
-                              &by_object[person ? 0 : t.trolley ? 1 : 2],
-                              h.measured && h.edges >= 0
-                                  ? (t.occluded ? &occluded_by_edges[static_cast<std::size_t>(h.edges)]
-                                                : &unoccluded_by_edges[static_cast<std::size_t>(h.edges)])
-                                  : nullptr,
-                              clear ? &clear_by_rate[rate_bin] : nullptr,
-                              clear && person ? &clear_by_exponent[t.exponent < 2.25 ? 0 : 1]
-                                              : nullptr,
-                              person && h.points >= 2 && h.points <= 4
-                                  ? &few_points_by_size[size_bin]
-                                  : nullptr,
-                              person && h.points >= 5 && h.points <= 9
-                                  ? &some_points_by_size[size_bin]
-                                  : nullptr,
-                              &by_range[RangeBin(range_m)],
-                              &by_points[PointBin(h.points)],
-                              &by_parts[parts == 5 && t.trolley ? 8 : parts],
-                              &total,
-                              legs,
-                              gait,
-                              since,
-                              view,
-                              spread,
-                              support,
-                              heading,
-                              heading_range};
+    BreakdownCell* cells[] = {
+        &by_model[std::min(t.model, by_model.size() - 1)],
+        person ? &by_size[size_bin] : nullptr,
+        person ? &by_exponent[t.exponent < 2.25 ? 0 : 1] : nullptr,
+        &by_occlusion[t.occluded ? 1 : 0],
+        &by_speed[speed_bin],
+        &by_crowd[crowd_bin],
+        t.occluded ? nullptr : &unoccluded_by_speed[speed_bin],
+        t.occluded ? nullptr : &unoccluded_by_crowd[crowd_bin],
+        clear ? &clear_by_model[std::min(t.model, by_model.size() - 1)] : nullptr,
+        clear ? &clear_by_model_range[std::min(t.model, by_model.size() - 1)][RangeBin(range_m)]
+              : nullptr,
+        clear && person ? &clear_by_size[size_bin] : nullptr,
+        &by_rate[rate_bin],
+        &by_object[person      ? 0
+                   : t.trolley ? 1
+                               : 2],
+        h.measured && h.edges >= 0
+            ? (t.occluded ? &occluded_by_edges[static_cast<std::size_t>(h.edges)]
+                          : &unoccluded_by_edges[static_cast<std::size_t>(h.edges)])
+            : nullptr,
+        clear ? &clear_by_rate[rate_bin] : nullptr,
+        clear && person ? &clear_by_exponent[t.exponent < 2.25 ? 0 : 1] : nullptr,
+        person && h.points >= 2 && h.points <= 4 ? &few_points_by_size[size_bin] : nullptr,
+        person && h.points >= 5 && h.points <= 9 ? &some_points_by_size[size_bin] : nullptr,
+        &by_range[RangeBin(range_m)],
+        &by_points[PointBin(h.points)],
+        &by_parts[parts == 5 && t.trolley ? 8 : parts],
+        &total,
+        legs,
+        gait,
+        since,
+        view,
+        spread,
+        support,
+        heading,
+        heading_range};
     const Vector2d e = h.p - t.p;
     for (BreakdownCell* c : cells) {
       if (c != nullptr) c->all.Add(e, los, t.v);
@@ -1954,14 +1950,20 @@ void FarOffErrors(const tracking::TrackingPipeline& pipeline, const tracking::Sc
               (other > 0 ? " (another object's)" : " (background)") + crowd;
       } else if (other > 0) {
         key = std::string("measured, another object's points too (") +
-              (other == 1 ? "1" : other <= 3 ? "2-3" : "4+") + "), " + occl + crowd;
+              (other == 1   ? "1"
+               : other <= 3 ? "2-3"
+                            : "4+") +
+              "), " + occl + crowd;
       } else if (background > 0) {
         key = "measured, background points too, " + occl + crowd;
       } else {
         const double seen = own > 1 ? (hi_a - lo) / (2.0 * t->a_m) : 0.0;
         key = "measured, its own points alone, " + occl + ", " + std::to_string(h.edges) +
               " ends, extent " +
-              (seen < 0.33 ? "< 1/3" : seen < 0.67 ? "1/3-2/3" : ">= 2/3") + " of 2a" + crowd;
+              (seen < 0.33   ? "< 1/3"
+               : seen < 0.67 ? "1/3-2/3"
+                             : ">= 2/3") +
+              " of 2a" + crowd;
       }
     }
     rows.push_back({key, {err, nees}});
