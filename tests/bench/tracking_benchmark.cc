@@ -1510,6 +1510,27 @@ int EdgesOf(const tracking::TrackingPipeline& pipeline, const tracking::TrackRep
          (ob.parts[ob.part_count - 1].silhouette.last_valid ? 1 : 0);
 }
 
+// The truth matched to a hypothesis (its id; the last of equal ids, nullptr when none).
+const Truth* TruthById(const std::vector<Truth>& truths, long id) {
+  const Truth* t = nullptr;
+  for (const Truth& c : truths) t = static_cast<long>(c.id) == id ? &c : t;
+  return t;
+}
+
+// The range at which beam `beam` of `sensor` meets target `target`'s body at that beam's time
+// (sim::kNoHit where it misses or the target is absent); yaw_rad, origin: the sensor's pose.
+double BodyRangeOnBeam(const sim::Simulator& simulator, std::size_t sensor,
+                       const tracking::ScanView& scan, double start_s, std::size_t target,
+                       std::size_t beam) {
+  const sim::SensorSetup& setup = simulator.sensor(sensor);
+  const double a = common::DegToRad(setup.yaw_deg) + scan.BeamAngleRad(beam);
+  const double t_beam = start_s + static_cast<double>(beam) * setup.device.beam_time_s;
+  const sim::Target& tg = simulator.targets()[target];
+  const sim::TargetState st = tg.StateAt(t_beam);
+  if (!st.present) return sim::kNoHit;
+  return tg.Intersect({{setup.x_m, setup.y_m}, {std::cos(a), std::sin(a)}}, st, setup.mount);
+}
+
 // --explain, knee height: every measured match of a person, its measurement's error along the
 // line of sight binned by what made it (Causes::los): all of them ("all ...") and those off by at
 // least 0.1 m ("off ..."), by the observation's class, point count, range, sign (nearer / farther
@@ -1525,8 +1546,7 @@ void LineOfSightErrors(const tracking::TrackingPipeline& pipeline, const trackin
   for (std::size_t hi = 0; hi < hyps.size() && hi < matched.size(); ++hi) {
     const Hypothesis& h = hyps[hi];
     if (!h.measured || matched[hi] < 0) continue;
-    const Truth* t = nullptr;
-    for (const Truth& c : truths) t = static_cast<long>(c.id) == matched[hi] ? &c : t;
+    const Truth* t = TruthById(truths, matched[hi]);
     if (t == nullptr || t->leg_radius_m <= 0.0) continue;
     const tracking::TrackReport* rep = nullptr;
     for (const tracking::TrackReport& r : out.tracks) rep = r.track_id == h.id ? &r : rep;
@@ -1739,15 +1759,11 @@ void TorsoEndErrors(const tracking::TrackingPipeline& pipeline, const tracking::
                     std::map<std::string, std::array<double, 4>>* ends) {
   const auto obs = pipeline.observations();
   const auto ms = pipeline.measurements();
-  const sim::SensorSetup& setup = simulator.sensor(sensor);
-  const double yaw = common::DegToRad(setup.yaw_deg);
-  const sim::Vec2 origin{setup.x_m, setup.y_m};
   const std::size_t beams = scan.range_m.size();
   for (std::size_t hi = 0; hi < hyps.size() && hi < matched.size(); ++hi) {
     const Hypothesis& h = hyps[hi];
     if (!h.measured || matched[hi] < 0) continue;
-    const Truth* t = nullptr;
-    for (const Truth& c : truths) t = static_cast<long>(c.id) == matched[hi] ? &c : t;
+    const Truth* t = TruthById(truths, matched[hi]);
     if (t == nullptr || (t->a_m <= 0.0 && !t->trolley) || h.edges < 0) continue;
     // Its observation (as EdgesOf finds it).
     const std::size_t found = ObservationOf(obs, ms, h.z, h.points);
@@ -1756,12 +1772,7 @@ void TorsoEndErrors(const tracking::TrackingPipeline& pipeline, const tracking::
     const double range = t->p.norm();
     if (!(range > 0.0)) continue;
     const auto body_range = [&](std::size_t target, std::size_t beam) {
-      const double a = yaw + scan.BeamAngleRad(beam);
-      const double t_beam = start_s + static_cast<double>(beam) * setup.device.beam_time_s;
-      const sim::Target& tg = simulator.targets()[target];
-      const sim::TargetState st = tg.StateAt(t_beam);
-      if (!st.present) return sim::kNoHit;
-      return tg.Intersect({origin, {std::cos(a), std::sin(a)}}, st, setup.mount);
+      return BodyRangeOnBeam(simulator, sensor, scan, start_s, target, beam);
     };
     // Where the end point is another object's: from that end inwards, the first point on the
     // person's body; the range step there and how far the foreign end point lies from the track.
@@ -1875,17 +1886,13 @@ void FarOffErrors(const tracking::TrackingPipeline& pipeline, const tracking::Sc
                   std::map<std::string, std::array<double, 4>>* far) {
   const auto obs = pipeline.observations();
   const auto ms = pipeline.measurements();
-  const sim::SensorSetup& setup = simulator.sensor(sensor);
-  const double yaw = common::DegToRad(setup.yaw_deg);
-  const sim::Vec2 origin{setup.x_m, setup.y_m};
   const std::size_t beams = scan.range_m.size();
   std::size_t person_matches = 0;
   std::vector<std::pair<std::string, std::array<double, 2>>> rows;
   for (std::size_t hi = 0; hi < hyps.size() && hi < matched.size(); ++hi) {
     const Hypothesis& h = hyps[hi];
     if (matched[hi] < 0) continue;
-    const Truth* t = nullptr;
-    for (const Truth& c : truths) t = static_cast<long>(c.id) == matched[hi] ? &c : t;
+    const Truth* t = TruthById(truths, matched[hi]);
     if (t == nullptr || t->a_m <= 0.0 || t->trolley) continue;
     ++person_matches;
     const double err = (h.p - t->p).norm();
@@ -1911,12 +1918,7 @@ void FarOffErrors(const tracking::TrackingPipeline& pipeline, const tracking::Sc
     } else {
       const tracking::Observation& ob = obs[found];
       const auto body_range = [&](std::size_t target, std::size_t beam) {
-        const double a = yaw + scan.BeamAngleRad(beam);
-        const double t_beam = start_s + static_cast<double>(beam) * setup.device.beam_time_s;
-        const sim::Target& tg = simulator.targets()[target];
-        const sim::TargetState st = tg.StateAt(t_beam);
-        if (!st.present) return sim::kNoHit;
-        return tg.Intersect({origin, {std::cos(a), std::sin(a)}}, st, setup.mount);
+        return BodyRangeOnBeam(simulator, sensor, scan, start_s, target, beam);
       };
       std::size_t own = 0, other = 0, background = 0;
       double lo = std::numeric_limits<double>::infinity(), hi_a = -lo;
