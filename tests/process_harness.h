@@ -127,15 +127,32 @@ class Process {
 
   // Polls stdout until it contains `text`.
   bool WaitForOutput(const std::string& text, milliseconds timeout) {
+    return WaitForText(out_path_, text, timeout);
+  }
+  // Polls stderr until it contains `text` `count` times (a signal's effect, logged: a second
+  // signal sent before the first was handled may be merged with it by the kernel).
+  bool WaitForError(const std::string& text, milliseconds timeout, std::size_t count = 1) {
+    return WaitForText(err_path_, text, timeout, count);
+  }
+
+ private:
+  static std::size_t Occurrences(const std::string& haystack, const std::string& text) {
+    std::size_t n = 0;
+    for (auto at = haystack.find(text); at != std::string::npos; at = haystack.find(text, at + 1)) {
+      ++n;
+    }
+    return n;
+  }
+  static bool WaitForText(const std::string& path, const std::string& text, milliseconds timeout,
+                          std::size_t count = 1) {
     const auto deadline = std::chrono::steady_clock::now() + timeout;
     while (std::chrono::steady_clock::now() < deadline) {
-      if (out().find(text) != std::string::npos) return true;
+      if (Occurrences(ReadText(path), text) >= count) return true;
       std::this_thread::sleep_for(milliseconds(20));
     }
     return false;
   }
 
- private:
   std::filesystem::path dir_;
   std::string out_path_, err_path_;
   pid_t pid_ = -1;
