@@ -360,8 +360,7 @@ TEST(DaemonCliTest, SighupReloadsTheConfigAndABrokenFileKeepsTheOldOne) {
   // Each reload is awaited before the file changes again: two SIGHUPs sent before the daemon
   // handled the first are one signal to it (the kernel keeps one pending), and a loaded machine
   // can take longer than any fixed sleep.
-  EXPECT_TRUE(daemon.WaitForError("SIGHUP: config reloaded", milliseconds(10'000)))
-      << daemon.err();
+  EXPECT_TRUE(daemon.WaitForError("SIGHUP: config reloaded", milliseconds(10'000))) << daemon.err();
   {
     std::ofstream(config) << "sensors: {silent_after_s: [broken\n";
   }
@@ -369,9 +368,7 @@ TEST(DaemonCliTest, SighupReloadsTheConfigAndABrokenFileKeepsTheOldOne) {
   EXPECT_TRUE(daemon.WaitForError("SIGHUP: config not reloaded", milliseconds(10'000)))
       << daemon.err();
   // Still serving with the config it had: a third reload of a good file works again.
-  {
-    std::ofstream(config) << "sensors: {silent_after_s: 4}\n";
-  }
+  { std::ofstream(config) << "sensors: {silent_after_s: 4}\n"; }
   daemon.Signal(SIGHUP);
   EXPECT_TRUE(daemon.WaitForError("SIGHUP: config reloaded", milliseconds(10'000), 2))
       << daemon.err();
