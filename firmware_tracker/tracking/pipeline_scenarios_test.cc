@@ -290,6 +290,24 @@ const TrackReport* Find(const Frame& f, std::uint32_t id) {
   return nullptr;
 }
 
+// Two runs of one scene whose options change only what is reported: every confirmed report of
+// `run` has its track's report in `old` in the same frame at the same position, and
+// compare(frame index, report, old report) checks the rest.
+template <typename Compare>
+void ForEachReportPair(const SceneRun& run, const SceneRun& old, Compare compare) {
+  ASSERT_EQ(run.frames.size(), old.frames.size());
+  for (std::size_t k = 0; k < run.frames.size(); ++k) {
+    for (const TrackReport& r : run.frames[k].tracks) {
+      if (r.state != TrackState::kConfirmed) continue;
+      const TrackReport* o = Find(old.frames[k], r.track_id);
+      ASSERT_NE(o, nullptr);
+      EXPECT_NEAR(r.x_m, o->x_m, 1e-9);
+      EXPECT_NEAR(r.y_m, o->y_m, 1e-9);
+      compare(k, r, *o);
+    }
+  }
+}
+
 std::set<std::uint32_t> AllReportedIds(const SceneRun& run) {
   std::set<std::uint32_t> ids;
   for (const Frame& f : run.frames) {
@@ -2503,32 +2521,24 @@ TEST(PipelineScenarioTest, APartialViewIsReportedWithItsFitsCovariance) {
   const SceneRun old = Simulate(scene, walker.end_s() + 1.0, before);
   EXPECT_GT(run.pipeline->counters().partial_view_widened, 5u);
   EXPECT_EQ(old.pipeline->counters().partial_view_widened, 0u);
-  ASSERT_EQ(run.frames.size(), old.frames.size());
   int wider = 0, same = 0;
   double nees = 0.0, nees_before = 0.0;
-  for (std::size_t k = 0; k < run.frames.size(); ++k) {
-    if (!run.frames[k].truth[0]) continue;
-    for (const TrackReport& r : run.frames[k].tracks) {
-      if (r.state != TrackState::kConfirmed) continue;
-      const TrackReport* o = Find(old.frames[k], r.track_id);
-      ASSERT_NE(o, nullptr);
-      EXPECT_NEAR(r.x_m, o->x_m, 1e-9);
-      EXPECT_NEAR(r.y_m, o->y_m, 1e-9);
-      const Eigen::Matrix2d c = r.covariance.topLeftCorner<2, 2>();
-      const Eigen::Matrix2d c_old = o->covariance.topLeftCorner<2, 2>();
-      if ((c - c_old).norm() < 1e-12) {
-        ++same;
-        continue;
-      }
-      // Larger by a positive definite matrix: the fit's covariance.
-      const Eigen::SelfAdjointEigenSolver<Eigen::Matrix2d> added(Eigen::Matrix2d(c - c_old));
-      EXPECT_GT(added.eigenvalues().minCoeff(), 0.0);
-      ++wider;
-      const Eigen::Vector2d e = Eigen::Vector2d(r.x_m, r.y_m) - *run.frames[k].truth[0];
-      nees += e.dot(c.inverse() * e);
-      nees_before += e.dot(c_old.inverse() * e);
+  ForEachReportPair(run, old, [&](std::size_t k, const TrackReport& r, const TrackReport& o) {
+    if (!run.frames[k].truth[0]) return;
+    const Eigen::Matrix2d c = r.covariance.topLeftCorner<2, 2>();
+    const Eigen::Matrix2d c_old = o.covariance.topLeftCorner<2, 2>();
+    if ((c - c_old).norm() < 1e-12) {
+      ++same;
+      return;
     }
-  }
+    // Larger by a positive definite matrix: the fit's covariance.
+    const Eigen::SelfAdjointEigenSolver<Eigen::Matrix2d> added(Eigen::Matrix2d(c - c_old));
+    EXPECT_GT(added.eigenvalues().minCoeff(), 0.0);
+    ++wider;
+    const Eigen::Vector2d e = Eigen::Vector2d(r.x_m, r.y_m) - *run.frames[k].truth[0];
+    nees += e.dot(c.inverse() * e);
+    nees_before += e.dot(c_old.inverse() * e);
+  });
   EXPECT_GE(wider, 5);
   EXPECT_GT(same, 100);  // a whole view: reported as before
   EXPECT_LT(nees, nees_before);
@@ -2567,28 +2577,20 @@ TEST(PipelineScenarioTest, APersonBesideAnotherIsReportedWider) {
   const SceneRun old = Simulate(scene, end_s + 0.5, before);
   EXPECT_GT(run.pipeline->counters().neighbour_widened, 20u);
   EXPECT_EQ(old.pipeline->counters().neighbour_widened, 0u);
-  ASSERT_EQ(run.frames.size(), old.frames.size());
   int wider = 0, same = 0;
-  for (std::size_t k = 0; k < run.frames.size(); ++k) {
-    for (const TrackReport& r : run.frames[k].tracks) {
-      if (r.state != TrackState::kConfirmed) continue;
-      const TrackReport* o = Find(old.frames[k], r.track_id);
-      ASSERT_NE(o, nullptr);
-      EXPECT_NEAR(r.x_m, o->x_m, 1e-9);
-      EXPECT_NEAR(r.y_m, o->y_m, 1e-9);
-      const Eigen::Matrix2d added =
-          r.covariance.topLeftCorner<2, 2>() - o->covariance.topLeftCorner<2, 2>();
-      if (added.norm() < 1e-12) {
-        ++same;
-        continue;
-      }
-      ++wider;
-      EXPECT_GT(added(0, 0), 0.0);
-      EXPECT_NEAR(added(0, 0), added(1, 1), 1e-12);
-      EXPECT_NEAR(added(0, 1), 0.0, 1e-12);
-      EXPECT_LE(added(0, 0), options.shape.neighbour_sigma_m * options.shape.neighbour_sigma_m);
+  ForEachReportPair(run, old, [&](std::size_t, const TrackReport& r, const TrackReport& o) {
+    const Eigen::Matrix2d added =
+        r.covariance.topLeftCorner<2, 2>() - o.covariance.topLeftCorner<2, 2>();
+    if (added.norm() < 1e-12) {
+      ++same;
+      return;
     }
-  }
+    ++wider;
+    EXPECT_GT(added(0, 0), 0.0);
+    EXPECT_NEAR(added(0, 0), added(1, 1), 1e-12);
+    EXPECT_NEAR(added(0, 1), 0.0, 1e-12);
+    EXPECT_LE(added(0, 0), options.shape.neighbour_sigma_m * options.shape.neighbour_sigma_m);
+  });
   EXPECT_GE(wider, 20);
   EXPECT_GT(same, 100);
 }
@@ -2613,28 +2615,20 @@ TEST(PipelineScenarioTest, AnUnderdeterminedFitIsReportedWithItsFitsCovariance) 
   const SceneRun old = Simulate(scene, walker.end_s() + 0.5, before, coarse);
   EXPECT_GT(run.pipeline->counters().underdetermined_fit_widened, 20u);
   EXPECT_EQ(old.pipeline->counters().underdetermined_fit_widened, 0u);
-  ASSERT_EQ(run.frames.size(), old.frames.size());
   int wider = 0;
   double nees = 0.0, nees_before = 0.0;
-  for (std::size_t k = 0; k < run.frames.size(); ++k) {
-    if (!run.frames[k].truth[0]) continue;
-    for (const TrackReport& r : run.frames[k].tracks) {
-      if (r.state != TrackState::kConfirmed) continue;
-      const TrackReport* o = Find(old.frames[k], r.track_id);
-      ASSERT_NE(o, nullptr);
-      EXPECT_NEAR(r.x_m, o->x_m, 1e-9);
-      EXPECT_NEAR(r.y_m, o->y_m, 1e-9);
-      const Eigen::Matrix2d c = r.covariance.topLeftCorner<2, 2>();
-      const Eigen::Matrix2d c_old = o->covariance.topLeftCorner<2, 2>();
-      if ((c - c_old).norm() < 1e-12) continue;
-      const Eigen::SelfAdjointEigenSolver<Eigen::Matrix2d> added(Eigen::Matrix2d(c - c_old));
-      EXPECT_GT(added.eigenvalues().minCoeff(), 0.0);
-      ++wider;
-      const Eigen::Vector2d e = Eigen::Vector2d(r.x_m, r.y_m) - *run.frames[k].truth[0];
-      nees += e.dot(c.inverse() * e);
-      nees_before += e.dot(c_old.inverse() * e);
-    }
-  }
+  ForEachReportPair(run, old, [&](std::size_t k, const TrackReport& r, const TrackReport& o) {
+    if (!run.frames[k].truth[0]) return;
+    const Eigen::Matrix2d c = r.covariance.topLeftCorner<2, 2>();
+    const Eigen::Matrix2d c_old = o.covariance.topLeftCorner<2, 2>();
+    if ((c - c_old).norm() < 1e-12) return;
+    const Eigen::SelfAdjointEigenSolver<Eigen::Matrix2d> added(Eigen::Matrix2d(c - c_old));
+    EXPECT_GT(added.eigenvalues().minCoeff(), 0.0);
+    ++wider;
+    const Eigen::Vector2d e = Eigen::Vector2d(r.x_m, r.y_m) - *run.frames[k].truth[0];
+    nees += e.dot(c.inverse() * e);
+    nees_before += e.dot(c_old.inverse() * e);
+  });
   EXPECT_GE(wider, 20);
   EXPECT_LT(nees, nees_before);
 }
