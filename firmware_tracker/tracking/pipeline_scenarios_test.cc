@@ -308,6 +308,27 @@ void ForEachReportPair(const SceneRun& run, const SceneRun& old, Compare compare
   }
 }
 
+// Reports that a report-only option widened (ForEachReportPair's pairs against the truth): the
+// added covariance must be positive definite; their NEES summed with the new and the old one.
+struct WidenedReports {
+  int wider = 0, same = 0;
+  double nees = 0.0, nees_before = 0.0;
+  void Add(const TrackReport& r, const TrackReport& o, const Eigen::Vector2d& truth) {
+    const Eigen::Matrix2d c = r.covariance.topLeftCorner<2, 2>();
+    const Eigen::Matrix2d c_old = o.covariance.topLeftCorner<2, 2>();
+    if ((c - c_old).norm() < 1e-12) {
+      ++same;
+      return;
+    }
+    const Eigen::SelfAdjointEigenSolver<Eigen::Matrix2d> added(Eigen::Matrix2d(c - c_old));
+    EXPECT_GT(added.eigenvalues().minCoeff(), 0.0);
+    ++wider;
+    const Eigen::Vector2d e = Eigen::Vector2d(r.x_m, r.y_m) - truth;
+    nees += e.dot(c.inverse() * e);
+    nees_before += e.dot(c_old.inverse() * e);
+  }
+};
+
 std::set<std::uint32_t> AllReportedIds(const SceneRun& run) {
   std::set<std::uint32_t> ids;
   for (const Frame& f : run.frames) {
@@ -2521,27 +2542,14 @@ TEST(PipelineScenarioTest, APartialViewIsReportedWithItsFitsCovariance) {
   const SceneRun old = Simulate(scene, walker.end_s() + 1.0, before);
   EXPECT_GT(run.pipeline->counters().partial_view_widened, 5u);
   EXPECT_EQ(old.pipeline->counters().partial_view_widened, 0u);
-  int wider = 0, same = 0;
-  double nees = 0.0, nees_before = 0.0;
+  WidenedReports widened;
   ForEachReportPair(run, old, [&](std::size_t k, const TrackReport& r, const TrackReport& o) {
-    if (!run.frames[k].truth[0]) return;
-    const Eigen::Matrix2d c = r.covariance.topLeftCorner<2, 2>();
-    const Eigen::Matrix2d c_old = o.covariance.topLeftCorner<2, 2>();
-    if ((c - c_old).norm() < 1e-12) {
-      ++same;
-      return;
-    }
-    // Larger by a positive definite matrix: the fit's covariance.
-    const Eigen::SelfAdjointEigenSolver<Eigen::Matrix2d> added(Eigen::Matrix2d(c - c_old));
-    EXPECT_GT(added.eigenvalues().minCoeff(), 0.0);
-    ++wider;
-    const Eigen::Vector2d e = Eigen::Vector2d(r.x_m, r.y_m) - *run.frames[k].truth[0];
-    nees += e.dot(c.inverse() * e);
-    nees_before += e.dot(c_old.inverse() * e);
+    // Larger by a positive definite matrix where widened: the fit's covariance.
+    if (run.frames[k].truth[0]) widened.Add(r, o, *run.frames[k].truth[0]);
   });
-  EXPECT_GE(wider, 5);
-  EXPECT_GT(same, 100);  // a whole view: reported as before
-  EXPECT_LT(nees, nees_before);
+  EXPECT_GE(widened.wider, 5);
+  EXPECT_GT(widened.same, 100);  // a whole view: reported as before
+  EXPECT_LT(widened.nees, widened.nees_before);
 }
 
 // ShapeOptions::neighbour_sigma_m: neighbour_sigma_m^2 (1 - d / neighbour_distance_m) per axis
@@ -2615,22 +2623,12 @@ TEST(PipelineScenarioTest, AnUnderdeterminedFitIsReportedWithItsFitsCovariance) 
   const SceneRun old = Simulate(scene, walker.end_s() + 0.5, before, coarse);
   EXPECT_GT(run.pipeline->counters().underdetermined_fit_widened, 20u);
   EXPECT_EQ(old.pipeline->counters().underdetermined_fit_widened, 0u);
-  int wider = 0;
-  double nees = 0.0, nees_before = 0.0;
+  WidenedReports widened;
   ForEachReportPair(run, old, [&](std::size_t k, const TrackReport& r, const TrackReport& o) {
-    if (!run.frames[k].truth[0]) return;
-    const Eigen::Matrix2d c = r.covariance.topLeftCorner<2, 2>();
-    const Eigen::Matrix2d c_old = o.covariance.topLeftCorner<2, 2>();
-    if ((c - c_old).norm() < 1e-12) return;
-    const Eigen::SelfAdjointEigenSolver<Eigen::Matrix2d> added(Eigen::Matrix2d(c - c_old));
-    EXPECT_GT(added.eigenvalues().minCoeff(), 0.0);
-    ++wider;
-    const Eigen::Vector2d e = Eigen::Vector2d(r.x_m, r.y_m) - *run.frames[k].truth[0];
-    nees += e.dot(c.inverse() * e);
-    nees_before += e.dot(c_old.inverse() * e);
+    if (run.frames[k].truth[0]) widened.Add(r, o, *run.frames[k].truth[0]);
   });
-  EXPECT_GE(wider, 20);
-  EXPECT_LT(nees, nees_before);
+  EXPECT_GE(widened.wider, 20);
+  EXPECT_LT(widened.nees, widened.nees_before);
 }
 
 TEST(PipelineScenarioTest, AWideBeamDoesNotPullTheCentreTowardsTheSensor) {
