@@ -62,7 +62,8 @@
 //   on what) and the tracker's counters; --breakdown: a table more per section, the per-sensor
 //   matched error along and across the line of sight by range and point count, by the sensor's
 //   model and scan rate, the person's size and outline, the object's speed, a partial view (a
-//   nearer return beside it) or another object near it, and the filtered track's error beside
+//   nearer return beside it) or another object near it, a moving trolley's view and whether its
+//   track is a box (at either height), and the filtered track's error beside
 //   that of the scan's measurement it was updated with, see Breakdown;
 //   --before-report-rules: a third tracker, "before", the new one without
 //   ShapeOptions::unseen_coasting_m and MultiTrackerOptions::moving_speed_mps, the tree before
@@ -247,6 +248,8 @@ struct Hypothesis {
   int edges = -1;         // --breakdown: its observation's silhouette ends (0-2), -1 unknown
   // --explain, per sensor, coasting: what the scan shows across its body (CoastingView).
   std::string view;
+  // --breakdown: the track's shape state is a box (ObjectShape::kBox).
+  bool box = false;
 };
 
 // --breakdown: where the matched error of the per-sensor tracks comes from. Every match's error
@@ -416,6 +419,8 @@ struct Breakdown {
   std::array<BreakdownCell, 4> two_legs_by_spread;
   std::array<BreakdownCell, 2> two_legs_by_support;
   std::array<BreakdownCell, 4> trolley_by_view;
+  // A moving trolley at either height, by its view (Truth::view) and whether its track is a box.
+  std::array<std::array<BreakdownCell, 2>, 4> trolley_by_view_shape;
   // A walking person (faster than kWalkingMps, not a trolley): its heading against the line of
   // sight (HeadingBin, kHeadingBins), over every range and per range bin (kRangeBins).
   std::array<BreakdownCell, 4> walking_by_heading;
@@ -452,6 +457,8 @@ struct Breakdown {
     BreakdownCell* since = parts == 2 ? &one_leg_by_since[SinceBin(since_two_legs_s)] : nullptr;
     BreakdownCell* view =
         parts == 5 && t.trolley && t.view >= 0 ? &trolley_by_view[t.view] : nullptr;
+    BreakdownCell* view_shape =
+        t.trolley && t.view >= 0 ? &trolley_by_view_shape[t.view][h.box ? 1 : 0] : nullptr;
     BreakdownCell* spread = parts == 4 && t.legs_spread_m >= 0.0
                                 ? &two_legs_by_spread[SpreadBin(t.legs_spread_m)]
                                 : nullptr;
@@ -501,6 +508,7 @@ struct Breakdown {
         gait,
         since,
         view,
+        view_shape,
         spread,
         support,
         heading,
@@ -576,6 +584,9 @@ struct Breakdown {
     }
     for (std::size_t i = 0; i < trolley_by_view.size(); ++i) {
       trolley_by_view[i].Merge(o.trolley_by_view[i]);
+      for (std::size_t j = 0; j < trolley_by_view_shape[i].size(); ++j) {
+        trolley_by_view_shape[i][j].Merge(o.trolley_by_view_shape[i][j]);
+      }
     }
     for (std::size_t i = 0; i < walking_by_heading.size(); ++i) {
       walking_by_heading[i].Merge(o.walking_by_heading[i]);
@@ -2274,7 +2285,8 @@ void RunSensor(const sim::Simulator& simulator, std::size_t sensor,
                         r.measured_offset_s,
                         PartsOf(*pipelines[v], r),
                         EdgesOf(*pipelines[v], r),
-                        std::move(coasting_view)});
+                        std::move(coasting_view),
+                        r.shape == tracking::ObjectShape::kBox});
         frame.tracks.push_back(ToObservation(r));
       }
       std::array<tracking::TrackPrediction, tracking::kMaxTracks> predictions;
@@ -3100,6 +3112,15 @@ std::string BreakdownTable(const Section& s) {
                                  "trolley, broadside", "trolley, end-on, going away"};
     for (std::size_t i = 0; i < b.trolley_by_view.size(); ++i) {
       if (b.trolley_by_view[i].all.n > 0) t += BreakdownRow(lead, views[i], b.trolley_by_view[i]);
+    }
+    for (std::size_t i = 0; i < b.trolley_by_view_shape.size(); ++i) {
+      for (std::size_t j = 0; j < b.trolley_by_view_shape[i].size(); ++j) {
+        if (b.trolley_by_view_shape[i][j].all.n == 0) continue;
+        t += BreakdownRow(
+            lead,
+            std::string(views[i]) + (j == 1 ? ", tracked as a box" : ", tracked as another shape"),
+            b.trolley_by_view_shape[i][j]);
+      }
     }
     for (std::size_t i = 0; i < b.walking_by_heading.size(); ++i) {
       if (b.walking_by_heading[i].all.n == 0) continue;
