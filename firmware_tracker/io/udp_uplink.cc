@@ -136,6 +136,10 @@ void UdpUplink::Send(std::span<const std::uint8_t> datagram, common::UtcNs /*sen
     ++held_count_;
     return;
   }
+  SendNow(datagram);
+}
+
+void UdpUplink::SendNow(std::span<const std::uint8_t> datagram) {
   ssize_t n;
   do {
     n = ::send(fd_, datagram.data(), datagram.size(), MSG_DONTWAIT | MSG_NOSIGNAL);
@@ -165,6 +169,11 @@ void UdpUplink::SendHeld() {
   const std::size_t count = held_count_;
   held_count_ = 0;
   if (count == 0 || fd_ < 0) return;
+  if (count == 1) {
+    // One send(2): sendmmsg's message headers would cost more than they save.
+    SendNow(std::span<const std::uint8_t>(held_[0].data(), held_bytes_[0]));
+    return;
+  }
   std::array<iovec, kMaxHeldDatagrams> parts{};
   std::array<mmsghdr, kMaxHeldDatagrams> messages{};
   for (std::size_t i = 0; i < count; ++i) {

@@ -10,7 +10,8 @@
 // - Between BeginBatch() and EndBatch() (UdpUplinkOptions::batch_sends) Send() copies the datagram
 //   into one of kMaxHeldDatagrams fixed buffers instead, and EndBatch() sends the held ones, in
 //   order, with one sendmmsg(2) (the system call's entry and exit once per scan, not once per
-//   datagram: a scan of many tracks and a background snapshot send several). The same datagrams in
+//   datagram: a scan of many tracks and a background snapshot send several; a lone datagram goes
+//   with send(2), which costs less than sendmmsg's message headers). The same datagrams in
 //   the same order; each one the kernel refuses is dropped and counted as a failed send(2) would
 //   be. With every buffer full the held datagrams are sent at once. Close() sends what is held
 //   first.
@@ -57,7 +58,7 @@ struct UdpUplinkCounters {
   std::uint64_t oversize = 0;     // refused: larger than kMaxDatagramBytes (never from the encoder)
   std::uint64_t not_open = 0;     // Send before Open or after a failed Open
   std::uint64_t batches = 0;      // sendmmsg(2) calls (UdpUplinkOptions::batch_sends)
-  std::uint64_t batched = 0;      // of the datagrams sent, those sent in a batch
+  std::uint64_t batched = 0;      // of the datagrams sent, those sent by sendmmsg(2)
   std::uint64_t received = 0;     // datagrams read by Poll
   std::uint64_t receive_errors = 0;
   int last_errno = 0;
@@ -103,7 +104,9 @@ class UdpUplink final : public DatagramSink {
   const RequestDecoderCounters& request_counters() const { return decoder_.counters(); }
 
  private:
-  // Sends the datagrams held since BeginBatch() (batch_sends).
+  // One send(2).
+  void SendNow(std::span<const std::uint8_t> datagram);
+  // Sends the datagrams held since BeginBatch() (batch_sends): two or more in one sendmmsg(2).
   void SendHeld();
   void CountSendError(int error);
 

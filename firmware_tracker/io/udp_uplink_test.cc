@@ -229,7 +229,7 @@ TEST(UdpUplinkTest, BatchedDatagramsLeaveTogetherInOrder) {
   EXPECT_EQ(unbatched.counters().batches, 0u);
 }
 
-// Held datagrams are sent before the socket closes.
+// Held datagrams are sent before the socket closes; one alone with send(2).
 TEST(UdpUplinkTest, CloseSendsWhatIsHeld) {
   FakeDaemon daemon(AF_INET);
   ASSERT_TRUE(daemon.ok());
@@ -240,6 +240,7 @@ TEST(UdpUplinkTest, CloseSendsWhatIsHeld) {
   uplink.Send(d, 0);
   uplink.Close();
   EXPECT_EQ(uplink.counters().datagrams_sent, 1u);
+  EXPECT_EQ(uplink.counters().batches, 0u);
   EXPECT_EQ(daemon.Receive(), d);
 }
 
