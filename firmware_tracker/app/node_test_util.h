@@ -84,11 +84,18 @@ class SyntheticDevice {
   std::unique_ptr<cola::ScanTelegram> telegram_;
 };
 
-// Decoded datagrams (nanopb), in emission order.
+// Decoded datagrams (nanopb), in emission order, each with whether it came between BeginBatch()
+// and EndBatch().
 class CollectingSink final : public io::DatagramSink {
  public:
+  void BeginBatch() override {
+    batch_open = true;
+    ++batches;
+  }
+  void EndBatch() override { batch_open = false; }
   void Send(std::span<const std::uint8_t> datagram, common::UtcNs) override {
     sizes.push_back(datagram.size());
+    in_batch.push_back(batch_open);
     auto d = std::make_unique<lrfnet_proto_Datagram>();
     *d = lrfnet_proto_Datagram{};
     pb_istream_t stream = pb_istream_from_buffer(datagram.data(), datagram.size());
@@ -103,10 +110,15 @@ class CollectingSink final : public io::DatagramSink {
   void Clear() {
     datagrams.clear();
     sizes.clear();
+    in_batch.clear();
+    batches = 0;
   }
 
   std::vector<std::unique_ptr<lrfnet_proto_Datagram>> datagrams;
   std::vector<std::size_t> sizes;
+  std::vector<bool> in_batch;
+  bool batch_open = false;
+  std::size_t batches = 0;  // BeginBatch calls
   bool decoded_ok = true;
 };
 

@@ -82,6 +82,9 @@ void TrackerNode::OnScan(const cola::ScanTelegram& scan, common::UtcNs receive_n
     if (mount_watch_.EndScan()) ++counters_.mount_looks_like_legs;
   }
 
+  // The scan's datagrams (sensor info, track frame, background snapshot) leave together where the
+  // sink can send them in one call (DatagramSink::BeginBatch, EndBatch).
+  sink_.BeginBatch();
   // Sensor info before the first frame of a new geometry, so a receiver can interpret it.
   if (polar.count != info_count_ || polar.first_angle_rad != info_first_angle_rad_ ||
       polar.angle_step_rad != info_step_rad_ || polar.scan_frequency_hz != scan_frequency_hz_) {
@@ -107,6 +110,7 @@ void TrackerNode::OnScan(const cola::ScanTelegram& scan, common::UtcNs receive_n
                      (since_s >= config_.publish.snapshot_min_interval_s && BackgroundChanged());
     if (due) PublishBackground(sent_ns);
   }
+  sink_.EndBatch();
 }
 
 bool TrackerNode::BackgroundChanged() const {

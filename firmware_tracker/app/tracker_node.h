@@ -66,7 +66,8 @@ class TrackerNode {
                          std::string_view firmware);
 
   // One LMDscandata telegram received at receive_ns; sent_ns stamps the datagrams (live: the
-  // gateway clock now; replay: receive_ns).
+  // gateway clock now; replay: receive_ns). The scan's datagrams go to the sink between one
+  // BeginBatch() and EndBatch().
   void OnScan(const cola::ScanTelegram& scan, common::UtcNs receive_ns, common::UtcNs sent_ns);
 
   // Periodic work at gateway time now_ns (call after every scan and from a timer while no scans

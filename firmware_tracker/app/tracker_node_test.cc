@@ -215,6 +215,24 @@ TEST(TrackerNode, ChangedBackgroundIsSentAgainUnchangedIsNot) {
   EXPECT_EQ(run.node.counters().snapshots, 2u);
 }
 
+// Every datagram of a scan (track frame, background snapshot, sensor info) goes to the sink in one
+// batch per scan (one sendmmsg on the UDP uplink); health, from OnTick, on its own.
+TEST(TrackerNode, ScanDatagramsGoToTheSinkInOneBatch) {
+  NodeRun run;
+  run.Scans(0, 150, EmptyRoom);
+  EXPECT_EQ(run.sink.batches, 150u);
+  EXPECT_FALSE(run.sink.batch_open);
+  ASSERT_EQ(run.sink.in_batch.size(), run.sink.datagrams.size());
+  std::size_t batched = 0;
+  for (std::size_t i = 0; i < run.sink.datagrams.size(); ++i) {
+    const bool health = run.sink.datagrams[i]->which_payload == lrfnet_proto_Datagram_health_tag;
+    EXPECT_EQ(run.sink.in_batch[i], !health) << i;
+    batched += run.sink.in_batch[i] ? 1 : 0;
+  }
+  // 150 frames, the background's first snapshot (two parts) and the sensor info.
+  EXPECT_EQ(batched, 150u + 2u + 1u);
+}
+
 TEST(TrackerNode, PeriodicSnapshotWithoutChange) {
   TrackerConfig config = Config();
   config.publish.snapshot_period_s = 4.0;

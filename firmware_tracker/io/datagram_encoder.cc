@@ -235,6 +235,14 @@ void DatagramFanout::Send(std::span<const std::uint8_t> datagram, common::UtcNs 
   for (std::size_t i = 0; i < count_; ++i) sinks_[i]->Send(datagram, sent_ns);
 }
 
+void DatagramFanout::BeginBatch() {
+  for (std::size_t i = 0; i < count_; ++i) sinks_[i]->BeginBatch();
+}
+
+void DatagramFanout::EndBatch() {
+  for (std::size_t i = 0; i < count_; ++i) sinks_[i]->EndBatch();
+}
+
 bool IsValidSensorId(std::string_view id) {
   if (id.empty() || id.size() > kMaxSensorIdLength) return false;
   return std::all_of(id.begin(), id.end(), [](char c) {

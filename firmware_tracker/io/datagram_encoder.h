@@ -76,6 +76,11 @@ class DatagramSink {
   // One serialised Datagram of at most kMaxPayloadBytes; the bytes are valid during the call only.
   // sent_ns is the datagram's own sent_ns field.
   virtual void Send(std::span<const std::uint8_t> datagram, common::UtcNs sent_ns) = 0;
+  // The datagrams Sent after BeginBatch() may be held until EndBatch(), which passes on every one
+  // still held, in the order they were sent (the UDP uplink: all of them in one system call). A
+  // sink that passes each datagram on at once ignores both (the defaults).
+  virtual void BeginBatch() {}
+  virtual void EndBatch() {}
 };
 
 // Hands every datagram to up to kMaxSinks sinks in the order they were added. Not owning.
@@ -85,6 +90,8 @@ class DatagramFanout final : public DatagramSink {
   // False when full or null.
   [[nodiscard]] bool Add(DatagramSink* sink);
   void Send(std::span<const std::uint8_t> datagram, common::UtcNs sent_ns) override;
+  void BeginBatch() override;
+  void EndBatch() override;
 
  private:
   std::array<DatagramSink*, kMaxSinks> sinks_{};

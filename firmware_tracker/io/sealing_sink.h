@@ -25,6 +25,9 @@ class SealingSink final : public DatagramSink {
   SealingSink(const auth::SealerOptions& options, DatagramSink& next);
 
   void Send(std::span<const std::uint8_t> datagram, common::UtcNs sent_ns) override;
+  // Passed on to `next` (which holds its own copies of the sealed bytes).
+  void BeginBatch() override { next_.BeginBatch(); }
+  void EndBatch() override { next_.EndBatch(); }
 
   const SealingCounters& counters() const { return counters_; }
   const auth::Sealer& sealer() const { return sealer_; }

@@ -5,6 +5,7 @@
 #include <netdb.h>
 #include <netinet/in.h>
 #include <sys/socket.h>
+#include <sys/uio.h>
 #include <unistd.h>
 
 #include <cerrno>
@@ -53,7 +54,12 @@ UdpUplink::UdpUplink(const UdpUplinkOptions& options)
 UdpUplink::~UdpUplink() { Close(); }
 
 void UdpUplink::Close() {
-  if (fd_ >= 0) ::close(fd_);
+  if (fd_ >= 0) {
+    SendHeld();
+    ::close(fd_);
+  }
+  held_count_ = 0;
+  batching_ = false;
   fd_ = -1;
 }
 
@@ -123,18 +129,80 @@ void UdpUplink::Send(std::span<const std::uint8_t> datagram, common::UtcNs /*sen
     ++counters_.oversize;
     return;
   }
+  if (batching_) {
+    if (held_count_ == kMaxHeldDatagrams) SendHeld();
+    std::memcpy(held_[held_count_].data(), datagram.data(), datagram.size());
+    held_bytes_[held_count_] = datagram.size();
+    ++held_count_;
+    return;
+  }
+  SendNow(datagram);
+}
+
+void UdpUplink::SendNow(std::span<const std::uint8_t> datagram) {
   ssize_t n;
   do {
     n = ::send(fd_, datagram.data(), datagram.size(), MSG_DONTWAIT | MSG_NOSIGNAL);
   } while (n < 0 && errno == EINTR);
   if (n < 0) {
-    ++counters_.send_errors;
-    if (errno == EAGAIN || errno == EWOULDBLOCK) ++counters_.would_block;
-    counters_.last_errno = errno;
+    CountSendError(errno);
     return;
   }
   ++counters_.datagrams_sent;
   counters_.bytes_sent += static_cast<std::uint64_t>(n);
+}
+
+void UdpUplink::CountSendError(int error) {
+  ++counters_.send_errors;
+  if (error == EAGAIN || error == EWOULDBLOCK) ++counters_.would_block;
+  counters_.last_errno = error;
+}
+
+void UdpUplink::BeginBatch() { batching_ = options_.batch_sends && fd_ >= 0; }
+
+void UdpUplink::EndBatch() {
+  SendHeld();
+  batching_ = false;
+}
+
+void UdpUplink::SendHeld() {
+  const std::size_t count = held_count_;
+  held_count_ = 0;
+  if (count == 0 || fd_ < 0) return;
+  if (count == 1) {
+    // One send(2): sendmmsg's message headers would cost more than they save.
+    SendNow(std::span<const std::uint8_t>(held_[0].data(), held_bytes_[0]));
+    return;
+  }
+  std::array<iovec, kMaxHeldDatagrams> parts{};
+  std::array<mmsghdr, kMaxHeldDatagrams> messages{};
+  for (std::size_t i = 0; i < count; ++i) {
+    parts[i].iov_base = held_[i].data();
+    parts[i].iov_len = held_bytes_[i];
+    messages[i].msg_hdr.msg_iov = &parts[i];
+    messages[i].msg_hdr.msg_iovlen = 1;
+  }
+  // sendmmsg stops at the first datagram the kernel refuses: with none sent before it that one's
+  // error is returned, else the count sent so far and the next call starts at it. A refused
+  // datagram is dropped and counted, and the rest go on, as with one send(2) each.
+  std::size_t next = 0;
+  while (next < count) {
+    const int n = ::sendmmsg(fd_, messages.data() + next, static_cast<unsigned>(count - next),
+                             MSG_DONTWAIT | MSG_NOSIGNAL);
+    if (n < 0 && errno == EINTR) continue;
+    ++counters_.batches;
+    if (n <= 0) {
+      CountSendError(n < 0 ? errno : 0);
+      ++next;
+      continue;
+    }
+    for (std::size_t i = next; i < next + static_cast<std::size_t>(n); ++i) {
+      ++counters_.datagrams_sent;
+      ++counters_.batched;
+      counters_.bytes_sent += messages[i].msg_len;
+    }
+    next += static_cast<std::size_t>(n);
+  }
 }
 
 std::size_t UdpUplink::Poll() {

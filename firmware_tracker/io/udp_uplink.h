@@ -7,6 +7,14 @@
 // - Send() is one non-blocking send(2) per datagram. A full socket buffer (EAGAIN) or any other
 //   error (e.g. ECONNREFUSED after an ICMP port-unreachable while the daemon is down) drops that
 //   datagram and is counted; nothing is ever fatal or retried.
+// - Between BeginBatch() and EndBatch() (UdpUplinkOptions::batch_sends) Send() copies the datagram
+//   into one of kMaxHeldDatagrams fixed buffers instead, and EndBatch() sends the held ones, in
+//   order, with one sendmmsg(2) (the system call's entry and exit once per scan, not once per
+//   datagram: a scan of many tracks and a background snapshot send several; a lone datagram goes
+//   with send(2), which costs less than sendmmsg's message headers). The same datagrams in
+//   the same order; each one the kernel refuses is dropped and counted as a failed send(2) would
+//   be. With every buffer full the held datagrams are sent at once. Close() sends what is held
+//   first.
 // - Poll() reads the datagrams queued on the socket (at most max_datagrams_per_poll per call) and
 //   decodes Requests (RequestDecoder). Because the socket is connected, the kernel delivers only
 //   datagrams from the daemon's address: the daemon answers from the socket the tracker sends to,
@@ -36,6 +44,9 @@ struct UdpUplinkOptions {
   // This sensor's keys when the uplink is authenticated: Requests must then be sealed for it
   // (RequestDecoder). The datagrams sent are sealed before they reach Send (SealingSink).
   std::optional<auth::SensorKeys> keys;
+  // Datagrams sent between BeginBatch() and EndBatch() go out together, in one sendmmsg(2); false:
+  // one send(2) each, as at any other time.
+  bool batch_sends = true;
 };
 std::optional<std::string> Validate(const UdpUplinkOptions& options);
 
@@ -46,6 +57,8 @@ struct UdpUplinkCounters {
   std::uint64_t would_block = 0;  // of which: socket buffer full
   std::uint64_t oversize = 0;     // refused: larger than kMaxDatagramBytes (never from the encoder)
   std::uint64_t not_open = 0;     // Send before Open or after a failed Open
+  std::uint64_t batches = 0;      // sendmmsg(2) calls (UdpUplinkOptions::batch_sends)
+  std::uint64_t batched = 0;      // of the datagrams sent, those sent by sendmmsg(2)
   std::uint64_t received = 0;     // datagrams read by Poll
   std::uint64_t receive_errors = 0;
   int last_errno = 0;
@@ -71,6 +84,8 @@ class UdpUplink final : public DatagramSink {
   bool is_open() const { return fd_ >= 0; }
 
   void Send(std::span<const std::uint8_t> datagram, common::UtcNs sent_ns) override;
+  void BeginBatch() override;
+  void EndBatch() override;
 
   // Returns the number of datagrams read.
   std::size_t Poll();
@@ -89,6 +104,12 @@ class UdpUplink final : public DatagramSink {
   const RequestDecoderCounters& request_counters() const { return decoder_.counters(); }
 
  private:
+  // One send(2).
+  void SendNow(std::span<const std::uint8_t> datagram);
+  // Sends the datagrams held since BeginBatch() (batch_sends): two or more in one sendmmsg(2).
+  void SendHeld();
+  void CountSendError(int error);
+
   UdpUplinkOptions options_;
   int fd_ = -1;
   std::string peer_;
@@ -97,6 +118,12 @@ class UdpUplink final : public DatagramSink {
   PendingRequests pending_;
   // One byte more than the largest acceptable datagram: with MSG_TRUNC the true size is reported.
   std::array<std::uint8_t, kMaxDatagramBytes + 1> receive_buffer_{};
+  // The datagrams held since BeginBatch() (batch_sends), sent by SendHeld().
+  static constexpr std::size_t kMaxHeldDatagrams = 8;
+  bool batching_ = false;
+  std::size_t held_count_ = 0;
+  std::array<std::size_t, kMaxHeldDatagrams> held_bytes_{};
+  std::array<std::array<std::uint8_t, kMaxDatagramBytes>, kMaxHeldDatagrams> held_{};
 };
 
 }  // namespace lrfnet::io

@@ -183,6 +183,67 @@ TEST(UdpUplinkTest, DaemonDownMeansCountedErrorsOnly) {
   uplink.Send(d, 0);  // still usable
 }
 
+// Between BeginBatch and EndBatch the datagrams are held and then sent in order, in one sendmmsg
+// per kMaxHeldDatagrams (8); with batch_sends off, or outside a batch, each at once.
+TEST(UdpUplinkTest, BatchedDatagramsLeaveTogetherInOrder) {
+  FakeDaemon daemon(AF_INET);
+  ASSERT_TRUE(daemon.ok());
+  UdpUplink uplink(Options("127.0.0.1", daemon.port()));
+  ASSERT_EQ(uplink.Open(), std::nullopt);
+  const auto datagram = [](std::uint8_t k) {
+    return std::vector<std::uint8_t>(static_cast<std::size_t>(100 + 50 * k), k);
+  };
+  uplink.BeginBatch();
+  for (std::uint8_t k = 0; k < 3; ++k) uplink.Send(datagram(k), 0);
+  EXPECT_EQ(uplink.counters().datagrams_sent, 0u);
+  EXPECT_TRUE(daemon.Receive(0).empty());  // held
+  uplink.EndBatch();
+  EXPECT_EQ(uplink.counters().batches, 1u);
+  EXPECT_EQ(uplink.counters().batched, 3u);
+  EXPECT_EQ(uplink.counters().datagrams_sent, 3u);
+  EXPECT_EQ(uplink.counters().bytes_sent, 100u + 150u + 200u);
+  for (std::uint8_t k = 0; k < 3; ++k) EXPECT_EQ(daemon.Receive(), datagram(k)) << int{k};
+  // Ten: the first eight go when the ninth arrives, the last two at EndBatch.
+  uplink.BeginBatch();
+  for (std::uint8_t k = 0; k < 10; ++k) uplink.Send(datagram(k), 0);
+  EXPECT_EQ(uplink.counters().datagrams_sent, 3u + 8u);
+  uplink.EndBatch();
+  EXPECT_EQ(uplink.counters().batches, 3u);
+  EXPECT_EQ(uplink.counters().batched, 13u);
+  for (std::uint8_t k = 0; k < 10; ++k) EXPECT_EQ(daemon.Receive(), datagram(k)) << int{k};
+  // Outside a batch: at once.
+  uplink.Send(datagram(1), 0);
+  EXPECT_EQ(daemon.Receive(), datagram(1));
+  EXPECT_EQ(uplink.counters().batches, 3u);
+  EXPECT_EQ(uplink.counters().send_errors, 0u);
+
+  UdpUplinkOptions o = Options("127.0.0.1", daemon.port());
+  o.batch_sends = false;
+  UdpUplink unbatched(o);
+  ASSERT_EQ(unbatched.Open(), std::nullopt);
+  unbatched.BeginBatch();
+  unbatched.Send(datagram(2), 0);
+  EXPECT_EQ(unbatched.counters().datagrams_sent, 1u);
+  EXPECT_EQ(daemon.Receive(), datagram(2));
+  unbatched.EndBatch();
+  EXPECT_EQ(unbatched.counters().batches, 0u);
+}
+
+// Held datagrams are sent before the socket closes; one alone with send(2).
+TEST(UdpUplinkTest, CloseSendsWhatIsHeld) {
+  FakeDaemon daemon(AF_INET);
+  ASSERT_TRUE(daemon.ok());
+  UdpUplink uplink(Options("127.0.0.1", daemon.port()));
+  ASSERT_EQ(uplink.Open(), std::nullopt);
+  const std::vector<std::uint8_t> d(64, 9);
+  uplink.BeginBatch();
+  uplink.Send(d, 0);
+  uplink.Close();
+  EXPECT_EQ(uplink.counters().datagrams_sent, 1u);
+  EXPECT_EQ(uplink.counters().batches, 0u);
+  EXPECT_EQ(daemon.Receive(), d);
+}
+
 TEST(UdpUplinkTest, OptionsAreValidated) {
   EXPECT_EQ(Validate(Options("127.0.0.1", 5000)), std::nullopt);
   EXPECT_TRUE(Validate(Options("", 5000)).has_value());

@@ -157,6 +157,8 @@ TEST_P(UplinkAllocPathTest, NoHeapAllocationPerScanAfterStart) {
       t->kind =
           i % 2 ? tracking::MeasurementKind::kEllipse : tracking::MeasurementKind::kCenterOfMass;
     }
+    // The scan's datagrams in one batch (one sendmmsg), as the tracker node sends them.
+    p.sink().BeginBatch();
     p.encoder.EncodeTracks(p.scan, receive, p.sink());
 
     if (k % 25 == 0) {  // once a second: health and the daemon's requests
@@ -202,6 +204,7 @@ TEST_P(UplinkAllocPathTest, NoHeapAllocationPerScanAfterStart) {
         snapshots += p.encoder.EncodeBackground(view, receive, p.sink()) > 0 ? 1 : 0;
       }
     }
+    p.sink().EndBatch();
   }
   EXPECT_EQ(::lrfnet::testing::StopCountingAllocations(), 0u);
 
@@ -210,6 +213,7 @@ TEST_P(UplinkAllocPathTest, NoHeapAllocationPerScanAfterStart) {
   EXPECT_EQ(valid_stamps, static_cast<std::size_t>(kScans));
   EXPECT_GT(p.encoder.counters().track_parts, static_cast<std::uint64_t>(kScans));
   EXPECT_EQ(p.uplink.counters().datagrams_sent, p.encoder.counters().datagrams);
+  EXPECT_GT(p.uplink.counters().batches, static_cast<std::uint64_t>(kScans / 2));  // 2+ a scan
   EXPECT_EQ(p.recording.counters().entries, p.encoder.counters().datagrams);
   EXPECT_GT(p.recording.counters().flushes, 100u);
   EXPECT_EQ(p.recording.counters().write_errors, 0u);

@@ -718,14 +718,8 @@ class TrackingPipeline::Refiner final : public MeasurementRefiner {
     // ShapeOptions::neighbour_sigma_m: the nearest other observation of the scan.
     shape.reported_neighbour_m2 = 0.0;
     if (body && o.neighbour_sigma_m > 0.0 && source < p_.measurements_.size()) {
-      const Eigen::Vector2d here = p_.measurements_[source].position_m;
-      // Squared distances, one square root (the same nearest distance, bit for bit).
-      double nearest_m2 = std::numeric_limits<double>::infinity();
-      for (std::size_t k = 0; k < p_.measurements_.size(); ++k) {
-        if (k == source) continue;
-        nearest_m2 = std::min(nearest_m2, (p_.measurements_[k].position_m - here).squaredNorm());
-      }
-      shape.reported_neighbour_m2 = internal::NeighbourVar(o, std::sqrt(nearest_m2));
+      if (nearest_step_ != scans) NearestOthers();
+      shape.reported_neighbour_m2 = internal::NeighbourVar(o, std::sqrt(nearest_m2_[source]));
       if (shape.reported_neighbour_m2 > 0.0) ++neighbour_widened;
     }
     if (underdetermined) ++underdetermined_widened;
@@ -896,6 +890,26 @@ class TrackingPipeline::Refiner final : public MeasurementRefiner {
           o.person_size_sigma_m * o.person_size_sigma_m * Eigen::Matrix2d::Identity();
     }
     shape.stamp_ns = at_ns;
+  }
+
+  // Per measurement of the scan, the squared distance to the nearest other one (ShapeOptions::
+  // neighbour_sigma_m), once per scan for all of them rather than once per refinement: each pair's
+  // distance once, (a - b) and (b - a) squared alike (the same minimum, bit for bit).
+  void NearestOthers() {
+    const std::span<const Measurement> m = p_.measurements_.span();
+    const std::size_t n = m.size();
+    for (std::size_t i = 0; i < n; ++i) nearest_m2_[i] = std::numeric_limits<double>::infinity();
+    for (std::size_t i = 0; i < n; ++i) {
+      const Eigen::Vector2d here = m[i].position_m;
+      double nearest_i = nearest_m2_[i];
+      for (std::size_t k = i + 1; k < n; ++k) {
+        const double d2 = (m[k].position_m - here).squaredNorm();
+        nearest_i = std::min(nearest_i, d2);
+        nearest_m2_[k] = std::min(nearest_m2_[k], d2);
+      }
+      nearest_m2_[i] = nearest_i;
+    }
+    nearest_step_ = scans;
   }
 
   // internal::SuperellipseReachFactor(exponent), the pow only where the exponent differs from the
@@ -1394,6 +1408,9 @@ class TrackingPipeline::Refiner final : public MeasurementRefiner {
   // changes seldom, a pow per fit cost more than the rest of the reach test.
   double reach_exponent_ = std::numeric_limits<double>::quiet_NaN();
   double reach_factor_ = 0.0;
+  // NearestOthers' squared distances, valid where nearest_step_ is the current count of scans.
+  std::array<double, kMaxSegments> nearest_m2_{};
+  std::uint64_t nearest_step_ = 0;
 };
 
 TrackingPipeline::TrackingPipeline(const TrackerOptions& options)

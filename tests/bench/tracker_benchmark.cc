@@ -13,7 +13,8 @@
 // --out FILE (replacing its header and table; the file's "## " sections after them are kept).
 //
 //   tracker_benchmark [--out FILE] [--scans N] [--people LIST] [--no-send] [--rounds R]
-//                     [--no-turns] [--before-single-precision-fit] [google benchmark flags]
+//                     [--no-turns] [--before-single-precision-fit] [--before-send-per-datagram]
+//                     [google benchmark flags]
 //
 // --people 0,50 renders only those synthetic scenes and skips the capture (for profiling one case
 // under callgrind, where rendering every scene costs more than the timed loop). --no-send drops the
@@ -33,9 +34,13 @@
 // (ShapeFitOptions::single_precision_points = false), the previous arithmetic, so that the same
 // binary measures both.
 //
-// For every case with shape fits, stderr gets the fits' evaluations of their objective (each one
-// pass over the points): fits, evaluations per fit and the fits by their count of evaluations
-// (PipelineCounters::shape_fit_evaluations).
+// --before-send-per-datagram sends every datagram with its own send(2) (UdpUplinkOptions::
+// batch_sends = false) instead of a scan's datagrams in one sendmmsg(2).
+//
+// For every case that sends, stderr gets its datagrams per scan and how many of them went in
+// batches (sendmmsg). For every case with shape fits, stderr gets the fits' evaluations of their
+// objective (each one pass over the points): fits, evaluations per fit and the fits by their count
+// of evaluations (PipelineCounters::shape_fit_evaluations).
 
 #include <benchmark/benchmark.h>
 #include <sys/resource.h>
@@ -234,6 +239,8 @@ double Quantile(std::vector<double> values, double q) {
 
 // --before-single-precision-fit.
 bool g_before_single_precision_fit = false;
+// --before-send-per-datagram.
+bool g_before_send_per_datagram = false;
 
 struct Case {
   const Input* input = nullptr;
@@ -262,6 +269,7 @@ class CaseRunner {
     udp_options.host = "127.0.0.1";
     udp_options.port = receiver_.port();
     udp_options.sensor_id = "bench";
+    udp_options.batch_sends = !g_before_send_per_datagram;
     udp_ = std::make_unique<io::UdpUplink>(udp_options);
     if (auto e = udp_->Open()) return e;
     tracker::TrackerConfig config;
@@ -280,6 +288,7 @@ class CaseRunner {
     for (const Frame& f : case_->input->learn) decoder_.Feed(f.bytes, f.receive_ns, listener_);
     receiver_.Drain();
     bytes_before_ = node_->encoder().counters().bytes;
+    sent_before_ = udp_->counters();
     return std::nullopt;
   }
 
@@ -305,9 +314,22 @@ class CaseRunner {
   std::uint64_t confirmed_tracks() const {
     return node_->pipeline().tracker().counters().confirmed;
   }
-  // The shape fits' evaluations of their objective so far, to stderr: fits, evaluations per fit
-  // and the fits by their count of evaluations (the last bin: that many or more).
+  // The datagrams per timed scan (where sent), and the shape fits' evaluations of their objective
+  // so far, to stderr: fits, evaluations per fit and the fits by their count of evaluations (the
+  // last bin: that many or more).
   void PrintFitEvaluations() const {
+    if (case_->send && fed() > 0) {
+      const io::UdpUplinkCounters& c = udp_->counters();
+      const auto per_scan = [&](std::uint64_t now, std::uint64_t before) {
+        return static_cast<double>(now - before) / static_cast<double>(fed());
+      };
+      std::fprintf(stderr,
+                   "sends: %s: %.3f datagrams per scan, %.3f of them in batches, %.3f sendmmsg "
+                   "calls per scan\n",
+                   case_->name.c_str(), per_scan(c.datagrams_sent, sent_before_.datagrams_sent),
+                   per_scan(c.batched, sent_before_.batched),
+                   per_scan(c.batches, sent_before_.batches));
+    }
     const auto& histogram = node_->pipeline().counters().shape_fit_evaluations;
     std::uint64_t fits = 0, evaluations = 0;
     std::string bins;
@@ -332,6 +354,7 @@ class CaseRunner {
   cola::StreamDecoder decoder_;
   Listener listener_;
   std::uint64_t bytes_before_ = 0;
+  io::UdpUplinkCounters sent_before_;
   std::uint64_t raw_bytes_ = 0;
   std::size_t next_ = 0;
 };
@@ -559,6 +582,8 @@ int main(int argc, char** argv) {
       turns = false;
     } else if (std::strcmp(argv[i], "--before-single-precision-fit") == 0) {
       g_before_single_precision_fit = true;
+    } else if (std::strcmp(argv[i], "--before-send-per-datagram") == 0) {
+      g_before_send_per_datagram = true;
     } else if (std::strcmp(argv[i], "--no-send") == 0) {
       send = false;
     } else if (std::strcmp(argv[i], "--people") == 0 && i + 1 < argc) {
