@@ -55,10 +55,9 @@ UdpUplink::~UdpUplink() { Close(); }
 
 void UdpUplink::Close() {
   if (fd_ >= 0) {
-    SendHeld();
+    SendHeld();  // also empties the held datagrams
     ::close(fd_);
   }
-  held_count_ = 0;
   batching_ = false;
   fd_ = -1;
 }

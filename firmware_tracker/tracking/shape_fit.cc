@@ -48,7 +48,6 @@ bool AllFinite(const Eigen::MatrixBase<Derived>& m) {
 // nearly always) remainder(a, pi) is a itself, within 3 pi/2 (a fitted yaw) a -+ pi: no libm call
 // there (common::RemainderHalfTurn).
 double WrapHalfTurn(double a) {
-  if (std::abs(a) < common::kPi / 2) return a;
   a = common::RemainderHalfTurn(a);
   if (a <= -common::kPi / 2) a += common::kPi;
   return a;

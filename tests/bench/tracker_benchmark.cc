@@ -317,7 +317,7 @@ class CaseRunner {
   // The datagrams per timed scan (where sent), and the shape fits' evaluations of their objective
   // so far, to stderr: fits, evaluations per fit and the fits by their count of evaluations (the
   // last bin: that many or more).
-  void PrintFitEvaluations() const {
+  void PrintCaseCounters() const {
     if (case_->send && fed() > 0) {
       const io::UdpUplinkCounters& c = udp_->counters();
       const auto per_scan = [&](std::uint64_t now, std::uint64_t before) {
@@ -401,7 +401,7 @@ void RunCase(benchmark::State& state, const Case* c) {
   row.uplink_bytes_per_s = runner.uplink_bytes() / seconds;
   row.raw_bytes_per_s = runner.raw_bytes() / seconds;
   row.confirmed_tracks = runner.confirmed_tracks();
-  runner.PrintFitEvaluations();
+  runner.PrintCaseCounters();
   state.counters["median_us"] = row.median_us;
   state.counters["p99_us"] = row.p99_us;
   state.counters["allocs"] = static_cast<double>(row.allocations);
@@ -481,7 +481,7 @@ std::string Interleaved(const std::vector<const Case*>& cases, std::size_t round
       "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n";
   char line[512];
   for (std::size_t c = 0; c < n; ++c) {
-    runners[c]->PrintFitEvaluations();
+    runners[c]->PrintCaseCounters();
     const std::vector<double>& m = round_median[c];
     const std::size_t e = EmptySceneOf(cases, c);
     std::vector<double> ratio;

@@ -475,8 +475,9 @@ struct Breakdown {
     const std::size_t crowd_bin = t.nearest_other_m < 1.0 ? 0 : t.nearest_other_m < 2.0 ? 1 : 2;
     const bool clear = !t.occluded && crowd_bin == 2;
     const std::size_t rate_bin = t.rate_hz <= 15.0 ? 0 : t.rate_hz <= 30.0 ? 1 : 2;
+    const std::size_t model_bin = std::min(t.model, by_model.size() - 1);
     BreakdownCell* cells[] = {
-        &by_model[std::min(t.model, by_model.size() - 1)],
+        &by_model[model_bin],
         person ? &by_size[size_bin] : nullptr,
         person ? &by_exponent[t.exponent < 2.25 ? 0 : 1] : nullptr,
         &by_occlusion[t.occluded ? 1 : 0],
@@ -484,9 +485,8 @@ struct Breakdown {
         &by_crowd[crowd_bin],
         t.occluded ? nullptr : &unoccluded_by_speed[speed_bin],
         t.occluded ? nullptr : &unoccluded_by_crowd[crowd_bin],
-        clear ? &clear_by_model[std::min(t.model, by_model.size() - 1)] : nullptr,
-        clear ? &clear_by_model_range[std::min(t.model, by_model.size() - 1)][RangeBin(range_m)]
-              : nullptr,
+        clear ? &clear_by_model[model_bin] : nullptr,
+        clear ? &clear_by_model_range[model_bin][RangeBin(range_m)] : nullptr,
         clear && person ? &clear_by_size[size_bin] : nullptr,
         &by_rate[rate_bin],
         &by_object[person      ? 0
