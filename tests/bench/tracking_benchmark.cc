@@ -64,7 +64,10 @@
 //   model and scan rate, the person's size and outline, the object's speed, a partial view (a
 //   nearer return beside it) or another object near it, a moving trolley's view and whether its
 //   track is a box (at either height), and the filtered track's error beside
-//   that of the scan's measurement it was updated with, see Breakdown;
+//   that of the scan's measurement it was updated with, see Breakdown; and a second one, a
+//   person's matches by source (coasting, a track just born, a partial view, another object near,
+//   else a clear view by sensor model and range) with each source's share of the matches, of the
+//   summed error and of the matches above the people's p95 (PersonSourceTable);
 //   --before-report-rules: a third tracker, "before", the new one without
 //   ShapeOptions::unseen_coasting_m and MultiTrackerOptions::moving_speed_mps, the tree before
 //   them; --before-mixed-pixels: "before" is the new one taking knee-height mixed pixels for legs,
@@ -250,6 +253,7 @@ struct Hypothesis {
   std::string view;
   // --breakdown: the track's shape state is a box (ObjectShape::kBox).
   bool box = false;
+  std::uint32_t age_scans = 0;  // --breakdown: scans since the track was created
 };
 
 // --breakdown: where the matched error of the per-sensor tracks comes from. Every match's error
@@ -376,6 +380,15 @@ constexpr const char* kSpeedBins[] = {"speed < 0.3 m/s", "speed 0.3-1.0 m/s", "s
                                       "speed > 1.3 m/s"};
 constexpr const char* kCrowdBins[] = {"another object within 1 m", "another object 1-2 m",
                                       "no other object within 2 m"};
+// --breakdown, a person's matches (trolleys and other objects left out) each in the first of
+// these sources that applies: coasting, a track younger than kJustBornS, a partial view (a nearer
+// return beside it), another object within 1 m, 1-2 m, else a clear view by sensor model and range.
+constexpr const char* kPersonSourceBins[] = {"coasting", "just born (track younger than 1 s)",
+                                             "partial view (a nearer return beside it)",
+                                             "another object within 1 m", "another object 1-2 m"};
+constexpr double kJustBornS = 1.0;
+constexpr std::size_t kPersonSources =
+    std::size(kPersonSourceBins) + std::size(kModelBins) * std::size(kRangeBins);
 std::size_t ModelBin(std::string_view key) {
   for (std::size_t i = 0; i + 1 < std::size(kModelBins); ++i) {
     if (std::string_view(kModelBins[i]).substr(7) == key) return i;
@@ -425,6 +438,8 @@ struct Breakdown {
   // sight (HeadingBin, kHeadingBins), over every range and per range bin (kRangeBins).
   std::array<BreakdownCell, 4> walking_by_heading;
   std::array<std::array<BreakdownCell, 4>, 4> walking_by_heading_range;
+  // A person's matches by their source (kPersonSourceBins, then the clear view's model x range).
+  std::array<BreakdownCell, kPersonSources> person_by_source;
   BreakdownCell total;
   static std::size_t RangeBin(double r_m) {
     return r_m < 5.0 ? 0 : r_m < 10.0 ? 1 : r_m < 20.0 ? 2 : 3;
@@ -476,7 +491,16 @@ struct Breakdown {
     const bool clear = !t.occluded && crowd_bin == 2;
     const std::size_t rate_bin = t.rate_hz <= 15.0 ? 0 : t.rate_hz <= 30.0 ? 1 : 2;
     const std::size_t model_bin = std::min(t.model, by_model.size() - 1);
+    const bool just_born =
+        t.rate_hz > 0.0 && static_cast<double>(h.age_scans) < kJustBornS * t.rate_hz;
+    const std::size_t source = !h.measured  ? 0
+                               : just_born  ? 1
+                               : t.occluded ? 2
+                               : !clear     ? 2 + crowd_bin + 1
+                                            : std::size(kPersonSourceBins) +
+                                              model_bin * std::size(kRangeBins) + RangeBin(range_m);
     BreakdownCell* cells[] = {
+        person ? &person_by_source[source] : nullptr,
         &by_model[model_bin],
         person ? &by_size[size_bin] : nullptr,
         person ? &by_exponent[t.exponent < 2.25 ? 0 : 1] : nullptr,
@@ -593,6 +617,9 @@ struct Breakdown {
       for (std::size_t j = 0; j < walking_by_heading_range[i].size(); ++j) {
         walking_by_heading_range[i][j].Merge(o.walking_by_heading_range[i][j]);
       }
+    }
+    for (std::size_t i = 0; i < person_by_source.size(); ++i) {
+      person_by_source[i].Merge(o.person_by_source[i]);
     }
     total.Merge(o.total);
   }
@@ -2286,7 +2313,8 @@ void RunSensor(const sim::Simulator& simulator, std::size_t sensor,
                         PartsOf(*pipelines[v], r),
                         EdgesOf(*pipelines[v], r),
                         std::move(coasting_view),
-                        r.shape == tracking::ObjectShape::kBox});
+                        r.shape == tracking::ObjectShape::kBox,
+                        r.age_scans});
         frame.tracks.push_back(ToObservation(r));
       }
       std::array<tracking::TrackPrediction, tracking::kMaxTracks> predictions;
@@ -3135,6 +3163,50 @@ std::string BreakdownTable(const Section& s) {
   return t + s.breakdown_rows;
 }
 
+// --breakdown: a person's per-sensor matches by source (Breakdown::person_by_source): each
+// source's share of the matches, of the summed error (what MOTP averages) and of the tail (the
+// matches above the people's own p95), and its matches more than 0.25 m off.
+std::string PersonSourceTable(const Section& s) {
+  std::string t =
+      "| mount | tracker | source | matches | share of matches | MOTP m | p95 m | share of summed "
+      "error | share of the tail (above the people's p95) | matches > 0.25 m | radial mean m | "
+      "filtered NEES |\n|---|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n";
+  for (const auto& [key, b] : s.breakdowns) {
+    const std::size_t space = key.find(' ');
+    const std::string lead = key.substr(0, space) + " | " + key.substr(space + 1);
+    BreakdownCell people;
+    for (const BreakdownCell& c : b.person_by_source) people.Merge(c);
+    if (people.all.n == 0) continue;
+    const double p95 = people.all.P95();
+    double tail = 0;
+    for (const double e : people.all.norms) tail += e > p95 ? 1 : 0;
+    const auto row = [&](const std::string& name, const BreakdownCell& c) {
+      double above = 0, far = 0;
+      for (const double x : c.all.norms) {
+        above += x > p95 ? 1 : 0;
+        far += x > 0.25 ? 1 : 0;
+      }
+      char line[512];
+      std::snprintf(line, sizeof line,
+                    "| %s | %s | %.0f | %.3f | %.3f | %.3f | %.3f | %.3f | %.0f | %+.3f | %.2f |\n",
+                    lead.c_str(), name.c_str(), c.all.n, c.all.n / people.all.n, c.all.Mean(),
+                    c.all.P95(), c.all.sum / people.all.sum, tail > 0 ? above / tail : 0.0, far,
+                    c.all.RadialMean(), c.filtered.Nees());
+      return std::string(line);
+    };
+    t += row("all people", people);
+    const std::size_t n = std::size(kPersonSourceBins), r = std::size(kRangeBins);
+    for (std::size_t i = 0; i < b.person_by_source.size(); ++i) {
+      if (b.person_by_source[i].all.n == 0) continue;
+      t += row(i < n ? std::string(kPersonSourceBins[i])
+                     : std::string("clear view, ") + kModelBins[(i - n) / r] + ", " +
+                           kRangeBins[(i - n) % r],
+               b.person_by_source[i]);
+    }
+  }
+  return t;
+}
+
 const char* const kExplainText =
     "Every reported track's scan that matched no object (a false positive: what lowers "
     "precision) in one class; a false track (unmatched in more than half of its scans) in the "
@@ -3591,7 +3663,8 @@ int main(int argc, char** argv) {
             Totals(s) + "\n### " + s.title + ": targets (per sensor)\n\n" + Targets(s) + "\n";
     if (breakdown) {
       text += "### " + s.title + ": where the per-sensor error comes from\n\n" + BreakdownTable(s) +
-              "\n";
+              "\n### " + s.title + ": a person's per-sensor error by source\n\n" +
+              PersonSourceTable(s) + "\n";
     }
     if (explain) {
       text += "### " + s.title + ": what the false positives are\n\n" + kExplainText +
