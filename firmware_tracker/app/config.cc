@@ -321,6 +321,10 @@ void VisitShape(tracking::ShapeOptions& o, ConfigVisitor& v) {
           "leg_pairing_distance_m of that leg (the person's other leg with its edge in one "
           "beam); not a beam beside the leg's edge returning from behind it (its mixed echo) "
           "(false: a lone beam partners no segment's leg).");
+  v.Field("lone_beam_edge_echo", o.lone_beam_edge_echo,
+          "mount legs (with single_beam_legs): a lone beam within a footprint's beams of a "
+          "return nearer than it by more than the segmentation's jump is that edge's mixed echo "
+          "and no leg (false: such beams are legs).");
   v.Field("edge_echo_no_birth", o.edge_echo_no_birth,
           "mount legs: a single leg no wider than the beams whose footprint reaches past an "
           "edge, beside a return nearer by more than the segmentation's jump, with the learned "

@@ -1894,9 +1894,36 @@ void TrackingPipeline::AddSingleBeamLegs(const ScanView& scan, std::size_t track
       segments_.points_m.pop_back();
       continue;
     }
+    if (o.lone_beam_edge_echo && LoneBeamBesideNearer(scan, b)) {
+      ++counters_.lone_beam_edge_echoes;
+      segments_.points_m.pop_back();
+      continue;
+    }
     leg_partner_only_[leg_parts_.size()] = partner_only;
     (void)leg_parts_.push_back(MakePart(scan, single, 0, 1));
   }
+}
+
+// ShapeOptions::lone_beam_edge_echo: beam b has a return within a footprint's beams
+// (ceil(beam_divergence_rad / 2 step) + 1, as BesideNearerEdge) nearer than it by more than the
+// segmentation's jump at its range.
+bool TrackingPipeline::LoneBeamBesideNearer(const ScanView& scan, std::size_t b) const {
+  const SegmentationOptions& g = options_.segmentation;
+  const ShapeOptions& o = options_.shape;
+  const double step = std::abs(scan.angle_step_rad);
+  const auto footprint_beams =
+      static_cast<std::size_t>(std::ceil(0.5 * o.beam_divergence_rad / std::max(step, 1e-9))) + 1;
+  const auto r = static_cast<double>(scan.range_m[b]);
+  const double limit_m = r - (g.jump_base_m + g.jump_per_m * r);
+  const std::size_t n = scan.range_m.size();
+  for (std::size_t k = 1; k <= footprint_beams; ++k) {
+    for (const std::size_t j : {b >= k ? b - k : n, b + k}) {
+      if (j >= n) continue;
+      const float rj = scan.range_m[j];
+      if (std::isfinite(rj) && rj > 0.0f && static_cast<double>(rj) < limit_m) return true;
+    }
+  }
+  return false;
 }
 
 // A segment's leg (leg_parts_ before single_beam_first_) whose centre lies within
