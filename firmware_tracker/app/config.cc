@@ -325,6 +325,11 @@ void VisitShape(tracking::ShapeOptions& o, ConfigVisitor& v) {
           "mount legs (with single_beam_legs): a lone beam within a footprint's beams of a "
           "return nearer than it by more than the segmentation's jump is that edge's mixed echo "
           "and no leg (false: such beams are legs).");
+  v.Field("far_legs_no_birth", o.far_legs_no_birth,
+          "mount legs: legs where a leg covers at most half of a beam's footprint (range times "
+          "beam_divergence_rad at least 4 leg_radius_m), whose echoes are mixed with what lies "
+          "behind, update a confirmed track but start none (false: such legs may start "
+          "tracks).");
   v.Field("edge_echo_no_birth", o.edge_echo_no_birth,
           "mount legs: a single leg no wider than the beams whose footprint reaches past an "
           "edge, beside a return nearer by more than the segmentation's jump, with the learned "

@@ -2170,6 +2170,13 @@ void TrackingPipeline::PairLegs(const ScanView& scan, std::size_t tracks) {
     if (a >= single_beam_first_ || b >= single_beam_first_) {
       ++counters_.single_beam_legs;
       if (measurements_.size() > before) measurements_[before].evidence_only = true;
+    } else if (o.far_legs_no_birth && measurements_.size() > before &&
+               std::min(leg_centres_m_[a].norm(), leg_centres_m_[b].norm()) *
+                       o.beam_divergence_rad >=
+                   4.0 * o.leg_radius_m) {
+      // ShapeOptions::far_legs_no_birth: a leg there covers at most half of a beam's footprint.
+      ++counters_.far_leg_births;
+      measurements_[before].evidence_only = true;
     } else if (b == a && o.edge_echo_no_birth && measurements_.size() > before &&
                BesideNearerEdge(scan, leg_parts_[a])) {
       ++counters_.edge_echo_births;

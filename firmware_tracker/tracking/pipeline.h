@@ -379,6 +379,17 @@ struct ShapeOptions {
   // coasting right after). Dropped, counted in PipelineCounters::lone_beam_edge_echoes. false:
   // such beams are legs.
   bool lone_beam_edge_echo = true;
+  // Legs mount: legs where a leg covers at most half of a beam's footprint (the nearer leg's
+  // range times beam_divergence_rad at least 4 leg_radius_m: 16 m at 15 mrad) are evidence for a
+  // confirmed track (Measurement::evidence_only) but start no track and feed no tentative one.
+  // There every echo a leg returns is a mix in which the surface behind carries at least half the
+  // energy, its range anywhere between the leg and that surface, and such echoes walk with the
+  // person metres behind them: tracks started on them were false ones straight behind people at
+  // 15-25 m (tracking_benchmark --explain, knee height per sensor: "far from every object
+  // (clutter)", measured on one or two legs of 1-3 points at 15 m and more, then coasting). A
+  // person walking in from farther is found once nearer; a track that came from nearer keeps
+  // them. Counted in PipelineCounters::far_leg_births. false: such legs may start tracks.
+  bool far_legs_no_birth = true;
   // Legs mount: a single leg no wider than the beams whose footprint reaches past an edge
   // (ceil(beam_divergence_rad / 2 step) + 1), beside a nearer return by more than the
   // segmentation's jump, may be the mixed echo of that edge and what lies behind it (its range
@@ -741,7 +752,8 @@ struct PipelineCounters {
   std::uint64_t legs_behind = 0;        // of them: the other hidden behind (hidden_leg_behind)
   std::uint64_t single_beam_legs = 0;   // observations of single-beam legs (single_beam_legs)
   std::uint64_t single_beam_partners = 0;
-  std::uint64_t lone_beam_edge_echoes = 0;  // lone beams beside a nearer return: dropped  // of them: a segment's leg and a lone beam (partner)
+  std::uint64_t lone_beam_edge_echoes = 0;  // lone beams beside a nearer return: dropped
+  std::uint64_t far_leg_births = 0;  // legs too far to fill half a footprint: no birth  // of them: a segment's leg and a lone beam (partner)
   std::uint64_t edge_echo_births = 0;  // single legs beside a nearer edge: no birth (edge_echo_no_birth)
   std::uint64_t legs_across_walk = 0;   // one leg measured across the walk (single_leg_across_walk)
   std::uint64_t legs_side_uncertain = 0;  // of them: side uncertain (single_leg_side_uncertainty)

@@ -3459,6 +3459,47 @@ TEST(PipelineScenarioTest, ALoneBeamBesideANearerLegIsItsMixedEchoNotALeg) {
   EXPECT_GT(before_range, 14.35);  // 14.43 m
 }
 
+// ShapeOptions::far_legs_no_birth: knee height, 25 Hz, 1/3 deg, a wall at 30 m; legs walk across
+// the view, each returned by 2 beams, 3 beams between them, for 3 s. At 18 m a leg covers at most half of
+// a beam's footprint (18 m x 15 mrad = 0.27 m >= 4 x 0.06 m): with the option they start no track
+// (counted in every scan), without they are one. At 12 m (0.18 m) they are one track either way.
+TEST(PipelineScenarioTest, LegsTooFarToFillHalfAFootprintStartNoTrack) {
+  constexpr std::size_t kBeams = 361;
+  constexpr double kStepRad = common::kPi / 3.0 / 180.0;
+  constexpr double kFirstRad = -0.5 * common::kPi;
+  const auto run = [&](bool no_birth, float range_m, std::uint64_t* counted) {
+    TrackerOptions options;
+    options.shape.mount = Mount::kLegs;
+    options.shape.far_legs_no_birth = no_birth;
+    TrackingPipeline pipeline(options);
+    std::vector<float> ranges(kBeams);
+    std::set<std::uint32_t> ids;
+    const auto k0 = static_cast<std::int64_t>(kLearnedS * 25.0);
+    for (std::int64_t k = 0; k < k0 + 75; ++k) {
+      std::fill(ranges.begin(), ranges.end(), 30.0f);
+      if (k >= k0) {
+        const auto c = static_cast<std::size_t>(120 + (k - k0) / 5);
+        ranges[c - 3] = ranges[c - 2] = range_m;
+        ranges[c + 2] = ranges[c + 3] = range_m;
+      }
+      const ScanView scan = RangesScan(ranges, kFirstRad, kStepRad, k, 40);
+      const ScanTracks& tracks = pipeline.Process(scan, static_cast<std::uint32_t>(k));
+      for (const TrackReport& r : tracks.tracks) {
+        if (r.state == TrackState::kConfirmed) ids.insert(r.track_id);
+      }
+    }
+    *counted = pipeline.counters().far_leg_births;
+    return ids.size();
+  };
+  std::uint64_t counted = 0;
+  EXPECT_EQ(run(true, 18.0f, &counted), 0u);
+  EXPECT_GE(counted, 70u);
+  EXPECT_EQ(run(false, 18.0f, &counted), 1u);
+  EXPECT_EQ(counted, 0u);
+  EXPECT_EQ(run(true, 12.0f, &counted), 1u);
+  EXPECT_EQ(counted, 0u);
+}
+
 // ShapeOptions::leg_edge_in_mixed_beam: knee height, 0.5 deg, a wall at 5 m; a leg at 3 m
 // returned by beams 180-183 (the last at 3.02 m), beam 184 a mixed echo at 3.6 m (its share of
 // the leg w = (5 - 3.6) / (5 - 3.02) = 0.71), beam 179 the wall. The last edge lies within beam

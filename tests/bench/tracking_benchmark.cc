@@ -1229,6 +1229,9 @@ bool g_before_edge_echo_birth = false;
 // --before-lone-beam-echo: "before" takes a knee-height lone beam beside a nearer return (that
 // edge's mixed echo) for a leg (ShapeOptions::lone_beam_edge_echo = false).
 bool g_before_lone_beam_echo = false;
+// --before-far-leg-birth: "before" lets knee-height legs start tracks also where a leg covers at
+// most half of a beam's footprint (ShapeOptions::far_legs_no_birth = false).
+bool g_before_far_leg_birth = false;
 // --before-person-size: "before" runs with ShapeOptions::person_size_across_ray the other way
 // round from the default (default off: "before" learns each semi-axis across the ray only).
 bool g_before_person_size = false;
@@ -1358,6 +1361,7 @@ std::vector<Variant> Variants(sim::Mount mount, double range_m) {
   old.shape.single_beam_partner = false;
   old.shape.edge_echo_no_birth = false;
   old.shape.lone_beam_edge_echo = false;
+  old.shape.far_legs_no_birth = false;
   old.shape.drop_deep_mixed_pixel_pieces = false;
   old.shape.single_leg_across_walk = false;
   old.shape.split_few_point_legs = false;
@@ -1388,7 +1392,7 @@ std::vector<Variant> Variants(sim::Mount mount, double range_m) {
              g_before_touching_legs || g_before_box_occluders || g_before_box_rejoin ||
              g_before_box_unseen_cov || g_before_lone_leg_standing ||
              g_before_single_beam_partner || g_before_edge_echo_birth || g_before_lone_beam_echo ||
-             g_before_person_size ||
+             g_before_far_leg_birth || g_before_person_size ||
              g_before_person_reach || g_before_partial_extent || g_before_neighbour ||
              g_before_range_noise) {
     tracking::TrackerOptions before = fresh;
@@ -1428,6 +1432,7 @@ std::vector<Variant> Variants(sim::Mount mount, double range_m) {
     if (g_before_single_beam_partner) before.shape.single_beam_partner = false;
     if (g_before_edge_echo_birth) before.shape.edge_echo_no_birth = false;
     if (g_before_lone_beam_echo) before.shape.lone_beam_edge_echo = false;
+    if (g_before_far_leg_birth) before.shape.far_legs_no_birth = false;
     if (g_before_person_size) {
       before.shape.person_size_across_ray = !fresh.shape.person_size_across_ray;
     }
@@ -3213,7 +3218,7 @@ std::string KneeHeightBefore() {
         g_before_single_precision_fit || g_before_stance_weight || g_before_adopt ||
         g_before_touching_legs || g_before_box_occluders || g_before_box_rejoin ||
         g_before_box_unseen_cov || g_before_single_beam_partner || g_before_edge_echo_birth ||
-        g_before_lone_beam_echo || g_before_person_size || g_before_person_reach || g_before_partial_extent ||
+        g_before_lone_beam_echo || g_before_far_leg_birth || g_before_person_size || g_before_person_reach || g_before_partial_extent ||
         g_before_neighbour || g_before_range_noise) ||
       g_before_mixed_pixels || g_before_far || g_before_evidence_coasting ||
       g_before_report_rules) {
@@ -3389,6 +3394,11 @@ std::string KneeHeightBefore() {
         "`shape.person_size_across_ray` the other way round from the default (on: each "
         "semi-axis of an upper-body person learnt only from views that show it across the ray)");
   }
+  if (g_before_far_leg_birth) {
+    without.push_back(
+        "letting knee-height legs start tracks also where a leg covers at most half of a beam's "
+        "footprint (`shape.far_legs_no_birth` false)");
+  }
   if (g_before_lone_beam_echo) {
     without.push_back(
         "taking a knee-height lone beam beside a nearer return, that edge's mixed echo, for a leg "
@@ -3497,6 +3507,8 @@ int main(int argc, char** argv) {
       g_before_edge_echo_birth = true;
     } else if (a == "--before-lone-beam-echo") {
       g_before_lone_beam_echo = true;
+    } else if (a == "--before-far-leg-birth") {
+      g_before_far_leg_birth = true;
     } else if (a == "--before-person-size") {
       g_before_person_size = true;
     } else if (a == "--before-person-reach") {
