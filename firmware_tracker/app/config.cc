@@ -323,8 +323,9 @@ void VisitShape(tracking::ShapeOptions& o, ConfigVisitor& v) {
           "(false: a lone beam partners no segment's leg).");
   v.Field("lone_beam_edge_echo", o.lone_beam_edge_echo,
           "mount legs (with single_beam_legs): a lone beam within a footprint's beams of a "
-          "return nearer than it by more than the segmentation's jump is that edge's mixed echo "
-          "and no leg (false: such beams are legs).");
+          "return nearer than it by more than the segmentation's jump (and by no more than "
+          "leg_pairing_distance_m + 2 leg_radius_m) is that edge's mixed echo and no leg "
+          "(false: such beams are legs).");
   v.Field("far_legs_no_birth", o.far_legs_no_birth,
           "mount legs: legs where a leg covers at most half of a beam's footprint (range times "
           "beam_divergence_rad at least 4 leg_radius_m), whose echoes are mixed with what lies "

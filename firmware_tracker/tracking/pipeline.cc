@@ -1906,7 +1906,7 @@ void TrackingPipeline::AddSingleBeamLegs(const ScanView& scan, std::size_t track
 
 // ShapeOptions::lone_beam_edge_echo: beam b has a return within a footprint's beams
 // (ceil(beam_divergence_rad / 2 step) + 1, as BesideNearerEdge) nearer than it by more than the
-// segmentation's jump at its range.
+// segmentation's jump at its range and by at most leg_pairing_distance_m + 2 leg_radius_m.
 bool TrackingPipeline::LoneBeamBesideNearer(const ScanView& scan, std::size_t b) const {
   const SegmentationOptions& g = options_.segmentation;
   const ShapeOptions& o = options_.shape;
@@ -1915,12 +1915,16 @@ bool TrackingPipeline::LoneBeamBesideNearer(const ScanView& scan, std::size_t b)
       static_cast<std::size_t>(std::ceil(0.5 * o.beam_divergence_rad / std::max(step, 1e-9))) + 1;
   const auto r = static_cast<double>(scan.range_m[b]);
   const double limit_m = r - (g.jump_base_m + g.jump_per_m * r);
+  // ... and near enough to be taken for that return's other leg (within the pairing distance of
+  // its centre): an echo farther behind pairs with no leg of it, and a real leg there beside a
+  // much nearer edge (a screen, a wall's end) is kept.
+  const double bound_m = r - o.leg_pairing_distance_m - 2.0 * o.leg_radius_m;
   const std::size_t n = scan.range_m.size();
   for (std::size_t k = 1; k <= footprint_beams; ++k) {
     for (const std::size_t j : {b >= k ? b - k : n, b + k}) {
       if (j >= n) continue;
-      const float rj = scan.range_m[j];
-      if (std::isfinite(rj) && rj > 0.0f && static_cast<double>(rj) < limit_m) return true;
+      const auto rj = static_cast<double>(scan.range_m[j]);
+      if (std::isfinite(rj) && rj > 0.0 && rj < limit_m && rj >= bound_m) return true;
     }
   }
   return false;

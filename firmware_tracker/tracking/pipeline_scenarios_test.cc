@@ -2932,6 +2932,8 @@ TEST(PipelineScenarioTest, MixedPixelsWithinAPersonsReachOfANearerReturnAreNotLe
     TrackerOptions options;
     options.shape.mount = Mount::kLegs;
     options.shape.drop_mixed_pixel_legs_whole_person = whole_person;
+    // At 18 m a leg covers less than half a footprint: that rule alone would start no track.
+    options.shape.far_legs_no_birth = false;
     TrackingPipeline pipeline(options);
     std::vector<float> ranges(kBeams);
     std::set<std::uint32_t> ids;
