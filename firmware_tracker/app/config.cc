@@ -321,6 +321,16 @@ void VisitShape(tracking::ShapeOptions& o, ConfigVisitor& v) {
           "leg_pairing_distance_m of that leg (the person's other leg with its edge in one "
           "beam); not a beam beside the leg's edge returning from behind it (its mixed echo) "
           "(false: a lone beam partners no segment's leg).");
+  v.Field("lone_beam_edge_echo", o.lone_beam_edge_echo,
+          "mount legs (with single_beam_legs): a lone beam within a footprint's beams of a "
+          "return nearer than it by more than the segmentation's jump (and by no more than "
+          "leg_pairing_distance_m + 2 leg_radius_m) is that edge's mixed echo and no leg "
+          "(false: such beams are legs).");
+  v.Field("far_legs_no_birth", o.far_legs_no_birth,
+          "mount legs: legs where a leg covers at most half of a beam's footprint (range times "
+          "beam_divergence_rad at least 4 leg_radius_m), whose echoes are mixed with what lies "
+          "behind, update a confirmed track but start none (false: such legs may start "
+          "tracks).");
   v.Field("edge_echo_no_birth", o.edge_echo_no_birth,
           "mount legs: a single leg no wider than the beams whose footprint reaches past an "
           "edge, beside a return nearer by more than the segmentation's jump, with the learned "

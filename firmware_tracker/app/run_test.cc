@@ -104,6 +104,8 @@ TEST(TrackerRun, PipelineSummaryNamesEveryCounter) {
   c.coasting_uncertain = 41;
   c.box_unseen_widened = 42;
   c.neighbour_widened = 43;
+  c.lone_beam_edge_echoes = 44;
+  c.far_leg_births = 45;
   EXPECT_EQ(PipelineSummary(c),
             "rejected_scans=1 learning_scans=2 segments=3 dropped_segments=4 "
             "ellipse_measurements=5 com_measurements=6 shape_fits=7 failed_shape_fits=8 "
@@ -117,7 +119,8 @@ TEST(TrackerRun, PipelineSummaryNamesEveryCounter) {
             "legs_along_from_standing=33 single_beam_partners=34 edge_echo_births=35 "
             "person_sizes_across_ray=36 partial_view_widened=37 "
             "underdetermined_fit_widened=38 box_pieces_rejoined=39 legs_coasting_uncertain=40 "
-            "coasting_uncertain=41 box_unseen_widened=42 neighbour_widened=43");
+            "coasting_uncertain=41 box_unseen_widened=42 neighbour_widened=43 "
+            "lone_beam_edge_echoes=44 far_leg_births=45");
 }
 
 TEST(TrackerRun, MultiTrackerSummaryNamesEveryCounterButTheTwoBeforeIt) {

@@ -1894,9 +1894,40 @@ void TrackingPipeline::AddSingleBeamLegs(const ScanView& scan, std::size_t track
       segments_.points_m.pop_back();
       continue;
     }
+    if (o.lone_beam_edge_echo && LoneBeamBesideNearer(scan, b)) {
+      ++counters_.lone_beam_edge_echoes;
+      segments_.points_m.pop_back();
+      continue;
+    }
     leg_partner_only_[leg_parts_.size()] = partner_only;
     (void)leg_parts_.push_back(MakePart(scan, single, 0, 1));
   }
+}
+
+// ShapeOptions::lone_beam_edge_echo: beam b has a return within a footprint's beams
+// (ceil(beam_divergence_rad / 2 step) + 1, as BesideNearerEdge) nearer than it by more than the
+// segmentation's jump at its range and by at most leg_pairing_distance_m + 2 leg_radius_m.
+bool TrackingPipeline::LoneBeamBesideNearer(const ScanView& scan, std::size_t b) const {
+  const SegmentationOptions& g = options_.segmentation;
+  const ShapeOptions& o = options_.shape;
+  const double step = std::abs(scan.angle_step_rad);
+  const auto footprint_beams =
+      static_cast<std::size_t>(std::ceil(0.5 * o.beam_divergence_rad / std::max(step, 1e-9))) + 1;
+  const auto r = static_cast<double>(scan.range_m[b]);
+  const double limit_m = r - (g.jump_base_m + g.jump_per_m * r);
+  // ... and near enough to be taken for that return's other leg (within the pairing distance of
+  // its centre): an echo farther behind pairs with no leg of it, and a real leg there beside a
+  // much nearer edge (a screen, a wall's end) is kept.
+  const double bound_m = r - o.leg_pairing_distance_m - 2.0 * o.leg_radius_m;
+  const std::size_t n = scan.range_m.size();
+  for (std::size_t k = 1; k <= footprint_beams; ++k) {
+    for (const std::size_t j : {b >= k ? b - k : n, b + k}) {
+      if (j >= n) continue;
+      const auto rj = static_cast<double>(scan.range_m[j]);
+      if (std::isfinite(rj) && rj > 0.0 && rj < limit_m && rj >= bound_m) return true;
+    }
+  }
+  return false;
 }
 
 // A segment's leg (leg_parts_ before single_beam_first_) whose centre lies within
@@ -2143,6 +2174,13 @@ void TrackingPipeline::PairLegs(const ScanView& scan, std::size_t tracks) {
     if (a >= single_beam_first_ || b >= single_beam_first_) {
       ++counters_.single_beam_legs;
       if (measurements_.size() > before) measurements_[before].evidence_only = true;
+    } else if (o.far_legs_no_birth && measurements_.size() > before &&
+               std::min(leg_centres_m_[a].norm(), leg_centres_m_[b].norm()) *
+                       o.beam_divergence_rad >=
+                   4.0 * o.leg_radius_m) {
+      // ShapeOptions::far_legs_no_birth: a leg there covers at most half of a beam's footprint.
+      ++counters_.far_leg_births;
+      measurements_[before].evidence_only = true;
     } else if (b == a && o.edge_echo_no_birth && measurements_.size() > before &&
                BesideNearerEdge(scan, leg_parts_[a])) {
       ++counters_.edge_echo_births;

@@ -2932,6 +2932,8 @@ TEST(PipelineScenarioTest, MixedPixelsWithinAPersonsReachOfANearerReturnAreNotLe
     TrackerOptions options;
     options.shape.mount = Mount::kLegs;
     options.shape.drop_mixed_pixel_legs_whole_person = whole_person;
+    // At 18 m a leg covers less than half a footprint: that rule alone would start no track.
+    options.shape.far_legs_no_birth = false;
     TrackingPipeline pipeline(options);
     std::vector<float> ranges(kBeams);
     std::set<std::uint32_t> ids;
@@ -3389,6 +3391,115 @@ TEST(PipelineScenarioTest, AnEdgesMixedEchoStartsNoTrack) {
   EXPECT_GE(now_counted, 90u);
   EXPECT_EQ(run(false, &before_counted), 2u);
   EXPECT_EQ(before_counted, 0u);
+}
+
+// ShapeOptions::lone_beam_edge_echo: knee height, 25 Hz, 0.5 deg, a wall at 20 m; a person walks
+// across the view at 14 m (a leg fills no beam's footprint there: 14 m x 15 mrad = 0.21 m), the
+// near leg at 14 m and the far one at 14.3 m, each returned by 2 beams, 3 beams apart; then for 1 s
+// the near leg by one beam at 14 m, the far one hidden behind it, and the beam beside it returns
+// that edge's mixed echo at 14.65 m (between the leg and the wall, beyond the segmentation's jump:
+// a lone beam of its own). With the option that beam is no leg (counted in every such scan) and
+// the track stays at the person (mean range 14.11 m: the near leg's centre 14.06 m, the body's
+// about 14.16 m); without, it is paired with the leg as the other one and pulls the track away from
+// the sensor (14.43 m).
+TEST(PipelineScenarioTest, ALoneBeamBesideANearerLegIsItsMixedEchoNotALeg) {
+  constexpr std::size_t kBeams = 361;
+  constexpr double kStepRad = 0.5 * common::kPi / 180.0;
+  constexpr double kFirstRad = -0.5 * common::kPi;
+  struct Run {
+    std::set<std::uint32_t> ids;
+    int echo_scans = 0, reported = 0;
+    double range_sum_m = 0.0;
+    std::uint64_t echoes = 0;
+  };
+  const auto run = [&](bool drop_echo) {
+    TrackerOptions options;
+    options.shape.mount = Mount::kLegs;
+    options.shape.lone_beam_edge_echo = drop_echo;
+    TrackingPipeline pipeline(options);
+    std::vector<float> ranges(kBeams);
+    Run out;
+    const auto k0 = static_cast<std::int64_t>(kLearnedS * 25.0);
+    for (std::int64_t k = 0; k < k0 + 75; ++k) {
+      std::fill(ranges.begin(), ranges.end(), 20.0f);
+      const bool walking = k >= k0;
+      const std::int64_t i = k - k0;
+      const bool echo = walking && i >= 50;
+      const auto c = static_cast<std::size_t>(120 + std::max<std::int64_t>(i, 0) / 5);
+      if (echo) {
+        ranges[c - 2] = 14.0f;
+        ranges[c - 1] = 14.65f;
+      } else if (walking) {
+        ranges[c - 3] = ranges[c - 2] = 14.0f;
+        ranges[c + 2] = ranges[c + 3] = 14.3f;
+      }
+      const ScanView scan = RangesScan(ranges, kFirstRad, kStepRad, k, 40);
+      const ScanTracks& tracks = pipeline.Process(scan, static_cast<std::uint32_t>(k));
+      for (const TrackReport& r : tracks.tracks) {
+        if (r.state != TrackState::kConfirmed) continue;
+        out.ids.insert(r.track_id);
+        if (!echo) continue;
+        ++out.reported;
+        out.range_sum_m += std::hypot(r.x_m, r.y_m);
+      }
+      if (echo) ++out.echo_scans;
+    }
+    out.echoes = pipeline.counters().lone_beam_edge_echoes;
+    return out;
+  };
+  const Run now = run(true);
+  const Run before = run(false);
+  ASSERT_EQ(now.echo_scans, 25);
+  EXPECT_EQ(now.ids.size(), 1u);
+  EXPECT_GE(now.echoes, 24u);
+  EXPECT_EQ(before.echoes, 0u);
+  ASSERT_GT(now.reported, 0);
+  ASSERT_GT(before.reported, 0);
+  const double now_range = now.range_sum_m / now.reported;
+  const double before_range = before.range_sum_m / before.reported;
+  EXPECT_LT(now_range, 14.2);     // 14.11 m
+  EXPECT_GT(before_range, 14.35);  // 14.43 m
+}
+
+// ShapeOptions::far_legs_no_birth: knee height, 25 Hz, 1/3 deg, a wall at 30 m; legs walk across
+// the view, each returned by 2 beams, 3 beams between them, for 3 s. At 18 m a leg covers at most half of
+// a beam's footprint (18 m x 15 mrad = 0.27 m >= 4 x 0.06 m): with the option they start no track
+// (counted in every scan), without they are one. At 12 m (0.18 m) they are one track either way.
+TEST(PipelineScenarioTest, LegsTooFarToFillHalfAFootprintStartNoTrack) {
+  constexpr std::size_t kBeams = 361;
+  constexpr double kStepRad = common::kPi / 3.0 / 180.0;
+  constexpr double kFirstRad = -0.5 * common::kPi;
+  const auto run = [&](bool no_birth, float range_m, std::uint64_t* counted) {
+    TrackerOptions options;
+    options.shape.mount = Mount::kLegs;
+    options.shape.far_legs_no_birth = no_birth;
+    TrackingPipeline pipeline(options);
+    std::vector<float> ranges(kBeams);
+    std::set<std::uint32_t> ids;
+    const auto k0 = static_cast<std::int64_t>(kLearnedS * 25.0);
+    for (std::int64_t k = 0; k < k0 + 75; ++k) {
+      std::fill(ranges.begin(), ranges.end(), 30.0f);
+      if (k >= k0) {
+        const auto c = static_cast<std::size_t>(120 + (k - k0) / 5);
+        ranges[c - 3] = ranges[c - 2] = range_m;
+        ranges[c + 2] = ranges[c + 3] = range_m;
+      }
+      const ScanView scan = RangesScan(ranges, kFirstRad, kStepRad, k, 40);
+      const ScanTracks& tracks = pipeline.Process(scan, static_cast<std::uint32_t>(k));
+      for (const TrackReport& r : tracks.tracks) {
+        if (r.state == TrackState::kConfirmed) ids.insert(r.track_id);
+      }
+    }
+    *counted = pipeline.counters().far_leg_births;
+    return ids.size();
+  };
+  std::uint64_t counted = 0;
+  EXPECT_EQ(run(true, 18.0f, &counted), 0u);
+  EXPECT_GE(counted, 70u);
+  EXPECT_EQ(run(false, 18.0f, &counted), 1u);
+  EXPECT_EQ(counted, 0u);
+  EXPECT_EQ(run(true, 12.0f, &counted), 1u);
+  EXPECT_EQ(counted, 0u);
 }
 
 // ShapeOptions::leg_edge_in_mixed_beam: knee height, 0.5 deg, a wall at 5 m; a leg at 3 m

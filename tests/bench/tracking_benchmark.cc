@@ -1253,6 +1253,12 @@ bool g_before_single_beam_partner = false;
 // --before-edge-echo-birth: "before" lets a knee-height single leg beside a nearer edge start a
 // track (ShapeOptions::edge_echo_no_birth = false).
 bool g_before_edge_echo_birth = false;
+// --before-lone-beam-echo: "before" takes a knee-height lone beam beside a nearer return (that
+// edge's mixed echo) for a leg (ShapeOptions::lone_beam_edge_echo = false).
+bool g_before_lone_beam_echo = false;
+// --before-far-leg-birth: "before" lets knee-height legs start tracks also where a leg covers at
+// most half of a beam's footprint (ShapeOptions::far_legs_no_birth = false).
+bool g_before_far_leg_birth = false;
 // --before-person-size: "before" runs with ShapeOptions::person_size_across_ray the other way
 // round from the default (default off: "before" learns each semi-axis across the ray only).
 bool g_before_person_size = false;
@@ -1381,6 +1387,8 @@ std::vector<Variant> Variants(sim::Mount mount, double range_m) {
   old.shape.single_beam_legs = false;
   old.shape.single_beam_partner = false;
   old.shape.edge_echo_no_birth = false;
+  old.shape.lone_beam_edge_echo = false;
+  old.shape.far_legs_no_birth = false;
   old.shape.drop_deep_mixed_pixel_pieces = false;
   old.shape.single_leg_across_walk = false;
   old.shape.split_few_point_legs = false;
@@ -1410,7 +1418,8 @@ std::vector<Variant> Variants(sim::Mount mount, double range_m) {
              g_before_single_precision_fit || g_before_stance_weight || g_before_adopt ||
              g_before_touching_legs || g_before_box_occluders || g_before_box_rejoin ||
              g_before_box_unseen_cov || g_before_lone_leg_standing ||
-             g_before_single_beam_partner || g_before_edge_echo_birth || g_before_person_size ||
+             g_before_single_beam_partner || g_before_edge_echo_birth || g_before_lone_beam_echo ||
+             g_before_far_leg_birth || g_before_person_size ||
              g_before_person_reach || g_before_partial_extent || g_before_neighbour ||
              g_before_range_noise) {
     tracking::TrackerOptions before = fresh;
@@ -1449,6 +1458,8 @@ std::vector<Variant> Variants(sim::Mount mount, double range_m) {
     if (g_before_box_unseen_cov) before.shape.box_unseen_depth_cov = false;
     if (g_before_single_beam_partner) before.shape.single_beam_partner = false;
     if (g_before_edge_echo_birth) before.shape.edge_echo_no_birth = false;
+    if (g_before_lone_beam_echo) before.shape.lone_beam_edge_echo = false;
+    if (g_before_far_leg_birth) before.shape.far_legs_no_birth = false;
     if (g_before_person_size) {
       before.shape.person_size_across_ray = !fresh.shape.person_size_across_ray;
     }
@@ -3279,7 +3290,7 @@ std::string KneeHeightBefore() {
         g_before_single_precision_fit || g_before_stance_weight || g_before_adopt ||
         g_before_touching_legs || g_before_box_occluders || g_before_box_rejoin ||
         g_before_box_unseen_cov || g_before_single_beam_partner || g_before_edge_echo_birth ||
-        g_before_person_size || g_before_person_reach || g_before_partial_extent ||
+        g_before_lone_beam_echo || g_before_far_leg_birth || g_before_person_size || g_before_person_reach || g_before_partial_extent ||
         g_before_neighbour || g_before_range_noise) ||
       g_before_mixed_pixels || g_before_far || g_before_evidence_coasting ||
       g_before_report_rules) {
@@ -3455,6 +3466,16 @@ std::string KneeHeightBefore() {
         "`shape.person_size_across_ray` the other way round from the default (on: each "
         "semi-axis of an upper-body person learnt only from views that show it across the ray)");
   }
+  if (g_before_far_leg_birth) {
+    without.push_back(
+        "letting knee-height legs start tracks also where a leg covers at most half of a beam's "
+        "footprint (`shape.far_legs_no_birth` false)");
+  }
+  if (g_before_lone_beam_echo) {
+    without.push_back(
+        "taking a knee-height lone beam beside a nearer return, that edge's mixed echo, for a leg "
+        "(`shape.lone_beam_edge_echo` false)");
+  }
   if (g_before_edge_echo_birth) {
     without.push_back(
         "letting a knee-height single leg beside a nearer edge, no wider than that edge's mixed "
@@ -3556,6 +3577,10 @@ int main(int argc, char** argv) {
       g_before_single_beam_partner = true;
     } else if (a == "--before-edge-echo-birth") {
       g_before_edge_echo_birth = true;
+    } else if (a == "--before-lone-beam-echo") {
+      g_before_lone_beam_echo = true;
+    } else if (a == "--before-far-leg-birth") {
+      g_before_far_leg_birth = true;
     } else if (a == "--before-person-size") {
       g_before_person_size = true;
     } else if (a == "--before-person-reach") {
