@@ -2,7 +2,10 @@
 
 #include <gtest/gtest.h>
 
+#include <bit>
 #include <cmath>
+#include <random>
+#include <span>
 #include <vector>
 
 #include "firmware_tracker/tracking/tracking_test_util.h"
@@ -318,6 +321,168 @@ TEST(BackgroundModelTest, TimeGoingBackwardsIsCountedNotFatal) {
   RunScans(model, scanner, 0, Scans(6.0), room, {});
   EXPECT_EQ(model.Update(scanner.Render(10, room, {})).foreground_beams, 0u);
   EXPECT_EQ(model.counters().time_steps_backwards, 1u);
+}
+
+// The per-beam update after learning, written out plainly (one struct per beam, every outcome of a
+// change candidate by ternaries), against which the model's per-scan pass is checked bit for bit
+// when it is made faster. Learning is done by the model; this reference starts from its learned
+// background.
+class ReferenceBeams {
+ public:
+  ReferenceBeams(const BackgroundOptions& o, std::span<const float> learned)
+      : o_(o), bg_(learned.begin(), learned.end()), beams_(learned.size()) {}
+
+  double Margin(double range_m) const {
+    return o_.base_margin_m +
+           o_.noise_margin_k * (o_.range_noise_m + o_.range_noise_per_m * range_m);
+  }
+
+  // One scan of sanitised returns (0 = no echo), dt seconds after the last.
+  std::vector<std::uint8_t> Update(std::span<const float> ranges, double dt_s) {
+    const double alpha = dt_s / (o_.track_time_constant_s + dt_s);
+    const auto dt = static_cast<float>(dt_s);
+    std::vector<std::uint8_t> fg_out(ranges.size());
+    for (std::size_t i = 0; i < ranges.size(); ++i) {
+      const float r = ranges[i];
+      float& bg = bg_[i];
+      Beam& b = beams_[i];
+      const double margin = Margin(bg);
+      const bool echo = r != 0.0f;
+      fg_out[i] = echo && (bg == 0.0f || r < bg - margin) ? 1 : 0;
+      const bool at_background = echo ? bg != 0.0f && std::abs(r - bg) <= margin : bg == 0.0f;
+      if (at_background) {
+        if (echo) bg += static_cast<float>(alpha * (r - bg));
+        b.candidate = 0;
+        b.age_s = 0.0f;
+        continue;
+      }
+      const bool nearer = echo && (bg == 0.0f || r < bg);
+      const int kind = nearer ? 1 : 2;
+      const float cm = b.m;
+      const bool same =
+          b.candidate == kind && (echo ? cm != 0.0f && std::abs(r - cm) <= Margin(cm) : cm == 0.0f);
+      const bool holds = !same && nearer && b.candidate == 1 && r < cm;
+      const bool restarts = !same && !holds;
+      const float followed_m = echo ? cm + 0.5f * (r - cm) : cm;
+      const float age_s = same ? b.age_s + dt : restarts ? 0.0f : b.age_s;
+      const float new_m = same ? followed_m : restarts ? r : cm;
+      const int new_candidate = restarts ? kind : b.candidate;
+      const double limit_s = nearer ? o_.absorb_after_s : o_.recede_after_s;
+      if (same && age_s >= limit_s) {
+        bg = new_m;
+        b = Beam{0, new_m, 0.0f};
+        ++(nearer ? absorbed : receded);
+        continue;
+      }
+      b = Beam{new_candidate, new_m, age_s};
+    }
+    return fg_out;
+  }
+
+  std::span<const float> background_m() const { return bg_; }
+  std::uint64_t absorbed = 0;
+  std::uint64_t receded = 0;
+
+ private:
+  struct Beam {
+    int candidate = 0;  // 0 none, 1 nearer, 2 farther
+    float m = 0.0f;
+    float age_s = 0.0f;
+  };
+  BackgroundOptions o_;
+  std::vector<float> bg_;
+  std::vector<Beam> beams_;
+};
+
+TEST(BackgroundModelTest, CandidateOutcomesMatchThePerBeamReferenceBitForBit) {
+  // Short absorb and recede times, so that every outcome of a change candidate occurs many times:
+  // people passing (restarts), an object standing long enough to be absorbed, something passing in
+  // front of it (holds), a wall's beam losing its echo or returning farther (recedes), free beams.
+  BackgroundOptions o;
+  o.learn_duration_s = 0.2;
+  o.absorb_after_s = 0.6;
+  o.recede_after_s = 0.3;
+  BackgroundModel model(o);
+  constexpr std::size_t kBeams = 96;
+  constexpr double kDt = 0.04;
+  std::mt19937 rng(7);
+  std::normal_distribution<float> noise(0.0f, 0.01f);
+  std::uniform_real_distribution<float> uniform(0.0f, 1.0f);
+  std::vector<float> wall(kBeams);
+  for (std::size_t i = 0; i < kBeams; ++i)
+    wall[i] = i % 16 == 15 ? 0.0f : 3.0f + 0.05f * static_cast<float>(i);
+  std::vector<float> ranges(kBeams);
+  ScanView scan;
+  scan.first_angle_rad = -1.0;
+  scan.angle_step_rad = 0.01;
+  scan.scan_period_s = kDt;
+  scan.range_m = ranges;
+  std::int64_t k = 0;
+  const auto stamp = [&](std::int64_t n) { return static_cast<common::UtcNs>(n * 40'000'000); };
+  while (!model.learned()) {
+    for (std::size_t i = 0; i < kBeams; ++i)
+      ranges[i] = wall[i] == 0.0f ? 0.0f : wall[i] + noise(rng);
+    scan.stamp_ns = stamp(k++);
+    ASSERT_EQ(model.Update(scan).scan_error, ScanError::kNone);
+  }
+  ReferenceBeams reference(o, model.background_range_m());
+  // Per beam, a piecewise scene: what the beam sees and for how many more scans.
+  enum Sees { kWall, kPerson, kObject, kNoEcho, kFarther };
+  std::vector<Sees> sees(kBeams, kWall);
+  std::vector<int> left(kBeams, 0);
+  std::vector<float> object_m(kBeams, 0.0f);
+  std::size_t candidates_seen = 0;
+  for (int scan_index = 0; scan_index < 3000; ++scan_index) {
+    for (std::size_t i = 0; i < kBeams; ++i) {
+      if (left[i]-- <= 0) {
+        const float u = uniform(rng);
+        sees[i] = u < 0.4f    ? kWall
+                  : u < 0.7f  ? kPerson
+                  : u < 0.85f ? kObject
+                  : u < 0.93f ? kNoEcho
+                              : kFarther;
+        left[i] = 1 + static_cast<int>(uniform(rng) * (sees[i] == kObject ? 40.0f : 12.0f));
+        object_m[i] = 0.5f + 2.0f * uniform(rng);
+      }
+      float r = 0.0f;
+      switch (sees[i]) {
+        case kWall:
+          r = wall[i] == 0.0f ? 0.0f : wall[i] + noise(rng);
+          break;
+        // A person moves along the beam by up to 20 cm a scan, sometimes in front of an object.
+        case kPerson:
+          r = 0.4f + 2.5f * uniform(rng);
+          break;
+        case kObject:
+          r = uniform(rng) < 0.1f ? 0.3f + 0.1f * uniform(rng) : object_m[i] + noise(rng);
+          break;
+        case kNoEcho:
+          r = 0.0f;
+          break;
+        case kFarther:
+          r = (wall[i] == 0.0f ? 10.0f : wall[i] + 1.0f) + noise(rng);
+          break;
+      }
+      ranges[i] = r;
+    }
+    scan.stamp_ns = stamp(k++);
+    const BackgroundResult result = model.Update(scan);
+    ASSERT_TRUE(result.learned);
+    const std::vector<std::uint8_t> fg = reference.Update(ranges, kDt);
+    candidates_seen += result.foreground_beams;
+    for (std::size_t i = 0; i < kBeams; ++i) {
+      ASSERT_EQ(model.foreground()[i], fg[i]) << "scan " << scan_index << " beam " << i;
+      ASSERT_EQ(std::bit_cast<std::uint32_t>(model.background_range_m()[i]),
+                std::bit_cast<std::uint32_t>(reference.background_m()[i]))
+          << "scan " << scan_index << " beam " << i;
+    }
+  }
+  EXPECT_EQ(model.counters().absorbed_beams, reference.absorbed);
+  EXPECT_EQ(model.counters().receded_beams, reference.receded);
+  // Every outcome occurred often.
+  EXPECT_GT(reference.absorbed, 200u);
+  EXPECT_GT(reference.receded, 200u);
+  EXPECT_GT(candidates_seen, 50'000u);
 }
 
 }  // namespace
