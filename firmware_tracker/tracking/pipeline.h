@@ -756,7 +756,7 @@ struct PipelineCounters {
   std::uint64_t single_beam_legs = 0;   // observations of single-beam legs (single_beam_legs)
   std::uint64_t single_beam_partners = 0;  // of them: a segment's leg and a lone beam (partner)
   std::uint64_t lone_beam_edge_echoes = 0;  // lone beams beside a nearer return: dropped
-  std::uint64_t far_leg_births = 0;  // legs too far to fill half a footprint: no birth
+  std::uint64_t far_leg_births = 0;         // legs too far to fill half a footprint: no birth
   std::uint64_t edge_echo_births = 0;  // single legs beside a nearer edge: no birth (edge_echo_no_birth)
   std::uint64_t legs_across_walk = 0;   // one leg measured across the walk (single_leg_across_walk)
   std::uint64_t legs_side_uncertain = 0;  // of them: side uncertain (single_leg_side_uncertainty)

@@ -3457,14 +3457,15 @@ TEST(PipelineScenarioTest, ALoneBeamBesideANearerLegIsItsMixedEchoNotALeg) {
   ASSERT_GT(before.reported, 0);
   const double now_range = now.range_sum_m / now.reported;
   const double before_range = before.range_sum_m / before.reported;
-  EXPECT_LT(now_range, 14.2);     // 14.11 m
+  EXPECT_LT(now_range, 14.2);      // 14.11 m
   EXPECT_GT(before_range, 14.35);  // 14.43 m
 }
 
 // ShapeOptions::far_legs_no_birth: knee height, 25 Hz, 1/3 deg, a wall at 30 m; legs walk across
-// the view, each returned by 2 beams, 3 beams between them, for 3 s. At 18 m a leg covers at most half of
-// a beam's footprint (18 m x 15 mrad = 0.27 m >= 4 x 0.06 m): with the option they start no track
-// (counted in every scan), without they are one. At 12 m (0.18 m) they are one track either way.
+// the view, each returned by 2 beams, 3 beams between them, for 3 s. At 18 m a leg covers at most
+// half of a beam's footprint (18 m x 15 mrad = 0.27 m >= 4 x 0.06 m): with the option they start no
+// track (counted in every scan), without they are one. At 12 m (0.18 m) they are one track either
+// way.
 TEST(PipelineScenarioTest, LegsTooFarToFillHalfAFootprintStartNoTrack) {
   constexpr std::size_t kBeams = 361;
   constexpr double kStepRad = common::kPi / 3.0 / 180.0;
