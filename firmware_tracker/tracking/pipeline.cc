@@ -443,6 +443,14 @@ using internal::kSideKnownWeight;
 constexpr int kMaxSidePlaces = 16;
 // Pairing legs around a track: a single leg costs this much more than a pair.
 constexpr double kSingleLegPenaltyM = 0.25;
+
+// The beams on either side of an edge whose footprint (beam_divergence_rad wide) reaches past it:
+// ceil(beam_divergence_rad / 2 step) + 1.
+std::size_t FootprintBeams(double beam_divergence_rad, double angle_step_rad) {
+  const double step = std::max(std::abs(angle_step_rad), 1e-9);
+  return static_cast<std::size_t>(std::ceil(0.5 * beam_divergence_rad / step)) + 1;
+}
+
 // Share of a fit's size information the track's state takes (see LearnSize).
 constexpr double kSizeLearningShare = 0.25;
 
@@ -1910,9 +1918,7 @@ void TrackingPipeline::AddSingleBeamLegs(const ScanView& scan, std::size_t track
 bool TrackingPipeline::LoneBeamBesideNearer(const ScanView& scan, std::size_t b) const {
   const SegmentationOptions& g = options_.segmentation;
   const ShapeOptions& o = options_.shape;
-  const double step = std::abs(scan.angle_step_rad);
-  const auto footprint_beams =
-      static_cast<std::size_t>(std::ceil(0.5 * o.beam_divergence_rad / std::max(step, 1e-9))) + 1;
+  const std::size_t footprint_beams = FootprintBeams(o.beam_divergence_rad, scan.angle_step_rad);
   const auto r = static_cast<double>(scan.range_m[b]);
   const double limit_m = r - (g.jump_base_m + g.jump_per_m * r);
   // ... and near enough to be taken for that return's other leg (within the pairing distance of
@@ -1956,8 +1962,7 @@ bool TrackingPipeline::Veiled(const ScanView& scan, const Segment& segment) cons
   const ShapeOptions& o = options_.shape;
   const auto pts = segments_.Points(segment);
   const double step = std::abs(scan.angle_step_rad);
-  const auto footprint_beams =
-      static_cast<std::size_t>(std::ceil(0.5 * o.beam_divergence_rad / step)) + 1;
+  const std::size_t footprint_beams = FootprintBeams(o.beam_divergence_rad, step);
   const std::size_t reach = g.max_missing_beams + 1;
   const auto nearer = [&](std::size_t beam, const Eigen::Vector2d& p) {
     const float r = scan.range_m[beam];
@@ -2314,9 +2319,7 @@ void TrackingPipeline::PairLegs(const ScanView& scan, std::size_t tracks) {
 bool TrackingPipeline::BesideNearerEdge(const ScanView& scan, const ObservationPart& part) const {
   const SegmentationOptions& g = options_.segmentation;
   const ShapeOptions& o = options_.shape;
-  const double step = std::abs(scan.angle_step_rad);
-  const auto footprint_beams =
-      static_cast<std::size_t>(std::ceil(0.5 * o.beam_divergence_rad / std::max(step, 1e-9))) + 1;
+  const std::size_t footprint_beams = FootprintBeams(o.beam_divergence_rad, scan.angle_step_rad);
   if (part.end_beam - part.begin_beam > footprint_beams) return false;
   double nearest_m = std::numeric_limits<double>::infinity();
   for (std::size_t k = 0; k < part.point_count; ++k) {
@@ -2362,9 +2365,7 @@ std::size_t TrackingPipeline::SingleBeamPartner(const ScanView& scan, const Eige
   for (std::size_t k = 0; k < leg.point_count; ++k) {
     nearest_m = std::min(nearest_m, segments_.points_m[leg.first_point + k].norm());
   }
-  const double step = std::abs(scan.angle_step_rad);
-  const auto footprint_beams =
-      static_cast<std::size_t>(std::ceil(0.5 * o.beam_divergence_rad / std::max(step, 1e-9))) + 1;
+  const std::size_t footprint_beams = FootprintBeams(o.beam_divergence_rad, scan.angle_step_rad);
   double best =
       std::max(0.0, (leg_centres_m_[a] - c).norm() - o.hip_half_width_m) + kSingleLegPenaltyM;
   std::size_t partner = a;
