@@ -1038,25 +1038,74 @@ ShapeFitResult Fit(std::span<const Eigen::Vector2d> points, const Silhouette& si
   const std::span<const Eigen::Vector2d> used(pts.data(), n);
   result.points_used = n;
 
+  // Per-point weights: noise and model error, discounted for correlation (with each point's range
+  // in the pass that sums them).
+  const double discount = std::max(1.0, static_cast<double>(n) / o.effective_points);
+  std::array<double, kMaxFitPoints> base_weight;  // [0, n) set below
   // Shape of the point set: principal line and extent (flat objects: doors, boards).
   Eigen::Vector2d mean = Eigen::Vector2d::Zero();
   double range_sum = 0.0;
-  std::array<double, kMaxFitPoints> range_m;  // each point's range (its noise below); [0, n)
+  std::array<double, kMaxFitPoints> range_m;  // each point's range; [0, n)
   for (std::size_t i = 0; i < n; ++i) {
     mean += used[i];
     range_m[i] = used[i].norm();
     range_sum += range_m[i];
+    const double noise = o.point_sigma_m + o.point_sigma_per_m * range_m[i];
+    base_weight[i] = 1.0 / ((noise * noise + o.model_sigma_m * o.model_sigma_m) * discount);
   }
   mean /= static_cast<double>(n);
   const double mean_range = range_sum / static_cast<double>(n);
+
+  const ShapeModel model = prior.model;
+  const bool circle = model == ShapeModel::kCircle;
+  const double exponent = std::max(2.0, prior.exponent);
+  // The points in single precision about their mean, four to a lane group (SumPointsQuad), where
+  // the fit takes them so: filled in the scatter's pass below (the same differences).
+  const SumQuadsFn sum_quads =
+      kPaired && !kReference && o.single_precision_points ? SumQuadsFor(model, exponent) : nullptr;
+  QuadPoints quad_points;
+
+  // Start: on the ray through the middle of the silhouette, the body's extent behind the points
+  // (the bisector of the first and last point's directions: their mean angle without atan2).
+  Eigen::Vector2d ray;
+  if constexpr (kReference) {
+    ray = RayByMeanAngle(used.front(), used.back());
+  } else {
+    const double front = range_m[0], back = range_m[n - 1];  // used.front().norm(), back's
+    ray = used.front() / front + used.back() / back;
+    const double length = ray.norm();
+    // Points on opposite sides of the sensor or at it: the angles' mean as before.
+    if (!(front > 0.0 && back > 0.0 && length > 1e-6)) [[unlikely]] {
+      ray = RayByMeanAngle(used.front(), used.back());
+    } else {
+      ray /= length;
+    }
+  }
   // The scatter matrix's three distinct entries, each the same sum of the same products as the
-  // matrix's outer-product sum.
+  // matrix's outer-product sum; in the same pass the nearest point along the ray.
   double sxx = 0.0, sxy = 0.0, syy = 0.0;
-  for (const auto& p : used) {
-    const double dx = p.x() - mean.x(), dy = p.y() - mean.y();
-    sxx += dx * dx;
-    sxy += dx * dy;
-    syy += dy * dy;
+  double nearest_along = mean_range;
+  if (sum_quads != nullptr) {
+    for (std::size_t i = 0; i < n; ++i) {
+      const Eigen::Vector2d& p = used[i];
+      const double dx = p.x() - mean.x(), dy = p.y() - mean.y();
+      sxx += dx * dx;
+      sxy += dx * dy;
+      syy += dy * dy;
+      nearest_along = std::min(nearest_along, p.dot(ray));
+      quad_points.x[i] = static_cast<float>(dx);
+      quad_points.y[i] = static_cast<float>(dy);
+      quad_points.weight[i] = static_cast<float>(base_weight[i]);
+      quad_points.used[i] = 1.0f;
+    }
+  } else {
+    for (const auto& p : used) {
+      const double dx = p.x() - mean.x(), dy = p.y() - mean.y();
+      sxx += dx * dx;
+      sxy += dx * dy;
+      syy += dy * dy;
+      nearest_along = std::min(nearest_along, p.dot(ray));
+    }
   }
   {
     const double count = static_cast<double>(n);
@@ -1070,32 +1119,11 @@ ShapeFitResult Fit(std::span<const Eigen::Vector2d> points, const Silhouette& si
   }
   result.extent_m = (used.front() - used.back()).norm();
 
-  const ShapeModel model = prior.model;
-  const bool circle = model == ShapeModel::kCircle;
   Vec5 x = Vec5::Zero();
   x(kYaw) = circle ? 0.0 : prior.yaw_rad;
   x(kA) = std::clamp(prior.size_m.x(), o.min_size_m, o.max_size_m);
   x(kB) = circle ? x(kA) : std::clamp(prior.size_m.y(), o.min_size_m, o.max_size_m);
 
-  // Start: on the ray through the middle of the silhouette, the body's extent behind the points
-  // (the bisector of the first and last point's directions: their mean angle without atan2).
-  Eigen::Vector2d ray;
-  if constexpr (kReference) {
-    ray = RayByMeanAngle(used.front(), used.back());
-  } else {
-    const double front = used.front().norm(), back = used.back().norm();
-    ray = used.front() / front + used.back() / back;
-    const double length = ray.norm();
-    // Points on opposite sides of the sensor or at it: the angles' mean as before.
-    if (!(front > 0.0 && back > 0.0 && length > 1e-6)) [[unlikely]] {
-      ray = RayByMeanAngle(used.front(), used.back());
-    } else {
-      ray /= length;
-    }
-  }
-  double nearest_along = mean_range;
-  for (const auto& p : used) nearest_along = std::min(nearest_along, p.dot(ray));
-  const double exponent = std::max(2.0, prior.exponent);
   // The sine and cosine of the last yaw evaluated (the start's is the first evaluation's too).
   double cos_yaw = std::cos(x(kYaw)), sin_yaw = std::sin(x(kYaw)), trig_yaw = x(kYaw);
   // The guess (the track's prediction) is taken where it lies behind the points and within
@@ -1144,14 +1172,6 @@ ShapeFitResult Fit(std::span<const Eigen::Vector2d> points, const Silhouette& si
     }
   }
 
-  // Per-point weights: noise and model error, discounted for correlation.
-  const double discount = std::max(1.0, static_cast<double>(n) / o.effective_points);
-  std::array<double, kMaxFitPoints> base_weight;  // [0, n) set below
-  for (std::size_t i = 0; i < n; ++i) {
-    const double noise = o.point_sigma_m + o.point_sigma_per_m * range_m[i];
-    base_weight[i] = 1.0 / ((noise * noise + o.model_sigma_m * o.model_sigma_m) * discount);
-  }
-
   // Priors: size information, yaw, weak centre.
   Eigen::Matrix2d size_info = Eigen::Matrix2d::Zero();
   if (circle) {
@@ -1172,18 +1192,9 @@ ShapeFitResult Fit(std::span<const Eigen::Vector2d> points, const Silhouette& si
   // the points.
   const double k2 = o.robust_k * o.robust_k;
   const SumPointsFn sum_points = SumPointsFor(model, exponent, kPaired);
-  const SumQuadsFn sum_quads =
-      kPaired && !kReference && o.single_precision_points ? SumQuadsFor(model, exponent) : nullptr;
-  QuadPoints quad_points;
   if (sum_quads != nullptr) {
     quad_points.origin = mean;
     quad_points.quads = (n + 3) / 4;
-    for (std::size_t i = 0; i < n; ++i) {
-      quad_points.x[i] = static_cast<float>(used[i].x() - mean.x());
-      quad_points.y[i] = static_cast<float>(used[i].y() - mean.y());
-      quad_points.weight[i] = static_cast<float>(base_weight[i]);
-      quad_points.used[i] = 1.0f;
-    }
     for (std::size_t i = n; i < 4 * quad_points.quads; ++i) {
       quad_points.x[i] = quad_points.x[n - 1];
       quad_points.y[i] = quad_points.y[n - 1];
