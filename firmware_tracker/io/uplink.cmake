@@ -28,6 +28,7 @@ target_include_directories(lrfnet_uplink PUBLIC ${PROJECT_SOURCE_DIR} ${LRFNET_N
 target_link_libraries(lrfnet_uplink PUBLIC lrfnet_tracking lrfnet_common lrfnet_auth
                                            nanopb::protobuf-nanopb-static)
 lrfnet_warnings(lrfnet_uplink)
+lrfnet_hot_code(lrfnet_uplink)
 if(LRFNET_FUZZ)
   target_compile_options(lrfnet_uplink PRIVATE -fsanitize=fuzzer-no-link,address,undefined)
 endif()

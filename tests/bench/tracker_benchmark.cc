@@ -30,6 +30,13 @@
 // --rounds the cases run one after the other as before and then once more in 10 rounds, whose
 // ratios the table's last column gives (--no-turns leaves that run out).
 //
+// Code placement: built with the compiler's default function alignment (16 bytes), the same code
+// shifted by 16, 32 or 48 bytes in the binary moved the 10-people ratio in turns by up to 0.07
+// (2.085 to 2.155, medians of four runs each), as much as most changes to the tracker. The per-scan
+// libraries are therefore built with their functions on 64-byte boundaries
+// (LRFNET_ALIGN_HOT_FUNCTIONS): two builds' ratios then compare the code, not where it landed.
+// Within one binary the rounds' lowest and highest ratios show the machine's share of the spread.
+//
 // --before-single-precision-fit fits a person's outline with every point in double precision
 // (ShapeFitOptions::single_precision_points = false), the previous arithmetic, so that the same
 // binary measures both.
