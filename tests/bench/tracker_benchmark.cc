@@ -35,7 +35,9 @@
 // (2.085 to 2.155, medians of four runs each), as much as most changes to the tracker. The per-scan
 // libraries are therefore built with their functions on 64-byte boundaries
 // (LRFNET_ALIGN_HOT_FUNCTIONS): two builds' ratios then compare the code, not where it landed.
-// Within one binary the rounds' lowest and highest ratios show the machine's share of the spread.
+// Within one binary the rounds' lowest and highest ratios show the machine's share of the spread;
+// the load also moves a binary's median by up to 0.05 between sessions minutes apart, so two builds
+// are compared alternated, run after run, in one session.
 //
 // --before-single-precision-fit fits a person's outline with every point in double precision
 // (ShapeFitOptions::single_precision_points = false), the previous arithmetic, so that the same
