@@ -186,7 +186,7 @@ void Simulator::PlaceSensor(std::size_t index, double from_s, Vec2 origin, doubl
       beam.dir[k] = {std::cos(a), std::sin(a)};
       beam.static_samples[k] = CastStatic(world, {place.origin, beam.dir[k]});
     }
-    beam.static_combined = Combine(beam.static_samples, d.range_m);
+    beam.static_combined = Combine(beam.static_samples, d.range_m, d.model->resolved_echo_m);
   }
 }
 
@@ -206,7 +206,8 @@ double Simulator::Remission(int surface) const {
   return 0.0;
 }
 
-Simulator::Sample Simulator::Combine(const Sample* samples, double range_limit_m) const {
+Simulator::Sample Simulator::Combine(const Sample* samples, double range_limit_m,
+                                     double resolved_echo_m) const {
   // Group the rays into echoes: rays on one surface, or within kSameEchoM of each other.
   struct Group {
     double weight = 0;
@@ -273,6 +274,12 @@ Simulator::Sample Simulator::Combine(const Sample* samples, double range_limit_m
   if (behind == nullptr) {
     // Only empty space behind the edge: the echo is there if it carries half of the energy.
     return nearest.weight >= 0.5 ? as_sample(nearest) : Sample{};
+  }
+  if (resolved_echo_m > 0.0 && behind->Range() - nearest.Range() > resolved_echo_m) {
+    // Two pulses the receiver tells apart (DeviceModel::resolved_echo_m): the first that carries
+    // half of the energy, as with nothing behind.
+    if (nearest.weight >= 0.5) return as_sample(nearest);
+    return behind->weight >= 0.5 ? as_sample(*behind) : Sample{};
   }
   // A mixed pixel: the receiver sees both echoes merged into one pulse and reports a range
   // between them, weighted by their energy.
@@ -397,7 +404,7 @@ void Simulator::SimulateScan(std::size_t sensor, std::uint64_t k, cola::ScanTele
         }
       }
     }
-    if (touched) echo = Combine(samples.data(), d.range_m);
+    if (touched) echo = Combine(samples.data(), d.range_m, m.resolved_echo_m);
     if (target_hits != nullptr && echo.surface >= kTargetSurface && echo.range_m <= d.range_m) {
       ++(*target_hits)[static_cast<std::size_t>(echo.surface - kTargetSurface)];
     }
@@ -485,7 +492,8 @@ double Simulator::NoiselessRange(std::size_t sensor, std::size_t beam_index, dou
       }
     }
   }
-  const Sample s = Combine(samples.data(), sensors_[sensor].setup.device.range_m);
+  const DeviceConfig& device = sensors_[sensor].setup.device;
+  const Sample s = Combine(samples.data(), device.range_m, device.model->resolved_echo_m);
   return s.range_m;
 }
 

@@ -13,7 +13,8 @@
 // Range model per beam: five rays across the beam's width (the model's divergence) against the
 // static world (cast once per sensor) and the targets (cast per scan where a target can be); rays
 // on different surfaces that each carry 20-80 % of the beam's energy give a mixed pixel between
-// them, as real scanners report at edges; then the per-sensor bias, Gaussian noise (σ = noise_m +
+// them, as real scanners report at edges (where the model resolves two echoes farther apart than
+// its resolved_echo_m, the first with half of the energy instead); then the per-sensor bias, Gaussian noise (σ = noise_m +
 // noise_per_m × range), random drop-outs, no echo beyond range_m, and quantisation to whole mm.
 // RSSI (when the model sends it) falls with range and grows with the surface's remission.
 //
@@ -156,7 +157,7 @@ class Simulator {
   const StaticWorld& WorldAt(double t_s) const;
   Sample CastStatic(const StaticWorld& world, const Ray& ray) const;
   double Remission(int surface) const;
-  Sample Combine(const Sample* samples, double range_limit_m) const;
+  Sample Combine(const Sample* samples, double range_limit_m, double resolved_echo_m) const;
 
   Scenario scenario_;
   std::vector<StaticWorld> worlds_;  // from_s increasing, the first at 0

@@ -10,6 +10,7 @@
 #include <vector>
 
 #include "common/time.h"
+#include "tools/sim/device_model.h"
 #include "tools/sim/sim_output.h"
 
 namespace lrfnet::sim {
@@ -159,6 +160,25 @@ TEST(Simulator, MixedPixelsAtAnEdgeLieBetweenForegroundAndBackground) {
   EXPECT_LT(mixed, 9.5);
   EXPECT_NEAR(sim->NoiselessRange(0, BeamAt(6.0), 0.0), 5.0 / std::cos(6 * kPi / 180), 0.02);
   EXPECT_NEAR(sim->NoiselessRange(0, BeamAt(5.0), 0.0), 10.0 / std::cos(5 * kPi / 180), 0.01);
+}
+
+TEST(Simulator, AnLms511ResolvesAnEdgesEchoesFartherApartThanHalfAMetre) {
+  // The plate of the test above, 5 m in front of the wall, seen by an LMS511 (1141 beams from
+  // −95° at 1/6°, beam 570 straight ahead; 11 mrad: rays 0.1575° apart). The beam at 5.667°
+  // (rays from 5.352° to 5.982°) has 30 % of its energy on the plate: the wall's echo, not a
+  // range between; the beam at 5.833° has 70 %: the plate's (a merged echo would lie between).
+  Scenario s = WallScenario();
+  s.sensors[0].model = "lms511";
+  s.world.walls.push_back({{5, 0.5}, {5, 3}});
+  auto sim = Make(s);
+  ASSERT_NE(sim, nullptr);
+  const auto beam_at = [](int sixths) { return static_cast<std::size_t>(570 + sixths); };
+  const double deg = kPi / 180;
+  EXPECT_NEAR(sim->NoiselessRange(0, beam_at(34), 0.0), 10.0 / std::cos(34.0 / 6 * deg), 0.02);
+  EXPECT_NEAR(sim->NoiselessRange(0, beam_at(35), 0.0), 5.0 / std::cos(35.0 / 6 * deg), 0.02);
+  // The LMS111 merges them (DeviceModel::resolved_echo_m 0): the test above.
+  ASSERT_EQ(FindDeviceModel("lms111")->resolved_echo_m, 0.0);
+  ASSERT_EQ(FindDeviceModel("lms511")->resolved_echo_m, 0.5);
 }
 
 TEST(Simulator, RangeLimitAndNoise) {
