@@ -384,6 +384,15 @@ void VisitShape(tracking::ShapeOptions& o, ConfigVisitor& v) {
           "size state's variance). false: the same size term in every direction.");
   v.Field("box_unseen_sigma_m", o.box_unseen_sigma_m,
           "With box_unseen_depth_cov: sigma of a box's semi-axis the scan does not show.");
+  v.Field("box_seen_extent_cov", o.box_seen_extent_cov,
+          "A box's (cart's) reported centre covariance along an axis whose semi-axis the track "
+          "never saw whole (a complete view showing the face across it) is at least a uniform "
+          "distribution's between the longest half extent seen (at least box_prior_min_half_m) "
+          "and box_prior_max_half_m. false: box_unseen_depth_cov's test of each scan alone.");
+  v.Field("box_prior_min_half_m", o.box_prior_min_half_m,
+          "With box_seen_extent_cov: the least semi-axis a box may have.");
+  v.Field("box_prior_max_half_m", o.box_prior_max_half_m,
+          "With box_seen_extent_cov: the largest semi-axis a box may have.");
   v.Field("box_size_from_faces_seen", o.box_size_from_faces_seen,
           "A box's half-length is learned only from scans that show one of its sides, its "
           "half-width only from scans that show one of its ends (at least three beams across the "

@@ -284,6 +284,11 @@ struct TrackShape {
   // outline not being the model's): added to the reported position covariance, not to the
   // filter's.
   Eigen::Matrix2d centre_bias_cov_m2 = Eigen::Matrix2d::Zero();
+  // A box's semi-axes as seen (ShapeOptions::box_seen_extent_cov): half the longest extent its
+  // fitted points showed along each axis, and half the extent the last complete view that showed
+  // the semi-axis whole did (0: none yet).
+  Eigen::Vector2d box_seen_half_m = Eigen::Vector2d::Zero();
+  Eigen::Vector2d box_whole_half_m = Eigen::Vector2d::Zero();
   // Mean over recent scans of the variance the outline's departure from the model adds
   // (ShapeOptions::outline_departure_gain).
   double departure_m2 = 0.0;

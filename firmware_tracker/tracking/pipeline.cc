@@ -330,6 +330,41 @@ Eigen::Matrix2d BoxUnseenCentreCov(const Eigen::Matrix2d& cov_m2, double size_va
   return cov;
 }
 
+Eigen::Vector2d BoxHalfExtents(std::span<const Eigen::Vector2d> points, double yaw_rad) {
+  if (points.empty()) return Eigen::Vector2d::Zero();
+  const Eigen::Vector2d e1(std::cos(yaw_rad), std::sin(yaw_rad)), e2(-e1.y(), e1.x());
+  Eigen::Vector2d lo(std::numeric_limits<double>::infinity(),
+                     std::numeric_limits<double>::infinity());
+  Eigen::Vector2d hi = -lo;
+  for (const Eigen::Vector2d& p : points) {
+    const Eigen::Vector2d uv(p.dot(e1), p.dot(e2));
+    lo = lo.cwiseMin(uv);
+    hi = hi.cwiseMax(uv);
+  }
+  return 0.5 * (hi - lo);
+}
+
+double BoxHalfVar(double seen_half_m, double whole_half_m, double size_half_m, double min_half_m,
+                  double max_half_m) {
+  if (whole_half_m > 0.0) return (size_half_m - whole_half_m) * (size_half_m - whole_half_m);
+  const double lo = std::max(seen_half_m, min_half_m);
+  const double range = std::max(max_half_m, lo) - lo;
+  return range * range / 12.0;  // a uniform distribution's variance
+}
+
+Eigen::Matrix2d BoxSeenCentreCov(double bias_var_m2, double floor_var_m2,
+                                 const Eigen::Matrix2d& size_cov_m2, double yaw_rad,
+                                 const std::array<double, 2>& half_var_m2) {
+  Eigen::Matrix2d cov = bias_var_m2 * Eigen::Matrix2d::Identity();
+  const Eigen::Vector2d e1(std::cos(yaw_rad), std::sin(yaw_rad)), e2(-e1.y(), e1.x());
+  for (int k = 0; k < 2; ++k) {
+    const Eigen::Vector2d& e = k == 0 ? e1 : e2;
+    cov += std::max({floor_var_m2, size_cov_m2(k, k), half_var_m2[static_cast<std::size_t>(k)]}) *
+           e * e.transpose();
+  }
+  return cov;
+}
+
 bool InsideGrownBox(const Eigen::Vector2d& centre_m, const Eigen::Vector2d& size_m, double yaw_rad,
                     double margin_m, std::span<const Eigen::Vector2d> points) {
   if (points.empty()) return false;
@@ -635,6 +670,10 @@ std::optional<std::string> Validate(const ShapeOptions& o) {
   if (!Positive(o.box_rejoin_sigmas)) return "box_rejoin_sigmas must be > 0";
   if (!Positive(o.box_size_sigma_m)) return "box_size_sigma_m must be > 0";
   if (!Positive(o.box_unseen_sigma_m)) return "box_unseen_sigma_m must be > 0";
+  if (!Positive(o.box_prior_min_half_m) || !(o.box_prior_max_half_m > o.box_prior_min_half_m) ||
+      !std::isfinite(o.box_prior_max_half_m)) {
+    return "box_prior_min_half_m must be > 0 and box_prior_max_half_m > box_prior_min_half_m";
+  }
   return std::nullopt;
 }
 
@@ -764,7 +803,24 @@ class TrackingPipeline::Refiner final : public MeasurementRefiner {
           std::max({shape.size_cov_m2(0, 0), shape.size_cov_m2(1, 1), floor_m * floor_m});
       shape.centre_bias_cov_m2 =
           (bias_sigma_m * bias_sigma_m + size_var) * Eigen::Matrix2d::Identity();
-      if (shape.model == ShapeModel::kBox && o.box_unseen_depth_cov && ob.part_count > 0) {
+      if (shape.model == ShapeModel::kBox && o.box_seen_extent_cov && ob.part_count > 0) {
+        // ShapeOptions::box_seen_extent_cov: per box axis, the centre is as uncertain as that
+        // semi-axis: learned where the track saw it whole, else anywhere between what was seen
+        // of it and the prior's largest (the half-width at most the half-length seen whole).
+        const Eigen::Vector2d& seen = shape.box_seen_half_m;
+        const Eigen::Vector2d& whole = shape.box_whole_half_m;
+        const double max_b = whole.x() > 0.0 ? std::min(o.box_prior_max_half_m, shape.size_m.x())
+                                             : o.box_prior_max_half_m;
+        const std::array<double, 2> half_var = {
+            internal::BoxHalfVar(seen.x(), whole.x(), shape.size_m.x(), o.box_prior_min_half_m,
+                                 o.box_prior_max_half_m),
+            internal::BoxHalfVar(seen.y(), whole.y(), shape.size_m.y(), o.box_prior_min_half_m,
+                                 max_b)};
+        shape.centre_bias_cov_m2 = internal::BoxSeenCentreCov(
+            bias_sigma_m * bias_sigma_m, floor_m * floor_m, shape.size_cov_m2, shape.yaw_rad,
+            half_var);
+        if (!(whole.x() > 0.0) || !(whole.y() > 0.0)) ++box_unseen_widened;
+      } else if (shape.model == ShapeModel::kBox && o.box_unseen_depth_cov && ob.part_count > 0) {
         // ShapeOptions::box_unseen_depth_cov: along a box axis whose semi-axis the scan does not
         // show, the centre is as uncertain as that semi-axis.
         const std::array<bool, 2> shown =
@@ -814,6 +870,7 @@ class TrackingPipeline::Refiner final : public MeasurementRefiner {
   std::uint64_t box_occluded = 0;
   std::uint64_t box_unseen_sizes = 0;
   std::uint64_t box_unseen_widened = 0;
+  std::uint64_t box_bounded = 0;
   std::uint64_t person_across_ray = 0;
   std::uint64_t person_beyond_reach = 0;
   std::uint64_t partial_size_floored = 0;
@@ -1044,6 +1101,9 @@ class TrackingPipeline::Refiner final : public MeasurementRefiner {
       return false;
     }
     ++fits;
+    // The points and silhouette of the fit kept (ShapeOptions::box_seen_extent_cov).
+    std::span<const Eigen::Vector2d> fit_points = points;
+    Silhouette fit_silhouette = silhouette;
     if (occluders) {
       // ... then against the fitted one: the points in front of it are another object's (its
       // pusher); the box refitted without them, behind an occluder's edge there.
@@ -1058,10 +1118,30 @@ class TrackingPipeline::Refiner final : public MeasurementRefiner {
         if (refit.ok) {
           fit = refit;
           occluded = true;
+          fit_points = std::span<const Eigen::Vector2d>(kept_points_.data(), kept);
+          fit_silhouette = refit_silhouette;
         }
       }
     }
     if (occluded) ++box_occluded;
+    if (shape.model == ShapeModel::kBox && o.box_seen_extent_cov) {
+      // ShapeOptions::box_seen_extent_cov: what this view shows of each semi-axis.
+      const Eigen::Vector2d half = internal::BoxHalfExtents(fit_points, fit.yaw_rad);
+      shape.box_seen_half_m = shape.box_seen_half_m.cwiseMax(half);
+      // At knee height a cart's outline is its castors' and legs', not its faces: no view shows a
+      // face whole there.
+      if (o.mount == Mount::kTorso && fit_silhouette.first_valid && fit_silhouette.last_valid) {
+        // The faces as far as the points show them, not as far as the fit's size would: a yaw
+        // a little off makes the learned length seem to show beside an end seen head-on.
+        const std::array<bool, 2> shown = internal::BoxFacesShown(
+            fit.centre_m, half, fit.yaw_rad, std::abs(part.silhouette.step_rad));
+        for (int k = 0; k < 2; ++k) {
+          if (!shown[static_cast<std::size_t>(k)] || !(half(k) > 0.0)) continue;
+          if (!(shape.box_whole_half_m(k) > 0.0)) ++box_bounded;
+          shape.box_whole_half_m(k) = half(k);
+        }
+      }
+    }
     m.position_m = fit.centre_m;
     m.covariance_m2 = fit.centre_cov_m2;
     m.orientation_rad = fit.yaw_rad;
@@ -2545,10 +2625,17 @@ void TrackingPipeline::DropCoasting(const ScanView& scan) {
       // Upper body: only while the prediction still says where the body stands.
       // A box's reported covariance carries its unseen depth (box_unseen_depth_cov), up to
       // box_unseen_sigma_m^2 along one axis, half of that in sigma_m^2: not where it stands.
-      const double max_sigma_m = o.box_unseen_depth_cov && r.shape == ObjectShape::kBox
-                                     ? std::sqrt(o.coasting_max_sigma_m * o.coasting_max_sigma_m +
-                                                 0.5 * o.box_unseen_sigma_m * o.box_unseen_sigma_m)
-                                     : o.coasting_max_sigma_m;
+      // With box_seen_extent_cov, its unbounded semi-axis's variance at most the prior's.
+      const double prior_range_m = o.box_prior_max_half_m - o.box_prior_min_half_m;
+      const double unseen_var_m2 =
+          o.box_seen_extent_cov
+              ? std::max(o.box_unseen_sigma_m * o.box_unseen_sigma_m,
+                         prior_range_m * prior_range_m / 12.0)
+              : o.box_unseen_sigma_m * o.box_unseen_sigma_m;
+      const double max_sigma_m =
+          (o.box_unseen_depth_cov || o.box_seen_extent_cov) && r.shape == ObjectShape::kBox
+              ? std::sqrt(o.coasting_max_sigma_m * o.coasting_max_sigma_m + 0.5 * unseen_var_m2)
+              : o.coasting_max_sigma_m;
       if (torso && o.coasting_max_sigma_m > 0.0 && sigma_m > max_sigma_m) {
         ++counters_.coasting_uncertain;
         continue;
@@ -2610,6 +2697,7 @@ const ScanTracks& TrackingPipeline::Process(const ScanView& scan, std::uint32_t 
   const std::uint64_t box_occluded_before = refiner_->box_occluded;
   const std::uint64_t box_unseen_widened_before = refiner_->box_unseen_widened;
   const std::uint64_t box_unseen_before = refiner_->box_unseen_sizes;
+  const std::uint64_t box_bounded_before = refiner_->box_bounded;
   const std::uint64_t person_across_ray_before = refiner_->person_across_ray;
   const std::uint64_t person_beyond_reach_before = refiner_->person_beyond_reach;
   const std::uint64_t partial_size_floored_before = refiner_->partial_size_floored;
@@ -2635,6 +2723,7 @@ const ScanTracks& TrackingPipeline::Process(const ScanView& scan, std::uint32_t 
   counters_.box_occluded_fits += refiner_->box_occluded - box_occluded_before;
   counters_.box_unseen_widened += refiner_->box_unseen_widened - box_unseen_widened_before;
   counters_.box_sizes_unseen += refiner_->box_unseen_sizes - box_unseen_before;
+  counters_.box_semi_axes_bounded += refiner_->box_bounded - box_bounded_before;
   counters_.person_sizes_across_ray += refiner_->person_across_ray - person_across_ray_before;
   counters_.person_beyond_reach_fits += refiner_->person_beyond_reach - person_beyond_reach_before;
   counters_.partial_view_size_floored +=

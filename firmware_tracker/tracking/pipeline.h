@@ -510,6 +510,26 @@ struct ShapeOptions {
   // the isotropic size term for every box.
   bool box_unseen_depth_cov = true;
   double box_unseen_sigma_m = 0.2;
+  // What a box track has seen of each semi-axis, over all its scans rather than in this one
+  // (replaces box_unseen_depth_cov's per-scan test where on). Per semi-axis the track keeps half
+  // the longest extent its fitted points showed along that axis (a lower bound of the semi-axis)
+  // and whether a complete view showed it whole (both ends of the outline its silhouette's, the
+  // face across the semi-axis shown by internal::BoxFacesShown for the points' extents: then every
+  // face in view is seen from corner to corner; upper body only: at knee height the outline is a
+  // cart's castors and legs, not its faces). A semi-axis seen whole is as uncertain as its
+  // size state differs from half the last such view's extent. A semi-axis never seen whole lies
+  // anywhere between max(lower bound,
+  // box_prior_min_half_m) and box_prior_max_half_m: the reported centre variance along its axis
+  // is at least that uniform distribution's, (max - min)^2 / 12, shrinking as longer extents are
+  // seen (the half-width's largest at most the half-length once that is bounded); once bounded,
+  // the size state's alone (at least box_size_floor_sigma_m), per axis rather than the larger
+  // semi-axis's variance in every direction. Counted in
+  // PipelineCounters::box_unseen_widened (scans with an unbounded semi-axis) and
+  // box_semi_axes_bounded (semi-axes that became bounded). false: box_unseen_depth_cov's per-scan
+  // test.
+  bool box_seen_extent_cov = true;
+  double box_prior_min_half_m = 0.2;
+  double box_prior_max_half_m = 0.9;
   // Upper-body mount: a person's size is learned only as far as the scan shows it across the ray.
   // The silhouette's two ends fix the body's width across the ray; its extent along the ray,
   // which puts the centre behind the visible side, a fit reads from the visible arc's curvature
@@ -778,6 +798,8 @@ struct PipelineCounters {
   std::uint64_t box_pieces_rejoined = 0;
   // Box refinements whose reported covariance took an unseen semi-axis (box_unseen_depth_cov).
   std::uint64_t box_unseen_widened = 0;
+  // Semi-axes of box tracks bounded by a complete view (box_seen_extent_cov).
+  std::uint64_t box_semi_axes_bounded = 0;
   // Person (upper-body) refinements whose size was learned per semi-axis by its share across the
   // ray (person_size_across_ray).
   std::uint64_t person_sizes_across_ray = 0;
@@ -1034,6 +1056,24 @@ std::array<bool, 2> BoxFacesShown(const Eigen::Vector2d& centre_m, const Eigen::
 Eigen::Matrix2d BoxUnseenCentreCov(const Eigen::Matrix2d& cov_m2, double size_var_m2,
                                    const Eigen::Matrix2d& size_cov_m2, double yaw_rad,
                                    const std::array<bool, 2>& shown, double unseen_sigma_m);
+
+// ShapeOptions::box_seen_extent_cov: half the extent of the points along the box's axis e1
+// (yaw_rad) and across it e2: (max - min) / 2 of their projections on each; zero for no points.
+Eigen::Vector2d BoxHalfExtents(std::span<const Eigen::Vector2d> points, double yaw_rad);
+
+// ShapeOptions::box_seen_extent_cov: the variance of a box's semi-axis (its size state size_half_m)
+// seen to at least seen_half_m: where a complete view showed it whole (whole_half_m > 0, half that
+// view's extent), the squared difference of the state from it; else uniform between
+// max(seen_half_m, min_half_m) and max(max_half_m, that): (max - min)^2 / 12.
+double BoxHalfVar(double seen_half_m, double whole_half_m, double size_half_m, double min_half_m,
+                  double max_half_m);
+
+// ShapeOptions::box_seen_extent_cov: the centre covariance of a box (semi-axes a along yaw_rad, b
+// across it): bias_var_m2 in every direction plus, along each box axis k,
+// max(floor_var_m2, size_cov_m2(k, k), half_var_m2[k]).
+Eigen::Matrix2d BoxSeenCentreCov(double bias_var_m2, double floor_var_m2,
+                                 const Eigen::Matrix2d& size_cov_m2, double yaw_rad,
+                                 const std::array<double, 2>& half_var_m2);
 
 // ShapeOptions::box_rejoin_pieces: whether every point lies inside the box (centre_m, half-lengths
 // size_m along yaw_rad and across it) grown by margin_m on every side; false for no points.

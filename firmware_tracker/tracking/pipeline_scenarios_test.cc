@@ -2076,11 +2076,13 @@ TEST(PipelineTest, BoxUnseenCentreCovIsTheUnseenSemiAxisAlongItsAxis) {
 // on its long side near y = 0, its depth (x, along the ray) not shown: the reported sigma along
 // x is at least box_unseen_sigma_m (0.2 m) there; without, the size floor's (0.06 m) and the
 // filter's.
-double TrolleyBroadsideSigmaX(bool unseen_cov, std::uint64_t* widened) {
+double TrolleyBroadsideSigmaX(bool unseen_cov, bool seen_extent_cov, std::uint64_t* widened,
+                              std::uint64_t* bounded = nullptr) {
   Scene scene;
   const MovingBox box = AddMovingBox(scene, {5.3, -4.2}, {5.3, 0.0}, 0.8, 0.35, 0.6);
   TrackerOptions options = Synthetic();
   options.shape.box_unseen_depth_cov = unseen_cov;
+  options.shape.box_seen_extent_cov = seen_extent_cov;
   const SceneRun run = Simulate(scene, box.end_s + 0.2, options);
   double var = 0.0;
   int n = 0;
@@ -2095,19 +2097,69 @@ double TrolleyBroadsideSigmaX(bool unseen_cov, std::uint64_t* widened) {
     }
   }
   *widened = run.pipeline->counters().box_unseen_widened;
+  if (bounded != nullptr) *bounded = run.pipeline->counters().box_semi_axes_bounded;
   return n > 0 ? std::sqrt(var / n) : 0.0;
 }
 
 TEST(PipelineScenarioTest, ABroadsideTrolleysUnseenDepthIsInItsReportedCovariance) {
   std::uint64_t widened_before = 0, widened_after = 0;
-  const double before = TrolleyBroadsideSigmaX(false, &widened_before);
-  const double after = TrolleyBroadsideSigmaX(true, &widened_after);
+  const double before = TrolleyBroadsideSigmaX(false, false, &widened_before);
+  const double after = TrolleyBroadsideSigmaX(true, false, &widened_after);
   SCOPED_TRACE("sigma x before " + std::to_string(before) + ", after " + std::to_string(after));
   EXPECT_EQ(widened_before, 0u);
   EXPECT_GT(widened_after, 0u);
   EXPECT_GT(before, 0.0);
   EXPECT_LT(before, 0.15);
   EXPECT_GE(after, 0.2);
+}
+
+// ShapeOptions::box_seen_extent_cov: the same trolley, coming into view obliquely (its front end
+// towards the sensor, seen whole between two silhouette ends) before it passes broadside: its
+// half-width b, the depth along x at broadside, was seen whole in those views; the reported sigma
+// along x is no longer at least box_unseen_sigma_m there (it was, taking only the scan at hand).
+TEST(PipelineScenarioTest, ABoxsDepthSeenWholeBeforeIsNotWidenedWhereTheScanHidesIt) {
+  std::uint64_t widened_before = 0, widened_after = 0, bounded_before = 0, bounded_after = 0;
+  const double before = TrolleyBroadsideSigmaX(true, false, &widened_before, &bounded_before);
+  const double after = TrolleyBroadsideSigmaX(true, true, &widened_after, &bounded_after);
+  SCOPED_TRACE("sigma x before " + std::to_string(before) + ", after " + std::to_string(after) +
+               ", bounded " + std::to_string(bounded_after));
+  EXPECT_EQ(bounded_before, 0u);
+  EXPECT_GT(bounded_after, 0u);
+  EXPECT_GE(before, 0.2);
+  EXPECT_GT(after, 0.0);
+  EXPECT_LT(after, 0.19);  // the filter's own sigma along x is about 0.15 m here
+}
+
+// ShapeOptions::box_seen_extent_cov: points along a box's axis at yaw 30 deg, from -0.5 to +0.3 m
+// along it and 0.1 m to one side: half extents 0.4 along, 0 across. A semi-axis never seen whole:
+// uniform between max(seen, 0.2) and 0.9: seen 0.35 gives (0.55)^2 / 12, seen 0.1 (0.7)^2 / 12,
+// seen beyond the prior's largest 0; seen whole: the state's squared difference from it. BoxSeenCentreCov: the bias in every direction and
+// per axis the largest of the floor, the size state's variance and the unbounded semi-axis's.
+TEST(PipelineTest, BoxHalfVarIsTheUniformBetweenWhatWasSeenAndThePriorsLargest) {
+  const double yaw = common::kPi / 6;
+  const Eigen::Vector2d e1(std::cos(yaw), std::sin(yaw)), e2(-e1.y(), e1.x());
+  const Eigen::Vector2d c(4.0, 1.0);
+  const std::array<Eigen::Vector2d, 3> points = {c - 0.5 * e1 + 0.1 * e2, c + 0.1 * e2,
+                                                 c + 0.3 * e1 + 0.1 * e2};
+  const Eigen::Vector2d half = internal::BoxHalfExtents(points, yaw);
+  EXPECT_NEAR(half.x(), 0.4, 1e-12);
+  EXPECT_NEAR(half.y(), 0.0, 1e-12);
+  EXPECT_TRUE(internal::BoxHalfExtents(std::span<const Eigen::Vector2d>(), yaw).isZero());
+  EXPECT_NEAR(internal::BoxHalfVar(0.35, 0.0, 0.5, 0.2, 0.9), 0.55 * 0.55 / 12.0, 1e-12);
+  EXPECT_NEAR(internal::BoxHalfVar(0.1, 0.0, 0.5, 0.2, 0.9), 0.7 * 0.7 / 12.0, 1e-12);
+  EXPECT_EQ(internal::BoxHalfVar(1.0, 0.0, 0.5, 0.2, 0.9), 0.0);
+  // Seen whole at 0.58, the state says 0.43: (0.15)^2.
+  EXPECT_NEAR(internal::BoxHalfVar(0.58, 0.58, 0.43, 0.2, 0.9), 0.15 * 0.15, 1e-12);
+  // Bias 0.03 m; floor 0.06 m; size state 0.01 m along a, 0.08 m along b; a unbounded (0.2 m).
+  const Eigen::Matrix2d size_cov = Eigen::Vector2d(0.01 * 0.01, 0.08 * 0.08).asDiagonal();
+  const Eigen::Matrix2d cov =
+      internal::BoxSeenCentreCov(0.03 * 0.03, 0.06 * 0.06, size_cov, yaw, {0.2 * 0.2, 0.0});
+  EXPECT_NEAR(e1.dot(cov * e1), 0.03 * 0.03 + 0.2 * 0.2, 1e-12);
+  EXPECT_NEAR(e2.dot(cov * e2), 0.03 * 0.03 + 0.08 * 0.08, 1e-12);
+  EXPECT_NEAR(e1.dot(cov * e2), 0.0, 1e-12);
+  const Eigen::Matrix2d bounded =
+      internal::BoxSeenCentreCov(0.03 * 0.03, 0.06 * 0.06, size_cov, yaw, {0.0, 0.0});
+  EXPECT_NEAR(e1.dot(bounded * e1), 0.03 * 0.03 + 0.06 * 0.06, 1e-12);
 }
 
 // ShapeOptions::box_drop_occluders: the points of a box's near end (x = 4.55, the box centred at
@@ -2740,6 +2792,7 @@ TEST(PipelineScenarioTest, MixedPixelsAtAFarBodysEdgesDoNotPushItsCentreAway) {
   // The body the mixed pixels widen becomes a box without them left out: its covariance, with the
   // box's unseen depth in it (box_unseen_depth_cov), would hide how far off its centre is.
   options.shape.box_unseen_depth_cov = false;
+  options.shape.box_seen_extent_cov = false;
   const MixedPixelRun with = RunMixedPixels(options);
   options.shape.mixed_pixel_min_footprint_m = 0.0;
   const MixedPixelRun without = RunMixedPixels(options);

@@ -47,6 +47,7 @@
 //                       [--before-single-precision-fit]
 //                       [--before-stance-weight] [--before-adopt] [--before-touching-legs]
 //                       [--before-box-occluders] [--before-box-rejoin] [--before-box-unseen-cov]
+//                       [--before-box-seen-extent]
 //                       [--before-person-size]
 //                       [--before-person-reach] [--before-partial-extent]
 //                       [--before-fusion-merge] [--before-report-sourceless]]
@@ -130,6 +131,9 @@
 //   those in front of it (its pusher's), ShapeOptions::box_drop_occluders = false;
 //   --before-box-unseen-cov: "before" reports a box's size error as the same in every direction,
 //   also along an axis the scan does not show, ShapeOptions::box_unseen_depth_cov = false;
+//   --before-box-seen-extent: "before" widens a box's reported centre covariance along an axis
+//   only where the scan does not show its semi-axis, not where the track never saw it whole,
+//   ShapeOptions::box_seen_extent_cov = false;
 //   --before-box-rejoin: "before" measures every segment on its own, also the pieces the width
 //   limit cuts a box's outline into, ShapeOptions::box_rejoin_pieces = false;
 //   --before-person-size: "before" runs with ShapeOptions::person_size_across_ray the other way
@@ -1355,6 +1359,10 @@ bool g_before_box_rejoin = false;
 // --before-box-unseen-cov: "before" reports a box's size error as the same in every direction,
 // also along an axis the scan does not show (ShapeOptions::box_unseen_depth_cov = false).
 bool g_before_box_unseen_cov = false;
+// --before-box-seen-extent: "before" widens a box's reported centre covariance along an axis only
+// where this scan does not show its semi-axis, not where the track never saw it whole
+// (ShapeOptions::box_seen_extent_cov = false).
+bool g_before_box_seen_extent = false;
 // --before-fusion-merge: "before"'s fusion without merging fused tracks left without sources and
 // reporting fused tracks no tracker holds any more (FusionOptions::merge_sourceless = false,
 // report_sourceless = true).
@@ -1417,7 +1425,7 @@ std::vector<Variant> Variants(sim::Mount mount, double range_m) {
              g_before_fusion_merge || g_before_report_sourceless || g_before_recent_veil ||
              g_before_single_precision_fit || g_before_stance_weight || g_before_adopt ||
              g_before_touching_legs || g_before_box_occluders || g_before_box_rejoin ||
-             g_before_box_unseen_cov || g_before_lone_leg_standing ||
+             g_before_box_unseen_cov || g_before_box_seen_extent || g_before_lone_leg_standing ||
              g_before_single_beam_partner || g_before_edge_echo_birth || g_before_lone_beam_echo ||
              g_before_far_leg_birth || g_before_person_size || g_before_person_reach ||
              g_before_partial_extent || g_before_neighbour || g_before_range_noise) {
@@ -1455,6 +1463,7 @@ std::vector<Variant> Variants(sim::Mount mount, double range_m) {
     if (g_before_box_occluders) before.shape.box_drop_occluders = false;
     if (g_before_box_rejoin) before.shape.box_rejoin_pieces = false;
     if (g_before_box_unseen_cov) before.shape.box_unseen_depth_cov = false;
+    if (g_before_box_seen_extent) before.shape.box_seen_extent_cov = false;
     if (g_before_single_beam_partner) before.shape.single_beam_partner = false;
     if (g_before_edge_echo_birth) before.shape.edge_echo_no_birth = false;
     if (g_before_lone_beam_echo) before.shape.lone_beam_edge_echo = false;
@@ -3288,7 +3297,7 @@ std::string KneeHeightBefore() {
         g_before_fusion_merge || g_before_report_sourceless || g_before_recent_veil ||
         g_before_single_precision_fit || g_before_stance_weight || g_before_adopt ||
         g_before_touching_legs || g_before_box_occluders || g_before_box_rejoin ||
-        g_before_box_unseen_cov || g_before_single_beam_partner || g_before_edge_echo_birth ||
+        g_before_box_unseen_cov || g_before_box_seen_extent || g_before_single_beam_partner || g_before_edge_echo_birth ||
         g_before_lone_beam_echo || g_before_far_leg_birth || g_before_person_size ||
         g_before_person_reach || g_before_partial_extent || g_before_neighbour ||
         g_before_range_noise) ||
@@ -3491,6 +3500,12 @@ std::string KneeHeightBefore() {
         "reporting a box's (a cart's) size error as the same in every direction, also along an "
         "axis whose semi-axis the scan does not show (`shape.box_unseen_depth_cov` false)");
   }
+  if (g_before_box_seen_extent) {
+    without.push_back(
+        "widening a box's (a cart's) reported centre covariance only along an axis whose "
+        "semi-axis the scan does not show, not along one the track never saw whole "
+        "(`shape.box_seen_extent_cov` false)");
+  }
   if (g_before_box_rejoin) {
     without.push_back(
         "measuring every segment on its own, also the pieces the width limit cuts a box's "
@@ -3639,6 +3654,8 @@ int main(int argc, char** argv) {
       g_before_box_occluders = true;
     } else if (a == "--before-box-unseen-cov") {
       g_before_box_unseen_cov = true;
+    } else if (a == "--before-box-seen-extent") {
+      g_before_box_seen_extent = true;
     } else if (a == "--before-box-rejoin") {
       g_before_box_rejoin = true;
     } else if (a == "--before-fusion-merge") {
@@ -3665,6 +3682,7 @@ int main(int argc, char** argv) {
                    "[--before-single-precision-fit] "
                    "[--before-stance-weight] [--before-adopt] [--before-touching-legs] "
                    "[--before-box-occluders] [--before-box-rejoin] [--before-box-unseen-cov] "
+                   "[--before-box-seen-extent] "
                    "[--before-person-size] "
                    "[--before-person-reach] [--before-partial-extent] "
                    "[--before-fusion-merge] "
