@@ -816,9 +816,9 @@ class TrackingPipeline::Refiner final : public MeasurementRefiner {
                                  o.box_prior_max_half_m),
             internal::BoxHalfVar(seen.y(), whole.y(), shape.size_m.y(), o.box_prior_min_half_m,
                                  max_b)};
-        shape.centre_bias_cov_m2 = internal::BoxSeenCentreCov(
-            bias_sigma_m * bias_sigma_m, floor_m * floor_m, shape.size_cov_m2, shape.yaw_rad,
-            half_var);
+        shape.centre_bias_cov_m2 =
+            internal::BoxSeenCentreCov(bias_sigma_m * bias_sigma_m, floor_m * floor_m,
+                                       shape.size_cov_m2, shape.yaw_rad, half_var);
         if (!(whole.x() > 0.0) || !(whole.y() > 0.0)) ++box_unseen_widened;
       } else if (shape.model == ShapeModel::kBox && o.box_unseen_depth_cov && ob.part_count > 0) {
         // ShapeOptions::box_unseen_depth_cov: along a box axis whose semi-axis the scan does not
@@ -2627,11 +2627,10 @@ void TrackingPipeline::DropCoasting(const ScanView& scan) {
       // box_unseen_sigma_m^2 along one axis, half of that in sigma_m^2: not where it stands.
       // With box_seen_extent_cov, its unbounded semi-axis's variance at most the prior's.
       const double prior_range_m = o.box_prior_max_half_m - o.box_prior_min_half_m;
-      const double unseen_var_m2 =
-          o.box_seen_extent_cov
-              ? std::max(o.box_unseen_sigma_m * o.box_unseen_sigma_m,
-                         prior_range_m * prior_range_m / 12.0)
-              : o.box_unseen_sigma_m * o.box_unseen_sigma_m;
+      const double unseen_var_m2 = o.box_seen_extent_cov
+                                       ? std::max(o.box_unseen_sigma_m * o.box_unseen_sigma_m,
+                                                  prior_range_m * prior_range_m / 12.0)
+                                       : o.box_unseen_sigma_m * o.box_unseen_sigma_m;
       const double max_sigma_m =
           (o.box_unseen_depth_cov || o.box_seen_extent_cov) && r.shape == ObjectShape::kBox
               ? std::sqrt(o.coasting_max_sigma_m * o.coasting_max_sigma_m + 0.5 * unseen_var_m2)

@@ -2133,8 +2133,9 @@ TEST(PipelineScenarioTest, ABoxsDepthSeenWholeBeforeIsNotWidenedWhereTheScanHide
 // ShapeOptions::box_seen_extent_cov: points along a box's axis at yaw 30 deg, from -0.5 to +0.3 m
 // along it and 0.1 m to one side: half extents 0.4 along, 0 across. A semi-axis never seen whole:
 // uniform between max(seen, 0.2) and 0.9: seen 0.35 gives (0.55)^2 / 12, seen 0.1 (0.7)^2 / 12,
-// seen beyond the prior's largest 0; seen whole: the state's squared difference from it. BoxSeenCentreCov: the bias in every direction and
-// per axis the largest of the floor, the size state's variance and the unbounded semi-axis's.
+// seen beyond the prior's largest 0; seen whole: the state's squared difference from it.
+// BoxSeenCentreCov: the bias in every direction and per axis the largest of the floor, the size
+// state's variance and the unbounded semi-axis's.
 TEST(PipelineTest, BoxHalfVarIsTheUniformBetweenWhatWasSeenAndThePriorsLargest) {
   const double yaw = common::kPi / 6;
   const Eigen::Vector2d e1(std::cos(yaw), std::sin(yaw)), e2(-e1.y(), e1.x());

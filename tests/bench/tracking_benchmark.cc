@@ -3297,10 +3297,10 @@ std::string KneeHeightBefore() {
         g_before_fusion_merge || g_before_report_sourceless || g_before_recent_veil ||
         g_before_single_precision_fit || g_before_stance_weight || g_before_adopt ||
         g_before_touching_legs || g_before_box_occluders || g_before_box_rejoin ||
-        g_before_box_unseen_cov || g_before_box_seen_extent || g_before_single_beam_partner || g_before_edge_echo_birth ||
-        g_before_lone_beam_echo || g_before_far_leg_birth || g_before_person_size ||
-        g_before_person_reach || g_before_partial_extent || g_before_neighbour ||
-        g_before_range_noise) ||
+        g_before_box_unseen_cov || g_before_box_seen_extent || g_before_single_beam_partner ||
+        g_before_edge_echo_birth || g_before_lone_beam_echo || g_before_far_leg_birth ||
+        g_before_person_size || g_before_person_reach || g_before_partial_extent ||
+        g_before_neighbour || g_before_range_noise) ||
       g_before_mixed_pixels || g_before_far || g_before_evidence_coasting ||
       g_before_report_rules) {
     return "";
