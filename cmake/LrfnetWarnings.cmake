@@ -58,9 +58,9 @@ endfunction()
 # default (16 bytes), the same code moved by 16, 32 or 48 bytes (code added in front of it, e.g. a
 # change to an unrelated function) moved tracker_benchmark's 10-people ratio to the empty scene
 # between 2.085 and 2.155 (medians of four runs in turns each); aligned to 64 bytes the shift
-# changes no address in them, and one binary's medians spread 2.07-2.09 within a session (the
-# machine's load moves a binary's median by up to 0.05 between sessions: compare builds only
-# alternated in one session). It applies to every scene alike (the empty scene's code too) and
+# changes no address in them, and one binary's medians spread 2.07-2.09 within one sitting (the
+# machine's load moves a binary's median by up to 0.05 between sittings minutes apart: compare
+# builds only alternated, run after run). It applies to every scene alike (the empty scene's code too) and
 # changes no result (alignment padding only). -DLRFNET_ALIGN_HOT_FUNCTIONS= (empty) leaves the compiler's default.
 set(LRFNET_ALIGN_HOT_FUNCTIONS "64" CACHE STRING
     "Function alignment in bytes for the tracker's per-scan libraries (empty: the compiler's default)")

@@ -36,8 +36,8 @@
 // libraries are therefore built with their functions on 64-byte boundaries
 // (LRFNET_ALIGN_HOT_FUNCTIONS): two builds' ratios then compare the code, not where it landed.
 // Within one binary the rounds' lowest and highest ratios show the machine's share of the spread;
-// the load also moves a binary's median by up to 0.05 between sessions minutes apart, so two builds
-// are compared alternated, run after run, in one session.
+// the load also moves a binary's median by up to 0.05 between sittings minutes apart, so two builds
+// are compared alternated, run after run.
 //
 // --before-single-precision-fit fits a person's outline with every point in double precision
 // (ShapeFitOptions::single_precision_points = false), the previous arithmetic, so that the same

@@ -9,6 +9,7 @@ namespace lrfnet::sim {
 namespace {
 
 // Values and sources: see the table in device_model.h.
+// clang-format off
 const std::vector<DeviceModel> kModels = {
     {"lms111", "LMS111-10100", "V1.80.2", "V1.80.2  ", 270.0, 0.5, 50.0, 20.0, 0.012, 0.0, 0.030,
      0.015, 0, 1, 3050.0, 250.0, false, 50.0, 1e-4, 0.0},
@@ -21,6 +22,7 @@ const std::vector<DeviceModel> kModels = {
     {"tim781", "TiM781-2174101", "V3.13", "V3.13", 270.0, 1.0 / 3.0, 15.0, 25.0, 0.020, 0.0, 0.060,
      0.015, 16, 1, 6200.0, 800.0, false, 30.0, 2e-4, 0.0},
 };
+// clang-format on
 
 }  // namespace
 

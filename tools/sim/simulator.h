@@ -14,9 +14,10 @@
 // static world (cast once per sensor) and the targets (cast per scan where a target can be); rays
 // on different surfaces that each carry 20-80 % of the beam's energy give a mixed pixel between
 // them, as real scanners report at edges (where the model resolves two echoes farther apart than
-// its resolved_echo_m, the first with half of the energy instead); then the per-sensor bias, Gaussian noise (σ = noise_m +
-// noise_per_m × range), random drop-outs, no echo beyond range_m, and quantisation to whole mm.
-// RSSI (when the model sends it) falls with range and grows with the surface's remission.
+// its resolved_echo_m, the first with half of the energy instead); then the per-sensor bias,
+// Gaussian noise (σ = noise_m + noise_per_m × range), random drop-outs, no echo beyond range_m, and
+// quantisation to whole mm. RSSI (when the model sends it) falls with range and grows with the
+// surface's remission.
 //
 // Determinism: every random draw comes from the scenario seed and (sensor, scan index), so scan k
 // of a sensor is the same whichever scans were simulated before it, and SimulateScan may run for
