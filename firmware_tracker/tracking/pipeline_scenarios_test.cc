@@ -53,6 +53,28 @@ ScanView RangesScan(std::span<const float> ranges, double first_angle_rad, doubl
   return scan;
 }
 
+// A knee-height sensor at 25 Hz, 361 beams of 0.5 deg from -90 deg, every beam at background_m
+// until the background is learnt (kLearnedS), then walk_scans more scans: draw(i, ranges) writes
+// scan i of the walk over ranges reset to background_m (i < 0 while learning: draw is not
+// called), seen(i, tracks) sees every scan's tracks. The pipeline's counters at the end.
+template <typename Draw, typename Seen>
+PipelineCounters RunKneeWalk(const TrackerOptions& options, float background_m,
+                             std::int64_t walk_scans, Draw draw, Seen seen) {
+  constexpr std::size_t kBeams = 361;
+  constexpr double kStepRad = 0.5 * common::kPi / 180.0;
+  TrackingPipeline pipeline(options);
+  std::vector<float> ranges(kBeams);
+  const auto k0 = static_cast<std::int64_t>(kLearnedS * 25.0);
+  for (std::int64_t k = 0; k < k0 + walk_scans; ++k) {
+    std::fill(ranges.begin(), ranges.end(), background_m);
+    const std::int64_t i = k - k0;
+    if (i >= 0) draw(i, ranges);
+    const ScanView scan = RangesScan(ranges, -0.5 * common::kPi, kStepRad, k, 40);
+    seen(i, pipeline.Process(scan, static_cast<std::uint32_t>(k)));
+  }
+  return pipeline.counters();
+}
+
 // A person moving through keyframes (time s, position m) with linear interpolation; absent before
 // the first and after the last keyframe. Shoulders (major axis) across the walking direction.
 class Walker {
@@ -3348,9 +3370,7 @@ TEST(PipelineScenarioTest, SingleBeamLegsUpdateAConfirmedTrackButStartNone) {
 // id, every such scan counted, the centre within a few centimetres); without, the lone beam is
 // dropped and the track is measured from the left leg alone.
 TEST(PipelineScenarioTest, ALoneBeamPartnersAConfirmedTracksSegmentLeg) {
-  constexpr std::size_t kBeams = 361;
   constexpr double kStepRad = 0.5 * common::kPi / 180.0;
-  constexpr double kFirstRad = -0.5 * common::kPi;
   struct Run {
     std::set<std::uint32_t> ids;
     int single_scans = 0, measured = 0;
@@ -3361,36 +3381,31 @@ TEST(PipelineScenarioTest, ALoneBeamPartnersAConfirmedTracksSegmentLeg) {
     TrackerOptions options;
     options.shape.mount = Mount::kLegs;
     options.shape.single_beam_partner = partner;
-    TrackingPipeline pipeline(options);
-    std::vector<float> ranges(kBeams);
     Run out;
-    const auto k0 = static_cast<std::int64_t>(kLearnedS * 25.0);
-    for (std::int64_t k = 0; k < k0 + 100; ++k) {
-      std::fill(ranges.begin(), ranges.end(), 30.0f);
-      const bool walking = k >= k0;
-      const std::int64_t i = k - k0;
-      const bool single = walking && i >= 50 && i < 75;
-      const auto c = static_cast<std::size_t>(120 + std::max<std::int64_t>(i, 0) / 5);
-      if (walking) {
-        for (std::size_t b = c - 4; b <= c - 2; ++b) ranges[b] = 5.0f;
-        ranges[c + 2] = 5.0f;
-        if (!single) ranges[c + 3] = ranges[c + 4] = 5.0f;
-      }
-      const ScanView scan = RangesScan(ranges, kFirstRad, kStepRad, k, 40);
-      const ScanTracks& tracks = pipeline.Process(scan, static_cast<std::uint32_t>(k));
+    const auto single = [](std::int64_t i) { return i >= 50 && i < 75; };
+    const auto centre = [](std::int64_t i) {
+      return static_cast<std::size_t>(120 + std::max<std::int64_t>(i, 0) / 5);
+    };
+    const auto draw = [&](std::int64_t i, std::vector<float>& ranges) {
+      const std::size_t c = centre(i);
+      for (std::size_t b = c - 4; b <= c - 2; ++b) ranges[b] = 5.0f;
+      ranges[c + 2] = 5.0f;
+      if (!single(i)) ranges[c + 3] = ranges[c + 4] = 5.0f;
+    };
+    const auto seen = [&](std::int64_t i, const ScanTracks& tracks) {
       for (const TrackReport& r : tracks.tracks) out.ids.insert(r.track_id);
-      if (!single) continue;
+      if (!single(i)) return;
       ++out.single_scans;
       // Truth: the legs' midpoint, a leg radius behind their front.
-      const double bearing = kFirstRad + static_cast<double>(c) * kStepRad;
+      const double bearing = -0.5 * common::kPi + static_cast<double>(centre(i)) * kStepRad;
       const Eigen::Vector2d truth = 5.06 * Eigen::Vector2d(std::cos(bearing), std::sin(bearing));
       for (const TrackReport& r : tracks.tracks) {
         if (r.state != TrackState::kConfirmed) continue;
         ++out.measured;
         out.error_sum_m += (Eigen::Vector2d(r.x_m, r.y_m) - truth).norm();
       }
-    }
-    out.partners = pipeline.counters().single_beam_partners;
+    };
+    out.partners = RunKneeWalk(options, 30.0f, 100, draw, seen).single_beam_partners;
     return out;
   };
   const Run now = run(true);
@@ -3412,32 +3427,23 @@ TEST(PipelineScenarioTest, ALoneBeamPartnersAConfirmedTracksSegmentLeg) {
 // jump: a piece of their own). With the option that piece starts no track (one
 // id); without, it becomes a second track behind the person.
 TEST(PipelineScenarioTest, AnEdgesMixedEchoStartsNoTrack) {
-  constexpr std::size_t kBeams = 361;
-  constexpr double kStepRad = 0.5 * common::kPi / 180.0;
-  constexpr double kFirstRad = -0.5 * common::kPi;
   const auto run = [&](bool no_birth, std::uint64_t* counted) {
     TrackerOptions options;
     options.shape.mount = Mount::kLegs;
     options.shape.edge_echo_no_birth = no_birth;
-    TrackingPipeline pipeline(options);
-    std::vector<float> ranges(kBeams);
     std::set<std::uint32_t> ids;
-    const auto k0 = static_cast<std::int64_t>(kLearnedS * 25.0);
-    for (std::int64_t k = 0; k < k0 + 100; ++k) {
-      std::fill(ranges.begin(), ranges.end(), 9.0f);
-      if (k >= k0) {
-        const auto c = static_cast<std::size_t>(150 + (k - k0) / 5);
-        ranges[c - 3] = ranges[c - 2] = 8.0f;
-        ranges[c + 2] = ranges[c + 3] = 8.0f;
-        ranges[c + 4] = ranges[c + 5] = 8.5f;
-      }
-      const ScanView scan = RangesScan(ranges, kFirstRad, kStepRad, k, 40);
-      const ScanTracks& tracks = pipeline.Process(scan, static_cast<std::uint32_t>(k));
+    const auto draw = [](std::int64_t i, std::vector<float>& ranges) {
+      const auto c = static_cast<std::size_t>(150 + i / 5);
+      ranges[c - 3] = ranges[c - 2] = 8.0f;
+      ranges[c + 2] = ranges[c + 3] = 8.0f;
+      ranges[c + 4] = ranges[c + 5] = 8.5f;
+    };
+    const auto seen = [&](std::int64_t, const ScanTracks& tracks) {
       for (const TrackReport& r : tracks.tracks) {
         if (r.state == TrackState::kConfirmed) ids.insert(r.track_id);
       }
-    }
-    *counted = pipeline.counters().edge_echo_births;
+    };
+    *counted = RunKneeWalk(options, 9.0f, 100, draw, seen).edge_echo_births;
     return ids.size();
   };
   std::uint64_t now_counted = 0, before_counted = 0;
@@ -3457,9 +3463,6 @@ TEST(PipelineScenarioTest, AnEdgesMixedEchoStartsNoTrack) {
 // about 14.16 m); without, it is paired with the leg as the other one and pulls the track away from
 // the sensor (14.43 m).
 TEST(PipelineScenarioTest, ALoneBeamBesideANearerLegIsItsMixedEchoNotALeg) {
-  constexpr std::size_t kBeams = 361;
-  constexpr double kStepRad = 0.5 * common::kPi / 180.0;
-  constexpr double kFirstRad = -0.5 * common::kPi;
   struct Run {
     std::set<std::uint32_t> ids;
     int echo_scans = 0, reported = 0;
@@ -3470,25 +3473,19 @@ TEST(PipelineScenarioTest, ALoneBeamBesideANearerLegIsItsMixedEchoNotALeg) {
     TrackerOptions options;
     options.shape.mount = Mount::kLegs;
     options.shape.lone_beam_edge_echo = drop_echo;
-    TrackingPipeline pipeline(options);
-    std::vector<float> ranges(kBeams);
     Run out;
-    const auto k0 = static_cast<std::int64_t>(kLearnedS * 25.0);
-    for (std::int64_t k = 0; k < k0 + 75; ++k) {
-      std::fill(ranges.begin(), ranges.end(), 20.0f);
-      const bool walking = k >= k0;
-      const std::int64_t i = k - k0;
-      const bool echo = walking && i >= 50;
-      const auto c = static_cast<std::size_t>(120 + std::max<std::int64_t>(i, 0) / 5);
-      if (echo) {
+    const auto draw = [](std::int64_t i, std::vector<float>& ranges) {
+      const auto c = static_cast<std::size_t>(120 + i / 5);
+      if (i >= 50) {
         ranges[c - 2] = 14.0f;
         ranges[c - 1] = 14.65f;
-      } else if (walking) {
+      } else {
         ranges[c - 3] = ranges[c - 2] = 14.0f;
         ranges[c + 2] = ranges[c + 3] = 14.3f;
       }
-      const ScanView scan = RangesScan(ranges, kFirstRad, kStepRad, k, 40);
-      const ScanTracks& tracks = pipeline.Process(scan, static_cast<std::uint32_t>(k));
+    };
+    const auto seen = [&](std::int64_t i, const ScanTracks& tracks) {
+      const bool echo = i >= 50;
       for (const TrackReport& r : tracks.tracks) {
         if (r.state != TrackState::kConfirmed) continue;
         out.ids.insert(r.track_id);
@@ -3497,8 +3494,8 @@ TEST(PipelineScenarioTest, ALoneBeamBesideANearerLegIsItsMixedEchoNotALeg) {
         out.range_sum_m += std::hypot(r.x_m, r.y_m);
       }
       if (echo) ++out.echo_scans;
-    }
-    out.echoes = pipeline.counters().lone_beam_edge_echoes;
+    };
+    out.echoes = RunKneeWalk(options, 20.0f, 75, draw, seen).lone_beam_edge_echoes;
     return out;
   };
   const Run now = run(true);
