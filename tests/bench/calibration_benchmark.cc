@@ -8,6 +8,14 @@
 //   calibration_benchmark --tool LRFNET --tracker LRFNET_TRACKER --scenarios DIR
 //                         [--seeds 3] [--only NAME] [--out results/calibration_benchmark.md]
 //                         [--cache DIR] [--variants SUBSTRING] [--diagnostic-variants]
+//                         [--attempts 3]
+//
+// Every step of the chain is checked (calibration_chain.h): a sim or tracker run that fails is run
+// again up to --attempts times, each tracker writes its recording under a temporary name renamed
+// only on success (a cache never holds a partial one), and the loaded input must hold every sensor
+// of the truth. A seed whose chain still lacks a sensor is not calibrated: it is listed under its
+// scenario's table with the cause of every attempt, the chain's summary counts it, and the exit
+// code is 1 (the table is still written).
 //
 // LRFNET_BENCH_VERBOSE=1 prints per run each sensor's error against its reported sigma, the edges
 // and the accepted pairs against the truth; LRFNET_BENCH_VERBOSE=pairs adds the rejected pairs
@@ -34,11 +42,14 @@
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
+#include <functional>
 #include <limits>
 #include <map>
+#include <optional>
 #include <set>
 #include <sstream>
 #include <string>
+#include <thread>
 #include <vector>
 
 #include "central_daemon/app/calibration_input.h"
@@ -47,6 +58,7 @@
 #include "central_daemon/calibration/pairwise.h"
 #include "central_daemon/calibration/pipeline.h"
 #include "tests/bench/bench_util.h"
+#include "tests/bench/calibration_chain.h"
 #include "yaml-cpp/yaml.h"
 
 namespace {
@@ -54,7 +66,6 @@ namespace {
 namespace fs = std::filesystem;
 using namespace lrfnet;
 using bench::Arg;
-using bench::RunProcess;
 
 // The tracker runs per sensor: the benchmark's name of each (in file names and Variant) and its
 // measurement.kind in the tracker's configuration.
@@ -193,7 +204,10 @@ struct Tally {
   // The same over the sensors placed without a flag, and the flagged placements.
   std::vector<double> d_r_unflagged_deg, d_t_unflagged_m;
   std::size_t flagged = 0;
+  // runs: calibrated runs (the chain gave every sensor's tracks).
   std::size_t runs = 0, failed_runs = 0, sensors_missing = 0;
+  // Seeds not calibrated: the chain did not give every sensor's tracks (listed with the cause).
+  std::size_t not_run = 0;
   // Reported uncertainty against the error, per placed non-reference sensor: within 2 sigma
   // (d_t <= 2 sqrt(sigma_x^2 + sigma_y^2) and d_R <= 2 sigma_yaw), and the 2-dof NEES of the
   // position error; runs in which some sensor's error exceeds 3 times its reported sigma.
@@ -245,6 +259,15 @@ Coverage JudgeUncertainty(const calib::SensorPose& sensor, const common::Pose2& 
   return c;
 }
 
+// `text` without the benchmark's work folder in front of the paths it names (the results file
+// names files relative to it).
+std::string WithoutFolder(std::string text, const fs::path& folder) {
+  const std::string prefix = folder.string() + "/";
+  for (std::size_t at; (at = text.find(prefix)) != std::string::npos;)
+    text.erase(at, prefix.size());
+  return text;
+}
+
 double Mean(const std::vector<double>& v) {
   if (v.empty()) return 0.0;
   double s = 0.0;
@@ -269,6 +292,18 @@ int main(int argc, char** argv) {
   const std::string out_path = Arg(argc, argv, "--out", "");
   const std::string cache = Arg(argc, argv, "--cache", "");
   const std::string variant_filter = Arg(argc, argv, "--variants", "");
+  bench::ChainOptions chain_options;
+  chain_options.attempts = std::stoi(Arg(argc, argv, "--attempts", "3"));
+  if (auto e = bench::Validate(chain_options)) {
+    std::fprintf(stderr, "calibration_benchmark: --attempts: %s\n", e->c_str());
+    return 2;
+  }
+  const auto sleep_s = [](double seconds) {
+    std::this_thread::sleep_for(std::chrono::duration<double>(seconds));
+  };
+  // The chain over all scenarios: steps run, steps that needed more than one attempt, and the
+  // calibrations (variant and seed) not run because a sensor's tracks were still missing.
+  std::size_t chain_steps = 0, chain_retried = 0, chain_not_calibrated = 0;
   if (tool.empty() || tracker.empty()) {
     std::fprintf(stderr,
                  "usage: calibration_benchmark --tool LRFNET --tracker TRACKER [--scenarios DIR] "
@@ -298,8 +333,11 @@ int main(int argc, char** argv) {
            "legs`) → calibration → errors against "
            "the truth in the reference sensor's frame (d_R [deg], d_t [m], over all non-reference "
            "sensors of all seeds; Quenzel et al. Table III). Seeds per scenario: "
-        << seeds
-        << ". `failed` counts runs that did not connect every sensor; their sensors "
+        << seeds << ". Every step of the chain is checked and a failed one run again (up to "
+        << chain_options.attempts
+        << " times); a seed whose chain still lacks a sensor's tracks is not calibrated "
+           "and is listed under its table with the cause (see `## Chain`). `failed` counts "
+           "calibrated runs that did not connect every sensor; their sensors "
            "that were placed still count, the others are `missing`. `no flag`: the "
            "means over the sensors placed without a flag (not hanging on weak pairs), "
            "`flagged` the flagged placements over all seeds. The reported "
@@ -316,16 +354,39 @@ int main(int argc, char** argv) {
   for (const std::string& scenario : scenarios) {
     if (!only.empty() && scenario != only) continue;
     std::map<std::string, Tally> tallies;
+    // What the chain needed more than one attempt for, and the seeds it could not complete.
+    std::vector<std::string> chain_notes;
+    const auto step = [&](const std::string& name, const std::vector<std::string>& args,
+                          const std::function<std::optional<std::string>()>& check) {
+      const bench::StepReport report = bench::RunStep(
+          name, [&] { return bench::RunChild(args, log); }, check, chain_options, sleep_s);
+      ++chain_steps;
+      if (report.attempts > 1) {
+        ++chain_retried;
+        chain_notes.push_back(WithoutFolder(bench::Describe(report), work));
+        std::fprintf(stderr, "%s: %s\n", scenario.c_str(), chain_notes.back().c_str());
+      }
+      return report.ok;
+    };
     for (int seed = 1; seed <= seeds; ++seed) {
       const fs::path dir = work / (scenario + "_" + std::to_string(seed));
       fs::create_directories(dir);
+      const std::string seed_name = "seed " + std::to_string(seed);
       const bool cached = !cache.empty() && fs::exists(dir / "sim/truth.yaml");
-      if (!cached && RunProcess({tool, "sim", (fs::path(scenarios_dir) / (scenario + ".yaml")).string(),
-                      "--out", (dir / "sim").string(), "--seed", std::to_string(seed), "--jobs",
-                      "2", "--log-level", "warn"},
-                     log) != 0) {
-        std::fprintf(stderr, "%s seed %d: lrfnet sim failed (see %s)\n", scenario.c_str(), seed,
+      if (!cached &&
+          !step(seed_name + ": lrfnet sim",
+                {tool, "sim", (fs::path(scenarios_dir) / (scenario + ".yaml")).string(), "--out",
+                 (dir / "sim").string(), "--seed", std::to_string(seed), "--jobs", "2",
+                 "--log-level", "warn"},
+                [&] { return bench::CheckOutputFile((dir / "sim/truth.yaml").string()); })) {
+        chain_notes.push_back(seed_name + " not calibrated: lrfnet sim failed");
+        std::fprintf(stderr, "%s: %s (log %s)\n", scenario.c_str(), chain_notes.back().c_str(),
                      log.c_str());
+        for (const Variant& v : variants) {
+          if (!variant_filter.empty() && v.name.find(variant_filter) == std::string::npos) continue;
+          ++tallies[v.name].not_run;
+          ++chain_not_calibrated;
+        }
         continue;
       }
       calib::PoseFile truth;
@@ -335,10 +396,15 @@ int main(int argc, char** argv) {
         continue;
       }
       std::map<std::string, calib::CalibrationInput> inputs;
+      // Per measurement: why its input lacks a sensor (empty: complete).
+      std::map<std::string, std::string> incomplete;
       const std::set<std::string> legs = LegsMounted(dir / "sim/truth.yaml");
+      std::vector<std::string> expected_ids;
+      for (const auto& [id, pose] : truth.sensors) expected_ids.push_back(id);
       for (const std::string measurement : kMeasurements) {
         if (measurement == "shape_fit_mount" && legs.empty()) {
           inputs[measurement] = inputs["shape_fit"];  // every sensor at the default mount
+          incomplete[measurement] = incomplete["shape_fit"];
           continue;
         }
         const fs::path config = dir / (measurement + ".yaml");
@@ -347,22 +413,53 @@ int main(int argc, char** argv) {
         std::ofstream(legs_config)
             << "measurement:\n  kind: " << TrackerKind(measurement) << "\nshape:\n  mount: legs\n";
         std::vector<std::string> recordings;
+        std::string failed_steps;
         for (const auto& [id, pose] : truth.sensors) {
           const bool at_legs = measurement == "shape_fit_mount" && legs.count(id) != 0;
           const std::string rec = (dir / (id + "." + measurement + ".rec")).string();
+          // Written under another name and renamed once the tracker exited 0 with a recording:
+          // a run cut short leaves nothing a later --cache run would take for a whole one.
+          const std::string part = rec + ".part";
+          const std::string name =
+              seed_name + ": lrfnet-tracker " + id + " (" + MeasurementLabel(measurement) + ")";
           if (!(cached && fs::exists(rec)) &&
-              RunProcess({tracker, "--replay", (dir / ("sim/" + id + ".pcap")).string(),
-                          "--sensor-id", id, "--out", rec, "--config",
-                          (at_legs ? legs_config : config).string(), "--log-level", "warn"},
-                         log) != 0) {
-            std::fprintf(stderr, "%s seed %d: tracker %s failed\n", scenario.c_str(), seed,
-                         id.c_str());
+              !step(name,
+                    {tracker, "--replay", (dir / ("sim/" + id + ".pcap")).string(), "--sensor-id",
+                     id, "--out", part, "--config", (at_legs ? legs_config : config).string(),
+                     "--log-level", "warn"},
+                    [&]() -> std::optional<std::string> {
+                      if (auto bad = bench::CheckOutputFile(part)) return bad;
+                      std::error_code ec;
+                      fs::rename(part, rec, ec);
+                      if (ec) return rec + ": " + ec.message();
+                      return std::nullopt;
+                    })) {
+            failed_steps += (failed_steps.empty() ? "" : ", ") + id;
+            continue;
           }
           recordings.push_back(rec);
         }
         daemon::LoadCounters counters;
         if (!daemon::LoadCalibrationInput(recordings, 0, &inputs[measurement], &counters, &error)) {
-          std::fprintf(stderr, "%s\n", error.c_str());
+          incomplete[measurement] = "the recordings could not be loaded: " + error;
+          inputs[measurement] = {};
+        } else if (const std::vector<std::string> missing =
+                       bench::MissingSensors(expected_ids, inputs[measurement]);
+                   !missing.empty()) {
+          std::string ids;
+          for (const std::string& id : missing) ids += (ids.empty() ? "" : ", ") + id;
+          incomplete[measurement] =
+              "no tracks of " + ids +
+              (failed_steps.empty() ? std::string(" in the recordings")
+                                    : " (lrfnet-tracker failed for " + failed_steps + ")");
+        }
+        if (!incomplete[measurement].empty()) {
+          chain_notes.push_back(WithoutFolder(seed_name + " not calibrated with " +
+                                                  MeasurementLabel(measurement) +
+                                                  " tracks: " + incomplete[measurement],
+                                              work));
+          std::fprintf(stderr, "%s: %s (log %s)\n", scenario.c_str(), chain_notes.back().c_str(),
+                       log.c_str());
         }
       }
       // The mount check on the shape-fit runs, per sensor, against the simulator's mount.
@@ -379,6 +476,11 @@ int main(int argc, char** argv) {
       }
       for (const Variant& v : variants) {
         if (!variant_filter.empty() && v.name.find(variant_filter) == std::string::npos) continue;
+        if (!incomplete[v.measurement].empty()) {
+          ++tallies[v.name].not_run;
+          ++chain_not_calibrated;
+          continue;
+        }
         const auto start = std::chrono::steady_clock::now();
         const calib::CalibrationOutcome outcome = calib::Calibrate(
             inputs[v.measurement], v.options, [start] {
@@ -543,7 +645,14 @@ int main(int argc, char** argv) {
       }
     }
     table << "\n";
+    for (const std::string& note : chain_notes) table << "- " << note << "\n";
+    if (!chain_notes.empty()) table << "\n";
   }
+  table << "## Chain\n\n"
+        << "Steps run (lrfnet sim, lrfnet-tracker per sensor and measurement): " << chain_steps
+        << "; run more than once: " << chain_retried
+        << "; calibrations not run because a sensor's tracks were missing: " << chain_not_calibrated
+        << ".\n\n";
   // The mount check: every sensor of the shape-fit runs, grouped by the simulator's mount.
   table << "## Mount check\n\n"
         << "The check of a sensor configured for upper-body height (common/mount_check.h): its "
@@ -602,5 +711,12 @@ int main(int argc, char** argv) {
   }
   std::error_code ec;
   if (cache.empty()) fs::remove_all(work, ec);
+  if (chain_not_calibrated > 0) {
+    std::fprintf(stderr,
+                 "calibration_benchmark: %zu calibrations not run: the chain lacked a sensor's "
+                 "tracks (causes under the tables)\n",
+                 chain_not_calibrated);
+    return 1;
+  }
   return 0;
 }
