@@ -146,4 +146,20 @@ if [ -s "$out/fused.jsonl" ]; then
   ids=$(grep -o '"id":[0-9]*' "$out/fused.jsonl" | sort -u | wc -l)
   echo "demo: fused tracks: $(wc -l <"$out/fused.jsonl") snapshots in $out/fused.jsonl, $ids distinct fused ids"
 fi
+# The daemon calibrated from what it had received when the attempt started (calibration.yaml's
+# input_window); its recording gives that input again, and the same poses: what differs between two
+# runs of the demo is the live data and the moment the calibration starts, not the calibration.
+window=$(sed -n 's/^input_window: {received_until_utc_ns: \([0-9]*\), scan_from_utc_ns: \([0-9]*\)}$/\1 \2/p' \
+  "$out/calibration.yaml")
+if [ -n "$window" ]; then
+  read -r until_ns from_ns <<<"$window"
+  "$lrfnet" calibrate "$out/lrfnetd.rec" --received-until-ns "$until_ns" --scan-from-ns "$from_ns" \
+    --min-overlap-s 10 --out "$out/calibration_again.yaml" >"$out/logs/calibrate_again.log" 2>&1 || true
+  if [ -s "$out/calibration_again.yaml" ] &&
+    diff <(grep '^  - {id:' "$out/calibration.yaml") <(grep '^  - {id:' "$out/calibration_again.yaml") >/dev/null; then
+    echo "demo: the same poses again from the recording (lrfnet calibrate $out/lrfnetd.rec --received-until-ns $until_ns --scan-from-ns $from_ns --min-overlap-s 10)"
+  else
+    echo "demo: the recording's input window gave other poses: compare $out/calibration.yaml and $out/calibration_again.yaml" >&2
+  fi
+fi
 echo "demo: report picture: $out/report/calibration.png (and .svg); calibration: $out/calibration.yaml"

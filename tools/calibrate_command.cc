@@ -152,6 +152,7 @@ int RunCalibrate(int argc, char** argv) {
   int udp_port = 0;
   double grid_step_s = 0.0;
   double min_overlap_s = 0.0;
+  daemon::InputWindow window;
   visible.add_options()("help,h", "this help")("out", po::value<std::string>(&out_path),
                                                "write the calibration here (YAML)")(
       "report", po::value<std::string>(&report_dir), "write the report into this folder")(
@@ -169,6 +170,11 @@ int RunCalibrate(int argc, char** argv) {
       "min-overlap-s", po::value<double>(&min_overlap_s),
       "seconds of simultaneous tracks a pair needs to count as linked (default 3)")(
       "partial", "also write the calibration of the sensors that could be connected on failure")(
+      "received-until-ns", po::value<std::int64_t>(&window.received_until_ns),
+      "only the datagrams received up to this time (UTC ns, the recording's receive clock): with "
+      "--scan-from-ns, the input of a calibration lrfnetd made live (its `input_window`)")(
+      "scan-from-ns", po::value<std::int64_t>(&window.scan_from_ns),
+      "only the track frames from this scan time on (UTC ns)")(
       "truth", po::value<std::string>(&truth_path),
       "a truth.yaml (lrfnet sim): print the errors d_R, d_t per sensor as `lrfnet eval` does")(
       "stats-out", po::value<std::string>(&stats_out),
@@ -240,7 +246,7 @@ int RunCalibrate(int argc, char** argv) {
       return UsageError("calibrate", "--keys " + *e);
   }
   if (!daemon::LoadCalibrationInput(inputs, static_cast<std::uint16_t>(udp_port), &input, &load,
-                                    &error, auth_options)) {
+                                    &error, auth_options, window)) {
     std::fprintf(stderr, "lrfnet calibrate: %s\n", error.c_str());
     return kExitFailure;
   }
@@ -270,6 +276,10 @@ int RunCalibrate(int argc, char** argv) {
     calib::YamlContext context;
     context.created_utc = daemon::UtcNowText();
     context.inputs = inputs;
+    if (vm.count("received-until-ns") != 0 || vm.count("scan-from-ns") != 0) {
+      context.received_until_ns = window.received_until_ns;
+      context.scan_from_ns = window.scan_from_ns;
+    }
     error = daemon::WriteFileAtomically(out_path, calib::CalibrationYaml(outcome.result, context));
     if (!error.empty()) {
       std::fprintf(stderr, "lrfnet calibrate: %s\n", error.c_str());

@@ -30,7 +30,7 @@ calib::CalibrationInput CalibrationInputFrom(const Ingest& ingest, const TrackSt
 
 bool LoadCalibrationInput(const std::vector<std::string>& paths, std::uint16_t udp_port,
                           calib::CalibrationInput* input, LoadCounters* counters,
-                          std::string* error, const AuthOptions& auth) {
+                          std::string* error, const AuthOptions& auth, const InputWindow& window) {
   DaemonOptions options;
   options.send_requests = false;
   options.ingest.auth = auth;
@@ -51,6 +51,7 @@ bool LoadCalibrationInput(const std::vector<std::string>& paths, std::uint16_t u
     ReceivedDatagram d;
     SourceStatus status;
     while ((status = source->Next(&d)) == SourceStatus::kDatagram) {
+      if (d.receive_ns > window.received_until_ns) continue;
       core.OnDatagram(d.bytes, d.source, d.receive_ns);
       ++local.datagrams;
     }
@@ -62,7 +63,7 @@ bool LoadCalibrationInput(const std::vector<std::string>& paths, std::uint16_t u
   local.invalid = core.ingest().counters().rejected;
   local.verified = core.ingest().counters().verified;
   local.unverified = core.ingest().counters().unverified;
-  *input = CalibrationInputFrom(core.ingest(), core.store());
+  *input = CalibrationInputFrom(core.ingest(), core.store(), window.scan_from_ns);
   if (counters != nullptr) *counters = local;
   return true;
 }

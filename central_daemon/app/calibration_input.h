@@ -14,6 +14,17 @@
 
 namespace lrfnet::daemon {
 
+// Which datagrams and frames make a calibration's input. A live calibration takes what the store
+// holds when it starts: every datagram received up to then (received_until_ns, the daemon's
+// receive clock, which its recording keeps) and of those the frames with scan time from
+// scan_from_ns on (its window). Both are written into calibration.yaml (`input_window`), so the
+// daemon's recording gives the same input, and with it the same calibration, again
+// (LoadCalibrationInput, `lrfnet calibrate --received-until-ns --scan-from-ns`).
+struct InputWindow {
+  common::UtcNs received_until_ns = std::numeric_limits<common::UtcNs>::max();
+  common::UtcNs scan_from_ns = 0;
+};
+
 // Every sensor the store has frames or a background of, sorted by id, with its frames whose scan
 // time is in [from_ns, to_ns), its newest background, its SensorInfo and clock state (from the
 // ingest, when received). A copy: the calibration may run on another thread.
@@ -30,13 +41,15 @@ struct LoadCounters {
 };
 
 // Reads every file (recordings, with their rotation parts, or pcap/pcapng captures of the UDP
-// stream: only datagrams to udp_port, 0 = all) in order. False with a one-line *error naming the
-// file when one cannot be opened or is corrupt; invalid datagrams are only counted. With keys
-// (auth.keys), every datagram is verified as lrfnetd does (fresh windows: forged and repeated ones
-// in the files are dropped); without, sealed plain datagrams are read unverified and encrypted
-// ones dropped (datagram_verifier.h).
+// stream: only datagrams to udp_port, 0 = all) in order, the datagrams received after
+// window.received_until_ns left out and the frames before window.scan_from_ns too. False with a
+// one-line *error naming the file when one cannot be opened or is corrupt; invalid datagrams are
+// only counted. With keys (auth.keys), every datagram is verified as lrfnetd does (fresh windows:
+// forged and repeated ones in the files are dropped); without, sealed plain datagrams are read
+// unverified and encrypted ones dropped (datagram_verifier.h).
 bool LoadCalibrationInput(const std::vector<std::string>& paths, std::uint16_t udp_port,
                           calib::CalibrationInput* input, LoadCounters* counters,
-                          std::string* error, const AuthOptions& auth = {});
+                          std::string* error, const AuthOptions& auth = {},
+                          const InputWindow& window = {});
 
 }  // namespace lrfnet::daemon

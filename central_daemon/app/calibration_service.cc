@@ -139,11 +139,16 @@ bool AttemptDue(const CalibrationSchedule& schedule, const DaemonConfig& config,
 
 std::string WriteCalibrationFiles(const calib::CalibrationOutcome& outcome,
                                   const std::string& output, const std::string& report_dir,
-                                  const std::vector<std::string>& inputs) {
+                                  const std::vector<std::string>& inputs,
+                                  const std::optional<InputWindow>& window) {
   if (!output.empty()) {
     calib::YamlContext context;
     context.created_utc = UtcNowText();
     context.inputs = inputs;
+    if (window) {
+      context.received_until_ns = window->received_until_ns;
+      context.scan_from_ns = window->scan_from_ns;
+    }
     if (std::string e = WriteFileAtomically(output, calib::CalibrationYaml(outcome.result, context));
         !e.empty())
       return e;
@@ -168,19 +173,28 @@ CalibrationService::~CalibrationService() {
 
 void CalibrationService::Reconfigure(const DaemonConfig& config) { config_ = config; }
 
-calib::CalibrationInput CalibrationService::WindowInput(const Daemon& daemon) const {
+calib::CalibrationInput WindowInput(const Daemon& daemon, double window_s, InputWindow* window) {
   common::UtcNs newest_ns = 0;
   for (const SensorStoreInfo& s : daemon.store().Sensors()) {
     newest_ns = std::max(newest_ns, s.last_scan_ns);
   }
-  const auto window_ns = static_cast<common::UtcNs>(config_.calibration_window_s * 1e9);
+  const auto window_ns = static_cast<common::UtcNs>(window_s * 1e9);
   const common::UtcNs from_ns = newest_ns > window_ns ? newest_ns - window_ns : 0;
+  if (window != nullptr) {
+    // Everything the store holds arrived at or before the newest receive time of any sensor (one
+    // receive clock, datagrams ingested in the order received).
+    window->received_until_ns = 0;
+    for (const SensorStatus& s : daemon.ingest().Sensors()) {
+      window->received_until_ns = std::max(window->received_until_ns, s.last_receive_ns);
+    }
+    window->scan_from_ns = from_ns;
+  }
   return CalibrationInputFrom(daemon.ingest(), daemon.store(), from_ns);
 }
 
 void CalibrationService::UpdateProgress(double now_s, const Daemon& daemon) {
   last_progress_s_ = now_s;
-  const calib::CalibrationInput input = WindowInput(daemon);
+  const calib::CalibrationInput input = WindowInput(daemon, config_.calibration_window_s, nullptr);
   const calib::AlignedTracks tracks = calib::Align(input, config_.calibration.align);
   progress_ = ProgressOf(calib::Assess(tracks, config_.calibration.min_pair_overlap_s),
                          config_.calibration.min_pair_overlap_s);
@@ -202,6 +216,7 @@ std::optional<double> CalibrationService::RemainingS() const {
 
 void CalibrationService::SetInitial(calib::CalibrationOutcome outcome) {
   latest_ = std::move(outcome);
+  latest_window_.reset();
 }
 
 void CalibrationService::OnTick(double now_s, const Daemon& daemon) {
@@ -214,11 +229,13 @@ void CalibrationService::OnTick(double now_s, const Daemon& daemon) {
   schedule_.requested = false;
   schedule_.last_attempt_s = now_s;
   ++counters_.attempts;
-  auto input = std::make_shared<calib::CalibrationInput>(WindowInput(daemon));
+  InputWindow window;
+  auto input = std::make_shared<calib::CalibrationInput>(
+      WindowInput(daemon, config_.calibration_window_s, &window));
   if (worker_.joinable()) worker_.join();
   busy_ = true;
   const DaemonConfig config = config_;
-  worker_ = std::thread([this, input, config] {
+  worker_ = std::thread([this, input, config, window] {
     const auto start = std::chrono::steady_clock::now();
     const calib::StageClock clock = [start] {
       return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
@@ -228,14 +245,15 @@ void CalibrationService::OnTick(double now_s, const Daemon& daemon) {
     std::string write_error;
     if (outcome->ok) {
       write_error = WriteCalibrationFiles(*outcome, config.calibration_output,
-                                          config.calibration_report_dir, {"lrfnetd"});
+                                          config.calibration_report_dir, {"lrfnetd"}, window);
     }
-    boost::asio::post(io_, [this, outcome, write_error] { Finish(outcome, write_error); });
+    boost::asio::post(
+        io_, [this, outcome, write_error, window] { Finish(outcome, write_error, window); });
   });
 }
 
 void CalibrationService::Finish(std::shared_ptr<calib::CalibrationOutcome> outcome,
-                                std::string write_error) {
+                                std::string write_error, InputWindow window) {
   busy_ = false;
   if (!outcome->ok) {
     ++counters_.insufficient;
@@ -254,6 +272,7 @@ void CalibrationService::Finish(std::shared_ptr<calib::CalibrationOutcome> outco
     spdlog::info("calibration: wrote {}", config_.calibration_output);
   }
   latest_ = std::move(*outcome);
+  latest_window_ = window;
 }
 
 std::string CalibrationService::StatusText() const {

@@ -12,14 +12,15 @@
 //
 // Thread-safety: every public function is called on the io thread.
 
-#include <boost/asio/io_context.hpp>
 #include <atomic>
+#include <boost/asio/io_context.hpp>
 #include <deque>
 #include <memory>
 #include <optional>
 #include <string>
 #include <thread>
 
+#include "central_daemon/app/calibration_input.h"
 #include "central_daemon/app/config.h"
 #include "central_daemon/app/daemon.h"
 #include "central_daemon/calibration/pipeline.h"
@@ -65,9 +66,15 @@ std::string WriteFileAtomically(const std::string& path, const std::string& text
 std::string UtcNowText();
 
 // Writes the calibration (YAML) and, when report_dir is set, the report. Returns "" or the error.
+// With `window`, the YAML says which of the received data made the input (`input_window`).
 std::string WriteCalibrationFiles(const calib::CalibrationOutcome& outcome,
                                   const std::string& output, const std::string& report_dir,
-                                  const std::vector<std::string>& inputs);
+                                  const std::vector<std::string>& inputs,
+                                  const std::optional<InputWindow>& window = std::nullopt);
+
+// The store's newest window_s of tracks (copied), and in *window what that is in the daemon's
+// receive clock and in scan time: the same input again from its recording (LoadCalibrationInput).
+calib::CalibrationInput WindowInput(const Daemon& daemon, double window_s, InputWindow* window);
 
 class CalibrationService {
  public:
@@ -82,6 +89,8 @@ class CalibrationService {
   void OnTick(double now_s, const Daemon& daemon);
   bool busy() const { return busy_; }
   const std::optional<calib::CalibrationOutcome>& latest() const { return latest_; }
+  // The data of latest() when this service computed it (nullopt for one set by SetInitial).
+  const std::optional<InputWindow>& latest_window() const { return latest_window_; }
   const CalibrationCounters& counters() const { return counters_; }
   // The calibration state in a few words for the status line (with the progress bar and the
   // estimated time still needed while collecting).
@@ -94,10 +103,9 @@ class CalibrationService {
   void SetInitial(calib::CalibrationOutcome outcome);
 
  private:
-  void Finish(std::shared_ptr<calib::CalibrationOutcome> outcome, std::string write_error);
+  void Finish(std::shared_ptr<calib::CalibrationOutcome> outcome, std::string write_error,
+              InputWindow window);
   void UpdateProgress(double now_s, const Daemon& daemon);
-  // The store's newest calibration_window_s of tracks (copied; on the io thread).
-  calib::CalibrationInput WindowInput(const Daemon& daemon) const;
 
   boost::asio::io_context& io_;
   DaemonConfig config_;
@@ -105,6 +113,7 @@ class CalibrationService {
   std::thread worker_;
   bool busy_ = false;
   std::optional<calib::CalibrationOutcome> latest_;
+  std::optional<InputWindow> latest_window_;
   std::string last_problem_;
   CalibrationCounters counters_;
   CalibrationProgress progress_;

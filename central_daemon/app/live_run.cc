@@ -203,6 +203,7 @@ int RunLive(const RunOptions& run, DaemonConfig config) {
       if (calibration.counters().successes != applied_calibrations && calibration.latest()) {
         applied_calibrations = calibration.counters().successes;
         monitoring.SetCalibration(calibration.latest()->result, daemon, "calibrated");
+        monitoring.SetInputWindow(calibration.latest_window());
         if (std::string e = monitoring.WriteCalibration(); !e.empty()) {
           spdlog::error("monitoring: {}", e);
         }

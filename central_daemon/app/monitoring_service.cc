@@ -177,6 +177,10 @@ std::string MonitoringService::WriteCalibration() {
   calib::YamlContext context;
   context.created_utc = UtcNowText();
   context.inputs = {"lrfnetd"};
+  if (input_window_) {
+    context.received_until_ns = input_window_->received_until_ns;
+    context.scan_from_ns = input_window_->scan_from_ns;
+  }
   const std::string text = calib::CalibrationYaml(result_, context) + calib::HistoryYaml(history_);
   if (std::string e = WriteFileAtomically(output_, text); !e.empty()) {
     ++counters_.write_errors;

@@ -13,11 +13,13 @@
 #include <cstdint>
 #include <map>
 #include <nlohmann/json.hpp>
+#include <optional>
 #include <set>
 #include <string>
 #include <utility>
 #include <vector>
 
+#include "central_daemon/app/calibration_input.h"
 #include "central_daemon/app/config.h"
 #include "central_daemon/app/daemon.h"
 #include "central_daemon/app/live_state.h"
@@ -64,6 +66,9 @@ class MonitoringService {
   // calibration.output with the history (atomically); "" or the error. Done by OnTick after every
   // event; offline runs call it once more at the end.
   std::string WriteCalibration();
+  // The data the calibration in use was computed from, written with it (`input_window`);
+  // nullopt: not known (a calibration read from a file).
+  void SetInputWindow(const std::optional<InputWindow>& window) { input_window_ = window; }
   // A few words for the status line ("" when every sensor is fine or nothing is watched).
   std::string StatusText() const;
   // Per sensor: state, counters, the last verdict; the events so far.
@@ -77,6 +82,7 @@ class MonitoringService {
   bool enabled_ = true;
   bool active_ = false;
   std::string output_;
+  std::optional<InputWindow> input_window_;
   monitoring::Monitor monitor_;
   calib::CalibrationResult result_;
   std::vector<calib::CalibrationEvent> history_;

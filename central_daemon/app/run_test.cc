@@ -4,6 +4,7 @@
 #include <gtest/gtest.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdint>
 #include <filesystem>
@@ -11,8 +12,11 @@
 #include <nlohmann/json.hpp>
 #include <sstream>
 #include <string>
+#include <tuple>
 #include <vector>
 
+#include "central_daemon/app/calibration_input.h"
+#include "central_daemon/app/calibration_service.h"
 #include "central_daemon/app/fusion_service.h"
 #include "central_daemon/app/live_feed.h"
 #include "central_daemon/app/monitoring_service.h"
@@ -22,6 +26,7 @@
 #include "central_daemon/app/run_setup.h"
 #include "central_daemon/calibration/calibration_yaml.h"
 #include "central_daemon/io/datagram_source.h"
+#include "firmware_tracker/io/datagram_encoder.h"
 
 namespace lrfnet::daemon {
 namespace {
@@ -264,6 +269,86 @@ TEST_F(RunTest, RecorderWritesWhatTheCoreRecordsAndItReadsBack) {
     EXPECT_EQ(d.receive_ns, kRunT0 + static_cast<common::UtcNs>(i) * 1'000'000);
   }
   EXPECT_EQ(source->Next(&d), SourceStatus::kEnd);
+}
+
+// What a tracker's encoder sends, with the time it sends it.
+struct Sent final : io::DatagramSink {
+  std::vector<std::pair<std::vector<std::uint8_t>, common::UtcNs>> out;
+  void Send(std::span<const std::uint8_t> d, common::UtcNs t) override {
+    out.emplace_back(std::vector<std::uint8_t>(d.begin(), d.end()), t);
+  }
+};
+
+// A live calibration takes what the store holds when it starts, so the same sources calibrate
+// differently with the moment it starts; its window (calibration.yaml `input_window`) gives that
+// same input again from the daemon's recording, whatever arrived after it.
+TEST_F(RunTest, ALiveCalibrationsInputComesBackFromTheRecordingThroughItsWindow) {
+  DaemonConfig config;
+  config.record_path = (dir_ / "rec.lrfrec").string();
+  Recorder recorder(RecordingOptions(config, Writer()));
+  ASSERT_EQ(recorder.Open(kRunT0), std::nullopt);
+  Daemon daemon(CoreOptions(config), &recorder, nullptr, 1);
+  constexpr common::DurationNs kPeriodNs = 40'000'000;
+  // Two sensors, 25 Hz for 4 s, their datagrams arriving 2 and 7 ms after they were sent.
+  std::vector<std::tuple<common::UtcNs, std::vector<std::uint8_t>>> arrivals;
+  int sensor = 0;
+  for (const char* id : {"a", "b"}) {
+    io::DatagramEncoder encoder({id, static_cast<std::uint64_t>(++sensor)});
+    Sent sent;
+    for (std::uint32_t i = 0; i < 100; ++i) {
+      tracking::ScanTracks scan;
+      scan.scan_start_ns = kRunT0 + i * kPeriodNs;
+      scan.scan_period_s = 0.04;
+      scan.scan_counter = i;
+      tracking::TrackReport* t = scan.tracks.emplace_slot();
+      t->track_id = 1;
+      t->state = tracking::TrackState::kConfirmed;
+      t->x_m = 1.0 + 0.01 * i;
+      t->y_m = sensor;
+      t->covariance = Eigen::Matrix4d::Identity() * 0.01;
+      encoder.EncodeTracks(scan, scan.scan_start_ns + kPeriodNs, sent);
+    }
+    for (auto& [bytes, sent_ns] : sent.out) {
+      arrivals.emplace_back(sent_ns + (sensor == 1 ? 2 : 7) * 1'000'000, std::move(bytes));
+    }
+  }
+  std::sort(arrivals.begin(), arrivals.end());
+  calib::CalibrationInput live;
+  InputWindow window;
+  for (std::size_t i = 0; i < arrivals.size(); ++i) {
+    const auto& [receive_ns, bytes] = arrivals[i];
+    daemon.OnDatagram(bytes, "192.0.2.1:4000", receive_ns);
+    if (i == 130) live = WindowInput(daemon, 1.5, &window);  // the attempt, 2.6 s in
+  }
+  ASSERT_EQ(recorder.Close(), std::nullopt);
+  EXPECT_EQ(window.received_until_ns, std::get<0>(arrivals[130]));
+  const std::string path = recorder.writer().current_path();
+
+  const auto frames_of = [](const calib::CalibrationInput& input) {
+    std::vector<std::tuple<std::string, common::UtcNs, float>> out;
+    for (const calib::SensorRecording& s : input.sensors) {
+      for (const TrackFrameData& f : s.frames) {
+        out.emplace_back(s.id, f.scan_start_ns, f.tracks.empty() ? 0.0f : f.tracks[0].x_m);
+      }
+    }
+    return out;
+  };
+  calib::CalibrationInput again;
+  std::string error;
+  ASSERT_TRUE(LoadCalibrationInput({path}, 0, &again, nullptr, &error, {}, window)) << error;
+  ASSERT_EQ(again.sensors.size(), 2u);
+  EXPECT_EQ(frames_of(again), frames_of(live));
+  const std::size_t live_frames = frames_of(live).size();
+  EXPECT_GT(live_frames, 60u);   // 1.5 s of two sensors at 25 Hz
+  EXPECT_LT(live_frames, 100u);  // not the 2.6 s received by then
+  // The whole recording is another input (later frames), as is the store with any other window.
+  calib::CalibrationInput all;
+  ASSERT_TRUE(LoadCalibrationInput({path}, 0, &all, nullptr, &error)) << error;
+  EXPECT_EQ(frames_of(all).size(), 200u);
+  InputWindow received_only = window;
+  received_only.scan_from_ns = 0;
+  ASSERT_TRUE(LoadCalibrationInput({path}, 0, &all, nullptr, &error, {}, received_only)) << error;
+  EXPECT_GT(frames_of(all).size(), live_frames);
 }
 
 TEST_F(RunTest, SummaryAndStatsCountWhatArrived) {

@@ -434,6 +434,13 @@ std::string CalibrationYaml(const CalibrationResult& result, const YamlContext& 
     y += "inputs:\n";
     for (const std::string& input : context.inputs) y += "  - " + Quoted(input) + "\n";
   }
+  if (context.received_until_ns && context.scan_from_ns) {
+    y += "# input_window: the datagrams received up to received_until_utc_ns (the receive clock\n"
+         "# of the daemon's recording), their frames from scan time scan_from_utc_ns on; `lrfnet\n"
+         "# calibrate RECORDING --received-until-ns N --scan-from-ns M` calibrates them again\n";
+    y += "input_window: {received_until_utc_ns: " + std::to_string(*context.received_until_ns) +
+         ", scan_from_utc_ns: " + std::to_string(*context.scan_from_ns) + "}\n";
+  }
 
   y += "sensors:\n";
   std::size_t calibrated = 0;

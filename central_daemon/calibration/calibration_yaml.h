@@ -20,6 +20,7 @@
 // that sensor (types.h RadialBiasEstimate). quality.track_residual_rms_m is read too; other keys
 // (method, the rest of quality, devices, targets, ...) are informative and ignored by the reader.
 
+#include <cstdint>
 #include <optional>
 #include <string>
 #include <utility>
@@ -34,6 +35,11 @@ namespace lrfnet::calib {
 struct YamlContext {
   std::string created_utc;          // e.g. "2024-05-01T12:00:00Z"; omitted when empty
   std::vector<std::string> inputs;  // the recordings / captures calibrated
+  // The data of a live calibration (written as `input_window` when set): the datagrams received up
+  // to received_until_ns (the daemon's receive clock, which its recording keeps), their frames
+  // from scan time scan_from_ns on.
+  std::optional<std::int64_t> received_until_ns = std::nullopt;
+  std::optional<std::int64_t> scan_from_ns = std::nullopt;
 };
 
 // The whole file: a comment block explaining the fields, then method, reference, the context,

@@ -61,6 +61,24 @@ CalibrationResult MakeResult() {
   return r;
 }
 
+// A live calibration says which data it was computed from; the file still reads back.
+TEST(CalibrationYaml, TheInputWindowIsWrittenAndTheFileReadsBack) {
+  YamlContext context;
+  context.inputs = {"lrfnetd"};
+  EXPECT_EQ(CalibrationYaml(MakeResult(), context).find("input_window:"), std::string::npos);
+  context.received_until_ns = 1'700'000'012'345'678'901;
+  context.scan_from_ns = 1'700'000'000'000'000'000;
+  const std::string yaml = CalibrationYaml(MakeResult(), context);
+  EXPECT_NE(yaml.find("\ninput_window: {received_until_utc_ns: 1700000012345678901, "
+                      "scan_from_utc_ns: 1700000000000000000}\n"),
+            std::string::npos)
+      << yaml;
+  PoseFile file;
+  std::string error;
+  ASSERT_TRUE(ParsePoseYaml(yaml, &file, &error)) << error << "\n" << yaml;
+  EXPECT_EQ(file.sensors.size(), MakeResult().sensors.size());
+}
+
 TEST(CalibrationYaml, RoundTripGivesTheSamePoses) {
   const CalibrationResult result = MakeResult();
   const std::string yaml = CalibrationYaml(result, {"2024-05-01T12:00:00Z", {"a.rec", "b c.pcap"}});
