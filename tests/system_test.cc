@@ -289,6 +289,9 @@ TEST(SystemTest, SimTrackersDaemonCalibrateFuseSurviveATrackerRestartAndCorrectA
     text << yaml.rdbuf();
     EXPECT_NE(text.str().find("event: \"moved\""), std::string::npos) << text.str();
     EXPECT_NE(text.str().find("event: \"corrected\""), std::string::npos) << text.str();
+    // Rewritten with the history, it still says which received data the calibration took.
+    EXPECT_NE(text.str().find("\ninput_window: {received_until_utc_ns: "), std::string::npos)
+        << text.str();
   }
 
   // Calibration against the truth.
