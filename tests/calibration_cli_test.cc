@@ -156,6 +156,39 @@ TEST_F(CalibrationChain, TheDaemonCalibratesItsInputTheSameWay) {
   EXPECT_LT(e["mean_d_r_deg"].get<double>(), 1e-6);
 }
 
+// --received-until-ns / --scan-from-ns take only the data a live calibration of lrfnetd took (its
+// input_window): all of it gives the same poses and names the window in the file; none of it is
+// too little data.
+TEST_F(CalibrationChain, AnInputWindowTakesOnlyTheDataItNames) {
+  TempDir out;
+  std::vector<std::string> args = {"calibrate"};
+  for (const std::string& r : Recordings()) args.push_back(r);
+  std::vector<std::string> all = args, none = args;
+  args.insert(args.end(), {"--out", out / "plain.yaml"});
+  all.insert(all.end(), {"--out", out / "all.yaml", "--received-until-ns", "9000000000000000000",
+                         "--scan-from-ns", "0"});
+  none.insert(none.end(), {"--out", out / "none.yaml", "--received-until-ns", "1"});
+  Process plain(LRFNET_TOOL_BINARY, args);
+  ASSERT_EQ(plain.Wait(milliseconds(120'000)), 0) << plain.err();
+  Process whole(LRFNET_TOOL_BINARY, all);
+  ASSERT_EQ(whole.Wait(milliseconds(120'000)), 0) << whole.err();
+  Process empty(LRFNET_TOOL_BINARY, none);
+  EXPECT_EQ(empty.Wait(milliseconds(120'000)), 1) << empty.out();
+  EXPECT_FALSE(fs::exists(out / "none.yaml"));
+  const std::string text = ReadText(out / "all.yaml");
+  EXPECT_NE(text.find("\ninput_window: {received_until_utc_ns: 9000000000000000000, "
+                      "scan_from_utc_ns: 0}\n"),
+            std::string::npos)
+      << text;
+  EXPECT_EQ(ReadText(out / "plain.yaml").find("input_window:"), std::string::npos);
+  Process eval(LRFNET_TOOL_BINARY, {"eval", out / "all.yaml", out / "plain.yaml", "--json"});
+  ASSERT_EQ(eval.Wait(), 0) << eval.err();
+  const nlohmann::json e = nlohmann::json::parse(eval.out(), nullptr, false);
+  ASSERT_TRUE(e.is_object()) << eval.out();
+  EXPECT_EQ(e["mean_d_t_m"].get<double>(), 0.0);
+  EXPECT_EQ(e["mean_d_r_deg"].get<double>(), 0.0);
+}
+
 TEST_F(CalibrationChain, TooLittleDataAndBadInputAreOneLineErrors) {
   TempDir out;
   {
