@@ -69,3 +69,23 @@ function(lrfnet_hot_code target)
     target_compile_options(${target} PRIVATE -falign-functions=${LRFNET_ALIGN_HOT_FUNCTIONS})
   endif()
 endfunction()
+
+# The per-track code of the per-scan path (the shape fit, the tracks' filters, gate and assignment,
+# the pipeline's measurements: work that grows with the people in view and is nearly absent from an
+# empty scene) built with -O3 (inlining, unrolling and vectorising across the fit's fixed-size
+# loops), -fno-math-errno (a square root is one instruction, without the branch to libm that only
+# sets errno) and -fno-plt (libm's sincos, hypot and atan2 called without the PLT's jump), on top of
+# the build type's flags. None of them changes a result: no reassociation or contraction of floating
+# point (tracking_benchmark's tables byte for byte the same). The per-beam code every scan runs
+# (background model, segmentation, the scan's decoding) keeps the build type's flags: -O3 inlines the
+# background model's per-beam update into its loop, which makes every scene faster alike and is not
+# what these flags are for. Only in optimised builds (RelWithDebInfo, Release);
+# -DLRFNET_PER_TRACK_FLAGS= (empty) builds these files like the others.
+set(LRFNET_PER_TRACK_FLAGS "-O3;-fno-math-errno;-fno-plt" CACHE STRING
+    "Extra compiler flags for the tracker's per-track sources in optimised builds (empty: none)")
+function(lrfnet_per_track_sources target)
+  foreach(flag IN LISTS LRFNET_PER_TRACK_FLAGS)
+    set_property(SOURCE ${ARGN} TARGET_DIRECTORY ${target} APPEND PROPERTY COMPILE_OPTIONS
+                 "$<$<CONFIG:RelWithDebInfo,Release>:${flag}>")
+  endforeach()
+endfunction()
