@@ -29,6 +29,7 @@ target_link_libraries(lrfnet_uplink PUBLIC lrfnet_tracking lrfnet_common lrfnet_
                                            nanopb::protobuf-nanopb-static)
 lrfnet_warnings(lrfnet_uplink)
 lrfnet_hot_code(lrfnet_uplink)
+lrfnet_per_track_sources(lrfnet_uplink datagram_encoder.cc)
 if(LRFNET_FUZZ)
   target_compile_options(lrfnet_uplink PRIVATE -fsanitize=fuzzer-no-link,address,undefined)
 endif()
