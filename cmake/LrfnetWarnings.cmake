@@ -71,16 +71,28 @@ function(lrfnet_hot_code target)
 endfunction()
 
 # The per-track code of the per-scan path (the shape fit, the tracks' filters, gate and assignment,
-# the pipeline's measurements: work that grows with the people in view and is nearly absent from an
-# empty scene) built with -O3 (inlining, unrolling and vectorising across the fit's fixed-size
-# loops), -fno-math-errno (a square root is one instruction, without the branch to libm that only
-# sets errno) and -fno-plt (libm's sincos, hypot and atan2 called without the PLT's jump), on top of
-# the build type's flags. None of them changes a result: no reassociation or contraction of floating
-# point (tracking_benchmark's tables byte for byte the same). The per-beam code every scan runs
-# (background model, segmentation, the scan's decoding) keeps the build type's flags: -O3 inlines the
-# background model's per-beam update into its loop, which makes every scene faster alike and is not
-# what these flags are for. Only in optimised builds (RelWithDebInfo, Release);
-# -DLRFNET_PER_TRACK_FLAGS= (empty) builds these files like the others.
+# the pipeline's measurements, the encoding of the tracks: work that grows with the people in view
+# and is nearly absent from an empty scene) built with -O3 (inlining, unrolling and vectorising
+# across the fit's fixed-size loops), -fno-math-errno (a square root is one instruction, without
+# the branch to libm that only sets errno) and -fno-plt (libm's sincos, hypot and atan2 called
+# without the PLT's jump), on top of the build type's flags. None of them changes a result: no
+# reassociation or contraction of floating point (tracking_benchmark's tables byte for byte the
+# same). The per-beam code every scan runs (background model, segmentation, the scan's decoding)
+# keeps the build type's flags: -O3 inlines the background model's per-beam update into its loop,
+# which makes every scene faster alike. Measured (tracker_benchmark, callgrind inside
+# TrackerNode::OnScan per scan): instructions 130.0k / 257.6k / 559.2k -> 130.0k / 247.7k / 528.9k
+# at 0 / 10 / 50 people. In time the gain is smaller and partly not the code's: in turns, alternated
+# with the tree without these flags, 10 people 2.04-2.06x -> 1.98-2.00x and 50 people 5.12-5.17x
+# -> 5.00x, but the empty scene took 2-3 % longer in turns (not when run alone: 10.40 against 10.40
+# us); the same binary with only 3 KiB of cold padding in front of the per-scan code (no code
+# changed) showed the same: its empty scene 2 % slower in turns and 10 people 2.055x -> 2.030x
+# (1 KiB of padding instead: the empty scene 2 % faster, 10 people 2.06x -> 2.07x, 50 people 5.23x
+# -> 5.33x; where the linker puts the per-beam code moves the ratios by as much as these flags).
+# Over three placements (0, 1 and 3 KiB of padding, each with and without the flags, in turns, six
+# runs each) the flags gave 10 people 21.15 -> 20.75 us, 50 people 53.0 -> 52.2 us, the empty scene
+# 10.25 -> 10.32 us; the ratios 2.06 -> 2.02x and 5.22 -> 5.10x: not yet 2x at 10 people.
+# Only in optimised builds (RelWithDebInfo, Release); -DLRFNET_PER_TRACK_FLAGS= (empty) builds these
+# files like the others.
 set(LRFNET_PER_TRACK_FLAGS "-O3;-fno-math-errno;-fno-plt" CACHE STRING
     "Extra compiler flags for the tracker's per-track sources in optimised builds (empty: none)")
 function(lrfnet_per_track_sources target)
