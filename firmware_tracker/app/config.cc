@@ -397,6 +397,10 @@ void VisitShape(tracking::ShapeOptions& o, ConfigVisitor& v) {
           "A box's half-length is learned only from scans that show one of its sides, its "
           "half-width only from scans that show one of its ends (at least three beams across the "
           "face). Default false: both from every box fit.");
+  v.Field("box_size_from_faces_seen_at_knee", o.box_size_from_faces_seen_at_knee,
+          "Knee height: box_size_from_faces_seen there whatever it says (a cart's width is not "
+          "learned from its side, its length not from its end). false: box_size_from_faces_seen "
+          "alone decides.");
   v.Field("person_size_across_ray", o.person_size_across_ray,
           "Upper-body mount: a person's semi-axes learn from each fit by their share of the "
           "width across the ray (the shoulders' half-width from a front-on or back-on view, the "

@@ -1161,7 +1161,10 @@ class TrackingPipeline::Refiner final : public MeasurementRefiner {
     // says: model errors of successive scans are alike, not independent.
     if (prior.yaw_sigma_rad < kMaxLearningYawSigmaRad || shape.model == ShapeModel::kBox) {
       std::array<bool, 2> shown = {true, true};
-      if (shape.model == ShapeModel::kBox && o.box_size_from_faces_seen) {
+      if (shape.model == ShapeModel::kBox &&
+          (o.box_size_from_faces_seen ||
+           (o.mount == Mount::kLegs && o.box_size_from_faces_seen_at_knee))) {
+        // ShapeOptions::box_size_from_faces_seen(_at_knee).
         shown = internal::BoxFacesShown(fit.centre_m, size, yaw, part.silhouette.step_rad);
         if (!shown[0] || !shown[1]) ++box_unseen_sizes;
       }

@@ -47,7 +47,7 @@
 //                       [--before-single-precision-fit]
 //                       [--before-stance-weight] [--before-adopt] [--before-touching-legs]
 //                       [--before-box-occluders] [--before-box-rejoin] [--before-box-unseen-cov]
-//                       [--before-box-seen-extent]
+//                       [--before-box-seen-extent] [--before-knee-box-faces]
 //                       [--before-person-size]
 //                       [--before-person-reach] [--before-partial-extent]
 //                       [--before-fusion-merge] [--before-report-sourceless]]
@@ -134,6 +134,8 @@
 //   --before-box-seen-extent: "before" widens a box's reported centre covariance along an axis
 //   only where the scan does not show its semi-axis, not where the track never saw it whole,
 //   ShapeOptions::box_seen_extent_cov = false;
+//   --before-knee-box-faces: "before" learns a knee-height box's semi-axes from every fit, also
+//   one whose scan does not show them, ShapeOptions::box_size_from_faces_seen_at_knee = false;
 //   --before-box-rejoin: "before" measures every segment on its own, also the pieces the width
 //   limit cuts a box's outline into, ShapeOptions::box_rejoin_pieces = false;
 //   --before-person-size: "before" runs with ShapeOptions::person_size_across_ray the other way
@@ -1363,6 +1365,9 @@ bool g_before_box_unseen_cov = false;
 // where this scan does not show its semi-axis, not where the track never saw it whole
 // (ShapeOptions::box_seen_extent_cov = false).
 bool g_before_box_seen_extent = false;
+// --before-knee-box-faces: "before" learns a knee-height box's semi-axes from every fit
+// (ShapeOptions::box_size_from_faces_seen_at_knee = false).
+bool g_before_knee_box_faces = false;
 // --before-fusion-merge: "before"'s fusion without merging fused tracks left without sources and
 // reporting fused tracks no tracker holds any more (FusionOptions::merge_sourceless = false,
 // report_sourceless = true).
@@ -1425,10 +1430,11 @@ std::vector<Variant> Variants(sim::Mount mount, double range_m) {
              g_before_fusion_merge || g_before_report_sourceless || g_before_recent_veil ||
              g_before_single_precision_fit || g_before_stance_weight || g_before_adopt ||
              g_before_touching_legs || g_before_box_occluders || g_before_box_rejoin ||
-             g_before_box_unseen_cov || g_before_box_seen_extent || g_before_lone_leg_standing ||
-             g_before_single_beam_partner || g_before_edge_echo_birth || g_before_lone_beam_echo ||
-             g_before_far_leg_birth || g_before_person_size || g_before_person_reach ||
-             g_before_partial_extent || g_before_neighbour || g_before_range_noise) {
+             g_before_box_unseen_cov || g_before_box_seen_extent || g_before_knee_box_faces ||
+             g_before_lone_leg_standing || g_before_single_beam_partner ||
+             g_before_edge_echo_birth || g_before_lone_beam_echo || g_before_far_leg_birth ||
+             g_before_person_size || g_before_person_reach || g_before_partial_extent ||
+             g_before_neighbour || g_before_range_noise) {
     tracking::TrackerOptions before = fresh;
     if (g_before_one_leg) before.shape.hidden_leg_behind = false;
     if (g_before_mixed_pixels) before.shape.drop_mixed_pixel_legs = false;
@@ -1464,6 +1470,7 @@ std::vector<Variant> Variants(sim::Mount mount, double range_m) {
     if (g_before_box_rejoin) before.shape.box_rejoin_pieces = false;
     if (g_before_box_unseen_cov) before.shape.box_unseen_depth_cov = false;
     if (g_before_box_seen_extent) before.shape.box_seen_extent_cov = false;
+    if (g_before_knee_box_faces) before.shape.box_size_from_faces_seen_at_knee = false;
     if (g_before_single_beam_partner) before.shape.single_beam_partner = false;
     if (g_before_edge_echo_birth) before.shape.edge_echo_no_birth = false;
     if (g_before_lone_beam_echo) before.shape.lone_beam_edge_echo = false;
@@ -3297,10 +3304,10 @@ std::string KneeHeightBefore() {
         g_before_fusion_merge || g_before_report_sourceless || g_before_recent_veil ||
         g_before_single_precision_fit || g_before_stance_weight || g_before_adopt ||
         g_before_touching_legs || g_before_box_occluders || g_before_box_rejoin ||
-        g_before_box_unseen_cov || g_before_box_seen_extent || g_before_single_beam_partner ||
-        g_before_edge_echo_birth || g_before_lone_beam_echo || g_before_far_leg_birth ||
-        g_before_person_size || g_before_person_reach || g_before_partial_extent ||
-        g_before_neighbour || g_before_range_noise) ||
+        g_before_box_unseen_cov || g_before_box_seen_extent || g_before_knee_box_faces ||
+        g_before_single_beam_partner || g_before_edge_echo_birth || g_before_lone_beam_echo ||
+        g_before_far_leg_birth || g_before_person_size || g_before_person_reach ||
+        g_before_partial_extent || g_before_neighbour || g_before_range_noise) ||
       g_before_mixed_pixels || g_before_far || g_before_evidence_coasting ||
       g_before_report_rules) {
     return "";
@@ -3506,6 +3513,11 @@ std::string KneeHeightBefore() {
         "semi-axis the scan does not show, not along one the track never saw whole "
         "(`shape.box_seen_extent_cov` false)");
   }
+  if (g_before_knee_box_faces) {
+    without.push_back(
+        "learning a knee-height box's (a cart's) semi-axes from every fit, also one whose scan "
+        "does not show them (`shape.box_size_from_faces_seen_at_knee` false)");
+  }
   if (g_before_box_rejoin) {
     without.push_back(
         "measuring every segment on its own, also the pieces the width limit cuts a box's "
@@ -3656,6 +3668,8 @@ int main(int argc, char** argv) {
       g_before_box_unseen_cov = true;
     } else if (a == "--before-box-seen-extent") {
       g_before_box_seen_extent = true;
+    } else if (a == "--before-knee-box-faces") {
+      g_before_knee_box_faces = true;
     } else if (a == "--before-box-rejoin") {
       g_before_box_rejoin = true;
     } else if (a == "--before-fusion-merge") {
@@ -3682,7 +3696,7 @@ int main(int argc, char** argv) {
                    "[--before-single-precision-fit] "
                    "[--before-stance-weight] [--before-adopt] [--before-touching-legs] "
                    "[--before-box-occluders] [--before-box-rejoin] [--before-box-unseen-cov] "
-                   "[--before-box-seen-extent] "
+                   "[--before-box-seen-extent] [--before-knee-box-faces] "
                    "[--before-person-size] "
                    "[--before-person-reach] [--before-partial-extent] "
                    "[--before-fusion-merge] "
