@@ -174,6 +174,8 @@ void VisitMeasurement(tracking::TrackerOptions& p, ConfigVisitor& v) {
 }
 
 constexpr std::array<std::string_view, 2> kMountNames = {"torso", "legs"};
+constexpr std::array<std::string_view, 3> kOutsideGuessStartNames = {"guess", "silhouette",
+                                                                     "better"};
 
 void VisitShape(tracking::ShapeOptions& o, ConfigVisitor& v) {
   v.Section("shape",
@@ -512,6 +514,15 @@ void VisitShape(tracking::ShapeOptions& o, ConfigVisitor& v) {
           "A person's outline fit takes its points in single precision, four at a time (a "
           "distance rounded to about 1e-8 m, far below the range noise). false: double, two at "
           "a time.");
+  v.Field("edges_face_points", o.fit.edges_face_points,
+          "Each silhouette edge of a fit faces away from the segment's points. false: away from "
+          "the fit's start (the track's prediction), which may lie beyond the edge.");
+  VisitEnum(v, "outside_guess_start", o.fit.outside_guess_start, kOutsideGuessStartNames,
+            "Where a fit starts when the track's prediction lies outside the silhouette: guess "
+            "(there), silhouette (behind the points, as without a prediction) "
+            "or better (from both, the lower cost of points, silhouette and size prior).");
+  VisitInteger(v, "outside_guess_max_points", o.fit.outside_guess_max_points,
+               "outside_guess_start applies to fits of at most this many points.");
 }
 
 constexpr std::array<std::string_view, 2> kAssociationNames = {"global_nearest_neighbour",

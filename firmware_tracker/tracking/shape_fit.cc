@@ -8,6 +8,7 @@
 #include <cmath>
 #include <cstdint>
 #include <limits>
+#include <utility>
 #if defined(__SSE__)
 #include <xmmintrin.h>
 #endif
@@ -888,6 +889,9 @@ std::optional<std::string> Validate(const ShapeFitOptions& o) {
   if (!Positive(o.min_size_m) || !Positive(o.max_size_m) || o.max_size_m <= o.min_size_m) {
     return "need 0 < min_size_m < max_size_m";
   }
+  if (o.outside_guess_start > OutsideGuessStart::kBetter) {
+    return "outside_guess_start must be guess, silhouette or better";
+  }
   return std::nullopt;
 }
 
@@ -1146,7 +1150,11 @@ ShapeFitResult Fit(std::span<const Eigen::Vector2d> points, const Silhouette& si
   x(kCy) = start.y();
   const Eigen::Vector2d centre_prior = start;
 
-  // Silhouette edges, half a step outwards of the first and last hit beams.
+  // Silhouette edges, half a step outwards of the first and last hit beams, each normal pointing
+  // away from the body: away from the bisector of the points (inside both edges' rays), not from
+  // the start, which (the track's prediction) may lie beyond an edge's ray when the track has
+  // drifted; the edge then held the body outside the silhouette.
+  const Eigen::Vector2d edge_inside = o.edges_face_points ? ray : start;
   std::array<Edge, 2> edges{};
   std::size_t n_edges = 0;
   {
@@ -1161,7 +1169,7 @@ ShapeFitResult Fit(std::span<const Eigen::Vector2d> points, const Silhouette& si
       } else {
         nrm = Eigen::Vector2d(std::sin(angle), -std::cos(angle));
       }
-      if (nrm.dot(start) > 0.0) nrm = -nrm;
+      if (nrm.dot(edge_inside) > 0.0) nrm = -nrm;
       edges[n_edges++] = {nrm, weight};
     };
     if (silhouette.first_valid) {
@@ -1285,6 +1293,7 @@ ShapeFitResult Fit(std::span<const Eigen::Vector2d> points, const Silhouette& si
   Vec5 g;
   double points_cost = 0.0;
   double cost = evaluate(x, &h, &g, &points_cost);
+  Eigen::Vector2d cost_centre = x.head<2>();  // where `cost` was evaluated
   int iterations = 0;
   // The solver holds the factorisation of h while `factored`: the covariance at the end reuses it
   // when the last step changed nothing (converged or rejected).
@@ -1326,6 +1335,7 @@ ShapeFitResult Fit(std::span<const Eigen::Vector2d> points, const Silhouette& si
         h = h_trial;
         g = g_trial;
         cost = cost_trial;
+        cost_centre = x.head<2>();
         points_cost = sq_trial;
         accepted = true;
         factored = false;
@@ -1353,6 +1363,7 @@ ShapeFitResult Fit(std::span<const Eigen::Vector2d> points, const Silhouette& si
     result.yaw_rad = WrapHalfTurn(x(kYaw));
     result.yaw_sigma_rad = std::sqrt(std::max(0.0, cov(kYaw, kYaw)));
   }
+  result.cost = cost - centre_info * (cost_centre - centre_prior).squaredNorm();
   result.rms_m = std::sqrt(points_cost / static_cast<double>(n));
   result.iterations = iterations;
   result.evaluations = evaluations;
@@ -1360,11 +1371,48 @@ ShapeFitResult Fit(std::span<const Eigen::Vector2d> points, const Silhouette& si
   return result;
 }
 
+// Whether the start's guess lies outside the wedge between the silhouette's two ends (the rays half
+// a beam step beyond the outermost beams that hit; ShapeFitOptions::outside_guess_start applies).
+bool GuessOutsideSilhouette(std::span<const Eigen::Vector2d> points, const Silhouette& silhouette,
+                            const ShapePrior& prior, const ShapeFitOptions& o) {
+  if (o.outside_guess_start == OutsideGuessStart::kGuess || !prior.centre_guess_m ||
+      !prior.centre_guess_m->allFinite() || points.size() > o.outside_guess_max_points ||
+      !silhouette.first_valid || !silhouette.last_valid) {
+    return false;
+  }
+  // The rays' directions (the caller's where it has them; the same values); the wedge is the one
+  // between them narrower than a half turn: in front of both, anticlockwise of the one with the
+  // smaller angle and clockwise of the other. No atan2 per fit.
+  const auto unit = [](double angle, bool known, const std::array<double, 2>& u) {
+    return known ? Eigen::Vector2d(u[0], u[1]) : Eigen::Vector2d(std::cos(angle), std::sin(angle));
+  };
+  Eigen::Vector2d low =
+      unit(silhouette.first_edge_rad, silhouette.first_edge_unit_known, silhouette.first_edge_unit);
+  Eigen::Vector2d high =
+      unit(silhouette.last_edge_rad, silhouette.last_edge_unit_known, silhouette.last_edge_unit);
+  if (low.x() * high.y() - low.y() * high.x() < 0.0) std::swap(low, high);
+  const Eigen::Vector2d& g = *prior.centre_guess_m;
+  const bool inside = low.x() * g.y() - low.y() * g.x() >= 0.0 &&
+                      g.x() * high.y() - g.y() * high.x() >= 0.0 && g.dot(low + high) > 0.0;
+  return !inside;
+}
+
 }  // namespace
 
 ShapeFitResult FitShape(std::span<const Eigen::Vector2d> points, const Silhouette& silhouette,
                         const ShapePrior& prior, const ShapeFitOptions& options) {
-  return Fit<NormalSolver>(points, silhouette, prior, options);
+  if (!GuessOutsideSilhouette(points, silhouette, prior, options)) [[likely]] {
+    return Fit<NormalSolver>(points, silhouette, prior, options);
+  }
+  ShapePrior without_guess = prior;
+  without_guess.centre_guess_m.reset();
+  const ShapeFitResult from_silhouette =
+      Fit<NormalSolver>(points, silhouette, without_guess, options);
+  if (options.outside_guess_start == OutsideGuessStart::kSilhouette) return from_silhouette;
+  const ShapeFitResult from_guess = Fit<NormalSolver>(points, silhouette, prior, options);
+  return from_silhouette.ok && (!from_guess.ok || from_silhouette.cost < from_guess.cost)
+             ? from_silhouette
+             : from_guess;
 }
 
 namespace internal {

@@ -69,6 +69,16 @@ struct Silhouette {
   bool last_edge_unit_known = false;
 };
 
+// Where a fit starts when the start's guess (the track's prediction) lies outside the silhouette's
+// wedge (between the rays through its two ends, half a beam step beyond the outermost beams that
+// hit): no body there touches both ends.
+enum class OutsideGuessStart : std::uint8_t {
+  kGuess,       // at the guess, as anywhere else (as before)
+  kSilhouette,  // where no guess is given: behind the points on the ray through their middle
+  kBetter,      // from both; the solution with the lower cost of the terms that do not depend on
+                // the start (ShapeFitResult::cost: points, edges, size and yaw priors)
+};
+
 struct ShapePrior {
   ShapeModel model = ShapeModel::kSuperellipse;
   Eigen::Vector2d size_m = Eigen::Vector2d(0.23, 0.14);  // (a, b); kCircle: (radius, unused)
@@ -102,6 +112,17 @@ struct ShapeFitOptions {
   // the range noise); edges, priors, solver and covariance in double. Default true; false: every
   // point in double, two at a time (the previous arithmetic, the same results as before).
   bool single_precision_points = true;
+  // Each silhouette edge's normal points away from the bisector of the points (inside the wedge
+  // between the edges' rays). false: away from the start (the track's prediction where one is
+  // taken), as before; a prediction beyond an edge's ray then turned that edge round and held the
+  // body outside the silhouette (far views of 2-4 points, the centre 0.25-0.37 m to the side).
+  bool edges_face_points = true;
+  // A view whose track's prediction has drifted beside its silhouette (far views of 2-4 points:
+  // from the prediction the fit stayed beside the points and the error crept from scan to scan).
+  // Applies to fits of segments of at most outside_guess_max_points points with both silhouette
+  // ends. kBetter was measured too and kept fewer tracks on their people than kSilhouette.
+  OutsideGuessStart outside_guess_start = OutsideGuessStart::kSilhouette;
+  std::size_t outside_guess_max_points = 1000;
 };
 
 std::optional<std::string> Validate(const ShapeFitOptions& options);
@@ -114,6 +135,9 @@ struct ShapeFitResult {
   Eigen::Matrix2d size_cov_m2 = Eigen::Matrix2d::Identity();
   double yaw_rad = 0.0;
   double yaw_sigma_rad = kUnknownYawSigmaRad;
+  // The objective at the solution without the weak prior on the centre around the start: points,
+  // silhouette edges, size and yaw priors (the fits from two starts compare by it).
+  double cost = 0.0;
   double rms_m = 0.0;       // RMS of the point distances to the fitted outline
   double line_rms_m = 0.0;  // RMS distance of the points to their principal line (flat: small)
   double extent_m = 0.0;    // first to last point

@@ -70,6 +70,9 @@ TEST(ShapeFitTest, OptionsValidate) {
   o = {};
   o.point_sigma_m = o.model_sigma_m = 0.0;
   EXPECT_NE(Validate(o), std::nullopt);
+  o = {};
+  o.outside_guess_start = static_cast<OutsideGuessStart>(3);
+  EXPECT_NE(Validate(o), std::nullopt);
 }
 
 TEST(ShapeFitTest, SupportFunctionsOfTheShapes) {
@@ -309,6 +312,54 @@ TEST(ShapeFitTest, FewPointsStillGiveTheBodyCentreWithAnHonestCovariance) {
     EXPECT_LT(Nees(fit, body.centre_m), 13.8);
     // Along the ray the size and orientation are open: several centimetres.
     EXPECT_GT(std::sqrt(fit.centre_cov_m2(0, 0)), 0.02);
+  }
+}
+
+// A far view (15 m, 0.5 deg beams: three points) of a person with the track's prediction 0.35 m
+// to the side, outside the silhouette's wedge (the rays through its ends). With each edge turned
+// away from the start, the edge the prediction lies beyond held the body beside the points, and
+// the fit stayed there (the error crept from scan to scan); with the edges turned away from the
+// points, and with either start the fit lands on the person.
+TEST(ShapeFitTest, FewPointsWithAPredictionOutsideTheSilhouetteLandOnThePerson) {
+  for (const double side : {0.35, -0.35}) {
+    const Body body{15.0 * Eigen::Vector2d(1.0, 0.0), 0.22, 0.15, common::kPi / 2};
+    const View v = Look(body, 0.5, 0.005, 3);
+    ASSERT_EQ(v.points.size(), 3u);
+    ShapePrior prior;
+    prior.size_m = Eigen::Vector2d(0.22, 0.15);
+    prior.size_cov_m2 = 0.03 * 0.03 * Eigen::Matrix2d::Identity();
+    prior.centre_guess_m = body.centre_m + Eigen::Vector2d(0.0, side);
+    // Outside the wedge by more than half a beam step.
+    const double guess_angle = std::atan2(prior.centre_guess_m->y(), prior.centre_guess_m->x());
+    ASSERT_TRUE(guess_angle > v.silhouette.last_edge_rad + 0.5 * v.silhouette.step_rad ||
+                guess_angle < v.silhouette.first_edge_rad - 0.5 * v.silhouette.step_rad);
+    SCOPED_TRACE("side " + std::to_string(side));
+    const ShapeFitResult fit = FitShape(v.points, v.silhouette, prior, ShapeFitOptions{});
+    ASSERT_TRUE(fit.ok);
+    EXPECT_LT((fit.centre_m - body.centre_m).norm(), 0.1);
+    for (const OutsideGuessStart start :
+         {OutsideGuessStart::kGuess, OutsideGuessStart::kSilhouette, OutsideGuessStart::kBetter}) {
+      ShapeFitOptions o;
+      o.outside_guess_start = start;
+      const ShapeFitResult from = FitShape(v.points, v.silhouette, prior, o);
+      ASSERT_TRUE(from.ok);
+      EXPECT_LT((from.centre_m - body.centre_m).norm(), 0.1) << static_cast<int>(start);
+      // The cost leaves out the weak prior around the start: from the silhouette's start (no
+      // guess) the same solution has the same cost.
+      if (start == OutsideGuessStart::kSilhouette) {
+        ShapePrior no_guess = prior;
+        no_guess.centre_guess_m.reset();
+        EXPECT_DOUBLE_EQ(from.cost, FitShape(v.points, v.silhouette, no_guess, o).cost);
+      }
+    }
+    ShapeFitOptions before;
+    before.edges_face_points = false;
+    before.outside_guess_start = OutsideGuessStart::kGuess;
+    const ShapeFitResult stuck = FitShape(v.points, v.silhouette, prior, before);
+    ASSERT_TRUE(stuck.ok);
+    EXPECT_GT((stuck.centre_m - body.centre_m).norm(), 0.2);
+    std::printf("prediction %+.2f m to the side: off by %.3f m (before %.3f m)\n", side,
+                (fit.centre_m - body.centre_m).norm(), (stuck.centre_m - body.centre_m).norm());
   }
 }
 

@@ -44,7 +44,8 @@
 //                       [--before-outline-departure] [--before-partial-view]
 //                       [--before-underdetermined-fit]
 //                       [--before-recent-veil]
-//                       [--before-single-precision-fit]
+//                       [--before-single-precision-fit] [--before-edge-sides]
+//                       [--before-outside-start]
 //                       [--before-stance-weight] [--before-adopt] [--before-touching-legs]
 //                       [--before-box-occluders] [--before-box-rejoin] [--before-box-unseen-cov]
 //                       [--before-box-seen-extent] [--before-knee-box-faces]
@@ -105,7 +106,8 @@
 //   than a leg as one leg, ShapeOptions::split_few_point_legs = false;
 //   --before-deep-legs: "before" measures a confirmed track's knee-height segment of two or three
 //   points deeper along the line of sight than a leg as one leg, ShapeOptions::deep_legs_as_pair
-//   = false;
+//   = false; --before-outside-start: "before" starts a fit at the track's prediction also where it
+//   lies outside the silhouette, ShapeFitOptions::outside_guess_start = kGuess;
 //   --before-legs-seen-through: "before" reports a knee-height coasting track also where the scan
 //   sees through every place its legs may stand, ShapeOptions::legs_seen_through = false;
 //   --before-legs-report-coasting: "before" reports a knee-height coasting track for all of
@@ -118,6 +120,9 @@
 //   beams had in the last scans for a leg, ShapeOptions::recent_veil_s = 0;
 //   --before-single-precision-fit: "before" fits a person's outline with every point in double
 //   precision, two at a time, ShapeFitOptions::single_precision_points = false;
+//   --before-edge-sides: "before" turns each silhouette edge of a fit away from the fit's start
+//   (the track's prediction) instead of away from the points, ShapeFitOptions::edges_face_points
+//   = false;
 //   --before-leg-edges: "before" takes a knee-height leg's silhouette edge half a step beyond its
 //   last returning beam also where the beam beyond is a mixed echo,
 //   ShapeOptions::leg_edge_in_mixed_beam = false;
@@ -1329,6 +1334,13 @@ bool g_before_recent_veil = false;
 // --before-single-precision-fit: "before" fits a person's outline with every point in double
 // precision (ShapeFitOptions::single_precision_points = false).
 bool g_before_single_precision_fit = false;
+// --before-edge-sides: "before" turns each silhouette edge of a fit away from the fit's start (the
+// track's prediction where one is taken) instead of away from the points
+// (ShapeFitOptions::edges_face_points = false).
+bool g_before_edge_sides = false;
+// --before-outside-start: "before" starts a fit at the track's prediction also where it lies
+// outside the silhouette (ShapeFitOptions::outside_guess_start = kGuess).
+bool g_before_outside_start = false;
 // --before-leg-edges: "before" takes a knee-height leg's silhouette edge half a step beyond its
 // last returning beam also where the beam beyond is a mixed echo
 // (ShapeOptions::leg_edge_in_mixed_beam = false).
@@ -1428,7 +1440,7 @@ std::vector<Variant> Variants(sim::Mount mount, double range_m) {
              g_before_legs_coasting_sigma || g_before_coasting_sigma || g_before_leg_edges ||
              g_before_outline_departure || g_before_partial_view || g_before_underdetermined_fit ||
              g_before_fusion_merge || g_before_report_sourceless || g_before_recent_veil ||
-             g_before_single_precision_fit || g_before_stance_weight || g_before_adopt ||
+             g_before_single_precision_fit || g_before_edge_sides || g_before_outside_start || g_before_stance_weight || g_before_adopt ||
              g_before_touching_legs || g_before_box_occluders || g_before_box_rejoin ||
              g_before_box_unseen_cov || g_before_box_seen_extent || g_before_knee_box_faces ||
              g_before_lone_leg_standing || g_before_single_beam_partner ||
@@ -1463,6 +1475,10 @@ std::vector<Variant> Variants(sim::Mount mount, double range_m) {
     if (g_before_underdetermined_fit) before.shape.underdetermined_fit_shared = false;
     if (g_before_recent_veil) before.shape.recent_veil_s = 0.0;
     if (g_before_single_precision_fit) before.shape.fit.single_precision_points = false;
+    if (g_before_edge_sides) before.shape.fit.edges_face_points = false;
+    if (g_before_outside_start) {
+      before.shape.fit.outside_guess_start = tracking::OutsideGuessStart::kGuess;
+    }
     if (g_before_stance_weight) before.shape.stance_leg_weight = 0.5;
     if (g_before_adopt) before.tracking.adopt_successor_m = 0.0;
     if (g_before_touching_legs) before.shape.touching_legs_along_ray = false;
@@ -3302,7 +3318,7 @@ std::string KneeHeightBefore() {
         g_before_legs_coasting_sigma || g_before_coasting_sigma || g_before_leg_edges ||
         g_before_outline_departure || g_before_partial_view || g_before_underdetermined_fit ||
         g_before_fusion_merge || g_before_report_sourceless || g_before_recent_veil ||
-        g_before_single_precision_fit || g_before_stance_weight || g_before_adopt ||
+        g_before_single_precision_fit || g_before_edge_sides || g_before_outside_start || g_before_stance_weight || g_before_adopt ||
         g_before_touching_legs || g_before_box_occluders || g_before_box_rejoin ||
         g_before_box_unseen_cov || g_before_box_seen_extent || g_before_knee_box_faces ||
         g_before_single_beam_partner || g_before_edge_echo_birth || g_before_lone_beam_echo ||
@@ -3436,6 +3452,16 @@ std::string KneeHeightBefore() {
         "fitting a person's outline with every point in double precision, two at a time "
         "(`shape.single_precision_points` false)");
   }
+  if (g_before_edge_sides) {
+    without.push_back(
+        "turning each silhouette edge of a fit away from its start (the track's prediction) "
+        "instead of away from the points (`shape.edges_face_points` false)");
+  }
+  if (g_before_outside_start) {
+    without.push_back(
+        "starting a fit at the track's prediction also where it lies outside the silhouette "
+        "(`shape.outside_guess_start` guess)");
+  }
   if (g_before_stance_weight) {
     without.push_back(
         "measuring a walking knee-height track's two legs by their midpoint also where one "
@@ -3539,7 +3565,8 @@ std::string KneeHeightBefore() {
             "(`fusion.report_sourceless` true)";
   }
   const char* const same =
-      g_before_single_precision_fit ? ", on the same scans in the same run"
+      g_before_single_precision_fit || g_before_edge_sides || g_before_outside_start
+          ? ", on the same scans in the same run"
       : g_before_outline_departure || g_before_isotropic_bias || g_before_partial_view ||
               g_before_underdetermined_fit || g_before_partial_extent || g_before_neighbour
           ? ", on the same scans in the same run; upper-body tracks are the same by construction, "
@@ -3656,6 +3683,10 @@ int main(int argc, char** argv) {
       g_before_recent_veil = true;
     } else if (a == "--before-single-precision-fit") {
       g_before_single_precision_fit = true;
+    } else if (a == "--before-edge-sides") {
+      g_before_edge_sides = true;
+    } else if (a == "--before-outside-start") {
+      g_before_outside_start = true;
     } else if (a == "--before-stance-weight") {
       g_before_stance_weight = true;
     } else if (a == "--before-adopt") {
@@ -3693,7 +3724,8 @@ int main(int argc, char** argv) {
                    "[--before-leg-edges] [--before-outline-departure] [--before-partial-view] "
                    "[--before-underdetermined-fit] "
                    "[--before-recent-veil] "
-                   "[--before-single-precision-fit] "
+                   "[--before-single-precision-fit] [--before-edge-sides] "
+                   "[--before-outside-start] "
                    "[--before-stance-weight] [--before-adopt] [--before-touching-legs] "
                    "[--before-box-occluders] [--before-box-rejoin] [--before-box-unseen-cov] "
                    "[--before-box-seen-extent] [--before-knee-box-faces] "
