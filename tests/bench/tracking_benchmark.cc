@@ -45,7 +45,7 @@
 //                       [--before-underdetermined-fit]
 //                       [--before-recent-veil]
 //                       [--before-single-precision-fit] [--before-edge-sides]
-//                       [--before-outside-start]
+//                       [--before-outside-start] [--before-across-sway]
 //                       [--before-stance-weight] [--before-adopt] [--before-touching-legs]
 //                       [--before-box-occluders] [--before-box-rejoin] [--before-box-unseen-cov]
 //                       [--before-box-seen-extent] [--before-knee-box-faces]
@@ -108,6 +108,8 @@
 //   points deeper along the line of sight than a leg as one leg, ShapeOptions::deep_legs_as_pair
 //   = false; --before-outside-start: "before" starts a fit at the track's prediction also where it
 //   lies outside the silhouette, ShapeFitOptions::outside_guess_start = kGuess;
+//   --before-across-sway: "before" reports an upper-body centre with the sideways sway allowance
+//   across the ray as before, ShapeOptions::centre_bias_across_sigma_m = 0.006;
 //   --before-legs-seen-through: "before" reports a knee-height coasting track also where the scan
 //   sees through every place its legs may stand, ShapeOptions::legs_seen_through = false;
 //   --before-legs-report-coasting: "before" reports a knee-height coasting track for all of
@@ -1341,6 +1343,9 @@ bool g_before_edge_sides = false;
 // --before-outside-start: "before" starts a fit at the track's prediction also where it lies
 // outside the silhouette (ShapeFitOptions::outside_guess_start = kGuess).
 bool g_before_outside_start = false;
+// --before-across-sway: "before" reports the centre with the sideways sway allowance across the
+// ray as before (ShapeOptions::centre_bias_across_sigma_m = 0.006).
+bool g_before_across_sway = false;
 // --before-leg-edges: "before" takes a knee-height leg's silhouette edge half a step beyond its
 // last returning beam also where the beam beyond is a mixed echo
 // (ShapeOptions::leg_edge_in_mixed_beam = false).
@@ -1440,7 +1445,8 @@ std::vector<Variant> Variants(sim::Mount mount, double range_m) {
              g_before_legs_coasting_sigma || g_before_coasting_sigma || g_before_leg_edges ||
              g_before_outline_departure || g_before_partial_view || g_before_underdetermined_fit ||
              g_before_fusion_merge || g_before_report_sourceless || g_before_recent_veil ||
-             g_before_single_precision_fit || g_before_edge_sides || g_before_outside_start || g_before_stance_weight || g_before_adopt ||
+             g_before_single_precision_fit || g_before_edge_sides || g_before_outside_start ||
+             g_before_across_sway || g_before_stance_weight || g_before_adopt ||
              g_before_touching_legs || g_before_box_occluders || g_before_box_rejoin ||
              g_before_box_unseen_cov || g_before_box_seen_extent || g_before_knee_box_faces ||
              g_before_lone_leg_standing || g_before_single_beam_partner ||
@@ -1476,6 +1482,7 @@ std::vector<Variant> Variants(sim::Mount mount, double range_m) {
     if (g_before_recent_veil) before.shape.recent_veil_s = 0.0;
     if (g_before_single_precision_fit) before.shape.fit.single_precision_points = false;
     if (g_before_edge_sides) before.shape.fit.edges_face_points = false;
+    if (g_before_across_sway) before.shape.centre_bias_across_sigma_m = 0.006;
     if (g_before_outside_start) {
       before.shape.fit.outside_guess_start = tracking::OutsideGuessStart::kGuess;
     }
@@ -3318,7 +3325,8 @@ std::string KneeHeightBefore() {
         g_before_legs_coasting_sigma || g_before_coasting_sigma || g_before_leg_edges ||
         g_before_outline_departure || g_before_partial_view || g_before_underdetermined_fit ||
         g_before_fusion_merge || g_before_report_sourceless || g_before_recent_veil ||
-        g_before_single_precision_fit || g_before_edge_sides || g_before_outside_start || g_before_stance_weight || g_before_adopt ||
+        g_before_single_precision_fit || g_before_edge_sides || g_before_outside_start ||
+        g_before_across_sway || g_before_stance_weight || g_before_adopt ||
         g_before_touching_legs || g_before_box_occluders || g_before_box_rejoin ||
         g_before_box_unseen_cov || g_before_box_seen_extent || g_before_knee_box_faces ||
         g_before_single_beam_partner || g_before_edge_echo_birth || g_before_lone_beam_echo ||
@@ -3457,6 +3465,11 @@ std::string KneeHeightBefore() {
         "turning each silhouette edge of a fit away from its start (the track's prediction) "
         "instead of away from the points (`shape.edges_face_points` false)");
   }
+  if (g_before_across_sway) {
+    without.push_back(
+        "reporting the centre with the sideways sway allowance across the ray as before "
+        "(`shape.centre_bias_across_sigma_m` 0.006)");
+  }
   if (g_before_outside_start) {
     without.push_back(
         "starting a fit at the track's prediction also where it lies outside the silhouette "
@@ -3565,7 +3578,8 @@ std::string KneeHeightBefore() {
             "(`fusion.report_sourceless` true)";
   }
   const char* const same =
-      g_before_single_precision_fit || g_before_edge_sides || g_before_outside_start
+      g_before_single_precision_fit || g_before_edge_sides || g_before_outside_start ||
+              g_before_across_sway
           ? ", on the same scans in the same run"
       : g_before_outline_departure || g_before_isotropic_bias || g_before_partial_view ||
               g_before_underdetermined_fit || g_before_partial_extent || g_before_neighbour
@@ -3685,6 +3699,8 @@ int main(int argc, char** argv) {
       g_before_single_precision_fit = true;
     } else if (a == "--before-edge-sides") {
       g_before_edge_sides = true;
+    } else if (a == "--before-across-sway") {
+      g_before_across_sway = true;
     } else if (a == "--before-outside-start") {
       g_before_outside_start = true;
     } else if (a == "--before-stance-weight") {
@@ -3725,7 +3741,7 @@ int main(int argc, char** argv) {
                    "[--before-underdetermined-fit] "
                    "[--before-recent-veil] "
                    "[--before-single-precision-fit] [--before-edge-sides] "
-                   "[--before-outside-start] "
+                   "[--before-outside-start] [--before-across-sway] "
                    "[--before-stance-weight] [--before-adopt] [--before-touching-legs] "
                    "[--before-box-occluders] [--before-box-rejoin] [--before-box-unseen-cov] "
                    "[--before-box-seen-extent] [--before-knee-box-faces] "
