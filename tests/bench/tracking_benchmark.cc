@@ -2086,6 +2086,7 @@ struct RunResult {
   std::vector<tracking::MultiTrackerCounters> counters;        // per variant, summed over sensors
   std::vector<Mot> fused;                                      // per variant
   std::vector<Breakdown> breakdown;                            // per variant, per sensor summed
+  std::map<std::string, std::vector<Breakdown>> breakdown_by_mount;  // as per_sensor_by_mount
   double scans = 0;
   double track_seconds = 0;
   double cpu_s = 0;
@@ -2839,6 +2840,9 @@ RunResult RunScenario(sim::Scenario scenario, bool all_legs, int jobs) {
       result.causes[v].Add(causes[i][v]);
       AddCounters(counters[i][v], &result.counters[v]);
       result.breakdown[v].Merge(breakdowns[i][v]);
+      auto& breakdown_by_mount = result.breakdown_by_mount[mount];
+      breakdown_by_mount.resize(nv);
+      breakdown_by_mount[v].Merge(breakdowns[i][v]);
       by_sensor.push_back(std::move(frames[i][v]));
     }
     result.fused_causes.emplace_back();
@@ -3073,9 +3077,14 @@ Section RunFolder(const std::string& title, const std::string& dir, const std::s
         AddCauses(r.fused_causes, &section.explain_totals[ExplainGroup(key)]);
       }
       const char* const* names = kVariantNames;
+      // Each sensor counted by its own mount, as the totals: a scenario's knee-height sensors in
+      // its run as given go to "legs", not to "torso".
+      for (const auto& [sensor_mount, breakdowns] : r.breakdown_by_mount) {
+        for (std::size_t v = 0; v < breakdowns.size(); ++v) {
+          section.breakdowns[sensor_mount + " " + names[v]].Merge(breakdowns[v]);
+        }
+      }
       for (std::size_t v = 0; v < r.breakdown.size(); ++v) {
-        const std::string key = std::string(legs ? "legs" : "torso") + " " + names[v];
-        section.breakdowns[key].Merge(r.breakdown[v]);
         section.breakdown_rows += BreakdownRow(scenario.name + " | " + mount + " | " + names[v],
                                                "all", r.breakdown[v].total);
       }
