@@ -423,6 +423,15 @@ void VisitShape(tracking::ShapeOptions& o, ConfigVisitor& v) {
           "segmentation's jump), whose range steps from the person's points, is left out of the "
           "fit; that end is an occluder's edge where the run is nearer, the person's silhouette "
           "where it is behind. false: every point of the segment is the person's.");
+  v.Field("split_see_through", o.split_see_through,
+          "Upper-body mount: a segment wider than see_through_min_width_m is measured as one "
+          "object per piece where beams between its points saw through it (no return, or one "
+          "farther than both points around it by more than the segmentation's jump): people side "
+          "by side that the segmentation joined across its missing beams; not where the segment "
+          "touches a confirmed cart's predicted outline. false: every segment is one object.");
+  v.Field("see_through_min_width_m", o.see_through_min_width_m,
+          "With split_see_through: only segments wider than this (m, first to last point) are "
+          "cut.");
   v.Field("partial_view_size_sigma_m", o.partial_view_size_sigma_m,
           "Upper-body mount, a partial view (fewer than two silhouette ends): in the centre "
           "covariance successive scans share, each semi-axis's sigma is at least this (m), since "

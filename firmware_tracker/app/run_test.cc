@@ -106,6 +106,7 @@ TEST(TrackerRun, PipelineSummaryNamesEveryCounter) {
   c.neighbour_widened = 43;
   c.lone_beam_edge_echoes = 44;
   c.far_leg_births = 45;
+  c.see_through_splits = 46;
   EXPECT_EQ(PipelineSummary(c),
             "rejected_scans=1 learning_scans=2 segments=3 dropped_segments=4 "
             "ellipse_measurements=5 com_measurements=6 shape_fits=7 failed_shape_fits=8 "
@@ -120,7 +121,7 @@ TEST(TrackerRun, PipelineSummaryNamesEveryCounter) {
             "person_sizes_across_ray=36 partial_view_widened=37 "
             "underdetermined_fit_widened=38 box_pieces_rejoined=39 legs_coasting_uncertain=40 "
             "coasting_uncertain=41 box_unseen_widened=42 neighbour_widened=43 "
-            "lone_beam_edge_echoes=44 far_leg_births=45");
+            "lone_beam_edge_echoes=44 far_leg_births=45 see_through_splits=46");
 }
 
 TEST(TrackerRun, MultiTrackerSummaryNamesEveryCounterButTheTwoBeforeIt) {

@@ -32,6 +32,8 @@ constexpr double kOccluderSigmas = 3.0;
 // ShapeOptions::box_size_from_faces_seen: a face shows its length where at least this many beams
 // fall across it (fewer cannot tell its length from where its corners lie between beams).
 constexpr double kFaceMinBeams = 3.0;
+// ShapeOptions::split_see_through: at most this many cuts per segment (four people side by side).
+constexpr std::size_t kMaxSeeThroughCuts = 3;
 
 // x^p for x >= 0: the common exponents by algebra (2: x x; 2.5: x x sqrt(x)), others by pow.
 double PowerOf(double x, double p) {
@@ -668,6 +670,9 @@ std::optional<std::string> Validate(const ShapeOptions& o) {
     return "neighbour_sigma_m must be >= 0 (0: off)";
   }
   if (!Positive(o.box_rejoin_sigmas)) return "box_rejoin_sigmas must be > 0";
+  if (!(std::isfinite(o.see_through_min_width_m) && o.see_through_min_width_m >= 0.0)) {
+    return "see_through_min_width_m must be >= 0";
+  }
   if (!Positive(o.box_size_sigma_m)) return "box_size_sigma_m must be > 0";
   if (!Positive(o.box_unseen_sigma_m)) return "box_unseen_sigma_m must be > 0";
   if (!Positive(o.box_prior_min_half_m) || !(o.box_prior_max_half_m > o.box_prior_min_half_m) ||
@@ -1722,6 +1727,7 @@ void TrackingPipeline::BuildObservations(const ScanView& scan) {
         s.point_count += segments[k].point_count;
       }
       counters_.box_pieces_rejoined += last - i;
+      const bool whole = last == i;  // no box pieces rejoined
       i = last + 1;
       if (observations_.full()) {
         ++counters_.dropped_segments;  // as AddObservation counts it
@@ -1730,10 +1736,29 @@ void TrackingPipeline::BuildObservations(const ScanView& scan) {
       s.width_m = (segments_.points_m[s.first_point + s.point_count - 1] -
                    segments_.points_m[s.first_point])
                       .norm();
-      Observation* ob = observations_.emplace_slot();
-      ob->parts[0] = MakePart(scan, s, 0, s.point_count);
-      ob->part_count = 1;
-      MeasureObservation(scan, *ob);
+      // ShapeOptions::split_see_through (not the pieces of a box rejoined above).
+      std::array<std::size_t, kMaxSeeThroughCuts + 1> starts{};
+      std::size_t pieces = 1;
+      if (options_.shape.split_see_through && whole) {
+        pieces += SeeThroughCuts(scan, segments_, s, options_.segmentation,
+                                 options_.shape.see_through_min_width_m,
+                                 std::span<std::size_t>(starts).subspan(1));
+      }
+      if (pieces > 1 && OnConfirmedBox(s, scan.stamp_ns, tracks)) pieces = 1;
+      for (std::size_t p = 0; p < pieces; ++p) {
+        const std::size_t end = p + 1 < pieces ? starts[p + 1] : s.point_count;
+        if (p > 0) {
+          if (observations_.full()) {
+            ++counters_.dropped_segments;
+            break;
+          }
+          ++counters_.see_through_splits;
+        }
+        Observation* ob = observations_.emplace_slot();
+        ob->parts[0] = MakePart(scan, s, starts[p], end - starts[p]);
+        ob->part_count = 1;
+        MeasureObservation(scan, *ob);
+      }
     }
     return;
   }
@@ -1793,6 +1818,37 @@ void TrackingPipeline::BuildObservations(const ScanView& scan) {
   const std::size_t tracks = tracker_.Predict(scan.stamp_ns, predictions_);
   if (o.single_beam_legs) AddSingleBeamLegs(scan, tracks);
   PairLegs(scan, tracks);
+}
+
+// ShapeOptions::split_see_through: a piece of segment s lies on a confirmed box track's predicted
+// rectangle, grown as box_rejoin_pieces grows it (a cart and its pusher: the box's fit leaves the
+// pusher out, box_drop_occluders).
+bool TrackingPipeline::OnConfirmedBox(const Segment& s, common::UtcNs stamp_ns,
+                                      std::optional<std::size_t>& tracks) {
+  const ShapeOptions& o = options_.shape;
+  if (!tracks) tracks = tracker_.Predict(stamp_ns, predictions_);
+  const auto pts = segments_.Points(s);
+  const double range = Range(pts.front());
+  const double noise = o.fit.point_sigma_m + o.fit.point_sigma_per_m * range;
+  for (std::size_t t = 0; t < *tracks; ++t) {
+    const TrackPrediction& pr = predictions_[t];
+    if (!pr.confirmed || pr.model != ShapeModel::kBox) continue;
+    const Eigen::SelfAdjointEigenSolver<Eigen::Matrix2d> position(pr.covariance_m2,
+                                                                  Eigen::EigenvaluesOnly);
+    const double state_var = std::max({pr.size_cov_m2(0, 0), pr.size_cov_m2(1, 1),
+                                       o.box_size_sigma_m * o.box_size_sigma_m}) +
+                             position.eigenvalues().maxCoeff();
+    const double margin =
+        o.box_rejoin_sigmas * std::sqrt(noise * noise + o.fit.model_sigma_m * o.fit.model_sigma_m +
+                                        std::max(0.0, state_var));
+    for (const Eigen::Vector2d& p : pts) {
+      if (internal::InsideGrownBox(pr.position_m, pr.size_m, pr.yaw_rad, margin,
+                                   std::span<const Eigen::Vector2d>(&p, 1))) {
+        return true;
+      }
+    }
+  }
+  return false;
 }
 
 std::size_t TrackingPipeline::BoxPiecesEnd(std::size_t first, common::UtcNs stamp_ns,

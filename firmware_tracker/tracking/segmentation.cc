@@ -114,4 +114,45 @@ void SegmentScan(const ScanView& scan, std::span<const std::uint8_t> foreground,
   builder.Close();
 }
 
+std::size_t SeeThroughCuts(const ScanView& scan, const SegmentList& list, const Segment& s,
+                           const SegmentationOptions& options, double min_width_m,
+                           std::span<std::size_t> cuts) {
+  if (cuts.empty() || s.point_count < 2 * options.min_points || !(s.width_m > min_width_m)) {
+    return 0;
+  }
+  const auto pts = list.Points(s);
+  const std::size_t end_beam = std::min(s.end_beam, scan.range_m.size());
+  // The segment's points in beam order: point k is beam b's where b's range along its direction
+  // (SegmentScan's table of this scan) gives the very same point.
+  const auto is_point = [&](std::size_t b, const Eigen::Vector2d& p) {
+    const double r = scan.range_m[b];
+    return r * list.directions.cos(b) == p.x() && r * list.directions.sin(b) == p.y();
+  };
+  std::size_t count = 0, k = 0, last_cut = 0;
+  bool through = false;  // beams since point k - 1 all saw through
+  bool gap = false;      // and there was at least one
+  for (std::size_t b = s.begin_beam; b < end_beam && k < pts.size(); ++b) {
+    if (is_point(b, pts[k])) {
+      if (k > 0 && gap && through && k - last_cut >= options.min_points &&
+          pts.size() - k >= options.min_points) {
+        cuts[count++] = k;
+        last_cut = k;
+        if (count == cuts.size()) break;
+      }
+      ++k;
+      through = true;
+      gap = false;
+      continue;
+    }
+    if (k == 0) continue;
+    const double r = scan.range_m[b];
+    const double near = std::max(pts[k - 1].norm(), pts[k].norm());
+    const bool beyond = !(std::isfinite(r) && r > 0.0) ||
+                        r > near + options.jump_base_m + options.jump_per_m * near;
+    through = through && beyond;
+    gap = true;
+  }
+  return count;
+}
+
 }  // namespace lrfnet::tracking

@@ -66,4 +66,17 @@ struct SegmentList {
 void SegmentScan(const ScanView& scan, std::span<const std::uint8_t> foreground,
                  const SegmentationOptions& options, SegmentList& out);
 
+// Where segment `s` of `list` (filled by SegmentScan from `scan`) holds objects side by side: the
+// points k (1 <= k < point_count, in order) before which lie one or more beams that saw through the
+// segment, each either without a return or with one farther than both points around it by more
+// than the jump limit at their range (jump_base_m + jump_per_m * range). A convex body hides what
+// lies behind it on every beam across it, so such a beam passes between two objects that the
+// segmentation joined across up to max_missing_beams beams (or, without a return, a dropout on a
+// dark body: min_width_m keeps those whole). Only for segments wider (first to last
+// point) than min_width_m; a cut is kept where each piece it leaves has at least min_points points.
+// Writes at most cuts.size() cuts in increasing order and returns their count.
+std::size_t SeeThroughCuts(const ScanView& scan, const SegmentList& list, const Segment& s,
+                           const SegmentationOptions& options, double min_width_m,
+                           std::span<std::size_t> cuts);
+
 }  // namespace lrfnet::tracking

@@ -2,6 +2,7 @@
 
 #include <gtest/gtest.h>
 
+#include <array>
 #include <cmath>
 #include <memory>
 #include <vector>
@@ -134,6 +135,58 @@ TEST(SegmentationTest, MissingBeamGapUpToLimitJoinsBeyondSplits) {
   EXPECT_EQ(out.segments[0].end_beam, 110u);
   EXPECT_EQ(out.segments[0].point_count, 8u);
   EXPECT_EQ(out.segments[1].begin_beam, 113u);
+}
+
+// SeeThroughCuts: two bodies at 5 m, 12 beams each (0.48 m across), two beams between them that
+// the segmentation joins across (one segment about 1.1 m wide); what those two beams returned
+// decides whether the segment is cut between the bodies.
+struct TwoBodies {
+  explicit TwoBodies(float between_m) : s(361) {
+    s.Mark(100, 112);
+    s.Mark(114, 126);
+    s.ranges[112] = s.ranges[113] = between_m;
+    SegmentationOptions o;
+    o.max_width_m = 2.0;
+    SegmentScan(s.view(), s.mask, o, list);
+  }
+  std::size_t Cuts(double min_width_m, std::array<std::size_t, 3>& cuts) const {
+    return SeeThroughCuts(s.view(), list, list.segments[0], SegmentationOptions{}, min_width_m,
+                          cuts);
+  }
+  MaskScan s;
+  SegmentList list;
+};
+
+TEST(SegmentationTest, SeeThroughCutsWhereBeamsBetweenTwoBodiesReturnedFromBeyond) {
+  std::array<std::size_t, 3> cuts{};
+  const TwoBodies wall_behind(8.0f);  // 3 m behind: beyond the jump limit (0.3 m at 5 m)
+  ASSERT_EQ(wall_behind.list.segments.size(), 1u);
+  EXPECT_GT(wall_behind.list.segments[0].width_m, 1.0);
+  ASSERT_EQ(wall_behind.Cuts(0.7, cuts), 1u);
+  EXPECT_EQ(cuts[0], 12u);  // the second body's first point
+  const TwoBodies no_echo(0.0f);
+  ASSERT_EQ(no_echo.Cuts(0.7, cuts), 1u);
+  EXPECT_EQ(cuts[0], 12u);
+  // A return within the jump limit behind the bodies (a surface they stand against): not seen
+  // through, one object as far as the scan tells.
+  const TwoBodies close_behind(5.2f);
+  EXPECT_EQ(close_behind.Cuts(0.7, cuts), 0u);
+  // Narrower than min_width_m (one body with a dropout): whole.
+  EXPECT_EQ(wall_behind.Cuts(1.2, cuts), 0u);
+}
+
+TEST(SegmentationTest, SeeThroughCutsLeaveNoPieceBelowMinPoints) {
+  MaskScan s(361);
+  s.Mark(100, 101);  // one point, then two beams seen through, then a body
+  s.Mark(103, 125);
+  s.ranges[101] = s.ranges[102] = 9.0f;
+  SegmentationOptions o;
+  o.max_width_m = 2.0;
+  SegmentList list;
+  SegmentScan(s.view(), s.mask, o, list);
+  ASSERT_EQ(list.segments.size(), 1u);
+  std::array<std::size_t, 3> cuts{};
+  EXPECT_EQ(SeeThroughCuts(s.view(), list, list.segments[0], o, 0.7, cuts), 0u);
 }
 
 TEST(SegmentationTest, RangeJumpSplitsNeighbouringBeams) {

@@ -48,7 +48,7 @@
 //                       [--before-outside-start] [--before-across-sway]
 //                       [--before-stance-weight] [--before-adopt] [--before-touching-legs]
 //                       [--before-box-occluders] [--before-box-rejoin] [--before-box-unseen-cov]
-//                       [--before-box-seen-extent] [--before-knee-box-faces]
+//                       [--before-box-seen-extent] [--before-knee-box-faces] [--before-see-through]
 //                       [--before-person-size]
 //                       [--before-person-reach] [--before-partial-extent]
 //                       [--before-fusion-merge] [--before-report-sourceless]]
@@ -145,6 +145,8 @@
 //   one whose scan does not show them, ShapeOptions::box_size_from_faces_seen_at_knee = false;
 //   --before-box-rejoin: "before" measures every segment on its own, also the pieces the width
 //   limit cuts a box's outline into, ShapeOptions::box_rejoin_pieces = false;
+//   --before-see-through: "before" measures every segment as one observation, also where beams
+//   saw through it between objects side by side, ShapeOptions::split_see_through = false;
 //   --before-person-size: "before" runs with ShapeOptions::person_size_across_ray the other way
 //   round from the default (off by default since it moves round objects' centres towards the
 //   sensor: "before" learns each semi-axis only from views that show it across the ray);
@@ -1375,6 +1377,9 @@ bool g_before_box_occluders = false;
 // --before-box-rejoin: "before" measures every segment on its own, also the pieces the width limit
 // cuts a box's outline into (ShapeOptions::box_rejoin_pieces = false).
 bool g_before_box_rejoin = false;
+// --before-see-through: "before" measures every segment as one observation, also where beams saw
+// through it between objects side by side (ShapeOptions::split_see_through = false).
+bool g_before_see_through = false;
 // --before-box-unseen-cov: "before" reports a box's size error as the same in every direction,
 // also along an axis the scan does not show (ShapeOptions::box_unseen_depth_cov = false).
 bool g_before_box_unseen_cov = false;
@@ -1448,11 +1453,11 @@ std::vector<Variant> Variants(sim::Mount mount, double range_m) {
              g_before_single_precision_fit || g_before_edge_sides || g_before_outside_start ||
              g_before_across_sway || g_before_stance_weight || g_before_adopt ||
              g_before_touching_legs || g_before_box_occluders || g_before_box_rejoin ||
-             g_before_box_unseen_cov || g_before_box_seen_extent || g_before_knee_box_faces ||
-             g_before_lone_leg_standing || g_before_single_beam_partner ||
-             g_before_edge_echo_birth || g_before_lone_beam_echo || g_before_far_leg_birth ||
-             g_before_person_size || g_before_person_reach || g_before_partial_extent ||
-             g_before_neighbour || g_before_range_noise) {
+             g_before_see_through || g_before_box_unseen_cov || g_before_box_seen_extent ||
+             g_before_knee_box_faces || g_before_lone_leg_standing ||
+             g_before_single_beam_partner || g_before_edge_echo_birth || g_before_lone_beam_echo ||
+             g_before_far_leg_birth || g_before_person_size || g_before_person_reach ||
+             g_before_partial_extent || g_before_neighbour || g_before_range_noise) {
     tracking::TrackerOptions before = fresh;
     if (g_before_one_leg) before.shape.hidden_leg_behind = false;
     if (g_before_mixed_pixels) before.shape.drop_mixed_pixel_legs = false;
@@ -1491,6 +1496,7 @@ std::vector<Variant> Variants(sim::Mount mount, double range_m) {
     if (g_before_touching_legs) before.shape.touching_legs_along_ray = false;
     if (g_before_box_occluders) before.shape.box_drop_occluders = false;
     if (g_before_box_rejoin) before.shape.box_rejoin_pieces = false;
+    if (g_before_see_through) before.shape.split_see_through = false;
     if (g_before_box_unseen_cov) before.shape.box_unseen_depth_cov = false;
     if (g_before_box_seen_extent) before.shape.box_seen_extent_cov = false;
     if (g_before_knee_box_faces) before.shape.box_size_from_faces_seen_at_knee = false;
@@ -3337,10 +3343,11 @@ std::string KneeHeightBefore() {
         g_before_single_precision_fit || g_before_edge_sides || g_before_outside_start ||
         g_before_across_sway || g_before_stance_weight || g_before_adopt ||
         g_before_touching_legs || g_before_box_occluders || g_before_box_rejoin ||
-        g_before_box_unseen_cov || g_before_box_seen_extent || g_before_knee_box_faces ||
-        g_before_single_beam_partner || g_before_edge_echo_birth || g_before_lone_beam_echo ||
-        g_before_far_leg_birth || g_before_person_size || g_before_person_reach ||
-        g_before_partial_extent || g_before_neighbour || g_before_range_noise) ||
+        g_before_see_through || g_before_box_unseen_cov || g_before_box_seen_extent ||
+        g_before_knee_box_faces || g_before_single_beam_partner || g_before_edge_echo_birth ||
+        g_before_lone_beam_echo || g_before_far_leg_birth || g_before_person_size ||
+        g_before_person_reach || g_before_partial_extent || g_before_neighbour ||
+        g_before_range_noise) ||
       g_before_mixed_pixels || g_before_far || g_before_evidence_coasting ||
       g_before_report_rules) {
     return "";
@@ -3566,6 +3573,11 @@ std::string KneeHeightBefore() {
         "learning a knee-height box's (a cart's) semi-axes from every fit, also one whose scan "
         "does not show them (`shape.box_size_from_faces_seen_at_knee` false)");
   }
+  if (g_before_see_through) {
+    without.push_back(
+        "measuring every segment as one object, also where beams saw through it between objects "
+        "side by side (`shape.split_see_through` false)");
+  }
   if (g_before_box_rejoin) {
     without.push_back(
         "measuring every segment on its own, also the pieces the width limit cuts a box's "
@@ -3728,6 +3740,8 @@ int main(int argc, char** argv) {
       g_before_knee_box_faces = true;
     } else if (a == "--before-box-rejoin") {
       g_before_box_rejoin = true;
+    } else if (a == "--before-see-through") {
+      g_before_see_through = true;
     } else if (a == "--before-fusion-merge") {
       g_before_fusion_merge = true;
     } else if (a == "--before-report-sourceless") {
@@ -3754,6 +3768,7 @@ int main(int argc, char** argv) {
                    "[--before-stance-weight] [--before-adopt] [--before-touching-legs] "
                    "[--before-box-occluders] [--before-box-rejoin] [--before-box-unseen-cov] "
                    "[--before-box-seen-extent] [--before-knee-box-faces] "
+                   "[--before-see-through] "
                    "[--before-person-size] "
                    "[--before-person-reach] [--before-partial-extent] "
                    "[--before-fusion-merge] "
