@@ -459,6 +459,14 @@ void VisitShape(tracking::ShapeOptions& o, ConfigVisitor& v) {
   v.Field("mixed_pixel_min_gap_m", o.mixed_pixel_min_gap_m,
           "How far behind an edge point the neighbour beam must have returned for the edge point "
           "to be a mixed pixel.");
+  v.Field("receded_background_edge_m", o.receded_background_edge_m,
+          "A segment's end is no silhouette where the beam beyond returned from within this of "
+          "the end point's range and was classed background only because the background model "
+          "holds something more than receded_background_margin_m nearer there (someone who stood "
+          "there and left). 0: off.");
+  v.Field("receded_background_margin_m", o.receded_background_margin_m,
+          "How much nearer than the beam's return the background model must hold something for "
+          "receded_background_edge_m.");
   v.Field("centre_model_sigma_m", o.centre_model_sigma_m,
           "Added in quadrature to every centre measurement's sigma: what the fit cannot know "
           "(sway, an outline that is not the model's).");

@@ -656,6 +656,12 @@ std::optional<std::string> Validate(const ShapeOptions& o) {
   if (!(std::isfinite(o.mixed_pixel_min_footprint_m) && o.mixed_pixel_min_footprint_m >= 0.0)) {
     return "mixed_pixel_min_footprint_m must be >= 0 (0: off)";
   }
+  if (!(std::isfinite(o.receded_background_edge_m) && o.receded_background_edge_m >= 0.0)) {
+    return "receded_background_edge_m must be >= 0 (0: off)";
+  }
+  if (!(std::isfinite(o.receded_background_margin_m) && o.receded_background_margin_m >= 0.0)) {
+    return "receded_background_margin_m must be >= 0";
+  }
   if (!(std::isfinite(o.recent_veil_s) && o.recent_veil_s >= 0.0 && o.recent_veil_s <= 2.0)) {
     return "recent_veil_s must be in [0, 2]";
   }
@@ -879,6 +885,7 @@ class TrackingPipeline::Refiner final : public MeasurementRefiner {
   std::uint64_t person_across_ray = 0;
   std::uint64_t person_beyond_reach = 0;
   std::uint64_t partial_size_floored = 0;
+  std::uint64_t person_size_kept = 0;
   std::uint64_t neighbour_widened = 0;
 
   // How many of the observation's two outline ends are silhouettes (MakePart: not an occluder's
@@ -1164,7 +1171,12 @@ class TrackingPipeline::Refiner final : public MeasurementRefiner {
     // Size learning. Only where the orientation is known: without it, what the outline shows cannot
     // be told apart into size and orientation. And only a share kSizeLearningShare of what the scan
     // says: model errors of successive scans are alike, not independent.
-    if (prior.yaw_sigma_rad < kMaxLearningYawSigmaRad || shape.model == ShapeModel::kBox) {
+    // ShapeOptions::person_size_min_points.
+    const bool enough_points =
+        shape.model != ShapeModel::kSuperellipse || fit.points_used >= o.person_size_min_points;
+    if (!enough_points) ++person_size_kept;
+    if (enough_points &&
+        (prior.yaw_sigma_rad < kMaxLearningYawSigmaRad || shape.model == ShapeModel::kBox)) {
       std::array<bool, 2> shown = {true, true};
       if (shape.model == ShapeModel::kBox &&
           (o.box_size_from_faces_seen ||
@@ -1573,9 +1585,24 @@ ObservationPart TrackingPipeline::MakePart(const ScanView& scan, const Segment& 
   s.first_edge_unit_known = s.last_edge_unit_known = true;
   // An edge is the outline's when the beam beyond it saw nothing nearer (no echo, the background,
   // something behind): a nearer return is an occluder, and the field of view's end hides the rest.
+  // ShapeOptions::receded_background_edge_m: not where the beam returned from the body's range
+  // over a background model that holds something nearer there.
+  const double receded_m = options_.shape.receded_background_edge_m;
+  const auto foreground = background_.foreground();
+  const auto background_m = background_.background_range_m();
   const auto clear = [&](std::size_t beam, const Eigen::Vector2d& edge_point) {
     const float r = scan.range_m[beam];
-    return !(std::isfinite(r) && r > 0.0f) || static_cast<double>(r) > Range(edge_point) - 0.1;
+    if (!(std::isfinite(r) && r > 0.0f)) return true;
+    const double edge_range = Range(edge_point);
+    const double range = static_cast<double>(r);
+    if (receded_m > 0.0 && beam < foreground.size() && foreground[beam] == 0 &&
+        beam < background_m.size() && background_m[beam] > 0.0f &&
+        std::abs(range - edge_range) <= receded_m &&
+        range >
+            static_cast<double>(background_m[beam]) + options_.shape.receded_background_margin_m) {
+      return false;
+    }
+    return range > edge_range - 0.1;
   };
   s.first_valid = part.begin_beam > 0 && clear(part.begin_beam - 1, points.front());
   s.last_valid = part.end_beam < scan.range_m.size() && clear(part.end_beam, points.back());
@@ -2760,6 +2787,7 @@ const ScanTracks& TrackingPipeline::Process(const ScanView& scan, std::uint32_t 
   const std::uint64_t person_beyond_reach_before = refiner_->person_beyond_reach;
   const std::uint64_t partial_size_floored_before = refiner_->partial_size_floored;
   const std::uint64_t neighbour_widened_before = refiner_->neighbour_widened;
+  const std::uint64_t person_size_kept_before = refiner_->person_size_kept;
   scan_ = &scan;
   ++refiner_->scans;
   tracker_.Step(scan.stamp_ns, measurements_.span(), offsets_s_.span(),
@@ -2787,6 +2815,7 @@ const ScanTracks& TrackingPipeline::Process(const ScanView& scan, std::uint32_t 
   counters_.partial_view_size_floored +=
       refiner_->partial_size_floored - partial_size_floored_before;
   counters_.neighbour_widened += refiner_->neighbour_widened - neighbour_widened_before;
+  counters_.person_sizes_kept_few_points += refiner_->person_size_kept - person_size_kept_before;
   if (bg.scan_error == ScanError::kNone && bg.learned) {
     AbsorbStatic(scan);
     if (shape_fit) DropCoasting(scan);

@@ -12,6 +12,7 @@
 #include <vector>
 
 #include "common/geometry.h"
+#include "firmware_tracker/tracking/pipeline.h"
 #include "firmware_tracker/tracking/tracking_test_util.h"
 
 namespace lrfnet::tracking {
@@ -930,6 +931,102 @@ TEST(ShapeFitTest, DefaultRangeNoiseIsTheScannersStatisticalError) {
   EXPECT_NEAR(o.point_sigma_m + o.point_sigma_per_m * 0.0, 0.015, 1e-12);
   EXPECT_NEAR(o.point_sigma_m + o.point_sigma_per_m * 20.0, 0.019, 1e-12);
   EXPECT_LE(o.point_sigma_m + o.point_sigma_per_m * 30.0, 0.022);
+}
+
+// 2-4 points of a person of the prior's size (a = 0.23, b = 0.14 m) at 10-20 m, 0.5 deg beams,
+// walking along the ray (seen from behind: the depth along the ray is the half-depth b) and
+// across it (seen from the side: the depth is the shoulders' half-width a), the walking direction
+// known as a track knows it: the centre lies that depth behind the points, within its covariance.
+TEST(ShapeFitTest, FewPointsEndOnAndBroadsideGiveTheKnownDepth) {
+  for (const bool end_on : {true, false}) {
+    for (const double range : {10.0, 15.0, 20.0}) {
+      const double off = 0.3 * common::DegToRad(0.5);  // not on a beam's centre
+      const Eigen::Vector2d ray(std::cos(off), std::sin(off));
+      // Axis a across the ray when walking along it (shoulders across), along it when across.
+      const double yaw = end_on ? off + common::kPi / 2 : off;
+      const Body body{range * ray, 0.23, 0.14, yaw};
+      const View v = Look(body, 0.5, 0.0, 1);
+      SCOPED_TRACE(std::string(end_on ? "end-on" : "broadside") + " at " + std::to_string(range) +
+                   " m");
+      ASSERT_GE(v.points.size(), 2u);
+      ASSERT_LE(v.points.size(), 4u + (range < 12.0 ? 2u : 0u));
+      ShapePrior prior;
+      prior.exponent = 2.0;
+      prior.yaw_rad = yaw;
+      prior.yaw_sigma_rad = 0.35;
+      const ShapeFitResult fit = FitShape(v.points, v.silhouette, prior, ShapeFitOptions{});
+      ASSERT_TRUE(fit.ok);
+      const Eigen::Vector2d e = fit.centre_m - body.centre_m;
+      const double depth = end_on ? 0.14 : 0.23;
+      double nearest = range;
+      for (const auto& p : v.points) nearest = std::min(nearest, p.dot(ray));
+      // The centre lies the depth behind the nearest point, a few centimetres at most off.
+      EXPECT_NEAR(fit.centre_m.dot(ray) - nearest, depth, 0.03);
+      EXPECT_LT(std::abs(e.dot(ray)), 0.03);
+      EXPECT_LT(Nees(fit, body.centre_m), 9.21);
+    }
+  }
+}
+
+// A back seen end-on at 9 m of which the scan shows two beams, one silhouette end the body's and
+// the other where its neighbouring beams were taken for the background (the segment ends there,
+// the beam beyond returned from the body too): the fit's size says a sliver of a person, far below
+// the truth, with a sigma a fraction of that error; a track that learns it (ShapeOptions::
+// person_size_min_points 0) ends with a third of the shoulders.
+TEST(ShapeFitTest, TwoPointsOfATruncatedBackDoNotShowThePersonsSize) {
+  const double off = 0.3 * common::DegToRad(0.5);
+  const Eigen::Vector2d ray(std::cos(off), std::sin(off));
+  const Body body{9.0 * ray, 0.23, 0.14, off + common::kPi / 2};
+  const View whole = Look(body, 0.5, 0.0, 1);
+  ASSERT_GE(whole.points.size(), 5u);
+  View v;
+  v.points.assign(whole.points.begin(), whole.points.begin() + 2);
+  v.silhouette = whole.silhouette;
+  // The second point's beam plus half a step: where the segment ended.
+  v.silhouette.last_edge_rad =
+      std::atan2(v.points[1].y(), v.points[1].x()) +
+      0.5 * (whole.silhouette.last_edge_rad > whole.silhouette.first_edge_rad
+                 ? whole.silhouette.step_rad
+                 : -whole.silhouette.step_rad);
+  ShapePrior prior;
+  prior.exponent = 2.0;
+  prior.yaw_rad = body.yaw_rad;
+  prior.yaw_sigma_rad = 0.35;
+  const ShapeFitResult fit = FitShape(v.points, v.silhouette, prior, ShapeFitOptions{});
+  ASSERT_TRUE(fit.ok);
+  const double a_error = 0.23 - fit.size_m.x();
+  std::printf("truncated back: size %.3f x %.3f (sigma %.3f), centre off %.3f m along the ray\n",
+              fit.size_m.x(), fit.size_m.y(), std::sqrt(fit.size_cov_m2(0, 0)),
+              (fit.centre_m - body.centre_m).dot(ray));
+  EXPECT_GT(a_error, 0.05);
+  EXPECT_LT(std::sqrt(fit.size_cov_m2(0, 0)), 0.5 * a_error);
+  // Scan after scan of the same view (a track's size state learned as the pipeline does, a
+  // quarter of each fit's information, or kept): learned, the shoulders shrink to a third.
+  for (const bool learn : {true, false}) {
+    TrackShape shape;
+    shape.model = ShapeModel::kSuperellipse;
+    shape.size_m = prior.size_m;
+    shape.size_cov_m2 = prior.size_cov_m2;
+    ShapeFitResult last;
+    for (int k = 0; k < 30; ++k) {
+      ShapePrior p = prior;
+      p.size_m = shape.size_m;
+      p.size_cov_m2 = shape.size_cov_m2 + 0.003 * 0.003 * 0.04 * Eigen::Matrix2d::Identity();
+      last = FitShape(v.points, v.silhouette, p, ShapeFitOptions{});
+      ASSERT_TRUE(last.ok);
+      if (learn) internal::LearnSize(last.size_m, last.size_cov_m2, 0.25, {true, true}, shape);
+    }
+    const double radial = (last.centre_m - body.centre_m).dot(ray);
+    std::printf("%s: size %.3f x %.3f, centre %+.3f m along the ray, NEES %.1f\n",
+                learn ? "learned" : "kept", shape.size_m.x(), shape.size_m.y(), radial,
+                Nees(last, body.centre_m));
+    if (learn) {
+      EXPECT_LT(shape.size_m.x(), 0.12);  // half the person's shoulders
+    } else {
+      EXPECT_NEAR(shape.size_m.x(), 0.23, 1e-12);
+    }
+    EXPECT_LT(std::abs(radial), 0.05);
+  }
 }
 
 }  // namespace

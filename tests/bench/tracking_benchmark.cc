@@ -45,7 +45,7 @@
 //                       [--before-underdetermined-fit]
 //                       [--before-recent-veil]
 //                       [--before-single-precision-fit] [--before-edge-sides]
-//                       [--before-outside-start] [--before-across-sway]
+//                       [--before-outside-start] [--before-across-sway] [--before-receded-edges]
 //                       [--before-stance-weight] [--before-adopt] [--before-touching-legs]
 //                       [--before-box-occluders] [--before-box-rejoin] [--before-box-unseen-cov]
 //                       [--before-box-seen-extent] [--before-knee-box-faces] [--before-see-through]
@@ -110,6 +110,9 @@
 //   lies outside the silhouette, ShapeFitOptions::outside_guess_start = kGuess;
 //   --before-across-sway: "before" reports an upper-body centre with the sideways sway allowance
 //   across the ray as before, ShapeOptions::centre_bias_across_sigma_m = 0.006;
+//   --before-receded-edges: "before" takes a segment's end as a silhouette also where the beam
+//   beyond returned from the body's range over a background that receded there,
+//   ShapeOptions::receded_background_edge_m = 0;
 //   --before-legs-seen-through: "before" reports a knee-height coasting track also where the scan
 //   sees through every place its legs may stand, ShapeOptions::legs_seen_through = false;
 //   --before-legs-report-coasting: "before" reports a knee-height coasting track for all of
@@ -1348,6 +1351,10 @@ bool g_before_outside_start = false;
 // --before-across-sway: "before" reports the centre with the sideways sway allowance across the
 // ray as before (ShapeOptions::centre_bias_across_sigma_m = 0.006).
 bool g_before_across_sway = false;
+// --before-receded-edges: "before" takes a segment's end as a silhouette also where the beam
+// beyond returned from the body's range over a background that receded there
+// (ShapeOptions::receded_background_edge_m = 0).
+bool g_before_receded_edges = false;
 // --before-leg-edges: "before" takes a knee-height leg's silhouette edge half a step beyond its
 // last returning beam also where the beam beyond is a mixed echo
 // (ShapeOptions::leg_edge_in_mixed_beam = false).
@@ -1451,10 +1458,10 @@ std::vector<Variant> Variants(sim::Mount mount, double range_m) {
              g_before_outline_departure || g_before_partial_view || g_before_underdetermined_fit ||
              g_before_fusion_merge || g_before_report_sourceless || g_before_recent_veil ||
              g_before_single_precision_fit || g_before_edge_sides || g_before_outside_start ||
-             g_before_across_sway || g_before_stance_weight || g_before_adopt ||
-             g_before_touching_legs || g_before_box_occluders || g_before_box_rejoin ||
-             g_before_see_through || g_before_box_unseen_cov || g_before_box_seen_extent ||
-             g_before_knee_box_faces || g_before_lone_leg_standing ||
+             g_before_across_sway || g_before_receded_edges || g_before_stance_weight ||
+             g_before_adopt || g_before_touching_legs || g_before_box_occluders ||
+             g_before_box_rejoin || g_before_see_through || g_before_box_unseen_cov ||
+             g_before_box_seen_extent || g_before_knee_box_faces || g_before_lone_leg_standing ||
              g_before_single_beam_partner || g_before_edge_echo_birth || g_before_lone_beam_echo ||
              g_before_far_leg_birth || g_before_person_size || g_before_person_reach ||
              g_before_partial_extent || g_before_neighbour || g_before_range_noise) {
@@ -1488,6 +1495,7 @@ std::vector<Variant> Variants(sim::Mount mount, double range_m) {
     if (g_before_single_precision_fit) before.shape.fit.single_precision_points = false;
     if (g_before_edge_sides) before.shape.fit.edges_face_points = false;
     if (g_before_across_sway) before.shape.centre_bias_across_sigma_m = 0.006;
+    if (g_before_receded_edges) before.shape.receded_background_edge_m = 0.0;
     if (g_before_outside_start) {
       before.shape.fit.outside_guess_start = tracking::OutsideGuessStart::kGuess;
     }
@@ -3341,8 +3349,8 @@ std::string KneeHeightBefore() {
         g_before_outline_departure || g_before_partial_view || g_before_underdetermined_fit ||
         g_before_fusion_merge || g_before_report_sourceless || g_before_recent_veil ||
         g_before_single_precision_fit || g_before_edge_sides || g_before_outside_start ||
-        g_before_across_sway || g_before_stance_weight || g_before_adopt ||
-        g_before_touching_legs || g_before_box_occluders || g_before_box_rejoin ||
+        g_before_across_sway || g_before_receded_edges || g_before_stance_weight ||
+        g_before_adopt || g_before_touching_legs || g_before_box_occluders || g_before_box_rejoin ||
         g_before_see_through || g_before_box_unseen_cov || g_before_box_seen_extent ||
         g_before_knee_box_faces || g_before_single_beam_partner || g_before_edge_echo_birth ||
         g_before_lone_beam_echo || g_before_far_leg_birth || g_before_person_size ||
@@ -3486,6 +3494,11 @@ std::string KneeHeightBefore() {
         "reporting the centre with the sideways sway allowance across the ray as before "
         "(`shape.centre_bias_across_sigma_m` 0.006)");
   }
+  if (g_before_receded_edges) {
+    without.push_back(
+        "taking a segment's end as a silhouette also where the beam beyond returned from the "
+        "body's range over a background that receded there (`shape.receded_background_edge_m` 0)");
+  }
   if (g_before_outside_start) {
     without.push_back(
         "starting a fit at the track's prediction also where it lies outside the silhouette "
@@ -3600,7 +3613,7 @@ std::string KneeHeightBefore() {
   }
   const char* const same =
       g_before_single_precision_fit || g_before_edge_sides || g_before_outside_start ||
-              g_before_across_sway
+              g_before_across_sway || g_before_receded_edges
           ? ", on the same scans in the same run"
       : g_before_outline_departure || g_before_isotropic_bias || g_before_partial_view ||
               g_before_underdetermined_fit || g_before_partial_extent || g_before_neighbour
@@ -3722,6 +3735,8 @@ int main(int argc, char** argv) {
       g_before_edge_sides = true;
     } else if (a == "--before-across-sway") {
       g_before_across_sway = true;
+    } else if (a == "--before-receded-edges") {
+      g_before_receded_edges = true;
     } else if (a == "--before-outside-start") {
       g_before_outside_start = true;
     } else if (a == "--before-stance-weight") {
@@ -3764,7 +3779,7 @@ int main(int argc, char** argv) {
                    "[--before-underdetermined-fit] "
                    "[--before-recent-veil] "
                    "[--before-single-precision-fit] [--before-edge-sides] "
-                   "[--before-outside-start] [--before-across-sway] "
+                   "[--before-outside-start] [--before-across-sway] [--before-receded-edges] "
                    "[--before-stance-weight] [--before-adopt] [--before-touching-legs] "
                    "[--before-box-occluders] [--before-box-rejoin] [--before-box-unseen-cov] "
                    "[--before-box-seen-extent] [--before-knee-box-faces] "
