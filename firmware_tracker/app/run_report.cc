@@ -41,7 +41,8 @@ std::string PipelineSummary(const tracking::PipelineCounters& c) {
       "single_beam_partners={} edge_echo_births={} person_sizes_across_ray={} "
       "partial_view_widened={} underdetermined_fit_widened={} box_pieces_rejoined={} "
       "legs_coasting_uncertain={} coasting_uncertain={} box_unseen_widened={} "
-      "neighbour_widened={} lone_beam_edge_echoes={} far_leg_births={} see_through_splits={}",
+      "neighbour_widened={} lone_beam_edge_echoes={} far_leg_births={} see_through_splits={} "
+      "torso_edge_echoes={}",
       c.rejected_scans, c.learning_scans, c.segments, c.dropped_segments, c.ellipse_measurements,
       c.com_measurements, c.shape_fits, c.failed_shape_fits, c.leg_pairs, c.single_legs,
       c.legs_behind, c.veiled_segments, c.shadowed_legs, c.absorbed_objects, c.seen_through,
@@ -52,7 +53,8 @@ std::string PipelineSummary(const tracking::PipelineCounters& c) {
       c.box_sizes_unseen, c.legs_along_from_standing, c.single_beam_partners, c.edge_echo_births,
       c.person_sizes_across_ray, c.partial_view_widened, c.underdetermined_fit_widened,
       c.box_pieces_rejoined, c.legs_coasting_uncertain, c.coasting_uncertain, c.box_unseen_widened,
-      c.neighbour_widened, c.lone_beam_edge_echoes, c.far_leg_births, c.see_through_splits);
+      c.neighbour_widened, c.lone_beam_edge_echoes, c.far_leg_births, c.see_through_splits,
+      c.torso_edge_echoes);
 }
 
 std::string MultiTrackerSummary(const tracking::MultiTrackerCounters& c) {

@@ -679,6 +679,9 @@ std::optional<std::string> Validate(const ShapeOptions& o) {
   if (!(std::isfinite(o.see_through_min_width_m) && o.see_through_min_width_m >= 0.0)) {
     return "see_through_min_width_m must be >= 0";
   }
+  if (!(o.torso_edge_echo_min_far_share >= 0.0 && o.torso_edge_echo_min_far_share < 1.0)) {
+    return "torso_edge_echo_min_far_share must be in [0, 1)";
+  }
   if (!Positive(o.box_size_sigma_m)) return "box_size_sigma_m must be > 0";
   if (!Positive(o.box_unseen_sigma_m)) return "box_unseen_sigma_m must be > 0";
   if (!Positive(o.box_prior_min_half_m) || !(o.box_prior_max_half_m > o.box_prior_min_half_m) ||
@@ -1781,10 +1784,16 @@ void TrackingPipeline::BuildObservations(const ScanView& scan) {
           }
           ++counters_.see_through_splits;
         }
+        const bool echo = pieces == 1 && options_.shape.torso_edge_echo && TorsoEdgeEcho(scan, s);
         Observation* ob = observations_.emplace_slot();
         ob->parts[0] = MakePart(scan, s, starts[p], end - starts[p]);
         ob->part_count = 1;
+        const std::size_t before = measurements_.size();
         MeasureObservation(scan, *ob);
+        if (echo && measurements_.size() > before) {
+          ++counters_.torso_edge_echoes;
+          measurements_[before].evidence_only = true;
+        }
       }
     }
     return;
@@ -2100,6 +2109,48 @@ bool TrackingPipeline::LoneBeamBesideNearer(const ScanView& scan, std::size_t b)
     }
   }
   return false;
+}
+
+// ShapeOptions::torso_edge_echo: at most a footprint's beams (as BesideNearerEdge), with a return
+// within as many beams of either end nearer than its nearest point by more than the segmentation's
+// jump at that range, and a learned background behind it such that the nearer surface's share of
+// a mix at its range is at most 1 - torso_edge_echo_min_far_share.
+bool TrackingPipeline::TorsoEdgeEcho(const ScanView& scan, const Segment& s) const {
+  const SegmentationOptions& g = options_.segmentation;
+  const ShapeOptions& o = options_.shape;
+  const std::size_t footprint_beams = FootprintBeams(o.beam_divergence_rad, scan.angle_step_rad);
+  if (s.point_count == 0 || s.point_count > footprint_beams) return false;
+  double range = std::numeric_limits<double>::infinity();
+  for (const Eigen::Vector2d& p : segments_.Points(s)) range = std::min(range, p.norm());
+  // Only where a body seen side-on (2 person_minor_m) spans no more beams than that: nearer, a
+  // person returns more beams than an edge's mix, and a piece this small is part of one.
+  if (o.torso_edge_echo_far_only &&
+      range * std::abs(scan.angle_step_rad) * static_cast<double>(footprint_beams) <
+          2.0 * o.person_minor_m) {
+    return false;
+  }
+  const double limit_m = range - (g.jump_base_m + g.jump_per_m * range);
+  const std::size_t n = scan.range_m.size();
+  double nearer_m = std::numeric_limits<double>::infinity();
+  for (std::size_t k = 1; k <= footprint_beams; ++k) {
+    for (const std::size_t j : {s.begin_beam >= k ? s.begin_beam - k : n, s.end_beam - 1 + k}) {
+      if (j >= n) continue;
+      const auto rj = static_cast<double>(scan.range_m[j]);
+      if (std::isfinite(rj) && rj > 0.0 && rj < limit_m) nearer_m = std::min(nearer_m, rj);
+    }
+  }
+  if (!std::isfinite(nearer_m)) return false;
+  // A mix of the nearer surface (share w) and the background behind (range f, 0 = free: nothing
+  // to mix with) lies at w nearer + (1 - w) f: behind the nearer one by at least the far surface's
+  // least share of (f - nearer). A body just behind the nearer one (a pair side by side seen
+  // almost in line) lies nearer than that.
+  const auto background = background_.background_range_m();
+  double behind_m = 0.0;
+  for (std::size_t b = s.begin_beam; b < s.end_beam && b < background.size(); ++b) {
+    behind_m = std::max(behind_m, static_cast<double>(background[b]));
+  }
+  if (!(behind_m > range)) return false;
+  return range - nearer_m >= o.torso_edge_echo_min_far_share * (behind_m - nearer_m);
 }
 
 // A segment's leg (leg_parts_ before single_beam_first_) whose centre lies within

@@ -453,6 +453,9 @@ TEST(TrackerOptionsTest, DefaultsValidAndErrorsNameTheSectionAndField) {
   o.shape.legs_report_coasting_s = -0.1;
   EXPECT_EQ(Validate(o)->rfind("shape.legs_report_coasting_s", 0), 0u) << *Validate(o);
   o = {};
+  o.shape.torso_edge_echo_min_far_share = 1.0;
+  EXPECT_EQ(Validate(o)->rfind("shape.torso_edge_echo_min_far_share", 0), 0u) << *Validate(o);
+  o.shape.torso_edge_echo_min_far_share = 0.2;
   o.shape.deep_mixed_pixel_behind_ratio = -1.0;
   EXPECT_EQ(Validate(o)->rfind("shape.deep_mixed_pixel_behind_ratio", 0), 0u) << *Validate(o);
   o.shape.deep_mixed_pixel_behind_ratio = std::nan("");
@@ -3162,6 +3165,94 @@ TEST(PipelineScenarioTest, MixedPixelsBehindLegsAtKneeHeightGiveNoFalseTracks) {
   EXPECT_LT(recent.FalseReports(), 40);
   EXPECT_GT(recent.counters.recently_veiled, 50u);
   EXPECT_GE(recent.matched, before.matched - recent.person_frames / 100);
+}
+
+// ShapeOptions::torso_edge_echo: a person walking at upper-body height across a hall 20 m from
+// the sensor (0.5 deg, 15 mrad: two beams' footprints reach past an edge), its back wall at 24 m.
+// The two beams beside the body's far edge report a mix of the body and the wall, 1.5 m behind
+// the body: a two-beam piece that walks with the person. Taken for a body it starts a track
+// where nobody is; as evidence only it starts none, and the person is tracked as well. A piece
+// 1.2 m behind the body with the wall 10 m behind (a second person almost in line: a mix would
+// lie at least 2 m behind) starts its track as before.
+struct EdgeEchoes {
+  int far_reports = 0;  // reports farther than 0.5 m from the person
+  int person_frames = 0, matched = 0;
+  std::uint64_t echoes = 0;
+};
+
+EdgeEchoes WalkPastEdgeEchoes(bool echo_rule, double behind_m, double wall_m = 24.0) {
+  const std::vector<Wall> hall = {{{wall_m, -9.0}, {wall_m, 9.0}},
+                                  {{wall_m, 9.0}, {-1.0, 9.0}},
+                                  {{-1.0, 9.0}, {-1.0, -9.0}},
+                                  {{-1.0, -9.0}, {wall_m, -9.0}}};
+  const Walker walker = Walker::Path(kLearnedS, {{20.0, -4.0}, {20.0, 4.0}}, 1.0);
+  TrackerOptions options;
+  options.shape.torso_edge_echo = echo_rule;
+  TrackingPipeline pipeline(options);
+  ScannerConfig config;
+  config.max_range_m = 40.0;
+  SyntheticScanner scanner(config);
+  EdgeEchoes out;
+  std::vector<Body> bodies;
+  std::vector<float> ranges;
+  const auto scans = static_cast<std::int64_t>((walker.end_s() + 0.5) * scanner.config().rate_hz);
+  for (std::int64_t k = 0; k < scans; ++k) {
+    const double t_s = scanner.ScanTimeS(k);
+    ScanView scan = scanner.RenderTimed(k, hall, [&](double bt_s) -> const std::vector<Body>& {
+      bodies.clear();
+      if (const auto p = walker.At(bt_s)) bodies.push_back({*p, 0.25, 0.15, walker.YawAt(bt_s)});
+      return bodies;
+    });
+    ranges.assign(scan.range_m.begin(), scan.range_m.end());
+    // The body's beams (nearer than the wall), the two after its last one: the mix.
+    std::size_t last = ranges.size();
+    for (std::size_t i = 0; i < ranges.size(); ++i) {
+      const double angle = scan.first_angle_rad + static_cast<double>(i) * scan.angle_step_rad;
+      if (std::abs(angle) < 0.4 && ranges[i] > 0.0f && ranges[i] < 22.0f) last = i;
+    }
+    if (last + 2 < ranges.size()) {
+      for (std::size_t j = last + 1; j <= last + 2; ++j) {
+        ranges[j] = ranges[last] + static_cast<float>(behind_m);
+      }
+    }
+    scan.range_m = ranges;
+    const ScanTracks& tracks = pipeline.Process(scan, static_cast<std::uint32_t>(k));
+    const auto truth = walker.At(t_s);
+    bool held = false;
+    for (const TrackReport& r : tracks.tracks) {
+      const bool near = truth && (Position(r) - *truth).norm() <= 0.5;
+      out.far_reports += near ? 0 : 1;
+      held = held || near;
+    }
+    if (truth && t_s > walker.start_s() + 1.0) {
+      ++out.person_frames;
+      out.matched += held ? 1 : 0;
+    }
+  }
+  out.echoes = pipeline.counters().torso_edge_echoes;
+  return out;
+}
+
+TEST(PipelineScenarioTest, EdgeEchoesBehindAFarPersonAtUpperBodyHeightStartNoTrack) {
+  const EdgeEchoes before = WalkPastEdgeEchoes(false, 1.5), now = WalkPastEdgeEchoes(true, 1.5);
+  const EdgeEchoes in_line = WalkPastEdgeEchoes(true, 1.2, 30.0);
+  const auto describe = [](const EdgeEchoes& e) {
+    return "far reports " + std::to_string(e.far_reports) + ", matched " +
+           std::to_string(e.matched) + " of " + std::to_string(e.person_frames) + ", echoes " +
+           std::to_string(e.echoes);
+  };
+  SCOPED_TRACE("before: " + describe(before) + "; now: " + describe(now) +
+               "; in line: " + describe(in_line));
+  EXPECT_EQ(before.echoes, 0u);
+  EXPECT_GT(before.far_reports, before.person_frames / 2);  // a second track behind the person
+  EXPECT_GT(now.echoes, 0u);
+  EXPECT_EQ(now.far_reports, 0);
+  ASSERT_GT(now.person_frames, 100);
+  EXPECT_GE(now.matched, before.matched - now.person_frames / 100);
+  EXPECT_GT(now.matched, now.person_frames * 9 / 10);
+  // Nearer than a mix with the wall: its track as before.
+  EXPECT_LE(in_line.echoes, static_cast<std::uint64_t>(in_line.person_frames / 20));
+  EXPECT_GT(in_line.far_reports, in_line.person_frames / 2);
 }
 
 // Knee height, 50 Hz, 0.25 deg: a person at 15 m returned by a single beam (their legs fill no
