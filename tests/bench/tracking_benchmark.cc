@@ -1466,11 +1466,12 @@ std::vector<Variant> Variants(sim::Mount mount, double range_m) {
              g_before_single_precision_fit || g_before_edge_sides || g_before_outside_start ||
              g_before_across_sway || g_before_receded_edges || g_before_stance_weight ||
              g_before_adopt || g_before_touching_legs || g_before_box_occluders ||
-             g_before_box_rejoin || g_before_see_through || g_before_torso_edge_echo || g_before_box_unseen_cov ||
-             g_before_box_seen_extent || g_before_knee_box_faces || g_before_lone_leg_standing ||
-             g_before_single_beam_partner || g_before_edge_echo_birth || g_before_lone_beam_echo ||
-             g_before_far_leg_birth || g_before_person_size || g_before_person_reach ||
-             g_before_partial_extent || g_before_neighbour || g_before_range_noise) {
+             g_before_box_rejoin || g_before_see_through || g_before_torso_edge_echo ||
+             g_before_box_unseen_cov || g_before_box_seen_extent || g_before_knee_box_faces ||
+             g_before_lone_leg_standing || g_before_single_beam_partner ||
+             g_before_edge_echo_birth || g_before_lone_beam_echo || g_before_far_leg_birth ||
+             g_before_person_size || g_before_person_reach || g_before_partial_extent ||
+             g_before_neighbour || g_before_range_noise) {
     tracking::TrackerOptions before = fresh;
     if (g_before_one_leg) before.shape.hidden_leg_behind = false;
     if (g_before_mixed_pixels) before.shape.drop_mixed_pixel_legs = false;
@@ -3358,11 +3359,11 @@ std::string KneeHeightBefore() {
         g_before_single_precision_fit || g_before_edge_sides || g_before_outside_start ||
         g_before_across_sway || g_before_receded_edges || g_before_stance_weight ||
         g_before_adopt || g_before_touching_legs || g_before_box_occluders || g_before_box_rejoin ||
-        g_before_see_through || g_before_torso_edge_echo || g_before_box_unseen_cov || g_before_box_seen_extent ||
-        g_before_knee_box_faces || g_before_single_beam_partner || g_before_edge_echo_birth ||
-        g_before_lone_beam_echo || g_before_far_leg_birth || g_before_person_size ||
-        g_before_person_reach || g_before_partial_extent || g_before_neighbour ||
-        g_before_range_noise) ||
+        g_before_see_through || g_before_torso_edge_echo || g_before_box_unseen_cov ||
+        g_before_box_seen_extent || g_before_knee_box_faces || g_before_single_beam_partner ||
+        g_before_edge_echo_birth || g_before_lone_beam_echo || g_before_far_leg_birth ||
+        g_before_person_size || g_before_person_reach || g_before_partial_extent ||
+        g_before_neighbour || g_before_range_noise) ||
       g_before_mixed_pixels || g_before_far || g_before_evidence_coasting ||
       g_before_report_rules) {
     return "";
