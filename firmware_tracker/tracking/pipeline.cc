@@ -1856,6 +1856,29 @@ void TrackingPipeline::BuildObservations(const ScanView& scan) {
   PairLegs(scan, tracks);
 }
 
+namespace {
+
+// A confirmed box track's position and size variance for rejoining pieces: the size no more
+// certain than when the track became a box (a view cut into pieces shows part of the outline only,
+// and what the track learned from such views is not its size).
+double BoxStateVar(const ShapeOptions& o, const TrackPrediction& pr) {
+  const Eigen::SelfAdjointEigenSolver<Eigen::Matrix2d> position(pr.covariance_m2,
+                                                                Eigen::EigenvaluesOnly);
+  return std::max({pr.size_cov_m2(0, 0), pr.size_cov_m2(1, 1),
+                   o.box_size_sigma_m * o.box_size_sigma_m}) +
+         position.eigenvalues().maxCoeff();
+}
+
+// How far outside that box's predicted outline a piece at range_m may lie and still be the box's:
+// box_rejoin_sigmas of the range noise, the model's departure and the state's spread together.
+double BoxRejoinMargin(const ShapeOptions& o, double state_var, double range_m) {
+  const double noise = o.fit.point_sigma_m + o.fit.point_sigma_per_m * range_m;
+  return o.box_rejoin_sigmas * std::sqrt(noise * noise + o.fit.model_sigma_m * o.fit.model_sigma_m +
+                                         std::max(0.0, state_var));
+}
+
+}  // namespace
+
 // ShapeOptions::split_see_through: a piece of segment s lies on a confirmed box track's predicted
 // rectangle, grown as box_rejoin_pieces grows it (a cart and its pusher: the box's fit leaves the
 // pusher out, box_drop_occluders).
@@ -1865,18 +1888,10 @@ bool TrackingPipeline::OnConfirmedBox(const Segment& s, common::UtcNs stamp_ns,
   if (!tracks) tracks = tracker_.Predict(stamp_ns, predictions_);
   const auto pts = segments_.Points(s);
   const double range = Range(pts.front());
-  const double noise = o.fit.point_sigma_m + o.fit.point_sigma_per_m * range;
   for (std::size_t t = 0; t < *tracks; ++t) {
     const TrackPrediction& pr = predictions_[t];
     if (!pr.confirmed || pr.model != ShapeModel::kBox) continue;
-    const Eigen::SelfAdjointEigenSolver<Eigen::Matrix2d> position(pr.covariance_m2,
-                                                                  Eigen::EigenvaluesOnly);
-    const double state_var = std::max({pr.size_cov_m2(0, 0), pr.size_cov_m2(1, 1),
-                                       o.box_size_sigma_m * o.box_size_sigma_m}) +
-                             position.eigenvalues().maxCoeff();
-    const double margin =
-        o.box_rejoin_sigmas * std::sqrt(noise * noise + o.fit.model_sigma_m * o.fit.model_sigma_m +
-                                        std::max(0.0, state_var));
+    const double margin = BoxRejoinMargin(o, BoxStateVar(o, pr), range);
     for (const Eigen::Vector2d& p : pts) {
       if (internal::InsideGrownBox(pr.position_m, pr.size_m, pr.yaw_rad, margin,
                                    std::span<const Eigen::Vector2d>(&p, 1))) {
@@ -1915,21 +1930,11 @@ std::size_t TrackingPipeline::BoxPiecesEnd(std::size_t first, common::UtcNs stam
   for (std::size_t t = 0; t < *tracks; ++t) {
     const TrackPrediction& pr = predictions_[t];
     if (!pr.confirmed || pr.model != ShapeModel::kBox) continue;
-    const Eigen::SelfAdjointEigenSolver<Eigen::Matrix2d> position(pr.covariance_m2,
-                                                                  Eigen::EigenvaluesOnly);
-    // The size no more certain than when the track became a box: a view cut into pieces shows
-    // part of the outline only, and what the track learned from such views is not its size.
-    const double state_var = std::max({pr.size_cov_m2(0, 0), pr.size_cov_m2(1, 1),
-                                       o.box_size_sigma_m * o.box_size_sigma_m}) +
-                             position.eigenvalues().maxCoeff();
+    const double state_var = BoxStateVar(o, pr);
     std::size_t end = first;
     for (std::size_t k = first; k <= chain; ++k) {
       const Segment& s = segments[k];
-      const double range = Range(segments_.points_m[s.first_point]);
-      const double noise = o.fit.point_sigma_m + o.fit.point_sigma_per_m * range;
-      const double margin = o.box_rejoin_sigmas *
-                            std::sqrt(noise * noise + o.fit.model_sigma_m * o.fit.model_sigma_m +
-                                      std::max(0.0, state_var));
+      const double margin = BoxRejoinMargin(o, state_var, Range(segments_.points_m[s.first_point]));
       if (!internal::InsideGrownBox(pr.position_m, pr.size_m, pr.yaw_rad, margin,
                                     segments_.Points(s))) {
         break;

@@ -13,9 +13,9 @@ extern char** environ;
 
 namespace lrfnet::bench {
 
-// Runs args[0] (a path) with args, stdout and stderr appended to `log`; its exit code, -1 when it
-// could not start, -2 when a signal ended it.
-inline int RunProcess(const std::vector<std::string>& args, const std::string& log) {
+// Starts args[0] (a path) with args, stdout and stderr appended to `log`: posix_spawn's result (0:
+// started, *pid set; else the error, e.g. ETXTBSY for a binary being relinked).
+inline int SpawnLogged(const std::vector<std::string>& args, const std::string& log, pid_t* pid) {
   std::vector<std::string> copy = args;
   std::vector<char*> argv;
   for (std::string& s : copy) argv.push_back(s.data());
@@ -24,10 +24,16 @@ inline int RunProcess(const std::vector<std::string>& args, const std::string& l
   posix_spawn_file_actions_init(&actions);
   posix_spawn_file_actions_addopen(&actions, 1, log.c_str(), O_WRONLY | O_CREAT | O_APPEND, 0644);
   posix_spawn_file_actions_addopen(&actions, 2, log.c_str(), O_WRONLY | O_CREAT | O_APPEND, 0644);
-  pid_t pid = 0;
-  const int rc = posix_spawn(&pid, copy[0].c_str(), &actions, nullptr, argv.data(), environ);
+  const int rc = posix_spawn(pid, copy[0].c_str(), &actions, nullptr, argv.data(), environ);
   posix_spawn_file_actions_destroy(&actions);
-  if (rc != 0) return -1;
+  return rc;
+}
+
+// Runs args[0] (a path) with args, stdout and stderr appended to `log`; its exit code, -1 when it
+// could not start, -2 when a signal ended it.
+inline int RunProcess(const std::vector<std::string>& args, const std::string& log) {
+  pid_t pid = 0;
+  if (SpawnLogged(args, log, &pid) != 0) return -1;
   int status = 0;
   waitpid(pid, &status, 0);
   return WIFEXITED(status) ? WEXITSTATUS(status) : -2;

@@ -1,14 +1,12 @@
 #include "tests/bench/calibration_chain.h"
 
-#include <fcntl.h>
-#include <spawn.h>
 #include <sys/wait.h>
 
 #include <cerrno>
 #include <cstring>
 #include <filesystem>
 
-extern char** environ;
+#include "tests/bench/bench_util.h"
 
 namespace lrfnet::bench {
 
@@ -25,17 +23,8 @@ std::string Describe(const ProcessExit& e) {
 
 ProcessExit RunChild(const std::vector<std::string>& args, const std::string& log) {
   ProcessExit out;
-  std::vector<std::string> copy = args;
-  std::vector<char*> argv;
-  for (std::string& s : copy) argv.push_back(s.data());
-  argv.push_back(nullptr);
-  posix_spawn_file_actions_t actions;
-  posix_spawn_file_actions_init(&actions);
-  posix_spawn_file_actions_addopen(&actions, 1, log.c_str(), O_WRONLY | O_CREAT | O_APPEND, 0644);
-  posix_spawn_file_actions_addopen(&actions, 2, log.c_str(), O_WRONLY | O_CREAT | O_APPEND, 0644);
   pid_t pid = 0;
-  const int rc = posix_spawn(&pid, copy[0].c_str(), &actions, nullptr, argv.data(), environ);
-  posix_spawn_file_actions_destroy(&actions);
+  const int rc = SpawnLogged(args, log, &pid);
   if (rc != 0) {
     out.spawn_errno = rc;
     return out;
