@@ -1397,22 +1397,30 @@ bool GuessOutsideSilhouette(std::span<const Eigen::Vector2d> points, const Silho
   return !inside;
 }
 
-}  // namespace
-
-ShapeFitResult FitShape(std::span<const Eigen::Vector2d> points, const Silhouette& silhouette,
-                        const ShapePrior& prior, const ShapeFitOptions& options) {
+// The fit from the track's guess, or where that lies outside the silhouette from behind the points
+// (ShapeFitOptions::outside_guess_start); every entry point, the reference solvers' too, the same.
+template <class Solver, bool... kArgs>
+ShapeFitResult FitFromStart(std::span<const Eigen::Vector2d> points, const Silhouette& silhouette,
+                            const ShapePrior& prior, const ShapeFitOptions& options) {
   if (!GuessOutsideSilhouette(points, silhouette, prior, options)) [[likely]] {
-    return Fit<NormalSolver>(points, silhouette, prior, options);
+    return Fit<Solver, kArgs...>(points, silhouette, prior, options);
   }
   ShapePrior without_guess = prior;
   without_guess.centre_guess_m.reset();
   const ShapeFitResult from_silhouette =
-      Fit<NormalSolver>(points, silhouette, without_guess, options);
+      Fit<Solver, kArgs...>(points, silhouette, without_guess, options);
   if (options.outside_guess_start == OutsideGuessStart::kSilhouette) return from_silhouette;
-  const ShapeFitResult from_guess = Fit<NormalSolver>(points, silhouette, prior, options);
+  const ShapeFitResult from_guess = Fit<Solver, kArgs...>(points, silhouette, prior, options);
   return from_silhouette.ok && (!from_guess.ok || from_silhouette.cost < from_guess.cost)
              ? from_silhouette
              : from_guess;
+}
+
+}  // namespace
+
+ShapeFitResult FitShape(std::span<const Eigen::Vector2d> points, const Silhouette& silhouette,
+                        const ShapePrior& prior, const ShapeFitOptions& options) {
+  return FitFromStart<NormalSolver>(points, silhouette, prior, options);
 }
 
 namespace internal {
@@ -1420,13 +1428,13 @@ namespace internal {
 ShapeFitResult FitShapeWithPivotedLdlt(std::span<const Eigen::Vector2d> points,
                                        const Silhouette& silhouette, const ShapePrior& prior,
                                        const ShapeFitOptions& options) {
-  return Fit<PivotedLdltSolver, true>(points, silhouette, prior, options);
+  return FitFromStart<PivotedLdltSolver, true>(points, silhouette, prior, options);
 }
 
 ShapeFitResult FitShapeUnpaired(std::span<const Eigen::Vector2d> points,
                                 const Silhouette& silhouette, const ShapePrior& prior,
                                 const ShapeFitOptions& options) {
-  return Fit<NormalSolver, false, false>(points, silhouette, prior, options);
+  return FitFromStart<NormalSolver, false, false>(points, silhouette, prior, options);
 }
 
 bool GuessWithinReach(ShapeModel model, const Eigen::Vector2d& size_m, double yaw_rad,
