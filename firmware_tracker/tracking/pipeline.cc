@@ -1775,6 +1775,8 @@ void TrackingPipeline::BuildObservations(const ScanView& scan) {
                                  std::span<std::size_t>(starts).subspan(1));
       }
       if (pieces > 1 && OnConfirmedBox(s, scan.stamp_ns, tracks)) pieces = 1;
+      // ShapeOptions::torso_edge_echo (an uncut segment only).
+      const bool echo = pieces == 1 && options_.shape.torso_edge_echo && TorsoEdgeEcho(scan, s);
       for (std::size_t p = 0; p < pieces; ++p) {
         const std::size_t end = p + 1 < pieces ? starts[p + 1] : s.point_count;
         if (p > 0) {
@@ -1784,7 +1786,6 @@ void TrackingPipeline::BuildObservations(const ScanView& scan) {
           }
           ++counters_.see_through_splits;
         }
-        const bool echo = pieces == 1 && options_.shape.torso_edge_echo && TorsoEdgeEcho(scan, s);
         Observation* ob = observations_.emplace_slot();
         ob->parts[0] = MakePart(scan, s, starts[p], end - starts[p]);
         ob->part_count = 1;
@@ -2116,12 +2117,34 @@ bool TrackingPipeline::LoneBeamBesideNearer(const ScanView& scan, std::size_t b)
   return false;
 }
 
+// The nearest range among the beams within footprint_beams of [begin_beam, end_beam) on either side
+// that return nearer than nearest_m by more than the segmentation's jump at that range; infinity:
+// none (BesideNearerEdge, TorsoEdgeEcho).
+double TrackingPipeline::NearerReturnBeside(const ScanView& scan, std::size_t begin_beam,
+                                            std::size_t end_beam, double nearest_m,
+                                            std::size_t footprint_beams) const {
+  const SegmentationOptions& g = options_.segmentation;
+  const double limit_m = nearest_m - (g.jump_base_m + g.jump_per_m * nearest_m);
+  const std::size_t n = scan.range_m.size();
+  double edge_m = std::numeric_limits<double>::infinity();
+  const auto nearer = [&](std::size_t b) {
+    const float r = scan.range_m[b];
+    if (std::isfinite(r) && r > 0.0f && static_cast<double>(r) < limit_m) {
+      edge_m = std::min(edge_m, static_cast<double>(r));
+    }
+  };
+  for (std::size_t k = 1; k <= footprint_beams; ++k) {
+    if (begin_beam >= k) nearer(begin_beam - k);
+    if (end_beam + k - 1 < n) nearer(end_beam + k - 1);
+  }
+  return edge_m;
+}
+
 // ShapeOptions::torso_edge_echo: at most a footprint's beams (as BesideNearerEdge), with a return
 // within as many beams of either end nearer than its nearest point by more than the segmentation's
 // jump at that range, and a learned background behind it such that the nearer surface's share of
 // a mix at its range is at most 1 - torso_edge_echo_min_far_share.
 bool TrackingPipeline::TorsoEdgeEcho(const ScanView& scan, const Segment& s) const {
-  const SegmentationOptions& g = options_.segmentation;
   const ShapeOptions& o = options_.shape;
   const std::size_t footprint_beams = FootprintBeams(o.beam_divergence_rad, scan.angle_step_rad);
   if (s.point_count == 0 || s.point_count > footprint_beams) return false;
@@ -2134,16 +2157,8 @@ bool TrackingPipeline::TorsoEdgeEcho(const ScanView& scan, const Segment& s) con
           2.0 * o.person_minor_m) {
     return false;
   }
-  const double limit_m = range - (g.jump_base_m + g.jump_per_m * range);
-  const std::size_t n = scan.range_m.size();
-  double nearer_m = std::numeric_limits<double>::infinity();
-  for (std::size_t k = 1; k <= footprint_beams; ++k) {
-    for (const std::size_t j : {s.begin_beam >= k ? s.begin_beam - k : n, s.end_beam - 1 + k}) {
-      if (j >= n) continue;
-      const auto rj = static_cast<double>(scan.range_m[j]);
-      if (std::isfinite(rj) && rj > 0.0 && rj < limit_m) nearer_m = std::min(nearer_m, rj);
-    }
-  }
+  const double nearer_m =
+      NearerReturnBeside(scan, s.begin_beam, s.end_beam, range, footprint_beams);
   if (!std::isfinite(nearer_m)) return false;
   // A mix of the nearer surface (share w) and the background behind (range f, 0 = free: nothing
   // to mix with) lies at w nearer + (1 - w) f: behind the nearer one by at least the far surface's
@@ -2539,7 +2554,6 @@ void TrackingPipeline::PairLegs(const ScanView& scan, std::size_t tracks) {
 // part's nearest point by more than the segmentation's jump (a mixed range lies between the edge's
 // and the background's).
 bool TrackingPipeline::BesideNearerEdge(const ScanView& scan, const ObservationPart& part) const {
-  const SegmentationOptions& g = options_.segmentation;
   const ShapeOptions& o = options_.shape;
   const std::size_t footprint_beams = FootprintBeams(o.beam_divergence_rad, scan.angle_step_rad);
   if (part.end_beam - part.begin_beam > footprint_beams) return false;
@@ -2547,19 +2561,8 @@ bool TrackingPipeline::BesideNearerEdge(const ScanView& scan, const ObservationP
   for (std::size_t k = 0; k < part.point_count; ++k) {
     nearest_m = std::min(nearest_m, segments_.points_m[part.first_point + k].norm());
   }
-  const double limit_m = nearest_m - (g.jump_base_m + g.jump_per_m * nearest_m);
-  const std::size_t n = scan.range_m.size();
-  double edge_m = std::numeric_limits<double>::infinity();
-  const auto nearer = [&](std::size_t b) {
-    const float r = scan.range_m[b];
-    if (std::isfinite(r) && r > 0.0f && static_cast<double>(r) < limit_m) {
-      edge_m = std::min(edge_m, static_cast<double>(r));
-    }
-  };
-  for (std::size_t k = 1; k <= footprint_beams; ++k) {
-    if (part.begin_beam >= k) nearer(part.begin_beam - k);
-    if (part.end_beam + k - 1 < n) nearer(part.end_beam + k - 1);
-  }
+  const double edge_m =
+      NearerReturnBeside(scan, part.begin_beam, part.end_beam, nearest_m, footprint_beams);
   if (!std::isfinite(edge_m)) return false;
   // A mixed range m = w n + (1 - w) f (each weight at least s) has the far surface f no more than
   // deep_mixed_pixel_behind_ratio (1 - s) / s times m - n behind it: the learned background of

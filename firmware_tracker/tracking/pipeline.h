@@ -1006,6 +1006,8 @@ class TrackingPipeline {
   bool LoneBeamBesideNearer(const ScanView& scan, std::size_t b) const;
   // ShapeOptions::torso_edge_echo: segment s (of segments_) is a nearer edge's mixed echo.
   bool TorsoEdgeEcho(const ScanView& scan, const Segment& s) const;
+  double NearerReturnBeside(const ScanView& scan, std::size_t begin_beam, std::size_t end_beam,
+                            double nearest_m, std::size_t footprint_beams) const;
   std::size_t SingleBeamPartner(const ScanView& scan, const Eigen::Vector2d& c,
                                 std::size_t a) const;
   void AddObservation(const ScanView& scan, const Observation& observation);
