@@ -205,6 +205,10 @@ void VisitShape(tracking::ShapeOptions& o, ConfigVisitor& v) {
           "mount legs: two legs this close (centre to centre) can be one person's.");
   v.Field("person_min_leg_radius_m", o.person_min_leg_radius_m,
           "mount legs: thinner legs are not a person's (a chair's) for the static-object rules.");
+  v.Field("still_legs_max_depth_m", o.still_legs_max_depth_m,
+          "mount legs: a still track measured in most of its two-leg scans as legs farther apart "
+          "along the line of sight than this is not a person's for the static-object rules (the "
+          "mixed echoes of a chair's leg and someone standing behind it; 0: off).");
   v.Field("hip_half_width_m", o.hip_half_width_m,
           "mount legs: a leg's lateral offset from the body centre (a single leg's uncertainty).");
   v.Field("drop_mixed_pixel_legs", o.drop_mixed_pixel_legs,

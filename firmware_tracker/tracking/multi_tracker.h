@@ -279,6 +279,11 @@ struct TrackShape {
   // a person's make it not person-like.
   double flatness_m2 = 0.0;
   std::uint32_t evidence_updates = 0;  // updates that carried such evidence
+  // Legs mount: the share of a still track's recent two-leg measurements whose legs lay deeper
+  // along the ray than a standing person's (ShapeOptions::still_legs_max_depth_m), and how many
+  // such still two-leg measurements it had.
+  double still_deep_pair_share = 0.0;
+  std::uint32_t still_pair_updates = 0;
   bool person_like = true;
   // What the measurements share and the filter cannot average away (the size state's error, the
   // outline not being the model's): added to the reported position covariance, not to the

@@ -578,6 +578,9 @@ std::optional<std::string> Validate(const ShapeOptions& o) {
   if (!(std::isfinite(o.person_min_leg_radius_m) && o.person_min_leg_radius_m >= 0.0)) {
     return "person_min_leg_radius_m must be >= 0";
   }
+  if (!(std::isfinite(o.still_legs_max_depth_m) && o.still_legs_max_depth_m >= 0.0)) {
+    return "still_legs_max_depth_m must be >= 0";
+  }
   if (!(std::isfinite(o.hip_half_width_m) && o.hip_half_width_m >= 0.0)) {
     return "hip_half_width_m must be >= 0";
   }
@@ -1268,6 +1271,20 @@ class TrackingPipeline::Refiner final : public MeasurementRefiner {
           centre.weight - 0.5 >= 0.5 * (o.stance_leg_weight - 0.5)) {
         shape.legs_standing = centre.standing;
       }
+      // ShapeOptions::still_legs_max_depth_m: a still track's legs one behind the other along the
+      // ray, deeper than a standing person's.
+      Eigen::Vector2d walk;
+      const Eigen::Vector2d mid = 0.5 * (now[0] + now[1]);
+      if (o.still_legs_max_depth_m > 0.0 && predicted != nullptr && predicted_cov != nullptr &&
+          mid.norm() > 0.0 && !WalkingDirection(predicted, predicted_cov, &walk)) {
+        const double depth = std::abs((now[1] - now[0]).dot(mid / mid.norm()));
+        const std::size_t nearer = now[0].norm() <= now[1].norm() ? 0 : 1;
+        const double deep =
+            depth > o.still_legs_max_depth_m && ob.parts[nearer].point_count == 1 ? 1.0 : 0.0;
+        shape.still_deep_pair_share +=
+            (deep - shape.still_deep_pair_share) /
+            std::min(kFlatnessMemory, static_cast<double>(++shape.still_pair_updates));
+      }
       shape.legs_m = now;
       shape.legs_var_m2 = now_var;
       shape.legs_ns = at_ns;
@@ -1379,7 +1396,9 @@ class TrackingPipeline::Refiner final : public MeasurementRefiner {
     shape.shape = ObjectShape::kLegs;
     ++flat_count(shape);
     shape.person_like =
-        flat_count(shape) < kMinFlatnessUpdates || shape.size_m.x() >= o.person_min_leg_radius_m;
+        (flat_count(shape) < kMinFlatnessUpdates ||
+         shape.size_m.x() >= o.person_min_leg_radius_m) &&
+        !(shape.still_pair_updates >= kMinFlatnessUpdates && shape.still_deep_pair_share > 0.5);
     return true;
   }
 

@@ -107,6 +107,21 @@ struct ShapeOptions {
   double leg_radius_sigma_m = 0.015;
   double leg_pairing_distance_m = 0.7;
   double person_min_leg_radius_m = 0.035;
+  // Legs mount: a track that stands still (not walking: WalkingDirection) and is measured, in
+  // more than half of its recent two-leg measurements (the last 20, at least 5), as two legs
+  // farther apart along the line of sight than this, the nearer of them a single beam, is not a
+  // person's for the static-object rules (MultiTrackerOptions::static_object_to_background_s).
+  // A standing person's legs stand side by side, their centres a hip's width (2
+  // hip_half_width_m, 0.16-0.22 m) apart across the body, so along any ray at most that plus a
+  // stance; a single beam this far in front of a still leg is a post too thin to fill a beam (a
+  // chair's leg) with something standing behind it: every beam over the post returns a range
+  // between the two (a mixed pixel), a leg-like pair that stands as still as they do, on which a
+  // track sat until the background absorbed it (background.absorb_after_s); the person behind
+  // stays hidden by the mixed echoes either way. Without the single-beam condition the
+  // pusher of a parked trolley, their legs paired with the trolley's, was deleted as well.
+  // Scenario test AStillKneeHeightPairDeepAlongTheRayBehindASingleBeamIsNotAPerson. 0: off (only
+  // the legs' radius decides).
+  double still_legs_max_depth_m = 0.4;
   double hip_half_width_m = 0.1;  // a leg's lateral offset from the body centre
   // Legs mount: mixed pixels are not legs. A beam that grazes a leg reports a range between the
   // leg and what lies behind it; where the beam's footprint (beam_divergence_rad times the range)

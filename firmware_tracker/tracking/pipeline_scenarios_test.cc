@@ -4034,5 +4034,74 @@ TEST(PipelineScenarioTest, DISABLED_RecentVeilKeepsTwoFarPeopleOnePartlyBehindTh
   ExpectFarKept(c, 0);
 }
 
+// ShapeOptions::still_legs_max_depth_m: knee height, 25 Hz, 0.5 deg, a wall at 11 m. A chair's leg
+// too thin to fill a beam, in front of someone standing behind it, returns on its one beam a range
+// between the two, and the beams beside it a leg-like arc: a pair of "legs" 0.5 m apart along the
+// ray, the nearer a single beam. It comes in from the side (the chair pushed there, 2 s) and
+// stands for 12 s. A person's two legs side by side (0.2 m apart across the ray) walk in and stand
+// as long. The pair is handed to the background once it has stood still; the person is kept.
+TEST(PipelineScenarioTest, AStillKneeHeightPairDeepAlongTheRayBehindASingleBeamIsNotAPerson) {
+  constexpr double kStepRad = 0.5 * common::kPi / 180.0;
+  constexpr double kRangeM = 5.0;
+  constexpr std::int64_t kMoveScans = 50, kScans = 350;
+  // A leg (radius 0.06 m) at kRangeM + depth_m whose centre lies on fractional beam c.
+  const auto leg = [&](std::vector<float>& ranges, double c, double depth_m) {
+    const double range = kRangeM + depth_m;
+    for (auto b = static_cast<std::size_t>(c - 3.0); b <= static_cast<std::size_t>(c + 3.0); ++b) {
+      const double d = (static_cast<double>(b) - c) * kStepRad * range;
+      if (std::abs(d) < 0.06) {
+        ranges[b] = static_cast<float>(range - std::sqrt(0.06 * 0.06 - d * d));
+      }
+    }
+  };
+  // Beam of the object's centre: 10 beams (0.44 m) in 2 s, then still.
+  const auto centre = [&](std::int64_t i) {
+    return 170.0 + 0.2 * static_cast<double>(std::min(i, kMoveScans));
+  };
+  struct Run {
+    int late_reports = 0;  // reported confirmed tracks near the object in the last 3 s
+    std::uint64_t absorbed = 0;
+  };
+  const auto run = [&](bool person, double max_depth_m) {
+    TrackerOptions options;
+    options.shape.mount = Mount::kLegs;
+    options.shape.still_legs_max_depth_m = max_depth_m;
+    Run out;
+    const auto draw = [&](std::int64_t i, std::vector<float>& ranges) {
+      const double c = centre(i);
+      if (person) {
+        // Legs 0.2 m apart across the ray: 2.3 beams either side of the centre.
+        leg(ranges, c - 2.3, 0.0);
+        leg(ranges, c + 2.3, 0.0);
+      } else {
+        // The mixed echoes' arc 0.5 m behind the single beam beside it.
+        leg(ranges, c, 0.5);
+        ranges[static_cast<std::size_t>(std::lround(c)) + 2] = static_cast<float>(kRangeM);
+      }
+    };
+    const auto seen = [&](std::int64_t i, const ScanTracks& tracks) {
+      if (i < kScans - 75) return;
+      const double bearing = -0.5 * common::kPi + centre(i) * kStepRad;
+      for (const TrackReport& r : tracks.tracks) {
+        const double off =
+            std::abs(std::remainder(std::atan2(r.y_m, r.x_m) - bearing, 2.0 * common::kPi));
+        if (r.state == TrackState::kConfirmed && off < 0.1) ++out.late_reports;
+      }
+    };
+    out.absorbed = RunKneeWalk(options, 11.0f, kScans, draw, seen).absorbed_objects;
+    return out;
+  };
+  const Run pair_now = run(false, 0.4);
+  const Run pair_before = run(false, 0.0);
+  const Run person_now = run(true, 0.4);
+  const Run person_before = run(true, 0.0);
+  EXPECT_EQ(pair_now.late_reports, 0);
+  EXPECT_GE(pair_now.absorbed, 1u);
+  EXPECT_EQ(pair_before.late_reports, 75);
+  EXPECT_EQ(person_now.late_reports, 75);
+  EXPECT_EQ(person_before.late_reports, 75);
+  EXPECT_EQ(person_now.absorbed, 0u);
+}
+
 }  // namespace
 }  // namespace lrfnet::tracking

@@ -47,6 +47,7 @@
 //                       [--before-single-precision-fit] [--before-edge-sides]
 //                       [--before-outside-start] [--before-across-sway] [--before-receded-edges]
 //                       [--before-stance-weight] [--before-adopt] [--before-touching-legs]
+//                       [--before-still-legs]
 //                       [--before-box-occluders] [--before-box-rejoin] [--before-box-unseen-cov]
 //                       [--before-box-seen-extent] [--before-knee-box-faces] [--before-see-through]
 //                       [--before-torso-edge-echo]
@@ -138,6 +139,8 @@
 //   reported until its time is up, MultiTrackerOptions::adopt_successor_m = 0;
 //   --before-touching-legs: "before" measures two legs that touch in the scan with a pair's
 //   covariance, ShapeOptions::touching_legs_along_ray = false;
+//   --before-still-legs: "before" takes a still knee-height track for a person's whatever the
+//   depth of its legs along the line of sight, ShapeOptions::still_legs_max_depth_m = 0;
 //   --before-box-occluders: "before" fits a box (a cart) to every point of its segment, also to
 //   those in front of it (its pusher's), ShapeOptions::box_drop_occluders = false;
 //   --before-box-unseen-cov: "before" reports a box's size error as the same in every direction,
@@ -1381,6 +1384,9 @@ bool g_before_adopt = false;
 // --before-touching-legs: "before" measures two legs that touch in the scan with a pair's
 // covariance (ShapeOptions::touching_legs_along_ray = false).
 bool g_before_touching_legs = false;
+// --before-still-legs: "before" takes a still knee-height track for a person's whatever the depth
+// of its legs along the line of sight (ShapeOptions::still_legs_max_depth_m = 0).
+bool g_before_still_legs = false;
 // --before-box-occluders: "before" fits a box to every point of its segment, also those in front
 // of it (ShapeOptions::box_drop_occluders = false).
 bool g_before_box_occluders = false;
@@ -1465,13 +1471,13 @@ std::vector<Variant> Variants(sim::Mount mount, double range_m) {
              g_before_fusion_merge || g_before_report_sourceless || g_before_recent_veil ||
              g_before_single_precision_fit || g_before_edge_sides || g_before_outside_start ||
              g_before_across_sway || g_before_receded_edges || g_before_stance_weight ||
-             g_before_adopt || g_before_touching_legs || g_before_box_occluders ||
-             g_before_box_rejoin || g_before_see_through || g_before_torso_edge_echo ||
-             g_before_box_unseen_cov || g_before_box_seen_extent || g_before_knee_box_faces ||
-             g_before_lone_leg_standing || g_before_single_beam_partner ||
-             g_before_edge_echo_birth || g_before_lone_beam_echo || g_before_far_leg_birth ||
-             g_before_person_size || g_before_person_reach || g_before_partial_extent ||
-             g_before_neighbour || g_before_range_noise) {
+             g_before_adopt || g_before_touching_legs || g_before_still_legs ||
+             g_before_box_occluders || g_before_box_rejoin || g_before_see_through ||
+             g_before_torso_edge_echo || g_before_box_unseen_cov || g_before_box_seen_extent ||
+             g_before_knee_box_faces || g_before_lone_leg_standing ||
+             g_before_single_beam_partner || g_before_edge_echo_birth || g_before_lone_beam_echo ||
+             g_before_far_leg_birth || g_before_person_size || g_before_person_reach ||
+             g_before_partial_extent || g_before_neighbour || g_before_range_noise) {
     tracking::TrackerOptions before = fresh;
     if (g_before_one_leg) before.shape.hidden_leg_behind = false;
     if (g_before_mixed_pixels) before.shape.drop_mixed_pixel_legs = false;
@@ -1509,6 +1515,7 @@ std::vector<Variant> Variants(sim::Mount mount, double range_m) {
     if (g_before_stance_weight) before.shape.stance_leg_weight = 0.5;
     if (g_before_adopt) before.tracking.adopt_successor_m = 0.0;
     if (g_before_touching_legs) before.shape.touching_legs_along_ray = false;
+    if (g_before_still_legs) before.shape.still_legs_max_depth_m = 0.0;
     if (g_before_box_occluders) before.shape.box_drop_occluders = false;
     if (g_before_box_rejoin) before.shape.box_rejoin_pieces = false;
     if (g_before_see_through) before.shape.split_see_through = false;
@@ -3358,12 +3365,12 @@ std::string KneeHeightBefore() {
         g_before_fusion_merge || g_before_report_sourceless || g_before_recent_veil ||
         g_before_single_precision_fit || g_before_edge_sides || g_before_outside_start ||
         g_before_across_sway || g_before_receded_edges || g_before_stance_weight ||
-        g_before_adopt || g_before_touching_legs || g_before_box_occluders || g_before_box_rejoin ||
-        g_before_see_through || g_before_torso_edge_echo || g_before_box_unseen_cov ||
-        g_before_box_seen_extent || g_before_knee_box_faces || g_before_single_beam_partner ||
-        g_before_edge_echo_birth || g_before_lone_beam_echo || g_before_far_leg_birth ||
-        g_before_person_size || g_before_person_reach || g_before_partial_extent ||
-        g_before_neighbour || g_before_range_noise) ||
+        g_before_adopt || g_before_touching_legs || g_before_still_legs || g_before_box_occluders ||
+        g_before_box_rejoin || g_before_see_through || g_before_torso_edge_echo ||
+        g_before_box_unseen_cov || g_before_box_seen_extent || g_before_knee_box_faces ||
+        g_before_single_beam_partner || g_before_edge_echo_birth || g_before_lone_beam_echo ||
+        g_before_far_leg_birth || g_before_person_size || g_before_person_reach ||
+        g_before_partial_extent || g_before_neighbour || g_before_range_noise) ||
       g_before_mixed_pixels || g_before_far || g_before_evidence_coasting ||
       g_before_report_rules) {
     return "";
@@ -3527,6 +3534,11 @@ std::string KneeHeightBefore() {
         "measuring a knee-height track's two legs that touch in the scan with a pair's "
         "covariance, not the farther leg's cut arc's along the line of sight "
         "(`shape.touching_legs_along_ray` false)");
+  }
+  if (g_before_still_legs) {
+    without.push_back(
+        "taking a still knee-height track for a person's whatever the depth of its legs along "
+        "the line of sight (`shape.still_legs_max_depth_m` 0)");
   }
   if (g_before_single_beam_partner) {
     without.push_back(
@@ -3758,6 +3770,8 @@ int main(int argc, char** argv) {
       g_before_adopt = true;
     } else if (a == "--before-touching-legs") {
       g_before_touching_legs = true;
+    } else if (a == "--before-still-legs") {
+      g_before_still_legs = true;
     } else if (a == "--before-box-occluders") {
       g_before_box_occluders = true;
     } else if (a == "--before-box-unseen-cov") {
@@ -3796,6 +3810,7 @@ int main(int argc, char** argv) {
                    "[--before-single-precision-fit] [--before-edge-sides] "
                    "[--before-outside-start] [--before-across-sway] [--before-receded-edges] "
                    "[--before-stance-weight] [--before-adopt] [--before-touching-legs] "
+                   "[--before-still-legs] "
                    "[--before-box-occluders] [--before-box-rejoin] [--before-box-unseen-cov] "
                    "[--before-box-seen-extent] [--before-knee-box-faces] "
                    "[--before-see-through] [--before-torso-edge-echo] "
