@@ -3053,7 +3053,17 @@ std::string ExplainTable(const std::map<std::string, std::vector<Causes>>& group
         for (const auto& [row_key, row_causes] : *rows) {
           if (row_causes.size() <= v_new || ExplainGroup(row_key) != key) continue;
           const double n = count(row_causes[v_new].false_scan_classes, cls);
-          if (n > 0) share.emplace_back(n, row_key.substr(0, row_key.find(" | ")));
+          if (n <= 0) continue;
+          // "<scenario> (<run>)": a scenario's knee-height sensors are counted in both its runs,
+          // as given and with every sensor at knee height, so its name alone appeared twice.
+          const std::size_t a = row_key.find(" | ");
+          const std::size_t b = row_key.find(" | ", a + 3);
+          const std::string run = row_key.substr(a + 3, b - a - 3);
+          share.emplace_back(n, row_key.substr(0, a) + " (" +
+                                    (run == "legs"    ? std::string("all at knee height")
+                                     : run == "torso" ? std::string("all at upper-body height")
+                                                      : run) +
+                                    ")");
         }
         std::sort(share.begin(), share.end(), std::greater<>());
         for (const auto& [n, scenario] : share) {
@@ -3306,7 +3316,9 @@ const char* const kExplainText =
     "Coasting: reported without a measurement in that scan. Tracks on doors and chairs and on "
     "hidden people within the match radius count neither way (the door/chair/hidden column). Per "
     "sensor under the sensor's own mount (shop_floor as given: two sensors at upper-body height, "
-    "two at knee height), fused by the run (as given counts as upper-body height).\n\n";
+    "two at knee height), fused by the run (as given counts as upper-body height). Where: each "
+    "scenario with its run, as given or with every sensor at knee height (a sensor at knee height "
+    "as given is in both).\n\n";
 
 std::string Totals(const Section& s) {
   std::string t = kHeader;
