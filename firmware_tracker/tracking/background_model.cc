@@ -43,6 +43,9 @@ void BackgroundModel::Reset() {
   learn_elapsed_s_ = 0.0;
   learn_scans_ = 0;
   beams_.clear();
+  candidate_.clear();
+  candidate_m_.clear();
+  candidate_age_s_.clear();
   background_m_.clear();
   foreground_.clear();
 }
@@ -98,6 +101,12 @@ void BackgroundModel::StartLearning(const ScanView& scan) {
   // Capacity was checked by CheckScan; resize cannot fail here.
   (void)beams_.resize(0);
   (void)beams_.resize(n);
+  (void)candidate_.resize(0);
+  (void)candidate_.resize(n);
+  (void)candidate_m_.resize(0);
+  (void)candidate_m_.resize(n);
+  (void)candidate_age_s_.resize(0);
+  (void)candidate_age_s_.resize(n);
   (void)background_m_.resize(0);
   (void)background_m_.resize(n);
   (void)foreground_.resize(0);
@@ -125,6 +134,9 @@ void BackgroundModel::FinishLearning() {
         static_cast<double>(b.no_echo_scans) > options_.free_fraction * total;
     background_m_[i] = mostly_no_echo ? 0.0f : b.learn_max_m;
     b = Beam{};
+    candidate_[i] = Candidate::kNone;
+    candidate_m_[i] = 0.0f;
+    candidate_age_s_[i] = 0.0f;
   }
   learned_ = true;
 }
@@ -136,45 +148,46 @@ bool BackgroundModel::UpdateBeam(std::size_t i, float r, float dt, double alpha)
   // Classified against the model as it was before this scan.
   const bool fg = echo && (bg == 0.0f || r < bg - margin);
   const bool at_background = echo ? bg != 0.0f && std::abs(r - bg) <= margin : bg == 0.0f;
-  Beam& b = beams_[i];
+  Candidate& candidate = candidate_[i];
   if (at_background) {
     if (echo) bg += static_cast<float>(alpha * (r - bg));
-    b.candidate = Candidate::kNone;
-    b.candidate_age_s = 0.0f;
+    // The candidate's range and age are left: they are read only while candidate is not kNone,
+    // and a beam leaves kNone only by a restart, which sets both.
+    candidate = Candidate::kNone;
     return fg;
   }
 
   // A change candidate (a person's beams, mostly): its next state is selected from the outcomes
   // (follow, hold behind an occluder, restart; absorb or recede when old enough).
+  float& candidate_m_ref = candidate_m_[i];
+  float& candidate_age_s = candidate_age_s_[i];
   const bool nearer = echo && (bg == 0.0f || r < bg);
   const Candidate kind = nearer ? Candidate::kNearer : Candidate::kFarther;
-  const float candidate_m = b.candidate_m;
+  const float candidate_m = candidate_m_ref;
   const bool same_as_candidate =
-      b.candidate == kind &&
+      candidate == kind &&
       (echo ? candidate_m != 0.0f && std::abs(r - candidate_m) <= Margin(candidate_m)
             : candidate_m == 0.0f);
   // Something passes in front of a candidate static object: its clock holds, it does not restart.
   const bool holds =
-      !same_as_candidate && nearer && b.candidate == Candidate::kNearer && r < candidate_m;
+      !same_as_candidate && nearer && candidate == Candidate::kNearer && r < candidate_m;
   const bool restarts = !same_as_candidate && !holds;
   const float followed_m = echo ? candidate_m + 0.5f * (r - candidate_m) : candidate_m;
-  const float age_s = same_as_candidate ? b.candidate_age_s + dt
-                      : restarts        ? 0.0f
-                                        : b.candidate_age_s;
+  const float age_s = same_as_candidate ? candidate_age_s + dt : restarts ? 0.0f : candidate_age_s;
   const float new_m = same_as_candidate ? followed_m : restarts ? r : candidate_m;
-  const Candidate new_candidate = restarts ? kind : b.candidate;
+  const Candidate new_candidate = restarts ? kind : candidate;
   const double limit_s = nearer ? options_.absorb_after_s : options_.recede_after_s;
   if (same_as_candidate && age_s >= limit_s) [[unlikely]] {
     bg = new_m;
-    b.candidate = Candidate::kNone;
-    b.candidate_m = new_m;
-    b.candidate_age_s = 0.0f;
+    candidate = Candidate::kNone;
+    candidate_m_ref = new_m;
+    candidate_age_s = 0.0f;
     ++(nearer ? counters_.absorbed_beams : counters_.receded_beams);
     return fg;
   }
-  b.candidate = new_candidate;
-  b.candidate_m = new_m;
-  b.candidate_age_s = age_s;
+  candidate = new_candidate;
+  candidate_m_ref = new_m;
+  candidate_age_s = age_s;
   return fg;
 }
 
@@ -190,8 +203,8 @@ void BackgroundModel::Absorb(const ScanView& scan, std::size_t begin_beam, std::
     const float bg = background_m_[i];
     if (r == 0.0f || !(bg == 0.0f || r < bg - Margin(bg))) continue;
     background_m_[i] = r;
-    beams_[i].candidate = Candidate::kNone;
-    beams_[i].candidate_age_s = 0.0f;
+    candidate_[i] = Candidate::kNone;
+    candidate_age_s_[i] = 0.0f;
     ++taken;
   }
   counters_.absorbed_beams += taken;
