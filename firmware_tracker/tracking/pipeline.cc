@@ -685,6 +685,7 @@ std::optional<std::string> Validate(const ShapeOptions& o) {
   if (!(o.torso_edge_echo_min_far_share >= 0.0 && o.torso_edge_echo_min_far_share < 1.0)) {
     return "torso_edge_echo_min_far_share must be in [0, 1)";
   }
+  if (auto e = Validate(o.step_seam)) return "step_seam: " + *e;
   if (!Positive(o.box_size_sigma_m)) return "box_size_sigma_m must be > 0";
   if (!Positive(o.box_unseen_sigma_m)) return "box_unseen_sigma_m must be > 0";
   if (!Positive(o.box_prior_min_half_m) || !(o.box_prior_max_half_m > o.box_prior_min_half_m) ||
@@ -1793,7 +1794,13 @@ void TrackingPipeline::BuildObservations(const ScanView& scan) {
                                  options_.shape.see_through_min_width_m,
                                  std::span<std::size_t>(starts).subspan(1));
       }
-      if (pieces > 1 && OnConfirmedBox(s, scan.stamp_ns, tracks)) pieces = 1;
+      bool seam = false;  // the cuts are at range steps (ShapeOptions::split_step_seam)
+      if (options_.shape.split_step_seam && whole && pieces == 1) {
+        pieces += RangeStepCuts(segments_, s, options_.shape.step_seam,
+                                std::span<std::size_t>(starts).subspan(1));
+        seam = pieces > 1;
+      }
+      if (pieces > 1 && OnConfirmedBox(s, scan.stamp_ns, tracks, seam)) pieces = 1;
       // ShapeOptions::torso_edge_echo (an uncut segment only).
       const bool echo = pieces == 1 && options_.shape.torso_edge_echo && TorsoEdgeEcho(scan, s);
       for (std::size_t p = 0; p < pieces; ++p) {
@@ -1803,7 +1810,7 @@ void TrackingPipeline::BuildObservations(const ScanView& scan) {
             ++counters_.dropped_segments;
             break;
           }
-          ++counters_.see_through_splits;
+          ++(seam ? counters_.step_seam_splits : counters_.see_through_splits);
         }
         Observation* ob = observations_.emplace_slot();
         ob->parts[0] = MakePart(scan, s, starts[p], end - starts[p]);
@@ -1903,14 +1910,15 @@ double BoxRejoinMargin(const ShapeOptions& o, double state_var, double range_m) 
 // rectangle, grown as box_rejoin_pieces grows it (a cart and its pusher: the box's fit leaves the
 // pusher out, box_drop_occluders).
 bool TrackingPipeline::OnConfirmedBox(const Segment& s, common::UtcNs stamp_ns,
-                                      std::optional<std::size_t>& tracks) {
+                                      std::optional<std::size_t>& tracks, bool seam) {
   const ShapeOptions& o = options_.shape;
   if (!tracks) tracks = tracker_.Predict(stamp_ns, predictions_);
   const auto pts = segments_.Points(s);
   const double range = Range(pts.front());
   for (std::size_t t = 0; t < *tracks; ++t) {
     const TrackPrediction& pr = predictions_[t];
-    if (!pr.confirmed || pr.model != ShapeModel::kBox) continue;
+    // ShapeOptions::split_step_seam: also a box track not yet confirmed.
+    if (pr.model != ShapeModel::kBox || !(pr.confirmed || seam)) continue;
     const double margin = BoxRejoinMargin(o, BoxStateVar(o, pr), range);
     for (const Eigen::Vector2d& p : pts) {
       if (internal::InsideGrownBox(pr.position_m, pr.size_m, pr.yaw_rad, margin,

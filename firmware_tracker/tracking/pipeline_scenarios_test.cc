@@ -2113,14 +2113,21 @@ struct SideBySide {
   double error_m = 0.0;  // mean distance of each one's nearest confirmed report (within 0.5 m)
   std::size_t ids = 0;   // confirmed ids ever reported within 0.5 m of either
   std::uint64_t splits = 0;
+  std::uint64_t seams = 0;  // ShapeOptions::split_step_seam
 };
 
-SideBySide WalkSideBySide(bool split) {
+// `behind_m`: the second walks that much farther from the sensor; `apart_m`: across the line of
+// sight, centre to centre.
+SideBySide WalkSideBySide(bool split, bool seam = true, double behind_m = 0.0,
+                          double apart_m = 0.6) {
   Scene scene;
-  scene.walkers = {Walker::Path(kLearnedS, {{7.0, -1.3}, {3.0, -1.3}}, 1.0),
-                   Walker::Path(kLearnedS, {{7.0, -0.7}, {3.0, -0.7}}, 1.0)};
+  scene.walkers = {
+      Walker::Path(kLearnedS, {{7.0, -1.3}, {3.0, -1.3}}, 1.0),
+      Walker::Path(kLearnedS, {{7.0 + behind_m, -1.3 + apart_m}, {3.0 + behind_m, -1.3 + apart_m}},
+                   1.0)};
   TrackerOptions options = Synthetic();
   options.shape.split_see_through = split;
+  options.shape.split_step_seam = seam;
   const SceneRun run = Simulate(scene, kLearnedS + 4.2, options);
   SideBySide out;
   std::set<std::uint32_t> ids;
@@ -2150,6 +2157,7 @@ SideBySide WalkSideBySide(bool split) {
   if (matched > 0) out.error_m /= matched;
   out.ids = ids.size();
   out.splits = run.pipeline->counters().see_through_splits;
+  out.seams = run.pipeline->counters().step_seam_splits;
   return out;
 }
 
@@ -2167,6 +2175,28 @@ TEST(PipelineScenarioTest, PeopleSideBySideWithBeamsBetweenThemKeepATrackEach) {
   EXPECT_LT(before.both_held, before.frames / 2);
   EXPECT_GT(before.error_m, 0.1);
   // Cut (75 of 76 scans, 0.02 m, 2 ids): each one's track on its body throughout.
+  EXPECT_GE(after.both_held, after.frames * 9 / 10);
+  EXPECT_LT(after.error_m, 0.05);
+  EXPECT_EQ(after.ids, 2u);
+}
+
+// ShapeOptions::split_step_seam: the same walk, the second 0.2 m behind the first and 0.5 m
+// beside it: the farther one's near shoulder lies behind the nearer one's edge on most scans, no
+// beam passes between them (the see-through cut finds nothing), only the range steps. Cut at the
+// step, each keeps a track of its own (before: 0 of 76 scans, 0.42 m; after: 75, 0.02 m).
+TEST(PipelineScenarioTest, PeopleSideBySideWithNoBeamBetweenThemKeepATrackEach) {
+  const SideBySide before = WalkSideBySide(true, false, 0.2, 0.5);
+  const SideBySide after = WalkSideBySide(true, true, 0.2, 0.5);
+  const auto describe = [](const SideBySide& t) {
+    return "frames " + std::to_string(t.frames) + ", both held " + std::to_string(t.both_held) +
+           ", error " + std::to_string(t.error_m) + ", ids " + std::to_string(t.ids) + ", seams " +
+           std::to_string(t.seams);
+  };
+  SCOPED_TRACE("before: " + describe(before) + "; after: " + describe(after));
+  EXPECT_EQ(before.seams, 0u);
+  EXPECT_GT(after.seams, 0u);
+  EXPECT_LT(before.both_held, before.frames / 2);
+  EXPECT_GT(before.error_m, 0.1);
   EXPECT_GE(after.both_held, after.frames * 9 / 10);
   EXPECT_LT(after.error_m, 0.05);
   EXPECT_EQ(after.ids, 2u);

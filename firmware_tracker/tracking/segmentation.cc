@@ -155,4 +155,65 @@ std::size_t SeeThroughCuts(const ScanView& scan, const SegmentList& list, const 
   return count;
 }
 
+std::optional<std::string> Validate(const RangeStepCutOptions& o) {
+  if (!(std::isfinite(o.min_width_m) && o.min_width_m >= 0.0)) return "min_width_m must be >= 0";
+  if (!(std::isfinite(o.min_step_m) && o.min_step_m > 0.0)) return "min_step_m must be > 0";
+  if (o.min_piece_points < 2) return "min_piece_points must be >= 2";
+  if (!(std::isfinite(o.min_piece_width_m) && o.min_piece_width_m >= 0.0 &&
+        std::isfinite(o.max_piece_width_m) && o.max_piece_width_m > o.min_piece_width_m)) {
+    return "min_piece_width_m must be >= 0 and max_piece_width_m finite and greater";
+  }
+  if (!(std::isfinite(o.min_turn_m) && o.min_turn_m >= 0.0)) return "min_turn_m must be >= 0";
+  if (!(std::isfinite(o.min_bulge_m) && o.min_bulge_m >= 0.0)) return "min_bulge_m must be >= 0";
+  return std::nullopt;
+}
+
+std::size_t RangeStepCuts(const SegmentList& list, const Segment& s,
+                          const RangeStepCutOptions& options, std::span<std::size_t> cuts) {
+  if (cuts.empty() || s.point_count < 2 * options.min_piece_points ||
+      !(s.width_m > options.min_width_m)) {
+    return 0;
+  }
+  const auto pts = list.Points(s);
+  const std::size_t n = pts.size();
+  // Whether points [a, b) form one body-sized piece whose end `end` (a or b - 1) lies beyond its
+  // nearest point.
+  const auto body = [&](std::size_t a, std::size_t b, std::size_t end) {
+    if (b - a < options.min_piece_points) return false;
+    const double width = (pts[b - 1] - pts[a]).norm();
+    if (width < options.min_piece_width_m || width > options.max_piece_width_m) return false;
+    double nearest = pts[a].norm();
+    for (std::size_t i = a + 1; i < b; ++i) nearest = std::min(nearest, pts[i].norm());
+    if (!(pts[end].norm() > nearest + options.min_turn_m)) return false;
+    // Curved: a point between the ends lies nearer the sensor than their chord by min_bulge_m (a
+    // box's face is straight).
+    const Eigen::Vector2d chord = pts[b - 1] - pts[a];
+    Eigen::Vector2d normal(-chord.y(), chord.x());
+    normal.normalize();
+    if (normal.dot(pts[a]) > 0.0) normal = -normal;  // towards the sensor
+    double bulge = 0.0;
+    for (std::size_t i = a + 1; i + 1 < b; ++i) {
+      bulge = std::max(bulge, normal.dot(pts[i] - pts[a]));
+    }
+    return bulge > options.min_bulge_m;
+  };
+  std::size_t count = 0, last_cut = 0;
+  for (std::size_t k = options.min_piece_points; k + options.min_piece_points <= n; ++k) {
+    if (!(std::abs(pts[k].norm() - pts[k - 1].norm()) > options.min_step_m)) continue;
+    // The piece after the cut reaches to the next step's seam or the segment's end.
+    std::size_t next = n;
+    for (std::size_t j = k + options.min_piece_points; j + options.min_piece_points <= n; ++j) {
+      if (std::abs(pts[j].norm() - pts[j - 1].norm()) > options.min_step_m) {
+        next = j;
+        break;
+      }
+    }
+    if (!body(last_cut, k, k - 1) || !(body(k, next, k) || body(k, n, k))) continue;
+    cuts[count++] = k;
+    last_cut = k;
+    if (count == cuts.size()) break;
+  }
+  return count;
+}
+
 }  // namespace lrfnet::tracking

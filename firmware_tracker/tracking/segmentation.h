@@ -79,4 +79,26 @@ std::size_t SeeThroughCuts(const ScanView& scan, const SegmentList& list, const 
                            const SegmentationOptions& options, double min_width_m,
                            std::span<std::size_t> cuts);
 
+// Where segment `s` of `list` holds two convex bodies that touch in the view with no beam between
+// them: the points k (in order) where the range steps by more than options.min_step_m from point
+// k - 1 while the outline turns there from receding to approaching. A convex body's range along
+// its outline falls to its nearest point and rises again (one minimum), so a point where the range
+// jumps with both neighbouring points farther than the nearest of their own side is the seam of
+// two bodies. Each piece is body-sized: at least options.min_piece_points points, first to last
+// point between min_piece_width_m and max_piece_width_m, and its end at the cut lies farther than
+// its nearest point by more than min_turn_m. Only for segments wider than min_width_m. Writes at
+// most cuts.size() cuts in increasing order and returns their count.
+struct RangeStepCutOptions {
+  double min_width_m = 0.8;
+  double min_step_m = 0.1;
+  std::size_t min_piece_points = 3;
+  double min_piece_width_m = 0.2;
+  double max_piece_width_m = 0.7;
+  double min_turn_m = 0.05;
+  double min_bulge_m = 0.03;
+};
+std::optional<std::string> Validate(const RangeStepCutOptions& options);
+std::size_t RangeStepCuts(const SegmentList& list, const Segment& s,
+                          const RangeStepCutOptions& options, std::span<std::size_t> cuts);
+
 }  // namespace lrfnet::tracking

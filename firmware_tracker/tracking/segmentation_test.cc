@@ -37,6 +37,10 @@ TEST(SegmentationOptionsTest, DefaultsValidAndBadValuesRejected) {
   o = {};
   o.max_width_m = 0.0;
   EXPECT_NE(Validate(o), std::nullopt);
+  EXPECT_EQ(Validate(RangeStepCutOptions{}), std::nullopt);
+  RangeStepCutOptions r;
+  r.max_piece_width_m = r.min_piece_width_m;
+  EXPECT_NE(Validate(r), std::nullopt);
 }
 
 TEST(SegmentationTest, TwoSeparatedGroupsGiveTwoSegmentsWithSensorFramePoints) {
@@ -187,6 +191,94 @@ TEST(SegmentationTest, SeeThroughCutsLeaveNoPieceBelowMinPoints) {
   ASSERT_EQ(list.segments.size(), 1u);
   std::array<std::size_t, 3> cuts{};
   EXPECT_EQ(SeeThroughCuts(s.view(), list, list.segments[0], o, 0.7, cuts), 0u);
+}
+
+// RangeStepCuts: what a scan at 0.5 degrees shows of round bodies (radius 0.22 m, a person's
+// shoulders) and straight faces, each beam returning from the nearest outline it meets.
+struct Outlines {
+  MaskScan s{361, 0.0f};
+  void Circle(double range_m, double bearing_deg, double radius_m) {
+    const Eigen::Vector2d c = range_m * Eigen::Vector2d(std::cos(common::DegToRad(bearing_deg)),
+                                                        std::sin(common::DegToRad(bearing_deg)));
+    for (std::size_t i = 0; i < s.ranges.size(); ++i) {
+      const double a = common::DegToRad(-90.0 + 0.5 * static_cast<double>(i));
+      const Eigen::Vector2d u(std::cos(a), std::sin(a));
+      const double along = u.dot(c);
+      const double across2 = c.squaredNorm() - along * along;
+      if (across2 >= radius_m * radius_m) continue;
+      Hit(i, along - std::sqrt(radius_m * radius_m - across2));
+    }
+  }
+  // A straight face from p to q.
+  void Face(const Eigen::Vector2d& p, const Eigen::Vector2d& q) {
+    for (std::size_t i = 0; i < s.ranges.size(); ++i) {
+      const double a = common::DegToRad(-90.0 + 0.5 * static_cast<double>(i));
+      const Eigen::Vector2d u(std::cos(a), std::sin(a));
+      const Eigen::Vector2d d = q - p;
+      const double den = u.x() * d.y() - u.y() * d.x();
+      if (std::abs(den) < 1e-12) continue;
+      const double t = (p.x() * d.y() - p.y() * d.x()) / den;  // along the beam
+      const double w = (p.x() * u.y() - p.y() * u.x()) / den;  // along the face
+      if (t > 0.0 && w >= 0.0 && w <= 1.0) Hit(i, t);
+    }
+  }
+  void Hit(std::size_t i, double r) {
+    if (s.mask[i] == 0 || r < s.ranges[i]) s.ranges[i] = static_cast<float>(r);
+    s.mask[i] = 1;
+  }
+  SegmentList Segments() const {
+    SegmentList list;
+    SegmentScan(s.view(), s.mask, SegmentationOptions{}, list);
+    return list;
+  }
+};
+
+TEST(SegmentationTest, RangeStepCutsBetweenTwoPeopleWithNoBeamBetweenThem) {
+  Outlines o;
+  o.Circle(4.2, -3.4, 0.23);  // the nearer person
+  o.Circle(4.35, 2.7, 0.23);  // the other, 0.15 m farther, its shoulder behind the first's
+  const SegmentList list = o.Segments();
+  ASSERT_EQ(list.segments.size(), 1u);  // no beam sees through: one segment
+  const Segment& s = list.segments[0];
+  EXPECT_GT(s.width_m, 0.8);
+  std::array<std::size_t, 3> cuts{};
+  ASSERT_EQ(RangeStepCuts(list, s, RangeStepCutOptions{}, cuts), 1u);
+  const auto pts = list.Points(s);
+  // The first piece is the nearer person's (all within 0.24 m of its centre), the rest the other's.
+  const Eigen::Vector2d a =
+      4.2 * Eigen::Vector2d(std::cos(common::DegToRad(-3.4)), std::sin(common::DegToRad(-3.4)));
+  for (std::size_t k = 0; k < pts.size(); ++k) {
+    EXPECT_EQ((pts[k] - a).norm() < 0.24, k < cuts[0]) << k;
+  }
+  // Narrower than min_width_m: whole.
+  RangeStepCutOptions narrow;
+  narrow.min_width_m = 1.5;
+  EXPECT_EQ(RangeStepCuts(list, s, narrow, cuts), 0u);
+}
+
+TEST(SegmentationTest, RangeStepCutsKeepAStraightFaceWithWhatStandsBehindItsEnd) {
+  // A cart's face, 0.5 m across, seen obliquely, its pusher standing behind its far end: the face
+  // is not curved, so not a body of its own (with any straight run taken for one: cut).
+  Outlines o;
+  o.Face({3.95, -0.5}, {4.1, -0.02});
+  o.Circle(4.35, 2.7, 0.23);
+  const SegmentList list = o.Segments();
+  ASSERT_EQ(list.segments.size(), 1u);
+  ASSERT_GT(list.segments[0].width_m, 0.8);
+  std::array<std::size_t, 3> cuts{};
+  EXPECT_EQ(RangeStepCuts(list, list.segments[0], RangeStepCutOptions{}, cuts), 0u);
+  RangeStepCutOptions flat;
+  flat.min_bulge_m = 0.0;
+  EXPECT_EQ(RangeStepCuts(list, list.segments[0], flat, cuts), 1u);
+  // One round body alone, however wide the limits allow: no step, no cut.
+  Outlines one;
+  one.Circle(3.0, 0.0, 0.45);
+  const SegmentList whole = one.Segments();
+  ASSERT_EQ(whole.segments.size(), 1u);
+  RangeStepCutOptions wide;
+  wide.min_width_m = 0.5;
+  wide.max_piece_width_m = 1.0;
+  EXPECT_EQ(RangeStepCuts(whole, whole.segments[0], wide, cuts), 0u);
 }
 
 TEST(SegmentationTest, RangeJumpSplitsNeighbouringBeams) {

@@ -50,7 +50,7 @@
 //                       [--before-still-legs]
 //                       [--before-box-occluders] [--before-box-rejoin] [--before-box-unseen-cov]
 //                       [--before-box-seen-extent] [--before-knee-box-faces] [--before-see-through]
-//                       [--before-torso-edge-echo]
+//                       [--before-step-seam] [--before-torso-edge-echo]
 //                       [--before-person-size]
 //                       [--before-person-reach] [--before-partial-extent]
 //                       [--before-fusion-merge] [--before-report-sourceless]]
@@ -156,6 +156,8 @@
 //   saw through it between objects side by side, ShapeOptions::split_see_through = false;
 //   --before-torso-edge-echo: "before" measures an upper-body segment of a footprint's beams beside
 //   a nearer return as any, ShapeOptions::torso_edge_echo = false;
+//   --before-step-seam: "before" measures a segment as one observation also where its range steps
+//   between two bodies that touch in the view, ShapeOptions::split_step_seam = false;
 //   --before-person-size: "before" runs with ShapeOptions::person_size_across_ray the other way
 //   round from the default (off by default since it moves round objects' centres towards the
 //   sensor: "before" learns each semi-axis only from views that show it across the ray);
@@ -1399,6 +1401,9 @@ bool g_before_see_through = false;
 // --before-torso-edge-echo: "before" measures an upper-body segment of a footprint's beams beside a
 // nearer return as any (ShapeOptions::torso_edge_echo = false).
 bool g_before_torso_edge_echo = false;
+// --before-step-seam: "before" measures a segment as one observation also where its range steps
+// between two bodies that touch in the view (ShapeOptions::split_step_seam = false).
+bool g_before_step_seam = false;
 // --before-box-unseen-cov: "before" reports a box's size error as the same in every direction,
 // also along an axis the scan does not show (ShapeOptions::box_unseen_depth_cov = false).
 bool g_before_box_unseen_cov = false;
@@ -1473,8 +1478,8 @@ std::vector<Variant> Variants(sim::Mount mount, double range_m) {
              g_before_across_sway || g_before_receded_edges || g_before_stance_weight ||
              g_before_adopt || g_before_touching_legs || g_before_still_legs ||
              g_before_box_occluders || g_before_box_rejoin || g_before_see_through ||
-             g_before_torso_edge_echo || g_before_box_unseen_cov || g_before_box_seen_extent ||
-             g_before_knee_box_faces || g_before_lone_leg_standing ||
+             g_before_step_seam || g_before_torso_edge_echo || g_before_box_unseen_cov ||
+             g_before_box_seen_extent || g_before_knee_box_faces || g_before_lone_leg_standing ||
              g_before_single_beam_partner || g_before_edge_echo_birth || g_before_lone_beam_echo ||
              g_before_far_leg_birth || g_before_person_size || g_before_person_reach ||
              g_before_partial_extent || g_before_neighbour || g_before_range_noise) {
@@ -1520,6 +1525,7 @@ std::vector<Variant> Variants(sim::Mount mount, double range_m) {
     if (g_before_box_rejoin) before.shape.box_rejoin_pieces = false;
     if (g_before_see_through) before.shape.split_see_through = false;
     if (g_before_torso_edge_echo) before.shape.torso_edge_echo = false;
+    if (g_before_step_seam) before.shape.split_step_seam = false;
     if (g_before_box_unseen_cov) before.shape.box_unseen_depth_cov = false;
     if (g_before_box_seen_extent) before.shape.box_seen_extent_cov = false;
     if (g_before_knee_box_faces) before.shape.box_size_from_faces_seen_at_knee = false;
@@ -3378,11 +3384,12 @@ std::string KneeHeightBefore() {
         g_before_single_precision_fit || g_before_edge_sides || g_before_outside_start ||
         g_before_across_sway || g_before_receded_edges || g_before_stance_weight ||
         g_before_adopt || g_before_touching_legs || g_before_still_legs || g_before_box_occluders ||
-        g_before_box_rejoin || g_before_see_through || g_before_torso_edge_echo ||
-        g_before_box_unseen_cov || g_before_box_seen_extent || g_before_knee_box_faces ||
-        g_before_single_beam_partner || g_before_edge_echo_birth || g_before_lone_beam_echo ||
-        g_before_far_leg_birth || g_before_person_size || g_before_person_reach ||
-        g_before_partial_extent || g_before_neighbour || g_before_range_noise) ||
+        g_before_box_rejoin || g_before_see_through || g_before_step_seam ||
+        g_before_torso_edge_echo || g_before_box_unseen_cov || g_before_box_seen_extent ||
+        g_before_knee_box_faces || g_before_single_beam_partner || g_before_edge_echo_birth ||
+        g_before_lone_beam_echo || g_before_far_leg_birth || g_before_person_size ||
+        g_before_person_reach || g_before_partial_extent || g_before_neighbour ||
+        g_before_range_noise) ||
       g_before_mixed_pixels || g_before_far || g_before_evidence_coasting ||
       g_before_report_rules) {
     return "";
@@ -3623,6 +3630,11 @@ std::string KneeHeightBefore() {
         "measuring an upper-body segment of a beam footprint's width beside a nearer return as a "
         "body, not as that edge's mixed echo (`shape.torso_edge_echo` false)");
   }
+  if (g_before_step_seam) {
+    without.push_back(
+        "measuring a segment as one object also where its range steps between two bodies that "
+        "touch in the view (`shape.split_step_seam` false)");
+  }
   if (g_before_see_through) {
     without.push_back(
         "measuring every segment as one object, also where beams saw through it between objects "
@@ -3798,6 +3810,8 @@ int main(int argc, char** argv) {
       g_before_see_through = true;
     } else if (a == "--before-torso-edge-echo") {
       g_before_torso_edge_echo = true;
+    } else if (a == "--before-step-seam") {
+      g_before_step_seam = true;
     } else if (a == "--before-fusion-merge") {
       g_before_fusion_merge = true;
     } else if (a == "--before-report-sourceless") {
@@ -3825,7 +3839,7 @@ int main(int argc, char** argv) {
                    "[--before-still-legs] "
                    "[--before-box-occluders] [--before-box-rejoin] [--before-box-unseen-cov] "
                    "[--before-box-seen-extent] [--before-knee-box-faces] "
-                   "[--before-see-through] [--before-torso-edge-echo] "
+                   "[--before-see-through] [--before-step-seam] [--before-torso-edge-echo] "
                    "[--before-person-size] "
                    "[--before-person-reach] [--before-partial-extent] "
                    "[--before-fusion-merge] "
