@@ -436,6 +436,47 @@ void VisitShape(tracking::ShapeOptions& o, ConfigVisitor& v) {
   v.Field("see_through_min_width_m", o.see_through_min_width_m,
           "With split_see_through: only segments wider than this (m, first to last point) are "
           "cut.");
+  v.Field("split_step_seam", o.split_step_seam,
+          "Upper-body mount: a segment that split_see_through leaves whole is measured as one "
+          "object per piece where its range steps by more than step_seam_min_step_m between two "
+          "curved body-sized pieces that touch in the view with no beam between them (two people "
+          "side by side, one partly behind the other); not where the segment touches a cart's "
+          "predicted outline (a box track, confirmed or not, or with step_seam_size_guard a track "
+          "larger than a person). false: such a segment is one object.");
+  v.Field("step_seam_min_width_m", o.step_seam.min_width_m,
+          "With split_step_seam: only segments wider than this (m, first to last point) are cut.");
+  v.Field("step_seam_min_step_m", o.step_seam.min_step_m,
+          "With split_step_seam: a cut only where the range of neighbouring points steps by more "
+          "than this (m).");
+  VisitInteger(v, "step_seam_min_piece_points", o.step_seam.min_piece_points,
+               "With split_step_seam: each piece holds at least this many points.");
+  v.Field("step_seam_min_piece_width_m", o.step_seam.min_piece_width_m,
+          "With split_step_seam: each piece is at least this wide (m, first to last point).");
+  v.Field("step_seam_max_piece_width_m", o.step_seam.max_piece_width_m,
+          "With split_step_seam: each piece is at most this wide (m, first to last point).");
+  v.Field("step_seam_min_turn_m", o.step_seam.min_turn_m,
+          "With split_step_seam: a piece's end at the cut lies farther than its nearest point by "
+          "more than this (m): its outline turns away there.");
+  v.Field("step_seam_min_bulge_m", o.step_seam.min_bulge_m,
+          "With split_step_seam: a point of each piece lies nearer the sensor than the chord of "
+          "its ends by more than this (m): curved like a body, not a cart's straight face.");
+  v.Field("step_seam_hidden_far_piece", o.step_seam.hidden_far_piece,
+          "With split_step_seam: the piece on the farther side of the step need not turn there "
+          "(the nearer body hides part of it). false: both pieces turn at the step.");
+  v.Field("step_seam_size_guard", o.step_seam_size_guard,
+          "With split_step_seam: no cut where the segment touches (within "
+          "step_seam_size_margin_m) a track not yet fitted as a box whose learned semi-axes "
+          "exceed a person's (step_seam_person_max_a_m, step_seam_person_max_b_m): a cart still "
+          "learned as another shape, whose size a cut would keep below box_min_half_length_m. "
+          "false: only box tracks keep a segment whole.");
+  v.Field("step_seam_person_max_a_m", o.step_seam_person_max_a_m,
+          "With step_seam_size_guard: a learned semi-axis a (along the shoulders) beyond this (m) "
+          "is not a person's.");
+  v.Field("step_seam_person_max_b_m", o.step_seam_person_max_b_m,
+          "With step_seam_size_guard: a learned semi-axis b (front to back) beyond this (m) is "
+          "not a person's.");
+  v.Field("step_seam_size_margin_m", o.step_seam_size_margin_m,
+          "With step_seam_size_guard: the track's predicted bounding rectangle grown by this (m).");
   v.Field("partial_view_size_sigma_m", o.partial_view_size_sigma_m,
           "Upper-body mount, a partial view (fewer than two silhouette ends): in the centre "
           "covariance successive scans share, each semi-axis's sigma is at least this (m), since "

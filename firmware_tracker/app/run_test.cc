@@ -108,22 +108,23 @@ TEST(TrackerRun, PipelineSummaryNamesEveryCounter) {
   c.far_leg_births = 45;
   c.see_through_splits = 46;
   c.torso_edge_echoes = 47;
-  EXPECT_EQ(
-      PipelineSummary(c),
-      "rejected_scans=1 learning_scans=2 segments=3 dropped_segments=4 "
-      "ellipse_measurements=5 com_measurements=6 shape_fits=7 failed_shape_fits=8 "
-      "leg_pairs=9 single_legs=10 legs_behind=11 veiled_segments=12 shadowed_legs=13 "
-      "absorbed_objects=14 seen_through=15 unseen_coasting=16 single_beam_legs=17 "
-      "legs_across_walk=18 split_few_point_legs=19 legs_seen_through=20 "
-      "deep_pieces_kept=21 outline_departure_widened=22 legs_side_uncertain=23 "
-      "legs_side_from_view=24 legs_side_view_contested=25 deep_leg_pairs=26 "
-      "recently_veiled=27 leg_edges_in_mixed_beam=28 stance_weighted_pairs=29 "
-      "touching_leg_pairs=30 box_occluded_fits=31 box_sizes_unseen=32 "
-      "legs_along_from_standing=33 single_beam_partners=34 edge_echo_births=35 "
-      "person_sizes_across_ray=36 partial_view_widened=37 "
-      "underdetermined_fit_widened=38 box_pieces_rejoined=39 legs_coasting_uncertain=40 "
-      "coasting_uncertain=41 box_unseen_widened=42 neighbour_widened=43 "
-      "lone_beam_edge_echoes=44 far_leg_births=45 see_through_splits=46 torso_edge_echoes=47");
+  c.step_seam_splits = 48;
+  EXPECT_EQ(PipelineSummary(c),
+            "rejected_scans=1 learning_scans=2 segments=3 dropped_segments=4 "
+            "ellipse_measurements=5 com_measurements=6 shape_fits=7 failed_shape_fits=8 "
+            "leg_pairs=9 single_legs=10 legs_behind=11 veiled_segments=12 shadowed_legs=13 "
+            "absorbed_objects=14 seen_through=15 unseen_coasting=16 single_beam_legs=17 "
+            "legs_across_walk=18 split_few_point_legs=19 legs_seen_through=20 "
+            "deep_pieces_kept=21 outline_departure_widened=22 legs_side_uncertain=23 "
+            "legs_side_from_view=24 legs_side_view_contested=25 deep_leg_pairs=26 "
+            "recently_veiled=27 leg_edges_in_mixed_beam=28 stance_weighted_pairs=29 "
+            "touching_leg_pairs=30 box_occluded_fits=31 box_sizes_unseen=32 "
+            "legs_along_from_standing=33 single_beam_partners=34 edge_echo_births=35 "
+            "person_sizes_across_ray=36 partial_view_widened=37 "
+            "underdetermined_fit_widened=38 box_pieces_rejoined=39 legs_coasting_uncertain=40 "
+            "coasting_uncertain=41 box_unseen_widened=42 neighbour_widened=43 "
+            "lone_beam_edge_echoes=44 far_leg_births=45 see_through_splits=46 torso_edge_echoes=47 "
+            "step_seam_splits=48");
 }
 
 TEST(TrackerRun, MultiTrackerSummaryNamesEveryCounterButTheTwoBeforeIt) {

@@ -686,6 +686,11 @@ std::optional<std::string> Validate(const ShapeOptions& o) {
     return "torso_edge_echo_min_far_share must be in [0, 1)";
   }
   if (auto e = Validate(o.step_seam)) return "step_seam: " + *e;
+  if (!(Positive(o.step_seam_person_max_a_m) && Positive(o.step_seam_person_max_b_m) &&
+        std::isfinite(o.step_seam_size_margin_m) && o.step_seam_size_margin_m >= 0.0)) {
+    return "step_seam_person_max_a_m and step_seam_person_max_b_m must be > 0, "
+           "step_seam_size_margin_m >= 0";
+  }
   if (!Positive(o.box_size_sigma_m)) return "box_size_sigma_m must be > 0";
   if (!Positive(o.box_unseen_sigma_m)) return "box_unseen_sigma_m must be > 0";
   if (!Positive(o.box_prior_min_half_m) || !(o.box_prior_max_half_m > o.box_prior_min_half_m) ||
@@ -1917,6 +1922,18 @@ bool TrackingPipeline::OnConfirmedBox(const Segment& s, common::UtcNs stamp_ns,
   const double range = Range(pts.front());
   for (std::size_t t = 0; t < *tracks; ++t) {
     const TrackPrediction& pr = predictions_[t];
+    if (seam && o.step_seam_size_guard && pr.model != ShapeModel::kBox &&
+        (pr.size_m.x() > o.step_seam_person_max_a_m ||
+         pr.size_m.y() > o.step_seam_person_max_b_m)) {
+      // ShapeOptions::step_seam_size_guard: a cart the tracker still learns as another shape.
+      for (const Eigen::Vector2d& p : pts) {
+        if (internal::InsideGrownBox(pr.position_m, pr.size_m, pr.yaw_rad,
+                                     o.step_seam_size_margin_m,
+                                     std::span<const Eigen::Vector2d>(&p, 1))) {
+          return true;
+        }
+      }
+    }
     // ShapeOptions::split_step_seam: also a box track not yet confirmed.
     if (pr.model != ShapeModel::kBox || !(pr.confirmed || seam)) continue;
     const double margin = BoxRejoinMargin(o, BoxStateVar(o, pr), range);

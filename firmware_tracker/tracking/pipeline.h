@@ -680,14 +680,27 @@ struct ShapeOptions {
   // after it, each piece body-sized). Two people walking side by side, the one's shoulder in front
   // of the other's, leave no beam that sees through. Not where a point of the segment lies on a
   // box track's predicted rectangle (as for split_see_through, confirmed or not: a cart and its
-  // pusher; a cart tracked as another shape can still be cut from its pusher).
+  // pusher), nor (step_seam_size_guard) on the outline of a track the tracker still learns as
+  // another shape but whose learned size is beyond a person's.
   // tracking_benchmark --before-step-seam, upper body per sensor over the shipped scenes: p95
-  // 0.0710 -> 0.0709, precision 0.9943 -> 0.9944, NEES 1.51 -> 1.50 (shop_floor p95 0.216 ->
-  // 0.209). Nearly all the cuts leave a piece of 3 or 4 points (a far pair, or the farther one's
-  // sliver). Counted (pieces added) in PipelineCounters::step_seam_splits. false: such a segment is
-  // one observation.
+  // 0.0688 -> 0.0687, precision 0.9972, NEES 1.50 (both unchanged). Nearly all the cuts leave a
+  // piece of 3 or 4 points (a far pair, or the farther one's sliver). Counted (pieces added) in
+  // PipelineCounters::step_seam_splits. false: such a segment is one observation.
   bool split_step_seam = true;
   RangeStepCutOptions step_seam;
+  // split_step_seam: no cut where a point of the segment lies within step_seam_size_margin_m of
+  // the predicted bounding rectangle of a track (confirmed or not) not yet fitted as a box whose
+  // learned semi-axes exceed a person's (a > step_seam_person_max_a_m or b >
+  // step_seam_person_max_b_m; the person prior is 0.23 / 0.14 +- 0.04): a cart whose semi-axis
+  // grows towards box_min_half_length_m. Cut from its pusher or a person beside it, the cart's
+  // piece (at most max_piece_width_m across) keeps its learned size below that limit and the
+  // track never becomes a box (scenario test ACartLearnedAsAPersonIsNotCutFromThePersonBesideIt:
+  // 62 -> 0 cuts, a third track beside the two in 52 -> 0 scans). false: only box tracks keep a
+  // segment whole.
+  bool step_seam_size_guard = true;
+  double step_seam_person_max_a_m = 0.30;
+  double step_seam_person_max_b_m = 0.22;
+  double step_seam_size_margin_m = 0.15;
   // Upper-body mount, a partial view (fewer than two silhouette ends): the centre across the ray
   // and along it rests on the body's extent towards the hidden side, which the scan does not
   // show; the size state the track learned (from scans whose errors are alike, floored at
@@ -1024,7 +1037,8 @@ class TrackingPipeline {
                            std::optional<std::size_t>& tracks);
   // ShapeOptions::split_see_through: whether a point of segment s lies on a confirmed box track's
   // predicted rectangle (grown as for box_rejoin_pieces); predicts the tracks once per scan.
-  // seam (ShapeOptions::split_step_seam): on any box track, confirmed or not.
+  // seam (ShapeOptions::split_step_seam): on any box track, confirmed or not, or
+  // (step_seam_size_guard) near any track larger than a person.
   bool OnConfirmedBox(const Segment& s, common::UtcNs stamp_ns, std::optional<std::size_t>& tracks,
                       bool seam = false);
   // tracks: the live tracks' predictions at the scan's time, in predictions_ (predicted once).

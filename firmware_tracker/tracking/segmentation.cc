@@ -178,13 +178,15 @@ std::size_t RangeStepCuts(const SegmentList& list, const Segment& s,
   const std::size_t n = pts.size();
   // Whether points [a, b) form one body-sized piece whose end `end` (a or b - 1) lies beyond its
   // nearest point.
-  const auto body = [&](std::size_t a, std::size_t b, std::size_t end) {
+  // `hidden`: the piece may be a body the other hides in part, its end at the cut no end of its
+  // outline (no turn asked of it).
+  const auto body = [&](std::size_t a, std::size_t b, std::size_t end, bool hidden) {
     if (b - a < options.min_piece_points) return false;
     const double width = (pts[b - 1] - pts[a]).norm();
     if (width < options.min_piece_width_m || width > options.max_piece_width_m) return false;
     double nearest = pts[a].norm();
     for (std::size_t i = a + 1; i < b; ++i) nearest = std::min(nearest, pts[i].norm());
-    if (!(pts[end].norm() > nearest + options.min_turn_m)) return false;
+    if (!hidden && !(pts[end].norm() > nearest + options.min_turn_m)) return false;
     // Curved: a point between the ends lies nearer the sensor than their chord by min_bulge_m (a
     // box's face is straight).
     const Eigen::Vector2d chord = pts[b - 1] - pts[a];
@@ -208,7 +210,15 @@ std::size_t RangeStepCuts(const SegmentList& list, const Segment& s,
         break;
       }
     }
-    if (!body(last_cut, k, k - 1) || !(body(k, next, k) || body(k, n, k))) continue;
+    // RangeStepCutOptions::hidden_far_piece: the farther piece at the step may be the body the
+    // nearer one hides in part.
+    const bool left_far = pts[k - 1].norm() > pts[k].norm();
+    const bool left_hidden = options.hidden_far_piece && left_far;
+    const bool right_hidden = options.hidden_far_piece && !left_far;
+    if (!body(last_cut, k, k - 1, left_hidden) ||
+        !(body(k, next, k, right_hidden) || body(k, n, k, right_hidden))) {
+      continue;
+    }
     cuts[count++] = k;
     last_cut = k;
     if (count == cuts.size()) break;

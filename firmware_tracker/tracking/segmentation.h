@@ -88,6 +88,10 @@ std::size_t SeeThroughCuts(const ScanView& scan, const SegmentList& list, const 
 // point between min_piece_width_m and max_piece_width_m, and its end at the cut lies farther than
 // its nearest point by more than min_turn_m. Only for segments wider than min_width_m. Writes at
 // most cuts.size() cuts in increasing order and returns their count.
+// hidden_far_piece: the piece on the farther side of the step need not turn there: where the
+// nearer body hides part of the farther one, the farther piece's end at the step is where the
+// nearer one's silhouette cuts its outline, not an end of that outline (a pair seen one partly
+// behind the other). false: both pieces turn at the step.
 struct RangeStepCutOptions {
   double min_width_m = 0.8;
   double min_step_m = 0.1;
@@ -96,6 +100,7 @@ struct RangeStepCutOptions {
   double max_piece_width_m = 0.7;
   double min_turn_m = 0.05;
   double min_bulge_m = 0.03;
+  bool hidden_far_piece = true;
 };
 std::optional<std::string> Validate(const RangeStepCutOptions& options);
 std::size_t RangeStepCuts(const SegmentList& list, const Segment& s,

@@ -256,6 +256,31 @@ TEST(SegmentationTest, RangeStepCutsBetweenTwoPeopleWithNoBeamBetweenThem) {
   EXPECT_EQ(RangeStepCuts(list, s, narrow, cuts), 0u);
 }
 
+TEST(SegmentationTest, RangeStepCutsWhereTheNearerHidesTheOthersNearestPoint) {
+  // The farther person's nearest point lies just beside the nearer one's silhouette: its outline
+  // at the step rises less than min_turn_m from there (the nearer one hides the rest of its turn).
+  Outlines o;
+  o.Circle(4.0, -4.0, 0.23);
+  o.Circle(4.3, 0.5, 0.23);
+  const SegmentList list = o.Segments();
+  ASSERT_EQ(list.segments.size(), 1u);
+  const Segment& s = list.segments[0];
+  RangeStepCutOptions hidden;
+  hidden.min_width_m = 0.6;
+  std::array<std::size_t, 3> cuts{};
+  ASSERT_EQ(RangeStepCuts(list, s, hidden, cuts), 1u);
+  const auto pts = list.Points(s);
+  const Eigen::Vector2d a =
+      4.0 * Eigen::Vector2d(std::cos(common::DegToRad(-4.0)), std::sin(common::DegToRad(-4.0)));
+  for (std::size_t k = 0; k < pts.size(); ++k) {
+    EXPECT_EQ((pts[k] - a).norm() < 0.24, k < cuts[0]) << k;
+  }
+  // Both pieces asked to turn at the step: whole.
+  RangeStepCutOptions both_turn = hidden;
+  both_turn.hidden_far_piece = false;
+  EXPECT_EQ(RangeStepCuts(list, s, both_turn, cuts), 0u);
+}
+
 TEST(SegmentationTest, RangeStepCutsKeepAStraightFaceWithWhatStandsBehindItsEnd) {
   // A cart's face, 0.5 m across, seen obliquely, its pusher standing behind its far end: the face
   // is not curved, so not a body of its own (with any straight run taken for one: cut).
