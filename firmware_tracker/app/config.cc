@@ -614,6 +614,15 @@ void VisitTracking(tracking::TrackerOptions& p, ConfigVisitor& v) {
           "A measurement whose squared Mahalanobis distance exceeds this scales the track's "
           "covariance by d2 / 2 before the update, so a track follows a start, stop or turn "
           "instead of lagging behind; 0: off, else >= 2.");
+  v.Field("report_gain_covariance", o.report_gain_covariance,
+          "The covariance sent with a measured track: the one the filter's gains leave with "
+          "the measurement noise across the ray measured from the track's innovations (at "
+          "upper-body height, where nothing beside the body, no outline departure beyond "
+          "the filter's allowance and no partial view make the errors shared) instead of "
+          "the filter's own; the tracks are the same. false: the filter's own covariance.");
+  v.Field("measured_noise_memory_scans", o.measured_noise_memory_scans,
+          "Updates over which report_gain_covariance measures the noise across the ray from "
+          "the innovations (covariance matching); 0: the filter's noise.");
   v.Field("extra_measurement_sigma_m", o.extra_measurement_sigma_m,
           "Added in quadrature to every centre_of_mass / ellipse measurement's sigma and to the "
           "rough position of shape_fit's association (sway, viewpoint changes).");

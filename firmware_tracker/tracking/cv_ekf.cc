@@ -25,12 +25,44 @@ void CvEkf::Init(const Eigen::Vector2d& z_m, const Eigen::Matrix2d& r_m2) {
   const double v2 = options_.initial_velocity_sigma_mps * options_.initial_velocity_sigma_mps;
   p_(2, 2) = v2;
   p_(3, 3) = v2;
+  p_gain_ = p_;
 }
 
 void CvEkf::Predict(double dt_s) {
   if (!(dt_s > 0.0) || !std::isfinite(dt_s)) return;
+  State x = x_;
+  common::CvPredict(dt_s, options_.accel_psd_m2ps3, x, p_gain_);
   common::CvPredict(dt_s, options_.accel_psd_m2ps3, x_, p_);
 }
+
+namespace {
+
+// (I - K H) P (I - K H)^T + K R K^T for H = [I 0], P symmetric, in 2 x 2 blocks: I - K H =
+// [[I - K1, 0], [-K2, I]] (K1, K2: K's position and velocity rows), so without the 4 x 4 products'
+// multiplications by zero:
+//   M = (I - K1) [P11 P12],  N = [P21 P22] - K2 [P11 P12],
+//   P' = [[M1 (I - K1)^T, M2 - M1 K2^T], [., N2 - N1 K2^T]] + K R K^T (upper blocks; symmetric).
+void JosephUpdate(const Eigen::Matrix<double, 4, 2>& k, const Eigen::Matrix2d& r,
+                  Eigen::Matrix4d& p) {
+  const Eigen::Matrix2d k1 = k.topRows<2>(), k2 = k.bottomRows<2>();
+  const Eigen::Matrix2d a = Eigen::Matrix2d::Identity() - k1;
+  const Eigen::Matrix2d p11 = p.topLeftCorner<2, 2>(), p12 = p.topRightCorner<2, 2>();
+  const Eigen::Matrix2d p21 = p.bottomLeftCorner<2, 2>(), p22 = p.bottomRightCorner<2, 2>();
+  const Eigen::Matrix2d m1 = a * p11, m2 = a * p12;
+  const Eigen::Matrix2d n1 = p21 - k2 * p11, n2 = p22 - k2 * p12;
+  const Eigen::Matrix2d rk1 = r * k1.transpose(), rk2 = r * k2.transpose();
+  const Eigen::Matrix2d top_left = m1 * a.transpose() + k1 * rk1;
+  const Eigen::Matrix2d top_right = m2 - m1 * k2.transpose() + k1 * rk2;
+  const Eigen::Matrix2d bottom_left = n1 * a.transpose() + k2 * rk1;
+  const Eigen::Matrix2d bottom_right = n2 - n1 * k2.transpose() + k2 * rk2;
+  p.topLeftCorner<2, 2>() = 0.5 * (top_left + top_left.transpose());
+  p.bottomRightCorner<2, 2>() = 0.5 * (bottom_right + bottom_right.transpose());
+  const Eigen::Matrix2d off = 0.5 * (top_right + bottom_left.transpose());
+  p.topRightCorner<2, 2>() = off;
+  p.bottomLeftCorner<2, 2>() = off.transpose();
+}
+
+}  // namespace
 
 double CvEkf::MahalanobisSq(const Eigen::Vector2d& z_m, const Eigen::Matrix2d& r_m2) const {
   const Eigen::Matrix2d s = p_.topLeftCorner<2, 2>() + r_m2;
@@ -41,7 +73,8 @@ double CvEkf::MahalanobisSq(const Eigen::Vector2d& z_m, const Eigen::Matrix2d& r
   return std::isfinite(d2) ? d2 : std::numeric_limits<double>::infinity();
 }
 
-bool CvEkf::Update(const Eigen::Vector2d& z_m, const Eigen::Matrix2d& r_m2) {
+bool CvEkf::Update(const Eigen::Vector2d& z_m, const Eigen::Matrix2d& r_m2,
+                   const Eigen::Matrix2d* gain_r_m2) {
   if (!z_m.allFinite() || !r_m2.allFinite()) return false;
   const Eigen::Matrix2d r = 0.5 * (r_m2 + r_m2.transpose());
   // H = [I 0] selects the position: S = H P H^T + R is P's top-left block plus R, and P H^T its
@@ -56,27 +89,14 @@ bool CvEkf::Update(const Eigen::Vector2d& z_m, const Eigen::Matrix2d& r_m2) {
   s_inv /= det;
   const Eigen::Matrix<double, 4, 2> k = p_.topRows<2>().transpose() * s_inv;  // K = P H^T S^-1
   x_ += k * (z_m - x_.head<2>());
-  // Joseph form: stays positive semi-definite even with a slightly wrong gain from rounding.
-  // I - K H = [[I - K1, 0], [-K2, I]] (K1, K2: K's position and velocity rows), so
-  // (I - K H) P (I - K H)^T in 2 x 2 blocks, without the 4 x 4 products' multiplications by zero:
-  //   M = (I - K1) [P11 P12],  N = [P21 P22] - K2 [P11 P12],
-  //   P' = [[M1 (I - K1)^T, M2 - M1 K2^T], [., N2 - N1 K2^T]] + K R K^T (upper blocks; symmetric).
-  const Eigen::Matrix2d k1 = k.topRows<2>(), k2 = k.bottomRows<2>();
-  const Eigen::Matrix2d a = Eigen::Matrix2d::Identity() - k1;
-  const Eigen::Matrix2d p11 = p_.topLeftCorner<2, 2>(), p12 = p_.topRightCorner<2, 2>();
-  const Eigen::Matrix2d p21 = p_.bottomLeftCorner<2, 2>(), p22 = p_.bottomRightCorner<2, 2>();
-  const Eigen::Matrix2d m1 = a * p11, m2 = a * p12;
-  const Eigen::Matrix2d n1 = p21 - k2 * p11, n2 = p22 - k2 * p12;
-  const Eigen::Matrix2d rk1 = r * k1.transpose(), rk2 = r * k2.transpose();
-  const Eigen::Matrix2d top_left = m1 * a.transpose() + k1 * rk1;
-  const Eigen::Matrix2d top_right = m2 - m1 * k2.transpose() + k1 * rk2;
-  const Eigen::Matrix2d bottom_left = n1 * a.transpose() + k2 * rk1;
-  const Eigen::Matrix2d bottom_right = n2 - n1 * k2.transpose() + k2 * rk2;
-  p_.topLeftCorner<2, 2>() = 0.5 * (top_left + top_left.transpose());
-  p_.bottomRightCorner<2, 2>() = 0.5 * (bottom_right + bottom_right.transpose());
-  const Eigen::Matrix2d off = 0.5 * (top_right + bottom_left.transpose());
-  p_.topRightCorner<2, 2>() = off;
-  p_.bottomLeftCorner<2, 2>() = off.transpose();
+  // Joseph form: stays positive semi-definite even with a slightly wrong gain from rounding; the
+  // gain's own covariance (gain_covariance()) through the same gain.
+  JosephUpdate(k, r, p_);
+  if (gain_r_m2 != nullptr && gain_r_m2->allFinite()) {
+    JosephUpdate(k, 0.5 * (*gain_r_m2 + gain_r_m2->transpose()), p_gain_);
+  } else {
+    JosephUpdate(k, r, p_gain_);
+  }
   return true;
 }
 

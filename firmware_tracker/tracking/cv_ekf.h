@@ -45,12 +45,17 @@ class CvEkf {
 
   // Position update. Returns false (filter unchanged) when the innovation covariance is not
   // positive definite or the input is not finite.
-  bool Update(const Eigen::Vector2d& z_m, const Eigen::Matrix2d& r_m2);
+  // gain_r_m2: the measurement noise gain_covariance() takes (else r_m2).
+  bool Update(const Eigen::Vector2d& z_m, const Eigen::Matrix2d& r_m2,
+              const Eigen::Matrix2d* gain_r_m2 = nullptr);
 
   // Multiplies the covariance by factor (> 0 and finite, else nothing): a state that proved less
-  // certain than it claimed (a manoeuvre the constant-velocity model did not predict).
+  // certain than it claimed (a manoeuvre the constant-velocity model did not predict); the gain
+  // covariance too (the state's error is as much larger).
   void InflateCovariance(double factor) {
-    if (std::isfinite(factor) && factor > 0.0) p_ *= factor;
+    if (!(std::isfinite(factor) && factor > 0.0)) return;
+    p_ *= factor;
+    p_gain_ *= factor;
   }
 
   // Replaces the state (e.g. a velocity limited to the possible), keeping the covariance.
@@ -58,6 +63,13 @@ class CvEkf {
 
   const State& state() const { return x_; }
   const Covariance& covariance() const { return p_; }
+  // The covariance of the state's error given the gains the filter applied and the measurement
+  // noise gain_r_m2 of each Update (Gelb, Applied Optimal Estimation, 1974, sec. 7.2: the error
+  // covariance of a filter whose gains were computed from other noise statistics than the true
+  // ones): propagated with the same process noise and inflations, updated in Joseph form with the
+  // gain K = P H^T S^-1 computed from covariance() and R. Equal to covariance() where every
+  // gain_r_m2 was R.
+  const Covariance& gain_covariance() const { return p_gain_; }
   Eigen::Vector2d position_m() const { return x_.head<2>(); }
   Eigen::Vector2d velocity_mps() const { return x_.tail<2>(); }
 
@@ -65,6 +77,7 @@ class CvEkf {
   CvEkfOptions options_;
   State x_ = State::Zero();
   Covariance p_ = Covariance::Identity();
+  Covariance p_gain_ = Covariance::Identity();
 };
 
 }  // namespace lrfnet::tracking

@@ -123,5 +123,46 @@ TEST(CvEkfTest, BadMeasurementsLeaveTheFilterUnchanged) {
   EXPECT_EQ(ekf.covariance(), p);
 }
 
+// CvEkf::gain_covariance: the same gains with the true noise. Told 1.5 cm per scan while the
+// measurements scatter by 3 mm, the filter's state scatters by what the gains make of 3 mm, which
+// the gain covariance says and the filter's own does not; the state is the same either way.
+TEST(CvEkfTest, GainCovarianceIsTheErrorTheGainsLeaveWithTheTrueNoise) {
+  const Eigen::Matrix2d told = 0.015 * 0.015 * Eigen::Matrix2d::Identity();
+  const Eigen::Matrix2d actual = 0.003 * 0.003 * Eigen::Matrix2d::Identity();
+  CvEkf a{CvEkfOptions{}}, b{CvEkfOptions{}};
+  a.Init({0.0, 0.0}, told);
+  b.Init({0.0, 0.0}, told);
+  std::mt19937 rng(7);
+  std::normal_distribution<double> noise(0.0, 0.003);
+  double err2 = 0.0;
+  int n = 0;
+  for (int k = 1; k <= 2000; ++k) {
+    a.Predict(0.04);
+    b.Predict(0.04);
+    if (k % 50 == 0) {
+      a.InflateCovariance(3.0);
+      b.InflateCovariance(3.0);
+    }
+    const Eigen::Vector2d truth(0.04 * k, 0.0);
+    const Eigen::Vector2d z = truth + Eigen::Vector2d(noise(rng), noise(rng));
+    ASSERT_TRUE(a.Update(z, told));
+    ASSERT_TRUE(b.Update(z, told, &actual));
+    EXPECT_EQ(a.state(), b.state());
+    EXPECT_LT((a.gain_covariance() - a.covariance()).norm(), 1e-15);
+    if (k > 100) {
+      err2 += (b.position_m() - truth).squaredNorm();
+      ++n;
+    }
+  }
+  const double claimed = b.gain_covariance().topLeftCorner<2, 2>().trace();
+  const double filters = b.covariance().topLeftCorner<2, 2>().trace();
+  EXPECT_LT(claimed, 0.25 * filters);
+  // The mean squared error against each trace: the gain covariance is nearer (what is left is the
+  // process noise, for accelerations this straight walk does not make) and not below it.
+  const double mse = err2 / n;
+  EXPECT_GT(mse / claimed, 3.0 * mse / filters);
+  EXPECT_LT(mse / claimed, 1.0);
+}
+
 }  // namespace
 }  // namespace lrfnet::tracking

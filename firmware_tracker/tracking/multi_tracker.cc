@@ -1,5 +1,6 @@
 #include "firmware_tracker/tracking/multi_tracker.h"
 
+#include <Eigen/Eigenvalues>
 #include <algorithm>
 #include <bit>
 #include <cmath>
@@ -59,6 +60,9 @@ std::optional<std::string> Validate(const MultiTrackerOptions& o) {
   if (!(std::isfinite(o.inflate_nis_above) &&
         (o.inflate_nis_above == 0.0 || o.inflate_nis_above >= 2.0))) {
     return "inflate_nis_above must be 0 (off) or >= 2";
+  }
+  if (!(std::isfinite(o.measured_noise_memory_scans) && o.measured_noise_memory_scans >= 0.0)) {
+    return "measured_noise_memory_scans must be >= 0 (0: off)";
   }
   if (!(std::isfinite(o.extra_measurement_sigma_m) && o.extra_measurement_sigma_m >= 0.0)) {
     return "extra_measurement_sigma_m must be >= 0";
@@ -461,7 +465,8 @@ void MultiTracker::UpdateAssigned(common::UtcNs scan_start_ns,
       ++counters_.refine_failures;
       continue;
     }
-    if (!t.filter.Update(z, r)) {
+    const Eigen::Matrix2d gain_r = MeasuredNoise(t, z, r);
+    if (!t.filter.Update(z, r, &gain_r)) {
       ++counters_.failed_updates;
       continue;
     }
@@ -470,6 +475,34 @@ void MultiTracker::UpdateAssigned(common::UtcNs scan_start_ns,
     t.hits |= 1u;
     NoteUpdate(t, m, c, z, at_ns, scan_start_ns);
   }
+}
+
+Eigen::Matrix2d MultiTracker::MeasuredNoise(Track& t, const Eigen::Vector2d& z_m,
+                                            const Eigen::Matrix2d& r_m2) const {
+  const double memory = options_.measured_noise_memory_scans;
+  const double range_m = z_m.norm();
+  if (!(memory > 0.0) || !(range_m > 0.0)) return r_m2;
+  // Across the line of sight (the sensor at the origin): along it the measurement's error is
+  // mostly the body's extent towards the sensor, which successive scans share and which the
+  // innovations therefore do not show.
+  const Eigen::Vector2d u = z_m / range_m;
+  const Eigen::Vector2d w(-u.y(), u.x());
+  const double nu_across = w.dot(z_m - t.filter.position_m());
+  const double excess_m2 =
+      nu_across * nu_across - w.dot(t.filter.gain_covariance().topLeftCorner<2, 2>() * w);
+  t.innovation_updates = std::min(memory, t.innovation_updates + 1.0);
+  t.innovation_excess_m2 += (excess_m2 - t.innovation_excess_m2) / t.innovation_updates;
+  if (t.innovation_updates < 0.5 * memory) return r_m2;
+  // Another object beside the body, an outline that departs from the model by more than the
+  // filter's R allows for per scan, or a view resting on the priors: errors successive scans
+  // share, which the innovations do not show; the filter's R stays.
+  if (t.shape.reported_neighbour_m2 > 0.0 || t.shape.reported_departure_m2 > w.dot(r_m2 * w) ||
+      !t.shape.reported_partial_cov_m2.isZero()) {
+    return r_m2;
+  }
+  const double along_m2 = u.dot(r_m2 * u);
+  const double across_m2 = std::max(0.0, t.innovation_excess_m2);
+  return along_m2 * u * u.transpose() + across_m2 * w * w.transpose();
 }
 
 bool MultiTracker::MeasureForTrack(Track& t, const Candidate& c, common::UtcNs at_ns,
@@ -822,7 +855,8 @@ void MultiTracker::Report(common::UtcNs scan_start_ns, ScanTracks& out) {
     }
     if (!reportable && !options_.report_tentative) continue;
     Eigen::Vector4d x = t.filter.state();
-    Eigen::Matrix4d p = t.filter.covariance();
+    Eigen::Matrix4d p = options_.report_gain_covariance && t.updated ? t.filter.gain_covariance()
+                                                                     : t.filter.covariance();
     const double back_s = common::NsToSeconds(scan_start_ns - t.filter_ns);
     if (back_s < 0.0) internal::Extrapolate(back_s, x, p);
     TrackReport* r = out.tracks.emplace_slot();

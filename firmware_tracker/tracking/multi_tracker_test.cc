@@ -123,6 +123,7 @@ TEST(MultiTrackerOptionsTest, DefaultsValidAndEachBadValueNamesItsField) {
        "recover_gate_mahalanobis_sq"},
       {with([](auto& o) { o.inflate_nis_above = 1.0; }), "inflate_nis_above"},
       {with([](auto& o) { o.inflate_nis_above = -1.0; }), "inflate_nis_above"},
+      {with([](auto& o) { o.measured_noise_memory_scans = -1.0; }), "measured_noise_memory_scans"},
       {with([](auto& o) { o.coast_timeout_s = 0.0; }), "coast_timeout_s"},
       {with([](auto& o) { o.resume_window_s = -1.0; }), "resume_window_s"},
       {with([](auto& o) { o.adopt_successor_m = -1.0; }), "adopt_successor_m"},
