@@ -25,13 +25,15 @@ void CvEkf::Init(const Eigen::Vector2d& z_m, const Eigen::Matrix2d& r_m2) {
   const double v2 = options_.initial_velocity_sigma_mps * options_.initial_velocity_sigma_mps;
   p_(2, 2) = v2;
   p_(3, 3) = v2;
-  p_gain_ = p_;
+  gain_ = false;
 }
 
 void CvEkf::Predict(double dt_s) {
   if (!(dt_s > 0.0) || !std::isfinite(dt_s)) return;
-  State x = x_;
-  common::CvPredict(dt_s, options_.accel_psd_m2ps3, x, p_gain_);
+  if (gain_) {
+    State x = x_;
+    common::CvPredict(dt_s, options_.accel_psd_m2ps3, x, p_gain_);
+  }
   common::CvPredict(dt_s, options_.accel_psd_m2ps3, x_, p_);
 }
 
@@ -91,12 +93,14 @@ bool CvEkf::Update(const Eigen::Vector2d& z_m, const Eigen::Matrix2d& r_m2,
   x_ += k * (z_m - x_.head<2>());
   // Joseph form: stays positive semi-definite even with a slightly wrong gain from rounding; the
   // gain's own covariance (gain_covariance()) through the same gain.
-  JosephUpdate(k, r, p_);
-  if (gain_r_m2 != nullptr && gain_r_m2->allFinite()) {
-    JosephUpdate(k, 0.5 * (*gain_r_m2 + gain_r_m2->transpose()), p_gain_);
-  } else {
-    JosephUpdate(k, r, p_gain_);
+  if (gain_) {
+    if (gain_r_m2 != nullptr && gain_r_m2->allFinite()) {
+      JosephUpdate(k, 0.5 * (*gain_r_m2 + gain_r_m2->transpose()), p_gain_);
+    } else {
+      JosephUpdate(k, r, p_gain_);
+    }
   }
+  JosephUpdate(k, r, p_);
   return true;
 }
 

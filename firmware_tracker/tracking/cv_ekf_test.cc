@@ -132,6 +132,8 @@ TEST(CvEkfTest, GainCovarianceIsTheErrorTheGainsLeaveWithTheTrueNoise) {
   CvEkf a{CvEkfOptions{}}, b{CvEkfOptions{}};
   a.Init({0.0, 0.0}, told);
   b.Init({0.0, 0.0}, told);
+  a.StartGainCovariance();
+  b.StartGainCovariance();
   std::mt19937 rng(7);
   std::normal_distribution<double> noise(0.0, 0.003);
   double err2 = 0.0;

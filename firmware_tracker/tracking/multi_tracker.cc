@@ -1,6 +1,5 @@
 #include "firmware_tracker/tracking/multi_tracker.h"
 
-#include <Eigen/Eigenvalues>
 #include <algorithm>
 #include <bit>
 #include <cmath>
@@ -144,8 +143,7 @@ std::size_t MultiTracker::Predict(common::UtcNs t_ns, std::span<TrackPrediction>
   for (const bool confirmed : {true, false}) {
     for (const Track& t : tracks_) {
       if (t.confirmed != confirmed || n == out.size()) continue;
-      CvEkf f = t.filter;
-      if (t_ns > t.filter_ns) f.Predict(common::NsToSeconds(t_ns - t.filter_ns));
+      const CvEkf f = t.filter.Predicted(common::NsToSeconds(t_ns - t.filter_ns));
       TrackPrediction& p = out[n++];
       p.id = t.id;
       p.confirmed = t.confirmed;
@@ -289,8 +287,8 @@ void MultiTracker::Gate(common::UtcNs scan_start_ns) {
     offset_s[j] = 0.0;
   }
   for (std::size_t i = 0; i < tracks_.size(); ++i) {
-    CvEkf predicted = tracks_[i].filter;
-    predicted.Predict(common::NsToSeconds(scan_start_ns - tracks_[i].filter_ns));
+    const CvEkf predicted =
+        tracks_[i].filter.Predicted(common::NsToSeconds(scan_start_ns - tracks_[i].filter_ns));
     track_to_candidate_[i] = -1;
     const Eigen::Vector4d& x = predicted.state();
     const Eigen::Matrix4d& p = predicted.covariance();
@@ -565,6 +563,7 @@ void MultiTracker::ManageLifecycle(common::UtcNs scan_start_ns) {
       if (hits >= options_.confirm_hits && long_enough) {
         t.confirmed = true;
         ++counters_.confirmed;
+        if (GainCovariance()) t.filter.StartGainCovariance();
       } else {
         const std::uint32_t scans_left = t.age_scans + 1 >= options_.confirm_window
                                              ? 0
@@ -663,6 +662,7 @@ void MultiTracker::AdoptSuccessors(common::UtcNs scan_start_ns) {
     Track& old = tracks_[best_old];
     const Track& young = tracks_[best_young];
     old.filter = young.filter;
+    if (GainCovariance() && old.confirmed) old.filter.StartGainCovariance();
     old.filter_ns = young.filter_ns;
     old.last_update_ns = young.last_update_ns;
     old.measured_s += young.measured_s;
@@ -721,8 +721,7 @@ bool MultiTracker::Resume(common::UtcNs scan_start_ns, const Candidate& c,
         at_ns < t.filter_ns) {
       continue;
     }
-    CvEkf predicted = t.filter;
-    predicted.Predict(common::NsToSeconds(at_ns - t.filter_ns));
+    const CvEkf predicted = t.filter.Predicted(common::NsToSeconds(at_ns - t.filter_ns));
     double d2 = 0.0;
     if (InsideGate(predicted.position_m(), predicted.covariance().topLeftCorner<2, 2>(), c, &d2,
                    nullptr) &&
@@ -739,6 +738,7 @@ bool MultiTracker::Resume(common::UtcNs scan_start_ns, const Candidate& c,
   t.filter = CvEkf(options_.ekf);
   t.filter.Init(t.z_m, c.r_m2);
   t.filter.Predict(common::NsToSeconds(at_ns - t.last_update_ns));
+  if (GainCovariance() && t.confirmed) t.filter.StartGainCovariance();
   t.filter_ns = at_ns;
   Measurement m;
   Eigen::Vector2d z;

@@ -473,6 +473,11 @@ class MultiTracker {
   // statistics updated with it.
   Eigen::Matrix2d MeasuredNoise(Track& t, const Eigen::Vector2d& z_m,
                                 const Eigen::Matrix2d& r_m2) const;
+  // MultiTrackerOptions::report_gain_covariance with measured noise: a confirmed track's filter
+  // keeps its gain covariance (CvEkf::StartGainCovariance), from its confirmation on.
+  bool GainCovariance() const {
+    return options_.report_gain_covariance && options_.measured_noise_memory_scans > 0.0;
+  }
   bool MeasureForTrack(Track& t, const Candidate& c, common::UtcNs at_ns,
                        std::span<const Measurement> measurements, MeasurementRefiner* refiner,
                        double max_d2, Measurement* m, Eigen::Vector2d* z, Eigen::Matrix2d* r) const;
