@@ -583,6 +583,9 @@ std::optional<std::string> Validate(const ShapeOptions& o) {
   if (!(std::isfinite(o.person_min_leg_radius_m) && o.person_min_leg_radius_m >= 0.0)) {
     return "person_min_leg_radius_m must be >= 0";
   }
+  if (!(std::isfinite(o.mixed_leg_max_gap_m) && o.mixed_leg_max_gap_m >= 0.0)) {
+    return "mixed_leg_max_gap_m must be >= 0";
+  }
   if (!(std::isfinite(o.still_legs_max_depth_m) && o.still_legs_max_depth_m >= 0.0)) {
     return "still_legs_max_depth_m must be >= 0";
   }
@@ -895,6 +898,7 @@ class TrackingPipeline::Refiner final : public MeasurementRefiner {
   std::uint64_t underdetermined_widened = 0;
   std::uint64_t stance_weighted = 0;
   std::uint64_t touching = 0;
+  std::uint64_t mixed_legs = 0;
   std::uint64_t box_occluded = 0;
   std::uint64_t box_unseen_sizes = 0;
   std::uint64_t box_unseen_widened = 0;
@@ -1252,6 +1256,16 @@ class TrackingPipeline::Refiner final : public MeasurementRefiner {
         return false;
       }
       ++fits;
+      const ObservationPart& part = ob.parts[k];
+      const double mixed_range = part.mixed_leg_centre_m.norm();
+      if (part.mixed_leg_along_var_m2 > 0.0 && mixed_range > 0.0) {
+        // ShapeOptions::mixed_leg_max_gap_m: the points are mixed pixels behind the leg; its
+        // centre from their range deficits, along the ray as uncertain as that estimate.
+        const Eigen::Vector2d ray = part.mixed_leg_centre_m / mixed_range;
+        legs[k].centre_m = part.mixed_leg_centre_m;
+        legs[k].centre_cov_m2 += part.mixed_leg_along_var_m2 * ray * ray.transpose();
+        ++mixed_legs;
+      }
     }
     m.point_count = points;
     m.orientation_rad = 0.0;
@@ -1678,8 +1692,56 @@ ObservationPart TrackingPipeline::MakePart(const ScanView& scan, const Segment& 
     if (part.first_edge_in_mixed_beam) s.first_edge_unit_known = false;
     if (part.last_edge_in_mixed_beam) s.last_edge_unit_known = false;
   }
+  if (options_.shape.mount == Mount::kLegs) MixedPixelLeg(scan, points, part);
   MarkMixedPixels(scan, points, part);
   return part;
+}
+
+// ShapeOptions::mixed_leg_max_gap_m. Each beam b returns r_b = s_b r_leg + (1 - s_b) f_b (the
+// energy-weighted mean of the leg's echo and the surface's behind it), so its deficit
+// d_b = f_b - r_b = s_b (f_b - r_leg); summed over the beams, sum(s_b) = 2 leg_radius_m / (r_leg
+// step) (a beam profile of unit energy, sampled at the beams' spacing r_leg step, integrated over
+// the leg's width) gives sum(d_b) = (f - r_leg) 2 leg_radius_m / (r_leg step), f the d-weighted
+// mean of the f_b, solved for r_leg.
+void TrackingPipeline::MixedPixelLeg(const ScanView& scan, std::span<const Eigen::Vector2d> points,
+                                     ObservationPart& part) const {
+  const ShapeOptions& o = options_.shape;
+  if (!(o.mixed_leg_max_gap_m > 0.0) || points.empty() || !background_.learned()) return;
+  const double step = std::abs(scan.angle_step_rad);
+  double nearest_m = std::numeric_limits<double>::infinity();
+  for (const Eigen::Vector2d& p : points) nearest_m = std::min(nearest_m, Range(p));
+  // The leg fills no footprint: every beam on it is part leg, part what is behind.
+  if (!(nearest_m * o.beam_divergence_rad >= 2.0 * o.leg_radius_m) || !(step > 0.0)) return;
+  const double footprint_m = nearest_m * o.beam_divergence_rad + o.beam_exit_diameter_m;
+  if (static_cast<double>(part.end_beam - part.begin_beam) >
+      std::floor((2.0 * o.leg_radius_m + footprint_m) / (nearest_m * step)) + 1.0) {
+    return;  // wider than one leg's beams
+  }
+  const auto background = background_.background_range_m();
+  double deficit_sum = 0.0;
+  double behind_sum = 0.0;
+  Eigen::Vector2d bearing = Eigen::Vector2d::Zero();
+  for (std::size_t b = part.begin_beam; b < part.end_beam; ++b) {
+    if (b >= background.size() || b >= scan.range_m.size()) return;
+    const auto r = static_cast<double>(scan.range_m[b]);
+    const auto f = static_cast<double>(background[b]);
+    if (!(std::isfinite(r) && r > 0.0)) continue;  // a beam without echo within the part
+    // Each return must have a learned surface behind it, near enough to mix with.
+    if (!(f > r && f - r <= o.mixed_leg_max_gap_m)) return;
+    const double d = f - r;
+    deficit_sum += d;
+    behind_sum += d * f;
+    const double angle = scan.BeamAngleRad(b);
+    bearing += d * Eigen::Vector2d(std::cos(angle), std::sin(angle));
+  }
+  if (!(deficit_sum > 0.0) || !(bearing.norm() > 0.0)) return;
+  const double f = behind_sum / deficit_sum;
+  double front_m = f / (1.0 + step * deficit_sum / (2.0 * o.leg_radius_m));
+  front_m = std::min(front_m, nearest_m);
+  const double gap_m = f - front_m;
+  const double relative = o.leg_radius_sigma_m / o.leg_radius_m;
+  part.mixed_leg_centre_m = (front_m + o.leg_radius_m) * bearing.normalized();
+  part.mixed_leg_along_var_m2 = gap_m * gap_m * (relative * relative + 0.01);
 }
 
 void TrackingPipeline::MarkMixedPixels(const ScanView& scan,
@@ -1743,7 +1805,11 @@ void TrackingPipeline::MeasureObservation(const ScanView& scan, const Observatio
     const double depth = observation.legs
                              ? o.leg_radius_m
                              : std::max(0.5 * (o.person_major_m + o.person_minor_m), 0.5 * width);
-    centre += (nearest + depth) * ray;
+    if (observation.legs && part.mixed_leg_along_var_m2 > 0.0) {
+      centre += part.mixed_leg_centre_m;  // ShapeOptions::mixed_leg_max_gap_m
+    } else {
+      centre += (nearest + depth) * ray;
+    }
     ray_sum += ray;
     points += part.point_count;
   }
@@ -2887,6 +2953,7 @@ const ScanTracks& TrackingPipeline::Process(const ScanView& scan, std::uint32_t 
   const std::uint64_t underdetermined_before = refiner_->underdetermined_widened;
   const std::uint64_t stance_weighted_before = refiner_->stance_weighted;
   const std::uint64_t touching_before = refiner_->touching;
+  const std::uint64_t mixed_legs_before = refiner_->mixed_legs;
   const std::uint64_t box_occluded_before = refiner_->box_occluded;
   const std::uint64_t box_unseen_widened_before = refiner_->box_unseen_widened;
   const std::uint64_t box_unseen_before = refiner_->box_unseen_sizes;
@@ -2914,6 +2981,7 @@ const ScanTracks& TrackingPipeline::Process(const ScanView& scan, std::uint32_t 
       refiner_->underdetermined_widened - underdetermined_before;
   counters_.stance_weighted_pairs += refiner_->stance_weighted - stance_weighted_before;
   counters_.touching_leg_pairs += refiner_->touching - touching_before;
+  counters_.mixed_pixel_legs += refiner_->mixed_legs - mixed_legs_before;
   counters_.box_occluded_fits += refiner_->box_occluded - box_occluded_before;
   counters_.box_unseen_widened += refiner_->box_unseen_widened - box_unseen_widened_before;
   counters_.box_sizes_unseen += refiner_->box_unseen_sizes - box_unseen_before;

@@ -3618,6 +3618,10 @@ TEST(PipelineScenarioTest, EchoesBehindTheReturnTheirBeamsHadAScanBeforeAreMixed
   constexpr double kStepRad = 0.5 * common::kPi / 180.0;
   const auto run = [&](double recent_veil_s, bool walker) {
     TrackerOptions options;
+    // The walker's legs are drawn as whole returns on two beams each up to the wall, where a
+    // 15 mrad footprint (0.22 m at 14.5 m) would make them mixed pixels: not what
+    // shape.mixed_leg_max_gap_m measures.
+    options.shape.mixed_leg_max_gap_m = 0.0;
     options.shape.mount = Mount::kLegs;
     options.shape.recent_veil_s = recent_veil_s;
     TrackingPipeline pipeline(options);
@@ -4256,6 +4260,76 @@ TEST(PipelineScenarioTest, AStillKneeHeightPairDeepAlongTheRayBehindASingleBeamI
   EXPECT_EQ(person_now.late_reports, 75);
   EXPECT_EQ(person_before.late_reports, 75);
   EXPECT_EQ(person_now.absorbed, 0u);
+}
+
+// ShapeOptions::mixed_leg_max_gap_m: knee height, 25 Hz, 0.5 deg, a wall at 12.2 m. A person walks
+// across the line of sight at 11 m (legs 0.2 m apart across the ray, radius 0.06 m): a beam's
+// footprint there (0.165 m) is wider than a leg, so each beam on a leg returns the energy-weighted
+// mean of leg and wall, its share s the part of the footprint the leg covers (evenly lit; the leg
+// alone from s 0.8 on, the wall alone up to 0.2). Fitted to those points, the track walked behind
+// the person; measured from the returns' range deficits it walks with them.
+TEST(PipelineScenarioTest, AFarLegSeenOnlyAsMixedPixelsBeforeANearWallIsMeasuredAtTheLeg) {
+  constexpr double kStepRad = 0.5 * common::kPi / 180.0;
+  constexpr double kRangeM = 11.0, kWallM = 12.2, kLegM = 0.06, kSpeedMps = 0.8;
+  constexpr std::int64_t kScans = 125;
+  const double footprint_m = kRangeM * 0.015;
+  // Bearing of the person's centre at walk scan i: from -9 deg on, across the ray.
+  const auto bearing = [&](std::int64_t i) {
+    return -9.0 * common::kPi / 180.0 + kSpeedMps * static_cast<double>(i) / 25.0 / kRangeM;
+  };
+  const auto draw = [&](std::int64_t i, std::vector<float>& ranges) {
+    for (std::size_t b = 0; b < ranges.size(); ++b) {
+      const double angle = -0.5 * common::kPi + static_cast<double>(b) * kStepRad;
+      double share = 0.0;
+      for (const double side : {-0.1, 0.1}) {
+        const double offset = kRangeM * (bearing(i) - angle) + side;  // leg centre off the beam
+        const double lo = std::max(offset - kLegM, -0.5 * footprint_m);
+        const double hi = std::min(offset + kLegM, 0.5 * footprint_m);
+        share += std::max(hi - lo, 0.0) / footprint_m;
+      }
+      if (share <= 0.2) continue;
+      const double leg = kRangeM - kLegM;
+      ranges[b] = static_cast<float>(share >= 0.8 ? leg : share * leg + (1.0 - share) * kWallM);
+    }
+  };
+  struct Run {
+    int measured = 0;  // scans of the last 2 s with a confirmed track within 1 m of the person
+    double error_sum_m = 0.0;
+    std::uint64_t mixed = 0;
+  };
+  const auto run = [&](double max_gap_m) {
+    TrackerOptions options;
+    options.shape.mount = Mount::kLegs;
+    options.shape.mixed_leg_max_gap_m = max_gap_m;
+    Run out;
+    const auto seen = [&](std::int64_t i, const ScanTracks& tracks) {
+      if (i < kScans - 50) return;
+      const Eigen::Vector2d truth =
+          kRangeM * Eigen::Vector2d(std::cos(bearing(i)), std::sin(bearing(i)));
+      double best = 1.0;
+      for (const TrackReport& r : tracks.tracks) {
+        if (r.state != TrackState::kConfirmed) continue;
+        best = std::min(best, (Eigen::Vector2d(r.x_m, r.y_m) - truth).norm());
+      }
+      if (best < 1.0) {
+        ++out.measured;
+        out.error_sum_m += best;
+      }
+    };
+    out.mixed =
+        RunKneeWalk(options, static_cast<float>(kWallM), kScans, draw, seen).mixed_pixel_legs;
+    return out;
+  };
+  const Run now = run(1.5);
+  const Run before = run(0.0);
+  const double now_mean = now.error_sum_m / std::max(now.measured, 1);
+  const double before_mean = before.error_sum_m / std::max(before.measured, 1);
+  EXPECT_EQ(now.measured, 50);
+  EXPECT_EQ(before.measured, 50);
+  EXPECT_GE(now.mixed, 200u);  // both legs in most scans (250)
+  EXPECT_EQ(before.mixed, 0u);
+  EXPECT_LT(now_mean, 0.2);      // 0.115 m
+  EXPECT_GT(before_mean, 0.35);  // 0.441 m: behind the person along the ray
 }
 
 }  // namespace

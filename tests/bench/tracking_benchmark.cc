@@ -47,7 +47,7 @@
 //                       [--before-single-precision-fit] [--before-edge-sides]
 //                       [--before-outside-start] [--before-across-sway] [--before-receded-edges]
 //                       [--before-stance-weight] [--before-adopt] [--before-touching-legs]
-//                       [--before-still-legs]
+//                       [--before-still-legs] [--before-mixed-legs]
 //                       [--before-box-occluders] [--before-box-rejoin] [--before-box-unseen-cov]
 //                       [--before-box-seen-extent] [--before-knee-box-faces] [--before-see-through]
 //                       [--before-step-seam] [--before-torso-edge-echo]
@@ -141,6 +141,8 @@
 //   covariance, ShapeOptions::touching_legs_along_ray = false;
 //   --before-still-legs: "before" takes a still knee-height track for a person's whatever the
 //   depth of its legs along the line of sight, ShapeOptions::still_legs_max_depth_m = 0;
+//   --before-mixed-legs: "before" fits a far knee-height leg to its points also where each may be
+//   a mixed pixel with a near background, ShapeOptions::mixed_leg_max_gap_m = 0;
 //   --before-box-occluders: "before" fits a box (a cart) to every point of its segment, also to
 //   those in front of it (its pusher's), ShapeOptions::box_drop_occluders = false;
 //   --before-box-unseen-cov: "before" reports a box's size error as the same in every direction,
@@ -1392,6 +1394,9 @@ bool g_before_touching_legs = false;
 // --before-still-legs: "before" takes a still knee-height track for a person's whatever the depth
 // of its legs along the line of sight (ShapeOptions::still_legs_max_depth_m = 0).
 bool g_before_still_legs = false;
+// --before-mixed-legs: "before" fits a far knee-height leg to its points also where each may be a
+// mixed pixel with a near background (ShapeOptions::mixed_leg_max_gap_m = 0).
+bool g_before_mixed_legs = false;
 // --before-box-occluders: "before" fits a box to every point of its segment, also those in front
 // of it (ShapeOptions::box_drop_occluders = false).
 bool g_before_box_occluders = false;
@@ -1428,9 +1433,15 @@ const char* const kVariantNames[] = {"old", "new", "before"};
 // --explain: why tracks coast beside a person the scan returned (CoastingCause).
 bool g_explain_coasting = false;
 
-std::vector<Variant> Variants(sim::Mount mount, double range_m) {
+// resolved_echo_m: the scanner's (sim::DeviceModel::resolved_echo_m; 0: it merges echoes at
+// every separation), as a sensor's configuration states it for shape.mixed_leg_max_gap_m.
+std::vector<Variant> Variants(sim::Mount mount, double range_m, double resolved_echo_m) {
   tracking::TrackerOptions fresh;
   fresh.background.max_range_m = std::max(fresh.background.max_range_m, range_m + 1.0);
+  if (resolved_echo_m > 0.0) {
+    // Echoes farther apart than that come back apart: no mixed pixel beyond it.
+    fresh.shape.mixed_leg_max_gap_m = std::min(fresh.shape.mixed_leg_max_gap_m, resolved_echo_m);
+  }
   fresh.shape.mount = mount == sim::Mount::kLegs ? tracking::Mount::kLegs : tracking::Mount::kTorso;
   tracking::TrackerOptions old = fresh;
   old.method = tracking::MeasurementMethod::kEllipse;
@@ -1445,6 +1456,7 @@ std::vector<Variant> Variants(sim::Mount mount, double range_m) {
   old.shape.mixed_pixel_min_footprint_m = 0.0;
   old.shape.drop_mixed_pixel_legs = false;
   old.shape.drop_mixed_pixel_legs_whole_person = false;
+  old.shape.mixed_leg_max_gap_m = 0.0;
   old.shape.hidden_leg_behind = false;
   old.shape.single_beam_legs = false;
   old.shape.single_beam_partner = false;
@@ -1480,13 +1492,13 @@ std::vector<Variant> Variants(sim::Mount mount, double range_m) {
              g_before_single_precision_fit || g_before_edge_sides || g_before_outside_start ||
              g_before_across_sway || g_before_receded_edges || g_before_stance_weight ||
              g_before_adopt || g_before_touching_legs || g_before_still_legs ||
-             g_before_box_occluders || g_before_box_rejoin || g_before_see_through ||
-             g_before_step_seam || g_before_torso_edge_echo || g_before_box_unseen_cov ||
-             g_before_box_seen_extent || g_before_knee_box_faces || g_before_lone_leg_standing ||
-             g_before_single_beam_partner || g_before_edge_echo_birth || g_before_lone_beam_echo ||
-             g_before_far_leg_birth || g_before_person_size || g_before_person_reach ||
-             g_before_partial_extent || g_before_neighbour || g_before_range_noise ||
-             g_before_gain_covariance) {
+             g_before_mixed_legs || g_before_box_occluders || g_before_box_rejoin ||
+             g_before_see_through || g_before_step_seam || g_before_torso_edge_echo ||
+             g_before_box_unseen_cov || g_before_box_seen_extent || g_before_knee_box_faces ||
+             g_before_lone_leg_standing || g_before_single_beam_partner ||
+             g_before_edge_echo_birth || g_before_lone_beam_echo || g_before_far_leg_birth ||
+             g_before_person_size || g_before_person_reach || g_before_partial_extent ||
+             g_before_neighbour || g_before_range_noise || g_before_gain_covariance) {
     tracking::TrackerOptions before = fresh;
     if (g_before_one_leg) before.shape.hidden_leg_behind = false;
     if (g_before_mixed_pixels) before.shape.drop_mixed_pixel_legs = false;
@@ -1525,6 +1537,7 @@ std::vector<Variant> Variants(sim::Mount mount, double range_m) {
     if (g_before_adopt) before.tracking.adopt_successor_m = 0.0;
     if (g_before_touching_legs) before.shape.touching_legs_along_ray = false;
     if (g_before_still_legs) before.shape.still_legs_max_depth_m = 0.0;
+    if (g_before_mixed_legs) before.shape.mixed_leg_max_gap_m = 0.0;
     if (g_before_box_occluders) before.shape.box_drop_occluders = false;
     if (g_before_box_rejoin) before.shape.box_rejoin_pieces = false;
     if (g_before_see_through) before.shape.split_see_through = false;
@@ -2832,7 +2845,9 @@ RunResult RunScenario(sim::Scenario scenario, bool all_legs, int jobs) {
   const std::size_t n = simulator->sensor_count();
   std::vector<std::vector<Variant>> variants(n);
   for (std::size_t i = 0; i < n; ++i) {
-    variants[i] = Variants(simulator->sensor(i).mount, simulator->sensor(i).device.range_m);
+    const sim::DeviceConfig& device = simulator->sensor(i).device;
+    variants[i] = Variants(simulator->sensor(i).mount, device.range_m,
+                           device.model != nullptr ? device.model->resolved_echo_m : 0.0);
   }
   const std::size_t nv = variants[0].size();
   std::vector<std::vector<Mot>> mots(n, std::vector<Mot>(nv));
@@ -3388,13 +3403,13 @@ std::string KneeHeightBefore() {
         g_before_fusion_merge || g_before_report_sourceless || g_before_recent_veil ||
         g_before_single_precision_fit || g_before_edge_sides || g_before_outside_start ||
         g_before_across_sway || g_before_receded_edges || g_before_stance_weight ||
-        g_before_adopt || g_before_touching_legs || g_before_still_legs || g_before_box_occluders ||
-        g_before_box_rejoin || g_before_see_through || g_before_step_seam ||
-        g_before_torso_edge_echo || g_before_box_unseen_cov || g_before_box_seen_extent ||
-        g_before_knee_box_faces || g_before_single_beam_partner || g_before_edge_echo_birth ||
-        g_before_lone_beam_echo || g_before_far_leg_birth || g_before_person_size ||
-        g_before_person_reach || g_before_partial_extent || g_before_neighbour ||
-        g_before_range_noise || g_before_gain_covariance) ||
+        g_before_adopt || g_before_touching_legs || g_before_still_legs || g_before_mixed_legs ||
+        g_before_box_occluders || g_before_box_rejoin || g_before_see_through ||
+        g_before_step_seam || g_before_torso_edge_echo || g_before_box_unseen_cov ||
+        g_before_box_seen_extent || g_before_knee_box_faces || g_before_single_beam_partner ||
+        g_before_edge_echo_birth || g_before_lone_beam_echo || g_before_far_leg_birth ||
+        g_before_person_size || g_before_person_reach || g_before_partial_extent ||
+        g_before_neighbour || g_before_range_noise || g_before_gain_covariance) ||
       g_before_mixed_pixels || g_before_far || g_before_evidence_coasting ||
       g_before_report_rules) {
     return "";
@@ -3563,6 +3578,11 @@ std::string KneeHeightBefore() {
     without.push_back(
         "taking a still knee-height track for a person's whatever the depth of its legs along "
         "the line of sight (`shape.still_legs_max_depth_m` 0)");
+  }
+  if (g_before_mixed_legs) {
+    without.push_back(
+        "fitting a far knee-height leg to its points where each may be a mixed pixel with a near "
+        "background (`shape.mixed_leg_max_gap_m` 0)");
   }
   if (g_before_single_beam_partner) {
     without.push_back(
@@ -3809,6 +3829,8 @@ int main(int argc, char** argv) {
       g_before_touching_legs = true;
     } else if (a == "--before-still-legs") {
       g_before_still_legs = true;
+    } else if (a == "--before-mixed-legs") {
+      g_before_mixed_legs = true;
     } else if (a == "--before-box-occluders") {
       g_before_box_occluders = true;
     } else if (a == "--before-box-unseen-cov") {
@@ -3849,7 +3871,7 @@ int main(int argc, char** argv) {
                    "[--before-single-precision-fit] [--before-edge-sides] "
                    "[--before-outside-start] [--before-across-sway] [--before-receded-edges] "
                    "[--before-stance-weight] [--before-adopt] [--before-touching-legs] "
-                   "[--before-still-legs] "
+                   "[--before-still-legs] [--before-mixed-legs] "
                    "[--before-box-occluders] [--before-box-rejoin] [--before-box-unseen-cov] "
                    "[--before-box-seen-extent] [--before-knee-box-faces] "
                    "[--before-see-through] [--before-step-seam] [--before-torso-edge-echo] "
