@@ -213,8 +213,8 @@ void VisitShape(tracking::ShapeOptions& o, ConfigVisitor& v) {
           "mount legs: a leg filling no beam footprint with a learned background no more than "
           "this behind each of its returns is measured from the returns' range deficits (each "
           "may be a mixed pixel between leg and background), not fitted to them; the largest gap "
-          "the scanner merges echoes over (LMS1xx, TiM: 1.5; LMS5xx, which resolves echoes "
-          "beyond ~0.5 m: 0.5; 0: off).");
+          "the scanner merges echoes over (LMS1xx, TiM: 1.5; an LMS5xx, which resolves echoes "
+          "beyond ~0.5 m, caps it at 0.5 by itself, from its DeviceIdent name; 0: off).");
   v.Field("hip_half_width_m", o.hip_half_width_m,
           "mount legs: a leg's lateral offset from the body centre (a single leg's uncertainty).");
   v.Field("drop_mixed_pixel_legs", o.drop_mixed_pixel_legs,

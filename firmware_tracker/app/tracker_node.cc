@@ -45,6 +45,8 @@ void TrackerNode::SetDeviceIdentity(std::string_view model, std::string_view ser
   serial_.assign(serial.substr(0, 32));
   firmware_.assign(firmware.substr(0, 64));
   identity_changed_ = true;
+  // ShapeOptions::mixed_leg_max_gap_m: no mixed pixel of echoes this scanner reports apart.
+  pipeline_->SetResolvedEchoSeparation(tracking::ResolvedEchoSeparationM(model));
 }
 
 void TrackerNode::OnScan(const cola::ScanTelegram& scan, common::UtcNs receive_ns,

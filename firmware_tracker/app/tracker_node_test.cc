@@ -270,5 +270,27 @@ TEST(TrackerNode, IdentityChangeResendsSensorInfo) {
   EXPECT_EQ(run.sink.Count(lrfnet_proto_Datagram_sensor_info_tag), 2u);
 }
 
+// ShapeOptions::mixed_leg_max_gap_m: an LMS5xx resolves echoes more than ~0.5 m apart, so its
+// node takes no mixed pixel over a wider gap whatever the configuration says; an LMS1xx or a TiM
+// keeps the configured gap, also after an LMS5xx was swapped for one.
+TEST(TrackerNode, AnLms5xxCapsTheMixedLegGapAtItsEchoSeparation) {
+  TrackerConfig config = Config();
+  config.tracking.shape.mixed_leg_max_gap_m = 1.5;
+  NodeRun run(config);
+  const auto gap = [&] { return run.node.pipeline().options().shape.mixed_leg_max_gap_m; };
+  EXPECT_EQ(gap(), 1.5);  // LMS111
+  run.node.SetDeviceIdentity("LMS511-10100", "1234567", "V1.80");
+  EXPECT_EQ(gap(), 0.5);
+  run.node.SetDeviceIdentity("TiM781-2174101", "1234567", "V3.13");
+  EXPECT_EQ(gap(), 1.5);
+  config.tracking.shape.mixed_leg_max_gap_m = 0.3;  // narrower than the echo separation
+  NodeRun narrow(config);
+  narrow.node.SetDeviceIdentity("LMS511-10100", "1234567", "V1.80");
+  EXPECT_EQ(narrow.node.pipeline().options().shape.mixed_leg_max_gap_m, 0.3);
+  EXPECT_EQ(tracking::ResolvedEchoSeparationM("LMS511-10100"), 0.5);
+  EXPECT_EQ(tracking::ResolvedEchoSeparationM("LMS111-10100"), 0.0);
+  EXPECT_EQ(tracking::ResolvedEchoSeparationM(""), 0.0);
+}
+
 }  // namespace
 }  // namespace lrfnet::tracker

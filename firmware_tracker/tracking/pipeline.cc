@@ -1572,7 +1572,20 @@ TrackingPipeline::TrackingPipeline(const TrackerOptions& options)
     : options_(Resolved(Checked(options))),
       background_(options.background),
       tracker_(options_.tracking),
-      refiner_(std::make_unique<Refiner>(*this, counters_.shape_fit_evaluations)) {}
+      refiner_(std::make_unique<Refiner>(*this, counters_.shape_fit_evaluations)) {
+  configured_mixed_leg_max_gap_m_ = options_.shape.mixed_leg_max_gap_m;
+}
+
+double ResolvedEchoSeparationM(std::string_view device_name) {
+  return device_name.substr(0, 4) == "LMS5" ? 0.5 : 0.0;
+}
+
+void TrackingPipeline::SetResolvedEchoSeparation(double resolved_echo_m) {
+  options_.shape.mixed_leg_max_gap_m =
+      std::isfinite(resolved_echo_m) && resolved_echo_m > 0.0
+          ? std::min(configured_mixed_leg_max_gap_m_, resolved_echo_m)
+          : configured_mixed_leg_max_gap_m_;
+}
 
 TrackingPipeline::~TrackingPipeline() = default;
 

@@ -69,6 +69,7 @@
 #include <optional>
 #include <span>
 #include <string>
+#include <string_view>
 
 #include "common/fixed_capacity.h"
 #include "firmware_tracker/tracking/background_model.h"
@@ -1019,10 +1020,23 @@ struct Observation {
   bool deep_pair = false;
 };
 
+// The separation beyond which a SICK scanner family reports the echoes of two surfaces one behind
+// the other apart (the first, or none) instead of one range between them (a mixed pixel), by its
+// DeviceIdent name: the LMS5xx's echo filter separates echoes beyond about 0.5 m (the shared
+// LMS511 capture: edges 0.4-0.5 m apart resolved at a third of them, farther ones at all); 0 for
+// the LMS1xx, the TiMs and any other (their captures show merged ranges at every separation seen,
+// up to 1 m and more). For TrackingPipeline::SetResolvedEchoSeparation.
+double ResolvedEchoSeparationM(std::string_view device_name);
+
 class TrackingPipeline {
  public:
   // Precondition: Validate(options) is nullopt (checked; aborts otherwise).
   explicit TrackingPipeline(const TrackerOptions& options);
+  // The scanner's echo separation (ResolvedEchoSeparationM of its DeviceIdent name; 0: it merges
+  // two surfaces' echoes at every separation): ShapeOptions::mixed_leg_max_gap_m is the configured
+  // value capped at it (no mixed pixel of two surfaces farther apart), the configured value where
+  // it is 0. Called again for another device (a swapped scanner), it starts from the configured.
+  void SetResolvedEchoSeparation(double resolved_echo_m);
   ~TrackingPipeline();
 
   // Runs one scan; scans must come in time order. The result (tracks at scan.stamp_ns, with
@@ -1129,6 +1143,7 @@ class TrackingPipeline {
                           double reach_m) const;
 
   TrackerOptions options_;
+  double configured_mixed_leg_max_gap_m_ = 0.0;  // SetResolvedEchoSeparation
   PipelineCounters counters_;
   ScanError last_scan_error_ = ScanError::kNone;
   BackgroundModel background_;

@@ -1433,14 +1433,15 @@ const char* const kVariantNames[] = {"old", "new", "before"};
 // --explain: why tracks coast beside a person the scan returned (CoastingCause).
 bool g_explain_coasting = false;
 
-// resolved_echo_m: the scanner's (sim::DeviceModel::resolved_echo_m; 0: it merges echoes at
-// every separation), as a sensor's configuration states it for shape.mixed_leg_max_gap_m.
-std::vector<Variant> Variants(sim::Mount mount, double range_m, double resolved_echo_m) {
+// device_name: the scanner's DeviceIdent name, whose echo separation caps
+// shape.mixed_leg_max_gap_m as lrfnet-tracker caps it (tracking::ResolvedEchoSeparationM, from
+// the device's start-up dialogue).
+std::vector<Variant> Variants(sim::Mount mount, double range_m, std::string_view device_name) {
   tracking::TrackerOptions fresh;
   fresh.background.max_range_m = std::max(fresh.background.max_range_m, range_m + 1.0);
-  if (resolved_echo_m > 0.0) {
+  if (const double resolved = tracking::ResolvedEchoSeparationM(device_name); resolved > 0.0) {
     // Echoes farther apart than that come back apart: no mixed pixel beyond it.
-    fresh.shape.mixed_leg_max_gap_m = std::min(fresh.shape.mixed_leg_max_gap_m, resolved_echo_m);
+    fresh.shape.mixed_leg_max_gap_m = std::min(fresh.shape.mixed_leg_max_gap_m, resolved);
   }
   fresh.shape.mount = mount == sim::Mount::kLegs ? tracking::Mount::kLegs : tracking::Mount::kTorso;
   tracking::TrackerOptions old = fresh;
@@ -2847,7 +2848,7 @@ RunResult RunScenario(sim::Scenario scenario, bool all_legs, int jobs) {
   for (std::size_t i = 0; i < n; ++i) {
     const sim::DeviceConfig& device = simulator->sensor(i).device;
     variants[i] = Variants(simulator->sensor(i).mount, device.range_m,
-                           device.model != nullptr ? device.model->resolved_echo_m : 0.0);
+                           device.model != nullptr ? device.model->ident_name : "");
   }
   const std::size_t nv = variants[0].size();
   std::vector<std::vector<Mot>> mots(n, std::vector<Mot>(nv));
