@@ -207,14 +207,17 @@ void VisitShape(tracking::ShapeOptions& o, ConfigVisitor& v) {
           "mount legs: thinner legs are not a person's (a chair's) for the static-object rules.");
   v.Field("still_legs_max_depth_m", o.still_legs_max_depth_m,
           "mount legs: a still track measured in most of its two-leg scans as legs farther apart "
-          "along the line of sight than this is not a person's for the static-object rules (the "
-          "mixed echoes of a chair's leg and someone standing behind it; 0: off).");
+          "along the line of sight than this, the nearer a single beam, is not a person's for "
+          "the static-object rules (the mixed echoes of a chair's leg and someone standing "
+          "behind it; 0: off).");
   v.Field("mixed_leg_max_gap_m", o.mixed_leg_max_gap_m,
           "mount legs: a leg filling no beam footprint with a learned background no more than "
           "this behind each of its returns is measured from the returns' range deficits (each "
           "may be a mixed pixel between leg and background), not fitted to them; the largest gap "
-          "the scanner merges echoes over (LMS1xx, TiM: 1.5; an LMS5xx, which resolves echoes "
-          "beyond ~0.5 m, caps it at 0.5 by itself, from its DeviceIdent name; 0: off).");
+          "the scanner merges echoes over (LMS1xx, TiM: their captures show merged echoes up to "
+          "about 1 m and none resolved, 1.5 assumes the same a little beyond; an LMS5xx, which "
+          "resolves echoes beyond ~0.5 m, caps it at 0.5 by itself, from its DeviceIdent name; "
+          "0: off).");
   v.Field("hip_half_width_m", o.hip_half_width_m,
           "mount legs: a leg's lateral offset from the body centre (a single leg's uncertainty).");
   v.Field("drop_mixed_pixel_legs", o.drop_mixed_pixel_legs,

@@ -60,8 +60,10 @@ std::optional<std::string> Validate(const MultiTrackerOptions& o) {
         (o.inflate_nis_above == 0.0 || o.inflate_nis_above >= 2.0))) {
     return "inflate_nis_above must be 0 (off) or >= 2";
   }
-  if (!(std::isfinite(o.measured_noise_memory_scans) && o.measured_noise_memory_scans >= 0.0)) {
-    return "measured_noise_memory_scans must be >= 0 (0: off)";
+  // A memory below 2 would weigh each update by more than the whole mean (1 / updates > 1).
+  if (!(std::isfinite(o.measured_noise_memory_scans) &&
+        (o.measured_noise_memory_scans == 0.0 || o.measured_noise_memory_scans >= 2.0))) {
+    return "measured_noise_memory_scans must be 0 (off) or >= 2";
   }
   if (!(std::isfinite(o.extra_measurement_sigma_m) && o.extra_measurement_sigma_m >= 0.0)) {
     return "extra_measurement_sigma_m must be >= 0";
@@ -479,7 +481,7 @@ Eigen::Matrix2d MultiTracker::MeasuredNoise(Track& t, const Eigen::Vector2d& z_m
                                             const Eigen::Matrix2d& r_m2) const {
   const double memory = options_.measured_noise_memory_scans;
   const double range_m = z_m.norm();
-  if (!(memory > 0.0) || !(range_m > 0.0)) return r_m2;
+  if (!GainCovariance() || !(range_m > 0.0)) return r_m2;
   // Across the line of sight (the sensor at the origin): along it the measurement's error is
   // mostly the body's extent towards the sensor, which successive scans share and which the
   // innovations therefore do not show.
@@ -738,7 +740,6 @@ bool MultiTracker::Resume(common::UtcNs scan_start_ns, const Candidate& c,
   t.filter = CvEkf(options_.ekf);
   t.filter.Init(t.z_m, c.r_m2);
   t.filter.Predict(common::NsToSeconds(at_ns - t.last_update_ns));
-  if (GainCovariance() && t.confirmed) t.filter.StartGainCovariance();
   t.filter_ns = at_ns;
   Measurement m;
   Eigen::Vector2d z;
@@ -755,6 +756,7 @@ bool MultiTracker::Resume(common::UtcNs scan_start_ns, const Candidate& c,
   t.hits = 1u;
   t.age_scans = 0;
   t.confirmed = options_.confirm_hits <= 1 && options_.confirm_min_s <= 0.0;
+  if (t.confirmed && GainCovariance()) t.filter.StartGainCovariance();
   NoteUpdate(t, m, c, z, at_ns, scan_start_ns);
   t.first_update_ns = at_ns;
   // Still for as long as it was lost: the static-object clocks restart here.
@@ -831,6 +833,7 @@ void MultiTracker::StartTracks(common::UtcNs scan_start_ns,
     t->z_m = z;
     t->z_offset_s = common::NsToSeconds(at_ns - scan_start_ns);
     t->confirmed = options_.confirm_hits <= 1 && options_.confirm_min_s <= 0.0;
+    if (t->confirmed && GainCovariance()) t->filter.StartGainCovariance();
     ++counters_.created;
     if (t->confirmed) ++counters_.confirmed;
   }

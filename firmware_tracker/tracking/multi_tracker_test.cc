@@ -124,6 +124,7 @@ TEST(MultiTrackerOptionsTest, DefaultsValidAndEachBadValueNamesItsField) {
       {with([](auto& o) { o.inflate_nis_above = 1.0; }), "inflate_nis_above"},
       {with([](auto& o) { o.inflate_nis_above = -1.0; }), "inflate_nis_above"},
       {with([](auto& o) { o.measured_noise_memory_scans = -1.0; }), "measured_noise_memory_scans"},
+      {with([](auto& o) { o.measured_noise_memory_scans = 0.5; }), "measured_noise_memory_scans"},
       {with([](auto& o) { o.coast_timeout_s = 0.0; }), "coast_timeout_s"},
       {with([](auto& o) { o.resume_window_s = -1.0; }), "resume_window_s"},
       {with([](auto& o) { o.adopt_successor_m = -1.0; }), "adopt_successor_m"},
@@ -667,6 +668,32 @@ StartResult StandThenWalk(const MultiTrackerOptions& o) {
   }
   r.recovered = tracker.counters().recovered;
   return r;
+}
+
+// MultiTrackerOptions::report_gain_covariance: a walker measured with 3 mm of noise across the
+// ray, told 2 cm: the reported position variance is the gain covariance's (well below the filter's
+// own), also where a track is confirmed at birth (1 of 1) and never passes through confirmation.
+TEST(MultiTrackerTest, GainCovarianceIsReportedHoweverATrackWasConfirmed) {
+  const auto reported_var = [](std::uint32_t hits, std::uint32_t window, bool gain) {
+    MultiTrackerOptions o = Opts();
+    o.confirm_hits = hits;
+    o.confirm_window = window;
+    o.report_gain_covariance = gain;
+    MultiTracker tracker(o);
+    ScanTracks out;
+    for (std::int64_t k = 0; k < 100; ++k) {
+      const double across = 0.003 * std::sin(1.7 * static_cast<double>(k));
+      tracker.Step(ScanNs(k), std::vector<Measurement>{Meas(5.0, -2.0 + 0.05 * static_cast<double>(k) + across, 0.02)},
+                   out);
+    }
+    EXPECT_EQ(out.tracks.size(), 1u);
+    return out.tracks.empty() ? 0.0 : out.tracks[0].covariance(1, 1);
+  };
+  const double filter = reported_var(3, 4, false);
+  const double gain = reported_var(3, 4, true);
+  const double at_birth = reported_var(1, 1, true);
+  EXPECT_LT(gain, 0.5 * filter);
+  EXPECT_NEAR(at_birth, gain, 0.1 * gain);
 }
 
 TEST(MultiTrackerTest, PersonWhoStartsWalkingOrTurnsKeepsOneTrack) {

@@ -693,11 +693,11 @@ std::optional<std::string> Validate(const ShapeOptions& o) {
   if (!(o.torso_edge_echo_min_far_share >= 0.0 && o.torso_edge_echo_min_far_share < 1.0)) {
     return "torso_edge_echo_min_far_share must be in [0, 1)";
   }
-  if (auto e = Validate(o.step_seam)) return "step_seam: " + *e;
-  if (!(Positive(o.step_seam_person_max_a_m) && Positive(o.step_seam_person_max_b_m) &&
-        std::isfinite(o.step_seam_size_margin_m) && o.step_seam_size_margin_m >= 0.0)) {
-    return "step_seam_person_max_a_m and step_seam_person_max_b_m must be > 0, "
-           "step_seam_size_margin_m >= 0";
+  if (auto e = Validate(o.step_seam)) return "step_seam." + *e;
+  if (!Positive(o.step_seam_person_max_a_m)) return "step_seam_person_max_a_m must be > 0";
+  if (!Positive(o.step_seam_person_max_b_m)) return "step_seam_person_max_b_m must be > 0";
+  if (!(std::isfinite(o.step_seam_size_margin_m) && o.step_seam_size_margin_m >= 0.0)) {
+    return "step_seam_size_margin_m must be >= 0";
   }
   if (!Positive(o.box_size_sigma_m)) return "box_size_sigma_m must be > 0";
   if (!Positive(o.box_unseen_sigma_m)) return "box_unseen_sigma_m must be > 0";
@@ -1297,15 +1297,18 @@ class TrackingPipeline::Refiner final : public MeasurementRefiner {
         shape.legs_standing = centre.standing;
       }
       // ShapeOptions::still_legs_max_depth_m: a still track's legs one behind the other along the
-      // ray, deeper than a standing person's.
+      // ray, deeper than a standing person's; a walking track's pairs count as not deep (the
+      // share is of its recent two-leg measurements, a stride may stand deep along the ray).
       Eigen::Vector2d walk;
       const Eigen::Vector2d mid = 0.5 * (now[0] + now[1]);
       if (o.still_legs_max_depth_m > 0.0 && predicted != nullptr && predicted_cov != nullptr &&
-          mid.norm() > 0.0 && !WalkingDirection(predicted, predicted_cov, &walk)) {
-        const double depth = std::abs((now[1] - now[0]).dot(mid / mid.norm()));
-        const std::size_t nearer = now[0].norm() <= now[1].norm() ? 0 : 1;
-        const double deep =
-            depth > o.still_legs_max_depth_m && ob.parts[nearer].point_count == 1 ? 1.0 : 0.0;
+          mid.norm() > 0.0) {
+        double deep = 0.0;
+        if (!WalkingDirection(predicted, predicted_cov, &walk)) {
+          const double depth = std::abs((now[1] - now[0]).dot(mid / mid.norm()));
+          const std::size_t nearer = now[0].norm() <= now[1].norm() ? 0 : 1;
+          if (depth > o.still_legs_max_depth_m && ob.parts[nearer].point_count == 1) deep = 1.0;
+        }
         shape.still_deep_pair_share +=
             (deep - shape.still_deep_pair_share) /
             std::min(kFlatnessMemory, static_cast<double>(++shape.still_pair_updates));

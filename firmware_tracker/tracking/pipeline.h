@@ -109,10 +109,10 @@ struct ShapeOptions {
   double leg_pairing_distance_m = 0.7;
   double person_min_leg_radius_m = 0.035;
   // Legs mount: a track that stands still (not walking: WalkingDirection) and is measured, in
-  // more than half of its recent two-leg measurements (the last 20, at least 5), as two legs
-  // farther apart along the line of sight than this, the nearer of them a single beam, is not a
-  // person's for the static-object rules (MultiTrackerOptions::static_object_to_background_s).
-  // A standing person's legs stand side by side, their centres a hip's width (2
+  // more than half of its recent two-leg measurements (the last 20, at least 5; those while it
+  // walked count as not deep), as two legs farther apart along the line of sight than this, the
+  // nearer of them a single beam, is not a person's for the static-object rules
+  // (MultiTrackerOptions::static_object_to_background_s). A standing person's legs stand side by side, their centres a hip's width (2
   // hip_half_width_m, 0.16-0.22 m) apart across the body, so along any ray at most that plus a
   // stance; a single beam this far in front of a still leg is a post too thin to fill a beam (a
   // chair's leg) with something standing behind it: every beam over the post returns a range
@@ -331,10 +331,11 @@ struct ShapeOptions {
   // leg_radius_m)^2 with D = f - r_leg, and a tenth of D for a beam whose share is dominant
   // (reported as the leg alone) or minor (the surface alone). Only parts within the beams one leg
   // touches ((2 leg_radius_m + footprint) / (R step) + 1). Counted in
-  // PipelineCounters::mixed_pixel_legs. The scanner must merge echoes that far apart: LMS1xx
-  // and TiM merge them at every separation seen (1.5 m); an LMS5xx resolves echoes beyond about
-  // 0.5 m and reports the first with half of the energy (the leg or the surface alone), so 0.5
-  // there. Scenario test AFarLegSeenOnlyAsMixedPixelsBeforeANearWallIsMeasuredAtTheLeg. 0: off
+  // PipelineCounters::mixed_pixel_legs. The scanner must merge echoes that far apart: the
+  // LMS1xx and TiM captures show merged echoes at every separation they hold (up to about 1 m)
+  // and none resolved; 1.5 m assumes the same a little beyond, where no capture tells. An LMS5xx
+  // resolves echoes beyond about 0.5 m and reports the first with half of the energy (the leg or
+  // the surface alone), so 0.5 there (TrackingPipeline::SetResolvedEchoSeparation). Scenario test AFarLegSeenOnlyAsMixedPixelsBeforeANearWallIsMeasuredAtTheLeg. 0: off
   // (the circle fit to the points).
   double mixed_leg_max_gap_m = 1.5;
   // Legs mount: a leg-sized segment (no wider than a pair of legs) of two or three points whose
@@ -1025,7 +1026,7 @@ struct Observation {
 // DeviceIdent name: the LMS5xx's echo filter separates echoes beyond about 0.5 m (the shared
 // LMS511 capture: edges 0.4-0.5 m apart resolved at a third of them, farther ones at all); 0 for
 // the LMS1xx, the TiMs and any other (their captures show merged ranges at every separation seen,
-// up to 1 m and more). For TrackingPipeline::SetResolvedEchoSeparation.
+// up to about 1 m). For TrackingPipeline::SetResolvedEchoSeparation.
 double ResolvedEchoSeparationM(std::string_view device_name);
 
 class TrackingPipeline {

@@ -1458,6 +1458,9 @@ std::vector<Variant> Variants(sim::Mount mount, double range_m, std::string_view
   old.shape.drop_mixed_pixel_legs = false;
   old.shape.drop_mixed_pixel_legs_whole_person = false;
   old.shape.mixed_leg_max_gap_m = 0.0;
+  old.shape.still_legs_max_depth_m = 0.0;
+  old.shape.split_step_seam = false;
+  old.tracking.report_gain_covariance = false;
   old.shape.hidden_leg_behind = false;
   old.shape.single_beam_legs = false;
   old.shape.single_beam_partner = false;
