@@ -55,11 +55,8 @@ inline void CvApplyTransitionTransposed(double dt_s, Eigen::Matrix4d& m) {
   m.col(1) += dt_s * m.col(3);
 }
 
-// Kalman prediction over dt_s >= 0: x <- F x, p <- F p F^T + Q, p re-symmetrised (keeps p exactly
-// symmetric in floating point, so Cholesky factorisations downstream see a symmetric matrix).
-inline void CvPredict(double dt_s, double accel_psd_m2ps3, CvState& x, CvCovariance& p) {
-  x(0) += dt_s * x(2);
-  x(1) += dt_s * x(3);
+// The covariance half of CvPredict: p <- F p F^T + Q, re-symmetrised.
+inline void CvPredictCovariance(double dt_s, double accel_psd_m2ps3, CvCovariance& p) {
   CvApplyTransition(dt_s, p);
   CvApplyTransitionTransposed(dt_s, p);
   const double q = accel_psd_m2ps3;
@@ -75,6 +72,14 @@ inline void CvPredict(double dt_s, double accel_psd_m2ps3, CvState& x, CvCovaria
   p(1, 3) += q12;
   p(3, 1) += q12;
   p = 0.5 * (p + p.transpose()).eval();
+}
+
+// Kalman prediction over dt_s >= 0: x <- F x, p <- F p F^T + Q, p re-symmetrised (keeps p exactly
+// symmetric in floating point, so Cholesky factorisations downstream see a symmetric matrix).
+inline void CvPredict(double dt_s, double accel_psd_m2ps3, CvState& x, CvCovariance& p) {
+  x(0) += dt_s * x(2);
+  x(1) += dt_s * x(3);
+  CvPredictCovariance(dt_s, accel_psd_m2ps3, p);
 }
 
 }  // namespace lrfnet::common

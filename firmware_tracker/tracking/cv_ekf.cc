@@ -30,10 +30,7 @@ void CvEkf::Init(const Eigen::Vector2d& z_m, const Eigen::Matrix2d& r_m2) {
 
 void CvEkf::Predict(double dt_s) {
   if (!(dt_s > 0.0) || !std::isfinite(dt_s)) return;
-  if (gain_) {
-    State x = x_;
-    common::CvPredict(dt_s, options_.accel_psd_m2ps3, x, p_gain_);
-  }
+  if (gain_) common::CvPredictCovariance(dt_s, options_.accel_psd_m2ps3, p_gain_);
   common::CvPredict(dt_s, options_.accel_psd_m2ps3, x_, p_);
 }
 

@@ -858,8 +858,9 @@ void MultiTracker::Report(common::UtcNs scan_start_ns, ScanTracks& out) {
     }
     if (!reportable && !options_.report_tentative) continue;
     Eigen::Vector4d x = t.filter.state();
-    Eigen::Matrix4d p = options_.report_gain_covariance && t.updated ? t.filter.gain_covariance()
-                                                                     : t.filter.covariance();
+    // The gain covariance is kept only with report_gain_covariance (GainCovariance()); else it is
+    // the filter's own.
+    Eigen::Matrix4d p = t.updated ? t.filter.gain_covariance() : t.filter.covariance();
     const double back_s = common::NsToSeconds(scan_start_ns - t.filter_ns);
     if (back_s < 0.0) internal::Extrapolate(back_s, x, p);
     TrackReport* r = out.tracks.emplace_slot();

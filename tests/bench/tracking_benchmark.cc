@@ -1433,16 +1433,9 @@ const char* const kVariantNames[] = {"old", "new", "before"};
 // --explain: why tracks coast beside a person the scan returned (CoastingCause).
 bool g_explain_coasting = false;
 
-// device_name: the scanner's DeviceIdent name, whose echo separation caps
-// shape.mixed_leg_max_gap_m as lrfnet-tracker caps it (tracking::ResolvedEchoSeparationM, from
-// the device's start-up dialogue).
-std::vector<Variant> Variants(sim::Mount mount, double range_m, std::string_view device_name) {
+std::vector<Variant> Variants(sim::Mount mount, double range_m) {
   tracking::TrackerOptions fresh;
   fresh.background.max_range_m = std::max(fresh.background.max_range_m, range_m + 1.0);
-  if (const double resolved = tracking::ResolvedEchoSeparationM(device_name); resolved > 0.0) {
-    // Echoes farther apart than that come back apart: no mixed pixel beyond it.
-    fresh.shape.mixed_leg_max_gap_m = std::min(fresh.shape.mixed_leg_max_gap_m, resolved);
-  }
   fresh.shape.mount = mount == sim::Mount::kLegs ? tracking::Mount::kLegs : tracking::Mount::kTorso;
   tracking::TrackerOptions old = fresh;
   old.method = tracking::MeasurementMethod::kEllipse;
@@ -2276,8 +2269,13 @@ void RunSensor(const sim::Simulator& simulator, std::size_t sensor,
   std::vector<std::unique_ptr<tracking::TrackingPipeline>> pipelines;
   std::vector<MotSequence> sequences(variants.size());
   for (std::size_t v = 0; v < variants.size(); ++v) sequences[v].set_breakdown(&(*breakdowns)[v]);
+  // The scanner's echo separation from its DeviceIdent name, as lrfnet-tracker takes it from the
+  // device's start-up dialogue (TrackerNode::SetDeviceIdentity).
+  const double resolved_echo_m = tracking::ResolvedEchoSeparationM(
+      setup.device.model != nullptr ? setup.device.model->ident_name : "");
   for (std::size_t v = 0; v < variants.size(); ++v) {
     pipelines.push_back(std::make_unique<tracking::TrackingPipeline>(variants[v].options));
+    pipelines.back()->SetResolvedEchoSeparation(resolved_echo_m);
   }
   for (std::size_t v = 0; v < variants.size(); ++v) (*frames)[v].id = setup.id;
   auto telegram = std::make_unique<cola::ScanTelegram>();
@@ -2849,9 +2847,7 @@ RunResult RunScenario(sim::Scenario scenario, bool all_legs, int jobs) {
   const std::size_t n = simulator->sensor_count();
   std::vector<std::vector<Variant>> variants(n);
   for (std::size_t i = 0; i < n; ++i) {
-    const sim::DeviceConfig& device = simulator->sensor(i).device;
-    variants[i] = Variants(simulator->sensor(i).mount, device.range_m,
-                           device.model != nullptr ? device.model->ident_name : "");
+    variants[i] = Variants(simulator->sensor(i).mount, simulator->sensor(i).device.range_m);
   }
   const std::size_t nv = variants[0].size();
   std::vector<std::vector<Mot>> mots(n, std::vector<Mot>(nv));
