@@ -30,8 +30,12 @@ void CvEkf::Init(const Eigen::Vector2d& z_m, const Eigen::Matrix2d& r_m2) {
 
 void CvEkf::Predict(double dt_s) {
   if (!(dt_s > 0.0) || !std::isfinite(dt_s)) return;
-  if (gain_) common::CvPredictCovariance(dt_s, options_.accel_psd_m2ps3, p_gain_);
-  common::CvPredict(dt_s, options_.accel_psd_m2ps3, x_, p_);
+  // p_ and p_gain_ are exactly symmetric (Init, the Joseph updates and InflateCovariance keep
+  // them so): common::CvPredict's covariance from the upper triangle, bit for bit.
+  if (gain_) common::CvPredictSymmetricCovariance(dt_s, options_.accel_psd_m2ps3, p_gain_);
+  x_(0) += dt_s * x_(2);
+  x_(1) += dt_s * x_(3);
+  common::CvPredictSymmetricCovariance(dt_s, options_.accel_psd_m2ps3, p_);
 }
 
 namespace {
@@ -59,6 +63,27 @@ void JosephUpdate(const Eigen::Matrix<double, 4, 2>& k, const Eigen::Matrix2d& r
   const Eigen::Matrix2d off = 0.5 * (top_right + bottom_left.transpose());
   p.topRightCorner<2, 2>() = off;
   p.bottomLeftCorner<2, 2>() = off.transpose();
+}
+
+// The same Joseph form for a covariance p the gain k was not computed from (the gain
+// covariance), multiplied out: with H = [I 0], P_1 = H P (p's top two rows) and S_p = H P H^T + R,
+//   (I - K H) P (I - K H)^T + K R K^T = P - K P_1 - P_1^T K^T + K S_p K^T = P + V K^T + K V^T,
+//   V = K S_p / 2 - P_1^T (4 x 2),
+// 48 multiplications instead of the blocks' 112, a column at a time. Entry (i, j) adds to P_ij
+// (V_i K_j^T) + (K_i V_j^T) and entry (j, i) the same two sums the other way round, so p stays
+// exactly symmetric. Equal to JosephUpdate but for rounding.
+void JosephUpdateOtherGain(const Eigen::Matrix<double, 4, 2>& k, const Eigen::Matrix2d& r,
+                           Eigen::Matrix4d& p) {
+  const double h00 = 0.5 * (p(0, 0) + r(0, 0));
+  const double h01 = 0.5 * (p(0, 1) + r(0, 1));
+  const double h11 = 0.5 * (p(1, 1) + r(1, 1));
+  Eigen::Matrix<double, 4, 2> v;
+  v.col(0) = k.col(0) * h00 + k.col(1) * h01 - p.col(0);  // p symmetric: its rows are its columns
+  v.col(1) = k.col(0) * h01 + k.col(1) * h11 - p.col(1);
+  for (int j = 0; j < 4; ++j) {
+    p.col(j) +=
+        (v.col(0) * k(j, 0) + v.col(1) * k(j, 1)) + (k.col(0) * v(j, 0) + k.col(1) * v(j, 1));
+  }
 }
 
 }  // namespace
@@ -92,9 +117,9 @@ bool CvEkf::Update(const Eigen::Vector2d& z_m, const Eigen::Matrix2d& r_m2,
   // gain's own covariance (gain_covariance()) through the same gain.
   if (gain_) {
     if (gain_r_m2 != nullptr && gain_r_m2->allFinite()) {
-      JosephUpdate(k, 0.5 * (*gain_r_m2 + gain_r_m2->transpose()), p_gain_);
+      JosephUpdateOtherGain(k, 0.5 * (*gain_r_m2 + gain_r_m2->transpose()), p_gain_);
     } else {
-      JosephUpdate(k, r, p_gain_);
+      JosephUpdateOtherGain(k, r, p_gain_);
     }
   }
   JosephUpdate(k, r, p_);

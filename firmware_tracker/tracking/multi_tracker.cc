@@ -38,9 +38,7 @@ namespace internal {
 void Extrapolate(double dt_s, Eigen::Vector4d& x, Eigen::Matrix4d& p) {
   x(0) += dt_s * x(2);
   x(1) += dt_s * x(3);
-  common::CvApplyTransition(dt_s, p);
-  common::CvApplyTransitionTransposed(dt_s, p);
-  p = 0.5 * (p + p.transpose()).eval();
+  common::CvTransitionSymmetric(dt_s, p);  // p is a filter's covariance: exactly symmetric
 }
 
 }  // namespace internal
