@@ -26,16 +26,26 @@ void CvEkf::Init(const Eigen::Vector2d& z_m, const Eigen::Matrix2d& r_m2) {
   p_(2, 2) = v2;
   p_(3, 3) = v2;
   gain_ = false;
+  gain_apart_ = false;
 }
 
 void CvEkf::Predict(double dt_s) {
   if (!(dt_s > 0.0) || !std::isfinite(dt_s)) return;
   // p_ and p_gain_ are exactly symmetric (Init, the Joseph updates and InflateCovariance keep
   // them so): common::CvPredict's covariance from the upper triangle, bit for bit.
-  if (gain_) common::CvPredictSymmetricCovariance(dt_s, options_.accel_psd_m2ps3, p_gain_);
+  if (gain_apart_) common::CvPredictSymmetricCovariance(dt_s, options_.accel_psd_m2ps3, p_gain_);
   x_(0) += dt_s * x_(2);
   x_(1) += dt_s * x_(3);
   common::CvPredictSymmetricCovariance(dt_s, options_.accel_psd_m2ps3, p_);
+}
+
+CvEkf::Prediction CvEkf::Predicted(double dt_s) const {
+  Prediction f{x_, p_};
+  if (!(dt_s > 0.0) || !std::isfinite(dt_s)) return f;
+  f.x(0) += dt_s * f.x(2);
+  f.x(1) += dt_s * f.x(3);
+  common::CvPredictSymmetricCovariance(dt_s, options_.accel_psd_m2ps3, f.p);
+  return f;
 }
 
 namespace {
@@ -111,16 +121,28 @@ bool CvEkf::Update(const Eigen::Vector2d& z_m, const Eigen::Matrix2d& r_m2,
   Eigen::Matrix2d s_inv;
   s_inv << s(1, 1), -s(0, 1), -s(1, 0), s(0, 0);
   s_inv /= det;
-  const Eigen::Matrix<double, 4, 2> k = p_.topRows<2>().transpose() * s_inv;  // K = P H^T S^-1
-  x_ += k * (z_m - x_.head<2>());
+  // K = P H^T S^-1, a column at a time: P is symmetric, so P H^T's columns are P's first two
+  // (entry (i, j): P_0i S^-1_0j + P_1i S^-1_1j, as the product of P's top rows transposed forms
+  // it).
+  Eigen::Matrix<double, 4, 2> k;
+  k.col(0) = p_.col(0) * s_inv(0, 0) + p_.col(1) * s_inv(1, 0);
+  k.col(1) = p_.col(0) * s_inv(0, 1) + p_.col(1) * s_inv(1, 1);
+  const Eigen::Vector2d y = z_m - x_.head<2>();
+  x_ += k.col(0) * y(0) + k.col(1) * y(1);
   // Joseph form: stays positive semi-definite even with a slightly wrong gain from rounding; the
   // gain's own covariance (gain_covariance()) through the same gain.
+  // Until an update's gain_r_m2 differs from R, the gain covariance is covariance() (the same
+  // recursion with the same noise), and is not formed apart.
   if (gain_) {
-    if (gain_r_m2 != nullptr && gain_r_m2->allFinite()) {
-      JosephUpdateOtherGain(k, 0.5 * (*gain_r_m2 + gain_r_m2->transpose()), p_gain_);
-    } else {
-      JosephUpdateOtherGain(k, r, p_gain_);
+    const Eigen::Matrix2d gain_r =
+        gain_r_m2 != nullptr && gain_r_m2->allFinite()
+            ? Eigen::Matrix2d(0.5 * (*gain_r_m2 + gain_r_m2->transpose()))
+            : r;
+    if (!gain_apart_ && gain_r != r) {
+      p_gain_ = p_;
+      gain_apart_ = true;
     }
+    if (gain_apart_) JosephUpdateOtherGain(k, gain_r, p_gain_);
   }
   JosephUpdate(k, r, p_);
   return true;

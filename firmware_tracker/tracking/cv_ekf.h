@@ -55,7 +55,7 @@ class CvEkf {
   void InflateCovariance(double factor) {
     if (!(std::isfinite(factor) && factor > 0.0)) return;
     p_ *= factor;
-    if (gain_) p_gain_ *= factor;
+    if (gain_apart_) p_gain_ *= factor;
   }
 
   // Replaces the state (e.g. a velocity limited to the possible), keeping the covariance.
@@ -69,24 +69,26 @@ class CvEkf {
   // ones): propagated with the same process noise and inflations, updated in Joseph form with the
   // gain K = P H^T S^-1 computed from covariance() and R. Equal to covariance() where every
   // gain_r_m2 was R.
-  // Kept from StartGainCovariance() on (before that, and in a copy from Predicted(), the
-  // filter's own covariance()): the recursion costs a second covariance per prediction and update,
-  // paid only by the tracks whose covariance is reported.
-  const Covariance& gain_covariance() const { return gain_ ? p_gain_ : p_; }
+  // Kept from StartGainCovariance() on (before that the filter's own
+  // covariance()): the recursion costs a second covariance per prediction and update,
+  // paid only by the tracks whose covariance is reported, and only from their first update whose
+  // gain_r_m2 is not R on (until then it is covariance() itself, as the recursion would give).
+  const Covariance& gain_covariance() const { return gain_apart_ ? p_gain_ : p_; }
   // Starts gain_covariance() from covariance() (the filter's R: the larger, so never too small).
   void StartGainCovariance() {
-    p_gain_ = p_;
     gain_ = true;
+    gain_apart_ = false;
   }
   // The state and covariance() predicted by dt_s, without the gain covariance (for a gate or a
-  // look ahead; Predict's arguments).
-  CvEkf Predicted(double dt_s) const {
-    CvEkf f(options_);
-    f.x_ = x_;
-    f.p_ = p_;
-    f.Predict(dt_s);
-    return f;
-  }
+  // look ahead; Predict's arguments and arithmetic), as a plain pair instead of a filter.
+  struct Prediction {
+    State x;
+    Covariance p;
+    const State& state() const { return x; }
+    const Covariance& covariance() const { return p; }
+    Eigen::Vector2d position_m() const { return x.head<2>(); }
+  };
+  Prediction Predicted(double dt_s) const;
   Eigen::Vector2d position_m() const { return x_.head<2>(); }
   Eigen::Vector2d velocity_mps() const { return x_.tail<2>(); }
 
@@ -95,7 +97,8 @@ class CvEkf {
   State x_ = State::Zero();
   Covariance p_ = Covariance::Identity();
   Covariance p_gain_ = Covariance::Identity();
-  bool gain_ = false;  // StartGainCovariance() was called
+  bool gain_ = false;        // StartGainCovariance() was called
+  bool gain_apart_ = false;  // p_gain_ holds gain_covariance() (else it equals p_)
 };
 
 }  // namespace lrfnet::tracking

@@ -143,7 +143,7 @@ std::size_t MultiTracker::Predict(common::UtcNs t_ns, std::span<TrackPrediction>
   for (const bool confirmed : {true, false}) {
     for (const Track& t : tracks_) {
       if (t.confirmed != confirmed || n == out.size()) continue;
-      const CvEkf f = t.filter.Predicted(common::NsToSeconds(t_ns - t.filter_ns));
+      const CvEkf::Prediction f = t.filter.Predicted(common::NsToSeconds(t_ns - t.filter_ns));
       TrackPrediction& p = out[n++];
       p.id = t.id;
       p.confirmed = t.confirmed;
@@ -287,7 +287,7 @@ void MultiTracker::Gate(common::UtcNs scan_start_ns) {
     offset_s[j] = 0.0;
   }
   for (std::size_t i = 0; i < tracks_.size(); ++i) {
-    const CvEkf predicted =
+    const CvEkf::Prediction predicted =
         tracks_[i].filter.Predicted(common::NsToSeconds(scan_start_ns - tracks_[i].filter_ns));
     track_to_candidate_[i] = -1;
     const Eigen::Vector4d& x = predicted.state();
@@ -511,23 +511,28 @@ bool MultiTracker::MeasureForTrack(Track& t, const Candidate& c, common::UtcNs a
   *z = c.z_m;
   *r = c.r_m2;
   if (refiner == nullptr) return true;
-  const Eigen::Vector4d x = t.filter.state();
-  const Eigen::Matrix4d p = t.filter.covariance();
-  TrackShape shape = t.shape;
-  if (!refiner->Refine(c.source, at_ns, &x, &p, shape, *m)) return false;
+  const Eigen::Vector4d& x = t.filter.state();
+  const Eigen::Matrix4d& p = t.filter.covariance();
+  // The shape is refined in place (one copy of it per update instead of two); a refinement that
+  // is not taken leaves the track's shape as it was.
+  const TrackShape before = t.shape;
+  const auto refused = [&] {
+    t.shape = before;
+    return false;
+  };
+  if (!refiner->Refine(c.source, at_ns, &x, &p, t.shape, *m)) return refused();
   // The refiner's covariance is its own, model errors included: no extra sigma.
   *z = m->position_m;
   *r = 0.5 * (m->covariance_m2 + m->covariance_m2.transpose());
-  if (!z->allFinite() || !r->allFinite()) return false;
+  if (!z->allFinite() || !r->allFinite()) return refused();
   if (std::isfinite(max_d2)) {
     Candidate refined = c;
     refined.z_m = *z;
     refined.r_m2 = *r;
     if (!(MahalanobisSq(x.head<2>(), p.topLeftCorner<2, 2>(), refined, nullptr) <= max_d2)) {
-      return false;
+      return refused();
     }
   }
-  t.shape = shape;
   return true;
 }
 
@@ -721,7 +726,8 @@ bool MultiTracker::Resume(common::UtcNs scan_start_ns, const Candidate& c,
         at_ns < t.filter_ns) {
       continue;
     }
-    const CvEkf predicted = t.filter.Predicted(common::NsToSeconds(at_ns - t.filter_ns));
+    const CvEkf::Prediction predicted =
+        t.filter.Predicted(common::NsToSeconds(at_ns - t.filter_ns));
     double d2 = 0.0;
     if (InsideGate(predicted.position_m(), predicted.covariance().topLeftCorner<2, 2>(), c, &d2,
                    nullptr) &&

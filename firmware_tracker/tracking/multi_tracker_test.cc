@@ -751,6 +751,48 @@ TEST(MultiTrackerTest, RefinedMeasurementFarBeyondTheGateIsNotUsed) {
   }
 }
 
+// A refiner that learns a size, then (far_) moves the measurement far off and claims another size
+// (true), or fails after writing that size (false).
+class SizeRefiner final : public MeasurementRefiner {
+ public:
+  bool Refine(std::size_t, common::UtcNs, const Eigen::Vector4d* predicted, const Eigen::Matrix4d*,
+              TrackShape& shape, Measurement& m) override {
+    shape.shape = ObjectShape::kTorso;
+    m.covariance_m2 = 0.02 * 0.02 * Eigen::Matrix2d::Identity();
+    if (predicted == nullptr || mode_ == Mode::kNear) {
+      shape.size_m = Eigen::Vector2d(0.25, 0.15);
+      return true;
+    }
+    shape.size_m = Eigen::Vector2d(0.9, 0.9);
+    m.position_m += Eigen::Vector2d(0.0, 0.8);
+    return mode_ == Mode::kFarTaken;
+  }
+  enum class Mode { kNear, kFarTaken, kFails };
+  Mode mode_ = Mode::kNear;
+};
+
+// MultiTracker refines a track's shape in place: a refinement it does not take (beyond the gate,
+// or the refiner's failure) leaves the shape the track had.
+TEST(MultiTrackerTest, ARefinementNotTakenLeavesTheTrackShapeAsItWas) {
+  const std::vector<Measurement> ms = {Meas(3.0, 0.0, 0.02)};
+  for (const auto mode : {SizeRefiner::Mode::kFarTaken, SizeRefiner::Mode::kFails}) {
+    MultiTracker tracker(Opts());
+    SizeRefiner refiner;
+    ScanTracks out;
+    for (std::int64_t k = 0; k < 10; ++k) tracker.Step(ScanNs(k), ms, {}, &refiner, out);
+    ASSERT_EQ(out.tracks.size(), 1u);
+    EXPECT_DOUBLE_EQ(out.tracks[0].size_major_m, 0.25);
+    refiner.mode_ = mode;
+    const std::uint64_t failures = tracker.counters().refine_failures;
+    tracker.Step(ScanNs(10), ms, {}, &refiner, out);
+    EXPECT_EQ(tracker.counters().refine_failures, failures + 1);
+    ASSERT_EQ(out.tracks.size(), 1u);
+    EXPECT_EQ(out.tracks[0].state, TrackState::kCoasting);
+    EXPECT_DOUBLE_EQ(out.tracks[0].size_major_m, 0.25);
+    EXPECT_DOUBLE_EQ(out.tracks[0].size_minor_m, 0.15);
+  }
+}
+
 // A refiner that reports a fixed outline departure with every measurement.
 class DepartureRefiner final : public MeasurementRefiner {
  public:
