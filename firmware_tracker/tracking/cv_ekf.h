@@ -69,10 +69,10 @@ class CvEkf {
   // ones): propagated with the same process noise and inflations, updated in Joseph form with the
   // gain K = P H^T S^-1 computed from covariance() and R. Equal to covariance() where every
   // gain_r_m2 was R.
-  // Kept from StartGainCovariance() on (before that the filter's own
-  // covariance()): the recursion costs a second covariance per prediction and update,
-  // paid only by the tracks whose covariance is reported, and only from their first update whose
-  // gain_r_m2 is not R on (until then it is covariance() itself, as the recursion would give).
+  // Kept from StartGainCovariance() on (before that, the filter's own covariance()): the recursion
+  // costs a second covariance per prediction and update, paid only by the tracks whose covariance
+  // is reported, and only from their first update whose gain_r_m2 is not R on (until then it is
+  // covariance() itself, which the recursion would give bit for bit).
   const Covariance& gain_covariance() const { return gain_apart_ ? p_gain_ : p_; }
   // Starts gain_covariance() from covariance() (the filter's R: the larger, so never too small).
   void StartGainCovariance() {
