@@ -19,72 +19,6 @@ std::optional<std::string> Validate(const SegmentationOptions& o) {
   return std::nullopt;
 }
 
-namespace {
-
-class Builder {
- public:
-  Builder(const SegmentationOptions& options, SegmentList& out) : options_(options), out_(out) {}
-
-  bool open() const { return open_; }
-  const Eigen::Vector2d& last_point() const { return out_.points_m[out_.points_m.size() - 1]; }
-  std::size_t last_beam() const { return last_beam_; }
-
-  bool Fits(const Eigen::Vector2d& p) const {
-    return count_ < options_.max_points &&
-           (p - out_.points_m[first_point_]).norm() <= options_.max_width_m;
-  }
-
-  void Open(std::size_t beam, const Eigen::Vector2d& p) {
-    open_ = true;
-    begin_beam_ = beam;
-    first_point_ = out_.points_m.size();
-    count_ = 0;
-    Add(beam, p);
-  }
-
-  void Add(std::size_t beam, const Eigen::Vector2d& p) {
-    (void)out_.points_m.push_back(p);  // the pool holds one point per beam: cannot overflow
-    last_beam_ = beam;
-    ++count_;
-  }
-
-  void Close() {
-    if (!open_) return;
-    open_ = false;
-    const double width_m = (last_point() - out_.points_m[first_point_]).norm();
-    if (count_ < options_.min_points || width_m < options_.min_width_m) {
-      DropPoints();
-      return;
-    }
-    Segment s;
-    s.begin_beam = begin_beam_;
-    s.end_beam = last_beam_ + 1;
-    s.first_point = first_point_;
-    s.point_count = count_;
-    s.width_m = width_m;
-    if (!out_.segments.push_back(s)) {
-      ++out_.dropped_segments;
-      DropPoints();
-    }
-  }
-
- private:
-  // Shrinking only; FixedVector::resize would also be able to grow with uninitialised Eigen values.
-  void DropPoints() {
-    while (out_.points_m.size() > first_point_) out_.points_m.pop_back();
-  }
-
-  const SegmentationOptions& options_;
-  SegmentList& out_;
-  bool open_ = false;
-  std::size_t begin_beam_ = 0;
-  std::size_t last_beam_ = 0;
-  std::size_t first_point_ = 0;
-  std::size_t count_ = 0;
-};
-
-}  // namespace
-
 void SegmentScan(const ScanView& scan, std::span<const std::uint8_t> foreground,
                  const SegmentationOptions& options, SegmentList& out) {
   out.segments.clear();
@@ -93,25 +27,60 @@ void SegmentScan(const ScanView& scan, std::span<const std::uint8_t> foreground,
   if (CheckScan(scan) != ScanError::kNone) return;
   out.directions.Fit(scan);
 
-  Builder builder(options, out);
+  // The open segment's state in locals (its first and last point held here as well as in the
+  // pool): the per-beam tests read no member and no pool entry. The same tests on the same values
+  // as before, the cheap integer ones first (each test is pure, so their order changes nothing).
+  const double jump_base_m = options.jump_base_m, jump_per_m = options.jump_per_m;
+  const double max_width_m = options.max_width_m;
+  const std::size_t max_missing_beams = options.max_missing_beams;
+  const std::size_t max_points = options.max_points;
+  bool open = false;
+  std::size_t begin_beam = 0, last_beam = 0, first_point = 0, count = 0;
+  Eigen::Vector2d first_p = Eigen::Vector2d::Zero(), last_p = Eigen::Vector2d::Zero();
+  const auto close = [&] {
+    open = false;
+    const double width_m = (last_p - first_p).norm();
+    if (count >= options.min_points && !(width_m < options.min_width_m)) {
+      Segment s;
+      s.begin_beam = begin_beam;
+      s.end_beam = last_beam + 1;
+      s.first_point = first_point;
+      s.point_count = count;
+      s.width_m = width_m;
+      if (out.segments.push_back(s)) return;
+      ++out.dropped_segments;
+    }
+    // Shrinking only; FixedVector::resize would also be able to grow with uninitialised values.
+    while (out.points_m.size() > first_point) out.points_m.pop_back();
+  };
+
   const std::size_t n = std::min(scan.range_m.size(), foreground.size());
   for (std::size_t i = 0; i < n; ++i) {
     const double r = scan.range_m[i];
     if (foreground[i] == 0 || !(std::isfinite(r) && r > 0.0)) continue;
     const Eigen::Vector2d p(r * out.directions.cos(i), r * out.directions.sin(i));
-    if (builder.open()) {
-      const bool beam_gap_ok = i - builder.last_beam() - 1 <= options.max_missing_beams;
-      const bool jump_ok =
-          (p - builder.last_point()).norm() <= options.jump_base_m + options.jump_per_m * r;
-      if (beam_gap_ok && jump_ok && builder.Fits(p)) {
-        builder.Add(i, p);
+    if (open) {
+      if (i - last_beam - 1 <= max_missing_beams && count < max_points &&
+          (p - last_p).norm() <= jump_base_m + jump_per_m * r &&
+          (p - first_p).norm() <= max_width_m) {
+        (void)out.points_m.push_back(p);  // the pool holds one point per beam: cannot overflow
+        last_p = p;
+        last_beam = i;
+        ++count;
         continue;
       }
-      builder.Close();
+      close();
     }
-    builder.Open(i, p);
+    open = true;
+    begin_beam = i;
+    last_beam = i;
+    first_point = out.points_m.size();
+    count = 1;
+    first_p = p;
+    last_p = p;
+    (void)out.points_m.push_back(p);
   }
-  builder.Close();
+  if (open) close();
 }
 
 std::size_t SeeThroughCuts(const ScanView& scan, const SegmentList& list, const Segment& s,

@@ -5,6 +5,7 @@
 #include <array>
 #include <cmath>
 #include <memory>
+#include <random>
 #include <vector>
 
 #include "common/geometry.h"
@@ -386,6 +387,100 @@ TEST(SegmentationTest, ShortMaskBadScanAndNoEchoBeamsAreSafe) {
   bad.angle_step_rad = 0.0;
   SegmentScan(bad, s.mask, SegmentationOptions{}, out);
   EXPECT_TRUE(out.segments.empty());
+}
+
+// The segmentation rule as the header states it, one beam at a time, for comparison: a point joins
+// the open segment when no more than max_missing_beams beams lie between, its jump is within the
+// limit, the segment holds fewer than max_points and the point lies within max_width_m of the
+// first.
+struct ReferenceSegments {
+  std::vector<Segment> segments;
+  std::vector<Eigen::Vector2d> points;
+  std::uint64_t dropped = 0;  // beyond kMaxSegments
+};
+ReferenceSegments ReferenceSegmentScan(const ScanView& scan, const std::vector<std::uint8_t>& mask,
+                                       const SegmentationOptions& o) {
+  ReferenceSegments out;
+  std::vector<std::size_t> beams;
+  std::vector<Eigen::Vector2d> open;
+  const auto close = [&] {
+    if (open.empty()) return;
+    const double width_m = (open.back() - open.front()).norm();
+    if (open.size() >= o.min_points && !(width_m < o.min_width_m)) {
+      if (out.segments.size() == kMaxSegments) {
+        ++out.dropped;
+      } else {
+        out.segments.push_back(
+            {beams.front(), beams.back() + 1, out.points.size(), open.size(), width_m});
+        out.points.insert(out.points.end(), open.begin(), open.end());
+      }
+    }
+    open.clear();
+    beams.clear();
+  };
+  for (std::size_t i = 0; i < scan.range_m.size(); ++i) {
+    const double r = scan.range_m[i];
+    if (mask[i] == 0 || !(std::isfinite(r) && r > 0.0)) continue;
+    const double angle = scan.first_angle_rad + static_cast<double>(i) * scan.angle_step_rad;
+    const Eigen::Vector2d p(r * std::cos(angle), r * std::sin(angle));
+    if (!open.empty() &&
+        !(i - beams.back() - 1 <= o.max_missing_beams &&
+          (p - open.back()).norm() <= o.jump_base_m + o.jump_per_m * r &&
+          open.size() < o.max_points && (p - open.front()).norm() <= o.max_width_m)) {
+      close();
+    }
+    open.push_back(p);
+    beams.push_back(i);
+  }
+  close();
+  return out;
+}
+
+TEST(SegmentationTest, RandomScansGiveTheSegmentsOfTheRuleBeamByBeam) {
+  std::mt19937_64 rng(2028);
+  std::uniform_real_distribution<double> unit(0.0, 1.0);
+  SegmentList out;
+  std::size_t compared_segments = 0;
+  for (int trial = 0; trial < 300; ++trial) {
+    MaskScan s(400, 5.0f);
+    double range = 1.0 + 9.0 * unit(rng);
+    for (std::size_t i = 0; i < s.ranges.size(); ++i) {
+      const double u = unit(rng);
+      // A walk in range with jumps, runs of foreground, and beams without a return.
+      range = u < 0.1 ? 0.5 + 15.0 * unit(rng) : std::max(0.3, range + 0.1 * (unit(rng) - 0.5));
+      s.ranges[i] = u > 0.97 ? 0.0f : u > 0.96 ? std::nanf("") : static_cast<float>(range);
+      if (i == 0 || unit(rng) < 0.15)
+        s.mask[i] = unit(rng) < 0.6 ? 1 : 0;
+      else
+        s.mask[i] = s.mask[i - 1];
+    }
+    SegmentationOptions o;
+    o.max_missing_beams = static_cast<std::size_t>(rng() % 4);
+    o.min_points = 1 + static_cast<std::size_t>(rng() % 3);
+    o.max_points = o.min_points + static_cast<std::size_t>(rng() % 12);
+    o.min_width_m = 0.1 * unit(rng);
+    o.max_width_m = o.min_width_m + 0.2 + 1.2 * unit(rng);
+    ASSERT_EQ(Validate(o), std::nullopt);
+    SegmentScan(s.view(), s.mask, o, out);
+    const ReferenceSegments want = ReferenceSegmentScan(s.view(), s.mask, o);
+    ASSERT_EQ(out.segments.size(), want.segments.size()) << "trial " << trial;
+    ASSERT_EQ(out.points_m.size(), want.points.size()) << "trial " << trial;
+    EXPECT_EQ(out.dropped_segments, want.dropped);
+    for (std::size_t k = 0; k < want.segments.size(); ++k) {
+      const Segment& got = out.segments[k];
+      const Segment& ref = want.segments[k];
+      EXPECT_EQ(got.begin_beam, ref.begin_beam);
+      EXPECT_EQ(got.end_beam, ref.end_beam);
+      EXPECT_EQ(got.first_point, ref.first_point);
+      EXPECT_EQ(got.point_count, ref.point_count);
+      EXPECT_NEAR(got.width_m, ref.width_m, 1e-12);
+    }
+    for (std::size_t k = 0; k < want.points.size(); ++k) {
+      EXPECT_NEAR((out.points_m[k] - want.points[k]).norm(), 0.0, 1e-12);
+    }
+    compared_segments += want.segments.size();
+  }
+  EXPECT_GT(compared_segments, 3000u);
 }
 
 TEST(SegmentationTest, PersonInSyntheticScanIsOneSegment) {
