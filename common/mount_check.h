@@ -104,15 +104,25 @@ class MountWatch {
 
   // One confirmed person track (not a box) in the current scan.
   void Add(std::uint32_t track_id, double speed_mps, double half_width_m) {
+    // The ids are unique among the live tracks, and a scan's tracks come in the order of the last
+    // scan's (new ones after them): the one after the last found is tried first, then every one.
     Live* live = nullptr;
-    for (std::size_t i = 0; i < live_count_; ++i) {
-      if (live_[i].id == track_id) live = &live_[i];
+    if (next_live_ < live_count_ && live_[next_live_].id == track_id) {
+      live = &live_[next_live_];
+    } else {
+      for (std::size_t i = 0; i < live_count_; ++i) {
+        if (live_[i].id == track_id) {
+          live = &live_[i];
+          break;
+        }
+      }
     }
     if (live == nullptr) {
       if (live_count_ == kTracks) return;
       live = &live_[live_count_++];
       *live = Live{track_id};
     }
+    next_live_ = static_cast<std::size_t>(live - live_.data()) + 1;
     live->seen = true;
     if (!(speed_mps > options_.min_speed_mps) || !std::isfinite(half_width_m) ||
         !(half_width_m > 0.0) || live->filed) {
@@ -136,6 +146,7 @@ class MountWatch {
       live_[kept++] = live_[i];
     }
     live_count_ = kept;
+    next_live_ = 0;
     return verdict_.looks_like_legs && !before;
   }
 
@@ -163,6 +174,7 @@ class MountWatch {
   MountCheckOptions options_;
   std::array<Live, kTracks> live_{};
   std::size_t live_count_ = 0;
+  std::size_t next_live_ = 0;  // where Add looks first
   std::array<double, kHistory> history_{};
   std::size_t next_ = 0, filled_ = 0;
   MountCheck verdict_;
