@@ -263,7 +263,6 @@ void MultiTracker::Gate(common::UtcNs scan_start_ns) {
   const double q = options_.ekf.accel_psd_m2ps3;
   const double max_gate_sq_m2 = options_.max_gate_distance_m * options_.max_gate_distance_m;
   constexpr double kInf = std::numeric_limits<double>::infinity();
-  gated_rows_ = tracks_.size();
   // Most pairs of a crowded scene lie beyond max_gate_distance_m (InsideGate's first test: out
   // whatever the covariance). That test runs on blocks of 8 measurements at once (Eigen's packets,
   // on contiguous copies of their positions and beam times), the rows are filled as "out" in bulk,
@@ -281,6 +280,7 @@ void MultiTracker::Gate(common::UtcNs scan_start_ns) {
     z_y_m[j] = candidates_[j].z_m.y();
     offset_s[j] = candidates_[j].offset_s;
   }
+  std::fill_n(gated_any_.begin(), n, false);
   for (std::size_t j = n; j < padded; ++j) {
     z_x_m[j] = kInf;
     z_y_m[j] = kInf;
@@ -331,6 +331,7 @@ void MultiTracker::Gate(common::UtcNs scan_start_ns) {
         const bool inside = d2 <= options_.gate_mahalanobis_sq;
         d2_row[j] = d2;
         gated_row[j] = inside;
+        gated_any_[j] = gated_any_[j] || inside;
         cost_row[j] = inside ? d2 + std::log(det) : kUnassignableCost;
       }
     }
@@ -777,16 +778,14 @@ bool MultiTracker::Resume(common::UtcNs scan_start_ns, const Candidate& c,
 void MultiTracker::StartTracks(common::UtcNs scan_start_ns,
                                std::span<const Measurement> measurements,
                                MeasurementRefiner* refiner) {
-  // Rows of gated_ still refer to the tracks as they were before the lifecycle step, which is what
-  // "inside an existing track's gate" means for this scan.
-  const std::size_t gated_rows = gated_rows_;
+  // gated_any_ still refers to the tracks as they were before the lifecycle step (Gate's), which is
+  // what "inside an existing track's gate" means for this scan.
   const std::size_t first_born = tracks_.size();
   for (std::size_t j = 0; j < candidates_.size(); ++j) {
     if (candidate_to_track_[j] >= 0) continue;
     const Candidate& c = candidates_[j];
     if (c.evidence_only) continue;  // step 3c: never a new or resumed track
-    bool suppressed = false;
-    for (std::size_t i = 0; i < gated_rows && !suppressed; ++i) suppressed = gated_[i][j];
+    bool suppressed = gated_any_[j];
     for (std::size_t b = first_born; b < tracks_.size() && !suppressed; ++b) {
       const Track& born = tracks_[b];
       suppressed = InsideGate(born.filter.position_m(),

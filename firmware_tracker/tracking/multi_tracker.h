@@ -511,7 +511,7 @@ class MultiTracker {
   std::array<std::array<double, kMaxSegments>, kMaxTracks> distance_{};  // metres; where gated_
   std::array<std::array<bool, kMaxSegments>, kMaxTracks> gated_{};
   std::array<std::array<double, kMaxSegments>, kMaxTracks> d2_{};  // Mahalanobis^2, inf: none
-  std::size_t gated_rows_ = 0;                                     // tracks when gated_ was filled
+  std::array<bool, kMaxSegments> gated_any_{};  // per candidate: gated_ set in any track's row
   std::array<int, kMaxTracks> track_to_candidate_{};               // -1: none
   std::array<int, kMaxSegments> candidate_to_track_{};             // -1: none
   common::FixedVector<std::size_t, kMaxTracks> absorbed_;
