@@ -92,8 +92,12 @@ namespace {
 //   V = K S_p / 2 - P_1^T (4 x 2),
 // 83 multiplications, two at a time down p's columns, instead of the blocks' 112 (the compiled code
 // about half as long). Entry (i, j) adds to P_ij
-// (V_i K_j^T) + (K_i V_j^T) and entry (j, i) the same two sums the other way round, so p stays
-// exactly symmetric. Equal to JosephUpdate but for rounding.
+// (V_i K_j^T) + (K_i V_j^T) and entry (j, i) the same two sums the other way round, so without
+// fused multiply-adds p stays exactly symmetric; the lower triangle is copied from the upper one
+// after the loop so that it does with them too (Predict reads the upper triangle only). Equal to
+// JosephUpdate but for rounding; the multiplied-out form cancels like the standard Kalman update
+// (P - K P_1 ...), not positive semi-definite by construction as the Joseph blocks are: harmless
+// at these sizes, and the filter's own covariance (which decides the gains) keeps the blocks.
 void JosephUpdateOtherGain(const Eigen::Matrix<double, 4, 2>& k, const Eigen::Matrix2d& r,
                            Eigen::Matrix4d& p) {
   const double h00 = 0.5 * (p(0, 0) + r(0, 0));
@@ -105,6 +109,9 @@ void JosephUpdateOtherGain(const Eigen::Matrix<double, 4, 2>& k, const Eigen::Ma
   for (int j = 0; j < 4; ++j) {
     p.col(j) +=
         (v.col(0) * k(j, 0) + v.col(1) * k(j, 1)) + (k.col(0) * v(j, 0) + k.col(1) * v(j, 1));
+  }
+  for (int j = 1; j < 4; ++j) {
+    for (int i = 0; i < j; ++i) p(j, i) = p(i, j);
   }
 }
 
@@ -135,14 +142,15 @@ bool CvEkf::Update(const Eigen::Vector2d& z_m, const Eigen::Matrix2d& r_m2,
   s_inv /= det;
   // K = P H^T S^-1, a column at a time: P is symmetric, so P H^T's columns are P's first two
   // (entry (i, j): P_0i S^-1_0j + P_1i S^-1_1j, as the product of P's top rows transposed forms
-  // it).
+  // it where multiply-adds are not fused; with fused multiply-adds, as on aarch64, the last bits
+  // differ from that product).
   Eigen::Matrix<double, 4, 2> k;
   k.col(0) = p_.col(0) * s_inv(0, 0) + p_.col(1) * s_inv(1, 0);
   k.col(1) = p_.col(0) * s_inv(0, 1) + p_.col(1) * s_inv(1, 1);
   const Eigen::Vector2d y = z_m - x_.head<2>();
   x_ += k.col(0) * y(0) + k.col(1) * y(1);
-  // Joseph form: stays positive semi-definite even with a slightly wrong gain from rounding; the
-  // gain's own covariance (gain_covariance()) through the same gain.
+  // Joseph form (p_): stays positive semi-definite even with a slightly wrong gain from rounding;
+  // the gain's own covariance (gain_covariance()) through the same gain, multiplied out.
   // Until an update's gain_r_m2 differs from R, the gain covariance is covariance() (the same
   // recursion with the same noise), and is not formed apart.
   if (gain_) {

@@ -7,8 +7,9 @@
 // State x = (x_m, y_m, vx_mps, vy_mps) in the sensor frame. Process noise: continuous white
 // acceleration with spectral density q = accel_psd_m2ps3 per axis, discretised exactly:
 //   Q_axis = q * [dt^3/3, dt^2/2; dt^2/2, dt].
-// Update uses the Joseph form, and covariances are re-symmetrised after every step, so P stays
-// symmetric positive definite in floating point. Pure, fixed-size, never allocates.
+// Update uses the Joseph form; the covariances are kept exactly symmetric (the prediction from the
+// upper triangle, the Joseph updates symmetric by construction), so P stays symmetric positive
+// definite in floating point. Pure, fixed-size, never allocates.
 
 #include <Eigen/Core>
 #include <cmath>

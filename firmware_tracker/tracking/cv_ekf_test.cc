@@ -170,6 +170,64 @@ TEST(CvEkfTest, PredictAndGainCovarianceAreTheTextbookSteps) {
   EXPECT_EQ(predictions_checked, 600);
 }
 
+// The gain covariance is formed apart from the filter's own only from the first update whose
+// noise is not R: until then it is covariance() itself; from then on it is the textbook recursion
+// started at StartGainCovariance (predictions, inflations and Joseph updates with the other noise);
+// a restart or a new Init makes it the filter's covariance again.
+TEST(CvEkfTest, GainCovarianceGoesApartAtTheFirstOtherNoiseAndRestarts) {
+  const CvEkfOptions options{};
+  CvEkf ekf{options};
+  const Eigen::Matrix2d r = 0.015 * 0.015 * Eigen::Matrix2d::Identity();
+  Eigen::Matrix2d r_other;
+  r_other << 0.004 * 0.004, 0.000002, 0.000002, 0.006 * 0.006;
+  Eigen::Matrix<double, 2, 4> h = Eigen::Matrix<double, 2, 4>::Zero();
+  h(0, 0) = h(1, 1) = 1.0;
+  ekf.Init({1.0, 2.0}, r);
+  ekf.StartGainCovariance();
+  common::CvCovariance pg = ekf.covariance();  // the textbook recursion, by hand
+  const auto step = [&](int k, const Eigen::Matrix2d& gain_r) {
+    const double dt_s = 0.04;
+    common::CvPredictCovariance(dt_s, options.accel_psd_m2ps3, pg);
+    ekf.Predict(dt_s);
+    if (k == 3) {
+      ekf.InflateCovariance(2.5);
+      pg *= 2.5;
+    }
+    const common::CvCovariance p = ekf.covariance();
+    const Eigen::Matrix<double, 4, 2> gain =
+        p * h.transpose() * (h * p * h.transpose() + r).inverse();
+    const Eigen::Matrix4d i_kh = Eigen::Matrix4d::Identity() - gain * h;
+    pg = (i_kh * pg * i_kh.transpose() + gain * gain_r * gain.transpose()).eval();
+    const Eigen::Vector2d z(1.0 + 0.04 * k, 2.0 + 0.01 * (k % 3));
+    ASSERT_TRUE(ekf.Update(z, r, &gain_r));
+  };
+  for (int k = 1; k <= 5; ++k) {
+    step(k, r);  // told R as the gain's noise too: not formed apart
+    EXPECT_EQ(&ekf.gain_covariance(), &ekf.covariance()) << k;
+    EXPECT_LT((ekf.gain_covariance() - pg).norm(), 1e-12 * pg.norm()) << k;
+  }
+  for (int k = 6; k <= 12; ++k) {
+    step(k, r_other);
+    EXPECT_NE(&ekf.gain_covariance(), &ekf.covariance()) << k;
+    EXPECT_LT((ekf.gain_covariance() - pg).norm(), 1e-12 * pg.norm()) << k;
+    EXPECT_EQ(ekf.gain_covariance(), ekf.gain_covariance().transpose()) << k;
+  }
+  // Apart, the gain covariance is the smaller: the other noise is below R.
+  const double apart_trace = ekf.gain_covariance().topLeftCorner<2, 2>().trace();
+  const double filter_trace = ekf.covariance().topLeftCorner<2, 2>().trace();
+  EXPECT_LT(apart_trace, 0.5 * filter_trace);
+  ekf.StartGainCovariance();  // e.g. a resumed track confirmed again
+  EXPECT_EQ(ekf.gain_covariance(), ekf.covariance());
+  pg = ekf.covariance();
+  step(13, r_other);  // apart again from here, started from the filter's covariance
+  EXPECT_NE(ekf.gain_covariance(), ekf.covariance());
+  EXPECT_LT((ekf.gain_covariance() - pg).norm(), 1e-12 * pg.norm());
+  ekf.Init({0.0, 0.0}, r);
+  EXPECT_EQ(ekf.gain_covariance(), ekf.covariance());
+  ASSERT_TRUE(ekf.Update({0.01, 0.0}, r, &r_other));
+  EXPECT_EQ(ekf.gain_covariance(), ekf.covariance());  // Init stops it until started again
+}
+
 TEST(CvEkfTest, BadMeasurementsLeaveTheFilterUnchanged) {
   CvEkf ekf{CvEkfOptions{}};
   const Eigen::Matrix2d r = 0.01 * Eigen::Matrix2d::Identity();
