@@ -499,6 +499,10 @@ void VisitShape(tracking::ShapeOptions& o, ConfigVisitor& v) {
           "end taken for the silhouette), shared by the scans while they stay close: this "
           "squared, times 1 - distance / neighbour_distance_m, per axis, is reported with the "
           "person's measured scans (m). 0: off.");
+  v.Field("segment_excess_shared", o.segment_excess_shared,
+          "Upper-body mount, a person whose segment is wider than twice the fitted outline's "
+          "reach: the centre's variance along the segment from where along it the body lies "
+          "(excess^2 / 12) is reported with the measured scans. false: not reported.");
   v.Field("beam_divergence_rad", o.beam_divergence_rad,
           "Full beam divergence of the scanner (LMS1xx, TiM: 0.015; LMS5xx: 0.011); the beam's "
           "footprint at range R is R times this plus beam_exit_diameter_m (mixed pixels of legs "

@@ -496,7 +496,7 @@ Eigen::Matrix2d MultiTracker::MeasuredNoise(Track& t, const Eigen::Vector2d& z_m
   // filter's R allows for per scan, or a view resting on the priors: errors successive scans
   // share, which the innovations do not show; the filter's R stays.
   if (t.shape.reported_neighbour_m2 > 0.0 || t.shape.reported_departure_m2 > w.dot(r_m2 * w) ||
-      !t.shape.reported_partial_cov_m2.isZero()) {
+      !t.shape.reported_partial_cov_m2.isZero() || !t.shape.reported_excess_cov_m2.isZero()) {
     return r_m2;
   }
   const double along_m2 = u.dot(r_m2 * u);
@@ -886,6 +886,7 @@ void MultiTracker::Report(common::UtcNs scan_start_ns, ScanTracks& out) {
       p.topLeftCorner<2, 2>() += t.shape.reported_departure_m2 * Eigen::Matrix2d::Identity();
       p.topLeftCorner<2, 2>() += t.shape.reported_partial_cov_m2;
       p.topLeftCorner<2, 2>() += t.shape.reported_neighbour_m2 * Eigen::Matrix2d::Identity();
+      p.topLeftCorner<2, 2>() += t.shape.reported_excess_cov_m2;
     }
     r->covariance = p;
     r->age_scans = t.age_scans;

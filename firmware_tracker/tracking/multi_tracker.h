@@ -327,6 +327,9 @@ struct TrackShape {
   // Another object beside the body (ShapeOptions::neighbour_sigma_m): the variance per axis
   // reported with the track's measured scans; zero otherwise. Not with coasting reports.
   double reported_neighbour_m2 = 0.0;
+  // A segment wider than the body (ShapeOptions::segment_excess_shared): the covariance of where
+  // along the segment the body lies, reported with the track's measured scans; zero otherwise.
+  Eigen::Matrix2d reported_excess_cov_m2 = Eigen::Matrix2d::Zero();
   // Knee height: the leg centres of the track's last two-leg measurement, their fits' variance
   // (mean over the axes) and its time, 0: none (ShapeOptions::stance_leg_weight).
   std::array<Eigen::Vector2d, 2> legs_m{Eigen::Vector2d::Zero(), Eigen::Vector2d::Zero()};

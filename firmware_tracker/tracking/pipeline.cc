@@ -232,6 +232,33 @@ double NeighbourVar(const ShapeOptions& o, double distance_m) {
          (1.0 - std::max(0.0, distance_m) / o.neighbour_distance_m);
 }
 
+Eigen::Matrix2d SegmentExcessCov(std::span<const Eigen::Vector2d> points,
+                                 const Eigen::Vector2d& centre_m, double reach_m, double noise_m) {
+  const double range_m = centre_m.norm();
+  if (points.size() < 2 || !(range_m > 0.0)) return Eigen::Matrix2d::Zero();
+  const Eigen::Vector2d u = centre_m / range_m;
+  const Eigen::Vector2d w(-u.y(), u.x());
+  double u_lo = std::numeric_limits<double>::infinity();
+  double u_hi = -u_lo;
+  double w_lo = u_lo;
+  double w_hi = -u_lo;
+  for (const Eigen::Vector2d& p : points) {
+    const double pu = u.dot(p);
+    const double pw = w.dot(p);
+    u_lo = std::min(u_lo, pu);
+    u_hi = std::max(u_hi, pu);
+    w_lo = std::min(w_lo, pw);
+    w_hi = std::max(w_hi, pw);
+  }
+  // A body shows at most its width (twice its reach) across the ray and its near half (its
+  // reach) along it; the outermost points' noise (two sigmas at each end) widens either.
+  const double margin_m = 4.0 * noise_m;
+  const double across_m = std::max(0.0, (w_hi - w_lo) - 2.0 * reach_m - margin_m);
+  const double along_m = std::max(0.0, (u_hi - u_lo) - reach_m - margin_m);
+  return (along_m * along_m / 12.0) * u * u.transpose() +
+         (across_m * across_m / 12.0) * w * w.transpose();
+}
+
 double SuperellipseReachFactor(double exponent) {
   return std::pow(2.0, 0.5 - 1.0 / std::max(exponent, 2.0));
 }
@@ -801,6 +828,15 @@ class TrackingPipeline::Refiner final : public MeasurementRefiner {
       if (shape.reported_neighbour_m2 > 0.0) ++neighbour_widened;
     }
     if (underdetermined) ++underdetermined_widened;
+    // ShapeOptions::segment_excess_shared.
+    shape.reported_excess_cov_m2.setZero();
+    if (body && o.segment_excess_shared && ob.part_count > 0) {
+      shape.reported_excess_cov_m2 = internal::SegmentExcessCov(
+          ReliablePoints(ob.parts[0]), measurement.position_m,
+          internal::SuperellipseReach(shape.size_m, shape.exponent),
+          o.fit.point_sigma_m + o.fit.point_sigma_per_m * measurement.position_m.norm());
+      if (!shape.reported_excess_cov_m2.isZero()) ++segment_excess_widened;
+    }
     const double share = measured_outline ? o.outline_fixed_share : 1.0;
     const double model_sigma_m =
         (measured_outline ? o.outline_model_share : 1.0) * o.centre_model_sigma_m;
@@ -908,6 +944,7 @@ class TrackingPipeline::Refiner final : public MeasurementRefiner {
   std::uint64_t partial_size_floored = 0;
   std::uint64_t person_size_kept = 0;
   std::uint64_t neighbour_widened = 0;
+  std::uint64_t segment_excess_widened = 0;
 
   // How many of the observation's two outline ends are silhouettes (MakePart: not an occluder's
   // edge, not the field of view's end).
@@ -2978,6 +3015,7 @@ const ScanTracks& TrackingPipeline::Process(const ScanView& scan, std::uint32_t 
   const std::uint64_t person_beyond_reach_before = refiner_->person_beyond_reach;
   const std::uint64_t partial_size_floored_before = refiner_->partial_size_floored;
   const std::uint64_t neighbour_widened_before = refiner_->neighbour_widened;
+  const std::uint64_t segment_excess_widened_before = refiner_->segment_excess_widened;
   const std::uint64_t person_size_kept_before = refiner_->person_size_kept;
   scan_ = &scan;
   ++refiner_->scans;
@@ -3007,6 +3045,8 @@ const ScanTracks& TrackingPipeline::Process(const ScanView& scan, std::uint32_t 
   counters_.partial_view_size_floored +=
       refiner_->partial_size_floored - partial_size_floored_before;
   counters_.neighbour_widened += refiner_->neighbour_widened - neighbour_widened_before;
+  counters_.segment_excess_widened +=
+      refiner_->segment_excess_widened - segment_excess_widened_before;
   counters_.person_sizes_kept_few_points += refiner_->person_size_kept - person_size_kept_before;
   if (bg.scan_error == ScanError::kNone && bg.learned) {
     AbsorbStatic(scan);

@@ -753,6 +753,15 @@ struct ShapeOptions {
   // --before-neighbour). Counted in PipelineCounters::neighbour_widened. neighbour_sigma_m 0: off.
   double neighbour_distance_m = 1.5;
   double neighbour_sigma_m = 0.1;
+  // Upper-body mount, a person whose segment is wider than the body can be (its chord, first to
+  // last reliable point, beyond twice the fitted outline's reach): the segment holds something
+  // else too (a second person walking beside, a cart's handle), and which part of it is the
+  // person's is not known. With the body equally likely anywhere along the chord's excess e, its
+  // centre's variance along the chord is e^2 / 12 (a uniform distribution's); shared by the scans
+  // while the segment stays joined, so it is reported with measured scans (not given to the
+  // filter, whose positions are unchanged). Counted in PipelineCounters::segment_excess_widened.
+  // false: not reported (as before).
+  bool segment_excess_shared = true;
   double outline_fixed_share = 0.3;
   double outline_model_share = 1.0;
   // Flat objects (not person-like).
@@ -964,6 +973,9 @@ struct PipelineCounters {
   // Measured upper-body fits reported wider for another observation within
   // ShapeOptions::neighbour_distance_m.
   std::uint64_t neighbour_widened = 0;
+  // Upper-body person fits whose segment is wider than the body (ShapeOptions::
+  // segment_excess_shared).
+  std::uint64_t segment_excess_widened = 0;
   std::uint64_t deep_leg_pairs = 0;    // deep 2-3 point legs measured as a pair (deep_legs_as_pair)
   std::uint64_t veiled_segments = 0;   // legs: mixed pixels (beside a nearer edge, deep), dropped
   std::uint64_t deep_pieces_kept = 0;  // legs: deep pieces with no surface behind, kept
@@ -1219,6 +1231,14 @@ double PartialViewSizeFloor(const ShapeOptions& o, bool body, int edges, double 
 // measured scan whose nearest other observation lies distance_m away:
 // neighbour_sigma_m^2 (1 - distance_m / neighbour_distance_m) within neighbour_distance_m, else 0.
 double NeighbourVar(const ShapeOptions& o, double distance_m);
+// ShapeOptions::segment_excess_shared: for a segment's points and a body centred at centre_m
+// reaching reach_m from its centre, the centre's covariance from where in the segment the body
+// lies: e^2 / 12 (uniform over the excess e) across the ray for the points' extent across it
+// beyond 2 reach_m, and along the ray for their extent along it beyond reach_m (the near half
+// shows), each less 4 noise_m (the points' range sigma, two at either end); zero where the body
+// can hold them all.
+Eigen::Matrix2d SegmentExcessCov(std::span<const Eigen::Vector2d> points,
+                                 const Eigen::Vector2d& centre_m, double reach_m, double noise_m);
 
 // The largest distance from its centre of a superellipse |u / a|^p + |v / b|^p = 1 with semi-axes
 // at most size_m's larger one and exponent p >= 2: max(a, b) 2^(1/2 - 1/p) (its diagonal where

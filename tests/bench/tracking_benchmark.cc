@@ -1299,6 +1299,10 @@ bool g_before_partial_extent = false;
 // --before-neighbour: "before" reports an upper-body person with another object beside it as
 // one alone (ShapeOptions::neighbour_sigma_m = 0).
 bool g_before_neighbour = false;
+// --before-segment-excess: "before" reports an upper-body person whose segment is wider than the
+// body without the covariance of where along it the body lies
+// (ShapeOptions::segment_excess_shared = false).
+bool g_before_segment_excess = false;
 // --before-gain-covariance: "before" reports a measured upper-body track with the filter's own
 // covariance (MultiTrackerOptions::report_gain_covariance = false).
 bool g_before_gain_covariance = false;
@@ -1495,7 +1499,8 @@ std::vector<Variant> Variants(sim::Mount mount, double range_m) {
              g_before_lone_leg_standing || g_before_single_beam_partner ||
              g_before_edge_echo_birth || g_before_lone_beam_echo || g_before_far_leg_birth ||
              g_before_person_size || g_before_person_reach || g_before_partial_extent ||
-             g_before_neighbour || g_before_range_noise || g_before_gain_covariance) {
+             g_before_neighbour || g_before_segment_excess || g_before_range_noise ||
+             g_before_gain_covariance) {
     tracking::TrackerOptions before = fresh;
     if (g_before_one_leg) before.shape.hidden_leg_behind = false;
     if (g_before_mixed_pixels) before.shape.drop_mixed_pixel_legs = false;
@@ -1553,6 +1558,7 @@ std::vector<Variant> Variants(sim::Mount mount, double range_m) {
     if (g_before_person_reach) before.shape.person_drop_beyond_reach = false;
     if (g_before_partial_extent) before.shape.partial_view_size_sigma_m = 0.0;
     if (g_before_neighbour) before.shape.neighbour_sigma_m = 0.0;
+    if (g_before_segment_excess) before.shape.segment_excess_shared = false;
     if (g_before_gain_covariance) before.tracking.report_gain_covariance = false;
     if (g_before_range_noise) before.shape.fit.point_sigma_per_m = 0.001;
     variants.push_back({"before", before});
@@ -3409,7 +3415,8 @@ std::string KneeHeightBefore() {
         g_before_box_seen_extent || g_before_knee_box_faces || g_before_single_beam_partner ||
         g_before_edge_echo_birth || g_before_lone_beam_echo || g_before_far_leg_birth ||
         g_before_person_size || g_before_person_reach || g_before_partial_extent ||
-        g_before_neighbour || g_before_range_noise || g_before_gain_covariance) ||
+        g_before_neighbour || g_before_segment_excess || g_before_range_noise ||
+        g_before_gain_covariance) ||
       g_before_mixed_pixels || g_before_far || g_before_evidence_coasting ||
       g_before_report_rules) {
     return "";
@@ -3604,6 +3611,11 @@ std::string KneeHeightBefore() {
         "reporting an upper-body person with another observation beside it as one alone "
         "(`shape.neighbour_sigma_m` 0)");
   }
+  if (g_before_segment_excess) {
+    without.push_back(
+        "reporting an upper-body person whose segment is wider than the body as if the segment "
+        "were the body's (`shape.segment_excess_shared` false)");
+  }
   if (g_before_partial_extent) {
     without.push_back(
         "reporting an upper-body partial view's shared covariance with the size's own sigma "
@@ -3696,7 +3708,7 @@ std::string KneeHeightBefore() {
           ? ", on the same scans in the same run"
       : g_before_outline_departure || g_before_isotropic_bias || g_before_partial_view ||
               g_before_underdetermined_fit || g_before_partial_extent || g_before_neighbour ||
-              g_before_gain_covariance
+              g_before_segment_excess || g_before_gain_covariance
           ? ", on the same scans in the same run; upper-body tracks are the same by construction, "
             "their reported covariance (so NEES and what fusion makes of them) is not"
           : ", on the same scans in the same run; upper-body rows are the same by construction";
@@ -3771,6 +3783,8 @@ int main(int argc, char** argv) {
       g_before_partial_extent = true;
     } else if (a == "--before-neighbour") {
       g_before_neighbour = true;
+    } else if (a == "--before-segment-excess") {
+      g_before_segment_excess = true;
     } else if (a == "--before-gain-covariance") {
       g_before_gain_covariance = true;
     } else if (a == "--before-range-noise") {
