@@ -500,9 +500,11 @@ void VisitShape(tracking::ShapeOptions& o, ConfigVisitor& v) {
           "squared, times 1 - distance / neighbour_distance_m, per axis, is reported with the "
           "person's measured scans (m). 0: off.");
   v.Field("segment_excess_shared", o.segment_excess_shared,
-          "Upper-body mount, a person whose segment is wider than twice the fitted outline's "
-          "reach: the centre's variance along the segment from where along it the body lies "
-          "(excess^2 / 12) is reported with the measured scans. false: not reported.");
+          "Upper-body mount, a person whose points extend across the ray beyond twice the fitted "
+          "outline's reach, or along it beyond its reach, by more than their range noise: where "
+          "in them the body lies is not known, and the excess squared over 12 along that "
+          "direction is reported with the measured scans (not given to the filter). false: not "
+          "reported.");
   v.Field("beam_divergence_rad", o.beam_divergence_rad,
           "Full beam divergence of the scanner (LMS1xx, TiM: 0.015; LMS5xx: 0.011); the beam's "
           "footprint at range R is R times this plus beam_exit_diameter_m (mixed pixels of legs "
