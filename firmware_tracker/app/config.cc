@@ -702,6 +702,12 @@ void VisitTracking(tracking::TrackerOptions& p, ConfigVisitor& v) {
           "A track that never moved becomes background after this.");
   v.Field("static_object_to_background_s", o.static_object_to_background_s,
           "A not person-like track standing still becomes background after this.");
+  v.Field("inherit_moved_s", o.inherit_moved_s,
+          "A track that has not moved, first measured after the last measurement of a moved "
+          "track that was then lost (coast timeout) and at most this long after it, within that "
+          "one's gate, counts as moved: someone standing whose track ended (an occlusion, a "
+          "drift) and restarted on them stays reported instead of waiting to move and becoming "
+          "background. 0: off.");
   v.Field("correct_beam_time", p.correct_beam_time,
           "Stamp each measurement with its middle beam's time within the scan instead of the "
           "scan start.");

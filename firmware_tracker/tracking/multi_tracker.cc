@@ -105,6 +105,9 @@ std::optional<std::string> Validate(const MultiTrackerOptions& o) {
   if (!Positive(o.static_object_to_background_s)) {
     return "static_object_to_background_s must be > 0";
   }
+  if (!(std::isfinite(o.inherit_moved_s) && o.inherit_moved_s >= 0.0)) {
+    return "inherit_moved_s must be >= 0";
+  }
   return std::nullopt;
 }
 
@@ -115,6 +118,7 @@ MultiTracker::MultiTracker(const MultiTrackerOptions& options) : options_(option
 void MultiTracker::Clear() {
   tracks_.clear();
   lost_.clear();
+  lost_moved_.clear();
 }
 
 std::size_t MultiTracker::confirmed_count() const {
@@ -195,6 +199,7 @@ void MultiTracker::HandleTime(common::UtcNs scan_start_ns) {
       counters_.deleted_time_reset += tracks_.size();
       tracks_.clear();
       lost_.clear();
+      lost_moved_.clear();
     }
   }
   has_time_ = true;
@@ -584,6 +589,7 @@ void MultiTracker::ManageLifecycle(common::UtcNs scan_start_ns) {
       remove = true;
       ++counters_.deleted_coast_timeout;
       Lose(t, scan_start_ns);
+      NoteLostMoved(t, scan_start_ns);
     }
     if (!remove) {
       const Eigen::Matrix2d p = t.filter.covariance().topLeftCorner<2, 2>();
@@ -592,6 +598,7 @@ void MultiTracker::ManageLifecycle(common::UtcNs scan_start_ns) {
         remove = true;
         ++counters_.deleted_covariance;
         if (t.confirmed && !t.updated) Lose(t, scan_start_ns);
+        if (t.confirmed) NoteLostMoved(t, scan_start_ns);
       }
     }
     if (!remove && t.updated && options_.static_objects) {
@@ -606,6 +613,11 @@ void MultiTracker::ManageLifecycle(common::UtcNs scan_start_ns) {
           const double var = u.dot(t.filter.covariance().bottomRightCorner<2, 2>() * u);
           moving = speed * speed > 9.0 * var;
         }
+      }
+      if (!t.moved && t.confirmed && options_.inherit_moved_s > 0.0 && t.shape.person_like &&
+          Inherit(t, scan_start_ns)) {
+        moving = true;
+        ++counters_.inherited_moved;
       }
       if (moving || (position - t.anchor_m).norm() > options_.still_radius_m) {
         t.anchor_m = position;
@@ -689,6 +701,61 @@ void MultiTracker::AdoptSuccessors(common::UtcNs scan_start_ns) {
     for (std::size_t k = best_young; k + 1 < tracks_.size(); ++k) tracks_[k] = tracks_[k + 1];
     tracks_.pop_back();
   }
+}
+
+void MultiTracker::NoteLostMoved(const Track& t, common::UtcNs scan_start_ns) {
+  if (!(options_.inherit_moved_s > 0.0) || !options_.static_objects || !t.moved) return;
+  // Kept while an heir may still come: born within inherit_moved_s, confirmed and not yet absorbed
+  // as never moved.
+  const double keep_s = options_.inherit_moved_s + options_.never_moved_to_background_s;
+  std::size_t kept = 0;
+  for (std::size_t i = 0; i < lost_moved_.size(); ++i) {
+    if (common::NsToSeconds(scan_start_ns - lost_moved_[i].lost_ns) > keep_s) continue;
+    if (kept != i) lost_moved_[kept] = lost_moved_[i];
+    ++kept;
+  }
+  while (lost_moved_.size() > kept) lost_moved_.pop_back();
+  internal::LostMoved lost;
+  lost.position_m = t.z_m;  // where it was last measured: not where its velocity took it since
+  lost.cov_m2 = t.filter.covariance().topLeftCorner<2, 2>();
+  lost.lost_ns = scan_start_ns;
+  lost.last_update_ns = t.last_update_ns;
+  if (lost_moved_.full()) {
+    std::size_t oldest = 0;
+    for (std::size_t i = 1; i < lost_moved_.size(); ++i) {
+      if (lost_moved_[i].lost_ns < lost_moved_[oldest].lost_ns) oldest = i;
+    }
+    lost_moved_[oldest] = lost;
+    return;
+  }
+  (void)lost_moved_.push_back(lost);
+}
+
+bool MultiTracker::Inherit(const Track& t, common::UtcNs scan_start_ns) {
+  const double keep_s = options_.inherit_moved_s + options_.never_moved_to_background_s;
+  const Eigen::Vector2d position = t.filter.position_m();
+  const Eigen::Matrix2d cov = t.filter.covariance().topLeftCorner<2, 2>();
+  const double max_sq = options_.max_gate_distance_m * options_.max_gate_distance_m;
+  for (std::size_t i = 0; i < lost_moved_.size(); ++i) {
+    const internal::LostMoved& lost = lost_moved_[i];
+    if (common::NsToSeconds(scan_start_ns - lost.lost_ns) > keep_s ||
+        t.first_update_ns <= lost.last_update_ns ||
+        common::NsToSeconds(t.first_update_ns - lost.last_update_ns) > options_.inherit_moved_s) {
+      continue;
+    }
+    const Eigen::Vector2d d = position - lost.position_m;
+    if (!(d.squaredNorm() <= max_sq)) continue;
+    const Eigen::Matrix2d s = lost.cov_m2 + cov;
+    const double det = s(0, 0) * s(1, 1) - s(0, 1) * s(1, 0);
+    if (!(det > 0.0)) continue;
+    const double m2 =
+        (d.x() * d.x() * s(1, 1) - 2.0 * d.x() * d.y() * s(0, 1) + d.y() * d.y() * s(0, 0)) / det;
+    if (!(m2 <= options_.gate_mahalanobis_sq)) continue;
+    lost_moved_[i] = lost_moved_[lost_moved_.size() - 1];
+    lost_moved_.pop_back();
+    return true;
+  }
+  return false;
 }
 
 void MultiTracker::Lose(const Track& t, common::UtcNs scan_start_ns) {

@@ -65,6 +65,8 @@
 //     adopt_successor_m of the coasting track's prediction (nearest pairs first): the coasting
 //     track takes the younger one's filter, shape and measurement, keeps its id and its confirmed
 //     and moved state, and the younger one is deleted (counted as adopted, not as a deletion).
+//  5c. Heirs: a confirmed track that has not moved, born within inherit_moved_s after a moved
+//     track was lost nearby (within that one's gate), counts as moved (see inherit_moved_s).
 //  6. Births. A measurement that was not assigned starts a tentative track unless it lies within
 //     the gate of an existing track or of a track born earlier in the same scan (a person split
 //     into two segments must not become two tracks). Births beyond max_tracks are dropped and
@@ -246,6 +248,19 @@ struct MultiTrackerOptions {
   double moving_speed_mps = 0.5;
   double never_moved_to_background_s = 3.0;
   double static_object_to_background_s = 2.0;
+  // Heirs (step 5c): a confirmed track that has not moved, first measured after the last
+  // measurement of a moved track that was then lost (deleted by the coast timeout or for its
+  // covariance, not handed to the background), at most this long after it (never measured beside
+  // it: not an object that stood next to the person), counts as moved (reported from then on, not
+  // absorbed as never moved) when its position lies within that track's gate: the lost track's
+  // last measurement (not its coasted prediction: a track that drifted off along the ray before
+  // it was lost coasts on away from the person) with its coasted covariance plus the heir's
+  // (gate_mahalanobis_sq, and max_gate_distance_m). A person who was reported and stands still,
+  // whose track ended (a short occlusion, a drift, an id swap) and restarted on them, has not left
+  // still_radius_m since and was otherwise never reported again, then deleted by
+  // never_moved_to_background_s. One heir per lost track; the heir must be person-like
+  // (TrackShape::person_like): a chair a person moved and left does not inherit. 0: off.
+  double inherit_moved_s = 3.0;
 };
 
 // nullopt when valid, else the reason, naming the field first (nested: "ekf.<field> ...").
@@ -274,6 +289,7 @@ struct MultiTrackerCounters {
   std::uint64_t recovered = 0;        // associations made in the wider gate (step 3b)
   std::uint64_t resumed = 0;          // deleted tracks found again (resume_window_s)
   std::uint64_t adopted = 0;          // younger tracks taken over by a coasting one (step 5b)
+  std::uint64_t inherited_moved = 0;  // tracks counted as moved for a lost moved one (step 5c)
   // Confirmed coasting tracks' reports withheld: coasting for longer than report_coasting_s (or
   // report_coasting_per_measured_s times how long they were seen), per scan.
   std::uint64_t coasting_unreported = 0;
@@ -408,6 +424,14 @@ struct Candidate {
   std::size_t source = 0;      // index into the caller's measurements
   bool evidence_only = false;  // Measurement::evidence_only
 };
+// Where a moved track was lost (step 5c): its last measurement, its position covariance at the
+// scan start it was lost at.
+struct LostMoved {
+  Eigen::Vector2d position_m = Eigen::Vector2d::Zero();
+  Eigen::Matrix2d cov_m2 = Eigen::Matrix2d::Identity();
+  common::UtcNs lost_ns = 0;
+  common::UtcNs last_update_ns = 0;  // its last measurement
+};
 // State and covariance of a constant-velocity filter moved by dt_s without process noise: used to
 // move a just-updated track from its measurement time back to the scan start (a few ms).
 void Extrapolate(double dt_s, Eigen::Vector4d& x, Eigen::Matrix4d& p);
@@ -463,6 +487,10 @@ class MultiTracker {
                       MeasurementRefiner* refiner);
   void ManageLifecycle(common::UtcNs scan_start_ns);
   void AdoptSuccessors(common::UtcNs scan_start_ns);
+  // Step 5c: notes a moved track lost at scan_start_ns; Inherit: true when t (confirmed, not
+  // moved, updated) lies where such a track was lost (the record is used up).
+  void NoteLostMoved(const Track& t, common::UtcNs scan_start_ns);
+  bool Inherit(const Track& t, common::UtcNs scan_start_ns);
   void StartTracks(common::UtcNs scan_start_ns, std::span<const Measurement> measurements,
                    MeasurementRefiner* refiner);
   // Step 6's resumption: true when candidate c resumed a lost track (moved back into tracks_).
@@ -507,6 +535,8 @@ class MultiTracker {
   common::FixedVector<Track, kMaxTracks> tracks_;
   // Confirmed tracks deleted by the coast timeout within resume_window_s (step 6).
   common::FixedVector<Track, kMaxTracks> lost_;
+  // Step 5c: where moved tracks were lost (inherit_moved_s).
+  common::FixedVector<internal::LostMoved, kMaxTracks> lost_moved_;
 
   // Per-scan scratch, sized at compile time.
   common::FixedVector<Candidate, kMaxSegments> candidates_;

@@ -130,6 +130,8 @@ TEST(MultiTrackerOptionsTest, DefaultsValidAndEachBadValueNamesItsField) {
       {with([](auto& o) { o.adopt_successor_m = -1.0; }), "adopt_successor_m"},
       {with([nan](auto& o) { o.adopt_successor_m = nan; }), "adopt_successor_m"},
       {with([](auto& o) { o.adopt_after_hits = 0; }), "adopt_after_hits"},
+      {with([](auto& o) { o.inherit_moved_s = -1.0; }), "inherit_moved_s"},
+      {with([nan](auto& o) { o.inherit_moved_s = nan; }), "inherit_moved_s"},
       {with([nan](auto& o) { o.resume_window_s = nan; }), "resume_window_s"},
       {with([](auto& o) { o.max_position_sigma_m = 0.0; }), "max_position_sigma_m"},
       {with([](auto& o) { o.max_tracks = 0; }), "max_tracks"},
@@ -1085,6 +1087,59 @@ TEST(MultiTrackerTest, CoastingTrackDoesNotAdoptATrackMeasuredBesideIt) {
   ASSERT_EQ(out.tracks.size(), 2u);
   EXPECT_EQ(out.tracks[1].track_id, 2u);
   EXPECT_EQ(out.tracks[1].state, TrackState::kCoasting);
+}
+
+// A person walks 2 s along y at x = 4 m, stands 1 s, is hidden 2.5 s (lost after the coast
+// timeout; no resume window) and stands on where they were. With a box put down 0.6 m beside
+// them while they were still measured (box_too), which never moves.
+struct RestartResult {
+  int reported_after = 0;  // scans from 1 s after the person is seen again with a report on them
+  int box_reports = 0;
+  std::uint64_t inherited = 0;
+};
+RestartResult StandAfterRestart(const MultiTrackerOptions& o, bool box_too) {
+  MultiTracker tracker(o);
+  ScanTracks out;
+  RestartResult r;
+  const Eigen::Vector2d stand(4.0, 1.2 * 0.04 * 50.0);
+  const Eigen::Vector2d box = stand + Eigen::Vector2d(0.0, 0.6);
+  for (std::int64_t k = 0; k < 260; ++k) {
+    const Eigen::Vector2d p =
+        k < 50 ? Eigen::Vector2d(4.0, 1.2 * 0.04 * static_cast<double>(k)) : stand;
+    std::vector<Measurement> ms;
+    if (k < 75 || k >= 137) ms.push_back(Meas(p.x(), p.y(), 0.02));
+    if (box_too && k >= 70) ms.push_back(Meas(box.x(), box.y(), 0.02));
+    tracker.Step(ScanNs(k), ms, out);
+    for (const TrackReport& t : out.tracks) {
+      const Eigen::Vector2d at(t.x_m, t.y_m);
+      if ((at - box).norm() < 0.2) ++r.box_reports;
+      if (k >= 162 && (at - stand).norm() < 0.2) ++r.reported_after;
+    }
+  }
+  r.inherited = tracker.counters().inherited_moved;
+  return r;
+}
+
+TEST(MultiTrackerTest, ATrackRestartedWhereAMovedOneWasLostInheritsItsMovedState) {
+  MultiTrackerOptions o = Opts();
+  o.static_objects = true;
+  o.resume_window_s = 0.0;
+  const RestartResult with = StandAfterRestart(o, false);
+  EXPECT_EQ(with.inherited, 1u);
+  EXPECT_EQ(with.reported_after, 260 - 162);
+
+  MultiTrackerOptions off = o;
+  off.inherit_moved_s = 0.0;
+  const RestartResult without = StandAfterRestart(off, false);
+  EXPECT_EQ(without.inherited, 0u);
+  EXPECT_EQ(without.reported_after, 0);  // never moved: unreported, then the background's
+
+  // The box first measured beside the person before they were lost is something else: it stays
+  // unreported; the person's new track still inherits.
+  const RestartResult box = StandAfterRestart(o, true);
+  EXPECT_EQ(box.box_reports, 0);
+  EXPECT_EQ(box.inherited, 1u);
+  EXPECT_EQ(box.reported_after, 260 - 162);
 }
 
 }  // namespace

@@ -749,6 +749,44 @@ TEST(PipelineScenarioTest, PersonStoppingForFourSecondsKeepsTheIdAndStaysForegro
   EXPECT_TRUE(run.frames.back().tracks.empty());
 }
 
+// A person walks in, stops at 5 m and stands; a panel carried past 1 m in front of the sensor
+// hides them for 2.5 s (longer than the coast timeout and the resume window: their track is
+// lost). The track born on them when the panel is gone lies where the lost one was last measured
+// and inherits its moved state (tracking.inherit_moved_s): reported again at once and kept; with
+// that off it waits to move, is never reported and is handed to the background as never moved.
+TEST(PipelineScenarioTest, AStandingPersonWhoseTrackRestartsAfterAnOcclusionStaysReported) {
+  Scene scene;
+  const Eigen::Vector2d stop(5.0, 0.0);
+  const double speed = 1.2;
+  const double arrive_s = kLearnedS + (stop - Eigen::Vector2d(3.0, -3.0)).norm() / speed;
+  const double hidden_s = arrive_s + 1.5;
+  const double seen_s = hidden_s + 2.5;
+  const double leave_s = seen_s + 6.0;
+  scene.walkers = {Walker({{kLearnedS, {3.0, -3.0}}, {arrive_s, stop}, {leave_s, stop}})};
+  scene.moving_walls = [hidden_s, seen_s](double t_s) {
+    if (t_s < hidden_s || t_s >= seen_s) return std::vector<Wall>{};
+    return std::vector<Wall>{{{1.0, -0.3}, {1.0, 0.3}}};
+  };
+  const Walker& walker = scene.walkers[0];
+  auto run_with = [&](double inherit_moved_s) {
+    TrackerOptions o = Synthetic();
+    o.tracking.inherit_moved_s = inherit_moved_s;
+    const SceneRun run = Simulate(scene, leave_s, o);
+    const Follow before = FollowWalker(run, walker, 0, walker.start_s() + 0.5, hidden_s);
+    SCOPED_TRACE(Describe(before));
+    EXPECT_EQ(before.unmatched, 0);  // reported while walking in and standing
+    return FollowWalker(run, walker, 0, seen_s + 0.5, leave_s);
+  };
+  const Follow with = run_with(Synthetic().tracking.inherit_moved_s);
+  SCOPED_TRACE(Describe(with));
+  EXPECT_EQ(with.unmatched, 0);
+  EXPECT_EQ(with.frames_per_id.size(), 1u);
+  EXPECT_LT(with.mean_error_m, 0.05);
+  const Follow without = run_with(0.0);
+  SCOPED_TRACE(Describe(without));
+  EXPECT_GT(without.unmatched, without.frames / 2);
+}
+
 TEST(PipelineScenarioTest, OcclusionBehindAPillarCoastsAndReacquiresTheSameId) {
   // A 0.4 m pillar 2 m in front of the sensor; the person walks behind it at 4.5 m: fully hidden
   // for ~0.5 s, partly for ~1 s.

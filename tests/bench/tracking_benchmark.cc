@@ -46,7 +46,8 @@
 //                       [--before-recent-veil]
 //                       [--before-single-precision-fit] [--before-edge-sides]
 //                       [--before-outside-start] [--before-across-sway] [--before-receded-edges]
-//                       [--before-stance-weight] [--before-adopt] [--before-touching-legs]
+//                       [--before-stance-weight] [--before-adopt] [--before-inherit-moved]
+//                       [--before-touching-legs]
 //                       [--before-still-legs] [--before-mixed-legs]
 //                       [--before-box-occluders] [--before-box-rejoin] [--before-box-unseen-cov]
 //                       [--before-box-seen-extent] [--before-knee-box-faces] [--before-see-through]
@@ -137,6 +138,8 @@
 //   midpoint also where one stands and the other swings, ShapeOptions::stance_leg_weight = 0.5;
 //   --before-adopt: "before" leaves a track born beside a coasting one to itself, the coasting one
 //   reported until its time is up, MultiTrackerOptions::adopt_successor_m = 0;
+//   --before-inherit-moved: "before" waits for a track born where a moved track was just lost to
+//   move by itself before reporting it, MultiTrackerOptions::inherit_moved_s = 0;
 //   --before-touching-legs: "before" measures two legs that touch in the scan with a pair's
 //   covariance, ShapeOptions::touching_legs_along_ray = false;
 //   --before-still-legs: "before" takes a still knee-height track for a person's whatever the
@@ -1392,6 +1395,9 @@ bool g_before_stance_weight = false;
 // --before-adopt: "before" leaves a track born beside a coasting one to itself, the coasting one
 // reported until its time is up (MultiTrackerOptions::adopt_successor_m = 0).
 bool g_before_adopt = false;
+// --before-inherit-moved: "before" waits for a track born where a moved track was just lost to
+// move by itself before reporting it (MultiTrackerOptions::inherit_moved_s = 0).
+bool g_before_inherit_moved = false;
 // --before-touching-legs: "before" measures two legs that touch in the scan with a pair's
 // covariance (ShapeOptions::touching_legs_along_ray = false).
 bool g_before_touching_legs = false;
@@ -1474,6 +1480,7 @@ std::vector<Variant> Variants(sim::Mount mount, double range_m) {
   old.shape.coasting_max_sigma_m = 0.0;
   old.shape.recent_veil_s = 0.0;
   old.tracking.adopt_successor_m = 0.0;
+  old.tracking.inherit_moved_s = 0.0;
   old.shape.single_leg_from_standing = false;
   std::vector<Variant> variants = {{"old", old}, {"new", fresh}};
   if (g_before_report_rules) {
@@ -1492,15 +1499,15 @@ std::vector<Variant> Variants(sim::Mount mount, double range_m) {
              g_before_fusion_merge || g_before_report_sourceless || g_before_recent_veil ||
              g_before_single_precision_fit || g_before_edge_sides || g_before_outside_start ||
              g_before_across_sway || g_before_receded_edges || g_before_stance_weight ||
-             g_before_adopt || g_before_touching_legs || g_before_still_legs ||
-             g_before_mixed_legs || g_before_box_occluders || g_before_box_rejoin ||
-             g_before_see_through || g_before_step_seam || g_before_torso_edge_echo ||
-             g_before_box_unseen_cov || g_before_box_seen_extent || g_before_knee_box_faces ||
-             g_before_lone_leg_standing || g_before_single_beam_partner ||
-             g_before_edge_echo_birth || g_before_lone_beam_echo || g_before_far_leg_birth ||
-             g_before_person_size || g_before_person_reach || g_before_partial_extent ||
-             g_before_neighbour || g_before_segment_excess || g_before_range_noise ||
-             g_before_gain_covariance) {
+             g_before_adopt || g_before_inherit_moved || g_before_touching_legs ||
+             g_before_still_legs || g_before_mixed_legs || g_before_box_occluders ||
+             g_before_box_rejoin || g_before_see_through || g_before_step_seam ||
+             g_before_torso_edge_echo || g_before_box_unseen_cov || g_before_box_seen_extent ||
+             g_before_knee_box_faces || g_before_lone_leg_standing ||
+             g_before_single_beam_partner || g_before_edge_echo_birth || g_before_lone_beam_echo ||
+             g_before_far_leg_birth || g_before_person_size || g_before_person_reach ||
+             g_before_partial_extent || g_before_neighbour || g_before_segment_excess ||
+             g_before_range_noise || g_before_gain_covariance) {
     tracking::TrackerOptions before = fresh;
     if (g_before_one_leg) before.shape.hidden_leg_behind = false;
     if (g_before_mixed_pixels) before.shape.drop_mixed_pixel_legs = false;
@@ -1537,6 +1544,7 @@ std::vector<Variant> Variants(sim::Mount mount, double range_m) {
     }
     if (g_before_stance_weight) before.shape.stance_leg_weight = 0.5;
     if (g_before_adopt) before.tracking.adopt_successor_m = 0.0;
+    if (g_before_inherit_moved) before.tracking.inherit_moved_s = 0.0;
     if (g_before_touching_legs) before.shape.touching_legs_along_ray = false;
     if (g_before_still_legs) before.shape.still_legs_max_depth_m = 0.0;
     if (g_before_mixed_legs) before.shape.mixed_leg_max_gap_m = 0.0;
@@ -2759,6 +2767,7 @@ void AddCounters(const tracking::MultiTrackerCounters& c, tracking::MultiTracker
   sum->recovered += c.recovered;
   sum->resumed += c.resumed;
   sum->adopted += c.adopted;
+  sum->inherited_moved += c.inherited_moved;
 }
 
 // --explain: the causes and the tracker's counters of one run, per variant, on stderr.
@@ -2770,7 +2779,8 @@ void Explain(const std::string& scenario, const std::string& mount, const RunRes
         stderr,
         "%s %s %s: created %llu confirmed %llu deleted: tentative %llu coast %llu "
         "covariance %llu static %llu; births suppressed %llu refine failures %llu speed "
-        "clamps %llu recovered %llu resumed %llu adopted %llu\n",
+        "clamps %llu recovered %llu resumed %llu adopted %llu "
+        "inherited moved %llu\n",
         scenario.c_str(), mount.c_str(), names[v], static_cast<unsigned long long>(c.created),
         static_cast<unsigned long long>(c.confirmed),
         static_cast<unsigned long long>(c.deleted_tentative),
@@ -2781,7 +2791,8 @@ void Explain(const std::string& scenario, const std::string& mount, const RunRes
         static_cast<unsigned long long>(c.refine_failures),
         static_cast<unsigned long long>(c.speed_clamps),
         static_cast<unsigned long long>(c.recovered), static_cast<unsigned long long>(c.resumed),
-        static_cast<unsigned long long>(c.adopted));
+        static_cast<unsigned long long>(c.adopted),
+        static_cast<unsigned long long>(c.inherited_moved));
     for (const auto& [why, count] : r.causes[v].switches)
       std::fprintf(stderr, "  switch: %-60s %5.0f\n", why.c_str(), count);
     for (const auto& [why, count] : r.causes[v].false_positives)
@@ -3409,14 +3420,14 @@ std::string KneeHeightBefore() {
         g_before_fusion_merge || g_before_report_sourceless || g_before_recent_veil ||
         g_before_single_precision_fit || g_before_edge_sides || g_before_outside_start ||
         g_before_across_sway || g_before_receded_edges || g_before_stance_weight ||
-        g_before_adopt || g_before_touching_legs || g_before_still_legs || g_before_mixed_legs ||
-        g_before_box_occluders || g_before_box_rejoin || g_before_see_through ||
-        g_before_step_seam || g_before_torso_edge_echo || g_before_box_unseen_cov ||
-        g_before_box_seen_extent || g_before_knee_box_faces || g_before_single_beam_partner ||
-        g_before_edge_echo_birth || g_before_lone_beam_echo || g_before_far_leg_birth ||
-        g_before_person_size || g_before_person_reach || g_before_partial_extent ||
-        g_before_neighbour || g_before_segment_excess || g_before_range_noise ||
-        g_before_gain_covariance) ||
+        g_before_adopt || g_before_inherit_moved || g_before_touching_legs || g_before_still_legs ||
+        g_before_mixed_legs || g_before_box_occluders || g_before_box_rejoin ||
+        g_before_see_through || g_before_step_seam || g_before_torso_edge_echo ||
+        g_before_box_unseen_cov || g_before_box_seen_extent || g_before_knee_box_faces ||
+        g_before_single_beam_partner || g_before_edge_echo_birth || g_before_lone_beam_echo ||
+        g_before_far_leg_birth || g_before_person_size || g_before_person_reach ||
+        g_before_partial_extent || g_before_neighbour || g_before_segment_excess ||
+        g_before_range_noise || g_before_gain_covariance) ||
       g_before_mixed_pixels || g_before_far || g_before_evidence_coasting ||
       g_before_report_rules) {
     return "";
@@ -3574,6 +3585,11 @@ std::string KneeHeightBefore() {
     without.push_back(
         "leaving a track born beside a coasting one to itself while the coasting one is reported "
         "until its time is up (`tracking.adopt_successor_m` 0)");
+  }
+  if (g_before_inherit_moved) {
+    without.push_back(
+        "waiting for a track born where a moved track was just lost to move by itself before "
+        "reporting it (`tracking.inherit_moved_s` 0)");
   }
   if (g_before_touching_legs) {
     without.push_back(
@@ -3839,6 +3855,8 @@ int main(int argc, char** argv) {
       g_before_stance_weight = true;
     } else if (a == "--before-adopt") {
       g_before_adopt = true;
+    } else if (a == "--before-inherit-moved") {
+      g_before_inherit_moved = true;
     } else if (a == "--before-touching-legs") {
       g_before_touching_legs = true;
     } else if (a == "--before-still-legs") {
@@ -3884,7 +3902,8 @@ int main(int argc, char** argv) {
                    "[--before-recent-veil] "
                    "[--before-single-precision-fit] [--before-edge-sides] "
                    "[--before-outside-start] [--before-across-sway] [--before-receded-edges] "
-                   "[--before-stance-weight] [--before-adopt] [--before-touching-legs] "
+                   "[--before-stance-weight] [--before-adopt] [--before-inherit-moved] "
+                   "[--before-touching-legs] "
                    "[--before-still-legs] [--before-mixed-legs] "
                    "[--before-box-occluders] [--before-box-rejoin] [--before-box-unseen-cov] "
                    "[--before-box-seen-extent] [--before-knee-box-faces] "
