@@ -218,6 +218,12 @@ void VisitShape(tracking::ShapeOptions& o, ConfigVisitor& v) {
           "about 1 m and none resolved, 1.5 assumes the same a little beyond; an LMS5xx, which "
           "resolves echoes beyond ~0.5 m, caps it at 0.5 by itself, from its DeviceIdent name; "
           "0: off).");
+  v.Field("mixed_leg_band_variance", o.mixed_leg_band_variance,
+          "mount legs: where a beam may return a leg alone (its footprint at most 1.25 leg "
+          "diameters), a leg of two returns or more measured from range deficits no deeper than "
+          "its nearest return reports the leg radius' share of its variance along the ray as the "
+          "spread of the fronts one radius sigma either side, each held at that return (false: "
+          "the whole gap to the background times the radius' relative sigma).");
   v.Field("hip_half_width_m", o.hip_half_width_m,
           "mount legs: a leg's lateral offset from the body centre (a single leg's uncertainty).");
   v.Field("drop_mixed_pixel_legs", o.drop_mixed_pixel_legs,

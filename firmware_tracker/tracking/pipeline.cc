@@ -1756,6 +1756,9 @@ ObservationPart TrackingPipeline::MakePart(const ScanView& scan, const Segment& 
 // step) (a beam profile of unit energy, sampled at the beams' spacing r_leg step, integrated over
 // the leg's width) gives sum(d_b) = (f - r_leg) 2 leg_radius_m / (r_leg step), f the d-weighted
 // mean of the f_b, solved for r_leg.
+// ShapeOptions::mixed_leg_band_variance: a receiver reports an echo under this share of the beam's
+// energy not at all (the other echo alone), as ShapeOptions::deep_mixed_pixel_behind_ratio.
+constexpr double kMixedPixelMinorShare = 0.2;
 void TrackingPipeline::MixedPixelLeg(const ScanView& scan, std::span<const Eigen::Vector2d> points,
                                      ObservationPart& part) const {
   const ShapeOptions& o = options_.shape;
@@ -1773,6 +1776,7 @@ void TrackingPipeline::MixedPixelLeg(const ScanView& scan, std::span<const Eigen
   const auto background = background_.background_range_m();
   double deficit_sum = 0.0;
   double behind_sum = 0.0;
+  std::size_t returns = 0;
   Eigen::Vector2d bearing = Eigen::Vector2d::Zero();
   for (std::size_t b = part.begin_beam; b < part.end_beam; ++b) {
     if (b >= background.size() || b >= scan.range_m.size()) return;
@@ -1782,6 +1786,7 @@ void TrackingPipeline::MixedPixelLeg(const ScanView& scan, std::span<const Eigen
     // Each return must have a learned surface behind it, near enough to mix with.
     if (!(f > r && f - r <= o.mixed_leg_max_gap_m)) return;
     const double d = f - r;
+    ++returns;
     deficit_sum += d;
     behind_sum += d * f;
     const double angle = scan.BeamAngleRad(b);
@@ -1789,12 +1794,25 @@ void TrackingPipeline::MixedPixelLeg(const ScanView& scan, std::span<const Eigen
   }
   if (!(deficit_sum > 0.0) || !(bearing.norm() > 0.0)) return;
   const double f = behind_sum / deficit_sum;
-  double front_m = f / (1.0 + step * deficit_sum / (2.0 * o.leg_radius_m));
-  front_m = std::min(front_m, nearest_m);
+  // The front of a leg of radius_m that leaves these deficits, never behind the nearest return (a
+  // mixed return lies behind the leg).
+  const auto front_for = [&](double radius_m) {
+    return std::min(f / (1.0 + step * deficit_sum / (2.0 * std::max(radius_m, 1e-3))), nearest_m);
+  };
+  const double front_m = front_for(o.leg_radius_m);
   const double gap_m = f - front_m;
   const double relative = o.leg_radius_sigma_m / o.leg_radius_m;
   part.mixed_leg_centre_m = (front_m + o.leg_radius_m) * bearing.normalized();
   part.mixed_leg_along_var_m2 = gap_m * gap_m * (relative * relative + 0.01);
+  // ShapeOptions::mixed_leg_band_variance: where a beam may return the leg alone, the radius'
+  // share is the spread of the fronts one sigma either side of it, each held at the nearest return.
+  if (o.mixed_leg_band_variance && returns >= 2 &&
+      (1.0 - kMixedPixelMinorShare) * footprint_m <= 2.0 * o.leg_radius_m &&
+      front_for(o.leg_radius_m - 2.0 * o.leg_radius_sigma_m) < nearest_m) {
+    const double band_m = 0.5 * (front_for(o.leg_radius_m + o.leg_radius_sigma_m) -
+                                 front_for(o.leg_radius_m - o.leg_radius_sigma_m));
+    part.mixed_leg_along_var_m2 = band_m * band_m + 0.01 * gap_m * gap_m;
+  }
 }
 
 void TrackingPipeline::MarkMixedPixels(const ScanView& scan,

@@ -338,6 +338,24 @@ struct ShapeOptions {
   // the surface alone), so 0.5 there (TrackingPipeline::SetResolvedEchoSeparation). Scenario test AFarLegSeenOnlyAsMixedPixelsBeforeANearWallIsMeasuredAtTheLeg. 0: off
   // (the circle fit to the points).
   double mixed_leg_max_gap_m = 1.5;
+  // ... and the radius' share of that variance where a beam may return the leg alone: an echo
+  // under 20 % of a beam's energy is not reported (as deep_mixed_pixel_behind_ratio), so a beam
+  // the leg covers 80 % of returns the leg's range, not a mixed one. Where the footprint allows
+  // that (0.8 (R beam_divergence_rad + beam_exit_diameter_m) <= 2 leg_radius_m, R the nearest
+  // return's range: about 8-9.5 m at the defaults), the part has two returns or more (a lone one
+  // shows no neighbour's mixing; such estimates lay 0.07-0.23 m behind the leg) and the deficits
+  // would put a leg two sigmas thinner than the prior in front of the nearest return (else they
+  // are too small for a leg there), the estimate is held at that return as above, and so is its
+  // spread: the radius' share is half the distance between the fronts of legs one sigma thicker
+  // and thinner, each held at the nearest return, not D leg_radius_sigma_m / leg_radius_m. Where
+  // the deficits put the leg behind its nearest return, that return is the leg's own echo and the
+  // radius' share vanishes; the tenth of D stays. Unheld, the variance was 3-5 times the error
+  // (tracking_benchmark, office_semicircle at knee height, 8-9.5 m before walls 1.2 m behind:
+  // estimates held at the nearest return 0.06 m RMS off along the ray, reported 0.32 m), the
+  // filter's sigma at 8-9 m 0.077 m where 0.052 without mixed_leg_max_gap_m, and a track coasting
+  // one scan passed legs_coasting_max_sigma_m and went unreported (one-scan fragments 43 -> 96).
+  // false: the radius' share D leg_radius_sigma_m / leg_radius_m wherever the rule applies.
+  bool mixed_leg_band_variance = true;
   // Legs mount: a leg-sized segment (no wider than a pair of legs) of two or three points whose
   // beams' centres spread across the line of sight wider than a leg two sigmas above the prior
   // (2 (leg_radius_m + 2 leg_radius_sigma_m)) holds two legs side by side: a beam returns a leg

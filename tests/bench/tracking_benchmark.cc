@@ -48,7 +48,7 @@
 //                       [--before-outside-start] [--before-across-sway] [--before-receded-edges]
 //                       [--before-stance-weight] [--before-adopt] [--before-inherit-moved]
 //                       [--before-touching-legs]
-//                       [--before-still-legs] [--before-mixed-legs]
+//                       [--before-still-legs] [--before-mixed-legs] [--before-mixed-leg-band]
 //                       [--before-box-occluders] [--before-box-rejoin] [--before-box-unseen-cov]
 //                       [--before-box-seen-extent] [--before-knee-box-faces] [--before-see-through]
 //                       [--before-step-seam] [--before-torso-edge-echo]
@@ -146,6 +146,9 @@
 //   depth of its legs along the line of sight, ShapeOptions::still_legs_max_depth_m = 0;
 //   --before-mixed-legs: "before" fits a far knee-height leg to its points also where each may be
 //   a mixed pixel with a near background, ShapeOptions::mixed_leg_max_gap_m = 0;
+//   --before-mixed-leg-band: "before" gives a leg measured from mixed pixels' range deficits the
+//   radius' share of the whole gap to the background along the ray, also where its nearest return
+//   may be the leg's own echo, ShapeOptions::mixed_leg_band_variance = false;
 //   --before-box-occluders: "before" fits a box (a cart) to every point of its segment, also to
 //   those in front of it (its pusher's), ShapeOptions::box_drop_occluders = false;
 //   --before-box-unseen-cov: "before" reports a box's size error as the same in every direction,
@@ -405,8 +408,7 @@ constexpr const char* kOcclusionBins[] = {"unoccluded", "a nearer return beside 
 constexpr const char* kRateBins[] = {"scan rate <= 15 Hz", "scan rate 15-30 Hz",
                                      "scan rate > 30 Hz"};
 constexpr const char* kObjectBins[] = {"object: a person", "object: a trolley", "object: other"};
-constexpr const char* kEdgeBins[] = {"silhouette ends 0", "silhouette ends 1",
-                                     "silhouette ends 2"};
+constexpr const char* kEdgeBins[] = {"silhouette ends 0", "silhouette ends 1", "silhouette ends 2"};
 constexpr const char* kSpeedBins[] = {"speed < 0.3 m/s", "speed 0.3-1.0 m/s", "speed 1.0-1.3 m/s",
                                       "speed > 1.3 m/s"};
 constexpr const char* kCrowdBins[] = {"another object within 1 m", "another object 1-2 m",
@@ -1407,6 +1409,9 @@ bool g_before_still_legs = false;
 // --before-mixed-legs: "before" fits a far knee-height leg to its points also where each may be a
 // mixed pixel with a near background (ShapeOptions::mixed_leg_max_gap_m = 0).
 bool g_before_mixed_legs = false;
+// --before-mixed-leg-band: "before" gives a leg measured from mixed pixels' range deficits the
+// radius' share of the whole gap along the ray (ShapeOptions::mixed_leg_band_variance = false).
+bool g_before_mixed_leg_band = false;
 // --before-box-occluders: "before" fits a box to every point of its segment, also those in front
 // of it (ShapeOptions::box_drop_occluders = false).
 bool g_before_box_occluders = false;
@@ -1500,10 +1505,10 @@ std::vector<Variant> Variants(sim::Mount mount, double range_m) {
              g_before_single_precision_fit || g_before_edge_sides || g_before_outside_start ||
              g_before_across_sway || g_before_receded_edges || g_before_stance_weight ||
              g_before_adopt || g_before_inherit_moved || g_before_touching_legs ||
-             g_before_still_legs || g_before_mixed_legs || g_before_box_occluders ||
-             g_before_box_rejoin || g_before_see_through || g_before_step_seam ||
-             g_before_torso_edge_echo || g_before_box_unseen_cov || g_before_box_seen_extent ||
-             g_before_knee_box_faces || g_before_lone_leg_standing ||
+             g_before_still_legs || g_before_mixed_legs || g_before_mixed_leg_band ||
+             g_before_box_occluders || g_before_box_rejoin || g_before_see_through ||
+             g_before_step_seam || g_before_torso_edge_echo || g_before_box_unseen_cov ||
+             g_before_box_seen_extent || g_before_knee_box_faces || g_before_lone_leg_standing ||
              g_before_single_beam_partner || g_before_edge_echo_birth || g_before_lone_beam_echo ||
              g_before_far_leg_birth || g_before_person_size || g_before_person_reach ||
              g_before_partial_extent || g_before_neighbour || g_before_segment_excess ||
@@ -1548,6 +1553,7 @@ std::vector<Variant> Variants(sim::Mount mount, double range_m) {
     if (g_before_touching_legs) before.shape.touching_legs_along_ray = false;
     if (g_before_still_legs) before.shape.still_legs_max_depth_m = 0.0;
     if (g_before_mixed_legs) before.shape.mixed_leg_max_gap_m = 0.0;
+    if (g_before_mixed_leg_band) before.shape.mixed_leg_band_variance = false;
     if (g_before_box_occluders) before.shape.box_drop_occluders = false;
     if (g_before_box_rejoin) before.shape.box_rejoin_pieces = false;
     if (g_before_see_through) before.shape.split_see_through = false;
@@ -3201,7 +3207,8 @@ std::string BreakdownTable(const Section& s) {
     t += BreakdownRows(lead, "", kSizeBins, b.by_size);
     for (std::size_t i = 0; i < b.by_size.size(); ++i) {
       if (b.few_points_by_size[i].all.n > 0) {
-        t += BreakdownRow(lead, std::string("points 2-4, ") + kSizeBins[i], b.few_points_by_size[i]);
+        t +=
+            BreakdownRow(lead, std::string("points 2-4, ") + kSizeBins[i], b.few_points_by_size[i]);
       }
       if (b.some_points_by_size[i].all.n > 0) {
         t += BreakdownRow(lead, std::string("points 5-9, ") + kSizeBins[i],
@@ -3421,13 +3428,13 @@ std::string KneeHeightBefore() {
         g_before_single_precision_fit || g_before_edge_sides || g_before_outside_start ||
         g_before_across_sway || g_before_receded_edges || g_before_stance_weight ||
         g_before_adopt || g_before_inherit_moved || g_before_touching_legs || g_before_still_legs ||
-        g_before_mixed_legs || g_before_box_occluders || g_before_box_rejoin ||
-        g_before_see_through || g_before_step_seam || g_before_torso_edge_echo ||
-        g_before_box_unseen_cov || g_before_box_seen_extent || g_before_knee_box_faces ||
-        g_before_single_beam_partner || g_before_edge_echo_birth || g_before_lone_beam_echo ||
-        g_before_far_leg_birth || g_before_person_size || g_before_person_reach ||
-        g_before_partial_extent || g_before_neighbour || g_before_segment_excess ||
-        g_before_range_noise || g_before_gain_covariance) ||
+        g_before_mixed_legs || g_before_mixed_leg_band || g_before_box_occluders ||
+        g_before_box_rejoin || g_before_see_through || g_before_step_seam ||
+        g_before_torso_edge_echo || g_before_box_unseen_cov || g_before_box_seen_extent ||
+        g_before_knee_box_faces || g_before_single_beam_partner || g_before_edge_echo_birth ||
+        g_before_lone_beam_echo || g_before_far_leg_birth || g_before_person_size ||
+        g_before_person_reach || g_before_partial_extent || g_before_neighbour ||
+        g_before_segment_excess || g_before_range_noise || g_before_gain_covariance) ||
       g_before_mixed_pixels || g_before_far || g_before_evidence_coasting ||
       g_before_report_rules) {
     return "";
@@ -3606,6 +3613,12 @@ std::string KneeHeightBefore() {
     without.push_back(
         "fitting a far knee-height leg to its points where each may be a mixed pixel with a near "
         "background (`shape.mixed_leg_max_gap_m` 0)");
+  }
+  if (g_before_mixed_leg_band) {
+    without.push_back(
+        "giving a knee-height leg measured from mixed pixels' range deficits the leg radius' "
+        "share of the whole gap to the background along the line of sight, also where its "
+        "nearest return may be the leg's own echo (`shape.mixed_leg_band_variance` false)");
   }
   if (g_before_single_beam_partner) {
     without.push_back(
@@ -3863,6 +3876,8 @@ int main(int argc, char** argv) {
       g_before_still_legs = true;
     } else if (a == "--before-mixed-legs") {
       g_before_mixed_legs = true;
+    } else if (a == "--before-mixed-leg-band") {
+      g_before_mixed_leg_band = true;
     } else if (a == "--before-box-occluders") {
       g_before_box_occluders = true;
     } else if (a == "--before-box-unseen-cov") {
@@ -3904,7 +3919,7 @@ int main(int argc, char** argv) {
                    "[--before-outside-start] [--before-across-sway] [--before-receded-edges] "
                    "[--before-stance-weight] [--before-adopt] [--before-inherit-moved] "
                    "[--before-touching-legs] "
-                   "[--before-still-legs] [--before-mixed-legs] "
+                   "[--before-still-legs] [--before-mixed-legs] [--before-mixed-leg-band] "
                    "[--before-box-occluders] [--before-box-rejoin] [--before-box-unseen-cov] "
                    "[--before-box-seen-extent] [--before-knee-box-faces] "
                    "[--before-see-through] [--before-step-seam] [--before-torso-edge-echo] "
