@@ -232,10 +232,11 @@ double NeighbourVar(const ShapeOptions& o, double distance_m) {
          (1.0 - std::max(0.0, distance_m) / o.neighbour_distance_m);
 }
 
-Eigen::Matrix2d SegmentExcessCov(std::span<const Eigen::Vector2d> points,
-                                 const Eigen::Vector2d& centre_m, double reach_m, double noise_m) {
+SegmentExtent SegmentExtents(std::span<const Eigen::Vector2d> points,
+                             const Eigen::Vector2d& centre_m) {
+  SegmentExtent out;
   const double range_m = centre_m.norm();
-  if (points.size() < 2 || !(range_m > 0.0)) return Eigen::Matrix2d::Zero();
+  if (points.size() < 2 || !(range_m > 0.0)) return out;
   const Eigen::Vector2d u = centre_m / range_m;
   const Eigen::Vector2d w(-u.y(), u.x());
   double u_lo = std::numeric_limits<double>::infinity();
@@ -250,13 +251,27 @@ Eigen::Matrix2d SegmentExcessCov(std::span<const Eigen::Vector2d> points,
     w_lo = std::min(w_lo, pw);
     w_hi = std::max(w_hi, pw);
   }
+  out.along_dir = u;
+  out.along_m = u_hi - u_lo;
+  out.across_m = w_hi - w_lo;
+  return out;
+}
+
+Eigen::Matrix2d SegmentExcessCov(const SegmentExtent& extent, double reach_m, double noise_m) {
   // A body shows at most its width (twice its reach) across the ray and its near half (its
   // reach) along it; the outermost points' noise (two sigmas at each end) widens either.
   const double margin_m = 4.0 * noise_m;
-  const double across_m = std::max(0.0, (w_hi - w_lo) - 2.0 * reach_m - margin_m);
-  const double along_m = std::max(0.0, (u_hi - u_lo) - reach_m - margin_m);
+  const double across_m = std::max(0.0, extent.across_m - 2.0 * reach_m - margin_m);
+  const double along_m = std::max(0.0, extent.along_m - reach_m - margin_m);
+  const Eigen::Vector2d& u = extent.along_dir;
+  const Eigen::Vector2d w(-u.y(), u.x());
   return (along_m * along_m / 12.0) * u * u.transpose() +
          (across_m * across_m / 12.0) * w * w.transpose();
+}
+
+Eigen::Matrix2d SegmentExcessCov(std::span<const Eigen::Vector2d> points,
+                                 const Eigen::Vector2d& centre_m, double reach_m, double noise_m) {
+  return SegmentExcessCov(SegmentExtents(points, centre_m), reach_m, noise_m);
 }
 
 double SuperellipseReachFactor(double exponent) {
@@ -831,10 +846,18 @@ class TrackingPipeline::Refiner final : public MeasurementRefiner {
     // ShapeOptions::segment_excess_shared.
     shape.reported_excess_cov_m2.setZero();
     if (body && o.segment_excess_shared && ob.part_count > 0) {
-      shape.reported_excess_cov_m2 = internal::SegmentExcessCov(
-          ReliablePoints(ob.parts[0]), measurement.position_m,
-          internal::SuperellipseReach(shape.size_m, shape.exponent),
-          o.fit.point_sigma_m + o.fit.point_sigma_per_m * measurement.position_m.norm());
+      const internal::SegmentExtent extent =
+          internal::SegmentExtents(ReliablePoints(ob.parts[0]), measurement.position_m);
+      const double noise_m =
+          o.fit.point_sigma_m + o.fit.point_sigma_per_m * measurement.position_m.norm();
+      // The reach is at least the larger semi-axis (SuperellipseReachFactor >= 1): the reach's pow
+      // only where the extents could leave an excess beyond that (most fits leave none).
+      const double semi_max_m = std::max(shape.size_m.x(), shape.size_m.y());
+      if (extent.across_m - 4.0 * noise_m > 2.0 * semi_max_m ||
+          extent.along_m - 4.0 * noise_m > semi_max_m) {
+        shape.reported_excess_cov_m2 = internal::SegmentExcessCov(
+            extent, internal::SuperellipseReach(shape.size_m, shape.exponent), noise_m);
+      }
       if (!shape.reported_excess_cov_m2.isZero()) ++segment_excess_widened;
     }
     const double share = measured_outline ? o.outline_fixed_share : 1.0;

@@ -1257,6 +1257,16 @@ double NeighbourVar(const ShapeOptions& o, double distance_m);
 // can hold them all.
 Eigen::Matrix2d SegmentExcessCov(std::span<const Eigen::Vector2d> points,
                                  const Eigen::Vector2d& centre_m, double reach_m, double noise_m);
+// SegmentExcessCov in two steps: the points' extents along and across the ray through centre_m
+// (zero for fewer than two points or a centre at the origin), then the covariance from them.
+struct SegmentExtent {
+  Eigen::Vector2d along_dir = Eigen::Vector2d::Zero();  // unit vector along the ray
+  double along_m = 0.0;
+  double across_m = 0.0;
+};
+SegmentExtent SegmentExtents(std::span<const Eigen::Vector2d> points,
+                             const Eigen::Vector2d& centre_m);
+Eigen::Matrix2d SegmentExcessCov(const SegmentExtent& extent, double reach_m, double noise_m);
 
 // The largest distance from its centre of a superellipse |u / a|^p + |v / b|^p = 1 with semi-axes
 // at most size_m's larger one and exponent p >= 2: max(a, b) 2^(1/2 - 1/p) (its diagonal where
