@@ -4409,6 +4409,33 @@ TEST(PipelineScenarioTest, AStillKneeHeightPairDeepAlongTheRayBehindASingleBeamI
   EXPECT_EQ(person_now.absorbed, 0u);
 }
 
+namespace {
+
+// Two legs (radius 0.06 m, centres side_m either side of the person at range_m, bearing_rad) before
+// a wall at wall_m as a receiver returns them (the simulator's rule): each beam's share s of its
+// footprint (1.5 % of the range wide, evenly lit) the legs cover; the leg's range from s 0.8 on,
+// the wall's up to 0.2 (left as drawn), the energy-weighted mean between.
+void DrawLegsBeforeWall(double range_m, double wall_m, double bearing_rad, double side_m,
+                        double step_rad, std::vector<float>& ranges) {
+  constexpr double kLegM = 0.06;
+  const double footprint_m = range_m * 0.015;
+  for (std::size_t b = 0; b < ranges.size(); ++b) {
+    const double angle = -0.5 * common::kPi + static_cast<double>(b) * step_rad;
+    double share = 0.0;
+    for (const double side : {-side_m, side_m}) {
+      const double offset = range_m * (bearing_rad - angle) + side;  // leg centre off the beam
+      const double lo = std::max(offset - kLegM, -0.5 * footprint_m);
+      const double hi = std::min(offset + kLegM, 0.5 * footprint_m);
+      share += std::max(hi - lo, 0.0) / footprint_m;
+    }
+    if (share <= 0.2) continue;
+    const double leg = range_m - kLegM;
+    ranges[b] = static_cast<float>(share >= 0.8 ? leg : share * leg + (1.0 - share) * wall_m);
+  }
+}
+
+}  // namespace
+
 // ShapeOptions::mixed_leg_max_gap_m: knee height, 25 Hz, 0.5 deg, a wall at 12.2 m. A person walks
 // across the line of sight at 11 m (legs 0.2 m apart across the ray, radius 0.06 m): a beam's
 // footprint there (0.165 m) is wider than a leg, so each beam on a leg returns the energy-weighted
@@ -4417,27 +4444,14 @@ TEST(PipelineScenarioTest, AStillKneeHeightPairDeepAlongTheRayBehindASingleBeamI
 // the person; measured from the returns' range deficits it walks with them.
 TEST(PipelineScenarioTest, AFarLegSeenOnlyAsMixedPixelsBeforeANearWallIsMeasuredAtTheLeg) {
   constexpr double kStepRad = 0.5 * common::kPi / 180.0;
-  constexpr double kRangeM = 11.0, kWallM = 12.2, kLegM = 0.06, kSpeedMps = 0.8;
+  constexpr double kRangeM = 11.0, kWallM = 12.2, kSpeedMps = 0.8;
   constexpr std::int64_t kScans = 125;
-  const double footprint_m = kRangeM * 0.015;
   // Bearing of the person's centre at walk scan i: from -9 deg on, across the ray.
   const auto bearing = [&](std::int64_t i) {
     return -9.0 * common::kPi / 180.0 + kSpeedMps * static_cast<double>(i) / 25.0 / kRangeM;
   };
   const auto draw = [&](std::int64_t i, std::vector<float>& ranges) {
-    for (std::size_t b = 0; b < ranges.size(); ++b) {
-      const double angle = -0.5 * common::kPi + static_cast<double>(b) * kStepRad;
-      double share = 0.0;
-      for (const double side : {-0.1, 0.1}) {
-        const double offset = kRangeM * (bearing(i) - angle) + side;  // leg centre off the beam
-        const double lo = std::max(offset - kLegM, -0.5 * footprint_m);
-        const double hi = std::min(offset + kLegM, 0.5 * footprint_m);
-        share += std::max(hi - lo, 0.0) / footprint_m;
-      }
-      if (share <= 0.2) continue;
-      const double leg = kRangeM - kLegM;
-      ranges[b] = static_cast<float>(share >= 0.8 ? leg : share * leg + (1.0 - share) * kWallM);
-    }
+    DrawLegsBeforeWall(kRangeM, kWallM, bearing(i), 0.1, kStepRad, ranges);
   };
   struct Run {
     int measured = 0;  // scans of the last 2 s with a confirmed track within 1 m of the person
@@ -4490,28 +4504,14 @@ TEST(PipelineScenarioTest, AFarLegSeenOnlyAsMixedPixelsBeforeANearWallIsMeasured
 // reported and with the person.
 TEST(PipelineScenarioTest, AFarLegReturningABeamAloneBeforeANearWallStaysReportedWhenUnseen) {
   constexpr double kStepRad = 0.5 * common::kPi / 180.0;
-  constexpr double kRangeM = 8.3, kWallM = 9.5, kLegM = 0.06, kSpeedMps = 0.8;
+  constexpr double kRangeM = 8.3, kWallM = 9.5, kSpeedMps = 0.8;
   constexpr std::int64_t kScans = 125;
-  const double footprint_m = kRangeM * 0.015;
   const auto bearing = [&](std::int64_t i) {
     return -9.0 * common::kPi / 180.0 + kSpeedMps * static_cast<double>(i) / 25.0 / kRangeM;
   };
   const auto unseen = [](std::int64_t i) { return i % 4 == 3; };
   const auto draw = [&](std::int64_t i, std::vector<float>& ranges) {
-    if (unseen(i)) return;
-    for (std::size_t b = 0; b < ranges.size(); ++b) {
-      const double angle = -0.5 * common::kPi + static_cast<double>(b) * kStepRad;
-      double share = 0.0;
-      for (const double side : {-0.2, 0.2}) {
-        const double offset = kRangeM * (bearing(i) - angle) + side;  // leg centre off the beam
-        const double lo = std::max(offset - kLegM, -0.5 * footprint_m);
-        const double hi = std::min(offset + kLegM, 0.5 * footprint_m);
-        share += std::max(hi - lo, 0.0) / footprint_m;
-      }
-      if (share <= 0.2) continue;
-      const double leg = kRangeM - kLegM;
-      ranges[b] = static_cast<float>(share >= 0.8 ? leg : share * leg + (1.0 - share) * kWallM);
-    }
+    if (!unseen(i)) DrawLegsBeforeWall(kRangeM, kWallM, bearing(i), 0.2, kStepRad, ranges);
   };
   struct Run {
     int reported = 0;         // scans of the last 2 s with a track within 0.5 m of the person
