@@ -104,8 +104,10 @@ class MountWatch {
 
   // One confirmed person track (not a box) in the current scan.
   void Add(std::uint32_t track_id, double speed_mps, double half_width_m) {
-    // The ids are unique among the live tracks, and a scan's tracks come in the order of the last
-    // scan's (new ones after them): the one after the last found is tried first, then every one.
+    // The ids are unique among the live tracks, and a scan's tracks mostly come in the order of the
+    // last scan's (new ones after them; a track not reported this scan leaves a gap): the one after
+    // the last found is tried first, then every one (mount_check_test: the same verdicts as a plain
+    // search, in any order).
     Live* live = nullptr;
     if (next_live_ < live_count_ && live_[next_live_].id == track_id) {
       live = &live_[next_live_];
