@@ -28,6 +28,30 @@ double LargestEigenvalue(const Eigen::Matrix2d& m) {
   return half_trace + std::sqrt(half_diff * half_diff + off * off);
 }
 
+// Files item in a fixed list of records (lost tracks, where moved ones were lost): the records
+// stamp(record) older than max_age_s at now_ns are forgotten first; when the list is still full,
+// the oldest record gives its place.
+template <typename T, std::size_t N, typename Stamp>
+void KeepRecent(common::FixedVector<T, N>& list, const T& item, common::UtcNs now_ns,
+                double max_age_s, Stamp stamp) {
+  std::size_t kept = 0;
+  for (std::size_t i = 0; i < list.size(); ++i) {
+    if (common::NsToSeconds(now_ns - stamp(list[i])) > max_age_s) continue;
+    if (kept != i) list[kept] = list[i];
+    ++kept;
+  }
+  while (list.size() > kept) list.pop_back();
+  if (list.full()) {
+    std::size_t oldest = 0;
+    for (std::size_t i = 1; i < list.size(); ++i) {
+      if (stamp(list[i]) < stamp(list[oldest])) oldest = i;
+    }
+    list[oldest] = item;
+    return;
+  }
+  (void)list.push_back(item);
+}
+
 }  // namespace
 
 namespace internal {
@@ -705,30 +729,16 @@ void MultiTracker::AdoptSuccessors(common::UtcNs scan_start_ns) {
 
 void MultiTracker::NoteLostMoved(const Track& t, common::UtcNs scan_start_ns) {
   if (!(options_.inherit_moved_s > 0.0) || !options_.static_objects || !t.moved) return;
-  // Kept while an heir may still come: born within inherit_moved_s, confirmed and not yet absorbed
-  // as never moved.
-  const double keep_s = options_.inherit_moved_s + options_.never_moved_to_background_s;
-  std::size_t kept = 0;
-  for (std::size_t i = 0; i < lost_moved_.size(); ++i) {
-    if (common::NsToSeconds(scan_start_ns - lost_moved_[i].lost_ns) > keep_s) continue;
-    if (kept != i) lost_moved_[kept] = lost_moved_[i];
-    ++kept;
-  }
-  while (lost_moved_.size() > kept) lost_moved_.pop_back();
   internal::LostMoved lost;
   lost.position_m = t.z_m;  // where it was last measured: not where its velocity took it since
   lost.cov_m2 = t.filter.covariance().topLeftCorner<2, 2>();
   lost.lost_ns = scan_start_ns;
   lost.last_update_ns = t.last_update_ns;
-  if (lost_moved_.full()) {
-    std::size_t oldest = 0;
-    for (std::size_t i = 1; i < lost_moved_.size(); ++i) {
-      if (lost_moved_[i].lost_ns < lost_moved_[oldest].lost_ns) oldest = i;
-    }
-    lost_moved_[oldest] = lost;
-    return;
-  }
-  (void)lost_moved_.push_back(lost);
+  // Kept while an heir may still come: born within inherit_moved_s, confirmed and not yet absorbed
+  // as never moved.
+  KeepRecent(lost_moved_, lost, scan_start_ns,
+             options_.inherit_moved_s + options_.never_moved_to_background_s,
+             [](const internal::LostMoved& l) { return l.lost_ns; });
 }
 
 bool MultiTracker::Inherit(const Track& t, common::UtcNs scan_start_ns) {
@@ -751,8 +761,7 @@ bool MultiTracker::Inherit(const Track& t, common::UtcNs scan_start_ns) {
     const double m2 =
         (d.x() * d.x() * s(1, 1) - 2.0 * d.x() * d.y() * s(0, 1) + d.y() * d.y() * s(0, 0)) / det;
     if (!(m2 <= options_.gate_mahalanobis_sq)) continue;
-    lost_moved_[i] = lost_moved_[lost_moved_.size() - 1];
-    lost_moved_.pop_back();
+    lost_moved_.swap_remove(i);
     return true;
   }
   return false;
@@ -760,26 +769,8 @@ bool MultiTracker::Inherit(const Track& t, common::UtcNs scan_start_ns) {
 
 void MultiTracker::Lose(const Track& t, common::UtcNs scan_start_ns) {
   if (!(options_.resume_window_s > 0.0)) return;
-  // Forget those past the window first; when full, the one lost longest ago.
-  std::size_t kept = 0;
-  for (std::size_t i = 0; i < lost_.size(); ++i) {
-    if (common::NsToSeconds(scan_start_ns - lost_[i].last_update_ns) >
-        options_.coast_timeout_s + options_.resume_window_s) {
-      continue;
-    }
-    if (kept != i) lost_[kept] = lost_[i];
-    ++kept;
-  }
-  while (lost_.size() > kept) lost_.pop_back();
-  if (lost_.full()) {
-    std::size_t oldest = 0;
-    for (std::size_t i = 1; i < lost_.size(); ++i) {
-      if (lost_[i].last_update_ns < lost_[oldest].last_update_ns) oldest = i;
-    }
-    lost_[oldest] = t;
-    return;
-  }
-  (void)lost_.push_back(t);
+  KeepRecent(lost_, t, scan_start_ns, options_.coast_timeout_s + options_.resume_window_s,
+             [](const Track& l) { return l.last_update_ns; });
 }
 
 bool MultiTracker::Resume(common::UtcNs scan_start_ns, const Candidate& c,

@@ -237,23 +237,10 @@ SegmentExtent SegmentExtents(std::span<const Eigen::Vector2d> points,
   SegmentExtent out;
   const double range_m = centre_m.norm();
   if (points.size() < 2 || !(range_m > 0.0)) return out;
-  const Eigen::Vector2d u = centre_m / range_m;
-  const Eigen::Vector2d w(-u.y(), u.x());
-  double u_lo = std::numeric_limits<double>::infinity();
-  double u_hi = -u_lo;
-  double w_lo = u_lo;
-  double w_hi = -u_lo;
-  for (const Eigen::Vector2d& p : points) {
-    const double pu = u.dot(p);
-    const double pw = w.dot(p);
-    u_lo = std::min(u_lo, pu);
-    u_hi = std::max(u_hi, pu);
-    w_lo = std::min(w_lo, pw);
-    w_hi = std::max(w_hi, pw);
-  }
-  out.along_dir = u;
-  out.along_m = u_hi - u_lo;
-  out.across_m = w_hi - w_lo;
+  out.along_dir = centre_m / range_m;
+  const Eigen::Vector2d half = HalfExtentsAlong(points, out.along_dir);
+  out.along_m = 2.0 * half.x();
+  out.across_m = 2.0 * half.y();
   return out;
 }
 
@@ -374,9 +361,10 @@ Eigen::Matrix2d BoxUnseenCentreCov(const Eigen::Matrix2d& cov_m2, double size_va
   return cov;
 }
 
-Eigen::Vector2d BoxHalfExtents(std::span<const Eigen::Vector2d> points, double yaw_rad) {
+Eigen::Vector2d HalfExtentsAlong(std::span<const Eigen::Vector2d> points,
+                                 const Eigen::Vector2d& e1) {
   if (points.empty()) return Eigen::Vector2d::Zero();
-  const Eigen::Vector2d e1(std::cos(yaw_rad), std::sin(yaw_rad)), e2(-e1.y(), e1.x());
+  const Eigen::Vector2d e2(-e1.y(), e1.x());
   Eigen::Vector2d lo(std::numeric_limits<double>::infinity(),
                      std::numeric_limits<double>::infinity());
   Eigen::Vector2d hi = -lo;
@@ -386,6 +374,11 @@ Eigen::Vector2d BoxHalfExtents(std::span<const Eigen::Vector2d> points, double y
     hi = hi.cwiseMax(uv);
   }
   return 0.5 * (hi - lo);
+}
+
+Eigen::Vector2d BoxHalfExtents(std::span<const Eigen::Vector2d> points, double yaw_rad) {
+  if (points.empty()) return Eigen::Vector2d::Zero();
+  return HalfExtentsAlong(points, Eigen::Vector2d(std::cos(yaw_rad), std::sin(yaw_rad)));
 }
 
 double BoxHalfVar(double seen_half_m, double whole_half_m, double size_half_m, double min_half_m,
@@ -409,18 +402,31 @@ Eigen::Matrix2d BoxSeenCentreCov(double bias_var_m2, double floor_var_m2,
   return cov;
 }
 
+// Whether p lies within the box (centre_m, half-lengths size_m along e1 and e2) grown by margin_m.
+static bool InGrownBox(const Eigen::Vector2d& p, const Eigen::Vector2d& centre_m,
+                       const Eigen::Vector2d& size_m, const Eigen::Vector2d& e1,
+                       const Eigen::Vector2d& e2, double margin_m) {
+  const Eigen::Vector2d d = p - centre_m;
+  return !(std::abs(d.dot(e1)) > size_m.x() + margin_m ||
+           std::abs(d.dot(e2)) > size_m.y() + margin_m);
+}
+
 bool InsideGrownBox(const Eigen::Vector2d& centre_m, const Eigen::Vector2d& size_m, double yaw_rad,
                     double margin_m, std::span<const Eigen::Vector2d> points) {
   if (points.empty()) return false;
   const Eigen::Vector2d e1(std::cos(yaw_rad), std::sin(yaw_rad)), e2(-e1.y(), e1.x());
-  for (const Eigen::Vector2d& p : points) {
-    const Eigen::Vector2d d = p - centre_m;
-    if (std::abs(d.dot(e1)) > size_m.x() + margin_m ||
-        std::abs(d.dot(e2)) > size_m.y() + margin_m) {
-      return false;
-    }
-  }
-  return true;
+  return std::all_of(points.begin(), points.end(), [&](const Eigen::Vector2d& p) {
+    return InGrownBox(p, centre_m, size_m, e1, e2, margin_m);
+  });
+}
+
+bool AnyInsideGrownBox(const Eigen::Vector2d& centre_m, const Eigen::Vector2d& size_m,
+                       double yaw_rad, double margin_m, std::span<const Eigen::Vector2d> points) {
+  if (points.empty()) return false;
+  const Eigen::Vector2d e1(std::cos(yaw_rad), std::sin(yaw_rad)), e2(-e1.y(), e1.x());
+  return std::any_of(points.begin(), points.end(), [&](const Eigen::Vector2d& p) {
+    return InGrownBox(p, centre_m, size_m, e1, e2, margin_m);
+  });
 }
 
 namespace {
@@ -2091,22 +2097,16 @@ bool TrackingPipeline::OnConfirmedBox(const Segment& s, common::UtcNs stamp_ns,
         (pr.size_m.x() > o.step_seam_person_max_a_m ||
          pr.size_m.y() > o.step_seam_person_max_b_m)) {
       // ShapeOptions::step_seam_size_guard: a cart the tracker still learns as another shape.
-      for (const Eigen::Vector2d& p : pts) {
-        if (internal::InsideGrownBox(pr.position_m, pr.size_m, pr.yaw_rad,
-                                     o.step_seam_size_margin_m,
-                                     std::span<const Eigen::Vector2d>(&p, 1))) {
-          return true;
-        }
+      if (internal::AnyInsideGrownBox(pr.position_m, pr.size_m, pr.yaw_rad,
+                                      o.step_seam_size_margin_m, pts)) {
+        return true;
       }
     }
     // ShapeOptions::split_step_seam: also a box track not yet confirmed.
     if (pr.model != ShapeModel::kBox || !(pr.confirmed || seam)) continue;
     const double margin = BoxRejoinMargin(o, BoxStateVar(o, pr), range);
-    for (const Eigen::Vector2d& p : pts) {
-      if (internal::InsideGrownBox(pr.position_m, pr.size_m, pr.yaw_rad, margin,
-                                   std::span<const Eigen::Vector2d>(&p, 1))) {
-        return true;
-      }
+    if (internal::AnyInsideGrownBox(pr.position_m, pr.size_m, pr.yaw_rad, margin, pts)) {
+      return true;
     }
   }
   return false;

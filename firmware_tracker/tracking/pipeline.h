@@ -1294,6 +1294,9 @@ Eigen::Matrix2d BoxUnseenCentreCov(const Eigen::Matrix2d& cov_m2, double size_va
 // ShapeOptions::box_seen_extent_cov: half the extent of the points along the box's axis e1
 // (yaw_rad) and across it e2: (max - min) / 2 of their projections on each; zero for no points.
 Eigen::Vector2d BoxHalfExtents(std::span<const Eigen::Vector2d> points, double yaw_rad);
+// The same along the unit vector e1 and across it (e1 turned by +90 degrees).
+Eigen::Vector2d HalfExtentsAlong(std::span<const Eigen::Vector2d> points,
+                                 const Eigen::Vector2d& e1);
 
 // ShapeOptions::box_seen_extent_cov: the variance of a box's semi-axis (its size state size_half_m)
 // seen to at least seen_half_m: where a complete view showed it whole (whole_half_m > 0, half that
@@ -1313,6 +1316,9 @@ Eigen::Matrix2d BoxSeenCentreCov(double bias_var_m2, double floor_var_m2,
 // size_m along yaw_rad and across it) grown by margin_m on every side; false for no points.
 bool InsideGrownBox(const Eigen::Vector2d& centre_m, const Eigen::Vector2d& size_m, double yaw_rad,
                     double margin_m, std::span<const Eigen::Vector2d> points);
+// Whether any of the points lies inside that grown box (false for no points).
+bool AnyInsideGrownBox(const Eigen::Vector2d& centre_m, const Eigen::Vector2d& size_m,
+                       double yaw_rad, double margin_m, std::span<const Eigen::Vector2d> points);
 
 // ShapeOptions::person_size_across_ray: the weights of a body's semi-axes (a along yaw_rad, b
 // across it) centred at centre_m (sensor at the origin) in what a scan shows across the ray:

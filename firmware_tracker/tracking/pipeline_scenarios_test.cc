@@ -4434,6 +4434,20 @@ void DrawLegsBeforeWall(double range_m, double wall_m, double bearing_rad, doubl
   }
 }
 
+// Distance of truth_m to the nearest confirmed track (confirmed_only) or to the nearest track not
+// tentative; infinity without one.
+double NearestTrackM(const ScanTracks& tracks, const Eigen::Vector2d& truth_m,
+                     bool confirmed_only) {
+  double best = std::numeric_limits<double>::infinity();
+  for (const TrackReport& r : tracks.tracks) {
+    if (confirmed_only ? r.state != TrackState::kConfirmed : r.state == TrackState::kTentative) {
+      continue;
+    }
+    best = std::min(best, (Eigen::Vector2d(r.x_m, r.y_m) - truth_m).norm());
+  }
+  return best;
+}
+
 }  // namespace
 
 // ShapeOptions::mixed_leg_max_gap_m: knee height, 25 Hz, 0.5 deg, a wall at 12.2 m. A person walks
@@ -4467,11 +4481,7 @@ TEST(PipelineScenarioTest, AFarLegSeenOnlyAsMixedPixelsBeforeANearWallIsMeasured
       if (i < kScans - 50) return;
       const Eigen::Vector2d truth =
           kRangeM * Eigen::Vector2d(std::cos(bearing(i)), std::sin(bearing(i)));
-      double best = 1.0;
-      for (const TrackReport& r : tracks.tracks) {
-        if (r.state != TrackState::kConfirmed) continue;
-        best = std::min(best, (Eigen::Vector2d(r.x_m, r.y_m) - truth).norm());
-      }
+      const double best = NearestTrackM(tracks, truth, true);
       if (best < 1.0) {
         ++out.measured;
         out.error_sum_m += best;
@@ -4528,11 +4538,7 @@ TEST(PipelineScenarioTest, AFarLegReturningABeamAloneBeforeANearWallStaysReporte
       if (i < kScans - 50) return;
       const Eigen::Vector2d truth =
           kRangeM * Eigen::Vector2d(std::cos(bearing(i)), std::sin(bearing(i)));
-      double best = 0.5;
-      for (const TrackReport& r : tracks.tracks) {
-        if (r.state == TrackState::kTentative) continue;
-        best = std::min(best, (Eigen::Vector2d(r.x_m, r.y_m) - truth).norm());
-      }
+      const double best = NearestTrackM(tracks, truth, false);
       if (best < 0.5) {
         ++out.reported;
         out.unseen_reported += unseen(i) ? 1 : 0;
