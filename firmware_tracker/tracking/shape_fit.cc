@@ -394,9 +394,8 @@ class UpperSum5 {
     u.s44_ = s44;
     return u;
   }
-  // The sum in the upper triangle, zeros below.
-  Mat5 Upper() const {
-    Mat5 m = Mat5::Zero();
+  // The sum into m's upper triangle (the entries below it left as they are).
+  void WriteUpper(Mat5& m) const {
     m(0, 0) = s00_11_(0);
     m(1, 1) = s00_11_(1);
     m(0, 1) = s01_;
@@ -412,7 +411,6 @@ class UpperSum5 {
     m(2, 4) = s24_34_(0);
     m(3, 4) = s24_34_(1);
     m(4, 4) = s44_;
-    return m;
   }
 
  private:
@@ -587,6 +585,10 @@ struct QuadPoints {
   alignas(16) std::array<float, kMaxFitPoints> x, y, weight, used;
   std::size_t quads = 0;
   Eigen::Vector2d origin = Eigen::Vector2d::Zero();
+  // The fit's constants of the Huber loss, once per fit rather than per pass (the same values):
+  // z^2 = d^2 w discount / k^2, and k^2 / discount, the scale of the loss's sum.
+  float huber = 0.0f;
+  double cost_scale = 0.0;
 };
 
 // The lane sums of four vectors, (sum a, sum b, sum c, sum d): SSE's transposing adds (7
@@ -609,14 +611,14 @@ inline Eigen::Array4f LaneSums(const Eigen::Array4f& a, const Eigen::Array4f& b,
 
 template <int kKind>
 void SumPointsQuad(const Vec5& at, double c, double s, double inv_a, double inv_b,
-                   const QuadPoints& q, double discount, double k2, PointSums& sums) {
+                   const QuadPoints& q, PointSums& sums) {
   static_assert(kKind == kExponent2 || kKind == kExponent2_5);
   using F4 = Eigen::Array4f;
   const auto ox = static_cast<float>(at(kCx) - q.origin.x());
   const auto oy = static_cast<float>(at(kCy) - q.origin.y());
   const auto cf = static_cast<float>(c), sf = static_cast<float>(s);
   const auto ia = static_cast<float>(inv_a), ib = static_cast<float>(inv_b);
-  const auto huber = static_cast<float>(discount / k2);  // z^2 = d^2 w discount / k^2
+  const float huber = q.huber;
   const auto centre_d = static_cast<float>(-std::min(at(kA), at(kB)));  // a point at the centre
   F4 h00 = F4::Zero(), h01 = F4::Zero(), h02 = F4::Zero(), h03 = F4::Zero(), h04 = F4::Zero();
   F4 h11 = F4::Zero(), h12 = F4::Zero(), h13 = F4::Zero(), h14 = F4::Zero();
@@ -709,12 +711,12 @@ void SumPointsQuad(const Vec5& at, double c, double s, double inv_a, double inv_
   sums.g01 = lanes(s3, 0);
   sums.g23 = lanes(s3, 2);
   sums.g4 = static_cast<double>(s4(3));
-  sums.cost = k2 / discount * static_cast<double>(s5(0));
+  sums.cost = q.cost_scale * static_cast<double>(s5(0));
   sums.sq = static_cast<double>(s5(1));
 }
 
-using SumQuadsFn = void (*)(const Vec5&, double, double, double, double, const QuadPoints&, double,
-                            double, PointSums&);
+using SumQuadsFn = void (*)(const Vec5&, double, double, double, double, const QuadPoints&,
+                            PointSums&);
 
 // SumPointsQuad where it serves (a superellipse with exponent 2 or 2.5), else nullptr.
 SumQuadsFn SumQuadsFor(ShapeModel model, double exponent) {
@@ -1202,6 +1204,8 @@ ShapeFitResult Fit(std::span<const Eigen::Vector2d> points, const Silhouette& si
   const SumPointsFn sum_points = SumPointsFor(model, exponent, kPaired);
   if (sum_quads != nullptr) {
     quad_points.origin = mean;
+    quad_points.huber = static_cast<float>(discount / k2);
+    quad_points.cost_scale = k2 / discount;
     quad_points.quads = (n + 3) / 4;
     for (std::size_t i = n; i < 4 * quad_points.quads; ++i) {
       quad_points.x[i] = quad_points.x[n - 1];
@@ -1240,7 +1244,7 @@ ShapeFitResult Fit(std::span<const Eigen::Vector2d> points, const Silhouette& si
     }
     PointSums sums;
     if (sum_quads != nullptr) {
-      sum_quads(at, c, s, inv_a, inv_b, quad_points, discount, k2, sums);
+      sum_quads(at, c, s, inv_a, inv_b, quad_points, sums);
     } else {
       sum_points(at, c, s, inv_a, inv_b, exponent, used, base_weight.data(), discount, k2, sums);
     }
@@ -1257,7 +1261,9 @@ ShapeFitResult Fit(std::span<const Eigen::Vector2d> points, const Silhouette& si
       gg += (edges[e].weight * r) * grad;
       cost += edges[e].weight * r * r;
     }
-    Mat5 hh = outer.Upper();
+    // Straight into the caller's matrix (its entries below the diagonal are read by no solver).
+    Mat5& hh = *h;
+    outer.WriteUpper(hh);
     // Priors.
     const Eigen::Vector2d dc = at.head<2>() - centre_prior;
     hh(kCx, kCx) += centre_info;
@@ -1275,7 +1281,10 @@ ShapeFitResult Fit(std::span<const Eigen::Vector2d> points, const Silhouette& si
       gg(kB) = 0.0;
     } else {
       const Eigen::Vector2d ds(at(kA) - size0.x(), at(kB) - size0.y());
-      hh.block<2, 2>(kA, kA) += size_info;
+      // The upper triangle only (the matrix is reused from evaluation to evaluation).
+      hh(kA, kA) += size_info(0, 0);
+      hh(kA, kB) += size_info(0, 1);
+      hh(kB, kB) += size_info(1, 1);
       gg.segment<2>(kA) += size_info * ds;
       cost += ds.dot(size_info * ds);
       const double dyaw = WrapHalfTurn(at(kYaw) - prior.yaw_rad);
@@ -1283,16 +1292,19 @@ ShapeFitResult Fit(std::span<const Eigen::Vector2d> points, const Silhouette& si
       gg(kYaw) += yaw_info * dyaw;
       cost += yaw_info * dyaw * dyaw;
     }
-    *h = hh;
     *g = gg;
     if (points_sq != nullptr) *points_sq = sq;
     return cost;
   };
 
-  Mat5 h;
+  // The normal matrices of x and of the trial, swapped when a trial is taken instead of copied
+  // (only their upper triangles are written and read; zero below).
+  std::array<Mat5, 2> normal = {Mat5::Zero(), Mat5::Zero()};
+  Mat5* h_at = &normal[0];
+  Mat5* h_next = &normal[1];
   Vec5 g;
   double points_cost = 0.0;
-  double cost = evaluate(x, &h, &g, &points_cost);
+  double cost = evaluate(x, h_at, &g, &points_cost);
   Eigen::Vector2d cost_centre = x.head<2>();  // where `cost` was evaluated
   int iterations = 0;
   // The solver holds the factorisation of h while `factored`: the covariance at the end reuses it
@@ -1300,18 +1312,25 @@ ShapeFitResult Fit(std::span<const Eigen::Vector2d> points, const Silhouette& si
   Solver solver;
   bool factored = false;
   for (; iterations < o.max_iterations; ++iterations) {
-    factored = solver.Factor(h);
+    factored = solver.Factor(*h_at);
     if (!factored) break;
     Vec5 step = -solver.Solve(g);
     if (!AllFinite(step)) break;
     // Trust region in parameter units.
     // The largest of the five (std::max over an initializer list walks them with a branch each;
     // the chain of maxima gives the same value for finite ones without a branch).
-    const double scale =
-        std::max(std::max(std::max(1.0, step.head<2>().norm() / kMaxCentreStepM),
-                          std::abs(step(kYaw)) / kMaxYawStepRad),
-                 std::max(std::abs(step(kA)) / kMaxSizeStepM, std::abs(step(kB)) / kMaxSizeStepM));
-    step /= scale;
+    // Within every bound (nearly always) each ratio is at most 1 (IEEE division is monotone and
+    // c / c is 1), so the scale is 1 and the step stays as it is: the divisions, which lie on the
+    // chain from the solve to the next evaluation, are left out with the same result.
+    const double centre_step = step.head<2>().norm();
+    if (!(centre_step <= kMaxCentreStepM && std::abs(step(kYaw)) <= kMaxYawStepRad &&
+          std::abs(step(kA)) <= kMaxSizeStepM && std::abs(step(kB)) <= kMaxSizeStepM)) {
+      const double scale = std::max(
+          std::max(std::max(1.0, centre_step / kMaxCentreStepM),
+                   std::abs(step(kYaw)) / kMaxYawStepRad),
+          std::max(std::abs(step(kA)) / kMaxSizeStepM, std::abs(step(kB)) / kMaxSizeStepM));
+      step /= scale;
+    }
     // Converged: a step this small changes nothing that matters, and evaluating it would cost a
     // pass over the points (the normal matrix at x serves for the covariance).
     if (step.head<2>().norm() < kConvergedCentreM &&
@@ -1326,13 +1345,12 @@ ShapeFitResult Fit(std::span<const Eigen::Vector2d> points, const Silhouette& si
       Vec5 trial = x + step;
       trial(kA) = std::clamp(trial(kA), o.min_size_m, o.max_size_m);
       trial(kB) = circle ? trial(kA) : std::clamp(trial(kB), o.min_size_m, o.max_size_m);
-      Mat5 h_trial;
       Vec5 g_trial;
       double sq_trial = 0.0;
-      const double cost_trial = evaluate(trial, &h_trial, &g_trial, &sq_trial);
+      const double cost_trial = evaluate(trial, h_next, &g_trial, &sq_trial);
       if (std::isfinite(cost_trial) && cost_trial <= cost) {
         x = trial;
-        h = h_trial;
+        std::swap(h_at, h_next);
         g = g_trial;
         cost = cost_trial;
         cost_centre = x.head<2>();
@@ -1346,7 +1364,7 @@ ShapeFitResult Fit(std::span<const Eigen::Vector2d> points, const Silhouette& si
     if (!accepted) break;
   }
 
-  if (!factored && !solver.Factor(h)) return result;
+  if (!factored && !solver.Factor(*h_at)) return result;
   // Only the entries the result takes: the others are used by nothing, so they are neither formed
   // nor tested for finiteness.
   const Mat5 cov = solver.ResultInverse();

@@ -263,6 +263,30 @@ TEST(ShapeFitTest, CylinderRadiusIsLearnedFromAWideArc) {
   EXPECT_LT(std::sqrt(fit.size_cov_m2(0, 0)), 0.03);
 }
 
+// A prediction 0.45 m behind a round person (the track lagging a turn): each Gauss-Newton step
+// moves the centre by at most 0.25 m (the trust region), so one iteration ends 0.25 m from the
+// start, and the whole fit still reaches the person. Fails if a step beyond a bound is not cut.
+TEST(ShapeFitTest, AStepBeyondTheTrustRegionIsCutAndTheFitStillConverges) {
+  const Body body = testing::Cylinder({4.0, 0.0}, 0.2);
+  const View v = Look(body, 0.5);
+  ASSERT_GE(v.points.size(), 4u);
+  ShapePrior prior;
+  prior.exponent = 2.0;
+  prior.size_m = {0.2, 0.2};
+  prior.centre_guess_m = Eigen::Vector2d(4.45, 0.0);
+  ShapeFitOptions one_step;
+  one_step.max_iterations = 1;
+  const ShapeFitResult first = FitShape(v.points, v.silhouette, prior, one_step);
+  ASSERT_TRUE(first.ok);
+  EXPECT_EQ(first.iterations, 1);
+  EXPECT_NEAR((first.centre_m - *prior.centre_guess_m).norm(), 0.25, 1e-9);
+  EXPECT_LT(first.centre_m.x(), 4.45);
+  const ShapeFitResult fit = FitShape(v.points, v.silhouette, prior, ShapeFitOptions{});
+  ASSERT_TRUE(fit.ok);
+  EXPECT_GE(fit.iterations, 2);
+  EXPECT_LT((fit.centre_m - body.centre_m).norm(), 0.01);
+}
+
 // A person's upper-body ellipse at every heading and 3-10 m, with the sizes known (a track that
 // learned them) and the heading from the walking direction (20 degrees sigma).
 TEST(ShapeFitTest, EllipseAtEveryHeading) {
