@@ -511,6 +511,17 @@ void VisitShape(tracking::ShapeOptions& o, ConfigVisitor& v) {
           "in them the body lies is not known, and the excess squared over 12 along that "
           "direction is reported with the measured scans (not given to the filter). false: not "
           "reported.");
+  v.Field("box_view_shared", o.box_view_shared,
+          "A track fitted as a body (not a box, not legs) measured from a segment whose points "
+          "are a box's outline (one straight face, or two at a corner): the second moment about "
+          "the measurement of where the box's centre lies (behind one face by a depth uniform "
+          "over box_prior_min_half_m..box_prior_max_half_m, or in the middle of the two faces' "
+          "diagonal) is reported with the measured scans (not given to the filter). false: not "
+          "reported.");
+  v.Field("box_view_at_torso", o.box_view_at_torso,
+          "box_view_shared at upper-body height too, where the longest face seen is longer than "
+          "twice box_min_half_length_m (shorter ones are people's fronts too). false: knee "
+          "height only.");
   v.Field("beam_divergence_rad", o.beam_divergence_rad,
           "Full beam divergence of the scanner (LMS1xx, TiM: 0.015; LMS5xx: 0.011); the beam's "
           "footprint at range R is R times this plus beam_exit_diameter_m (mixed pixels of legs "

@@ -945,6 +945,7 @@ void MultiTracker::Report(common::UtcNs scan_start_ns, ScanTracks& out) {
       p.topLeftCorner<2, 2>() += t.shape.reported_partial_cov_m2;
       p.topLeftCorner<2, 2>() += t.shape.reported_neighbour_m2 * Eigen::Matrix2d::Identity();
       p.topLeftCorner<2, 2>() += t.shape.reported_excess_cov_m2;
+      p.topLeftCorner<2, 2>() += t.shape.reported_box_view_cov_m2;
     }
     r->covariance = p;
     r->age_scans = t.age_scans;

@@ -346,6 +346,10 @@ struct TrackShape {
   // A segment wider than the body (ShapeOptions::segment_excess_shared): the covariance of where
   // along the segment the body lies, reported with the track's measured scans; zero otherwise.
   Eigen::Matrix2d reported_excess_cov_m2 = Eigen::Matrix2d::Zero();
+  // A body fit's segment that is a box's outline (ShapeOptions::box_view_shared): the second
+  // moment of where the box's centre lies about the measurement, reported with the track's
+  // measured scans; zero otherwise. Not given to the filter's measured noise.
+  Eigen::Matrix2d reported_box_view_cov_m2 = Eigen::Matrix2d::Zero();
   // Knee height: the leg centres of the track's last two-leg measurement, their fits' variance
   // (mean over the axes) and its time, 0: none (ShapeOptions::stance_leg_weight).
   std::array<Eigen::Vector2d, 2> legs_m{Eigen::Vector2d::Zero(), Eigen::Vector2d::Zero()};

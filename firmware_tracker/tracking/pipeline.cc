@@ -256,6 +256,231 @@ Eigen::Matrix2d SegmentExcessCov(const SegmentExtent& extent, double reach_m, do
          (across_m * across_m / 12.0) * w * w.transpose();
 }
 
+namespace {
+
+// The principal line of points: their mean, the line's unit direction and the RMS distance of the
+// points to it (the smaller eigenvalue of their scatter, closed form for a symmetric 2x2).
+struct PrincipalLine {
+  Eigen::Vector2d mean = Eigen::Vector2d::Zero();
+  Eigen::Vector2d dir = Eigen::Vector2d::UnitX();
+  double rms_m = 0.0;
+};
+PrincipalLine FitPrincipalLine(std::span<const Eigen::Vector2d> points) {
+  PrincipalLine line;
+  if (points.empty()) return line;
+  for (const Eigen::Vector2d& p : points) line.mean += p;
+  line.mean /= static_cast<double>(points.size());
+  Eigen::Matrix2d scatter = Eigen::Matrix2d::Zero();
+  for (const Eigen::Vector2d& p : points) {
+    scatter += (p - line.mean) * (p - line.mean).transpose();
+  }
+  scatter /= static_cast<double>(points.size());
+  const double d = 0.5 * (scatter(0, 0) - scatter(1, 1));
+  const double r = std::sqrt(d * d + scatter(0, 1) * scatter(0, 1));
+  line.rms_m = std::sqrt(std::max(0.0, 0.5 * scatter.trace() - r));
+  const double angle = 0.5 * std::atan2(2.0 * scatter(0, 1), scatter(0, 0) - scatter(1, 1));
+  line.dir = Eigen::Vector2d(std::cos(angle), std::sin(angle));
+  return line;
+}
+
+// The second moment E[(e/2)^2] = e_max^2 / 12 of a box's centre shift along a face whose far end
+// was not seen (an occluder's edge, the field of view's end): the face goes on by e, uniform over
+// [0, e_max], e_max = 2 max_half_m - seen_m, and the centre moves by e / 2.
+double UnseenEndVar(double max_half_m, double seen_m) {
+  const double e_max = std::max(0.0, 2.0 * max_half_m - seen_m);
+  return e_max * e_max / 12.0;
+}
+
+// Whether a face from `from_m` to its end `end_m` ends there (internal::OutlineEnd): a silhouette
+// whose next beam returned nothing, or from a point off the face's line by more than two range
+// sigmas (a point on it: the face goes on, cut from the segment by the width limit or, seen at a
+// grazing angle, by the segmentation's jump).
+bool FaceEndSeen(const internal::OutlineEnd& end, const Eigen::Vector2d& from_m,
+                 const Eigen::Vector2d& end_m, double noise_m) {
+  if (!end.silhouette) return false;
+  if (!end.beyond_valid) return end.beyond_returned_none;
+  const Eigen::Vector2d dir = (end_m - from_m).normalized();
+  const Eigen::Vector2d d = end.beyond_m - end_m;
+  return std::abs(d.x() * dir.y() - d.y() * dir.x()) > 2.0 * noise_m || d.dot(dir) < 0.0;
+}
+
+}  // namespace
+
+namespace {
+
+// BoxViewCov's one face from first_m to last_m (points within two range sigmas of their principal
+// line `line`): the centre half the box's depth h behind the face's middle, h uniform over the
+// prior's half-lengths.
+Eigen::Matrix2d OneFaceCov(const ShapeOptions& o, const Eigen::Vector2d& first_m,
+                           const Eigen::Vector2d& last_m, const PrincipalLine& line,
+                           const Eigen::Vector2d& centre_m, double noise_m,
+                           const OutlineEnd& first_end, const OutlineEnd& last_end) {
+  const double h_min = o.box_prior_min_half_m;
+  const double h_max = o.box_prior_max_half_m;
+  Eigen::Vector2d normal(-line.dir.y(), line.dir.x());
+  if (normal.dot(line.mean) < 0.0) normal = -normal;
+  const double ta = (first_m - line.mean).dot(line.dir);
+  const double tb = (last_m - line.mean).dot(line.dir);
+  const Eigen::Vector2d end_a = line.mean + ta * line.dir;
+  const Eigen::Vector2d end_b = line.mean + tb * line.dir;
+  const Eigen::Vector2d middle = 0.5 * (end_a + end_b);
+  const double seen_m = std::abs(tb - ta);
+  const double mean_h = 0.5 * (h_min + h_max);
+  const double mean_h2 = (h_min * h_min + h_min * h_max + h_max * h_max) / 3.0;
+  const Eigen::Vector2d delta = middle - centre_m;
+  Eigen::Matrix2d cov = delta * delta.transpose() +
+                        mean_h * (delta * normal.transpose() + normal * delta.transpose()) +
+                        mean_h2 * normal * normal.transpose();
+  const double ends_var =
+      (FaceEndSeen(first_end, end_b, end_a, noise_m) ? 0.0 : UnseenEndVar(h_max, seen_m)) +
+      (FaceEndSeen(last_end, end_a, end_b, noise_m) ? 0.0 : UnseenEndVar(h_max, seen_m));
+  return cov + ends_var * line.dir * line.dir.transpose();
+}
+
+// BoxViewCov's one face with something in front of part of it (a pusher's legs, in the same
+// segment): the points nearer the sensor than the line by more than kOccluderSigmas range sigmas
+// left out and the line refitted, a few rounds from the line of all points `line`; a face where
+// at least half the points, kMinFlatnessPoints or more over at least flat_min_extent_m, lie within
+// two range sigmas of their line. An end whose outer point was left out is not seen (the face may
+// go on behind what stands in front of it).
+Eigen::Matrix2d OccludedFaceCov(const ShapeOptions& o, std::span<const Eigen::Vector2d> points,
+                                const PrincipalLine& line, const Eigen::Vector2d& centre_m,
+                                double noise_m, const OutlineEnd& first_end,
+                                const OutlineEnd& last_end, int* faces, double* longest_m) {
+  constexpr int kRounds = 3;
+  const double cut_m = kOccluderSigmas * noise_m;
+  PrincipalLine face = line;
+  std::size_t kept = points.size(), first = 0, last = points.size() - 1;
+  for (int round = 0; round < kRounds; ++round) {
+    Eigen::Vector2d normal(-face.dir.y(), face.dir.x());
+    if (normal.dot(face.mean) < 0.0) normal = -normal;
+    Eigen::Vector2d sum = Eigen::Vector2d::Zero();
+    std::size_t count = 0;
+    for (const Eigen::Vector2d& p : points) {
+      if ((p - face.mean).dot(normal) < -cut_m) continue;
+      sum += p;
+      ++count;
+    }
+    if (count < kMinFlatnessPoints || 2 * count < points.size()) return Eigen::Matrix2d::Zero();
+    PrincipalLine next;
+    next.mean = sum / static_cast<double>(count);
+    Eigen::Matrix2d scatter = Eigen::Matrix2d::Zero();
+    first = points.size();
+    for (std::size_t i = 0; i < points.size(); ++i) {
+      if ((points[i] - face.mean).dot(normal) < -cut_m) continue;
+      scatter += (points[i] - next.mean) * (points[i] - next.mean).transpose();
+      if (first == points.size()) first = i;
+      last = i;
+    }
+    scatter /= static_cast<double>(count);
+    const double d = 0.5 * (scatter(0, 0) - scatter(1, 1));
+    const double r = std::sqrt(d * d + scatter(0, 1) * scatter(0, 1));
+    next.rms_m = std::sqrt(std::max(0.0, 0.5 * scatter.trace() - r));
+    const double angle = 0.5 * std::atan2(2.0 * scatter(0, 1), scatter(0, 0) - scatter(1, 1));
+    next.dir = Eigen::Vector2d(std::cos(angle), std::sin(angle));
+    face = next;
+    const bool same = count == kept;
+    kept = count;
+    if (same && round > 0) break;
+  }
+  if (kept == points.size() || !(face.rms_m <= 2.0 * noise_m) ||
+      !((points[last] - points[first]).norm() >= o.flat_min_extent_m)) {
+    return Eigen::Matrix2d::Zero();
+  }
+  const OutlineEnd unseen;
+  *faces = 1;
+  *longest_m = (points[last] - points[first]).norm();
+  return OneFaceCov(o, points[first], points[last], face, centre_m, noise_m,
+                    first == 0 ? first_end : unseen, last + 1 == points.size() ? last_end : unseen);
+}
+
+}  // namespace
+
+Eigen::Matrix2d BoxViewCov(const ShapeOptions& o, std::span<const Eigen::Vector2d> points,
+                           const Eigen::Vector2d& centre_m, double noise_m,
+                           const OutlineEnd& first_end, const OutlineEnd& last_end, int* faces,
+                           double* longest_m) {
+  *faces = 0;
+  *longest_m = 0.0;
+  const std::size_t n = points.size();
+  if (n < kMinFlatnessPoints) return Eigen::Matrix2d::Zero();
+  const Eigen::Vector2d& a = points.front();
+  const Eigen::Vector2d& b = points.back();
+  if (!((b - a).norm() >= o.flat_min_extent_m)) return Eigen::Matrix2d::Zero();
+  const double straight_m = 2.0 * noise_m;
+  const PrincipalLine line = FitPrincipalLine(points);
+  if (line.rms_m <= straight_m) {
+    *faces = 1;
+    *longest_m = (b - a).norm();
+    return OneFaceCov(o, a, b, line, centre_m, noise_m, first_end, last_end);
+  }
+  // Two faces: split at the point farthest from the chord; each side straight, the corner
+  // between them nearer the sensor than the chord's middle (a box seen from outside) and the
+  // sides far from parallel (a rectangle's at right angles).
+  const Eigen::Vector2d chord = (b - a).normalized();
+  std::size_t k = 0;
+  double farthest_m = -1.0;
+  for (std::size_t i = 1; i + 1 < n; ++i) {
+    const Eigen::Vector2d d = points[i] - a;
+    const double dist_m = std::abs(d.x() * chord.y() - d.y() * chord.x());
+    if (dist_m > farthest_m) {
+      farthest_m = dist_m;
+      k = i;
+    }
+  }
+  const Eigen::Vector2d& corner = points[k];
+  const Eigen::Vector2d middle = 0.5 * (a + b);
+  if (k == 0 || !((corner - middle).dot(middle) < 0.0)) {
+    return OccludedFaceCov(o, points, line, centre_m, noise_m, first_end, last_end, faces,
+                           longest_m);
+  }
+  // A side of one or two points beyond the corner (seen at a grazing angle) shows where the
+  // other face begins, not how long it is: one face, ending at the corner.
+  const std::span<const Eigen::Vector2d> side_a = points.subspan(0, k + 1);
+  const std::span<const Eigen::Vector2d> side_b = points.subspan(k);
+  OutlineEnd at_corner;
+  at_corner.silhouette = true;
+  at_corner.beyond_returned_none = true;
+  if (side_b.size() < 3 || side_a.size() < 3) {
+    const bool keep_a = side_a.size() >= side_b.size();
+    const std::span<const Eigen::Vector2d> face =
+        keep_a ? points.subspan(0, k) : points.subspan(k + 1);
+    const PrincipalLine face_line = FitPrincipalLine(face);
+    if (face.size() < kMinFlatnessPoints || !(face_line.rms_m <= straight_m)) {
+      return OccludedFaceCov(o, points, line, centre_m, noise_m, first_end, last_end, faces,
+                             longest_m);
+    }
+    *faces = 1;
+    *longest_m = (face.back() - face.front()).norm();
+    return keep_a ? OneFaceCov(o, face.front(), face.back(), face_line, centre_m, noise_m,
+                               first_end, at_corner)
+                  : OneFaceCov(o, face.front(), face.back(), face_line, centre_m, noise_m,
+                               at_corner, last_end);
+  }
+  const PrincipalLine first = FitPrincipalLine(side_a);
+  const PrincipalLine second = FitPrincipalLine(side_b);
+  if (!(first.rms_m <= straight_m && second.rms_m <= straight_m) ||
+      !(std::abs(first.dir.dot(second.dir)) <= 0.5)) {
+    return OccludedFaceCov(o, points, line, centre_m, noise_m, first_end, last_end, faces,
+                           longest_m);
+  }
+  // The centre in the middle of the diagonal between the outer ends.
+  const double h_max = o.box_prior_max_half_m;
+  const Eigen::Vector2d delta = middle - centre_m;
+  Eigen::Matrix2d cov = delta * delta.transpose();
+  if (!FaceEndSeen(first_end, corner, a, noise_m)) {
+    const Eigen::Vector2d side = (a - corner).normalized();
+    cov += UnseenEndVar(h_max, (a - corner).norm()) * side * side.transpose();
+  }
+  if (!FaceEndSeen(last_end, corner, b, noise_m)) {
+    const Eigen::Vector2d side = (b - corner).normalized();
+    cov += UnseenEndVar(h_max, (b - corner).norm()) * side * side.transpose();
+  }
+  *faces = 2;
+  *longest_m = std::max((a - corner).norm(), (b - corner).norm());
+  return cov;
+}
+
 Eigen::Matrix2d SegmentExcessCov(std::span<const Eigen::Vector2d> points,
                                  const Eigen::Vector2d& centre_m, double reach_m, double noise_m) {
   return SegmentExcessCov(SegmentExtents(points, centre_m), reach_m, noise_m);
@@ -866,6 +1091,29 @@ class TrackingPipeline::Refiner final : public MeasurementRefiner {
       }
       if (!shape.reported_excess_cov_m2.isZero()) ++segment_excess_widened;
     }
+    // ShapeOptions::box_view_shared.
+    shape.reported_box_view_cov_m2.setZero();
+    if (o.box_view_shared && !ob.legs && shape.model == ShapeModel::kSuperellipse &&
+        ob.part_count > 0) {
+      const double noise_m =
+          o.fit.point_sigma_m + o.fit.point_sigma_per_m * measurement.position_m.norm();
+      const ObservationPart& first = ob.parts[0];
+      const ObservationPart& last = ob.parts[ob.part_count - 1];
+      const std::span<const Eigen::Vector2d> outline = ReliablePoints(first);
+      int faces = 0;
+      double longest_m = 0.0;
+      shape.reported_box_view_cov_m2 = internal::BoxViewCov(
+          o, outline, measurement.position_m, noise_m,
+          OutlineEndAt(first.silhouette.first_valid, first.begin_beam, -1),
+          OutlineEndAt(last.silhouette.last_valid, last.end_beam - 1, +1), &faces, &longest_m);
+      // ShapeOptions::box_view_at_torso.
+      if (o.mount == Mount::kTorso &&
+          (!o.box_view_at_torso || !(longest_m > 2.0 * o.box_min_half_length_m))) {
+        shape.reported_box_view_cov_m2.setZero();
+        faces = 0;
+      }
+      if (faces > 0) ++box_view_widened;
+    }
     const double share = measured_outline ? o.outline_fixed_share : 1.0;
     const double model_sigma_m =
         (measured_outline ? o.outline_model_share : 1.0) * o.centre_model_sigma_m;
@@ -974,6 +1222,28 @@ class TrackingPipeline::Refiner final : public MeasurementRefiner {
   std::uint64_t person_size_kept = 0;
   std::uint64_t neighbour_widened = 0;
   std::uint64_t segment_excess_widened = 0;
+  std::uint64_t box_view_widened = 0;
+
+  // ShapeOptions::box_view_shared: an outline's end at beam `edge_beam`, what the beam beside
+  // it (step -1 or +1) returned.
+  internal::OutlineEnd OutlineEndAt(bool silhouette, std::size_t edge_beam, int step) const {
+    internal::OutlineEnd end;
+    end.silhouette = silhouette;
+    if (p_.scan_ == nullptr) return end;
+    const ScanView& scan = *p_.scan_;
+    if (step < 0 && edge_beam == 0) return end;  // the field of view's end
+    const std::size_t beam = step < 0 ? edge_beam - 1 : edge_beam + 1;
+    if (beam >= scan.range_m.size()) return end;
+    const double r = static_cast<double>(scan.range_m[beam]);
+    if (!(std::isfinite(r) && r > 0.0)) {
+      end.beyond_returned_none = true;
+      return end;
+    }
+    const double angle = scan.BeamAngleRad(beam);
+    end.beyond_valid = true;
+    end.beyond_m = Eigen::Vector2d(r * std::cos(angle), r * std::sin(angle));
+    return end;
+  }
 
   // How many of the observation's two outline ends are silhouettes (MakePart: not an occluder's
   // edge, not the field of view's end).
@@ -3057,6 +3327,7 @@ const ScanTracks& TrackingPipeline::Process(const ScanView& scan, std::uint32_t 
   const std::uint64_t partial_size_floored_before = refiner_->partial_size_floored;
   const std::uint64_t neighbour_widened_before = refiner_->neighbour_widened;
   const std::uint64_t segment_excess_widened_before = refiner_->segment_excess_widened;
+  const std::uint64_t box_view_widened_before = refiner_->box_view_widened;
   const std::uint64_t person_size_kept_before = refiner_->person_size_kept;
   scan_ = &scan;
   ++refiner_->scans;
@@ -3088,6 +3359,7 @@ const ScanTracks& TrackingPipeline::Process(const ScanView& scan, std::uint32_t 
   counters_.neighbour_widened += refiner_->neighbour_widened - neighbour_widened_before;
   counters_.segment_excess_widened +=
       refiner_->segment_excess_widened - segment_excess_widened_before;
+  counters_.box_view_widened += refiner_->box_view_widened - box_view_widened_before;
   counters_.person_sizes_kept_few_points += refiner_->person_size_kept - person_size_kept_before;
   if (bg.scan_error == ScanError::kNone && bg.learned) {
     AbsorbStatic(scan);

@@ -780,6 +780,20 @@ struct ShapeOptions {
   // filter, whose positions are unchanged). Counted in PipelineCounters::segment_excess_widened.
   // false: not reported (as before).
   bool segment_excess_shared = true;
+  // A track fitted as a body (not a box, not legs: a cart before its track learns a box's length,
+  // a person merged with one) measured from a segment whose points are a box's outline, one
+  // straight face (part of it perhaps behind the pusher's legs) or two at a corner
+  // (internal::BoxViewCov): the fit puts a body at the points, the box's centre lies where the
+  // rectangle puts it, behind one face by an unseen depth (uniform over the box prior's
+  // half-lengths) or in the middle of the two faces' diagonal. The second moment of that centre
+  // about the measurement is reported with measured scans (not given to the filter, whose
+  // positions are unchanged). Counted in PipelineCounters::box_view_widened. false: not reported
+  // (as before).
+  bool box_view_shared = true;
+  // box_view_shared at upper-body height too, where the longest face seen is longer than a body
+  // can be (2 box_min_half_length_m, beyond which a track is a cart's): shorter straight runs and
+  // corners are people's fronts too (arms beside a flat chest). false: knee height only.
+  bool box_view_at_torso = true;
   double outline_fixed_share = 0.3;
   double outline_model_share = 1.0;
   // Flat objects (not person-like).
@@ -994,6 +1008,8 @@ struct PipelineCounters {
   // Upper-body person fits whose segment is wider than the body (ShapeOptions::
   // segment_excess_shared).
   std::uint64_t segment_excess_widened = 0;
+  // Body fits measured from a box's outline (ShapeOptions::box_view_shared).
+  std::uint64_t box_view_widened = 0;
   std::uint64_t deep_leg_pairs = 0;    // deep 2-3 point legs measured as a pair (deep_legs_as_pair)
   std::uint64_t veiled_segments = 0;   // legs: mixed pixels (beside a nearer edge, deep), dropped
   std::uint64_t deep_pieces_kept = 0;  // legs: deep pieces with no surface behind, kept
@@ -1267,6 +1283,30 @@ struct SegmentExtent {
 SegmentExtent SegmentExtents(std::span<const Eigen::Vector2d> points,
                              const Eigen::Vector2d& centre_m);
 Eigen::Matrix2d SegmentExcessCov(const SegmentExtent& extent, double reach_m, double noise_m);
+// ShapeOptions::box_view_shared: where a segment's points (in scan order, the sensor at the
+// origin; at least kMinFlatnessPoints over at least flat_min_extent_m) are a box's outline, the
+// second moment about centre_m of where the box's centre lies, and *faces 1 or 2 (else zero and
+// 0). One face (the points within 2 noise_m RMS of their principal line): the centre half the
+// box's depth h behind the face's middle, h uniform over [box_prior_min_half_m,
+// box_prior_max_half_m]. Two faces (split at the point farthest from the chord, each side within
+// 2 noise_m of its line, the corner nearer the sensor than the chord's middle, the sides at least
+// 60 degrees apart, each of at least three points): the centre in the middle of the diagonal
+// between the outer ends (a side of one or two points beyond the corner: the other face alone).
+// Neither: one face with something in front of part of it (a pusher's legs): the points nearer
+// than its line by more than three noise_m left out (at least half kept). An outer end not seen
+// to end (not a silhouette; the beam beyond it on the face's line within two noise_m, beyond the
+// field of view, or left out as in front) lets the face go on by e, uniform over
+// [0, 2 box_prior_max_half_m - the face's seen length]: e_max^2 / 12 along it.
+struct OutlineEnd {
+  bool silhouette = false;            // not an occluder's edge (Silhouette::first/last_valid)
+  bool beyond_valid = false;          // the beam beside the end returned beyond_m
+  bool beyond_returned_none = false;  // ... returned nothing (false too at the field's end)
+  Eigen::Vector2d beyond_m = Eigen::Vector2d::Zero();
+};
+Eigen::Matrix2d BoxViewCov(const ShapeOptions& o, std::span<const Eigen::Vector2d> points,
+                           const Eigen::Vector2d& centre_m, double noise_m,
+                           const OutlineEnd& first_end, const OutlineEnd& last_end, int* faces,
+                           double* longest_m);
 
 // The largest distance from its centre of a superellipse |u / a|^p + |v / b|^p = 1 with semi-axes
 // at most size_m's larger one and exponent p >= 2: max(a, b) 2^(1/2 - 1/p) (its diagonal where

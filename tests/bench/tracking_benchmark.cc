@@ -1308,6 +1308,13 @@ bool g_before_neighbour = false;
 // body without the covariance of where along it the body lies
 // (ShapeOptions::segment_excess_shared = false).
 bool g_before_segment_excess = false;
+// --before-box-view: "before" reports a track fitted as a body and measured from a box's outline
+// (one face or two) without the covariance of where the box's centre lies
+// (ShapeOptions::box_view_shared = false).
+bool g_before_box_view = false;
+// --before-box-view-torso: "before" applies box_view_shared at knee height only
+// (ShapeOptions::box_view_at_torso = false).
+bool g_before_box_view_torso = false;
 // --before-gain-covariance: "before" reports a measured upper-body track with the filter's own
 // covariance (MultiTrackerOptions::report_gain_covariance = false).
 bool g_before_gain_covariance = false;
@@ -1512,7 +1519,8 @@ std::vector<Variant> Variants(sim::Mount mount, double range_m) {
              g_before_single_beam_partner || g_before_edge_echo_birth || g_before_lone_beam_echo ||
              g_before_far_leg_birth || g_before_person_size || g_before_person_reach ||
              g_before_partial_extent || g_before_neighbour || g_before_segment_excess ||
-             g_before_range_noise || g_before_gain_covariance) {
+             g_before_box_view || g_before_box_view_torso || g_before_range_noise ||
+             g_before_gain_covariance) {
     tracking::TrackerOptions before = fresh;
     if (g_before_one_leg) before.shape.hidden_leg_behind = false;
     if (g_before_mixed_pixels) before.shape.drop_mixed_pixel_legs = false;
@@ -1573,6 +1581,8 @@ std::vector<Variant> Variants(sim::Mount mount, double range_m) {
     if (g_before_partial_extent) before.shape.partial_view_size_sigma_m = 0.0;
     if (g_before_neighbour) before.shape.neighbour_sigma_m = 0.0;
     if (g_before_segment_excess) before.shape.segment_excess_shared = false;
+    if (g_before_box_view) before.shape.box_view_shared = false;
+    if (g_before_box_view_torso) before.shape.box_view_at_torso = false;
     if (g_before_gain_covariance) before.tracking.report_gain_covariance = false;
     if (g_before_range_noise) before.shape.fit.point_sigma_per_m = 0.001;
     variants.push_back({"before", before});
@@ -3434,7 +3444,8 @@ std::string KneeHeightBefore() {
         g_before_knee_box_faces || g_before_single_beam_partner || g_before_edge_echo_birth ||
         g_before_lone_beam_echo || g_before_far_leg_birth || g_before_person_size ||
         g_before_person_reach || g_before_partial_extent || g_before_neighbour ||
-        g_before_segment_excess || g_before_range_noise || g_before_gain_covariance) ||
+        g_before_segment_excess || g_before_box_view || g_before_box_view_torso ||
+        g_before_range_noise || g_before_gain_covariance) ||
       g_before_mixed_pixels || g_before_far || g_before_evidence_coasting ||
       g_before_report_rules) {
     return "";
@@ -3640,6 +3651,16 @@ std::string KneeHeightBefore() {
         "reporting an upper-body person with another observation beside it as one alone "
         "(`shape.neighbour_sigma_m` 0)");
   }
+  if (g_before_box_view_torso && !g_before_box_view) {
+    without.push_back(
+        "reporting an upper-body track fitted as a body and measured from a cart's long face "
+        "as if the body were the cart (`shape.box_view_at_torso` false)");
+  }
+  if (g_before_box_view) {
+    without.push_back(
+        "reporting a track fitted as a body and measured from a box's outline (one face or two) "
+        "as if the body were the box (`shape.box_view_shared` false)");
+  }
   if (g_before_segment_excess) {
     without.push_back(
         "reporting an upper-body person whose segment is wider than the body as if the segment "
@@ -3737,7 +3758,8 @@ std::string KneeHeightBefore() {
           ? ", on the same scans in the same run"
       : g_before_outline_departure || g_before_isotropic_bias || g_before_partial_view ||
               g_before_underdetermined_fit || g_before_partial_extent || g_before_neighbour ||
-              g_before_segment_excess || g_before_gain_covariance
+              g_before_segment_excess || g_before_box_view || g_before_box_view_torso ||
+              g_before_gain_covariance
           ? ", on the same scans in the same run; upper-body tracks are the same by construction, "
             "their reported covariance (so NEES and what fusion makes of them) is not"
           : ", on the same scans in the same run; upper-body rows are the same by construction";
@@ -3814,6 +3836,10 @@ int main(int argc, char** argv) {
       g_before_neighbour = true;
     } else if (a == "--before-segment-excess") {
       g_before_segment_excess = true;
+    } else if (a == "--before-box-view") {
+      g_before_box_view = true;
+    } else if (a == "--before-box-view-torso") {
+      g_before_box_view_torso = true;
     } else if (a == "--before-gain-covariance") {
       g_before_gain_covariance = true;
     } else if (a == "--before-range-noise") {
