@@ -120,9 +120,8 @@ StanceCentre StanceWeightedCentre(const ShapeOptions& o, const Eigen::Vector2d& 
 Eigen::Vector2d LoneLegCentreFromStanding(const ShapeOptions& o, const Eigen::Vector2d& forward,
                                           const Eigen::Vector2d& velocity_mps,
                                           const Eigen::Vector2d& leg_m, double leg_var_m2,
-                                          const Eigen::Vector2d& standing_m,
-                                          double standing_var_m2, double dt_s,
-                                          double* along_var_m2) {
+                                          const Eigen::Vector2d& standing_m, double standing_var_m2,
+                                          double dt_s, double* along_var_m2) {
   // The standing knee, about halfway between the planted foot and the hip, moves at about half
   // the body's speed: carried forward by half the displacement since it was seen, known to half.
   const Eigen::Vector2d displacement = velocity_mps * std::max(0.0, dt_s);
@@ -1076,9 +1075,13 @@ class TrackingPipeline::Refiner final : public MeasurementRefiner {
     if (underdetermined) ++underdetermined_widened;
     // ShapeOptions::segment_excess_shared.
     shape.reported_excess_cov_m2.setZero();
+    // The outline's bounding box's squared diagonal where the segment excess measured it, else -1
+    // (ShapeOptions::box_view_at_torso reads it).
+    double outline_diagonal_m2 = -1.0;
     if (body && o.segment_excess_shared && ob.part_count > 0) {
       const internal::SegmentExtent extent =
           internal::SegmentExtents(ReliablePoints(ob.parts[0]), measurement.position_m);
+      outline_diagonal_m2 = extent.along_m * extent.along_m + extent.across_m * extent.across_m;
       const double noise_m =
           o.fit.point_sigma_m + o.fit.point_sigma_per_m * measurement.position_m.norm();
       // The reach is at least the larger semi-axis (SuperellipseReachFactor >= 1): the reach's pow
@@ -1094,25 +1097,9 @@ class TrackingPipeline::Refiner final : public MeasurementRefiner {
     // ShapeOptions::box_view_shared.
     shape.reported_box_view_cov_m2.setZero();
     if (o.box_view_shared && !ob.legs && shape.model == ShapeModel::kSuperellipse &&
-        ob.part_count > 0) {
-      const double noise_m =
-          o.fit.point_sigma_m + o.fit.point_sigma_per_m * measurement.position_m.norm();
-      const ObservationPart& first = ob.parts[0];
-      const ObservationPart& last = ob.parts[ob.part_count - 1];
-      const std::span<const Eigen::Vector2d> outline = ReliablePoints(first);
-      int faces = 0;
-      double longest_m = 0.0;
-      shape.reported_box_view_cov_m2 = internal::BoxViewCov(
-          o, outline, measurement.position_m, noise_m,
-          OutlineEndAt(first.silhouette.first_valid, first.begin_beam, -1),
-          OutlineEndAt(last.silhouette.last_valid, last.end_beam - 1, +1), &faces, &longest_m);
-      // ShapeOptions::box_view_at_torso.
-      if (o.mount == Mount::kTorso &&
-          (!o.box_view_at_torso || !(longest_m > 2.0 * o.box_min_half_length_m))) {
-        shape.reported_box_view_cov_m2.setZero();
-        faces = 0;
-      }
-      if (faces > 0) ++box_view_widened;
+        ob.part_count > 0 &&
+        (o.mount != Mount::kTorso || BoxViewAtTorsoPossible(o, ob, outline_diagonal_m2))) {
+      shape.reported_box_view_cov_m2 = BoxViewShared(o, ob, measurement.position_m);
     }
     const double share = measured_outline ? o.outline_fixed_share : 1.0;
     const double model_sigma_m =
@@ -1243,6 +1230,50 @@ class TrackingPipeline::Refiner final : public MeasurementRefiner {
     end.beyond_valid = true;
     end.beyond_m = Eigen::Vector2d(r * std::cos(angle), r * std::sin(angle));
     return end;
+  }
+
+  // ShapeOptions::box_view_shared: the covariance reported for a body fit at `position_m` from
+  // the observation's outline (zero where it is no box's), counted.
+  Eigen::Matrix2d BoxViewShared(const ShapeOptions& o, const Observation& ob,
+                                const Eigen::Vector2d& position_m) {
+    const double noise_m = o.fit.point_sigma_m + o.fit.point_sigma_per_m * position_m.norm();
+    const ObservationPart& first = ob.parts[0];
+    const ObservationPart& last = ob.parts[ob.part_count - 1];
+    const std::span<const Eigen::Vector2d> outline = ReliablePoints(first);
+    int faces = 0;
+    double longest_m = 0.0;
+    Eigen::Matrix2d cov = internal::BoxViewCov(
+        o, outline, position_m, noise_m,
+        OutlineEndAt(first.silhouette.first_valid, first.begin_beam, -1),
+        OutlineEndAt(last.silhouette.last_valid, last.end_beam - 1, +1), &faces, &longest_m);
+    // ShapeOptions::box_view_at_torso.
+    if (o.mount == Mount::kTorso &&
+        (!o.box_view_at_torso || !(longest_m > 2.0 * o.box_min_half_length_m))) {
+      return Eigen::Matrix2d::Zero();
+    }
+    if (faces > 0) ++box_view_widened;
+    return cov;
+  }
+
+  // ShapeOptions::box_view_at_torso: whether the outline may hold a face longer than a body can be.
+  // Every face BoxViewCov finds joins two of the outline's points, no farther apart than the
+  // diagonal of their bounding box (in any frame; diagonal_m2 its square where known, else < 0):
+  // a person's outline (most upper-body fits) is left at that.
+  bool BoxViewAtTorsoPossible(const ShapeOptions& o, const Observation& ob,
+                              double diagonal_m2) const {
+    if (!o.box_view_at_torso) return false;
+    if (diagonal_m2 < 0.0) {
+      const std::span<const Eigen::Vector2d> outline = ReliablePoints(ob.parts[0]);
+      if (outline.empty()) return false;
+      Eigen::Vector2d lo = outline[0];
+      Eigen::Vector2d hi = outline[0];
+      for (const Eigen::Vector2d& q : outline) {
+        lo = lo.cwiseMin(q);
+        hi = hi.cwiseMax(q);
+      }
+      diagonal_m2 = (hi - lo).squaredNorm();
+    }
+    return diagonal_m2 > 4.0 * o.box_min_half_length_m * o.box_min_half_length_m;
   }
 
   // How many of the observation's two outline ends are silhouettes (MakePart: not an occluder's
@@ -1741,8 +1772,7 @@ class TrackingPipeline::Refiner final : public MeasurementRefiner {
             const Eigen::Matrix2d j = (1.0 - o.stance_leg_weight) * walk * walk.transpose() +
                                       side_of_walk * side_of_walk.transpose();
             m.covariance_m2 = j * legs[0].centre_cov_m2 * j.transpose() +
-                              along2 * walk * walk.transpose() +
-                              across2 * left * left.transpose();
+                              along2 * walk * walk.transpose() + across2 * left * left.transpose();
             ++along_from_standing;
           }
         }
@@ -2653,14 +2683,16 @@ bool TrackingPipeline::TorsoEdgeEcho(const ScanView& scan, const Segment& s) con
 }
 
 // A segment's leg (leg_parts_ before single_beam_first_) whose centre lies within
-// leg_pairing_distance_m of the centre of a leg whose front is at p (ShapeOptions::single_beam_partner).
+// leg_pairing_distance_m of the centre of a leg whose front is at p
+// (ShapeOptions::single_beam_partner).
 bool TrackingPipeline::NearSegmentLeg(const Eigen::Vector2d& p) const {
   const ShapeOptions& o = options_.shape;
   const Eigen::Vector2d centre = p + o.leg_radius_m * p.normalized();
   for (std::size_t i = 0; i < single_beam_first_; ++i) {
     const ObservationPart& part = leg_parts_[i];
     Eigen::Vector2d mean = Eigen::Vector2d::Zero();
-    for (std::size_t k = 0; k < part.point_count; ++k) mean += segments_.points_m[part.first_point + k];
+    for (std::size_t k = 0; k < part.point_count; ++k)
+      mean += segments_.points_m[part.first_point + k];
     mean /= static_cast<double>(std::max<std::size_t>(part.point_count, 1));
     if ((mean + o.leg_radius_m * mean.normalized() - centre).norm() <= o.leg_pairing_distance_m) {
       return true;
