@@ -331,6 +331,22 @@ void VisitShape(tracking::ShapeOptions& o, ConfigVisitor& v) {
           "its centre is known along the line of sight only to within a leg's diameter; the "
           "midpoint's variance along the ray grows by leg_radius_m^2 / 3 (false: a touching "
           "pair's covariance as any pair's).");
+  v.Field("still_legs_cov", o.still_legs_cov,
+          "mount legs: two legs of a standing track (predicted speed at most "
+          "still_legs_max_speed_mps) each where one of its last two legs stood (within "
+          "stance_memory_s, the 99 % bound of the fits' variances), nothing else within "
+          "leg_pairing_distance_m: the covariance reported follows the filter's gains with the "
+          "gait and centre model allowance replaced by still_legs_sigma_m, without the process "
+          "noise since the last update, and with the leg radius floor and outline allowance cut "
+          "to outline_fixed_share; the filter and the tracks are unchanged (needs "
+          "tracking.report_gain_covariance; false: as a walking pair's).");
+  v.Field("still_legs_sigma_m", o.still_legs_sigma_m,
+          "mount legs, still_legs_cov: 1-sigma per axis of a still pair's midpoint about the "
+          "body's centre (how the feet stand), in place of gait_sigma_m and "
+          "centre_model_sigma_m; at most gait_sigma_m.");
+  v.Field("still_legs_max_speed_mps", o.still_legs_max_speed_mps,
+          "mount legs, still_legs_cov: a track counts as standing up to this predicted speed "
+          "(faster, the filter may still be stopping behind a person who stopped).");
   v.Field("single_beam_legs", o.single_beam_legs,
           "mount legs: a leg returned by a single beam (below segmentation.min_points), where "
           "a leg is narrower than two beams' spacing, within leg_pairing_distance_m of one "

@@ -75,6 +75,12 @@ class CvEkf {
   // is reported, and only from their first update whose gain_r_m2 is not R on (until then it is
   // covariance() itself, which the recursion would give bit for bit).
   const Covariance& gain_covariance() const { return gain_apart_ ? p_gain_ : p_; }
+  // Takes the process noise of the last dt_s of prediction out of gain_covariance() (not out of
+  // covariance(): the gains stay): where a measurement shows that the object did not move in that
+  // time, the acceleration the filter allows for was not realised, and gain_covariance() is the
+  // state's error given the noise that was. Only while the gain covariance is kept; dt_s must be
+  // at most the time predicted since the last update (else the result may not be a covariance).
+  void RelieveGainProcessNoise(double dt_s);
   // Starts gain_covariance() from covariance() (the filter's R: the larger, so never too small).
   void StartGainCovariance() {
     gain_ = true;

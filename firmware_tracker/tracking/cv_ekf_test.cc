@@ -284,4 +284,34 @@ TEST(CvEkfTest, GainCovarianceIsTheErrorTheGainsLeaveWithTheTrueNoise) {
 }
 
 }  // namespace
+// RelieveGainProcessNoise: a prediction of dt_s followed by it leaves the gain covariance at
+// F P F^T (no acceleration realised; per axis F = [1 dt; 0 1]), the filter's own at F P F^T + Q.
+// Known answer, one axis: P = diag(0.01, 0.25), dt 0.1 s, q 0.5: position 0.01 + 0.01 * 0.25 =
+// 0.0125 (the filter's 0.0125 + 0.5 * 0.001 / 3), position-velocity 0.025 (+ 0.0025), velocity
+// 0.25 (+ 0.05).
+TEST(CvEkfTest, RelievedProcessNoiseLeavesTheGainCovarianceWithoutTheLastPredictionsQ) {
+  CvEkf ekf{CvEkfOptions{.accel_psd_m2ps3 = 0.5, .initial_velocity_sigma_mps = 0.5}};
+  ekf.Init({2.0, 1.0}, 0.01 * Eigen::Matrix2d::Identity());
+  ekf.RelieveGainProcessNoise(0.1);  // before StartGainCovariance: nothing
+  EXPECT_EQ(ekf.gain_covariance(), ekf.covariance());
+  ekf.StartGainCovariance();
+  ekf.Predict(0.1);
+  const Eigen::Matrix4d filter = ekf.covariance();
+  ekf.RelieveGainProcessNoise(0.1);
+  EXPECT_EQ(ekf.covariance(), filter);
+  const Eigen::Matrix4d& g = ekf.gain_covariance();
+  for (int a = 0; a < 2; ++a) {
+    EXPECT_NEAR(g(a, a), 0.0125, 1e-15) << a;
+    EXPECT_NEAR(g(a, a + 2), 0.025, 1e-15) << a;
+    EXPECT_NEAR(g(a + 2, a + 2), 0.25, 1e-15) << a;
+    EXPECT_NEAR(filter(a, a), 0.0125 + 0.5 * 0.001 / 3.0, 1e-15) << a;
+    EXPECT_NEAR(filter(a, a + 2), 0.025 + 0.0025, 1e-15) << a;
+    EXPECT_NEAR(filter(a + 2, a + 2), 0.25 + 0.05, 1e-15) << a;
+  }
+  EXPECT_TRUE(SymmetricPositiveDefinite(g));
+  // Updated with the same noise afterwards, the gain covariance stays the smaller one.
+  ASSERT_TRUE(ekf.Update({2.0, 1.0}, 0.01 * Eigen::Matrix2d::Identity()));
+  EXPECT_LT(ekf.gain_covariance()(0, 0), ekf.covariance()(0, 0));
+}
+
 }  // namespace lrfnet::tracking

@@ -70,6 +70,15 @@ struct Measurement {
   // Evidence for a confirmed track only (MultiTracker): it may update a confirmed track whose gate
   // it falls within, never a tentative one, and never starts or resumes a track.
   bool evidence_only = false;
+  // Two legs seen still (ShapeOptions::still_legs_cov): the share of covariance_m2 this
+  // measurement's error does not have, though the filter's gains are computed with it; the
+  // covariance the tracker reports follows the gains with covariance_m2 less this
+  // (MultiTracker, CvEkf::gain_covariance). Zero: none (positive semi-definite, no larger than
+  // covariance_m2).
+  Eigen::Matrix2d gain_relief_m2 = Eigen::Matrix2d::Zero();
+  // ... and the object did not move since the track's last measurement: the process noise
+  // predicted since is not in the reported covariance (CvEkf::RelieveGainProcessNoise).
+  bool gain_still = false;
 };
 
 // Precondition: points is not empty.

@@ -476,7 +476,8 @@ void MultiTracker::UpdateAssigned(common::UtcNs scan_start_ns,
     }
     const Candidate& c = candidates_[static_cast<std::size_t>(j)];
     const common::UtcNs at_ns = AtOffset(scan_start_ns, c.offset_s);
-    t.filter.Predict(common::NsToSeconds(at_ns - t.filter_ns));
+    const double predicted_s = common::NsToSeconds(at_ns - t.filter_ns);
+    t.filter.Predict(predicted_s);
     t.filter_ns = std::max(t.filter_ns, at_ns);
     const double pair_d2 = d2_[i][static_cast<std::size_t>(j)];
     if (options_.inflate_nis_above > 0.0 && pair_d2 > options_.inflate_nis_above) {
@@ -493,7 +494,11 @@ void MultiTracker::UpdateAssigned(common::UtcNs scan_start_ns,
       ++counters_.refine_failures;
       continue;
     }
-    const Eigen::Matrix2d gain_r = MeasuredNoise(t, z, r);
+    // Less what the measurement says its error does not have (two legs seen still,
+    // ShapeOptions::still_legs_cov): noise the gains allow for, and the process noise predicted
+    // since the last update where the body did not move.
+    const Eigen::Matrix2d gain_r = MeasuredNoise(t, z, r) - m.gain_relief_m2;
+    if (m.gain_still) t.filter.RelieveGainProcessNoise(predicted_s);
     if (!t.filter.Update(z, r, &gain_r)) {
       ++counters_.failed_updates;
       continue;
@@ -598,7 +603,7 @@ void MultiTracker::ManageLifecycle(common::UtcNs scan_start_ns) {
       if (hits >= options_.confirm_hits && long_enough) {
         t.confirmed = true;
         ++counters_.confirmed;
-        if (GainCovariance()) t.filter.StartGainCovariance();
+        if (KeepGainCovariance()) t.filter.StartGainCovariance();
       } else {
         const std::uint32_t scans_left = t.age_scans + 1 >= options_.confirm_window
                                              ? 0
@@ -704,7 +709,7 @@ void MultiTracker::AdoptSuccessors(common::UtcNs scan_start_ns) {
     Track& old = tracks_[best_old];
     const Track& young = tracks_[best_young];
     old.filter = young.filter;
-    if (GainCovariance() && old.confirmed) old.filter.StartGainCovariance();
+    if (KeepGainCovariance() && old.confirmed) old.filter.StartGainCovariance();
     old.filter_ns = young.filter_ns;
     old.last_update_ns = young.last_update_ns;
     old.measured_s += young.measured_s;
@@ -819,7 +824,7 @@ bool MultiTracker::Resume(common::UtcNs scan_start_ns, const Candidate& c,
   t.hits = 1u;
   t.age_scans = 0;
   t.confirmed = options_.confirm_hits <= 1 && options_.confirm_min_s <= 0.0;
-  if (t.confirmed && GainCovariance()) t.filter.StartGainCovariance();
+  if (t.confirmed && KeepGainCovariance()) t.filter.StartGainCovariance();
   NoteUpdate(t, m, c, z, at_ns, scan_start_ns);
   t.first_update_ns = at_ns;
   // Still for as long as it was lost: the static-object clocks restart here.
@@ -894,7 +899,7 @@ void MultiTracker::StartTracks(common::UtcNs scan_start_ns,
     t->z_m = z;
     t->z_offset_s = common::NsToSeconds(at_ns - scan_start_ns);
     t->confirmed = options_.confirm_hits <= 1 && options_.confirm_min_s <= 0.0;
-    if (t->confirmed && GainCovariance()) t->filter.StartGainCovariance();
+    if (t->confirmed && KeepGainCovariance()) t->filter.StartGainCovariance();
     ++counters_.created;
     if (t->confirmed) ++counters_.confirmed;
   }
@@ -946,6 +951,7 @@ void MultiTracker::Report(common::UtcNs scan_start_ns, ScanTracks& out) {
       p.topLeftCorner<2, 2>() += t.shape.reported_neighbour_m2 * Eigen::Matrix2d::Identity();
       p.topLeftCorner<2, 2>() += t.shape.reported_excess_cov_m2;
       p.topLeftCorner<2, 2>() += t.shape.reported_box_view_cov_m2;
+      p.topLeftCorner<2, 2>() -= t.shape.reported_bias_relief_m2;
     }
     r->covariance = p;
     r->age_scans = t.age_scans;

@@ -147,7 +147,10 @@ struct MultiTrackerOptions {
   // scan, or the view rests on the priors, the errors are shared by successive scans and the
   // innovations do not show them: the filter's R stays. Until half the memory has been seen, too.
   // The tracks are the same (the gains are); a coasting report stays the filter's prediction.
-  // Upper-body mount only (TrackingPipeline sets measured_noise_memory_scans 0 at knee height).
+  // Upper-body mount only (TrackingPipeline sets measured_noise_memory_scans 0 at knee height);
+  // at either height a measurement may carry its own noise (Measurement::gain_relief_m2,
+  // gain_still: two legs seen still, ShapeOptions::still_legs_cov), which the gain covariance
+  // takes with this on.
   // false: the filter's own covariance, as before (tracking_benchmark --before-gain-covariance).
   bool report_gain_covariance = true;
   // 0: the gain covariance with the filter's R (the same as the filter's own).
@@ -350,6 +353,10 @@ struct TrackShape {
   // moment of where the box's centre lies about the measurement, reported with the track's
   // measured scans; zero otherwise. Not given to the filter's measured noise.
   Eigen::Matrix2d reported_box_view_cov_m2 = Eigen::Matrix2d::Zero();
+  // Two legs seen still (ShapeOptions::still_legs_cov): what centre_bias_cov_m2 holds beyond the
+  // shared allowances of a still pair, taken out of the reports of measured scans (not of coasting
+  // ones: the coasting checks take their reach from those); zero otherwise.
+  Eigen::Matrix2d reported_bias_relief_m2 = Eigen::Matrix2d::Zero();
   // Knee height: the leg centres of the track's last two-leg measurement, their fits' variance
   // (mean over the axes) and its time, 0: none (ShapeOptions::stance_leg_weight).
   std::array<Eigen::Vector2d, 2> legs_m{Eigen::Vector2d::Zero(), Eigen::Vector2d::Zero()};
@@ -513,6 +520,10 @@ class MultiTracker {
   bool GainCovariance() const {
     return options_.report_gain_covariance && options_.measured_noise_memory_scans > 0.0;
   }
+  // ... or a measurement's own noise (Measurement::gain_relief_m2, gain_still): with
+  // report_gain_covariance a confirmed track keeps its gain covariance either way (equal to the
+  // filter's own, and not formed apart, until an update's noise differs from R).
+  bool KeepGainCovariance() const { return options_.report_gain_covariance; }
   bool MeasureForTrack(Track& t, const Candidate& c, common::UtcNs at_ns,
                        std::span<const Measurement> measurements, MeasurementRefiner* refiner,
                        double max_d2, Measurement* m, Eigen::Vector2d* z, Eigen::Matrix2d* r) const;

@@ -150,6 +150,22 @@ double DeepLegExcessDepth(const ShapeOptions& o, std::span<const Eigen::Vector2d
   return std::max(0.0, farthest - nearest - deepest);
 }
 
+bool LegsStill(const ShapeOptions& o, const std::array<Eigen::Vector2d, 2>& legs_m,
+               const std::array<double, 2>& legs_var_m2,
+               const std::array<Eigen::Vector2d, 2>& last_m,
+               const std::array<double, 2>& last_var_m2, double dt_s) {
+  if (!(dt_s > 0.0 && dt_s <= o.stance_memory_s)) return false;
+  const auto moved = [&](std::size_t k, std::size_t j) {
+    return (legs_m[k] - last_m[j]).squaredNorm();
+  };
+  const bool swapped = moved(0, 1) + moved(1, 0) < moved(0, 0) + moved(1, 1);
+  for (std::size_t k = 0; k < 2; ++k) {
+    const std::size_t j = swapped ? 1 - k : k;
+    if (!(moved(k, j) <= kStillLegsChi2 * (legs_var_m2[k] + last_var_m2[j]))) return false;
+  }
+  return true;
+}
+
 double TouchingLegsAlongRayVar(const ShapeOptions& o, const ObservationPart& first,
                                const ObservationPart& second, bool deep_pair) {
   if (!o.touching_legs_along_ray || deep_pair || second.begin_beam > first.end_beam) return 0.0;
@@ -865,6 +881,13 @@ std::optional<std::string> Validate(const ShapeOptions& o) {
     return "hip_half_width_m must be >= 0";
   }
   if (!Positive(o.gait_sigma_m)) return "gait_sigma_m must be > 0";
+  if (!(std::isfinite(o.still_legs_sigma_m) && o.still_legs_sigma_m >= 0.0 &&
+        o.still_legs_sigma_m <= o.gait_sigma_m)) {
+    return "still_legs_sigma_m must be in [0, gait_sigma_m]";
+  }
+  if (!(std::isfinite(o.still_legs_max_speed_mps) && o.still_legs_max_speed_mps >= 0.0)) {
+    return "still_legs_max_speed_mps must be >= 0";
+  }
   if (!(std::isfinite(o.stance_leg_weight) && o.stance_leg_weight >= 0.5 &&
         o.stance_leg_weight <= 1.0)) {
     return "stance_leg_weight must be in [0.5, 1]";
@@ -1121,6 +1144,7 @@ class TrackingPipeline::Refiner final : public MeasurementRefiner {
                                : share * o.size_floor_sigma_m;
     const double bias_sigma_m = share * o.centre_bias_sigma_m;
     const double range_m = measurement.position_m.norm();
+    shape.reported_bias_relief_m2.setZero();
     if (o.centre_bias_along_ray && range_m > 0.0 && shape.model != ShapeModel::kBox) {
       const double step_rad = ob.part_count > 0 ? ob.parts[0].silhouette.step_rad : 0.0;
       // ShapeOptions::partial_view_size_sigma_m.
@@ -1129,6 +1153,15 @@ class TrackingPipeline::Refiner final : public MeasurementRefiner {
       shape.centre_bias_cov_m2 =
           CentreBiasAlongRay(shape, measurement.position_m / range_m, range_m, step_rad, edges,
                              bias_floor_m, bias_sigma_m, o);
+      if (measurement.gain_still) {
+        // ShapeOptions::still_legs_cov: two legs seen still share the fixed allowances cut to
+        // outline_fixed_share, in the reports of measured scans.
+        shape.reported_bias_relief_m2 =
+            shape.centre_bias_cov_m2 - CentreBiasAlongRay(shape, measurement.position_m / range_m,
+                                                          range_m, step_rad, edges,
+                                                          o.outline_fixed_share * bias_floor_m,
+                                                          o.outline_fixed_share * bias_sigma_m, o);
+      }
     } else {
       const double size_var =
           std::max({shape.size_cov_m2(0, 0), shape.size_cov_m2(1, 1), floor_m * floor_m});
@@ -1198,6 +1231,7 @@ class TrackingPipeline::Refiner final : public MeasurementRefiner {
   std::uint64_t underdetermined_widened = 0;
   std::uint64_t stance_weighted = 0;
   std::uint64_t touching = 0;
+  std::uint64_t still_legs = 0;
   std::uint64_t mixed_legs = 0;
   std::uint64_t box_occluded = 0;
   std::uint64_t box_unseen_sizes = 0;
@@ -1355,6 +1389,13 @@ class TrackingPipeline::Refiner final : public MeasurementRefiner {
           o.person_size_sigma_m * o.person_size_sigma_m * Eigen::Matrix2d::Identity();
     }
     shape.stamp_ns = at_ns;
+  }
+
+  // The distance from measurement `source` to the nearest other one of the scan (infinite: none).
+  double NearestOtherM(std::size_t source) {
+    if (source >= p_.measurements_.size()) return std::numeric_limits<double>::infinity();
+    if (nearest_step_ != scans) NearestOthers();
+    return std::sqrt(nearest_m2_[source]);
   }
 
   // Per measurement of the scan, the squared distance to the nearest other one (ShapeOptions::
@@ -1650,13 +1691,20 @@ class TrackingPipeline::Refiner final : public MeasurementRefiner {
       centre.centre_m = 0.5 * (now[0] + now[1]);
       // ShapeOptions::stance_leg_weight: a walking track's standing leg weighs more.
       Eigen::Vector2d forward;
+      const double legs_dt_s = common::NsToSeconds(at_ns - shape.legs_ns);
       if (shape.legs_ns != 0 && WalkingDirection(predicted, predicted_cov, &forward)) {
-        const double dt_s = common::NsToSeconds(at_ns - shape.legs_ns);
         centre = internal::StanceWeightedCentre(o, forward, now, now_var, shape.legs_m,
-                                                shape.legs_var_m2, dt_s,
-                                                predicted->tail<2>().norm() * dt_s);
+                                                shape.legs_var_m2, legs_dt_s,
+                                                predicted->tail<2>().norm() * legs_dt_s);
         if (centre.standing >= 0) ++stance_weighted;
       }
+      // ShapeOptions::still_legs_cov: a standing track's legs where they stood, nothing else
+      // within the pairing reach.
+      const bool still =
+          o.still_legs_cov && shape.legs_ns != 0 && predicted != nullptr &&
+          predicted->tail<2>().norm() <= o.still_legs_max_speed_mps &&
+          internal::LegsStill(o, now, now_var, shape.legs_m, shape.legs_var_m2, legs_dt_s) &&
+          NearestOtherM(source) > o.leg_pairing_distance_m;
       // ShapeOptions::single_leg_from_standing: the standing leg, where at least half sure.
       shape.legs_standing = -1;
       if (centre.standing >= 0 && o.stance_leg_weight > 0.5 &&
@@ -1687,6 +1735,17 @@ class TrackingPipeline::Refiner final : public MeasurementRefiner {
       m.covariance_m2 = centre.m[0] * legs[0].centre_cov_m2 * centre.m[0].transpose() +
                         centre.m[1] * legs[1].centre_cov_m2 * centre.m[1].transpose() +
                         o.gait_sigma_m * o.gait_sigma_m * Eigen::Matrix2d::Identity();
+      // ShapeOptions::still_legs_cov: of the gait and the centre model's allowance (added with
+      // the refinement) the feet's stance is left; the filter's R stays.
+      m.gain_still = still;
+      m.gain_relief_m2.setZero();
+      if (still) {
+        m.gain_relief_m2 =
+            (o.gait_sigma_m * o.gait_sigma_m + o.centre_model_sigma_m * o.centre_model_sigma_m -
+             o.still_legs_sigma_m * o.still_legs_sigma_m) *
+            Eigen::Matrix2d::Identity();
+        ++still_legs;
+      }
       m.rms_residual_m = std::max(legs[0].rms_m, legs[1].rms_m);
       const double range = m.position_m.norm();
       if (ob.deep_pair && range > 0.0) {
@@ -3349,6 +3408,7 @@ const ScanTracks& TrackingPipeline::Process(const ScanView& scan, std::uint32_t 
   const std::uint64_t underdetermined_before = refiner_->underdetermined_widened;
   const std::uint64_t stance_weighted_before = refiner_->stance_weighted;
   const std::uint64_t touching_before = refiner_->touching;
+  const std::uint64_t still_legs_before = refiner_->still_legs;
   const std::uint64_t mixed_legs_before = refiner_->mixed_legs;
   const std::uint64_t box_occluded_before = refiner_->box_occluded;
   const std::uint64_t box_unseen_widened_before = refiner_->box_unseen_widened;
@@ -3379,6 +3439,7 @@ const ScanTracks& TrackingPipeline::Process(const ScanView& scan, std::uint32_t 
       refiner_->underdetermined_widened - underdetermined_before;
   counters_.stance_weighted_pairs += refiner_->stance_weighted - stance_weighted_before;
   counters_.touching_leg_pairs += refiner_->touching - touching_before;
+  counters_.still_leg_pairs += refiner_->still_legs - still_legs_before;
   counters_.mixed_pixel_legs += refiner_->mixed_legs - mixed_legs_before;
   counters_.box_occluded_fits += refiner_->box_occluded - box_occluded_before;
   counters_.box_unseen_widened += refiner_->box_unseen_widened - box_unseen_widened_before;

@@ -399,6 +399,38 @@ struct ShapeOptions {
   // along the ray 1,576 touched, 176 did not. Counted in PipelineCounters::touching_leg_pairs.
   // false: a touching pair's covariance as any pair's.
   bool touching_legs_along_ray = true;
+  // Legs mount: the covariance reported for two legs seen still. A track that stands (predicted
+  // speed at most still_legs_max_speed_mps), measured as two legs that each stand where one of the
+  // track's last two legs stood (at most stance_memory_s before; within the 99 % bound of the two
+  // fits' variances, internal::LegsStill), with no other measurement of the scan within
+  // leg_pairing_distance_m (nothing else a leg could have been paired with: a parked cart's posts
+  // taken for legs stand still as well, and are not a body's legs): no step is being taken and
+  // the body did not move. So (1) the legs' midpoint does not swing about the body's
+  // centre with the gait, and what the filter's R allows for a walking body's centre beyond the
+  // fits (gait_sigma_m, centre_model_sigma_m) is not in this measurement's error, only how the
+  // feet stand about the centre, still_legs_sigma_m per axis; (2) the acceleration the filter's
+  // process noise allows for since its last update was not realised; (3) of the allowances
+  // successive scans share, the leg radius' floor (size_floor_sigma_m) and the outline's
+  // (centre_bias_sigma_m) are cut to outline_fixed_share, as for an upper-body outline at the
+  // range noise. The filter keeps its R and process noise (the tracks are the same): (1) and (2)
+  // go into the gain covariance the report follows (Measurement::gain_relief_m2, gain_still;
+  // Gelb, Applied Optimal Estimation, 1974, sec. 7.2; needs
+  // MultiTrackerOptions::report_gain_covariance), (3) into the report of measured scans only.
+  // tracking_benchmark --breakdown before this, shipped scenes: two-leg measurements of tracks
+  // standing still (predicted speed below 0.05 m/s), 4,054 matches at NEES 0.35, the midpoint off
+  // by 0.025 m along the ray and 0.012 m across it where 0.041 / 0.029 m were reported; where the
+  // legs do not touch in the scan (2,915), 0.014 / 0.012 m off, reported as 0.040 / 0.029 m: the
+  // shared 0.028 m along the ray (leg radius floor and outline, 0.02 m each, where the learned
+  // radius was 0.006 m off, RMS) and the filter's 0.030 m per axis, most of it the gait allowance
+  // and the process noise. After: NEES 0.75, reported 0.025 / 0.018 m. still_legs_sigma_m 0.01 m:
+  // those pairs' raw measurements were 0.015 / 0.012 m off, the shared part included.
+  // still_legs_max_speed_mps 0.05: below it the tracks of people standing were 0.018-0.030 m off
+  // along the ray and 0.009-0.014 m across it; at 0.05-0.1 m/s (the filter still stopping behind
+  // a person who stopped) 0.043 / 0.031 m. Counted in PipelineCounters::still_leg_pairs. false: a
+  // still pair's covariance as a walking pair's.
+  bool still_legs_cov = true;
+  double still_legs_sigma_m = 0.01;
+  double still_legs_max_speed_mps = 0.05;
   // Legs mount: a leg returned by a single beam (segmentation drops it: min_points) is evidence
   // for a confirmed track (Measurement::evidence_only): a foreground beam in no segment, at a
   // range where a leg is narrower than two beams' spacing (nearer, a lone beam is clutter or a
@@ -975,6 +1007,7 @@ struct PipelineCounters {
   std::uint64_t split_few_point_legs = 0;       // 2-3 point segments split into two legs
   std::uint64_t stance_weighted_pairs = 0;      // two legs weighted to the standing leg
   std::uint64_t touching_leg_pairs = 0;         // touching legs widened along the ray
+  std::uint64_t still_leg_pairs = 0;            // two legs seen still (still_legs_cov)
   // Box refinements refitted without the points in front of the box (box_drop_occluders; counted
   // per refinement, also of candidates the tracker then does not take).
   std::uint64_t box_occluded_fits = 0;
@@ -1407,6 +1440,16 @@ double DeepLegExcessDepth(const ShapeOptions& o, std::span<const Eigen::Vector2d
 // (Observation::deep_pair), else 0 (and 0 with the option off).
 double TouchingLegsAlongRayVar(const ShapeOptions& o, const ObservationPart& first,
                                const ObservationPart& second, bool deep_pair);
+
+// ShapeOptions::still_legs_cov: whether two legs legs_m (fit variances legs_var_m2, mean over the
+// axes) stand where the track's last two legs last_m (last_var_m2) stood dt_s before: dt_s within
+// (0, stance_memory_s], and each leg, matched to the last ones in the order (straight or swapped)
+// that moved them less, displaced by d with d^2 <= kStillLegsChi2 (its variance + the last one's).
+inline constexpr double kStillLegsChi2 = 9.21;  // 99 % of chi-square with 2 dof
+bool LegsStill(const ShapeOptions& o, const std::array<Eigen::Vector2d, 2>& legs_m,
+               const std::array<double, 2>& legs_var_m2,
+               const std::array<Eigen::Vector2d, 2>& last_m,
+               const std::array<double, 2>& last_var_m2, double dt_s);
 
 // ShapeOptions::stance_leg_weight: the body centre from two legs legs_m (fit variances legs_var_m2,
 // mean over the axes) of a track walking along the unit vector forward, step_m in dt_s (its
