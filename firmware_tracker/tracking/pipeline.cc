@@ -274,22 +274,18 @@ Eigen::Matrix2d SegmentExcessCov(const SegmentExtent& extent, double reach_m, do
 namespace {
 
 // The principal line of points: their mean, the line's unit direction and the RMS distance of the
-// points to it (the smaller eigenvalue of their scatter, closed form for a symmetric 2x2).
+// points to it (the smaller eigenvalue of their scatter, closed form for a symmetric 2x2): the
+// line of closest fit, orthogonal distances (Pearson 1901, "On lines and planes of closest fit to
+// systems of points in space", Phil. Mag. 2(11)).
 struct PrincipalLine {
   Eigen::Vector2d mean = Eigen::Vector2d::Zero();
   Eigen::Vector2d dir = Eigen::Vector2d::UnitX();
   double rms_m = 0.0;
 };
-PrincipalLine FitPrincipalLine(std::span<const Eigen::Vector2d> points) {
+// The line from the points' mean and their scatter (second moment about the mean, per point).
+PrincipalLine LineFromScatter(const Eigen::Vector2d& mean, const Eigen::Matrix2d& scatter) {
   PrincipalLine line;
-  if (points.empty()) return line;
-  for (const Eigen::Vector2d& p : points) line.mean += p;
-  line.mean /= static_cast<double>(points.size());
-  Eigen::Matrix2d scatter = Eigen::Matrix2d::Zero();
-  for (const Eigen::Vector2d& p : points) {
-    scatter += (p - line.mean) * (p - line.mean).transpose();
-  }
-  scatter /= static_cast<double>(points.size());
+  line.mean = mean;
   const double d = 0.5 * (scatter(0, 0) - scatter(1, 1));
   const double r = std::sqrt(d * d + scatter(0, 1) * scatter(0, 1));
   line.rms_m = std::sqrt(std::max(0.0, 0.5 * scatter.trace() - r));
@@ -297,13 +293,34 @@ PrincipalLine FitPrincipalLine(std::span<const Eigen::Vector2d> points) {
   line.dir = Eigen::Vector2d(std::cos(angle), std::sin(angle));
   return line;
 }
+PrincipalLine FitPrincipalLine(std::span<const Eigen::Vector2d> points) {
+  if (points.empty()) return PrincipalLine{};
+  Eigen::Vector2d mean = Eigen::Vector2d::Zero();
+  for (const Eigen::Vector2d& p : points) mean += p;
+  mean /= static_cast<double>(points.size());
+  Eigen::Matrix2d scatter = Eigen::Matrix2d::Zero();
+  for (const Eigen::Vector2d& p : points) scatter += (p - mean) * (p - mean).transpose();
+  return LineFromScatter(mean, scatter / static_cast<double>(points.size()));
+}
 
-// The second moment E[(e/2)^2] = e_max^2 / 12 of a box's centre shift along a face whose far end
-// was not seen (an occluder's edge, the field of view's end): the face goes on by e, uniform over
-// [0, e_max], e_max = 2 max_half_m - seen_m, and the centre moves by e / 2.
-double UnseenEndVar(double max_half_m, double seen_m) {
+// Where a box's centre lies about a point: a mean offset and a variance (BoxViewCov adds the
+// unseen depth and the unseen ends' shifts to it, independent of one another).
+struct CentreSpread {
+  Eigen::Vector2d mean = Eigen::Vector2d::Zero();
+  Eigen::Matrix2d var = Eigen::Matrix2d::Zero();
+  // The second moment about the point.
+  Eigen::Matrix2d SecondMoment() const { return mean * mean.transpose() + var; }
+};
+
+// A face whose far end was not seen (an occluder's edge, the field of view's end) goes on by e
+// beyond it, uniform over [0, e_max], e_max = 2 max_half_m - seen_m; the box's centre moves by
+// e / 2 towards that end (unit `toward`): mean e_max / 4, variance e_max^2 / 48 along it (second
+// moment e_max^2 / 12).
+void AddUnseenEnd(double max_half_m, double seen_m, const Eigen::Vector2d& toward,
+                  CentreSpread* spread) {
   const double e_max = std::max(0.0, 2.0 * max_half_m - seen_m);
-  return e_max * e_max / 12.0;
+  spread->mean += 0.25 * e_max * toward;
+  spread->var += (e_max * e_max / 48.0) * toward * toward.transpose();
 }
 
 // Whether a face from `from_m` to its end `end_m` ends there (internal::OutlineEnd): a silhouette
@@ -340,16 +357,18 @@ Eigen::Matrix2d OneFaceCov(const ShapeOptions& o, const Eigen::Vector2d& first_m
   const Eigen::Vector2d end_b = line.mean + tb * line.dir;
   const Eigen::Vector2d middle = 0.5 * (end_a + end_b);
   const double seen_m = std::abs(tb - ta);
-  const double mean_h = 0.5 * (h_min + h_max);
-  const double mean_h2 = (h_min * h_min + h_min * h_max + h_max * h_max) / 3.0;
-  const Eigen::Vector2d delta = middle - centre_m;
-  Eigen::Matrix2d cov = delta * delta.transpose() +
-                        mean_h * (delta * normal.transpose() + normal * delta.transpose()) +
-                        mean_h2 * normal * normal.transpose();
-  const double ends_var =
-      (FaceEndSeen(first_end, end_b, end_a, noise_m) ? 0.0 : UnseenEndVar(h_max, seen_m)) +
-      (FaceEndSeen(last_end, end_a, end_b, noise_m) ? 0.0 : UnseenEndVar(h_max, seen_m));
-  return cov + ends_var * line.dir * line.dir.transpose();
+  // The centre behind the middle by h, uniform over [h_min, h_max] (mean and variance along the
+  // normal), moved along the face towards each end not seen to end.
+  CentreSpread spread;
+  spread.mean = middle - centre_m + 0.5 * (h_min + h_max) * normal;
+  spread.var = ((h_max - h_min) * (h_max - h_min) / 12.0) * normal * normal.transpose();
+  const Eigen::Vector2d towards_b = tb >= ta ? line.dir : Eigen::Vector2d(-line.dir);
+  if (!FaceEndSeen(first_end, end_b, end_a, noise_m)) {
+    AddUnseenEnd(h_max, seen_m, -towards_b, &spread);
+  }
+  if (!FaceEndSeen(last_end, end_a, end_b, noise_m))
+    AddUnseenEnd(h_max, seen_m, towards_b, &spread);
+  return spread.SecondMoment();
 }
 
 // BoxViewCov's one face with something in front of part of it (a pusher's legs, in the same
@@ -377,23 +396,16 @@ Eigen::Matrix2d OccludedFaceCov(const ShapeOptions& o, std::span<const Eigen::Ve
       ++count;
     }
     if (count < kMinFlatnessPoints || 2 * count < points.size()) return Eigen::Matrix2d::Zero();
-    PrincipalLine next;
-    next.mean = sum / static_cast<double>(count);
+    const Eigen::Vector2d mean = sum / static_cast<double>(count);
     Eigen::Matrix2d scatter = Eigen::Matrix2d::Zero();
     first = points.size();
     for (std::size_t i = 0; i < points.size(); ++i) {
       if ((points[i] - face.mean).dot(normal) < -cut_m) continue;
-      scatter += (points[i] - next.mean) * (points[i] - next.mean).transpose();
+      scatter += (points[i] - mean) * (points[i] - mean).transpose();
       if (first == points.size()) first = i;
       last = i;
     }
-    scatter /= static_cast<double>(count);
-    const double d = 0.5 * (scatter(0, 0) - scatter(1, 1));
-    const double r = std::sqrt(d * d + scatter(0, 1) * scatter(0, 1));
-    next.rms_m = std::sqrt(std::max(0.0, 0.5 * scatter.trace() - r));
-    const double angle = 0.5 * std::atan2(2.0 * scatter(0, 1), scatter(0, 0) - scatter(1, 1));
-    next.dir = Eigen::Vector2d(std::cos(angle), std::sin(angle));
-    face = next;
+    face = LineFromScatter(mean, scatter / static_cast<double>(count));
     const bool same = count == kept;
     kept = count;
     if (same && round > 0) break;
@@ -429,9 +441,12 @@ Eigen::Matrix2d BoxViewCov(const ShapeOptions& o, std::span<const Eigen::Vector2
     *longest_m = (b - a).norm();
     return OneFaceCov(o, a, b, line, centre_m, noise_m, first_end, last_end);
   }
-  // Two faces: split at the point farthest from the chord; each side straight, the corner
-  // between them nearer the sensor than the chord's middle (a box seen from outside) and the
-  // sides far from parallel (a rectangle's at right angles).
+  // Two faces (the L-shape of a rectangle's corner, as in Zhang et al. 2017, "Efficient L-shape
+  // fitting for vehicle detection using laser scanners", IEEE IV): split at the point farthest
+  // from the chord (Douglas and Peucker 1973, "Algorithms for the reduction of the number of
+  // points required to represent a digitized line or its caricature", Cartographica 10(2)); each
+  // side straight, the corner between them nearer the sensor than the chord's middle (a box seen
+  // from outside) and the sides far from parallel (a rectangle's at right angles).
   const Eigen::Vector2d chord = (b - a).normalized();
   std::size_t k = 0;
   double farthest_m = -1.0;
@@ -479,21 +494,20 @@ Eigen::Matrix2d BoxViewCov(const ShapeOptions& o, std::span<const Eigen::Vector2
     return OccludedFaceCov(o, points, line, centre_m, noise_m, first_end, last_end, faces,
                            longest_m);
   }
-  // The centre in the middle of the diagonal between the outer ends.
+  // The centre in the middle of the diagonal between the outer ends, moved along each side not
+  // seen to end.
   const double h_max = o.box_prior_max_half_m;
-  const Eigen::Vector2d delta = middle - centre_m;
-  Eigen::Matrix2d cov = delta * delta.transpose();
+  CentreSpread spread;
+  spread.mean = middle - centre_m;
   if (!FaceEndSeen(first_end, corner, a, noise_m)) {
-    const Eigen::Vector2d side = (a - corner).normalized();
-    cov += UnseenEndVar(h_max, (a - corner).norm()) * side * side.transpose();
+    AddUnseenEnd(h_max, (a - corner).norm(), (a - corner).normalized(), &spread);
   }
   if (!FaceEndSeen(last_end, corner, b, noise_m)) {
-    const Eigen::Vector2d side = (b - corner).normalized();
-    cov += UnseenEndVar(h_max, (b - corner).norm()) * side * side.transpose();
+    AddUnseenEnd(h_max, (b - corner).norm(), (b - corner).normalized(), &spread);
   }
   *faces = 2;
   *longest_m = std::max((a - corner).norm(), (b - corner).norm());
-  return cov;
+  return spread.SecondMoment();
 }
 
 Eigen::Matrix2d SegmentExcessCov(std::span<const Eigen::Vector2d> points,
