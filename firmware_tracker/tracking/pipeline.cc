@@ -340,6 +340,9 @@ bool FaceEndSeen(const internal::OutlineEnd& end, const Eigen::Vector2d& from_m,
 
 namespace {
 
+// BoxViewCov: the points a side beyond a corner needs besides the corner to count as a face.
+constexpr std::size_t kCornerSidePoints = 3;
+
 // BoxViewCov's one face from first_m to last_m (points within two range sigmas of their principal
 // line `line`): the centre half the box's depth h behind the face's middle, h uniform over the
 // prior's half-lengths.
@@ -464,17 +467,16 @@ Eigen::Matrix2d BoxViewCov(const ShapeOptions& o, std::span<const Eigen::Vector2
     return OccludedFaceCov(o, points, line, centre_m, noise_m, first_end, last_end, faces,
                            longest_m);
   }
-  // A side of one or two points beyond the corner (seen at a grazing angle) shows where the
-  // other face begins, not how long it is: one face, ending at the corner.
+  // A side of fewer than kCornerSidePoints points of its own beyond the corner (seen at a grazing
+  // angle) shows where the other face begins, not how long it is: one face, the corner its end.
   const std::span<const Eigen::Vector2d> side_a = points.subspan(0, k + 1);
   const std::span<const Eigen::Vector2d> side_b = points.subspan(k);
   OutlineEnd at_corner;
   at_corner.silhouette = true;
   at_corner.beyond_returned_none = true;
-  if (side_b.size() < 3 || side_a.size() < 3) {
+  if (side_b.size() < kCornerSidePoints + 1 || side_a.size() < kCornerSidePoints + 1) {
     const bool keep_a = side_a.size() >= side_b.size();
-    const std::span<const Eigen::Vector2d> face =
-        keep_a ? points.subspan(0, k) : points.subspan(k + 1);
+    const std::span<const Eigen::Vector2d> face = keep_a ? side_a : side_b;
     const PrincipalLine face_line = FitPrincipalLine(face);
     if (face.size() < kMinFlatnessPoints || !(face_line.rms_m <= straight_m)) {
       return OccludedFaceCov(o, points, line, centre_m, noise_m, first_end, last_end, faces,

@@ -3192,8 +3192,8 @@ TEST(PipelineScenarioTest, APersonBesideACartInOneSegmentIsReportedWiderAlongIt)
 // lies behind its middle by h, uniform over [0.2, 0.9] m, so along the ray E[(h - 0.15)^2] about a
 // fit 0.15 m behind the face, nothing across it; an end the beam beyond continues lets the face go
 // on (the uniform's (1.8 - 0.6)^2 / 12 across); legs in front of it are left out. Two faces at a
-// corner: the middle of the diagonal. A side of two points beyond the corner: one face. A person's
-// arc: nothing.
+// corner: the middle of the diagonal. A side of two points beyond the corner: one face, the corner
+// its end. A person's arc: nothing.
 TEST(PipelineTest, BoxViewCovPutsTheCentreWhereTheRectangleDoes) {
   ShapeOptions o;
   o.box_prior_min_half_m = 0.2;
@@ -3287,13 +3287,21 @@ TEST(PipelineTest, BoxViewCovPutsTheCentreWhereTheRectangleDoes) {
                                              {{Eigen::Vector2d(1.0, 0.0), 0.9}}, fit);
   EXPECT_NEAR(two_cut(0, 0), 0.25 * 0.25 + 0.25 * 0.9 / 2.0 + 0.9 * 0.9 / 12.0, 1e-9);
   EXPECT_LT((two_cut - two_mc).cwiseAbs().maxCoeff(), 2e-3);
-  // The far side's two points only (grazing): the near face alone, its end at the corner seen.
-  std::vector<Eigen::Vector2d> grazing(corner.begin(), corner.begin() + 11);
+  // The far side's two points only beyond the corner (grazing): the near face alone, from
+  // x = 3.9 to the corner at x = 3 (its middle 0.25 m beyond the fit along x), its end at the
+  // corner seen.
+  std::vector<Eigen::Vector2d> grazing(corner.begin(), corner.begin() + 12);
   const Eigen::Matrix2d near_face =
       internal::BoxViewCov(o, grazing, fit, noise, seen, seen, &faces, &longest);
   EXPECT_EQ(faces, 1);
+  EXPECT_NEAR(longest, 0.9, 1e-9);
+  EXPECT_NEAR(near_face(0, 0), 0.25 * 0.25, 1e-9);
   // Along y, the face's normal: the unseen depth behind the fit 0.15 m behind the face.
   EXPECT_NEAR(near_face(1, 1), 0.15 * 0.15 - 2.0 * 0.15 * mean_h + mean_h2, 1e-9);
+  // Three points beyond it: a side, two faces.
+  std::vector<Eigen::Vector2d> short_side(corner.begin(), corner.begin() + 13);
+  internal::BoxViewCov(o, short_side, fit, noise, seen, seen, &faces, &longest);
+  EXPECT_EQ(faces, 2);
   // A person's front: an arc of 0.23 x 0.14 m, 5 m away.
   std::vector<Eigen::Vector2d> arc;
   for (int i = 0; i <= 10; ++i) {
