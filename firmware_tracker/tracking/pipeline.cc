@@ -1261,15 +1261,23 @@ class TrackingPipeline::Refiner final : public MeasurementRefiner {
   std::uint64_t segment_excess_widened = 0;
   std::uint64_t box_view_widened = 0;
 
-  // ShapeOptions::box_view_shared: an outline's end at beam `edge_beam`, what the beam beside
-  // it (step -1 or +1) returned.
-  internal::OutlineEnd OutlineEndAt(bool silhouette, std::size_t edge_beam, int step) const {
+  // ShapeOptions::box_view_shared: the first (or last) end of the outline ReliablePoints(part)
+  // and what the beam beyond it returned: the mixed pixel ReliablePoints left out there, else the
+  // beam beside the part's.
+  internal::OutlineEnd OutlineEndAt(const ObservationPart& part, bool first_end) const {
     internal::OutlineEnd end;
-    end.silhouette = silhouette;
+    end.silhouette = first_end ? part.silhouette.first_valid : part.silhouette.last_valid;
+    const std::span<const Eigen::Vector2d> all = Points(part);
+    const std::size_t mixed = (part.first_mixed ? 1 : 0) + (part.last_mixed ? 1 : 0);
+    if ((first_end ? part.first_mixed : part.last_mixed) && all.size() > mixed) {
+      end.beyond_valid = true;
+      end.beyond_m = first_end ? all.front() : all.back();
+      return end;
+    }
     if (p_.scan_ == nullptr) return end;
     const ScanView& scan = *p_.scan_;
-    if (step < 0 && edge_beam == 0) return end;  // the field of view's end
-    const std::size_t beam = step < 0 ? edge_beam - 1 : edge_beam + 1;
+    if (first_end && part.begin_beam == 0) return end;  // the field of view's end
+    const std::size_t beam = first_end ? part.begin_beam - 1 : part.end_beam;
     if (beam >= scan.range_m.size()) return end;
     const double r = static_cast<double>(scan.range_m[beam]);
     if (!(std::isfinite(r) && r > 0.0)) {
@@ -1287,15 +1295,12 @@ class TrackingPipeline::Refiner final : public MeasurementRefiner {
   Eigen::Matrix2d BoxViewShared(const ShapeOptions& o, const Observation& ob,
                                 const Eigen::Vector2d& position_m) {
     const double noise_m = o.fit.point_sigma_m + o.fit.point_sigma_per_m * position_m.norm();
-    const ObservationPart& first = ob.parts[0];
-    const ObservationPart& last = ob.parts[ob.part_count - 1];
-    const std::span<const Eigen::Vector2d> outline = ReliablePoints(first);
+    const ObservationPart& part = ob.parts[0];
     int faces = 0;
     double longest_m = 0.0;
-    Eigen::Matrix2d cov = internal::BoxViewCov(
-        o, outline, position_m, noise_m,
-        OutlineEndAt(first.silhouette.first_valid, first.begin_beam, -1),
-        OutlineEndAt(last.silhouette.last_valid, last.end_beam - 1, +1), &faces, &longest_m);
+    Eigen::Matrix2d cov =
+        internal::BoxViewCov(o, ReliablePoints(part), position_m, noise_m, OutlineEndAt(part, true),
+                             OutlineEndAt(part, false), &faces, &longest_m);
     // ShapeOptions::box_view_at_torso.
     if (o.mount == Mount::kTorso &&
         (!o.box_view_at_torso || !(longest_m > 2.0 * o.box_min_half_length_m))) {

@@ -1323,13 +1323,18 @@ Eigen::Matrix2d SegmentExcessCov(const SegmentExtent& extent, double reach_m, do
 // box's depth h behind the face's middle, h uniform over [box_prior_min_half_m,
 // box_prior_max_half_m]. Two faces (split at the point farthest from the chord, each side within
 // 2 noise_m of its line, the corner nearer the sensor than the chord's middle, the sides at least
-// 60 degrees apart, each of at least three points): the centre in the middle of the diagonal
-// between the outer ends (a side of one or two points beyond the corner: the other face alone).
-// Neither: one face with something in front of part of it (a pusher's legs): the points nearer
-// than its line by more than three noise_m left out (at least half kept). An outer end not seen
-// to end (not a silhouette; the beam beyond it on the face's line within two noise_m, beyond the
-// field of view, or left out as in front) lets the face go on by e, uniform over
-// [0, 2 box_prior_max_half_m - the face's seen length]: e_max^2 / 12 along it.
+// 60 degrees apart, each with at least three points of its own besides the corner): the centre in
+// the middle of the diagonal between the outer ends (a side of one or two points beyond the
+// corner: the other face alone, the corner its end). Neither: one face with something in front of
+// part of it (a pusher's legs): the points nearer than its line by more than three noise_m left
+// out (at least half kept). An outer end not seen to end (not a silhouette; the beam beyond it on
+// the face's line within two noise_m, beyond the field of view, or the face's outermost point
+// left out as in front) lets the face go on by e, uniform over [0, e_max], e_max =
+// 2 box_prior_max_half_m - the face's seen length: the centre moves by e / 2 towards that end,
+// mean e_max / 4 and variance e_max^2 / 48 along it. The result is (delta + mu)(delta + mu)^T + V:
+// delta from centre_m to the face's middle (or the diagonal's), mu the mean offsets (the depth's
+// along the normal, the ends' along the face: two unseen ends of one face cancel), V their
+// variances.
 struct OutlineEnd {
   bool silhouette = false;            // not an occluder's edge (Silhouette::first/last_valid)
   bool beyond_valid = false;          // the beam beside the end returned beyond_m
