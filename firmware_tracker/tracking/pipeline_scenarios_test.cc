@@ -3387,6 +3387,40 @@ TEST(PipelineScenarioTest, AnUpperBodyCartsLongSideIsReportedAsABoxButAPersonIsN
             0u);
 }
 
+// ShapeOptions::box_view_shared: the cart of the test above with a board 3 m from the sensor
+// hiding the far end of its face from 5 m on (the segment ends at the board's edge, no
+// silhouette): the face may go on behind it, so its reports are widened along the face by far
+// more than with both ends seen.
+TEST(PipelineScenarioTest, ACartFaceHiddenAtOneEndIsReportedToGoOnBehindTheOccluder) {
+  TrackerOptions options = Synthetic();
+  options.shape.mount = Mount::kLegs;
+  TrackerOptions before = options;
+  before.shape.box_view_shared = false;
+  const auto along_face = [&](bool post) {
+    Scene scene;
+    const MovingBox box = AddMovingBox(scene, {8.0, 0.2}, {2.5, 0.2}, 1.0, 0.45, 0.3);
+    if (post) scene.walls.push_back({{3.0, 0.3}, {3.0, 0.9}});
+    const SceneRun run = Simulate(scene, box.end_s + 0.2, options);
+    const SceneRun old = Simulate(scene, box.end_s + 0.2, before);
+    double sum_m2 = 0.0;
+    int wider = 0;
+    ForEachReportPair(run, old, [&](std::size_t, const TrackReport& r, const TrackReport& o) {
+      const double added_m2 = (r.covariance - o.covariance)(1, 1);
+      if (std::abs(added_m2) < 1e-12) return;
+      sum_m2 += added_m2;
+      ++wider;
+    });
+    SCOPED_TRACE(std::string(post ? "post" : "no post") + ": widened " + std::to_string(wider));
+    EXPECT_GT(wider, 10);
+    return wider > 0 ? sum_m2 / wider : 0.0;
+  };
+  const double seen_m2 = along_face(false);
+  const double hidden_m2 = along_face(true);
+  RecordProperty("along_face_seen_m2", std::to_string(seen_m2));
+  RecordProperty("along_face_hidden_m2", std::to_string(hidden_m2));
+  EXPECT_GT(hidden_m2, seen_m2 + 0.02);
+}
+
 // ShapeOptions::neighbour_sigma_m: two people walk past each other 0.7 m apart at 4.5-5.2 m.
 // While the other is within neighbour_distance_m, each one's measured scans are reported wider by
 // a multiple of the identity (the positions are the same either way: the filter is not changed);
