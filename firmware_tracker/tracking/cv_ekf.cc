@@ -56,15 +56,8 @@ void CvEkf::RelieveGainProcessNoise(double dt_s) {
     p_gain_ = p_;
     gain_apart_ = true;
   }
-  // Q_axis = q [dt^3/3, dt^2/2; dt^2/2, dt] on (position, velocity) of each axis (Predict's).
-  const double q = options_.accel_psd_m2ps3;
-  const double pp = q * dt_s * dt_s * dt_s / 3.0, pv = q * dt_s * dt_s / 2.0, vv = q * dt_s;
-  for (int a = 0; a < 2; ++a) {
-    p_gain_(a, a) -= pp;
-    p_gain_(a, a + 2) -= pv;
-    p_gain_(a + 2, a) -= pv;
-    p_gain_(a + 2, a + 2) -= vv;
-  }
+  // Predict's Q(dt) (the same entries; zeros elsewhere).
+  p_gain_ -= common::CvProcessNoise(dt_s, options_.accel_psd_m2ps3);
 }
 
 CvEkf::Prediction CvEkf::Predicted(double dt_s) const {

@@ -336,10 +336,6 @@ bool FaceEndSeen(const internal::OutlineEnd& end, const Eigen::Vector2d& from_m,
   return std::abs(d.x() * dir.y() - d.y() * dir.x()) > 2.0 * noise_m || d.dot(dir) < 0.0;
 }
 
-}  // namespace
-
-namespace {
-
 // BoxViewCov: the points a side beyond a corner needs besides the corner to count as a face.
 constexpr std::size_t kCornerSidePoints = 3;
 
@@ -369,8 +365,9 @@ Eigen::Matrix2d OneFaceCov(const ShapeOptions& o, const Eigen::Vector2d& first_m
   if (!FaceEndSeen(first_end, end_b, end_a, noise_m)) {
     AddUnseenEnd(h_max, seen_m, -towards_b, &spread);
   }
-  if (!FaceEndSeen(last_end, end_a, end_b, noise_m))
+  if (!FaceEndSeen(last_end, end_a, end_b, noise_m)) {
     AddUnseenEnd(h_max, seen_m, towards_b, &spread);
+  }
   return spread.SecondMoment();
 }
 
@@ -1107,8 +1104,7 @@ class TrackingPipeline::Refiner final : public MeasurementRefiner {
     // ShapeOptions::neighbour_sigma_m: the nearest other observation of the scan.
     shape.reported_neighbour_m2 = 0.0;
     if (body && o.neighbour_sigma_m > 0.0 && source < p_.measurements_.size()) {
-      if (nearest_step_ != scans) NearestOthers();
-      shape.reported_neighbour_m2 = internal::NeighbourVar(o, std::sqrt(nearest_m2_[source]));
+      shape.reported_neighbour_m2 = internal::NeighbourVar(o, NearestOtherM(source));
       if (shape.reported_neighbour_m2 > 0.0) ++neighbour_widened;
     }
     if (underdetermined) ++underdetermined_widened;

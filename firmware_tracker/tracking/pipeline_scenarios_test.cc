@@ -1825,8 +1825,9 @@ TEST(PipelineScenarioTest, OneLegSideIsNotTakenFromTheViewBeyondALegsFootprint) 
 // two or three points, wider across the ray than a leg. The standing person's error (confirmed
 // tracks from 0.5 s after the stop), with or without ShapeOptions::split_few_point_legs, over
 // lateral offsets that move the beams across the legs.
-struct StandingFar : ConfirmedError {
-  std::uint64_t splits = 0;
+struct StandingRuns : ConfirmedError {
+  std::uint64_t counted = 0;               // the pipeline counter chosen, summed over the runs
+  std::vector<Eigen::Vector2d> positions;  // every report's, in the runs' order
 };
 
 // A person at knee height in a 17 x 14 m room walking from `from_m` (once the background is
@@ -1845,34 +1846,50 @@ SceneRun WalkAndStandAtKneeHeight(const Eigen::Vector2d& from_m, const Eigen::Ve
   return Simulate(scene, stop_s + 3.0, options);
 }
 
-StandingFar StandFarAtKneeHeight(bool split) {
-  StandingFar out;
-  for (const double y : {0.0, 0.02, 0.04, 0.06, 0.08}) {
+// WalkAndStandAtKneeHeight from each walk's start to its end with LegsOptions() as `configure`
+// sets them, scored from `score_from_s` after the stop; `counter` summed into counted.
+StandingRuns StandAtKneeHeight(
+    const std::vector<std::pair<Eigen::Vector2d, Eigen::Vector2d>>& walks, double score_from_s,
+    const std::function<void(TrackerOptions&)>& configure,
+    std::uint64_t PipelineCounters::*counter) {
+  StandingRuns out;
+  for (const auto& [from_m, to_m] : walks) {
     TrackerOptions options = LegsOptions();
-    options.shape.split_few_point_legs = split;
-    const SceneRun run = WalkAndStandAtKneeHeight({9.0, y}, {11.0, y}, options);
-    out.Add(run, kWalkAndStandStopS + 0.5, 0.4);
-    out.splits += run.pipeline->counters().split_few_point_legs;
+    configure(options);
+    const SceneRun run = WalkAndStandAtKneeHeight(from_m, to_m, options);
+    out.Add(run, kWalkAndStandStopS + score_from_s, 0.4);
+    out.counted += run.pipeline->counters().*counter;
+    for (const Frame& f : run.frames) {
+      for (const TrackReport& r : f.tracks) out.positions.push_back(Position(r));
+    }
   }
   out.Mean();
   return out;
 }
 
-std::string Describe(const StandingFar& s) {
+std::string Describe(const StandingRuns& s, const std::string& counted) {
   return "error " + std::to_string(s.error_m) + " m, NEES " + std::to_string(s.nees) + " (" +
-         std::to_string(s.n) + "), split " + std::to_string(s.splits);
+         std::to_string(s.n) + "), " + counted + " " + std::to_string(s.counted);
+}
+
+StandingRuns StandFarAtKneeHeight(bool split) {
+  std::vector<std::pair<Eigen::Vector2d, Eigen::Vector2d>> walks;
+  for (const double y : {0.0, 0.02, 0.04, 0.06, 0.08}) walks.push_back({{9.0, y}, {11.0, y}});
+  return StandAtKneeHeight(
+      walks, 0.5, [split](TrackerOptions& o) { o.shape.split_few_point_legs = split; },
+      &PipelineCounters::split_few_point_legs);
 }
 
 TEST(PipelineScenarioTest, TwoLegsSideBySideInOneFewPointSegmentAreMeasuredAsAPair) {
-  const StandingFar before = StandFarAtKneeHeight(false);
-  const StandingFar after = StandFarAtKneeHeight(true);
-  SCOPED_TRACE("before: " + Describe(before) + "; after: " + Describe(after));
-  RecordProperty("before", Describe(before));
-  RecordProperty("after", Describe(after));
+  const StandingRuns before = StandFarAtKneeHeight(false);
+  const StandingRuns after = StandFarAtKneeHeight(true);
+  SCOPED_TRACE("before: " + Describe(before, "split") + "; after: " + Describe(after, "split"));
+  RecordProperty("before", Describe(before, "split"));
+  RecordProperty("after", Describe(after, "split"));
   ASSERT_GT(before.n, 200);
   ASSERT_GT(after.n, 200);
-  EXPECT_EQ(before.splits, 0u);
-  EXPECT_GT(after.splits, 50u);
+  EXPECT_EQ(before.counted, 0u);
+  EXPECT_GT(after.counted, 50u);
   // Before: one circle through both legs' beams; now the legs' midpoint, within what the
   // covariance says.
   EXPECT_LT(after.error_m, before.error_m - 0.01);
@@ -2027,42 +2044,26 @@ TEST(PipelineScenarioTest, LegsStillWithinTheFitsBoundOfWhereTheyStood) {
 // A person walking towards the sensor and standing at 4-5 m, legs side by side across the line of
 // sight (clear of each other in the scan). Confirmed tracks from 1 s after the stop, with or
 // without ShapeOptions::still_legs_cov: the same positions, reported as they are off.
-struct StandingStill : ConfirmedError {
-  std::uint64_t still = 0;
-  std::vector<Eigen::Vector2d> positions;
-};
-StandingStill StandStillAtKneeHeight(bool still_cov) {
-  StandingStill out;
+StandingRuns StandStillAtKneeHeight(bool still_cov) {
+  std::vector<std::pair<Eigen::Vector2d, Eigen::Vector2d>> walks;
   for (const double y : {-0.5, 0.0, 0.4}) {
-    for (const double x : {4.0, 5.0}) {
-      TrackerOptions options = LegsOptions();
-      options.shape.still_legs_cov = still_cov;
-      const SceneRun run = WalkAndStandAtKneeHeight({x + 2.5, y}, {x, y}, options);
-      out.Add(run, kWalkAndStandStopS + 1.0, 0.4);
-      out.still += run.pipeline->counters().still_leg_pairs;
-      for (const Frame& f : run.frames) {
-        for (const TrackReport& r : f.tracks) out.positions.push_back(Position(r));
-      }
-    }
+    for (const double x : {4.0, 5.0}) walks.push_back({{x + 2.5, y}, {x, y}});
   }
-  out.Mean();
-  return out;
-}
-
-std::string Describe(const StandingStill& s) {
-  return "error " + std::to_string(s.error_m) + " m, NEES " + std::to_string(s.nees) + " (" +
-         std::to_string(s.n) + "), still pairs " + std::to_string(s.still);
+  return StandAtKneeHeight(
+      walks, 1.0, [still_cov](TrackerOptions& o) { o.shape.still_legs_cov = still_cov; },
+      &PipelineCounters::still_leg_pairs);
 }
 
 TEST(PipelineScenarioTest, StillLegsAreReportedWithoutTheGaitAndTheUnrealisedAcceleration) {
-  const StandingStill before = StandStillAtKneeHeight(false);
-  const StandingStill after = StandStillAtKneeHeight(true);
-  SCOPED_TRACE("before: " + Describe(before) + "; after: " + Describe(after));
-  RecordProperty("before", Describe(before));
-  RecordProperty("after", Describe(after));
+  const StandingRuns before = StandStillAtKneeHeight(false);
+  const StandingRuns after = StandStillAtKneeHeight(true);
+  const std::string still = "still pairs";
+  SCOPED_TRACE("before: " + Describe(before, still) + "; after: " + Describe(after, still));
+  RecordProperty("before", Describe(before, still));
+  RecordProperty("after", Describe(after, still));
   ASSERT_GT(before.n, 200);
-  EXPECT_EQ(before.still, 0u);
-  EXPECT_GT(after.still, 100u);
+  EXPECT_EQ(before.counted, 0u);
+  EXPECT_GT(after.counted, 100u);
   // The tracks are the same; only the reported covariance shrinks towards the error.
   ASSERT_EQ(after.positions.size(), before.positions.size());
   for (std::size_t i = 0; i < after.positions.size(); ++i) {
