@@ -4718,6 +4718,19 @@ TEST(PipelineScenarioTest, AStillKneeHeightPairDeepAlongTheRayBehindASingleBeamI
 
 namespace {
 
+// A person walking across the line of sight at range_m, from -9 deg on at speed_mps, seen at 25 Hz:
+// their centre's bearing and position at scan i.
+struct AcrossRayWalk {
+  double range_m = 0.0;
+  double speed_mps = 0.0;
+  double BearingRad(std::int64_t i) const {
+    return -9.0 * common::kPi / 180.0 + speed_mps * static_cast<double>(i) / 25.0 / range_m;
+  }
+  Eigen::Vector2d CentreM(std::int64_t i) const {
+    return range_m * Eigen::Vector2d(std::cos(BearingRad(i)), std::sin(BearingRad(i)));
+  }
+};
+
 // Two legs (radius 0.06 m, centres side_m either side of the person at range_m, bearing_rad) before
 // a wall at wall_m as a receiver returns them (the simulator's rule): each beam's share s of its
 // footprint (1.5 % of the range wide, evenly lit) the legs cover; the leg's range from s 0.8 on,
@@ -4767,12 +4780,9 @@ TEST(PipelineScenarioTest, AFarLegSeenOnlyAsMixedPixelsBeforeANearWallIsMeasured
   constexpr double kStepRad = 0.5 * common::kPi / 180.0;
   constexpr double kRangeM = 11.0, kWallM = 12.2, kSpeedMps = 0.8;
   constexpr std::int64_t kScans = 125;
-  // Bearing of the person's centre at walk scan i: from -9 deg on, across the ray.
-  const auto bearing = [&](std::int64_t i) {
-    return -9.0 * common::kPi / 180.0 + kSpeedMps * static_cast<double>(i) / 25.0 / kRangeM;
-  };
+  const AcrossRayWalk walk{kRangeM, kSpeedMps};
   const auto draw = [&](std::int64_t i, std::vector<float>& ranges) {
-    DrawLegsBeforeWall(kRangeM, kWallM, bearing(i), 0.1, kStepRad, ranges);
+    DrawLegsBeforeWall(kRangeM, kWallM, walk.BearingRad(i), 0.1, kStepRad, ranges);
   };
   struct Run {
     int measured = 0;  // scans of the last 2 s with a confirmed track within 1 m of the person
@@ -4786,8 +4796,7 @@ TEST(PipelineScenarioTest, AFarLegSeenOnlyAsMixedPixelsBeforeANearWallIsMeasured
     Run out;
     const auto seen = [&](std::int64_t i, const ScanTracks& tracks) {
       if (i < kScans - 50) return;
-      const Eigen::Vector2d truth =
-          kRangeM * Eigen::Vector2d(std::cos(bearing(i)), std::sin(bearing(i)));
+      const Eigen::Vector2d truth = walk.CentreM(i);
       const double best = NearestTrackM(tracks, truth, true);
       if (best < 1.0) {
         ++out.measured;
@@ -4823,12 +4832,10 @@ TEST(PipelineScenarioTest, AFarLegReturningABeamAloneBeforeANearWallStaysReporte
   constexpr double kStepRad = 0.5 * common::kPi / 180.0;
   constexpr double kRangeM = 8.3, kWallM = 9.5, kSpeedMps = 0.8;
   constexpr std::int64_t kScans = 125;
-  const auto bearing = [&](std::int64_t i) {
-    return -9.0 * common::kPi / 180.0 + kSpeedMps * static_cast<double>(i) / 25.0 / kRangeM;
-  };
+  const AcrossRayWalk walk{kRangeM, kSpeedMps};
   const auto unseen = [](std::int64_t i) { return i % 4 == 3; };
   const auto draw = [&](std::int64_t i, std::vector<float>& ranges) {
-    if (!unseen(i)) DrawLegsBeforeWall(kRangeM, kWallM, bearing(i), 0.2, kStepRad, ranges);
+    if (!unseen(i)) DrawLegsBeforeWall(kRangeM, kWallM, walk.BearingRad(i), 0.2, kStepRad, ranges);
   };
   struct Run {
     int reported = 0;         // scans of the last 2 s with a track within 0.5 m of the person
@@ -4843,8 +4850,7 @@ TEST(PipelineScenarioTest, AFarLegReturningABeamAloneBeforeANearWallStaysReporte
     Run out;
     const auto seen = [&](std::int64_t i, const ScanTracks& tracks) {
       if (i < kScans - 50) return;
-      const Eigen::Vector2d truth =
-          kRangeM * Eigen::Vector2d(std::cos(bearing(i)), std::sin(bearing(i)));
+      const Eigen::Vector2d truth = walk.CentreM(i);
       const double best = NearestTrackM(tracks, truth, false);
       if (best < 0.5) {
         ++out.reported;
