@@ -184,13 +184,16 @@ std::size_t BoxUnoccludedPoints(const ShapeOptions& o, const Eigen::Vector2d& ce
   to_box << c, s, -s, c;                                // R(yaw)^T
   const Eigen::Vector2d origin = to_box * (-centre_m);  // the sensor in the box's frame
   const std::size_t n = std::min(points.size(), kMaxSegmentPoints);
-  std::array<bool, kMaxSegmentPoints> in_front{};
-  std::array<double, kMaxSegmentPoints> margin{};
+  // Entries 0 .. n - 1 written before they are read (the whole arrays not cleared: 4.5 KiB a
+  // call).
+  std::array<bool, kMaxSegmentPoints> in_front;
+  std::array<double, kMaxSegmentPoints> margin;
   for (std::size_t i = 0; i < n; ++i) {
     const Eigen::Vector2d& p = points[i];
     const double range = p.norm();
     const double noise = o.fit.point_sigma_m + o.fit.point_sigma_per_m * range;
     margin[i] = kOccluderSigmas * std::hypot(noise, o.fit.model_sigma_m);
+    in_front[i] = false;
     if (!(range > 0.0)) continue;
     // Where the point's beam enters the box (slab test in the box's frame): a beam returns the
     // first surface it meets, so a return nearer than that by more than the range noise is
@@ -617,16 +620,19 @@ Eigen::Matrix2d BoxUnseenCentreCov(const Eigen::Matrix2d& cov_m2, double size_va
 Eigen::Vector2d HalfExtentsAlong(std::span<const Eigen::Vector2d> points,
                                  const Eigen::Vector2d& e1) {
   if (points.empty()) return Eigen::Vector2d::Zero();
-  const Eigen::Vector2d e2(-e1.y(), e1.x());
-  Eigen::Vector2d lo(std::numeric_limits<double>::infinity(),
-                     std::numeric_limits<double>::infinity());
-  Eigen::Vector2d hi = -lo;
+  // Both projections at once, (p.dot(e1), p.dot(e2)) = x (e1.x, e2.x) + y (e1.y, e2.y) with
+  // e2 = (-e1.y, e1.x): the same products summed in the same order as the two dot products (bit
+  // for bit), a point's coordinates broadcast instead of two horizontal sums.
+  const Eigen::Array2d by_x(e1.x(), -e1.y());
+  const Eigen::Array2d by_y(e1.y(), e1.x());
+  Eigen::Array2d lo = Eigen::Array2d::Constant(std::numeric_limits<double>::infinity());
+  Eigen::Array2d hi = -lo;
   for (const Eigen::Vector2d& p : points) {
-    const Eigen::Vector2d uv(p.dot(e1), p.dot(e2));
-    lo = lo.cwiseMin(uv);
-    hi = hi.cwiseMax(uv);
+    const Eigen::Array2d uv = p.x() * by_x + p.y() * by_y;
+    lo = lo.min(uv);
+    hi = hi.max(uv);
   }
-  return 0.5 * (hi - lo);
+  return 0.5 * (hi - lo).matrix();
 }
 
 Eigen::Vector2d BoxHalfExtents(std::span<const Eigen::Vector2d> points, double yaw_rad) {
@@ -1418,19 +1424,38 @@ class TrackingPipeline::Refiner final : public MeasurementRefiner {
   // Per measurement of the scan, the squared distance to the nearest other one (ShapeOptions::
   // neighbour_sigma_m), once per scan for all of them rather than once per refinement: each pair's
   // distance once, (a - b) and (b - a) squared alike (the same minimum, bit for bit).
+  // The positions are copied into x and y arrays first, so that two pairs at a time take the same
+  // arithmetic, dx dx + dy dy, and the same minima (exact in any order: squares are never -0, and
+  // a NaN is never taken, as by std::min one pair at a time).
   void NearestOthers() {
     const std::span<const Measurement> m = p_.measurements_.span();
     const std::size_t n = m.size();
-    for (std::size_t i = 0; i < n; ++i) nearest_m2_[i] = std::numeric_limits<double>::infinity();
+    constexpr double kInf = std::numeric_limits<double>::infinity();
     for (std::size_t i = 0; i < n; ++i) {
-      const Eigen::Vector2d here = m[i].position_m;
-      double nearest_i = nearest_m2_[i];
-      for (std::size_t k = i + 1; k < n; ++k) {
-        const double d2 = (m[k].position_m - here).squaredNorm();
-        nearest_i = std::min(nearest_i, d2);
+      nearest_x_m_[i] = m[i].position_m.x();
+      nearest_y_m_[i] = m[i].position_m.y();
+      nearest_m2_[i] = kInf;
+    }
+    for (std::size_t i = 0; i < n; ++i) {
+      const double x = nearest_x_m_[i], y = nearest_y_m_[i];
+      Eigen::Array2d nearest_i = Eigen::Array2d::Constant(kInf);
+      std::size_t k = i + 1;
+      for (; k + 2 <= n; k += 2) {
+        const Eigen::Array2d dx = Eigen::Map<const Eigen::Array2d>(nearest_x_m_.data() + k) - x;
+        const Eigen::Array2d dy = Eigen::Map<const Eigen::Array2d>(nearest_y_m_.data() + k) - y;
+        const Eigen::Array2d d2 = dx * dx + dy * dy;
+        nearest_i = nearest_i.min(d2);
+        Eigen::Map<Eigen::Array2d> nearest_k(nearest_m2_.data() + k);
+        nearest_k = nearest_k.min(d2);
+      }
+      double nearest = std::min(nearest_m2_[i], std::min(nearest_i(0), nearest_i(1)));
+      for (; k < n; ++k) {
+        const double dx = nearest_x_m_[k] - x, dy = nearest_y_m_[k] - y;
+        const double d2 = dx * dx + dy * dy;
+        nearest = std::min(nearest, d2);
         nearest_m2_[k] = std::min(nearest_m2_[k], d2);
       }
-      nearest_m2_[i] = nearest_i;
+      nearest_m2_[i] = nearest;
     }
     nearest_step_ = scans;
   }
@@ -2010,6 +2035,8 @@ class TrackingPipeline::Refiner final : public MeasurementRefiner {
   double reach_factor_ = 0.0;
   // NearestOthers' squared distances, valid where nearest_step_ is the current count of scans.
   std::array<double, kMaxSegments> nearest_m2_{};
+  std::array<double, kMaxSegments> nearest_x_m_{};  // NearestOthers' copies of the positions
+  std::array<double, kMaxSegments> nearest_y_m_{};
   std::uint64_t nearest_step_ = 0;
 };
 
@@ -2274,8 +2301,16 @@ void TrackingPipeline::MeasureObservation(const ScanView& scan, const Observatio
                                 std::atan2(pts.back().y(), pts.back().x()));
       ray = Eigen::Vector2d(std::cos(mid), std::sin(mid));
     }
-    double nearest = front_range;
-    for (const auto& p : pts) nearest = std::min(nearest, p.dot(ray));
+    // Two points at a time (x ray.x + y ray.y, p.dot(ray)'s products and sum): the same minimum.
+    Eigen::Array2d nearest_pair = Eigen::Array2d::Constant(front_range);
+    std::size_t i = 0;
+    for (; i + 2 <= pts.size(); i += 2) {
+      const Eigen::Array2d x(pts[i].x(), pts[i + 1].x());
+      const Eigen::Array2d y(pts[i].y(), pts[i + 1].y());
+      nearest_pair = nearest_pair.min(x * ray.x() + y * ray.y());
+    }
+    double nearest = std::min(nearest_pair(0), nearest_pair(1));
+    for (; i < pts.size(); ++i) nearest = std::min(nearest, pts[i].dot(ray));
     const double width = (pts.back() - pts.front()).norm();
     extent = std::max(extent, width);
     const double depth = observation.legs

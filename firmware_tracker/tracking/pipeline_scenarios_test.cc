@@ -2638,6 +2638,38 @@ TEST(PipelineTest, BoxHalfVarIsTheUniformBetweenWhatWasSeenAndThePriorsLargest) 
   EXPECT_NEAR(e1.dot(bounded * e1), 0.03 * 0.03 + 0.06 * 0.06, 1e-12);
 }
 
+// HalfExtentsAlong (the segment excess's and the box's extents) forms both projections of a point
+// at once: bit for bit the half ranges of the two dot products p.dot(e1) and p.dot(e2), over random
+// point sets of 1 to 40 points in random directions (where multiply-adds are not fused).
+TEST(PipelineTest, HalfExtentsAlongAreTheDotProductsHalfRangesBitForBit) {
+  std::mt19937 rng(20261129);
+  std::uniform_real_distribution<double> coordinate(-8.0, 8.0), angle(-common::kPi, common::kPi);
+  std::vector<Eigen::Vector2d> points;
+  for (int trial = 0; trial < 400; ++trial) {
+    points.resize(static_cast<std::size_t>(1 + trial % 40));
+    for (Eigen::Vector2d& p : points) p = Eigen::Vector2d(coordinate(rng), coordinate(rng));
+    const double a = angle(rng);
+    const Eigen::Vector2d e1(std::cos(a), std::sin(a)), e2(-e1.y(), e1.x());
+    double lo1 = std::numeric_limits<double>::infinity(), lo2 = lo1, hi1 = -lo1, hi2 = -lo1;
+    for (const Eigen::Vector2d& p : points) {
+      lo1 = std::min(lo1, p.dot(e1));
+      hi1 = std::max(hi1, p.dot(e1));
+      lo2 = std::min(lo2, p.dot(e2));
+      hi2 = std::max(hi2, p.dot(e2));
+    }
+    const Eigen::Vector2d half = internal::HalfExtentsAlong(points, e1);
+#ifdef __FP_FAST_FMA
+    // Fused multiply-adds (aarch64) may fuse either product of a sum: up to its rounding.
+    const double tol = 64.0 * std::numeric_limits<double>::epsilon();
+    ASSERT_NEAR(half.x(), 0.5 * (hi1 - lo1), tol) << trial;
+    ASSERT_NEAR(half.y(), 0.5 * (hi2 - lo2), tol) << trial;
+#else
+    ASSERT_EQ(half.x(), 0.5 * (hi1 - lo1)) << trial;
+    ASSERT_EQ(half.y(), 0.5 * (hi2 - lo2)) << trial;
+#endif
+  }
+}
+
 // ShapeOptions::box_drop_occluders: the points of a box's near end (x = 4.55, the box centred at
 // (5, 0), 0.9 x 0.6 m along x) are kept, a pusher's two legs 0.35 m in front of it are not, and
 // where the segment ends on them that silhouette end is no longer the box's.
