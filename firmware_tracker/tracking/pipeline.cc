@@ -2084,6 +2084,12 @@ double TrackingPipeline::LegRadius(std::size_t observation, std::size_t part) co
 ObservationPart TrackingPipeline::MakePart(const ScanView& scan, const Segment& segment,
                                            std::size_t first, std::size_t count) const {
   ObservationPart part;
+  MakePartIn(scan, segment, first, count, part);
+  return part;
+}
+
+void TrackingPipeline::MakePartIn(const ScanView& scan, const Segment& segment, std::size_t first,
+                                  std::size_t count, ObservationPart& part) const {
   part.first_point = segment.first_point + first;
   part.point_count = count;
   const auto points = segments_.points_m.span().subspan(part.first_point, count);
@@ -2179,7 +2185,6 @@ ObservationPart TrackingPipeline::MakePart(const ScanView& scan, const Segment& 
   }
   if (options_.shape.mount == Mount::kLegs) MixedPixelLeg(scan, points, part);
   MarkMixedPixels(scan, points, part);
-  return part;
 }
 
 // ShapeOptions::mixed_leg_max_gap_m. Each beam b returns r_b = s_b r_leg + (1 - s_b) f_b (the
@@ -2400,7 +2405,7 @@ void TrackingPipeline::BuildObservations(const ScanView& scan) {
           ++(seam ? counters_.step_seam_splits : counters_.see_through_splits);
         }
         Observation* ob = observations_.emplace_slot();
-        ob->parts[0] = MakePart(scan, s, starts[p], end - starts[p]);
+        MakePartIn(scan, s, starts[p], end - starts[p], ob->parts[0]);
         ob->part_count = 1;
         const std::size_t before = measurements_.size();
         MeasureObservation(scan, *ob);

@@ -1186,6 +1186,10 @@ class TrackingPipeline {
   void MeasureObservation(const ScanView& scan, const Observation& observation);
   ObservationPart MakePart(const ScanView& scan, const Segment& segment, std::size_t first,
                            std::size_t count) const;
+  // MakePart into `part`, which holds a default ObservationPart (an observation's slot just
+  // emplaced): built in place instead of copied there.
+  void MakePartIn(const ScanView& scan, const Segment& segment, std::size_t first,
+                  std::size_t count, ObservationPart& part) const;
   void MarkMixedPixels(const ScanView& scan, std::span<const Eigen::Vector2d> points,
                        ObservationPart& part) const;
   // ShapeOptions::mixed_leg_max_gap_m: sets part's mixed_leg_* where it applies.
