@@ -255,8 +255,16 @@ double Support(ShapeModel model, const Vec5& x, double c, double s, const Eigen:
       if (five_thirds) return v * (kLibmRoots ? std::cbrt(v * v) : RootN<3>(v * v));
       return std::pow(v, k);
     };
-    const double tp = power(ap);
-    const double tq = power(bq);
+    double tp = 0.0, tq = 0.0;
+    if (five_thirds && !kLibmRoots) {
+      // The two cube roots side by side, one per lane (the same steps as one at a time).
+      const Lanes root = RootN<3>(Lanes(ap * ap, bq * bq));
+      tp = ap * root(0);
+      tq = bq * root(1);
+    } else {
+      tp = power(ap);
+      tq = power(bq);
+    }
     const double t = tp + tq;
     if (!(t > 0.0)) return 0.0;
     double h = 0.0;
@@ -547,6 +555,15 @@ using SumPointsFn = void (*)(const Vec5&, double, double, double, double, double
                              std::span<const Eigen::Vector2d>, const double*, double, double,
                              PointSums&);
 
+// The sums of a SumPointsFn from zero.
+PointSums SumPointsFrom(SumPointsFn sum_points, const Vec5& at, double c, double s, double inv_a,
+                        double inv_b, double exponent, std::span<const Eigen::Vector2d> points,
+                        const double* base_weight, double discount, double k2) {
+  PointSums sums;
+  sum_points(at, c, s, inv_a, inv_b, exponent, points, base_weight, discount, k2, sums);
+  return sums;
+}
+
 // paired: SumPointsPaired where it serves (the same results as SumPoints).
 SumPointsFn SumPointsFor(ShapeModel model, double exponent, bool paired) {
   switch (model) {
@@ -609,102 +626,160 @@ inline Eigen::Array4f LaneSums(const Eigen::Array4f& a, const Eigen::Array4f& b,
 #endif
 }
 
+// One quad's contributions to the sums of SumPointsQuad, lane by lane: the normal matrix's upper
+// triangle (w g_r) g_c, the gradient (w d) g_r, the Huber loss and the squared distance.
+struct QuadTerms {
+  using F4 = Eigen::Array4f;
+  F4 h00, h01, h02, h03, h04, h11, h12, h13, h14, h22, h23, h24, h33, h34, h44;
+  F4 g0, g1, g2, g3, g4;
+  F4 cost, sq;
+
+  [[gnu::always_inline]] void operator+=(const QuadTerms& o) {
+    h00 += o.h00;
+    h01 += o.h01;
+    h02 += o.h02;
+    h03 += o.h03;
+    h04 += o.h04;
+    h11 += o.h11;
+    h12 += o.h12;
+    h13 += o.h13;
+    h14 += o.h14;
+    h22 += o.h22;
+    h23 += o.h23;
+    h24 += o.h24;
+    h33 += o.h33;
+    h34 += o.h34;
+    h44 += o.h44;
+    g0 += o.g0;
+    g1 += o.g1;
+    g2 += o.g2;
+    g3 += o.g3;
+    g4 += o.g4;
+    cost += o.cost;
+    sq += o.sq;
+  }
+};
+
+// The per-fit constants of SumPointsQuad's pass, in single precision.
+struct QuadFrame {
+  float ox, oy, cf, sf, ia, ib, huber, centre_d;
+};
+
 template <int kKind>
-void SumPointsQuad(const Vec5& at, double c, double s, double inv_a, double inv_b,
-                   const QuadPoints& q, PointSums& sums) {
+[[gnu::always_inline]] inline QuadTerms QuadTermsAt(const QuadPoints& q, std::size_t k,
+                                                    const QuadFrame& f) {
   static_assert(kKind == kExponent2 || kKind == kExponent2_5);
   using F4 = Eigen::Array4f;
-  const auto ox = static_cast<float>(at(kCx) - q.origin.x());
-  const auto oy = static_cast<float>(at(kCy) - q.origin.y());
-  const auto cf = static_cast<float>(c), sf = static_cast<float>(s);
-  const auto ia = static_cast<float>(inv_a), ib = static_cast<float>(inv_b);
-  const float huber = q.huber;
-  const auto centre_d = static_cast<float>(-std::min(at(kA), at(kB)));  // a point at the centre
-  F4 h00 = F4::Zero(), h01 = F4::Zero(), h02 = F4::Zero(), h03 = F4::Zero(), h04 = F4::Zero();
-  F4 h11 = F4::Zero(), h12 = F4::Zero(), h13 = F4::Zero(), h14 = F4::Zero();
-  F4 h22 = F4::Zero(), h23 = F4::Zero(), h24 = F4::Zero();
-  F4 h33 = F4::Zero(), h34 = F4::Zero(), h44 = F4::Zero();
-  F4 g0 = F4::Zero(), g1 = F4::Zero(), g2s = F4::Zero(), g3 = F4::Zero(), g4 = F4::Zero();
-  F4 cost = F4::Zero(), sq = F4::Zero();
   using Quad = Eigen::Map<const F4, Eigen::Aligned16>;
-  for (std::size_t k = 0; k < q.quads; ++k) {
-    const F4 weight = Quad(q.weight.data() + 4 * k);
-    const F4 dx = Quad(q.x.data() + 4 * k) - ox, dy = Quad(q.y.data() + 4 * k) - oy;
-    const F4 u = cf * dx + sf * dy;
-    const F4 v = cf * dy - sf * dx;
-    const F4 xu = u * ia, xv = v * ib;
-    F4 s1, d1, s2, d2;
-    if constexpr (kKind == kExponent2) {
-      s1 = xu * xu;
-      d1 = 2.0f * xu;
-      s2 = xv * xv;
-      d2 = 2.0f * xv;
-    } else {
-      const F4 ru = xu.abs().sqrt(), rv = xv.abs().sqrt();
-      s1 = xu * xu * ru;
-      d1 = 2.5f * xu * ru;
-      s2 = xv * xv * rv;
-      d2 = 2.5f * xv * rv;
+  const float cf = f.cf, sf = f.sf, ia = f.ia, ib = f.ib;
+  const F4 weight = Quad(q.weight.data() + 4 * k);
+  const F4 dx = Quad(q.x.data() + 4 * k) - f.ox, dy = Quad(q.y.data() + 4 * k) - f.oy;
+  const F4 u = cf * dx + sf * dy;
+  const F4 v = cf * dy - sf * dx;
+  const F4 xu = u * ia, xv = v * ib;
+  F4 s1, d1, s2, d2;
+  if constexpr (kKind == kExponent2) {
+    s1 = xu * xu;
+    d1 = 2.0f * xu;
+    s2 = xv * xv;
+    d2 = 2.0f * xv;
+  } else {
+    const F4 ru = xu.abs().sqrt(), rv = xv.abs().sqrt();
+    s1 = xu * xu * ru;
+    d1 = 2.5f * xu * ru;
+    s2 = xv * xv * rv;
+    d2 = 2.5f * xv * rv;
+  }
+  const F4 su = d1 * ia, sv = d2 * ib;  // dS/du, dS/dv
+  const F4 g2 = su * su + sv * sv;
+  const F4 inv_g = g2.rsqrt();
+  F4 d = (s1 + s2 - 1.0f) * inv_g;
+  const F4 gu = su * inv_g, gv = sv * inv_g;
+  F4 gcx = gv * sf - gu * cf;
+  F4 gcy = -(gu * sf + gv * cf);
+  F4 gyaw = gu * v - gv * u;
+  F4 ga = -gu * u * ia;
+  F4 gb = -gv * v * ib;
+  if (!(g2.minCoeff() > 1e-24f)) [[unlikely]] {
+    for (int l = 0; l < 4; ++l) {
+      if (g2(l) > 1e-24f) continue;
+      d(l) = f.centre_d;
+      gcx(l) = gcy(l) = gyaw(l) = ga(l) = gb(l) = 0.0f;
     }
-    const F4 su = d1 * ia, sv = d2 * ib;  // dS/du, dS/dv
-    const F4 g2 = su * su + sv * sv;
-    const F4 inv_g = g2.rsqrt();
-    F4 d = (s1 + s2 - 1.0f) * inv_g;
-    const F4 gu = su * inv_g, gv = sv * inv_g;
-    F4 gcx = gv * sf - gu * cf;
-    F4 gcy = -(gu * sf + gv * cf);
-    F4 gyaw = gu * v - gv * u;
-    F4 ga = -gu * u * ia;
-    F4 gb = -gv * v * ib;
-    if (!(g2.minCoeff() > 1e-24f)) [[unlikely]] {
-      for (int l = 0; l < 4; ++l) {
-        if (g2(l) > 1e-24f) continue;
-        d(l) = centre_d;
-        gcx(l) = gcy(l) = gyaw(l) = ga(l) = gb(l) = 0.0f;
-      }
-    }
-    // Huber (SumPoints): z = max(1, |s| / k), w = weight / z, rho = z^2 within k and 2 z - 1
-    // beyond, i.e. z^2 - (z - 1)^2 for both.
-    const F4 z2 = d * d * weight * huber;
-    F4 w = weight;
-    F4 rho = z2;
-    if (z2.maxCoeff() > 1.0f) {
-      const F4 z = z2.max(1.0f).sqrt();
-      w = w / z;
-      rho = z2 - (z - 1.0f).square();
-    }
-    const F4 wcx = w * gcx, wcy = w * gcy, wyaw = w * gyaw, wa = w * ga, wb = w * gb;
-    const F4 wd = w * d;
-    h00 += wcx * gcx;
-    h01 += wcx * gcy;
-    h02 += wcx * gyaw;
-    h03 += wcx * ga;
-    h04 += wcx * gb;
-    h11 += wcy * gcy;
-    h12 += wcy * gyaw;
-    h13 += wcy * ga;
-    h14 += wcy * gb;
-    h22 += wyaw * gyaw;
-    h23 += wyaw * ga;
-    h24 += wyaw * gb;
-    h33 += wa * ga;
-    h34 += wa * gb;
-    h44 += wb * gb;
-    g0 += wd * gcx;
-    g1 += wd * gcy;
-    g2s += wd * gyaw;
-    g3 += wd * ga;
-    g4 += wd * gb;
-    cost += rho;
-    sq += d * d * Quad(q.used.data() + 4 * k);
+  }
+  // Huber (SumPoints): z = max(1, |s| / k), w = weight / z, rho = z^2 within k and 2 z - 1
+  // beyond, i.e. z^2 - (z - 1)^2 for both.
+  const F4 z2 = d * d * weight * f.huber;
+  F4 w = weight;
+  F4 rho = z2;
+  if (z2.maxCoeff() > 1.0f) {
+    const F4 z = z2.max(1.0f).sqrt();
+    w = w / z;
+    rho = z2 - (z - 1.0f).square();
+  }
+  const F4 wcx = w * gcx, wcy = w * gcy, wyaw = w * gyaw, wa = w * ga, wb = w * gb;
+  const F4 wd = w * d;
+  QuadTerms t;
+  t.h00 = wcx * gcx;
+  t.h01 = wcx * gcy;
+  t.h02 = wcx * gyaw;
+  t.h03 = wcx * ga;
+  t.h04 = wcx * gb;
+  t.h11 = wcy * gcy;
+  t.h12 = wcy * gyaw;
+  t.h13 = wcy * ga;
+  t.h14 = wcy * gb;
+  t.h22 = wyaw * gyaw;
+  t.h23 = wyaw * ga;
+  t.h24 = wyaw * gb;
+  t.h33 = wa * ga;
+  t.h34 = wa * gb;
+  t.h44 = wb * gb;
+  t.g0 = wd * gcx;
+  t.g1 = wd * gcy;
+  t.g2 = wd * gyaw;
+  t.g3 = wd * ga;
+  t.g4 = wd * gb;
+  t.cost = rho;
+  t.sq = d * d * Quad(q.used.data() + 4 * k);
+  return t;
+}
+
+// Returns the sums (rather than adding to the caller's: every member is set here, so the caller
+// clears nothing).
+template <int kKind>
+PointSums SumPointsQuad(const Vec5& at, double c, double s, double inv_a, double inv_b,
+                        const QuadPoints& q) {
+  static_assert(kKind == kExponent2 || kKind == kExponent2_5);
+  using F4 = Eigen::Array4f;
+  QuadFrame f;
+  f.ox = static_cast<float>(at(kCx) - q.origin.x());
+  f.oy = static_cast<float>(at(kCy) - q.origin.y());
+  f.cf = static_cast<float>(c);
+  f.sf = static_cast<float>(s);
+  f.ia = static_cast<float>(inv_a);
+  f.ib = static_cast<float>(inv_b);
+  f.huber = q.huber;
+  f.centre_d = static_cast<float>(-std::min(at(kA), at(kB)));  // a point at the centre
+  // Each lane's sum over the quads in order (a fit has at least one point, so one quad), started
+  // from the first quad's terms rather than from zeros (0 + x is x, but for the sign of a zero sum)
+  // and the usual one or two quads (max_points 8) without a loop: the accumulators neither cleared
+  // nor carried from one quad to the next (they outnumber the registers).
+  QuadTerms t = QuadTermsAt<kKind>(q, 0, f);
+  if (q.quads == 2) {
+    t += QuadTermsAt<kKind>(q, 1, f);
+  } else if (q.quads > 2) [[unlikely]] {
+    for (std::size_t k = 1; k < q.quads; ++k) t += QuadTermsAt<kKind>(q, k, f);
   }
   // Each entry's four lanes added, four entries at a time, then in double.
-  const F4 s0 = LaneSums(h00, h11, h02, h12), s1 = LaneSums(h03, h13, h04, h14);
-  const F4 s2 = LaneSums(h22, h33, h24, h34), s3 = LaneSums(g0, g1, g2s, g3);
-  const F4 s4 = LaneSums(h01, h23, h44, g4), s5 = LaneSums(cost, sq, F4::Zero(), F4::Zero());
+  const F4 s0 = LaneSums(t.h00, t.h11, t.h02, t.h12), s1 = LaneSums(t.h03, t.h13, t.h04, t.h14);
+  const F4 s2 = LaneSums(t.h22, t.h33, t.h24, t.h34), s3 = LaneSums(t.g0, t.g1, t.g2, t.g3);
+  const F4 s4 = LaneSums(t.h01, t.h23, t.h44, t.g4),
+           s5 = LaneSums(t.cost, t.sq, F4::Zero(), F4::Zero());
   const auto lanes = [](const F4& v, int i) {
     return Lanes(static_cast<double>(v(i)), static_cast<double>(v(i + 1)));
   };
+  PointSums sums;
   sums.outer = UpperSum5::FromEntries(lanes(s0, 0), lanes(s0, 2), lanes(s1, 0), lanes(s1, 2),
                                       lanes(s2, 0), lanes(s2, 2), static_cast<double>(s4(0)),
                                       static_cast<double>(s4(1)), static_cast<double>(s4(2)));
@@ -713,10 +788,10 @@ void SumPointsQuad(const Vec5& at, double c, double s, double inv_a, double inv_
   sums.g4 = static_cast<double>(s4(3));
   sums.cost = q.cost_scale * static_cast<double>(s5(0));
   sums.sq = static_cast<double>(s5(1));
+  return sums;
 }
 
-using SumQuadsFn = void (*)(const Vec5&, double, double, double, double, const QuadPoints&,
-                            PointSums&);
+using SumQuadsFn = PointSums (*)(const Vec5&, double, double, double, double, const QuadPoints&);
 
 // SumPointsQuad where it serves (a superellipse with exponent 2 or 2.5), else nullptr.
 SumQuadsFn SumQuadsFor(ShapeModel model, double exponent) {
@@ -1052,12 +1127,30 @@ ShapeFitResult Fit(std::span<const Eigen::Vector2d> points, const Silhouette& si
   Eigen::Vector2d mean = Eigen::Vector2d::Zero();
   double range_sum = 0.0;
   std::array<double, kMaxFitPoints> range_m;  // each point's range; [0, n)
-  for (std::size_t i = 0; i < n; ++i) {
-    mean += used[i];
-    range_m[i] = used[i].norm();
-    range_sum += range_m[i];
-    const double noise = o.point_sigma_m + o.point_sigma_per_m * range_m[i];
-    base_weight[i] = 1.0 / ((noise * noise + o.model_sigma_m * o.model_sigma_m) * discount);
+  // Two points at a time: each lane's range and weight the same operations as one point's
+  // (|p| = sqrt(x^2 + y^2)), the sums taken point by point in order.
+  const double model_var = o.model_sigma_m * o.model_sigma_m;
+  std::size_t j = 0;
+  for (; j + 1 < n; j += 2) {
+    const Lanes px(used[j].x(), used[j + 1].x()), py(used[j].y(), used[j + 1].y());
+    const Lanes range = (px * px + py * py).sqrt();
+    const Lanes noise = o.point_sigma_m + o.point_sigma_per_m * range;
+    mean += used[j];
+    mean += used[j + 1];
+    range_m[j] = range(0);
+    range_m[j + 1] = range(1);
+    range_sum += range(0);
+    range_sum += range(1);
+    const Lanes weight = 1.0 / ((noise * noise + model_var) * discount);
+    base_weight[j] = weight(0);
+    base_weight[j + 1] = weight(1);
+  }
+  if (j < n) {
+    mean += used[j];
+    range_m[j] = used[j].norm();
+    range_sum += range_m[j];
+    const double noise = o.point_sigma_m + o.point_sigma_per_m * range_m[j];
+    base_weight[j] = 1.0 / ((noise * noise + model_var) * discount);
   }
   mean /= static_cast<double>(n);
   const double mean_range = range_sum / static_cast<double>(n);
@@ -1092,18 +1185,22 @@ ShapeFitResult Fit(std::span<const Eigen::Vector2d> points, const Silhouette& si
   double sxx = 0.0, sxy = 0.0, syy = 0.0;
   double nearest_along = mean_range;
   if (sum_quads != nullptr) {
+    // (dx, dy) and (sxx, syy) as lane pairs (each the same difference, product and sum).
+    Lanes sxx_syy = Lanes::Zero();
     for (std::size_t i = 0; i < n; ++i) {
       const Eigen::Vector2d& p = used[i];
-      const double dx = p.x() - mean.x(), dy = p.y() - mean.y();
-      sxx += dx * dx;
-      sxy += dx * dy;
-      syy += dy * dy;
+      const Lanes d = p.array() - mean.array();
+      sxx_syy += d * d;
+      sxy += d(0) * d(1);
       nearest_along = std::min(nearest_along, p.dot(ray));
-      quad_points.x[i] = static_cast<float>(dx);
-      quad_points.y[i] = static_cast<float>(dy);
+      const Eigen::Array2f df = d.cast<float>();
+      quad_points.x[i] = df(0);
+      quad_points.y[i] = df(1);
       quad_points.weight[i] = static_cast<float>(base_weight[i]);
       quad_points.used[i] = 1.0f;
     }
+    sxx = sxx_syy(0);
+    syy = sxx_syy(1);
   } else {
     for (const auto& p : used) {
       const double dx = p.x() - mean.x(), dy = p.y() - mean.y();
@@ -1197,9 +1294,8 @@ ShapeFitResult Fit(std::span<const Eigen::Vector2d> points, const Silhouette& si
 
   // The objective at x: Huber on the points (rho(s) = s^2 within k, 2 k |s| - k^2 beyond, s the
   // normalised distance), squares on edges and priors. Fills the Gauss-Newton normal matrix h (its
-  // upper triangle, which is all the solvers read; below it the sums' zeros and the size prior's
-  // lower entry) and gradient g (halves) with the IRLS weights min(1, k / |s|) of x; one pass over
-  // the points.
+  // upper triangle, which is all the solvers read; the entries below it are not written) and
+  // gradient g (halves) with the IRLS weights min(1, k / |s|) of x; one pass over the points.
   const double k2 = o.robust_k * o.robust_k;
   const SumPointsFn sum_points = SumPointsFor(model, exponent, kPaired);
   if (sum_quads != nullptr) {
@@ -1216,7 +1312,10 @@ ShapeFitResult Fit(std::span<const Eigen::Vector2d> points, const Silhouette& si
   }
   const bool paired_edges = kPaired && n_edges == 2 && PairedSupport(model, exponent);
   int evaluations = 0;
-  auto evaluate = [&](const Vec5& at, Mat5* h, Vec5* g, double* points_sq) {
+  // Inlined at both calls (the start, each trial): called out of line it read every captured value
+  // through its closure and spilled around the calls (about 230 instructions a fit more).
+  auto evaluate = [&](const Vec5& at, Mat5* h, Vec5* g, double* points_sq)
+      __attribute__((always_inline)) {
     ++evaluations;
     // A circle has no orientation (its yaw stays 0).
     if (!circle && !(at(kYaw) == trig_yaw)) {
@@ -1242,12 +1341,10 @@ ShapeFitResult Fit(std::span<const Eigen::Vector2d> points, const Silhouette& si
         support[e] = Support<kReference>(model, at, c, s, edges[e].n, exponent, &edge_grad[e]);
       }
     }
-    PointSums sums;
-    if (sum_quads != nullptr) {
-      sum_quads(at, c, s, inv_a, inv_b, quad_points, sums);
-    } else {
-      sum_points(at, c, s, inv_a, inv_b, exponent, used, base_weight.data(), discount, k2, sums);
-    }
+    PointSums sums = sum_quads != nullptr
+                         ? sum_quads(at, c, s, inv_a, inv_b, quad_points)
+                         : SumPointsFrom(sum_points, at, c, s, inv_a, inv_b, exponent, used,
+                                         base_weight.data(), discount, k2);
     UpperSum5& outer = sums.outer;
     Vec5 gg = sums.Gradient();
     double cost = sums.cost;
@@ -1298,8 +1395,8 @@ ShapeFitResult Fit(std::span<const Eigen::Vector2d> points, const Silhouette& si
   };
 
   // The normal matrices of x and of the trial, swapped when a trial is taken instead of copied
-  // (only their upper triangles are written and read; zero below).
-  std::array<Mat5, 2> normal = {Mat5::Zero(), Mat5::Zero()};
+  // (only their upper triangles are written and read: the entries below are left unset).
+  std::array<Mat5, 2> normal;
   Mat5* h_at = &normal[0];
   Mat5* h_next = &normal[1];
   Vec5 g;

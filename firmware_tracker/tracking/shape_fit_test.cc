@@ -694,13 +694,17 @@ TEST(ShapeFitTest, CholeskySolverGivesThePivotedLdltResults) {
 
 // A person's points in single precision, four at a time (ShapeFitOptions::single_precision_points),
 // against the same fits in double: the answers differ (the other arithmetic is taken) by
-// far less than the points' noise, and both find the known body.
-TEST(ShapeFitTest, SinglePrecisionPointsGiveTheDoubleFitWithinItsRounding) {
+// far less than the points' noise, and both find the known body. With the default max_points (8:
+// one or two groups of four, summed without a loop) and with 16 (up to four groups, the loop).
+void ExpectSinglePrecisionPointsGiveTheDoubleFit(std::size_t max_points) {
   std::mt19937 rng(15);
   std::uniform_real_distribution<double> uniform(0.0, 1.0);
   const double steps_deg[] = {0.1667, 0.25, 0.5, 1.0};
-  ShapeFitOptions exact;
+  ShapeFitOptions single;
+  single.max_points = max_points;
+  ShapeFitOptions exact = single;
   exact.single_precision_points = false;
+  int beyond_two_quads = 0;  // fits of more than 8 points
   int fits = 0, differing = 0, same_iterations = 0;
   std::vector<double> centre_differences;
   for (int k = 0; k < 600; ++k) {
@@ -714,24 +718,24 @@ TEST(ShapeFitTest, SinglePrecisionPointsGiveTheDoubleFitWithinItsRounding) {
     if (v.points.empty()) continue;
     const ShapePrior prior =
         RandomPrior(ShapeModel::kSuperellipse, k, body, /*random_size_sigma=*/false, rng);
-    const ShapeFitResult single = FitShape(v.points, v.silhouette, prior, ShapeFitOptions{});
+    const ShapeFitResult fit = FitShape(v.points, v.silhouette, prior, single);
     const ShapeFitResult dbl = FitShape(v.points, v.silhouette, prior, exact);
+    beyond_two_quads += fit.points_used > 8 ? 1 : 0;
     SCOPED_TRACE("case " + std::to_string(k) + " points " + std::to_string(v.points.size()));
-    ASSERT_EQ(single.ok, dbl.ok);
+    ASSERT_EQ(fit.ok, dbl.ok);
     if (!dbl.ok) continue;
     ++fits;
-    const double dc = (single.centre_m - dbl.centre_m).norm();
+    const double dc = (fit.centre_m - dbl.centre_m).norm();
     centre_differences.push_back(dc);
-    differing += single.centre_m != dbl.centre_m ? 1 : 0;
-    same_iterations += single.iterations == dbl.iterations ? 1 : 0;
+    differing += fit.centre_m != dbl.centre_m ? 1 : 0;
+    same_iterations += fit.iterations == dbl.iterations ? 1 : 0;
     // Within a Gauss-Newton step's stopping threshold (3 mm) always, however the rounding falls.
     EXPECT_LT(dc, 0.003);
-    EXPECT_LT((single.size_m - dbl.size_m).norm(), 0.003);
-    EXPECT_NEAR(single.rms_m, dbl.rms_m, 1e-3);
-    EXPECT_LT((single.centre_cov_m2 - dbl.centre_cov_m2).norm(), 0.05 * dbl.centre_cov_m2.norm());
+    EXPECT_LT((fit.size_m - dbl.size_m).norm(), 0.003);
+    EXPECT_NEAR(fit.rms_m, dbl.rms_m, 1e-3);
+    EXPECT_LT((fit.centre_cov_m2 - dbl.centre_cov_m2).norm(), 0.05 * dbl.centre_cov_m2.norm());
     // Both as far from the body (noise 12 mm on the range).
-    EXPECT_NEAR((single.centre_m - body.centre_m).norm(), (dbl.centre_m - body.centre_m).norm(),
-                1e-5);
+    EXPECT_NEAR((fit.centre_m - body.centre_m).norm(), (dbl.centre_m - body.centre_m).norm(), 1e-5);
   }
   ASSERT_GT(fits, 500);
   std::sort(centre_differences.begin(), centre_differences.end());
@@ -746,6 +750,17 @@ TEST(ShapeFitTest, SinglePrecisionPointsGiveTheDoubleFitWithinItsRounding) {
   // ... and nearly every answer is the double one to within a micrometre.
   EXPECT_LT(p99, 1e-6);
   EXPECT_GT(same_iterations, fits * 98 / 100);
+  if (max_points > 8) {
+    EXPECT_GT(beyond_two_quads, fits / 4);
+  }
+}
+
+TEST(ShapeFitTest, SinglePrecisionPointsGiveTheDoubleFitWithinItsRounding) {
+  ExpectSinglePrecisionPointsGiveTheDoubleFit(8);
+}
+
+TEST(ShapeFitTest, SinglePrecisionPointsBeyondTwoQuadsGiveTheDoubleFitWithinItsRounding) {
+  ExpectSinglePrecisionPointsGiveTheDoubleFit(16);
 }
 
 // The silhouette edges' directions handed in by the caller (Silhouette::first_edge_unit and
