@@ -347,6 +347,20 @@ void VisitShape(tracking::ShapeOptions& o, ConfigVisitor& v) {
   v.Field("still_legs_max_speed_mps", o.still_legs_max_speed_mps,
           "mount legs, still_legs_cov: a track counts as standing up to this predicted speed "
           "(faster, the filter may still be stopping behind a person who stopped).");
+  v.Field("walking_legs_cov", o.walking_legs_cov,
+          "mount legs: two legs of a walking track that are not a still pair, no other "
+          "measurement within leg_pairing_distance_m + 2 hip_half_width_m: the covariance "
+          "reported follows the filter's gains without gait_sigma_m and without the process "
+          "noise since the last update, plus walking_legs_sigma_m per axis (the stance-weighted "
+          "midpoint's offset from the body's centre, which swings once per stride and is shared "
+          "by successive scans); the next other update starts it again from the filter's "
+          "covariance; the filter and the tracks are unchanged (needs "
+          "tracking.report_gain_covariance; false: the filter's gait allowance as per-scan "
+          "noise).");
+  v.Field("walking_legs_sigma_m", o.walking_legs_sigma_m,
+          "mount legs, walking_legs_cov: 1-sigma per axis of a walking pair's stance-weighted "
+          "midpoint about the body's centre, reported as shared by successive scans; at most "
+          "gait_sigma_m.");
   v.Field("single_beam_legs", o.single_beam_legs,
           "mount legs: a leg returned by a single beam (below segmentation.min_points), where "
           "a leg is narrower than two beams' spacing, within leg_pairing_distance_m of one "

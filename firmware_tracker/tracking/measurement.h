@@ -79,6 +79,13 @@ struct Measurement {
   // ... and the object did not move since the track's last measurement: the process noise
   // predicted since is not in the reported covariance (CvEkf::RelieveGainProcessNoise).
   bool gain_still = false;
+  // Two legs of a walking track (ShapeOptions::walking_legs_cov): as gain_still, the process
+  // noise predicted since the last update is not in the reported covariance (the gait's share of
+  // it is reported apart), though the object moved.
+  bool gain_walking = false;
+  // The reported covariance starts again from the filter's own before this update
+  // (CvEkf::StartGainCovariance): the track's last update was gain_walking's, this one is not.
+  bool gain_restart = false;
 };
 
 // Precondition: points is not empty.

@@ -498,7 +498,8 @@ void MultiTracker::UpdateAssigned(common::UtcNs scan_start_ns,
     // ShapeOptions::still_legs_cov): noise the gains allow for, and the process noise predicted
     // since the last update where the body did not move.
     const Eigen::Matrix2d gain_r = MeasuredNoise(t, z, r) - m.gain_relief_m2;
-    if (m.gain_still) t.filter.RelieveGainProcessNoise(predicted_s);
+    if (m.gain_restart && KeepGainCovariance()) t.filter.StartGainCovariance();
+    if (m.gain_still || m.gain_walking) t.filter.RelieveGainProcessNoise(predicted_s);
     if (!t.filter.Update(z, r, &gain_r)) {
       ++counters_.failed_updates;
       continue;
@@ -952,6 +953,7 @@ void MultiTracker::Report(common::UtcNs scan_start_ns, ScanTracks& out) {
       p.topLeftCorner<2, 2>() += t.shape.reported_excess_cov_m2;
       p.topLeftCorner<2, 2>() += t.shape.reported_box_view_cov_m2;
       p.topLeftCorner<2, 2>() -= t.shape.reported_bias_relief_m2;
+      p.topLeftCorner<2, 2>() += t.shape.reported_gait_m2 * Eigen::Matrix2d::Identity();
     }
     r->covariance = p;
     r->age_scans = t.age_scans;

@@ -357,6 +357,12 @@ struct TrackShape {
   // shared allowances of a still pair, taken out of the reports of measured scans (not of coasting
   // ones: the coasting checks take their reach from those); zero otherwise.
   Eigen::Matrix2d reported_bias_relief_m2 = Eigen::Matrix2d::Zero();
+  // Two legs of a walking track (ShapeOptions::walking_legs_cov): the variance per axis of the
+  // legs' midpoint about the body's centre that successive scans share, reported with the track's
+  // measured scans; zero otherwise. walking_relieved: the track's last update was such a pair's
+  // (Measurement::gain_walking; the next other one sets Measurement::gain_restart).
+  double reported_gait_m2 = 0.0;
+  bool walking_relieved = false;
   // Knee height: the leg centres of the track's last two-leg measurement, their fits' variance
   // (mean over the axes) and its time, 0: none (ShapeOptions::stance_leg_weight).
   std::array<Eigen::Vector2d, 2> legs_m{Eigen::Vector2d::Zero(), Eigen::Vector2d::Zero()};

@@ -904,6 +904,10 @@ std::optional<std::string> Validate(const ShapeOptions& o) {
         o.still_legs_sigma_m <= o.gait_sigma_m)) {
     return "still_legs_sigma_m must be in [0, gait_sigma_m]";
   }
+  if (!(std::isfinite(o.walking_legs_sigma_m) && o.walking_legs_sigma_m >= 0.0 &&
+        o.walking_legs_sigma_m <= o.gait_sigma_m)) {
+    return "walking_legs_sigma_m must be in [0, gait_sigma_m]";
+  }
   if (!(std::isfinite(o.still_legs_max_speed_mps) && o.still_legs_max_speed_mps >= 0.0)) {
     return "still_legs_max_speed_mps must be >= 0";
   }
@@ -1692,6 +1696,12 @@ class TrackingPipeline::Refiner final : public MeasurementRefiner {
                   TrackShape& shape, Measurement& m) {
     const ShapeOptions& o = p_.options_.shape;
     std::array<ShapeFitResult, 2> legs;
+    // ShapeOptions::walking_legs_cov: set below for a walking pair; any other update after one
+    // starts the reported covariance again from the filter's.
+    shape.reported_gait_m2 = 0.0;
+    m.gain_walking = false;
+    m.gain_restart = shape.walking_relieved;
+    shape.walking_relieved = false;
     std::size_t points = 0;
     ShapePrior prior;
     prior.model = ShapeModel::kCircle;
@@ -1734,7 +1744,8 @@ class TrackingPipeline::Refiner final : public MeasurementRefiner {
       // ShapeOptions::stance_leg_weight: a walking track's standing leg weighs more.
       Eigen::Vector2d forward;
       const double legs_dt_s = common::NsToSeconds(at_ns - shape.legs_ns);
-      if (shape.legs_ns != 0 && WalkingDirection(predicted, predicted_cov, &forward)) {
+      const bool walking = WalkingDirection(predicted, predicted_cov, &forward);
+      if (shape.legs_ns != 0 && walking) {
         centre = internal::StanceWeightedCentre(o, forward, now, now_var, shape.legs_m,
                                                 shape.legs_var_m2, legs_dt_s,
                                                 predicted->tail<2>().norm() * legs_dt_s);
@@ -1787,6 +1798,15 @@ class TrackingPipeline::Refiner final : public MeasurementRefiner {
              o.still_legs_sigma_m * o.still_legs_sigma_m) *
             Eigen::Matrix2d::Identity();
         ++still_legs;
+      } else if (o.walking_legs_cov && walking &&
+                 NearestOtherM(source) > o.leg_pairing_distance_m + 2.0 * o.hip_half_width_m) {
+        // ShapeOptions::walking_legs_cov: the gait's offset is shared by successive scans, not
+        // noise the gains average: out of the gain covariance's R, into the report.
+        m.gain_relief_m2 = o.gait_sigma_m * o.gait_sigma_m * Eigen::Matrix2d::Identity();
+        m.gain_walking = true;
+        m.gain_restart = false;
+        shape.reported_gait_m2 = o.walking_legs_sigma_m * o.walking_legs_sigma_m;
+        shape.walking_relieved = true;
       }
       m.rms_residual_m = std::max(legs[0].rms_m, legs[1].rms_m);
       const double range = m.position_m.norm();

@@ -431,6 +431,36 @@ struct ShapeOptions {
   bool still_legs_cov = true;
   double still_legs_sigma_m = 0.01;
   double still_legs_max_speed_mps = 0.05;
+  // Legs mount: the covariance reported for two legs of a walking track (WalkingDirection: the
+  // stance weighting's condition) that are not still_legs_cov's, with no other measurement of the
+  // scan within leg_pairing_distance_m + 2 hip_half_width_m (no other leg within pairing reach of
+  // either leg: nothing the pairing could have taken instead). The legs' midpoint, stance-weighted
+  // (stance_leg_weight), does not scatter about the body's centre from scan to scan as gait_sigma_m
+  // in the filter's R says: it swings once per stride (~1 s), far slower than the few scans the
+  // filter's gains average, so successive scans share that offset and the filter cannot average
+  // it away. The gains stay (the tracks are the same); the covariance the report follows takes
+  // this measurement's noise without gait_sigma_m, and without the process noise predicted since
+  // the last update (the body's acceleration on a walk is the gait's sway about the stance foot,
+  // counted below; a start, stop or turn shows in the innovation, which inflates the gain
+  // covariance as the filter's: MultiTrackerOptions::inflate_nis_above; Measurement::
+  // gain_relief_m2, gain_walking); the report of that scan adds the offset as a shared term,
+  // walking_legs_sigma_m per axis. The next update that is not such a pair (one leg, a still pair,
+  // a neighbour within reach) starts the gain covariance again from the filter's own
+  // (Measurement::gain_restart): a lone leg's centre lies a stride phase and a hip's width from the
+  // leg, errors that successive scans share as well, which the filter's R and process noise cover
+  // and the relieved covariance would not. walking_legs_sigma_m 0.015 m: the stance-weighted
+  // midpoint of a walker's knees about the body's centre, per axis: along the walk the knees'
+  // weighted offset from the hip (with stance_leg_weight 0.6 and the stance's 60 % of the cycle,
+  // about 0.0093 x the stride, 0.013 m at a 1.37 m stride, 1.25 m/s; the plain midpoint's is about
+  // 0.021 x the stride, 0.028 m), across it half the body's sway over the standing foot (0.5-1.8 cm
+  // amplitude, about 0.009 m RMS). tracking_benchmark --breakdown, walking two-leg matches: that
+  // offset measured against the simulated truth's knees, 0.014-0.017 m RMS along and across the
+  // ray on the shipped scenes and on others; the measurements were 0.040 / 0.025 m off along /
+  // across the ray and the tracks 0.037 / 0.024 m where 0.043 / 0.030 m were reported (of it the
+  // gain covariance 0.032 / 0.028 m, with R's 0.064 / 0.055 m, gait_sigma_m the most of it).
+  // false: as before (tracking_benchmark --before-walking-legs-cov).
+  bool walking_legs_cov = true;
+  double walking_legs_sigma_m = 0.015;
   // Legs mount: a leg returned by a single beam (segmentation drops it: min_points) is evidence
   // for a confirmed track (Measurement::evidence_only): a foreground beam in no segment, at a
   // range where a leg is narrower than two beams' spacing (nearer, a lone beam is clutter or a

@@ -48,6 +48,7 @@
 //                       [--before-outside-start] [--before-across-sway] [--before-receded-edges]
 //                       [--before-stance-weight] [--before-adopt] [--before-inherit-moved]
 //                       [--before-touching-legs] [--before-still-legs-cov]
+//                       [--before-walking-legs-cov]
 //                       [--before-still-legs] [--before-mixed-legs] [--before-mixed-leg-band]
 //                       [--before-box-occluders] [--before-box-rejoin] [--before-box-unseen-cov]
 //                       [--before-box-seen-extent] [--before-knee-box-faces] [--before-see-through]
@@ -144,6 +145,8 @@
 //   covariance, ShapeOptions::touching_legs_along_ray = false;
 //   --before-still-legs-cov: "before" reports a knee-height track's two legs seen still with a
 //   walking pair's covariance, ShapeOptions::still_legs_cov = false;
+//   --before-walking-legs-cov: "before" reports a knee-height track's two legs seen walking with
+//   the gait allowance as noise the filter averages, ShapeOptions::walking_legs_cov = false;
 //   --before-still-legs: "before" takes a still knee-height track for a person's whatever the
 //   depth of its legs along the line of sight, ShapeOptions::still_legs_max_depth_m = 0;
 //   --before-mixed-legs: "before" fits a far knee-height leg to its points also where each may be
@@ -1415,6 +1418,9 @@ bool g_before_touching_legs = false;
 // --before-still-legs-cov: "before" reports a knee-height track's two legs seen still with a
 // walking pair's covariance (ShapeOptions::still_legs_cov = false).
 bool g_before_still_legs_cov = false;
+// --before-walking-legs-cov: "before" reports a knee-height track's two legs seen walking with the
+// gait allowance as noise the filter averages (ShapeOptions::walking_legs_cov = false).
+bool g_before_walking_legs_cov = false;
 // --before-still-legs: "before" takes a still knee-height track for a person's whatever the depth
 // of its legs along the line of sight (ShapeOptions::still_legs_max_depth_m = 0).
 bool g_before_still_legs = false;
@@ -1517,15 +1523,16 @@ std::vector<Variant> Variants(sim::Mount mount, double range_m) {
              g_before_single_precision_fit || g_before_edge_sides || g_before_outside_start ||
              g_before_across_sway || g_before_receded_edges || g_before_stance_weight ||
              g_before_adopt || g_before_inherit_moved || g_before_touching_legs ||
-             g_before_still_legs_cov || g_before_still_legs || g_before_mixed_legs ||
-             g_before_mixed_leg_band || g_before_box_occluders || g_before_box_rejoin ||
-             g_before_see_through || g_before_step_seam || g_before_torso_edge_echo ||
-             g_before_box_unseen_cov || g_before_box_seen_extent || g_before_knee_box_faces ||
-             g_before_lone_leg_standing || g_before_single_beam_partner ||
-             g_before_edge_echo_birth || g_before_lone_beam_echo || g_before_far_leg_birth ||
-             g_before_person_size || g_before_person_reach || g_before_partial_extent ||
-             g_before_neighbour || g_before_segment_excess || g_before_box_view ||
-             g_before_box_view_torso || g_before_range_noise || g_before_gain_covariance) {
+             g_before_still_legs_cov || g_before_walking_legs_cov || g_before_still_legs ||
+             g_before_mixed_legs || g_before_mixed_leg_band || g_before_box_occluders ||
+             g_before_box_rejoin || g_before_see_through || g_before_step_seam ||
+             g_before_torso_edge_echo || g_before_box_unseen_cov || g_before_box_seen_extent ||
+             g_before_knee_box_faces || g_before_lone_leg_standing ||
+             g_before_single_beam_partner || g_before_edge_echo_birth || g_before_lone_beam_echo ||
+             g_before_far_leg_birth || g_before_person_size || g_before_person_reach ||
+             g_before_partial_extent || g_before_neighbour || g_before_segment_excess ||
+             g_before_box_view || g_before_box_view_torso || g_before_range_noise ||
+             g_before_gain_covariance) {
     tracking::TrackerOptions before = fresh;
     if (g_before_one_leg) before.shape.hidden_leg_behind = false;
     if (g_before_mixed_pixels) before.shape.drop_mixed_pixel_legs = false;
@@ -1565,6 +1572,7 @@ std::vector<Variant> Variants(sim::Mount mount, double range_m) {
     if (g_before_inherit_moved) before.tracking.inherit_moved_s = 0.0;
     if (g_before_touching_legs) before.shape.touching_legs_along_ray = false;
     if (g_before_still_legs_cov) before.shape.still_legs_cov = false;
+    if (g_before_walking_legs_cov) before.shape.walking_legs_cov = false;
     if (g_before_still_legs) before.shape.still_legs_max_depth_m = 0.0;
     if (g_before_mixed_legs) before.shape.mixed_leg_max_gap_m = 0.0;
     if (g_before_mixed_leg_band) before.shape.mixed_leg_band_variance = false;
@@ -3444,14 +3452,15 @@ std::string KneeHeightBefore() {
         g_before_single_precision_fit || g_before_edge_sides || g_before_outside_start ||
         g_before_across_sway || g_before_receded_edges || g_before_stance_weight ||
         g_before_adopt || g_before_inherit_moved || g_before_touching_legs || g_before_still_legs ||
-        g_before_still_legs_cov || g_before_mixed_legs || g_before_mixed_leg_band ||
-        g_before_box_occluders || g_before_box_rejoin || g_before_see_through ||
-        g_before_step_seam || g_before_torso_edge_echo || g_before_box_unseen_cov ||
-        g_before_box_seen_extent || g_before_knee_box_faces || g_before_single_beam_partner ||
-        g_before_edge_echo_birth || g_before_lone_beam_echo || g_before_far_leg_birth ||
-        g_before_person_size || g_before_person_reach || g_before_partial_extent ||
-        g_before_neighbour || g_before_segment_excess || g_before_box_view ||
-        g_before_box_view_torso || g_before_range_noise || g_before_gain_covariance) ||
+        g_before_still_legs_cov || g_before_walking_legs_cov || g_before_mixed_legs ||
+        g_before_mixed_leg_band || g_before_box_occluders || g_before_box_rejoin ||
+        g_before_see_through || g_before_step_seam || g_before_torso_edge_echo ||
+        g_before_box_unseen_cov || g_before_box_seen_extent || g_before_knee_box_faces ||
+        g_before_single_beam_partner || g_before_edge_echo_birth || g_before_lone_beam_echo ||
+        g_before_far_leg_birth || g_before_person_size || g_before_person_reach ||
+        g_before_partial_extent || g_before_neighbour || g_before_segment_excess ||
+        g_before_box_view || g_before_box_view_torso || g_before_range_noise ||
+        g_before_gain_covariance) ||
       g_before_mixed_pixels || g_before_far || g_before_evidence_coasting ||
       g_before_report_rules) {
     return "";
@@ -3625,6 +3634,12 @@ std::string KneeHeightBefore() {
     without.push_back(
         "reporting a standing knee-height track's two legs seen still with a walking pair's "
         "covariance (`shape.still_legs_cov` false)");
+  }
+  if (g_before_walking_legs_cov) {
+    without.push_back(
+        "reporting a walking knee-height track's two legs with the gait allowance as noise the "
+        "filter averages instead of an offset successive scans share (`shape.walking_legs_cov` "
+        "false)");
   }
   if (g_before_still_legs) {
     without.push_back(
@@ -3911,6 +3926,8 @@ int main(int argc, char** argv) {
       g_before_touching_legs = true;
     } else if (a == "--before-still-legs-cov") {
       g_before_still_legs_cov = true;
+    } else if (a == "--before-walking-legs-cov") {
+      g_before_walking_legs_cov = true;
     } else if (a == "--before-still-legs") {
       g_before_still_legs = true;
     } else if (a == "--before-mixed-legs") {
@@ -3958,6 +3975,7 @@ int main(int argc, char** argv) {
                    "[--before-outside-start] [--before-across-sway] [--before-receded-edges] "
                    "[--before-stance-weight] [--before-adopt] [--before-inherit-moved] "
                    "[--before-touching-legs] [--before-still-legs-cov] "
+                   "[--before-walking-legs-cov] "
                    "[--before-still-legs] [--before-mixed-legs] [--before-mixed-leg-band] "
                    "[--before-box-occluders] [--before-box-rejoin] [--before-box-unseen-cov] "
                    "[--before-box-seen-extent] [--before-knee-box-faces] "
