@@ -953,7 +953,9 @@ void MultiTracker::Report(common::UtcNs scan_start_ns, ScanTracks& out) {
       p.topLeftCorner<2, 2>() += t.shape.reported_excess_cov_m2;
       p.topLeftCorner<2, 2>() += t.shape.reported_box_view_cov_m2;
       p.topLeftCorner<2, 2>() -= t.shape.reported_bias_relief_m2;
-      p.topLeftCorner<2, 2>() += t.shape.reported_gait_m2 * Eigen::Matrix2d::Identity();
+      if (t.shape.walking_relieved) {
+        p.topLeftCorner<2, 2>().diagonal().array() += double{t.shape.reported_gait_m2};
+      }
     }
     r->covariance = p;
     r->age_scans = t.age_scans;

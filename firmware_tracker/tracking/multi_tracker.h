@@ -315,6 +315,12 @@ struct TrackShape {
   double exponent = 2.0;       // superellipse exponent (2: ellipse or cylinder)
   common::UtcNs stamp_ns = 0;  // time of the state (the last refined measurement)
   std::uint32_t updates = 0;
+  // Two legs of a walking track (ShapeOptions::walking_legs_cov): the variance per axis of the
+  // legs' midpoint about the body's centre that successive scans share, reported with the track's
+  // measured scans; zero otherwise (a float: it fits beside `updates`, and the shape is copied
+  // with every update). walking_relieved: the track's last update was such a pair's
+  // (Measurement::gain_walking; the next other one sets Measurement::gain_restart).
+  float reported_gait_m2 = 0.0F;
   // Running evidence of what the object is: a flat outline (door leaf, board) or legs thinner than
   // a person's make it not person-like.
   double flatness_m2 = 0.0;
@@ -325,6 +331,7 @@ struct TrackShape {
   double still_deep_pair_share = 0.0;
   std::uint32_t still_pair_updates = 0;
   bool person_like = true;
+  bool walking_relieved = false;
   // What the measurements share and the filter cannot average away (the size state's error, the
   // outline not being the model's): added to the reported position covariance, not to the
   // filter's.
@@ -357,12 +364,6 @@ struct TrackShape {
   // shared allowances of a still pair, taken out of the reports of measured scans (not of coasting
   // ones: the coasting checks take their reach from those); zero otherwise.
   Eigen::Matrix2d reported_bias_relief_m2 = Eigen::Matrix2d::Zero();
-  // Two legs of a walking track (ShapeOptions::walking_legs_cov): the variance per axis of the
-  // legs' midpoint about the body's centre that successive scans share, reported with the track's
-  // measured scans; zero otherwise. walking_relieved: the track's last update was such a pair's
-  // (Measurement::gain_walking; the next other one sets Measurement::gain_restart).
-  double reported_gait_m2 = 0.0;
-  bool walking_relieved = false;
   // Knee height: the leg centres of the track's last two-leg measurement, their fits' variance
   // (mean over the axes) and its time, 0: none (ShapeOptions::stance_leg_weight).
   std::array<Eigen::Vector2d, 2> legs_m{Eigen::Vector2d::Zero(), Eigen::Vector2d::Zero()};

@@ -1698,7 +1698,7 @@ class TrackingPipeline::Refiner final : public MeasurementRefiner {
     std::array<ShapeFitResult, 2> legs;
     // ShapeOptions::walking_legs_cov: set below for a walking pair; any other update after one
     // starts the reported covariance again from the filter's.
-    shape.reported_gait_m2 = 0.0;
+    shape.reported_gait_m2 = 0.0F;
     m.gain_walking = false;
     m.gain_restart = shape.walking_relieved;
     shape.walking_relieved = false;
@@ -1805,7 +1805,8 @@ class TrackingPipeline::Refiner final : public MeasurementRefiner {
         m.gain_relief_m2 = o.gait_sigma_m * o.gait_sigma_m * Eigen::Matrix2d::Identity();
         m.gain_walking = true;
         m.gain_restart = false;
-        shape.reported_gait_m2 = o.walking_legs_sigma_m * o.walking_legs_sigma_m;
+        shape.reported_gait_m2 =
+            static_cast<float>(o.walking_legs_sigma_m * o.walking_legs_sigma_m);
         shape.walking_relieved = true;
       }
       m.rms_residual_m = std::max(legs[0].rms_m, legs[1].rms_m);
