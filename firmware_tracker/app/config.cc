@@ -331,6 +331,12 @@ void VisitShape(tracking::ShapeOptions& o, ConfigVisitor& v) {
           "its centre is known along the line of sight only to within a leg's diameter; the "
           "midpoint's variance along the ray grows by leg_radius_m^2 / 3 (false: a touching "
           "pair's covariance as any pair's).");
+  v.Field("occluded_gap_depth_m", o.occluded_gap_depth_m,
+          "mount legs: two legs with something nearer between them (a beam between the parts, "
+          "an occluder's edge on both inner ends) may be the two ends of one surface behind it "
+          "(a parked trolley's face either side of its pusher's legs): the reported covariance "
+          "grows along the ray by this^2 / 3, the centre anywhere up to this behind it; the "
+          "filter is left as it is (m; 0: off).");
   v.Field("still_legs_cov", o.still_legs_cov,
           "mount legs: two legs of a standing track (predicted speed at most "
           "still_legs_max_speed_mps) each where one of its last two legs stood (within "

@@ -174,6 +174,17 @@ double TouchingLegsAlongRayVar(const ShapeOptions& o, const ObservationPart& fir
   return o.leg_radius_m * o.leg_radius_m / 3.0;
 }
 
+double OccludedGapAlongRayVar(const ShapeOptions& o, const ObservationPart& a,
+                              const ObservationPart& b) {
+  if (!(o.occluded_gap_depth_m > 0.0)) return 0.0;
+  const ObservationPart& first = a.begin_beam <= b.begin_beam ? a : b;
+  const ObservationPart& second = a.begin_beam <= b.begin_beam ? b : a;
+  if (second.begin_beam <= first.end_beam) return 0.0;  // touching: no beam between them
+  if (first.silhouette.last_valid || second.silhouette.first_valid) return 0.0;
+  // The centre uniform over [0, D] behind the midpoint: E[x^2] = D^2 / 3.
+  return o.occluded_gap_depth_m * o.occluded_gap_depth_m / 3.0;
+}
+
 std::size_t BoxUnoccludedPoints(const ShapeOptions& o, const Eigen::Vector2d& centre_m,
                                 const Eigen::Vector2d& size_m, double yaw_rad,
                                 std::span<const Eigen::Vector2d> points,
@@ -893,6 +904,9 @@ std::optional<std::string> Validate(const ShapeOptions& o) {
   if (!(std::isfinite(o.mixed_leg_max_gap_m) && o.mixed_leg_max_gap_m >= 0.0)) {
     return "mixed_leg_max_gap_m must be >= 0";
   }
+  if (!(std::isfinite(o.occluded_gap_depth_m) && o.occluded_gap_depth_m >= 0.0)) {
+    return "occluded_gap_depth_m must be >= 0";
+  }
   if (!(std::isfinite(o.still_legs_max_depth_m) && o.still_legs_max_depth_m >= 0.0)) {
     return "still_legs_max_depth_m must be >= 0";
   }
@@ -1146,6 +1160,18 @@ class TrackingPipeline::Refiner final : public MeasurementRefiner {
         (o.mount != Mount::kTorso || BoxViewAtTorsoPossible(o, ob, outline_diagonal_m2))) {
       shape.reported_box_view_cov_m2 = BoxViewShared(o, ob, measurement.position_m);
     }
+    // ShapeOptions::occluded_gap_depth_m: two legs with something nearer between them may be one
+    // surface's ends behind it, the centre of its object behind them; the same in every scan
+    // while it stands, so reported, not given to the filter (as a box's view above).
+    if (ob.legs && ob.part_count == 2) {
+      const double gap_var = internal::OccludedGapAlongRayVar(o, ob.parts[0], ob.parts[1]);
+      const double gap_range_m = measurement.position_m.norm();
+      if (gap_var > 0.0 && gap_range_m > 0.0) {
+        const Eigen::Vector2d ray = measurement.position_m / gap_range_m;
+        shape.reported_box_view_cov_m2 = gap_var * ray * ray.transpose();
+        ++occluded_gap_widened;
+      }
+    }
     const double share = measured_outline ? o.outline_fixed_share : 1.0;
     const double model_sigma_m =
         (measured_outline ? o.outline_model_share : 1.0) * o.centre_model_sigma_m;
@@ -1265,6 +1291,7 @@ class TrackingPipeline::Refiner final : public MeasurementRefiner {
   std::uint64_t person_size_kept = 0;
   std::uint64_t neighbour_widened = 0;
   std::uint64_t segment_excess_widened = 0;
+  std::uint64_t occluded_gap_widened = 0;
   std::uint64_t box_view_widened = 0;
 
   // ShapeOptions::box_view_shared: the first (or last) end of the outline ReliablePoints(part)
@@ -3497,6 +3524,7 @@ const ScanTracks& TrackingPipeline::Process(const ScanView& scan, std::uint32_t 
   const std::uint64_t partial_size_floored_before = refiner_->partial_size_floored;
   const std::uint64_t neighbour_widened_before = refiner_->neighbour_widened;
   const std::uint64_t segment_excess_widened_before = refiner_->segment_excess_widened;
+  const std::uint64_t occluded_gap_widened_before = refiner_->occluded_gap_widened;
   const std::uint64_t box_view_widened_before = refiner_->box_view_widened;
   const std::uint64_t person_size_kept_before = refiner_->person_size_kept;
   scan_ = &scan;
@@ -3530,6 +3558,7 @@ const ScanTracks& TrackingPipeline::Process(const ScanView& scan, std::uint32_t 
   counters_.neighbour_widened += refiner_->neighbour_widened - neighbour_widened_before;
   counters_.segment_excess_widened +=
       refiner_->segment_excess_widened - segment_excess_widened_before;
+  counters_.occluded_gap_widened += refiner_->occluded_gap_widened - occluded_gap_widened_before;
   counters_.box_view_widened += refiner_->box_view_widened - box_view_widened_before;
   counters_.person_sizes_kept_few_points += refiner_->person_size_kept - person_size_kept_before;
   if (bg.scan_error == ScanError::kNone && bg.learned) {

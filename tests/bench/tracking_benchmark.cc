@@ -48,7 +48,7 @@
 //                       [--before-outside-start] [--before-across-sway] [--before-receded-edges]
 //                       [--before-stance-weight] [--before-adopt] [--before-inherit-moved]
 //                       [--before-touching-legs] [--before-still-legs-cov]
-//                       [--before-walking-legs-cov]
+//                       [--before-walking-legs-cov] [--before-occluded-gap]
 //                       [--before-still-legs] [--before-mixed-legs] [--before-mixed-leg-band]
 //                       [--before-box-occluders] [--before-box-rejoin] [--before-box-unseen-cov]
 //                       [--before-box-seen-extent] [--before-knee-box-faces] [--before-see-through]
@@ -143,6 +143,8 @@
 //   move by itself before reporting it, MultiTrackerOptions::inherit_moved_s = 0;
 //   --before-touching-legs: "before" measures two legs that touch in the scan with a pair's
 //   covariance, ShapeOptions::touching_legs_along_ray = false;
+//   --before-occluded-gap: "before" reports two knee-height legs with something nearer between
+//   them with a pair's covariance, ShapeOptions::occluded_gap_depth_m = 0;
 //   --before-still-legs-cov: "before" reports a knee-height track's two legs seen still with a
 //   walking pair's covariance, ShapeOptions::still_legs_cov = false;
 //   --before-walking-legs-cov: "before" reports a knee-height track's two legs seen walking with
@@ -1415,6 +1417,9 @@ bool g_before_inherit_moved = false;
 // --before-touching-legs: "before" measures two legs that touch in the scan with a pair's
 // covariance (ShapeOptions::touching_legs_along_ray = false).
 bool g_before_touching_legs = false;
+// --before-occluded-gap: "before" reports two knee-height legs with something nearer between them
+// with a pair's covariance (ShapeOptions::occluded_gap_depth_m = 0).
+bool g_before_occluded_gap = false;
 // --before-still-legs-cov: "before" reports a knee-height track's two legs seen still with a
 // walking pair's covariance (ShapeOptions::still_legs_cov = false).
 bool g_before_still_legs_cov = false;
@@ -1532,7 +1537,7 @@ std::vector<Variant> Variants(sim::Mount mount, double range_m) {
              g_before_far_leg_birth || g_before_person_size || g_before_person_reach ||
              g_before_partial_extent || g_before_neighbour || g_before_segment_excess ||
              g_before_box_view || g_before_box_view_torso || g_before_range_noise ||
-             g_before_gain_covariance) {
+             g_before_gain_covariance || g_before_occluded_gap) {
     tracking::TrackerOptions before = fresh;
     if (g_before_one_leg) before.shape.hidden_leg_behind = false;
     if (g_before_mixed_pixels) before.shape.drop_mixed_pixel_legs = false;
@@ -1571,6 +1576,7 @@ std::vector<Variant> Variants(sim::Mount mount, double range_m) {
     if (g_before_adopt) before.tracking.adopt_successor_m = 0.0;
     if (g_before_inherit_moved) before.tracking.inherit_moved_s = 0.0;
     if (g_before_touching_legs) before.shape.touching_legs_along_ray = false;
+    if (g_before_occluded_gap) before.shape.occluded_gap_depth_m = 0.0;
     if (g_before_still_legs_cov) before.shape.still_legs_cov = false;
     if (g_before_walking_legs_cov) before.shape.walking_legs_cov = false;
     if (g_before_still_legs) before.shape.still_legs_max_depth_m = 0.0;
@@ -3460,7 +3466,7 @@ std::string KneeHeightBefore() {
         g_before_far_leg_birth || g_before_person_size || g_before_person_reach ||
         g_before_partial_extent || g_before_neighbour || g_before_segment_excess ||
         g_before_box_view || g_before_box_view_torso || g_before_range_noise ||
-        g_before_gain_covariance) ||
+        g_before_gain_covariance || g_before_occluded_gap) ||
       g_before_mixed_pixels || g_before_far || g_before_evidence_coasting ||
       g_before_report_rules) {
     return "";
@@ -3629,6 +3635,12 @@ std::string KneeHeightBefore() {
         "measuring a knee-height track's two legs that touch in the scan with a pair's "
         "covariance, not the farther leg's cut arc's along the line of sight "
         "(`shape.touching_legs_along_ray` false)");
+  }
+  if (g_before_occluded_gap) {
+    without.push_back(
+        "reporting a knee-height track's two legs with something nearer between them (an "
+        "occluder's edge on both inner ends) with a pair's covariance, not one that allows the "
+        "centre of an object whose face they may be behind them (`shape.occluded_gap_depth_m` 0)");
   }
   if (g_before_still_legs_cov) {
     without.push_back(
@@ -3924,6 +3936,8 @@ int main(int argc, char** argv) {
       g_before_inherit_moved = true;
     } else if (a == "--before-touching-legs") {
       g_before_touching_legs = true;
+    } else if (a == "--before-occluded-gap") {
+      g_before_occluded_gap = true;
     } else if (a == "--before-still-legs-cov") {
       g_before_still_legs_cov = true;
     } else if (a == "--before-walking-legs-cov") {
@@ -3975,7 +3989,7 @@ int main(int argc, char** argv) {
                    "[--before-outside-start] [--before-across-sway] [--before-receded-edges] "
                    "[--before-stance-weight] [--before-adopt] [--before-inherit-moved] "
                    "[--before-touching-legs] [--before-still-legs-cov] "
-                   "[--before-walking-legs-cov] "
+                   "[--before-walking-legs-cov] [--before-occluded-gap] "
                    "[--before-still-legs] [--before-mixed-legs] [--before-mixed-leg-band] "
                    "[--before-box-occluders] [--before-box-rejoin] [--before-box-unseen-cov] "
                    "[--before-box-seen-extent] [--before-knee-box-faces] "
