@@ -198,12 +198,16 @@ std::size_t BoxUnoccludedPoints(const ShapeOptions& o, const Eigen::Vector2d& ce
   // Entries 0 .. n - 1 written before they are read (the whole arrays not cleared: 4.5 KiB a
   // call).
   std::array<bool, kMaxSegmentPoints> in_front;
-  std::array<double, kMaxSegmentPoints> margin;
+  // A point's margin, taken only where a test reads it (hypot is a libm call of some 50
+  // instructions; most points lie on the box and never need it).
+  const auto margin_of = [&](std::size_t i) {
+    const double noise = o.fit.point_sigma_m + o.fit.point_sigma_per_m * points[i].norm();
+    return kOccluderSigmas * std::hypot(noise, o.fit.model_sigma_m);
+  };
   for (std::size_t i = 0; i < n; ++i) {
     const Eigen::Vector2d& p = points[i];
     const double range = p.norm();
     const double noise = o.fit.point_sigma_m + o.fit.point_sigma_per_m * range;
-    margin[i] = kOccluderSigmas * std::hypot(noise, o.fit.model_sigma_m);
     in_front[i] = false;
     if (!(range > 0.0)) continue;
     // Where the point's beam enters the box (slab test in the box's frame): a beam returns the
@@ -221,7 +225,12 @@ std::size_t BoxUnoccludedPoints(const ShapeOptions& o, const Eigen::Vector2d& ce
       enter = std::max(enter, std::min(t0, t1));
       leave = std::min(leave, std::max(t0, t1));
     }
-    in_front[i] = enter <= leave && range < enter - margin[i] - extra_margin_m;
+    // hypot(a, b) >= max(a, b) (libm's hypot is faithfully rounded and max(a, b) a double), so a
+    // point not nearer than the smaller margin allows is not in front: the hypot only for the rest.
+    const double least_margin = kOccluderSigmas * std::max(noise, o.fit.model_sigma_m);
+    in_front[i] =
+        enter <= leave && range < enter - least_margin - extra_margin_m &&
+        range < enter - kOccluderSigmas * std::hypot(noise, o.fit.model_sigma_m) - extra_margin_m;
   }
   // Something in front of the box is a surface of its own: where a run of such points meets the
   // box's points, the range steps by more than the noise. A run that does not (a face turned
@@ -233,8 +242,9 @@ std::size_t BoxUnoccludedPoints(const ShapeOptions& o, const Eigen::Vector2d& ce
     }
     std::size_t end = i;
     while (end < n && in_front[end]) ++end;
-    const bool stepped_before = i > 0 && points[i - 1].norm() - points[i].norm() > margin[i - 1];
-    const bool stepped_after = end < n && points[end].norm() - points[end - 1].norm() > margin[end];
+    const bool stepped_before = i > 0 && points[i - 1].norm() - points[i].norm() > margin_of(i - 1);
+    const bool stepped_after =
+        end < n && points[end].norm() - points[end - 1].norm() > margin_of(end);
     if (!stepped_before && !stepped_after) {
       for (std::size_t k = i; k < end; ++k) in_front[k] = false;
     }
@@ -2384,7 +2394,8 @@ void TrackingPipeline::MeasureObservation(const ScanView& scan, const Observatio
   double sigma = o.association_sigma_m;
   if (observation.legs && observation.part_count == 1)
     sigma = std::hypot(sigma, o.hip_half_width_m);
-  const double along = std::hypot(sigma, observation.legs ? 0.0 : 0.5 * extent);
+  // hypot(sigma, 0) is |sigma| exactly: legs without the call.
+  const double along = observation.legs ? std::abs(sigma) : std::hypot(sigma, 0.5 * extent);
   const Eigen::Vector2d u = ray_sum.normalized();
   m.covariance_m2 = sigma * sigma * Eigen::Matrix2d::Identity() +
                     (along * along - sigma * sigma) * u * u.transpose();
