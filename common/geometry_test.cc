@@ -3,8 +3,11 @@
 #include <gtest/gtest.h>
 
 #include <bit>
+#include <cmath>
 #include <cstdint>
 #include <limits>
+#include <random>
+#include <utility>
 #include <vector>
 
 namespace lrfnet::common {
@@ -53,6 +56,42 @@ TEST(AngleTest, RemainderHalfTurnIsLibmRemainderBitForBit) {
   EXPECT_DOUBLE_EQ(RemainderHalfTurn(4.0), 4.0 - kPi);
   EXPECT_DOUBLE_EQ(RemainderHalfTurn(-2.0), -2.0 + kPi);
   EXPECT_EQ(std::signbit(RemainderHalfTurn(-kPi)), std::signbit(std::remainder(-kPi, kPi)));
+}
+
+// The same bits as glibc's hypot on x86-64 (elsewhere libm may take another kernel: within an ulp
+// there), over magnitudes and ratios from equal to beyond 2^54, and on each side of the ranges that
+// go to libm.
+TEST(HypotTest, HypotIsLibmHypotBitForBit) {
+  std::vector<std::pair<double, double>> pairs = {
+      {3.0, 4.0},      {-3.0, 4.0},      {0.0, 0.0},     {0.0, -2.5},    {1.0, 1.0},
+      {1.0, 0x1p-54},  {1.0, 0x1p-53},   {0x1p511, 1.0}, {0x1p512, 1.0}, {1.0, 0x1p-459},
+      {1.0, 0x1p-460}, {1e-300, 1e-300}, {1e300, 1e300}};
+  std::mt19937_64 rng(7);
+  std::uniform_real_distribution<double> exponent(-8.0, 8.0), ratio_exponent(-20.0, 0.0);
+  std::uniform_real_distribution<double> mantissa(1.0, 2.0);
+  std::bernoulli_distribution negative(0.5);
+  for (int i = 0; i < 200000; ++i) {
+    const double a = std::ldexp(mantissa(rng), static_cast<int>(exponent(rng)));
+    // Ratios log-uniform down to 2^-20 and, one pair in eight, near 1 (both branches of the
+    // kernel's correction).
+    const double b = i % 8 == 0 ? a * (1.0 - 0.5 * (mantissa(rng) - 1.0))
+                                : a * std::exp2(ratio_exponent(rng)) * mantissa(rng);
+    pairs.emplace_back(negative(rng) ? -a : a, negative(rng) ? -b : b);
+  }
+  for (const auto& [x, y] : pairs) {
+    const double expected = std::hypot(x, y);
+    const double got = Hypot(x, y);
+#if defined(__x86_64__) && defined(__GLIBC__)
+    EXPECT_EQ(std::bit_cast<std::uint64_t>(got), std::bit_cast<std::uint64_t>(expected))
+        << "x = " << x << " y = " << y << " got " << got << " expected " << expected;
+#else
+    EXPECT_LE(std::abs(got - expected), std::nextafter(expected, 2 * expected) - expected);
+#endif
+  }
+  constexpr double kInf = std::numeric_limits<double>::infinity();
+  EXPECT_EQ(Hypot(kInf, std::numeric_limits<double>::quiet_NaN()), kInf);
+  EXPECT_TRUE(std::isnan(Hypot(1.0, std::numeric_limits<double>::quiet_NaN())));
+  EXPECT_EQ(Hypot(3.0, -4.0), 5.0);
 }
 
 TEST(Pose2Test, ComposeWithInverseIsIdentity) {

@@ -78,7 +78,9 @@ void TrackerNode::OnScan(const cola::ScanTelegram& scan, common::UtcNs receive_n
           t.shape == tracking::ObjectShape::kLegs) {
         continue;
       }
-      mount_watch_.Add(t.track_id, std::hypot(t.vx_mps, t.vy_mps),
+      // The speed is compared with a threshold only: the root of the sum of squares (within an ulp
+      // of hypot, a libm call).
+      mount_watch_.Add(t.track_id, std::sqrt(t.vx_mps * t.vx_mps + t.vy_mps * t.vy_mps),
                        std::min(t.size_major_m, t.size_minor_m));
     }
     if (mount_watch_.EndScan()) ++counters_.mount_looks_like_legs;

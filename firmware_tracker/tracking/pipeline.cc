@@ -198,11 +198,11 @@ std::size_t BoxUnoccludedPoints(const ShapeOptions& o, const Eigen::Vector2d& ce
   // Entries 0 .. n - 1 written before they are read (the whole arrays not cleared: 4.5 KiB a
   // call).
   std::array<bool, kMaxSegmentPoints> in_front;
-  // A point's margin, taken only where a test reads it (hypot is a libm call of some 50
-  // instructions; most points lie on the box and never need it).
+  // A point's margin, taken only where a test reads it (a root and a division; most points lie
+  // on the box and never need it).
   const auto margin_of = [&](std::size_t i) {
     const double noise = o.fit.point_sigma_m + o.fit.point_sigma_per_m * points[i].norm();
-    return kOccluderSigmas * std::hypot(noise, o.fit.model_sigma_m);
+    return kOccluderSigmas * common::Hypot(noise, o.fit.model_sigma_m);
   };
   for (std::size_t i = 0; i < n; ++i) {
     const Eigen::Vector2d& p = points[i];
@@ -225,12 +225,12 @@ std::size_t BoxUnoccludedPoints(const ShapeOptions& o, const Eigen::Vector2d& ce
       enter = std::max(enter, std::min(t0, t1));
       leave = std::min(leave, std::max(t0, t1));
     }
-    // hypot(a, b) >= max(a, b) (libm's hypot is faithfully rounded and max(a, b) a double), so a
+    // hypot(a, b) >= max(a, b) (glibc's hypot is faithfully rounded and max(a, b) a double), so a
     // point not nearer than the smaller margin allows is not in front: the hypot only for the rest.
     const double least_margin = kOccluderSigmas * std::max(noise, o.fit.model_sigma_m);
-    in_front[i] =
-        enter <= leave && range < enter - least_margin - extra_margin_m &&
-        range < enter - kOccluderSigmas * std::hypot(noise, o.fit.model_sigma_m) - extra_margin_m;
+    in_front[i] = enter <= leave && range < enter - least_margin - extra_margin_m &&
+                  range < enter - kOccluderSigmas * common::Hypot(noise, o.fit.model_sigma_m) -
+                              extra_margin_m;
   }
   // Something in front of the box is a surface of its own: where a run of such points meets the
   // box's points, the range steps by more than the noise. A run that does not (a face turned
@@ -569,7 +569,7 @@ std::size_t PersonReachablePoints(const ShapeOptions& o, const Eigen::Vector2d& 
   // A surface of its own: the range steps where the run meets the person's points.
   const auto stepped = [&](const Eigen::Vector2d& inner, const Eigen::Vector2d& outer) {
     return std::abs(outer.norm() - inner.norm()) >
-           kOccluderSigmas * std::hypot(noise_of(inner), noise_of(outer));
+           kOccluderSigmas * common::Hypot(noise_of(inner), noise_of(outer));
   };
   std::size_t begin = 0, end = n;
   while (begin < n && beyond(points[begin])) ++begin;
@@ -1571,7 +1571,7 @@ class TrackingPipeline::Refiner final : public MeasurementRefiner {
           const Eigen::Matrix2d vc = predicted_cov->bottomRightCorner<2, 2>();
           direction_sigma = std::sqrt(std::max(0.0, 0.5 * vc.trace())) / speed;
         }
-        prior.yaw_sigma_rad = std::hypot(o.walking_yaw_sigma_rad, direction_sigma);
+        prior.yaw_sigma_rad = common::Hypot(o.walking_yaw_sigma_rad, direction_sigma);
       }
     }
     const ObservationPart& part = ob.parts[0];
@@ -2393,9 +2393,9 @@ void TrackingPipeline::MeasureObservation(const ScanView& scan, const Observatio
   m.position_m = centre;
   double sigma = o.association_sigma_m;
   if (observation.legs && observation.part_count == 1)
-    sigma = std::hypot(sigma, o.hip_half_width_m);
+    sigma = common::Hypot(sigma, o.hip_half_width_m);
   // hypot(sigma, 0) is |sigma| exactly: legs without the call.
-  const double along = observation.legs ? std::abs(sigma) : std::hypot(sigma, 0.5 * extent);
+  const double along = observation.legs ? std::abs(sigma) : common::Hypot(sigma, 0.5 * extent);
   const Eigen::Vector2d u = ray_sum.normalized();
   m.covariance_m2 = sigma * sigma * Eigen::Matrix2d::Identity() +
                     (along * along - sigma * sigma) * u * u.transpose();
@@ -3470,7 +3470,8 @@ void TrackingPipeline::DropCoasting(const ScanView& scan) {
         ++counters_.coasting_uncertain;
         continue;
       }
-      const double coasted_m = std::hypot(r.vx_mps, r.vy_mps) * r.coasted_s;
+      // Compared with a threshold only: the root of the sum of squares (within an ulp of hypot).
+      const double coasted_m = std::sqrt(r.vx_mps * r.vx_mps + r.vy_mps * r.vy_mps) * r.coasted_s;
       if (torso && o.unseen_coasting_m > 0.0 && coasted_m > o.unseen_coasting_m &&
           !ForegroundNear(scan, position, sigma_m)) {
         ++counters_.unseen_coasting;
