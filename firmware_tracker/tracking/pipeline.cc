@@ -1571,7 +1571,9 @@ class TrackingPipeline::Refiner final : public MeasurementRefiner {
           const Eigen::Matrix2d vc = predicted_cov->bottomRightCorner<2, 2>();
           direction_sigma = std::sqrt(std::max(0.0, 0.5 * vc.trace())) / speed;
         }
-        prior.yaw_sigma_rad = common::Hypot(o.walking_yaw_sigma_rad, direction_sigma);
+        // The root of the sum of squares (within an ulp of hypot; no overflow at these sizes).
+        prior.yaw_sigma_rad = std::sqrt(o.walking_yaw_sigma_rad * o.walking_yaw_sigma_rad +
+                                        direction_sigma * direction_sigma);
       }
     }
     const ObservationPart& part = ob.parts[0];
@@ -2393,9 +2395,11 @@ void TrackingPipeline::MeasureObservation(const ScanView& scan, const Observatio
   m.position_m = centre;
   double sigma = o.association_sigma_m;
   if (observation.legs && observation.part_count == 1)
-    sigma = common::Hypot(sigma, o.hip_half_width_m);
-  // hypot(sigma, 0) is |sigma| exactly: legs without the call.
-  const double along = observation.legs ? std::abs(sigma) : common::Hypot(sigma, 0.5 * extent);
+    sigma = std::sqrt(sigma * sigma + o.hip_half_width_m * o.hip_half_width_m);
+  // Roots of sums of squares (within an ulp of hypot; no overflow at these sizes); for legs
+  // hypot(sigma, 0), |sigma| exactly.
+  const double along =
+      observation.legs ? std::abs(sigma) : std::sqrt(sigma * sigma + 0.25 * extent * extent);
   const Eigen::Vector2d u = ray_sum.normalized();
   m.covariance_m2 = sigma * sigma * Eigen::Matrix2d::Identity() +
                     (along * along - sigma * sigma) * u * u.transpose();
