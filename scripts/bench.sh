@@ -22,7 +22,7 @@ mkdir -p results
   --before-legs-coasting-sigma --before-coasting-sigma \
   --before-leg-edges --before-outline-departure --before-partial-view --before-underdetermined-fit \
   --before-recent-veil --before-stance-weight \
-  --before-box-occluders --before-box-rejoin --before-see-through --before-step-seam --before-torso-edge-echo --before-box-unseen-cov --before-box-seen-extent --before-knee-box-faces --before-single-beam-partner \
+  --before-box-occluders --before-box-rejoin --before-see-through --before-step-seam --before-deep-tail --before-torso-edge-echo --before-box-unseen-cov --before-box-seen-extent --before-knee-box-faces --before-single-beam-partner \
   --before-edge-echo-birth --before-lone-beam-echo --before-far-leg-birth \
   --before-person-reach --before-partial-extent --before-neighbour --before-segment-excess --before-box-view --before-box-view-torso --before-gain-covariance --before-range-noise \
   --before-single-precision-fit --before-edge-sides --before-outside-start --before-across-sway --before-receded-edges --before-adopt --before-inherit-moved --before-touching-legs --before-occluded-gap --before-still-legs-cov --before-walking-legs-cov --before-still-legs --before-mixed-legs --before-mixed-leg-band \

@@ -528,6 +528,17 @@ void VisitShape(tracking::ShapeOptions& o, ConfigVisitor& v) {
           "not a person's.");
   v.Field("step_seam_size_margin_m", o.step_seam_size_margin_m,
           "With step_seam_size_guard: the track's predicted bounding rectangle grown by this (m).");
+  v.Field("split_deep_tail", o.split_deep_tail,
+          "Upper-body mount: a segment's first or last points deeper than its nearest point by "
+          "more than deep_tail_depth_m (a body behind, joined through mixed pixels) are left out "
+          "of its observation. Not on a box track's outline nor one larger than a person. false: "
+          "one observation.");
+  v.Field("deep_tail_centre_bias_sigma_m", o.deep_tail_centre_bias_sigma_m,
+          "With split_deep_tail, upper-body mount: centre_bias_sigma_m is this (m) instead (the "
+          "tails' pull along the ray was part of it).");
+  v.Field("deep_tail_depth_m", o.deep_tail_depth_m,
+          "With split_deep_tail: how much deeper than the segment's nearest point (m) an end "
+          "point lies to be cut off (a person's outline recedes by at most ~0.3 m).");
   v.Field("partial_view_size_sigma_m", o.partial_view_size_sigma_m,
           "Upper-body mount, a partial view (fewer than two silhouette ends): in the centre "
           "covariance successive scans share, each semi-axis's sigma is at least this (m), since "

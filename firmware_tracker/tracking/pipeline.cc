@@ -1038,6 +1038,12 @@ std::optional<std::string> Validate(const ShapeOptions& o) {
   if (auto e = Validate(o.step_seam)) return "step_seam." + *e;
   if (!Positive(o.step_seam_person_max_a_m)) return "step_seam_person_max_a_m must be > 0";
   if (!Positive(o.step_seam_person_max_b_m)) return "step_seam_person_max_b_m must be > 0";
+  if (!(std::isfinite(o.deep_tail_depth_m) && o.deep_tail_depth_m > 0.0)) {
+    return "deep_tail_depth_m must be > 0";
+  }
+  if (!(std::isfinite(o.deep_tail_centre_bias_sigma_m) && o.deep_tail_centre_bias_sigma_m >= 0.0)) {
+    return "deep_tail_centre_bias_sigma_m must be >= 0";
+  }
   if (!(std::isfinite(o.step_seam_size_margin_m) && o.step_seam_size_margin_m >= 0.0)) {
     return "step_seam_size_margin_m must be >= 0";
   }
@@ -1200,7 +1206,9 @@ class TrackingPipeline::Refiner final : public MeasurementRefiner {
     const double floor_m = shape.model == ShapeModel::kBox
                                ? std::max(share * o.size_floor_sigma_m, o.box_size_floor_sigma_m)
                                : share * o.size_floor_sigma_m;
-    const double bias_sigma_m = share * o.centre_bias_sigma_m;
+    const double bias_sigma_m =
+        share * (o.mount == Mount::kTorso && o.split_deep_tail ? o.deep_tail_centre_bias_sigma_m
+                                                               : o.centre_bias_sigma_m);
     const double range_m = measurement.position_m.norm();
     shape.reported_bias_relief_m2.setZero();
     if (o.centre_bias_along_ray && range_m > 0.0 && shape.model != ShapeModel::kBox) {
@@ -2424,6 +2432,7 @@ void TrackingPipeline::BuildObservations(const ScanView& scan) {
     const auto& segments = segments_.segments;
     for (std::size_t i = 0; i < segments.size();) {
       Segment s = segments[i];
+      const std::size_t first = i;
       const std::size_t last =
           options_.shape.box_rejoin_pieces ? BoxPiecesEnd(i, scan.stamp_ns, tracks) : i;
       for (std::size_t k = i + 1; k <= last; ++k) {
@@ -2438,28 +2447,73 @@ void TrackingPipeline::BuildObservations(const ScanView& scan) {
         ++counters_.dropped_segments;  // as AddObservation counts it
         continue;
       }
+      // ShapeOptions::split_deep_tail: the ends deeper than a body left out. The tail can make the
+      // segment wider than the segmentation's max_width_m, which then cut it (the body too) in
+      // pieces: those pieces are taken together where no piece lies wholly in a tail (an object
+      // behind that is itself that wide) and the body without its tails is no wider than
+      // max_width_m.
+      DeepTails tails;
+      bool tail = false;
+      if (options_.shape.split_deep_tail && whole) {
+        const std::size_t chain = WidthPiecesEnd(first);
+        const auto try_tail = [&](std::size_t end_piece) {
+          Segment m = s;
+          for (std::size_t k = first + 1; k <= end_piece; ++k) {
+            m.end_beam = segments[k].end_beam;
+            m.point_count += segments[k].point_count;
+          }
+          const DeepTails t = FindDeepTails(segments_, m, options_.shape.deep_tail_depth_m);
+          const std::size_t body_n = m.point_count - t.lead - t.trail;
+          if (t.lead + t.trail == 0 || body_n < options_.segmentation.min_points) return false;
+          if (end_piece > first) {
+            if (t.lead >= segments[first].point_count ||
+                t.trail >= segments[end_piece].point_count) {
+              return false;
+            }
+            const auto pts = segments_.Points(m);
+            if ((pts[m.point_count - 1 - t.trail] - pts[t.lead]).norm() >
+                options_.segmentation.max_width_m) {
+              return false;
+            }
+          }
+          if (OnConfirmedBox(m, scan.stamp_ns, tracks, true)) return false;
+          tails = t;
+          s = m;
+          i = end_piece + 1;
+          return true;
+        };
+        tail = (chain > first && try_tail(chain)) || try_tail(first);
+      }
       s.width_m = (segments_.points_m[s.first_point + s.point_count - 1] -
                    segments_.points_m[s.first_point])
                       .norm();
       // ShapeOptions::split_see_through (not the pieces of a box rejoined above).
       std::array<std::size_t, kMaxSeeThroughCuts + 1> starts{};
       std::size_t pieces = 1;
-      if (options_.shape.split_see_through && whole) {
+      if (options_.shape.split_see_through && whole && !tail) {
         pieces += SeeThroughCuts(scan, segments_, s, options_.segmentation,
                                  options_.shape.see_through_min_width_m,
                                  std::span<std::size_t>(starts).subspan(1));
       }
       bool seam = false;  // the cuts are at range steps (ShapeOptions::split_step_seam)
-      if (options_.shape.split_step_seam && whole && pieces == 1) {
+      if (options_.shape.split_step_seam && whole && !tail && pieces == 1) {
         pieces += RangeStepCuts(segments_, s, options_.shape.step_seam,
                                 std::span<std::size_t>(starts).subspan(1));
         seam = pieces > 1;
       }
       if (pieces > 1 && OnConfirmedBox(s, scan.stamp_ns, tracks, seam)) pieces = 1;
+      // ShapeOptions::split_deep_tail: the body between the tails, the tails left out.
+      std::size_t end_used = s.point_count;
+      if (tail) {
+        counters_.deep_tail_cuts += (tails.lead > 0 ? 1 : 0) + (tails.trail > 0 ? 1 : 0);
+        starts[0] = tails.lead;
+        end_used = s.point_count - tails.trail;
+      }
       // ShapeOptions::torso_edge_echo (an uncut segment only).
-      const bool echo = pieces == 1 && options_.shape.torso_edge_echo && TorsoEdgeEcho(scan, s);
+      const bool echo =
+          pieces == 1 && !tail && options_.shape.torso_edge_echo && TorsoEdgeEcho(scan, s);
       for (std::size_t p = 0; p < pieces; ++p) {
-        const std::size_t end = p + 1 < pieces ? starts[p + 1] : s.point_count;
+        const std::size_t end = p + 1 < pieces ? starts[p + 1] : end_used;
         if (p > 0) {
           if (observations_.full()) {
             ++counters_.dropped_segments;
@@ -2591,11 +2645,9 @@ bool TrackingPipeline::OnConfirmedBox(const Segment& s, common::UtcNs stamp_ns,
   return false;
 }
 
-std::size_t TrackingPipeline::BoxPiecesEnd(std::size_t first, common::UtcNs stamp_ns,
-                                           std::optional<std::size_t>& tracks) {
+std::size_t TrackingPipeline::WidthPiecesEnd(std::size_t first) const {
   const auto& segments = segments_.segments;
   const SegmentationOptions& so = options_.segmentation;
-  const ShapeOptions& o = options_.shape;
   // The run of pieces from `first` the segmentation cut only for their width (or point count).
   std::size_t chain = first;
   std::size_t points = segments[first].point_count;
@@ -2613,6 +2665,14 @@ std::size_t TrackingPipeline::BoxPiecesEnd(std::size_t first, common::UtcNs stam
     points += b.point_count;
     ++chain;
   }
+  return chain;
+}
+
+std::size_t TrackingPipeline::BoxPiecesEnd(std::size_t first, common::UtcNs stamp_ns,
+                                           std::optional<std::size_t>& tracks) {
+  const auto& segments = segments_.segments;
+  const ShapeOptions& o = options_.shape;
+  const std::size_t chain = WidthPiecesEnd(first);
   if (chain == first) return first;
   if (!tracks) tracks = tracker_.Predict(stamp_ns, predictions_);
   std::size_t best = first;

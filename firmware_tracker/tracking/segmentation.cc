@@ -137,6 +137,23 @@ std::optional<std::string> Validate(const RangeStepCutOptions& o) {
   return std::nullopt;
 }
 
+DeepTails FindDeepTails(const SegmentList& list, const Segment& s, double depth_m) {
+  DeepTails tails;
+  const auto pts = list.Points(s);
+  if (pts.size() < 2) return tails;
+  // On squared ranges: one square root per segment.
+  double nearest2 = pts[0].squaredNorm();
+  for (std::size_t i = 1; i < pts.size(); ++i) nearest2 = std::min(nearest2, pts[i].squaredNorm());
+  const double limit = std::sqrt(nearest2) + depth_m;
+  const double limit2 = limit * limit;
+  while (tails.lead < pts.size() && pts[tails.lead].squaredNorm() > limit2) ++tails.lead;
+  while (tails.trail < pts.size() - tails.lead &&
+         pts[pts.size() - 1 - tails.trail].squaredNorm() > limit2) {
+    ++tails.trail;
+  }
+  return tails;
+}
+
 std::size_t RangeStepCuts(const SegmentList& list, const Segment& s,
                           const RangeStepCutOptions& options, std::span<std::size_t> cuts) {
   if (cuts.empty() || s.point_count < 2 * options.min_piece_points ||

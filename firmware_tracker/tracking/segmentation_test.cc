@@ -504,4 +504,25 @@ TEST(SegmentationTest, PersonInSyntheticScanIsOneSegment) {
 }
 
 }  // namespace
+TEST(SegmentationTest, DeepTailsAreTheEndRunsBeyondTheNearestPointByTheDepth) {
+  SegmentList list;
+  // One segment along one bearing: ranges 8.6, 8.3 | 7.9, 7.85, 7.9, 8.0 | 8.4 (metres).
+  for (const double r : {8.6, 8.3, 7.9, 7.85, 7.9, 8.0, 8.4}) {
+    (void)list.points_m.push_back(Eigen::Vector2d(r, 0.0));
+  }
+  Segment s;
+  s.point_count = list.points_m.size();
+  // Beyond 7.85 + 0.35 = 8.2: two points at the start, one at the end.
+  DeepTails t = FindDeepTails(list, s, 0.35);
+  EXPECT_EQ(t.lead, 2u);
+  EXPECT_EQ(t.trail, 1u);
+  // Beyond 8.35: one at either end (8.3 is not).
+  t = FindDeepTails(list, s, 0.5);
+  EXPECT_EQ(t.lead, 1u);
+  EXPECT_EQ(t.trail, 1u);
+  // Nothing beyond 8.85.
+  t = FindDeepTails(list, s, 1.0);
+  EXPECT_EQ(t.lead + t.trail, 0u);
+}
+
 }  // namespace lrfnet::tracking

@@ -52,7 +52,7 @@
 //                       [--before-still-legs] [--before-mixed-legs] [--before-mixed-leg-band]
 //                       [--before-box-occluders] [--before-box-rejoin] [--before-box-unseen-cov]
 //                       [--before-box-seen-extent] [--before-knee-box-faces] [--before-see-through]
-//                       [--before-step-seam] [--before-torso-edge-echo]
+//                       [--before-step-seam] [--before-deep-tail] [--before-torso-edge-echo]
 //                       [--before-person-size]
 //                       [--before-person-reach] [--before-partial-extent]
 //                       [--before-fusion-merge] [--before-report-sourceless]]
@@ -173,6 +173,8 @@
 //   a nearer return as any, ShapeOptions::torso_edge_echo = false;
 //   --before-step-seam: "before" measures a segment as one observation also where its range steps
 //   between two bodies that touch in the view, ShapeOptions::split_step_seam = false;
+//   --before-deep-tail: "before" measures a segment's end points deeper than its nearest point by
+//   more than a body with it, ShapeOptions::split_deep_tail = false;
 //   --before-person-size: "before" runs with ShapeOptions::person_size_across_ray the other way
 //   round from the default (off by default since it moves round objects' centres towards the
 //   sensor: "before" learns each semi-axis only from views that show it across the ray);
@@ -1450,6 +1452,9 @@ bool g_before_torso_edge_echo = false;
 // --before-step-seam: "before" measures a segment as one observation also where its range steps
 // between two bodies that touch in the view (ShapeOptions::split_step_seam = false).
 bool g_before_step_seam = false;
+// --before-deep-tail: "before" measures a segment's end points deeper than its nearest point by
+// more than a body with it (ShapeOptions::split_deep_tail = false).
+bool g_before_deep_tail = false;
 // --before-box-unseen-cov: "before" reports a box's size error as the same in every direction,
 // also along an axis the scan does not show (ShapeOptions::box_unseen_depth_cov = false).
 bool g_before_box_unseen_cov = false;
@@ -1491,6 +1496,7 @@ std::vector<Variant> Variants(sim::Mount mount, double range_m) {
   old.shape.mixed_leg_max_gap_m = 0.0;
   old.shape.still_legs_max_depth_m = 0.0;
   old.shape.split_step_seam = false;
+  old.shape.split_deep_tail = false;
   old.tracking.report_gain_covariance = false;
   old.shape.hidden_leg_behind = false;
   old.shape.single_beam_legs = false;
@@ -1531,8 +1537,8 @@ std::vector<Variant> Variants(sim::Mount mount, double range_m) {
              g_before_still_legs_cov || g_before_walking_legs_cov || g_before_still_legs ||
              g_before_mixed_legs || g_before_mixed_leg_band || g_before_box_occluders ||
              g_before_box_rejoin || g_before_see_through || g_before_step_seam ||
-             g_before_torso_edge_echo || g_before_box_unseen_cov || g_before_box_seen_extent ||
-             g_before_knee_box_faces || g_before_lone_leg_standing ||
+             g_before_deep_tail || g_before_torso_edge_echo || g_before_box_unseen_cov ||
+             g_before_box_seen_extent || g_before_knee_box_faces || g_before_lone_leg_standing ||
              g_before_single_beam_partner || g_before_edge_echo_birth || g_before_lone_beam_echo ||
              g_before_far_leg_birth || g_before_person_size || g_before_person_reach ||
              g_before_partial_extent || g_before_neighbour || g_before_segment_excess ||
@@ -1587,6 +1593,7 @@ std::vector<Variant> Variants(sim::Mount mount, double range_m) {
     if (g_before_see_through) before.shape.split_see_through = false;
     if (g_before_torso_edge_echo) before.shape.torso_edge_echo = false;
     if (g_before_step_seam) before.shape.split_step_seam = false;
+    if (g_before_deep_tail) before.shape.split_deep_tail = false;
     if (g_before_box_unseen_cov) before.shape.box_unseen_depth_cov = false;
     if (g_before_box_seen_extent) before.shape.box_seen_extent_cov = false;
     if (g_before_knee_box_faces) before.shape.box_size_from_faces_seen_at_knee = false;
@@ -3460,13 +3467,13 @@ std::string KneeHeightBefore() {
         g_before_adopt || g_before_inherit_moved || g_before_touching_legs || g_before_still_legs ||
         g_before_still_legs_cov || g_before_walking_legs_cov || g_before_mixed_legs ||
         g_before_mixed_leg_band || g_before_box_occluders || g_before_box_rejoin ||
-        g_before_see_through || g_before_step_seam || g_before_torso_edge_echo ||
-        g_before_box_unseen_cov || g_before_box_seen_extent || g_before_knee_box_faces ||
-        g_before_single_beam_partner || g_before_edge_echo_birth || g_before_lone_beam_echo ||
-        g_before_far_leg_birth || g_before_person_size || g_before_person_reach ||
-        g_before_partial_extent || g_before_neighbour || g_before_segment_excess ||
-        g_before_box_view || g_before_box_view_torso || g_before_range_noise ||
-        g_before_gain_covariance || g_before_occluded_gap) ||
+        g_before_see_through || g_before_step_seam || g_before_deep_tail ||
+        g_before_torso_edge_echo || g_before_box_unseen_cov || g_before_box_seen_extent ||
+        g_before_knee_box_faces || g_before_single_beam_partner || g_before_edge_echo_birth ||
+        g_before_lone_beam_echo || g_before_far_leg_birth || g_before_person_size ||
+        g_before_person_reach || g_before_partial_extent || g_before_neighbour ||
+        g_before_segment_excess || g_before_box_view || g_before_box_view_torso ||
+        g_before_range_noise || g_before_gain_covariance || g_before_occluded_gap) ||
       g_before_mixed_pixels || g_before_far || g_before_evidence_coasting ||
       g_before_report_rules) {
     return "";
@@ -3964,6 +3971,8 @@ int main(int argc, char** argv) {
       g_before_torso_edge_echo = true;
     } else if (a == "--before-step-seam") {
       g_before_step_seam = true;
+    } else if (a == "--before-deep-tail") {
+      g_before_deep_tail = true;
     } else if (a == "--before-fusion-merge") {
       g_before_fusion_merge = true;
     } else if (a == "--before-report-sourceless") {
