@@ -19,7 +19,11 @@ option(LRFNET_PCH "Precompiled headers for the libraries whose many files share 
 # under test keeps the build type's level (its libraries are compiled as usual). Half the test
 # binaries' compile time is optimization, mostly of gtest's assertion templates; -O1 takes a fifth
 # to two fifths less CPU (daemon_io_test 14.9 -> 10.7 s, calib_align_test 50.5 -> 42.2 s) and the
-# results are the same on the host (no -ffast-math, ISO C++ mode: no FP contraction).
+# results are the same on x86-64 (no -ffast-math; x86-64's baseline has no fused multiply-add).
+# GCC contracts a * b + c into a fused multiply-add in C++ whatever the -std mode (its default
+# -ffp-contract=fast; the ISO mode turns it off for C only), from -O2 on where the target has one:
+# on aarch64 the tests' own arithmetic at -O1 (not fused) may differ in the last bit from the same
+# expression in the code under test (fused).
 # -DLRFNET_TEST_OPTIMIZE= (empty) compiles them like the rest.
 set(LRFNET_TEST_OPTIMIZE "-O1" CACHE STRING
     "Optimization flag for the test binaries' own sources in Release/RelWithDebInfo builds")
@@ -75,11 +79,15 @@ endfunction()
 # and is nearly absent from an empty scene) built with -O3 (inlining, unrolling and vectorising
 # across the fit's fixed-size loops), -fno-math-errno (a square root is one instruction, without
 # the branch to libm that only sets errno) and -fno-plt (libm's sincos, hypot and atan2 called
-# without the PLT's jump), on top of the build type's flags. None of them changes a result: no
-# reassociation or contraction of floating point (tracking_benchmark's tables byte for byte the
-# same). The per-beam code every scan runs (background model, segmentation, the scan's decoding)
-# keeps the build type's flags: -O3 inlines the background model's per-beam update into its loop,
-# which makes every scene faster alike. Measured (tracker_benchmark, callgrind inside
+# without the PLT's jump), on top of the build type's flags. None of them changes a result on
+# x86-64: no reassociation of floating point, and no fused multiply-add in x86-64's baseline to
+# contract into (tracking_benchmark's tables byte for byte the same). Where the target has one
+# (aarch64), GCC contracts a * b + c in C++ at -O2 and -O3 alike, ISO mode or not (its default
+# -ffp-contract=fast), and the loops -O3 vectorises may fuse differently from -O2's scalar code:
+# the last bit may differ there. The per-beam code every scan runs (background model,
+# segmentation, the scan's decoding) keeps the build type's flags: -O3 inlines the background
+# model's per-beam update into its loop, which makes every scene faster alike. Measured
+# (tracker_benchmark, callgrind inside
 # TrackerNode::OnScan per scan): instructions 130.0k / 257.6k / 559.2k -> 130.0k / 247.7k / 528.9k
 # at 0 / 10 / 50 people. In time the gain is smaller and partly not the code's: in turns, alternated
 # with the tree without these flags, 10 people 2.04-2.06x -> 1.98-2.00x and 50 people 5.12-5.17x

@@ -643,7 +643,9 @@ Eigen::Vector2d HalfExtentsAlong(std::span<const Eigen::Vector2d> points,
   if (points.empty()) return Eigen::Vector2d::Zero();
   // Both projections at once, (p.dot(e1), p.dot(e2)) = x (e1.x, e2.x) + y (e1.y, e2.y) with
   // e2 = (-e1.y, e1.x): the same products summed in the same order as the two dot products (bit
-  // for bit), a point's coordinates broadcast instead of two horizontal sums.
+  // for bit on x86-64; where multiply-adds are fused, e.g. aarch64, the lanes and the dot products
+  // may round differently in the last bit), a point's coordinates broadcast instead of two
+  // horizontal sums.
   const Eigen::Array2d by_x(e1.x(), -e1.y());
   const Eigen::Array2d by_y(e1.y(), e1.x());
   Eigen::Array2d lo = Eigen::Array2d::Constant(std::numeric_limits<double>::infinity());

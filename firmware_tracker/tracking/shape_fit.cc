@@ -762,7 +762,8 @@ PointSums SumPointsQuad(const Vec5& at, double c, double s, double inv_a, double
   f.huber = q.huber;
   f.centre_d = static_cast<float>(-std::min(at(kA), at(kB)));  // a point at the centre
   // Each lane's sum over the quads in order (a fit has at least one point, so one quad), started
-  // from the first quad's terms rather than from zeros (0 + x is x, but for the sign of a zero sum)
+  // from the first quad's terms rather than from zeros (0 + x is x, but for the sign of a zero sum:
+  // a sign that reaches no result)
   // and the usual one or two quads (max_points 8) without a loop: the accumulators neither cleared
   // nor carried from one quad to the next (they outnumber the registers).
   QuadTerms t = QuadTermsAt<kKind>(q, 0, f);
@@ -1128,7 +1129,9 @@ ShapeFitResult Fit(std::span<const Eigen::Vector2d> points, const Silhouette& si
   double range_sum = 0.0;
   std::array<double, kMaxFitPoints> range_m;  // each point's range; [0, n)
   // Two points at a time: each lane's range and weight the same operations as one point's
-  // (|p| = sqrt(x^2 + y^2)), the sums taken point by point in order.
+  // (|p| = sqrt(x^2 + y^2)), the sums taken point by point in order (the same bits on x86-64;
+  // where multiply-adds are fused, e.g. aarch64, the lanes and the scalar tail may round
+  // differently in the last bit).
   const double model_var = o.model_sigma_m * o.model_sigma_m;
   std::size_t j = 0;
   for (; j + 1 < n; j += 2) {
@@ -1170,7 +1173,9 @@ ShapeFitResult Fit(std::span<const Eigen::Vector2d> points, const Silhouette& si
   if constexpr (kReference) {
     ray = RayByMeanAngle(used.front(), used.back());
   } else {
-    const double front = range_m[0], back = range_m[n - 1];  // used.front().norm(), back's
+    // used.front().norm(), back's (bit for bit on x86-64; where multiply-adds are fused, e.g.
+    // aarch64, a range from a lane may differ from norm() in the last bit).
+    const double front = range_m[0], back = range_m[n - 1];
     ray = used.front() / front + used.back() / back;
     const double length = ray.norm();
     // Points on opposite sides of the sensor or at it: the angles' mean as before.
