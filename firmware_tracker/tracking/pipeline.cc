@@ -658,6 +658,39 @@ Eigen::Vector2d HalfExtentsAlong(std::span<const Eigen::Vector2d> points,
   return 0.5 * (hi - lo).matrix();
 }
 
+void NearestOtherSquares(std::span<const double> x, std::span<const double> y,
+                         std::span<double> out) {
+  // Each pair's distance once, (a - b) and (b - a) squared alike, two pairs at a time with the
+  // same arithmetic as one, dx dx + dy dy (bit for bit on x86-64; where multiply-adds are fused,
+  // e.g. aarch64, the lanes and the odd pair may round differently in the last bit), and the same
+  // minima in any order: squares are never -0 and no NaN reaches here (finite positions). (Eigen's
+  // min of two lanes is x86's minpd in std::min's operand order, which keeps the running minimum
+  // where d2 is NaN; NEON's fmin would take the NaN and order -0 below +0.)
+  const std::size_t n = out.size();
+  constexpr double kInf = std::numeric_limits<double>::infinity();
+  for (std::size_t i = 0; i < n; ++i) {
+    const double xi = x[i], yi = y[i];
+    Eigen::Array2d nearest_i = Eigen::Array2d::Constant(kInf);
+    std::size_t k = i + 1;
+    for (; k + 2 <= n; k += 2) {
+      const Eigen::Array2d dx = Eigen::Map<const Eigen::Array2d>(x.data() + k) - xi;
+      const Eigen::Array2d dy = Eigen::Map<const Eigen::Array2d>(y.data() + k) - yi;
+      const Eigen::Array2d d2 = dx * dx + dy * dy;
+      nearest_i = nearest_i.min(d2);
+      Eigen::Map<Eigen::Array2d> nearest_k(out.data() + k);
+      nearest_k = nearest_k.min(d2);
+    }
+    double nearest = std::min(out[i], std::min(nearest_i(0), nearest_i(1)));
+    for (; k < n; ++k) {
+      const double dx = x[k] - xi, dy = y[k] - yi;
+      const double d2 = dx * dx + dy * dy;
+      nearest = std::min(nearest, d2);
+      out[k] = std::min(out[k], d2);
+    }
+    out[i] = nearest;
+  }
+}
+
 Eigen::Vector2d BoxHalfExtents(std::span<const Eigen::Vector2d> points, double yaw_rad) {
   if (points.empty()) return Eigen::Vector2d::Zero();
   return HalfExtentsAlong(points, Eigen::Vector2d(std::cos(yaw_rad), std::sin(yaw_rad)));
@@ -1473,41 +1506,19 @@ class TrackingPipeline::Refiner final : public MeasurementRefiner {
   }
 
   // Per measurement of the scan, the squared distance to the nearest other one (ShapeOptions::
-  // neighbour_sigma_m), once per scan for all of them rather than once per refinement: each pair's
-  // distance once, (a - b) and (b - a) squared alike (the same minimum, bit for bit).
-  // The positions are copied into x and y arrays first, so that two pairs at a time take the same
-  // arithmetic, dx dx + dy dy, and the same minima (exact in any order: squares are never -0, and
-  // a NaN is never taken, as by std::min one pair at a time).
+  // neighbour_sigma_m), once per scan for all of them rather than once per refinement
+  // (internal::NearestOtherSquares, from copies of the positions in x and y arrays).
   void NearestOthers() {
     const std::span<const Measurement> m = p_.measurements_.span();
     const std::size_t n = m.size();
-    constexpr double kInf = std::numeric_limits<double>::infinity();
     for (std::size_t i = 0; i < n; ++i) {
       nearest_x_m_[i] = m[i].position_m.x();
       nearest_y_m_[i] = m[i].position_m.y();
-      nearest_m2_[i] = kInf;
+      nearest_m2_[i] = std::numeric_limits<double>::infinity();
     }
-    for (std::size_t i = 0; i < n; ++i) {
-      const double x = nearest_x_m_[i], y = nearest_y_m_[i];
-      Eigen::Array2d nearest_i = Eigen::Array2d::Constant(kInf);
-      std::size_t k = i + 1;
-      for (; k + 2 <= n; k += 2) {
-        const Eigen::Array2d dx = Eigen::Map<const Eigen::Array2d>(nearest_x_m_.data() + k) - x;
-        const Eigen::Array2d dy = Eigen::Map<const Eigen::Array2d>(nearest_y_m_.data() + k) - y;
-        const Eigen::Array2d d2 = dx * dx + dy * dy;
-        nearest_i = nearest_i.min(d2);
-        Eigen::Map<Eigen::Array2d> nearest_k(nearest_m2_.data() + k);
-        nearest_k = nearest_k.min(d2);
-      }
-      double nearest = std::min(nearest_m2_[i], std::min(nearest_i(0), nearest_i(1)));
-      for (; k < n; ++k) {
-        const double dx = nearest_x_m_[k] - x, dy = nearest_y_m_[k] - y;
-        const double d2 = dx * dx + dy * dy;
-        nearest = std::min(nearest, d2);
-        nearest_m2_[k] = std::min(nearest_m2_[k], d2);
-      }
-      nearest_m2_[i] = nearest;
-    }
+    internal::NearestOtherSquares(std::span<const double>(nearest_x_m_.data(), n),
+                                  std::span<const double>(nearest_y_m_.data(), n),
+                                  std::span<double>(nearest_m2_.data(), n));
     nearest_step_ = scans;
   }
 
@@ -2376,16 +2387,7 @@ void TrackingPipeline::MeasureObservation(const ScanView& scan, const Observatio
                                 std::atan2(pts.back().y(), pts.back().x()));
       ray = Eigen::Vector2d(std::cos(mid), std::sin(mid));
     }
-    // Two points at a time (x ray.x + y ray.y, p.dot(ray)'s products and sum): the same minimum.
-    Eigen::Array2d nearest_pair = Eigen::Array2d::Constant(front_range);
-    std::size_t i = 0;
-    for (; i + 2 <= pts.size(); i += 2) {
-      const Eigen::Array2d x(pts[i].x(), pts[i + 1].x());
-      const Eigen::Array2d y(pts[i].y(), pts[i + 1].y());
-      nearest_pair = nearest_pair.min(x * ray.x() + y * ray.y());
-    }
-    double nearest = std::min(nearest_pair(0), nearest_pair(1));
-    for (; i < pts.size(); ++i) nearest = std::min(nearest, pts[i].dot(ray));
+    const double nearest = internal::NearestAlong(pts, ray, front_range);
     const double width = (pts.back() - pts.front()).norm();
     extent = std::max(extent, width);
     const double depth = observation.legs

@@ -62,6 +62,7 @@
 // std::make_unique), not on the stack. Process itself needs about 30 KiB of stack (the ellipse
 // fit's per-point scratch). Not thread-safe; one instance per sensor.
 
+#include <algorithm>
 #include <array>
 #include <cstddef>
 #include <cstdint>
@@ -1461,6 +1462,35 @@ Eigen::Vector2d BoxHalfExtents(std::span<const Eigen::Vector2d> points, double y
 // The same along the unit vector e1 and across it (e1 turned by +90 degrees).
 Eigen::Vector2d HalfExtentsAlong(std::span<const Eigen::Vector2d> points,
                                  const Eigen::Vector2d& e1);
+
+// ShapeOptions::neighbour_sigma_m: each out[i] lowered to the least squared distance from point
+// i to another, (x[k] - x[i])^2 + (y[k] - y[i])^2 for k != i, where that is less (out all
+// infinite on entry: the nearest other's; left so where there is none). Precondition: x, y and
+// out of one size, finite.
+void NearestOtherSquares(std::span<const double> x, std::span<const double> y,
+                         std::span<double> out);
+
+// The least of start and the points' projections pts[i].dot(ray) (the nearest point along a
+// part's ray), two points at a time: each lane x ray.x + y ray.y, p.dot(ray)'s products and sum,
+// so the same minimum as std::min's one point at a time (bit for bit on x86-64; where multiply-adds
+// are fused, e.g. aarch64, the lanes and the scalar tail may round differently in the last bit).
+// Eigen's min of two lanes is x86's minpd in std::min's operand order; NEON's fmin would take a
+// NaN and order -0 below +0, but neither reaches here (the caller's points are finite and in
+// front of the sensor, start a range > 0). In the header so that it is inlined into the per-part
+// loop (a call per part cost ~18 instructions more than the loop).
+inline double NearestAlong(std::span<const Eigen::Vector2d> pts, const Eigen::Vector2d& ray,
+                           double start) {
+  Eigen::Array2d nearest_pair = Eigen::Array2d::Constant(start);
+  std::size_t i = 0;
+  for (; i + 2 <= pts.size(); i += 2) {
+    const Eigen::Array2d x(pts[i].x(), pts[i + 1].x());
+    const Eigen::Array2d y(pts[i].y(), pts[i + 1].y());
+    nearest_pair = nearest_pair.min(x * ray.x() + y * ray.y());
+  }
+  double nearest = std::min(nearest_pair(0), nearest_pair(1));
+  for (; i < pts.size(); ++i) nearest = std::min(nearest, pts[i].dot(ray));
+  return nearest;
+}
 
 // ShapeOptions::box_seen_extent_cov: the variance of a box's semi-axis (its size state size_half_m)
 // seen to at least seen_half_m: where a complete view showed it whole (whole_half_m > 0, half that

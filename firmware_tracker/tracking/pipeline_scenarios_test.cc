@@ -2755,6 +2755,82 @@ TEST(PipelineTest, HalfExtentsAlongAreTheDotProductsHalfRangesBitForBit) {
   }
 }
 
+// NearestOtherSquares (each measurement's nearest other, ShapeOptions::neighbour_sigma_m) takes two
+// pairs at a time and the odd one alone: against each point's squared distance to every other,
+// for 0 to 9 points (odd and even counts) on a coarse grid (equal distances and coincident points)
+// and off it, from infinity and from lower values kept where no other point is nearer.
+TEST(PipelineTest, NearestOtherSquaresAreTheLeastSquaredDistanceToAnotherPoint) {
+  std::mt19937 rng(20261129);
+  std::uniform_int_distribution<int> cell(-3, 3);
+  std::uniform_real_distribution<double> coordinate(-8.0, 8.0), start(0.0, 40.0);
+  constexpr double kInf = std::numeric_limits<double>::infinity();
+  for (int trial = 0; trial < 2000; ++trial) {
+    const std::size_t n = static_cast<std::size_t>(trial % 10);
+    const bool grid = trial % 3 == 0;
+    const bool from_inf = trial % 4 != 1;
+    std::vector<double> x(n), y(n), out(n), expected(n);
+    for (std::size_t i = 0; i < n; ++i) {
+      x[i] = grid ? 0.5 * cell(rng) : coordinate(rng);
+      y[i] = grid ? 0.5 * cell(rng) : coordinate(rng);
+      out[i] = expected[i] = from_inf ? kInf : start(rng);
+    }
+    for (std::size_t i = 0; i < n; ++i) {
+      for (std::size_t k = 0; k < n; ++k) {
+        if (k == i) continue;
+        const double dx = x[k] - x[i], dy = y[k] - y[i];
+        expected[i] = std::min(expected[i], dx * dx + dy * dy);
+      }
+    }
+    internal::NearestOtherSquares(x, y, out);
+    for (std::size_t i = 0; i < n; ++i) {
+      if (n == 1 && from_inf) {
+        ASSERT_EQ(out[i], kInf) << trial;  // no other point
+      }
+#ifdef __FP_FAST_FMA
+      // Fused multiply-adds (aarch64) may fuse either product of a sum: up to its rounding (the
+      // squares up to 512 m^2).
+      ASSERT_NEAR(out[i], expected[i], 1e-12) << trial << " " << i;
+#else
+      ASSERT_EQ(out[i], expected[i]) << trial << " " << i;
+#endif
+    }
+  }
+}
+
+// NearestAlong (the nearest point along a part's ray) takes two points at a time and the odd one
+// alone: against std::min over start and each point's p.dot(ray), for 0 to 9 points (odd and even
+// counts), the least one at every position in turn (the last of an odd count alone), ties and
+// a start below all of them.
+TEST(PipelineTest, NearestAlongIsTheLeastProjectionOrStart) {
+  std::mt19937 rng(20261130);
+  std::uniform_real_distribution<double> coordinate(-8.0, 8.0), angle(-common::kPi, common::kPi);
+  std::vector<Eigen::Vector2d> points;
+  for (int trial = 0; trial < 2000; ++trial) {
+    const std::size_t n = static_cast<std::size_t>(trial % 10);
+    points.resize(n);
+    for (Eigen::Vector2d& p : points) p = Eigen::Vector2d(coordinate(rng), coordinate(rng));
+    const double a = angle(rng);
+    const Eigen::Vector2d ray(std::cos(a), std::sin(a));
+    if (n > 0) {
+      // The least projection at position trial / 10 % n: that point moved 30 m against the ray
+      // (the others' projections lie within 8 sqrt(2) m of 0), a tie where it is copied onto
+      // another.
+      const std::size_t least = static_cast<std::size_t>(trial / 10) % n;
+      points[least] -= 30.0 * ray;
+      if (n > 1 && trial % 7 == 0) points[(least + 1) % n] = points[least];
+    }
+    const double start = trial % 5 == 0 ? -50.0 : 12.0;  // below every projection, or above some
+    double expected = start;
+    for (const Eigen::Vector2d& p : points) expected = std::min(expected, p.dot(ray));
+    const double nearest = internal::NearestAlong(points, ray, start);
+#ifdef __FP_FAST_FMA
+    ASSERT_NEAR(nearest, expected, 64.0 * std::numeric_limits<double>::epsilon()) << trial;
+#else
+    ASSERT_EQ(nearest, expected) << trial;
+#endif
+  }
+}
+
 // ShapeOptions::box_drop_occluders: the points of a box's near end (x = 4.55, the box centred at
 // (5, 0), 0.9 x 0.6 m along x) are kept, a pusher's two legs 0.35 m in front of it are not, and
 // where the segment ends on them that silhouette end is no longer the box's.
