@@ -1269,8 +1269,11 @@ class TrackingPipeline {
   void MeasureObservation(const ScanView& scan, const Observation& observation);
   ObservationPart MakePart(const ScanView& scan, const Segment& segment, std::size_t first,
                            std::size_t count) const;
-  // MakePart into `part`, which holds a default ObservationPart (an observation's slot just
-  // emplaced): built in place instead of copied there.
+  // MakePart into `part`, built in place instead of copied there. Precondition: `part` holds a
+  // default ObservationPart (an observation's slot just emplaced: FixedVector::emplace_slot assigns
+  // a default Observation): the fields set only where they apply (deep_split, the edges'
+  // *_in_mixed_beam, mixed_leg_centre_m and mixed_leg_along_var_m2) are left as they are, so a
+  // reused part would keep another's.
   void MakePartIn(const ScanView& scan, const Segment& segment, std::size_t first,
                   std::size_t count, ObservationPart& part) const;
   void MarkMixedPixels(const ScanView& scan, std::span<const Eigen::Vector2d> points,
