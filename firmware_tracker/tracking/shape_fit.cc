@@ -1574,6 +1574,13 @@ Mat5 NormalSolverInverse(const Mat5& h, bool result_entries_only) {
   return result_entries_only ? solver.ResultInverse() : solver.Inverse();
 }
 
+double FitCubeRoot(double x) { return RootN<3>(x); }
+
+Eigen::Vector2d FitCubeRootPair(double x0, double x1) {
+  const Lanes root = RootN<3>(Lanes(x0, x1));
+  return Eigen::Vector2d(root(0), root(1));
+}
+
 }  // namespace internal
 
 }  // namespace lrfnet::tracking

@@ -174,6 +174,11 @@ Eigen::Matrix<double, 5, 5> NormalSolverInverse(const Eigen::Matrix<double, 5, 5
 bool GuessWithinReach(ShapeModel model, const Eigen::Vector2d& size_m, double yaw_rad,
                       const Eigen::Vector2d& ray, double nearest_along,
                       const Eigen::Vector2d& guess);
+// The fit's cube root (Halley's iteration from a guess built from the exponent bits; libm's cbrt
+// outside [1e-290, 1e290]) of x, and of two values side by side in one lane pair as the support
+// function takes them. For the test that both give the same bits.
+double FitCubeRoot(double x);
+Eigen::Vector2d FitCubeRootPair(double x0, double x1);
 }  // namespace internal
 
 // Support function of the shape (extent from the centre in direction n, unit vector); d_size, if

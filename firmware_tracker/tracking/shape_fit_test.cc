@@ -5,7 +5,9 @@
 #include <Eigen/Cholesky>
 #include <algorithm>
 #include <array>
+#include <bit>
 #include <cmath>
+#include <cstdint>
 #include <cstdio>
 #include <limits>
 #include <random>
@@ -849,6 +851,49 @@ TEST(ShapeFitTest, GuessWithinReachAgreesWithTheStartsDepth) {
   EXPECT_GT(near, 1000);
   EXPECT_EQ(near_settled, near);
   EXPECT_GT(settled, near);
+}
+
+// The support function's two cube roots side by side in one lane pair: the same bits as the
+// scalar root of each (where multiply-adds are not fused; on x86-64), over values from 1e-300 to
+// 1e300 and the ones outside the iteration's range that libm's cbrt answers (0, -0, subnormal,
+// below 1e-290 and above 1e290, the largest double, infinity, negative), alone and paired with
+// a value inside it (then both lanes go to the scalar root).
+TEST(ShapeFitTest, CubeRootsInALanePairAreTheScalarRootsBitForBit) {
+#ifdef __FP_FAST_FMA
+  GTEST_SKIP() << "multiply-adds are fused: lanes and scalar code may round differently";
+#else
+  const auto bits = [](double v) { return std::bit_cast<std::uint64_t>(v); };
+  std::mt19937 rng(20261129);
+  std::uniform_real_distribution<double> log10(-300.0, 300.0);
+  std::vector<double> values = {0.0,
+                                -0.0,
+                                std::numeric_limits<double>::denorm_min(),
+                                1e-310,
+                                std::numeric_limits<double>::min(),
+                                1e-291,
+                                1e-290,
+                                1.0,
+                                8.0,
+                                0.3,
+                                1e290,
+                                1e291,
+                                1e300,
+                                std::numeric_limits<double>::max(),
+                                std::numeric_limits<double>::infinity(),
+                                -8.0};
+  for (int i = 0; i < 2000; ++i) values.push_back(std::pow(10.0, log10(rng)));
+  for (std::size_t i = 0; i < values.size(); ++i) {
+    const double a = values[i];
+    const double b = values[(i * 7 + 3) % values.size()];
+    const Eigen::Vector2d pair = internal::FitCubeRootPair(a, b);
+    ASSERT_EQ(bits(pair(0)), bits(internal::FitCubeRoot(a))) << a << " beside " << b;
+    ASSERT_EQ(bits(pair(1)), bits(internal::FitCubeRoot(b))) << b << " beside " << a;
+  }
+  // The roots themselves: within 1.2e-12 of libm's (kRootSteps' figure) inside the range.
+  for (const double v : {1e-280, 0.3, 8.0, 1e280}) {
+    EXPECT_NEAR(internal::FitCubeRoot(v) / std::cbrt(v), 1.0, 1.2e-12) << v;
+  }
+#endif
 }
 
 // What a scanner at the origin sees of a circle (centre c, radius r) with beams of full divergence
