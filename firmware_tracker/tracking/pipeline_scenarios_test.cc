@@ -76,6 +76,25 @@ PipelineCounters RunKneeWalk(const TrackerOptions& options, float background_m,
   return pipeline.counters();
 }
 
+// In RunKneeWalk's scans: a leg (radius 0.06 m) at range_m whose centre lies on fractional beam c,
+// drawn where it is nearer than what the beam returns already.
+void DrawKneeLeg(std::vector<float>& ranges, double c, double range_m) {
+  constexpr double kStepRad = 0.5 * common::kPi / 180.0;
+  for (auto b = static_cast<std::size_t>(c - 3.0); b <= static_cast<std::size_t>(c + 3.0); ++b) {
+    const double d = (static_cast<double>(b) - c) * kStepRad * range_m;
+    if (std::abs(d) < 0.06) {
+      ranges[b] = std::min(ranges[b], static_cast<float>(range_m - std::sqrt(0.06 * 0.06 - d * d)));
+    }
+  }
+}
+
+// In RunKneeWalk's scans: the beam of an object's centre that comes in from the side, 10 beams
+// (0.44 m at 5 m) over move_scans, then still.
+double SlideInBeam(std::int64_t i, std::int64_t move_scans) {
+  return 170.0 +
+         (10.0 / static_cast<double>(move_scans)) * static_cast<double>(std::min(i, move_scans));
+}
+
 // A person moving through keyframes (time s, position m) with linear interpolation; absent before
 // the first and after the last keyframe. Shoulders (major axis) across the walking direction.
 class Walker {
@@ -3731,6 +3750,57 @@ struct MixedPixelRun {
   int matches = 0;
 };
 
+// Confirmed tracks within 0.5 m of one body's true centre, summed over a run's scans: their error
+// along the line of sight (+: beyond the body centre), its length and their NEES.
+struct AlongRayScore {
+  double radial_sum_m = 0.0;
+  double error_sum_m = 0.0;
+  double nees_sum = 0.0;
+  int matches = 0;
+  void Add(const ScanTracks& out, const Eigen::Vector2d& truth) {
+    const Eigen::Vector2d los = truth.normalized();
+    for (const TrackReport& r : out.tracks) {
+      const Eigen::Vector2d e = Position(r) - truth;
+      if (r.state != TrackState::kConfirmed || e.norm() > 0.5) continue;
+      radial_sum_m += e.dot(los);
+      error_sum_m += e.norm();
+      nees_sum += e.dot(r.covariance.topLeftCorner<2, 2>().ldlt().solve(e));
+      ++matches;
+    }
+  }
+  double Mean(double sum) const { return matches > 0 ? sum / matches : 0.0; }
+};
+
+// Walkers (each a 0.25 x 0.15 m body) past walls, every scan's ranges changed by mix(clean, mixed)
+// before the pipeline sees them; the first walker scored from 1 s after it starts.
+template <typename Mix>
+AlongRayScore RunMixedScans(SyntheticScanner& scanner, TrackingPipeline& pipeline,
+                            const std::vector<Wall>& walls, const std::vector<Walker>& walkers,
+                            Mix mix) {
+  std::vector<Body> bodies;
+  std::vector<float> mixed;
+  AlongRayScore score;
+  const Walker& scored = walkers.front();
+  const auto scans = static_cast<std::int64_t>(std::lround(scored.end_s() * kRateHz));
+  for (std::int64_t k = 0; k < scans; ++k) {
+    const double t_s = scanner.ScanTimeS(k);
+    bodies.clear();
+    for (const Walker& w : walkers) {
+      if (const auto p = w.At(t_s)) bodies.push_back({*p, 0.25, 0.15, w.YawAt(t_s)});
+    }
+    const ScanView clean = scanner.Render(k, walls, bodies);
+    mixed.assign(clean.range_m.begin(), clean.range_m.end());
+    mix(clean, mixed);
+    ScanView scan = clean;
+    scan.range_m = mixed;
+    const ScanTracks& out = pipeline.Process(scan, static_cast<std::uint32_t>(k));
+    const auto truth = scored.At(t_s);
+    if (!truth || t_s < scored.start_s() + 1.0) continue;
+    score.Add(out, *truth);
+  }
+  return score;
+}
+
 MixedPixelRun RunMixedPixels(const TrackerOptions& options) {
   ScannerConfig config;
   config.max_range_m = 40.0;
@@ -3740,46 +3810,20 @@ MixedPixelRun RunMixedPixels(const TrackerOptions& options) {
   TrackingPipeline pipeline(options);
   const std::vector<Wall> walls = {{{31.0, -8.0}, {31.0, 8.0}}};
   const Walker walker = Walker::Path(kLearnedS, {{29.5, 0.5}, {26.5, 0.5}}, 1.0);
-  std::vector<Body> bodies;
-  std::vector<float> mixed;
-  MixedPixelRun run;
-  double nees_sum = 0.0;
-  const auto scans = static_cast<std::int64_t>(std::lround(walker.end_s() * kRateHz));
-  for (std::int64_t k = 0; k < scans; ++k) {
-    const double t_s = scanner.ScanTimeS(k);
-    const auto truth = walker.At(t_s);
-    bodies.clear();
-    if (truth) bodies.push_back({*truth, 0.25, 0.15, walker.YawAt(t_s)});
-    const ScanView clean = scanner.Render(k, walls, bodies);
-    mixed.assign(clean.range_m.begin(), clean.range_m.end());
-    // The first and last beam on the body: half on the wall behind.
-    for (std::size_t i = 1; i + 1 < mixed.size(); ++i) {
-      const auto on_body = [&](std::size_t j) {
-        return clean.range_m[j] > 0.0f && clean.range_m[j] < 30.0f;
-      };
-      if (on_body(i) && (!on_body(i - 1) || !on_body(i + 1))) {
-        mixed[i] = 0.5f * (clean.range_m[i] +
-                           (on_body(i - 1) ? clean.range_m[i + 1] : clean.range_m[i - 1]));
-      }
-    }
-    ScanView scan = clean;
-    scan.range_m = mixed;
-    const ScanTracks& out = pipeline.Process(scan, static_cast<std::uint32_t>(k));
-    if (!truth || t_s < walker.start_s() + 1.0) continue;
-    const Eigen::Vector2d los = truth->normalized();
-    for (const TrackReport& r : out.tracks) {
-      const Eigen::Vector2d e = Position(r) - *truth;
-      if (r.state != TrackState::kConfirmed || e.norm() > 0.5) continue;
-      run.radial_mean_m += e.dot(los);
-      nees_sum += e.dot(r.covariance.topLeftCorner<2, 2>().ldlt().solve(e));
-      ++run.matches;
-    }
-  }
-  if (run.matches > 0) {
-    run.radial_mean_m /= run.matches;
-    run.nees_mean = nees_sum / run.matches;
-  }
-  return run;
+  const AlongRayScore score = RunMixedScans(
+      scanner, pipeline, walls, {walker}, [](const ScanView& clean, std::vector<float>& mixed) {
+        // The first and last beam on the body: half on the wall behind.
+        for (std::size_t i = 1; i + 1 < mixed.size(); ++i) {
+          const auto on_body = [&](std::size_t j) {
+            return clean.range_m[j] > 0.0f && clean.range_m[j] < 30.0f;
+          };
+          if (on_body(i) && (!on_body(i - 1) || !on_body(i + 1))) {
+            mixed[i] = 0.5f * (clean.range_m[i] +
+                               (on_body(i - 1) ? clean.range_m[i + 1] : clean.range_m[i - 1]));
+          }
+        }
+      });
+  return {score.Mean(score.radial_sum_m), score.Mean(score.nees_sum), score.matches};
 }
 
 TEST(PipelineScenarioTest, MixedPixelsAtAFarBodysEdgesDoNotPushItsCentreAway) {
@@ -3825,46 +3869,21 @@ DeepTailRun RunDeepTail(const TrackerOptions& options) {
   const std::vector<Wall> walls = {{{12.0, -6.0}, {12.0, 6.0}}};
   const Walker front = Walker::Path(kLearnedS, {{9.5, 0.0}, {6.5, 0.0}}, 1.0);
   const Walker behind = Walker::Path(kLearnedS, {{10.2, 0.35}, {7.2, 0.35}}, 1.0);
-  std::vector<Body> bodies;
-  std::vector<float> mixed;
-  DeepTailRun run;
-  const auto scans = static_cast<std::int64_t>(std::lround(front.end_s() * kRateHz));
-  for (std::int64_t k = 0; k < scans; ++k) {
-    const double t_s = scanner.ScanTimeS(k);
-    const auto truth = front.At(t_s);
-    bodies.clear();
-    if (truth) bodies.push_back({*truth, 0.25, 0.15, front.YawAt(t_s)});
-    if (const auto p = behind.At(t_s)) bodies.push_back({*p, 0.25, 0.15, behind.YawAt(t_s)});
-    const ScanView clean = scanner.Render(k, walls, bodies);
-    mixed.assign(clean.range_m.begin(), clean.range_m.end());
-    // A body's edge beam beside a body behind it (not the wall): the mean of the two ranges.
-    for (std::size_t i = 1; i + 1 < mixed.size(); ++i) {
-      for (const std::size_t j : {i - 1, i + 1}) {
-        if (clean.range_m[i] > 0.0f && clean.range_m[j] > clean.range_m[i] + 0.2f &&
-            clean.range_m[j] < 11.0f) {
-          mixed[i] = 0.5f * (clean.range_m[i] + clean.range_m[j]);
+  const AlongRayScore score = RunMixedScans(
+      scanner, pipeline, walls, {front, behind},
+      [](const ScanView& clean, std::vector<float>& mixed) {
+        // A body's edge beam beside a body behind it (not the wall): the mean of the two ranges.
+        for (std::size_t i = 1; i + 1 < mixed.size(); ++i) {
+          for (const std::size_t j : {i - 1, i + 1}) {
+            if (clean.range_m[i] > 0.0f && clean.range_m[j] > clean.range_m[i] + 0.2f &&
+                clean.range_m[j] < 11.0f) {
+              mixed[i] = 0.5f * (clean.range_m[i] + clean.range_m[j]);
+            }
+          }
         }
-      }
-    }
-    ScanView scan = clean;
-    scan.range_m = mixed;
-    const ScanTracks& out = pipeline.Process(scan, static_cast<std::uint32_t>(k));
-    if (!truth || t_s < front.start_s() + 1.0) continue;
-    const Eigen::Vector2d los = truth->normalized();
-    for (const TrackReport& r : out.tracks) {
-      const Eigen::Vector2d e = Position(r) - *truth;
-      if (r.state != TrackState::kConfirmed || e.norm() > 0.5) continue;
-      run.radial_mean_m += e.dot(los);
-      run.error_mean_m += e.norm();
-      ++run.matches;
-    }
-  }
-  if (run.matches > 0) {
-    run.radial_mean_m /= run.matches;
-    run.error_mean_m /= run.matches;
-  }
-  run.cuts = pipeline.counters().deep_tail_cuts;
-  return run;
+      });
+  return {score.Mean(score.radial_sum_m), score.Mean(score.error_sum_m), score.matches,
+          pipeline.counters().deep_tail_cuts};
 }
 
 TEST(PipelineScenarioTest, APersonBehindJoinedThroughAMixedPixelDoesNotPullTheCentreBack) {
@@ -4929,20 +4948,12 @@ TEST(PipelineScenarioTest, AStillKneeHeightPairDeepAlongTheRayBehindASingleBeamI
   constexpr double kStepRad = 0.5 * common::kPi / 180.0;
   constexpr double kRangeM = 5.0;
   constexpr std::int64_t kMoveScans = 50, kScans = 350;
-  // A leg (radius 0.06 m) at kRangeM + depth_m whose centre lies on fractional beam c.
+  // A leg at kRangeM + depth_m whose centre lies on fractional beam c.
   const auto leg = [&](std::vector<float>& ranges, double c, double depth_m) {
-    const double range = kRangeM + depth_m;
-    for (auto b = static_cast<std::size_t>(c - 3.0); b <= static_cast<std::size_t>(c + 3.0); ++b) {
-      const double d = (static_cast<double>(b) - c) * kStepRad * range;
-      if (std::abs(d) < 0.06) {
-        ranges[b] = static_cast<float>(range - std::sqrt(0.06 * 0.06 - d * d));
-      }
-    }
+    DrawKneeLeg(ranges, c, kRangeM + depth_m);
   };
   // Beam of the object's centre: 10 beams (0.44 m) in 2 s, then still.
-  const auto centre = [&](std::int64_t i) {
-    return 170.0 + 0.2 * static_cast<double>(std::min(i, kMoveScans));
-  };
+  const auto centre = [&](std::int64_t i) { return SlideInBeam(i, kMoveScans); };
   struct Run {
     int late_reports = 0;  // reported confirmed tracks near the object in the last 3 s
     std::uint64_t absorbed = 0;
@@ -5000,18 +5011,9 @@ TEST(PipelineScenarioTest, KneeHeightPairWithSomethingNearerBetweenCoversAnObjec
   constexpr double kStepRad = 0.5 * common::kPi / 180.0;
   constexpr double kFaceM = 5.5, kLegsM = 4.9;
   constexpr std::int64_t kMoveScans = 50, kScans = 250;
-  const auto leg = [&](std::vector<float>& ranges, double c, double range) {
-    for (auto b = static_cast<std::size_t>(c - 3.0); b <= static_cast<std::size_t>(c + 3.0); ++b) {
-      const double d = (static_cast<double>(b) - c) * kStepRad * range;
-      if (std::abs(d) < 0.06) {
-        ranges[b] = std::min(ranges[b], static_cast<float>(range - std::sqrt(0.06 * 0.06 - d * d)));
-      }
-    }
-  };
+  const auto leg = DrawKneeLeg;
   // Beam of the objects' centre line: 10 beams in 2 s, then still.
-  const auto centre = [&](std::int64_t i) {
-    return 170.0 + 0.2 * static_cast<double>(std::min(i, kMoveScans));
-  };
+  const auto centre = [&](std::int64_t i) { return SlideInBeam(i, kMoveScans); };
   const auto bearing = [&](std::int64_t i) { return -0.5 * common::kPi + centre(i) * kStepRad; };
   struct Run {
     std::vector<double> nees;          // per late scan, the track nearest the trolley's centre
