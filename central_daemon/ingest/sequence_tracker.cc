@@ -72,16 +72,22 @@ void SequenceTracker::ClearSlots(std::uint64_t from, std::uint64_t to) {
 
 std::uint64_t SequenceTracker::MissingInWindow() const {
   // Numbers (lo, highest_) with lo = max(base_, highest_ - window_): at most window_ - 1 of them.
+  // Counted by how many are left, not by comparing with highest_: lo + 1 wraps to 0 where lo is
+  // the largest sequence number (a hostile datagram's), and a loop up to highest_ would then run
+  // over the whole 64-bit range.
   const std::uint64_t lo = std::max(base_, highest_ - std::min(highest_, window_));
   std::uint64_t missing = 0;
-  for (std::uint64_t s = lo + 1; s < highest_;) {
+  std::uint64_t left = highest_ - lo;  // lo <= highest_: base_ <= highest_
+  left = left > 0 ? left - 1 : 0;
+  for (std::uint64_t s = lo + 1; left > 0;) {
     const std::uint64_t slot = s & (slots_ - 1);
     const std::uint64_t bit = slot % 64;
-    const std::uint64_t take = std::min<std::uint64_t>(highest_ - s, 64 - bit);
+    const std::uint64_t take = std::min<std::uint64_t>(left, 64 - bit);
     const std::uint64_t mask =
         take == 64 ? ~std::uint64_t{0} : ((std::uint64_t{1} << take) - 1) << bit;
     missing += take - static_cast<std::uint64_t>(std::popcount(received_[slot / 64] & mask));
     s += take;
+    left -= take;
   }
   return missing;
 }

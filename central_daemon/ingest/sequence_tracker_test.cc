@@ -104,6 +104,22 @@ TEST(SequenceTrackerTest, WrapsAroundTheTopOfTheSequenceSpace) {
   EXPECT_EQ(t.counters().lost, 0u);  // top - 2 is still inside the window
 }
 
+// A state that starts at the largest sequence number (a hostile or corrupt datagram's): counting
+// what it misses ends at once (it ran over the whole 64-bit range before) and finds nothing.
+TEST(SequenceTrackerTest, AStateStartedAtTheTopOfTheSequenceSpaceMissesNothing) {
+  const std::uint64_t top = ~std::uint64_t{0};
+  SequenceTracker t(64, 1000);
+  EXPECT_EQ(t.Observe(1, top), V::kFirst);
+  EXPECT_EQ(t.counters().lost, 0u);
+  EXPECT_EQ(t.Observe(1, top - 2), V::kReordered);
+  EXPECT_EQ(t.counters().lost, 0u);
+  EXPECT_EQ(t.counters().received, 2u);
+  SequenceTracker u(4, 1000);
+  u.Observe(1, top - 10);
+  EXPECT_EQ(u.Observe(1, top), V::kInOrder);  // top - 9 to top - 4 left the window: lost
+  EXPECT_EQ(u.counters().lost, 6u);
+}
+
 // Reference model: the documented rules over the set of every accepted number of the state.
 struct Model {
   Model(std::uint64_t w, std::uint64_t j) : window(w), max_jump(j) {}
