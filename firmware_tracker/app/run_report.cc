@@ -43,7 +43,7 @@ std::string PipelineSummary(const tracking::PipelineCounters& c) {
       "legs_coasting_uncertain={} coasting_uncertain={} box_unseen_widened={} "
       "neighbour_widened={} lone_beam_edge_echoes={} far_leg_births={} see_through_splits={} "
       "torso_edge_echoes={} step_seam_splits={} mixed_pixel_legs={} segment_excess_widened={} "
-      "box_view_widened={} still_leg_pairs={}",
+      "box_view_widened={} still_leg_pairs={} occluded_gap_widened={} deep_tail_cuts={}",
       c.rejected_scans, c.learning_scans, c.segments, c.dropped_segments, c.ellipse_measurements,
       c.com_measurements, c.shape_fits, c.failed_shape_fits, c.leg_pairs, c.single_legs,
       c.legs_behind, c.veiled_segments, c.shadowed_legs, c.absorbed_objects, c.seen_through,
@@ -56,7 +56,7 @@ std::string PipelineSummary(const tracking::PipelineCounters& c) {
       c.box_pieces_rejoined, c.legs_coasting_uncertain, c.coasting_uncertain, c.box_unseen_widened,
       c.neighbour_widened, c.lone_beam_edge_echoes, c.far_leg_births, c.see_through_splits,
       c.torso_edge_echoes, c.step_seam_splits, c.mixed_pixel_legs, c.segment_excess_widened,
-      c.box_view_widened, c.still_leg_pairs);
+      c.box_view_widened, c.still_leg_pairs, c.occluded_gap_widened, c.deep_tail_cuts);
 }
 
 std::string MultiTrackerSummary(const tracking::MultiTrackerCounters& c) {

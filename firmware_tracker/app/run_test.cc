@@ -113,6 +113,8 @@ TEST(TrackerRun, PipelineSummaryNamesEveryCounter) {
   c.segment_excess_widened = 50;
   c.box_view_widened = 51;
   c.still_leg_pairs = 52;
+  c.occluded_gap_widened = 53;
+  c.deep_tail_cuts = 54;
   EXPECT_EQ(PipelineSummary(c),
             "rejected_scans=1 learning_scans=2 segments=3 dropped_segments=4 "
             "ellipse_measurements=5 com_measurements=6 shape_fits=7 failed_shape_fits=8 "
@@ -129,7 +131,7 @@ TEST(TrackerRun, PipelineSummaryNamesEveryCounter) {
             "coasting_uncertain=41 box_unseen_widened=42 neighbour_widened=43 "
             "lone_beam_edge_echoes=44 far_leg_births=45 see_through_splits=46 torso_edge_echoes=47 "
             "step_seam_splits=48 mixed_pixel_legs=49 segment_excess_widened=50 "
-            "box_view_widened=51 still_leg_pairs=52");
+            "box_view_widened=51 still_leg_pairs=52 occluded_gap_widened=53 deep_tail_cuts=54");
 }
 
 TEST(TrackerRun, MultiTrackerSummaryNamesEveryCounterButTheTwoBeforeIt) {

@@ -2435,15 +2435,11 @@ void TrackingPipeline::BuildObservations(const ScanView& scan) {
     std::optional<std::size_t> tracks;
     const auto& segments = segments_.segments;
     for (std::size_t i = 0; i < segments.size();) {
-      Segment s = segments[i];
       const std::size_t first = i;
       const std::size_t last =
           options_.shape.box_rejoin_pieces ? BoxPiecesEnd(i, scan.stamp_ns, tracks) : i;
-      for (std::size_t k = i + 1; k <= last; ++k) {
-        // ShapeOptions::box_rejoin_pieces: the pieces as the one segment they would have been.
-        s.end_beam = segments[k].end_beam;
-        s.point_count += segments[k].point_count;
-      }
+      // ShapeOptions::box_rejoin_pieces: the pieces as the one segment they would have been.
+      Segment s = JoinedPieces(first, last);
       counters_.box_pieces_rejoined += last - i;
       const bool whole = last == i;  // no box pieces rejoined
       i = last + 1;
@@ -2461,11 +2457,7 @@ void TrackingPipeline::BuildObservations(const ScanView& scan) {
       if (options_.shape.split_deep_tail && whole) {
         const std::size_t chain = WidthPiecesEnd(first);
         const auto try_tail = [&](std::size_t end_piece) {
-          Segment m = s;
-          for (std::size_t k = first + 1; k <= end_piece; ++k) {
-            m.end_beam = segments[k].end_beam;
-            m.point_count += segments[k].point_count;
-          }
+          const Segment m = JoinedPieces(first, end_piece);
           const DeepTails t = FindDeepTails(segments_, m, options_.shape.deep_tail_depth_m);
           const std::size_t body_n = m.point_count - t.lead - t.trail;
           if (t.lead + t.trail == 0 || body_n < options_.segmentation.min_points) return false;
@@ -2647,6 +2639,15 @@ bool TrackingPipeline::OnConfirmedBox(const Segment& s, common::UtcNs stamp_ns,
     }
   }
   return false;
+}
+
+Segment TrackingPipeline::JoinedPieces(std::size_t first, std::size_t last) const {
+  Segment s = segments_.segments[first];
+  for (std::size_t k = first + 1; k <= last; ++k) {
+    s.end_beam = segments_.segments[k].end_beam;
+    s.point_count += segments_.segments[k].point_count;
+  }
+  return s;
 }
 
 std::size_t TrackingPipeline::WidthPiecesEnd(std::size_t first) const {

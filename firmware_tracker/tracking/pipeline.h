@@ -1232,13 +1232,16 @@ class TrackingPipeline {
 
   void MeasureLegacy(const ScanView& scan);
   void BuildObservations(const ScanView& scan);
+  // Segments first..last of the scan (consecutive pieces the segmentation cut) as the one segment
+  // they would have been.
+  Segment JoinedPieces(std::size_t first, std::size_t last) const;
+  // The last of the run of segments from `first` that the segmentation cut only for their width
+  // or point count (each next piece continues within the jump limit), `first` where none.
+  std::size_t WidthPiecesEnd(std::size_t first) const;
   // ShapeOptions::box_rejoin_pieces: the last of the segments from `first` on that are pieces of
   // one outline lying on a confirmed box track's predicted rectangle (predictions_, `tracks` of
   // them, predicted at `stamp_ns` on the first run of pieces of the scan); `first` where none
   // follows.
-  // The last of the run of segments from `first` that the segmentation cut only for their width
-  // or point count (each next piece continues within the jump limit), `first` where none.
-  std::size_t WidthPiecesEnd(std::size_t first) const;
   std::size_t BoxPiecesEnd(std::size_t first, common::UtcNs stamp_ns,
                            std::optional<std::size_t>& tracks);
   // ShapeOptions::split_see_through: whether a point of segment s lies on a confirmed box track's

@@ -397,6 +397,14 @@ struct Follow {
   double mean_velocity_error_mps = 0.0;
 };
 
+// A run before and after a change, as the test's properties "before" and "after"; returns the two
+// for a failure's trace.
+std::string RecordBeforeAfter(const std::string& before, const std::string& after) {
+  ::testing::Test::RecordProperty("before", before);
+  ::testing::Test::RecordProperty("after", after);
+  return "before: " + before + "; after: " + after;
+}
+
 std::string Describe(const Follow& f) {
   std::string s = "frames " + std::to_string(f.frames) + ", unmatched " +
                   std::to_string(f.unmatched) + ", ids:";
@@ -1637,9 +1645,7 @@ std::string Describe(const HiddenLegWindows& w) {
 TEST(PipelineScenarioTest, LoneLegCentreAlongTheWalkFromTheStandingLeg) {
   const HiddenLegWindows before = WalkWithOneLegHiddenAtTimes(false);
   const HiddenLegWindows after = WalkWithOneLegHiddenAtTimes(true);
-  SCOPED_TRACE("before: " + Describe(before) + "; after: " + Describe(after));
-  RecordProperty("before", Describe(before));
-  RecordProperty("after", Describe(after));
+  SCOPED_TRACE(RecordBeforeAfter(Describe(before), Describe(after)));
   // Measured: before along RMS 0.0285 m, after 0.0216 m (35 screened scans, 12 from standing).
   ASSERT_GT(before.n, 30);
   ASSERT_GT(after.n, 30);
@@ -1911,9 +1917,7 @@ StandingRuns StandFarAtKneeHeight(bool split) {
 TEST(PipelineScenarioTest, TwoLegsSideBySideInOneFewPointSegmentAreMeasuredAsAPair) {
   const StandingRuns before = StandFarAtKneeHeight(false);
   const StandingRuns after = StandFarAtKneeHeight(true);
-  SCOPED_TRACE("before: " + Describe(before, "split") + "; after: " + Describe(after, "split"));
-  RecordProperty("before", Describe(before, "split"));
-  RecordProperty("after", Describe(after, "split"));
+  SCOPED_TRACE(RecordBeforeAfter(Describe(before, "split"), Describe(after, "split")));
   ASSERT_GT(before.n, 200);
   ASSERT_GT(after.n, 200);
   EXPECT_EQ(before.counted, 0u);
@@ -1970,9 +1974,7 @@ std::string Describe(const CrossingDeep& c) {
 TEST(PipelineScenarioTest, ADeepFewPointLegOfAConfirmedTrackIsMeasuredAsItsTwoLegs) {
   const CrossingDeep before = CrossAtKneeHeight(false);
   const CrossingDeep after = CrossAtKneeHeight(true);
-  SCOPED_TRACE("before: " + Describe(before) + "; after: " + Describe(after));
-  RecordProperty("before", Describe(before));
-  RecordProperty("after", Describe(after));
+  SCOPED_TRACE(RecordBeforeAfter(Describe(before), Describe(after)));
   ASSERT_GT(before.n, 200);
   ASSERT_GT(after.n, 200);
   EXPECT_EQ(before.deep_pairs, 0u);
@@ -2035,9 +2037,7 @@ std::string Describe(const StandingTouching& s) {
 TEST(PipelineScenarioTest, TouchingLegsAreMeasuredWithTheFartherLegsDepthAlongTheRay) {
   const StandingTouching before = StandWithTouchingLegs(false);
   const StandingTouching after = StandWithTouchingLegs(true);
-  SCOPED_TRACE("before: " + Describe(before) + "; after: " + Describe(after));
-  RecordProperty("before", Describe(before));
-  RecordProperty("after", Describe(after));
+  SCOPED_TRACE(RecordBeforeAfter(Describe(before), Describe(after)));
   ASSERT_GT(before.n, 200);
   ASSERT_GT(after.n, 200);
   EXPECT_EQ(before.touching, 0u);
@@ -2086,9 +2086,7 @@ TEST(PipelineScenarioTest, StillLegsAreReportedWithoutTheGaitAndTheUnrealisedAcc
   const StandingRuns before = StandStillAtKneeHeight(false);
   const StandingRuns after = StandStillAtKneeHeight(true);
   const std::string still = "still pairs";
-  SCOPED_TRACE("before: " + Describe(before, still) + "; after: " + Describe(after, still));
-  RecordProperty("before", Describe(before, still));
-  RecordProperty("after", Describe(after, still));
+  SCOPED_TRACE(RecordBeforeAfter(Describe(before, still), Describe(after, still)));
   ASSERT_GT(before.n, 200);
   EXPECT_EQ(before.counted, 0u);
   EXPECT_GT(after.counted, 100u);

@@ -79,6 +79,15 @@ std::size_t SeeThroughCuts(const ScanView& scan, const SegmentList& list, const 
                            const SegmentationOptions& options, double min_width_m,
                            std::span<std::size_t> cuts);
 
+// Of segment `s` of `list`: how many of its first points (lead) and of its last points (trail), in
+// runs from either end, lie farther from the sensor than the segment's nearest point by more than
+// depth_m. The nearest point is in neither run.
+struct DeepTails {
+  std::size_t lead = 0;
+  std::size_t trail = 0;
+};
+DeepTails FindDeepTails(const SegmentList& list, const Segment& s, double depth_m);
+
 // Where segment `s` of `list` holds two convex bodies that touch in the view with no beam between
 // them: the points k (in order) where the range steps by more than options.min_step_m from point
 // k - 1 while the outline turns there from receding to approaching. A convex body's range along
@@ -92,15 +101,6 @@ std::size_t SeeThroughCuts(const ScanView& scan, const SegmentList& list, const 
 // nearer body hides part of the farther one, the farther piece's end at the step is where the
 // nearer one's silhouette cuts its outline, not an end of that outline (a pair seen one partly
 // behind the other). false: both pieces turn at the step.
-// Of segment `s` of `list`: how many of its first points (lead) and of its last points (trail), in
-// runs from either end, lie farther from the sensor than the segment's nearest point by more than
-// depth_m. The nearest point is in neither run.
-struct DeepTails {
-  std::size_t lead = 0;
-  std::size_t trail = 0;
-};
-DeepTails FindDeepTails(const SegmentList& list, const Segment& s, double depth_m);
-
 struct RangeStepCutOptions {
   double min_width_m = 0.8;
   double min_step_m = 0.1;
